@@ -1,0 +1,1 @@
+"""ATO controller cores (plain Python) and their FMU wrappers."""

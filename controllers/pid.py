@@ -1,0 +1,78 @@
+"""PID tracking of the reference stopping curve (seed 000 baseline, sec. 4.1).
+
+Error ``e = v - v_ref(s)`` (m/s, positive when too fast); brake command (%)::
+
+    u = u_ff + kp e + ki int(e) + kd de/dt,   u_ff = a0 / c   (reference deceleration)
+
+clamped to ``[u_min, u_max]``. Anti-windup by conditional integration: the integral is frozen
+while the command is saturated in the direction the error would push it. The derivative acts on
+the error, by backward difference over the sample time.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from cosim.state import StatefulCore
+from plants.route import StoppingCurve
+
+
+@dataclass(frozen=True)
+class StopPidParams:
+    kp: float = 60.0  # % per m/s
+    ki: float = 10.0  # % per m
+    kd: float = 0.0  # % per m/s^2
+    ref_decel: float = 0.5  # m/s^2 (a0)
+    stop_point: float = 400.0  # m
+    brake_gain: float = 1.07 / 100.0  # m/s^2 per %, for the feedforward
+    feedforward: bool = True
+    u_min: float = 0.0  # %
+    u_max: float = 100.0  # %
+    sample_time: float = 0.2  # s
+
+    def check(self) -> None:
+        if not self.sample_time > 0:
+            raise ValueError(f"sample_time = {self.sample_time} must be > 0")
+        if not self.u_min < self.u_max:
+            raise ValueError(f"u_min = {self.u_min} must be < u_max = {self.u_max}")
+        if not self.ref_decel > 0:
+            raise ValueError(f"ref_decel = {self.ref_decel} must be > 0")
+        if not self.brake_gain > 0:
+            raise ValueError(f"brake_gain = {self.brake_gain} must be > 0")
+
+
+class StopPid(StatefulCore):
+    """Sampled PID with feedforward and anti-windup; one call of :meth:`compute` per sample."""
+
+    state_fields = ("integral", "prev_error", "command")
+
+    def __init__(self, params: StopPidParams) -> None:
+        params.check()
+        self.p = params
+        self.curve = StoppingCurve(params.ref_decel, params.stop_point)
+        self.integral = 0.0
+        self.prev_error: float | None = None
+        self.command = 0.0
+
+    def compute(self, t: float, inputs: dict[str, float]) -> tuple[dict[str, float], int]:
+        p = self.p
+        v, s = inputs["v"], inputs["s"]
+        v_ref = self.curve.speed(s)
+        error = v - v_ref
+        u_ff = p.ref_decel / p.brake_gain if p.feedforward and s < p.stop_point else 0.0
+        if s >= p.stop_point or (v_ref == 0.0 and v <= 0.0):
+            u_ff = p.u_max  # at or past the stop point: hold the train
+        derivative = 0.0 if self.prev_error is None else (error - self.prev_error) / p.sample_time
+        self.prev_error = error
+        integral = self.integral + error * p.sample_time
+        unclamped = u_ff + p.kp * error + p.ki * integral + p.kd * derivative
+        u = min(max(unclamped, p.u_min), p.u_max)
+        saturated_high = unclamped > p.u_max and error > 0
+        saturated_low = unclamped < p.u_min and error < 0
+        if not (saturated_high or saturated_low):
+            self.integral = integral
+        self.command = u
+        return {"brake_command": u, "v_ref": v_ref, "speed_error": error}, 1
+
+    def outputs(self) -> dict[str, float]:
+        return {"brake_command": self.command, "v_ref": 0.0, "speed_error": 0.0}

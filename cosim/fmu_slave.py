@@ -1,0 +1,490 @@
+"""FMI 2.0 co-simulation slave base classes that wrap a plain-Python core.
+
+This module is bundled into every FMU (it imports only the standard library, numpy and
+pythonfmu), so it must not import anything else from this package.
+
+What it adds to pythonfmu's ``Fmi2Slave``:
+
+* declarative variables (:class:`Var`) with units, min/max and descriptions, written into a
+  modelDescription.xml that passes ``fmpy.validation.validate_fmu`` (UnitDefinitions,
+  InitialUnknowns, and ModelStructure/Outputs with the *real* dependencies: a plant's outputs
+  depend on no input, a controller's outputs depend on its inputs);
+* FMU state (get/set/serialize) covering the *whole* core state, not only registered variables;
+* the timing contract of ``SPEC.md`` for sampled and self-triggered controllers: outputs are
+  computed once per event from the inputs set at that event (on the first output read, or in the
+  following doStep if nobody read first) and held until the next event; doStep advances the clock.
+
+Times are kept in integer nanoseconds so that sample times ``k * T`` never drift.
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+import math
+from dataclasses import dataclass
+from typing import Any, ClassVar
+from xml.etree.ElementTree import Element, SubElement
+
+import numpy as np
+from pythonfmu import Boolean, Fmi2Causality, Fmi2Slave, Fmi2Variability, Integer, Real, String
+from pythonfmu.enums import Fmi2Status
+
+from cosim.state import to_seconds, to_ticks
+
+# FMI unit name -> (SI base-unit exponents, factor). Every unit a Var may use is declared here.
+UNITS: dict[str, tuple[dict[str, int], float]] = {
+    "1": ({}, 1.0),
+    "%": ({}, 0.01),
+    "s": ({"s": 1}, 1.0),
+    "m": ({"m": 1}, 1.0),
+    "kg": ({"kg": 1}, 1.0),
+    "m/s": ({"m": 1, "s": -1}, 1.0),
+    "m/s2": ({"m": 1, "s": -2}, 1.0),
+    "m/s3": ({"m": 1, "s": -3}, 1.0),
+    "1/s": ({"s": -1}, 1.0),
+    "s/m": ({"m": -1, "s": 1}, 1.0),
+    "s2/m": ({"m": -1, "s": 2}, 1.0),
+    "s3/m": ({"m": -1, "s": 3}, 1.0),
+    "N": ({"kg": 1, "m": 1, "s": -2}, 1.0),
+    "N.s/m": ({"kg": 1, "s": -1}, 1.0),
+    "N.s2/m2": ({"kg": 1, "m": -1}, 1.0),
+    "N/m": ({"kg": 1, "s": -2}, 1.0),
+    "Pa": ({"kg": 1, "m": -1, "s": -2}, 1.0),
+    "W": ({"kg": 1, "m": 2, "s": -3}, 1.0),
+    "J": ({"kg": 1, "m": 2, "s": -2}, 1.0),
+    "m/s2/%": ({"m": 1, "s": -2}, 100.0),
+    "%.s/m": ({"m": -1, "s": 1}, 0.01),
+    "%/m": ({"m": -1}, 0.01),
+    "%/(m/s2)": ({"m": -1, "s": 2}, 0.01),
+}
+
+_TYPES = {float: Real, int: Integer, bool: Boolean, str: String}
+
+
+@dataclass(frozen=True)
+class Var:
+    """One FMI scalar variable.
+
+    ``causality`` is ``parameter``, ``input`` or ``output``. Parameters are fixed after
+    initialisation. Outputs are continuous for plants, discrete for sampled controllers.
+    """
+
+    name: str
+    causality: str
+    start: float | int | bool | str = 0.0
+    unit: str = "1"
+    description: str = ""
+    min: float | None = None
+    max: float | None = None
+    variability: str | None = None
+
+    @property
+    def type(self) -> type:
+        return type(self.start)
+
+    def resolved_variability(self, default_output: str) -> str:
+        if self.variability:
+            return self.variability
+        if self.causality == "parameter":
+            return "fixed"
+        if self.causality == "output":
+            return default_output
+        return "continuous" if self.type is float else "discrete"
+
+
+class FmuStateError(ValueError):
+    """A serialized FMU state that does not belong to this FMU."""
+
+
+def _encode(obj: Any) -> Any:
+    if isinstance(obj, np.ndarray):
+        return {"__ndarray__": obj.tolist(), "dtype": str(obj.dtype), "shape": list(obj.shape)}
+    if isinstance(obj, dict):
+        return {"__dict__": [[_encode(k), _encode(v)] for k, v in obj.items()]}
+    if isinstance(obj, tuple):
+        return {"__tuple__": [_encode(v) for v in obj]}
+    if isinstance(obj, list):
+        return [_encode(v) for v in obj]
+    if isinstance(obj, np.generic):
+        return obj.item()
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return {"__float__": repr(obj)}
+    return obj
+
+
+def _decode(obj: Any) -> Any:
+    if isinstance(obj, list):
+        return [_decode(v) for v in obj]
+    if isinstance(obj, dict):
+        if "__ndarray__" in obj:
+            return np.array(obj["__ndarray__"], dtype=obj["dtype"]).reshape(obj["shape"])
+        if "__dict__" in obj:
+            return {_decode(k): _decode(v) for k, v in obj["__dict__"]}
+        if "__tuple__" in obj:
+            return tuple(_decode(v) for v in obj["__tuple__"])
+        if "__float__" in obj:
+            return float(obj["__float__"])
+    return obj
+
+
+class CoreSlave(Fmi2Slave):
+    """Base of every FMU in this project: variables, modelDescription, state handling.
+
+    Subclasses set ``variables`` and implement :meth:`make_core` (build the core from
+    ``self.values``, raising ``ValueError`` naming the parameter on a bad value).
+    """
+
+    variables: ClassVar[tuple[Var, ...]] = ()
+    output_variability: ClassVar[str] = "continuous"
+    default_experiment_stop_time: ClassVar[float] = 10.0
+    default_experiment_step: ClassVar[float] = 0.1
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__(**kwargs)
+        self.description = self.__class__.__doc__.strip().splitlines()[0] if self.__doc__ else None
+        self.author = "ato-cosim"
+        self.version = "0.1.0"
+        self.values: dict[str, Any] = {}
+        self.core: Any = None
+        self.outputs: dict[str, Any] = {}
+        self.initialized = False
+        self.executions = 0
+        self.start_ticks = 0
+        for var in self.variables:
+            if var.causality in ("parameter", "input"):
+                self.values[var.name] = var.start
+        self._by_name = {v.name: v for v in self.variables}
+        for var in self.variables:
+            self._register(var)
+
+    # -- variables -------------------------------------------------------------------------
+    def _register(self, var: Var) -> None:
+        cls = _TYPES[var.type]
+        causality = getattr(Fmi2Causality, var.causality)
+        variability = getattr(Fmi2Variability, var.resolved_variability(self.output_variability))
+        if var.causality == "output":
+            getter = self._output_getter(var.name)
+            setter = None
+        else:
+            getter = self._value_getter(var.name)
+            setter = self._value_setter(var)
+        self.register_variable(
+            cls(var.name, causality=causality, variability=variability, description=var.description,
+                getter=getter, setter=setter),
+            nested=False,
+        )
+
+    def _value_getter(self, name: str):
+        return lambda: self.values[name]
+
+    def _value_setter(self, var: Var):
+        kind = var.type
+
+        def setter(value: Any) -> None:
+            if var.causality == "parameter" and self.initialized:
+                raise ValueError(f"parameter {var.name!r} is fixed after initialisation")
+            if kind is float:
+                value = float(value)
+                if not math.isfinite(value):
+                    raise ValueError(f"{var.name} = {value}: not a finite number")
+            if var.min is not None and value < var.min or var.max is not None and value > var.max:
+                if var.causality == "parameter":
+                    raise ValueError(f"{var.name} = {value} outside [{var.min}, {var.max}]")
+            self.values[var.name] = kind(value)
+            if var.causality == "parameter":
+                self.core = None  # rebuilt from the new parameters on next use
+            else:
+                self.on_input(var.name)
+
+        return setter
+
+    def _output_getter(self, name: str):
+        def getter() -> Any:
+            self.ensure_core()
+            self.refresh_outputs()
+            return self.outputs[name]
+
+        return getter
+
+    # -- hooks for subclasses ------------------------------------------------------------------
+    def make_core(self) -> Any:
+        raise NotImplementedError
+
+    def core_outputs(self) -> dict[str, Any]:
+        """Current output values computed from the core's state."""
+        return self.core.outputs()
+
+    def on_input(self, name: str) -> None:
+        """Called after an input was set."""
+
+    def refresh_outputs(self) -> None:
+        """Make ``self.outputs`` current (plants: from state; controllers: run a due event)."""
+
+    def inputs(self) -> dict[str, Any]:
+        return {v.name: self.values[v.name] for v in self.variables if v.causality == "input"}
+
+    def ensure_core(self) -> None:
+        if self.core is None:
+            try:
+                self.core = self.make_core()
+            except (ValueError, TypeError, KeyError, OSError) as err:
+                self.log(f"{self.instance_name}: bad parameter: {err}", Fmi2Status.error)
+                raise
+            self.after_core_built()
+
+    def after_core_built(self) -> None:
+        self.outputs = dict(self.core_outputs())
+
+    # -- FMI calls -----------------------------------------------------------------------------
+    def setup_experiment(self, start_time: float, stop_time=None, tolerance=None) -> None:
+        self.start_ticks = to_ticks(start_time)
+
+    def enter_initialization_mode(self) -> None:
+        self.initialized = False
+
+    def exit_initialization_mode(self) -> None:
+        self.ensure_core()
+        self.initialized = True
+
+    def terminate(self) -> None:
+        pass
+
+    # -- FMU state: the whole core, not only registered variables -------------------------------
+    def _get_fmu_state(self) -> dict[str, Any]:
+        self.ensure_core()
+        return {
+            "fmu": self.modelName,
+            "values": copy.deepcopy(self.values),
+            "slave": copy.deepcopy(self.slave_state()),
+            "core": self.core.get_state(),
+            "outputs": copy.deepcopy(self.outputs),
+            "executions": self.executions,
+            "initialized": self.initialized,
+        }
+
+    def _set_fmu_state(self, state: dict[str, Any]) -> None:
+        if not isinstance(state, dict) or state.get("fmu") != self.modelName:
+            raise FmuStateError(f"state does not belong to FMU {self.modelName}")
+        self.values = copy.deepcopy(state["values"])
+        self.core = None
+        self.initialized = False
+        self.ensure_core()
+        self.core.set_state(copy.deepcopy(state["core"]))
+        self.set_slave_state(copy.deepcopy(state["slave"]))
+        self.outputs = copy.deepcopy(state["outputs"])
+        self.executions = state["executions"]
+        self.initialized = state["initialized"]
+
+    def slave_state(self) -> dict[str, Any]:
+        return {}
+
+    def set_slave_state(self, state: dict[str, Any]) -> None:
+        pass
+
+    @staticmethod
+    def _fmu_state_to_bytes(state: dict[str, Any]) -> bytes:
+        return json.dumps(_encode(state)).encode("utf-8")
+
+    @staticmethod
+    def _fmu_state_from_bytes(data: bytes) -> dict[str, Any]:
+        return _decode(json.loads(bytes(data).decode("utf-8")))
+
+    # -- modelDescription ----------------------------------------------------------------------
+    def to_xml(self, model_options: dict[str, str] | None = None) -> Element:
+        options = dict(model_options or {})
+        options.setdefault("canGetAndSetFMUstate", "true")
+        options.setdefault("canSerializeFMUstate", "true")
+        root = super().to_xml(options)
+        for tag in ("ModelVariables", "ModelStructure", "DefaultExperiment"):
+            node = root.find(tag)
+            if node is not None:
+                root.remove(node)
+        children = list(root)
+        for child in children:
+            root.remove(child)
+        cosim = [c for c in children if c.tag == "CoSimulation"]
+        rest = [c for c in children if c.tag != "CoSimulation"]
+        for child in cosim:
+            root.append(child)
+        root.append(self._unit_definitions())
+        for child in rest:  # LogCategories
+            root.append(child)
+        SubElement(root, "DefaultExperiment", {
+            "startTime": "0.0",
+            "stopTime": repr(float(self.default_experiment_stop_time)),
+            "stepSize": repr(float(self.default_experiment_step)),
+        })
+        root.append(self._model_variables())
+        root.append(self._model_structure())
+        return root
+
+    def _unit_definitions(self) -> Element:
+        node = Element("UnitDefinitions")
+        for unit in sorted({v.unit for v in self.variables if v.type is float}):
+            exponents, factor = UNITS[unit]
+            u = SubElement(node, "Unit", {"name": unit})
+            attrib = {k: str(e) for k, e in exponents.items()}
+            if factor != 1.0:
+                attrib["factor"] = repr(factor)
+            SubElement(u, "BaseUnit", attrib)
+        return node
+
+    def _model_variables(self) -> Element:
+        node = Element("ModelVariables")
+        for vr, var in enumerate(self.variables):
+            attrib = {
+                "name": var.name,
+                "valueReference": str(vr),
+                "description": var.description or var.name,
+                "causality": var.causality,
+                "variability": var.resolved_variability(self.output_variability),
+            }
+            if var.causality == "parameter":
+                attrib["initial"] = "exact"
+            elif var.causality == "output":
+                attrib["initial"] = "calculated"
+            sv = SubElement(node, "ScalarVariable", attrib)
+            type_attrib: dict[str, str] = {}
+            if var.type is float:
+                type_attrib["unit"] = var.unit
+                if var.min is not None:
+                    type_attrib["min"] = repr(float(var.min))
+                if var.max is not None:
+                    type_attrib["max"] = repr(float(var.max))
+            if var.causality != "output":
+                if var.type is bool:
+                    type_attrib["start"] = str(var.start).lower()
+                elif var.type is float:
+                    type_attrib["start"] = repr(float(var.start))
+                else:
+                    type_attrib["start"] = str(var.start)
+            SubElement(sv, _TYPES[var.type].__name__, type_attrib)
+        return node
+
+    def output_dependencies(self, output: Var) -> list[str]:
+        """Names of the inputs an output depends on at the same instant (default: none)."""
+        return []
+
+    def _model_structure(self) -> Element:
+        node = Element("ModelStructure")
+        index = {v.name: i + 1 for i, v in enumerate(self.variables)}
+        outputs = [v for v in self.variables if v.causality == "output"]
+        if outputs:
+            out_node = SubElement(node, "Outputs")
+            init_node = Element("InitialUnknowns")
+            for var in outputs:
+                deps = " ".join(str(index[n]) for n in self.output_dependencies(var))
+                SubElement(out_node, "Unknown", {"index": str(index[var.name]),
+                                                 "dependencies": deps})
+                # initial values may depend on any parameter/input: no dependencies attribute
+                SubElement(init_node, "Unknown", {"index": str(index[var.name])})
+            node.append(init_node)
+        return node
+
+
+class PlantSlave(CoreSlave):
+    """A plant: no direct feedthrough; accepts any communication step.
+
+    The core provides ``advance(t_ticks, h_ticks, inputs)`` (sub-steps <= max_step inside) and
+    ``outputs() -> dict``.
+    """
+
+    output_variability = "continuous"
+
+    def do_step(self, current_time: float, step_size: float) -> bool:
+        self.ensure_core()
+        if not step_size > 0.0 or not math.isfinite(step_size):
+            raise ValueError(f"doStep: step size {step_size} must be positive and finite")
+        inputs = self.inputs()
+        for name, value in inputs.items():
+            if isinstance(value, float) and not math.isfinite(value):
+                raise ValueError(f"input {name} = {value} is not finite")
+        self.core.advance(to_ticks(current_time), to_ticks(step_size), inputs)
+        self.outputs = dict(self.core.outputs())
+        self.executions += 1
+        return True
+
+
+class SampledControllerSlave(CoreSlave):
+    """A sampled (periodic or self-triggered) controller with direct feedthrough.
+
+    Core API: ``compute(t_s, inputs) -> (outputs: dict, hold_samples: int)``. The event after
+    one at tick ``k`` is at ``k + hold_samples * sample_time``; periodic controllers return 1.
+    The output ``next_event_time`` (s) announces it to the master.
+    """
+
+    output_variability = "discrete"
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__(**kwargs)
+        self.now_ticks = 0
+        self.next_event_ticks = 0
+        self.event_done_ticks: int | None = None
+
+    def output_dependencies(self, output: Var) -> list[str]:
+        return [v.name for v in self.variables if v.causality == "input"]
+
+    def setup_experiment(self, start_time: float, stop_time=None, tolerance=None) -> None:
+        super().setup_experiment(start_time, stop_time, tolerance)
+        self.now_ticks = self.start_ticks
+        self.next_event_ticks = self.start_ticks
+        self.event_done_ticks = None
+
+    def sample_ticks(self) -> int:
+        return to_ticks(self.values["sample_time"])
+
+    def refresh_outputs(self) -> None:
+        if self.initialized:
+            self._run_due_event()
+
+    def _run_due_event(self) -> None:
+        if self.now_ticks < self.next_event_ticks or self.event_done_ticks == self.now_ticks:
+            return
+        inputs = self.inputs()
+        for name, value in inputs.items():
+            if isinstance(value, float) and not math.isfinite(value):
+                raise ValueError(f"input {name} = {value} is not finite")
+        outputs, hold = self.core.compute(to_seconds(self.now_ticks), inputs)
+        hold = max(1, int(hold))
+        # keep the sampling grid: the event is the scheduled one even if the master is late
+        event = self.next_event_ticks
+        period = self.sample_ticks()
+        while event + period <= self.now_ticks:
+            event += period
+        self.next_event_ticks = event + hold * period
+        self.event_done_ticks = self.now_ticks
+        self.executions += 1
+        self.outputs.update(outputs)
+        self.outputs["next_event_time"] = to_seconds(self.next_event_ticks)
+        self.outputs["executions"] = self.executions
+
+    def after_core_built(self) -> None:
+        super().after_core_built()
+        self.outputs["next_event_time"] = to_seconds(self.next_event_ticks)
+        self.outputs["executions"] = self.executions
+
+    def do_step(self, current_time: float, step_size: float) -> bool:
+        self.ensure_core()
+        if not step_size > 0.0 or not math.isfinite(step_size):
+            raise ValueError(f"doStep: step size {step_size} must be positive and finite")
+        self.now_ticks = to_ticks(current_time)
+        self._run_due_event()  # nobody read the outputs at this event: compute now
+        self.now_ticks = to_ticks(current_time + step_size)
+        return True
+
+    def slave_state(self) -> dict[str, Any]:
+        return {"now": self.now_ticks, "next": self.next_event_ticks,
+                "done": self.event_done_ticks}
+
+    def set_slave_state(self, state: dict[str, Any]) -> None:
+        self.now_ticks = state["now"]
+        self.next_event_ticks = state["next"]
+        self.event_done_ticks = state["done"]
+
+
+CONTROLLER_TIMING_VARS: tuple[Var, ...] = (
+    Var("next_event_time", "output", 0.0, "s",
+        "time of this controller's next event (sample or self-triggered)"),
+    Var("executions", "output", 0, "1", "number of events computed so far"),
+)

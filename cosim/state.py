@@ -1,0 +1,35 @@
+"""Integer-tick time and complete, copyable core state (bundled into every FMU; stdlib only)."""
+
+from __future__ import annotations
+
+import copy
+from typing import Any, ClassVar
+
+TICKS_PER_SECOND = 1_000_000_000
+
+
+def to_ticks(seconds: float) -> int:
+    """Seconds -> integer nanoseconds (rounded, so ``0.2 * k`` lands on the tick grid)."""
+    return int(round(seconds * TICKS_PER_SECOND))
+
+
+def to_seconds(ticks: int) -> float:
+    """Integer nanoseconds -> seconds."""
+    return ticks / TICKS_PER_SECOND
+
+
+class StatefulCore:
+    """Mixin for numerical cores: ``get_state``/``set_state`` over ``state_fields``.
+
+    Subclasses list every attribute that changes during a run in ``state_fields``; the FMU
+    wrapper saves and restores exactly those (deep copies), which makes FMU state complete.
+    """
+
+    state_fields: ClassVar[tuple[str, ...]] = ()
+
+    def get_state(self) -> dict[str, Any]:
+        return {name: copy.deepcopy(getattr(self, name)) for name in self.state_fields}
+
+    def set_state(self, state: dict[str, Any]) -> None:
+        for name in self.state_fields:
+            setattr(self, name, copy.deepcopy(state[name]))

@@ -1,0 +1,1 @@
+"""Train plant cores (plain Python) and their FMU wrappers."""

@@ -1,0 +1,150 @@
+"""High-speed train with first-order-lag plus dead-time brakes (seed 000, eqs. 1-7).
+
+    da_c/dt = -a_c / tau + (1 / tau) a_t(t - Td),   a_t = -c u       (eqs. 2-4)
+    dv/dt   = a_c - a_r(v, s),   ds/dt = v,   a_r = a_w(v) + a_g(s)   (eqs. 5-7)
+
+``u`` is the brake command in percent of full service braking (0..100); ``c`` maps 100 % to the
+maximum brake deceleration (1.07 m/s^2 in Table 1), so a_c <= 0 while braking (the paper's sign
+convention: a = a_c - a_r). ``a_w`` is Davis resistance per unit mass, ``a_g = g i(s)/1000``.
+
+Integration: sub-steps no longer than ``max_step`` on a grid anchored at t = 0 and split at
+every instant where the delayed command changes, so the result does not depend on the
+communication step. Over each sub-step the delayed command is constant and the lag is solved
+exactly (ZOH); speed and position use RK4 with the exact a_c(t) at the stage times.
+The dead time is exact for any step: commands are kept with their time stamps (ticks).
+A stopped train does not roll back: v >= 0, and it stays at rest while the net force is braking.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from cosim.state import StatefulCore, to_seconds, to_ticks
+from plants.resistance import Davis
+from plants.route import Route
+
+
+@dataclass(frozen=True)
+class BrakeDelayParams:
+    """Parameters in SI (defaults: seed 000 Table 1)."""
+
+    mass: float = 490e3  # kg
+    davis: Davis = Davis.from_kn_kmh(5.4, 0.0098, 0.00163)
+    brake_gain: float = 1.07 / 100.0  # m/s^2 per % (c)
+    brake_time_constant: float = 0.4  # s (tau)
+    brake_delay: float = 1.0  # s (Td)
+    max_step: float = 0.01  # s, longest internal sub-step
+
+    def check(self) -> None:
+        for name in ("mass", "brake_time_constant", "max_step"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"{name} = {getattr(self, name)} must be > 0")
+        if not self.brake_delay >= 0:
+            raise ValueError(f"brake_delay = {self.brake_delay} must be >= 0")
+        if not self.brake_gain > 0:
+            raise ValueError(f"brake_gain = {self.brake_gain} must be > 0")
+
+
+class BrakeDelayTrain(StatefulCore):
+    """Single-mass train, brake command -> lag + dead time -> deceleration."""
+
+    state_fields = ("t_ticks", "a_c", "v", "s", "history")
+
+    def __init__(self, params: BrakeDelayParams, route: Route, v0: float, s0: float = 0.0,
+                 initial_command: float = 0.0, t0: float = 0.0) -> None:
+        params.check()
+        if v0 < 0:
+            raise ValueError(f"v0 = {v0} must be >= 0")
+        self.p = params
+        self.route = route
+        self.t_ticks = to_ticks(t0)
+        self.v = float(v0)
+        self.s = float(s0)
+        # brake acceleration in equilibrium with the command held before t0
+        self.a_c = -params.brake_gain * initial_command
+        # [tick from which the command acts at the plant input, command %]; sorted by tick
+        self.history: list[list[float]] = [[-(2**62), float(initial_command)]]
+        self._delay_ticks = to_ticks(params.brake_delay)
+        self._grid_ticks = to_ticks(params.max_step)
+
+    # -- physics -------------------------------------------------------------------------------
+    def resistance_accel(self, v: float, s: float) -> float:
+        """a_r = a_w(v) + a_g(s) (m/s^2)."""
+        return self.p.davis.force(v) / self.p.mass + self.route.grade_accel(s)
+
+    def _accel(self, a_c: float, v: float, s: float) -> float:
+        a = a_c - self.resistance_accel(max(v, 0.0), s)
+        if v <= 0.0 and a <= 0.0:
+            return 0.0  # at rest and held: brakes and resistance cannot push it backwards
+        return a
+
+    def delayed_command(self, tick: int) -> float:
+        """u(t - Td) at plant time ``tick``."""
+        target = tick - self._delay_ticks
+        value = self.history[0][1]
+        for start, u in self.history:
+            if start > target:
+                break
+            value = u
+        return value
+
+    def _lag(self, a_c0: float, a_t: float, dt: float) -> float:
+        return a_t + (a_c0 - a_t) * math.exp(-dt / self.p.brake_time_constant)
+
+    def _rk4(self, a_c0: float, a_t: float, v: float, s: float, h: float) -> tuple[float, float]:
+        a_mid = self._lag(a_c0, a_t, 0.5 * h)
+        a_end = self._lag(a_c0, a_t, h)
+        k1v, k1s = self._accel(a_c0, v, s), v
+        k2v, k2s = self._accel(a_mid, v + 0.5 * h * k1v, s + 0.5 * h * k1s), v + 0.5 * h * k1v
+        k3v, k3s = self._accel(a_mid, v + 0.5 * h * k2v, s + 0.5 * h * k2s), v + 0.5 * h * k2v
+        k4v, k4s = self._accel(a_end, v + h * k3v, s + h * k3s), v + h * k3v
+        return (v + h / 6.0 * (k1v + 2 * k2v + 2 * k3v + k4v),
+                s + h / 6.0 * (k1s + 2 * k2s + 2 * k3s + k4s))
+
+    def _substep(self, h: float, a_t: float) -> None:
+        v1, s1 = self._rk4(self.a_c, a_t, self.v, self.s, h)
+        if v1 < 0.0:
+            # the train stops inside this sub-step: integrate up to the (secant) stop instant
+            h_stop = h * self.v / (self.v - v1)
+            _, s1 = self._rk4(self.a_c, a_t, self.v, self.s, h_stop)
+            v1 = 0.0
+        self.a_c = self._lag(self.a_c, a_t, h)
+        self.v, self.s = v1, s1
+
+    # -- co-simulation step ----------------------------------------------------------------------
+    def advance(self, t_ticks: int, h_ticks: int, inputs: dict[str, float]) -> None:
+        """Advance from ``t_ticks`` by ``h_ticks`` with ``inputs['brake_command']`` (%) held."""
+        if t_ticks != self.t_ticks:
+            raise ValueError(f"doStep at t={to_seconds(t_ticks)} s but plant is at "
+                             f"t={to_seconds(self.t_ticks)} s")
+        u = float(inputs["brake_command"])
+        if u != self.history[-1][1]:
+            self.history.append([t_ticks, u])
+        end = t_ticks + h_ticks
+        cuts = {end}
+        grid = self._grid_ticks
+        cuts.update(range((t_ticks // grid + 1) * grid, end, grid))
+        cuts.update(int(start) + self._delay_ticks for start, _ in self.history
+                    if t_ticks < int(start) + self._delay_ticks < end)
+        now = t_ticks
+        for cut in sorted(cuts):
+            a_t = -self.p.brake_gain * self.delayed_command(now)
+            self._substep(to_seconds(cut - now), a_t)
+            now = cut
+        self.t_ticks = end
+        # drop commands that can no longer act (keep the one acting now)
+        target = end - self._delay_ticks
+        while len(self.history) > 1 and self.history[1][0] <= target:
+            self.history.pop(0)
+
+    def outputs(self) -> dict[str, float]:
+        t = self.t_ticks
+        return {
+            "v": self.v,
+            "s": self.s,
+            "a": self._accel(self.a_c, self.v, self.s),
+            "a_c": self.a_c,
+            "applied_command": self.delayed_command(t),
+            "grade": self.route.grade.at(self.s),
+        }
