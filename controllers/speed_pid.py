@@ -1,0 +1,115 @@
+"""Speed-tracking PID with reference-acceleration feedforward (baseline of seeds 001, 002, 004).
+
+The loop works in acceleration units (m/s^2) so that one tuning fits any train; multiply by the
+effective mass ``M (1 + gamma)`` (seed 002: ``M (1+gamma) a = F_t - F_b - F_r``) for a force::
+
+    e       = v_ref - v                                          (m/s, > 0 when too slow)
+    a_dem   = a_ref + a_res + kp e + ki int(e) dt - kd dv_f/dt   (m/s^2)
+    F_dem   = m_eff a_dem                                        (N)
+
+``a_ref`` is the reference acceleration (feedforward of the profile slope), ``a_res`` an optional
+estimate of the running resistance per unit mass (resistance feedforward, 0 when unknown).
+The derivative acts on the measured speed (no kick at reference steps), filtered by a first-order
+lag ``derivative_filter`` (s; 0 = raw backward difference).
+
+Saturation and anti-windup: ``a_dem`` is clamped to ``[a_lo, a_hi]`` where the caller may pass
+the limits that hold *now* (e.g. the traction/brake envelope at the current speed divided by the
+mass), else ``[accel_min, accel_max]``. The integral is updated by conditional integration: it
+is frozen while the demand is saturated and the error would push it further out (the same rule
+as :mod:`controllers.pid`). ``rate_limit`` (m/s^3, 0 = off) limits the change of the demand per
+sample (jerk limit, ride comfort).
+
+One call of :meth:`SpeedPid.update` per sample; the sample time is a parameter, so the integral
+and derivative use the nominal ``T`` (the co-simulation master calls the controller on its grid).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from cosim.state import StatefulCore
+
+
+@dataclass(frozen=True)
+class SpeedPidParams:
+    """Gains in acceleration units; limits in m/s^2. Defaults suit a high-speed EMU at T = 0.2 s."""
+
+    kp: float = 0.6  # 1/s: m/s^2 per m/s of speed error
+    ki: float = 0.05  # 1/s^2: m/s^2 per m of integrated speed error
+    kd: float = 0.0  # 1 (s * 1/s): m/s^2 per m/s^2 of measured acceleration
+    derivative_filter: float = 0.0  # s, time constant of the derivative low-pass (0 = none)
+    accel_min: float = -1.0  # m/s^2, most negative demand (full service brake)
+    accel_max: float = 1.0  # m/s^2, largest demand
+    rate_limit: float = 0.0  # m/s^3, largest change of demand per second (0 = unlimited)
+    feedforward: bool = True  # add the reference acceleration a_ref
+    sample_time: float = 0.2  # s
+
+    def check(self) -> None:
+        if not self.sample_time > 0:
+            raise ValueError(f"sample_time = {self.sample_time} must be > 0")
+        if not self.accel_min < self.accel_max:
+            raise ValueError(f"accel_min = {self.accel_min} must be < accel_max = "
+                             f"{self.accel_max}")
+        for name in ("kp", "ki", "kd", "derivative_filter", "rate_limit"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0):
+                raise ValueError(f"{name} = {value} must be finite and >= 0")
+
+
+class SpeedPid(StatefulCore):
+    """Sampled speed PID; :meth:`update` returns the clamped acceleration demand (m/s^2)."""
+
+    state_fields = ("integral", "prev_speed", "derivative", "demand", "error")
+
+    def __init__(self, params: SpeedPidParams) -> None:
+        params.check()
+        self.p = params
+        self.integral = 0.0  # m, integral of the speed error
+        self.prev_speed: float | None = None  # m/s, measured speed at the previous sample
+        self.derivative = 0.0  # m/s^2, filtered measured acceleration
+        self.demand = 0.0  # m/s^2, last (clamped) demand
+        self.error = 0.0  # m/s, last speed error v_ref - v
+
+    def reset(self, demand: float = 0.0) -> None:
+        """Forget the history; ``demand`` is the output held before the first sample."""
+        self.integral = 0.0
+        self.prev_speed = None
+        self.derivative = 0.0
+        self.demand = float(demand)
+        self.error = 0.0
+
+    def update(self, v: float, v_ref: float, a_ref: float = 0.0, a_res: float = 0.0,
+               a_lo: float | None = None, a_hi: float | None = None) -> float:
+        """One sample: speeds in m/s, accelerations in m/s^2. Returns the demand (m/s^2).
+
+        ``a_lo``/``a_hi`` narrow ``[accel_min, accel_max]`` to what the actuators can give now.
+        """
+        p = self.p
+        T = p.sample_time
+        lo = p.accel_min if a_lo is None else max(p.accel_min, a_lo)
+        hi = p.accel_max if a_hi is None else min(p.accel_max, a_hi)
+        lo = min(lo, hi)  # inconsistent limits: the upper one wins
+        if p.rate_limit > 0:  # jerk limit, but never outside the actuator limits
+            step = p.rate_limit * T
+            lo, hi = (min(max(lo, self.demand - step), hi),
+                      max(min(hi, self.demand + step), lo))
+        error = v_ref - v
+        if self.prev_speed is not None:
+            raw = (v - self.prev_speed) / T
+            if p.derivative_filter > 0:
+                alpha = T / (p.derivative_filter + T)
+                self.derivative += alpha * (raw - self.derivative)
+            else:
+                self.derivative = raw
+        self.prev_speed = v
+        integral = self.integral + error * T
+        ff = (a_ref if p.feedforward else 0.0) + a_res
+        unclamped = ff + p.kp * error + p.ki * integral - p.kd * self.derivative
+        demand = min(max(unclamped, lo), hi)
+        pushing_out = (unclamped > hi and error > 0) or (unclamped < lo and error < 0)
+        if not pushing_out:
+            self.integral = integral
+        self.demand = demand
+        self.error = error
+        return demand

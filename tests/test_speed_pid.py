@@ -1,0 +1,109 @@
+"""Speed-tracking PID core: closed-loop behaviour on analytic plants, saturation, error paths."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from controllers.speed_pid import SpeedPid, SpeedPidParams
+
+
+def test_proportional_loop_on_integrator_decays_geometrically() -> None:
+    """Plant dv/dt = a (ZOH, sample T): e(k+1) = (1 - kp T) e(k) exactly with ki = kd = 0."""
+    T, kp = 0.2, 1.5
+    pid = SpeedPid(SpeedPidParams(kp=kp, ki=0.0, sample_time=T, accel_min=-10, accel_max=10))
+    v, v_ref = 10.0, 12.0
+    errors = []
+    for _ in range(10):
+        a = pid.update(v, v_ref)
+        errors.append(v_ref - v)
+        v += a * T
+    for k, e in enumerate(errors):
+        assert e == pytest.approx(2.0 * (1 - kp * T) ** k, rel=1e-12)
+
+
+def test_feedforward_tracks_a_ramp_without_error() -> None:
+    """On a reference ramp v_ref = a0 t the feedforward alone keeps the error at zero."""
+    T, a0 = 0.5, 0.4
+    pid = SpeedPid(SpeedPidParams(kp=0.8, ki=0.1, sample_time=T))
+    v = 0.0
+    for k in range(100):
+        a = pid.update(v, a0 * k * T, a_ref=a0)
+        v += a * T
+        assert abs(a0 * (k + 1) * T - v) < 1e-12
+
+
+def test_integral_removes_constant_disturbance() -> None:
+    """A constant unknown deceleration d: PI drives the steady-state error to zero."""
+    T, d = 0.2, 0.15
+    pid = SpeedPid(SpeedPidParams(kp=0.6, ki=0.1, sample_time=T))
+    v = 50.0
+    for _ in range(2000):
+        a = pid.update(v, 50.0)
+        v += (a - d) * T
+    assert v == pytest.approx(50.0, abs=1e-6)
+    assert pid.demand == pytest.approx(d, abs=1e-6)
+    # P alone keeps an offset d / kp
+    pid = SpeedPid(SpeedPidParams(kp=0.6, ki=0.0, sample_time=T))
+    v = 50.0
+    for _ in range(2000):
+        v += (pid.update(v, 50.0) - d) * T
+    assert 50.0 - v == pytest.approx(d / 0.6, rel=1e-6)
+
+
+def test_saturation_and_antiwindup_limit_overshoot() -> None:
+    """Large step: the demand stays in its limits and the frozen integral stops overshoot."""
+    T = 0.2
+    params = SpeedPidParams(kp=0.5, ki=0.2, sample_time=T, accel_min=-0.5, accel_max=0.5)
+    pid = SpeedPid(params)
+    v, peak = 0.0, 0.0
+    for _ in range(3000):
+        a = pid.update(v, 30.0)
+        assert -0.5 <= a <= 0.5
+        v += a * T
+        peak = max(peak, v)
+    # the integral only grows once the demand leaves saturation: overshoot stays small
+    assert peak - 30.0 < 1.0
+    assert v == pytest.approx(30.0, abs=1e-3)
+
+
+def test_actuator_limits_passed_per_sample_are_honoured() -> None:
+    pid = SpeedPid(SpeedPidParams(kp=5.0, ki=0.0))
+    assert pid.update(0.0, 10.0, a_hi=0.3) == pytest.approx(0.3)
+    assert pid.update(20.0, 10.0, a_lo=-0.2) == pytest.approx(-0.2)
+
+
+def test_rate_limit_bounds_the_jerk() -> None:
+    T, jerk = 0.2, 0.5
+    pid = SpeedPid(SpeedPidParams(kp=5.0, ki=0.0, sample_time=T, rate_limit=jerk))
+    demands = [pid.update(0.0, 10.0) for _ in range(20)]
+    steps = [b - a for a, b in zip([0.0, *demands[:-1]], demands, strict=True)]
+    assert max(abs(s) for s in steps) <= jerk * T + 1e-12
+    assert demands[-1] == pytest.approx(1.0)  # reached accel_max
+
+
+def test_derivative_on_measurement_damps_without_kick() -> None:
+    """A reference step gives no derivative kick; the D term opposes measured acceleration."""
+    pid = SpeedPid(SpeedPidParams(kp=0.0, ki=0.0, kd=0.5, feedforward=False))
+    assert pid.update(10.0, 10.0) == 0.0
+    assert pid.update(10.0, 15.0) == 0.0  # reference step: no kick
+    a = pid.update(10.2, 15.0)  # measured acceleration 1 m/s^2
+    assert a == pytest.approx(-0.5)
+
+
+def test_state_round_trip_reproduces_outputs() -> None:
+    pid = SpeedPid(SpeedPidParams())
+    for k in range(5):
+        pid.update(10.0 + 0.1 * k, 12.0)
+    state = pid.get_state()
+    a = [pid.update(11.0, 12.0) for _ in range(3)]
+    pid.set_state(state)
+    assert [pid.update(11.0, 12.0) for _ in range(3)] == a
+
+
+@pytest.mark.parametrize("field, value", [("sample_time", 0.0), ("kp", -1.0),
+                                           ("ki", math.nan), ("accel_min", 2.0)])
+def test_bad_parameters_are_rejected(field: str, value: float) -> None:
+    with pytest.raises(ValueError, match=field):
+        SpeedPid(SpeedPidParams(**{field: value}))
