@@ -20,8 +20,11 @@ Times are kept in integer nanoseconds so that sample times ``k * T`` never drift
 from __future__ import annotations
 
 import copy
+import ctypes
+import functools
 import json
 import math
+import sys
 from dataclasses import dataclass
 from typing import Any, ClassVar
 from xml.etree.ElementTree import Element, SubElement
@@ -128,6 +131,72 @@ def _decode(obj: Any) -> Any:
     return obj
 
 
+# FMI calls a master can make on a slave (pythonfmu method names); see ``_guarded``.
+_FMI_ENTRY_POINTS = (
+    "setup_experiment", "enter_initialization_mode", "exit_initialization_mode", "do_step",
+    "terminate", "get_real", "get_integer", "get_boolean", "get_string", "set_real",
+    "set_integer", "set_boolean", "set_string", "_get_fmu_state", "_set_fmu_state",
+)
+
+
+def _keep_alive_after_pythonfmu_error(slave: Fmi2Slave) -> None:
+    """Undo pythonfmu 0.7's spurious reference drops when a Python exception reaches it.
+
+    ``PySlaveInstance::handle_py_exception`` (pythonfmu 0.7.x) calls ``cleanPyObject``, which
+    decrements the references it holds to the slave class, the slave instance and its log queue
+    without clearing them, then returns fmi2Fatal. After a few rejected calls the live instance
+    is freed and the host crashes (use after free). One extra reference per exception keeps the
+    instance valid (the master may still read, reset or free it); the price is a small leak.
+    """
+    incref = ctypes.pythonapi.Py_IncRef
+    incref.argtypes = [ctypes.py_object]
+    incref.restype = None
+    for obj in (type(slave), slave, slave.log_queue):
+        incref(obj)
+
+
+def _hold_entry_module_globals(cls: type) -> None:
+    """Undo pythonfmu 0.7's release of a borrowed reference on every fmi2Instantiate.
+
+    Its ``findClass`` re-executes the FMU entry module and then decrements the reference count
+    of the module's globals dict, which it only borrowed (``PyModule_GetDict``). Without this
+    extra reference the third instance of one FMU in a process frees the dict: instantiation
+    fails ("module has no attribute ''") or the host crashes. Called once per slave object.
+    """
+    module = sys.modules.get(cls.__module__)
+    if module is not None:
+        incref = ctypes.pythonapi.Py_IncRef
+        incref.argtypes = [ctypes.py_object]
+        incref.restype = None
+        incref(module.__dict__)
+
+
+def _guarded(name: str, method):
+    """Wrap an FMI entry point: log a rejected call clearly and keep the instance alive.
+
+    The exception still propagates, so pythonfmu returns a non-OK status (fmi2Fatal in 0.7.x:
+    it maps every Python exception to fmi2Fatal) and logs it; only the outermost call of a
+    nested chain (``super()``) compensates pythonfmu's reference drops.
+    """
+
+    @functools.wraps(method)
+    def call(self, *args: Any, **kwargs: Any) -> Any:
+        depth = self.__dict__.get("_fmi_depth", 0)
+        self._fmi_depth = depth + 1
+        try:
+            return method(self, *args, **kwargs)
+        except BaseException as err:
+            if depth == 0:
+                self.log(f"{self.instance_name}: {name} rejected: {err}", Fmi2Status.error)
+                _keep_alive_after_pythonfmu_error(self)
+            raise
+        finally:
+            self._fmi_depth = depth
+
+    call._fmi_guarded = True  # type: ignore[attr-defined]
+    return call
+
+
 class CoreSlave(Fmi2Slave):
     """Base of every FMU in this project: variables, modelDescription, state handling.
 
@@ -151,6 +220,9 @@ class CoreSlave(Fmi2Slave):
         self.initialized = False
         self.executions = 0
         self.start_ticks = 0
+        # FMI 2 state: instantiated, initialization, initialized, terminated
+        self.mode = "instantiated"
+        _hold_entry_module_globals(type(self))
         for var in self.variables:
             if var.causality in ("parameter", "input"):
                 self.values[var.name] = var.start
@@ -237,18 +309,39 @@ class CoreSlave(Fmi2Slave):
         self.outputs = dict(self.core_outputs())
 
     # -- FMI calls -----------------------------------------------------------------------------
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        super().__init_subclass__(**kwargs)
+        for name in _FMI_ENTRY_POINTS:
+            method = cls.__dict__.get(name)
+            if method is not None and not getattr(method, "_fmi_guarded", False):
+                setattr(cls, name, _guarded(name, method))
+
+    def require_mode(self, call: str, *modes: str) -> None:
+        """Reject an FMI call made in the wrong state (FMI 2.0 sec. 4.2.4 state machine)."""
+        if self.mode not in modes:
+            raise RuntimeError(f"{call} not allowed in state {self.mode!r} "
+                               f"(allowed in: {', '.join(modes)})")
+
     def setup_experiment(self, start_time: float, stop_time=None, tolerance=None) -> None:
+        self.require_mode("fmi2SetupExperiment", "instantiated")
+        if not math.isfinite(start_time):
+            raise ValueError(f"start time {start_time} is not finite")
         self.start_ticks = to_ticks(start_time)
 
     def enter_initialization_mode(self) -> None:
+        self.require_mode("fmi2EnterInitializationMode", "instantiated")
         self.initialized = False
+        self.mode = "initialization"
 
     def exit_initialization_mode(self) -> None:
+        self.require_mode("fmi2ExitInitializationMode", "initialization")
         self.ensure_core()
         self.initialized = True
+        self.mode = "initialized"
 
     def terminate(self) -> None:
-        pass
+        self.require_mode("fmi2Terminate", "initialized")
+        self.mode = "terminated"
 
     # -- FMU state: the whole core, not only registered variables -------------------------------
     def _get_fmu_state(self) -> dict[str, Any]:
@@ -261,6 +354,7 @@ class CoreSlave(Fmi2Slave):
             "outputs": copy.deepcopy(self.outputs),
             "executions": self.executions,
             "initialized": self.initialized,
+            "mode": self.mode,
         }
 
     def _set_fmu_state(self, state: dict[str, Any]) -> None:
@@ -275,6 +369,7 @@ class CoreSlave(Fmi2Slave):
         self.outputs = copy.deepcopy(state["outputs"])
         self.executions = state["executions"]
         self.initialized = state["initialized"]
+        self.mode = state.get("mode", "initialized" if self.initialized else "instantiated")
 
     def slave_state(self) -> dict[str, Any]:
         return {}
@@ -393,6 +488,7 @@ class PlantSlave(CoreSlave):
     output_variability = "continuous"
 
     def do_step(self, current_time: float, step_size: float) -> bool:
+        self.require_mode("fmi2DoStep", "initialized")
         self.ensure_core()
         if not step_size > 0.0 or not math.isfinite(step_size):
             raise ValueError(f"doStep: step size {step_size} must be positive and finite")
@@ -465,6 +561,7 @@ class SampledControllerSlave(CoreSlave):
         self.outputs["executions"] = self.executions
 
     def do_step(self, current_time: float, step_size: float) -> bool:
+        self.require_mode("fmi2DoStep", "initialized")
         self.ensure_core()
         if not step_size > 0.0 or not math.isfinite(step_size):
             raise ValueError(f"doStep: step size {step_size} must be positive and finite")
@@ -481,6 +578,11 @@ class SampledControllerSlave(CoreSlave):
         self.now_ticks = state["now"]
         self.next_event_ticks = state["next"]
         self.event_done_ticks = state["done"]
+
+
+for _name in _FMI_ENTRY_POINTS:  # CoreSlave's own and those inherited from Fmi2Slave
+    setattr(CoreSlave, _name, _guarded(_name, getattr(CoreSlave, _name)))
+del _name
 
 
 CONTROLLER_TIMING_VARS: tuple[Var, ...] = (
