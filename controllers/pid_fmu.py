@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
-from cosim.fmu_slave import CONTROLLER_TIMING_VARS, SampledControllerSlave, Var
 from controllers.pid import StopPid, StopPidParams
+from cosim.fmu_slave import CONTROLLER_TIMING_VARS, SampledControllerSlave, Var
 
 _D = StopPidParams()
 

@@ -26,6 +26,7 @@ import json
 import math
 import sys
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any, ClassVar
 from xml.etree.ElementTree import Element, SubElement
 
@@ -61,6 +62,8 @@ UNITS: dict[str, tuple[dict[str, int], float]] = {
     "%/m": ({"m": -1}, 0.01),
     "%/(m/s2)": ({"m": -1, "s": 2}, 0.01),
 }
+
+BUNDLE_DIR = "atocosim_bundle"  # project code and data inside an FMU's resources folder
 
 _TYPES = {float: Real, int: Integer, bool: Boolean, str: String}
 
@@ -231,6 +234,19 @@ class CoreSlave(Fmi2Slave):
             self._register(var)
 
     # -- variables -------------------------------------------------------------------------
+    def resource_path(self, *parts: str) -> Path:
+        """Path of a bundled data file or folder, e.g. ``("plants", "routes")``.
+
+        Inside an FMU this is the instance's own resources folder (never a module's
+        ``__file__``: pythonfmu caches modules by name, so a module may come from another
+        extraction of the same FMU); outside an FMU, the project tree.
+        """
+        if self.resources:
+            bundled = Path(self.resources).joinpath(BUNDLE_DIR, *parts)
+            if bundled.exists():
+                return bundled
+        return Path(__file__).resolve().parent.parent.joinpath(*parts)
+
     def _register(self, var: Var) -> None:
         cls = _TYPES[var.type]
         causality = getattr(Fmi2Causality, var.causality)

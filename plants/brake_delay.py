@@ -20,6 +20,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import numpy as np
+
 from cosim.state import StatefulCore, to_seconds, to_ticks
 from plants.resistance import Davis
 from plants.route import Route
@@ -73,8 +75,8 @@ class BrakeDelayTrain(StatefulCore):
         """a_r = a_w(v) + a_g(s) (m/s^2)."""
         return self.p.davis.force(v) / self.p.mass + self.route.grade_accel(s)
 
-    def _accel(self, a_c: float, v: float, s: float) -> float:
-        a = a_c - self.resistance_accel(max(v, 0.0), s)
+    def _accel(self, a_c: float, v: float, grade_accel: float) -> float:
+        a = a_c - self.p.davis.force(max(v, 0.0)) / self.p.mass - grade_accel
         if v <= 0.0 and a <= 0.0:
             return 0.0  # at rest and held: brakes and resistance cannot push it backwards
         return a
@@ -92,25 +94,56 @@ class BrakeDelayTrain(StatefulCore):
     def _lag(self, a_c0: float, a_t: float, dt: float) -> float:
         return a_t + (a_c0 - a_t) * math.exp(-dt / self.p.brake_time_constant)
 
-    def _rk4(self, a_c0: float, a_t: float, v: float, s: float, h: float) -> tuple[float, float]:
+    def _rk4(self, a_t: float, g: float, h: float) -> tuple[float, float]:
+        """RK4 for (v, s) over ``h`` from the current state, exact a_c(t), grade accel ``g``."""
+        a_c0, v, s = self.a_c, self.v, self.s
         a_mid = self._lag(a_c0, a_t, 0.5 * h)
         a_end = self._lag(a_c0, a_t, h)
-        k1v, k1s = self._accel(a_c0, v, s), v
-        k2v, k2s = self._accel(a_mid, v + 0.5 * h * k1v, s + 0.5 * h * k1s), v + 0.5 * h * k1v
-        k3v, k3s = self._accel(a_mid, v + 0.5 * h * k2v, s + 0.5 * h * k2s), v + 0.5 * h * k2v
-        k4v, k4s = self._accel(a_end, v + h * k3v, s + h * k3s), v + h * k3v
+        k1v = self._accel(a_c0, v, g)
+        k2v = self._accel(a_mid, v + 0.5 * h * k1v, g)
+        k3v = self._accel(a_mid, v + 0.5 * h * k2v, g)
+        k4v = self._accel(a_end, v + h * k3v, g)
+        k1s, k2s, k3s, k4s = v, v + 0.5 * h * k1v, v + 0.5 * h * k2v, v + h * k3v
         return (v + h / 6.0 * (k1v + 2 * k2v + 2 * k3v + k4v),
                 s + h / 6.0 * (k1s + 2 * k2s + 2 * k3s + k4s))
 
+    def _next_grade_change(self) -> float:
+        starts = self.route.grade.starts
+        i = int(np.searchsorted(starts, self.s, side="right"))
+        return float(starts[i]) if i < len(starts) else math.inf
+
     def _substep(self, h: float, a_t: float) -> None:
-        v1, s1 = self._rk4(self.a_c, a_t, self.v, self.s, h)
-        if v1 < 0.0:
-            # the train stops inside this sub-step: integrate up to the (secant) stop instant
-            h_stop = h * self.v / (self.v - v1)
-            _, s1 = self._rk4(self.a_c, a_t, self.v, self.s, h_stop)
-            v1 = 0.0
-        self.a_c = self._lag(self.a_c, a_t, h)
-        self.v, self.s = v1, s1
+        """Advance ``h`` seconds with the delayed command constant. Grade changes and the
+        instant of stopping are located (Newton on the RK4 solution) and stepped to exactly,
+        so the result does not depend on where sub-steps fall."""
+        remaining = h
+        while remaining > 0.0:
+            g = self.route.grade_accel(self.s)
+            boundary = self._next_grade_change()
+            dt = remaining
+            v1, s1 = self._rk4(a_t, g, dt)
+            if s1 > boundary and self.v >= 0.0:
+                dt = remaining * (boundary - self.s) / (s1 - self.s)
+                for _ in range(4):
+                    v1, s1 = self._rk4(a_t, g, dt)
+                    dt = min(max(dt - (s1 - boundary) / max(v1, 1e-9), 0.0), remaining)
+                v1, _ = self._rk4(a_t, g, dt)
+                s1 = boundary
+            if v1 < 0.0:
+                dt = dt * self.v / (self.v - v1)
+                for _ in range(4):
+                    v1, s1 = self._rk4(a_t, g, dt)
+                    a1 = self._accel(self._lag(self.a_c, a_t, dt), max(v1, 1e-12), g)
+                    if a1 >= 0.0:
+                        break
+                    dt = min(max(dt - v1 / a1, 0.0), remaining)
+                _, s1 = self._rk4(a_t, g, dt)
+                v1 = 0.0
+                if dt <= 0.0:  # already at rest: hold for the rest of the sub-step
+                    dt = remaining
+            self.a_c = self._lag(self.a_c, a_t, dt)
+            self.v, self.s = v1, s1
+            remaining -= dt
 
     # -- co-simulation step ----------------------------------------------------------------------
     def advance(self, t_ticks: int, h_ticks: int, inputs: dict[str, float]) -> None:
@@ -143,7 +176,7 @@ class BrakeDelayTrain(StatefulCore):
         return {
             "v": self.v,
             "s": self.s,
-            "a": self._accel(self.a_c, self.v, self.s),
+            "a": self._accel(self.a_c, self.v, self.route.grade_accel(self.s)),
             "a_c": self.a_c,
             "applied_command": self.delayed_command(t),
             "grade": self.route.grade.at(self.s),

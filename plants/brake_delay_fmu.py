@@ -54,6 +54,7 @@ class BrakeDelayTrainFmu(PlantSlave):
             brake_delay=val["brake_delay"],
             max_step=val["max_step"],
         )
-        return BrakeDelayTrain(params, load_route(val["route"]), v0=val["v0"], s0=val["s0"],
+        route = load_route(val["route"], self.resource_path("plants", "routes"))
+        return BrakeDelayTrain(params, route, v0=val["v0"], s0=val["s0"],
                                initial_command=val["initial_command"],
                                t0=to_seconds(self.start_ticks))

@@ -1,0 +1,187 @@
+"""``cosim`` command line: build, list, run, validate (and more, each its own command)."""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich.console import Console
+from rich.table import Table
+
+app = typer.Typer(add_completion=False, no_args_is_help=True,
+                  help="Train plants and ATO controllers as FMUs: build, run, validate.")
+console = Console(stderr=True)
+out = Console()
+
+
+def _fail(message: str, code: int = 2) -> None:
+    console.print(f"[bold red]error:[/] {message}", highlight=False)
+    raise typer.Exit(code)
+
+
+@app.command()
+def build(names: Annotated[list[str] | None, typer.Argument(
+        help="FMU identifiers (default: all)")] = None) -> None:
+    """Build FMUs into fmus/ (all, or the named ones)."""
+    from cosim.build import build_fmu, resolve
+
+    try:
+        specs = resolve(names)
+    except ValueError as err:
+        _fail(str(err))
+    for spec in specs:
+        path = build_fmu(spec)
+        out.print(f"built {path.relative_to(Path.cwd()) if path.is_relative_to(Path.cwd()) else path}")
+
+
+@app.command("list")
+def list_() -> None:
+    """List the FMUs this project builds and the shipped scenarios, a line each."""
+    from cosim.build import catalog
+    from cosim.scenario import SCENARIO_DIR
+
+    table = Table(title="FMUs", show_edge=False)
+    table.add_column("identifier")
+    table.add_column("built")
+    table.add_column("description")
+    for spec in catalog().values():
+        table.add_row(spec.identifier, "yes" if spec.path.is_file() else "no", spec.description)
+    out.print(table)
+    table = Table(title="Scenarios", show_edge=False)
+    table.add_column("name")
+    table.add_column("description")
+    for path in sorted(SCENARIO_DIR.glob("*.toml")):
+        try:
+            import tomllib
+        except ModuleNotFoundError:  # Python 3.10
+            import tomli as tomllib  # type: ignore[no-redef]
+        try:
+            desc = tomllib.loads(path.read_text()).get("description", "")
+        except tomllib.TOMLDecodeError as err:
+            desc = f"[red]invalid TOML: {err}[/]"
+        table.add_row(path.stem, desc)
+    out.print(table)
+
+
+SUMMARY_KEYS = ("stop_error_m", "final_speed_mps", "command_switches", "speed_rmse_mps",
+                "speed_mse_kmh2", "iae_kmh_s", "max_abs_speed_error_kmh", "max_abs_accel_mps2",
+                "max_jerk_mps3", "ctcs3_speed_error_ok", "max_coupler_force_kn", "energy_kwh",
+                "arrival_time_error_s", "qp_solves", "qp_infeasible", "qp_solve_time_median_s",
+                "executions", "do_steps", "sim_time_s", "wall_time_s", "real_time_factor")
+
+
+def print_summary(summary: dict, title: str) -> None:
+    table = Table(title=title, show_header=False, show_edge=False)
+    table.add_column("metric", style="bold")
+    table.add_column("value")
+    for key in SUMMARY_KEYS:
+        if key in summary:
+            value = summary[key]
+            if isinstance(value, float):
+                value = f"{value:.6g}"
+            elif isinstance(value, dict):
+                value = ", ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}"
+                                  for k, v in value.items())
+            table.add_row(key, str(value))
+    out.print(table)
+
+
+@app.command()
+def run(
+    scenario: Annotated[str, typer.Argument(help="scenario name in scenarios/ or a path")],
+    out_dir: Annotated[Path | None, typer.Option("--out", help="output folder "
+                                                 "(default runs/<scenario>)")] = None,
+    algorithm: Annotated[str | None, typer.Option(
+        help="event (default), fixed or jacobi; overrides [simulation] algorithm")] = None,
+    set_: Annotated[list[str] | None, typer.Option(
+        "--set", help="override, e.g. plant.mass=539000, controller.N=10, "
+                      "simulation.stop_time=80 (repeatable)")] = None,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="no progress bar")] = False,
+    no_plot: Annotated[bool, typer.Option("--no-plot", help="skip plot.png")] = False,
+) -> None:
+    """Run a scenario; write results.csv, summary.json and plot.png; print the summary."""
+    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+
+    from cosim.master import SimulationError, run_scenario
+    from cosim.scenario import ScenarioError, find_scenario
+
+    try:
+        path = find_scenario(scenario)
+    except ScenarioError as err:
+        _fail(str(err))
+    target = out_dir or Path("runs") / path.stem
+    show = not quiet and sys.stderr.isatty()
+    progress = Progress(TextColumn("[bold]{task.description}"), BarColumn(),
+                        TextColumn("{task.fields[t]:>8.1f} / {task.total:.1f} s sim"),
+                        TimeElapsedColumn(), console=console, disable=not show, transient=True)
+    with progress:
+        task = progress.add_task(path.stem, total=1.0, t=0.0)
+
+        def on_progress(t: float, total: float) -> None:
+            progress.update(task, completed=t, total=total, t=t)
+
+        try:
+            result = run_scenario(path, overrides=set_ or [], algorithm=algorithm,
+                                  out_dir=target, progress=on_progress, plot=not no_plot)
+        except (ScenarioError, SimulationError) as err:
+            progress.stop()
+            _fail(str(err))
+    print_summary(result.summary, f"{path.stem} ({result.algorithm})")
+    out.print(f"wrote {target}/results.csv, summary.json" + ("" if no_plot else ", plot.png"))
+
+
+@app.command()
+def validate(
+    fmus: Annotated[list[str] | None, typer.Argument(
+        help="FMU identifiers or .fmu paths (default: every FMU of the catalog)")] = None,
+    as_json: Annotated[bool, typer.Option("--json", help="machine-readable report")] = False,
+) -> None:
+    """Check FMUs (fmpy validation and our compliance checks); non-zero exit on a problem."""
+    from cosim.build import build_fmu, catalog
+
+    specs = catalog()
+    paths: list[Path] = []
+    for name in fmus or list(specs):
+        if name.endswith(".fmu"):
+            if not Path(name).is_file():
+                _fail(f"{name}: no such file")
+            paths.append(Path(name))
+        elif name in specs:
+            if not specs[name].path.is_file():
+                build_fmu(specs[name])
+            paths.append(specs[name].path)
+        else:
+            _fail(f"unknown FMU {name!r}; known: {sorted(specs)}")
+    try:
+        from cosim.compliance import check_fmu, format_report  # full suite when available
+    except ImportError:
+        check_fmu = format_report = None  # type: ignore[assignment]
+    report: dict[str, list[str]] = {}
+    for path in paths:
+        if check_fmu is not None:
+            problems = [str(p) for p in check_fmu(path)]
+        else:
+            from fmpy.validation import validate_fmu
+
+            problems = list(validate_fmu(str(path)))
+        report[str(path)] = problems
+        if not as_json:
+            status = "[green]ok[/]" if not problems else f"[red]{len(problems)} problem(s)[/]"
+            out.print(f"{path.name}: {status}")
+            for p in problems:
+                out.print(f"  - {p}", highlight=False)
+    if as_json:
+        out.print_json(json.dumps(report))
+    if any(report.values()):
+        raise typer.Exit(1)
+
+
+def main() -> None:  # pragma: no cover - console entry point
+    app()
+
+
+if __name__ == "__main__":  # pragma: no cover
+    app()

@@ -1,0 +1,579 @@
+"""Co-simulation master on fmpy's FMU2Slave.
+
+Three separate concerns, each a small class:
+
+* :class:`FmuUnit` handles one FMU instance (load, parameters, get/set, doStep, counters);
+* an algorithm (:class:`EventDriven`, :class:`FixedStep`, :class:`Jacobi`) decides when each
+  FMU steps and in which order values flow;
+* a :class:`Recorder` stores the time series at the output points.
+
+Values flow at each communication point in dependency order (SPEC timing contract): outputs of
+FMUs without direct feedthrough (plants) -> inputs of feedthrough FMUs (controllers) -> their
+outputs -> inputs of the plants, so a command computed from the measurement at t acts from t.
+Time is kept in integer nanoseconds.
+"""
+
+from __future__ import annotations
+
+import atexit
+import re
+import shutil
+import time
+from abc import ABC, abstractmethod
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from fmpy import extract, read_model_description
+from fmpy.fmi2 import (
+    FMU2Slave,
+    calloc,
+    fmi2CallbackAllocateMemoryTYPE,
+    fmi2CallbackFreeMemoryTYPE,
+    fmi2CallbackFunctions,
+    fmi2CallbackLoggerTYPE,
+    free,
+)
+
+from cosim.scenario import Connection, Scenario, ScenarioError, check_against_fmus, load_scenario
+from cosim.state import to_seconds, to_ticks
+
+ProgressFn = Callable[[float, float], None]
+
+# One extraction per FMU file (and version) per process: pythonfmu caches the FMU's Python
+# module by name, so later instances keep using the first extraction; it stays until exit.
+_EXTRACTED: dict[tuple[str, float], str] = {}
+
+
+def extract_once(path: Path) -> str:
+    key = (str(path.resolve()), path.stat().st_mtime)
+    if key not in _EXTRACTED:
+        _EXTRACTED[key] = extract(str(path))
+    return _EXTRACTED[key]
+
+
+@atexit.register
+def _remove_extractions() -> None:
+    for d in _EXTRACTED.values():
+        shutil.rmtree(d, ignore_errors=True)
+
+
+class SimulationError(RuntimeError):
+    """An FMU call failed during a run; the message names the FMU, the call and the time."""
+
+
+@dataclass
+class Variable:
+    vr: int
+    type: str
+    causality: str
+
+
+class FmuUnit:
+    """One FMU instance: values by name, doStep accounting, scheduling information."""
+
+    def __init__(self, name: str, path: Path, unzipdir: str, md: Any) -> None:
+        self.name = name
+        self.path = path
+        self.md = md
+        self.vars = {v.name: Variable(v.valueReference, v.type, v.causality)
+                     for v in md.modelVariables}
+        self.slave = FMU2Slave(guid=md.guid, unzipDirectory=unzipdir,
+                               modelIdentifier=md.coSimulation.modelIdentifier,
+                               instanceName=name)
+        self.feedthrough = any(u.dependencies for u in md.outputs)
+        self.time_ticks = 0
+        self.do_steps = 0
+        self.wall_time = 0.0
+        self.sample_ticks: int | None = None
+        self.max_step_ticks: int | None = None
+        self.next_event_ticks: int | None = None
+        self.has_next_event_output = "next_event_time" in self.vars
+        self.messages: list[str] = []
+
+        def logger(env, instance, status, category, message) -> None:
+            text = message.decode("utf-8", "replace") if message else ""
+            self.messages.append(text)
+
+        self._callbacks = fmi2CallbackFunctions()  # kept referenced while the FMU lives
+        self._callbacks.logger = fmi2CallbackLoggerTYPE(logger)
+        self._callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
+        self._callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
+
+    def instantiate(self) -> None:
+        self.slave.instantiate(callbacks=self._callbacks, loggingOn=True)
+
+    def last_messages(self, n: int = 3) -> str:
+        """The FMU's last log messages, for error reports."""
+        return " | ".join(m.strip() for m in self.messages[-n:])
+
+    # -- values ------------------------------------------------------------------------------
+    def get(self, names: list[str]) -> list[Any]:
+        t0 = time.perf_counter()
+        out: list[Any] = []
+        for name in names:
+            var = self.vars[name]
+            if var.type == "Real":
+                out.append(self.slave.getReal([var.vr])[0])
+            elif var.type == "Integer":
+                out.append(self.slave.getInteger([var.vr])[0])
+            elif var.type == "Boolean":
+                out.append(self.slave.getBoolean([var.vr])[0])
+            else:
+                out.append(self.slave.getString([var.vr])[0])
+        self.wall_time += time.perf_counter() - t0
+        return out
+
+    def get_reals(self, vrs: list[int]) -> list[float]:
+        t0 = time.perf_counter()
+        values = self.slave.getReal(vrs)
+        self.wall_time += time.perf_counter() - t0
+        return values
+
+    def set(self, name: str, value: Any) -> None:
+        var = self.vars[name]
+        t0 = time.perf_counter()
+        if var.type == "Real":
+            self.slave.setReal([var.vr], [float(value)])
+        elif var.type == "Integer":
+            self.slave.setInteger([var.vr], [int(value)])
+        elif var.type == "Boolean":
+            self.slave.setBoolean([var.vr], [bool(value)])
+        else:
+            self.slave.setString([var.vr], [str(value)])
+        self.wall_time += time.perf_counter() - t0
+
+    def set_reals(self, vrs: list[int], values: list[float]) -> None:
+        t0 = time.perf_counter()
+        self.slave.setReal(vrs, values)
+        self.wall_time += time.perf_counter() - t0
+
+    def step_to(self, ticks: int) -> None:
+        """doStep from this FMU's own time to ``ticks``."""
+        h = ticks - self.time_ticks
+        if h <= 0:
+            return
+        t0 = time.perf_counter()
+        try:
+            self.slave.doStep(currentCommunicationPoint=to_seconds(self.time_ticks),
+                              communicationStepSize=to_seconds(h))
+        except Exception as err:  # fmpy raises FMICallException with the status
+            raise SimulationError(f"{self.name}: doStep at t={to_seconds(self.time_ticks)} s, "
+                                  f"h={to_seconds(h)} s failed: {err}; FMU says: "
+                                  f"{self.last_messages()}") from err
+        self.wall_time += time.perf_counter() - t0
+        self.do_steps += 1
+        self.time_ticks = ticks
+
+    def update_schedule(self, now: int) -> None:
+        """Next event after an event at ``now``: announced by the FMU or periodic."""
+        if self.has_next_event_output:
+            nxt = to_ticks(self.get(["next_event_time"])[0])
+            if nxt <= now:
+                raise SimulationError(f"{self.name}: next_event_time {to_seconds(nxt)} s is not "
+                                      f"after the current time {to_seconds(now)} s")
+            self.next_event_ticks = nxt
+        elif self.sample_ticks is not None:
+            self.next_event_ticks = now + self.sample_ticks
+
+    @property
+    def scheduled(self) -> bool:
+        return self.has_next_event_output or self.sample_ticks is not None
+
+
+@dataclass
+class Link:
+    """A resolved connection with value references, and its change count."""
+
+    conn: Connection
+    src: FmuUnit
+    dst: FmuUnit
+    src_name: str
+    dst_name: str
+    last: Any = None
+    changes: int = 0
+
+
+class Recorder:
+    """Records named variables at output points into a preallocated array."""
+
+    def __init__(self, refs: list[tuple[FmuUnit, str]], n_points: int) -> None:
+        self.refs = refs
+        self.columns = [f"{u.name}.{n}" for u, n in refs]
+        self.data = np.full((n_points, len(refs) + 1), np.nan)
+        self.rows = 0
+        by_unit: dict[str, tuple[FmuUnit, list[int], list[int]]] = {}
+        for col, (unit, name) in enumerate(refs):
+            entry = by_unit.setdefault(unit.name, (unit, [], []))
+            entry[1].append(name)  # type: ignore[arg-type]
+            entry[2].append(col + 1)
+        self._by_unit = list(by_unit.values())
+
+    def record(self, ticks: int) -> None:
+        if self.rows == len(self.data):
+            self.data = np.vstack([self.data, np.full_like(self.data, np.nan)])
+        row = self.data[self.rows]
+        row[0] = to_seconds(ticks)
+        for unit, names, cols in self._by_unit:
+            row[cols] = unit.get(names)  # type: ignore[arg-type]
+        self.rows += 1
+
+    def frame(self):
+        import pandas as pd
+
+        return pd.DataFrame(self.data[: self.rows], columns=["time", *self.columns])
+
+
+class Algorithm(ABC):
+    """A stepping policy over the units of a :class:`Master`."""
+
+    name = ""
+
+    def __init__(self, master: Master) -> None:
+        self.m = master
+
+    @abstractmethod
+    def run(self) -> None: ...
+
+
+class EventDriven(Algorithm):
+    """Next communication point = earliest of every scheduled FMU's next event, the output
+    points, each FMU's max step and the stop time. Plants step at every point; a scheduled
+    (sampled or self-triggered) FMU steps only to its own events."""
+
+    name = "event"
+
+    def run(self) -> None:
+        m = self.m
+        t = m.start_ticks
+        due = set(m.units)
+        while True:
+            m.propagate(due)
+            for unit in due:
+                if unit.scheduled:
+                    unit.update_schedule(t)
+            m.maybe_record(t)
+            if t >= m.stop_ticks:
+                break
+            candidates = [m.stop_ticks, m.next_output_ticks]
+            for u in m.units:
+                if u.scheduled:
+                    candidates.append(u.next_event_ticks)
+                elif u.max_step_ticks:
+                    candidates.append(u.time_ticks + u.max_step_ticks)
+            t_next = min(candidates)
+            due = {u for u in m.units if not u.scheduled or u.next_event_ticks == t_next}
+            for unit in m.units:
+                if unit in due:
+                    unit.step_to(t_next)
+            t = t_next
+            m.progress(t)
+        m.finish(t)
+
+
+class FixedStep(Algorithm):
+    """Every FMU every base step, values flowing in dependency order (Gauss-Seidel)."""
+
+    name = "fixed"
+
+    def run(self) -> None:
+        m = self.m
+        h = m.base_step_ticks
+        k = 0
+        t = m.start_ticks
+        while True:
+            m.propagate(set(m.units))
+            m.maybe_record(t)
+            if t >= m.stop_ticks:
+                break
+            k += 1
+            t = min(m.start_ticks + k * h, m.stop_ticks)
+            for unit in m.units:
+                unit.step_to(t)
+            m.progress(t)
+        m.finish(t)
+
+
+class Jacobi(Algorithm):
+    """Every FMU every base step from the same values: after all doSteps, read every output,
+    then set every input (as libcosim does). A command reaches the plant one step later."""
+
+    name = "jacobi"
+
+    def run(self) -> None:
+        m = self.m
+        h = m.base_step_ticks
+        k = 0
+        t = m.start_ticks
+        while True:
+            values = [link.src.get([link.src_name])[0] for link in m.links]
+            m.maybe_record(t)
+            for link, value in zip(m.links, values):
+                m.transfer(link, value)
+            if t >= m.stop_ticks:
+                break
+            k += 1
+            t = min(m.start_ticks + k * h, m.stop_ticks)
+            for unit in m.units:
+                unit.step_to(t)
+            m.progress(t)
+        m.finish(t)
+
+
+ALGORITHM_CLASSES: dict[str, type[Algorithm]] = {
+    cls.name: cls for cls in (EventDriven, FixedStep, Jacobi)
+}
+
+
+def _expand(units: dict[str, FmuUnit], ref: str) -> list[tuple[FmuUnit, str]]:
+    comp, var = ref.split(".", 1)
+    unit = units[comp]
+    if "*" not in var:
+        return [(unit, var)]
+    pattern = re.compile(re.escape(var).replace(r"\*", ".*") + "$")
+    return [(unit, n) for n in unit.vars if pattern.match(n)]
+
+
+class Master:
+    """Loads the FMUs of a scenario, initialises and wires them, and runs an algorithm."""
+
+    def __init__(self, scenario: Scenario, algorithm: str | None = None,
+                 progress: ProgressFn | None = None) -> None:
+        self.scenario = scenario
+        self.algorithm_name = algorithm or scenario.simulation.algorithm
+        if self.algorithm_name not in ALGORITHM_CLASSES:
+            raise ScenarioError(f"unknown algorithm {self.algorithm_name!r}; expected one of "
+                                f"{sorted(ALGORITHM_CLASSES)}")
+        self._progress_fn = progress
+        sim = scenario.simulation
+        self.start_ticks = to_ticks(sim.start_time)
+        self.stop_ticks = to_ticks(sim.stop_time)
+        self.output_ticks = to_ticks(sim.output_interval)
+        self.next_output_ticks = self.start_ticks
+        base = sim.base_step if sim.base_step is not None else sim.output_interval
+        self.base_step_ticks = to_ticks(base)
+        self.units: list[FmuUnit] = []
+        self.links: list[Link] = []
+        self.order: list[FmuUnit] = []
+        self.wall_time = 0.0
+
+    # -- set-up --------------------------------------------------------------------------------
+    def load(self) -> None:
+        sc = self.scenario
+        descriptions = {}
+        extracted: dict[Path, str] = {}
+        for comp in sc.components.values():
+            if not comp.fmu_path.is_file():
+                raise ScenarioError(f"{sc.path}: [fmus.{comp.name}] fmu = {comp.fmu!r}: "
+                                    f"{comp.fmu_path} not found (run `cosim build`)")
+            extracted[comp.fmu_path] = extract_once(comp.fmu_path)
+            descriptions[comp.name] = read_model_description(str(comp.fmu_path))
+        check_against_fmus(sc, descriptions)
+        by_name: dict[str, FmuUnit] = {}
+        for comp in sc.components.values():
+            unit = FmuUnit(comp.name, comp.fmu_path, extracted[comp.fmu_path],
+                           descriptions[comp.name])
+            if comp.sample_time is not None:
+                unit.sample_ticks = to_ticks(comp.sample_time)
+            if comp.max_step is not None:
+                unit.max_step_ticks = to_ticks(comp.max_step)
+            by_name[comp.name] = unit
+            self.units.append(unit)
+        self.by_name = by_name
+        for c in sc.connections:
+            self.links.append(Link(c, by_name[c.src], by_name[c.dst], c.src_var, c.dst_var))
+        self.order = self._dependency_order()
+        self._inputs_of = {u.name: [lk for lk in self.links if lk.dst is u] for u in self.units}
+
+    def _dependency_order(self) -> list[FmuUnit]:
+        """Units ordered so that every feedthrough source sets its inputs before its readers."""
+        order: list[FmuUnit] = []
+        state: dict[str, int] = {}
+
+        def visit(unit: FmuUnit, path: list[str]) -> None:
+            if state.get(unit.name) == 2:
+                return
+            if state.get(unit.name) == 1:
+                loop = " -> ".join([*path[path.index(unit.name):], unit.name])
+                raise ScenarioError(f"{self.scenario.path}: algebraic loop through FMUs with "
+                                    f"direct feedthrough: {loop}")
+            state[unit.name] = 1
+            for link in self.links:
+                if link.dst is unit and link.src.feedthrough and link.src is not unit:
+                    visit(link.src, [*path, unit.name])
+            state[unit.name] = 2
+            order.append(unit)
+
+        for unit in self.units:
+            visit(unit, [])
+        return order
+
+    def initialize(self) -> None:
+        sc = self.scenario
+        for unit in self.units:
+            comp = sc.components[unit.name]
+            unit.instantiate()
+            unit.slave.setupExperiment(startTime=sc.simulation.start_time,
+                                       stopTime=sc.simulation.stop_time)
+            unit.time_ticks = self.start_ticks
+            params = dict(comp.parameters)
+            if comp.sample_time is not None and "sample_time" in unit.vars:
+                params.setdefault("sample_time", comp.sample_time)
+            try:
+                for name, value in {**params, **comp.inputs}.items():
+                    unit.set(name, value)
+                unit.slave.enterInitializationMode()
+            except Exception as err:
+                raise SimulationError(f"{unit.name} ({comp.fmu}): rejected parameters: "
+                                      f"{err}; FMU says: {unit.last_messages()}") from err
+        if self.algorithm_name == "jacobi":
+            # initial values flow once in initialization mode (plant outputs are valid there)
+            for link in self.links:
+                if not link.src.feedthrough:
+                    self.transfer(link, link.src.get([link.src_name])[0])
+        for unit in self.units:
+            try:
+                unit.slave.exitInitializationMode()
+            except Exception as err:
+                raise SimulationError(f"{unit.name}: exitInitializationMode failed: "
+                                      f"{unit.last_messages()}") from err
+
+    # -- used by the algorithms ------------------------------------------------------------------
+    def transfer(self, link: Link, value: Any) -> None:
+        if link.last is not None and value != link.last:
+            link.changes += 1
+        link.last = value
+        link.dst.set(link.dst_name, value)
+
+    def propagate(self, due: set[FmuUnit]) -> None:
+        """Set the inputs of every due FMU from its sources, in dependency order."""
+        for unit in self.order:
+            if unit not in due:
+                continue
+            for link in self._inputs_of[unit.name]:
+                self.transfer(link, link.src.get([link.src_name])[0])
+
+    def maybe_record(self, ticks: int) -> None:
+        if ticks >= self.next_output_ticks or ticks >= self.stop_ticks:
+            self.recorder.record(ticks)
+            while self.next_output_ticks <= ticks:
+                self.next_output_ticks += self.output_ticks
+            self.next_output_ticks = min(self.next_output_ticks, self.stop_ticks)
+
+    def progress(self, ticks: int) -> None:
+        if self._progress_fn is not None:
+            self._progress_fn(to_seconds(ticks - self.start_ticks),
+                              to_seconds(self.stop_ticks - self.start_ticks))
+
+    def finish(self, ticks: int) -> None:
+        self.end_ticks = ticks
+
+    # -- run -----------------------------------------------------------------------------------
+    def run(self) -> RunResult:
+        t0 = time.perf_counter()
+        self.load()
+        refs = self._recorded_refs()
+        n_points = int((self.stop_ticks - self.start_ticks) // self.output_ticks) + 2
+        self.recorder = Recorder(refs, n_points)
+        try:
+            self.initialize()
+            ALGORITHM_CLASSES[self.algorithm_name](self).run()
+            final_outputs = self._final_outputs()
+            for unit in self.units:
+                unit.slave.terminate()
+        finally:
+            for unit in self.units:
+                try:
+                    unit.slave.freeInstance()
+                except Exception:  # noqa: BLE001 - freeing must not hide the real error
+                    pass
+        self.wall_time = time.perf_counter() - t0
+        return RunResult(
+            scenario=self.scenario,
+            algorithm=self.algorithm_name,
+            frame=self.recorder.frame(),
+            do_steps={u.name: u.do_steps for u in self.units},
+            executions={u.name: int(final_outputs[u.name].get("executions", u.do_steps))
+                        for u in self.units},
+            fmu_wall_time_s={u.name: u.wall_time for u in self.units},
+            connection_changes={f"{lk.conn.src}.{lk.src_name}": lk.changes for lk in self.links},
+            final_outputs=final_outputs,
+            wall_time_s=self.wall_time,
+            sim_time_s=to_seconds(self.end_ticks - self.start_ticks),
+        )
+
+    def _recorded_refs(self) -> list[tuple[FmuUnit, str]]:
+        sc = self.scenario
+        refs: list[str] = list(sc.record) if sc.record is not None else [
+            f"{u.name}.{n}" for u in self.units for n, v in u.vars.items()
+            if v.causality == "output" and v.type in ("Real", "Integer", "Boolean")]
+        for value in sc.summary.values():
+            for ref in value if isinstance(value, list) else [value]:
+                if isinstance(ref, str) and "." in ref and ref.split(".", 1)[0] in self.by_name:
+                    refs.append(ref)
+        seen: set[tuple[str, str]] = set()
+        out: list[tuple[FmuUnit, str]] = []
+        for ref in refs:
+            for unit, name in _expand(self.by_name, ref):
+                if (unit.name, name) not in seen and unit.vars[name].type != "String":
+                    seen.add((unit.name, name))
+                    out.append((unit, name))
+        return out
+
+    def _final_outputs(self) -> dict[str, dict[str, Any]]:
+        out: dict[str, dict[str, Any]] = {}
+        for unit in self.units:
+            names = [n for n, v in unit.vars.items()
+                     if v.causality == "output" and v.type != "String"]
+            out[unit.name] = dict(zip(names, unit.get(names)))
+        return out
+
+
+@dataclass
+class RunResult:
+    scenario: Scenario
+    algorithm: str
+    frame: Any  # pandas.DataFrame, first column "time" (s)
+    do_steps: dict[str, int]
+    executions: dict[str, int]
+    fmu_wall_time_s: dict[str, float]
+    connection_changes: dict[str, int]
+    final_outputs: dict[str, dict[str, Any]]
+    wall_time_s: float
+    sim_time_s: float
+    summary: dict[str, Any] = field(default_factory=dict)
+
+    def write(self, out_dir: Path, plot: bool = True) -> list[Path]:
+        from cosim.results import write_results
+
+        return write_results(self, Path(out_dir), plot=plot)
+
+
+def run_scenario(scenario: str | Path | Scenario, overrides: dict[str, Any] | list[str] | None
+                 = None, algorithm: str | None = None, out_dir: str | Path | None = None,
+                 progress: ProgressFn | None = None, build: bool = True,
+                 plot: bool = True) -> RunResult:
+    """Load (and override) a scenario, build missing or stale FMUs, run it, compute the summary
+    and, with ``out_dir``, write results.csv, summary.json and plot.png."""
+    from cosim.metrics import compute_summary
+
+    sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario, overrides)
+    if build:
+        ensure_built(sc)
+    result = Master(sc, algorithm, progress).run()
+    result.summary = compute_summary(result)
+    if out_dir is not None:
+        result.write(Path(out_dir), plot=plot)
+    return result
+
+
+def ensure_built(sc: Scenario) -> list[Path]:
+    """Build the scenario's catalog FMUs that are missing or older than their sources."""
+    from cosim.build import FMU_DIR, build_stale, catalog
+
+    specs = catalog()
+    wanted = [specs[c.fmu] for c in sc.components.values()
+              if c.fmu in specs and c.fmu_path.parent == FMU_DIR]
+    return build_stale(wanted)

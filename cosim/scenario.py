@@ -1,0 +1,372 @@
+"""Scenario files (TOML): which FMUs, their parameters, connections, timing and what to record.
+
+Format (see ``scenarios/seed000_stop_pid.toml``)::
+
+    description = "..."
+    [simulation]
+    stop_time = 60.0          # s (required)
+    start_time = 0.0          # s
+    output_interval = 0.2     # s, spacing of the recorded time series
+    algorithm = "event"       # event | fixed | jacobi
+    base_step = 0.2           # s, communication step of the fixed-step algorithms
+    [fmus.NAME]
+    fmu = "BrakeDelayTrain"   # FMU identifier in fmus/ (built on demand) or a path to a .fmu
+    sample_time = 0.2         # s, optional: periodic events of a sampled FMU (also set as its
+                              # `sample_time` parameter if it has one)
+    max_step = 0.5            # s, optional: longest communication step for this FMU
+    [fmus.NAME.parameters]    # parameter values (names as in the FMU's modelDescription)
+    [fmus.NAME.inputs]        # constant values for inputs that are not connected
+    [connections]             # "dst.input" = "src.output" (one source per input)
+    [record]
+    variables = ["NAME.var", ...]   # default: every output of every FMU
+    [summary]                 # which recorded variables the summary metrics read (cosim.metrics)
+
+Every error names the file, the key and what is wrong.
+"""
+
+from __future__ import annotations
+
+import difflib
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+try:
+    import tomllib
+except ModuleNotFoundError:  # Python 3.10
+    import tomli as tomllib  # type: ignore[no-redef]
+
+from cosim.build import FMU_DIR, ROOT
+
+SCENARIO_DIR = ROOT / "scenarios"
+ALGORITHMS = ("event", "fixed", "jacobi")
+
+
+class ScenarioError(ValueError):
+    """A scenario file or override that cannot be run; the message names file and key."""
+
+
+@dataclass
+class Component:
+    name: str
+    fmu: str  # identifier or path as written
+    fmu_path: Path
+    sample_time: float | None = None
+    max_step: float | None = None
+    parameters: dict[str, Any] = field(default_factory=dict)
+    inputs: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class Connection:
+    src: str  # component name
+    src_var: str
+    dst: str
+    dst_var: str
+
+    def __str__(self) -> str:
+        return f"{self.src}.{self.src_var} -> {self.dst}.{self.dst_var}"
+
+
+@dataclass
+class Simulation:
+    stop_time: float
+    start_time: float = 0.0
+    output_interval: float = 0.1
+    algorithm: str = "event"
+    base_step: float | None = None
+
+
+@dataclass
+class Scenario:
+    path: Path
+    name: str
+    description: str
+    simulation: Simulation
+    components: dict[str, Component]
+    connections: list[Connection]
+    record: list[str] | None
+    summary: dict[str, Any]
+    raw: dict[str, Any]
+
+
+def find_scenario(name_or_path: str | Path) -> Path:
+    """A scenario by path, or by name in ``scenarios/`` (with or without ``.toml``)."""
+    path = Path(name_or_path)
+    if path.is_file():
+        return path
+    for candidate in (SCENARIO_DIR / f"{name_or_path}.toml", SCENARIO_DIR / str(name_or_path)):
+        if candidate.is_file():
+            return candidate
+    known = sorted(p.stem for p in SCENARIO_DIR.glob("*.toml"))
+    hint = difflib.get_close_matches(str(name_or_path), known, n=1)
+    raise ScenarioError(f"{name_or_path}: no such scenario file"
+                        + (f" (did you mean {hint[0]!r}?)" if hint else f"; shipped: {known}"))
+
+
+def parse_value(text: str) -> Any:
+    """A ``--set`` value: a TOML literal (number, bool, string, array), else the raw string."""
+    try:
+        return tomllib.loads(f"v = {text}")["v"]
+    except tomllib.TOMLDecodeError:
+        return text
+
+
+def apply_overrides(raw: dict[str, Any], overrides: dict[str, Any] | list[str] | None,
+                    source: str) -> None:
+    """Apply ``NAME.param=value`` (parameter), ``NAME.sample_time=``, ``simulation.key=``,
+    ``summary.key=`` overrides in place."""
+    if not overrides:
+        return
+    items = overrides.items() if isinstance(overrides, dict) else [
+        _split_override(o) for o in overrides]
+    for key, value in items:
+        if isinstance(value, str) and not isinstance(overrides, dict):
+            value = parse_value(value)
+        head, _, rest = key.partition(".")
+        if not rest:
+            raise ScenarioError(f"{source}: --set {key}: expected NAME.key=value")
+        if head in ("simulation", "summary"):
+            raw.setdefault(head, {})[rest] = value
+            continue
+        fmus = raw.get("fmus", {})
+        if head not in fmus:
+            raise ScenarioError(f"{source}: --set {key}: no FMU named {head!r} "
+                                f"(scenario has {sorted(fmus)})")
+        if rest in ("sample_time", "max_step", "fmu"):
+            fmus[head][rest] = value
+        elif rest.startswith("inputs."):
+            fmus[head].setdefault("inputs", {})[rest[7:]] = value
+        else:
+            fmus[head].setdefault("parameters", {})[rest] = value
+
+
+def _split_override(text: str) -> tuple[str, str]:
+    key, sep, value = text.partition("=")
+    if not sep or not key.strip():
+        raise ScenarioError(f"--set {text!r}: expected KEY=VALUE, e.g. plant.mass=539000")
+    return key.strip(), value.strip()
+
+
+def _number(source: str, key: str, value: Any, positive: bool = True,
+            allow_zero: bool = False) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ScenarioError(f"{source}: {key} = {value!r}: expected a number")
+    value = float(value)
+    if not math.isfinite(value):
+        raise ScenarioError(f"{source}: {key} = {value}: must be finite")
+    if positive and not (value > 0 or (allow_zero and value == 0)):
+        raise ScenarioError(f"{source}: {key} = {value}: must be "
+                            + ("non-negative" if allow_zero else "positive"))
+    return value
+
+
+def _resolve_fmu(source: Path, key: str, fmu: Any) -> Path:
+    if not isinstance(fmu, str) or not fmu:
+        raise ScenarioError(f"{source}: {key} = {fmu!r}: expected an FMU identifier or path")
+    if fmu.endswith(".fmu"):
+        path = Path(fmu)
+        if not path.is_absolute():
+            path = (source.parent / path).resolve()
+        if not path.is_file():
+            raise ScenarioError(f"{source}: {key} = {fmu!r}: file {path} does not exist")
+        return path
+    from cosim.build import catalog
+
+    known = catalog()
+    if fmu not in known:
+        hint = difflib.get_close_matches(fmu, list(known), n=1)
+        raise ScenarioError(f"{source}: {key} = {fmu!r}: unknown FMU"
+                            + (f" (did you mean {hint[0]!r}?)" if hint else "")
+                            + f"; known: {sorted(known)}")
+    return FMU_DIR / f"{fmu}.fmu"
+
+
+def _split_ref(source: Path, key: str, ref: Any, components: dict[str, Component]
+               ) -> tuple[str, str]:
+    if not isinstance(ref, str) or "." not in ref:
+        raise ScenarioError(f"{source}: {key} = {ref!r}: expected 'FMU.variable'")
+    comp, var = ref.split(".", 1)
+    if comp not in components:
+        raise ScenarioError(f"{source}: {key} = {ref!r}: no FMU named {comp!r} "
+                            f"(scenario has {sorted(components)})")
+    return comp, var
+
+
+def load_scenario(name_or_path: str | Path,
+                  overrides: dict[str, Any] | list[str] | None = None) -> Scenario:
+    """Read, override and check the structure of a scenario (variables are checked against
+    the FMUs' modelDescriptions by :func:`check_against_fmus`)."""
+    path = find_scenario(name_or_path)
+    try:
+        with open(path, "rb") as f:
+            raw = tomllib.load(f)
+    except tomllib.TOMLDecodeError as err:
+        raise ScenarioError(f"{path}: not valid TOML: {err}") from err
+    apply_overrides(raw, overrides, str(path))
+    unknown = set(raw) - {"description", "simulation", "fmus", "connections", "record",
+                          "summary"}
+    if unknown:
+        raise ScenarioError(f"{path}: unknown top-level key(s) {sorted(unknown)}")
+
+    sim_raw = raw.get("simulation")
+    if not isinstance(sim_raw, dict) or "stop_time" not in sim_raw:
+        raise ScenarioError(f"{path}: [simulation] stop_time is required")
+    bad = set(sim_raw) - {"stop_time", "start_time", "output_interval", "algorithm", "base_step"}
+    if bad:
+        raise ScenarioError(f"{path}: [simulation] unknown key(s) {sorted(bad)}")
+    algorithm = sim_raw.get("algorithm", "event")
+    if algorithm not in ALGORITHMS:
+        raise ScenarioError(f"{path}: [simulation] algorithm = {algorithm!r}: expected one of "
+                            f"{list(ALGORITHMS)}")
+    sim = Simulation(
+        stop_time=_number(path, "[simulation] stop_time", sim_raw["stop_time"]),
+        start_time=_number(path, "[simulation] start_time", sim_raw.get("start_time", 0.0),
+                           positive=False),
+        output_interval=_number(path, "[simulation] output_interval",
+                                sim_raw.get("output_interval", 0.1)),
+        algorithm=algorithm,
+        base_step=(_number(path, "[simulation] base_step", sim_raw["base_step"])
+                   if "base_step" in sim_raw else None),
+    )
+    if sim.stop_time <= sim.start_time:
+        raise ScenarioError(f"{path}: [simulation] stop_time = {sim.stop_time} must be after "
+                            f"start_time = {sim.start_time}")
+
+    fmus_raw = raw.get("fmus")
+    if not isinstance(fmus_raw, dict) or not fmus_raw:
+        raise ScenarioError(f"{path}: [fmus] must name at least one FMU")
+    components: dict[str, Component] = {}
+    for name, spec in fmus_raw.items():
+        key = f"[fmus.{name}]"
+        if not isinstance(spec, dict):
+            raise ScenarioError(f"{path}: {key} must be a table")
+        bad = set(spec) - {"fmu", "sample_time", "max_step", "parameters", "inputs"}
+        if bad:
+            raise ScenarioError(f"{path}: {key} unknown key(s) {sorted(bad)}")
+        if "fmu" not in spec:
+            raise ScenarioError(f"{path}: {key} fmu is required")
+        for table in ("parameters", "inputs"):
+            if not isinstance(spec.get(table, {}), dict):
+                raise ScenarioError(f"{path}: [fmus.{name}.{table}] must be a table")
+        components[name] = Component(
+            name=name,
+            fmu=spec["fmu"],
+            fmu_path=_resolve_fmu(path, f"{key} fmu", spec["fmu"]),
+            sample_time=(_number(path, f"{key} sample_time", spec["sample_time"])
+                         if "sample_time" in spec else None),
+            max_step=(_number(path, f"{key} max_step", spec["max_step"])
+                      if "max_step" in spec else None),
+            parameters=dict(spec.get("parameters", {})),
+            inputs=dict(spec.get("inputs", {})),
+        )
+
+    connections: list[Connection] = []
+    conn_raw = raw.get("connections", {})
+    if not isinstance(conn_raw, dict):
+        raise ScenarioError(f"{path}: [connections] must be a table of \"dst.input\" = "
+                            f"\"src.output\"")
+    for dst_ref, src_ref in conn_raw.items():
+        key = f"[connections] {dst_ref!r}"
+        dst, dst_var = _split_ref(path, key, dst_ref, components)
+        src, src_var = _split_ref(path, key, src_ref, components)
+        connections.append(Connection(src, src_var, dst, dst_var))
+
+    record = raw.get("record", {}).get("variables")
+    if record is not None:
+        if not isinstance(record, list) or not all(isinstance(r, str) for r in record):
+            raise ScenarioError(f"{path}: [record] variables must be a list of 'FMU.variable'")
+        for ref in record:
+            _split_ref(path, "[record] variables", ref, components)
+
+    summary = raw.get("summary", {})
+    if not isinstance(summary, dict):
+        raise ScenarioError(f"{path}: [summary] must be a table")
+    return Scenario(path=path, name=path.stem, description=str(raw.get("description", "")),
+                    simulation=sim, components=components, connections=connections,
+                    record=record, summary=summary, raw=raw)
+
+
+_PY_TYPES = {"Real": (int, float), "Integer": (int,), "Boolean": (bool,), "String": (str,)}
+
+
+def check_against_fmus(scenario: Scenario, descriptions: dict[str, Any]) -> None:
+    """Check names, causalities, types and units of everything the scenario refers to.
+
+    ``descriptions`` maps component name to its fmpy ``ModelDescription``.
+    """
+    src = scenario.path
+    variables = {name: {v.name: v for v in md.modelVariables}
+                 for name, md in descriptions.items()}
+
+    def lookup(comp: str, var: str, key: str, causalities: tuple[str, ...]) -> Any:
+        vars_ = variables[comp]
+        if var not in vars_:
+            hint = difflib.get_close_matches(var, list(vars_), n=1)
+            raise ScenarioError(
+                f"{src}: {key}: {comp} ({scenario.components[comp].fmu}) has no variable "
+                f"{var!r}" + (f" (did you mean {hint[0]!r}?)" if hint else ""))
+        v = vars_[var]
+        if v.causality not in causalities:
+            raise ScenarioError(f"{src}: {key}: {comp}.{var} is a {v.causality}, expected "
+                                f"{' or '.join(causalities)}")
+        return v
+
+    def check_value(comp: str, var: str, key: str, value: Any, v: Any) -> None:
+        ok = _PY_TYPES[v.type]
+        if isinstance(value, bool) and v.type != "Boolean" or not isinstance(value, ok):
+            raise ScenarioError(f"{src}: {key}: {comp}.{var} is {v.type}, got {value!r}")
+        if v.type == "Real":
+            if not math.isfinite(float(value)):
+                raise ScenarioError(f"{src}: {key}: {value!r} is not finite")
+            lo = float(v.min) if v.min is not None else -math.inf
+            hi = float(v.max) if v.max is not None else math.inf
+            if not lo <= float(value) <= hi:
+                raise ScenarioError(f"{src}: {key}: {comp}.{var} = {value} outside "
+                                    f"[{v.min}, {v.max}] ({v.unit or 'no unit'})")
+
+    for name, comp in scenario.components.items():
+        for par, value in comp.parameters.items():
+            key = f"[fmus.{name}.parameters] {par}"
+            check_value(name, par, key, value, lookup(name, par, key, ("parameter",)))
+        for inp, value in comp.inputs.items():
+            key = f"[fmus.{name}.inputs] {inp}"
+            check_value(name, inp, key, value, lookup(name, inp, key, ("input",)))
+        if comp.sample_time is not None and "sample_time" in variables[name]:
+            if "sample_time" in comp.parameters and \
+                    comp.parameters["sample_time"] != comp.sample_time:
+                raise ScenarioError(f"{src}: [fmus.{name}] sample_time = {comp.sample_time} "
+                                    f"disagrees with parameters.sample_time = "
+                                    f"{comp.parameters['sample_time']}")
+
+    connected: dict[tuple[str, str], Connection] = {}
+    for c in scenario.connections:
+        key = f"[connections] \"{c.dst}.{c.dst_var}\""
+        dv = lookup(c.dst, c.dst_var, key, ("input",))
+        sv = lookup(c.src, c.src_var, key, ("output",))
+        if dv.type != sv.type:
+            raise ScenarioError(f"{src}: {key}: type mismatch: {c.src}.{c.src_var} is "
+                                f"{sv.type}, {c.dst}.{c.dst_var} is {dv.type}")
+        if (dv.unit or "") != (sv.unit or "") and dv.unit and sv.unit:
+            raise ScenarioError(f"{src}: {key}: unit mismatch: {c.src}.{c.src_var} in "
+                                f"{sv.unit}, {c.dst}.{c.dst_var} in {dv.unit}")
+        if c.dst_var in scenario.components[c.dst].inputs:
+            raise ScenarioError(f"{src}: {key}: input is both connected and given a constant "
+                                f"in [fmus.{c.dst}.inputs]")
+        connected[(c.dst, c.dst_var)] = c
+    for name, vars_ in variables.items():
+        for v in vars_.values():
+            if v.causality == "input" and (name, v.name) not in connected \
+                    and v.name not in scenario.components[name].inputs:
+                raise ScenarioError(
+                    f"{src}: input {name}.{v.name} is not connected: add "
+                    f"\"{name}.{v.name}\" = \"FMU.output\" to [connections] or a constant in "
+                    f"[fmus.{name}.inputs]")
+    for ref in scenario.record or []:
+        comp, var = ref.split(".", 1)
+        lookup(comp, var, "[record] variables", ("output", "input", "parameter", "local"))
+    for key, ref in scenario.summary.items():
+        if isinstance(ref, str) and "." in ref and ref.split(".", 1)[0] in variables:
+            comp, var = ref.split(".", 1)
+            lookup(comp, var, f"[summary] {key}", ("output", "input", "parameter", "local"))

@@ -1,0 +1,14 @@
+"""Shared fixtures: FMUs are built once per session (only those missing or out of date)."""
+
+from __future__ import annotations
+
+import pytest
+
+from cosim.build import build_stale, catalog
+
+
+@pytest.fixture(scope="session")
+def built_fmus() -> dict:
+    """Every catalog FMU, built and up to date: identifier -> FmuSpec (``.path``)."""
+    build_stale()
+    return catalog()
