@@ -311,13 +311,16 @@ def _reference_from_dict(data: dict, where: str) -> ReferenceProfile:
     return ReferenceProfile(str(data.get("kind", "distance")), pts[:, 0], pts[:, 1] * units[unit])
 
 
-def load_reference(name_or_path: str | Path, base: Path | None = None) -> ReferenceProfile:
+def load_reference(name_or_path: str | Path, base: Path | None = None,
+                   routes_dir: Path | None = None) -> ReferenceProfile:
     """Load a reference profile (CSV or TOML) by path, by path relative to ``base`` or by
-    bundled name (``routes/<name>.csv`` or ``.toml``)."""
+    bundled name (``<routes_dir>/<name>.csv`` or ``.toml``; FMU wrappers pass ``routes_dir``
+    as for :func:`load_route`)."""
+    routes_dir = routes_dir or ROUTES_DIR
     path = Path(name_or_path)
     candidates = [path] if path.is_absolute() else (
-        ([base / path] if base else []) + [path, ROUTES_DIR / path]
-        + [ROUTES_DIR / f"{name_or_path}{ext}" for ext in (".csv", ".toml") if not path.suffix])
+        ([base / path] if base else []) + [routes_dir / path, path]
+        + [routes_dir / f"{name_or_path}{ext}" for ext in (".csv", ".toml") if not path.suffix])
     found = next((c for c in candidates if c.is_file()), None)
     if found is None:
         raise ValueError(f"reference profile {str(name_or_path)!r} not found")
@@ -392,12 +395,16 @@ class StoppingCurve:
         """Reference acceleration dv/dt along the curve (m/s^2): ``-a0`` before the stop point."""
         return -self.decel if s < self.stop_point else 0.0
 
-    def along_time(self, s_start: float,
-                   elapsed: np.ndarray | float) -> tuple[np.ndarray, np.ndarray]:
+    def along_time(self, s_start: float, elapsed: np.ndarray | float,
+                   rest: bool = True) -> tuple[np.ndarray, np.ndarray]:
         """Time-indexed reference (speed m/s, position m) ``elapsed`` s after leaving ``s_start``.
 
-        Follows the curve at constant deceleration ``a0``: ``v = max(v_ref(s_start) - a0 t, 0)``,
-        ``s = s_stop - v^2 / (2 a0)``; it rests at the stop point once v reaches 0.
+        Follows the curve at constant deceleration ``a0``: ``v = v_ref(s_start) - a0 t``,
+        ``s = s_stop - v^2 / (2 a0)``. With ``rest`` it stays at the stop point once v reaches 0;
+        without, it continues the constant-deceleration parabola (v < 0), which is what a
+        linear design model that cannot represent the stop predicts under constant braking.
         """
-        v = np.maximum(self.speed(s_start) - self.decel * np.asarray(elapsed, dtype=float), 0.0)
+        v = self.speed(s_start) - self.decel * np.asarray(elapsed, dtype=float)
+        if rest:
+            v = np.maximum(v, 0.0)
         return v, self.stop_point - v * v / (2.0 * self.decel)
