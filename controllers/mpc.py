@@ -1,0 +1,388 @@
+"""Predictive accurate-stopping controllers of seed 000: ideal MPC, tube RMPC, RSMPC (sec. 2-3).
+
+All three share the design model of eq. (9) (:mod:`controllers.design_model`) and the horizon QP
+builder (:mod:`controllers.qp`). At an event at sample k the controller
+
+1. predicts ``x_{0|k} = x(k+l)`` from the measured ``[a_c, v, s]`` and the ``l`` commands already
+   issued but not yet acting (eq. 10: the dead time is handled by prediction);
+2. builds the time-indexed reference ``x_s`` (the stopping curve followed at ``a0`` from the
+   position of the first event; ``x_s(k+1) = A x_s(k)`` in the paper) for stages ``l+i``;
+3. solves the QP of eq. (11) (ideal), (11)+(14) (RMPC) or (25)+(26)/(29) (RSMPC) and applies
+   ``u(k) = u(k-1) + du_{0|k}``.
+
+Choices where the paper is silent (all parameters of :class:`StopMpcParams`):
+
+* Cost ``Q = diag(0, 0, q_speed, q_position)`` on the tracking error, ``R = r_du`` on du;
+  terminal weight ``P`` and tube feedback ``K`` from the DARE of (A, b, Q, R), so
+  ``Q + K'RK + A_cl'P A_cl - P = 0`` (eq. 19 with equality) and A_cl is Schur stable.
+* The reference's a_c and u components (seen only by ``P``) are those of steady tracking at
+  ``a0``: ``a_c,s = a_r,ff - a0``, ``u_s = -a_c,s / c``; zero once the reference rests.
+* Ideal MPC feeds the resistance forward (Davis + grade from the route, evaluated along the
+  previous plan), with the untightened constraints and no terminal set.
+* Tube RMPC / RSMPC treat the whole resistance as the unknown disturbance ``w = g a_r`` with
+  ``a_r`` in ``W = [a_r_min, a_r_max]``: grade range of the route (permille) times g/1000 plus
+  Davis resistance over ``[0, v_max]`` scaled by ``1 -+ davis_uncertainty``. Nominal prediction
+  uses ``a_r = 0``. Constraints are tightened by support functions of ``R_i`` (eq. 14) or
+  ``R_i^M`` (eq. 26). Constraint set X: ``u in [u_min, u_max]``, ``v <= v_max``,
+  ``|v - v_s| <= speed_error_max``, ``|s - s_s| <= position_error_max``; du bounded by
+  ``du_max``. Terminal set: a box on the speed and position error, ``Sigma = terminal_set_scale
+  x`` the symmetric box hull of the mRPI outer bound ``Z`` (eq. 15, truncated series), capped
+  by X (symmetric because W is lopsided: uphill grades dominate); the terminal constraint is
+  ``Sigma (-) R_H``.
+* RSMPC (eq. 25-29): the held-input problem for hold M predicts ``M + N - 1`` stages (the
+  paper writes ``M + N``) so that M = 1 is exactly RMPC with horizon N; it has ``N`` free moves
+  (``du_0`` and stages ``M .. M+N-2``); the first M stage costs are scaled by ``1/beta``.
+  M is the largest in ``[1, N-1]`` whose problem is feasible with ``J^M <= J^1``.
+* Infeasible QP: the tube feedback law ``du = K (x_{0|k} - x_s)`` (clipped) is applied and
+  counted in ``qp_infeasible``; nothing raises.
+* Standstill: once the measured speed is at most ``standstill_speed`` after the reference has
+  come to rest or within ``standstill_window`` m of the stop point, the brake is held at
+  ``max(u, standstill_command)`` (a train at a platform does not creep); RSMPC then holds
+  ``N - 1`` samples.
+"""
+
+from __future__ import annotations
+
+import math
+import statistics
+from dataclasses import dataclass, field
+from typing import Any, ClassVar
+
+import numpy as np
+from scipy.linalg import solve_discrete_are
+
+from controllers.design_model import A_C, U_PREV, DesignModel, S, V, brake_delay_model
+from controllers.qp import HorizonQP, QPResult, support_of_sum
+from cosim.state import StatefulCore
+from plants.resistance import Davis
+from plants.route import GRAVITY, Route, StoppingCurve, load_route
+
+
+@dataclass(frozen=True)
+class StopMpcParams:
+    """Parameters, SI units (defaults: seed 000 Table 1 plant, tuned weights)."""
+
+    horizon: int = 10  # N
+    q_speed: float = 10.0  # q1, weight on (v - v_s)^2, 1/(m/s)^2
+    q_position: float = 5.0  # q2, weight on (s - s_s)^2, 1/m^2
+    r_du: float = 0.01  # R, weight on du^2, 1/%^2
+    beta: float = 2.0  # RSMPC trade-off (>= 1); ignored by ideal MPC and RMPC
+    sample_time: float = 0.2  # s
+    brake_gain: float = 1.07 / 100.0  # c, m/s^2 per %
+    brake_time_constant: float = 0.4  # tau, s
+    brake_delay: float = 1.0  # Td, s
+    ref_decel: float = 0.5  # a0, m/s^2
+    stop_point: float = 400.0  # m
+    u_min: float = 0.0  # %
+    u_max: float = 100.0  # %
+    du_max: float = 100.0  # %, per sample
+    v_max: float = 20.0  # m/s, speed limit
+    speed_error_max: float = 2.0  # m/s
+    position_error_max: float = 20.0  # m
+    terminal_set_scale: float = 3.0
+    mass: float = 490e3  # kg (for the resistance model)
+    davis: Davis = field(default_factory=lambda: Davis.from_kn_kmh(5.4, 0.0098, 0.00163))
+    route: str = "seed000_stop"
+    davis_uncertainty: float = 0.2  # relative, for the bound W
+    initial_command: float = 0.0  # %, command held before the first event
+    standstill_speed: float = 0.02  # m/s
+    standstill_window: float = 2.0  # m
+    standstill_command: float = 30.0  # %
+    eps: float = 1e-7  # OSQP tolerance
+
+    def check(self) -> None:
+        if int(self.horizon) != self.horizon or self.horizon < 2:
+            raise ValueError(f"horizon = {self.horizon} must be an integer >= 2")
+        for name in ("q_speed", "q_position", "davis_uncertainty"):
+            if not getattr(self, name) >= 0:
+                raise ValueError(f"{name} = {getattr(self, name)} must be >= 0")
+        for name in ("r_du", "sample_time", "brake_gain", "ref_decel", "du_max", "mass",
+                     "speed_error_max", "position_error_max"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"{name} = {getattr(self, name)} must be > 0")
+        if not self.beta >= 1.0:
+            raise ValueError(f"beta = {self.beta} must be >= 1")
+        if not self.terminal_set_scale >= 1.0:
+            raise ValueError(f"terminal_set_scale = {self.terminal_set_scale} must be >= 1")
+        if not self.u_min < self.u_max:
+            raise ValueError(f"u_min = {self.u_min} must be < u_max = {self.u_max}")
+
+
+def disturbance_bounds(p: StopMpcParams, route: Route) -> tuple[float, float]:
+    """W as an interval of resistance acceleration a_r (m/s^2): grade range + Davis range."""
+    grades = route.grade.values
+    a_g = GRAVITY * np.asarray(grades, float) / 1000.0
+    a_w_lo = p.davis.force(0.0) / p.mass * (1.0 - p.davis_uncertainty)
+    a_w_hi = p.davis.force(p.v_max) / p.mass * (1.0 + p.davis_uncertainty)
+    return float(a_g.min() + a_w_lo), float(a_g.max() + a_w_hi)
+
+
+class _StopMpcBase(StatefulCore):
+    """Shared event logic; subclasses choose the QP(s)."""
+
+    state_fields: ClassVar[tuple[str, ...]] = (
+        "history", "command", "last_t", "anchor", "warm", "plan", "hold", "qp_solves",
+        "qp_infeasible", "solve_times", "standstill", "last_v_ref")
+    feedforward: ClassVar[bool] = False
+    tube: ClassVar[bool] = True
+    self_triggered: ClassVar[bool] = False
+
+    def __init__(self, params: StopMpcParams) -> None:
+        params.check()
+        self.p = params
+        self.model: DesignModel = brake_delay_model(
+            params.brake_gain, params.brake_time_constant, params.brake_delay, params.sample_time)
+        self.curve = StoppingCurve(params.ref_decel, params.stop_point)
+        self.route = load_route(params.route)
+        self.N = int(params.horizon)
+        m = self.model
+        Q = np.diag([0.0, 0.0, params.q_speed, params.q_position])
+        self.Q = Q
+        self.P = solve_discrete_are(m.A, m.b[:, None], Q, np.array([[params.r_du]]))
+        bPb = float(m.b @ self.P @ m.b)
+        self.K = -(m.b @ self.P @ m.A) / (params.r_du + bPb)  # du = K e
+        self.A_cl = m.A + np.outer(m.b, self.K)
+        self.w_bounds = disturbance_bounds(params, self.route) if self.tube else (0.0, 0.0)
+        self.w_vertices = np.array([m.g * self.w_bounds[0], m.g * self.w_bounds[1]])
+        # constraint rows on x: u_prev (abs), v (abs upper), speed / position error
+        self.F = np.array([[0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 1, 0], [0, 0, 0, 1]], float)
+        self.ref_mask = np.array([0.0, 0.0, 1.0, 1.0])
+        self.x_lo = np.array([params.u_min, -math.inf, -params.speed_error_max,
+                              -params.position_error_max])
+        self.x_hi = np.array([params.u_max, params.v_max, params.speed_error_max,
+                              params.position_error_max])
+        self.F_term = np.array([[0, 0, 1, 0], [0, 0, 0, 1]], float)
+        self.sigma = self._terminal_box()
+        self._qps: dict[int, HorizonQP] = {}
+        # state
+        self.history: list[float] = [params.initial_command] * (m.delay_steps + 1)
+        self.command = float(params.initial_command)
+        self.last_t: float | None = None
+        self.anchor: list[float] | None = None  # [t0, s0] of the time-indexed reference
+        self.warm: dict[int, list[list[float]]] = {}
+        self.plan: list[float] = []
+        self.hold = 1
+        self.qp_solves = 0
+        self.qp_infeasible = 0
+        self.solve_times: list[float] = []
+        self.standstill = False
+        self.last_v_ref = 0.0
+
+    # -- tube sets ---------------------------------------------------------------------------
+    def reach_mats(self, i: int, hold: int = 1) -> list[np.ndarray]:
+        """Matrices whose images of W sum to R_i^M (eq. 26); hold = 1 gives R_i (eq. 14)."""
+        A, Acl = self.model.A, self.A_cl
+        if i <= hold:
+            return [np.linalg.matrix_power(A, j) for j in range(i)]
+        head = np.linalg.matrix_power(Acl, i - hold)
+        return ([head @ np.linalg.matrix_power(A, j) for j in range(hold)]
+                + [np.linalg.matrix_power(Acl, j) for j in range(i - hold)])
+
+    def tightening(self, i: int, rows: np.ndarray, hold: int = 1) -> tuple[np.ndarray, np.ndarray]:
+        """(h_R(-f), h_R(f)) per row f: lower bounds rise by the first, upper fall by the second."""
+        if not self.tube or i == 0:
+            z = np.zeros(np.atleast_2d(rows).shape[0])
+            return z, z
+        mats = self.reach_mats(i, hold)
+        return (support_of_sum(mats, self.w_vertices, -rows),
+                support_of_sum(mats, self.w_vertices, rows))
+
+    def mrpi_box(self, rows: np.ndarray, terms: int = 400) -> np.ndarray:
+        """Support of Z = R_inf (eq. 15) in -rows then +rows; series cut after ``terms``."""
+        mats = [np.linalg.matrix_power(self.A_cl, j) for j in range(terms)]
+        return np.concatenate([support_of_sum(mats, self.w_vertices, -rows),
+                               support_of_sum(mats, self.w_vertices, rows)])
+
+    def _terminal_box(self) -> np.ndarray:
+        """Sigma (eq. 16): [lo_v, lo_s, hi_v, hi_s] of the terminal error box."""
+        p = self.p
+        cap = np.array([p.speed_error_max, p.position_error_max])
+        if not self.tube:
+            return np.concatenate([-cap, cap])
+        z = self.mrpi_box(self.F_term)
+        half = np.minimum(p.terminal_set_scale * np.maximum(z[:2], z[2:]), cap)
+        return np.concatenate([-half, half])
+
+    def make_qp(self, hold: int) -> HorizonQP:
+        """QP for hold length M (eq. 25-26); M = 1 is RMPC (eq. 11, 14) with horizon N."""
+        p, N = self.p, self.N
+        H = hold + N - 1
+        free = [0] + list(range(hold, H))
+        beta = p.beta if self.self_triggered else 1.0
+        scale = [1.0 / beta if i < hold else 1.0 for i in range(H)]
+        lo = np.zeros((H + 1, 4))
+        hi = np.zeros((H + 1, 4))
+        for i in range(H + 1):
+            dlo, dhi = self.tightening(i, self.F, hold)
+            lo[i] = self.x_lo + dlo
+            hi[i] = self.x_hi - dhi
+        tlo, thi = self.tightening(H, self.F_term, hold)
+        lo_term = self.sigma[:2] + tlo
+        hi_term = self.sigma[2:] - thi
+        return HorizonQP(self.model.A, self.model.b, self.model.g, H, free, self.Q, p.r_du,
+                         self.P, stage_scale=scale, F=self.F, ref_mask=self.ref_mask, lo=lo,
+                         hi=hi, F_term=self.F_term if self.tube else None, lo_term=lo_term,
+                         hi_term=hi_term, du_min=-p.du_max, du_max=p.du_max, eps=p.eps)
+
+    def qp(self, hold: int) -> HorizonQP:
+        if hold not in self._qps:
+            self._qps[hold] = self.make_qp(hold)
+        return self._qps[hold]
+
+    # -- prediction and reference --------------------------------------------------------------
+    def resistance(self, v: float, s: float) -> float:
+        """Known resistance a_r (m/s^2) for feedforward (ideal MPC only)."""
+        return self.p.davis.force(max(v, 0.0)) / self.p.mass + self.route.grade_accel(s)
+
+    def delay_prediction(self, a_c: float, v: float, s: float) -> np.ndarray:
+        """x_{0|k} = x(k+l) from the measurement and the commands still in the dead time."""
+        m = self.model
+        x = np.array([a_c, self.history[0], v, s])
+        for u in self.history[1:]:
+            a_r = self.resistance(x[V], x[S]) if self.feedforward else 0.0
+            x = m.step_command(x, u, a_r)
+        return x
+
+    def reference(self, t: float, stages: int, a_r: np.ndarray | None = None) -> np.ndarray:
+        """x_s for stages 0..stages (times t + (l + i) T), shape (stages + 1, 4)."""
+        m, p = self.model, self.p
+        t0, s0 = self.anchor
+        elapsed = t - t0 + (m.delay_steps + np.arange(stages + 1)) * m.sample_time
+        v_s, s_s = self.curve.along_time(s0, elapsed, rest=False)
+        a_r = np.zeros(stages + 1) if a_r is None else a_r
+        a_cs = a_r - p.ref_decel
+        ref = np.zeros((stages + 1, 4))
+        ref[:, A_C] = a_cs
+        ref[:, U_PREV] = -a_cs / m.brake_gain
+        ref[:, V] = v_s
+        ref[:, S] = s_s
+        return ref
+
+    def feedforward_profile(self, x0: np.ndarray, H: int) -> np.ndarray:
+        """a_r along the previous plan (shifted), for ideal MPC; zeros for the robust ones."""
+        if not self.feedforward:
+            return np.zeros(H)
+        m = self.model
+        plan = list(self.plan[1:]) + [0.0] * H
+        x = x0.copy()
+        out = np.zeros(H)
+        for i in range(H):
+            out[i] = self.resistance(x[V], x[S])
+            x = m.step(x, plan[i] if i < len(plan) else 0.0, out[i])
+        return out
+
+    # -- one QP --------------------------------------------------------------------------------
+    def solve(self, hold: int, x0: np.ndarray, t: float) -> tuple[QPResult, np.ndarray]:
+        qp = self.qp(hold)
+        d = self.feedforward_profile(x0, qp.H)
+        a_r_ref = np.concatenate([d, d[-1:]]) if self.feedforward else None
+        ref = self.reference(t, qp.H, a_r_ref)
+        warm = self.warm.get(hold)
+        res = qp.solve(x0, ref, d if self.feedforward else None,
+                       warm_x=None if warm is None else np.array(warm[0]),
+                       warm_y=None if warm is None else np.array(warm[1]))
+        self.qp_solves += 1
+        if res.feasible:
+            self.warm[hold] = [res.U.tolist(), res.dual.tolist()]
+        return res, ref
+
+    def fallback(self, x0: np.ndarray, t: float) -> float:
+        """Tube feedback law du = K (x - x_s), clipped to the bounds."""
+        ref = self.reference(t, 0)[0]
+        du = float(self.K @ (x0 - ref))
+        return float(np.clip(du, -self.p.du_max, self.p.du_max))
+
+    # -- event ---------------------------------------------------------------------------------
+    def choose(self, x0: np.ndarray, t: float) -> tuple[float, int, list[float], float]:
+        """Return (du_0, hold M, planned du sequence, solve time)."""
+        raise NotImplementedError
+
+    def compute(self, t: float, inputs: dict[str, float]) -> tuple[dict[str, float], int]:
+        p, m = self.p, self.model
+        v, s, a_c = float(inputs["v"]), float(inputs["s"]), float(inputs["a_c"])
+        if self.last_t is not None:  # the held command acted for the samples since last event
+            elapsed = int(round((t - self.last_t) / m.sample_time))
+            self.history = (self.history + [self.command] * elapsed)[-(m.delay_steps + 1):]
+        else:
+            self.anchor = [t, s]
+        self.last_t = t
+        x0 = self.delay_prediction(a_c, v, s)
+        ref_now = self.reference(t - m.delay_steps * m.sample_time, 0)[0]
+        rest = ref_now[V] <= 0.0 or p.stop_point - s <= p.standstill_window
+        if self.standstill or (v <= p.standstill_speed and rest):
+            self.standstill = True
+            u = max(self.command, p.standstill_command)
+            hold = self.N - 1 if self.self_triggered else 1
+            self.plan = []
+            elapsed_s = 0.0
+        else:
+            du, hold, plan, elapsed_s = self.choose(x0, t)
+            u = float(np.clip(x0[U_PREV] + du, p.u_min, p.u_max))
+            self.plan = plan
+        self.solve_times.append(elapsed_s)
+        self.command = u
+        self.hold = int(hold)
+        self.last_v_ref = self.curve.speed(s)
+        return self.outputs(), self.hold
+
+    def qp_solve_time_median(self) -> float:
+        times = [x for x in self.solve_times if x > 0.0]
+        return statistics.median(times) if times else 0.0
+
+    def outputs(self) -> dict[str, Any]:
+        return {
+            "brake_command": self.command,
+            "v_ref": self.last_v_ref,
+            "qp_solves": self.qp_solves,
+            "qp_infeasible": self.qp_infeasible,
+            "qp_solve_time_median": self.qp_solve_time_median(),
+            "hold_steps": self.hold,
+        }
+
+
+class IdealStopMpc(_StopMpcBase):
+    """MPC with the resistance known and fed forward (paper sec. 4, the 5.95 cm case)."""
+
+    feedforward = True
+    tube = False
+
+    def choose(self, x0: np.ndarray, t: float) -> tuple[float, int, list[float], float]:
+        res, _ = self.solve(1, x0, t)
+        if not res.feasible:
+            self.qp_infeasible += 1
+            return self.fallback(x0, t), 1, [], res.solve_time
+        return float(res.du[0]), 1, res.du.tolist(), res.solve_time
+
+
+class TubeStopMpc(_StopMpcBase):
+    """Tube-based robust MPC (RMPC, eq. 13-20): tightened constraints, no feedforward."""
+
+    def choose(self, x0: np.ndarray, t: float) -> tuple[float, int, list[float], float]:
+        res, _ = self.solve(1, x0, t)
+        if not res.feasible:
+            self.qp_infeasible += 1
+            return self.fallback(x0, t), 1, [], res.solve_time
+        return float(res.du[0]), 1, res.du.tolist(), res.solve_time
+
+
+class SelfTriggeredStopMpc(_StopMpcBase):
+    """Robust self-triggered MPC (RSMPC, eq. 25-29): largest hold M with J^M <= J^1."""
+
+    self_triggered = True
+
+    def __init__(self, params: StopMpcParams, max_hold: int | None = None) -> None:
+        super().__init__(params)
+        self.max_hold = self.N - 1 if max_hold is None else max(1, min(max_hold, self.N - 1))
+
+    def choose(self, x0: np.ndarray, t: float) -> tuple[float, int, list[float], float]:
+        first, _ = self.solve(1, x0, t)
+        elapsed = first.solve_time
+        if not first.feasible:
+            self.qp_infeasible += 1
+            return self.fallback(x0, t), 1, [], elapsed
+        for hold in range(self.max_hold, 1, -1):
+            res, _ = self.solve(hold, x0, t)
+            elapsed += res.solve_time
+            if res.feasible and res.cost <= first.cost:
+                return float(res.du[0]), hold, res.du.tolist(), elapsed
+        return float(first.du[0]), 1, first.du.tolist(), elapsed
