@@ -61,6 +61,8 @@ UNITS: dict[str, tuple[dict[str, int], float]] = {
     "%.s/m": ({"m": -1, "s": 1}, 0.01),
     "%/m": ({"m": -1}, 0.01),
     "%/(m/s2)": ({"m": -1, "s": 2}, 0.01),
+    "1/m2": ({"m": -2}, 1.0),
+    "s2/m2": ({"m": -2, "s": 2}, 1.0),
 }
 
 BUNDLE_DIR = "atocosim_bundle"  # project code and data inside an FMU's resources folder
