@@ -46,6 +46,7 @@ from __future__ import annotations
 import math
 import statistics
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any, ClassVar
 
 import numpy as np
@@ -127,13 +128,13 @@ class _StopMpcBase(StatefulCore):
     tube: ClassVar[bool] = True
     self_triggered: ClassVar[bool] = False
 
-    def __init__(self, params: StopMpcParams) -> None:
+    def __init__(self, params: StopMpcParams, routes_dir: Path | None = None) -> None:
         params.check()
         self.p = params
         self.model: DesignModel = brake_delay_model(
             params.brake_gain, params.brake_time_constant, params.brake_delay, params.sample_time)
         self.curve = StoppingCurve(params.ref_decel, params.stop_point)
-        self.route = load_route(params.route)
+        self.route = load_route(params.route, routes_dir)
         self.N = int(params.horizon)
         m = self.model
         Q = np.diag([0.0, 0.0, params.q_speed, params.q_position])
@@ -370,8 +371,9 @@ class SelfTriggeredStopMpc(_StopMpcBase):
 
     self_triggered = True
 
-    def __init__(self, params: StopMpcParams, max_hold: int | None = None) -> None:
-        super().__init__(params)
+    def __init__(self, params: StopMpcParams, routes_dir: Path | None = None,
+                 max_hold: int | None = None) -> None:
+        super().__init__(params, routes_dir)
         self.max_hold = self.N - 1 if max_hold is None else max(1, min(max_hold, self.N - 1))
 
     def choose(self, x0: np.ndarray, t: float) -> tuple[float, int, list[float], float]:

@@ -1,0 +1,13 @@
+"""FMU wrapper of :class:`controllers.mpc.TubeStopMpc` (seed 000 tube RMPC)."""
+
+from __future__ import annotations
+
+from controllers.mpc import TubeStopMpc
+from controllers.mpc_fmu import MPC_VARS, StopMpcSlave
+
+
+class StopRmpcFmu(StopMpcSlave):
+    """Tube-based robust MPC for accurate stopping, resistance as bounded disturbance (sec. 2.2)."""
+
+    core_class = TubeStopMpc
+    variables = MPC_VARS
