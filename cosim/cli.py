@@ -18,7 +18,7 @@ out = Console()
 
 
 def _fail(message: str, code: int = 2) -> None:
-    console.print(f"[bold red]error:[/] {message}", highlight=False)
+    console.print(f"[bold red]error:[/] {message}", highlight=False, soft_wrap=True)
     raise typer.Exit(code)
 
 
@@ -172,7 +172,7 @@ def validate(
             status = "[green]ok[/]" if not problems else f"[red]{len(problems)} problem(s)[/]"
             out.print(f"{path.name}: {status}")
             for p in problems:
-                out.print(f"  - {p}", highlight=False)
+                out.print(f"  - {p}", highlight=False, soft_wrap=True)
     if as_json:
         out.print_json(json.dumps(report))
     if any(report.values()):

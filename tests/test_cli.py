@@ -1,0 +1,63 @@
+"""The `cosim` command end to end (as a user runs it, in a subprocess)."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import pandas as pd
+import pytest
+
+
+def cosim(*args: str, cwd=None) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "cosim.cli", *args], capture_output=True,
+                          text=True, timeout=600, cwd=cwd)
+
+
+def test_run_writes_results_summary_and_plot(built_fmus, tmp_path):
+    done = cosim("run", "seed000_stop_pid", "--out", str(tmp_path))
+    assert done.returncode == 0, done.stderr
+    assert "stop_error_m" in done.stdout
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    for key in ("stop_error_m", "final_speed_mps", "command_switches", "executions",
+                "do_steps", "wall_time_s", "sim_time_s"):
+        assert key in summary
+    assert abs(summary["stop_error_m"]) < 0.5
+    frame = pd.read_csv(tmp_path / "results.csv")
+    assert frame.columns[0] == "time"
+    assert frame["time"].iloc[-1] == pytest.approx(60.0)
+    png = (tmp_path / "plot.png").read_bytes()
+    assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 10_000
+
+
+def test_run_with_set_and_algorithm(built_fmus, tmp_path):
+    done = cosim("run", "seed000_stop_pid", "--out", str(tmp_path), "--algorithm", "fixed",
+                 "--set", "simulation.stop_time=10", "--set", "plant.v0=15", "--no-plot")
+    assert done.returncode == 0, done.stderr
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["algorithm"] == "fixed"
+    assert summary["sim_time_s"] == pytest.approx(10.0)
+    assert not (tmp_path / "plot.png").exists()
+
+
+@pytest.mark.parametrize("args,message", [
+    (("run", "seed000_stop_pdi"), "did you mean 'seed000_stop_pid'"),
+    (("run", "seed000_stop_pid", "--set", "plant.mass=-1"), "mass = -1 outside"),
+    (("run", "seed000_stop_pid", "--set", "plant.nope=1"), "no variable 'nope'"),
+    (("build", "NoSuchFmu"), "unknown FMU"),
+])
+def test_errors_are_one_clear_line(built_fmus, tmp_path, args, message):
+    done = cosim(*args, cwd=tmp_path)
+    assert done.returncode == 2
+    assert message in done.stderr.replace("\n", " ")
+    assert "Traceback" not in done.stderr
+
+
+def test_list_and_validate(built_fmus):
+    listed = cosim("list")
+    assert listed.returncode == 0
+    assert "BrakeDelayTrain" in listed.stdout and "seed000_stop_pid" in listed.stdout
+    checked = cosim("validate", "BrakeDelayTrain", "StopPid")
+    assert checked.returncode == 0, checked.stdout + checked.stderr
+    assert "problem" not in checked.stdout

@@ -1,0 +1,128 @@
+"""Master: event scheduling, event-driven == fixed-step, Jacobi delay, scenario errors."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from cosim.master import run_scenario
+from cosim.scenario import ScenarioError, load_scenario
+
+PID = "seed000_stop_pid"
+
+
+@pytest.fixture(scope="module")
+def event_run(built_fmus):
+    return run_scenario(PID, build=False)
+
+
+def _max_diff(a, b) -> float:
+    fa, fb = a.frame.set_index("time"), b.frame.set_index("time")
+    common = fa.index.intersection(fb.index)
+    assert len(common) == len(fa)
+    return float(np.max(np.abs(fa.loc[common].to_numpy() - fb.loc[common].to_numpy())))
+
+
+@pytest.mark.parametrize("base_step", [0.2, 0.01, 0.05])
+def test_event_driven_equals_fixed_step(event_run, base_step):
+    fixed = run_scenario(PID, algorithm="fixed", build=False,
+                         overrides={"simulation.base_step": base_step})
+    assert _max_diff(event_run, fixed) < 1e-9
+    assert fixed.summary["stop_error_m"] == pytest.approx(event_run.summary["stop_error_m"],
+                                                          abs=1e-9)
+    # the fixed-step master steps the controller every base step, it computes only at events
+    assert fixed.do_steps["controller"] == round(60.0 / base_step)
+    assert fixed.executions["controller"] == event_run.executions["controller"]
+
+
+def test_event_schedule_counts(event_run):
+    s = event_run.summary
+    # controller: one event per 0.2 s sample, t = 0 .. 60 s inclusive; stepped once per event
+    assert s["executions"]["controller"] == 301
+    assert s["do_steps"]["controller"] == 300
+    # plant: one doStep per communication point (sample times and output points coincide)
+    assert s["do_steps"]["plant"] == 300
+    assert s["sim_time_s"] == pytest.approx(60.0)
+
+
+def test_controller_sampling_independent_of_output_interval(event_run):
+    """A finer output grid adds plant steps but neither controller events nor changes."""
+    fine = run_scenario(PID, build=False, overrides={"simulation.output_interval": 0.05})
+    assert fine.executions["controller"] == 301
+    assert fine.do_steps["controller"] == 300
+    assert fine.do_steps["plant"] == 1200
+    assert _max_diff(event_run, fine) < 1e-9
+
+
+def test_pid_stops_inside_window(event_run):
+    s = event_run.summary
+    assert abs(s["stop_error_m"]) < 0.5
+    assert s["final_speed_mps"] == 0.0
+    assert s["command_switches"] > 0
+
+
+def test_jacobi_delays_command_by_one_step(event_run):
+    jac = run_scenario(PID, algorithm="jacobi", build=False)
+    ev = event_run.frame
+    jf = jac.frame
+    # Gauss-Seidel: the command computed at t is applied at t; Jacobi: one step later
+    assert ev["controller.brake_command"].iloc[0] == jf["controller.brake_command"].iloc[0]
+    assert abs(jac.summary["stop_error_m"]) < 0.5
+    assert _max_diff(event_run, jac) > 1e-3
+
+
+def test_sample_time_override_changes_schedule(built_fmus):
+    r = run_scenario(PID, build=False, overrides={"controller.sample_time": 0.4,
+                                                  "simulation.stop_time": 10.0})
+    assert r.executions["controller"] == 26  # t = 0, 0.4, ..., 10.0
+    assert r.do_steps["controller"] == 25
+
+
+def _variant(tmp_path, old: str, new: str):
+    text = load_scenario(PID).path.read_text()
+    assert old in text
+    path = tmp_path / "variant.toml"
+    path.write_text(text.replace(old, new))
+    return path
+
+
+@pytest.mark.parametrize("old,new,message", [
+    ('fmu = "StopPid"', 'fmu = "StopPID"', "unknown FMU.*did you mean 'StopPid'"),
+    ("mass = 490000.0", "mas = 490000.0", "no variable 'mas'.*did you mean 'mass'"),
+    ("mass = 490000.0", 'mass = "heavy"', "mass is Real, got 'heavy'"),
+    ('"controller.s" = "plant.s"', '"controller.s" = "plant.v"', "unit mismatch"),
+    ('"controller.s" = "plant.s"\n', "", "input controller.s is not connected"),
+    ("output_interval = 0.2", "output_interval = -0.2", "output_interval = -0.2: must be pos"),
+    ("base_step = 0.2", "base_step = 0", "base_step = 0.0: must be positive"),
+    ('"plant.brake_command" = "controller.brake_command"',
+     '"plant.brake_command" = "controller.executions"', "type mismatch"),
+    ("brake_delay = 1.0", "brake_delay = -1.0", r"brake_delay = -1.0 outside \[0.0"),
+    ('algorithm = "event"', 'algorithm = "gauss"', "algorithm = 'gauss'"),
+    ('"controller.v" = "plant.v"', '"controller.v" = "plant.speed"', "no variable 'speed'"),
+])
+def test_scenario_errors_name_file_key_and_problem(tmp_path, built_fmus, old, new, message):
+    path = _variant(tmp_path, old, new)
+    with pytest.raises(ScenarioError, match=message) as info:
+        run_scenario(path, build=False)
+    assert str(path) in str(info.value)
+
+
+def test_bad_override_is_reported(built_fmus):
+    with pytest.raises(ScenarioError, match="no FMU named 'plnt'"):
+        load_scenario(PID, ["plnt.mass=1"])
+    with pytest.raises(ScenarioError, match="expected KEY=VALUE"):
+        load_scenario(PID, ["plant.mass"])
+
+
+def test_override_sets_parameter(built_fmus):
+    heavy = run_scenario(PID, build=False, overrides=["plant.brake_gain=0.009",
+                                                      "simulation.stop_time=20"])
+    assert heavy.scenario.components["plant"].parameters["brake_gain"] == 0.009
+    assert heavy.sim_time_s == pytest.approx(20.0)
+
+
+def test_invalid_toml_reported(tmp_path):
+    path = tmp_path / "broken.toml"
+    path.write_text("[simulation\nstop_time = 1")
+    with pytest.raises(ScenarioError, match="not valid TOML"):
+        load_scenario(path)
