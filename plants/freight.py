@@ -1,0 +1,429 @@
+"""Heavy freight train: one mass per vehicle, draft-gear couplers, traction lag, air-brake wave.
+
+Seed 002 (Li et al. 2022): HXD1 locomotive + 108 loaded C80 wagons (Table 1: 200 t / 35.2 m,
+20 t tare + 77 t load / 12 m; 10,676 t, 1,331.2 m). Vehicle ``i`` (1 = locomotive at the head)
+has its front at ``x_i`` (m along the line) and speed ``v_i`` (m/s)::
+
+    m_i (1 + gamma_i) dv_i/dt = F_t [i = 1] - F_b,i - F_r,i + f_{i-1} - f_i     (eqs. 1, 7)
+    f_j = k d_j + c (v_j - v_{j+1}),   d_j = x_j - l_j - x_{j+1}
+
+``f_j`` is the force of coupler ``j`` (between vehicles ``j`` and ``j+1``), positive in draft
+(tension), negative in buff. Couplers are linear spring-dampers without slack: the default
+stiffness is the secant stiffness of two MT-2 friction draft gears in series (public MT-2
+figures: 83 mm travel, 2.27 MN at full travel, so 2.27 MN / 0.166 m = 1.37e7 N/m per coupling);
+the damping ``c`` = 1.5e6 N s/m is an equivalent viscous damping of friction draft gears
+(friction forces of some hundred kN at relative speeds of a few tenths of m/s); a smaller value
+(e.g. 20 % of critical for the two-wagon mode, 3e5) leaves the slow whole-train modes (period
+~18 s) almost undamped, which friction gears do not. Slack is left out on purpose: the paper's
+eq. (1) has none, and the dead zone makes coupler forces impact-like (event handling, smaller
+steps) without changing speed tracking; the peaks reported here are therefore slack-free.
+
+Resistance per vehicle (N/kN of its weight ``m g / 1000`` kN, v in km/h; eqs. 2-6):
+
+* basic: locomotive ``1.40 + 0.038 v + 0.000300 v^2`` (eq. 3), loaded wagon
+  ``0.92 + 0.0048 v + 0.000125 v^2`` — the paper prints ``1.25e-5`` for the ``v^2`` term; we use
+  the Chinese traction-rules value 0.000125 (TB/T 1407) as SPEC says;
+* additional (grade ``i``, curve ``600/R``, tunnel): by the share of the vehicle's length on each
+  segment, :meth:`plants.route.Route.additional` (eq. 5).
+
+Basic resistance and brake forces oppose motion; near standstill they are regularised
+(``stiction_speed``) so that a train at rest stays at rest and never rolls back under them.
+
+Traction / electric brake (locomotive only): the demand ``force_demand`` (N, > 0 traction,
+< 0 electric braking) is delayed by ``traction_delay`` (tau of eq. 15), clamped to the HXD1
+envelope at the current speed (traction 760 kN up to 9,600 kW; electric brake 461 kN up to
+9,600 kW, fading linearly to 0 below ``ed_fade_speed``) and then lags: eq. (15)
+``t_vb dF/dt + F = F_dem(t - tau)`` (``traction_model = 0``) or the ramp of eq. (8), the force
+moving at ``0.8 F_M / (t3 - t2)`` towards the demand (``traction_model = 1``, ``F_M`` the
+traction maximum, ``t3 - t2 = traction_ramp_time``). Loading and removal share one lag (paper).
+
+Air brake on every vehicle (eqs. 9-13): the brake-pipe reduction ``r`` (Pa) set at the driver's
+brake valve in the locomotive cab (train front) reaches vehicle ``i`` after
+``t_d,i = brake_apply_delay + D_i / brake_propagation_speed`` (application) or
+``brake_release_delay + D_i / brake_release_propagation_speed`` (release), ``D_i`` the distance
+from the train front to the vehicle's centre. The public figure used for the service-brake
+wave of Chinese freight trains (120/120-1 valves) is about 250 m/s; the release wave is slower
+(200 m/s here, a chosen value). The cylinder pressure then moves towards the target
+``p(r) = p_max min(r / r_full, 1)`` for ``r >= r_min`` (0 below: the valve does not apply),
+with ``p_max`` the cylinder pressure at a full service reduction ``r_full`` (500 kPa pipe:
+140 kPa -> about 360 kPa, 50 kPa minimum reduction). Rising follows eq. (9),
+``p = p_max ((t - t_d) / t_max)^lambda`` (``t_max = brake_fill_time``, full service ~20 s for
+a long freight train), stopping at the target; falling mirrors it,
+``p = p_max (1 - ((t - t_jd) / t_rel)^lambda_r)``. A vehicle's pressure is its own state: a
+further reduction continues up the same curve from the current pressure (equivalent-time form),
+a partial increase of pipe pressure lowers the target (graduated release; real 120 valves release
+directly, which is how the blending controller uses them: apply in stages, release fully).
+Brake force ``F_b,i = theta_i phi(v_i) (p_i / p_max) m_i g`` with the converted braking ratio
+``theta`` at ``p_max`` and the converted friction coefficient of high-friction composite shoes
+``phi = 0.322 (v + 150) / (2 v + 150)`` (v km/h; TB/T 1407 form).
+
+Integration on sub-steps no longer than ``max_step`` on an absolute grid (split where a delayed
+traction change acts, so dead times are exact): the stiff linear coupler forces are integrated
+by the trapezoidal rule (A-stable, second order, exact momentum balance: the tridiagonal system
+is solved with a cached inverse), the other forces are evaluated once per sub-step (speed terms
+at the start, positions at the predicted mid-point, traction and brake pressures averaged over
+the sub-step from their exact lag solutions). Brake-pipe arrivals inside a sub-step are split
+exactly per vehicle. Outputs: see :meth:`FreightTrain.outputs`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from cosim.state import StatefulCore, to_seconds, to_ticks
+from plants.route import GRAVITY, KMH, Route
+
+LOCO_RESISTANCE = (1.40, 0.038, 0.000300)  # N/kN, v in km/h (eq. 3)
+LOADED_WAGON_RESISTANCE = (0.92, 0.0048, 0.000125)  # N/kN, v in km/h (eq. 4, rules v^2 term)
+
+
+@dataclass(frozen=True)
+class FreightParams:
+    """Parameters in SI (defaults: seed 002 Table 1, HXD1 + 108 loaded C80; see module doc)."""
+
+    n_wagons: int = 108
+    loco_mass: float = 200e3  # kg
+    loco_length: float = 35.2  # m
+    wagon_mass: float = 97e3  # kg, 20 t tare + 77 t load
+    wagon_length: float = 12.0  # m
+    loco_rotating_mass_factor: float = 0.06  # gamma (traction-rules train value)
+    wagon_rotating_mass_factor: float = 0.06  # gamma
+    loco_resistance: tuple[float, float, float] = LOCO_RESISTANCE  # N/kN, km/h
+    wagon_resistance: tuple[float, float, float] = LOADED_WAGON_RESISTANCE  # N/kN, km/h
+    coupler_stiffness: float = 1.37e7  # N/m, two MT-2 draft gears in series
+    coupler_damping: float = 1.5e6  # N s/m, equivalent viscous damping of friction gears
+    max_traction_force: float = 760e3  # N, HXD1 starting tractive effort
+    max_traction_power: float = 9.6e6  # W
+    max_ed_force: float = 461e3  # N, HXD1 electric (regenerative) brake
+    max_ed_power: float = 9.6e6  # W
+    ed_fade_speed: float = 5.0 * KMH  # m/s, electric brake fades linearly below this
+    traction_model: int = 0  # 0: first-order lag eq. (15); 1: ramp eq. (8)
+    traction_delay: float = 0.5  # s, tau (command transmission)
+    traction_time_constant: float = 1.5  # s, t_vb (10-90 % in 3.3 s)
+    traction_ramp_time: float = 3.0  # s, t3 - t2 of eq. (8)
+    brake_propagation_speed: float = 250.0  # m/s, service application wave
+    brake_release_propagation_speed: float = 200.0  # m/s, release wave
+    brake_apply_delay: float = 0.0  # s, valve delay added to the propagation delay
+    brake_release_delay: float = 0.0  # s
+    brake_fill_time: float = 20.0  # s, t_max of eq. (9), 0 -> p_max
+    brake_fill_exponent: float = 0.7  # lambda of eq. (9)
+    brake_release_time: float = 25.0  # s, p_max -> 0
+    brake_release_exponent: float = 1.0  # lambda_r
+    max_cylinder_pressure: float = 360e3  # Pa, p_max at a full service reduction
+    full_service_reduction: float = 140e3  # Pa, r_full
+    min_reduction: float = 50e3  # Pa, r_min
+    loco_braking_ratio: float = 0.20  # theta at p_max
+    wagon_braking_ratio: float = 0.20  # theta at p_max
+    stiction_speed: float = 0.01  # m/s, regularisation of friction forces at standstill
+    max_step: float = 0.01  # s
+
+    def check(self) -> None:
+        positive = ("loco_mass", "loco_length", "wagon_mass", "wagon_length", "coupler_stiffness",
+                    "max_traction_force", "max_traction_power", "max_ed_power",
+                    "traction_time_constant", "traction_ramp_time", "brake_propagation_speed",
+                    "brake_release_propagation_speed", "brake_fill_time", "brake_fill_exponent",
+                    "brake_release_time", "brake_release_exponent", "max_cylinder_pressure",
+                    "full_service_reduction", "stiction_speed", "max_step")
+        for name in positive:
+            if not getattr(self, name) > 0:
+                raise ValueError(f"{name} = {getattr(self, name)} must be > 0")
+        non_negative = ("coupler_damping", "max_ed_force", "ed_fade_speed", "traction_delay",
+                        "brake_apply_delay", "brake_release_delay", "min_reduction",
+                        "loco_braking_ratio", "wagon_braking_ratio",
+                        "loco_rotating_mass_factor", "wagon_rotating_mass_factor")
+        for name in non_negative:
+            if not getattr(self, name) >= 0:
+                raise ValueError(f"{name} = {getattr(self, name)} must be >= 0")
+        if self.n_wagons < 0:
+            raise ValueError(f"n_wagons = {self.n_wagons} must be >= 0")
+        if self.traction_model not in (0, 1):
+            raise ValueError(f"traction_model = {self.traction_model} must be 0 (lag) or 1 (ramp)")
+
+    @property
+    def n_vehicles(self) -> int:
+        return self.n_wagons + 1
+
+
+def friction_coefficient(v: np.ndarray) -> np.ndarray:
+    """Converted friction coefficient of high-friction composite shoes, v in m/s (TB/T 1407)."""
+    kmh = np.abs(v) / KMH
+    return 0.322 * (kmh + 150.0) / (2.0 * kmh + 150.0)
+
+
+class FreightTrain(StatefulCore):
+    """Multi-mass freight train core (see module docstring)."""
+
+    state_fields = ("t_ticks", "x", "v", "traction_force", "pressure", "traction_history",
+                    "brake_history", "energy", "peak_draft", "peak_buff", "accel")
+
+    def __init__(self, params: FreightParams, route: Route, v0: float = 0.0, s0: float = 0.0,
+                 t0: float = 0.0) -> None:
+        params.check()
+        p = self.p = params
+        self.route = route
+        n = p.n_vehicles
+        self.mass = np.full(n, p.wagon_mass)
+        self.mass[0] = p.loco_mass
+        self.length = np.full(n, p.wagon_length)
+        self.length[0] = p.loco_length
+        gamma = np.full(n, p.wagon_rotating_mass_factor)
+        gamma[0] = p.loco_rotating_mass_factor
+        self.m_eff = self.mass * (1.0 + gamma)
+        weight = self.mass * GRAVITY  # N
+        coeffs = np.tile(np.asarray(p.wagon_resistance, dtype=float), (n, 1))
+        coeffs[0] = p.loco_resistance
+        # basic resistance in N with v in m/s: N/kN * kN, v_kmh = v / KMH
+        self.res_a = coeffs[:, 0] * weight / 1e3
+        self.res_b = coeffs[:, 1] * weight / 1e3 / KMH
+        self.res_c = coeffs[:, 2] * weight / 1e3 / KMH**2
+        self.weight_per_kn = weight / 1e3  # N per (N/kN) of specific resistance
+        theta = np.full(n, p.wagon_braking_ratio)
+        theta[0] = p.loco_braking_ratio
+        self.brake_scale = theta * weight / p.max_cylinder_pressure  # N per (Pa * phi)
+        fronts = -np.concatenate(([0.0], np.cumsum(self.length[:-1])))  # relative to the head
+        centre_distance = -fronts + 0.5 * self.length
+        self.apply_delay = p.brake_apply_delay + centre_distance / p.brake_propagation_speed
+        self.release_delay = (p.brake_release_delay
+                              + centre_distance / p.brake_release_propagation_speed)
+        self.train_length = float(self.length.sum())
+        self._additional = route.additional
+        # state
+        self.t_ticks = to_ticks(t0)
+        self.x = s0 + fronts  # m, front of each vehicle
+        self.v = np.full(n, float(v0))
+        if v0 < 0:
+            raise ValueError(f"v0 = {v0} must be >= 0")
+        self.traction_force = 0.0  # N, achieved (traction > 0, electric brake < 0)
+        self.pressure = np.zeros(n)  # Pa, brake-cylinder pressures
+        self.traction_history: list[list[float]] = [[-(2**62), 0.0]]  # [tick, demand N]
+        self.brake_history: list[list[float]] = [[-1e18, 0.0]]  # [t s, reduction Pa]
+        self.energy = 0.0  # J, traction minus regenerated energy at the wheel
+        self.peak_draft = 0.0  # N, largest draft force over the last communication step
+        self.peak_buff = 0.0  # N, largest buff force (positive) over the last step
+        self.accel = 0.0  # m/s^2, train (mass-weighted) acceleration over the last sub-step
+        self._grid = to_ticks(p.max_step)
+        self._delay_ticks = to_ticks(p.traction_delay)
+        self._inverse: dict[int, np.ndarray] = {}
+        self._names_v = [f"v[{i + 1}]" for i in range(n)]
+        self._pressure_index = sorted({0, n // 4, n // 2, (3 * n) // 4, n - 1})
+
+    # -- traction ----------------------------------------------------------------------------
+    def traction_limits(self, v: float) -> tuple[float, float]:
+        """(largest traction force, largest electric brake force) in N at speed ``v`` (m/s)."""
+        p = self.p
+        speed = abs(v)
+        trac = min(p.max_traction_force, p.max_traction_power / speed) if speed > 0 else \
+            p.max_traction_force
+        ed = min(p.max_ed_force, p.max_ed_power / speed) if speed > 0 else p.max_ed_force
+        if p.ed_fade_speed > 0 and speed < p.ed_fade_speed:
+            ed *= speed / p.ed_fade_speed
+        return trac, ed
+
+    def delayed_demand(self, tick: int) -> float:
+        """Force demand acting at the lag input at ``tick``: F_dem(t - tau)."""
+        target = tick - self._delay_ticks
+        value = self.traction_history[0][1]
+        for start, u in self.traction_history:
+            if start > target:
+                break
+            value = u
+        return value
+
+    def _traction_step(self, demand: float, h: float) -> tuple[float, float]:
+        """Achieved force at the end of the sub-step and its mean over it (N)."""
+        trac, ed = self.traction_limits(self.v[0])
+        target = min(max(demand, -ed), trac)
+        f0 = self.traction_force
+        p = self.p
+        if p.traction_model == 0:
+            tau = p.traction_time_constant
+            decay = math.exp(-h / tau)
+            f1 = target + (f0 - target) * decay
+            mean = target + (f0 - target) * tau / h * (1.0 - decay)
+            return f1, mean
+        rate = 0.8 * p.max_traction_force / p.traction_ramp_time
+        gap = target - f0
+        step = rate * h
+        if abs(gap) <= step:  # reaches the target inside the sub-step
+            t_reach = abs(gap) / rate
+            return target, target - gap * t_reach / (2.0 * h)
+        f1 = f0 + math.copysign(step, gap)
+        return f1, 0.5 * (f0 + f1)
+
+    # -- air brake ---------------------------------------------------------------------------
+    def target_pressure(self, reduction: np.ndarray | float) -> np.ndarray:
+        """Cylinder pressure (Pa) a held pipe reduction (Pa) leads to."""
+        p = self.p
+        r = np.asarray(reduction, dtype=float)
+        level = p.max_cylinder_pressure * np.minimum(r / p.full_service_reduction, 1.0)
+        return np.where(r >= max(p.min_reduction, 1e-9), level, 0.0)
+
+    def _evolve_pressure(self, pres: np.ndarray, target: np.ndarray,
+                         dt: np.ndarray | float) -> np.ndarray:
+        """Move pressures towards ``target`` for ``dt`` s along eq. (9) / its release mirror."""
+        p = self.p
+        pmax = p.max_cylinder_pressure
+        frac = np.minimum(pres / pmax, 1.0)
+        t_up = p.brake_fill_time * frac ** (1.0 / p.brake_fill_exponent)
+        up = pmax * np.minimum((t_up + dt) / p.brake_fill_time, 1.0) ** p.brake_fill_exponent
+        t_down = p.brake_release_time * (1.0 - frac) ** (1.0 / p.brake_release_exponent)
+        down = pmax * (1.0 - np.minimum((t_down + dt) / p.brake_release_time, 1.0)
+                       ** p.brake_release_exponent)
+        return np.where(pres < target, np.minimum(up, target),
+                        np.where(pres > target, np.maximum(down, target), pres))
+
+    def _arrivals(self) -> tuple[np.ndarray, np.ndarray]:
+        """Arrival time (s) of each brake-pipe change at each vehicle, and the reductions."""
+        hist = np.asarray(self.brake_history)
+        times, values = hist[:, 0], hist[:, 1]
+        rising = np.concatenate(([True], values[1:] >= values[:-1]))
+        delay = np.where(rising[:, None], self.apply_delay[None, :], self.release_delay[None, :])
+        return times[:, None] + delay, values
+
+    def _seen(self, arrivals: np.ndarray, t: float) -> np.ndarray:
+        """Index of the latest command (by command time) that has reached each vehicle at t."""
+        k = np.arange(arrivals.shape[0])[:, None]
+        return np.max(np.where(arrivals <= t, k, 0), axis=0)
+
+    def _brake_step(self, t0: float, t1: float) -> np.ndarray:
+        """Advance cylinder pressures over [t0, t1]; returns the mean pressure over it."""
+        start = self.pressure
+        if len(self.brake_history) == 1:
+            target = self.target_pressure(self.brake_history[0][1])
+            if np.all(start == target):
+                return start
+            end = self._evolve_pressure(start, np.broadcast_to(target, start.shape), t1 - t0)
+        else:
+            arrivals, values = self._arrivals()
+            idx0, idx1 = self._seen(arrivals, t0), self._seen(arrivals, t1)
+            cols = np.arange(start.size)
+            target0 = self.target_pressure(values[idx0])
+            target1 = self.target_pressure(values[idx1])
+            switch = np.clip(arrivals[idx1, cols], t0, t1)  # where idx0 == idx1: harmless
+            mid = self._evolve_pressure(start, target0, switch - t0)
+            end = self._evolve_pressure(mid, target1, t1 - switch)
+            # forget commands every vehicle has already passed
+            newest_everywhere = int(np.min(idx1))
+            if newest_everywhere > 0:
+                del self.brake_history[:newest_everywhere]
+        self.pressure = end
+        return 0.5 * (start + end)
+
+    # -- mechanics ---------------------------------------------------------------------------
+    def _system_inverse(self, h_ticks: int) -> np.ndarray:
+        inv = self._inverse.get(h_ticks)
+        if inv is None:
+            h = to_seconds(h_ticks)
+            p = self.p
+            n = self.m_eff.size
+            lap = np.zeros((n, n))
+            idx = np.arange(n - 1)
+            lap[idx, idx] += 1.0
+            lap[idx + 1, idx + 1] += 1.0
+            lap[idx, idx + 1] -= 1.0
+            lap[idx + 1, idx] -= 1.0
+            system = np.diag(self.m_eff) + (0.25 * h * h * p.coupler_stiffness
+                                            + 0.5 * h * p.coupler_damping) * lap
+            inv = np.linalg.inv(system)
+            if len(self._inverse) > 16:
+                self._inverse.clear()
+            self._inverse[h_ticks] = inv
+        return inv
+
+    def coupler_forces(self, x: np.ndarray | None = None,
+                       v: np.ndarray | None = None) -> np.ndarray:
+        """Coupler forces (N, draft > 0) between vehicles j and j+1."""
+        x = self.x if x is None else x
+        v = self.v if v is None else v
+        p = self.p
+        return (p.coupler_stiffness * (x[:-1] - self.length[:-1] - x[1:])
+                + p.coupler_damping * (v[:-1] - v[1:]))
+
+    def _substep(self, t_ticks: int, h_ticks: int) -> None:
+        p = self.p
+        h = to_seconds(h_ticks)
+        x0, v0 = self.x, self.v
+        f1, f_mean = self._traction_step(self.delayed_demand(t_ticks), h)
+        pres = self._brake_step(to_seconds(t_ticks), to_seconds(t_ticks + h_ticks))
+        speed = np.abs(v0)
+        dissipative = self.res_a + (self.res_b + self.res_c * speed) * speed
+        if pres is not None and pres.any():
+            dissipative = dissipative + self.brake_scale * pres * friction_coefficient(v0)
+        direction = np.maximum(np.minimum(v0 / p.stiction_speed, 1.0), -1.0)
+        force = -dissipative * direction
+        force -= self.weight_per_kn * self._additional.mean_over(x0 + 0.5 * h * v0, self.length)
+        force[0] += f_mean
+        k, c = p.coupler_stiffness, p.coupler_damping
+        dv = v0[:-1] - v0[1:]
+        y = k * (x0[:-1] - self.length[:-1] - x0[1:]) + (0.25 * h * k + 0.5 * c) * dv
+        force[:-1] -= y
+        force[1:] += y
+        v1 = self._system_inverse(h_ticks) @ (self.m_eff * v0 + h * force)
+        x1 = x0 + 0.5 * h * (v0 + v1)
+        self.energy += f_mean * 0.5 * (v0[0] + v1[0]) * h
+        self.accel = float(np.dot(self.m_eff, v1 - v0) / (h * self.m_eff.sum()))
+        self.traction_force = f1
+        self.x, self.v = x1, v1
+        fc = k * (x1[:-1] - self.length[:-1] - x1[1:]) + c * (v1[:-1] - v1[1:])
+        self.peak_draft = max(self.peak_draft, float(fc.max()))
+        self.peak_buff = max(self.peak_buff, -float(fc.min()))
+
+    # -- co-simulation step --------------------------------------------------------------------
+    def advance(self, t_ticks: int, h_ticks: int, inputs: dict[str, float]) -> None:
+        """Advance by ``h_ticks`` with ``force_demand`` (N) and ``pipe_reduction`` (Pa) held."""
+        if t_ticks != self.t_ticks:
+            raise ValueError(f"doStep at t={to_seconds(t_ticks)} s but plant is at "
+                             f"t={to_seconds(self.t_ticks)} s")
+        demand = float(inputs.get("force_demand", 0.0))
+        reduction = float(inputs.get("pipe_reduction", 0.0))
+        if demand != self.traction_history[-1][1]:
+            self.traction_history.append([t_ticks, demand])
+        if reduction != self.brake_history[-1][1]:
+            self.brake_history.append([to_seconds(t_ticks), reduction])
+        end = t_ticks + h_ticks
+        grid = self._grid
+        cuts = set(range((t_ticks // grid + 1) * grid, end, grid))
+        cuts.add(end)
+        cuts.update(int(s) + self._delay_ticks for s, _ in self.traction_history
+                    if t_ticks < int(s) + self._delay_ticks < end)
+        self.peak_draft = 0.0
+        self.peak_buff = 0.0
+        now = t_ticks
+        for cut in sorted(cuts):
+            self._substep(now, cut - now)
+            now = cut
+        self.t_ticks = end
+        target = end - self._delay_ticks
+        while len(self.traction_history) > 1 and self.traction_history[1][0] <= target:
+            self.traction_history.pop(0)
+
+    def outputs(self) -> dict[str, float]:
+        x, v = self.x, self.v
+        fc = self.coupler_forces()
+        out = {
+            "v": float(v[0]),
+            "s": float(x[0]),
+            "v_tail": float(v[-1]),
+            "s_tail": float(x[-1] - self.length[-1]),
+            "a": self.accel,
+            "traction_force": self.traction_force,
+            "traction_power": self.traction_force * float(v[0]),
+            "traction_energy": self.energy,
+            "applied_demand": self.delayed_demand(self.t_ticks),
+            "draft_force_max": max(float(fc.max()), 0.0) if fc.size else 0.0,
+            "buff_force_max": max(-float(fc.min()), 0.0) if fc.size else 0.0,
+            "draft_force_peak": self.peak_draft,
+            "buff_force_peak": self.peak_buff,
+            "air_brake_force": float(np.dot(self.brake_scale * self.pressure,
+                                            friction_coefficient(v))),
+            "grade": self.route.grade.at(float(x[0])),
+            "speed_limit": float(self.route.speed_limit.at(float(x[0]))),
+            "brake_pipe_reduction": self.brake_history[-1][1],
+        }
+        out.update(zip(self._names_v, v.tolist()))
+        for i in self._pressure_index:
+            out[f"p_cyl[{i + 1}]"] = float(self.pressure[i])
+        return out
