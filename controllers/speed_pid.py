@@ -113,3 +113,88 @@ class SpeedPid(StatefulCore):
         self.demand = demand
         self.error = error
         return demand
+
+
+@dataclass(frozen=True)
+class DistributedSpeedPidParams:
+    """Speed PID for a multi-unit EMU (seeds 001, 004): one PID, force shared by the units."""
+
+    pid: SpeedPidParams
+    units: int  # number of power units / cars that receive a force
+    mass: float  # kg, effective train mass M (1 + gamma) that turns m/s^2 into N
+    hold_accel: float = -0.5  # m/s^2, brake demand that holds the train at the final stop
+    stop_speed: float = 0.3  # m/s, below this with a zero reference the holding brake is used
+
+    def check(self) -> None:
+        self.pid.check()
+        if self.units < 1:
+            raise ValueError(f"units = {self.units} must be >= 1")
+        if not self.mass > 0:
+            raise ValueError(f"mass = {self.mass} must be > 0")
+        if not self.hold_accel <= 0:
+            raise ValueError(f"hold_accel = {self.hold_accel} must be <= 0")
+
+
+class DistributedSpeedPid(StatefulCore):
+    """Tracks a reference profile and distributes the force demand over the units.
+
+    Inputs: ``v`` (m/s) and ``s`` (m, head position) of the train, and per unit the force the
+    plant can give now, ``traction_limit[i]`` and ``brake_limit[i]`` (N, both >= 0). The
+    reference ``profile`` (:class:`plants.route.ReferenceProfile`) is looked up by ``s`` for a
+    speed-distance profile and by time for a speed-time one. The total demand
+    ``F = M a_dem`` is shared in proportion to each unit's available force: traction only on
+    units that can pull (so trailers never brake while the train pulls, seed 004's delta),
+    braking on all. The summed limits bound the PID (anti-windup against the real envelope).
+    At the end of the profile (zero reference, speed below ``stop_speed``) it holds the brake.
+    """
+
+    state_fields = ("forces", "v_ref", "a_ref", "pid_state")
+
+    def __init__(self, params: DistributedSpeedPidParams, profile) -> None:
+        params.check()
+        self.p = params
+        self.profile = profile
+        self.pid = SpeedPid(params.pid)
+        self.forces = [0.0] * params.units
+        self.v_ref = 0.0
+        self.a_ref = 0.0
+
+    @property
+    def pid_state(self) -> dict:
+        return self.pid.get_state()
+
+    @pid_state.setter
+    def pid_state(self, state: dict) -> None:
+        self.pid.set_state(state)
+
+    def compute(self, t: float, inputs: dict[str, float]) -> tuple[dict[str, float], int]:
+        p = self.p
+        n = p.units
+        x = inputs["s"] if self.profile.kind == "distance" else t
+        self.v_ref = v_ref = self.profile.speed(x)
+        self.a_ref = a_ref = self.profile.accel(x)
+        v = inputs["v"]
+        trac = [max(float(inputs[f"traction_limit[{i + 1}]"]), 0.0) for i in range(n)]
+        brake = [max(float(inputs[f"brake_limit[{i + 1}]"]), 0.0) for i in range(n)]
+        total_trac, total_brake = sum(trac), sum(brake)
+        demand = self.pid.update(v, v_ref, a_ref, a_lo=-total_brake / p.mass,
+                                 a_hi=total_trac / p.mass)
+        if v_ref <= 0.0 and a_ref <= 0.0 and v < p.stop_speed:
+            demand = max(p.hold_accel, -total_brake / p.mass)  # hold at the stop
+            self.pid.demand = demand
+        force = p.mass * demand
+        if force >= 0.0:
+            share = trac if total_trac > 0 else [0.0] * n
+            total = total_trac
+        else:
+            share = brake
+            total = total_brake
+        self.forces = [force * si / total if total > 0 else 0.0 for si in share]
+        return self.outputs(), 1
+
+    def outputs(self) -> dict[str, float]:
+        out = {f"force[{i + 1}]": f for i, f in enumerate(self.forces)}
+        demand = self.pid.demand
+        out.update({"force_demand": self.p.mass * demand, "accel_demand": demand,
+                    "v_ref": self.v_ref, "a_ref": self.a_ref, "speed_error": -self.pid.error})
+        return out
