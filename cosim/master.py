@@ -278,48 +278,37 @@ class FixedStep(Algorithm):
 
     name = "fixed"
 
+    def exchange(self, t: int) -> None:
+        self.m.propagate(set(self.m.units))
+        self.m.maybe_record(t)
+
     def run(self) -> None:
         m = self.m
-        h = m.base_step_ticks
-        k = 0
-        t = m.start_ticks
+        k, t = 0, m.start_ticks
         while True:
-            m.propagate(set(m.units))
-            m.maybe_record(t)
+            self.exchange(t)
             if t >= m.stop_ticks:
                 break
             k += 1
-            t = min(m.start_ticks + k * h, m.stop_ticks)
+            t = min(m.start_ticks + k * m.base_step_ticks, m.stop_ticks)
             for unit in m.units:
                 unit.step_to(t)
             m.progress(t)
         m.finish(t)
 
 
-class Jacobi(Algorithm):
+class Jacobi(FixedStep):
     """Every FMU every base step from the same values: after all doSteps, read every output,
     then set every input (as libcosim does). A command reaches the plant one step later."""
 
     name = "jacobi"
 
-    def run(self) -> None:
+    def exchange(self, t: int) -> None:
         m = self.m
-        h = m.base_step_ticks
-        k = 0
-        t = m.start_ticks
-        while True:
-            values = [link.src.get([link.src_name])[0] for link in m.links]
-            m.maybe_record(t)
-            for link, value in zip(m.links, values):
-                m.transfer(link, value)
-            if t >= m.stop_ticks:
-                break
-            k += 1
-            t = min(m.start_ticks + k * h, m.stop_ticks)
-            for unit in m.units:
-                unit.step_to(t)
-            m.progress(t)
-        m.finish(t)
+        values = [link.src.get([link.src_name])[0] for link in m.links]
+        m.maybe_record(t)
+        for link, value in zip(m.links, values):
+            m.transfer(link, value)
 
 
 ALGORITHM_CLASSES: dict[str, type[Algorithm]] = {
