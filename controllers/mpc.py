@@ -38,7 +38,7 @@ Choices where the paper is silent (all parameters of :class:`StopMpcParams`):
 * Standstill: once the measured speed is at most ``standstill_speed`` after the reference has
   come to rest or within ``standstill_window`` m of the stop point, the brake is held at
   ``max(u, standstill_command)`` (a train at a platform does not creep); RSMPC then holds
-  ``N - 1`` samples.
+  its longest hold (``N - 1``) samples.
 """
 
 from __future__ import annotations
@@ -155,6 +155,7 @@ class _StopMpcBase(StatefulCore):
         self.F_term = np.array([[0, 0, 1, 0], [0, 0, 0, 1]], float)
         self.sigma = self._terminal_box()
         self._qps: dict[int, HorizonQP] = {}
+        self.max_hold = 1  # longest hold M (RSMPC: N - 1)
         # state
         self.history: list[float] = [params.initial_command] * (m.delay_steps + 1)
         self.command = float(params.initial_command)
@@ -313,7 +314,7 @@ class _StopMpcBase(StatefulCore):
         if self.standstill or (v <= p.standstill_speed and rest):
             self.standstill = True
             u = max(self.command, p.standstill_command)
-            hold = self.N - 1 if self.self_triggered else 1
+            hold = self.max_hold
             self.plan = []
             elapsed_s = 0.0
         else:

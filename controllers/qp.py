@@ -126,7 +126,7 @@ class HorizonQP:
         self.solver.setup(sp.csc_matrix(np.triu(2.0 * self.Hhalf)), np.zeros(nu),
                           sp.csc_matrix(self.Acon), -np.ones(self.n_con), np.ones(self.n_con),
                           verbose=False, eps_abs=eps, eps_rel=eps, max_iter=max_iter,
-                          polish=False, warm_starting=True)
+                          polishing=False, warm_starting=True, adaptive_rho=False)
         self.nu = nu
 
     def predict(self, x0: np.ndarray, U: np.ndarray, d: np.ndarray | None = None) -> np.ndarray:
@@ -170,7 +170,7 @@ class HorizonQP:
             self.solver.warm_start(x=np.asarray(warm_x, float), y=np.asarray(warm_y, float))
         else:
             self.solver.warm_start(x=np.zeros(self.nu), y=np.zeros(self.n_con))
-        res = self.solver.solve()
+        res = self.solver.solve(raise_error=False)
         elapsed = time.perf_counter() - t0
         status = str(res.info.status)
         if status not in _SOLVED or res.x is None or not np.all(np.isfinite(res.x)):
