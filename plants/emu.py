@@ -331,7 +331,9 @@ class Emu(StatefulCore):
         moving_before = float(self.m @ self.v) > 0.0
         self.x, self.v = new[:n], new[n:]
         self.applied = applied
-        if float(self.m @ self.v) <= 0.0 and (moving_before or np.all(u <= 0.0)):
+        v_mean = float(self.m @ self.v) / float(np.sum(self.m))
+        creeping = v_mean <= self.p.standstill_speed and np.all(u <= 0.0) and np.any(u < 0.0)
+        if (v_mean <= 0.0 and moving_before) or creeping:
             if self._holds(u, self._route_force(self.x)):
                 self.v = np.zeros(n)
                 self.held = True
