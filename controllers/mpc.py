@@ -65,7 +65,7 @@ class StopMpcParams:
 
     horizon: int = 10  # N
     q_speed: float = 10.0  # q1, weight on (v - v_s)^2, 1/(m/s)^2
-    q_position: float = 5.0  # q2, weight on (s - s_s)^2, 1/m^2
+    q_position: float = 10.0  # q2, weight on (s - s_s)^2, 1/m^2
     r_du: float = 0.01  # R, weight on du^2, 1/%^2
     beta: float = 2.0  # RSMPC trade-off (>= 1); ignored by ideal MPC and RMPC
     sample_time: float = 0.2  # s
