@@ -31,7 +31,8 @@ SUMMARY_COLUMNS = ("stop_error_m", "command_switches", "qp_solves", "qp_infeasib
 
 
 def parse_grid(items: Iterable[str]) -> dict[str, list[Any]]:
-    """``["controller.N=3..15", "controller.beta=1,2"]`` -> ``{"controller.N": [3, ..., 15], ...}``."""
+    """``["controller.N=3..15", "controller.beta=1,2"]`` -> ``{"controller.N": [3, .., 15], ..}``.
+    """
     from cosim.scenario import parse_value
 
     grid: dict[str, list[Any]] = {}
