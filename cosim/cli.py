@@ -179,6 +179,44 @@ def validate(
         raise typer.Exit(1)
 
 
+@app.command()
+def sweep(
+    scenarios: Annotated[list[str], typer.Argument(
+        help="scenario name(s) in scenarios/ or paths, e.g. seed000_stop_rmpc seed000_stop_rsmpc")],
+    set_: Annotated[list[str], typer.Option(
+        "--set", help="grid, e.g. controller.N=3..15 or controller.beta=1,2,4 (repeatable)")],
+    out_dir: Annotated[Path | None, typer.Option("--out", help="output folder "
+                                                 "(default runs/sweep_<scenario>)")] = None,
+    workers: Annotated[int | None, typer.Option(help="parallel processes (default: CPUs)")] = None,
+    no_plot: Annotated[bool, typer.Option("--no-plot", help="skip sweep.png")] = False,
+) -> None:
+    """Run scenarios over a parameter grid in parallel; write sweep.csv and sweep.png."""
+    from cosim.master import SimulationError
+    from cosim.scenario import ScenarioError, find_scenario
+    from cosim.sweep import parse_grid, run_sweep
+
+    try:
+        grid = parse_grid(set_)
+        stems = [find_scenario(s).stem for s in scenarios]
+        target = out_dir or Path("runs") / ("sweep_" + "_".join(stems))
+        frame = run_sweep(scenarios, grid, target, workers, plot=not no_plot)
+    except (ValueError, ScenarioError, SimulationError) as err:
+        _fail(str(err))
+    table = Table(title=f"sweep over {', '.join(grid)}")
+    columns = ["scenario", *grid, "stop_error_m", "controller_executions", "command_switches",
+               "qp_infeasible"]
+    labels = {"stop_error_m": "stop error m", "controller_executions": "executions",
+              "command_switches": "switches", "qp_infeasible": "infeasible"}
+    for col in columns:
+        table.add_column(labels.get(col, col.rpartition(".")[2]),
+                         justify="left" if col == "scenario" else "right")
+    for _, row in frame.iterrows():
+        table.add_row(*[f"{row[c]:+.3f}" if c == "stop_error_m" else str(row[c])
+                        for c in columns])
+    out.print(table)
+    out.print(f"wrote {target}/sweep.csv" + ("" if no_plot else ", sweep.png"))
+
+
 def main() -> None:  # pragma: no cover - console entry point
     app()
 
