@@ -187,7 +187,7 @@ class Emu(StatefulCore):
     """Multi-unit EMU plant core; inputs ``force[i]`` (N), see module docstring."""
 
     state_fields = ("t_ticks", "x", "v", "held", "traction_energy", "regenerated_energy",
-                    "applied")
+                    "command")
 
     def __init__(self, params: EmuParams, route: Route, v0: float = 0.0, s0: float = 0.0,
                  t0: float = 0.0) -> None:
@@ -217,7 +217,7 @@ class Emu(StatefulCore):
         self.held = bool(v0 == 0.0)
         self.traction_energy = 0.0  # J
         self.regenerated_energy = 0.0  # J
-        self.applied = np.zeros(n)  # N, clipped force acting now
+        self.command = np.zeros(n)  # N, last commanded forces (before the envelope)
         self._grid = to_ticks(params.max_step)
         self._noise_ticks = to_ticks(params.disturbance_interval)
         self._noise_cache: tuple[int, np.ndarray] | None = None
@@ -310,7 +310,7 @@ class Emu(StatefulCore):
         if self.held:
             route_force = self._route_force(self.x)
             if self._holds(u, route_force):
-                self.applied = self._clip(u, self.v, self.x)
+                self.command = u
                 return
             self.held = False
         prop = self._propagator(h_ticks)
@@ -330,7 +330,7 @@ class Emu(StatefulCore):
         self.regenerated_energy += h * float(np.sum(regen_force * np.maximum(v_mid, 0.0)))
         moving_before = float(self.m @ self.v) > 0.0
         self.x, self.v = new[:n], new[n:]
-        self.applied = applied
+        self.command = u
         v_mean = float(self.m @ self.v) / float(np.sum(self.m))
         creeping = v_mean <= self.p.standstill_speed and np.all(u <= 0.0) and np.any(u < 0.0)
         if (v_mean <= 0.0 and moving_before) or creeping:
@@ -362,6 +362,11 @@ class Emu(StatefulCore):
         return (p.coupler_stiffness * (self.x[:-1] - self.x[1:])
                 + p.coupler_damping * (self.v[:-1] - self.v[1:]))
 
+    @property
+    def applied(self) -> np.ndarray:
+        """Forces (N) acting now: the last command clipped to the envelope at this state."""
+        return self._clip(self.command, self.v, self.x)
+
     def accelerations(self) -> np.ndarray:
         """dv_i/dt (m/s^2) at the current state and applied forces."""
         if self.held:
@@ -384,8 +389,9 @@ class Emu(StatefulCore):
         fronts = self.x - self.offsets
         mass = float(np.sum(self.m))
         v_mean = float(self.m @ self.v) / mass
-        power = self.applied * self.v
-        regen = np.where(self.motored, np.minimum(-np.minimum(self.applied, 0.0),
+        applied = self.applied
+        power = applied * self.v
+        regen = np.where(self.motored, np.minimum(-np.minimum(applied, 0.0),
                                                   self.traction_limit()), 0.0) * self.v
         out: dict[str, float] = {
             "v": v_mean,
@@ -408,7 +414,7 @@ class Emu(StatefulCore):
             out[f"v[{k}]"] = float(self.v[i])
             out[f"s[{k}]"] = float(fronts[i])
             out[f"a[{k}]"] = float(a[i])
-            out[f"applied_force[{k}]"] = float(self.applied[i])
+            out[f"applied_force[{k}]"] = float(applied[i])
             out[f"traction_limit[{k}]"] = float(tl[i])
             out[f"brake_limit[{k}]"] = float(bl[i])
         for j in range(n - 1):

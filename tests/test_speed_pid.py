@@ -107,3 +107,87 @@ def test_state_round_trip_reproduces_outputs() -> None:
 def test_bad_parameters_are_rejected(field: str, value: float) -> None:
     with pytest.raises(ValueError, match=field):
         SpeedPid(SpeedPidParams(**{field: value}))
+
+
+# -- distributed EMU controller ------------------------------------------------------------------
+def _distributed(units: int = 3, **pid):
+    import numpy as np
+
+    from controllers.speed_pid import DistributedSpeedPid, DistributedSpeedPidParams
+    from plants.route import ReferenceProfile
+
+    profile = ReferenceProfile("time", np.array([0.0, 100.0, 200.0]),
+                               np.array([0.0, 40.0, 40.0]))
+    params = DistributedSpeedPidParams(pid=SpeedPidParams(**pid), units=units, mass=1.5e5)
+    return DistributedSpeedPid(params, profile)
+
+
+def _limits(trac, brake):
+    out = {f"traction_limit[{i + 1}]": t for i, t in enumerate(trac)}
+    out.update({f"brake_limit[{i + 1}]": b for i, b in enumerate(brake)})
+    return out
+
+
+def test_force_is_shared_by_available_force() -> None:
+    ctl = _distributed()
+    inputs = {"v": 1.0, "s": 0.0, **_limits([6e4, 0.0, 3e4], [5e4, 5e4, 1e5])}
+    out, hold = ctl.compute(10.0, inputs)  # too slow: traction
+    assert hold == 1
+    forces = [out[f"force[{i}]"] for i in (1, 2, 3)]
+    assert forces[1] == 0.0  # the trailer never pulls
+    assert forces[0] == pytest.approx(2 * forces[2])
+    assert sum(forces) == pytest.approx(out["force_demand"])
+    assert out["force_demand"] == pytest.approx(1.5e5 * out["accel_demand"])
+    out, _ = ctl.compute(10.2, {**inputs, "v": 20.0})  # too fast: braking on every unit
+    forces = [out[f"force[{i}]"] for i in (1, 2, 3)]
+    assert all(f < 0 for f in forces)
+    assert forces[2] == pytest.approx(2 * forces[0]) and forces[0] == pytest.approx(forces[1])
+
+
+def test_demand_is_bounded_by_what_the_units_can_give() -> None:
+    ctl = _distributed(kp=10.0)
+    out, _ = ctl.compute(50.0, {"v": 0.0, "s": 0.0, **_limits([1e4, 0.0, 1e4], [1e5] * 3)})
+    assert out["force_demand"] == pytest.approx(2e4)
+    assert out["force[1]"] == pytest.approx(1e4)
+
+
+def test_holds_the_brake_at_the_end_of_the_profile() -> None:
+    import numpy as np
+
+    from controllers.speed_pid import DistributedSpeedPid, DistributedSpeedPidParams
+    from plants.route import ReferenceProfile
+
+    profile = ReferenceProfile("distance", np.array([0.0, 400.0]), np.array([20.0, 0.0]))
+    ctl = DistributedSpeedPid(DistributedSpeedPidParams(pid=SpeedPidParams(), units=2,
+                                                        mass=1e5, hold_accel=-0.4), profile)
+    out, _ = ctl.compute(0.0, {"v": 0.1, "s": 400.2, **_limits([1e4, 1e4], [1e5, 1e5])})
+    assert out["accel_demand"] == pytest.approx(-0.4)
+    assert out["force[1]"] + out["force[2]"] == pytest.approx(-4e4)
+
+
+def test_closed_loop_on_the_emu_core_meets_ctcs3() -> None:
+    """PID + Emu core (3-car CRH3, seed 004 reference) without FMUs: CTCS-3 at every sample."""
+    import numpy as np
+
+    from controllers.speed_pid import DistributedSpeedPid, DistributedSpeedPidParams
+    from cosim.state import to_ticks
+    from plants.emu import Emu, emu_config
+    from plants.route import load_route
+
+    route = load_route("seed004_level")
+    emu = Emu(emu_config("crh3_3car"), route)
+    T = 1.0
+    ctl = DistributedSpeedPid(DistributedSpeedPidParams(
+        pid=SpeedPidParams(kp=0.5, ki=0.05, sample_time=T), units=3, mass=171e3),
+        route.reference)
+    errors, refs = [], []
+    for k in range(800):
+        meas = emu.outputs()
+        out, _ = ctl.compute(k * T, meas)
+        errors.append(meas["v"] - out["v_ref"])
+        refs.append(out["v_ref"])
+        emu.advance(to_ticks(k * T), to_ticks(T), out)
+    err_kmh, ref_kmh = np.abs(errors) * 3.6, np.array(refs) * 3.6
+    allowed = np.where(ref_kmh <= 30.0, 2.0, 0.02 * ref_kmh)
+    assert np.all(err_kmh <= allowed)
+    assert err_kmh[250:].max() < 0.2  # after the transients of the start

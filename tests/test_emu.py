@@ -1,0 +1,222 @@
+"""EMU coupler-chain plant: conservation, damping, rigid limit, envelope, step sizes, FMUs."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+
+from cosim.state import to_ticks
+from plants.emu import Emu, EmuParams, emu_config
+from plants.route import GRAVITY, Route, StepProfile
+
+
+def run(emu: Emu, forces, duration: float, step: float, t0: float = 0.0) -> None:
+    """Advance ``emu`` with constant per-unit forces over communication steps of ``step`` s."""
+    t, end = to_ticks(t0), to_ticks(t0 + duration)
+    inputs = {f"force[{i + 1}]": float(f) for i, f in enumerate(forces)}
+    h = to_ticks(step)
+    while t < end:
+        dt = min(h, end - t)
+        emu.advance(t, dt, inputs)
+        t += dt
+
+
+def frictionless(n: int = 3, **kw) -> EmuParams:
+    p = emu_config("crh380a_3unit") if n == 3 else emu_config("crh3_8car")
+    zero = (0.0,) * n
+    return replace(p, davis_a=zero, davis_b=zero, davis_c=zero,
+                   max_traction_force=(1e9,) * n, max_traction_power=(1e12,) * n,
+                   max_brake_force=(1e9,) * n, max_brake_power=(1e12,) * n, **kw)
+
+
+def test_coupler_chain_conserves_momentum_and_damps_relative_motion() -> None:
+    """No resistance, internal forces only: momentum constant, relative speeds decay."""
+    p = frictionless()
+    emu = Emu(p, Route.flat(), v0=20.0)
+    emu.v = np.array([21.0, 19.0, 20.5])
+    emu.held = False
+    m = np.array(p.masses)
+    momentum0 = float(m @ emu.v)
+    spread0 = np.ptp(emu.v)
+    energies = []
+    for _ in range(50):
+        run(emu, [0.0, 0.0, 0.0], 0.1, 0.1, t0=emu.t_ticks / 1e9)
+        assert float(m @ emu.v) == pytest.approx(momentum0, rel=1e-12)
+        # kinetic energy relative to the centre of mass plus spring energy never grows
+        vc = momentum0 / m.sum()
+        stretch = emu.x[:-1] - emu.x[1:]
+        energies.append(0.5 * float(m @ (emu.v - vc) ** 2)
+                        + 0.5 * p.coupler_stiffness * float(stretch @ stretch))
+    assert all(b <= a + 1e-9 for a, b in zip(energies, energies[1:], strict=False))
+    assert np.ptp(emu.v) < 1e-6 * spread0
+    # forces equal and opposite on the end units leave the momentum unchanged too
+    run(emu, [5e4, 0.0, -5e4], 5.0, 0.2, t0=emu.t_ticks / 1e9)
+    assert float(m @ emu.v) == pytest.approx(momentum0, rel=1e-12)
+    assert emu.coupler_forces()[0] == pytest.approx(5e4, rel=1e-3)  # front pulled: tension
+
+
+def test_stiff_couplers_match_single_mass_model() -> None:
+    """Very stiff couplers: the chain moves as one mass M dv/dt = F - sum(F_N)(v)."""
+    p = emu_config("crh380a_3unit", coupler_stiffness=1e10, coupler_damping=1e9,
+                   max_step=0.05)
+    p = replace(p, max_traction_force=(1e9,) * 3, max_traction_power=(1e12,) * 3)
+    emu = Emu(p, Route.flat(), v0=10.0)
+    force = 2e5  # N on the leading unit only
+    run(emu, [force, 0.0, 0.0], 120.0, 0.2)
+    mass = sum(p.masses)
+    a, b, c = sum(p.davis_a), sum(p.davis_b), sum(p.davis_c)
+
+    def rhs(_t, y):
+        return [(force - (a + b * y[0] + c * y[0] ** 2)) / mass, y[0]]
+
+    sol = solve_ivp(rhs, (0.0, 120.0), [10.0, 0.0], rtol=1e-11, atol=1e-9)
+    v_ref, s_ref = sol.y[0, -1], sol.y[1, -1]
+    assert np.allclose(emu.v, v_ref, atol=1e-4)
+    assert emu.outputs()["s"] == pytest.approx(s_ref, abs=5e-3)
+
+
+def test_constant_force_without_resistance_is_analytic() -> None:
+    p = frictionless()
+    emu = Emu(p, Route.flat(), v0=0.0)
+    forces = np.array(p.masses) * 0.3  # same acceleration on every unit: couplers stay slack
+    run(emu, forces, 30.0, 0.2)
+    assert np.allclose(emu.v, 0.3 * 30.0, rtol=1e-12)
+    assert emu.outputs()["s"] == pytest.approx(0.5 * 0.3 * 30.0**2, rel=1e-12)
+    assert np.allclose(emu.coupler_forces(), 0.0, atol=1e-3)
+
+
+def _run_steps(p: EmuParams, route: Route, steps: list[float]) -> dict[str, float]:
+    emu = Emu(p, route, v0=15.0)
+    t, k, end = 0, 0, to_ticks(60.0)
+    forces = {f"force[{i}]": 1.2e5 for i in (1, 2, 3)}
+    while t < end:
+        h = min(to_ticks(steps[k % len(steps)]), end - t)
+        emu.advance(t, h, forces)
+        t += h
+        k += 1
+    return emu.outputs()
+
+
+def test_results_do_not_depend_on_the_communication_step() -> None:
+    """Steps on the max_step grid: same trajectory to rounding; off the grid (split sub-steps):
+    same to the integrator's accuracy. Noise included (drawn per absolute interval)."""
+    p = emu_config("crh380a_3unit", disturbance_accel_std=0.05, disturbance_interval=0.2,
+                   disturbance_seed=3)
+    route = Route("g", 1e6, StepProfile.from_pairs([[0.0, 0.0], [300.0, 12.0]]))
+    base = _run_steps(p, route, [0.2])
+    for steps, rel, abs_ in (([0.05], 1e-9, 1e-6), ([1.0, 0.15, 0.5], 1e-9, 1e-6),
+                             ([0.07], 1e-4, 1e-2), ([1.0, 0.013, 0.5], 1e-4, 1e-2)):
+        other = _run_steps(p, route, steps)
+        for key, value in base.items():
+            assert other[key] == pytest.approx(value, rel=rel, abs=abs_), (steps, key)
+
+
+def test_traction_and_brake_envelope() -> None:
+    p = emu_config("crh380a_3unit")
+    emu = Emu(p, Route.flat(), v0=50.0)
+    tl, bl = emu.traction_limit(), emu.brake_limit()
+    for i in range(3):
+        assert tl[i] == pytest.approx(min(p.max_traction_force[i], p.max_traction_power[i] / 50))
+        assert bl[i] == pytest.approx(min(p.max_brake_force[i], p.max_brake_power[i] / 50))
+    run(emu, [1e7, 1e7, -1e7], 0.2, 0.2)
+    applied = [emu.outputs()[f"applied_force[{i}]"] for i in (1, 2, 3)]
+    v = emu.v
+    assert applied[0] == pytest.approx(min(p.max_traction_force[0], p.max_traction_power[0]
+                                           / v[0]), rel=1e-3)
+    assert applied[2] == pytest.approx(-min(p.max_brake_force[2], p.max_brake_power[2] / v[2]),
+                                       rel=1e-3)
+
+
+def test_trailers_of_crh3_have_no_traction() -> None:
+    p = emu_config("crh3_8car")
+    assert [f > 0 for f in p.max_traction_force] == [True, False, True, False, False, True,
+                                                     False, True]
+    p3 = emu_config("crh3_3car")
+    assert p3.masses[1] - p.masses[1] == pytest.approx(5e3)  # +5 t passengers on car 2
+    assert p3.max_traction_force[1] == 0.0
+
+
+def test_neutral_section_cuts_traction() -> None:
+    route = Route("n", 1e5, StepProfile.from_pairs(None, 0.0),
+                  neutral=StepProfile.from_intervals([[1000.0, 1200.0]], 0.0, value=1.0))
+    p = emu_config("crh380a_3unit")
+    emu = Emu(p, route, v0=0.0, s0=1000.0 + 38.0 + 1.0)  # unit 1 midpoint just inside
+    out = emu.outputs()
+    assert out["traction_limit[1]"] == 0.0 and out["traction_limit[2]"] > 0.0
+    run(emu, [1e5, 0.0, 0.0], 0.2, 0.2)
+    assert emu.applied[0] == 0.0
+
+
+def test_grade_resistance_by_length_share() -> None:
+    """Unit 1 (76 m) with 30 m on a 10 permille grade feels 30/76 of it."""
+    route = Route("g", 1e6, StepProfile.from_pairs([[0.0, 0.0], [1000.0, 10.0]]))
+    p = emu_config("crh380a_3unit")
+    emu = Emu(p, route, v0=0.0, s0=1030.0)
+    force = emu._route_force(emu.x)
+    assert force[0] == pytest.approx(p.masses[0] * GRAVITY * 10.0 / 1000 * 30 / 76)
+    assert force[1] == 0.0 and force[2] == 0.0
+
+
+def test_standstill_is_held_by_the_brake_and_rolls_back_without() -> None:
+    route = Route("up", 1e6, StepProfile.from_pairs([[-1e5, 10.0]]))
+    p = emu_config("crh380a_3unit")
+    emu = Emu(p, route, v0=0.0, s0=5000.0)
+    run(emu, [-1e5, -1e5, -1e5], 10.0, 0.2)
+    assert emu.held and np.all(emu.v == 0.0) and emu.outputs()["s"] == 5000.0
+    run(emu, [0.0, 0.0, 0.0], 10.0, 0.2, t0=10.0)
+    assert not emu.held and emu.outputs()["v"] < -0.1  # rolls back down the grade
+    # and comes to rest again when braked
+    run(emu, [-1.5e5, -1.5e5, -1.5e5], 20.0, 0.2, t0=20.0)
+    assert emu.held and emu.outputs()["v"] == 0.0
+
+
+def test_state_round_trip() -> None:
+    p = emu_config("crh380a_3unit", disturbance_accel_std=0.1)
+    emu = Emu(p, Route.flat(), v0=30.0)
+    run(emu, [5e4, 0.0, 5e4], 5.0, 0.2)
+    state = emu.get_state()
+    run(emu, [5e4, 0.0, -5e4], 5.0, 0.2, t0=5.0)
+    first = emu.outputs()
+    emu.set_state(state)
+    run(emu, [5e4, 0.0, -5e4], 5.0, 0.2, t0=5.0)
+    assert emu.outputs() == first
+
+
+def test_energy_counts_traction_and_regeneration() -> None:
+    p = frictionless()
+    p = replace(p, max_traction_force=(1e5,) * 3)
+    emu = Emu(p, Route.flat(), v0=20.0)
+    run(emu, [1e5, 1e5, 1e5], 10.0, 0.2)
+    ke = 0.5 * sum(p.masses) * (float(np.mean(emu.v)) ** 2 - 20.0**2)
+    assert emu.traction_energy == pytest.approx(ke, rel=1e-6)
+    e0 = emu.regenerated_energy
+    run(emu, [-5e4, -5e4, -5e4], 5.0, 0.2, t0=10.0)
+    assert emu.regenerated_energy - e0 > 0.0
+
+
+@pytest.mark.parametrize("name, value", [("masses", (1.0, -1.0, 1.0)), ("max_step", 0.0),
+                                         ("coupler_damping", -1.0)])
+def test_bad_parameters_are_rejected(name: str, value) -> None:
+    with pytest.raises(ValueError, match=name):
+        Emu(replace(emu_config("crh380a_3unit"), **{name: value}), Route.flat())
+    with pytest.raises(ValueError, match="unknown"):
+        emu_config("crh999")
+
+
+def test_emu_fmus_close_the_loop_through_the_master(built_fmus) -> None:
+    """Emu3 + EmuSpeedPid3 FMUs (seed 004 scenario, first 260 s): CTCS-3 tracking."""
+    from cosim.master import run_scenario
+
+    result = run_scenario("scenarios/seed004_crh3_pid.toml",
+                          overrides={"simulation.stop_time": 260.0}, plot=False)
+    s = result.summary
+    assert s["ctcs3_speed_error_ok"] is True
+    assert s["max_abs_speed_error_kmh"] < 0.5
+    frame = result.frame
+    # traction only on the motor cars 1 and 3 (car 2 is a trailer)
+    assert frame["plant.applied_force[2]"].max() <= 0.0
+    assert math.isclose(frame["plant.v"].iloc[-1], 45.0, abs_tol=0.05)
