@@ -25,7 +25,10 @@ Exercising the FMU: parameters keep their start values; every Real input follows
 deterministic signal inside its [min, max] (``start + a sin(0.7 k + phase)`` when unbounded);
 other inputs keep their start values. Outputs are read at every communication point after the
 inputs are set, i.e. as our master does. The run uses the default experiment's step size and at
-most ``n_steps`` steps. This module imports no other project module, so it works for any FMU.
+most ``n_steps`` steps. Outputs that are irreproducible by design (wall-clock measurements) or
+defined per communication step (e.g. a peak over the last step) are excluded from the exact
+comparisons they cannot pass, by name or description patterns (:class:`Options`), and listed
+in a note. This module imports no other project module, so it works for any FMU.
 """
 
 from __future__ import annotations
@@ -37,7 +40,7 @@ import shutil
 import subprocess
 import sys
 import zipfile
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 from xml.etree import ElementTree
@@ -256,7 +259,9 @@ def check_model_description(path: str | Path, strict: bool = True) -> list[Probl
 class _Host:
     """Loads one FMU for the worker: extraction, variables, instances with captured logs."""
 
-    def __init__(self, path: Path, unzipdir: str, n_steps: int) -> None:
+    def __init__(self, path: Path, unzipdir: str, n_steps: int,
+                 irreproducible: tuple[str, ...] = (), step_dependent: tuple[str, ...] = ()
+                 ) -> None:
         from fmpy import read_model_description
 
         self.path = path
@@ -268,6 +273,8 @@ class _Host:
         self.outputs = [v for v in variables if v.causality == "output"
                         and v.type in ("Real", "Integer", "Boolean", "Enumeration")]
         self.parameters = [v for v in variables if v.causality == "parameter"]
+        self.irreproducible = _matching(self.outputs, irreproducible)
+        self.step_dependent = _matching(self.outputs, step_dependent)
         de = self.md.defaultExperiment
         self.start = float(de.startTime) if de is not None and de.startTime is not None else 0.0
         stop = float(de.stopTime) if de is not None and de.stopTime is not None else None
@@ -297,6 +304,21 @@ class _Host:
                 value = min(value, hi) if hi is not None else value
             values.append((v, value))
         return values
+
+
+def _matching(outputs: list, patterns: tuple[str, ...]) -> frozenset[int]:
+    """Indices of outputs whose name or ``description:...`` matches a pattern (fnmatch)."""
+    from fnmatch import fnmatch
+
+    found = set()
+    for i, v in enumerate(outputs):
+        for pat in patterns:
+            if pat.startswith("description:"):
+                if fnmatch((v.description or "").lower(), pat[len("description:"):].lower()):
+                    found.add(i)
+            elif fnmatch(v.name, pat):
+                found.add(i)
+    return frozenset(found)
 
 
 class _Instance:
@@ -405,16 +427,20 @@ def _nominal(host: _Host, phase: float = 0.0, name: str = "nominal") -> np.ndarr
     return rows
 
 
-def _differs(a: np.ndarray, b: np.ndarray, tol: float = 0.0) -> str | None:
-    """None when equal (NaN == NaN) within ``tol`` (relative to 1 + |b|), else a description."""
+def _differs(a: np.ndarray, b: np.ndarray, tol: float = 0.0,
+             ignore: frozenset[int] = frozenset()) -> str | None:
+    """None when equal (NaN == NaN) within ``tol`` (relative to 1 + |b|), else a description.
+    Output columns in ``ignore`` are not compared."""
     if a.shape != b.shape:
         return f"shapes differ {a.shape} vs {b.shape}"
     bad = ~(np.isclose(a, b, rtol=tol, atol=tol, equal_nan=True) if tol else
             ((a == b) | (np.isnan(a) & np.isnan(b))))
+    bad[:, sorted(ignore)] = False
     if not bad.any():
         return None
     k, j = np.argwhere(bad)[0]
-    return f"step {k}, output #{j}: {a[k, j]!r} vs {b[k, j]!r} ({int(bad.sum())} values differ)"
+    return (f"step {k}, output #{j}: {float(a[k, j])!r} vs {float(b[k, j])!r} "
+            f"({int(bad.sum())} values differ)")
 
 
 def _out_name(host: _Host, message: str) -> str:
@@ -496,7 +522,7 @@ def _check_reset(host: _Host, ctx: dict) -> list[Problem]:
     inst.init()
     second = _run(inst, 0, host.n)
     inst.free()
-    diff = _differs(second, first)
+    diff = _differs(second, first, ignore=host.irreproducible)
     return [Problem("reset", "the run after fmi2Reset differs from the first run: "
                     + _out_name(host, diff))] if diff else []
 
@@ -513,7 +539,7 @@ def _check_fmu_state(host: _Host, ctx: dict) -> list[Problem]:
     rest = _run(inst, k, host.n)
     inst.must("setFMUstate", state)
     again = _run(inst, k, host.n)
-    diff = _differs(again, rest)
+    diff = _differs(again, rest, ignore=host.irreproducible)
     if diff:
         problems.append(Problem("fmu-state", "after fmi2SetFMUstate the rest of the run "
                                              "differs: " + _out_name(host, diff)))
@@ -523,7 +549,7 @@ def _check_fmu_state(host: _Host, ctx: dict) -> list[Problem]:
         restored = fresh.must("deSerializeFMUstate", data)
         fresh.must("setFMUstate", restored)
         copy_rest = _run(fresh, k, host.n)
-        diff = _differs(copy_rest, rest)
+        diff = _differs(copy_rest, rest, ignore=host.irreproducible)
         if diff:
             problems.append(Problem("fmu-state", "a fresh instance given the serialized state "
                                     "continues differently: " + _out_name(host, diff)))
@@ -548,7 +574,8 @@ def _check_variable_step(host: _Host, ctx: dict) -> list[Problem]:
         inst.init()
         rows = _run(inst, 0, host.n, splits=splits)
         inst.free()
-        diff = _differs(rows, reference, ctx["step_tolerance"])
+        diff = _differs(rows, reference, ctx["step_tolerance"],
+                        ignore=host.irreproducible | host.step_dependent)
         if diff:
             problems.append(Problem("variable-step", f"steps split {splits} x h give other "
                                     f"results than steps of h = {host.h} s (tolerance "
@@ -573,7 +600,7 @@ def _check_two_instances(host: _Host, ctx: dict) -> list[Problem]:
     n = host.n
     problems = []
     for label, rows, ref in (("first", rows_a, reference[:n]), ("second", rows_b, other[:n])):
-        diff = _differs(np.array(rows).reshape(ref.shape), ref)
+        diff = _differs(np.array(rows).reshape(ref.shape), ref, ignore=host.irreproducible)
         if diff:
             problems.append(Problem("two-instances", f"the {label} of two interleaved instances "
                                     "differs from a run alone: " + _out_name(host, diff)))
@@ -722,7 +749,8 @@ def _worker(args: dict) -> None:
     paths = [Path(p) for p in args["paths"]]
     unzipdirs = [extract(str(p)) for p in paths]
     try:
-        hosts = [_Host(p, d, args["n_steps"]) for p, d in zip(paths, unzipdirs)]
+        hosts = [_Host(p, d, args["n_steps"], tuple(args["irreproducible"]),
+                       tuple(args["step_dependent"])) for p, d in zip(paths, unzipdirs)]
         if args["mode"] == "together":
             _emit("begin", "together")
             for p in _together(hosts):
@@ -731,6 +759,14 @@ def _worker(args: dict) -> None:
             return
         host = hosts[0]
         ctx: dict[str, Any] = {"step_tolerance": args["step_tolerance"]}
+        if "calling-sequence" not in args["skip"]:
+            for label, cols in (("not compared (irreproducible by design)", host.irreproducible),
+                                ("not compared across step sizes (defined per communication "
+                                 "step)", host.step_dependent - host.irreproducible)):
+                if cols:
+                    names = ", ".join(host.outputs[i].name for i in sorted(cols))
+                    _emit("problem", asdict(Problem("calling-sequence", f"outputs {label}: "
+                                                    f"{names}", NOTE)))
         for name in DYNAMIC_CHECKS:
             if name in args["skip"]:
                 continue
@@ -763,7 +799,8 @@ def _together(hosts: list[_Host]) -> list[Problem]:
     problems = []
     for h, inst, r, ref in zip(hosts, insts, rows, alone):
         inst.free()
-        diff = _differs(np.array(r).reshape(ref[:h.n].shape), ref[:h.n])
+        diff = _differs(np.array(r).reshape(ref[:h.n].shape), ref[:h.n],
+                        ignore=h.irreproducible)
         if diff:
             problems.append(Problem("together", f"{h.path.name} run interleaved with the "
                                     "other FMUs differs from a run alone: "
@@ -827,8 +864,19 @@ class Options:
     step_tolerance: float = 1e-9  # variable-step results vs fixed-step results (relative)
     n_steps: int = 40  # communication steps per run
     timeout: float = 120.0  # s, per worker process (a hang is reported after this)
+    # outputs (fnmatch on name, or "description:<pattern>") excluded from the exact
+    # reproducibility comparisons (reset, state, instances): wall-clock measurements
+    irreproducible: tuple[str, ...] = ("*wall_time*", "*solve_time*", "*cpu_time*",
+                                       "description:*wall-clock*")
+    # outputs excluded only from the variable-step comparison: defined per communication step
+    step_dependent: tuple[str, ...] = ("description:*communication step*",)
     dynamic: bool = True
-    extra: dict[str, Any] = field(default_factory=dict)
+
+
+def _worker_options(opts: Options) -> dict[str, Any]:
+    return {"n_steps": opts.n_steps, "step_tolerance": opts.step_tolerance,
+            "irreproducible": list(opts.irreproducible),
+            "step_dependent": list(opts.step_dependent)}
 
 
 def check_fmu(path: str | Path, options: Options | None = None) -> list[Problem]:
@@ -844,8 +892,7 @@ def check_fmu(path: str | Path, options: Options | None = None) -> list[Problem]
                        or p.message == "not a co-simulation FMU" for p in problems)
     if not loadable:
         return problems
-    args = {"mode": "single", "paths": [str(path.resolve())], "n_steps": opts.n_steps,
-            "step_tolerance": opts.step_tolerance}
+    args = {"mode": "single", "paths": [str(path.resolve())], **_worker_options(opts)}
     return problems + _run_worker(args, DYNAMIC_CHECKS, opts.timeout)
 
 
@@ -853,7 +900,7 @@ def check_together(paths: list[str | Path], options: Options | None = None) -> l
     """Load all ``paths`` in one process and check each runs as it does alone."""
     opts = options or Options()
     args = {"mode": "together", "paths": [str(Path(p).resolve()) for p in paths],
-            "n_steps": opts.n_steps, "step_tolerance": opts.step_tolerance}
+            **_worker_options(opts)}
     return _run_worker(args, ("together",), opts.timeout)
 
 

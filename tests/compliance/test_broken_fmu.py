@@ -1,0 +1,56 @@
+"""The compliance suite itself: a deliberately broken FMU fails it, check by check, with
+messages that say what is wrong; crashes and hangs are reported instead of killing pytest."""
+
+from __future__ import annotations
+
+import zipfile
+
+import pytest
+
+from cosim.compliance import ERROR, check_fmu, format_report, passed
+
+PLANTED = {  # check -> fragment of the expected message (see broken_train.py)
+    "fmpy-validation": "InitialUnknowns",
+    "units": "without a unit",
+    "model-structure": "no dependencies attribute",
+    "default-experiment": "no DefaultExperiment",
+    "reset": "after fmi2Reset differs",
+    "fmu-state": "after fmi2SetFMUstate the rest of the run differs",
+    "two-instances": "differs from a run alone",
+    "wrong-state": "fmi2DoStep before initialisation: accepted",
+    "non-finite-inputs": "input u = nan: accepted",
+    "invalid-step": "crashed (signal 6)",
+    "bad-parameters": "hang",
+}
+
+
+def test_broken_fmu_fails(broken_results):
+    assert not passed(broken_results)
+
+
+@pytest.mark.parametrize("check", sorted(PLANTED))
+def test_planted_fault_reported(check, broken_results, broken_fmu):
+    messages = [p.message for p in broken_results if p.check == check and p.severity == ERROR]
+    assert any(PLANTED[check] in m for m in messages), format_report(broken_fmu, broken_results)
+
+
+def test_sound_parts_of_broken_fmu_pass(broken_results):
+    """No false alarms: the calling sequence itself works and v does not feed through."""
+    flagged = {p.check for p in broken_results if p.severity == ERROR}
+    assert not flagged & {"calling-sequence", "output-dependencies", "variables"}
+
+
+def test_report_is_readable(broken_results, broken_fmu):
+    report = format_report(broken_fmu, broken_results)
+    assert "FAIL  reset" in report and "ok    calling-sequence" in report
+    assert report.rstrip().endswith(f"FAILED: {sum(p.severity == ERROR for p in broken_results)}"
+                                    " error(s), 0 warning(s)")
+
+
+def test_not_an_fmu(tmp_path):
+    missing = check_fmu(tmp_path / "nothing.fmu")
+    assert not passed(missing) and "no such file" in missing[0].message
+    junk = tmp_path / "junk.fmu"
+    with zipfile.ZipFile(junk, "w") as z:
+        z.writestr("readme.txt", "not an FMU")
+    assert not passed(check_fmu(junk))
