@@ -261,7 +261,7 @@ class FreightTrain(StatefulCore):
         level = p.max_cylinder_pressure * np.minimum(r / p.full_service_reduction, 1.0)
         return np.where(r >= max(p.min_reduction, 1e-9), level, 0.0)
 
-    def _evolve_pressure(self, pres: np.ndarray, target: np.ndarray,
+    def evolve_pressure(self, pres: np.ndarray, target: np.ndarray,
                          dt: np.ndarray | float) -> np.ndarray:
         """Move pressures towards ``target`` for ``dt`` s along eq. (9) / its release mirror."""
         p = self.p
@@ -295,7 +295,7 @@ class FreightTrain(StatefulCore):
             target = self.target_pressure(self.brake_history[0][1])
             if np.all(start == target):
                 return start
-            end = self._evolve_pressure(start, np.broadcast_to(target, start.shape), t1 - t0)
+            end = self.evolve_pressure(start, np.broadcast_to(target, start.shape), t1 - t0)
         else:
             arrivals, values = self._arrivals()
             idx0, idx1 = self._seen(arrivals, t0), self._seen(arrivals, t1)
@@ -303,14 +303,22 @@ class FreightTrain(StatefulCore):
             target0 = self.target_pressure(values[idx0])
             target1 = self.target_pressure(values[idx1])
             switch = np.clip(arrivals[idx1, cols], t0, t1)  # where idx0 == idx1: harmless
-            mid = self._evolve_pressure(start, target0, switch - t0)
-            end = self._evolve_pressure(mid, target1, t1 - switch)
+            mid = self.evolve_pressure(start, target0, switch - t0)
+            end = self.evolve_pressure(mid, target1, t1 - switch)
             # forget commands every vehicle has already passed
             newest_everywhere = int(np.min(idx1))
             if newest_everywhere > 0:
                 del self.brake_history[:newest_everywhere]
         self.pressure = end
         return 0.5 * (start + end)
+
+    def step_brakes(self, t0: float, t1: float, reduction: float) -> np.ndarray:
+        """Brake pipe only: set ``reduction`` (Pa) at ``t0`` and advance the cylinder pressures
+        to ``t1`` (s); returns them (Pa). For controllers that model the brake wave."""
+        if reduction != self.brake_history[-1][1]:
+            self.brake_history.append([t0, float(reduction)])
+        self._brake_step(t0, t1)
+        return self.pressure
 
     # -- mechanics ---------------------------------------------------------------------------
     def _system_inverse(self, h_ticks: int) -> np.ndarray:
