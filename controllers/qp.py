@@ -26,6 +26,7 @@ import math
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 import osqp
@@ -60,6 +61,8 @@ class QPResult:
 
 class HorizonQP:
     """Condensed QP over a horizon with move blocking, built once, solved many times."""
+
+    RHO0: ClassVar[float] = 0.1  # OSQP step size at the start of every solve
 
     def __init__(self, A: np.ndarray, b: np.ndarray, g: np.ndarray, horizon: int,
                  free_stages: Sequence[int], Q: np.ndarray, R: float, P: np.ndarray,
@@ -119,14 +122,31 @@ class HorizonQP:
             self._hi.append(np.asarray(hi_term, float))
         blocks.append(np.eye(nu))
         self.Acon = np.vstack(blocks)
+        # vector updates as single products: q = Mq err, const = err' Qblk err, and the
+        # constraint offsets base = Fs x_free - Fr ref (flattened stages)
+        self._Qstack = np.array(Qs)
+        self._Mq = 2.0 * np.hstack([Gam[i].T @ Qs[i] for i in range(H + 1)])
+        n_rows = sum(F_.shape[0] for _, F_, _ in self._sel)
+        Fs = np.zeros((n_rows, (H + 1) * n))
+        Fr = np.zeros((n_rows, (H + 1) * n))
+        row = 0
+        for i, F_, mask_ in self._sel:
+            r = F_.shape[0]
+            Fs[row:row + r, i * n:(i + 1) * n] = F_
+            Fr[row:row + r, i * n:(i + 1) * n] = mask_[:, None] * F_
+            row += r
+        self._Fs, self._Fr = Fs, Fr
         self.du_lo = np.full(nu, du_min)
         self.du_hi = np.full(nu, du_max)
+        self._lo_all = np.concatenate(self._lo + [self.du_lo])
+        self._hi_all = np.concatenate(self._hi + [self.du_hi])
         self.n_con = self.Acon.shape[0]
         self.solver = osqp.OSQP()
         self.solver.setup(sp.csc_matrix(np.triu(2.0 * self.Hhalf)), np.zeros(nu),
                           sp.csc_matrix(self.Acon), -np.ones(self.n_con), np.ones(self.n_con),
                           verbose=False, eps_abs=eps, eps_rel=eps, max_iter=max_iter,
-                          polishing=False, warm_starting=True, adaptive_rho=False)
+                          polishing=False, warm_starting=True, adaptive_rho=True,
+                          adaptive_rho_interval=25, rho=self.RHO0)
         self.nu = nu
 
     def predict(self, x0: np.ndarray, U: np.ndarray, d: np.ndarray | None = None) -> np.ndarray:
@@ -144,20 +164,11 @@ class HorizonQP:
         if d is not None:
             free_part = free_part + self.Psi @ d
         err = free_part - ref
-        q = np.zeros(self.nu)
-        const = 0.0
-        for i in range(self.H + 1):
-            qe = self.Qbar[i] @ err[i]
-            q += 2.0 * self.Gam[i].T @ qe
-            const += float(err[i] @ qe)
-        lows, highs = [], []
-        for (i, F, mask), lo, hi in zip(self._sel, self._lo, self._hi, strict=True):
-            base = F @ free_part[i] - (F @ ref[i]) * mask
-            lows.append(lo - base)
-            highs.append(hi - base)
-        lows.append(self.du_lo)
-        highs.append(self.du_hi)
-        low, high = np.concatenate(lows), np.concatenate(highs)
+        q = self._Mq @ err.ravel()
+        const = float(np.einsum("ij,ijk,ik->", err, self._Qstack, err))
+        base = np.concatenate([self._Fs @ free_part.ravel() - self._Fr @ ref.ravel(),
+                               np.zeros(self.nu)])
+        low, high = self._lo_all - base, self._hi_all - base
         nan = np.full(self.nu, np.nan)
         if np.any(low > high + 1e-12):  # tightened sets empty along the way: infeasible
             return QPResult(nan, np.full(self.H, np.nan), np.full((self.H + 1, self.n), np.nan),
@@ -165,6 +176,9 @@ class HorizonQP:
                             time.perf_counter() - t0, np.zeros(self.n_con))
         high = np.maximum(high, low)
         self.solver.update(q=q, l=low, u=high)
+        # rho adapts within a solve (every 25 iterations, not by timing) and restarts from
+        # RHO0 at every solve, so the result depends only on the data and the warm start
+        self.solver.update_settings(rho=self.RHO0)
         if warm_x is not None and warm_y is not None and len(warm_x) == self.nu \
                 and len(warm_y) == self.n_con:
             self.solver.warm_start(x=np.asarray(warm_x, float), y=np.asarray(warm_y, float))

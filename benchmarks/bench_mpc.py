@@ -1,0 +1,92 @@
+"""Benchmark of the seed 000 predictive controllers (prints figures, asserts nothing).
+
+1. QP time per controller event (median and 99th percentile, wall time of vector update +
+   OSQP solve, summed over the QPs of one event; RSMPC solves up to N-1 QPs per event) for
+   N = 5, 10, 15, from a direct closed loop of the plant and controller cores.
+2. Whole-scenario wall time per controller through the event-driven master (FMUs).
+
+    python benchmarks/bench_mpc.py [--repeat 3]
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import sys
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path[:0] = [str(ROOT), str(ROOT / "tests")]
+
+from mpc_loop import run_loop  # noqa: E402
+
+from controllers.mpc import (  # noqa: E402
+    IdealStopMpc,
+    SelfTriggeredStopMpc,
+    StopMpcParams,
+    TubeStopMpc,
+)
+
+CONTROLLERS = {"MPC": IdealStopMpc, "RMPC": TubeStopMpc, "RSMPC": SelfTriggeredStopMpc}
+SCENARIOS = {"PID": "seed000_stop_pid", "MPC": "seed000_stop_mpc",
+             "RMPC": "seed000_stop_rmpc", "RSMPC": "seed000_stop_rsmpc"}
+
+
+def qp_table(repeat: int) -> None:
+    print("QP time per controller event (direct core loop, 60 s scenario)")
+    print(f"{'controller':<8} {'N':>3} {'events':>7} {'QPs':>6} {'median ms':>10} "
+          f"{'p99 ms':>8} {'per QP ms':>10} {'stop err m':>11}")
+    for name, cls in CONTROLLERS.items():
+        for N in (5, 10, 15):
+            times: list[float] = []
+            solves = events = 0
+            per_qp: list[float] = []
+            for _ in range(repeat):
+                p = replace(StopMpcParams(), horizon=N)
+                core = cls(p)
+                for hold in range(1, core.max_hold + 1):
+                    core.qp(hold)  # build outside the timed region (done once per FMU)
+                r = run_loop(core, p)
+                ev = [x for x in core.solve_times if x > 0.0]
+                times += ev
+                solves += core.qp_solves
+                events += len(ev)
+                per_qp.append(sum(ev) / max(core.qp_solves, 1))
+            arr = np.array(times) * 1e3
+            print(f"{name:<8} {N:>3} {events // repeat:>7} {solves // repeat:>6} "
+                  f"{np.median(arr):>10.3f} {np.percentile(arr, 99):>8.3f} "
+                  f"{1e3 * statistics.mean(per_qp):>10.3f} {r.stop_error:>+11.3f}")
+
+
+def scenario_table(repeat: int) -> None:
+    from cosim.master import ensure_built, run_scenario
+    from cosim.scenario import load_scenario
+
+    print("\nWhole scenario through the event-driven master (60 s simulated, N = 10)")
+    print(f"{'controller':<8} {'wall s (median)':>16} {'executions':>11} {'stop err m':>11}")
+    for name, scenario in SCENARIOS.items():
+        ensure_built(load_scenario(scenario))
+        walls = []
+        for _ in range(repeat):
+            t0 = time.perf_counter()
+            res = run_scenario(scenario, build=False, plot=False)
+            walls.append(time.perf_counter() - t0)
+        s = res.summary
+        print(f"{name:<8} {statistics.median(walls):>16.3f} "
+              f"{s['executions']['controller']:>11} {s['stop_error_m']:>+11.3f}")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--repeat", type=int, default=3)
+    args = parser.parse_args()
+    qp_table(args.repeat)
+    scenario_table(args.repeat)
+
+
+if __name__ == "__main__":
+    main()
