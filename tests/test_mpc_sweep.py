@@ -1,0 +1,52 @@
+"""Sweep: grid parsing, parallel runs equal to single runs, sweep.csv / sweep.png, CLI."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import pandas as pd
+import pytest
+
+from cosim.master import run_scenario
+from cosim.sweep import grid_points, parse_grid, run_sweep
+
+
+def test_parse_grid_ranges_lists_and_errors():
+    grid = parse_grid(["controller.N=3..6", "controller.beta=1,2.5"])
+    assert grid == {"controller.N": [3, 4, 5, 6], "controller.beta": [1, 2.5]}
+    assert len(grid_points(grid)) == 8
+    assert grid_points(grid)[1] == {"controller.N": 3, "controller.beta": 2.5}
+    for bad in ("controller.N", "controller.N=5..3", "controller.N=a..b", "=3"):
+        with pytest.raises(ValueError):
+            parse_grid([bad])
+
+
+def test_parallel_sweep_matches_single_runs(built_fmus, tmp_path):
+    frame = run_sweep(["seed000_stop_rmpc", "seed000_stop_rsmpc"], {"controller.N": [3, 10]},
+                      tmp_path, workers=2)
+    assert len(frame) == 4
+    written = pd.read_csv(tmp_path / "sweep.csv")
+    assert list(written["controller.N"]) == [3, 10, 3, 10]
+    assert (tmp_path / "sweep.png").read_bytes()[:4] == b"\x89PNG"
+    single = run_scenario("seed000_stop_rsmpc", build=False, plot=False,
+                          overrides={"controller.N": 3}).summary
+    row = frame[(frame.scenario == "seed000_stop_rsmpc") & (frame["controller.N"] == 3)].iloc[0]
+    assert row["stop_error_m"] == pytest.approx(single["stop_error_m"], abs=1e-12)
+    assert row["controller_executions"] == single["executions"]["controller"]
+    assert row["command_switches"] == single["command_switches"]
+    assert (frame["stop_error_m"].abs() <= 0.5).all()
+
+
+def test_cli_sweep(built_fmus, tmp_path):
+    done = subprocess.run([sys.executable, "-m", "cosim.cli", "sweep", "seed000_stop_rsmpc",
+                           "--set", "controller.N=4..5", "--workers", "1", "--out",
+                           str(tmp_path), "--no-plot"], capture_output=True, text=True,
+                          timeout=600)
+    assert done.returncode == 0, done.stderr
+    assert "sweep.csv" in done.stdout
+    assert len(pd.read_csv(tmp_path / "sweep.csv")) == 2
+    bad = subprocess.run([sys.executable, "-m", "cosim.cli", "sweep", "seed000_stop_rsmpc",
+                          "--set", "controller.N=9..x"], capture_output=True, text=True,
+                         timeout=600)
+    assert bad.returncode == 2 and "range needs integers" in bad.stderr
