@@ -165,8 +165,9 @@ def test_holds_the_brake_at_the_end_of_the_profile() -> None:
     assert out["force[1]"] + out["force[2]"] == pytest.approx(-4e4)
 
 
-def test_closed_loop_on_the_emu_core_meets_ctcs3() -> None:
-    """PID + Emu core (3-car CRH3, seed 004 reference) without FMUs: CTCS-3 at every sample."""
+@pytest.mark.parametrize("configuration", ["crh3_3car", "crh3_8car"])
+def test_closed_loop_on_the_emu_core_meets_ctcs3(configuration: str) -> None:
+    """PID + Emu core (CRH3, seed 004 reference) without FMUs: CTCS-3 at every sample."""
     import numpy as np
 
     from controllers.speed_pid import DistributedSpeedPid, DistributedSpeedPidParams
@@ -175,11 +176,12 @@ def test_closed_loop_on_the_emu_core_meets_ctcs3() -> None:
     from plants.route import load_route
 
     route = load_route("seed004_level")
-    emu = Emu(emu_config("crh3_3car"), route)
+    params = emu_config(configuration)
+    emu = Emu(params, route)
     T = 1.0
     ctl = DistributedSpeedPid(DistributedSpeedPidParams(
-        pid=SpeedPidParams(kp=0.5, ki=0.05, sample_time=T), units=3, mass=171e3),
-        route.reference)
+        pid=SpeedPidParams(kp=0.5, ki=0.05, sample_time=T), units=params.n,
+        mass=sum(params.masses)), route.reference)
     errors, refs = [], []
     for k in range(800):
         meas = emu.outputs()
