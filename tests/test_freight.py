@@ -1,0 +1,258 @@
+"""Freight train plant (seed 002) and its PID: brake wave, eq. (9), momentum, steps, FMUs."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+
+from controllers.freight_pid import FreightPid, FreightPidParams
+from cosim.state import to_ticks
+from plants.freight import FreightParams, FreightTrain
+from plants.route import GRAVITY, KMH, Route, load_route
+
+P = FreightParams()
+
+
+def run(train: FreightTrain, schedule, t_end: float, comm: float) -> None:
+    """Advance with piecewise-constant inputs ``schedule(t) -> dict`` on steps of ``comm`` s."""
+    t, end, h = train.t_ticks, to_ticks(t_end), to_ticks(comm)
+    while t < end:
+        step = min(h, end - t)
+        train.advance(t, step, schedule(t / 1e9))
+        t += step
+
+
+def centre_distances() -> np.ndarray:
+    """Distance (m) from the train front to each vehicle's centre, from Table 1 geometry."""
+    lengths = [35.2] + [12.0] * 108
+    fronts = np.concatenate(([0.0], np.cumsum(lengths[:-1])))
+    return fronts + 0.5 * np.array(lengths)
+
+
+def test_train_geometry_and_mass_match_table_1() -> None:
+    train = FreightTrain(P, Route.flat())
+    assert train.mass.size == 109
+    assert train.mass.sum() == pytest.approx(10_676e3)
+    assert train.train_length == pytest.approx(1331.2)
+
+
+def test_brake_application_reaches_vehicle_after_distance_over_wave_speed() -> None:
+    """Pressure of vehicle i is 0 until D_i / 250 m/s after the reduction, then rises."""
+    train = FreightTrain(P, Route.flat())
+    delay = centre_distances() / 250.0
+    assert delay[-1] == pytest.approx(5.3008, abs=1e-3)  # 1,325.2 m to the last centre
+    for t in np.arange(0.05, 6.0, 0.05):
+        run(train, lambda _: {"pipe_reduction": P.full_service_reduction}, t, 0.05)
+        p = train.pressure
+        before, after = delay > t + 1e-9, delay < t - 1e-9
+        assert np.all(p[before] == 0.0)
+        assert np.all(p[after] > 0.0)
+
+
+@pytest.mark.parametrize("reduction", [140e3, 70e3])
+def test_cylinder_pressure_follows_eq_9_up_to_the_reduction_target(reduction: float) -> None:
+    """p_i = p_max ((t - t_d,i) / t_max)^lambda, capped at p_max r / r_full (eq. 9)."""
+    train = FreightTrain(P, Route.flat())
+    delay = centre_distances() / P.brake_propagation_speed
+    target = P.max_cylinder_pressure * reduction / P.full_service_reduction
+    for t in (1.0, 3.7, 8.0, 15.0, 26.0):
+        run(train, lambda _: {"pipe_reduction": reduction}, t, 0.1)
+        since = np.maximum(t - delay, 0.0)
+        expected = np.minimum(P.max_cylinder_pressure * np.minimum(
+            since / P.brake_fill_time, 1.0) ** P.brake_fill_exponent, target)
+        np.testing.assert_allclose(train.pressure, expected, rtol=1e-9, atol=1e-6)
+    assert np.all(train.pressure == target)
+
+
+def test_release_travels_at_release_wave_speed_and_falls_over_release_time() -> None:
+    train = FreightTrain(P, Route.flat())
+    run(train, lambda _: {"pipe_reduction": P.full_service_reduction}, 30.0, 0.2)
+    assert np.all(train.pressure == P.max_cylinder_pressure)
+    delay = centre_distances() / P.brake_release_propagation_speed
+    for t in (32.0, 37.5, 50.0):
+        run(train, lambda _: {"pipe_reduction": 0.0}, t, 0.2)
+        since = np.maximum(t - 30.0 - delay, 0.0)
+        expected = P.max_cylinder_pressure * (1.0 - np.minimum(
+            since / P.brake_release_time, 1.0) ** P.brake_release_exponent)
+        np.testing.assert_allclose(train.pressure, expected, rtol=1e-9, atol=1e-6)
+
+
+def test_below_minimum_reduction_the_brakes_do_not_apply() -> None:
+    train = FreightTrain(P, Route.flat())
+    run(train, lambda _: {"pipe_reduction": 0.5 * P.min_reduction}, 20.0, 0.2)
+    assert np.all(train.pressure == 0.0)
+
+
+def _frictionless() -> FreightParams:
+    return dataclasses.replace(P, loco_resistance=(0.0, 0.0, 0.0),
+                               wagon_resistance=(0.0, 0.0, 0.0))
+
+
+def test_coupler_chain_conserves_momentum_and_damps_relative_motion() -> None:
+    """No resistance, no traction, no brakes: sum m(1+gamma) v is constant, spread decays."""
+    train = FreightTrain(_frictionless(), Route.flat(), v0=15.0)
+    rng = np.random.default_rng(4)
+    train.v = train.v + rng.normal(0.0, 0.5, train.v.size)
+    train.x = train.x + rng.normal(0.0, 0.02, train.x.size)
+    momentum0 = float(np.dot(train.m_eff, train.v))
+    spread0 = float(np.std(train.v))
+    run(train, lambda _: {}, 60.0, 0.2)
+    assert float(np.dot(train.m_eff, train.v)) == pytest.approx(momentum0, rel=1e-12)
+    assert np.std(train.v) < 0.05 * spread0
+
+
+def test_very_stiff_couplers_match_the_single_mass_model() -> None:
+    """Rigid limit: the chain moves like one mass M(1+gamma) under the summed forces."""
+    params = dataclasses.replace(P, coupler_stiffness=1e10, coupler_damping=1e8)
+    train = FreightTrain(params, Route.flat())
+    run(train, lambda _: {"force_demand": 700e3}, 100.0, 0.2)
+    a, b, c = train.res_a.sum(), train.res_b.sum(), train.res_c.sum()
+    m_eff = train.m_eff.sum()
+    tau, tv = params.traction_delay, params.traction_time_constant
+
+    def rhs(t: float, y: np.ndarray) -> list[float]:
+        force = 700e3 * (1.0 - np.exp(-(t - tau) / tv)) if t > tau else 0.0
+        v = y[0]
+        drag = (a + (b + c * v) * v) * min(v / params.stiction_speed, 1.0)
+        return [(force - drag) / m_eff, v]
+
+    sol = solve_ivp(rhs, (0.0, 100.0), [0.0, 0.0], rtol=1e-10, atol=1e-10, max_step=0.05)
+    v_end, s_end = sol.y[:, -1]
+    assert v_end > 4.0  # it really moved: 700 kN on 10,676 t
+    np.testing.assert_allclose(train.v, v_end, rtol=2e-4)
+    assert train.x[0] == pytest.approx(s_end, rel=2e-4)
+
+
+def _schedule(t: float) -> dict[str, float]:
+    force = 760e3 if t < 40.0 else (-300e3 if t < 60.0 else 0.0)
+    return {"force_demand": force, "pipe_reduction": 80e3 if t >= 50.0 else 0.0}
+
+
+def _downhill_route() -> Route:
+    return load_route("freight_20km")
+
+
+@pytest.mark.parametrize("comm", [0.05, 0.2, 1.0])
+def test_results_do_not_depend_on_grid_aligned_communication_steps(comm: float) -> None:
+    ref = FreightTrain(P, _downhill_route())
+    run(ref, _schedule, 80.0, 0.1)
+    train = FreightTrain(P, _downhill_route())
+    run(train, _schedule, 80.0, comm)
+    np.testing.assert_allclose(train.v, ref.v, rtol=0, atol=1e-10)
+    np.testing.assert_allclose(train.x, ref.x, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(train.pressure, ref.pressure, rtol=1e-12, atol=1e-6)
+
+
+def test_odd_communication_steps_only_split_sub_steps() -> None:
+    """Steps of 0.37 s cut the 0.01 s grid: same trajectory to integration accuracy."""
+    ref = FreightTrain(P, _downhill_route())
+    run(ref, _schedule, 80.0, 0.1)
+    train = FreightTrain(P, _downhill_route())
+    run(train, lambda t: _schedule(round(t / 0.1) * 0.1), 80.0, 0.37)
+    assert np.max(np.abs(train.v - ref.v)) < 5e-3
+
+
+def test_integrator_converges_when_the_sub_step_shrinks() -> None:
+    """Error against a 2 ms run shrinks with max_step; 10 ms is accurate to < 1 mm/s."""
+    def final(max_step: float) -> np.ndarray:
+        train = FreightTrain(dataclasses.replace(P, max_step=max_step), _downhill_route())
+        run(train, _schedule, 80.0, 0.2)
+        return train.v
+
+    fine = final(0.002)
+    err = {h: float(np.max(np.abs(final(h) - fine))) for h in (0.04, 0.02, 0.01)}
+    assert err[0.01] < 1e-3
+    assert err[0.04] > 1.8 * err[0.02] > 1.8 * 1.8 * err[0.01]
+
+
+def test_traction_envelope_and_electric_brake_fade() -> None:
+    train = FreightTrain(P, Route.flat())
+    assert train.traction_limits(5.0) == (760e3, 461e3)
+    trac, ed = train.traction_limits(25.0)
+    assert trac == pytest.approx(9.6e6 / 25.0) and ed == pytest.approx(9.6e6 / 25.0)
+    assert train.traction_limits(0.5 * P.ed_fade_speed)[1] == pytest.approx(0.5 * 461e3)
+
+
+def test_grade_resistance_by_length_share_accelerates_the_train_downhill() -> None:
+    """At rest on -4 permille with the brakes released the train starts rolling forward,
+    at the rate of the grade minus the basic resistance."""
+    route = _downhill_route()
+    train = FreightTrain(P, route, s0=13500.0)  # all vehicles on the -4 permille segment
+    run(train, lambda _: {}, 5.0, 0.2)
+    extra = route.additional_resistance(train.x, train.length)  # N/kN per vehicle
+    assert np.all(extra < -P.wagon_resistance[0])  # the grade beats the basic resistance
+    expected = -np.dot(train.mass * GRAVITY / 1e3, extra) - train.res_a.sum()
+    assert train.accel == pytest.approx(expected / train.m_eff.sum(), rel=2e-2)
+
+
+def test_bad_parameters_are_rejected() -> None:
+    with pytest.raises(ValueError, match="coupler_stiffness"):
+        FreightTrain(dataclasses.replace(P, coupler_stiffness=0.0), Route.flat())
+    with pytest.raises(ValueError, match="traction_model"):
+        FreightTrain(dataclasses.replace(P, traction_model=3), Route.flat())
+    train = FreightTrain(P, Route.flat())
+    with pytest.raises(ValueError, match="plant is at"):
+        train.advance(to_ticks(1.0), to_ticks(0.2), {})
+
+
+def _closed_loop(t_end: float) -> tuple[FreightTrain, np.ndarray]:
+    route = load_route("freight_20km")
+    train = FreightTrain(P, route)
+    pid = FreightPid(FreightPidParams(), route.reference, route)
+    T, rows = to_ticks(0.2), []
+    t = 0
+    while t < to_ticks(t_end):
+        out = train.outputs()
+        cmd, _ = pid.compute(t / 1e9, {"v": out["v"], "s": out["s"]})
+        rows.append((out["s"], out["v"], cmd["v_ref"], cmd["pipe_reduction"]))
+        train.advance(t, T, cmd)
+        t += T
+    return train, np.array(rows)
+
+
+def test_pid_tracks_the_reference_in_traction() -> None:
+    """Start-up (couplers stretching from the locomotive back) lags < 1 km/h; after the first
+    30 s the error stays within 0.8 km/h, its largest values where the reference acceleration
+    steps (paper: largest errors at start and mode changes), and is 0.1 km/h rms."""
+    _, rows = _closed_loop(300.0)
+    err_kmh = (rows[:, 1] - rows[:, 2]) / KMH
+    assert rows[-1, 1] > 10.0  # accelerated along the reference
+    assert np.max(np.abs(err_kmh)) < 1.0
+    assert np.max(np.abs(err_kmh[150:])) < 0.8
+    assert np.sqrt(np.mean(err_kmh[150:] ** 2)) < 0.1
+    assert np.all(rows[:, 3] == 0.0)  # no air brake while pulling
+
+
+@pytest.mark.slow
+def test_full_run_stops_at_20_km_with_one_air_application() -> None:
+    train, rows = _closed_loop(1400.0)
+    err_kmh = (rows[:, 1] - rows[:, 2]) / KMH
+    moving = rows[:, 2] > 3.0  # the last metres (v_ref -> 0) are judged by the stop error
+    assert np.max(np.abs(err_kmh[moving])) < 1.5
+    assert abs(train.x[0] - 20000.0) < 2.0
+    assert abs(train.v[0]) < 0.1
+    applications = np.count_nonzero(np.diff((rows[:, 3] > 0).astype(int)) == 1)
+    assert applications <= 2  # the final braking and (at most) the holding brake
+
+
+def test_fmus_validate_and_the_plant_fmu_reproduces_the_core(built_fmus) -> None:
+    """FreightTrain and FreightPid pass fmpy validation; the plant FMU gives the core's
+    trajectory (same sub-steps, same numbers)."""
+    from fmpy import simulate_fmu
+    from fmpy.validation import validate_fmu
+
+    for name in ("FreightTrain", "FreightPid"):
+        assert validate_fmu(str(built_fmus[name].path)) == []
+    res = simulate_fmu(str(built_fmus["FreightTrain"].path), stop_time=20.0,
+                       output_interval=0.2, start_values={"force_demand": 500e3},
+                       output=["v", "v_tail", "s", "v[55]"])
+    train = FreightTrain(P, load_route("freight_20km"))
+    run(train, lambda _: {"force_demand": 500e3}, 20.0, 0.2)
+    assert res["v"][-1] > 0.3  # it moved
+    assert res["v"][-1] == pytest.approx(train.v[0], abs=1e-12)
+    assert res["v_tail"][-1] == pytest.approx(train.v[-1], abs=1e-12)
+    assert res["v[55]"][-1] == pytest.approx(train.v[54], abs=1e-12)
+    assert res["s"][-1] == pytest.approx(train.x[0], abs=1e-9)
