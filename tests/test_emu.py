@@ -220,3 +220,60 @@ def test_emu_fmus_close_the_loop_through_the_master(built_fmus) -> None:
     # traction only on the motor cars 1 and 3 (car 2 is a trailer)
     assert frame["plant.applied_force[2]"].max() <= 0.0
     assert math.isclose(frame["plant.v"].iloc[-1], 45.0, abs_tol=0.05)
+
+
+def test_emu_fmus_serialized_state_reproduces_the_rest_of_the_run(built_fmus) -> None:
+    """Emu3 (with noise) + EmuSpeedPid3: serialize both states mid-run, finish, restore, rerun."""
+    from fmpy import extract, read_model_description
+    from fmpy.fmi2 import FMU2Slave
+
+    class Inst:
+        def __init__(self, ident: str, strings: dict[str, str], reals: dict[str, float]):
+            path = str(built_fmus[ident].path)
+            md = read_model_description(path)
+            self.vr = {v.name: v.valueReference for v in md.modelVariables}
+            self.fmu = FMU2Slave(guid=md.guid, unzipDirectory=extract(path), instanceName=ident,
+                                 modelIdentifier=md.coSimulation.modelIdentifier)
+            self.fmu.instantiate()
+            self.fmu.setupExperiment(startTime=0.0)
+            self.fmu.enterInitializationMode()
+            for k, v in strings.items():
+                self.fmu.setString([self.vr[k]], [v])
+            for k, v in reals.items():
+                self.fmu.setReal([self.vr[k]], [v])
+            self.fmu.exitInitializationMode()
+
+        def get(self, names: list[str]) -> list[float]:
+            return self.fmu.getReal([self.vr[n] for n in names])
+
+        def set(self, names: list[str], values: list[float]) -> None:
+            self.fmu.setReal([self.vr[n] for n in names], values)
+
+    plant = Inst("Emu3", {"configuration": "crh3_3car", "route": "seed004_level"},
+                 {"disturbance_accel_std": 0.05})
+    ctl = Inst("EmuSpeedPid3", {"reference": "seed004_crh3_reference"},
+               {"mass": 171e3, "sample_time": 1.0})
+    meas = ["v", "s"] + [f"traction_limit[{i}]" for i in (1, 2, 3)] + \
+        [f"brake_limit[{i}]" for i in (1, 2, 3)]
+    forces = [f"force[{i}]" for i in (1, 2, 3)]
+
+    def step(k: int) -> list[float]:
+        ctl.set(meas, plant.get(meas))
+        u = ctl.get(forces)
+        plant.set(forces, u)
+        plant.fmu.doStep(currentCommunicationPoint=float(k), communicationStepSize=1.0)
+        ctl.fmu.doStep(currentCommunicationPoint=float(k), communicationStepSize=1.0)
+        return plant.get(["v", "s", "coupler_force[1]"]) + u
+
+    for k in range(100):
+        step(k)
+    blobs = [i.fmu.serializeFMUstate(i.fmu.getFMUstate()) for i in (plant, ctl)]
+    first = [step(k) for k in range(100, 260)]
+    for inst, blob in zip((plant, ctl), blobs, strict=True):
+        inst.fmu.setFMUstate(inst.fmu.deSerializeFMUstate(blob))
+    second = [step(k) for k in range(100, 260)]
+    assert first == second
+    assert first[-1][0] == pytest.approx(45.0, abs=0.3)  # tracking the 45 m/s target
+    for inst in (plant, ctl):
+        inst.fmu.terminate()
+        inst.fmu.freeInstance()
