@@ -296,8 +296,12 @@ class _StopMpcBase(StatefulCore):
 
     # -- event ---------------------------------------------------------------------------------
     def choose(self, x0: np.ndarray, t: float) -> tuple[float, int, list[float], float]:
-        """Return (du_0, hold M, planned du sequence, solve time)."""
-        raise NotImplementedError
+        """Return (du_0, hold M, planned du sequence, solve time): one QP, M = 1."""
+        res, _ = self.solve(1, x0, t)
+        if not res.feasible:
+            self.qp_infeasible += 1
+            return self.fallback(x0, t), 1, [], res.solve_time
+        return float(res.du[0]), 1, res.du.tolist(), res.solve_time
 
     def compute(self, t: float, inputs: dict[str, float]) -> tuple[dict[str, float], int]:
         p, m = self.p, self.model
@@ -348,23 +352,9 @@ class IdealStopMpc(_StopMpcBase):
     feedforward = True
     tube = False
 
-    def choose(self, x0: np.ndarray, t: float) -> tuple[float, int, list[float], float]:
-        res, _ = self.solve(1, x0, t)
-        if not res.feasible:
-            self.qp_infeasible += 1
-            return self.fallback(x0, t), 1, [], res.solve_time
-        return float(res.du[0]), 1, res.du.tolist(), res.solve_time
-
 
 class TubeStopMpc(_StopMpcBase):
     """Tube-based robust MPC (RMPC, eq. 13-20): tightened constraints, no feedforward."""
-
-    def choose(self, x0: np.ndarray, t: float) -> tuple[float, int, list[float], float]:
-        res, _ = self.solve(1, x0, t)
-        if not res.feasible:
-            self.qp_infeasible += 1
-            return self.fallback(x0, t), 1, [], res.solve_time
-        return float(res.du[0]), 1, res.du.tolist(), res.solve_time
 
 
 class SelfTriggeredStopMpc(_StopMpcBase):
