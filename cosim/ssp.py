@@ -1,0 +1,171 @@
+"""Export a scenario as an SSP 1.0 System Structure Package (``cosim export --ssp``).
+
+The archive holds ``SystemStructure.ssd`` and the scenario's FMUs under ``resources/``:
+
+* one ``ssd:Component`` per scenario FMU (``source="resources/<file>.fmu"``) with a connector
+  for each of its inputs and outputs and for each bound parameter, typed and with units;
+* the scenario's parameter values (and ``sample_time``, and constant inputs) as an inline
+  ``ssv:ParameterSet`` in the component's ``ssd:ParameterBindings``;
+* one ``ssd:Connection`` per scenario connection;
+* ``ssd:Units`` copied from the FMUs' UnitDefinitions;
+* ``ssd:DefaultExperiment`` with the scenario's start and stop time, and the base step as the
+  Open Simulation Platform annotation ``osp:FixedStepAlgorithm`` (read by libcosim).
+
+The result passes ``fmpy.ssp.ssd.read_ssd(path, validate=True)`` (the SSP 1.0 schema) and runs
+in libcosim (``CosimExecution.from_ssp_file``) with the results of our master's ``jacobi``
+mode. Step-size hints are not written: every FMU steps at the base step, as in our master.
+"""
+
+from __future__ import annotations
+
+import zipfile
+from pathlib import Path
+from typing import Any
+from xml.etree.ElementTree import Element, SubElement, indent, register_namespace, tostring
+
+from cosim.scenario import Scenario, load_scenario
+
+SSD = "http://ssp-standard.org/SSP1/SystemStructureDescription"
+SSC = "http://ssp-standard.org/SSP1/SystemStructureCommon"
+SSV = "http://ssp-standard.org/SSP1/SystemStructureParameterValues"
+OSP = "http://opensimulationplatform.com/SSP/OSPAnnotations"
+for _prefix, _uri in (("ssd", SSD), ("ssc", SSC), ("ssv", SSV), ("osp", OSP)):
+    register_namespace(_prefix, _uri)
+
+_BASE_UNIT_KEYS = ("kg", "m", "s", "A", "K", "mol", "cd", "rad")
+
+
+def _q(ns: str, tag: str) -> str:
+    return f"{{{ns}}}{tag}"
+
+
+def _format(value: Any, kind: str) -> str:
+    if kind == "Real":
+        return repr(float(value))
+    if kind == "Integer":
+        return str(int(value))
+    if kind == "Boolean":
+        return "true" if value else "false"
+    return str(value)
+
+
+def _component(system_elements: Element, name: str, source: str, md: Any,
+               values: dict[str, Any], connected: set[str]) -> set[str]:
+    """Add one ``ssd:Component``; returns the units its connectors use."""
+    comp = SubElement(system_elements, _q(SSD, "Component"), {
+        "name": name, "type": "application/x-fmu-sharedlibrary", "source": source})
+    connectors = SubElement(comp, _q(SSD, "Connectors"))
+    variables = {v.name: v for v in md.modelVariables}
+    units: set[str] = set()
+    for v in md.modelVariables:
+        if v.causality not in ("input", "output") and v.name not in values:
+            continue
+        if v.type not in ("Real", "Integer", "Boolean", "String"):
+            continue
+        kind = v.causality if v.causality in ("input", "output") else "parameter"
+        conn = SubElement(connectors, _q(SSD, "Connector"), {"name": v.name, "kind": kind})
+        attrib = {}
+        if v.type == "Real" and v.unit:
+            attrib["unit"] = v.unit
+            units.add(v.unit)
+        SubElement(conn, _q(SSC, v.type), attrib)
+    missing = sorted(n for n in connected if n not in variables)
+    if missing:
+        raise ValueError(f"{name}: no variables {missing} in {source}")
+    if values:
+        bindings = SubElement(comp, _q(SSD, "ParameterBindings"))
+        binding = SubElement(bindings, _q(SSD, "ParameterBinding"))
+        pvalues = SubElement(binding, _q(SSD, "ParameterValues"))
+        pset = SubElement(pvalues, _q(SSV, "ParameterSet"), {"version": "1.0", "name": name})
+        params = SubElement(pset, _q(SSV, "Parameters"))
+        for pname, value in values.items():
+            if pname not in variables:
+                raise ValueError(f"{name}: no variable {pname!r} in {source}")
+            kind = variables[pname].type
+            p = SubElement(params, _q(SSV, "Parameter"), {"name": pname})
+            SubElement(p, _q(SSV, kind), {"value": _format(value, kind)})
+    return units
+
+
+def build_ssd(sc: Scenario, sources: dict[str, str]) -> Element:
+    """The ``SystemStructureDescription`` element of a scenario (``sources``: component ->
+    path of its FMU inside the package)."""
+    from fmpy import read_model_description
+
+    root = Element(_q(SSD, "SystemStructureDescription"), {"version": "1.0", "name": sc.name})
+    system = SubElement(root, _q(SSD, "System"), {"name": sc.name,
+                                                 "description": sc.description or sc.name})
+    elements = SubElement(system, _q(SSD, "Elements"))
+    unit_defs: dict[str, Any] = {}
+    used_units: set[str] = set()
+    for comp in sc.components.values():
+        md = read_model_description(str(comp.fmu_path))
+        unit_defs.update({u.name: u for u in md.unitDefinitions})
+        names = {v.name for v in md.modelVariables}
+        values = dict(comp.parameters)
+        if comp.sample_time is not None and "sample_time" in names:
+            values.setdefault("sample_time", comp.sample_time)
+        values.update(comp.inputs)
+        connected = ({c.src_var for c in sc.connections if c.src == comp.name}
+                     | {c.dst_var for c in sc.connections if c.dst == comp.name})
+        used_units |= _component(elements, comp.name, sources[comp.name], md, values, connected)
+    connections = SubElement(system, _q(SSD, "Connections"))
+    for c in sc.connections:
+        SubElement(connections, _q(SSD, "Connection"), {
+            "startElement": c.src, "startConnector": c.src_var,
+            "endElement": c.dst, "endConnector": c.dst_var})
+    if used_units:
+        units = SubElement(root, _q(SSD, "Units"))
+        for name in sorted(used_units):
+            unit = SubElement(units, _q(SSC, "Unit"), {"name": name})
+            base = unit_defs[name].baseUnit if name in unit_defs else None
+            attrib = {}
+            if base is not None:
+                attrib = {k: str(getattr(base, k)) for k in _BASE_UNIT_KEYS if getattr(base, k)}
+                if base.factor != 1.0:
+                    attrib["factor"] = repr(float(base.factor))
+                if base.offset:
+                    attrib["offset"] = repr(float(base.offset))
+            SubElement(unit, _q(SSC, "BaseUnit"), attrib)
+    sim = sc.simulation
+    experiment = SubElement(root, _q(SSD, "DefaultExperiment"), {
+        "startTime": repr(float(sim.start_time)), "stopTime": repr(float(sim.stop_time))})
+    annotations = SubElement(experiment, _q(SSD, "Annotations"))
+    annotation = SubElement(annotations, _q(SSC, "Annotation"),
+                            {"type": "com.opensimulationplatform"})
+    algorithm = SubElement(annotation, _q(OSP, "Algorithm"))
+    SubElement(algorithm, _q(OSP, "FixedStepAlgorithm"), {
+        "baseStepSize": repr(float(sim.base_step or sim.output_interval))})
+    return root
+
+
+def export_ssp(scenario: str | Path | Scenario, out: str | Path,
+               overrides: dict[str, Any] | list[str] | None = None, build: bool = True) -> Path:
+    """Write the scenario (with ``overrides``) and its FMUs as an SSP archive at ``out``."""
+    sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario, overrides)
+    if build:
+        from cosim.master import ensure_built
+
+        ensure_built(sc)
+    files: dict[Path, str] = {}
+    for comp in sc.components.values():
+        if not comp.fmu_path.is_file():
+            raise FileNotFoundError(f"{comp.name}: {comp.fmu_path} not found (run cosim build)")
+        if comp.fmu_path not in files:
+            stem, n = comp.fmu_path.stem, 1
+            target = f"resources/{stem}.fmu"
+            while target in files.values():
+                n += 1
+                target = f"resources/{stem}_{n}.fmu"
+            files[comp.fmu_path] = target
+    sources = {c.name: files[c.fmu_path] for c in sc.components.values()}
+    root = build_ssd(sc, sources)
+    indent(root)
+    xml = b'<?xml version="1.0" encoding="UTF-8"?>\n' + tostring(root, encoding="utf-8")
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    with zipfile.ZipFile(out, "w", zipfile.ZIP_DEFLATED) as z:
+        z.writestr("SystemStructure.ssd", xml)
+        for path, target in files.items():
+            z.write(path, target)
+    return out
