@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import difflib
 import math
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -363,10 +364,18 @@ def check_against_fmus(scenario: Scenario, descriptions: dict[str, Any]) -> None
                     f"{src}: input {name}.{v.name} is not connected: add "
                     f"\"{name}.{v.name}\" = \"FMU.output\" to [connections] or a constant in "
                     f"[fmus.{name}.inputs]")
-    for ref in scenario.record or []:
+    def check_ref(ref: str, key: str) -> None:
         comp, var = ref.split(".", 1)
-        lookup(comp, var, "[record] variables", ("output", "input", "parameter", "local"))
-    for key, ref in scenario.summary.items():
-        if isinstance(ref, str) and "." in ref and ref.split(".", 1)[0] in variables:
-            comp, var = ref.split(".", 1)
-            lookup(comp, var, f"[summary] {key}", ("output", "input", "parameter", "local"))
+        if "*" in var:  # a glob must match at least one variable
+            pattern = re.compile(re.escape(var).replace(r"\*", ".*") + "$")
+            if not any(pattern.match(n) for n in variables[comp]):
+                raise ScenarioError(f"{src}: {key}: {ref!r} matches no variable of {comp}")
+            return
+        lookup(comp, var, key, ("output", "input", "parameter", "local"))
+
+    for ref in scenario.record or []:
+        check_ref(ref, "[record] variables")
+    for key, value in scenario.summary.items():
+        for ref in value if isinstance(value, list) else [value]:
+            if isinstance(ref, str) and "." in ref and ref.split(".", 1)[0] in variables:
+                check_ref(ref, f"[summary] {key}")
