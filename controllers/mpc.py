@@ -21,7 +21,9 @@ Choices where the paper is silent (all parameters of :class:`StopMpcParams`):
   previous plan), with the untightened constraints and no terminal set.
 * Tube RMPC / RSMPC treat the whole resistance as the unknown disturbance ``w = g a_r`` with
   ``a_r`` in ``W = [a_r_min, a_r_max]``: grade range of the route (permille) times g/1000 plus
-  Davis resistance over ``[0, v_max]`` scaled by ``1 -+ davis_uncertainty``. Nominal prediction
+  Davis resistance over ``[0, v_max]`` scaled by ``1 -+ davis_uncertainty`` (seed 000 defaults:
+  ``W = [-0.0500, 0.3103] m/s^2``, -6 permille with 0.8 x Davis(0) to 28 permille with
+  1.2 x Davis(20 m/s)). Nominal prediction
   uses ``a_r = 0``. Constraints are tightened by support functions of ``R_i`` (eq. 14) or
   ``R_i^M`` (eq. 26). Constraint set X: ``u in [u_min, u_max]``, ``v <= v_max``,
   ``|v - v_s| <= speed_error_max``, ``|s - s_s| <= position_error_max``; du bounded by
@@ -101,6 +103,9 @@ class StopMpcParams:
                      "speed_error_max", "position_error_max"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"{name} = {getattr(self, name)} must be > 0")
+        if not self.q_position > 0:
+            raise ValueError(f"q_position = {self.q_position} must be > 0 (the stop is a "
+                             f"position target; without it the tube feedback is not stabilising)")
         if not self.beta >= 1.0:
             raise ValueError(f"beta = {self.beta} must be >= 1")
         if not self.terminal_set_scale >= 1.0:
@@ -143,6 +148,9 @@ class _StopMpcBase(StatefulCore):
         bPb = float(m.b @ self.P @ m.b)
         self.K = -(m.b @ self.P @ m.A) / (params.r_du + bPb)  # du = K e
         self.A_cl = m.A + np.outer(m.b, self.K)
+        if not np.max(np.abs(np.linalg.eigvals(self.A_cl))) < 1.0:
+            raise ValueError("the LQR feedback of (A, b, Q, R) does not stabilise the design "
+                             "model: check q_speed, q_position, r_du")
         self.w_bounds = disturbance_bounds(params, self.route) if self.tube else (0.0, 0.0)
         self.w_vertices = np.array([m.g * self.w_bounds[0], m.g * self.w_bounds[1]])
         # constraint rows on x: u_prev (abs), v (abs upper), speed / position error

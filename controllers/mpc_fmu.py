@@ -16,7 +16,7 @@ MPC_VARS: tuple[Var, ...] = (
         max=60),
     Var("q_speed", "parameter", _D.q_speed, "s2/m2", "q1: weight on the speed error", min=0.0),
     Var("q_position", "parameter", _D.q_position, "1/m2", "q2: weight on the position error",
-        min=0.0),
+        min=1e-9),
     Var("r_du", "parameter", _D.r_du, "1", "R: weight on the command increment (per %^2)",
         min=1e-12),
     Var("sample_time", "parameter", _D.sample_time, "s", "sample time T", min=1e-6),

@@ -100,5 +100,7 @@ def test_bad_parameters_are_rejected():
         SelfTriggeredStopMpc(replace(BASE, beta=0.5))
     with pytest.raises(ValueError, match="horizon"):
         TubeStopMpc(replace(BASE, horizon=1))
+    with pytest.raises(ValueError, match="q_position"):
+        TubeStopMpc(replace(BASE, q_position=0.0))
     with pytest.raises(ValueError, match="whole number"):
         TubeStopMpc(replace(BASE, brake_delay=0.5))
