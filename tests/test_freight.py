@@ -256,3 +256,63 @@ def test_fmus_validate_and_the_plant_fmu_reproduces_the_core(built_fmus) -> None
     assert res["v_tail"][-1] == pytest.approx(train.v[-1], abs=1e-12)
     assert res["v[55]"][-1] == pytest.approx(train.v[54], abs=1e-12)
     assert res["s"][-1] == pytest.approx(train.x[0], abs=1e-9)
+
+
+def _pid_on(points: list[list[float]], **kw) -> FreightPid:
+    """Freight PID on a level, straight line with a speed-distance reference (m, m/s)."""
+    from plants.route import ReferenceProfile
+
+    arr = np.array(points, dtype=float)
+    ref = ReferenceProfile("distance", arr[:, 0], arr[:, 1])
+    return FreightPid(FreightPidParams(**kw), ref, Route.flat())
+
+
+def test_electric_brake_alone_for_gentle_braking_air_brake_for_strong_braking() -> None:
+    """Reference decelerations: 0.02 m/s^2 is within the electric brake (461 kN = 0.04 m/s^2
+    on 11,317 t), 0.2 m/s^2 is not: only then is the pipe reduced."""
+    v0 = 15.0
+    for decel, air in ((0.02, False), (0.2, True)):
+        pid = _pid_on([[0.0, v0], [v0**2 / (2 * decel), 0.0]])
+        out, _ = pid.compute(0.0, {"v": v0, "s": 0.0})
+        assert (out["pipe_reduction"] > 0.0) is air
+        if air:
+            assert P.min_reduction <= out["pipe_reduction"] <= P.full_service_reduction
+        else:
+            assert -461e3 <= out["force_demand"] < 0.0
+
+
+def test_air_brake_hold_times_and_direct_release() -> None:
+    """Once applied the brake stays >= min_apply_time and is never partly released; once
+    released it is not re-applied for min_release_time."""
+    # braking at 0.5 m/s^2 from 15 to 5 m/s over 200 m, then 5 m/s
+    pid = _pid_on([[0.0, 15.0], [200.0, 5.0], [5000.0, 5.0]], min_apply_time=30.0,
+                  min_release_time=60.0)
+    out, _ = pid.compute(0.0, {"v": 15.0, "s": 0.0})
+    applied = out["pipe_reduction"]
+    assert applied > 0.0
+    t, reductions = 0.0, [applied]
+    while t < 29.8:  # past the braking, far too slow: no braking needed, yet it stays
+        t += 0.2
+        out, _ = pid.compute(t, {"v": 2.0, "s": 300.0})
+        reductions.append(out["pipe_reduction"])
+    assert min(reductions) >= applied
+    assert np.all(np.diff(reductions) >= 0.0)
+    out, _ = pid.compute(30.2, {"v": 2.0, "s": 300.0})
+    assert out["pipe_reduction"] == 0.0  # released fully
+    for k in range(1, 299):  # overspeed on the braking curve, but within the recharge time
+        out, _ = pid.compute(30.2 + 0.2 * k, {"v": 15.0, "s": 20.0})
+        assert out["pipe_reduction"] == 0.0
+    out, _ = pid.compute(90.4, {"v": 15.0, "s": 20.0})
+    assert out["pipe_reduction"] > 0.0
+
+
+def test_pid_holds_the_train_at_the_final_stop() -> None:
+    pid = _pid_on([[0.0, 5.0], [50.0, 0.0]])
+    out, _ = pid.compute(0.0, {"v": 0.05, "s": 49.99})
+    assert out["pipe_reduction"] == FreightPidParams().hold_reduction
+    assert out["force_demand"] == 0.0
+
+
+def test_pid_rejects_bad_parameters() -> None:
+    with pytest.raises(ValueError, match="release_share"):
+        _pid_on([[0.0, 5.0], [50.0, 0.0]], release_share=0.9, ed_share=0.8)
