@@ -316,3 +316,21 @@ def test_pid_holds_the_train_at_the_final_stop() -> None:
 def test_pid_rejects_bad_parameters() -> None:
     with pytest.raises(ValueError, match="release_share"):
         _pid_on([[0.0, 5.0], [50.0, 0.0]], release_share=0.9, ed_share=0.8)
+
+
+@pytest.mark.parametrize("model", [0, 1])
+def test_traction_force_follows_eq_15_lag_or_eq_8_ramp_after_the_dead_time(model: int) -> None:
+    """Demand 600 kN from t = 0: eq. (15) F = F_d (1 - exp(-(t - tau) / t_vb)); eq. (8) a ramp
+    of 0.8 F_M per (t3 - t2), i.e. 10 % -> 90 % of F_M in t3 - t2."""
+    params = dataclasses.replace(P, traction_model=model)
+    train = FreightTrain(params, Route.flat())
+    tau, demand = params.traction_delay, 600e3
+    rate = 0.8 * params.max_traction_force / params.traction_ramp_time
+    for t in (0.3, 0.5, 1.0, 2.35, 4.0, 8.0):
+        run(train, lambda _: {"force_demand": demand}, t, 0.05)
+        since = max(t - tau, 0.0)
+        if model == 0:
+            expected = demand * (1.0 - np.exp(-since / params.traction_time_constant))
+        else:
+            expected = min(rate * since, demand)
+        assert train.traction_force == pytest.approx(expected, rel=1e-9, abs=1e-6)
