@@ -6,6 +6,9 @@ Keys of ``[summary]`` (all optional; variable references are ``FMU.variable``):
   (m/s), ``speed_limit`` (m/s), ``power`` (W, traction minus regenerated),
   ``coupler_forces`` (list or ``"plant.coupler_force[*]"``, N);
 * ``stop_point`` (m): gives ``stop_error_m`` = final position - stop point (signed);
+* ``reference_decel`` (m/s^2, with ``stop_point``): the speed metrics compare the speed with the
+  stopping curve ``v_ref(s) = sqrt(2 a0 (s_stop - s))`` at the recorded positions instead of a
+  recorded ``reference_speed`` (which a self-triggered controller holds between its events);
 * ``planned_arrival_time`` (s): gives ``arrival_time_error_s`` (time the train came to rest
   minus the plan).
 
@@ -20,6 +23,8 @@ import math
 from typing import Any
 
 import numpy as np
+
+from plants.route import StoppingCurve
 
 KMH_PER_MPS = 3.6
 STANDSTILL_MPS = 1e-3
@@ -72,6 +77,9 @@ def compute_summary(result: Any) -> dict[str, Any]:
     speed = _series(frame, cfg.get("speed"))
     accel = _series(frame, cfg.get("acceleration"))
     ref = _series(frame, cfg.get("reference_speed"))
+    if pos is not None and "reference_decel" in cfg and "stop_point" in cfg:
+        curve = StoppingCurve(float(cfg["reference_decel"]), float(cfg["stop_point"]))
+        ref = np.array([curve.speed(x) for x in pos])
 
     if pos is not None and "stop_point" in cfg:
         out["stop_error_m"] = float(pos[-1] - float(cfg["stop_point"]))
@@ -104,7 +112,10 @@ def compute_summary(result: Any) -> dict[str, Any]:
         out["max_abs_accel_mps2"] = float(np.max(np.abs(accel)))
         if accel.size > 1:
             jerk = np.diff(accel) / np.diff(t)
-            out["max_jerk_mps3"] = float(np.max(np.abs(jerk)))
+            if speed is not None:  # while moving: the step to rest at the stop is not ride jerk
+                moving = (speed[:-1] > STANDSTILL_MPS) & (speed[1:] > STANDSTILL_MPS)
+                jerk = jerk[moving]
+            out["max_jerk_mps3"] = float(np.max(np.abs(jerk))) if jerk.size else 0.0
     cols = _columns(frame, cfg.get("coupler_forces"))
     if cols:
         out["max_coupler_force_kn"] = float(np.max(np.abs(frame[cols].to_numpy())) / 1e3)
