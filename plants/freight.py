@@ -14,9 +14,12 @@ figures: 83 mm travel, 2.27 MN at full travel, so 2.27 MN / 0.166 m = 1.37e7 N/m
 the damping ``c`` = 1.5e6 N s/m is an equivalent viscous damping of friction draft gears
 (friction forces of some hundred kN at relative speeds of a few tenths of m/s); a smaller value
 (e.g. 20 % of critical for the two-wagon mode, 3e5) leaves the slow whole-train modes (period
-~18 s) almost undamped, which friction gears do not. Slack is left out on purpose: the paper's
-eq. (1) has none, and the dead zone makes coupler forces impact-like (event handling, smaller
-steps) without changing speed tracking; the peaks reported here are therefore slack-free.
+~18 s) almost undamped, which friction gears do not. Slack is optional (``coupler_slack``, the
+total free play of a coupling, default 0): the paper's eq. (1) has none and speed tracking
+hardly depends on it, but run-in/run-out peaks do. With slack the draft gear (spring and
+damper) acts only beyond +-slack/2; engagement is decided at each sub-step start (contact is
+found at most one sub-step late, so peaks are resolved to ``max_step``; the contact stiffness
+must satisfy ``k max_step^2 / (m/2) <= 0.5``, checked, or the late contact pumps energy in).
 
 Resistance per vehicle (N/kN of its weight ``m g / 1000`` kN, v in km/h; eqs. 2-6):
 
@@ -60,8 +63,9 @@ Brake force ``F_b,i = theta_i phi(v_i) (p_i / p_max) m_i g`` with the converted 
 Integration on sub-steps no longer than ``max_step`` on an absolute grid (split where a delayed
 traction change acts, so dead times are exact): the stiff linear coupler forces are integrated
 by the trapezoidal rule (A-stable, second order, exact momentum balance: the tridiagonal system
-is solved with a cached inverse), the other forces are evaluated once per sub-step (speed terms
-at the start, positions at the predicted mid-point, traction and brake pressures averaged over
+is solved with a cached inverse; with slack it changes with the engagement and is solved as a
+banded system), the other forces once per sub-step (speed terms at the start, positions at the
+predicted mid-point, traction and brake pressures averaged over
 the sub-step from their exact lag solutions). Brake-pipe arrivals inside a sub-step are split
 exactly per vehicle. Outputs: see :meth:`FreightTrain.outputs`.
 """
@@ -72,6 +76,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.linalg import solveh_banded
 
 from cosim.state import StatefulCore, to_seconds, to_ticks
 from plants.route import GRAVITY, KMH, Route
@@ -95,6 +100,7 @@ class FreightParams:
     wagon_resistance: tuple[float, float, float] = LOADED_WAGON_RESISTANCE  # N/kN, km/h
     coupler_stiffness: float = 1.37e7  # N/m, two MT-2 draft gears in series
     coupler_damping: float = 1.5e6  # N s/m, equivalent viscous damping of friction gears
+    coupler_slack: float = 0.0  # m, total free play per coupling (0: none, see module doc)
     max_traction_force: float = 760e3  # N, HXD1 starting tractive effort
     max_traction_power: float = 9.6e6  # W
     max_ed_force: float = 461e3  # N, HXD1 electric (regenerative) brake
@@ -130,13 +136,22 @@ class FreightParams:
         for name in positive:
             if not getattr(self, name) > 0:
                 raise ValueError(f"{name} = {getattr(self, name)} must be > 0")
-        non_negative = ("coupler_damping", "max_ed_force", "ed_fade_speed", "traction_delay",
-                        "brake_apply_delay", "brake_release_delay", "min_reduction",
-                        "loco_braking_ratio", "wagon_braking_ratio",
+        non_negative = ("coupler_damping", "coupler_slack", "max_ed_force", "ed_fade_speed",
+                        "traction_delay", "brake_apply_delay", "brake_release_delay",
+                        "min_reduction", "loco_braking_ratio", "wagon_braking_ratio",
                         "loco_rotating_mass_factor", "wagon_rotating_mass_factor")
         for name in non_negative:
             if not getattr(self, name) >= 0:
                 raise ValueError(f"{name} = {getattr(self, name)} must be >= 0")
+        if self.coupler_slack > 0:
+            # engagement is found one sub-step late: the spring then starts with up to
+            # |dv| h of penetration; keep k h^2 / m_rel small so no energy is pumped in
+            stiffness = self.coupler_stiffness * self.max_step**2 / (
+                0.5 * min(self.loco_mass, self.wagon_mass))
+            if stiffness > 0.5:
+                raise ValueError(f"coupler_stiffness = {self.coupler_stiffness} with slack needs "
+                                 f"max_step <= {math.sqrt(0.5 / stiffness) * self.max_step:.2g}"
+                                 " s (contact too stiff for the sub-step)")
         if self.n_wagons < 0:
             raise ValueError(f"n_wagons = {self.n_wagons} must be >= 0")
         if self.traction_model not in (0, 1):
@@ -341,14 +356,42 @@ class FreightTrain(StatefulCore):
             self._inverse[h_ticks] = inv
         return inv
 
+    def _engagement(self, gap: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Per coupler: 1 where the slack is taken up (else 0) and the free play to subtract
+        (m, signed): the draft gear works on ``gap - offset`` only beyond +-slack/2."""
+        half = 0.5 * self.p.coupler_slack
+        draft, buff = gap > half, gap < -half
+        return (draft | buff).astype(float), np.where(draft, half, np.where(buff, -half, 0.0))
+
     def coupler_forces(self, x: np.ndarray | None = None,
                        v: np.ndarray | None = None) -> np.ndarray:
         """Coupler forces (N, draft > 0) between vehicles j and j+1."""
         x = self.x if x is None else x
         v = self.v if v is None else v
         p = self.p
-        return (p.coupler_stiffness * (x[:-1] - self.length[:-1] - x[1:])
-                + p.coupler_damping * (v[:-1] - v[1:]))
+        gap = x[:-1] - self.length[:-1] - x[1:]
+        if p.coupler_slack > 0:
+            on, offset = self._engagement(gap)
+            return on * (p.coupler_stiffness * (gap - offset)
+                         + p.coupler_damping * (v[:-1] - v[1:]))
+        return p.coupler_stiffness * gap + p.coupler_damping * (v[:-1] - v[1:])
+
+    def _solve_with_slack(self, h: float, gap: np.ndarray, dv: np.ndarray,
+                          force: np.ndarray, v0: np.ndarray) -> np.ndarray:
+        """Trapezoidal step with the couplers engaged at the sub-step start (tridiagonal)."""
+        p = self.p
+        on, offset = self._engagement(gap)
+        k, c = p.coupler_stiffness * on, p.coupler_damping * on
+        y = k * (gap - offset) + (0.25 * h * k + 0.5 * c) * dv
+        force[:-1] -= y
+        force[1:] += y
+        w = 0.25 * h * h * k + 0.5 * h * c
+        banded = np.zeros((2, v0.size))
+        banded[0, 1:] = -w
+        banded[1] = self.m_eff
+        banded[1, :-1] += w
+        banded[1, 1:] += w
+        return solveh_banded(banded, self.m_eff * v0 + h * force, check_finite=False)
 
     def _substep(self, t_ticks: int, h_ticks: int) -> None:
         p = self.p
@@ -364,18 +407,22 @@ class FreightTrain(StatefulCore):
         force = -dissipative * direction
         force -= self.weight_per_kn * self._additional.mean_over(x0 + 0.5 * h * v0, self.length)
         force[0] += f_mean
-        k, c = p.coupler_stiffness, p.coupler_damping
         dv = v0[:-1] - v0[1:]
-        y = k * (x0[:-1] - self.length[:-1] - x0[1:]) + (0.25 * h * k + 0.5 * c) * dv
-        force[:-1] -= y
-        force[1:] += y
-        v1 = self._system_inverse(h_ticks) @ (self.m_eff * v0 + h * force)
+        gap = x0[:-1] - self.length[:-1] - x0[1:]
+        if p.coupler_slack > 0:
+            v1 = self._solve_with_slack(h, gap, dv, force, v0)
+        else:
+            k, c = p.coupler_stiffness, p.coupler_damping
+            y = k * gap + (0.25 * h * k + 0.5 * c) * dv
+            force[:-1] -= y
+            force[1:] += y
+            v1 = self._system_inverse(h_ticks) @ (self.m_eff * v0 + h * force)
         x1 = x0 + 0.5 * h * (v0 + v1)
         self.energy += f_mean * 0.5 * (v0[0] + v1[0]) * h
         self.accel = float(np.dot(self.m_eff, v1 - v0) / (h * self.m_eff.sum()))
         self.traction_force = f1
         self.x, self.v = x1, v1
-        fc = k * (x1[:-1] - self.length[:-1] - x1[1:]) + c * (v1[:-1] - v1[1:])
+        fc = self.coupler_forces(x1, v1)
         self.peak_draft = max(self.peak_draft, float(fc.max()))
         self.peak_buff = max(self.peak_buff, -float(fc.min()))
 

@@ -21,6 +21,7 @@ _PARAMS: tuple[tuple[str, str, str, float | None], ...] = (
     ("wagon_rotating_mass_factor", "1", "gamma of a wagon", 0.0),
     ("coupler_stiffness", "N/m", "draft-gear stiffness per coupling", 1.0),
     ("coupler_damping", "N.s/m", "draft-gear damping per coupling", 0.0),
+    ("coupler_slack", "m", "total free play per coupling (0: none)", 0.0),
     ("max_traction_force", "N", "largest tractive effort (760 kN)", 0.0),
     ("max_traction_power", "W", "traction power at the wheel (9600 kW)", 1.0),
     ("max_ed_force", "N", "largest electric brake force (461 kN)", 0.0),

@@ -191,6 +191,9 @@ def test_grade_resistance_by_length_share_accelerates_the_train_downhill() -> No
 def test_bad_parameters_are_rejected() -> None:
     with pytest.raises(ValueError, match="coupler_stiffness"):
         FreightTrain(dataclasses.replace(P, coupler_stiffness=0.0), Route.flat())
+    with pytest.raises(ValueError, match="contact too stiff"):
+        FreightTrain(dataclasses.replace(P, coupler_slack=0.02, coupler_stiffness=1e10),
+                     Route.flat())
     with pytest.raises(ValueError, match="traction_model"):
         FreightTrain(dataclasses.replace(P, traction_model=3), Route.flat())
     train = FreightTrain(P, Route.flat())
@@ -334,3 +337,33 @@ def test_traction_force_follows_eq_15_lag_or_eq_8_ramp_after_the_dead_time(model
         else:
             expected = min(rate * since, demand)
         assert train.traction_force == pytest.approx(expected, rel=1e-9, abs=1e-6)
+
+
+def test_slack_is_taken_up_coupler_by_coupler_when_starting() -> None:
+    """With free play g per coupling (gaps start centred) the tail moves only once the
+    locomotive has taken up about g/2 in each of the 108 couplings (impacts let wagons run a
+    little ahead, elastic stretch adds a little); without slack it moves almost at once.
+    Momentum is conserved with slack too."""
+    g = 0.025
+    travel = {}
+    for slack in (0.0, g):
+        params = dataclasses.replace(_frictionless(), coupler_slack=slack,
+                                     coupler_stiffness=1e8, coupler_damping=1e6)
+        train = FreightTrain(params, Route.flat())
+        x_start = train.x.copy()
+        t = 0.0
+        while train.x[-1] - x_start[-1] < 1e-4:
+            t += 0.05
+            run(train, lambda _: {"force_demand": 100e3}, t, 0.05)
+            assert t < 120.0, "the tail never moved"
+        travel[slack] = train.x[0] - x_start[0]
+    assert 0.9 < travel[g] / (108 * g / 2) < 1.15
+    assert travel[0.0] < 0.2
+
+    free = dataclasses.replace(_frictionless(), coupler_slack=g)
+    train = FreightTrain(free, Route.flat(), v0=10.0)
+    rng = np.random.default_rng(7)
+    train.v = train.v + rng.normal(0.0, 0.3, train.v.size)
+    momentum0 = float(np.dot(train.m_eff, train.v))
+    run(train, lambda _: {}, 30.0, 0.2)
+    assert float(np.dot(train.m_eff, train.v)) == pytest.approx(momentum0, rel=1e-12)
