@@ -138,8 +138,13 @@ def validate(
     fmus: Annotated[list[str] | None, typer.Argument(
         help="FMU identifiers or .fmu paths (default: every FMU of the catalog)")] = None,
     as_json: Annotated[bool, typer.Option("--json", help="machine-readable report")] = False,
+    lenient: Annotated[bool, typer.Option(
+        "--lenient", help="project conventions (units everywhere, explicit output "
+        "dependencies, default step size) are warnings, not errors")] = False,
+    timeout: Annotated[float, typer.Option(
+        help="seconds before a hanging FMU is reported and its host process killed")] = 120.0,
 ) -> None:
-    """Check FMUs (fmpy validation and our compliance checks); non-zero exit on a problem."""
+    """FMI 2.0 compliance checks (cosim.compliance) on FMUs; non-zero exit on an error."""
     from cosim.build import build_fmu, catalog
 
     specs = catalog()
@@ -155,27 +160,19 @@ def validate(
             paths.append(specs[name].path)
         else:
             _fail(f"unknown FMU {name!r}; known: {sorted(specs)}")
-    try:
-        from cosim.compliance import check_fmu, format_report  # full suite when available
-    except ImportError:
-        check_fmu = format_report = None  # type: ignore[assignment]
-    report: dict[str, list[str]] = {}
-    for path in paths:
-        if check_fmu is not None:
-            problems = [str(p) for p in check_fmu(path)]
-        else:
-            from fmpy.validation import validate_fmu
+    from cosim.compliance import Options, check_fmu, format_report, passed
 
-            problems = list(validate_fmu(str(path)))
-        report[str(path)] = problems
+    report: dict[str, list[dict]] = {}
+    failed = False
+    for path in paths:
+        problems = check_fmu(path, Options(strict=not lenient, timeout=timeout))
+        failed |= not passed(problems)
+        report[str(path)] = [vars(p) for p in problems]
         if not as_json:
-            status = "[green]ok[/]" if not problems else f"[red]{len(problems)} problem(s)[/]"
-            out.print(f"{path.name}: {status}")
-            for p in problems:
-                out.print(f"  - {p}", highlight=False, soft_wrap=True)
+            out.print(format_report(path, problems), highlight=False, soft_wrap=True)
     if as_json:
         out.print_json(json.dumps(report))
-    if any(report.values()):
+    if failed:
         raise typer.Exit(1)
 
 
@@ -215,6 +212,24 @@ def sweep(
                         for c in columns])
     out.print(table)
     out.print(f"wrote {target}/sweep.csv" + ("" if no_plot else ", sweep.png"))
+
+
+@app.command()
+def export(
+    scenario: Annotated[str, typer.Argument(help="scenario name or TOML path")],
+    ssp: Annotated[Path, typer.Option("--ssp", help="SSP archive to write (.ssp)")],
+    set_: Annotated[list[str] | None, typer.Option(
+        "--set", help="override NAME.key=value (repeatable)")] = None,
+) -> None:
+    """Export a scenario and its FMUs as an SSP 1.0 package (SystemStructure.ssd + FMUs)."""
+    from cosim.scenario import ScenarioError
+    from cosim.ssp import export_ssp
+
+    try:
+        path = export_ssp(scenario, ssp, overrides=set_ or None)
+    except (ScenarioError, ValueError, FileNotFoundError) as err:
+        _fail(str(err))
+    out.print(f"wrote {path}")
 
 
 def main() -> None:  # pragma: no cover - console entry point
