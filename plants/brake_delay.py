@@ -23,6 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from cosim.state import StatefulCore, to_seconds, to_ticks
+from plants import dead_time
 from plants.resistance import Davis
 from plants.route import Route
 
@@ -66,7 +67,7 @@ class BrakeDelayTrain(StatefulCore):
         # brake acceleration in equilibrium with the command held before t0
         self.a_c = -params.brake_gain * initial_command
         # [tick from which the command acts at the plant input, command %]; sorted by tick
-        self.history: list[list[float]] = [[-(2**62), float(initial_command)]]
+        self.history = dead_time.new_history(initial_command)
         self._delay_ticks = to_ticks(params.brake_delay)
         self._grid_ticks = to_ticks(params.max_step)
 
@@ -83,13 +84,7 @@ class BrakeDelayTrain(StatefulCore):
 
     def delayed_command(self, tick: int) -> float:
         """u(t - Td) at plant time ``tick``."""
-        target = tick - self._delay_ticks
-        value = self.history[0][1]
-        for start, u in self.history:
-            if start > target:
-                break
-            value = u
-        return value
+        return dead_time.delayed(self.history, tick, self._delay_ticks)
 
     def _lag(self, a_c0: float, a_t: float, dt: float) -> float:
         return a_t + (a_c0 - a_t) * math.exp(-dt / self.p.brake_time_constant)
@@ -151,25 +146,15 @@ class BrakeDelayTrain(StatefulCore):
         if t_ticks != self.t_ticks:
             raise ValueError(f"doStep at t={to_seconds(t_ticks)} s but plant is at "
                              f"t={to_seconds(self.t_ticks)} s")
-        u = float(inputs["brake_command"])
-        if u != self.history[-1][1]:
-            self.history.append([t_ticks, u])
-        end = t_ticks + h_ticks
-        cuts = {end}
-        grid = self._grid_ticks
-        cuts.update(range((t_ticks // grid + 1) * grid, end, grid))
-        cuts.update(int(start) + self._delay_ticks for start, _ in self.history
-                    if t_ticks < int(start) + self._delay_ticks < end)
+        dead_time.record(self.history, t_ticks, float(inputs["brake_command"]))
         now = t_ticks
-        for cut in sorted(cuts):
+        for cut in dead_time.substep_ends(t_ticks, h_ticks, [self._grid_ticks], self.history,
+                                          self._delay_ticks):
             a_t = -self.p.brake_gain * self.delayed_command(now)
             self._substep(to_seconds(cut - now), a_t)
             now = cut
-        self.t_ticks = end
-        # drop commands that can no longer act (keep the one acting now)
-        target = end - self._delay_ticks
-        while len(self.history) > 1 and self.history[1][0] <= target:
-            self.history.pop(0)
+        self.t_ticks = now
+        dead_time.prune(self.history, now, self._delay_ticks)
 
     def outputs(self) -> dict[str, float]:
         t = self.t_ticks

@@ -45,6 +45,7 @@ import numpy as np
 from scipy.linalg import expm
 
 from cosim.state import StatefulCore, to_seconds, to_ticks
+from plants import dead_time
 from plants.resistance import Davis
 from plants.route import GRAVITY, Route
 
@@ -358,12 +359,9 @@ class Emu(StatefulCore):
                              f"t={to_seconds(self.t_ticks)} s")
         u = np.array([float(inputs[f"force[{i + 1}]"]) for i in range(self.n)])
         end = t_ticks + h_ticks
-        cuts = {end}
-        for grid in (self._grid, self._noise_ticks if self.p.disturbance_accel_std else 0):
-            if grid:
-                cuts.update(range((t_ticks // grid + 1) * grid, end, grid))
+        grids = (self._grid, self._noise_ticks if self.p.disturbance_accel_std else 0)
         now = t_ticks
-        for cut in sorted(cuts):
+        for cut in dead_time.substep_ends(t_ticks, h_ticks, grids):
             self._substep(now, cut - now, u)
             now = cut
         self.t_ticks = end

@@ -79,6 +79,7 @@ import numpy as np
 from scipy.linalg import solveh_banded
 
 from cosim.state import StatefulCore, to_seconds, to_ticks
+from plants import dead_time
 from plants.route import GRAVITY, KMH, Route
 
 LOCO_RESISTANCE = (1.40, 0.038, 0.000300)  # N/kN, v in km/h (eq. 3)
@@ -213,7 +214,7 @@ class FreightTrain(StatefulCore):
             raise ValueError(f"v0 = {v0} must be >= 0")
         self.traction_force = 0.0  # N, achieved (traction > 0, electric brake < 0)
         self.pressure = np.zeros(n)  # Pa, brake-cylinder pressures
-        self.traction_history: list[list[float]] = [[-(2**62), 0.0]]  # [tick, demand N]
+        self.traction_history = dead_time.new_history(0.0)  # [tick, demand N]
         self.brake_history: list[list[float]] = [[-1e18, 0.0]]  # [t s, reduction Pa]
         self.energy = 0.0  # J, traction minus regenerated energy at the wheel
         self.peak_draft = 0.0  # N, largest draft force over the last communication step
@@ -239,13 +240,7 @@ class FreightTrain(StatefulCore):
 
     def delayed_demand(self, tick: int) -> float:
         """Force demand acting at the lag input at ``tick``: F_dem(t - tau)."""
-        target = tick - self._delay_ticks
-        value = self.traction_history[0][1]
-        for start, u in self.traction_history:
-            if start > target:
-                break
-            value = u
-        return value
+        return dead_time.delayed(self.traction_history, tick, self._delay_ticks)
 
     def _traction_step(self, demand: float, h: float) -> tuple[float, float]:
         """Achieved force at the end of the sub-step and its mean over it (N)."""
@@ -434,26 +429,20 @@ class FreightTrain(StatefulCore):
                              f"t={to_seconds(self.t_ticks)} s")
         demand = float(inputs.get("force_demand", 0.0))
         reduction = float(inputs.get("pipe_reduction", 0.0))
-        if demand != self.traction_history[-1][1]:
-            self.traction_history.append([t_ticks, demand])
+        dead_time.record(self.traction_history, t_ticks, demand)
         if reduction != self.brake_history[-1][1]:
             self.brake_history.append([to_seconds(t_ticks), reduction])
         end = t_ticks + h_ticks
-        grid = self._grid
-        cuts = set(range((t_ticks // grid + 1) * grid, end, grid))
-        cuts.add(end)
-        cuts.update(int(s) + self._delay_ticks for s, _ in self.traction_history
-                    if t_ticks < int(s) + self._delay_ticks < end)
+        cuts = dead_time.substep_ends(t_ticks, h_ticks, [self._grid], self.traction_history,
+                                      self._delay_ticks)
         self.peak_draft = 0.0
         self.peak_buff = 0.0
         now = t_ticks
-        for cut in sorted(cuts):
+        for cut in cuts:
             self._substep(now, cut - now)
             now = cut
         self.t_ticks = end
-        target = end - self._delay_ticks
-        while len(self.traction_history) > 1 and self.traction_history[1][0] <= target:
-            self.traction_history.pop(0)
+        dead_time.prune(self.traction_history, end, self._delay_ticks)
 
     def outputs(self) -> dict[str, float]:
         x, v = self.x, self.v
