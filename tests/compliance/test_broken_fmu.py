@@ -54,3 +54,37 @@ def test_not_an_fmu(tmp_path):
     with zipfile.ZipFile(junk, "w") as z:
         z.writestr("readme.txt", "not an FMU")
     assert not passed(check_fmu(junk))
+
+
+def test_misdeclared_feedthrough_is_caught(built_fmus, tmp_path):
+    """StopPid with its ModelStructure edited to claim that brake_command does not depend on
+    the inputs: the dynamic check sees the output move when an input changes."""
+    source = built_fmus["StopPid"].path
+    target = tmp_path / "StopPidMisdeclared.fmu"
+    with zipfile.ZipFile(source) as zin, zipfile.ZipFile(target, "w") as zout:
+        for item in zin.infolist():
+            data = zin.read(item.filename)
+            if item.filename == "modelDescription.xml":
+                text = data.decode()
+                index = _index_of(text, "brake_command")
+                text = _empty_dependencies(text, index)
+                data = text.encode()
+            zout.writestr(item, data)
+    problems = [p for p in check_fmu(target) if p.check == "output-dependencies"]
+    assert any("brake_command changed when the inputs changed" in p.message for p in problems)
+
+
+def _index_of(xml: str, name: str) -> int:
+    from xml.etree import ElementTree
+
+    names = [sv.get("name") for sv in ElementTree.fromstring(xml).find("ModelVariables")]
+    return names.index(name) + 1
+
+
+def _empty_dependencies(xml: str, index: int) -> str:
+    import re
+
+    pattern = rf'(<Unknown index="{index}" dependencies=")[^"]*(")'
+    edited, n = re.subn(pattern, r"\g<1>\g<2>", xml, count=1)
+    assert n == 1
+    return edited
