@@ -34,7 +34,8 @@ def build(names: Annotated[list[str] | None, typer.Argument(
         _fail(str(err))
     for spec in specs:
         path = build_fmu(spec)
-        out.print(f"built {path.relative_to(Path.cwd()) if path.is_relative_to(Path.cwd()) else path}")
+        shown = path.relative_to(Path.cwd()) if path.is_relative_to(Path.cwd()) else path
+        out.print(f"built {shown}  ({spec.description})", highlight=False)
 
 
 @app.command("list")

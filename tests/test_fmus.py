@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import os
 import subprocess
-import sys
 import textwrap
 import venv
 from pathlib import Path
@@ -47,7 +46,7 @@ def test_all_fmus_and_two_instances_each_in_one_process(built_fmus):
     for spec in built_fmus.values():
         for k in (1, 2):
             instances[(spec.identifier, k)] = Instance(spec.path, f"{spec.identifier}_{k}")
-    for (ident, k), inst in instances.items():
+    for (_, k), inst in instances.items():
         reals = [v for v in inst.md.modelVariables
                  if v.causality == "input" and v.type == "Real"]
         for v in reals:  # different inputs in the two instances
