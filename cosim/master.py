@@ -461,17 +461,28 @@ class Master:
 
     # -- run -----------------------------------------------------------------------------------
     def run(self) -> RunResult:
+        """Run to the stop time. On a failure or an interrupt the result recorded so far is
+        kept in ``self.partial`` (a :class:`RunResult` with ``completed`` False)."""
         t0 = time.perf_counter()
         self.load()
         refs = self._recorded_refs()
         n_points = int((self.stop_ticks - self.start_ticks) // self.output_ticks) + 2
         self.recorder = Recorder(refs, n_points)
+        self.end_ticks = self.start_ticks
+        self.partial: RunResult | None = None
+        final_outputs: dict[str, dict[str, Any]] = {}
         try:
             self.initialize()
             ALGORITHM_CLASSES[self.algorithm_name](self).run()
             final_outputs = self._final_outputs()
             for unit in self.units:
                 unit.slave.terminate()
+        except BaseException as err:
+            self.end_ticks = max(u.time_ticks for u in self.units) if self.units else 0
+            self.partial = self._result(final_outputs, time.perf_counter() - t0)
+            self.partial.completed = False
+            self.partial.error = f"{type(err).__name__}: {err}"
+            raise
         finally:
             for unit in self.units:
                 try:
@@ -479,17 +490,21 @@ class Master:
                 except Exception:  # noqa: BLE001 - freeing must not hide the real error
                     pass
         self.wall_time = time.perf_counter() - t0
+        return self._result(final_outputs, self.wall_time)
+
+    def _result(self, final_outputs: dict[str, dict[str, Any]], wall_time: float) -> RunResult:
         return RunResult(
             scenario=self.scenario,
             algorithm=self.algorithm_name,
             frame=self.recorder.frame(),
             do_steps={u.name: u.do_steps for u in self.units},
-            executions={u.name: int(final_outputs[u.name].get("executions", u.do_steps))
+            executions={u.name: int(final_outputs.get(u.name, {}).get("executions",
+                                                                      u.do_steps))
                         for u in self.units},
             fmu_wall_time_s={u.name: u.wall_time for u in self.units},
             connection_changes={f"{lk.conn.src}.{lk.src_name}": lk.changes for lk in self.links},
             final_outputs=final_outputs,
-            wall_time_s=self.wall_time,
+            wall_time_s=wall_time,
             sim_time_s=to_seconds(self.end_ticks - self.start_ticks),
         )
 
@@ -533,6 +548,8 @@ class RunResult:
     wall_time_s: float
     sim_time_s: float
     summary: dict[str, Any] = field(default_factory=dict)
+    completed: bool = True
+    error: str | None = None
 
     def write(self, out_dir: Path, plot: bool = True) -> list[Path]:
         from cosim.results import write_results
@@ -551,7 +568,20 @@ def run_scenario(scenario: str | Path | Scenario, overrides: dict[str, Any] | li
     sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario, overrides)
     if build:
         ensure_built(sc)
-    result = Master(sc, algorithm, progress).run()
+    master = Master(sc, algorithm, progress)
+    try:
+        result = master.run()
+    except (SimulationError, KeyboardInterrupt) as err:
+        partial = getattr(master, "partial", None)
+        if out_dir is None or partial is None or partial.frame.empty:
+            raise
+        partial.summary = compute_summary(partial)
+        partial.write(Path(out_dir), plot=plot)
+        note = (f"; partial results up to t={partial.sim_time_s:g} s written to {out_dir} "
+                f"(summary.json has \"completed\": false)")
+        if isinstance(err, KeyboardInterrupt):
+            raise SimulationError(f"interrupted{note}") from err
+        raise SimulationError(f"{err}{note}") from err
     result.summary = compute_summary(result)
     if out_dir is not None:
         result.write(Path(out_dir), plot=plot)

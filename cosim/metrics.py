@@ -12,7 +12,8 @@ Keys of ``[summary]`` (all optional; variable references are ``FMU.variable``):
 * ``planned_arrival_time`` (s): gives ``arrival_time_error_s`` (time the train came to rest
   minus the plan).
 
-Always present: ``sim_time_s``, ``wall_time_s``, ``real_time_factor``, ``algorithm``,
+Always present: ``completed`` (False, with ``error``, for the partial results of a failed or
+interrupted run), ``sim_time_s``, ``wall_time_s``, ``real_time_factor``, ``algorithm``,
 ``do_steps``, ``executions``, ``fmu_wall_time_s``; controller counters (``qp_solves``,
 ``qp_infeasible``, ``qp_solve_time_median_s``) when an FMU publishes them.
 """
@@ -72,7 +73,10 @@ def compute_summary(result: Any) -> dict[str, Any]:
         "wall_time_s": round(result.wall_time_s, 4),
         "real_time_factor": (round(result.sim_time_s / result.wall_time_s, 2)
                              if result.wall_time_s > 0 else None),
+        "completed": result.completed,
     }
+    if result.error:
+        out["error"] = result.error
     pos = _series(frame, cfg.get("position"))
     speed = _series(frame, cfg.get("speed"))
     accel = _series(frame, cfg.get("acceleration"))

@@ -126,3 +126,29 @@ def test_invalid_toml_reported(tmp_path):
     path.write_text("[simulation\nstop_time = 1")
     with pytest.raises(ScenarioError, match="not valid TOML"):
         load_scenario(path)
+
+
+def test_failure_mid_run_keeps_partial_results(built_fmus, tmp_path, monkeypatch):
+    """An FMU failing at t = 10 s: the error names it, and what was recorded is written."""
+    import json
+
+    import pandas as pd
+
+    from cosim import master as master_mod
+
+    real_step = master_mod.FmuUnit.step_to
+
+    def failing_step(self, ticks):
+        if self.name == "plant" and ticks > 10_000_000_000:
+            raise master_mod.SimulationError("plant: doStep at t=10 s failed: test fault")
+        return real_step(self, ticks)
+
+    monkeypatch.setattr(master_mod.FmuUnit, "step_to", failing_step)
+    with pytest.raises(master_mod.SimulationError, match="test fault.*partial results up to"):
+        run_scenario(PID, build=False, out_dir=tmp_path)
+    frame = pd.read_csv(tmp_path / "results.csv")
+    assert frame["time"].iloc[-1] == pytest.approx(10.0)
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["completed"] is False and "test fault" in summary["error"]
+    assert summary["sim_time_s"] == pytest.approx(10.0)
+    assert (tmp_path / "plot.png").exists()
