@@ -15,6 +15,9 @@ checks are those of issue 5:
   fresh instance); variable communication step sizes; two instances in one process stay
   independent; calls in the wrong state, NaN/inf inputs and out-of-range or non-finite
   parameters are rejected (non-OK status or rejected at initialisation) with a logged message.
+  The expected status is fmi2Error; fmi2Fatal is an error too (it declares every instance of
+  the FMU unusable, so a master cannot recover; plain pythonfmu 0.7 binaries return it for any
+  Python exception, ours go through a shim that returns fmi2Error, see ``cosim/build.py``).
 
 The dynamic checks run in a worker subprocess (``python -m cosim.compliance``), so an FMU that
 crashes or hangs the host is reported as a problem of the check it was in, and the worker is
@@ -56,7 +59,7 @@ DYNAMIC_CHECKS = ("calling-sequence", "output-dependencies", "reset", "fmu-state
                   "non-finite-inputs", "bad-parameters")
 ALL_CHECKS = STATIC_CHECKS + DYNAMIC_CHECKS
 
-_FATAL_NOTE = "rejected with fmi2Fatal, not fmi2Error"
+_FATAL = "rejected with fmi2Fatal, expected fmi2Error"
 _MARK = "@@compliance "  # worker protocol lines on stdout (the FMU may print too)
 
 # FMI 2.0 Table (sec. 2.2.7): legal causality for each variability
@@ -474,7 +477,7 @@ def _rejection(inst: _Instance, statuses: list[int], what: str, check: str) -> l
         problems.append(Problem(check, f"{what}: rejected with fmi2Discard, expected fmi2Error",
                                 WARNING))
     if worst == 4:
-        problems.append(Problem(check, f"{what}: {_FATAL_NOTE}", NOTE))
+        problems.append(Problem(check, f"{what}: {_FATAL}"))
     return problems
 
 
@@ -760,16 +763,19 @@ _DYNAMIC = {
 }
 
 
-def _collapse_fatal_notes(problems: list[Problem]) -> list[Problem]:
-    """One note per check for the rejections that returned fmi2Fatal instead of fmi2Error."""
-    fatal = [p for p in problems if p.severity == NOTE and _FATAL_NOTE in p.message]
-    if len(fatal) <= 1:
+def _collapse_fatal(problems: list[Problem]) -> list[Problem]:
+    """One error per check for the rejections that returned fmi2Fatal instead of fmi2Error."""
+    fatal = [p for p in problems if p.severity == ERROR and p.message.endswith(_FATAL)]
+    if not fatal:
         return problems
-    first = fatal[0].message.split(":")[0]
-    note = Problem(fatal[0].check, f"{len(fatal)} rejections returned fmi2Fatal, not fmi2Error "
-                   f"(e.g. {first}); a master cannot recover such an instance (pythonfmu 0.7 "
-                   "reports every Python exception as fmi2Fatal)", NOTE)
-    return [p for p in problems if p not in fatal] + [note]
+    first = fatal[0].message[: -len(_FATAL)].rstrip(": ")
+    said = (f"{first}: {_FATAL}" if len(fatal) == 1 else
+            f"{len(fatal)} rejections returned fmi2Fatal, expected fmi2Error (e.g. {first})")
+    error = Problem(fatal[0].check, f"{said}. fmi2Fatal declares every instance of the FMU "
+                    "unusable, so a master cannot recover; plain pythonfmu 0.7 binaries return "
+                    "it for any Python exception (FMUs from `cosim build` return fmi2Error "
+                    "through their shim)")
+    return [p for p in problems if p not in fatal] + [error]
 
 
 def _emit(kind: str, payload: Any) -> None:
@@ -811,7 +817,7 @@ def _worker(args: dict) -> None:
                 problems = [Problem(name, str(err))]
             except Exception as err:  # a bug in the FMU surfacing as a host exception
                 problems = [Problem(name, f"{type(err).__name__}: {err}")]
-            for p in _collapse_fatal_notes(problems):
+            for p in _collapse_fatal(problems):
                 _emit("problem", asdict(p))
             _emit("end", name)
     finally:

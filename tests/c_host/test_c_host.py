@@ -1,5 +1,6 @@
 """A C program (gcc + fmpy's FMI 2 headers) runs one of our FMUs: the way any non-Python tool
-loads them (docs/other_tools.md). Its results equal fmpy's for the same calls."""
+loads them (docs/other_tools.md). Its results equal fmpy's for the same calls, with or without
+libpython preloaded (the FMU's shim loads it); pythonfmu's plain binary needs it preloaded."""
 
 from __future__ import annotations
 
@@ -7,6 +8,7 @@ import os
 import shutil
 import site
 import subprocess
+import sys
 import sysconfig
 from pathlib import Path
 
@@ -15,6 +17,8 @@ import numpy as np
 import pytest
 from fmpy import extract, read_model_description
 from fmpy.fmi2 import FMU2Slave
+
+from cosim.build import SHIM_SUFFIX, shim_binary
 
 HERE = Path(__file__).resolve().parent
 STEP, N_STEPS, COMMAND = 0.2, 25, 50.0
@@ -47,16 +51,24 @@ def plant(built_fmus, tmp_path_factory):
     return path, md, unzipdir
 
 
-def run_host(host: Path, plant, preload: bool) -> subprocess.CompletedProcess:
+def run_host(host: Path, plant, preload: bool, pythonpath: bool = True,
+             binary: str | None = None, plain_exit: bool = False) -> subprocess.CompletedProcess:
+    """Run the C host on the plant; ``binary``: another binaries/linux64/<binary>.so;
+    ``plain_exit``: leave main() normally (exit handlers run) instead of _exit()."""
     _, md, unzipdir = plant
     vr = {v.name: v.valueReference for v in md.modelVariables}
-    env = {k: v for k, v in os.environ.items() if k not in ("LD_PRELOAD", "PYTHONHOME")}
-    # the FMU's Python packages (pythonfmu, numpy) must be importable by the embedded
-    # interpreter: this interpreter's site-packages (a virtual environment's included)
-    env["PYTHONPATH"] = os.pathsep.join([*site.getsitepackages(), env.get("PYTHONPATH", "")])
+    env = {k: v for k, v in os.environ.items()
+           if k not in ("LD_PRELOAD", "PYTHONHOME", "PYTHONPATH", "FMU_HOST_PLAIN_EXIT")}
+    if plain_exit:
+        env["FMU_HOST_PLAIN_EXIT"] = "1"
+    if pythonpath:
+        # the FMU's Python packages (pythonfmu, numpy) must be importable by the embedded
+        # interpreter: this interpreter's site-packages (a virtual environment's included)
+        env["PYTHONPATH"] = os.pathsep.join([*site.getsitepackages(),
+                                             os.environ.get("PYTHONPATH", "")])
     if preload:
         env["LD_PRELOAD"] = str(libpython())
-    args = [str(host), unzipdir, md.coSimulation.modelIdentifier, md.guid, repr(STEP),
+    args = [str(host), unzipdir, binary or md.coSimulation.modelIdentifier, md.guid, repr(STEP),
             str(N_STEPS), f"in:{vr['brake_command']}={COMMAND}",
             *[f"out:{vr[name]}" for name in OUTPUTS]]
     return subprocess.run(args, capture_output=True, text=True, timeout=120, env=env)
@@ -81,8 +93,13 @@ def fmpy_reference(plant) -> np.ndarray:
     return np.array(rows)
 
 
-def test_c_host_runs_fmu_like_fmpy(host, plant):
-    done = run_host(host, plant, preload=True)
+@pytest.fixture(scope="module")
+def shim():
+    if shim_binary() is None:
+        pytest.skip("no shim (gcc missing): the FMUs carry pythonfmu's plain binary")
+
+
+def check_rows(done: subprocess.CompletedProcess, plant) -> None:
     assert done.returncode == 0, done.stderr
     rows = np.array([[float(x) for x in line.split(",")] for line in done.stdout.split()])
     assert rows.shape == (N_STEPS, 1 + len(OUTPUTS))
@@ -90,9 +107,36 @@ def test_c_host_runs_fmu_like_fmpy(host, plant):
     assert rows[-1, 1] < rows[0, 1]  # the brake command slowed the train
 
 
-def test_c_host_needs_libpython_loaded_first(host, plant):
-    """Without libpython in the global symbol scope the FMU binary does not load: this is why
-    hosts need LD_PRELOAD (or to link or dlopen libpython with RTLD_GLOBAL themselves)."""
-    done = run_host(host, plant, preload=False)
+def test_c_host_runs_fmu_like_fmpy(host, plant):
+    check_rows(run_host(host, plant, preload=True), plant)
+
+
+def test_c_host_runs_fmu_without_preload(host, plant, shim):
+    """The FMU's shim loads the libpython it was built with: no LD_PRELOAD needed."""
+    check_rows(run_host(host, plant, preload=False), plant)
+
+
+@pytest.mark.skipif(sys.prefix != sys.base_prefix,
+                    reason="a virtual environment's packages need PYTHONPATH")
+def test_c_host_runs_fmu_without_preload_or_pythonpath(host, plant, shim):
+    """Outside a virtual environment the embedded interpreter finds the packages itself."""
+    check_rows(run_host(host, plant, preload=False, pythonpath=False), plant)
+
+
+def test_c_host_exits_cleanly(host, plant, shim):
+    """pythonfmu's library destructor corrupts the heap when the process exits with the library
+    loaded; the shim tears pythonfmu down from an exit handler first (cosim/pythonfmu_shim.c)."""
+    done = run_host(host, plant, preload=False, plain_exit=True)
+    check_rows(done, plant)
+    assert "freed" in done.stderr and "corrupted" not in done.stderr
+
+
+def test_plain_pythonfmu_binary_needs_libpython_loaded_first(host, plant, shim):
+    """pythonfmu's own binary (kept in the FMU as <id>_pythonfmu.so) does not load without
+    libpython in the global symbol scope: why the shim exists (and why hosts of third-party
+    pythonfmu FMUs need LD_PRELOAD, or to link or dlopen libpython with RTLD_GLOBAL)."""
+    _, md, _ = plant
+    done = run_host(host, plant, preload=False,
+                    binary=md.coSimulation.modelIdentifier + SHIM_SUFFIX)
     assert done.returncode == 2
     assert "undefined symbol" in done.stderr and "Py" in done.stderr

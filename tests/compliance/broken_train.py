@@ -7,6 +7,8 @@ Each fault is planted for one check; ``test_broken_fmu.py`` asserts each is repo
 * a module-level run counter shifts the output     -> reset, two-instances
 * a hidden attribute not in the FMU state          -> fmu-state
 * doStep before initialisation is accepted         -> wrong-state
+* doStep after terminate raises: plain pythonfmu    -> wrong-state (fmi2Fatal, not fmi2Error)
+  turns the Python exception into fmi2Fatal
 * NaN/inf inputs are accepted and reach the output  -> non-finite-inputs
 * a negative step size aborts the host process      -> invalid-step (reported as a crash)
 * a NaN parameter never returns                     -> bad-parameters (reported as a hang)
@@ -30,6 +32,7 @@ class BrokenTrain(Fmi2Slave):
         self.u = 0.0
         self.v = 0.0
         self._hidden = 0.0  # affects the output, not saved in the FMU state
+        self._terminated = False
         self.register_variable(Real("gain", causality=Fmi2Causality.parameter,
                                     variability=Fmi2Variability.fixed,
                                     setter=self._set_gain))
@@ -50,7 +53,12 @@ class BrokenTrain(Fmi2Slave):
     def exit_initialization_mode(self):
         _RUNS[0] += 1
 
+    def terminate(self):
+        self._terminated = True
+
     def do_step(self, current_time, step_size):
+        if self._terminated:  # a correct rejection, but pythonfmu reports it as fmi2Fatal
+            raise RuntimeError("doStep after terminate")
         if step_size < 0:
             os.abort()
         self._hidden += step_size

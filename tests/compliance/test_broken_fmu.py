@@ -34,6 +34,16 @@ def test_planted_fault_reported(check, broken_results, broken_fmu):
     assert any(PLANTED[check] in m for m in messages), format_report(broken_fmu, broken_results)
 
 
+def test_fatal_rejection_is_an_error(broken_results, broken_fmu):
+    """Plain pythonfmu turns the planted exception (doStep after terminate) into fmi2Fatal:
+    an error that names the call, the expected status and the cause."""
+    messages = [p.message for p in broken_results
+                if p.check == "wrong-state" and p.severity == ERROR]
+    assert any("fmi2DoStep after fmi2Terminate: rejected with fmi2Fatal, expected fmi2Error"
+               in m and "pythonfmu" in m for m in messages), format_report(broken_fmu,
+                                                                           broken_results)
+
+
 def test_sound_parts_of_broken_fmu_pass(broken_results):
     """No false alarms: the calling sequence itself works and v does not feed through."""
     flagged = {p.check for p in broken_results if p.severity == ERROR}
