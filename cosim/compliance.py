@@ -337,27 +337,14 @@ class _Instance:
     """One FMU instance; ``call`` returns the status instead of raising, logs are kept."""
 
     def __init__(self, host: _Host, name: str) -> None:
-        from fmpy.fmi2 import (
-            FMU2Slave,
-            calloc,
-            fmi2CallbackAllocateMemoryTYPE,
-            fmi2CallbackFreeMemoryTYPE,
-            fmi2CallbackFunctions,
-            fmi2CallbackLoggerTYPE,
-            free,
-        )
+        from fmpy.fmi2 import FMU2Slave
+
+        from cosim.master import logging_callbacks
 
         self.host = host
         self.messages: list[tuple[int, str]] = []
-
-        def logger(env, instance, status, category, message) -> None:
-            text = message.decode("utf-8", "replace") if message else ""
-            self.messages.append((int(status), text))
-
-        self._callbacks = fmi2CallbackFunctions()
-        self._callbacks.logger = fmi2CallbackLoggerTYPE(logger)
-        self._callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
-        self._callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
+        self._callbacks = logging_callbacks(lambda status, text:
+                                            self.messages.append((status, text)))
         self.fmu = FMU2Slave(guid=host.md.guid, unzipDirectory=host.unzipdir,
                              modelIdentifier=host.cs.modelIdentifier, instanceName=name)
         self.fmu.instantiate(callbacks=self._callbacks, loggingOn=True)

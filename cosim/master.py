@@ -71,6 +71,20 @@ class Variable:
     causality: str
 
 
+def logging_callbacks(on_message: Callable[[int, str], None]) -> fmi2CallbackFunctions:
+    """fmpy FMI 2 callbacks that hand every log message (status, text) to ``on_message``.
+    The caller must keep the returned object referenced while the FMU instance lives."""
+
+    def logger(env, instance, status, category, message) -> None:
+        on_message(int(status), message.decode("utf-8", "replace") if message else "")
+
+    callbacks = fmi2CallbackFunctions()
+    callbacks.logger = fmi2CallbackLoggerTYPE(logger)
+    callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
+    callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
+    return callbacks
+
+
 class FmuUnit:
     """One FMU instance: values by name, doStep accounting, scheduling information."""
 
@@ -92,15 +106,8 @@ class FmuUnit:
         self.next_event_ticks: int | None = None
         self.has_next_event_output = "next_event_time" in self.vars
         self.messages: list[str] = []
-
-        def logger(env, instance, status, category, message) -> None:
-            text = message.decode("utf-8", "replace") if message else ""
-            self.messages.append(text)
-
-        self._callbacks = fmi2CallbackFunctions()  # kept referenced while the FMU lives
-        self._callbacks.logger = fmi2CallbackLoggerTYPE(logger)
-        self._callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
-        self._callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
+        # kept referenced while the FMU lives
+        self._callbacks = logging_callbacks(lambda status, text: self.messages.append(text))
 
     def instantiate(self) -> None:
         self.slave.instantiate(callbacks=self._callbacks, loggingOn=True)
