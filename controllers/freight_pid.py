@@ -80,7 +80,7 @@ class FreightPidParams:
 class FreightPid(StatefulCore):
     """Sampled controller: ``compute(t, {"v", "s"})`` -> force demand and pipe reduction."""
 
-    state_fields = ("pid_state", "reduction", "pressure_estimate", "changed_at", "force",
+    state_fields = ("pid", "reduction", "pressure_estimate", "changed_at", "force",
                     "v_ref", "a_ref", "brake_model_state")
 
     def __init__(self, params: FreightPidParams, profile: ReferenceProfile, route: Route) -> None:
@@ -101,14 +101,6 @@ class FreightPid(StatefulCore):
         self.force = 0.0  # N
         self.v_ref = 0.0
         self.a_ref = 0.0
-
-    @property
-    def pid_state(self) -> dict:
-        return self.pid.get_state()
-
-    @pid_state.setter
-    def pid_state(self, state: dict) -> None:
-        self.pid.set_state(state)
 
     @property
     def brake_model_state(self) -> dict:

@@ -148,7 +148,7 @@ class DistributedSpeedPid(StatefulCore):
     At the end of the profile (zero reference, speed below ``stop_speed``) it holds the brake.
     """
 
-    state_fields = ("forces", "v_ref", "a_ref", "pid_state")
+    state_fields = ("forces", "v_ref", "a_ref", "pid")
 
     def __init__(self, params: DistributedSpeedPidParams, profile) -> None:
         params.check()
@@ -158,14 +158,6 @@ class DistributedSpeedPid(StatefulCore):
         self.forces = [0.0] * params.units
         self.v_ref = 0.0
         self.a_ref = 0.0
-
-    @property
-    def pid_state(self) -> dict:
-        return self.pid.get_state()
-
-    @pid_state.setter
-    def pid_state(self, state: dict) -> None:
-        self.pid.set_state(state)
 
     def compute(self, t: float, inputs: dict[str, float]) -> tuple[dict[str, float], int]:
         p = self.p

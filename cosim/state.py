@@ -23,13 +23,24 @@ class StatefulCore:
 
     Subclasses list every attribute that changes during a run in ``state_fields``; the FMU
     wrapper saves and restores exactly those (deep copies), which makes FMU state complete.
+    A field holding another ``StatefulCore`` (a sub-controller) is saved through its own
+    ``get_state``/``set_state``.
     """
 
     state_fields: ClassVar[tuple[str, ...]] = ()
 
     def get_state(self) -> dict[str, Any]:
-        return {name: copy.deepcopy(getattr(self, name)) for name in self.state_fields}
+        state: dict[str, Any] = {}
+        for name in self.state_fields:
+            value = getattr(self, name)
+            state[name] = (value.get_state() if isinstance(value, StatefulCore)
+                           else copy.deepcopy(value))
+        return state
 
     def set_state(self, state: dict[str, Any]) -> None:
         for name in self.state_fields:
-            setattr(self, name, copy.deepcopy(state[name]))
+            current = getattr(self, name, None)
+            if isinstance(current, StatefulCore):
+                current.set_state(state[name])
+            else:
+                setattr(self, name, copy.deepcopy(state[name]))
