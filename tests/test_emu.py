@@ -7,6 +7,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from conftest import rerun_after_restore
 from scipy.integrate import solve_ivp
 
 from cosim.state import to_ticks
@@ -265,13 +266,7 @@ def test_emu_fmus_serialized_state_reproduces_the_rest_of_the_run(built_fmus) ->
         ctl.fmu.doStep(currentCommunicationPoint=float(k), communicationStepSize=1.0)
         return plant.get(["v", "s", "coupler_force[1]"]) + u
 
-    for k in range(100):
-        step(k)
-    blobs = [i.fmu.serializeFMUstate(i.fmu.getFMUstate()) for i in (plant, ctl)]
-    first = [step(k) for k in range(100, 260)]
-    for inst, blob in zip((plant, ctl), blobs, strict=True):
-        inst.fmu.setFMUstate(inst.fmu.deSerializeFMUstate(blob))
-    second = [step(k) for k in range(100, 260)]
+    first, second = rerun_after_restore([plant, ctl], step, 100, 260)
     assert first == second
     assert first[-1][0] == pytest.approx(45.0, abs=0.3)  # tracking the 45 m/s target
     for inst in (plant, ctl):

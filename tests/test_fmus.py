@@ -10,6 +10,7 @@ import venv
 from pathlib import Path
 
 import pytest
+from conftest import rerun_after_restore
 from fmpy import extract, read_model_description
 from fmpy.fmi2 import FMU2Slave
 from fmpy.validation import validate_fmu
@@ -78,13 +79,7 @@ def test_closed_loop_state_save_restore_reproduces_rest(built_fmus):
         pid.fmu.doStep(currentCommunicationPoint=k * h, communicationStepSize=h)
         return plant.get("v"), plant.get("s"), u
 
-    for k in range(60):
-        step(k)
-    blobs = [inst.fmu.serializeFMUstate(inst.fmu.getFMUstate()) for inst in (plant, pid)]
-    first = [step(k) for k in range(60, 200)]
-    for inst, blob in zip((plant, pid), blobs):
-        inst.fmu.setFMUstate(inst.fmu.deSerializeFMUstate(blob))
-    second = [step(k) for k in range(60, 200)]
+    first, second = rerun_after_restore([plant, pid], step, 60, 200)
     assert first == second
     assert first[-1][0] == 0.0  # the run got to the stop
 

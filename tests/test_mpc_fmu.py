@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from conftest import rerun_after_restore
 
 from cosim.master import run_scenario
 
@@ -105,13 +106,7 @@ def test_rsmpc_fmu_state_restore_reproduces_the_rest(built_fmus):
         ctrl.fmu.doStep(currentCommunicationPoint=k * h, communicationStepSize=h)
         return plant.get("v"), plant.get("s"), u
 
-    for k in range(60):
-        step(k)
-    blobs = [inst.fmu.serializeFMUstate(inst.fmu.getFMUstate()) for inst in (plant, ctrl)]
-    first = [step(k) for k in range(60, 160)]
-    for inst, blob in zip((plant, ctrl), blobs, strict=True):
-        inst.fmu.setFMUstate(inst.fmu.deSerializeFMUstate(blob))
-    again = [step(k) for k in range(60, 160)]
+    first, again = rerun_after_restore([plant, ctrl], step, 60, 160)
     assert first == again
     assert len({u for _, _, u in first}) > 3
     for inst in (plant, ctrl):
