@@ -7,7 +7,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from conftest import rerun_after_restore
+from fmi_state_helpers import rerun_after_restore
 from scipy.integrate import solve_ivp
 
 from cosim.state import to_ticks

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import rerun_after_restore
+from fmi_state_helpers import rerun_after_restore
 
 from cosim.master import run_scenario
 
