@@ -6,7 +6,7 @@ Target (issue 4): the 22.8 min run with plant sub-step 0.01 s, closed loop, unde
 * plant only, core: :class:`plants.freight.FreightTrain` (no FMI) replaying the force demand and
   pipe reduction recorded in that run, one advance per 0.2 s;
 * plant only, FMU: the same through the plant FMU (fmpy ``FMU2Slave``, setReal/doStep/getReal);
-* closed loop, cores: plant and :class:`controllers.freight_pid.FreightPid` in a Python loop.
+* closed loop, cores: plant and :class:`controllers.pid.freight_pid.FreightPid` in a Python loop.
 
     python benchmarks/bench_freight.py [--repeat 1]
 """
@@ -25,10 +25,10 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from controllers.freight_pid import FreightPid, FreightPidParams  # noqa: E402
-from cosim.build import resolve  # noqa: E402
-from cosim.master import run_scenario  # noqa: E402
-from cosim.state import to_ticks  # noqa: E402
+from controllers.pid.freight_pid import FreightPid, FreightPidParams  # noqa: E402
+from cosim.fmu.build import resolve  # noqa: E402
+from cosim.fmu.state import to_ticks  # noqa: E402
+from cosim.run.master import run_scenario  # noqa: E402
 from plants.freight import FreightParams, FreightTrain  # noqa: E402
 from plants.route import load_route  # noqa: E402
 

@@ -24,7 +24,7 @@ sys.path[:0] = [str(ROOT), str(ROOT / "tests")]
 
 from mpc_loop import run_loop  # noqa: E402
 
-from controllers.mpc import (  # noqa: E402
+from controllers.mpc.stop_mpc import (  # noqa: E402
     IdealStopMpc,
     SelfTriggeredStopMpc,
     StopMpcParams,
@@ -63,8 +63,8 @@ def qp_table(repeat: int) -> None:
 
 
 def scenario_table(repeat: int) -> None:
-    from cosim.master import ensure_built, run_scenario
-    from cosim.scenario import load_scenario
+    from cosim.run.master import ensure_built, run_scenario
+    from cosim.run.scenario import load_scenario
 
     print("\nWhole scenario through the event-driven master (60 s simulated, N = 10)")
     print(f"{'controller':<8} {'wall s (median)':>16} {'executions':>11} {'stop err m':>11}")

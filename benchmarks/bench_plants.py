@@ -27,9 +27,9 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from cosim.master import run_scenario  # noqa: E402
-from cosim.scenario import load_scenario  # noqa: E402
-from cosim.state import to_ticks  # noqa: E402
+from cosim.fmu.state import to_ticks  # noqa: E402
+from cosim.run.master import run_scenario  # noqa: E402
+from cosim.run.scenario import load_scenario  # noqa: E402
 from plants.emu import Emu, emu_config  # noqa: E402
 from plants.route import load_route  # noqa: E402
 

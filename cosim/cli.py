@@ -26,7 +26,7 @@ def _fail(message: str, code: int = 2) -> None:
 def build(names: Annotated[list[str] | None, typer.Argument(
         help="FMU identifiers (default: all)")] = None) -> None:
     """Build FMUs into fmus/ (all, or the named ones)."""
-    from cosim.build import build_fmu, resolve
+    from cosim.fmu.build import build_fmu, resolve
 
     try:
         specs = resolve(names)
@@ -41,8 +41,8 @@ def build(names: Annotated[list[str] | None, typer.Argument(
 @app.command("list")
 def list_() -> None:
     """List the FMUs this project builds and the shipped scenarios, a line each."""
-    from cosim.build import catalog
-    from cosim.scenario import SCENARIO_DIR
+    from cosim.fmu.build import catalog
+    from cosim.run.scenario import SCENARIO_DIR
 
     table = Table(title="FMUs", show_edge=False)
     table.add_column("identifier")
@@ -106,8 +106,8 @@ def run(
     """Run a scenario; write results.csv, summary.json and plot.png; print the summary."""
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
-    from cosim.master import SimulationError, run_scenario
-    from cosim.scenario import ScenarioError, find_scenario
+    from cosim.run.master import SimulationError, run_scenario
+    from cosim.run.scenario import ScenarioError, find_scenario
 
     try:
         path = find_scenario(scenario)
@@ -145,8 +145,8 @@ def validate(
     timeout: Annotated[float, typer.Option(
         help="seconds before a hanging FMU is reported and its host process killed")] = 120.0,
 ) -> None:
-    """FMI 2.0 compliance checks (cosim.compliance) on FMUs; non-zero exit on an error."""
-    from cosim.build import build_fmu, catalog
+    """FMI 2.0 compliance checks (cosim.interop.compliance) on FMUs; non-zero exit on an error."""
+    from cosim.fmu.build import build_fmu, catalog
 
     specs = catalog()
     paths: list[Path] = []
@@ -161,7 +161,7 @@ def validate(
             paths.append(specs[name].path)
         else:
             _fail(f"unknown FMU {name!r}; known: {sorted(specs)}")
-    from cosim.compliance import Options, check_fmu, format_report, passed
+    from cosim.interop.compliance import Options, check_fmu, format_report, passed
 
     report: dict[str, list[dict]] = {}
     failed = False
@@ -189,9 +189,9 @@ def sweep(
     no_plot: Annotated[bool, typer.Option("--no-plot", help="skip sweep.png")] = False,
 ) -> None:
     """Run scenarios over a parameter grid in parallel; write sweep.csv and sweep.png."""
-    from cosim.master import SimulationError
-    from cosim.scenario import ScenarioError, find_scenario
-    from cosim.sweep import parse_grid, run_sweep
+    from cosim.run.master import SimulationError
+    from cosim.run.scenario import ScenarioError, find_scenario
+    from cosim.run.sweep import parse_grid, run_sweep
 
     try:
         grid = parse_grid(set_)
@@ -223,8 +223,8 @@ def export(
         "--set", help="override NAME.key=value (repeatable)")] = None,
 ) -> None:
     """Export a scenario and its FMUs as an SSP 1.0 package (SystemStructure.ssd + FMUs)."""
-    from cosim.scenario import ScenarioError
-    from cosim.ssp import export_ssp
+    from cosim.interop.ssp import export_ssp
+    from cosim.run.scenario import ScenarioError
 
     try:
         path = export_ssp(scenario, ssp, overrides=set_ or None)

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from cosim.state import StatefulCore, to_seconds, to_ticks
+from cosim.fmu.state import StatefulCore, to_seconds, to_ticks
 from plants import dead_time
 from plants.resistance import Davis
 from plants.route import Route

@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
-from cosim.fmu_slave import PlantSlave, Var
-from cosim.state import to_seconds
+from cosim.fmu.slave import PlantSlave, Var
+from cosim.fmu.state import to_seconds
 from plants.brake_delay import BrakeDelayParams, BrakeDelayTrain
 from plants.resistance import Davis
 from plants.route import load_route

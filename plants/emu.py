@@ -44,7 +44,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from scipy.linalg import expm
 
-from cosim.state import StatefulCore, to_seconds, to_ticks
+from cosim.fmu.state import StatefulCore, to_seconds, to_ticks
 from plants import dead_time
 from plants.resistance import Davis
 from plants.route import GRAVITY, Route

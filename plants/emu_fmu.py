@@ -9,8 +9,8 @@ from __future__ import annotations
 
 from typing import ClassVar
 
-from cosim.fmu_slave import PlantSlave, Var
-from cosim.state import to_seconds
+from cosim.fmu.slave import PlantSlave, Var
+from cosim.fmu.state import to_seconds
 from plants.emu import CONFIGURATIONS, Emu, emu_config
 from plants.route import load_route
 

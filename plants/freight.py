@@ -78,7 +78,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.linalg import solveh_banded
 
-from cosim.state import StatefulCore, to_seconds, to_ticks
+from cosim.fmu.state import StatefulCore, to_seconds, to_ticks
 from plants import dead_time
 from plants.route import GRAVITY, KMH, Route
 

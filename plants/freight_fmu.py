@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
-from cosim.fmu_slave import PlantSlave, Var
-from cosim.state import to_seconds
+from cosim.fmu.slave import PlantSlave, Var
+from cosim.fmu.state import to_seconds
 from plants.freight import FreightParams, FreightTrain
 from plants.route import load_route
 

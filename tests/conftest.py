@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from cosim.build import build_stale, catalog
+from cosim.fmu.build import build_stale, catalog
 
 
 @pytest.fixture(scope="session")

@@ -8,8 +8,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from controllers.mpc import StopMpcParams
-from cosim.state import to_ticks
+from controllers.mpc.stop_mpc import StopMpcParams
+from cosim.fmu.state import to_ticks
 from plants.brake_delay import BrakeDelayParams, BrakeDelayTrain
 from plants.route import load_route
 

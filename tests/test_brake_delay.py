@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from cosim.state import to_ticks
+from cosim.fmu.state import to_ticks
 from plants.brake_delay import BrakeDelayParams, BrakeDelayTrain
 from plants.resistance import Davis
 from plants.route import Route, load_route

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from controllers.freight_pid import FreightPid, FreightPidParams
-from cosim.state import to_ticks
+from controllers.pid.freight_pid import FreightPid, FreightPidParams
+from cosim.fmu.state import to_ticks
 from plants.freight import FreightParams, FreightTrain
 from plants.route import GRAVITY, KMH, Route, load_route
 

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from cosim.master import run_scenario
-from cosim.scenario import ScenarioError, load_scenario
+from cosim.run.master import run_scenario
+from cosim.run.scenario import ScenarioError, load_scenario
 
 PID = "seed000_stop_pid"
 
@@ -134,7 +134,7 @@ def test_failure_mid_run_keeps_partial_results(built_fmus, tmp_path, monkeypatch
 
     import pandas as pd
 
-    from cosim import master as master_mod
+    from cosim.run import master as master_mod
 
     real_step = master_mod.FmuUnit.step_to
 

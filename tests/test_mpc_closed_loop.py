@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from mpc_loop import run_loop
 
-from controllers.mpc import IdealStopMpc, SelfTriggeredStopMpc, StopMpcParams, TubeStopMpc
+from controllers.mpc.stop_mpc import IdealStopMpc, SelfTriggeredStopMpc, StopMpcParams, TubeStopMpc
 
 BASE = StopMpcParams()
 

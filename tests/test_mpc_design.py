@@ -7,9 +7,9 @@ import math
 import numpy as np
 import pytest
 
-from controllers.design_model import U_PREV, S, V, brake_delay_model, delay_samples, zoh
-from controllers.qp import HorizonQP, support_of_sum
-from cosim.state import to_ticks
+from controllers.common.design_model import U_PREV, S, V, brake_delay_model, delay_samples, zoh
+from controllers.common.qp import HorizonQP, support_of_sum
+from cosim.fmu.state import to_ticks
 from plants.brake_delay import BrakeDelayParams, BrakeDelayTrain
 from plants.resistance import Davis
 from plants.route import Route

@@ -8,8 +8,8 @@ import sys
 import pandas as pd
 import pytest
 
-from cosim.master import run_scenario
-from cosim.sweep import grid_points, parse_grid, run_sweep
+from cosim.run.master import run_scenario
+from cosim.run.sweep import grid_points, parse_grid, run_sweep
 
 
 def test_parse_grid_ranges_lists_and_errors():

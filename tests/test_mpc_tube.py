@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from controllers.mpc import StopMpcParams, TubeStopMpc, disturbance_bounds
+from controllers.mpc.stop_mpc import StopMpcParams, TubeStopMpc, disturbance_bounds
 from plants.route import GRAVITY, load_route
 
 
@@ -80,7 +80,7 @@ def test_tightened_constraints_shrink_along_the_horizon(rmpc):
 
 
 def test_ideal_mpc_has_no_tightening():
-    from controllers.mpc import IdealStopMpc
+    from controllers.mpc.stop_mpc import IdealStopMpc
 
     ideal = IdealStopMpc(StopMpcParams(horizon=5))
     assert ideal.w_bounds == (0.0, 0.0)

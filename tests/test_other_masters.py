@@ -8,9 +8,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cosim.libcosim_runner import compare_frames, run_libcosim, simulate_single
-from cosim.master import run_scenario
-from cosim.scenario import load_scenario
+from cosim.interop.libcosim import compare_frames, run_libcosim, simulate_single
+from cosim.run.master import run_scenario
+from cosim.run.scenario import load_scenario
 
 SCENARIOS = sorted((Path(__file__).resolve().parent.parent / "scenarios").glob("*.toml"))
 SHORT = 40.0  # s of each scenario in the quick test; the full runs are marked slow

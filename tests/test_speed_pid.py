@@ -6,7 +6,7 @@ import math
 
 import pytest
 
-from controllers.speed_pid import SpeedPid, SpeedPidParams
+from controllers.pid.speed_pid import SpeedPid, SpeedPidParams
 
 
 def test_proportional_loop_on_integrator_decays_geometrically() -> None:
@@ -113,7 +113,7 @@ def test_bad_parameters_are_rejected(field: str, value: float) -> None:
 def _distributed(units: int = 3, **pid):
     import numpy as np
 
-    from controllers.speed_pid import DistributedSpeedPid, DistributedSpeedPidParams
+    from controllers.pid.speed_pid import DistributedSpeedPid, DistributedSpeedPidParams
     from plants.route import ReferenceProfile
 
     profile = ReferenceProfile("time", np.array([0.0, 100.0, 200.0]),
@@ -154,7 +154,7 @@ def test_demand_is_bounded_by_what_the_units_can_give() -> None:
 def test_holds_the_brake_at_the_end_of_the_profile() -> None:
     import numpy as np
 
-    from controllers.speed_pid import DistributedSpeedPid, DistributedSpeedPidParams
+    from controllers.pid.speed_pid import DistributedSpeedPid, DistributedSpeedPidParams
     from plants.route import ReferenceProfile
 
     profile = ReferenceProfile("distance", np.array([0.0, 400.0]), np.array([20.0, 0.0]))
@@ -170,8 +170,8 @@ def test_closed_loop_on_the_emu_core_meets_ctcs3(configuration: str) -> None:
     """PID + Emu core (CRH3, seed 004 reference) without FMUs: CTCS-3 at every sample."""
     import numpy as np
 
-    from controllers.speed_pid import DistributedSpeedPid, DistributedSpeedPidParams
-    from cosim.state import to_ticks
+    from controllers.pid.speed_pid import DistributedSpeedPid, DistributedSpeedPidParams
+    from cosim.fmu.state import to_ticks
     from plants.emu import Emu, emu_config
     from plants.route import load_route
 

@@ -18,7 +18,7 @@ import pytest
 from fmpy import extract, read_model_description
 from fmpy.fmi2 import FMU2Slave
 
-from cosim.build import SHIM_SUFFIX, shim_binary
+from cosim.fmu.build import SHIM_SUFFIX, shim_binary
 
 HERE = Path(__file__).resolve().parent
 STEP, N_STEPS, COMMAND = 0.2, 25, 50.0
@@ -125,7 +125,8 @@ def test_c_host_runs_fmu_without_preload_or_pythonpath(host, plant, shim):
 
 def test_c_host_exits_cleanly(host, plant, shim):
     """pythonfmu's library destructor corrupts the heap when the process exits with the library
-    loaded; the shim tears pythonfmu down from an exit handler first (cosim/pythonfmu_shim.c)."""
+    loaded; the shim tears pythonfmu down from an exit handler first
+    (cosim/fmu/pythonfmu_shim.c)."""
     done = run_host(host, plant, preload=False, plain_exit=True)
     check_rows(done, plant)
     assert "freed" in done.stderr and "corrupted" not in done.stderr

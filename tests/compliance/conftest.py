@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from cosim.compliance import Options, check_fmu
+from cosim.interop.compliance import Options, check_fmu
 
 HERE = Path(__file__).resolve().parent
 

@@ -7,7 +7,7 @@ import zipfile
 
 import pytest
 
-from cosim.compliance import ERROR, check_fmu, format_report, passed
+from cosim.interop.compliance import ERROR, check_fmu, format_report, passed
 
 PLANTED = {  # check -> fragment of the expected message (see broken_train.py)
     "fmpy-validation": "InitialUnknowns",

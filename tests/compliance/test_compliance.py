@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import pytest
 
-from cosim.build import catalog
-from cosim.compliance import ALL_CHECKS, ERROR, Options, check_together, format_report
+from cosim.fmu.build import catalog
+from cosim.interop.compliance import ALL_CHECKS, ERROR, Options, check_together, format_report
 
 IDENTIFIERS = sorted(catalog())
 

@@ -1,4 +1,4 @@
-"""The C shim in front of pythonfmu's linux64 binary (cosim/pythonfmu_shim.c, installed by
+"""The C shim in front of pythonfmu's linux64 binary (cosim/fmu/pythonfmu_shim.c, installed by
 `cosim build`): rejected calls return fmi2Error (pythonfmu alone: fmi2Fatal) and the instance
 stays usable; every FMI 2.0 function is exported; the win64 binary is pythonfmu's."""
 
@@ -14,8 +14,8 @@ import pytest
 import pythonfmu
 from fmpy import extract, read_model_description
 
-from cosim.build import SHIM_SUFFIX, shim_binary
-from cosim.compliance import _Host
+from cosim.fmu.build import SHIM_SUFFIX, shim_binary
+from cosim.interop.compliance import _Host
 
 FMI2_FUNCTIONS = (
     "GetTypesPlatform GetVersion SetDebugLogging Instantiate FreeInstance SetupExperiment "

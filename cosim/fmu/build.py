@@ -8,7 +8,7 @@ that bundle *in isolation*: it hides any other copy of ``cosim``/``plants``/``co
 instances of one, or this package itself can live in one process without colliding.
 
 On Linux the FMU's ``binaries/linux64/<identifier>.so`` is a small C shim
-(``cosim/pythonfmu_shim.c``, compiled once per process with gcc against fmpy's FMI 2 headers)
+(``cosim/fmu/pythonfmu_shim.c``, compiled once per process with gcc against fmpy's FMI 2 headers)
 in front of pythonfmu's binary, which is kept as ``<identifier>_pythonfmu.so``: it loads the
 libpython this FMU was built with when the host has no Python, and reports pythonfmu's
 fmi2Fatal for a rejected call as fmi2Error. Without gcc the FMU keeps pythonfmu's binary (a
@@ -34,9 +34,9 @@ import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 
-from cosim.fmu_slave import BUNDLE_DIR
+from cosim.fmu.slave import BUNDLE_DIR
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 PROJECT_PACKAGES = ("cosim", "plants", "controllers")
 WRAPPER_DIRS = ("plants", "controllers")
 FMU_DIR = ROOT / "fmus"
@@ -97,14 +97,14 @@ class FmuSpec:
 def _wrapper_modules() -> list[str]:
     mods = []
     for d in WRAPPER_DIRS:
-        for f in sorted((ROOT / d).glob("*_fmu.py")):
-            mods.append(f"{d}.{f.stem}")
+        for f in sorted((ROOT / d).rglob("*_fmu.py")):
+            mods.append(".".join(f.relative_to(ROOT).with_suffix("").parts))
     return mods
 
 
 def catalog() -> dict[str, FmuSpec]:
     """All FMUs this project builds, by identifier (wrapper class name without 'Fmu')."""
-    from cosim.fmu_slave import CoreSlave
+    from cosim.fmu.slave import CoreSlave
 
     specs: dict[str, FmuSpec] = {}
     for mod_name in _wrapper_modules():

@@ -1,10 +1,10 @@
-"""FMU wrapper of :class:`controllers.mpc.SelfTriggeredStopMpc` (seed 000 RSMPC)."""
+"""FMU wrapper of :class:`controllers.mpc.stop_mpc.SelfTriggeredStopMpc` (seed 000 RSMPC)."""
 
 from __future__ import annotations
 
-from controllers.mpc import SelfTriggeredStopMpc, StopMpcParams
-from controllers.mpc_fmu import MPC_VARS, StopMpcSlave
-from cosim.fmu_slave import Var
+from controllers.mpc.stop_mpc import SelfTriggeredStopMpc, StopMpcParams
+from controllers.mpc.stop_mpc_fmu import MPC_VARS, StopMpcSlave
+from cosim.fmu.slave import Var
 
 _D = StopMpcParams()
 

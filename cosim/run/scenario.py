@@ -19,7 +19,7 @@ Format (see ``scenarios/seed000_stop_pid.toml``)::
     [connections]             # "dst.input" = "src.output" (one source per input)
     [record]
     variables = ["NAME.var", ...]   # default: every output of every FMU
-    [summary]                 # which recorded variables the summary metrics read (cosim.metrics)
+    [summary]                 # recorded variables the summary metrics read (cosim.run.metrics)
 
 Every error names the file, the key and what is wrong.
 """
@@ -38,7 +38,7 @@ try:
 except ModuleNotFoundError:  # Python 3.10
     import tomli as tomllib  # type: ignore[no-redef]
 
-from cosim.build import FMU_DIR, ROOT
+from cosim.fmu.build import FMU_DIR, ROOT
 
 SCENARIO_DIR = ROOT / "scenarios"
 ALGORITHMS = ("event", "fixed", "jacobi")
@@ -173,7 +173,7 @@ def _resolve_fmu(source: Path, key: str, fmu: Any) -> Path:
         if not path.is_file():
             raise ScenarioError(f"{source}: {key} = {fmu!r}: file {path} does not exist")
         return path
-    from cosim.build import catalog
+    from cosim.fmu.build import catalog
 
     known = catalog()
     if fmu not in known:

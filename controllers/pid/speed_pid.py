@@ -16,7 +16,8 @@ Saturation and anti-windup: ``a_dem`` is clamped to ``[a_lo, a_hi]`` where the c
 the limits that hold *now* (e.g. the traction/brake envelope at the current speed divided by the
 mass), else ``[accel_min, accel_max]``. The integral is updated by conditional integration: it
 is frozen while the demand is saturated and the error would push it further out (the same rule
-as :mod:`controllers.pid`). ``rate_limit`` (m/s^3, 0 = off) limits the change of the demand per
+as :mod:`controllers.pid.stop_pid`).
+``rate_limit`` (m/s^3, 0 = off) limits the change of the demand per
 sample (jerk limit, ride comfort).
 
 One call of :meth:`SpeedPid.update` per sample; the sample time is a parameter, so the integral
@@ -28,7 +29,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from cosim.state import StatefulCore
+from cosim.fmu.state import StatefulCore
 
 
 @dataclass(frozen=True)

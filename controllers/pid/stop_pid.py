@@ -13,8 +13,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from cosim.state import StatefulCore
-from plants.route import StoppingCurve
+from cosim.fmu.profiles import StoppingCurve
+from cosim.fmu.state import StatefulCore
 
 
 @dataclass(frozen=True)

@@ -1,4 +1,4 @@
-"""FMU wrappers of :class:`controllers.speed_pid.DistributedSpeedPid` for the EMU plants.
+"""FMU wrappers of :class:`controllers.pid.speed_pid.DistributedSpeedPid` for the EMU plants.
 
 ``EmuSpeedPid3`` drives ``Emu3`` (3 units), ``EmuSpeedPid8`` drives ``Emu8``. The reference is a
 bundled profile name or a file (see :mod:`plants.route`), looked up by the measured head
@@ -9,12 +9,12 @@ from __future__ import annotations
 
 from typing import ClassVar
 
-from controllers.speed_pid import (
+from controllers.pid.speed_pid import (
     DistributedSpeedPid,
     DistributedSpeedPidParams,
     SpeedPidParams,
 )
-from cosim.fmu_slave import CONTROLLER_TIMING_VARS, SampledControllerSlave, Var
+from cosim.fmu.slave import CONTROLLER_TIMING_VARS, SampledControllerSlave, Var
 from plants.route import load_reference
 
 _D = SpeedPidParams()

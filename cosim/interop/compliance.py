@@ -17,12 +17,12 @@ checks are those of issue 5:
   parameters are rejected (non-OK status or rejected at initialisation) with a logged message.
   The expected status is fmi2Error; fmi2Fatal is an error too (it declares every instance of
   the FMU unusable, so a master cannot recover; plain pythonfmu 0.7 binaries return it for any
-  Python exception, ours go through a shim that returns fmi2Error, see ``cosim/build.py``).
+  Python exception, ours go through a shim that returns fmi2Error, see ``cosim/fmu/build.py``).
 
-The dynamic checks run in a worker subprocess (``python -m cosim.compliance``), so an FMU that
-crashes or hangs the host is reported as a problem of the check it was in, and the worker is
-restarted for the remaining checks. ``check_together(paths)`` loads several FMUs in one process
-and checks that they do not disturb each other (pythonfmu FMUs share one interpreter).
+The dynamic checks run in a worker subprocess (``python -m cosim.interop.compliance``), so an
+FMU that crashes or hangs the host is reported as a problem of the check it was in, and the
+worker is restarted for the remaining checks. ``check_together(paths)`` loads several FMUs in
+one process and checks that they do not disturb each other (pythonfmu FMUs share one interpreter).
 
 Exercising the FMU: parameters keep their start values; every Real input follows a
 deterministic signal inside its [min, max] (``start + a sin(0.7 k + phase)`` when unbounded);
@@ -339,7 +339,7 @@ class _Instance:
     def __init__(self, host: _Host, name: str) -> None:
         from fmpy.fmi2 import FMU2Slave
 
-        from cosim.master import logging_callbacks
+        from cosim.run.master import logging_callbacks
 
         self.host = host
         self.messages: list[tuple[int, str]] = []
@@ -841,9 +841,9 @@ def _run_worker(args: dict, checks: tuple[str, ...], timeout: float) -> list[Pro
     done: set[str] = set()
     while True:
         args = {**args, "skip": sorted(done)}
-        cmd = [sys.executable, "-m", "cosim.compliance", json.dumps(args)]
+        cmd = [sys.executable, "-m", "cosim.interop.compliance", json.dumps(args)]
         env = dict(os.environ)
-        root = str(Path(__file__).resolve().parent.parent)
+        root = str(Path(__file__).resolve().parents[2])
         env["PYTHONPATH"] = root + os.pathsep + env.get("PYTHONPATH", "")
         current: str | None = None
         try:

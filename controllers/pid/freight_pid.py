@@ -1,6 +1,6 @@
 """Speed-tracking PID for the heavy freight train, traction / ED / air-brake blending (seed 002).
 
-The loop is :class:`controllers.speed_pid.SpeedPid` (acceleration units) on the head speed and
+The loop is :class:`controllers.pid.speed_pid.SpeedPid` (acceleration units) on the head speed and
 position, with three feedforwards:
 
 * reference acceleration ``a_ref`` taken ``preview_time`` ahead (``s + v t_p``), so that the
@@ -35,8 +35,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from controllers.speed_pid import SpeedPid, SpeedPidParams
-from cosim.state import StatefulCore
+from controllers.pid.speed_pid import SpeedPid, SpeedPidParams
+from cosim.fmu.state import StatefulCore
 from plants.freight import FreightParams, FreightTrain, friction_coefficient
 from plants.route import GRAVITY, ReferenceProfile, Route
 

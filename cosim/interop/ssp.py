@@ -23,7 +23,7 @@ from pathlib import Path
 from typing import Any
 from xml.etree.ElementTree import Element, SubElement, indent, register_namespace, tostring
 
-from cosim.scenario import Scenario, load_scenario
+from cosim.run.scenario import Scenario, load_scenario
 
 SSD = "http://ssp-standard.org/SSP1/SystemStructureDescription"
 SSC = "http://ssp-standard.org/SSP1/SystemStructureCommon"
@@ -144,7 +144,7 @@ def export_ssp(scenario: str | Path | Scenario, out: str | Path,
     """Write the scenario (with ``overrides``) and its FMUs as an SSP archive at ``out``."""
     sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario, overrides)
     if build:
-        from cosim.master import ensure_built
+        from cosim.run.master import ensure_built
 
         ensure_built(sc)
     files: dict[Path, str] = {}

@@ -34,7 +34,7 @@ import numpy as np
 from pythonfmu import Boolean, Fmi2Causality, Fmi2Slave, Fmi2Variability, Integer, Real, String
 from pythonfmu.enums import Fmi2Status
 
-from cosim.state import to_seconds, to_ticks
+from cosim.fmu.state import to_seconds, to_ticks
 
 # FMI unit name -> (SI base-unit exponents, factor). Every unit a Var may use is declared here.
 UNITS: dict[str, tuple[dict[str, int], float]] = {
@@ -248,7 +248,7 @@ class CoreSlave(Fmi2Slave):
             bundled = Path(self.resources).joinpath(BUNDLE_DIR, *parts)
             if bundled.exists():
                 return bundled
-        return Path(__file__).resolve().parent.parent.joinpath(*parts)
+        return Path(__file__).resolve().parents[2].joinpath(*parts)
 
     def _register(self, var: Var) -> None:
         cls = _TYPES[var.type]

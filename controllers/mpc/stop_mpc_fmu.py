@@ -1,12 +1,12 @@
-"""FMU wrapper of :class:`controllers.mpc.IdealStopMpc`, and the variables shared by the
+"""FMU wrapper of :class:`controllers.mpc.stop_mpc.IdealStopMpc`, and the variables shared by the
 seed 000 predictive controllers (RMPC and RSMPC wrappers import :class:`StopMpcSlave`)."""
 
 from __future__ import annotations
 
 from typing import Any, ClassVar
 
-from controllers.mpc import IdealStopMpc, StopMpcParams
-from cosim.fmu_slave import CONTROLLER_TIMING_VARS, SampledControllerSlave, Var
+from controllers.mpc.stop_mpc import IdealStopMpc, StopMpcParams
+from cosim.fmu.slave import CONTROLLER_TIMING_VARS, SampledControllerSlave, Var
 from plants.resistance import Davis
 
 _D = StopMpcParams()

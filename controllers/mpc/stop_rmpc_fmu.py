@@ -1,9 +1,9 @@
-"""FMU wrapper of :class:`controllers.mpc.TubeStopMpc` (seed 000 tube RMPC)."""
+"""FMU wrapper of :class:`controllers.mpc.stop_mpc.TubeStopMpc` (seed 000 tube RMPC)."""
 
 from __future__ import annotations
 
-from controllers.mpc import TubeStopMpc
-from controllers.mpc_fmu import MPC_VARS, StopMpcSlave
+from controllers.mpc.stop_mpc import TubeStopMpc
+from controllers.mpc.stop_mpc_fmu import MPC_VARS, StopMpcSlave
 
 
 class StopRmpcFmu(StopMpcSlave):

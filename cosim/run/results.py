@@ -59,7 +59,7 @@ def plot_run(result: Any, path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from cosim.metrics import _columns
+    from cosim.run.metrics import _columns
 
     cfg = result.scenario.summary
     frame = result.frame

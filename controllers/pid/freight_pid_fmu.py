@@ -1,13 +1,13 @@
-"""FMU wrapper of :class:`controllers.freight_pid.FreightPid` (seed 002 baseline)."""
+"""FMU wrapper of :class:`controllers.pid.freight_pid.FreightPid` (seed 002 baseline)."""
 
 from __future__ import annotations
 
 import dataclasses
 
-from controllers.freight_pid import FreightPid, FreightPidParams
-from controllers.speed_pid import SpeedPidParams
-from controllers.speed_pid_fmu import speed_pid_variables
-from cosim.fmu_slave import CONTROLLER_TIMING_VARS, SampledControllerSlave, Var
+from controllers.pid.freight_pid import FreightPid, FreightPidParams
+from controllers.pid.speed_pid import SpeedPidParams
+from controllers.pid.speed_pid_fmu import speed_pid_variables
+from cosim.fmu.slave import CONTROLLER_TIMING_VARS, SampledControllerSlave, Var
 from plants.route import load_route
 
 _D = FreightPidParams()

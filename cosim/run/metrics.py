@@ -25,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from plants.route import StoppingCurve
+from cosim.fmu.profiles import StoppingCurve
 
 KMH_PER_MPS = 3.6
 STANDSTILL_MPS = 1e-3
@@ -62,7 +62,7 @@ def _count_changes(x: np.ndarray) -> int:
 
 
 def compute_summary(result: Any) -> dict[str, Any]:
-    """The ``summary.json`` content of a :class:`cosim.master.RunResult`."""
+    """The ``summary.json`` content of a :class:`cosim.run.master.RunResult`."""
     cfg = result.scenario.summary
     frame = result.frame
     t = frame["time"].to_numpy(dtype=float)

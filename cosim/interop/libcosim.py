@@ -31,8 +31,8 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from cosim.scenario import Scenario, load_scenario
-from cosim.state import to_seconds, to_ticks
+from cosim.fmu.state import to_seconds, to_ticks
+from cosim.run.scenario import Scenario, load_scenario
 
 
 class LibcosimError(RuntimeError):

@@ -1,7 +1,7 @@
 """Predictive accurate-stopping controllers of seed 000: ideal MPC, tube RMPC, RSMPC (sec. 2-3).
 
-All three share the design model of eq. (9) (:mod:`controllers.design_model`) and the horizon QP
-builder (:mod:`controllers.qp`). At an event at sample k the controller
+All three share the design model of eq. (9) (:mod:`controllers.common.design_model`) and
+the horizon QP builder (:mod:`controllers.common.qp`). At an event at sample k the controller
 
 1. predicts ``x_{0|k} = x(k+l)`` from the measured ``[a_c, v, s]`` and the ``l`` commands already
    issued but not yet acting (eq. 10: the dead time is handled by prediction);
@@ -54,11 +54,12 @@ from typing import Any, ClassVar
 import numpy as np
 from scipy.linalg import solve_discrete_are
 
-from controllers.design_model import A_C, U_PREV, DesignModel, S, V, brake_delay_model
-from controllers.qp import HorizonQP, QPResult, support_of_sum
-from cosim.state import StatefulCore
+from controllers.common.design_model import A_C, U_PREV, DesignModel, S, V, brake_delay_model
+from controllers.common.qp import HorizonQP, QPResult, support_of_sum
+from cosim.fmu.profiles import StoppingCurve
+from cosim.fmu.state import StatefulCore
 from plants.resistance import Davis
-from plants.route import GRAVITY, Route, StoppingCurve, load_route
+from plants.route import GRAVITY, Route, load_route
 
 
 @dataclass(frozen=True)

@@ -1,9 +1,9 @@
-"""FMU wrapper of :class:`controllers.pid.StopPid` (seed 000 baseline)."""
+"""FMU wrapper of :class:`controllers.pid.stop_pid.StopPid` (seed 000 baseline)."""
 
 from __future__ import annotations
 
-from controllers.pid import StopPid, StopPidParams
-from cosim.fmu_slave import CONTROLLER_TIMING_VARS, SampledControllerSlave, Var
+from controllers.pid.stop_pid import StopPid, StopPidParams
+from cosim.fmu.slave import CONTROLLER_TIMING_VARS, SampledControllerSlave, Var
 
 _D = StopPidParams()
 

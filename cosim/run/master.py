@@ -37,8 +37,14 @@ from fmpy.fmi2 import (
     free,
 )
 
-from cosim.scenario import Connection, Scenario, ScenarioError, check_against_fmus, load_scenario
-from cosim.state import to_seconds, to_ticks
+from cosim.fmu.state import to_seconds, to_ticks
+from cosim.run.scenario import (
+    Connection,
+    Scenario,
+    ScenarioError,
+    check_against_fmus,
+    load_scenario,
+)
 
 ProgressFn = Callable[[float, float], None]
 
@@ -559,7 +565,7 @@ class RunResult:
     error: str | None = None
 
     def write(self, out_dir: Path, plot: bool = True) -> list[Path]:
-        from cosim.results import write_results
+        from cosim.run.results import write_results
 
         return write_results(self, Path(out_dir), plot=plot)
 
@@ -570,7 +576,7 @@ def run_scenario(scenario: str | Path | Scenario, overrides: dict[str, Any] | li
                  plot: bool = True) -> RunResult:
     """Load (and override) a scenario, build missing or stale FMUs, run it, compute the summary
     and, with ``out_dir``, write results.csv, summary.json and plot.png."""
-    from cosim.metrics import compute_summary
+    from cosim.run.metrics import compute_summary
 
     sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario, overrides)
     if build:
@@ -597,7 +603,7 @@ def run_scenario(scenario: str | Path | Scenario, overrides: dict[str, Any] | li
 
 def ensure_built(sc: Scenario) -> list[Path]:
     """Build the scenario's catalog FMUs that are missing or older than their sources."""
-    from cosim.build import FMU_DIR, build_stale, catalog
+    from cosim.fmu.build import FMU_DIR, build_stale, catalog
 
     specs = catalog()
     wanted = [specs[c.fmu] for c in sc.components.values()

@@ -1,7 +1,7 @@
 """Parameter sweeps: one scenario (or several) over a grid of overrides, in parallel processes.
 
 ``run_sweep("seed000_stop_rsmpc", {"controller.N": range(3, 16)}, "runs/sweep", workers=2)``
-runs every grid point with :func:`cosim.master.run_scenario` in a process pool, and writes
+runs every grid point with :func:`cosim.run.master.run_scenario` in a process pool, and writes
 
 * ``sweep.csv``: one row per run (scenario, the grid values, the summary figures);
 * ``sweep.png``: stop error against the first grid key, one line per scenario, with the
@@ -33,7 +33,7 @@ SUMMARY_COLUMNS = ("stop_error_m", "command_switches", "qp_solves", "qp_infeasib
 def parse_grid(items: Iterable[str]) -> dict[str, list[Any]]:
     """``["controller.N=3..15", "controller.beta=1,2"]`` -> ``{"controller.N": [3, .., 15], ..}``.
     """
-    from cosim.scenario import parse_value
+    from cosim.run.scenario import parse_value
 
     grid: dict[str, list[Any]] = {}
     for item in items:
@@ -64,7 +64,7 @@ def grid_points(grid: dict[str, Sequence[Any]]) -> list[dict[str, Any]]:
 
 def _run_point(scenario: str, point: dict[str, Any]) -> dict[str, Any]:
     """One grid point in a worker process: the summary figures of the run."""
-    from cosim.master import run_scenario
+    from cosim.run.master import run_scenario
 
     result = run_scenario(scenario, overrides=dict(point), build=False, plot=False)
     summary = result.summary
@@ -84,8 +84,8 @@ def run_sweep(scenario: str | Sequence[str], grid: dict[str, Sequence[Any]],
     FMUs are built (if stale) once, before the pool starts. Returns one row per run; with
     ``out_dir`` writes ``sweep.csv`` and, with ``plot``, ``sweep.png``.
     """
-    from cosim.master import ensure_built
-    from cosim.scenario import find_scenario, load_scenario
+    from cosim.run.master import ensure_built
+    from cosim.run.scenario import find_scenario, load_scenario
 
     scenarios = [scenario] if isinstance(scenario, (str, Path)) else list(scenario)
     if not scenarios:

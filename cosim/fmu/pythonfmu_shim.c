@@ -15,7 +15,7 @@
  *    other missing function return fmi2Error with a log message;
  * 3. reports fmi2Fatal from pythonfmu as fmi2Error, in return values and in log messages.
  *    pythonfmu 0.7 turns *every* Python exception raised by the slave into fmi2Fatal. Our
- *    slaves (cosim/fmu_slave.py) raise only to reject a call (wrong state, NaN/inf input,
+ *    slaves (cosim/fmu/slave.py) raise only to reject a call (wrong state, NaN/inf input,
  *    out-of-range parameter, bad step size), log the reason, and keep the instance valid (they
  *    restore the references pythonfmu drops on an exception), so the FMI 2.0 status for these
  *    rejections is fmi2Error: this instance's call failed; the instance can still be reset or
@@ -28,7 +28,7 @@
  * componentEnvironment. pythonfmu 0.7 always passes the complete message as the format string
  * without arguments, so the logger forwards it unchanged.
  *
- * Compile-time settings (cosim/build.py): SHIM_LIBPYTHON_SONAME, SHIM_LIBPYTHON_PATH (strings,
+ * Compile-time settings (cosim/fmu/build.py): SHIM_LIBPYTHON_SONAME, SHIM_LIBPYTHON_PATH (strings,
  * may be empty).
  */
 #define _GNU_SOURCE

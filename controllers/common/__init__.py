@@ -1,0 +1,1 @@
+"""Machinery shared by the controller families: QP and horizon builders, design models."""

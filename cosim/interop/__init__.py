@@ -1,0 +1,1 @@
+"""Interoperability side: FMI compliance checks, SSP export, libcosim as a second master."""

@@ -1,0 +1,1 @@
+"""Running side: scenarios, the co-simulation master, results, metrics and sweeps."""
