@@ -19,25 +19,36 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
 
 import numpy as np
 
+from cosim.fmu.declare import Declared, Var, build, group, param
 from cosim.fmu.state import StatefulCore, to_seconds, to_ticks
 from plants import dead_time
 from plants.resistance import Davis
-from plants.route import Route
+from plants.route import (
+    Route,
+    initial_state_parameters,
+    load_route,
+    route_parameter,
+    routes_dir_in,
+)
 
 
 @dataclass(frozen=True)
 class BrakeDelayParams:
     """Parameters in SI (defaults: seed 000 Table 1)."""
 
-    mass: float = 490e3  # kg
-    davis: Davis = Davis.from_kn_kmh(5.4, 0.0098, 0.00163)
-    brake_gain: float = 1.07 / 100.0  # m/s^2 per % (c)
-    brake_time_constant: float = 0.4  # s (tau)
-    brake_delay: float = 1.0  # s (Td)
-    max_step: float = 0.01  # s, longest internal sub-step
+    mass: float = param(490e3, "kg", "train mass", min=1.0)
+    davis: Davis = group(Davis.from_kn_kmh(5.4, 0.0098, 0.00163), "davis_")
+    brake_gain: float = param(1.07 / 100.0, "m/s2/%",
+                              "c: brake deceleration per % of command (100 % -> 1.07 m/s2)",
+                              min=0.0)
+    brake_time_constant: float = param(0.4, "s", "tau: first-order brake lag", min=1e-6)
+    brake_delay: float = param(1.0, "s", "Td: brake dead time", min=0.0)
+    max_step: float = param(0.01, "s", "longest internal integration sub-step", min=1e-6)
 
     def check(self) -> None:
         for name in ("mass", "brake_time_constant", "max_step"):
@@ -49,10 +60,36 @@ class BrakeDelayParams:
             raise ValueError(f"brake_gain = {self.brake_gain} must be > 0")
 
 
-class BrakeDelayTrain(StatefulCore):
+class BrakeDelayTrain(StatefulCore, Declared):
     """Single-mass train, brake command -> lag + dead time -> deceleration."""
 
     state_fields = ("t_ticks", "a_c", "v", "s", "history")
+    params_class = BrakeDelayParams
+    setup_vars = (
+        *initial_state_parameters(20.0),
+        Var("initial_command", "parameter", 0.0, "%",
+            "brake command held before the start (brake in equilibrium with it)", min=0.0,
+            max=100.0),
+        route_parameter("seed000_stop", "grade profile"),
+    )
+    input_vars = (
+        Var.input("brake_command", "%", "brake command u (0..100 %)", min=0.0, max=100.0),
+    )
+    output_vars = (
+        Var.output("v", "m/s", "speed"),
+        Var.output("s", "m", "position"),
+        Var.output("a", "m/s2", "acceleration dv/dt"),
+        Var.output("a_c", "m/s2", "acceleration produced by the brakes (<= 0)"),
+        Var.output("applied_command", "%", "command acting now: u(t - Td)"),
+        Var.output("grade", "1", "grade at the train position (permille, uphill > 0)"),
+    )
+
+    @classmethod
+    def from_parameters(cls, values: dict[str, Any], data_dir: Path,
+                        t0: float = 0.0) -> BrakeDelayTrain:
+        route = load_route(values["route"], routes_dir_in(data_dir))
+        return cls(build(BrakeDelayParams, values), route, v0=values["v0"], s0=values["s0"],
+                   initial_command=values["initial_command"], t0=t0)
 
     def __init__(self, params: BrakeDelayParams, route: Route, v0: float, s0: float = 0.0,
                  initial_command: float = 0.0, t0: float = 0.0) -> None:

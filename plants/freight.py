@@ -72,15 +72,25 @@ exactly per vehicle. Outputs: see :meth:`FreightTrain.outputs`.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
 import numpy as np
 from scipy.linalg import solveh_banded
 
+from cosim.fmu.declare import Declared, Var, build, param, parameters
 from cosim.fmu.state import StatefulCore, to_seconds, to_ticks
 from plants import dead_time
-from plants.route import GRAVITY, KMH, Route
+from plants.route import (
+    GRAVITY,
+    KMH,
+    Route,
+    initial_state_parameters,
+    load_route,
+    route_parameter,
+    routes_dir_in,
+)
 
 LOCO_RESISTANCE = (1.40, 0.038, 0.000300)  # N/kN, v in km/h (eq. 3)
 LOADED_WAGON_RESISTANCE = (0.92, 0.0048, 0.000125)  # N/kN, v in km/h (eq. 4, rules v^2 term)
@@ -91,41 +101,55 @@ class FreightParams:
     """Parameters in SI (defaults: seed 002 Table 1, HXD1 + 108 loaded C80; see module doc)."""
 
     n_wagons: int = 108
-    loco_mass: float = 200e3  # kg
-    loco_length: float = 35.2  # m
-    wagon_mass: float = 97e3  # kg, 20 t tare + 77 t load
-    wagon_length: float = 12.0  # m
-    loco_rotating_mass_factor: float = 0.06  # gamma (traction-rules train value)
-    wagon_rotating_mass_factor: float = 0.06  # gamma
+    loco_mass: float = param(200e3, "kg", "locomotive mass (HXD1: 200 t)", min=1.0)
+    loco_length: float = param(35.2, "m", "locomotive length (35.2 m)", min=0.1)
+    wagon_mass: float = param(97e3, "kg", "loaded wagon mass (C80: 20 t + 77 t)", min=1.0)
+    wagon_length: float = param(12.0, "m", "wagon length (12 m)", min=0.1)
+    loco_rotating_mass_factor: float = param(0.06, "1", "gamma of the locomotive", min=0.0)
+    wagon_rotating_mass_factor: float = param(0.06, "1", "gamma of a wagon", min=0.0)
     loco_resistance: tuple[float, float, float] = LOCO_RESISTANCE  # N/kN, km/h
     wagon_resistance: tuple[float, float, float] = LOADED_WAGON_RESISTANCE  # N/kN, km/h
-    coupler_stiffness: float = 1.37e7  # N/m, two MT-2 draft gears in series
-    coupler_damping: float = 1.5e6  # N s/m, equivalent viscous damping of friction gears
-    coupler_slack: float = 0.0  # m, total free play per coupling (0: none, see module doc)
-    max_traction_force: float = 760e3  # N, HXD1 starting tractive effort
-    max_traction_power: float = 9.6e6  # W
-    max_ed_force: float = 461e3  # N, HXD1 electric (regenerative) brake
-    max_ed_power: float = 9.6e6  # W
-    ed_fade_speed: float = 5.0 * KMH  # m/s, electric brake fades linearly below this
-    traction_model: int = 0  # 0: first-order lag eq. (15); 1: ramp eq. (8)
-    traction_delay: float = 0.5  # s, tau (command transmission)
-    traction_time_constant: float = 1.5  # s, t_vb (10-90 % in 3.3 s)
-    traction_ramp_time: float = 3.0  # s, t3 - t2 of eq. (8)
-    brake_propagation_speed: float = 250.0  # m/s, service application wave
-    brake_release_propagation_speed: float = 200.0  # m/s, release wave
-    brake_apply_delay: float = 0.0  # s, valve delay added to the propagation delay
-    brake_release_delay: float = 0.0  # s
-    brake_fill_time: float = 20.0  # s, t_max of eq. (9), 0 -> p_max
-    brake_fill_exponent: float = 0.7  # lambda of eq. (9)
-    brake_release_time: float = 25.0  # s, p_max -> 0
-    brake_release_exponent: float = 1.0  # lambda_r
-    max_cylinder_pressure: float = 360e3  # Pa, p_max at a full service reduction
-    full_service_reduction: float = 140e3  # Pa, r_full
-    min_reduction: float = 50e3  # Pa, r_min
-    loco_braking_ratio: float = 0.20  # theta at p_max
-    wagon_braking_ratio: float = 0.20  # theta at p_max
-    stiction_speed: float = 0.01  # m/s, regularisation of friction forces at standstill
-    max_step: float = 0.01  # s
+    coupler_stiffness: float = param(1.37e7, "N/m", "draft-gear stiffness per coupling", min=1.0)
+    coupler_damping: float = param(1.5e6, "N.s/m", "draft-gear damping per coupling", min=0.0)
+    coupler_slack: float = param(0.0, "m", "total free play per coupling (0: none)", min=0.0)
+    max_traction_force: float = param(760e3, "N", "largest tractive effort (760 kN)", min=0.0)
+    max_traction_power: float = param(9.6e6, "W", "traction power at the wheel (9600 kW)", min=1.0)
+    max_ed_force: float = param(461e3, "N", "largest electric brake force (461 kN)", min=0.0)
+    max_ed_power: float = param(9.6e6, "W", "electric brake power (9600 kW)", min=1.0)
+    ed_fade_speed: float = param(
+        5.0 * KMH, "m/s", "electric brake fades linearly to 0 below this speed", min=0.0)
+    traction_model: int = param(
+        0, "1", "0: first-order lag with dead time (eq. 15); 1: ramp (eq. 8)",
+                                min=0, max=1)
+    traction_delay: float = param(
+        0.5, "s", "tau of eq. (15): dead time of traction/electric brake", min=0.0)
+    traction_time_constant: float = param(
+        1.5, "s", "t_vb of eq. (15): traction/electric brake lag", min=1e-6)
+    traction_ramp_time: float = param(3.0, "s", "t3 - t2 of eq. (8) (traction_model = 1)", min=1e-6)
+    brake_propagation_speed: float = param(
+        250.0, "m/s", "brake-pipe application wave speed (~250 m/s)", min=1e-3)
+    brake_release_propagation_speed: float = param(
+        200.0, "m/s", "brake-pipe release wave speed", min=1e-3)  # m/s, release wave
+    brake_apply_delay: float = param(
+        0.0, "s", "valve delay added to the application propagation delay", min=0.0)
+    brake_release_delay: float = param(
+        0.0, "s", "valve delay added to the release propagation delay", min=0.0)  # s
+    brake_fill_time: float = param(20.0, "s", "t_max of eq. (9): cylinder 0 -> p_max", min=1e-6)
+    brake_fill_exponent: float = param(0.7, "1", "lambda of eq. (9)", min=1e-6)
+    brake_release_time: float = param(25.0, "s", "cylinder p_max -> 0", min=1e-6)
+    brake_release_exponent: float = param(1.0, "1", "exponent of the release curve", min=1e-6)
+    max_cylinder_pressure: float = param(
+        360e3, "Pa", "p_max: cylinder pressure at a full service reduction", min=1.0)
+    full_service_reduction: float = param(
+        140e3, "Pa", "brake-pipe reduction of a full service application", min=1.0)  # Pa, r_full
+    min_reduction: float = param(50e3, "Pa", "smallest reduction that applies the brakes", min=0.0)
+    loco_braking_ratio: float = param(
+        0.20, "1", "converted braking ratio of the locomotive at p_max", min=0.0)  # theta at p_max
+    wagon_braking_ratio: float = param(
+        0.20, "1", "converted braking ratio of a wagon at p_max", min=0.0)  # theta at p_max
+    stiction_speed: float = param(
+        0.01, "m/s", "regularisation of friction forces at standstill", min=1e-6)
+    max_step: float = param(0.01, "s", "longest internal integration sub-step", min=1e-6)
 
     def check(self) -> None:
         positive = ("loco_mass", "loco_length", "wagon_mass", "wagon_length", "coupler_stiffness",
@@ -169,11 +193,74 @@ def friction_coefficient(v: np.ndarray) -> np.ndarray:
     return 0.322 * (kmh + 150.0) / (2.0 * kmh + 150.0)
 
 
-class FreightTrain(StatefulCore):
+PRESSURE_VEHICLES = (1, 28, 55, 82, 109)  # vehicles whose cylinder pressure is an output
+_RESISTANCE = (("loco_resistance", "locomotive"), ("wagon_resistance", "loaded wagon"))
+_RESISTANCE_TERMS = (("a", "N/kN"), ("b", "N/kN per km/h"), ("c", "N/kN per (km/h)^2"))
+
+
+def _resistance_parameters(p: FreightParams) -> tuple[Var, ...]:
+    """The (a, b, c) tuples of eq. (3)-(4) as scalars ``loco_resistance_a``..."""
+    return tuple(Var(f"{name}_{term}", "parameter", float(value), "1",
+                     f"basic resistance of a {who}: {what} (v in km/h)", min=0.0)
+                 for name, who in _RESISTANCE
+                 for (term, what), value in zip(_RESISTANCE_TERMS, getattr(p, name)))
+
+
+class FreightTrain(StatefulCore, Declared):
     """Multi-mass freight train core (see module docstring)."""
 
     state_fields = ("t_ticks", "x", "v", "traction_force", "pressure", "traction_history",
                     "brake_history", "energy", "peak_draft", "peak_buff", "accel")
+    setup_vars = (*initial_state_parameters(0.0, " of every vehicle"),
+                  route_parameter("freight_20km"))
+    input_vars = (
+        Var.input("force_demand", "N",
+                  "locomotive force demand: > 0 traction, < 0 electric brake"),
+        Var.input("pipe_reduction", "Pa",
+                  "brake-pipe pressure reduction at the driver's brake valve (0 = released)",
+                  min=0.0),
+    )
+    output_vars = (
+        Var.output("v", "m/s", "head (locomotive) speed"),
+        Var.output("s", "m", "head position (train front)"),
+        Var.output("v_tail", "m/s", "tail (last wagon) speed"),
+        Var.output("s_tail", "m", "tail position (rear of the last wagon)"),
+        Var.output("a", "m/s2", "train acceleration (mass-weighted, last sub-step)"),
+        Var.output("traction_force", "N",
+                   "achieved locomotive force (> 0 traction, < 0 electric brake)"),
+        Var.output("traction_power", "W", "traction power at the wheel (< 0 regen)"),
+        Var.output("traction_energy", "J", "traction minus regenerated energy"),
+        Var.output("applied_demand", "N", "force demand acting now: F_dem(t - tau)"),
+        Var.output("draft_force_max", "N", "largest coupler draft force now"),
+        Var.output("buff_force_max", "N", "largest coupler buff force now (> 0)"),
+        Var.output("draft_force_peak", "N",
+                   "largest draft force over the last communication step"),
+        Var.output("buff_force_peak", "N",
+                   "largest buff force (> 0) over the last communication step"),
+        Var.output("air_brake_force", "N", "total air-brake force"),
+        Var.output("grade", "1", "grade at the head (permille, uphill > 0)"),
+        Var.output("speed_limit", "m/s", "line speed limit at the head"),
+        Var.output("brake_pipe_reduction", "Pa", "brake-pipe reduction commanded"),
+    )
+
+    @classmethod
+    def declarations(cls) -> tuple[Var, ...]:
+        """The FMU interface is fixed: 1 locomotive + 108 wagons (the default train)."""
+        p = FreightParams()
+        return (*parameters(p), *_resistance_parameters(p), *cls.setup_vars, *cls.input_vars,
+                *cls.output_vars,
+                *(Var.output(f"p_cyl[{i}]", "Pa", f"brake-cylinder pressure of vehicle {i}")
+                  for i in PRESSURE_VEHICLES),
+                *(Var.output(f"v[{i}]", "m/s", f"speed of vehicle {i} (1 = locomotive)")
+                  for i in range(1, p.n_vehicles + 1)))
+
+    @classmethod
+    def from_parameters(cls, values: dict, data_dir, t0: float = 0.0) -> FreightTrain:
+        tuples = {name: tuple(values[f"{name}_{term}"] for term, _ in _RESISTANCE_TERMS)
+                  for name, _ in _RESISTANCE}
+        params = dataclasses.replace(build(FreightParams, values), **tuples)
+        route = load_route(values["route"], routes_dir_in(data_dir))
+        return cls(params, route, v0=values["v0"], s0=values["s0"], t0=t0)
 
     def __init__(self, params: FreightParams, route: Route, v0: float = 0.0, s0: float = 0.0,
                  t0: float = 0.0) -> None:

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from cosim.fmu.declare import param
+
 KMH = 1.0 / 3.6  # m/s per km/h
 
 
@@ -11,9 +13,9 @@ KMH = 1.0 / 3.6  # m/s per km/h
 class Davis:
     """Basic running resistance ``F = a + b v + c v^2`` in N with v in m/s."""
 
-    a: float  # N
-    b: float  # N s/m
-    c: float  # N s^2/m^2
+    a: float = param(unit="N", description="Davis constant term a", min=0.0)
+    b: float = param(unit="N.s/m", description="Davis linear term b", min=0.0)
+    c: float = param(unit="N.s2/m2", description="Davis quadratic term c", min=0.0)
 
     @classmethod
     def from_kn_kmh(cls, a_kn: float, b_kn_per_kmh: float, c_kn_per_kmh2: float) -> Davis:

@@ -52,6 +52,8 @@ from pathlib import Path
 
 import numpy as np
 
+from cosim.fmu.declare import Var
+
 try:
     import tomllib
 except ModuleNotFoundError:  # Python 3.10
@@ -375,3 +377,21 @@ def load_route(name_or_path: str | Path, routes_dir: Path | None = None) -> Rout
         )
     except (KeyError, ValueError, TypeError, IndexError) as err:
         raise ValueError(f"{path}: bad route data: {err}") from err
+
+
+def routes_dir_in(data_dir: Path) -> Path:
+    """The bundled routes folder under an FMU's data folder (or the project tree)."""
+    return Path(data_dir) / "plants" / "routes"
+
+
+def route_parameter(default: str, what: str = "") -> Var:
+    """The ``route`` parameter shared by plants and route-reading controllers."""
+    return Var("route", "parameter", default,
+               description="bundled route name or path of a route TOML file"
+               + (f" ({what})" if what else ""))
+
+
+def initial_state_parameters(v0: float = 0.0, what: str = "") -> tuple[Var, ...]:
+    """``v0`` and ``s0`` of a plant (``what``: whose speed, e.g. "of every unit")."""
+    return (Var("v0", "parameter", v0, "m/s", f"initial speed{what}", min=0.0),
+            Var("s0", "parameter", 0.0, "m", "initial position of the train front"))

@@ -47,7 +47,7 @@ from __future__ import annotations
 
 import math
 import statistics
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, ClassVar
 
@@ -56,42 +56,56 @@ from scipy.linalg import solve_discrete_are
 
 from controllers.common.design_model import A_C, U_PREV, DesignModel, S, V, brake_delay_model
 from controllers.common.qp import HorizonQP, QPResult, support_of_sum
-from cosim.fmu.profiles import StoppingCurve
+from controllers.common.stopping import MEASURED_SPEED_POSITION, u_max_param, u_min_param
+from cosim.fmu.declare import Declared, Var, build, group, param, sample_time
+from cosim.fmu.profiles import StoppingCurve, ref_decel_param, stop_point_param
 from cosim.fmu.state import StatefulCore
 from plants.resistance import Davis
-from plants.route import GRAVITY, Route, load_route
+from plants.route import GRAVITY, Route, load_route, routes_dir_in
 
 
 @dataclass(frozen=True)
 class StopMpcParams:
     """Parameters, SI units (defaults: seed 000 Table 1 plant, tuned weights)."""
 
-    horizon: int = 10  # N
-    q_speed: float = 10.0  # q1, weight on (v - v_s)^2, 1/(m/s)^2
-    q_position: float = 10.0  # q2, weight on (s - s_s)^2, 1/m^2
-    r_du: float = 0.01  # R, weight on du^2, 1/%^2
-    beta: float = 2.0  # RSMPC trade-off (>= 1); ignored by ideal MPC and RMPC
-    sample_time: float = 0.2  # s
-    brake_gain: float = 1.07 / 100.0  # c, m/s^2 per %
-    brake_time_constant: float = 0.4  # tau, s
-    brake_delay: float = 1.0  # Td, s
-    ref_decel: float = 0.5  # a0, m/s^2
-    stop_point: float = 400.0  # m
-    u_min: float = 0.0  # %
-    u_max: float = 100.0  # %
-    du_max: float = 100.0  # %, per sample
-    v_max: float = 20.0  # m/s, speed limit
-    speed_error_max: float = 2.0  # m/s
-    position_error_max: float = 20.0  # m
-    terminal_set_scale: float = 3.0
-    mass: float = 490e3  # kg (for the resistance model)
-    davis: Davis = field(default_factory=lambda: Davis.from_kn_kmh(5.4, 0.0098, 0.00163))
-    route: str = "seed000_stop"
-    davis_uncertainty: float = 0.2  # relative, for the bound W
-    initial_command: float = 0.0  # %, command held before the first event
-    standstill_speed: float = 0.02  # m/s
-    standstill_window: float = 2.0  # m
-    standstill_command: float = 30.0  # %
+    horizon: int = param(10, description="prediction (and control) horizon N", min=2, max=60,
+                         name="N")
+    q_speed: float = param(10.0, "s2/m2", "q1: weight on the speed error", min=0.0)
+    q_position: float = param(10.0, "1/m2", "q2: weight on the position error", min=1e-9)
+    r_du: float = param(0.01, "1", "R: weight on the command increment (per %^2)", min=1e-12)
+    beta: float = param(2.0, "1", "beta >= 1: suboptimality traded for fewer executions "
+                        "(eq. 22, 25)", min=1.0)  # RSMPC only
+    sample_time: float = sample_time(0.2)
+    brake_gain: float = param(1.07 / 100.0, "m/s2/%", "c: deceleration per % of command",
+                              min=1e-9)
+    brake_time_constant: float = param(0.4, "s", "tau: brake lag of the design model", min=1e-6)
+    brake_delay: float = param(1.0, "s", "Td: brake dead time of the design model (whole "
+                               "samples)", min=0.0)
+    ref_decel: float = ref_decel_param()
+    stop_point: float = stop_point_param()
+    u_min: float = u_min_param()
+    u_max: float = u_max_param()
+    du_max: float = param(100.0, "%", "largest command change per sample", min=1e-9)
+    v_max: float = param(20.0, "m/s", "speed limit", min=0.0)
+    speed_error_max: float = param(2.0, "m/s", "bound of |v - v_s| in the constraint set X",
+                                   min=1e-9)
+    position_error_max: float = param(20.0, "m", "bound of |s - s_s| in the constraint set X",
+                                      min=1e-9)
+    terminal_set_scale: float = param(3.0, "1", "terminal box = scale x box hull of the mRPI "
+                                      "set Z", min=1.0)
+    mass: float = param(490e3, "kg", "train mass (resistance model)", min=1.0)
+    davis: Davis = group(Davis.from_kn_kmh(5.4, 0.0098, 0.00163), "davis_")
+    route: str = param("seed000_stop", description="route (grade profile): bundled name or path")
+    davis_uncertainty: float = param(0.2, "1", "relative Davis uncertainty in the disturbance "
+                                     "bound W", min=0.0)
+    initial_command: float = param(0.0, "%", "command held before the first event", min=0.0,
+                                   max=100.0)
+    standstill_speed: float = param(0.02, "m/s", "speed below which a train near the stop "
+                                    "point is held", min=0.0)
+    standstill_window: float = param(2.0, "m", "distance before the stop point where "
+                                     "standstill holding may start", min=0.0)
+    standstill_command: float = param(30.0, "%", "least brake command while held at "
+                                      "standstill", min=0.0, max=100.0)
     eps: float = 1e-7  # OSQP tolerance
 
     def check(self) -> None:
@@ -124,8 +138,30 @@ def disturbance_bounds(p: StopMpcParams, route: Route) -> tuple[float, float]:
     return float(a_g.min() + a_w_lo), float(a_g.max() + a_w_hi)
 
 
-class _StopMpcBase(StatefulCore):
+class _StopMpcBase(StatefulCore, Declared):
     """Shared event logic; subclasses choose the QP(s)."""
+
+    params_class = StopMpcParams
+    params_exclude: ClassVar[tuple[str, ...]] = ("beta",)  # only the self-triggered one has it
+    input_vars = (
+        *MEASURED_SPEED_POSITION,
+        Var.input("a_c", "m/s2", "measured brake acceleration a_c (<= 0 when braking)"),
+    )
+    output_vars = (
+        Var.output("brake_command", "%", "brake command u"),
+        Var.output("v_ref", "m/s", "stopping-curve speed at the measured position"),
+        Var.output("qp_solves", "1", "QPs solved so far", start=0),
+        Var.output("qp_infeasible", "1", "events whose QP was infeasible (fallback law used)",
+                   start=0),
+        Var.output("qp_solve_time_median", "s", "median QP time per event so far"),
+        Var.output("hold_steps", "1", "samples the current command is held (RSMPC: M)",
+                   start=1),
+    )
+
+    @classmethod
+    def from_parameters(cls, values: dict[str, Any], data_dir: Path,
+                        t0: float = 0.0) -> _StopMpcBase:
+        return cls(build(StopMpcParams, values), routes_dir_in(data_dir))
 
     state_fields: ClassVar[tuple[str, ...]] = (
         "history", "command", "last_t", "anchor", "warm", "plan", "hold", "qp_solves",
@@ -370,6 +406,7 @@ class SelfTriggeredStopMpc(_StopMpcBase):
     """Robust self-triggered MPC (RSMPC, eq. 25-29): largest hold M with J^M <= J^1."""
 
     self_triggered = True
+    params_exclude = ()
 
     def __init__(self, params: StopMpcParams, routes_dir: Path | None = None,
                  max_hold: int | None = None) -> None:

@@ -32,13 +32,23 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from controllers.pid.speed_pid import SpeedPid, SpeedPidParams
+from cosim.fmu.declare import Declared, Var, build, group, param
 from cosim.fmu.state import StatefulCore
 from plants.freight import FreightParams, FreightTrain, friction_coefficient
-from plants.route import GRAVITY, ReferenceProfile, Route
+from plants.route import (
+    GRAVITY,
+    ReferenceProfile,
+    Route,
+    load_route,
+    route_parameter,
+    routes_dir_in,
+)
 
 
 def default_pid() -> SpeedPidParams:
@@ -49,19 +59,28 @@ def default_pid() -> SpeedPidParams:
 
 @dataclass(frozen=True)
 class FreightPidParams:
-    pid: SpeedPidParams = field(default_factory=default_pid)
+    pid: SpeedPidParams = group(default_pid(), "")
     train: FreightParams = field(default_factory=FreightParams)  # nominal model
-    preview_time: float = 2.0  # s, look-ahead of the reference acceleration
-    air_preview_time: float = 6.0  # s, look-ahead for the air-brake decision
-    resistance_feedforward: bool = True
-    ed_share: float = 0.8  # share of the electric brake used before the air brake
-    release_share: float = 0.4  # release when the ED brake alone needs less than this share
-    min_apply_time: float = 30.0  # s
-    min_release_time: float = 60.0  # s
-    reduction_step: float = 10e3  # Pa
-    overspeed: float = 2.0 / 3.6  # m/s, overspeed above which feedback may call the air brake
-    stop_speed: float = 0.3  # m/s
-    hold_reduction: float = 100e3  # Pa, holds the train at the final stop
+    preview_time: float = param(2.0, "s", "look-ahead of the reference acceleration "
+                                "feedforward", min=0.0)
+    air_preview_time: float = param(6.0, "s", "look-ahead of the planned braking for the "
+                                    "air-brake decision", min=0.0)
+    resistance_feedforward: bool = param(True, description="add the modelled running "
+                                         "resistance to the demand")
+    ed_share: float = param(0.8, "1", "share of the electric brake used before the air brake "
+                            "is applied", min=0.0, max=1.0)
+    release_share: float = param(0.4, "1", "air brake released when the electric brake alone "
+                                 "needs less than this share", min=0.0, max=1.0)
+    min_apply_time: float = param(30.0, "s", "shortest air-brake application", min=0.0)
+    min_release_time: float = param(60.0, "s", "shortest time released before a new "
+                                    "application", min=0.0)
+    reduction_step: float = param(10e3, "Pa", "pipe-reduction stage", min=1.0)
+    overspeed: float = param(2.0 / 3.6, "m/s", "overspeed above which feedback may call the "
+                             "air brake", min=0.0)
+    stop_speed: float = param(0.3, "m/s", "below this speed at the end of the profile the "
+                              "train is held", min=0.0)
+    hold_reduction: float = param(100e3, "Pa", "pipe reduction holding the train at the final "
+                                  "stop", min=0.0)
 
     def check(self) -> None:
         self.pid.check()
@@ -77,11 +96,35 @@ class FreightPidParams:
             raise ValueError(f"reduction_step = {self.reduction_step} must be > 0")
 
 
-class FreightPid(StatefulCore):
+class FreightPid(StatefulCore, Declared):
     """Sampled controller: ``compute(t, {"v", "s"})`` -> force demand and pipe reduction."""
 
     state_fields = ("pid", "reduction", "pressure_estimate", "changed_at", "force",
                     "v_ref", "a_ref", "brake_model_state")
+    params_class = FreightPidParams
+    setup_vars = (route_parameter("freight_20km", "its reference profile is tracked"),)
+    input_vars = (
+        Var.input("v", "m/s", "measured head speed"),
+        Var.input("s", "m", "measured head position"),
+    )
+    output_vars = (
+        Var.output("force_demand", "N", "locomotive force demand (> 0 traction, < 0 electric "
+                   "brake)"),
+        Var.output("pipe_reduction", "Pa", "brake-pipe reduction (0 = released)"),
+        Var.output("accel_demand", "m/s2", "PID acceleration demand a_dem"),
+        Var.output("v_ref", "m/s", "reference speed at the measured position"),
+        Var.output("a_ref", "m/s2", "reference acceleration (with preview)"),
+        Var.output("speed_error", "m/s", "v - v_ref"),
+        Var.output("air_brake_estimate", "Pa", "modelled mean cylinder pressure"),
+    )
+
+    @classmethod
+    def from_parameters(cls, values: dict[str, Any], data_dir: Path,
+                        t0: float = 0.0) -> FreightPid:
+        route = load_route(values["route"], routes_dir_in(data_dir))
+        if route.reference is None:
+            raise ValueError(f"route {values['route']!r} has no reference profile")
+        return cls(build(FreightPidParams, values), route.reference, route)
 
     def __init__(self, params: FreightPidParams, profile: ReferenceProfile, route: Route) -> None:
         params.check()

@@ -28,23 +28,29 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
 
+from cosim.fmu.declare import Declared, Var, build, group, param, parameters, sample_time
 from cosim.fmu.state import StatefulCore
+from plants.route import load_reference, routes_dir_in
 
 
 @dataclass(frozen=True)
 class SpeedPidParams:
     """Gains in acceleration units; limits in m/s^2. Defaults suit a high-speed EMU at T = 0.2 s."""
 
-    kp: float = 0.6  # 1/s: m/s^2 per m/s of speed error
-    ki: float = 0.05  # 1/s^2: m/s^2 per m of integrated speed error
-    kd: float = 0.0  # 1 (s * 1/s): m/s^2 per m/s^2 of measured acceleration
-    derivative_filter: float = 0.0  # s, time constant of the derivative low-pass (0 = none)
-    accel_min: float = -1.0  # m/s^2, most negative demand (full service brake)
-    accel_max: float = 1.0  # m/s^2, largest demand
-    rate_limit: float = 0.0  # m/s^3, largest change of demand per second (0 = unlimited)
-    feedforward: bool = True  # add the reference acceleration a_ref
-    sample_time: float = 0.2  # s
+    kp: float = param(0.6, "1/s", "m/s2 of demand per m/s of speed error", min=0.0)
+    ki: float = param(0.05, "1/s2", "m/s2 of demand per m of integrated error", min=0.0)
+    kd: float = param(0.0, "1", "m/s2 of demand per m/s2 of measured acceleration", min=0.0)
+    derivative_filter: float = param(0.0, "s", "time constant of the derivative low-pass "
+                                     "(0: none)", min=0.0)
+    accel_min: float = param(-1.0, "m/s2", "most negative demand")
+    accel_max: float = param(1.0, "m/s2", "largest demand")
+    rate_limit: float = param(0.0, "m/s3", "largest change of the demand per second "
+                              "(0: unlimited)", min=0.0)
+    feedforward: bool = param(True, description="add the reference acceleration to the demand")
+    sample_time: float = sample_time(0.2)
 
     def check(self) -> None:
         if not self.sample_time > 0:
@@ -120,11 +126,13 @@ class SpeedPid(StatefulCore):
 class DistributedSpeedPidParams:
     """Speed PID for a multi-unit EMU (seeds 001, 004): one PID, force shared by the units."""
 
-    pid: SpeedPidParams
-    units: int  # number of power units / cars that receive a force
-    mass: float  # kg, effective train mass M (1 + gamma) that turns m/s^2 into N
-    hold_accel: float = -0.5  # m/s^2, brake demand that holds the train at the final stop
-    stop_speed: float = 0.3  # m/s, below this with a zero reference the holding brake is used
+    pid: SpeedPidParams = group(SpeedPidParams(), "")
+    units: int = 1  # number of power units / cars that receive a force (the FMU's size)
+    mass: float = param(479.5e3, "kg", "effective train mass M (1 + gamma)", min=1.0)
+    hold_accel: float = param(-0.5, "m/s2", "brake demand holding the train at the final stop",
+                              max=0.0)
+    stop_speed: float = param(0.3, "m/s", "below this speed with a zero reference the holding "
+                              "brake is applied", min=0.0)
 
     def check(self) -> None:
         self.pid.check()
@@ -136,7 +144,7 @@ class DistributedSpeedPidParams:
             raise ValueError(f"hold_accel = {self.hold_accel} must be <= 0")
 
 
-class DistributedSpeedPid(StatefulCore):
+class DistributedSpeedPid(StatefulCore, Declared):
     """Tracks a reference profile and distributes the force demand over the units.
 
     Inputs: ``v`` (m/s) and ``s`` (m, head position) of the train, and per unit the force the
@@ -150,6 +158,39 @@ class DistributedSpeedPid(StatefulCore):
     """
 
     state_fields = ("forces", "v_ref", "a_ref", "pid")
+    setup_vars = (Var("reference", "parameter", "jinan_xuzhou_east_reference", description=
+                      "bundled reference profile name or path of a CSV/TOML profile"),)
+    output_vars = (
+        Var.output("force_demand", "N", "total force demand M a_dem"),
+        Var.output("accel_demand", "m/s2", "acceleration demand a_dem"),
+        Var.output("v_ref", "m/s", "reference speed"),
+        Var.output("a_ref", "m/s2", "reference acceleration"),
+        Var.output("speed_error", "m/s", "v - v_ref"),
+    )
+
+    @classmethod
+    def declarations(cls, units: int = 1) -> tuple[Var, ...]:
+        """Parameters, inputs and outputs for ``units`` units (indexed ``force[i]``...)."""
+        indices = range(1, units + 1)
+        return (
+            *parameters(DistributedSpeedPidParams()),
+            *cls.setup_vars,
+            Var.input("v", "m/s", "measured train speed"),
+            Var.input("s", "m", "measured head position"),
+            *[Var.input(f"traction_limit[{i}]", "N", f"traction force unit {i} can give now")
+              for i in indices],
+            *[Var.input(f"brake_limit[{i}]", "N", f"brake force unit {i} can give now")
+              for i in indices],
+            *[Var.output(f"force[{i}]", "N", f"force command of unit {i}") for i in indices],
+            *cls.output_vars,
+        )
+
+    @classmethod
+    def from_parameters(cls, values: dict[str, Any], data_dir: Path, t0: float = 0.0,
+                        units: int = 1) -> DistributedSpeedPid:
+        params = build(DistributedSpeedPidParams(units=units), values)
+        profile = load_reference(values["reference"], routes_dir=routes_dir_in(data_dir))
+        return cls(params, profile)
 
     def __init__(self, params: DistributedSpeedPidParams, profile) -> None:
         params.check()

@@ -12,23 +12,30 @@ the error, by backward difference over the sample time.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
 
-from cosim.fmu.profiles import StoppingCurve
+from controllers.common.stopping import MEASURED_SPEED_POSITION, u_max_param, u_min_param
+from cosim.fmu.declare import Declared, Var, build, param, sample_time
+from cosim.fmu.profiles import StoppingCurve, ref_decel_param, stop_point_param
 from cosim.fmu.state import StatefulCore
 
 
 @dataclass(frozen=True)
 class StopPidParams:
-    kp: float = 60.0  # % per m/s
-    ki: float = 10.0  # % per m
-    kd: float = 0.0  # % per m/s^2
-    ref_decel: float = 0.5  # m/s^2 (a0)
-    stop_point: float = 400.0  # m
-    brake_gain: float = 1.07 / 100.0  # m/s^2 per %, for the feedforward
-    feedforward: bool = True
-    u_min: float = 0.0  # %
-    u_max: float = 100.0  # %
-    sample_time: float = 0.2  # s
+    kp: float = param(60.0, "%.s/m", "proportional gain on v - v_ref")
+    ki: float = param(10.0, "%/m", "integral gain")
+    kd: float = param(0.0, "%/(m/s2)", "derivative gain")
+    ref_decel: float = ref_decel_param()
+    stop_point: float = stop_point_param()
+    brake_gain: float = param(1.07 / 100.0, "m/s2/%",
+                              "c: deceleration per % of command, for the feedforward a0 / c",
+                              min=1e-9)
+    feedforward: bool = param(True, description="add the reference-deceleration feedforward "
+                              "a0 / c")
+    u_min: float = u_min_param()
+    u_max: float = u_max_param()
+    sample_time: float = sample_time(0.2)
 
     def check(self) -> None:
         if not self.sample_time > 0:
@@ -41,10 +48,21 @@ class StopPidParams:
             raise ValueError(f"brake_gain = {self.brake_gain} must be > 0")
 
 
-class StopPid(StatefulCore):
+class StopPid(StatefulCore, Declared):
     """Sampled PID with feedforward and anti-windup; one call of :meth:`compute` per sample."""
 
     state_fields = ("integral", "prev_error", "command")
+    params_class = StopPidParams
+    input_vars = MEASURED_SPEED_POSITION
+    output_vars = (
+        Var.output("brake_command", "%", "brake command u"),
+        Var.output("v_ref", "m/s", "reference speed at the measured position"),
+        Var.output("speed_error", "m/s", "v - v_ref"),
+    )
+
+    @classmethod
+    def from_parameters(cls, values: dict[str, Any], data_dir: Path, t0: float = 0.0) -> StopPid:
+        return cls(build(StopPidParams, values))
 
     def __init__(self, params: StopPidParams) -> None:
         params.check()

@@ -89,6 +89,10 @@ class FmuSpec:
     def path(self) -> Path:
         return FMU_DIR / f"{self.identifier}.fmu"
 
+    def load(self) -> type:
+        """The wrapper class (imports its module)."""
+        return getattr(importlib.import_module(self.module), self.cls)
+
     @property
     def entry_module(self) -> str:
         return f"atocosim_{self.identifier.lower()}"

@@ -11,6 +11,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from cosim.fmu.declare import param
+
 
 @dataclass(frozen=True)
 class StoppingCurve:
@@ -43,3 +45,13 @@ class StoppingCurve:
         if rest:
             v = np.maximum(v, 0.0)
         return v, self.stop_point - v * v / (2.0 * self.decel)
+
+
+def ref_decel_param(default: float = 0.5) -> float:
+    """Declared field: a0 of the stopping curve (shared by the stopping controllers)."""
+    return param(default, "m/s2", "a0: reference deceleration", min=1e-6)
+
+
+def stop_point_param(default: float = 400.0) -> float:
+    """Declared field: the stop position of the stopping curve."""
+    return param(default, "m", "stop position s_stop")

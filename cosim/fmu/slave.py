@@ -25,7 +25,6 @@ import functools
 import json
 import math
 import sys
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, ClassVar
 from xml.etree.ElementTree import Element, SubElement
@@ -34,72 +33,19 @@ import numpy as np
 from pythonfmu import Boolean, Fmi2Causality, Fmi2Slave, Fmi2Variability, Integer, Real, String
 from pythonfmu.enums import Fmi2Status
 
+from cosim.fmu.declare import UNITS, Var
 from cosim.fmu.state import to_seconds, to_ticks
-
-# FMI unit name -> (SI base-unit exponents, factor). Every unit a Var may use is declared here.
-UNITS: dict[str, tuple[dict[str, int], float]] = {
-    "1": ({}, 1.0),
-    "%": ({}, 0.01),
-    "s": ({"s": 1}, 1.0),
-    "m": ({"m": 1}, 1.0),
-    "kg": ({"kg": 1}, 1.0),
-    "m/s": ({"m": 1, "s": -1}, 1.0),
-    "m/s2": ({"m": 1, "s": -2}, 1.0),
-    "m/s3": ({"m": 1, "s": -3}, 1.0),
-    "1/s": ({"s": -1}, 1.0),
-    "1/s2": ({"s": -2}, 1.0),
-    "s/m": ({"m": -1, "s": 1}, 1.0),
-    "s2/m": ({"m": -1, "s": 2}, 1.0),
-    "s3/m": ({"m": -1, "s": 3}, 1.0),
-    "N": ({"kg": 1, "m": 1, "s": -2}, 1.0),
-    "N.s/m": ({"kg": 1, "s": -1}, 1.0),
-    "N.s2/m2": ({"kg": 1, "m": -1}, 1.0),
-    "N/m": ({"kg": 1, "s": -2}, 1.0),
-    "Pa": ({"kg": 1, "m": -1, "s": -2}, 1.0),
-    "W": ({"kg": 1, "m": 2, "s": -3}, 1.0),
-    "J": ({"kg": 1, "m": 2, "s": -2}, 1.0),
-    "m/s2/%": ({"m": 1, "s": -2}, 100.0),
-    "%.s/m": ({"m": -1, "s": 1}, 0.01),
-    "%/m": ({"m": -1}, 0.01),
-    "%/(m/s2)": ({"m": -1, "s": 2}, 0.01),
-    "1/m2": ({"m": -2}, 1.0),
-    "s2/m2": ({"m": -2, "s": 2}, 1.0),
-}
 
 BUNDLE_DIR = "atocosim_bundle"  # project code and data inside an FMU's resources folder
 
 _TYPES = {float: Real, int: Integer, bool: Boolean, str: String}
 
 
-@dataclass(frozen=True)
-class Var:
-    """One FMI scalar variable.
-
-    ``causality`` is ``parameter``, ``input`` or ``output``. Parameters are fixed after
-    initialisation. Outputs are continuous for plants, discrete for sampled controllers.
-    """
-
-    name: str
-    causality: str
-    start: float | int | bool | str = 0.0
-    unit: str = "1"
-    description: str = ""
-    min: float | None = None
-    max: float | None = None
-    variability: str | None = None
-
-    @property
-    def type(self) -> type:
-        return type(self.start)
-
-    def resolved_variability(self, default_output: str) -> str:
-        if self.variability:
-            return self.variability
-        if self.causality == "parameter":
-            return "fixed"
-        if self.causality == "output":
-            return default_output
-        return "continuous" if self.type is float else "discrete"
+CONTROLLER_TIMING_VARS: tuple[Var, ...] = (
+    Var("next_event_time", "output", 0.0, "s",
+        "time of this controller's next event (sample or self-triggered)"),
+    Var("executions", "output", 0, "1", "number of events computed so far"),
+)
 
 
 class FmuStateError(ValueError):
@@ -206,11 +152,16 @@ def _guarded(name: str, method):
 class CoreSlave(Fmi2Slave):
     """Base of every FMU in this project: variables, modelDescription, state handling.
 
-    Subclasses set ``variables`` and implement :meth:`make_core` (build the core from
-    ``self.values``, raising ``ValueError`` naming the parameter on a bad value).
+    A subclass names its ``core_class`` (and ``core_options``, e.g. ``{"units": 3}``); its
+    ``variables`` are the core's declarations (``core_class.declarations(**core_options)``, see
+    :mod:`cosim.fmu.declare`) and the core is built by
+    ``core_class.from_parameters(values, data_dir, t0, **core_options)``, which raises
+    ``ValueError`` naming the parameter on a bad value.
     """
 
     variables: ClassVar[tuple[Var, ...]] = ()
+    core_class: ClassVar[Any] = None
+    core_options: ClassVar[dict[str, Any]] = {}
     output_variability: ClassVar[str] = "continuous"
     default_experiment_stop_time: ClassVar[float] = 10.0
     default_experiment_step: ClassVar[float] = 0.1
@@ -299,8 +250,15 @@ class CoreSlave(Fmi2Slave):
         return getter
 
     # -- hooks for subclasses ------------------------------------------------------------------
+    @classmethod
+    def declared_variables(cls) -> tuple[Var, ...]:
+        """The FMU's variables: the core's declarations (controllers add their timing)."""
+        return tuple(cls.core_class.declarations(**cls.core_options))
+
     def make_core(self) -> Any:
-        raise NotImplementedError
+        return self.core_class.from_parameters(self.values, data_dir=self.resource_path(),
+                                               t0=to_seconds(self.start_ticks),
+                                               **self.core_options)
 
     def core_outputs(self) -> dict[str, Any]:
         """Current output values computed from the core's state."""
@@ -330,6 +288,8 @@ class CoreSlave(Fmi2Slave):
     # -- FMI calls -----------------------------------------------------------------------------
     def __init_subclass__(cls, **kwargs: Any) -> None:
         super().__init_subclass__(**kwargs)
+        if cls.core_class is not None and "variables" not in cls.__dict__:
+            cls.variables = cls.declared_variables()
         for name in _FMI_ENTRY_POINTS:
             method = cls.__dict__.get(name)
             if method is not None and not getattr(method, "_fmi_guarded", False):
@@ -537,6 +497,10 @@ class SampledControllerSlave(CoreSlave):
         self.next_event_ticks = 0
         self.event_done_ticks: int | None = None
 
+    @classmethod
+    def declared_variables(cls) -> tuple[Var, ...]:
+        return (*super().declared_variables(), *CONTROLLER_TIMING_VARS)
+
     def output_dependencies(self, output: Var) -> list[str]:
         return [v.name for v in self.variables if v.causality == "input"]
 
@@ -602,10 +566,3 @@ class SampledControllerSlave(CoreSlave):
 for _name in _FMI_ENTRY_POINTS:  # CoreSlave's own and those inherited from Fmi2Slave
     setattr(CoreSlave, _name, _guarded(_name, getattr(CoreSlave, _name)))
 del _name
-
-
-CONTROLLER_TIMING_VARS: tuple[Var, ...] = (
-    Var("next_event_time", "output", 0.0, "s",
-        "time of this controller's next event (sample or self-triggered)"),
-    Var("executions", "output", 0, "1", "number of events computed so far"),
-)
