@@ -233,6 +233,22 @@ def export(
     out.print(f"wrote {path}")
 
 
+@app.command()
+def docs(check: Annotated[bool, typer.Option(
+        "--check", help="exit 1 if docs/fmus.md is out of date instead of writing it")] = False,
+         ) -> None:
+    """Write docs/fmus.md, the FMU reference generated from the cores' declarations."""
+    from cosim.fmu.reference import REFERENCE_PATH, fmu_reference, write_reference
+
+    if check:
+        current = REFERENCE_PATH.read_text() if REFERENCE_PATH.is_file() else ""
+        if current != fmu_reference():
+            _fail(f"{REFERENCE_PATH} is out of date: run `cosim docs`", code=1)
+        out.print(f"{REFERENCE_PATH} is up to date")
+        return
+    out.print(f"wrote {write_reference()}")
+
+
 def main() -> None:  # pragma: no cover - console entry point
     app()
 

@@ -22,10 +22,18 @@ def third_party_imports(module: str) -> list[str]:
     """Top-level packages outside the standard library and this project that the modules
     bundled with ``module`` import (pythonfmu included)."""
     found: set[str] = set(_ALWAYS)
+    fallbacks: set[str] = set()  # imported only when another import failed (tomli < 3.11)
     for path in bundled_files(module):
         if path.suffix != ".py":
             continue
-        for node in ast.walk(ast.parse(path.read_text())):
+        tree = ast.parse(path.read_text())
+        for node in ast.walk(tree):
+            if isinstance(node, ast.Try):
+                for handler in node.handlers:
+                    for sub in ast.walk(handler):
+                        if isinstance(sub, ast.Import):
+                            fallbacks.update(a.name.split(".")[0] for a in sub.names)
+        for node in ast.walk(tree):
             if isinstance(node, ast.Import):
                 names = [a.name for a in node.names]
             elif isinstance(node, ast.ImportFrom) and not node.level and node.module:
@@ -36,7 +44,7 @@ def third_party_imports(module: str) -> list[str]:
                 top = name.split(".")[0]
                 if top not in sys.stdlib_module_names and top not in PROJECT_PACKAGES:
                     found.add(top)
-    return sorted(found)
+    return sorted(f"{name} (Python < 3.11)" if name in fallbacks else name for name in found)
 
 
 def _cell(value: object) -> str:
