@@ -234,6 +234,36 @@ def export(
 
 
 @app.command()
+def reproduce(
+    name: Annotated[str, typer.Argument(
+        help="entry in scenarios/reproduce/ (seed000, ...) or 'all'")],
+    out_dir: Annotated[Path | None, typer.Option("--out", help="output folder "
+                                                 "(default runs/reproduce/<name>)")] = None,
+    workers: Annotated[int | None, typer.Option(
+        help="parallel processes (default: CPUs)", min=1)] = None,
+) -> None:
+    """Reproduce a paper's results: run its scenarios, write the table (ours beside the
+    paper's), the sweeps and the figures; 'all' writes one REPRODUCTION.md."""
+    from cosim.run.master import SimulationError
+    from cosim.run.reproduce import ReproduceError, entry_names, reproduce_all
+    from cosim.run.reproduce import reproduce as reproduce_entry
+    from cosim.run.scenario import ScenarioError
+
+    try:
+        if name == "all":
+            path = reproduce_all(out_dir, workers)
+        else:
+            if name not in entry_names() and not Path(name).is_file():
+                raise ReproduceError(f"no reproduction entry {name!r} "
+                                     f"(known: {', '.join(entry_names())}, all)")
+            path = reproduce_entry(name, out_dir, workers)
+    except (ReproduceError, ScenarioError, SimulationError) as err:
+        _fail(str(err))
+    out.print(path.read_text(), markup=False, highlight=False)
+    out.print(f"wrote {path}")
+
+
+@app.command()
 def docs(check: Annotated[bool, typer.Option(
         "--check", help="exit 1 if docs/fmus.md is out of date instead of writing it")] = False,
          ) -> None:

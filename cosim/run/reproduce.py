@@ -1,0 +1,345 @@
+"""Paper reproductions as data plus one command: ``cosim reproduce SEED`` / ``cosim reproduce all``.
+
+Each paper has an entry ``scenarios/reproduce/<name>.toml`` (the paper's numbers and tolerances
+live there, not in code)::
+
+    title = "Seed 000: ..."
+    notes = "why our figures differ from the paper's"     # optional, markdown
+    [[runs]]                       # one table row per run
+    name = "RMPC N=5"
+    scenario = "seed000_stop_rmpc"
+    set = { "controller.N" = 5 }   # optional overrides (as --set)
+    [[metrics]]                    # table columns: summary.json keys ('.' for nested keys)
+    key = "stop_error_m"
+    label = "stop error (m)"
+    [[paper]]                      # the paper's figure for (run, metric)
+    run = "PID"
+    metric = "stop_error_m"
+    value = 0.2898                 # the paper's number (shown), and/or
+    range = [-0.5, 0.5]            # the band the paper requires (shown when there is no value)
+    tolerance = 0.5                # optional verdict: |ours - value| <= tolerance, or ours in range
+    source = "sec. 4.1"
+    [[sweeps]]                     # optional: a cosim sweep (sweep.csv, sweep.png)
+    name = "fig11"
+    scenarios = ["seed000_stop_rmpc", "seed000_stop_rsmpc"]
+    grid = { "controller.N" = "3..15" }
+    [[figures]]                    # drawn from the runs' results.csv
+    file = "fig_speed.png"
+    title = "Speed against position"
+    kind = "overlay"               # overlay (one line per run) | panels (one panel per run)
+    x = "plant.s"                  # a recorded column or "time"
+    y = ["plant.v"]
+    y_scale = 3.6                  # optional factor (m/s -> km/h)
+    ylabel = "speed (km/h)"
+    runs = ["PID", "MPC"]          # optional, default all
+
+The command runs every run (in parallel processes), writes each run's results under
+``runs/``, then ``table.md`` and ``table.csv`` (ours beside the paper's, with the verdict where
+a tolerance is given), the sweeps and the figures. ``all`` runs every entry and writes one
+``REPRODUCTION.md``.
+"""
+
+from __future__ import annotations
+
+import math
+import multiprocessing
+import os
+import re
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from cosim.run.scenario import SCENARIO_DIR
+
+try:
+    import tomllib
+except ModuleNotFoundError:  # Python < 3.11
+    import tomli as tomllib  # type: ignore[no-redef]
+
+REPRODUCE_DIR = SCENARIO_DIR / "reproduce"
+
+_ENTRY_KEYS = {"title", "notes", "runs", "metrics", "paper", "sweeps", "figures"}
+_RUN_KEYS = {"name", "scenario", "set"}
+_METRIC_KEYS = {"key", "label"}
+_PAPER_KEYS = {"run", "metric", "value", "range", "tolerance", "source"}
+_SWEEP_KEYS = {"name", "scenarios", "grid"}
+_FIGURE_KEYS = {"file", "title", "kind", "x", "y", "y_scale", "ylabel", "xlabel", "runs"}
+
+
+class ReproduceError(ValueError):
+    """A reproduction entry that cannot be used (the message names the file and key)."""
+
+
+@dataclass
+class Entry:
+    name: str
+    path: Path
+    title: str
+    runs: list[dict[str, Any]]
+    metrics: list[dict[str, Any]]
+    paper: list[dict[str, Any]] = field(default_factory=list)
+    sweeps: list[dict[str, Any]] = field(default_factory=list)
+    figures: list[dict[str, Any]] = field(default_factory=list)
+    notes: str = ""
+
+
+def entry_names() -> list[str]:
+    return sorted(p.stem for p in REPRODUCE_DIR.glob("*.toml"))
+
+
+def _check_keys(where: str, table: dict[str, Any], allowed: set[str],
+                required: tuple[str, ...]) -> None:
+    unknown = sorted(set(table) - allowed)
+    if unknown:
+        raise ReproduceError(f"{where}: unknown key(s) {unknown} (allowed: {sorted(allowed)})")
+    missing = [k for k in required if k not in table]
+    if missing:
+        raise ReproduceError(f"{where}: missing key(s) {missing}")
+
+
+def load_entry(name: str | Path) -> Entry:
+    """Read and check an entry by name (``seed000``) or path."""
+    path = Path(name)
+    if not path.suffix:
+        path = REPRODUCE_DIR / f"{name}.toml"
+    if not path.is_file():
+        raise ReproduceError(f"no reproduction entry {str(name)!r} (known: {entry_names()})")
+    try:
+        data = tomllib.loads(path.read_text())
+    except tomllib.TOMLDecodeError as err:
+        raise ReproduceError(f"{path}: not valid TOML: {err}") from err
+    _check_keys(str(path), data, _ENTRY_KEYS, ("title", "runs"))
+    runs = data["runs"]
+    for i, run in enumerate(runs):
+        _check_keys(f"{path}: [[runs]] #{i + 1}", run, _RUN_KEYS, ("name", "scenario"))
+    names = [r["name"] for r in runs]
+    if len(set(names)) != len(names):
+        raise ReproduceError(f"{path}: [[runs]] names repeat: {names}")
+    metrics = data.get("metrics", [])
+    for i, metric in enumerate(metrics):
+        _check_keys(f"{path}: [[metrics]] #{i + 1}", metric, _METRIC_KEYS, ("key",))
+    keys = {m["key"] for m in metrics}
+    for i, ref in enumerate(data.get("paper", [])):
+        where = f"{path}: [[paper]] #{i + 1}"
+        _check_keys(where, ref, _PAPER_KEYS, ("run", "metric"))
+        if "value" not in ref and "range" not in ref:
+            raise ReproduceError(f"{where}: needs a value or a range")
+        if "range" in ref and not (isinstance(ref["range"], list) and len(ref["range"]) == 2
+                                   and ref["range"][0] <= ref["range"][1]):
+            raise ReproduceError(f"{where}: range {ref.get('range')!r} must be [low, high]")
+        if "tolerance" in ref and "value" not in ref:
+            raise ReproduceError(f"{where}: a tolerance needs a value")
+        if ref["run"] not in names:
+            raise ReproduceError(f"{where}: run {ref['run']!r} is not one of {names}")
+        if ref["metric"] not in keys:
+            raise ReproduceError(f"{where}: metric {ref['metric']!r} is not in [[metrics]]")
+    for i, sweep in enumerate(data.get("sweeps", [])):
+        _check_keys(f"{path}: [[sweeps]] #{i + 1}", sweep, _SWEEP_KEYS,
+                    ("name", "scenarios", "grid"))
+    for i, fig in enumerate(data.get("figures", [])):
+        where = f"{path}: [[figures]] #{i + 1}"
+        _check_keys(where, fig, _FIGURE_KEYS, ("file", "x", "y"))
+        if fig.get("kind", "overlay") not in ("overlay", "panels"):
+            raise ReproduceError(f"{where}: kind {fig['kind']!r} (overlay or panels)")
+        unknown_runs = sorted(set(fig.get("runs", names)) - set(names))
+        if unknown_runs:
+            raise ReproduceError(f"{where}: runs {unknown_runs} are not in [[runs]]")
+    return Entry(path.stem, path, data["title"], runs, metrics, data.get("paper", []),
+                 data.get("sweeps", []), data.get("figures", []), data.get("notes", ""))
+
+
+def slug(name: str) -> str:
+    return re.sub(r"[^A-Za-z0-9]+", "_", name).strip("_").lower()
+
+
+def summary_value(summary: dict[str, Any], key: str) -> Any:
+    """``summary["a"]["b"]`` for ``key = "a.b"``; None where absent."""
+    value: Any = summary
+    for part in key.split("."):
+        if not isinstance(value, dict) or part not in value:
+            return None
+        value = value[part]
+    return value
+
+
+def _run_one(scenario: str, overrides: dict[str, Any], out_dir: str) -> dict[str, Any]:
+    from cosim.run.master import run_scenario
+
+    result = run_scenario(scenario, overrides=overrides, out_dir=out_dir, build=False)
+    return result.summary
+
+
+def run_entry(entry: Entry, out_dir: Path, workers: int | None = None
+              ) -> dict[str, dict[str, Any]]:
+    """Run every run of ``entry`` (``workers`` processes); returns run name -> summary."""
+    from cosim.run.master import ensure_built
+    from cosim.run.scenario import load_scenario
+
+    for run in entry.runs:  # bad overrides fail here, before anything runs; build once
+        ensure_built(load_scenario(run["scenario"], run.get("set", {})))
+    jobs = [(run["name"], run["scenario"], dict(run.get("set", {})),
+             str(out_dir / "runs" / slug(run["name"]))) for run in entry.runs]
+    workers = max(1, min(workers or os.cpu_count() or 1, len(jobs)))
+    if workers == 1:
+        return {name: _run_one(sc, ov, out) for name, sc, ov, out in jobs}
+    ctx = multiprocessing.get_context("spawn")
+    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
+        futures = {name: pool.submit(_run_one, sc, ov, out) for name, sc, ov, out in jobs}
+        return {name: f.result() for name, f in futures.items()}
+
+
+def _fmt(value: Any) -> str:
+    if value is None:
+        return "-"
+    if isinstance(value, bool):
+        return "yes" if value else "no"
+    if isinstance(value, float):
+        return "-" if math.isnan(value) else f"{value:.4g}"
+    return str(value)
+
+
+def table_rows(entry: Entry, summaries: dict[str, dict[str, Any]]) -> list[dict[str, Any]]:
+    """Long format: one row per (run, metric) with ours, the paper's and the verdict."""
+    refs = {(r["run"], r["metric"]): r for r in entry.paper}
+    rows = []
+    for run in entry.runs:
+        for metric in entry.metrics:
+            ours = summary_value(summaries[run["name"]], metric["key"])
+            ref = refs.get((run["name"], metric["key"]))
+            ref = ref or {}
+            band = ref.get("range")
+            row = {"run": run["name"], "metric": metric["key"], "ours": ours,
+                   "paper": ref.get("value"), "paper_range": band,
+                   "tolerance": ref.get("tolerance"), "source": ref.get("source", "")}
+            within = None
+            if ours is not None and band is not None:
+                within = band[0] <= float(ours) <= band[1]
+            if ours is not None and row["tolerance"] is not None:
+                close = abs(float(ours) - float(ref["value"])) <= row["tolerance"]
+                within = close if within is None else within and close
+            row["within"] = within
+            rows.append(row)
+    return rows
+
+
+def table_markdown(entry: Entry, rows: list[dict[str, Any]]) -> str:
+    """Wide table: a row per run, per metric "ours" and "paper" columns."""
+    header = ["run"]
+    for metric in entry.metrics:
+        label = metric.get("label", metric["key"])
+        header += [f"{label}", "paper"]
+    lines = ["| " + " | ".join(header) + " |", "|" + " --- |" * len(header)]
+    by = {(r["run"], r["metric"]): r for r in rows}
+    for run in entry.runs:
+        cells = [run["name"]]
+        for metric in entry.metrics:
+            r = by[run["name"], metric["key"]]
+            mark = "" if r["within"] is None else (" ✓" if r["within"] else " ✗")
+            paper = _fmt(r["paper"])
+            if r["paper_range"] is not None:
+                band = f"in [{_fmt(r['paper_range'][0])}, {_fmt(r['paper_range'][1])}]"
+                paper = band if r["paper"] is None else f"{paper} ({band})"
+            cells += [_fmt(r["ours"]) + mark, paper]
+        lines.append("| " + " | ".join(cells) + " |")
+    sources = sorted({f"{r['run']} / {r['metric']}: {r['source']}" for r in rows if r["source"]})
+    if sources:
+        lines += ["", "Paper figures: " + "; ".join(sources) + "."]
+    if any(r["within"] is not None for r in rows):
+        lines += ["", "✓ / ✗: inside / outside the paper's band or the tolerance stated in the "
+                  "entry."]
+    return "\n".join(lines)
+
+
+def draw_figure(spec: dict[str, Any], run_dirs: dict[str, Path], path: Path) -> None:
+    """One figure from the runs' results.csv (see the module docstring)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import pandas as pd
+
+    names = list(spec.get("runs", list(run_dirs)))
+    ys = spec["y"] if isinstance(spec["y"], list) else [spec["y"]]
+    scale = float(spec.get("y_scale", 1.0))
+    panels = spec.get("kind", "overlay") == "panels"
+    fig, axes = plt.subplots(len(names) if panels else 1, 1, squeeze=False, sharex=True,
+                             figsize=(8, 2.6 * len(names) if panels else 4.5))
+    for i, name in enumerate(names):
+        frame = pd.read_csv(run_dirs[name] / "results.csv")
+        ax = axes[i if panels else 0][0]
+        x = frame["time"] if spec["x"] == "time" else frame[spec["x"]]
+        for y in ys:
+            if y not in frame:
+                raise ReproduceError(f"figure {spec['file']}: run {name!r} recorded no {y!r}")
+            label = y if panels else (name if len(ys) == 1 else f"{name}: {y}")
+            ax.plot(x, frame[y] * scale, label=label, linewidth=1.0)
+        if panels:
+            ax.set_title(name, fontsize=9)
+        ax.set_ylabel(spec.get("ylabel", ys[0]))
+        ax.grid(True, alpha=0.3)
+        ax.legend(fontsize=7)
+    axes[-1][0].set_xlabel(spec.get("xlabel", "time (s)" if spec["x"] == "time" else spec["x"]))
+    fig.suptitle(spec.get("title", ""))
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def reproduce(name: str, out_dir: str | Path | None = None, workers: int | None = None
+              ) -> Path:
+    """Run one entry; write table.md/table.csv, sweeps and figures; return table.md."""
+    import pandas as pd
+
+    from cosim.run.sweep import parse_grid, run_sweep
+
+    entry = load_entry(name)
+    out = Path(out_dir) if out_dir is not None else Path("runs") / "reproduce" / entry.name
+    out.mkdir(parents=True, exist_ok=True)
+    summaries = run_entry(entry, out, workers)
+    rows = table_rows(entry, summaries)
+    pd.DataFrame(rows).to_csv(out / "table.csv", index=False)
+    parts = [f"## {entry.title}", "", f"`cosim reproduce {entry.name}` (entry "
+             f"`scenarios/reproduce/{entry.path.name}`)", "", table_markdown(entry, rows)]
+    for sweep in entry.sweeps:
+        grid = parse_grid(f"{k}={v}" for k, v in sweep["grid"].items())
+        target = out / slug(sweep["name"])
+        frame = run_sweep(sweep["scenarios"], grid, target, workers=workers)
+        keep = [c for c in ("scenario", *grid, "stop_error_m", "controller_executions",
+                            "command_switches", "qp_infeasible") if c in frame]
+        parts += ["", f"### Sweep {sweep['name']}", "", _frame_markdown(frame[keep]), "",
+                  f"![{sweep['name']}]({target.name}/sweep.png)"]
+    run_dirs = {r["name"]: out / "runs" / slug(r["name"]) for r in entry.runs}
+    for spec in entry.figures:
+        draw_figure(spec, run_dirs, out / spec["file"])
+        parts += ["", f"![{spec.get('title', spec['file'])}]({spec['file']})"]
+    if entry.notes:
+        parts += ["", "### Where we differ from the paper, and why", "", entry.notes.strip()]
+    table = out / "table.md"
+    table.write_text("\n".join(parts) + "\n")
+    return table
+
+
+def _frame_markdown(frame: Any) -> str:
+    cols = list(frame.columns)
+    lines = ["| " + " | ".join(cols) + " |", "|" + " --- |" * len(cols)]
+    for _, row in frame.iterrows():
+        lines.append("| " + " | ".join(_fmt(row[c]) for c in cols) + " |")
+    return "\n".join(lines)
+
+
+def reproduce_all(out_dir: str | Path | None = None, workers: int | None = None) -> Path:
+    """Every entry; one ``REPRODUCTION.md`` linking each entry's figures."""
+    out = Path(out_dir) if out_dir is not None else Path("runs") / "reproduce"
+    out.mkdir(parents=True, exist_ok=True)
+    parts = ["# Reproduced results", "", "Made by `cosim reproduce all`; each section by "
+             "`cosim reproduce NAME` from the entry in `scenarios/reproduce/`."]
+    for name in entry_names():
+        table = reproduce(name, out / name, workers)
+        text = table.read_text()
+        # relative links from out/: prefix the entry folder
+        text = re.sub(r"\]\((?!http)([^)]+)\)", rf"]({name}/\1)", text)
+        parts += ["", text]
+    path = out / "REPRODUCTION.md"
+    path.write_text("\n".join(parts) + "\n")
+    return path

@@ -1,0 +1,99 @@
+"""``cosim reproduce``: entries are data, tables put ours beside the paper's (issue 15 item 4)."""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+from cosim.run.master import run_scenario
+from cosim.run.reproduce import (
+    ReproduceError,
+    entry_names,
+    load_entry,
+    reproduce,
+    summary_value,
+)
+
+ENTRY = """
+title = "Test entry"
+notes = "why we differ"
+[[runs]]
+name = "PID"
+scenario = "seed000_stop_pid"
+[[runs]]
+name = "PID kp=30"
+scenario = "seed000_stop_pid"
+set = { "controller.kp" = 30.0 }
+[[metrics]]
+key = "stop_error_m"
+label = "stop error (m)"
+[[metrics]]
+key = "executions.controller"
+[[paper]]
+run = "PID"
+metric = "stop_error_m"
+value = 0.2898
+range = [-0.5, 0.5]
+source = "sec. 4"
+[[paper]]
+run = "PID kp=30"
+metric = "stop_error_m"
+value = 0.2898
+tolerance = 1e-6
+[[figures]]
+file = "speed.png"
+kind = "overlay"
+x = "plant.s"
+y = ["plant.v"]
+"""
+
+
+def test_shipped_entries_load() -> None:
+    assert "seed000" in entry_names()
+    for name in entry_names():
+        entry = load_entry(name)
+        assert entry.runs and entry.metrics
+
+
+def test_reproduce_writes_ours_beside_the_paper(built_fmus, tmp_path: Path) -> None:
+    path = tmp_path / "entry.toml"
+    path.write_text(ENTRY)
+    table = reproduce(str(path), tmp_path / "out", workers=1)
+    rows = pd.read_csv(tmp_path / "out" / "table.csv")
+    # ours: the same numbers as an independent run of the same scenario and override
+    alone = run_scenario("seed000_stop_pid", overrides={"controller.kp": 30.0}).summary
+    row = rows[(rows.run == "PID kp=30") & (rows.metric == "stop_error_m")].iloc[0]
+    assert row.ours == pytest.approx(alone["stop_error_m"], abs=1e-12)
+    assert not row.within  # 1e-6 around the paper's 0.2898: ours is not that
+    pid = rows[(rows.run == "PID") & (rows.metric == "stop_error_m")].iloc[0]
+    assert pid.within == (-0.5 <= pid.ours <= 0.5)
+    execs = rows[(rows.run == "PID") & (rows.metric == "executions.controller")].iloc[0]
+    summary = json.loads((tmp_path / "out/runs/pid/summary.json").read_text())
+    assert execs.ours == summary_value(summary, "executions.controller") == 301
+    text = table.read_text()
+    assert "| PID |" in text and "0.2898 (in [-0.5, 0.5])" in text and "why we differ" in text
+    assert (tmp_path / "out" / "speed.png").stat().st_size > 10_000
+
+
+@pytest.mark.parametrize(("patch", "message"), [
+    ('[[paper]]\nrun = "nobody"\nmetric = "stop_error_m"\nvalue = 1.0\n', "run 'nobody'"),
+    ('[[paper]]\nrun = "PID"\nmetric = "nope"\nvalue = 1.0\n', "metric 'nope'"),
+    ('[[paper]]\nrun = "PID"\nmetric = "stop_error_m"\nrange = [1, 0]\n', "must be [low, high]"),
+    ('[[figures]]\nfile = "x.png"\nx = "time"\ny = ["plant.v"]\nkind = "pie"\n', "kind 'pie'"),
+    ('colour = "red"\n', "unknown key(s) ['colour']"),
+])
+def test_bad_entries_name_the_file_and_key(tmp_path: Path, patch: str, message: str) -> None:
+    path = tmp_path / "bad.toml"
+    path.write_text(patch + "\n" + ENTRY if patch.startswith("colour") else ENTRY + patch)
+    with pytest.raises(ReproduceError, match=re.escape(message)) as err:
+        load_entry(str(path))
+    assert str(path) in str(err.value)
+
+
+def test_unknown_entry_lists_the_known_ones() -> None:
+    with pytest.raises(ReproduceError, match="seed000"):
+        load_entry("seed999")
