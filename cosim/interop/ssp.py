@@ -6,7 +6,10 @@ The archive holds ``SystemStructure.ssd`` and the scenario's FMUs under ``resour
   for each of its inputs and outputs and for each bound parameter, typed and with units;
 * the scenario's parameter values (and ``sample_time``, and constant inputs) as an inline
   ``ssv:ParameterSet`` in the component's ``ssd:ParameterBindings``;
-* one ``ssd:Connection`` per scenario connection;
+* one ``ssd:Connection`` per scenario connection (no ``ssd:Connections`` element without one:
+  the schema requires at least one child);
+* connectors and parameter values of every FMI 2.0 type; an Enumeration's items go into
+  ``ssd:Enumerations`` and its values are written by item name;
 * ``ssd:Units`` copied from the FMUs' UnitDefinitions;
 * ``ssd:DefaultExperiment`` with the scenario's start and stop time, and the base step as the
   Open Simulation Platform annotation ``osp:FixedStepAlgorithm`` (read by libcosim).
@@ -23,7 +26,8 @@ from pathlib import Path
 from typing import Any
 from xml.etree.ElementTree import Element, SubElement, indent, register_namespace, tostring
 
-from cosim.run.scenario import Scenario, load_scenario
+from cosim.run.fmi_types import enumeration_items, to_fmi
+from cosim.run.scenario import Scenario, check_against_fmus, load_scenario
 
 SSD = "http://ssp-standard.org/SSP1/SystemStructureDescription"
 SSC = "http://ssp-standard.org/SSP1/SystemStructureCommon"
@@ -49,9 +53,15 @@ def _format(value: Any, kind: str) -> str:
     return str(value)
 
 
+def _enumeration_name(v: Any) -> str:
+    return v.declaredType.name if v.declaredType is not None else v.name
+
+
 def _component(system_elements: Element, name: str, source: str, md: Any,
-               values: dict[str, Any], connected: set[str]) -> set[str]:
-    """Add one ``ssd:Component``; returns the units its connectors use."""
+               values: dict[str, Any], connected: set[str],
+               enumerations: dict[str, dict[str, int]]) -> set[str]:
+    """Add one ``ssd:Component``; returns the units its connectors use and collects the
+    Enumeration types in ``enumerations`` (name -> items)."""
     comp = SubElement(system_elements, _q(SSD, "Component"), {
         "name": name, "type": "application/x-fmu-sharedlibrary", "source": source})
     connectors = SubElement(comp, _q(SSD, "Connectors"))
@@ -60,7 +70,7 @@ def _component(system_elements: Element, name: str, source: str, md: Any,
     for v in md.modelVariables:
         if v.causality not in ("input", "output") and v.name not in values:
             continue
-        if v.type not in ("Real", "Integer", "Boolean", "String"):
+        if v.type not in ("Real", "Integer", "Boolean", "String", "Enumeration"):
             continue
         kind = v.causality if v.causality in ("input", "output") else "parameter"
         conn = SubElement(connectors, _q(SSD, "Connector"), {"name": v.name, "kind": kind})
@@ -68,6 +78,9 @@ def _component(system_elements: Element, name: str, source: str, md: Any,
         if v.type == "Real" and v.unit:
             attrib["unit"] = v.unit
             units.add(v.unit)
+        if v.type == "Enumeration":
+            attrib["name"] = _enumeration_name(v)
+            enumerations[attrib["name"]] = enumeration_items(v)
         SubElement(conn, _q(SSC, v.type), attrib)
     missing = sorted(n for n in connected if n not in variables)
     if missing:
@@ -81,9 +94,16 @@ def _component(system_elements: Element, name: str, source: str, md: Any,
         for pname, value in values.items():
             if pname not in variables:
                 raise ValueError(f"{name}: no variable {pname!r} in {source}")
-            kind = variables[pname].type
+            v = variables[pname]
             p = SubElement(params, _q(SSV, "Parameter"), {"name": pname})
-            SubElement(p, _q(SSV, kind), {"value": _format(value, kind)})
+            if v.type == "Enumeration":  # by item name (SSP 1.0 ssv:Enumeration)
+                items = enumeration_items(v)
+                number = to_fmi("Enumeration", value, items)
+                item = next(n for n, k in items.items() if k == number)
+                SubElement(p, _q(SSV, "Enumeration"), {"value": item,
+                                                       "name": _enumeration_name(v)})
+            else:
+                SubElement(p, _q(SSV, v.type), {"value": _format(value, v.type)})
     return units
 
 
@@ -98,6 +118,7 @@ def build_ssd(sc: Scenario, sources: dict[str, str]) -> Element:
     elements = SubElement(system, _q(SSD, "Elements"))
     unit_defs: dict[str, Any] = {}
     used_units: set[str] = set()
+    enumerations: dict[str, dict[str, int]] = {}
     for comp in sc.components.values():
         md = read_model_description(str(comp.fmu_path))
         unit_defs.update({u.name: u for u in md.unitDefinitions})
@@ -108,12 +129,20 @@ def build_ssd(sc: Scenario, sources: dict[str, str]) -> Element:
         values.update(comp.inputs)
         connected = ({c.src_var for c in sc.connections if c.src == comp.name}
                      | {c.dst_var for c in sc.connections if c.dst == comp.name})
-        used_units |= _component(elements, comp.name, sources[comp.name], md, values, connected)
-    connections = SubElement(system, _q(SSD, "Connections"))
+        used_units |= _component(elements, comp.name, sources[comp.name], md, values, connected,
+                                 enumerations)
+    if sc.connections:  # an empty ssd:Connections violates the schema
+        connections = SubElement(system, _q(SSD, "Connections"))
     for c in sc.connections:
         SubElement(connections, _q(SSD, "Connection"), {
             "startElement": c.src, "startConnector": c.src_var,
             "endElement": c.dst, "endConnector": c.dst_var})
+    if enumerations:
+        enums = SubElement(root, _q(SSD, "Enumerations"))
+        for ename, items in sorted(enumerations.items()):
+            enum = SubElement(enums, _q(SSC, "Enumeration"), {"name": ename})
+            for item, number in items.items():
+                SubElement(enum, _q(SSC, "Item"), {"name": item, "value": str(number)})
     if used_units:
         units = SubElement(root, _q(SSD, "Units"))
         for name in sorted(used_units):
@@ -141,12 +170,31 @@ def build_ssd(sc: Scenario, sources: dict[str, str]) -> Element:
 
 def export_ssp(scenario: str | Path | Scenario, out: str | Path,
                overrides: dict[str, Any] | list[str] | None = None, build: bool = True) -> Path:
-    """Write the scenario (with ``overrides``) and its FMUs as an SSP archive at ``out``."""
+    """Write the scenario (with ``overrides``) and its FMUs as an SSP archive at ``out``, after
+    checking the scenario against its FMUs as ``cosim run`` does (names, causalities, types,
+    ranges, units, unconnected inputs, algebraic loops)."""
+    from fmpy import read_model_description
+
+    from cosim.run.dependencies import order_connections, output_dependencies
+    from cosim.run.scenario import ScenarioError
+
     sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario, overrides)
     if build:
         from cosim.run.master import ensure_built
 
         ensure_built(sc)
+    descriptions = {}
+    for comp in sc.components.values():
+        if not comp.fmu_path.is_file():
+            raise FileNotFoundError(f"{comp.name}: {comp.fmu_path} not found (run cosim build)")
+        descriptions[comp.name] = read_model_description(str(comp.fmu_path))
+    check_against_fmus(sc, descriptions)
+    try:
+        order_connections(sc.connections, {n: output_dependencies(md)
+                                           for n, md in descriptions.items()},
+                          f"{sc.path}: [connections]: ")
+    except ValueError as err:
+        raise ScenarioError(str(err)) from err
     files: dict[Path, str] = {}
     for comp in sc.components.values():
         if not comp.fmu_path.is_file():

@@ -38,6 +38,8 @@ from fmpy.fmi2 import (
 )
 
 from cosim.fmu.state import to_seconds, to_ticks
+from cosim.run.dependencies import order_connections, output_dependencies
+from cosim.run.fmi_types import NUMERIC, enumeration_items, get_values, set_values, to_fmi
 from cosim.run.scenario import (
     Connection,
     Scenario,
@@ -70,11 +72,28 @@ class SimulationError(RuntimeError):
     """An FMU call failed during a run; the message names the FMU, the call and the time."""
 
 
+class FmuTerminated(Exception):  # noqa: N818 - a normal end of the run, not an error
+    """An FMU ended the simulation: doStep returned fmi2Discard with fmi2Terminated true
+    (FMI 2.0.4 sec. 4.2.2); ``ticks`` is its fmi2LastSuccessfulTime."""
+
+    def __init__(self, unit: FmuUnit, ticks: int) -> None:
+        super().__init__(f"{unit.name} terminated the simulation at t={to_seconds(ticks)} s")
+        self.unit = unit
+        self.ticks = ticks
+
+
+# Discard policy: a refused step is retried from the FMU's last successful time in pieces of
+# half the refused size, down to 1/2**MAX_HALVINGS of the communication step.
+MAX_HALVINGS = 10
+_FMI2_DISCARD, _FMI2_LAST_SUCCESSFUL_TIME, _FMI2_TERMINATED = 2, 2, 3
+
+
 @dataclass
 class Variable:
     vr: int
     type: str
     causality: str
+    items: dict[str, int] = field(default_factory=dict)  # Enumeration item name -> value
 
 
 def logging_callbacks(on_message: Callable[[int, str], None]) -> fmi2CallbackFunctions:
@@ -98,12 +117,14 @@ class FmuUnit:
         self.name = name
         self.path = path
         self.md = md
-        self.vars = {v.name: Variable(v.valueReference, v.type, v.causality)
-                     for v in md.modelVariables}
+        self.vars = {v.name: Variable(v.valueReference, v.type, v.causality,
+                                      enumeration_items(v)) for v in md.modelVariables}
         self.slave = FMU2Slave(guid=md.guid, unzipDirectory=unzipdir,
                                modelIdentifier=md.coSimulation.modelIdentifier,
                                instanceName=name)
-        self.feedthrough = any(u.dependencies for u in md.outputs)
+        self.deps = output_dependencies(md)  # absent dependencies attribute: all inputs
+        self.feedthrough = any(self.deps.values())
+        self.variable_step = bool(md.coSimulation.canHandleVariableCommunicationStepSize)
         self.time_ticks = 0
         self.do_steps = 0
         self.wall_time = 0.0
@@ -128,14 +149,8 @@ class FmuUnit:
         out: list[Any] = []
         for name in names:
             var = self.vars[name]
-            if var.type == "Real":
-                out.append(self.slave.getReal([var.vr])[0])
-            elif var.type == "Integer":
-                out.append(self.slave.getInteger([var.vr])[0])
-            elif var.type == "Boolean":
-                out.append(self.slave.getBoolean([var.vr])[0])
-            else:
-                out.append(self.slave.getString([var.vr])[0])
+            value = get_values(self.slave, var.type, [var.vr])[0]
+            out.append(value.decode("utf-8") if isinstance(value, bytes) else value)
         self.wall_time += time.perf_counter() - t0
         return out
 
@@ -148,14 +163,7 @@ class FmuUnit:
     def set(self, name: str, value: Any) -> None:
         var = self.vars[name]
         t0 = time.perf_counter()
-        if var.type == "Real":
-            self.slave.setReal([var.vr], [float(value)])
-        elif var.type == "Integer":
-            self.slave.setInteger([var.vr], [int(value)])
-        elif var.type == "Boolean":
-            self.slave.setBoolean([var.vr], [bool(value)])
-        else:
-            self.slave.setString([var.vr], [str(value)])
+        set_values(self.slave, var.type, [var.vr], [to_fmi(var.type, value, var.items)])
         self.wall_time += time.perf_counter() - t0
 
     def set_reals(self, vrs: list[int], values: list[float]) -> None:
@@ -170,15 +178,64 @@ class FmuUnit:
             return
         t0 = time.perf_counter()
         try:
-            self.slave.doStep(currentCommunicationPoint=to_seconds(self.time_ticks),
-                              communicationStepSize=to_seconds(h))
+            self._do_step(self.time_ticks, h)
+        except (FmuTerminated, SimulationError):
+            raise
         except Exception as err:  # fmpy raises FMICallException with the status
             raise SimulationError(f"{self.name}: doStep at t={to_seconds(self.time_ticks)} s, "
                                   f"h={to_seconds(h)} s failed: {err}; FMU says: "
                                   f"{self.last_messages()}") from err
-        self.wall_time += time.perf_counter() - t0
-        self.do_steps += 1
+        finally:
+            self.wall_time += time.perf_counter() - t0
         self.time_ticks = ticks
+
+    def _do_step(self, t: int, h: int) -> None:
+        """One communication step; fmi2Discard ends the run if the FMU terminated, else the
+        step is retried in smaller pieces (``MAX_HALVINGS``) if the FMU handles variable steps.
+        Inputs keep the values set at ``t`` over every piece."""
+        from fmpy.fmi1 import FMICallException
+
+        end, piece, halvings = t + h, h, 0
+        while t < end:
+            piece = min(piece, end - t)
+            try:
+                self.slave.doStep(currentCommunicationPoint=to_seconds(t),
+                                  communicationStepSize=to_seconds(piece))
+                self.do_steps += 1
+                t += piece
+                continue
+            except FMICallException as err:
+                if err.status != _FMI2_DISCARD:
+                    raise
+            self.do_steps += 1
+            if self._status("getBooleanStatus", _FMI2_TERMINATED, False):
+                last = self._status("getRealStatus", _FMI2_LAST_SUCCESSFUL_TIME, None)
+                raise FmuTerminated(self, to_ticks(last) if last is not None else t)
+            if not self.variable_step:
+                raise SimulationError(
+                    f"{self.name}: doStep at t={to_seconds(t)} s, h={to_seconds(piece)} s "
+                    "returned fmi2Discard (step refused) and the FMU cannot handle variable "
+                    "communication step sizes (canHandleVariableCommunicationStepSize=false), "
+                    f"so the step cannot be retried in smaller pieces: give [fmus.{self.name}] "
+                    f"a smaller max_step, or a smaller base_step; FMU says: "
+                    f"{self.last_messages()}")
+            last = self._status("getRealStatus", _FMI2_LAST_SUCCESSFUL_TIME, None)
+            if last is not None and t < to_ticks(last) < t + piece:
+                t = to_ticks(last)
+            halvings += 1
+            if halvings > MAX_HALVINGS or piece < 2:
+                raise SimulationError(
+                    f"{self.name}: doStep at t={to_seconds(t)} s returned fmi2Discard for "
+                    f"steps down to h={to_seconds(piece)} s ({MAX_HALVINGS} halvings of the "
+                    f"communication step): giving up; FMU says: {self.last_messages()}")
+            piece //= 2
+
+    def _status(self, method: str, kind: int, default: Any) -> Any:
+        """fmi2Get<type>Status(kind), or ``default`` if the FMU does not provide it."""
+        try:
+            return getattr(self.slave, method)(kind)
+        except Exception:  # noqa: BLE001 - optional in FMI 2.0 (fmi2Discard)
+            return default
 
     def update_schedule(self, now: int) -> None:
         """Next event after an event at ``now``: announced by the FMU or periodic."""
@@ -210,15 +267,20 @@ class Link:
 
 
 class Recorder:
-    """Records named variables at output points into a preallocated array."""
+    """Records named variables at output points into a preallocated array (numbers: Real,
+    Integer, Boolean, Enumeration values) and lists (String variables)."""
 
     def __init__(self, refs: list[tuple[FmuUnit, str]], n_points: int) -> None:
         self.refs = refs
         self.columns = [f"{u.name}.{n}" for u, n in refs]
         self.data = np.full((n_points, len(refs) + 1), np.nan)
         self.rows = 0
+        self.strings = {col + 1: (unit, name, []) for col, (unit, name) in enumerate(refs)
+                        if unit.vars[name].type == "String"}
         by_unit: dict[str, tuple[FmuUnit, list[int], list[int]]] = {}
         for col, (unit, name) in enumerate(refs):
+            if col + 1 in self.strings:
+                continue
             entry = by_unit.setdefault(unit.name, (unit, [], []))
             entry[1].append(name)  # type: ignore[arg-type]
             entry[2].append(col + 1)
@@ -231,12 +293,17 @@ class Recorder:
         row[0] = to_seconds(ticks)
         for unit, names, cols in self._by_unit:
             row[cols] = unit.get(names)  # type: ignore[arg-type]
+        for unit, name, values in self.strings.values():
+            values.append(unit.get([name])[0])
         self.rows += 1
 
     def frame(self):
         import pandas as pd
 
-        return pd.DataFrame(self.data[: self.rows], columns=["time", *self.columns])
+        frame = pd.DataFrame(self.data[: self.rows], columns=["time", *self.columns])
+        for col, (_, _, values) in self.strings.items():
+            frame[frame.columns[col]] = pd.Series(values[: self.rows], dtype=object)
+        return frame
 
 
 class Algorithm(ABC):
@@ -386,31 +453,19 @@ class Master:
         self.by_name = by_name
         for c in sc.connections:
             self.links.append(Link(c, by_name[c.src], by_name[c.dst], c.src_var, c.dst_var))
-        self.order = self._dependency_order()
-        self._inputs_of = {u.name: [lk for lk in self.links if lk.dst is u] for u in self.units}
+        self.link_order = self._value_flow_order()
 
-    def _dependency_order(self) -> list[FmuUnit]:
-        """Units ordered so that every feedthrough source sets its inputs before its readers."""
-        order: list[FmuUnit] = []
-        state: dict[str, int] = {}
-
-        def visit(unit: FmuUnit, path: list[str]) -> None:
-            if state.get(unit.name) == 2:
-                return
-            if state.get(unit.name) == 1:
-                loop = " -> ".join([*path[path.index(unit.name):], unit.name])
-                raise ScenarioError(f"{self.scenario.path}: algebraic loop through FMUs with "
-                                    f"direct feedthrough: {loop}")
-            state[unit.name] = 1
-            for link in self.links:
-                if link.dst is unit and link.src.feedthrough and link.src is not unit:
-                    visit(link.src, [*path, unit.name])
-            state[unit.name] = 2
-            order.append(unit)
-
-        for unit in self.units:
-            visit(unit, [])
-        return order
+    def _value_flow_order(self) -> list[Link]:
+        """Connections in value-flow order by the per-variable dependency graph
+        (:mod:`cosim.run.dependencies`); an algebraic loop, also of one FMU wired to itself,
+        is a :class:`ScenarioError`."""
+        try:
+            order = order_connections([lk.conn for lk in self.links],
+                                      {u.name: u.deps for u in self.units},
+                                      f"{self.scenario.path}: [connections]: ")
+        except ValueError as err:
+            raise ScenarioError(str(err)) from err
+        return [self.links[i] for i in order]
 
     def initialize(self) -> None:
         sc = self.scenario
@@ -433,7 +488,7 @@ class Master:
         if self.algorithm_name == "jacobi":
             # initial values flow once in initialization mode (plant outputs are valid there)
             for link in self.links:
-                if not link.src.feedthrough:
+                if not link.src.deps.get(link.src_name):
                     self.transfer(link, link.src.get([link.src_name])[0])
         for unit in self.units:
             try:
@@ -450,11 +505,9 @@ class Master:
         link.dst.set(link.dst_name, value)
 
     def propagate(self, due: set[FmuUnit]) -> None:
-        """Set the inputs of every due FMU from its sources, in dependency order."""
-        for unit in self.order:
-            if unit not in due:
-                continue
-            for link in self._inputs_of[unit.name]:
+        """Set the inputs of every due FMU from its sources, in value-flow order."""
+        for link in self.link_order:
+            if link.dst in due:
                 self.transfer(link, link.src.get([link.src_name])[0])
 
     def maybe_record(self, ticks: int) -> None:
@@ -484,9 +537,13 @@ class Master:
         self.end_ticks = self.start_ticks
         self.partial: RunResult | None = None
         final_outputs: dict[str, dict[str, Any]] = {}
+        self.terminated_by: dict[str, Any] | None = None
         try:
             self.initialize()
-            ALGORITHM_CLASSES[self.algorithm_name](self).run()
+            try:
+                ALGORITHM_CLASSES[self.algorithm_name](self).run()
+            except FmuTerminated as stop:
+                self._end_at(stop)
             final_outputs = self._final_outputs()
             for unit in self.units:
                 unit.slave.terminate()
@@ -505,6 +562,15 @@ class Master:
         self.wall_time = time.perf_counter() - t0
         return self._result(final_outputs, self.wall_time)
 
+    def _end_at(self, stop: FmuTerminated) -> None:
+        """An FMU ended the simulation: a last output point at its last successful time."""
+        self.terminated_by = {"instance": stop.unit.name, "time": to_seconds(stop.ticks)}
+        stop.unit.time_ticks = stop.ticks
+        last = self.recorder.data[self.recorder.rows - 1, 0] if self.recorder.rows else None
+        if last is None or to_ticks(last) < stop.ticks:
+            self.recorder.record(stop.ticks)
+        self.end_ticks = stop.ticks
+
     def _result(self, final_outputs: dict[str, dict[str, Any]], wall_time: float) -> RunResult:
         return RunResult(
             scenario=self.scenario,
@@ -519,13 +585,14 @@ class Master:
             final_outputs=final_outputs,
             wall_time_s=wall_time,
             sim_time_s=to_seconds(self.end_ticks - self.start_ticks),
+            terminated_by=getattr(self, "terminated_by", None),
         )
 
     def _recorded_refs(self) -> list[tuple[FmuUnit, str]]:
         sc = self.scenario
         refs: list[str] = list(sc.record) if sc.record is not None else [
             f"{u.name}.{n}" for u in self.units for n, v in u.vars.items()
-            if v.causality == "output" and v.type in ("Real", "Integer", "Boolean")]
+            if v.causality == "output" and v.type in NUMERIC]
         for value in sc.summary.values():
             for ref in value if isinstance(value, list) else [value]:
                 if isinstance(ref, str) and "." in ref and ref.split(".", 1)[0] in self.by_name:
@@ -534,7 +601,7 @@ class Master:
         out: list[tuple[FmuUnit, str]] = []
         for ref in refs:
             for unit, name in _expand(self.by_name, ref):
-                if (unit.name, name) not in seen and unit.vars[name].type != "String":
+                if (unit.name, name) not in seen:
                     seen.add((unit.name, name))
                     out.append((unit, name))
         return out
@@ -563,6 +630,7 @@ class RunResult:
     summary: dict[str, Any] = field(default_factory=dict)
     completed: bool = True
     error: str | None = None
+    terminated_by: dict[str, Any] | None = None  # {instance, time}: an FMU ended the run
 
     def write(self, out_dir: Path, plot: bool = True) -> list[Path]:
         from cosim.run.results import write_results

@@ -15,7 +15,9 @@ Keys of ``[summary]`` (all optional; variable references are ``FMU.variable``):
 Always present: ``completed`` (False, with ``error``, for the partial results of a failed or
 interrupted run), ``sim_time_s``, ``wall_time_s``, ``real_time_factor``, ``algorithm``,
 ``do_steps``, ``executions``, ``fmu_wall_time_s``; controller counters (``qp_solves``,
-``qp_infeasible``, ``qp_solve_time_median_s``) when an FMU publishes them.
+``qp_infeasible``, ``qp_solve_time_median_s``) when an FMU publishes them; ``terminated_by``
+(``{instance, time}``) when an FMU ended the run itself (fmi2Discard with fmi2Terminated, FMI
+2.0.4 sec. 4.2.2; ``completed`` stays true).
 """
 
 from __future__ import annotations
@@ -77,6 +79,8 @@ def compute_summary(result: Any) -> dict[str, Any]:
     }
     if result.error:
         out["error"] = result.error
+    if getattr(result, "terminated_by", None):
+        out["terminated_by"] = result.terminated_by  # an FMU ended the run (fmi2Terminated)
     pos = _series(frame, cfg.get("position"))
     speed = _series(frame, cfg.get("speed"))
     accel = _series(frame, cfg.get("acceleration"))

@@ -39,6 +39,7 @@ except ModuleNotFoundError:  # Python 3.10
     import tomli as tomllib  # type: ignore[no-redef]
 
 from cosim.fmu.build import FMU_DIR, ROOT
+from cosim.run import fmi_types
 
 SCENARIO_DIR = ROOT / "scenarios"
 ALGORITHMS = ("event", "fixed", "jacobi")
@@ -289,9 +290,6 @@ def load_scenario(name_or_path: str | Path,
                     record=record, summary=summary, raw=raw)
 
 
-_PY_TYPES = {"Real": (int, float), "Integer": (int,), "Boolean": (bool,), "String": (str,)}
-
-
 def check_against_fmus(scenario: Scenario, descriptions: dict[str, Any]) -> None:
     """Check names, causalities, types and units of everything the scenario refers to.
 
@@ -315,17 +313,9 @@ def check_against_fmus(scenario: Scenario, descriptions: dict[str, Any]) -> None
         return v
 
     def check_value(comp: str, var: str, key: str, value: Any, v: Any) -> None:
-        ok = _PY_TYPES[v.type]
-        if isinstance(value, bool) and v.type != "Boolean" or not isinstance(value, ok):
-            raise ScenarioError(f"{src}: {key}: {comp}.{var} is {v.type}, got {value!r}")
-        if v.type == "Real":
-            if not math.isfinite(float(value)):
-                raise ScenarioError(f"{src}: {key}: {value!r} is not finite")
-            lo = float(v.min) if v.min is not None else -math.inf
-            hi = float(v.max) if v.max is not None else math.inf
-            if not lo <= float(value) <= hi:
-                raise ScenarioError(f"{src}: {key}: {comp}.{var} = {value} outside "
-                                    f"[{v.min}, {v.max}] ({v.unit or 'no unit'})")
+        why = fmi_types.check_value(v, value)
+        if why is not None:
+            raise ScenarioError(f"{src}: {key}: {comp}.{var} {why}")
 
     for name, comp in scenario.components.items():
         for par, value in comp.parameters.items():
@@ -349,6 +339,11 @@ def check_against_fmus(scenario: Scenario, descriptions: dict[str, Any]) -> None
         if dv.type != sv.type:
             raise ScenarioError(f"{src}: {key}: type mismatch: {c.src}.{c.src_var} is "
                                 f"{sv.type}, {c.dst}.{c.dst_var} is {dv.type}")
+        src_items, dst_items = (fmi_types.enumeration_items(sv),
+                                fmi_types.enumeration_items(dv))
+        if src_items and dst_items and src_items != dst_items:
+            raise ScenarioError(f"{src}: {key}: Enumeration items differ: {c.src}.{c.src_var} "
+                                f"has {src_items}, {c.dst}.{c.dst_var} has {dst_items}")
         if (dv.unit or "") != (sv.unit or "") and dv.unit and sv.unit:
             raise ScenarioError(f"{src}: {key}: unit mismatch: {c.src}.{c.src_var} in "
                                 f"{sv.unit}, {c.dst}.{c.dst_var} in {dv.unit}")

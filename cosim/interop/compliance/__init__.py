@@ -1,0 +1,134 @@
+"""FMI 2.0 co-simulation compliance checks for any FMU (ours or a third party's).
+
+``check_fmu(path)`` returns a list of :class:`Problem`; ``format_report`` renders it. The
+checks are those of issue 5:
+
+* static (read from the file, nothing loaded): fmpy validation; legal causality / variability /
+  initial combinations (FMI 2.0 sec. 2.2.7); start values present where required and inside
+  min/max; units used are declared and declared units are used; outputs listed in
+  ModelStructure/Outputs with an explicit ``dependencies`` attribute naming inputs only;
+  default experiment; co-simulation capability flags;
+* dynamic (the FMU is loaded and run): the calling sequence instantiate -> setup ->
+  initialisation -> doStep* -> terminate -> freeInstance; declared-independent outputs do not
+  move when inputs change; fmi2Reset then a rerun is identical; get/set and
+  serialize/deserialize FMU state mid-run reproduce the rest of the run exactly (also in a
+  fresh instance); variable communication step sizes; two instances in one process stay
+  independent; calls in the wrong state, NaN/inf inputs and out-of-range or non-finite
+  parameters are rejected (non-OK status or rejected at initialisation) with a logged message.
+  The expected status is fmi2Error; fmi2Fatal is an error too (it declares every instance of
+  the FMU unusable, so a master cannot recover; plain pythonfmu 0.7 binaries return it for any
+  Python exception, ours go through a shim that returns fmi2Error, see ``cosim/fmu/build.py``).
+
+The dynamic checks run in a worker subprocess (``python -m cosim.interop.compliance.worker``), so an
+FMU that crashes or hangs the host is reported as a problem of the check it was in, and the
+worker is restarted for the remaining checks. ``check_together(paths)`` loads several FMUs in
+one process and checks that they do not disturb each other (pythonfmu FMUs share one interpreter).
+
+Exercising the FMU: parameters keep their start values; every Real input follows a
+deterministic signal inside its [min, max] (``start + a sin(0.7 k + phase)`` when unbounded);
+other inputs keep their start values. Outputs are read at every communication point after the
+inputs are set, i.e. as our master does. The run uses the default experiment's step size and at
+most ``n_steps`` steps. Outputs that are irreproducible by design (wall-clock measurements) or
+defined per communication step (e.g. a peak over the last step) are excluded from the exact
+comparisons they cannot pass, by name or description patterns (:class:`Options`), and listed
+in a note. The package imports no plant or controller, so it works for any FMU.
+
+Modules: ``common`` (Problem, severities), ``model_description`` (static checks),
+``host`` (loading and running an FMU), ``calling_sequence``, ``state``, ``stepping``,
+``errors`` (the dynamic check families), ``worker`` (the subprocess and its supervisor).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from cosim.interop.compliance.common import (
+    ALL_CHECKS,
+    DYNAMIC_CHECKS,
+    ERROR,
+    NOTE,
+    STATIC_CHECKS,
+    WARNING,
+    Problem,
+    passed,
+)
+from cosim.interop.compliance.host import _Host
+from cosim.interop.compliance.model_description import check_model_description
+from cosim.interop.compliance.worker import _run_worker
+
+__all__ = ["ALL_CHECKS", "DYNAMIC_CHECKS", "ERROR", "NOTE", "STATIC_CHECKS", "WARNING",
+           "Options", "Problem", "_Host", "check_fmu", "check_model_description",
+           "check_together", "format_report", "passed"]
+
+
+@dataclass
+class Options:
+    """Knobs of :func:`check_fmu`."""
+
+    strict: bool = True  # project conventions are errors, not warnings
+    step_tolerance: float = 1e-9  # variable-step results vs fixed-step results (relative)
+    n_steps: int = 40  # communication steps per run
+    timeout: float = 120.0  # s, per worker process (a hang is reported after this)
+    # outputs (fnmatch on name, or "description:<pattern>") excluded from the exact
+    # reproducibility comparisons (reset, state, instances): wall-clock measurements
+    irreproducible: tuple[str, ...] = ("*wall_time*", "*solve_time*", "*cpu_time*",
+                                       "description:*wall-clock*")
+    # outputs excluded only from the variable-step comparison: defined per communication step
+    step_dependent: tuple[str, ...] = ("description:*communication step*",)
+    dynamic: bool = True
+
+
+def _worker_options(opts: Options) -> dict[str, Any]:
+    return {"n_steps": opts.n_steps, "step_tolerance": opts.step_tolerance,
+            "irreproducible": list(opts.irreproducible),
+            "step_dependent": list(opts.step_dependent)}
+
+
+def check_fmu(path: str | Path, options: Options | None = None) -> list[Problem]:
+    """All compliance checks of one FMU file; an empty list (or only warnings/notes) passes."""
+    opts = options or Options()
+    path = Path(path)
+    if not path.is_file():
+        return [Problem("fmpy-validation", f"{path}: no such file")]
+    problems = check_model_description(path, strict=opts.strict)
+    if not opts.dynamic:
+        return problems
+    loadable = not any(p.check in ("variables", "capabilities") and "unreadable" in p.message
+                       or p.message == "not a co-simulation FMU" for p in problems)
+    if not loadable:
+        return problems
+    args = {"mode": "single", "paths": [str(path.resolve())], **_worker_options(opts)}
+    return problems + _run_worker(args, DYNAMIC_CHECKS, opts.timeout)
+
+
+def check_together(paths: list[str | Path], options: Options | None = None) -> list[Problem]:
+    """Load all ``paths`` in one process and check each runs as it does alone."""
+    opts = options or Options()
+    args = {"mode": "together", "paths": [str(Path(p).resolve()) for p in paths],
+            **_worker_options(opts)}
+    return _run_worker(args, ("together",), opts.timeout)
+
+
+def format_report(path: str | Path, problems: list[Problem],
+                  checks: tuple[str, ...] = ALL_CHECKS) -> str:
+    """A readable report: one line per check (ok / FAIL / warn), then the findings."""
+    lines = [f"FMU {path}"]
+    by_check: dict[str, list[Problem]] = {}
+    for p in problems:
+        by_check.setdefault(p.check, []).append(p)
+    for check in [*checks, *[c for c in by_check if c not in checks]]:
+        found = by_check.get(check, [])
+        severities = {p.severity for p in found}
+        label = "FAIL" if ERROR in severities else "warn" if WARNING in severities else "ok"
+        lines.append(f"  {label:<4}  {check}")
+        for p in found:
+            lines.append(f"          {p.severity}: {p.message}")
+    n_err = sum(p.severity == ERROR for p in problems)
+    n_warn = sum(p.severity == WARNING for p in problems)
+    verdict = "PASSED" if n_err == 0 else "FAILED"
+    lines.append(f"  {verdict}: {n_err} error(s), {n_warn} warning(s)")
+    return "\n".join(lines)
+
+

@@ -1,0 +1,169 @@
+"""The worker subprocess running the dynamic checks (``python -m
+cosim.interop.compliance.worker ARGS_JSON``) and its supervisor ``_run_worker``, which restarts
+it after a crash or a hang and reports the check it was in."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+from dataclasses import asdict
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from cosim.interop.compliance.calling_sequence import (
+    _check_calling_sequence,
+    _check_output_dependencies,
+    _check_reset,
+    _check_two_instances,
+)
+from cosim.interop.compliance.common import _MARK, DYNAMIC_CHECKS, NOTE, Problem
+from cosim.interop.compliance.errors import (
+    _check_bad_parameters,
+    _check_non_finite_inputs,
+    _check_wrong_state,
+    _collapse_fatal,
+)
+from cosim.interop.compliance.host import _CallFailed, _differs, _Host, _nominal, _out_name, _run
+from cosim.interop.compliance.state import _check_fmu_state
+from cosim.interop.compliance.stepping import _check_invalid_step, _check_variable_step
+
+_DYNAMIC = {
+    "calling-sequence": _check_calling_sequence,
+    "output-dependencies": _check_output_dependencies,
+    "reset": _check_reset,
+    "fmu-state": _check_fmu_state,
+    "variable-step": _check_variable_step,
+    "two-instances": _check_two_instances,
+    "wrong-state": _check_wrong_state,
+    "invalid-step": _check_invalid_step,
+    "non-finite-inputs": _check_non_finite_inputs,
+    "bad-parameters": _check_bad_parameters,
+}
+
+
+def _emit(kind: str, payload: Any) -> None:
+    print(_MARK + json.dumps([kind, payload]), flush=True)
+
+
+def _worker(args: dict) -> None:
+    """Run dynamic checks, reporting progress on stdout (see ``_run_worker``)."""
+    from fmpy import extract
+
+    paths = [Path(p) for p in args["paths"]]
+    unzipdirs = [extract(str(p)) for p in paths]
+    try:
+        hosts = [_Host(p, d, args["n_steps"], tuple(args["irreproducible"]),
+                       tuple(args["step_dependent"])) for p, d in zip(paths, unzipdirs)]
+        if args["mode"] == "together":
+            _emit("begin", "together")
+            for p in _together(hosts):
+                _emit("problem", asdict(p))
+            _emit("end", "together")
+            return
+        host = hosts[0]
+        ctx: dict[str, Any] = {"step_tolerance": args["step_tolerance"]}
+        if "calling-sequence" not in args["skip"]:
+            for label, cols in (("not compared (irreproducible by design)", host.irreproducible),
+                                ("not compared across step sizes (defined per communication "
+                                 "step)", host.step_dependent - host.irreproducible)):
+                if cols:
+                    names = ", ".join(host.outputs[i].name for i in sorted(cols))
+                    _emit("problem", asdict(Problem("calling-sequence", f"outputs {label}: "
+                                                    f"{names}", NOTE)))
+        for name in DYNAMIC_CHECKS:
+            if name in args["skip"]:
+                continue
+            _emit("begin", name)
+            try:
+                problems = _DYNAMIC[name](host, ctx)
+            except _CallFailed as err:
+                problems = [Problem(name, str(err))]
+            except Exception as err:  # a bug in the FMU surfacing as a host exception
+                problems = [Problem(name, f"{type(err).__name__}: {err}")]
+            for p in _collapse_fatal(problems):
+                _emit("problem", asdict(p))
+            _emit("end", name)
+    finally:
+        for d in unzipdirs:
+            shutil.rmtree(d, ignore_errors=True)
+
+
+def _together(hosts: list[_Host]) -> list[Problem]:
+    """All FMUs alone, then all interleaved in this process: results must not change."""
+    alone = [_nominal(h) for h in hosts]
+    insts = [h.instance(f"together{i}") for i, h in enumerate(hosts)]
+    for inst in insts:
+        inst.init()
+    rows: list[list[np.ndarray]] = [[] for _ in hosts]
+    for k in range(max(h.n for h in hosts)):
+        for i, (h, inst) in enumerate(zip(hosts, insts)):
+            if k < h.n:
+                rows[i].append(_run(inst, k, k + 1)[0])
+    problems = []
+    for h, inst, r, ref in zip(hosts, insts, rows, alone):
+        inst.free()
+        diff = _differs(np.array(r).reshape(ref[:h.n].shape), ref[:h.n],
+                        ignore=h.irreproducible)
+        if diff:
+            problems.append(Problem("together", f"{h.path.name} run interleaved with the "
+                                    "other FMUs differs from a run alone: "
+                                    + _out_name(h, diff)))
+    return problems
+
+
+def _run_worker(args: dict, checks: tuple[str, ...], timeout: float) -> list[Problem]:
+    """Run the worker until every check has finished, crashed or hung (then restart it)."""
+    problems: list[Problem] = []
+    done: set[str] = set()
+    while True:
+        args = {**args, "skip": sorted(done)}
+        cmd = [sys.executable, "-m", "cosim.interop.compliance.worker", json.dumps(args)]
+        env = dict(os.environ)
+        root = str(Path(__file__).resolve().parents[3])
+        env["PYTHONPATH"] = root + os.pathsep + env.get("PYTHONPATH", "")
+        current: str | None = None
+        try:
+            proc = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, env=env)
+            out, err, code, hung = proc.stdout, proc.stderr, proc.returncode, False
+        except subprocess.TimeoutExpired as exc:
+            out = exc.stdout.decode() if isinstance(exc.stdout, bytes) else (exc.stdout or "")
+            err, code, hung = "", None, True
+        for line in out.splitlines():
+            if not line.startswith(_MARK):
+                continue
+            kind, payload = json.loads(line[len(_MARK):])
+            if kind == "begin":
+                current = payload
+            elif kind == "end":
+                done.add(payload)
+                current = None
+            elif kind == "problem":
+                problems.append(Problem(**payload))
+        if current is None and not hung and code == 0:
+            return problems
+        if current is None:  # died outside a check (loading): report once and stop
+            tail = err.strip().splitlines()[-1] if err.strip() else f"exit status {code}"
+            problems.append(Problem("calling-sequence", f"the host process failed while "
+                                    f"loading the FMU: {tail}"))
+            return problems
+        if hung:
+            problems.append(Problem(current, f"hang: no progress for {timeout:.0f} s (the "
+                                             "host was killed)"))
+        else:
+            signal = f"signal {-code}" if code < 0 else f"exit status {code}"
+            problems.append(Problem(current, f"the host process crashed ({signal}) during "
+                                             "this check"))
+        done.add(current)
+        if all(c in done for c in checks):
+            return problems
+
+
+
+
+if __name__ == "__main__":
+    _worker(json.loads(sys.argv[1]))

@@ -1,0 +1,17 @@
+"""The C test FMUs of tests/third_party, built once per test session."""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import pytest
+from third_party_fmus import build_all
+
+
+@pytest.fixture(scope="session")
+def c_fmus(tmp_path_factory) -> dict[str, Path]:
+    """Name -> path of every C test FMU (gcc + fmpy's FMI 2 headers), built once."""
+    if shutil.which("gcc") is None:
+        pytest.skip("gcc not installed: the C test FMUs cannot be built")
+    return build_all(tmp_path_factory.mktemp("c_fmus"))

@@ -1,0 +1,52 @@
+"""SSP export of scenarios with third-party FMUs: every FMI 2.0 type (Enumeration items in
+ssd:Enumerations, values by item name), no empty ssd:Connections, and the scenario checked
+against its FMUs as ``cosim run`` does. Every SSD is validated against the SSP 1.0 schema."""
+
+from __future__ import annotations
+
+import zipfile
+
+import pytest
+from fmpy.ssp.ssd import read_ssd
+from test_master_third_party import write_scenario
+
+from cosim.interop.ssp import export_ssp
+from cosim.run.scenario import ScenarioError
+
+
+def test_every_type_exports_and_validates(c_fmus, tmp_path):
+    f = c_fmus["AllTypes"]
+    conn = {"B.u": "A.y", "B.ui": "A.yi", "B.mode": "A.next_mode", "B.ub": "A.yb",
+            "B.us": "A.ys"}
+    path = write_scenario(tmp_path, {"A": (f, {"label": "a", "offset": 3, "invert": True},
+                                           {"mode": "fast", "u": 1.0, "ui": 2, "ub": True,
+                                            "us": "z"}),
+                                     "B": (f, {}, {})}, conn)
+    out = export_ssp(path, tmp_path / "types.ssp", build=False)
+    ssd = read_ssd(str(out), validate=True)  # raises on a schema violation
+    assert len(ssd.system.connections) == 5
+    xml = zipfile.ZipFile(out).read("SystemStructure.ssd").decode()
+    assert '<ssc:Item name="fast" value="3" />' in xml
+    assert '<ssv:Enumeration value="fast" name="Mode" />' in xml
+    assert '<ssv:String value="a" />' in xml and '<ssv:Integer value="3" />' in xml
+    assert '<ssc:Enumeration name="Mode" />' in xml
+
+
+def test_no_connections_writes_no_empty_element(c_fmus, tmp_path):
+    path = write_scenario(tmp_path, {"e": (c_fmus["Events"], {}, {"u": 1.0})})
+    out = export_ssp(path, tmp_path / "alone.ssp", build=False)
+    read_ssd(str(out), validate=True)
+    assert b"Connections" not in zipfile.ZipFile(out).read("SystemStructure.ssd")
+
+
+@pytest.mark.parametrize("fmus, connections, message", [
+    ({"e": ("Events", {})}, {}, "input e.u is not connected"),
+    ({"f": ("Feedthrough", {})}, {"f.u": "f.y"}, "algebraic loop"),
+    ({"a": ("AllTypes", {"mode": "fastest"})}, {}, "'fastest' is not one of its items"),
+])
+def test_export_checks_the_scenario_like_run(c_fmus, tmp_path, fmus, connections, message):
+    path = write_scenario(tmp_path, {n: (c_fmus[f], {}, i) for n, (f, i) in fmus.items()},
+                          connections)
+    with pytest.raises(ScenarioError, match=message):
+        export_ssp(path, tmp_path / "bad.ssp", build=False)
+    assert not (tmp_path / "bad.ssp").exists()
