@@ -3,12 +3,13 @@
 from __future__ import annotations
 
 import json
-import sys
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Annotated
 
 import typer
 from rich.console import Console
+from rich.markup import escape
 from rich.table import Table
 
 app = typer.Typer(add_completion=False, no_args_is_help=True,
@@ -18,7 +19,7 @@ out = Console()
 
 
 def _fail(message: str, code: int = 2) -> None:
-    console.print(f"[bold red]error:[/] {message}", highlight=False, soft_wrap=True)
+    console.print(f"[bold red]error:[/] {escape(message)}", highlight=False, soft_wrap=True)
     raise typer.Exit(code)
 
 
@@ -102,36 +103,88 @@ def run(
                       "simulation.stop_time=80 (repeatable)")] = None,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="no progress bar")] = False,
     no_plot: Annotated[bool, typer.Option("--no-plot", help="skip plot.png")] = False,
+    force: Annotated[bool, typer.Option(
+        "--force", help="let partial results replace a complete earlier run in --out "
+        "(otherwise they go to <out>.partial)")] = False,
 ) -> None:
-    """Run a scenario; write results.csv, summary.json and plot.png; print the summary."""
-    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+    """Run a scenario; write results.csv, summary.json and plot.png; print the summary.
 
+    Ctrl-C (or SIGTERM) stops the run at the next communication point, writes what was
+    recorded (summary.json "completed": false) and exits with status 130; a second one exits
+    at once."""
+    from cosim.run import interrupt
     from cosim.run.master import SimulationError, run_scenario
+    from cosim.run.results import OutputError, check_destination
     from cosim.run.scenario import ScenarioError, find_scenario
 
-    try:
-        path = find_scenario(scenario)
-    except ScenarioError as err:
-        _fail(str(err))
-    target = out_dir or Path("runs") / path.stem
-    show = not quiet and sys.stderr.isatty()
-    progress = Progress(TextColumn("[bold]{task.description}"), BarColumn(),
-                        TextColumn("{task.fields[t]:>8.1f} / {task.total:.1f} s sim"),
-                        TimeElapsedColumn(), console=console, disable=not show, transient=True)
-    with progress:
-        task = progress.add_task(path.stem, total=1.0, t=0.0)
-
-        def on_progress(t: float, total: float) -> None:
-            progress.update(task, completed=t, total=total, t=t)
-
+    with interrupt.guard(restore=False):
+        if not console.is_terminal and not quiet:
+            console.print(f"cosim run {scenario}", highlight=False, markup=False)
         try:
-            result = run_scenario(path, overrides=set_ or [], algorithm=algorithm,
-                                  out_dir=target, progress=on_progress, plot=not no_plot)
-        except (ScenarioError, SimulationError) as err:
-            progress.stop()
+            path = find_scenario(scenario)
+            target = out_dir or Path("runs") / path.stem
+            check_destination(target)
+        except (ScenarioError, OutputError) as err:
             _fail(str(err))
-    print_summary(result.summary, f"{path.stem} ({result.algorithm})")
-    out.print(f"wrote {target}/results.csv, summary.json" + ("" if no_plot else ", plot.png"))
+        with _progress(path.stem, quiet) as on_progress:
+            try:
+                result = run_scenario(path, overrides=set_ or [], algorithm=algorithm,
+                                      out_dir=target, progress=on_progress, plot=not no_plot,
+                                      force=force)
+            except interrupt.Interrupted as err:
+                on_progress.stop()
+                console.print(f"[bold yellow]{escape(str(err))}[/]", highlight=False,
+                              soft_wrap=True)
+                raise typer.Exit(interrupt.EXIT_INTERRUPTED) from None
+            except (ScenarioError, SimulationError) as err:
+                on_progress.stop()
+                _fail(str(err))
+        print_summary(result.summary, f"{path.stem} ({result.algorithm})")
+        out.print(f"wrote {target}/results.csv, summary.json" + ("" if no_plot else ", plot.png"),
+                  highlight=False)
+
+
+class _ProgressReporter:
+    """``progress(t, total)`` for the master: a rich bar on a terminal; elsewhere (a pipe, a
+    log) a plain line every ~10 % of the simulated time with the real-time factor."""
+
+    def __init__(self, label: str, quiet: bool) -> None:
+        import time
+
+        from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+
+        self.label, self.quiet, self.tty = label, quiet, console.is_terminal
+        self._clock = time.perf_counter
+        self._start: float | None = None  # at the first step: loading the FMUs is not sim time
+        self._next_tenth = 1
+        self.bar = Progress(TextColumn("[bold]{task.description}"), BarColumn(),
+                            TextColumn("{task.fields[t]:>8.1f} / {task.total:.1f} s sim"),
+                            TimeElapsedColumn(), console=console,
+                            disable=quiet or not self.tty, transient=True)
+        self.task = self.bar.add_task(escape(label), total=1.0, t=0.0)
+
+    def __call__(self, t: float, total: float) -> None:
+        if self.tty:
+            self.bar.update(self.task, completed=t, total=total, t=t)
+        elif self._start is None:
+            self._start = self._clock()
+        elif not self.quiet and total > 0 and t >= self._next_tenth * total / 10:
+            self._next_tenth = int(10 * t / total) + 1
+            wall = self._clock() - self._start
+            rtf = f"{t / wall:.3g}" if wall > 0 else "-"
+            console.print(f"{self.label}: t = {t:.1f} / {total:.1f} s sim "
+                          f"({100 * t / total:.0f} %), real-time factor {rtf}",
+                          highlight=False, markup=False, soft_wrap=True)
+
+    def stop(self) -> None:
+        self.bar.stop()
+
+
+@contextmanager
+def _progress(label: str, quiet: bool):
+    reporter = _ProgressReporter(label, quiet)
+    with reporter.bar:
+        yield reporter
 
 
 @app.command()
@@ -190,6 +243,7 @@ def sweep(
 ) -> None:
     """Run scenarios over a parameter grid in parallel; write sweep.csv and sweep.png."""
     from cosim.run.master import SimulationError
+    from cosim.run.results import check_destination
     from cosim.run.scenario import ScenarioError, find_scenario
     from cosim.run.sweep import parse_grid, run_sweep
 
@@ -197,6 +251,7 @@ def sweep(
         grid = parse_grid(set_)
         stems = [find_scenario(s).stem for s in scenarios]
         target = out_dir or Path("runs") / ("sweep_" + "_".join(stems))
+        check_destination(target)
         frame = run_sweep(scenarios, grid, target, workers, plot=not no_plot)
     except (ValueError, ScenarioError, SimulationError) as err:
         _fail(str(err))
@@ -224,9 +279,11 @@ def export(
 ) -> None:
     """Export a scenario and its FMUs as an SSP 1.0 package (SystemStructure.ssd + FMUs)."""
     from cosim.interop.ssp import export_ssp
+    from cosim.run.results import check_destination
     from cosim.run.scenario import ScenarioError
 
     try:
+        check_destination(ssp, "--ssp", is_dir=False)
         path = export_ssp(scenario, ssp, overrides=set_ or None)
     except (ScenarioError, ValueError, FileNotFoundError) as err:
         _fail(str(err))

@@ -32,7 +32,8 @@ def test_parallel_sweep_matches_single_runs(built_fmus, tmp_path):
     single = run_scenario("seed000_stop_rsmpc", build=False, plot=False,
                           overrides={"controller.N": 3}).summary
     row = frame[(frame.scenario == "seed000_stop_rsmpc") & (frame["controller.N"] == 3)].iloc[0]
-    assert row["stop_error_m"] == pytest.approx(single["stop_error_m"], abs=1e-12)
+    # same scenario, same FMUs, same operations in another process: the same number
+    assert row["stop_error_m"] == single["stop_error_m"]
     assert row["controller_executions"] == single["executions"]["controller"]
     assert row["command_switches"] == single["command_switches"]
     assert (frame["stop_error_m"].abs() <= 0.5).all()

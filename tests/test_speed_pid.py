@@ -8,6 +8,8 @@ import pytest
 
 from controllers.pid.speed_pid import SpeedPid, SpeedPidParams
 
+EPS = 2.0**-52  # double precision machine epsilon
+
 
 def test_proportional_loop_on_integrator_decays_geometrically() -> None:
     """Plant dv/dt = a (ZOH, sample T): e(k+1) = (1 - kp T) e(k) exactly with ki = kd = 0."""
@@ -19,8 +21,10 @@ def test_proportional_loop_on_integrator_decays_geometrically() -> None:
         a = pid.update(v, v_ref)
         errors.append(v_ref - v)
         v += a * T
+    # each sample rounds a handful of operations (error, P term, a T, v + a T) on values <=
+    # v_ref: k samples leave at most 8 k ulps of v_ref, however small e has become
     for k, e in enumerate(errors):
-        assert e == pytest.approx(2.0 * (1 - kp * T) ** k, rel=1e-12)
+        assert e == pytest.approx(2.0 * (1 - kp * T) ** k, abs=8 * k * EPS * v_ref)
 
 
 def test_feedforward_tracks_a_ramp_without_error() -> None:
@@ -31,7 +35,8 @@ def test_feedforward_tracks_a_ramp_without_error() -> None:
     for k in range(100):
         a = pid.update(v, a0 * k * T, a_ref=a0)
         v += a * T
-        assert abs(a0 * (k + 1) * T - v) < 1e-12
+        # feedforward + PI terms and v + a T: <= 8 roundings of values <= v per sample
+        assert abs(a0 * (k + 1) * T - v) <= 8 * (k + 1) * EPS * max(v, 1.0)
 
 
 def test_integral_removes_constant_disturbance() -> None:
@@ -79,7 +84,8 @@ def test_rate_limit_bounds_the_jerk() -> None:
     pid = SpeedPid(SpeedPidParams(kp=5.0, ki=0.0, sample_time=T, rate_limit=jerk))
     demands = [pid.update(0.0, 10.0) for _ in range(20)]
     steps = [b - a for a, b in zip([0.0, *demands[:-1]], demands, strict=True)]
-    assert max(abs(s) for s in steps) <= jerk * T + 1e-12
+    # a step of the demand is clipped to jerk T and then rounded once (demands <= accel_max)
+    assert max(abs(s) for s in steps) <= jerk * T + 2 * EPS * max(map(abs, demands))
     assert demands[-1] == pytest.approx(1.0)  # reached accel_max
 
 

@@ -38,6 +38,7 @@ from fmpy.fmi2 import (
 )
 
 from cosim.fmu.state import to_seconds, to_ticks
+from cosim.run import interrupt
 from cosim.run.dependencies import order_connections, output_dependencies
 from cosim.run.fmi_types import NUMERIC, enumeration_items, get_values, set_values, to_fmi
 from cosim.run.scenario import (
@@ -518,6 +519,7 @@ class Master:
             self.next_output_ticks = min(self.next_output_ticks, self.stop_ticks)
 
     def progress(self, ticks: int) -> None:
+        interrupt.check(to_seconds(ticks))
         if self._progress_fn is not None:
             self._progress_fn(to_seconds(ticks - self.start_ticks),
                               to_seconds(self.stop_ticks - self.start_ticks))
@@ -539,7 +541,9 @@ class Master:
         final_outputs: dict[str, dict[str, Any]] = {}
         self.terminated_by: dict[str, Any] | None = None
         try:
+            interrupt.check(to_seconds(self.start_ticks))
             self.initialize()
+            interrupt.check(to_seconds(self.start_ticks))
             try:
                 ALGORITHM_CLASSES[self.algorithm_name](self).run()
             except FmuTerminated as stop:
@@ -551,7 +555,8 @@ class Master:
             self.end_ticks = max(u.time_ticks for u in self.units) if self.units else 0
             self.partial = self._result(final_outputs, time.perf_counter() - t0)
             self.partial.completed = False
-            self.partial.error = f"{type(err).__name__}: {err}"
+            self.partial.error = (str(err) if isinstance(err, interrupt.Interrupted)
+                                  else f"{type(err).__name__}: {err}")
             raise
         finally:
             for unit in self.units:
@@ -632,40 +637,48 @@ class RunResult:
     error: str | None = None
     terminated_by: dict[str, Any] | None = None  # {instance, time}: an FMU ended the run
 
-    def write(self, out_dir: Path, plot: bool = True) -> list[Path]:
+    def write(self, out_dir: Path, plot: bool = True, force: bool = False) -> list[Path]:
         from cosim.run.results import write_results
 
-        return write_results(self, Path(out_dir), plot=plot)
+        return write_results(self, Path(out_dir), plot=plot, force=force)
 
 
 def run_scenario(scenario: str | Path | Scenario, overrides: dict[str, Any] | list[str] | None
                  = None, algorithm: str | None = None, out_dir: str | Path | None = None,
                  progress: ProgressFn | None = None, build: bool = True,
-                 plot: bool = True) -> RunResult:
+                 plot: bool = True, force: bool = False) -> RunResult:
     """Load (and override) a scenario, build missing or stale FMUs, run it, compute the summary
-    and, with ``out_dir``, write results.csv, summary.json and plot.png."""
+    and, with ``out_dir``, write results.csv, summary.json and plot.png (see
+    :func:`cosim.run.results.write_results` for ``force``). A failure raises
+    :class:`SimulationError`, SIGINT/SIGTERM :class:`cosim.run.interrupt.Interrupted`, both
+    after writing the partial results."""
     from cosim.run.metrics import compute_summary
 
     sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario, overrides)
     if build:
         ensure_built(sc)
     master = Master(sc, algorithm, progress)
-    try:
-        result = master.run()
-    except (SimulationError, KeyboardInterrupt) as err:
-        partial = getattr(master, "partial", None)
-        if out_dir is None or partial is None or partial.frame.empty:
-            raise
-        partial.summary = compute_summary(partial)
-        partial.write(Path(out_dir), plot=plot)
-        note = (f"; partial results up to t={partial.sim_time_s:g} s written to {out_dir} "
-                f"(summary.json has \"completed\": false)")
-        if isinstance(err, KeyboardInterrupt):
-            raise SimulationError(f"interrupted{note}") from err
-        raise SimulationError(f"{err}{note}") from err
-    result.summary = compute_summary(result)
-    if out_dir is not None:
-        result.write(Path(out_dir), plot=plot)
+    # SIGINT/SIGTERM only set a flag while the FMUs run (never an exception inside their code);
+    # the master stops at the next communication point and what was recorded is written
+    with interrupt.guard():
+        try:
+            result = master.run()
+        except (SimulationError, interrupt.Interrupted, KeyboardInterrupt) as err:
+            partial = getattr(master, "partial", None)
+            if out_dir is None or partial is None:
+                raise
+            partial.summary = compute_summary(partial)
+            where = partial.write(Path(out_dir), plot=plot, force=force)[0].parent
+            note = (f"; partial results up to t = {partial.sim_time_s:g} s written to {where} "
+                    f"(summary.json has \"completed\": false)")
+            if isinstance(err, interrupt.Interrupted):
+                raise interrupt.Interrupted(f"{err}{note}") from err
+            if isinstance(err, KeyboardInterrupt):
+                raise interrupt.Interrupted(f"{partial.error}{note}") from err
+            raise SimulationError(f"{err}{note}") from err
+        result.summary = compute_summary(result)
+        if out_dir is not None:
+            result.write(Path(out_dir), plot=plot, force=force)
     return result
 
 

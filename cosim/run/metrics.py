@@ -40,7 +40,8 @@ def ctcs3_speed_error_ok(v_ref_kmh: np.ndarray, error_kmh: np.ndarray) -> bool:
 
 
 def _series(frame: Any, ref: Any) -> np.ndarray | None:
-    if isinstance(ref, str) and ref in frame.columns:
+    """The recorded column ``ref`` (None when absent, or when nothing was recorded)."""
+    if isinstance(ref, str) and ref in frame.columns and len(frame):
         return frame[ref].to_numpy(dtype=float)
     return None
 
@@ -125,7 +126,7 @@ def compute_summary(result: Any) -> dict[str, Any]:
                 jerk = jerk[moving]
             out["max_jerk_mps3"] = float(np.max(np.abs(jerk))) if jerk.size else 0.0
     cols = _columns(frame, cfg.get("coupler_forces"))
-    if cols:
+    if cols and len(frame):
         out["max_coupler_force_kn"] = float(np.max(np.abs(frame[cols].to_numpy())) / 1e3)
     power = _series(frame, cfg.get("power"))
     if power is not None:

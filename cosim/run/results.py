@@ -1,7 +1,9 @@
 """Writing a run: ``results.csv`` (time series), ``summary.json`` and ``plot.png``.
 
-Files are written to a temporary name and renamed, so an interrupted write never leaves a
-half-written result next to a complete one.
+The files are written into a temporary folder inside the destination and then renamed into
+place, so an interrupted write never leaves a half-written result, or files of two runs, next
+to each other. Partial results never replace a complete earlier run unless forced: they go to
+``<out>.partial`` instead.
 """
 
 from __future__ import annotations
@@ -9,16 +11,49 @@ from __future__ import annotations
 import json
 import math
 import os
+import shutil
+import tempfile
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+FILES = ("results.csv", "summary.json", "plot.png")
 
-def _atomic_write(path: Path, write) -> None:
-    tmp = path.with_name(f".{path.name}.tmp")
-    write(tmp)
-    os.replace(tmp, path)
+
+class OutputError(ValueError):
+    """An output destination that cannot be written; the message names the option and path."""
+
+
+def check_destination(path: Path, option: str = "--out", is_dir: bool = True) -> None:
+    """Fail before a run if ``path`` cannot become the output folder (or file, with
+    ``is_dir=False``): it, or a parent, is a file, or the nearest existing folder is not
+    writable (tried by creating and removing a file, which also holds for root)."""
+    path = Path(path)
+    if is_dir and path.exists() and not path.is_dir():
+        raise OutputError(f"{option} {path}: is a file, not a folder")
+    if not is_dir and path.is_dir():
+        raise OutputError(f"{option} {path}: is a folder, not a file")
+    parent = path if is_dir else path.parent
+    existing = parent
+    while not existing.exists():
+        existing = existing.parent
+    if not existing.is_dir():
+        raise OutputError(f"{option} {path}: {existing} is a file, not a folder")
+    try:
+        fd, probe = tempfile.mkstemp(prefix=".cosim-probe-", dir=existing)
+        os.close(fd)
+        os.unlink(probe)
+    except OSError as err:
+        raise OutputError(f"{option} {path}: cannot write in {existing}: "
+                          f"{err.strerror or err}") from None
+
+
+def _is_complete_run(out_dir: Path) -> bool:
+    try:
+        return json.loads((out_dir / "summary.json").read_text()).get("completed") is True
+    except (OSError, ValueError, AttributeError):
+        return False
 
 
 def _json_safe(obj: Any) -> Any:
@@ -35,19 +70,31 @@ def _json_safe(obj: Any) -> Any:
     return obj
 
 
-def write_results(result: Any, out_dir: Path, plot: bool = True) -> list[Path]:
-    """Write results.csv, summary.json and (unless ``plot`` is False) plot.png."""
+def write_results(result: Any, out_dir: Path, plot: bool = True,
+                  force: bool = False) -> list[Path]:
+    """Write results.csv, summary.json and (unless ``plot`` is False) plot.png into ``out_dir``
+    (into ``<out_dir>.partial`` for a partial result when ``out_dir`` holds a complete run and
+    ``force`` is False). Returns the paths written."""
+    out_dir = Path(out_dir)
+    if not result.summary.get("completed", True) and not force and _is_complete_run(out_dir):
+        out_dir = out_dir.with_name(out_dir.name + ".partial")
     out_dir.mkdir(parents=True, exist_ok=True)
-    csv_path = out_dir / "results.csv"
-    summary_path = out_dir / "summary.json"
-    _atomic_write(csv_path, lambda p: result.frame.to_csv(p, index=False, float_format="%.10g"))
-    _atomic_write(summary_path, lambda p: p.write_text(
-        json.dumps(_json_safe(result.summary), indent=2) + "\n"))
-    written = [csv_path, summary_path]
-    if plot:
-        plot_path = out_dir / "plot.png"
-        _atomic_write(plot_path, lambda p: plot_run(result, p))
-        written.append(plot_path)
+    tmp = Path(tempfile.mkdtemp(prefix=".writing-", dir=out_dir))
+    try:
+        result.frame.to_csv(tmp / "results.csv", index=False, float_format="%.10g")
+        (tmp / "summary.json").write_text(json.dumps(_json_safe(result.summary), indent=2)
+                                          + "\n")
+        if plot:
+            plot_run(result, tmp / "plot.png")
+        written = []
+        for name in FILES:  # three renames: the window between them is microseconds
+            if (tmp / name).exists():
+                os.replace(tmp / name, out_dir / name)
+                written.append(out_dir / name)
+            elif name == "plot.png" and (out_dir / name).exists():
+                (out_dir / name).unlink()  # a plot of another run must not stay next to these
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
     return written
 
 
@@ -68,7 +115,10 @@ def plot_run(result: Any, path: Path) -> None:
     fig, axes = plt.subplots(rows, 1, figsize=(9, 4.5 * rows), squeeze=False)
     ax = axes[0][0]
     pos, speed = cfg.get("position"), cfg.get("speed")
-    if pos in frame.columns and speed in frame.columns:
+    if frame.empty:
+        ax.text(0.5, 0.5, "nothing recorded", ha="center", va="center",
+                transform=ax.transAxes)
+    elif pos in frame.columns and speed in frame.columns:
         x = frame[pos].to_numpy()
         xlabel = "position (m)"
         if np.nanmax(np.abs(x)) > 5000:
@@ -107,6 +157,9 @@ def plot_run(result: Any, path: Path) -> None:
         title += f"  stop error {summary['stop_error_m'] * 100:+.1f} cm"
     if summary.get("command_switches") is not None:
         title += f"  switches {summary['command_switches']}"
+    if not summary.get("completed", True):
+        error = str(summary.get("error") or "failed")
+        title += f"\nincomplete ({error if error.startswith('interrupted') else 'failed'})"
     ax.set_title(title)
     ax.grid(True, alpha=0.3)
     if couplers:
