@@ -53,6 +53,8 @@ MPC_VARS: tuple[Var, ...] = (
         "distance before the stop point where standstill holding may start", min=0.0),
     Var("standstill_command", "parameter", _D.standstill_command, "%",
         "least brake command while held at standstill", min=0.0, max=100.0),
+    Var("qp_solver", "parameter", _D.qp_solver,
+        description='QP solver: "daqp" (exact active set, default) or "osqp" (ADMM)'),
     Var("v", "input", 0.0, "m/s", "measured speed"),
     Var("s", "input", 0.0, "m", "measured position"),
     Var("a_c", "input", 0.0, "m/s2", "measured brake acceleration a_c (<= 0 when braking)"),
