@@ -68,6 +68,10 @@ banded system), the other forces once per sub-step (speed terms at the start, po
 predicted mid-point, traction and brake pressures averaged over
 the sub-step from their exact lag solutions). Brake-pipe arrivals inside a sub-step are split
 exactly per vehicle. Outputs: see :meth:`FreightTrain.outputs`.
+
+Speed: a communication step runs in one call of the compiled kernel
+:func:`plants.kernels.freight_steps` (numba) when numba is available; ``_substep`` here is the
+numpy reference it is tested against (``kernel=False`` selects it).
 """
 
 from __future__ import annotations
@@ -81,7 +85,7 @@ from scipy.linalg import solveh_banded
 
 from cosim.fmu.declare import Declared, Var, build, param, parameters
 from cosim.fmu.state import StatefulCore, to_seconds, to_ticks
-from plants import dead_time
+from plants import dead_time, kernels
 from plants.route import (
     GRAVITY,
     KMH,
@@ -263,7 +267,8 @@ class FreightTrain(StatefulCore, Declared):
         return cls(params, route, v0=values["v0"], s0=values["s0"], t0=t0)
 
     def __init__(self, params: FreightParams, route: Route, v0: float = 0.0, s0: float = 0.0,
-                 t0: float = 0.0) -> None:
+                 t0: float = 0.0, kernel: bool | None = None) -> None:
+        """``kernel``: compiled sub-steps (default: when numba is there) or the numpy path."""
         params.check()
         p = self.p = params
         self.route = route
@@ -312,6 +317,19 @@ class FreightTrain(StatefulCore, Declared):
         self._inverse: dict[int, np.ndarray] = {}
         self._names_v = [f"v[{i + 1}]" for i in range(n)]
         self._pressure_index = sorted({0, n // 4, n // 2, (3 * n) // 4, n - 1})
+        self.kernel = kernels.KERNELS if kernel is None else bool(kernel) and kernels.KERNELS
+        if self.kernel:
+            xs, cum = self._additional._cumulative
+            self._route_arrays = (xs, cum, np.diff(cum) / np.diff(xs))
+            self._hints = (np.zeros(n, dtype=np.int64), np.zeros(n, dtype=np.int64))
+            self._constants = np.array([
+                p.stiction_speed, p.coupler_stiffness, p.coupler_damping, p.coupler_slack,
+                float(p.traction_model), p.traction_time_constant,
+                0.8 * p.max_traction_force / p.traction_ramp_time, p.max_traction_force,
+                p.max_traction_power, p.max_ed_force, p.max_ed_power, p.ed_fade_speed,
+                p.max_cylinder_pressure, p.brake_fill_time, p.brake_fill_exponent,
+                p.brake_release_time, p.brake_release_exponent, p.full_service_reduction,
+                p.min_reduction])
 
     # -- traction ----------------------------------------------------------------------------
     def traction_limits(self, v: float) -> tuple[float, float]:
@@ -524,12 +542,41 @@ class FreightTrain(StatefulCore, Declared):
                                       self._delay_ticks)
         self.peak_draft = 0.0
         self.peak_buff = 0.0
-        now = t_ticks
-        for cut in cuts:
-            self._substep(now, cut - now)
-            now = cut
+        if self.kernel:
+            self._advance_compiled(t_ticks, cuts)
+        else:
+            now = t_ticks
+            for cut in cuts:
+                self._substep(now, cut - now)
+                now = cut
         self.t_ticks = end
         dead_time.prune(self.traction_history, end, self._delay_ticks)
+
+    def _advance_compiled(self, t_ticks: int, cuts: list[int]) -> None:
+        """The sub-steps ending at ``cuts`` in one kernel call (same grid and inputs as the
+        reference loop: delayed demand per sub-step start, brake commands with arrivals)."""
+        starts = [t_ticks] + cuts[:-1]
+        t0s = np.array([to_seconds(a) for a in starts])
+        t1s = np.array([to_seconds(b) for b in cuts])
+        hs = np.array([to_seconds(b - a) for a, b in zip(starts, cuts)])
+        demands = np.array([self.delayed_demand(a) for a in starts])
+        if len(self.brake_history) == 1:
+            arrivals = np.zeros((1, self.x.size))
+            values = np.array([self.brake_history[0][1]])
+        else:
+            arrivals, values = self._arrivals()
+        scalars = np.array([self.traction_force, self.energy, 0.0, 0.0, self.accel, 0.0])
+        x, v, pressure = self.x.copy(), self.v.copy(), self.pressure.copy()
+        kernels.freight_steps(x, v, pressure, scalars, hs, t0s, t1s, demands,
+                              arrivals, values, self.m_eff, self.length,
+                              self.res_a, self.res_b, self.res_c, self.weight_per_kn,
+                              self.brake_scale, *self._route_arrays, *self._hints,
+                              self._constants)
+        self.x, self.v, self.pressure = x, v, pressure
+        self.traction_force, self.energy = float(scalars[0]), float(scalars[1])
+        self.peak_draft, self.peak_buff = float(scalars[2]), float(scalars[3])
+        self.accel = float(scalars[4])
+        del self.brake_history[:int(scalars[5])]
 
     def outputs(self) -> dict[str, float]:
         x, v = self.x, self.v

@@ -13,8 +13,17 @@ with per-stage scale factors ``c_i`` (the 1/beta of eq. 25). Constraints ``lo_i 
 ref_mask * r_i) <= hi_i`` on stages 1..H (stage 0 is the measured state, nothing to decide)
 and a terminal box on stage H, plus ``du_min <= du <= du_max`` on the free moves.
 The Hessian and constraint matrix are fixed for a given structure; between solves only the
-vectors ``q``, ``l``, ``u`` are updated, and OSQP is warm-started from vectors the caller keeps
-(so controller state, not the solver object, decides the result).
+vectors ``q``, ``l``, ``u`` are updated. Two solvers, chosen per QP (``solver``):
+
+* ``"daqp"`` (default): DAQP's dual active-set method, set up once (its workspace keeps the
+  factorisation) and hot-started from the active set of the caller's previous dual, solving
+  these small dense QPs exactly (to rounding) in a few iterations;
+* ``"osqp"``: the ADMM solver, warm-started from the caller's primal and dual vectors, for
+  large sparse problems (answers within its tolerance ``eps``).
+
+Either way the warm start comes from vectors the caller keeps (so controller state, not the
+solver object, decides the result), and only a fully solved QP counts as feasible (OSQP's
+"solved inaccurate", DAQP's soft-optimal or iteration-limit exits do not).
 
 :func:`support_of_sum` gives the support function of a Minkowski sum of linear images of a
 polytope W (its vertices), which is all the tube tightening needs (eqs. 14, 26).
@@ -28,11 +37,20 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import ClassVar
 
+import daqp
 import numpy as np
 import osqp
 import scipy.sparse as sp
 
-_SOLVED = ("solved", "solved inaccurate")
+QP_SOLVERS = ("daqp", "osqp")
+_OSQP_SOLVED = "solved"
+_DAQP_OPTIMAL = 1  # exitflag: 2 is soft-optimal (a relaxed constraint), < 0 failures
+_DAQP_STATUS = {1: "solved", 2: "soft optimal", -1: "infeasible", -2: "cycling",
+                -3: "unbounded", -4: "iteration limit", -5: "nonconvex",
+                -6: "overdetermined initial active set"}
+# DAQP sense bits: ACTIVE = 1, LOWER = 2. From the sign of a dual (-1, 0, +1) as int32,
+# ``sign & 3`` is 3 (active at the lower bound; two's complement), 0 or 1 (active, upper)
+_SENSE_MASK = 3
 
 
 def support_of_sum(mats: Sequence[np.ndarray], w_vertices: np.ndarray,
@@ -56,7 +74,8 @@ class QPResult:
     feasible: bool
     status: str
     solve_time: float  # s, wall time of update + solve
-    dual: np.ndarray
+    dual: np.ndarray  # one per constraint row of ``Acon`` (> 0 upper, < 0 lower bound active)
+    iterations: int = 0
 
 
 class HorizonQP:
@@ -71,7 +90,11 @@ class HorizonQP:
                  lo: np.ndarray | None = None, hi: np.ndarray | None = None,
                  F_term: np.ndarray | None = None, lo_term: np.ndarray | None = None,
                  hi_term: np.ndarray | None = None, du_min: float = -math.inf,
-                 du_max: float = math.inf, eps: float = 1e-7, max_iter: int = 10000) -> None:
+                 du_max: float = math.inf, eps: float = 1e-7, max_iter: int = 10000,
+                 solver: str = "daqp") -> None:
+        if solver not in QP_SOLVERS:
+            raise ValueError(f"qp_solver = {solver!r} must be one of {QP_SOLVERS}")
+        self.solver_name = solver
         n, H = A.shape[0], int(horizon)
         if H < 1:
             raise ValueError(f"horizon = {horizon} must be >= 1")
@@ -120,34 +143,62 @@ class HorizonQP:
             self._sel.append((H, F_term, np.ones(F_term.shape[0])))
             self._lo.append(np.asarray(lo_term, float))
             self._hi.append(np.asarray(hi_term, float))
-        blocks.append(np.eye(nu))
-        self.Acon = np.vstack(blocks)
-        # vector updates as single products: q = Mq err, const = err' Qblk err, and the
-        # constraint offsets base = Fs x_free - Fr ref (flattened stages)
-        self._Qstack = np.array(Qs)
-        self._Mq = 2.0 * np.hstack([Gam[i].T @ Qs[i] for i in range(H + 1)])
-        n_rows = sum(F_.shape[0] for _, F_, _ in self._sel)
-        Fs = np.zeros((n_rows, (H + 1) * n))
-        Fr = np.zeros((n_rows, (H + 1) * n))
-        row = 0
+        # rows: the du box first (DAQP's simple bounds), then the stage and terminal rows
+        self.Acon = np.vstack([np.eye(nu)] + blocks)
+        self.n_con = self.Acon.shape[0]
+        self.nu = nu
+        # the vector update is one product W [x0; ref; d] of the stacked rows
+        #   e = Phi x0 + Psi d - ref (tracking error of the free response, flattened stages),
+        #   q = Mq e, base = Fs (Phi x0 + Psi d) - Fr ref (row offsets, 0 on the du box);
+        # then const = e' Qblk e
+        N1 = (H + 1) * n
+        Phi_f, Psi_f = Phi.reshape(N1, n), Psi.reshape(N1, H)
+        self._Gam_f = Gam.reshape(N1, nu)
+        Mq = 2.0 * np.hstack([Gam[i].T @ Qs[i] for i in range(H + 1)])
+        Qblk = np.zeros((N1, N1))
+        for i in range(H + 1):
+            Qblk[i * n:(i + 1) * n, i * n:(i + 1) * n] = Qs[i]
+        self._Qblk = Qblk
+        Fs = np.zeros((self.n_con, N1))
+        Fr = np.zeros((self.n_con, N1))
+        row = nu
         for i, F_, mask_ in self._sel:
             r = F_.shape[0]
             Fs[row:row + r, i * n:(i + 1) * n] = F_
             Fr[row:row + r, i * n:(i + 1) * n] = mask_[:, None] * F_
             row += r
-        self._Fs, self._Fr = Fs, Fr
+        err_rows = np.hstack([Phi_f, -np.eye(N1), Psi_f])
+        self._W = np.vstack([err_rows, Mq @ err_rows, np.hstack([Fs @ Phi_f, -Fr, Fs @ Psi_f])])
+        self._W_nod = np.ascontiguousarray(self._W[:, :n + N1])
+        self._split = (N1, N1 + nu)
         self.du_lo = np.full(nu, du_min)
         self.du_hi = np.full(nu, du_max)
-        self._lo_all = np.concatenate(self._lo + [self.du_lo])
-        self._hi_all = np.concatenate(self._hi + [self.du_hi])
-        self.n_con = self.Acon.shape[0]
-        self.solver = osqp.OSQP()
-        self.solver.setup(sp.csc_matrix(np.triu(2.0 * self.Hhalf)), np.zeros(nu),
-                          sp.csc_matrix(self.Acon), -np.ones(self.n_con), np.ones(self.n_con),
-                          verbose=False, eps_abs=eps, eps_rel=eps, max_iter=max_iter,
-                          polishing=False, warm_starting=True, adaptive_rho=True,
-                          adaptive_rho_interval=25, rho=self.RHO0)
-        self.nu = nu
+        self._lo_all = np.concatenate([self.du_lo] + self._lo)
+        self._hi_all = np.concatenate([self.du_hi] + self._hi)
+        self._nan = (np.full(nu, np.nan), np.full(H, np.nan), np.full((H + 1, n), np.nan))
+        if solver == "osqp":
+            self.solver = osqp.OSQP()
+            self.solver.setup(sp.csc_matrix(np.triu(2.0 * self.Hhalf)), np.zeros(nu),
+                              sp.csc_matrix(self.Acon), -np.ones(self.n_con),
+                              np.ones(self.n_con), verbose=False, eps_abs=eps, eps_rel=eps,
+                              max_iter=max_iter, polishing=False, warm_starting=True,
+                              adaptive_rho=True, adaptive_rho_interval=25, rho=self.RHO0)
+        else:
+            # the factorisation of H (and of the constraint rows in its metric) is done here,
+            # once; a solve only updates the vectors
+            self.solver = daqp.Model()
+            self._cold = np.zeros(self.n_con, dtype=np.int32)
+            flag = self.solver.setup(2.0 * self.Hhalf, np.zeros(nu),
+                                     np.ascontiguousarray(self.Acon[nu:]),
+                                     np.ones(self.n_con), -np.ones(self.n_con))
+            if isinstance(flag, tuple):
+                flag = flag[0]
+            if flag < 0:
+                raise ValueError(f"DAQP setup failed (exitflag {flag}): Hessian not positive "
+                                 f"definite? check r_du > 0")
+            settings = self.solver.settings
+            settings["iter_limit"] = int(max_iter)
+            self.solver.settings = settings
 
     def predict(self, x0: np.ndarray, U: np.ndarray, d: np.ndarray | None = None) -> np.ndarray:
         """Predicted states ``(H+1, n)`` for free moves ``U``."""
@@ -156,25 +207,44 @@ class HorizonQP:
             X = X + self.Psi @ d
         return X
 
+    def _failed(self, status: str, t0: float, iterations: int = 0) -> QPResult:
+        U, du, X = self._nan
+        return QPResult(U.copy(), du.copy(), X.copy(), math.inf, False, status,
+                        time.perf_counter() - t0, np.zeros(self.n_con), iterations)
+
     def solve(self, x0: np.ndarray, ref: np.ndarray, d: np.ndarray | None = None,
               warm_x: np.ndarray | None = None, warm_y: np.ndarray | None = None) -> QPResult:
-        """Solve for the current state ``x0`` and references ``ref`` ``(H+1, n)``."""
+        """Solve for the current state ``x0`` and references ``ref`` ``(H+1, n)``.
+
+        ``solve_time`` is the wall time of the whole step: vector update, solve and result.
+        """
         t0 = time.perf_counter()
-        free_part = self.Phi @ x0  # (H+1, n)
-        if d is not None:
-            free_part = free_part + self.Psi @ d
-        err = free_part - ref
-        q = self._Mq @ err.ravel()
-        const = float(np.einsum("ij,ijk,ik->", err, self._Qstack, err))
-        base = np.concatenate([self._Fs @ free_part.ravel() - self._Fr @ ref.ravel(),
-                               np.zeros(self.nu)])
+        ref_f = ref.ravel()
+        if d is None:
+            z = self._W_nod @ np.concatenate((x0, ref_f))
+        else:
+            z = self._W @ np.concatenate((x0, ref_f, d))
+        a, b = self._split
+        err, q, base = z[:a], z[a:b], z[b:]
+        const = float(err @ (self._Qblk @ err))
         low, high = self._lo_all - base, self._hi_all - base
-        nan = np.full(self.nu, np.nan)
-        if np.any(low > high + 1e-12):  # tightened sets empty along the way: infeasible
-            return QPResult(nan, np.full(self.H, np.nan), np.full((self.H + 1, self.n), np.nan),
-                            math.inf, False, "empty constraint set",
-                            time.perf_counter() - t0, np.zeros(self.n_con))
-        high = np.maximum(high, low)
+        if (low > high + 1e-12).any():  # tightened sets empty along the way: infeasible
+            return self._failed("empty constraint set", t0)
+        np.maximum(high, low, out=high)
+        if self.solver_name == "daqp":
+            U, dual, status, iters = self._solve_daqp(q, low, high, warm_y)
+        else:
+            U, dual, status, iters = self._solve_osqp(q, low, high, warm_x, warm_y)
+        if U is None:
+            return self._failed(status, t0, iters)
+        cost = float(U @ (self.Hhalf @ U) + q @ U + const)
+        states = (err + ref_f + self._Gam_f @ U).reshape(self.H + 1, self.n)
+        du = self.E @ U
+        return QPResult(U, du, states, cost, True, status, time.perf_counter() - t0, dual, iters)
+
+    def _solve_osqp(self, q: np.ndarray, low: np.ndarray, high: np.ndarray,
+                    warm_x: np.ndarray | None, warm_y: np.ndarray | None
+                    ) -> tuple[np.ndarray | None, np.ndarray, str, int]:
         self.solver.update(q=q, l=low, u=high)
         # rho adapts within a solve (every 25 iterations, not by timing) and restarts from
         # RHO0 at every solve, so the result depends only on the data and the warm start
@@ -185,12 +255,29 @@ class HorizonQP:
         else:
             self.solver.warm_start(x=np.zeros(self.nu), y=np.zeros(self.n_con))
         res = self.solver.solve(raise_error=False)
-        elapsed = time.perf_counter() - t0
         status = str(res.info.status)
-        if status not in _SOLVED or res.x is None or not np.all(np.isfinite(res.x)):
-            return QPResult(nan, np.full(self.H, np.nan), np.full((self.H + 1, self.n), np.nan),
-                            math.inf, False, status, elapsed, np.zeros(self.n_con))
-        U = np.asarray(res.x, float)
-        cost = float(U @ self.Hhalf @ U + q @ U + const)
-        return QPResult(U, self.E @ U, self.predict(x0, U, d), cost, True, status, elapsed,
-                        np.asarray(res.y, float))
+        iters = int(res.info.iter)
+        if status != _OSQP_SOLVED or res.x is None or not np.all(np.isfinite(res.x)):
+            return None, np.zeros(self.n_con), status, iters
+        return np.asarray(res.x, float), np.asarray(res.y, float), status, iters
+
+    def _solve_daqp(self, q: np.ndarray, low: np.ndarray, high: np.ndarray,
+                    warm_y: np.ndarray | None) -> tuple[np.ndarray | None, np.ndarray, str, int]:
+        """Hot start from the active set of ``warm_y`` (its sign: which bound); cold if that
+        fails (a stale working set can be degenerate for the new data)."""
+        sense = self._cold
+        if warm_y is not None and len(warm_y) == self.n_con:
+            sense = np.sign(warm_y).astype(np.int32)
+            sense &= _SENSE_MASK
+        iters = 0
+        while True:
+            self.solver.update(f=q, bupper=high, blower=low, sense=sense)
+            x, _, flag, info = self.solver.solve()
+            iters += int(info["iterations"])
+            if flag == _DAQP_OPTIMAL or sense is self._cold:
+                break
+            sense = self._cold
+        status = _DAQP_STATUS.get(int(flag), f"exitflag {flag}")
+        if flag != _DAQP_OPTIMAL or not np.all(np.isfinite(x)):
+            return None, np.zeros(self.n_con), status, iters
+        return x, info["lam"], status, iters

@@ -55,7 +55,7 @@ import numpy as np
 from scipy.linalg import solve_discrete_are
 
 from controllers.common.design_model import A_C, U_PREV, DesignModel, S, V, brake_delay_model
-from controllers.common.qp import HorizonQP, QPResult, support_of_sum
+from controllers.common.qp import QP_SOLVERS, HorizonQP, QPResult, support_of_sum
 from controllers.common.stopping import MEASURED_SPEED_POSITION, u_max_param, u_min_param
 from cosim.fmu.declare import Declared, Var, build, group, param, sample_time
 from cosim.fmu.profiles import StoppingCurve, ref_decel_param, stop_point_param
@@ -107,6 +107,8 @@ class StopMpcParams:
     standstill_command: float = param(30.0, "%", "least brake command while held at "
                                       "standstill", min=0.0, max=100.0)
     eps: float = 1e-7  # OSQP tolerance
+    qp_solver: str = param("daqp", description='QP solver: "daqp" (exact active set, default) '
+                           'or "osqp" (ADMM)')
 
     def check(self) -> None:
         if int(self.horizon) != self.horizon or self.horizon < 2:
@@ -127,6 +129,8 @@ class StopMpcParams:
             raise ValueError(f"terminal_set_scale = {self.terminal_set_scale} must be >= 1")
         if not self.u_min < self.u_max:
             raise ValueError(f"u_min = {self.u_min} must be < u_max = {self.u_max}")
+        if self.qp_solver not in QP_SOLVERS:
+            raise ValueError(f"qp_solver = {self.qp_solver!r} must be one of {QP_SOLVERS}")
 
 
 def disturbance_bounds(p: StopMpcParams, route: Route) -> tuple[float, float]:
@@ -206,7 +210,7 @@ class _StopMpcBase(StatefulCore, Declared):
         self.command = float(params.initial_command)
         self.last_t: float | None = None
         self.anchor: list[float] | None = None  # [t0, s0] of the time-indexed reference
-        self.warm: dict[int, list[list[float]]] = {}
+        self.warm: dict[int, list[np.ndarray]] = {}
         self.plan: list[float] = []
         self.hold = 1
         self.qp_solves = 0
@@ -269,7 +273,8 @@ class _StopMpcBase(StatefulCore, Declared):
         return HorizonQP(self.model.A, self.model.b, self.model.g, H, free, self.Q, p.r_du,
                          self.P, stage_scale=scale, F=self.F, ref_mask=self.ref_mask, lo=lo,
                          hi=hi, F_term=self.F_term if self.tube else None, lo_term=lo_term,
-                         hi_term=hi_term, du_min=-p.du_max, du_max=p.du_max, eps=p.eps)
+                         hi_term=hi_term, du_min=-p.du_max, du_max=p.du_max, eps=p.eps,
+                         solver=p.qp_solver)
 
     def qp(self, hold: int) -> HorizonQP:
         if hold not in self._qps:
@@ -326,11 +331,11 @@ class _StopMpcBase(StatefulCore, Declared):
         ref = self.reference(t, qp.H, a_r_ref)
         warm = self.warm.get(hold)
         res = qp.solve(x0, ref, d if self.feedforward else None,
-                       warm_x=None if warm is None else np.array(warm[0]),
-                       warm_y=None if warm is None else np.array(warm[1]))
+                       warm_x=None if warm is None else warm[0],
+                       warm_y=None if warm is None else warm[1])
         self.qp_solves += 1
-        if res.feasible:
-            self.warm[hold] = [res.U.tolist(), res.dual.tolist()]
+        if res.feasible:  # the QP's own arrays (fresh per solve): primal and dual warm start
+            self.warm[hold] = [res.U, res.dual]
         return res, ref
 
     def fallback(self, x0: np.ndarray, t: float) -> float:

@@ -1,0 +1,318 @@
+"""Compiled plant kernels (numba), one call per communication step (issue 10).
+
+:func:`freight_steps` advances :class:`plants.freight.FreightTrain` over a run of sub-steps with
+the equations of its numpy reference (``FreightTrain._substep``, kept and tested against this):
+traction lag, brake-pipe wave and cylinder filling (eq. 9), resistance (eqs. 2-6) and the
+trapezoidal coupler step; the tridiagonal coupler system is solved by the Thomas algorithm
+(O(n), diagonally dominant, no pivoting) instead of the cached dense inverse. The route's
+additional resistance is integrated over each vehicle's length from the per-segment slopes of
+the cumulative profile, each vehicle keeping the segment its front and rear were last in
+(a hint: the search walks from it, so a segment is only changed when a vehicle crosses a
+boundary).
+
+numba is optional: without it (``KERNELS is False``) the plants run their numpy reference.
+The on-disk cache is keyed by the content of this file (not its path or time stamp), under
+``$ATO_COSIM_NUMBA_CACHE`` or ``$XDG_CACHE_HOME/ato-cosim/numba`` (default ``~/.cache``), so an
+FMU extracted to a fresh temporary directory reuses the machine code compiled by an earlier
+extraction instead of compiling again (about a second).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+import os
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+try:  # numba is a third-party dependency of the plant FMUs, optional at run time
+    import numba
+    from numba.core import caching as _caching
+except ImportError:  # pragma: no cover - exercised where numba is missing
+    numba = None
+    _caching = None
+
+KERNELS = numba is not None and os.environ.get("ATO_COSIM_NO_KERNELS", "") == ""
+_SOURCE = Path(__file__).resolve()
+_DIGEST = hashlib.sha256(_SOURCE.read_bytes()).hexdigest()[:20]
+KMH = 1.0 / 3.6
+
+
+def cache_dir() -> Path:
+    """Where compiled kernels are kept (one sub-folder per content digest of this file)."""
+    env = os.environ.get("ATO_COSIM_NUMBA_CACHE")
+    if env:
+        return Path(env)
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return Path(base) / "ato-cosim" / "numba"
+
+
+if KERNELS:
+    class _ContentCacheLocator(_caching._CacheLocator):
+        """numba cache locator for this file only: by content digest, not path or mtime."""
+
+        def __init__(self, py_func, py_file):
+            self._path = str(cache_dir() / _DIGEST)
+
+        def ensure_cache_path(self):
+            os.makedirs(self._path, exist_ok=True)
+            tempfile.TemporaryFile(dir=self._path).close()  # writable, or numba moves on
+
+        def get_cache_path(self):
+            return self._path
+
+        def get_source_stamp(self):
+            return _DIGEST
+
+        def get_disambiguator(self):
+            return _DIGEST
+
+        @classmethod
+        def from_function(cls, py_func, py_file):
+            try:
+                if Path(py_file).resolve() != _SOURCE:
+                    return None
+                locator = cls(py_func, py_file)
+                locator.ensure_cache_path()
+            except OSError:
+                return None  # not writable: numba tries its own locators, else no cache
+            return locator
+
+    if _ContentCacheLocator not in _caching.CacheImpl._locator_classes:
+        _caching.CacheImpl._locator_classes.insert(0, _ContentCacheLocator)
+    _OPTIONS = dict(cache=True, nogil=True, fastmath=False, error_model="numpy")
+    njit = numba.njit(**_OPTIONS)
+
+    def njit_eager(signature):
+        """Compiled (or loaded from the cache) at import: inside an FMU the bundled module is
+        only importable while the FMU imports it, so nothing may compile lazily later."""
+        return numba.njit(signature, **_OPTIONS)
+else:
+    def njit(func):
+        return func
+
+    def njit_eager(signature):
+        return njit
+
+
+# constants vector of the freight kernel (indices)
+(C_STICTION, C_K, C_C, C_SLACK, C_MODEL, C_TAU, C_RAMP_RATE, C_F_MAX, C_P_MAX, C_ED_MAX,
+ C_ED_P_MAX, C_ED_FADE, C_PMAX, C_FILL_T, C_FILL_E, C_REL_T, C_REL_E, C_R_FULL, C_R_MIN) = range(19)
+N_CONST = 19
+# scalar state vector (in/out)
+S_TRACTION, S_ENERGY, S_PEAK_DRAFT, S_PEAK_BUFF, S_ACCEL, S_FIRST = range(6)
+
+
+@njit
+def _interp(x, xs, cum, slopes, j):
+    """``np.interp(x, xs, cum)`` walking from segment hint ``j``; returns (value, segment)."""
+    n = xs.size
+    if x < xs[0]:
+        return cum[0], 0
+    if x >= xs[n - 1]:
+        return cum[n - 1], n - 2
+    while j < n - 2 and x >= xs[j + 1]:
+        j += 1
+    while j > 0 and x < xs[j]:
+        j -= 1
+    if xs[j] == x:
+        return cum[j], j
+    return slopes[j] * (x - xs[j]) + cum[j], j
+
+
+@njit
+def _target_pressure(r, cp):
+    if r >= max(cp[C_R_MIN], 1e-9):
+        return cp[C_PMAX] * min(r / cp[C_R_FULL], 1.0)
+    return 0.0
+
+
+@njit
+def _evolve(pres, target, dt, cp):
+    """FreightTrain.evolve_pressure for one vehicle."""
+    pmax = cp[C_PMAX]
+    frac = min(pres / pmax, 1.0)
+    if pres < target:
+        t_up = cp[C_FILL_T] * frac ** (1.0 / cp[C_FILL_E])
+        up = pmax * min((t_up + dt) / cp[C_FILL_T], 1.0) ** cp[C_FILL_E]
+        return min(up, target)
+    if pres > target:
+        t_down = cp[C_REL_T] * (1.0 - frac) ** (1.0 / cp[C_REL_E])
+        down = pmax * (1.0 - min((t_down + dt) / cp[C_REL_T], 1.0) ** cp[C_REL_E])
+        return max(down, target)
+    return pres
+
+
+@njit
+def _traction(f0, demand, v_head, h, cp):
+    """FreightTrain._traction_step: (force at the end, mean force) over a sub-step."""
+    speed = abs(v_head)
+    if speed > 0:
+        trac = min(cp[C_F_MAX], cp[C_P_MAX] / speed)
+        ed = min(cp[C_ED_MAX], cp[C_ED_P_MAX] / speed)
+    else:
+        trac = cp[C_F_MAX]
+        ed = cp[C_ED_MAX]
+    if cp[C_ED_FADE] > 0 and speed < cp[C_ED_FADE]:
+        ed *= speed / cp[C_ED_FADE]
+    target = min(max(demand, -ed), trac)
+    if cp[C_MODEL] == 0.0:
+        tau = cp[C_TAU]
+        decay = math.exp(-h / tau)
+        return target + (f0 - target) * decay, target + (f0 - target) * tau / h * (1.0 - decay)
+    rate = cp[C_RAMP_RATE]
+    gap = target - f0
+    step = rate * h
+    if abs(gap) <= step:
+        t_reach = abs(gap) / rate
+        return target, target - gap * t_reach / (2.0 * h)
+    f1 = f0 + math.copysign(step, gap)
+    return f1, 0.5 * (f0 + f1)
+
+
+@njit
+def _coupler(gap, dv, cp):
+    """(stiffness, damping, free play to subtract) of one coupler from its gap (m)."""
+    k, c, slack = cp[C_K], cp[C_C], cp[C_SLACK]
+    if slack > 0:
+        half = 0.5 * slack
+        if gap > half:
+            return k, c, half
+        if gap < -half:
+            return k, c, -half
+        return 0.0, 0.0, 0.0
+    return k, c, 0.0
+
+
+_F = "float64[:]"
+_FREIGHT_SIGNATURE = (f"void({', '.join([_F] * 8)}, float64[:, :], {', '.join([_F] * 11)}, "
+                      f"int64[:], int64[:], {_F})")
+
+
+@njit_eager(_FREIGHT_SIGNATURE)
+def freight_steps(x, v, pres, sc, hs, t0s, t1s, demands, arrivals, values, m_eff, length,
+                  res_a, res_b, res_c, weight_per_kn, brake_scale, xs, cum, slopes, hint_f,
+                  hint_r, cp):
+    """Advance the freight train over the sub-steps ``hs`` (s) from ``t0s`` to ``t1s``.
+
+    ``x``, ``v``, ``pres`` (per vehicle) and ``sc`` (scalars, ``S_*``) are updated in place;
+    ``demands`` is the delayed traction demand per sub-step; ``arrivals[k, i]`` the time the
+    brake-pipe command ``k`` (reduction ``values[k]``) reaches vehicle ``i``; commands before
+    ``sc[S_FIRST]`` are forgotten (all vehicles passed them). Peaks are reset by the caller.
+    """
+    n = x.size
+    K = values.size
+    first = int(sc[S_FIRST])
+    f_trac = sc[S_TRACTION]
+    force = np.empty(n)
+    start = np.empty(n)
+    mean_p = np.empty(n)
+    gap = np.empty(max(n - 1, 0))
+    dv = np.empty(max(n - 1, 0))
+    w = np.empty(max(n - 1, 0))
+    cprime = np.empty(n)
+    rprime = np.empty(n)
+    v1 = np.empty(n)
+    m_total = 0.0
+    for i in range(n):
+        m_total += m_eff[i]
+    stiction = cp[C_STICTION]
+    for s in range(hs.size):
+        h, t0, t1 = hs[s], t0s[s], t1s[s]
+        f1, f_mean = _traction(f_trac, demands[s], v[0], h, cp)
+        # air brake: cylinder pressures over [t0, t1], mean over the sub-step
+        for i in range(n):
+            start[i] = pres[i]
+        if K - first == 1:
+            target = _target_pressure(values[first], cp)
+            same = True
+            for i in range(n):
+                if pres[i] != target:
+                    same = False
+                    break
+            if not same:
+                for i in range(n):
+                    pres[i] = _evolve(pres[i], target, t1 - t0, cp)
+        else:
+            newest = K
+            for i in range(n):
+                idx0 = first
+                idx1 = first
+                for k in range(first + 1, K):
+                    if arrivals[k, i] <= t0:
+                        idx0 = k
+                    if arrivals[k, i] <= t1:
+                        idx1 = k
+                switch = min(max(arrivals[idx1, i], t0), t1)
+                mid = _evolve(pres[i], _target_pressure(values[idx0], cp), switch - t0, cp)
+                pres[i] = _evolve(mid, _target_pressure(values[idx1], cp), t1 - switch, cp)
+                newest = min(newest, idx1)
+            if newest > first:
+                first = newest
+        braking = False
+        for i in range(n):
+            mean_p[i] = 0.5 * (start[i] + pres[i])
+            if mean_p[i] != 0.0:
+                braking = True
+        # resistance, brake and route forces at the sub-step start / predicted mid-point
+        for i in range(n):
+            speed = abs(v[i])
+            diss = res_a[i] + (res_b[i] + res_c[i] * speed) * speed
+            if braking:
+                kmh = abs(v[i]) / KMH
+                diss = diss + brake_scale[i] * mean_p[i] * (
+                    0.322 * (kmh + 150.0) / (2.0 * kmh + 150.0))
+            direction = max(min(v[i] / stiction, 1.0), -1.0)
+            front = x[i] + 0.5 * h * v[i]
+            c_front, hint_f[i] = _interp(front, xs, cum, slopes, hint_f[i])
+            c_rear, hint_r[i] = _interp(front - length[i], xs, cum, slopes, hint_r[i])
+            force[i] = -diss * direction - weight_per_kn[i] * ((c_front - c_rear) / length[i])
+        force[0] += f_mean
+        # couplers: trapezoidal rule, engagement (slack) fixed at the sub-step start
+        for j in range(n - 1):
+            gap[j] = x[j] - length[j] - x[j + 1]
+            dv[j] = v[j] - v[j + 1]
+            k, c, off = _coupler(gap[j], dv[j], cp)
+            y = k * (gap[j] - off) + (0.25 * h * k + 0.5 * c) * dv[j]
+            force[j] -= y
+            w[j] = 0.25 * h * h * k + 0.5 * h * c
+        for j in range(n - 1):
+            k, c, off = _coupler(gap[j], dv[j], cp)
+            force[j + 1] += k * (gap[j] - off) + (0.25 * h * k + 0.5 * c) * dv[j]
+        # (diag(m) + W-Laplacian) v1 = m v0 + h force: Thomas algorithm
+        for i in range(n):
+            diag = m_eff[i]
+            if i > 0:
+                diag += w[i - 1]
+            if i < n - 1:
+                diag += w[i]
+            rhs = m_eff[i] * v[i] + h * force[i]
+            if i > 0:
+                diag += w[i - 1] * cprime[i - 1]
+                rhs += w[i - 1] * rprime[i - 1]
+            cprime[i] = -w[i] / diag if i < n - 1 else 0.0
+            rprime[i] = rhs / diag
+        v1[n - 1] = rprime[n - 1]
+        for i in range(n - 2, -1, -1):
+            v1[i] = rprime[i] - cprime[i] * v1[i + 1]
+        sc[S_ENERGY] += f_mean * 0.5 * (v[0] + v1[0]) * h
+        momentum = 0.0
+        for i in range(n):
+            momentum += m_eff[i] * (v1[i] - v[i])
+            x[i] = x[i] + 0.5 * h * (v[i] + v1[i])
+            v[i] = v1[i]
+        sc[S_ACCEL] = momentum / (h * m_total)
+        f_trac = f1
+        for j in range(n - 1):
+            g = x[j] - length[j] - x[j + 1]
+            d = v[j] - v[j + 1]
+            k, c, off = _coupler(g, d, cp)
+            fc = k * (g - off) + c * d
+            if fc > sc[S_PEAK_DRAFT]:
+                sc[S_PEAK_DRAFT] = fc
+            if -fc > sc[S_PEAK_BUFF]:
+                sc[S_PEAK_BUFF] = -fc
+    sc[S_TRACTION] = f_trac
+    sc[S_FIRST] = first

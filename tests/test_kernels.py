@@ -1,0 +1,104 @@
+"""Compiled plant kernels (plants/kernels.py, numba) against the numpy reference paths.
+
+Both paths integrate the same equations on the same sub-step grid; they differ only in rounding:
+the coupler system is solved by the Thomas algorithm instead of a product with the cached dense
+inverse, sums run in another order, and numpy may use its own SIMD ``pow``. Per sub-step the
+speeds then differ by at most the matvec rounding bound ``(n + 8) eps |v|_max`` (``n``
+vehicles: a length-``n`` dot product, plus a few roundings of the Thomas sweep), the
+pressures by a few ulps of ``p_max`` (two ``pow`` per update), and the dynamics are stable
+(trapezoidal couplers, dissipative resistance), so these add up over the sub-steps:
+``tol_v = n_sub (n + 8) eps |v|_max``; positions take their own ulps plus the integral of the
+speed error, ``tol_x = n_sub 2 eps |x|_max + T tol_v``. States are drawn away from the
+non-smooth points (standstill regularisation, electric-brake fade), where a rounding-level
+difference could be amplified by ``1 / stiction_speed``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from cosim.fmu.state import to_ticks
+from plants import kernels
+from plants.freight import FreightParams, FreightTrain
+from plants.route import load_route
+
+pytestmark = pytest.mark.skipif(not kernels.KERNELS, reason="numba not installed")
+EPS = np.finfo(float).eps
+COMM = 0.2
+
+
+def random_state(train: FreightTrain, rng: np.random.Generator) -> dict:
+    """A moving train in the middle of the route with brake-pipe commands still travelling."""
+    n = train.x.size
+    state = train.get_state()
+    t0 = 300.0
+    state["t_ticks"] = to_ticks(t0)
+    state["v"] = rng.uniform(8.0, 22.0) + rng.uniform(-0.05, 0.05, n)
+    state["x"] = state["x"] + rng.uniform(3000.0, 15000.0) + rng.uniform(-0.01, 0.01, n)
+    state["pressure"] = rng.uniform(0.0, train.p.max_cylinder_pressure, n)
+    state["traction_force"] = rng.uniform(-3e5, 5e5)
+    state["traction_history"] = [[-(2**62), 0.0], [to_ticks(t0 - 0.3), rng.uniform(-4e5, 6e5)]]
+    state["brake_history"] = [[t0 - 30.0, 0.0], [t0 - 4.0, rng.uniform(60e3, 150e3)],
+                              [t0 - 1.0, rng.uniform(0.0, 40e3)]]
+    return state
+
+
+@pytest.mark.parametrize("slack", [0.0, 0.05])
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_freight_kernel_matches_the_numpy_reference(seed: int, slack: float) -> None:
+    params = FreightParams(coupler_slack=slack)
+    route = load_route("freight_20km")
+    fast = FreightTrain(params, route, kernel=True)
+    ref = FreightTrain(params, route, kernel=False)
+    assert fast.kernel and not ref.kernel
+    rng = np.random.default_rng(seed)
+    state = random_state(ref, rng)
+    fast.set_state(state)
+    ref.set_state(state)
+    steps = 12
+    t = state["t_ticks"]
+    peaks = []
+    for _ in range(steps):
+        inputs = {"force_demand": float(rng.uniform(-4e5, 6e5)),
+                  "pipe_reduction": float(rng.choice([0.0, 30e3, 80e3, 140e3]))}
+        for train in (fast, ref):
+            train.advance(t, to_ticks(COMM), inputs)
+        peaks.append((fast.peak_draft - ref.peak_draft, fast.peak_buff - ref.peak_buff))
+        t += to_ticks(COMM)
+    n, n_sub, duration = ref.x.size, steps * round(COMM / params.max_step), steps * COMM
+    tol_v = n_sub * (n + 8) * EPS * np.max(np.abs(ref.v))
+    tol_x = n_sub * 2 * EPS * np.max(np.abs(ref.x)) + duration * tol_v
+    tol_p = n_sub * 4 * EPS * params.max_cylinder_pressure
+    np.testing.assert_allclose(fast.v, ref.v, rtol=0, atol=tol_v)
+    np.testing.assert_allclose(fast.x, ref.x, rtol=0, atol=tol_x)
+    np.testing.assert_allclose(fast.pressure, ref.pressure, rtol=0, atol=tol_p)
+    # forces from the state: couplers k gap + c dv, traction (power limit P / v^2 per m/s)
+    tol_f = params.coupler_stiffness * 2 * tol_x + params.coupler_damping * 2 * tol_v
+    assert np.max(np.abs(peaks)) <= tol_f
+    v_min = np.min(np.abs(ref.v))
+    tol_trac = n_sub * 4 * EPS * params.max_traction_force \
+        + params.max_traction_power / v_min**2 * tol_v
+    assert abs(fast.traction_force - ref.traction_force) <= tol_trac
+    assert abs(fast.energy - ref.energy) <= (n_sub * 4 * EPS * abs(ref.energy)
+                                             + params.max_traction_force * duration * tol_v
+                                             + tol_trac * duration * np.max(np.abs(ref.v)))
+    assert abs(fast.accel - ref.accel) <= 2 * tol_v / params.max_step
+    assert fast.brake_history == ref.brake_history
+    assert fast.outputs().keys() == ref.outputs().keys()
+    # the reference does something: the trains moved and braked
+    assert np.max(np.abs(ref.x - state["x"])) > 10.0
+    assert np.ptp(ref.pressure) > 1e3
+
+
+def test_cache_locator_is_by_content(tmp_path, monkeypatch) -> None:
+    """Compiled code is found by the digest of kernels.py, wherever the file was extracted."""
+    monkeypatch.setenv("ATO_COSIM_NUMBA_CACHE", str(tmp_path))
+    assert kernels.cache_dir() == tmp_path
+    locator = kernels._ContentCacheLocator.from_function(kernels.freight_steps.py_func,
+                                                         kernels.__file__)
+    assert locator is not None
+    assert locator.get_cache_path() == str(tmp_path / kernels._DIGEST)
+    assert locator.get_source_stamp() == kernels._DIGEST
+    other = kernels._ContentCacheLocator.from_function(len, str(tmp_path / "elsewhere.py"))
+    assert other is None  # other files keep numba's own locators
