@@ -46,6 +46,7 @@ ALL_TYPES = Spec("AllTypes", "all_types.c", (
     ("yi", "Integer", "output", "discrete", 2, None, {}),
     ("mode", "Enumeration", "input", "discrete", 3, "1", {}),
     ("next_mode", "Enumeration", "output", "discrete", 4, None, {}),
+    ("level", "Enumeration", "parameter", "fixed", 5, "1", {}),
     ("invert", "Boolean", "parameter", "fixed", 0, "false", {}),
     ("ub", "Boolean", "input", "discrete", 1, "false", {}),
     ("yb", "Boolean", "output", "discrete", 2, None, {}),
