@@ -61,3 +61,13 @@ def test_list_and_validate(built_fmus):
     checked = cosim("validate", "BrakeDelayTrain", "StopPid")
     assert checked.returncode == 0, checked.stdout + checked.stderr
     assert "problem" not in checked.stdout
+
+
+def test_error_keeps_the_scenario_keys(built_fmus, tmp_path):
+    """Scenario keys in brackets are printed as written (not taken as console markup)."""
+    done = cosim("run", "seed000_stop_pid", "--algorithm", "fixed", "--set",
+                 "simulation.base_step=1.0", "--set", "simulation.output_interval=1.0",
+                 "--out", str(tmp_path / "x"))
+    assert done.returncode == 2
+    assert ("[fmus.controller] sample_time = 0.2 s is not a multiple of [simulation] "
+            "base_step = 1.0 s") in " ".join(done.stderr.split() + done.stdout.split())

@@ -10,9 +10,10 @@ What it adds to pythonfmu's ``Fmi2Slave``:
   InitialUnknowns, and ModelStructure/Outputs with the *real* dependencies: a plant's outputs
   depend on no input, a controller's outputs depend on its inputs);
 * FMU state (get/set/serialize) covering the *whole* core state, not only registered variables;
-* the timing contract of ``SPEC.md`` for sampled and self-triggered controllers: outputs are
-  computed once per event from the inputs set at that event (on the first output read, or in the
-  following doStep if nobody read first) and held until the next event; doStep advances the clock.
+* the timing contract of ``SPEC.md`` for sampled and self-triggered controllers: at an event,
+  outputs are computed on read from the current inputs (nothing committed) and the event is
+  committed by doStep from the inputs it is given; outputs hold until the next event; a doStep
+  that would pass over an event, or does not continue from the controller's time, is refused.
 
 Times are kept in integer nanoseconds so that sample times ``k * T`` never drift.
 """
@@ -487,6 +488,16 @@ class SampledControllerSlave(CoreSlave):
     Core API: ``compute(t_s, inputs) -> (outputs: dict, hold_samples: int)``. The event after
     one at tick ``k`` is at ``k + hold_samples * sample_time``; periodic controllers return 1.
     The output ``next_event_time`` (s) announces it to the master.
+
+    Timing contract under any master (SPEC timing contract, FMI 2.0.4 sec. 4.2.2):
+
+    * at an event instant, reading an output computes the event from the *current* inputs on a
+      copy of the core state (nothing is committed): inputs set again at the same instant, as an
+      iterating master does, give outputs of the new inputs; doStep commits the event computed
+      from the inputs it is given (reusing the last read's result when the inputs are the same);
+    * doStep must continue from the controller's own time, and a step may not pass over one of
+      its sample instants (that event would be skipped): such a doStep is refused with
+      fmi2Error and a message naming the event, so no event is ever dropped silently.
     """
 
     output_variability = "discrete"
@@ -496,6 +507,8 @@ class SampledControllerSlave(CoreSlave):
         self.now_ticks = 0
         self.next_event_ticks = 0
         self.event_done_ticks: int | None = None
+        # event computed on a read, not committed: (key, outputs, hold, core state after)
+        self._tentative: tuple[Any, dict[str, Any], int, Any] | None = None
 
     @classmethod
     def declared_variables(cls) -> tuple[Var, ...]:
@@ -509,48 +522,84 @@ class SampledControllerSlave(CoreSlave):
         self.now_ticks = self.start_ticks
         self.next_event_ticks = self.start_ticks
         self.event_done_ticks = None
+        self._tentative = None
 
     def sample_ticks(self) -> int:
         return to_ticks(self.values["sample_time"])
 
-    def refresh_outputs(self) -> None:
-        if self.initialized:
-            self._run_due_event()
+    def _event_due(self) -> bool:
+        return self.now_ticks >= self.next_event_ticks and self.event_done_ticks != self.now_ticks
 
-    def _run_due_event(self) -> None:
-        if self.now_ticks < self.next_event_ticks or self.event_done_ticks == self.now_ticks:
-            return
+    def _grid_event(self) -> int:
+        """The scheduled event being run at ``now`` (the sampling grid is kept if late)."""
+        event, period = self.next_event_ticks, self.sample_ticks()
+        while event + period <= self.now_ticks:
+            event += period
+        return event
+
+    def _compute_tentative(self) -> tuple[Any, dict[str, Any], int, Any]:
+        """The due event computed from the current inputs on a copy of the core state."""
         inputs = self.inputs()
+        key = (self.now_ticks, tuple(sorted(inputs.items())))
+        if self._tentative is not None and self._tentative[0] == key:
+            return self._tentative
         for name, value in inputs.items():
             if isinstance(value, float) and not math.isfinite(value):
                 raise ValueError(f"input {name} = {value} is not finite")
-        outputs, hold = self.core.compute(to_seconds(self.now_ticks), inputs)
-        hold = max(1, int(hold))
-        # keep the sampling grid: the event is the scheduled one even if the master is late
-        event = self.next_event_ticks
-        period = self.sample_ticks()
-        while event + period <= self.now_ticks:
-            event += period
-        self.next_event_ticks = event + hold * period
-        self.event_done_ticks = self.now_ticks
-        self.executions += 1
+        saved = self.core.get_state()
+        try:
+            outputs, hold = self.core.compute(to_seconds(self.now_ticks), inputs)
+            after = self.core.get_state()
+        finally:
+            self.core.set_state(saved)
+        self._tentative = (key, dict(outputs), max(1, int(hold)), after)
+        return self._tentative
+
+    def _show(self, outputs: dict[str, Any], next_event: int, executions: int) -> None:
         self.outputs.update(outputs)
-        self.outputs["next_event_time"] = to_seconds(self.next_event_ticks)
-        self.outputs["executions"] = self.executions
+        self.outputs["next_event_time"] = to_seconds(next_event)
+        self.outputs["executions"] = executions
+
+    def refresh_outputs(self) -> None:
+        if self.initialized and self._event_due():
+            _, outputs, hold, _ = self._compute_tentative()
+            self._show(outputs, self._grid_event() + hold * self.sample_ticks(),
+                       self.executions + 1)
 
     def after_core_built(self) -> None:
         super().after_core_built()
-        self.outputs["next_event_time"] = to_seconds(self.next_event_ticks)
-        self.outputs["executions"] = self.executions
+        self._show({}, self.next_event_ticks, self.executions)
 
     def do_step(self, current_time: float, step_size: float) -> bool:
         self.require_mode("fmi2DoStep", "initialized")
         self.ensure_core()
         if not step_size > 0.0 or not math.isfinite(step_size):
             raise ValueError(f"doStep: step size {step_size} must be positive and finite")
-        self.now_ticks = to_ticks(current_time)
-        self._run_due_event()  # nobody read the outputs at this event: compute now
-        self.now_ticks = to_ticks(current_time + step_size)
+        if not math.isfinite(current_time) or to_ticks(current_time) != self.now_ticks:
+            raise ValueError(f"doStep at t={current_time} s, but this controller is at "
+                             f"t={to_seconds(self.now_ticks)} s (a step must continue from "
+                             "the end of the previous one)")
+        end = to_ticks(current_time + step_size)
+        due = self._event_due()
+        if due:
+            _, outputs, hold, after = self._compute_tentative()
+            following = self._grid_event() + hold * self.sample_ticks()
+        else:
+            following = self.next_event_ticks
+        if following < end:
+            raise ValueError(
+                f"doStep from t={current_time} s to t={to_seconds(end)} s passes over this "
+                f"controller's event at t={to_seconds(following)} s (sample_time "
+                f"{self.values['sample_time']} s), which would be skipped: use communication "
+                "steps that end on its sample instants (at most sample_time long)")
+        if due:  # commit the event computed from the inputs of this doStep
+            self.core.set_state(after)
+            self.next_event_ticks = following
+            self.event_done_ticks = self.now_ticks
+            self.executions += 1
+            self._show(outputs, following, self.executions)
+            self._tentative = None
+        self.now_ticks = end
         return True
 
     def slave_state(self) -> dict[str, Any]:
@@ -561,6 +610,7 @@ class SampledControllerSlave(CoreSlave):
         self.now_ticks = state["now"]
         self.next_event_ticks = state["next"]
         self.event_done_ticks = state["done"]
+        self._tentative = None
 
 
 for _name in _FMI_ENTRY_POINTS:  # CoreSlave's own and those inherited from Fmi2Slave

@@ -27,7 +27,7 @@ from typing import Any
 from xml.etree.ElementTree import Element, SubElement, indent, register_namespace, tostring
 
 from cosim.run.fmi_types import enumeration_items, to_fmi
-from cosim.run.scenario import Scenario, check_against_fmus, load_scenario
+from cosim.run.scenario import Scenario, check_against_fmus, check_timing, load_scenario
 
 SSD = "http://ssp-standard.org/SSP1/SystemStructureDescription"
 SSC = "http://ssp-standard.org/SSP1/SystemStructureCommon"
@@ -189,6 +189,7 @@ def export_ssp(scenario: str | Path | Scenario, out: str | Path,
             raise FileNotFoundError(f"{comp.name}: {comp.fmu_path} not found (run cosim build)")
         descriptions[comp.name] = read_model_description(str(comp.fmu_path))
     check_against_fmus(sc, descriptions)
+    check_timing(sc, descriptions, "jacobi")  # libcosim steps every FMU at the base step
     try:
         order_connections(sc.connections, {n: output_dependencies(md)
                                            for n, md in descriptions.items()},

@@ -46,6 +46,7 @@ from cosim.run.scenario import (
     Scenario,
     ScenarioError,
     check_against_fmus,
+    check_timing,
     load_scenario,
 )
 
@@ -441,6 +442,7 @@ class Master:
             extracted[comp.fmu_path] = extract_once(comp.fmu_path)
             descriptions[comp.name] = read_model_description(str(comp.fmu_path))
         check_against_fmus(sc, descriptions)
+        check_timing(sc, descriptions, self.algorithm_name)
         by_name: dict[str, FmuUnit] = {}
         for comp in sc.components.values():
             unit = FmuUnit(comp.name, comp.fmu_path, extracted[comp.fmu_path],

@@ -39,6 +39,7 @@ except ModuleNotFoundError:  # Python 3.10
     import tomli as tomllib  # type: ignore[no-redef]
 
 from cosim.fmu.build import FMU_DIR, ROOT
+from cosim.fmu.state import to_ticks
 from cosim.run import fmi_types
 
 SCENARIO_DIR = ROOT / "scenarios"
@@ -374,3 +375,37 @@ def check_against_fmus(scenario: Scenario, descriptions: dict[str, Any]) -> None
         for ref in value if isinstance(value, list) else [value]:
             if isinstance(ref, str) and "." in ref and ref.split(".", 1)[0] in variables:
                 check_ref(ref, f"[summary] {key}")
+
+
+def check_timing(scenario: Scenario, descriptions: dict[str, Any], algorithm: str) -> None:
+    """Fixed-step algorithms (``fixed``, ``jacobi``; also libcosim running an SSP export) only
+    exchange values every ``base_step``: the output points and every sampled FMU's sample
+    instants must be communication points, so ``output_interval`` and each ``sample_time``
+    must be multiples of ``base_step`` (a longer base step would skip controller events, which
+    our controllers refuse; a misaligned output grid would be recorded elsewhere)."""
+    if algorithm not in ("fixed", "jacobi"):
+        return
+    src, sim = scenario.path, scenario.simulation
+    base = sim.base_step if sim.base_step is not None else sim.output_interval
+    base_ticks = to_ticks(base)
+    if to_ticks(sim.output_interval) % base_ticks:
+        raise ScenarioError(
+            f"{src}: [simulation] output_interval = {sim.output_interval} s is not a multiple "
+            f"of base_step = {base} s: with algorithm {algorithm!r} values exist only at the "
+            f"communication points (every {base} s); make output_interval a multiple of "
+            "base_step")
+    for name, comp in scenario.components.items():
+        variables = {v.name: v for v in descriptions[name].modelVariables}
+        sample = comp.sample_time if comp.sample_time is not None else \
+            comp.parameters.get("sample_time")
+        var = variables.get("sample_time")
+        if sample is None and var is not None and var.causality == "parameter" and var.start:
+            sample = float(var.start)
+        if sample is None or not isinstance(sample, (int, float)) or sample <= 0:
+            continue
+        if to_ticks(float(sample)) % base_ticks:
+            raise ScenarioError(
+                f"{src}: [fmus.{name}] sample_time = {sample} s is not a multiple of "
+                f"[simulation] base_step = {base} s: with algorithm {algorithm!r} its events "
+                "would fall inside communication steps (a base step longer than the sample "
+                "time would skip events); choose a base_step that divides every sample_time")

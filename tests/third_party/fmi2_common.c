@@ -257,6 +257,11 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean noPri
     Inst *m = c;
     (void)noPrior;
     if (!in_mode(m, "fmi2DoStep", 1 << STEPPING)) return fmi2Error;
+#ifdef HANG_ON_NAN_STEP
+    volatile int spin = h != h; /* a NaN step size never returns, as some FMUs do */
+    while (spin) {
+    }
+#endif
     if (!(h > 0.0)) {
         logf_(m, fmi2Error, "fmi2DoStep: step size %g must be positive", h);
         return fmi2Error;

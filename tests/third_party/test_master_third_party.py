@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from fmpy import simulate_fmu
+from third_party_fmus import MODE_ITEMS
 
 from cosim.run.master import SimulationError, run_scenario
 from cosim.run.scenario import ScenarioError, load_scenario
@@ -69,7 +70,7 @@ def assert_same_as_fmpy(result, fmu: Path, name: str, start_values: dict, stop: 
 
 CASES = {
     # name: (parameters, inputs, outputs compared, stop time)
-    "AllTypes": ({"gain": 1.5, "offset": -3, "invert": True, "label": "x"},
+    "AllTypes": ({"gain": 1.5, "offset": -3, "invert": True, "label": "x", "level": "normal"},
                  {"u": 0.25, "ui": 7, "ub": False, "mode": 2, "us": "s"},
                  ["y", "yi", "next_mode", "yb"], 1.0),
     "Terminator": ({"stop_at": 0.625}, {}, ["x", "steps"], 1.0),
@@ -87,7 +88,10 @@ def test_alone_equals_fmpy(c_fmus, tmp_path, name, algorithm):
                           algorithm=algorithm)
     result = run_scenario(path, build=False, plot=False)
     assert result.completed
-    assert_same_as_fmpy(result, c_fmus[name], "m", {**params, **inputs}, stop, outputs)
+    # fmpy takes an Enumeration by value only
+    values = {k: MODE_ITEMS.index(v) + 1 if k == "level" else v
+              for k, v in {**params, **inputs}.items()}
+    assert_same_as_fmpy(result, c_fmus[name], "m", values, stop, outputs)
 
 
 def test_enumeration_by_item_name_and_every_type_through_connections(c_fmus, tmp_path):

@@ -18,7 +18,8 @@ def test_every_type_exports_and_validates(c_fmus, tmp_path):
     f = c_fmus["AllTypes"]
     conn = {"B.u": "A.y", "B.ui": "A.yi", "B.mode": "A.next_mode", "B.ub": "A.yb",
             "B.us": "A.ys"}
-    path = write_scenario(tmp_path, {"A": (f, {"label": "a", "offset": 3, "invert": True},
+    path = write_scenario(tmp_path, {"A": (f, {"label": "a", "offset": 3, "invert": True,
+                                               "level": 2},
                                            {"mode": "fast", "u": 1.0, "ui": 2, "ub": True,
                                             "us": "z"}),
                                      "B": (f, {}, {})}, conn)
@@ -27,7 +28,8 @@ def test_every_type_exports_and_validates(c_fmus, tmp_path):
     assert len(ssd.system.connections) == 5
     xml = zipfile.ZipFile(out).read("SystemStructure.ssd").decode()
     assert '<ssc:Item name="fast" value="3" />' in xml
-    assert '<ssv:Enumeration value="fast" name="Mode" />' in xml
+    assert '<ssv:Enumeration value="fast" name="Mode" />' in xml  # input constant, by name
+    assert '<ssv:Enumeration value="normal" name="Mode" />' in xml  # parameter given as 2
     assert '<ssv:String value="a" />' in xml and '<ssv:Integer value="3" />' in xml
     assert '<ssc:Enumeration name="Mode" />' in xml
 

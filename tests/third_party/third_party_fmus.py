@@ -34,6 +34,7 @@ class Spec:
     variable_step: bool = True
     stop_time: float = 1.0
     step: float = 0.125
+    defines: tuple[str, ...] = ()  # C preprocessor switches, e.g. HANG_ON_NAN_STEP
 
 
 ALL_TYPES = Spec("AllTypes", "all_types.c", (
@@ -45,6 +46,7 @@ ALL_TYPES = Spec("AllTypes", "all_types.c", (
     ("yi", "Integer", "output", "discrete", 2, None, {}),
     ("mode", "Enumeration", "input", "discrete", 3, "1", {}),
     ("next_mode", "Enumeration", "output", "discrete", 4, None, {}),
+    ("level", "Enumeration", "parameter", "fixed", 5, "1", {}),
     ("invert", "Boolean", "parameter", "fixed", 0, "false", {}),
     ("ub", "Boolean", "input", "discrete", 1, "false", {}),
     ("yb", "Boolean", "output", "discrete", 2, None, {}),
@@ -87,8 +89,16 @@ EVENTS = Spec("Events", "events.c", (
     ("n", "Integer", "output", "discrete", 0, None, {}),
 ), dependencies={"q": (), "n": ()})
 
+# y = k u declared independent of u: wrong (a required rule of sec. 2.2.8 broken)
+FEEDTHROUGH_LYING = Spec("FeedthroughLying", "feedthrough.c", FEEDTHROUGH.variables,
+                         dependencies={"y": (), "z": ()})
+
+# doStep with a NaN step size never returns
+HANGER = Spec("Hanger", "events.c", EVENTS.variables, dependencies=EVENTS.dependencies,
+              defines=("HANG_ON_NAN_STEP",))
+
 SPECS = (ALL_TYPES, TERMINATOR, DISCARDER, DISCARDER_FIXED, FEEDTHROUGH, FEEDTHROUGH_UNDECLARED,
-         EVENTS)
+         EVENTS, FEEDTHROUGH_LYING, HANGER)
 
 
 def model_description(spec: Spec) -> bytes:
@@ -150,7 +160,8 @@ def build(spec: Spec, out_dir: Path, work: Path) -> Path:
     headers = Path(fmpy.__file__).parent / "c-code"
     lib = work / f"{spec.name}.so"
     subprocess.run(["gcc", "-std=c99", "-D_DEFAULT_SOURCE", "-Wall", "-Wextra", "-Werror",
-                    "-shared", "-fPIC", "-O1", f"-I{headers}", f"-I{HERE}", "-o", str(lib),
+                    "-shared", "-fPIC", "-O1", f"-I{headers}", f"-I{HERE}",
+                    *[f"-D{d}" for d in spec.defines], "-o", str(lib),
                     str(HERE / spec.source), "-lm"], check=True, capture_output=True, text=True)
     path = out_dir / f"{spec.name}.fmu"
     with zipfile.ZipFile(path, "w") as z:

@@ -46,31 +46,40 @@ from typing import Any
 
 from cosim.interop.compliance.common import (
     ALL_CHECKS,
+    CLAUSES,
+    CONVENTION,
     DYNAMIC_CHECKS,
     ERROR,
     NOTE,
+    RECOMMENDED,
+    REQUIRED,
     STATIC_CHECKS,
     WARNING,
     Problem,
+    classify,
     passed,
 )
 from cosim.interop.compliance.host import _Host
 from cosim.interop.compliance.model_description import check_model_description
 from cosim.interop.compliance.worker import _run_worker
 
-__all__ = ["ALL_CHECKS", "DYNAMIC_CHECKS", "ERROR", "NOTE", "STATIC_CHECKS", "WARNING",
-           "Options", "Problem", "_Host", "check_fmu", "check_model_description",
-           "check_together", "format_report", "passed"]
+__all__ = ["ALL_CHECKS", "CLAUSES", "CONVENTION", "DYNAMIC_CHECKS", "ERROR", "NOTE",
+           "RECOMMENDED", "REQUIRED", "STATIC_CHECKS", "WARNING", "Options", "Problem", "_Host",
+           "check_fmu", "check_model_description", "check_together", "classify",
+           "format_report", "passed"]
 
 
 @dataclass
 class Options:
     """Knobs of :func:`check_fmu`."""
 
-    strict: bool = True  # project conventions are errors, not warnings
+    # True: project conventions and the standard's recommendations are errors (our FMUs);
+    # False (--lenient): only what FMI 2.0.4 requires is an error, the rest warnings
+    strict: bool = True
     step_tolerance: float = 1e-9  # variable-step results vs fixed-step results (relative)
     n_steps: int = 40  # communication steps per run
-    timeout: float = 120.0  # s, per worker process (a hang is reported after this)
+    call_timeout: float = 5.0  # s, per FMI call: a call that does not return is a hang
+    timeout: float = 120.0  # s, per worker process (backstop for a hang the watchdog misses)
     # outputs (fnmatch on name, or "description:<pattern>") excluded from the exact
     # reproducibility comparisons (reset, state, instances): wall-clock measurements
     irreproducible: tuple[str, ...] = ("*wall_time*", "*solve_time*", "*cpu_time*",
@@ -82,12 +91,14 @@ class Options:
 
 def _worker_options(opts: Options) -> dict[str, Any]:
     return {"n_steps": opts.n_steps, "step_tolerance": opts.step_tolerance,
+            "call_timeout": opts.call_timeout,
             "irreproducible": list(opts.irreproducible),
             "step_dependent": list(opts.step_dependent)}
 
 
 def check_fmu(path: str | Path, options: Options | None = None) -> list[Problem]:
-    """All compliance checks of one FMU file; an empty list (or only warnings/notes) passes."""
+    """All compliance checks of one FMU file, each finding with its FMI 2.0.4 clause and
+    requirement; an empty list (or only warnings/notes) passes."""
     opts = options or Options()
     path = Path(path)
     if not path.is_file():
@@ -100,7 +111,7 @@ def check_fmu(path: str | Path, options: Options | None = None) -> list[Problem]
     if not loadable:
         return problems
     args = {"mode": "single", "paths": [str(path.resolve())], **_worker_options(opts)}
-    return problems + _run_worker(args, DYNAMIC_CHECKS, opts.timeout)
+    return classify(problems + _run_worker(args, DYNAMIC_CHECKS, opts.timeout), opts.strict)
 
 
 def check_together(paths: list[str | Path], options: Options | None = None) -> list[Problem]:
@@ -108,12 +119,14 @@ def check_together(paths: list[str | Path], options: Options | None = None) -> l
     opts = options or Options()
     args = {"mode": "together", "paths": [str(Path(p).resolve()) for p in paths],
             **_worker_options(opts)}
-    return _run_worker(args, ("together",), opts.timeout)
+    return classify(_run_worker(args, ("together",), opts.timeout), opts.strict)
 
 
 def format_report(path: str | Path, problems: list[Problem],
                   checks: tuple[str, ...] = ALL_CHECKS) -> str:
-    """A readable report: one line per check (ok / FAIL / warn), then the findings."""
+    """A readable report: one line per check (ok / FAIL / warn) with the FMI 2.0.4 clause it
+    enforces, then the findings (with what they rest on when the standard does not require
+    it: ``recommended`` or a project ``convention``)."""
     lines = [f"FMU {path}"]
     by_check: dict[str, list[Problem]] = {}
     for p in problems:
@@ -122,13 +135,13 @@ def format_report(path: str | Path, problems: list[Problem],
         found = by_check.get(check, [])
         severities = {p.severity for p in found}
         label = "FAIL" if ERROR in severities else "warn" if WARNING in severities else "ok"
-        lines.append(f"  {label:<4}  {check}")
+        clause = CLAUSES.get(check, ("", ""))[0]
+        lines.append(f"  {label:<4}  {check:<20}" + (f"  [FMI 2.0.4 {clause}]" if clause else ""))
         for p in found:
-            lines.append(f"          {p.severity}: {p.message}")
+            basis = f" ({p.requirement})" if p.requirement not in ("", REQUIRED) else ""
+            lines.append(f"          {p.severity}{basis}: {p.message}")
     n_err = sum(p.severity == ERROR for p in problems)
     n_warn = sum(p.severity == WARNING for p in problems)
     verdict = "PASSED" if n_err == 0 else "FAILED"
     lines.append(f"  {verdict}: {n_err} error(s), {n_warn} warning(s)")
     return "\n".join(lines)
-
-

@@ -4,7 +4,7 @@ and small readers of the modelDescription."""
 from __future__ import annotations
 
 import zipfile
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from xml.etree import ElementTree
 
@@ -17,6 +17,41 @@ DYNAMIC_CHECKS = ("calling-sequence", "output-dependencies", "reset", "fmu-state
                   "non-finite-inputs", "bad-parameters")
 ALL_CHECKS = STATIC_CHECKS + DYNAMIC_CHECKS
 
+# What a finding rests on: the standard's "shall" (an error everywhere), its recommendation or
+# a behaviour it leaves to the FMU (a warning under --lenient), or a project convention (ours
+# keep it; a warning under --lenient).
+REQUIRED, RECOMMENDED, CONVENTION = "required", "recommended", "convention"
+
+# check -> (FMI 2.0.4 clause it enforces, requirement of its findings unless a finding says
+# otherwise)
+CLAUSES: dict[str, tuple[str, str]] = {
+    "fmpy-validation": ("2.2 (modelDescription schema and rules)", REQUIRED),
+    "variables": ("2.2.7 (causality/variability/initial, start, min <= start <= max)",
+                  REQUIRED),
+    "units": ("2.2.2 (units of variables are defined in UnitDefinitions)", REQUIRED),
+    "model-structure": ("2.2.8 (every output listed in ModelStructure/Outputs)", REQUIRED),
+    "default-experiment": ("2.2.5 (DefaultExperiment is optional)", CONVENTION),
+    "capabilities": ("4.3.1 (co-simulation capability flags)", REQUIRED),
+    "calling-sequence": ("4.2.4 (the calling sequence of a co-simulation slave)", REQUIRED),
+    "output-dependencies": ("2.2.8 (an output depends on no input it does not list)",
+                            REQUIRED),
+    "reset": ("2.1.6 (fmi2Reset returns the FMU to its state after instantiation)", REQUIRED),
+    "fmu-state": ("2.1.8 (fmi2Get/SetFMUstate and serialisation restore the FMU state)",
+                  REQUIRED),
+    "variable-step": ("4.2.2 (fmi2DoStep; equal results for split steps is a convention)",
+                      CONVENTION),
+    "two-instances": ("2.1.5 (instances of one FMU are independent)", REQUIRED),
+    "wrong-state": ("4.2.4 (calls outside the state machine are the master's error; an FMU "
+                    "should detect them)", RECOMMENDED),
+    "invalid-step": ("4.2.2 (communicationStepSize > 0; an FMU should reject others)",
+                     RECOMMENDED),
+    "non-finite-inputs": ("2.1.7 (checking input values is left to the FMU)", RECOMMENDED),
+    "bad-parameters": ("2.2.7 (min/max bound the values a master may set; checking them is "
+                       "left to the FMU)", RECOMMENDED),
+    "together": ("2.1.5 (instances of several FMUs in one process are independent)",
+                 REQUIRED),
+}
+
 _FATAL = "rejected with fmi2Fatal, expected fmi2Error"
 _MARK = "@@compliance "  # worker protocol lines on stdout (the FMU may print too)
 
@@ -28,9 +63,24 @@ class Problem:
     check: str
     message: str
     severity: str = ERROR
+    requirement: str = ""  # REQUIRED / RECOMMENDED / CONVENTION; "" = the check's
+    clause: str = ""  # FMI 2.0.4 clause; "" = the check's
 
     def __str__(self) -> str:
         return f"[{self.severity}] {self.check}: {self.message}"
+
+
+def classify(problems: list[Problem], strict: bool) -> list[Problem]:
+    """Fill in clause and requirement; unless ``strict``, an error that is not required by
+    the standard becomes a warning (``cosim validate --lenient``)."""
+    out = []
+    for p in problems:
+        clause, requirement = CLAUSES.get(p.check, ("", REQUIRED))
+        p = replace(p, clause=p.clause or clause, requirement=p.requirement or requirement)
+        if not strict and p.severity == ERROR and p.requirement != REQUIRED:
+            p = replace(p, severity=WARNING)
+        out.append(p)
+    return out
 
 
 def passed(problems: list[Problem]) -> bool:

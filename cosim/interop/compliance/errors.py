@@ -112,7 +112,8 @@ def _collapse_fatal(problems: list[Problem]) -> list[Problem]:
     error = Problem(fatal[0].check, f"{said}. fmi2Fatal declares every instance of the FMU "
                     "unusable, so a master cannot recover; plain pythonfmu 0.7 binaries return "
                     "it for any Python exception (FMUs from `cosim build` return fmi2Error "
-                    "through their shim)")
+                    "through their shim)", requirement=fatal[0].requirement,
+                    clause=fatal[0].clause)
     return [p for p in problems if p not in fatal] + [error]
 
 

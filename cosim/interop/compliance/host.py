@@ -9,7 +9,14 @@ from typing import Any
 
 import numpy as np
 
-from cosim.interop.compliance.common import _FATAL, WARNING, Problem, _num, _read_xml
+from cosim.interop.compliance.common import (
+    _FATAL,
+    RECOMMENDED,
+    WARNING,
+    Problem,
+    _num,
+    _read_xml,
+)
 
 
 class _Host:
@@ -86,8 +93,55 @@ def _matching(outputs: list, patterns: tuple[str, ...]) -> frozenset[int]:
     return frozenset(found)
 
 
+def describe_call(method: str, args: tuple = (), kwargs: dict | None = None) -> str:
+    """``fmi2DoStep(currentCommunicationPoint=0.0, communicationStepSize=nan)``."""
+    parts = [repr(a) for a in args] + [f"{k}={v!r}" for k, v in (kwargs or {}).items()]
+    name = method if method.startswith("fmi2") else "fmi2" + method[0].upper() + method[1:]
+    return f"{name}({', '.join(parts)})"
+
+
+class _Watchdog:
+    """Ends the worker when one FMI call has not returned within ``timeout`` s, after
+    reporting the call and its arguments (``report``); a thread checks every 50 ms. Without
+    :meth:`start` (the FMU run outside the worker) it only keeps the current call."""
+
+    def __init__(self) -> None:
+        self.current: tuple[str, float] | None = None
+        self.timeout: float | None = None
+
+    def start(self, timeout: float, report: Any) -> None:
+        import os
+        import threading
+        import time
+
+        self.timeout = timeout
+
+        def watch() -> None:
+            while True:
+                time.sleep(0.05)
+                current = self.current
+                if current is not None and time.monotonic() - current[1] > timeout:
+                    report(current[0], timeout)
+                    os._exit(70)
+
+        threading.Thread(target=watch, daemon=True, name="fmi-call-watchdog").start()
+
+    def call(self, description: str, function: Any, *args: Any, **kwargs: Any) -> Any:
+        import time
+
+        self.current = (description, time.monotonic())
+        try:
+            return function(*args, **kwargs)
+        finally:
+            self.current = None
+
+
+WATCHDOG = _Watchdog()
+
+
 class _Instance:
-    """One FMU instance; ``call`` returns the status instead of raising, logs are kept."""
+    """One FMU instance; ``call`` returns the status instead of raising, logs are kept. Every
+    FMI call goes through :data:`WATCHDOG`."""
 
     def __init__(self, host: _Host, name: str) -> None:
         from fmpy.fmi2 import FMU2Slave
@@ -100,7 +154,8 @@ class _Instance:
                                             self.messages.append((status, text)))
         self.fmu = FMU2Slave(guid=host.md.guid, unzipDirectory=host.unzipdir,
                              modelIdentifier=host.cs.modelIdentifier, instanceName=name)
-        self.fmu.instantiate(callbacks=self._callbacks, loggingOn=True)
+        WATCHDOG.call(describe_call("instantiate", (), {"instanceName": name}),
+                      self.fmu.instantiate, callbacks=self._callbacks, loggingOn=True)
         self.alive = True
 
     def call(self, method: str, *args: Any, **kwargs: Any) -> tuple[int, Any]:
@@ -108,7 +163,8 @@ class _Instance:
         from fmpy.fmi1 import FMICallException
 
         try:
-            return 0, getattr(self.fmu, method)(*args, **kwargs)
+            return 0, WATCHDOG.call(describe_call(method, args, kwargs),
+                                    getattr(self.fmu, method), *args, **kwargs)
         except FMICallException as err:
             return err.status, None
 
@@ -140,7 +196,7 @@ class _Instance:
 
     def free(self) -> None:
         if self.alive:
-            self.fmu.freeInstance()
+            WATCHDOG.call(describe_call("freeInstance"), self.fmu.freeInstance)
             self.alive = False
 
 
@@ -212,12 +268,15 @@ def _rejection(inst: _Instance, statuses: list[int], what: str, check: str) -> l
         return [Problem(check, f"{what}: accepted (fmi2OK); expected fmi2Error")]
     problems = []
     if not logged:
-        problems.append(Problem(check, f"{what}: rejected without a log message"))
+        problems.append(Problem(check, f"{what}: rejected without a log message",
+                                requirement=RECOMMENDED, clause="2.1.5 (logger callback: "
+                                "an FMU should say why it rejects a call)"))
     if worst == 2:
         problems.append(Problem(check, f"{what}: rejected with fmi2Discard, expected fmi2Error",
                                 WARNING))
     if worst == 4:
-        problems.append(Problem(check, f"{what}: {_FATAL}"))
+        problems.append(Problem(check, f"{what}: {_FATAL}", requirement=RECOMMENDED,
+                                clause="2.1.3 (fmi2Fatal: all instances unusable)"))
     return problems
 
 

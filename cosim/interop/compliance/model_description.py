@@ -6,7 +6,14 @@ from __future__ import annotations
 from pathlib import Path
 from xml.etree import ElementTree
 
-from cosim.interop.compliance.common import ERROR, WARNING, Problem, _num, _read_xml
+from cosim.interop.compliance.common import (
+    CONVENTION,
+    WARNING,
+    Problem,
+    _num,
+    _read_xml,
+    classify,
+)
 
 # FMI 2.0 Table (sec. 2.2.7): legal causality for each variability
 _LEGAL = {
@@ -35,14 +42,18 @@ def _allowed_initial(causality: str, variability: str) -> tuple[set[str | None],
 
 
 def check_model_description(path: str | Path, strict: bool = True) -> list[Problem]:
-    """Static checks on the FMU file. ``strict`` makes project conventions errors (every Real
-    has a unit, outputs declare dependencies explicitly, default experiment has a step size);
-    otherwise they are warnings."""
+    """Static checks on the FMU file, each naming its FMI 2.0.4 clause. ``strict`` keeps project
+    conventions (every Real has a unit, outputs declare dependencies explicitly, default
+    experiment has a step size) errors; otherwise they, and what the standard only
+    recommends, are warnings."""
+    return classify(_static_checks(Path(path)), strict)
+
+
+def _static_checks(path: Path) -> list[Problem]:
     from fmpy import read_model_description
     from fmpy.validation import validate_fmu
 
     path = Path(path)
-    convention = ERROR if strict else WARNING
     problems: list[Problem] = []
     try:
         messages = validate_fmu(str(path))
@@ -109,8 +120,9 @@ def check_model_description(path: str | Path, strict: bool = True) -> list[Probl
                     problems.append(Problem("units", f"{name}: unit {unit!r} is not declared "
                                                      "in UnitDefinitions"))
             elif causality != "independent":
-                problems.append(Problem("units", f"{name}: Real variable without a unit",
-                                        convention))
+                problems.append(Problem("units", f"{name}: Real variable without a unit "
+                                        "(optional in FMI 2.0.4 2.2.7)",
+                                        requirement=CONVENTION))
     for unit in sorted(declared_units - used_units):
         problems.append(Problem("units", f"unit {unit!r} declared but not used", WARNING))
 
@@ -136,7 +148,8 @@ def check_model_description(path: str | Path, strict: bool = True) -> list[Probl
         deps = unk.get("dependencies")
         if deps is None:
             problems.append(Problem("model-structure", f"output {name}: no dependencies "
-                                    "attribute (means 'depends on everything')", convention))
+                                    "attribute (means 'depends on everything')",
+                                    requirement=CONVENTION))
             continue
         for token in deps.split():
             dep = by_index.get(int(token))
@@ -155,10 +168,10 @@ def check_model_description(path: str | Path, strict: bool = True) -> list[Probl
     else:
         if de.stopTime is None:
             problems.append(Problem("default-experiment", "DefaultExperiment has no stopTime",
-                                    convention))
+                                    requirement=CONVENTION))
         if de.stepSize is None:
             problems.append(Problem("default-experiment", "DefaultExperiment has no stepSize",
-                                    convention))
+                                    requirement=CONVENTION))
     cs = md.coSimulation
     if cs is None:
         problems.append(Problem("capabilities", "not a co-simulation FMU"))
@@ -167,6 +180,7 @@ def check_model_description(path: str | Path, strict: bool = True) -> list[Probl
                      "canSerializeFMUstate"):
             if not getattr(cs, flag):
                 problems.append(Problem("capabilities", f"{flag} is false; the related "
-                                                        "checks are skipped", convention))
+                                                        "checks are skipped",
+                                                        requirement=CONVENTION))
     return problems
 

@@ -28,7 +28,15 @@ from cosim.interop.compliance.errors import (
     _check_wrong_state,
     _collapse_fatal,
 )
-from cosim.interop.compliance.host import _CallFailed, _differs, _Host, _nominal, _out_name, _run
+from cosim.interop.compliance.host import (
+    WATCHDOG,
+    _CallFailed,
+    _differs,
+    _Host,
+    _nominal,
+    _out_name,
+    _run,
+)
 from cosim.interop.compliance.state import _check_fmu_state
 from cosim.interop.compliance.stepping import _check_invalid_step, _check_variable_step
 
@@ -54,6 +62,9 @@ def _worker(args: dict) -> None:
     """Run dynamic checks, reporting progress on stdout (see ``_run_worker``)."""
     from fmpy import extract
 
+    if args.get("call_timeout"):
+        WATCHDOG.start(args["call_timeout"], lambda call, seconds:
+                       _emit("hang", {"call": call, "seconds": seconds}))
     paths = [Path(p) for p in args["paths"]]
     unzipdirs = [extract(str(p)) for p in paths]
     try:
@@ -117,7 +128,9 @@ def _together(hosts: list[_Host]) -> list[Problem]:
 
 
 def _run_worker(args: dict, checks: tuple[str, ...], timeout: float) -> list[Problem]:
-    """Run the worker until every check has finished, crashed or hung (then restart it)."""
+    """Run the worker until every check has finished, crashed or hung (then restart it).
+    A call that does not return within ``args["call_timeout"]`` is reported by the worker's
+    watchdog with its arguments; ``timeout`` bounds a whole worker process as a backstop."""
     problems: list[Problem] = []
     done: set[str] = set()
     while True:
@@ -127,6 +140,7 @@ def _run_worker(args: dict, checks: tuple[str, ...], timeout: float) -> list[Pro
         root = str(Path(__file__).resolve().parents[3])
         env["PYTHONPATH"] = root + os.pathsep + env.get("PYTHONPATH", "")
         current: str | None = None
+        hung_call: dict | None = None
         try:
             proc = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, env=env)
             out, err, code, hung = proc.stdout, proc.stderr, proc.returncode, False
@@ -144,14 +158,25 @@ def _run_worker(args: dict, checks: tuple[str, ...], timeout: float) -> list[Pro
                 current = None
             elif kind == "problem":
                 problems.append(Problem(**payload))
+            elif kind == "hang":
+                hung_call = payload
         if current is None and not hung and code == 0:
             return problems
-        if current is None:  # died outside a check (loading): report once and stop
+        if hung_call is not None:
+            problems.append(Problem(current or "calling-sequence", f"hang: "
+                                    f"{hung_call['call']} did not return within "
+                                    f"{hung_call['seconds']:g} s (the host was killed; "
+                                    "--call-timeout sets the limit)"))
+            if current is None:
+                return problems
+        elif current is None:  # died outside a check (loading): report once and stop
             tail = err.strip().splitlines()[-1] if err.strip() else f"exit status {code}"
             problems.append(Problem("calling-sequence", f"the host process failed while "
                                     f"loading the FMU: {tail}"))
             return problems
-        if hung:
+        if hung_call is not None:
+            pass
+        elif hung:
             problems.append(Problem(current, f"hang: no progress for {timeout:.0f} s (the "
                                              "host was killed)"))
         else:
@@ -161,8 +186,6 @@ def _run_worker(args: dict, checks: tuple[str, ...], timeout: float) -> list[Pro
         done.add(current)
         if all(c in done for c in checks):
             return problems
-
-
 
 
 if __name__ == "__main__":
