@@ -31,6 +31,7 @@ polytope W (its vertices), which is all the tube tightening needs (eqs. 14, 26).
 
 from __future__ import annotations
 
+import copy
 import math
 import time
 from collections.abc import Sequence
@@ -176,29 +177,41 @@ class HorizonQP:
         self._lo_all = np.concatenate([self.du_lo] + self._lo)
         self._hi_all = np.concatenate([self.du_hi] + self._hi)
         self._nan = (np.full(nu, np.nan), np.full(H, np.nan), np.full((H + 1, n), np.nan))
-        if solver == "osqp":
+        self._eps, self._max_iter = eps, int(max_iter)
+        self._setup_solver()
+
+    def _setup_solver(self) -> None:
+        """A fresh solver workspace for this QP (OSQP, or DAQP with H factorised once)."""
+        nu, eps, max_iter = self.nu, self._eps, self._max_iter
+        if self.solver_name == "osqp":
             self.solver = osqp.OSQP()
             self.solver.setup(sp.csc_matrix(np.triu(2.0 * self.Hhalf)), np.zeros(nu),
                               sp.csc_matrix(self.Acon), -np.ones(self.n_con),
                               np.ones(self.n_con), verbose=False, eps_abs=eps, eps_rel=eps,
                               max_iter=max_iter, polishing=False, warm_starting=True,
                               adaptive_rho=True, adaptive_rho_interval=25, rho=self.RHO0)
-        else:
-            # the factorisation of H (and of the constraint rows in its metric) is done here,
-            # once; a solve only updates the vectors
-            self.solver = daqp.Model()
-            self._cold = np.zeros(self.n_con, dtype=np.int32)
-            flag = self.solver.setup(2.0 * self.Hhalf, np.zeros(nu),
-                                     np.ascontiguousarray(self.Acon[nu:]),
-                                     np.ones(self.n_con), -np.ones(self.n_con))
-            if isinstance(flag, tuple):
-                flag = flag[0]
-            if flag < 0:
-                raise ValueError(f"DAQP setup failed (exitflag {flag}): Hessian not positive "
-                                 f"definite? check r_du > 0")
-            settings = self.solver.settings
-            settings["iter_limit"] = int(max_iter)
-            self.solver.settings = settings
+            return
+        # the factorisation of H (and of the constraint rows in its metric) is done here,
+        # once; a solve only updates the vectors
+        self.solver = daqp.Model()
+        self._cold = np.zeros(self.n_con, dtype=np.int32)
+        flag = self.solver.setup(2.0 * self.Hhalf, np.zeros(nu),
+                                 np.ascontiguousarray(self.Acon[nu:]),
+                                 np.ones(self.n_con), -np.ones(self.n_con))
+        if isinstance(flag, tuple):
+            flag = flag[0]
+        if flag < 0:
+            raise ValueError(f"DAQP setup failed (exitflag {flag}): Hessian not positive "
+                             f"definite? check r_du > 0")
+        settings = self.solver.settings
+        settings["iter_limit"] = max_iter
+        self.solver.settings = settings
+
+    def clone(self) -> HorizonQP:
+        """The same QP (matrices shared, never written) with its own solver workspace."""
+        twin = copy.copy(self)
+        twin._setup_solver()
+        return twin
 
     def predict(self, x0: np.ndarray, U: np.ndarray, d: np.ndarray | None = None) -> np.ndarray:
         """Predicted states ``(H+1, n)`` for free moves ``U``."""
