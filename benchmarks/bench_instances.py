@@ -12,6 +12,8 @@ imports (numba, the bundled modules, compiled-kernel cache loads).
 from __future__ import annotations
 
 import argparse
+import json
+import os
 import shutil
 import statistics
 import sys
@@ -21,7 +23,25 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from cosim.fmu.build import build_stale, resolve  # noqa: E402
+from cosim.fmu.build import FMU_DIR, build_stale, resolve  # noqa: E402
+
+
+def fresh_process_times(names: list[str], count: int = 6) -> dict[str, dict[str, float]]:
+    """:func:`instance_times` in a new Python process per FMU, which imports none of the
+    FMU's code itself: the first instance pays the imports, as in a fresh host. The FMUs must
+    be built (``build_stale``)."""
+    import subprocess
+
+    out = {}
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+    for name in names:
+        code = (f"import sys; sys.path.insert(0, {str(Path(__file__).parent)!r}); "
+                f"sys.argv = ['x', '--json', '--count', '{count}', {name!r}]; "
+                "import bench_instances; bench_instances.main()")
+        done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                              check=True, cwd=ROOT, env=env)
+        out.update(json.loads(done.stdout.strip().splitlines()[-1]))
+    return out
 
 DEFAULT = ["StopRmpc", "FreightTrain", "Emu3", "FreightPid"]
 
@@ -31,7 +51,7 @@ def instance_times(name: str, count: int = 6) -> dict[str, float]:
     from fmpy import extract, read_model_description
     from fmpy.fmi2 import FMU2Slave
 
-    path = str(resolve([name])[0].path)
+    path = str(FMU_DIR / f"{name}.fmu")  # no catalog(): that would import the wrappers
     md = read_model_description(path)
     unzipped = extract(path)
     made, fmu_times, host_times = [], [], []
@@ -64,11 +84,14 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("names", nargs="*", default=DEFAULT)
     parser.add_argument("--count", type=int, default=6)
+    parser.add_argument("--json", action="store_true", help="print the figures as JSON")
     args = parser.parse_args()
+    if args.json:
+        print(json.dumps({name: instance_times(name, args.count) for name in args.names}))
+        return
     build_stale(resolve(args.names))
     print(f"{'FMU':<14} {'first s':>8} {'further ms':>11} {'fmpy object ms':>15}")
-    for name in args.names:
-        r = instance_times(name, args.count)
+    for name, r in fresh_process_times(args.names, args.count).items():
         print(f"{name:<14} {r['first_s']:>8.2f} {r['further_ms']:>11.1f} {r['host_ms']:>15.1f}")
 
 
