@@ -78,7 +78,7 @@ class QPResult:
     dual: np.ndarray  # one per constraint row of ``Acon`` (> 0 upper, < 0 lower bound active)
     iterations: int = 0
     # (qp, q, e, ref) of the solve: e the free response's tracking error (flattened)
-    _data: tuple | None = field(default=None, repr=False)
+    _data: tuple | None = field(default=None, repr=False, compare=False)
 
     @functools.cached_property
     def cost(self) -> float:
