@@ -36,8 +36,9 @@ SCENARIO = "seed002_freight_pid"
 STEP = 0.2  # s, controller sample time = communication step
 
 
-def plant_core(inputs: np.ndarray) -> float:
-    train = FreightTrain(FreightParams(), load_route("freight_20km"))
+def plant_core(inputs: np.ndarray, kernel: bool | None = None) -> float:
+    """Wall time of the plant core replaying ``inputs``; ``kernel=False``: numpy reference."""
+    train = FreightTrain(FreightParams(), load_route("freight_20km"), kernel=kernel)
     h = to_ticks(STEP)
     t0 = time.perf_counter()
     for k, (force, reduction) in enumerate(inputs):
@@ -105,6 +106,7 @@ def main() -> None:
     inputs = inputs[: int(round(sim_time / STEP))]
     for _ in range(args.repeat):
         walls.setdefault("plant only, core", []).append(plant_core(inputs))
+        walls.setdefault("plant only, core (numpy)", []).append(plant_core(inputs, False))
         walls.setdefault("plant only, FMU", []).append(plant_fmu(inputs))
         walls.setdefault("closed loop, cores", []).append(closed_loop_cores(sim_time))
     substeps = sim_time / FreightParams().max_step

@@ -43,13 +43,15 @@ def _plant_setup(name: str):
     return sc, plant, ctl
 
 
-def plant_core_run(name: str, forces: np.ndarray, step: float) -> float:
+def plant_core_run(name: str, forces: np.ndarray, step: float,
+                   kernel: bool | None = None) -> float:
+    """Wall time of the plant core replaying ``forces``; ``kernel=False``: numpy reference."""
     sc, plant, _ = _plant_setup(name)
     par = plant.parameters
     keys = ("max_step", "disturbance_accel_std", "disturbance_interval", "disturbance_seed")
     over = {k: par[k] for k in keys if k in par}
     emu = Emu(emu_config(par["configuration"], **over), load_route(par["route"]),
-              v0=par.get("v0", 0.0), s0=par.get("s0", 0.0))
+              v0=par.get("v0", 0.0), s0=par.get("s0", 0.0), kernel=kernel)
     n = emu.n
     t0 = time.perf_counter()
     h = to_ticks(step)

@@ -21,6 +21,8 @@ hold on the other forces); the other forces (resistance, clipped commands, route
 evaluated at the sub-step midpoint predicted by a half step (exponential midpoint rule, second
 order). Sub-steps are no longer than ``max_step`` on a grid anchored at absolute multiples of
 ``max_step`` (and disturbance intervals), so results do not depend on the communication step.
+With numba the sub-steps of a communication step run in one call of the compiled kernel
+:func:`plants.kernels.emu_steps`; ``_substep`` is the numpy reference (``kernel=False``).
 
 Standstill: braking and the constant resistance term act against the motion and can hold the
 train. Once the mean speed reaches zero while the brakes and static resistance can hold against
@@ -46,7 +48,7 @@ from scipy.linalg import expm
 
 from cosim.fmu.declare import Declared, Var, build, param, parameters
 from cosim.fmu.state import StatefulCore, to_seconds, to_ticks
-from plants import dead_time
+from plants import dead_time, kernels
 from plants.resistance import Davis
 from plants.route import (
     GRAVITY,
@@ -265,7 +267,8 @@ class Emu(StatefulCore, Declared):
         return cls(params, route, v0=values["v0"], s0=values["s0"], t0=t0)
 
     def __init__(self, params: EmuParams, route: Route, v0: float = 0.0, s0: float = 0.0,
-                 t0: float = 0.0) -> None:
+                 t0: float = 0.0, kernel: bool | None = None) -> None:
+        """``kernel``: compiled sub-steps (default: when numba is there) or the numpy path."""
         params.check()
         if not v0 >= 0:
             raise ValueError(f"v0 = {v0} must be >= 0")
@@ -308,6 +311,21 @@ class Emu(StatefulCore, Declared):
         minv = np.diag(1.0 / self.m_eff)
         self._A = np.block([[np.zeros((n, n)), np.eye(n)], [-k * minv @ lap, -d * minv @ lap]])
         self._B = np.vstack([np.zeros((n, n)), minv])
+        self._unit_names = tuple(
+            [f"{name}[{i + 1}]" for i in range(n)]
+            for name in ("v", "s", "a", "applied_force", "traction_limit", "brake_limit")
+        ) + ([f"coupler_force[{j + 1}]" for j in range(n - 1)],)
+        want = kernels.KERNELS if kernel is None else bool(kernel) and kernels.KERNELS
+        self.kernel = want and bool(np.all(self.lengths > 0))  # else mean_over's 0-length case
+        if self.kernel:
+            xs, cum = route.additional._cumulative
+            self._route_arrays = (xs, cum, np.diff(cum) / np.diff(xs))
+            self._hints = tuple(np.zeros(n, dtype=np.int64) for _ in range(3))
+            self._unit_arrays = (self.m, self.offsets, self.lengths, self.da, self.db, self.dc,
+                                 self.ft, self.pt, self.fb, self.pb,
+                                 self.motored.astype(float))
+            self._constants = np.array([params.standstill_speed, float(self._has_neutral),
+                                        self.total_mass, GRAVITY / 1000.0, k, d])
 
     # -- envelope and forces -----------------------------------------------------------------------
     def traction_limit(self, v: np.ndarray | None = None) -> np.ndarray:
@@ -433,11 +451,43 @@ class Emu(StatefulCore, Declared):
         u = np.array([float(inputs[f"force[{i + 1}]"]) for i in range(self.n)])
         end = t_ticks + h_ticks
         grids = (self._grid, self._noise_ticks if self.p.disturbance_accel_std else 0)
-        now = t_ticks
-        for cut in dead_time.substep_ends(t_ticks, h_ticks, grids):
-            self._substep(now, cut - now, u)
-            now = cut
+        cuts = dead_time.substep_ends(t_ticks, h_ticks, grids)
+        if self.kernel:
+            self._advance_compiled(t_ticks, cuts, u)
+        else:
+            now = t_ticks
+            for cut in cuts:
+                self._substep(now, cut - now, u)
+                now = cut
         self.t_ticks = end
+
+    def _advance_compiled(self, t_ticks: int, cuts: list[int], u: np.ndarray) -> None:
+        """Runs of equal sub-steps (one propagator) each in one kernel call."""
+        x, v = self.x.copy(), self.v.copy()
+        scalars = np.array([float(self.held), self.traction_energy, self.regenerated_energy])
+        noisy = self.p.disturbance_accel_std != 0.0
+        now, i = t_ticks, 0
+        while i < len(cuts):
+            h_ticks = cuts[i] - now
+            j = i
+            while j + 1 < len(cuts) and cuts[j + 1] - cuts[j] == h_ticks:
+                j += 1
+            count = j - i + 1
+            if noisy:
+                noise = np.array([self._noise(now + k * h_ticks) for k in range(count)])
+            else:
+                noise = np.zeros((count, self.n))
+            prop = self._propagator(h_ticks)
+            kernels.emu_steps(x, v, scalars, u, to_seconds(h_ticks), noise, prop.phi,
+                              prop.gamma, prop.half_phi, prop.half_gamma, *self._unit_arrays,
+                              *self._route_arrays, *self._hints[:2],
+                              self.route.neutral.starts, self.route.neutral.values,
+                              self._hints[2], self._constants)
+            now, i = cuts[j], j + 1
+        self.x, self.v = x, v
+        self.held = bool(scalars[0])
+        self.traction_energy, self.regenerated_energy = float(scalars[1]), float(scalars[2])
+        self.command = u
 
     # -- outputs -----------------------------------------------------------------------------------
     def coupler_forces(self) -> np.ndarray:
@@ -463,7 +513,23 @@ class Emu(StatefulCore, Declared):
         net[1:] += fz
         return net / self.m_eff
 
+    def _output_arrays(self) -> tuple[np.ndarray, ...]:
+        """(a, fz, tl, bl, applied, [v_mean, a_mean, power, max |fz|, sum tl, sum bl])."""
+        n = self.n
+        a, tl, bl, applied = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
+        fz, sc = np.empty(n - 1), np.empty(6)
+        noise = np.zeros(n) if self.held else self._noise(self.t_ticks)
+        m, offsets, lengths, da, db, dc, ft, pt, fb, pb, motored = self._unit_arrays
+        kernels.emu_outputs(self.x, self.v, self.command, noise, float(self.held), m,
+                            self.m_eff, offsets, lengths, da, db, dc, ft, pt, fb, pb, motored,
+                            *self._route_arrays, *self._hints[:2], self.route.neutral.starts,
+                            self.route.neutral.values, self._hints[2], self._constants, a, fz,
+                            tl, bl, applied, sc)
+        return a, fz, tl, bl, applied, sc
+
     def outputs(self) -> dict[str, float]:
+        if self.kernel:
+            return self._outputs_compiled()
         n = self.n
         a = self.accelerations()
         fz = self.coupler_forces()
@@ -489,14 +555,32 @@ class Emu(StatefulCore, Declared):
             "grade": float(self.route.grade.at(fronts[0])),
             "neutral": float(self.route.neutral.at(fronts[0] - 0.5 * self.lengths[0])),
         }
-        for i in range(n):
-            k = i + 1
-            out[f"v[{k}]"] = float(self.v[i])
-            out[f"s[{k}]"] = float(fronts[i])
-            out[f"a[{k}]"] = float(a[i])
-            out[f"applied_force[{k}]"] = float(applied[i])
-            out[f"traction_limit[{k}]"] = float(tl[i])
-            out[f"brake_limit[{k}]"] = float(bl[i])
-        for j in range(n - 1):
-            out[f"coupler_force[{j + 1}]"] = float(fz[j])
+        for names, values in zip(self._unit_names, (self.v, fronts, a, applied, tl, bl, fz)):
+            out.update(zip(names, values.tolist()))
+        return out
+
+    def _outputs_compiled(self) -> dict[str, float]:
+        """:meth:`outputs` with the arrays from the compiled kernel."""
+        a, fz, tl, bl, applied, sc = self._output_arrays()
+        fronts = self.x - self.offsets
+        front = float(fronts[0])
+        v_mean, a_mean, power, max_fz, sum_tl, sum_bl = sc.tolist()
+        out: dict[str, float] = {
+            "v": v_mean,
+            "s": front,
+            "a": a_mean,
+            "v_head": float(self.v[0]),
+            "s_tail": float(fronts[-1] - self.lengths[-1]),
+            "power": power,
+            "traction_energy": self.traction_energy,
+            "regenerated_energy": self.regenerated_energy,
+            "max_abs_coupler_force": max_fz,
+            "total_traction_limit": sum_tl,
+            "total_brake_limit": sum_bl,
+            "speed_limit": float(self.route.speed_limit.at(front)),
+            "grade": float(self.route.grade.at(front)),
+            "neutral": float(self.route.neutral.at(front - 0.5 * self.lengths[0])),
+        }
+        for names, values in zip(self._unit_names, (self.v, fronts, a, applied, tl, bl, fz)):
+            out.update(zip(names, values.tolist()))
         return out

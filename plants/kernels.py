@@ -316,3 +316,233 @@ def freight_steps(x, v, pres, sc, hs, t0s, t1s, demands, arrivals, values, m_eff
                 sc[S_PEAK_BUFF] = -fc
     sc[S_TRACTION] = f_trac
     sc[S_FIRST] = first
+
+
+# EMU kernel: constants vector and scalar state (in/out)
+E_STANDSTILL, E_HAS_NEUTRAL, E_TOTAL_MASS, E_GRAVITY_KN, E_K, E_D = range(6)
+EMU_HELD, EMU_TRACTION_ENERGY, EMU_REGEN_ENERGY = range(3)
+
+
+@njit
+def _step_value_positive(s, starts, values, j):
+    """``values[searchsorted(starts, s, 'right') - 1] > 0`` walking from hint ``j``."""
+    n = starts.size
+    while j < n - 1 and s >= starts[j + 1]:
+        j += 1
+    while j > 0 and s < starts[j]:
+        j -= 1
+    return values[j] > 0, j
+
+
+@njit
+def _emu_route(x, offsets, lengths, m, xs, cum, slopes, hint_f, hint_r, g_kn, out):
+    """Route force ``m g w / 1000`` per unit (w: additional resistance over its length)."""
+    for i in range(x.size):
+        front = x[i] - offsets[i]
+        c_front, hint_f[i] = _interp(front, xs, cum, slopes, hint_f[i])
+        c_rear, hint_r[i] = _interp(front - lengths[i], xs, cum, slopes, hint_r[i])
+        out[i] = m[i] * (g_kn * ((c_front - c_rear) / lengths[i]))
+
+
+@njit
+def _emu_neutral(x, offsets, lengths, nstarts, nvalues, hint_n, cp, out):
+    for i in range(x.size):
+        if cp[E_HAS_NEUTRAL] != 0.0:
+            out[i], hint_n[i] = _step_value_positive(x[i] - offsets[i] - 0.5 * lengths[i],
+                                                     nstarts, nvalues, hint_n[i])
+        else:
+            out[i] = False
+
+
+@njit
+def _emu_limits(v, neutral, ft, pt, fb, pb, hi, lo):
+    for i in range(v.size):
+        va = max(abs(v[i]), 1e-9)
+        hi[i] = 0.0 if neutral[i] else min(ft[i], pt[i] / va)
+        lo[i] = min(fb[i], pb[i] / va)
+
+
+@njit
+def _emu_force(applied, v, route, noise, da, db, dc, standstill, out):
+    for i in range(v.size):
+        sign = min(max(v[i] * (1.0 / standstill), -1.0), 1.0)
+        resist = da[i] * sign + db[i] * v[i] + dc[i] * v[i] * abs(v[i])
+        out[i] = max(applied[i], 0.0) + min(applied[i], 0.0) * sign - resist - route[i] \
+            + noise[i]
+
+
+@njit
+def _emu_holds(u, x, offsets, lengths, m, da, ft, pt, fb, pb, xs, cum, slopes, hint_f, hint_r,
+               nstarts, nvalues, hint_n, cp, route, neutral, hi, lo):
+    """Emu._holds at the positions ``x`` (speeds zero)."""
+    n = x.size
+    _emu_route(x, offsets, lengths, m, xs, cum, slopes, hint_f, hint_r, cp[E_GRAVITY_KN], route)
+    _emu_neutral(x, offsets, lengths, nstarts, nvalues, hint_n, cp, neutral)
+    zero = np.zeros(n)
+    _emu_limits(zero, neutral, ft, pt, fb, pb, hi, lo)
+    pos = 0.0
+    neg = 0.0
+    rf = 0.0
+    dsum = 0.0
+    for i in range(n):
+        a = max(min(u[i], hi[i]), -lo[i])
+        pos += max(a, 0.0)
+        neg += -min(a, 0.0)
+        rf += route[i]
+        dsum += da[i]
+    return abs(pos - rf) <= neg + dsum
+
+
+_F2 = "float64[:, :]"
+_EMU_SIGNATURE = (f"void({', '.join([_F] * 4)}, float64, {', '.join([_F2] * 5)}, "
+                  f"{', '.join([_F] * 14)}, int64[:], int64[:], {_F}, {_F}, int64[:], {_F})")
+
+
+@njit_eager(_EMU_SIGNATURE)
+def emu_steps(x, v, sc, u, h, noise, phi, gamma, hphi, hgamma, m, offsets, lengths, da, db,
+              dc, ft, pt, fb, pb, motored, xs, cum, slopes, hint_f, hint_r, nstarts, nvalues,
+              hint_n, cp):
+    """Advance :class:`plants.emu.Emu` over ``noise.shape[0]`` sub-steps of ``h`` s (same
+    propagator ``phi, gamma`` and half-step ``hphi, hgamma``), command ``u`` held; ``x``,
+    ``v`` and ``sc`` (``EMU_*``) in place. Same equations and order as ``Emu._substep``."""
+    n = x.size
+    route = np.empty(n)
+    neutral = np.empty(n, dtype=np.bool_)
+    hi = np.empty(n)
+    lo = np.empty(n)
+    applied = np.empty(n)
+    f = np.empty(n)
+    state = np.empty(2 * n)
+    mid = np.empty(2 * n)
+    new = np.empty(2 * n)
+    v_mid = np.empty(n)
+    x_mid = np.empty(n)
+    standstill = cp[E_STANDSTILL]
+    all_le = True
+    any_lt = False
+    for i in range(n):
+        if u[i] > 0.0:
+            all_le = False
+        if u[i] < 0.0:
+            any_lt = True
+    for s in range(noise.shape[0]):
+        if sc[EMU_HELD] != 0.0:
+            if _emu_holds(u, x, offsets, lengths, m, da, ft, pt, fb, pb, xs, cum, slopes,
+                          hint_f, hint_r, nstarts, nvalues, hint_n, cp, route, neutral, hi, lo):
+                continue
+            sc[EMU_HELD] = 0.0
+        for i in range(n):
+            state[i] = x[i]
+            state[n + i] = v[i]
+            x_mid[i] = x[i] + 0.5 * h * v[i]
+        _emu_route(x_mid, offsets, lengths, m, xs, cum, slopes, hint_f, hint_r,
+                   cp[E_GRAVITY_KN], route)
+        _emu_neutral(x_mid, offsets, lengths, nstarts, nvalues, hint_n, cp, neutral)
+        _emu_limits(v, neutral, ft, pt, fb, pb, hi, lo)
+        for i in range(n):
+            applied[i] = max(min(u[i], hi[i]), -lo[i])
+        _emu_force(applied, v, route, noise[s], da, db, dc, standstill, f)
+        for r in range(2 * n):
+            acc = 0.0
+            for c in range(2 * n):
+                acc += hphi[r, c] * state[c]
+            acc2 = 0.0
+            for c in range(n):
+                acc2 += hgamma[r, c] * f[c]
+            mid[r] = acc + acc2
+        for i in range(n):
+            v_mid[i] = mid[n + i]
+        _emu_limits(v_mid, neutral, ft, pt, fb, pb, hi, lo)
+        for i in range(n):
+            applied[i] = max(min(u[i], hi[i]), -lo[i])
+        _emu_force(applied, v_mid, route, noise[s], da, db, dc, standstill, f)
+        for r in range(2 * n):
+            acc = 0.0
+            for c in range(2 * n):
+                acc += phi[r, c] * state[c]
+            acc2 = 0.0
+            for c in range(n):
+                acc2 += gamma[r, c] * f[c]
+            new[r] = acc + acc2
+        trac = 0.0
+        regen = 0.0
+        mv_before = 0.0
+        mv_after = 0.0
+        for i in range(n):
+            trac += max(applied[i], 0.0) * v_mid[i]
+            regen += min(-min(applied[i], 0.0), hi[i]) * motored[i] * max(v_mid[i], 0.0)
+            mv_before += m[i] * v[i]
+            mv_after += m[i] * new[n + i]
+            x[i] = new[i]
+            v[i] = new[n + i]
+        sc[EMU_TRACTION_ENERGY] += h * trac
+        sc[EMU_REGEN_ENERGY] += h * regen
+        v_mean = mv_after / cp[E_TOTAL_MASS]
+        creeping = v_mean <= standstill and all_le and any_lt
+        if (v_mean <= 0.0 and mv_before > 0.0) or creeping:
+            if _emu_holds(u, x, offsets, lengths, m, da, ft, pt, fb, pb, xs, cum, slopes,
+                          hint_f, hint_r, nstarts, nvalues, hint_n, cp, route, neutral, hi,
+                          lo):
+                for i in range(n):
+                    v[i] = 0.0
+                sc[EMU_HELD] = 1.0
+
+
+_EMU_OUT_SIGNATURE = (f"void({', '.join([_F] * 4)}, float64, {', '.join([_F] * 15)}, "
+                      f"int64[:], int64[:], {_F}, {_F}, int64[:], {_F}, "
+                      f"{', '.join([_F] * 6)})")
+
+
+@njit_eager(_EMU_OUT_SIGNATURE)
+def emu_outputs(x, v, command, noise, held, m, m_eff, offsets, lengths, da, db, dc, ft, pt, fb,
+                pb, motored, xs, cum, slopes, hint_f, hint_r, nstarts, nvalues, hint_n, cp, a,
+                fz, tl, bl, applied, sc):
+    """Emu.outputs' arrays (``a``, ``fz``, ``tl``, ``bl``, ``applied``) and scalars ``sc`` =
+    [v_mean, a_mean, power, max |fz|, sum tl, sum bl] at the current state."""
+    n = x.size
+    route = np.empty(n)
+    neutral = np.empty(n, dtype=np.bool_)
+    f = np.empty(n)
+    _emu_neutral(x, offsets, lengths, nstarts, nvalues, hint_n, cp, neutral)
+    _emu_limits(v, neutral, ft, pt, fb, pb, tl, bl)
+    for i in range(n):
+        applied[i] = max(min(command[i], tl[i]), -bl[i])
+    k, d = cp[E_K], cp[E_D]
+    max_fz = 0.0
+    for j in range(n - 1):
+        fz[j] = k * (x[j] - x[j + 1]) + d * (v[j] - v[j + 1])
+        max_fz = max(max_fz, abs(fz[j]))
+    if held != 0.0:
+        for i in range(n):
+            a[i] = 0.0
+    else:
+        _emu_route(x, offsets, lengths, m, xs, cum, slopes, hint_f, hint_r, cp[E_GRAVITY_KN],
+                   route)
+        _emu_force(applied, v, route, noise, da, db, dc, cp[E_STANDSTILL], f)
+        for j in range(n - 1):
+            f[j] -= fz[j]
+        for j in range(n - 1):
+            f[j + 1] += fz[j]
+        for i in range(n):
+            a[i] = f[i] / m_eff[i]
+    mv = 0.0
+    ma = 0.0
+    m_sum = 0.0
+    pos = 0.0
+    regen = 0.0
+    s_tl = 0.0
+    s_bl = 0.0
+    for i in range(n):
+        mv += m[i] * v[i]
+        ma += m_eff[i] * a[i]
+        m_sum += m_eff[i]
+        pos += max(applied[i] * v[i], 0.0)
+        regen += min(-min(applied[i], 0.0), tl[i]) * motored[i] * v[i]
+        s_tl += tl[i]
+        s_bl += bl[i]
+    sc[0] = mv / cp[E_TOTAL_MASS]
+    sc[1] = ma / m_sum
+    sc[2] = pos - regen
+    sc[3] = max_fz
+    sc[4] = s_tl
+    sc[5] = s_bl

@@ -336,6 +336,14 @@ def load_reference(name_or_path: str | Path, base: Path | None = None,
         raise ValueError(f"{found}: bad reference profile: {err}") from err
 
 
+_LOADED: dict[tuple, Route] = {}  # per process: (file, mtime, size) -> parsed (immutable) route
+
+
+def _file_key(path: Path) -> tuple:
+    st = path.stat()
+    return (str(path.resolve()), st.st_mtime_ns, st.st_size)
+
+
 def load_route(name_or_path: str | Path, routes_dir: Path | None = None) -> Route:
     """Load a route by bundled name (``<routes_dir>/<name>.toml``) or by file path.
 
@@ -350,6 +358,16 @@ def load_route(name_or_path: str | Path, routes_dir: Path | None = None) -> Rout
     if not path.is_file():
         known = sorted(p.stem for p in routes_dir.glob("*.toml"))
         raise ValueError(f"route {str(name_or_path)!r} not found (bundled routes: {known})")
+    # parsed once per process and file version (routes are frozen): a further FMU instance
+    # does not parse the route and its reference profile again
+    key = _file_key(path)
+    route = _LOADED.get(key)
+    if route is None:
+        route = _LOADED[key] = _parse_route(path)
+    return route
+
+
+def _parse_route(path: Path) -> Route:
     with open(path, "rb") as f:
         data = tomllib.load(f)
     try:

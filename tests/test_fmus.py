@@ -111,3 +111,30 @@ def test_fmu_runs_in_fresh_venv_without_this_package(built_fmus, tmp_path):
     v_end, a_c_end, command = map(float, done.stdout.split())
     assert 0 < v_end < 20.0 and a_c_end < -0.4
     assert command == pytest.approx(0.5 / 0.0107, rel=1e-6)  # feedforward at v = v_ref
+
+
+def test_further_instances_reuse_the_bundled_modules(built_fmus):
+    """The bundle is imported once per process and digest (two extractions, three instances):
+    the modules are the same objects, the states stay separate."""
+    import re
+    import sys
+    import zipfile
+
+    spec = built_fmus["BrakeDelayTrain"]
+    with zipfile.ZipFile(spec.path) as z:
+        entry = z.read(f"resources/{spec.entry_module}.py").decode()
+    digest = re.search(r'_DIGEST = "([0-9a-f]{64})"', entry).group(1)
+    insts = [Instance(spec.path, f"shared_{k}") for k in range(3)]
+    try:
+        registry = sys.modules["atocosim_bundle_registry"].loaded
+        keys = [key for key in registry if key[0] == digest]
+        assert keys == [(digest, spec.module)]
+        insts[0].set("brake_command", 80.0)
+        for inst in insts:  # 3 s: past the brake dead time (1 s) and into the lag
+            for step in range(15):
+                inst.fmu.doStep(currentCommunicationPoint=0.2 * step, communicationStepSize=0.2)
+        assert insts[0].get("v") < insts[1].get("v") == insts[2].get("v")
+    finally:
+        for inst in insts:
+            inst.fmu.terminate()
+            inst.fmu.freeInstance()

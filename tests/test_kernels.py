@@ -102,3 +102,75 @@ def test_cache_locator_is_by_content(tmp_path, monkeypatch) -> None:
     assert locator.get_source_stamp() == kernels._DIGEST
     other = kernels._ContentCacheLocator.from_function(len, str(tmp_path / "elsewhere.py"))
     assert other is None  # other files keep numba's own locators
+
+
+def emu_pair(config: str, seed: int):
+    from plants.emu import Emu, emu_config
+
+    params = emu_config(config, disturbance_accel_std=0.05, disturbance_interval=0.2,
+                        disturbance_seed=seed)
+    route = load_route("jinan_xuzhou_east")
+    rng = np.random.default_rng(seed)
+    v0, s0 = rng.uniform(20.0, 80.0), rng.uniform(5e3, 2e5)
+    fast, ref = (Emu(params, route, v0=v0, s0=s0, kernel=k) for k in (True, False))
+    state = ref.get_state()
+    state["x"] = state["x"] + rng.uniform(-0.01, 0.01, params.n)
+    state["v"] = state["v"] + rng.uniform(-0.05, 0.05, params.n)
+    fast.set_state(state)
+    ref.set_state(state)
+    return params, fast, ref, rng
+
+
+@pytest.mark.parametrize("config", ["crh380a_3unit", "crh3_8car"])
+@pytest.mark.parametrize("seed", [0, 1])
+def test_emu_kernel_matches_the_numpy_reference(config: str, seed: int) -> None:
+    """Tolerance: both paths round the exact-propagator products ``phi s + gamma f`` (length
+    ``3n`` sums) within ``3n eps (|phi| |s| + |gamma| |f|)`` per sub-step (the coupler rows of
+    ``phi`` are big, ``k h / m``, and act on absolute positions); these add up over the
+    sub-steps. ``|f|`` is bounded by the envelope, resistance, 5 % grade and 6 sigma noise."""
+    params, fast, ref, rng = emu_pair(config, seed)
+    assert fast.kernel and not ref.kernel
+    n, steps = params.n, 25
+    x_start = ref.x.copy()
+    t = ref.t_ticks
+    for _ in range(steps):
+        level = rng.uniform(-1.5e5, 2.5e5)
+        inputs = {f"force[{i + 1}]": level * (1 + 0.1 * rng.standard_normal()) for i in range(n)}
+        for train in (fast, ref):
+            train.advance(t, to_ticks(COMM), inputs)
+        t += to_ticks(COMM)
+    n_sub = steps * round(COMM / params.max_step)
+    prop = ref._propagator(to_ticks(params.max_step))
+    v_max = float(np.max(np.abs(ref.v))) + 1.0
+    f_max = (np.maximum(ref.ft, ref.fb) + ref.da + ref.db * v_max + ref.dc * v_max**2
+             + ref.m * 9.81 * (0.05 + 6 * 0.05))
+    s_max = np.concatenate([np.full(n, np.max(np.abs(ref.x)) + 1e3), np.full(n, v_max)])
+    per_step = 3 * n * EPS * (np.abs(prop.phi) @ s_max + np.abs(prop.gamma) @ f_max)
+    tol = 2 * n_sub * per_step
+    tol_x, tol_v = tol[:n], tol[n:]
+    np.testing.assert_allclose(fast.x, ref.x, rtol=0, atol=np.max(tol_x))
+    np.testing.assert_allclose(fast.v, ref.v, rtol=0, atol=np.max(tol_v))
+    assert fast.held == ref.held
+    duration = steps * COMM
+    for name in ("traction_energy", "regenerated_energy"):
+        energy_tol = (n_sub * 2 * n * EPS * abs(getattr(ref, name))
+                      + np.sum(f_max) * duration * np.max(tol_v))
+        assert abs(getattr(fast, name) - getattr(ref, name)) <= energy_tol
+    out_fast, out_ref = fast.outputs(), ref.outputs()
+    assert out_fast.keys() == out_ref.keys()
+    tol_fz = params.coupler_stiffness * 2 * np.max(tol_x) + params.coupler_damping * 2 * np.max(
+        tol_v)
+    for j in range(n - 1):
+        name = f"coupler_force[{j + 1}]"
+        assert abs(out_fast[name] - out_ref[name]) <= tol_fz
+    tol_a = 2 * tol_fz / np.min(ref.m_eff) + 1e-9  # + forces' own dependence (Lipschitz, tiny)
+    for i in range(n):
+        assert abs(out_fast[f"a[{i + 1}]"] - out_ref[f"a[{i + 1}]"]) <= tol_a + 2 * np.max(
+            tol_v) * np.max((ref.db + 2 * ref.dc * v_max) / ref.m_eff)
+        # limits P / v: d/dv = -P / v^2
+        tol_limit = np.max(np.maximum(ref.pt, ref.pb)) / np.min(np.abs(ref.v))**2 * tol_v[i]
+        for name, bound in (("v", tol_v[i]), ("s", tol_x[i]), ("applied_force", tol_limit),
+                            ("traction_limit", tol_limit), ("brake_limit", tol_limit)):
+            key = f"{name}[{i + 1}]"
+            assert abs(out_fast[key] - out_ref[key]) <= bound, key
+    assert np.max(np.abs(ref.x - x_start)) > 50.0  # it moved

@@ -31,10 +31,12 @@ polytope W (its vertices), which is all the tube tightening needs (eqs. 14, 26).
 
 from __future__ import annotations
 
+import copy
+import functools
 import math
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import ClassVar
 
 import daqp
@@ -65,17 +67,35 @@ def support_of_sum(mats: Sequence[np.ndarray], w_vertices: np.ndarray,
 
 @dataclass
 class QPResult:
-    """One solve: free moves ``U``, stage moves ``du``, predicted states, cost, status."""
+    """One solve: free moves ``U``, stage moves ``du``, status, duals; the cost and the
+    predicted states are computed when first read (an RMPC event needs neither)."""
 
     U: np.ndarray
     du: np.ndarray
-    states: np.ndarray  # (H+1, n)
-    cost: float
     feasible: bool
     status: str
-    solve_time: float  # s, wall time of update + solve
+    solve_time: float  # s, wall time of vector update + solve + U/du/dual
     dual: np.ndarray  # one per constraint row of ``Acon`` (> 0 upper, < 0 lower bound active)
     iterations: int = 0
+    # (qp, q, e, ref) of the solve: e the free response's tracking error (flattened)
+    _data: tuple | None = field(default=None, repr=False, compare=False)
+
+    @functools.cached_property
+    def cost(self) -> float:
+        """``J = U' Hh U + q' U + e' Qblk e`` (eq. 11 / 25); inf when not feasible."""
+        if not self.feasible or self._data is None:
+            return math.inf
+        qp, q, e, _ = self._data
+        U = self.U
+        return float(U @ (qp.Hhalf @ U) + q @ U + e @ (qp._Qblk @ e))
+
+    @functools.cached_property
+    def states(self) -> np.ndarray:
+        """Predicted states ``(H+1, n)`` (NaN when not feasible)."""
+        qp, _, e, ref_f = self._data
+        if not self.feasible:
+            return np.full((qp.H + 1, qp.n), np.nan)
+        return (e + ref_f + qp._Gam_f @ self.U).reshape(qp.H + 1, qp.n)
 
 
 class HorizonQP:
@@ -176,29 +196,41 @@ class HorizonQP:
         self._lo_all = np.concatenate([self.du_lo] + self._lo)
         self._hi_all = np.concatenate([self.du_hi] + self._hi)
         self._nan = (np.full(nu, np.nan), np.full(H, np.nan), np.full((H + 1, n), np.nan))
-        if solver == "osqp":
+        self._eps, self._max_iter = eps, int(max_iter)
+        self._setup_solver()
+
+    def _setup_solver(self) -> None:
+        """A fresh solver workspace for this QP (OSQP, or DAQP with H factorised once)."""
+        nu, eps, max_iter = self.nu, self._eps, self._max_iter
+        if self.solver_name == "osqp":
             self.solver = osqp.OSQP()
             self.solver.setup(sp.csc_matrix(np.triu(2.0 * self.Hhalf)), np.zeros(nu),
                               sp.csc_matrix(self.Acon), -np.ones(self.n_con),
                               np.ones(self.n_con), verbose=False, eps_abs=eps, eps_rel=eps,
                               max_iter=max_iter, polishing=False, warm_starting=True,
                               adaptive_rho=True, adaptive_rho_interval=25, rho=self.RHO0)
-        else:
-            # the factorisation of H (and of the constraint rows in its metric) is done here,
-            # once; a solve only updates the vectors
-            self.solver = daqp.Model()
-            self._cold = np.zeros(self.n_con, dtype=np.int32)
-            flag = self.solver.setup(2.0 * self.Hhalf, np.zeros(nu),
-                                     np.ascontiguousarray(self.Acon[nu:]),
-                                     np.ones(self.n_con), -np.ones(self.n_con))
-            if isinstance(flag, tuple):
-                flag = flag[0]
-            if flag < 0:
-                raise ValueError(f"DAQP setup failed (exitflag {flag}): Hessian not positive "
-                                 f"definite? check r_du > 0")
-            settings = self.solver.settings
-            settings["iter_limit"] = int(max_iter)
-            self.solver.settings = settings
+            return
+        # the factorisation of H (and of the constraint rows in its metric) is done here,
+        # once; a solve only updates the vectors
+        self.solver = daqp.Model()
+        self._cold = np.zeros(self.n_con, dtype=np.int32)
+        flag = self.solver.setup(2.0 * self.Hhalf, np.zeros(nu),
+                                 np.ascontiguousarray(self.Acon[nu:]),
+                                 np.ones(self.n_con), -np.ones(self.n_con))
+        if isinstance(flag, tuple):
+            flag = flag[0]
+        if flag < 0:
+            raise ValueError(f"DAQP setup failed (exitflag {flag}): Hessian not positive "
+                             f"definite? check r_du > 0")
+        settings = self.solver.settings
+        settings["iter_limit"] = max_iter
+        self.solver.settings = settings
+
+    def clone(self) -> HorizonQP:
+        """The same QP (matrices shared, never written) with its own solver workspace."""
+        twin = copy.copy(self)
+        twin._setup_solver()
+        return twin
 
     def predict(self, x0: np.ndarray, U: np.ndarray, d: np.ndarray | None = None) -> np.ndarray:
         """Predicted states ``(H+1, n)`` for free moves ``U``."""
@@ -208,9 +240,9 @@ class HorizonQP:
         return X
 
     def _failed(self, status: str, t0: float, iterations: int = 0) -> QPResult:
-        U, du, X = self._nan
-        return QPResult(U.copy(), du.copy(), X.copy(), math.inf, False, status,
-                        time.perf_counter() - t0, np.zeros(self.n_con), iterations)
+        U, du, _ = self._nan
+        return QPResult(U.copy(), du.copy(), False, status, time.perf_counter() - t0,
+                        np.zeros(self.n_con), iterations, (self, None, None, None))
 
     def solve(self, x0: np.ndarray, ref: np.ndarray, d: np.ndarray | None = None,
               warm_x: np.ndarray | None = None, warm_y: np.ndarray | None = None) -> QPResult:
@@ -226,9 +258,8 @@ class HorizonQP:
             z = self._W @ np.concatenate((x0, ref_f, d))
         a, b = self._split
         err, q, base = z[:a], z[a:b], z[b:]
-        const = float(err @ (self._Qblk @ err))
         low, high = self._lo_all - base, self._hi_all - base
-        if (low > high + 1e-12).any():  # tightened sets empty along the way: infeasible
+        if (high - low).min() < -1e-12:  # tightened sets empty along the way: infeasible
             return self._failed("empty constraint set", t0)
         np.maximum(high, low, out=high)
         if self.solver_name == "daqp":
@@ -237,10 +268,9 @@ class HorizonQP:
             U, dual, status, iters = self._solve_osqp(q, low, high, warm_x, warm_y)
         if U is None:
             return self._failed(status, t0, iters)
-        cost = float(U @ (self.Hhalf @ U) + q @ U + const)
-        states = (err + ref_f + self._Gam_f @ U).reshape(self.H + 1, self.n)
         du = self.E @ U
-        return QPResult(U, du, states, cost, True, status, time.perf_counter() - t0, dual, iters)
+        return QPResult(U, du, True, status, time.perf_counter() - t0, dual, iters,
+                        (self, q, err, ref_f))
 
     def _solve_osqp(self, q: np.ndarray, low: np.ndarray, high: np.ndarray,
                     warm_x: np.ndarray | None, warm_y: np.ndarray | None

@@ -142,6 +142,12 @@ def disturbance_bounds(p: StopMpcParams, route: Route) -> tuple[float, float]:
     return float(a_g.min() + a_w_lo), float(a_g.max() + a_w_hi)
 
 
+_DESIGN_FIELDS = ("model", "curve", "route", "N", "Q", "P", "K", "A_cl", "w_bounds",
+                  "w_vertices", "F", "ref_mask", "x_lo", "x_hi", "F_term", "sigma")
+_DESIGNS: dict[tuple, dict[str, Any]] = {}  # (class, params, routes_dir) -> shared design
+_DESIGN_CACHE_SIZE = 64
+
+
 class _StopMpcBase(StatefulCore, Declared):
     """Shared event logic; subclasses choose the QP(s)."""
 
@@ -177,6 +183,40 @@ class _StopMpcBase(StatefulCore, Declared):
     def __init__(self, params: StopMpcParams, routes_dir: Path | None = None) -> None:
         params.check()
         self.p = params
+        # the design (DARE, tube sets, QP matrices) is a function of the parameters only:
+        # computed once per process and shared (read-only) by further cores, e.g. further FMU
+        # instances; each core gets its own solver workspaces (HorizonQP.clone)
+        key = (type(self), params, None if routes_dir is None else str(routes_dir))
+        design = _DESIGNS.get(key)
+        if design is None:
+            self._design(params, routes_dir)
+            design = {name: getattr(self, name) for name in _DESIGN_FIELDS}
+            design["qp_templates"] = {}
+            if len(_DESIGNS) >= _DESIGN_CACHE_SIZE:
+                _DESIGNS.pop(next(iter(_DESIGNS)))
+            _DESIGNS[key] = design
+        else:
+            self.__dict__.update({name: design[name] for name in _DESIGN_FIELDS})
+        self._qp_templates: dict[int, HorizonQP] = design["qp_templates"]
+        self._qps: dict[int, HorizonQP] = {}
+        self.max_hold = 1  # longest hold M (RSMPC: N - 1)
+        # state
+        m = self.model
+        self.history: list[float] = [params.initial_command] * (m.delay_steps + 1)
+        self.command = float(params.initial_command)
+        self.last_t: float | None = None
+        self.anchor: list[float] | None = None  # [t0, s0] of the time-indexed reference
+        self.warm: dict[int, list[np.ndarray]] = {}
+        self.plan: list[float] = []
+        self.hold = 1
+        self.qp_solves = 0
+        self.qp_infeasible = 0
+        self.solve_times: list[float] = []
+        self.standstill = False
+        self.last_v_ref = 0.0
+
+    def _design(self, params: StopMpcParams, routes_dir: Path | None) -> None:
+        """Everything derived from the parameters (the attributes in ``_DESIGN_FIELDS``)."""
         self.model: DesignModel = brake_delay_model(
             params.brake_gain, params.brake_time_constant, params.brake_delay, params.sample_time)
         self.curve = StoppingCurve(params.ref_decel, params.stop_point)
@@ -203,21 +243,6 @@ class _StopMpcBase(StatefulCore, Declared):
                               params.position_error_max])
         self.F_term = np.array([[0, 0, 1, 0], [0, 0, 0, 1]], float)
         self.sigma = self._terminal_box()
-        self._qps: dict[int, HorizonQP] = {}
-        self.max_hold = 1  # longest hold M (RSMPC: N - 1)
-        # state
-        self.history: list[float] = [params.initial_command] * (m.delay_steps + 1)
-        self.command = float(params.initial_command)
-        self.last_t: float | None = None
-        self.anchor: list[float] | None = None  # [t0, s0] of the time-indexed reference
-        self.warm: dict[int, list[np.ndarray]] = {}
-        self.plan: list[float] = []
-        self.hold = 1
-        self.qp_solves = 0
-        self.qp_infeasible = 0
-        self.solve_times: list[float] = []
-        self.standstill = False
-        self.last_v_ref = 0.0
 
     # -- tube sets ---------------------------------------------------------------------------
     def reach_mats(self, i: int, hold: int = 1) -> list[np.ndarray]:
@@ -277,9 +302,14 @@ class _StopMpcBase(StatefulCore, Declared):
                          solver=p.qp_solver)
 
     def qp(self, hold: int) -> HorizonQP:
-        if hold not in self._qps:
-            self._qps[hold] = self.make_qp(hold)
-        return self._qps[hold]
+        """This core's QP for hold M: a clone of the process-wide template (own solver)."""
+        qp = self._qps.get(hold)
+        if qp is None:
+            template = self._qp_templates.get(hold)
+            if template is None:
+                template = self._qp_templates[hold] = self.make_qp(hold)
+            qp = self._qps[hold] = template.clone()
+        return qp
 
     # -- prediction and reference --------------------------------------------------------------
     def resistance(self, v: float, s: float) -> float:

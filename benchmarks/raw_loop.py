@@ -1,0 +1,96 @@
+"""The minimal hand-written fmpy loop a master is measured against (no master, no results).
+
+For scenarios of periodic FMUs on one communication step (``base_step``): instantiate every
+component with its parameters (and ``sample_time``), then per step set each FMU's inputs from
+its sources in dependency order (plants first: their outputs do not depend on their inputs),
+read the recorded variables (one getReal per FMU), and doStep every FMU. One FMI call per FMU
+and direction: the floor of what a master costs on these FMUs.
+"""
+
+from __future__ import annotations
+
+import shutil
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+if str(ROOT) not in sys.path:
+    sys.path.insert(0, str(ROOT))
+
+from cosim.run.scenario import load_scenario  # noqa: E402
+
+
+def raw_fmpy_loop(scenario: str) -> dict[str, float]:
+    """Run ``scenario`` in the minimal loop: {wall_s, sim_s, final values of the records}."""
+    from fmpy import extract, read_model_description
+    from fmpy.fmi2 import FMU2Slave
+
+    sc = load_scenario(ROOT / "scenarios" / f"{scenario}.toml")
+    step = float(sc.simulation.base_step)
+    units: dict[str, dict] = {}
+    try:
+        for name, comp in sc.components.items():
+            md = read_model_description(str(comp.fmu_path))
+            unzipped = extract(str(comp.fmu_path))
+            fmu = FMU2Slave(guid=md.guid, unzipDirectory=unzipped, instanceName=name,
+                            modelIdentifier=md.coSimulation.modelIdentifier)
+            units[name] = {"fmu": fmu, "dir": unzipped,
+                           "vars": {v.name: v for v in md.modelVariables},
+                           "feedthrough": any(o.dependencies for o in md.outputs)}
+            fmu.instantiate()
+            fmu.setupExperiment(startTime=sc.simulation.start_time)
+            fmu.enterInitializationMode()
+            params = dict(comp.parameters)
+            if comp.sample_time is not None and "sample_time" in units[name]["vars"]:
+                params.setdefault("sample_time", comp.sample_time)
+            for key, value in {**params, **comp.inputs}.items():
+                var = units[name]["vars"][key]
+                setter = {"Real": fmu.setReal, "Integer": fmu.setInteger,
+                          "Boolean": fmu.setBoolean, "String": fmu.setString}[var.type]
+                cast = {"Real": float, "Integer": int, "Boolean": bool, "String": str}[var.type]
+                setter([var.valueReference], [cast(value)])
+            fmu.exitInitializationMode()
+        # inputs of FMUs with direct feedthrough (controllers) first, from their sources
+        # (plants, whose outputs do not depend on inputs); then the plants' inputs
+        plan = []
+        for name in sorted(units, key=lambda n: not units[n]["feedthrough"]):
+            links = [c for c in sc.connections if c.dst == name]
+            for src in dict.fromkeys(c.src for c in links):
+                mine = [c for c in links if c.src == src]
+                plan.append((units[src]["fmu"],
+                             [units[src]["vars"][c.src_var].valueReference for c in mine],
+                             units[name]["fmu"],
+                             [units[name]["vars"][c.dst_var].valueReference for c in mine]))
+        records = {}
+        for ref in sc.record or []:
+            comp, var = ref.split(".", 1)
+            records.setdefault(comp, []).append(units[comp]["vars"][var].valueReference)
+        record_calls = [(units[c]["fmu"], refs) for c, refs in records.items()]
+        fmus = [u["fmu"] for u in units.values()]
+        n_steps = int(round((sc.simulation.stop_time - sc.simulation.start_time) / step))
+        t = sc.simulation.start_time
+        t0 = time.perf_counter()
+        for k in range(n_steps):
+            t = sc.simulation.start_time + k * step
+            for src, src_refs, dst, dst_refs in plan:
+                dst.setReal(dst_refs, src.getReal(src_refs))
+            for fmu, refs in record_calls:
+                fmu.getReal(refs)
+            for fmu in fmus:
+                fmu.doStep(currentCommunicationPoint=t, communicationStepSize=step)
+        wall = time.perf_counter() - t0
+        final = {f"{c}.{v}": units[c]["fmu"].getReal([units[c]["vars"][v].valueReference])[0]
+                 for c, v in (r.split(".", 1) for r in (sc.record or [])[:2])}
+        return {"wall_s": wall, "sim_s": n_steps * step, **final}
+    finally:
+        for u in units.values():
+            try:
+                u["fmu"].terminate()
+                u["fmu"].freeInstance()
+            finally:
+                shutil.rmtree(u["dir"], ignore_errors=True)
+
+
+if __name__ == "__main__":
+    print(raw_fmpy_loop(sys.argv[1] if len(sys.argv) > 1 else "seed000_stop_pid"))
