@@ -51,6 +51,7 @@ from xml.etree import ElementTree
 import numpy as np
 
 ERROR, WARNING, NOTE = "error", "warning", "note"
+SKIPPED = "skipped"  # a check that could not run (never reported as "ok")
 
 STATIC_CHECKS = ("fmpy-validation", "variables", "units", "model-structure",
                  "default-experiment", "capabilities")
@@ -104,6 +105,13 @@ def passed(problems: list[Problem]) -> bool:
     return not any(p.severity == ERROR for p in problems)
 
 
+def _skipped(checks: tuple[str, ...], reason: str, problems: list[Problem]) -> list[Problem]:
+    """``problems`` plus a "skipped" entry for each of ``checks`` that has no finding."""
+    seen = {p.check for p in problems}
+    return [*problems, *(Problem(c, f"not run: {reason}", SKIPPED) for c in checks
+                         if c not in seen)]
+
+
 # -- static checks -------------------------------------------------------------------------------
 def _read_xml(path: Path) -> ElementTree.Element:
     with zipfile.ZipFile(path) as z:
@@ -134,17 +142,20 @@ def check_model_description(path: str | Path, strict: bool = True) -> list[Probl
     try:
         messages = validate_fmu(str(path))
     except Exception as err:  # a broken archive or XML
-        return [Problem("fmpy-validation", f"cannot be validated: {err}")]
+        return _skipped(STATIC_CHECKS, "the archive could not be read",
+                        [Problem("fmpy-validation", f"cannot be validated: {err}")])
     problems += [Problem("fmpy-validation", str(m).strip()) for m in messages]
     try:
         root = _read_xml(path)
         md = read_model_description(str(path), validate=False)
     except Exception as err:
-        return [*problems, Problem("variables", f"modelDescription.xml unreadable: {err}")]
+        return _skipped(STATIC_CHECKS, "modelDescription.xml could not be read",
+                        [*problems, Problem("variables", f"modelDescription.xml unreadable: "
+                                                         f"{err}")])
     if root.get("fmiVersion") != "2.0":
         problems.append(Problem("capabilities", f"fmiVersion {root.get('fmiVersion')!r}, "
                                                 "these checks are for FMI 2.0"))
-        return problems
+        return _skipped(STATIC_CHECKS, "not an FMI 2.0 FMU", problems)
 
     # variables: causality/variability/initial, start and min/max
     xml_vars = root.find("ModelVariables")
@@ -869,7 +880,8 @@ def _run_worker(args: dict, checks: tuple[str, ...], timeout: float) -> list[Pro
             tail = err.strip().splitlines()[-1] if err.strip() else f"exit status {code}"
             problems.append(Problem("calling-sequence", f"the host process failed while "
                                     f"loading the FMU: {tail}"))
-            return problems
+            return _skipped(tuple(c for c in checks if c not in done),
+                            "the FMU could not be loaded", problems)
         if hung:
             problems.append(Problem(current, f"hang: no progress for {timeout:.0f} s (the "
                                              "host was killed)"))
@@ -916,9 +928,11 @@ def check_fmu(path: str | Path, options: Options | None = None) -> list[Problem]
     if not opts.dynamic:
         return problems
     loadable = not any(p.check in ("variables", "capabilities") and "unreadable" in p.message
-                       or p.message == "not a co-simulation FMU" for p in problems)
+                       or p.message == "not a co-simulation FMU"
+                       or p.severity == SKIPPED for p in problems)
     if not loadable:
-        return problems
+        return _skipped(DYNAMIC_CHECKS, "the FMU could not be read or is not for "
+                        "co-simulation", problems)
     args = {"mode": "single", "paths": [str(path.resolve())], **_worker_options(opts)}
     return problems + _run_worker(args, DYNAMIC_CHECKS, opts.timeout)
 
@@ -941,14 +955,22 @@ def format_report(path: str | Path, problems: list[Problem],
     for check in [*checks, *[c for c in by_check if c not in checks]]:
         found = by_check.get(check, [])
         severities = {p.severity for p in found}
-        label = "FAIL" if ERROR in severities else "warn" if WARNING in severities else "ok"
+        label = ("FAIL" if ERROR in severities else "warn" if WARNING in severities
+                 else "skip" if SKIPPED in severities else "ok")
+        if label == "skip":
+            reason = next(p.message for p in found if p.severity == SKIPPED)
+            lines.append(f"  {label:<4}  {check}  ({reason.removeprefix('not run: ')})")
+            continue
         lines.append(f"  {label:<4}  {check}")
         for p in found:
-            lines.append(f"          {p.severity}: {p.message}")
+            if p.severity != SKIPPED:
+                lines.append(f"          {p.severity}: {p.message}")
     n_err = sum(p.severity == ERROR for p in problems)
     n_warn = sum(p.severity == WARNING for p in problems)
+    n_skip = len({p.check for p in problems if p.severity == SKIPPED})
     verdict = "PASSED" if n_err == 0 else "FAILED"
-    lines.append(f"  {verdict}: {n_err} error(s), {n_warn} warning(s)")
+    lines.append(f"  {verdict}: {n_err} error(s), {n_warn} warning(s)"
+                 + (f", {n_skip} check(s) skipped" if n_skip else ""))
     return "\n".join(lines)
 
 
