@@ -466,6 +466,11 @@ class CoreSlave(Fmi2Slave):
                     type_attrib["min"] = repr(float(var.min))
                 if var.max is not None:
                     type_attrib["max"] = repr(float(var.max))
+            elif var.type is int:  # declared, so a master checks a horizon N before running
+                if var.min is not None:
+                    type_attrib["min"] = str(int(var.min))
+                if var.max is not None:
+                    type_attrib["max"] = str(int(var.max))
             if var.causality != "output":
                 if var.type is bool:
                     type_attrib["start"] = str(var.start).lower()

@@ -318,7 +318,7 @@ def check_against_fmus(scenario: Scenario, descriptions: dict[str, Any]) -> None
         ok = _PY_TYPES[v.type]
         if isinstance(value, bool) and v.type != "Boolean" or not isinstance(value, ok):
             raise ScenarioError(f"{src}: {key}: {comp}.{var} is {v.type}, got {value!r}")
-        if v.type == "Real":
+        if v.type in ("Real", "Integer"):  # declared min/max of both are checked here
             if not math.isfinite(float(value)):
                 raise ScenarioError(f"{src}: {key}: {value!r} is not finite")
             lo = float(v.min) if v.min is not None else -math.inf
