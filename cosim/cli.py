@@ -106,6 +106,9 @@ def run(
     force: Annotated[bool, typer.Option(
         "--force", help="let partial results replace a complete earlier run in --out "
         "(otherwise they go to <out>.partial)")] = False,
+    strict: Annotated[bool, typer.Option(
+        "--strict", help="exit with status 1 when the run had warnings (e.g. infeasible QPs)")]
+        = False,
 ) -> None:
     """Run a scenario; write results.csv, summary.json and plot.png; print the summary.
 
@@ -142,6 +145,11 @@ def run(
         print_summary(result.summary, f"{path.stem} ({result.algorithm})")
         out.print(f"wrote {target}/results.csv, summary.json" + ("" if no_plot else ", plot.png"),
                   highlight=False)
+        for warning in result.summary.get("warnings", []):
+            console.print(f"[bold yellow]warning:[/] {escape(warning)}", highlight=False,
+                          soft_wrap=True)
+        if strict and result.summary.get("warnings"):
+            raise typer.Exit(1)
 
 
 class _ProgressReporter:

@@ -48,6 +48,7 @@ from cosim.run.scenario import (
 )
 
 ProgressFn = Callable[[float, float], None]
+WARNING_COUNTER = "qp_infeasible"  # an FMU output counting events that needed a fallback
 
 # One extraction per FMU file (and version) per process: pythonfmu caches the FMU's Python
 # module by name, so later instances keep using the first extraction; it stays until exit.
@@ -604,6 +605,8 @@ class Master:
         refs: list[str] = list(sc.record) if sc.record is not None else [
             f"{u.name}.{n}" for u in self.units for n, v in u.vars.items()
             if v.causality == "output" and v.type in ("Real", "Integer", "Boolean")]
+        # infeasibility counters are always recorded: the summary warns from when they rise
+        refs += [f"{u.name}.{WARNING_COUNTER}" for u in self.units if WARNING_COUNTER in u.vars]
         for value in sc.summary.values():
             for ref in value if isinstance(value, list) else [value]:
                 if isinstance(ref, str) and "." in ref and ref.split(".", 1)[0] in self.by_name:
