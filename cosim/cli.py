@@ -246,10 +246,17 @@ def sweep(
         "--set", help="grid, e.g. controller.N=3..15 or controller.beta=1,2,4 (repeatable)")],
     out_dir: Annotated[Path | None, typer.Option("--out", help="output folder "
                                                  "(default runs/sweep_<scenario>)")] = None,
-    workers: Annotated[int | None, typer.Option(help="parallel processes (default: CPUs)")] = None,
+    workers: Annotated[int | None, typer.Option(
+        min=1, help="parallel processes (default: CPUs)")] = None,
     no_plot: Annotated[bool, typer.Option("--no-plot", help="skip sweep.png")] = False,
+    resume: Annotated[bool, typer.Option(
+        "--resume", help="keep the ok rows of an existing sweep.csv and run only the rest")]
+        = False,
 ) -> None:
-    """Run scenarios over a parameter grid in parallel; write sweep.csv and sweep.png."""
+    """Run scenarios over a parameter grid in parallel; write sweep.csv (a row per point as it
+    finishes, with status and error) and sweep.png. A failed point does not stop the others
+    (exit status 1 at the end); Ctrl-C keeps the finished rows (exit status 130)."""
+    from cosim.run import interrupt
     from cosim.run.master import SimulationError
     from cosim.run.results import check_destination
     from cosim.run.scenario import ScenarioError, find_scenario
@@ -260,22 +267,41 @@ def sweep(
         stems = [find_scenario(s).stem for s in scenarios]
         target = out_dir or Path("runs") / ("sweep_" + "_".join(stems))
         check_destination(target)
-        frame = run_sweep(scenarios, grid, target, workers, plot=not no_plot)
+        frame = run_sweep(scenarios, grid, target, workers, plot=not no_plot, resume=resume)
+    except interrupt.Interrupted as err:
+        console.print(f"[bold yellow]{escape(str(err))}[/]; the finished rows are in "
+                      f"{escape(str(target))}/sweep.csv", highlight=False, soft_wrap=True)
+        raise typer.Exit(interrupt.EXIT_INTERRUPTED) from None
     except (ValueError, ScenarioError, SimulationError) as err:
         _fail(str(err))
     table = Table(title=f"sweep over {', '.join(grid)}")
-    columns = ["scenario", *grid, "stop_error_m", "controller_executions", "command_switches",
-               "qp_infeasible"]
+    columns = ["scenario", *grid, "status", "stop_error_m", "controller_executions",
+               "command_switches", "qp_infeasible"]
     labels = {"stop_error_m": "stop error m", "controller_executions": "executions",
               "command_switches": "switches", "qp_infeasible": "infeasible"}
     for col in columns:
-        table.add_column(labels.get(col, col.rpartition(".")[2]),
-                         justify="left" if col == "scenario" else "right")
+        table.add_column(escape(labels.get(col, col.rpartition(".")[2])),
+                         justify="left" if col in ("scenario", "status") else "right")
+
+    def cell(row, col: str) -> str:
+        value = row[col]
+        if value is None or value != value:  # None or NaN (a failed point)
+            return "-"
+        if isinstance(value, float) and value.is_integer() and col != "stop_error_m":
+            value = int(value)  # a count in a column that also holds empty cells
+        return f"{value:+.3f}" if col == "stop_error_m" else escape(str(value))
+
     for _, row in frame.iterrows():
-        table.add_row(*[f"{row[c]:+.3f}" if c == "stop_error_m" else str(row[c])
-                        for c in columns])
+        table.add_row(*[cell(row, c) for c in columns])
     out.print(table)
-    out.print(f"wrote {target}/sweep.csv" + ("" if no_plot else ", sweep.png"))
+    out.print(f"wrote {target}/sweep.csv" + ("" if no_plot else ", sweep.png"), highlight=False)
+    failed = frame[frame["status"] != "ok"]
+    for _, row in failed.iterrows():
+        point = ", ".join(f"{k}={row[k]}" for k in grid)
+        console.print(f"[bold red]failed:[/] {escape(row['scenario'])} {escape(point)}: "
+                      f"{escape(str(row['error']))}", highlight=False, soft_wrap=True)
+    if len(failed):
+        raise typer.Exit(1)
 
 
 @app.command()
