@@ -36,7 +36,7 @@ def build(names: Annotated[list[str] | None, typer.Argument(
     for spec in specs:
         path = build_fmu(spec)
         shown = path.relative_to(Path.cwd()) if path.is_relative_to(Path.cwd()) else path
-        out.print(f"built {shown}  ({spec.description})", highlight=False)
+        out.print(f"built {shown}  ({spec.description})", highlight=False, markup=False)
 
 
 @app.command("list")
@@ -50,7 +50,8 @@ def list_() -> None:
     table.add_column("built")
     table.add_column("description")
     for spec in catalog().values():
-        table.add_row(spec.identifier, "yes" if spec.path.is_file() else "no", spec.description)
+        table.add_row(escape(spec.identifier), "yes" if spec.path.is_file() else "no",
+                      escape(spec.description))
     out.print(table)
     table = Table(title="Scenarios", show_edge=False)
     table.add_column("name")
@@ -63,8 +64,8 @@ def list_() -> None:
         try:
             desc = tomllib.loads(path.read_text()).get("description", "")
         except tomllib.TOMLDecodeError as err:
-            desc = f"[red]invalid TOML: {err}[/]"
-        table.add_row(path.stem, desc)
+            desc = f"[red]invalid TOML: {escape(str(err))}[/]"
+        table.add_row(escape(path.stem), desc)
     out.print(table)
 
 
@@ -76,7 +77,7 @@ SUMMARY_KEYS = ("stop_error_m", "final_speed_mps", "command_switches", "speed_rm
 
 
 def print_summary(summary: dict, title: str) -> None:
-    table = Table(title=title, show_header=False, show_edge=False)
+    table = Table(title=escape(title), show_header=False, show_edge=False)
     table.add_column("metric", style="bold")
     table.add_column("value")
     for key in SUMMARY_KEYS:
@@ -87,7 +88,7 @@ def print_summary(summary: dict, title: str) -> None:
             elif isinstance(value, dict):
                 value = ", ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}"
                                   for k, v in value.items())
-            table.add_row(key, str(value))
+            table.add_row(key, escape(str(value)))
     out.print(table)
 
 
@@ -97,7 +98,8 @@ def run(
     out_dir: Annotated[Path | None, typer.Option("--out", help="output folder "
                                                  "(default runs/<scenario>)")] = None,
     algorithm: Annotated[str | None, typer.Option(
-        help="event (default), fixed or jacobi; overrides [simulation] algorithm")] = None,
+        help=escape("event (default), fixed or jacobi; overrides [simulation] algorithm"))]
+        = None,
     set_: Annotated[list[str] | None, typer.Option(
         "--set", help="override, e.g. plant.mass=539000, controller.N=10, "
                       "simulation.stop_time=80 (repeatable)")] = None,
@@ -144,7 +146,7 @@ def run(
                 _fail(str(err))
         print_summary(result.summary, f"{path.stem} ({result.algorithm})")
         out.print(f"wrote {target}/results.csv, summary.json" + ("" if no_plot else ", plot.png"),
-                  highlight=False)
+                  highlight=False, markup=False)
         for warning in result.summary.get("warnings", []):
             console.print(f"[bold yellow]warning:[/] {escape(warning)}", highlight=False,
                           soft_wrap=True)
@@ -231,7 +233,7 @@ def validate(
         failed |= not passed(problems)
         report[str(path)] = [vars(p) for p in problems]
         if not as_json:
-            out.print(format_report(path, problems), highlight=False, soft_wrap=True)
+            out.print(format_report(path, problems), highlight=False, soft_wrap=True, markup=False)
     if as_json:
         out.print_json(json.dumps(report))
     if failed:
@@ -274,7 +276,7 @@ def sweep(
         raise typer.Exit(interrupt.EXIT_INTERRUPTED) from None
     except (ValueError, ScenarioError, SimulationError) as err:
         _fail(str(err))
-    table = Table(title=f"sweep over {', '.join(grid)}")
+    table = Table(title=escape(f"sweep over {', '.join(grid)}"))
     columns = ["scenario", *grid, "status", "stop_error_m", "controller_executions",
                "command_switches", "qp_infeasible"]
     labels = {"stop_error_m": "stop error m", "controller_executions": "executions",
@@ -294,7 +296,8 @@ def sweep(
     for _, row in frame.iterrows():
         table.add_row(*[cell(row, c) for c in columns])
     out.print(table)
-    out.print(f"wrote {target}/sweep.csv" + ("" if no_plot else ", sweep.png"), highlight=False)
+    out.print(f"wrote {target}/sweep.csv" + ("" if no_plot else ", sweep.png"), highlight=False,
+              markup=False)
     failed = frame[frame["status"] != "ok"]
     for _, row in failed.iterrows():
         point = ", ".join(f"{k}={row[k]}" for k in grid)
@@ -321,7 +324,7 @@ def export(
         path = export_ssp(scenario, ssp, overrides=set_ or None)
     except (ScenarioError, ValueError, FileNotFoundError) as err:
         _fail(str(err))
-    out.print(f"wrote {path}")
+    out.print(f"wrote {path}", highlight=False, markup=False)
 
 
 def main() -> None:  # pragma: no cover - console entry point

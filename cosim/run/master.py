@@ -43,6 +43,7 @@ from cosim.run.scenario import (
     Connection,
     Scenario,
     ScenarioError,
+    blame_override,
     check_against_fmus,
     load_scenario,
 )
@@ -451,7 +452,10 @@ class Master:
                                     f"{comp.fmu_path} not found (run `cosim build`)")
             descriptions[comp.name] = read_fmu(sc, comp.name, comp.fmu_path)
             extracted[comp.fmu_path] = extract_once(comp.fmu_path)
-        check_against_fmus(sc, descriptions)
+        try:
+            check_against_fmus(sc, descriptions)
+        except ScenarioError as err:
+            raise blame_override(err, sc.path, sc.overrides) from None
         by_name: dict[str, FmuUnit] = {}
         for comp in sc.components.values():
             unit = FmuUnit(comp.name, comp.fmu_path, extracted[comp.fmu_path],
