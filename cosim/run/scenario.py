@@ -44,6 +44,13 @@ SCENARIO_DIR = ROOT / "scenarios"
 ALGORITHMS = ("event", "fixed", "jacobi")
 
 
+RECORD_KEYS = ("variables",)
+# what cosim.run.metrics and the plot read (see the cosim.run.metrics module docstring)
+SUMMARY_KEYS = ("position", "speed", "acceleration", "command", "reference_speed",
+                "speed_limit", "power", "coupler_forces", "stop_point", "reference_decel",
+                "planned_arrival_time")
+
+
 class ScenarioError(ValueError):
     """A scenario file or override that cannot be run; the message names file and key."""
 
@@ -321,6 +328,15 @@ def _load_scenario(path: Path, overrides: dict[str, Any] | list[str] | None) -> 
         src, src_var = _split_ref(path, key, src_ref, components)
         connections.append(Connection(src, src_var, dst, dst_var))
 
+    for table, known in (("record", RECORD_KEYS), ("summary", SUMMARY_KEYS)):
+        value = raw.get(table, {})
+        if not isinstance(value, dict):
+            raise ScenarioError(f"{path}: [{table}] must be a table")
+        for bad in sorted(set(value) - set(known)):
+            hint = difflib.get_close_matches(bad, known, n=1)
+            raise ScenarioError(f"{path}: [{table}] {bad}: unknown key"
+                                + (f" (did you mean {hint[0]!r}?)" if hint else
+                                   f"; known: {', '.join(known)}"))
     record = raw.get("record", {}).get("variables")
     if record is not None:
         if not isinstance(record, list) or not all(isinstance(r, str) for r in record):
