@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import ast
 import atexit
+import hashlib
 import importlib
 import inspect
 import json
@@ -89,9 +90,12 @@ class FmuSpec:
     def path(self) -> Path:
         return FMU_DIR / f"{self.identifier}.fmu"
 
-    @property
-    def entry_module(self) -> str:
-        return f"atocosim_{self.identifier.lower()}"
+    def entry_module(self, digest: str) -> str:
+        """The entry module's name: pythonfmu imports it by name and Python caches modules by
+        name, so it carries a digest of the bundled code; a rebuild with other code is then
+        another module, and a process that rebuilds (a notebook, a sweep worker, the tests)
+        runs the new code instead of the first build's."""
+        return f"atocosim_{self.identifier.lower()}_{digest[:12]}"
 
 
 def _wrapper_modules() -> list[str]:
@@ -263,6 +267,14 @@ def install_shim(fmu: Path, identifier: str, shim: Path) -> None:
     os.replace(staged, fmu)
 
 
+def _digest(bundle: Path, entry_text: str) -> str:
+    """SHA-256 over the bundle's files (paths and contents) and the entry script."""
+    h = hashlib.sha256(entry_text.encode())
+    for f in sorted(p for p in bundle.rglob("*") if p.is_file()):
+        h.update(str(f.relative_to(bundle)).encode() + b"\0" + f.read_bytes() + b"\0")
+    return h.hexdigest()
+
+
 def build_fmu(spec: FmuSpec, dest: Path = FMU_DIR) -> Path:
     """Build one FMU into ``dest`` and return its path."""
     from pythonfmu.builder import FmuBuilder
@@ -275,10 +287,11 @@ def build_fmu(spec: FmuSpec, dest: Path = FMU_DIR) -> Path:
             target = bundle / f.relative_to(ROOT)
             target.parent.mkdir(parents=True, exist_ok=True)
             shutil.copy2(f, target)
-        entry = tmp_path / f"{spec.entry_module}.py"
-        entry.write_text(_ENTRY_TEMPLATE.format(
+        text = _ENTRY_TEMPLATE.format(
             identifier=spec.identifier, bundle=BUNDLE_DIR, packages=PROJECT_PACKAGES,
-            module=spec.module, cls=spec.cls, doc=spec.description.replace('"', "'")))
+            module=spec.module, cls=spec.cls, doc=spec.description.replace('"', "'"))
+        entry = tmp_path / f"{spec.entry_module(_digest(bundle, text))}.py"
+        entry.write_text(text)
         tmp_fmu = tmp_path / "out" / f"{spec.identifier}.fmu"
         tmp_fmu.parent.mkdir()
         FmuBuilder.build_FMU(entry, dest=tmp_fmu, project_files=[bundle])
