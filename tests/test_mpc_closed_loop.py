@@ -121,3 +121,16 @@ def test_infeasible_qp_applies_the_clipped_tube_feedback_law(cls):
     expected = float(np.clip(core.K @ (x0 - ref), -p.du_max, p.du_max))
     assert core.qp_infeasible == before + 1
     assert (du, hold, plan) == (expected, 1, [])
+
+
+def test_wall_clock_solve_times_are_bounded_and_not_state():
+    """QP solve times are run-dependent diagnostics: never in the FMU state (which must be
+    deterministic and stays small), and kept over a bounded window only."""
+    from controllers.mpc.stop_mpc import SOLVE_TIME_WINDOW
+
+    p = replace(BASE, horizon=6)
+    core = SelfTriggeredStopMpc(p)
+    for k in range(SOLVE_TIME_WINDOW + 50):
+        core.compute(0.2 * k, {"v": max(20.0 - 0.1 * k, 0.0), "s": 2.0 * k, "a_c": 0.0})
+    assert len(core.solve_times) == SOLVE_TIME_WINDOW
+    assert "solve_times" not in core.get_state()

@@ -47,6 +47,7 @@ from __future__ import annotations
 
 import math
 import statistics
+from collections import deque
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, ClassVar
@@ -124,12 +125,15 @@ def disturbance_bounds(p: StopMpcParams, route: Route) -> tuple[float, float]:
     return float(a_g.min() + a_w_lo), float(a_g.max() + a_w_hi)
 
 
+SOLVE_TIME_WINDOW = 1001  # events over which qp_solve_time_median is taken (the latest ones)
+
+
 class _StopMpcBase(StatefulCore):
     """Shared event logic; subclasses choose the QP(s)."""
 
     state_fields: ClassVar[tuple[str, ...]] = (
         "history", "command", "last_t", "anchor", "warm", "plan", "hold", "qp_solves",
-        "qp_infeasible", "solve_times", "standstill", "last_v_ref")
+        "qp_infeasible", "standstill", "last_v_ref")  # solve_times: wall clock, not state
     feedforward: ClassVar[bool] = False
     tube: ClassVar[bool] = True
     self_triggered: ClassVar[bool] = False
@@ -175,7 +179,8 @@ class _StopMpcBase(StatefulCore):
         self.hold = 1
         self.qp_solves = 0
         self.qp_infeasible = 0
-        self.solve_times: list[float] = []
+        # wall-clock diagnostics: bounded, outside the (deterministic, serialized) state
+        self.solve_times: deque[float] = deque(maxlen=SOLVE_TIME_WINDOW)
         self.standstill = False
         self.last_v_ref = 0.0
 
