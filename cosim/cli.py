@@ -36,7 +36,7 @@ def build(names: Annotated[list[str] | None, typer.Argument(
     for spec in specs:
         path = build_fmu(spec)
         shown = path.relative_to(Path.cwd()) if path.is_relative_to(Path.cwd()) else path
-        out.print(f"built {shown}  ({spec.description})", highlight=False)
+        out.print(f"built {shown}  ({spec.description})", highlight=False, markup=False)
 
 
 @app.command("list")
@@ -50,7 +50,8 @@ def list_() -> None:
     table.add_column("built")
     table.add_column("description")
     for spec in catalog().values():
-        table.add_row(spec.identifier, "yes" if spec.path.is_file() else "no", spec.description)
+        table.add_row(escape(spec.identifier), "yes" if spec.path.is_file() else "no",
+                      escape(spec.description))
     out.print(table)
     table = Table(title="Scenarios", show_edge=False)
     table.add_column("name")
@@ -63,8 +64,8 @@ def list_() -> None:
         try:
             desc = tomllib.loads(path.read_text()).get("description", "")
         except tomllib.TOMLDecodeError as err:
-            desc = f"[red]invalid TOML: {err}[/]"
-        table.add_row(path.stem, desc)
+            desc = f"[red]invalid TOML: {escape(str(err))}[/]"
+        table.add_row(escape(path.stem), desc)
     out.print(table)
 
 
@@ -76,7 +77,7 @@ SUMMARY_KEYS = ("stop_error_m", "final_speed_mps", "command_switches", "speed_rm
 
 
 def print_summary(summary: dict, title: str) -> None:
-    table = Table(title=title, show_header=False, show_edge=False)
+    table = Table(title=escape(title), show_header=False, show_edge=False)
     table.add_column("metric", style="bold")
     table.add_column("value")
     for key in SUMMARY_KEYS:
@@ -87,7 +88,7 @@ def print_summary(summary: dict, title: str) -> None:
             elif isinstance(value, dict):
                 value = ", ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}"
                                   for k, v in value.items())
-            table.add_row(key, str(value))
+            table.add_row(key, escape(str(value)))
     out.print(table)
 
 
@@ -97,7 +98,8 @@ def run(
     out_dir: Annotated[Path | None, typer.Option("--out", help="output folder "
                                                  "(default runs/<scenario>)")] = None,
     algorithm: Annotated[str | None, typer.Option(
-        help="event (default), fixed or jacobi; overrides [simulation] algorithm")] = None,
+        help=escape("event (default), fixed or jacobi; overrides [simulation] algorithm"))]
+        = None,
     set_: Annotated[list[str] | None, typer.Option(
         "--set", help="override, e.g. plant.mass=539000, controller.N=10, "
                       "simulation.stop_time=80 (repeatable)")] = None,
@@ -106,6 +108,9 @@ def run(
     force: Annotated[bool, typer.Option(
         "--force", help="let partial results replace a complete earlier run in --out "
         "(otherwise they go to <out>.partial)")] = False,
+    strict: Annotated[bool, typer.Option(
+        "--strict", help="exit with status 1 when the run had warnings (e.g. infeasible QPs)")]
+        = False,
 ) -> None:
     """Run a scenario; write results.csv, summary.json and plot.png; print the summary.
 
@@ -141,7 +146,12 @@ def run(
                 _fail(str(err))
         print_summary(result.summary, f"{path.stem} ({result.algorithm})")
         out.print(f"wrote {target}/results.csv, summary.json" + ("" if no_plot else ", plot.png"),
-                  highlight=False)
+                  highlight=False, markup=False)
+        for warning in result.summary.get("warnings", []):
+            console.print(f"[bold yellow]warning:[/] {escape(warning)}", highlight=False,
+                          soft_wrap=True)
+        if strict and result.summary.get("warnings"):
+            raise typer.Exit(1)
 
 
 class _ProgressReporter:
@@ -229,7 +239,7 @@ def validate(
         failed |= not passed(problems)
         report[str(path)] = [vars(p) for p in problems]
         if not as_json:
-            out.print(format_report(path, problems), highlight=False, soft_wrap=True)
+            out.print(format_report(path, problems), highlight=False, soft_wrap=True, markup=False)
     if as_json:
         out.print_json(json.dumps(report))
     if failed:
@@ -244,10 +254,17 @@ def sweep(
         "--set", help="grid, e.g. controller.N=3..15 or controller.beta=1,2,4 (repeatable)")],
     out_dir: Annotated[Path | None, typer.Option("--out", help="output folder "
                                                  "(default runs/sweep_<scenario>)")] = None,
-    workers: Annotated[int | None, typer.Option(help="parallel processes (default: CPUs)")] = None,
+    workers: Annotated[int | None, typer.Option(
+        min=1, help="parallel processes (default: CPUs)")] = None,
     no_plot: Annotated[bool, typer.Option("--no-plot", help="skip sweep.png")] = False,
+    resume: Annotated[bool, typer.Option(
+        "--resume", help="keep the ok rows of an existing sweep.csv and run only the rest")]
+        = False,
 ) -> None:
-    """Run scenarios over a parameter grid in parallel; write sweep.csv and sweep.png."""
+    """Run scenarios over a parameter grid in parallel; write sweep.csv (a row per point as it
+    finishes, with status and error) and sweep.png. A failed point does not stop the others
+    (exit status 1 at the end); Ctrl-C keeps the finished rows (exit status 130)."""
+    from cosim.run import interrupt
     from cosim.run.master import SimulationError
     from cosim.run.results import check_destination
     from cosim.run.scenario import ScenarioError, find_scenario
@@ -258,22 +275,42 @@ def sweep(
         stems = [find_scenario(s).stem for s in scenarios]
         target = out_dir or Path("runs") / ("sweep_" + "_".join(stems))
         check_destination(target)
-        frame = run_sweep(scenarios, grid, target, workers, plot=not no_plot)
+        frame = run_sweep(scenarios, grid, target, workers, plot=not no_plot, resume=resume)
+    except interrupt.Interrupted as err:
+        console.print(f"[bold yellow]{escape(str(err))}[/]; the finished rows are in "
+                      f"{escape(str(target))}/sweep.csv", highlight=False, soft_wrap=True)
+        raise typer.Exit(interrupt.EXIT_INTERRUPTED) from None
     except (ValueError, ScenarioError, SimulationError) as err:
         _fail(str(err))
-    table = Table(title=f"sweep over {', '.join(grid)}")
-    columns = ["scenario", *grid, "stop_error_m", "controller_executions", "command_switches",
-               "qp_infeasible"]
+    table = Table(title=escape(f"sweep over {', '.join(grid)}"))
+    columns = ["scenario", *grid, "status", "stop_error_m", "controller_executions",
+               "command_switches", "qp_infeasible"]
     labels = {"stop_error_m": "stop error m", "controller_executions": "executions",
               "command_switches": "switches", "qp_infeasible": "infeasible"}
     for col in columns:
-        table.add_column(labels.get(col, col.rpartition(".")[2]),
-                         justify="left" if col == "scenario" else "right")
+        table.add_column(escape(labels.get(col, col.rpartition(".")[2])),
+                         justify="left" if col in ("scenario", "status") else "right")
+
+    def cell(row, col: str) -> str:
+        value = row[col]
+        if value is None or value != value:  # None or NaN (a failed point)
+            return "-"
+        if isinstance(value, float) and value.is_integer() and col != "stop_error_m":
+            value = int(value)  # a count in a column that also holds empty cells
+        return f"{value:+.3f}" if col == "stop_error_m" else escape(str(value))
+
     for _, row in frame.iterrows():
-        table.add_row(*[f"{row[c]:+.3f}" if c == "stop_error_m" else str(row[c])
-                        for c in columns])
+        table.add_row(*[cell(row, c) for c in columns])
     out.print(table)
-    out.print(f"wrote {target}/sweep.csv" + ("" if no_plot else ", sweep.png"))
+    out.print(f"wrote {target}/sweep.csv" + ("" if no_plot else ", sweep.png"), highlight=False,
+              markup=False)
+    failed = frame[frame["status"] != "ok"]
+    for _, row in failed.iterrows():
+        point = ", ".join(f"{k}={row[k]}" for k in grid)
+        console.print(f"[bold red]failed:[/] {escape(row['scenario'])} {escape(point)}: "
+                      f"{escape(str(row['error']))}", highlight=False, soft_wrap=True)
+    if len(failed):
+        raise typer.Exit(1)
 
 
 @app.command()
@@ -293,7 +330,7 @@ def export(
         path = export_ssp(scenario, ssp, overrides=set_ or None)
     except (ScenarioError, ValueError, FileNotFoundError) as err:
         _fail(str(err))
-    out.print(f"wrote {path}")
+    out.print(f"wrote {path}", highlight=False, markup=False)
 
 
 @app.command()

@@ -30,7 +30,10 @@ Resistance per vehicle (N/kN of its weight ``m g / 1000`` kN, v in km/h; eqs. 2-
   segment, :meth:`plants.route.Route.additional` (eq. 5).
 
 Basic resistance and brake forces oppose motion; near standstill they are regularised
-(``stiction_speed``) so that a train at rest stays at rest and never rolls back under them.
+(``stiction_speed``) so that they never push a train backwards. As in the EMU, static friction
+is explicit: once the mean speed is within ``stiction_speed`` of zero and the brake shoes (at
+their standstill friction coefficient) plus the constant resistance terms can hold the train
+against traction and grade, it is held at rest (all speeds zero) until they no longer can.
 
 Traction / electric brake (locomotive only): the demand ``force_demand`` (N, > 0 traction,
 < 0 electric braking) is delayed by ``traction_delay`` (tau of eq. 15), clamped to the HXD1
@@ -214,7 +217,7 @@ class FreightTrain(StatefulCore, Declared):
     """Multi-mass freight train core (see module docstring)."""
 
     state_fields = ("t_ticks", "x", "v", "traction_force", "pressure", "traction_history",
-                    "brake_history", "energy", "peak_draft", "peak_buff", "accel")
+                    "brake_history", "energy", "peak_draft", "peak_buff", "accel", "held")
     setup_vars = (*initial_state_parameters(0.0, " of every vehicle"),
                   route_parameter("freight_20km"))
     input_vars = (
@@ -312,6 +315,7 @@ class FreightTrain(StatefulCore, Declared):
         self.peak_draft = 0.0  # N, largest draft force over the last communication step
         self.peak_buff = 0.0  # N, largest buff force (positive) over the last step
         self.accel = 0.0  # m/s^2, train (mass-weighted) acceleration over the last sub-step
+        self.held = False  # at rest, held by the brakes and static resistance (see _holds)
         self._grid = to_ticks(p.max_step)
         self._delay_ticks = to_ticks(p.traction_delay)
         self._inverse: dict[int, np.ndarray] = {}
@@ -493,12 +497,29 @@ class FreightTrain(StatefulCore, Declared):
         banded[1, 1:] += w
         return solveh_banded(banded, self.m_eff * v0 + h * force, check_finite=False)
 
+    def _holds(self, traction: float, pres: np.ndarray | None) -> bool:
+        """Static friction, as the EMU's explicit hold: can the brake shoes (at their
+        standstill friction coefficient) and the constant resistance terms hold the train at
+        rest against traction and the grade/curve forces?"""
+        if pres is None or not pres.any():
+            return False
+        grade = -float(self.weight_per_kn @ self._additional.mean_over(self.x, self.length))
+        capacity = (float(self.brake_scale @ (pres * friction_coefficient(np.zeros(1))[0]))
+                    + float(self.res_a.sum()))
+        return abs(traction + grade) <= capacity
+
     def _substep(self, t_ticks: int, h_ticks: int) -> None:
         p = self.p
         h = to_seconds(h_ticks)
         x0, v0 = self.x, self.v
         f1, f_mean = self._traction_step(self.delayed_demand(t_ticks), h)
         pres = self._brake_step(to_seconds(t_ticks), to_seconds(t_ticks + h_ticks))
+        if self.held:
+            if self._holds(f_mean, pres):
+                self.traction_force = f1
+                self.accel = 0.0
+                return
+            self.held = False
         speed = np.abs(v0)
         dissipative = self.res_a + (self.res_b + self.res_c * speed) * speed
         if pres is not None and pres.any():
@@ -521,6 +542,10 @@ class FreightTrain(StatefulCore, Declared):
         self.energy += f_mean * 0.5 * (v0[0] + v1[0]) * h
         self.accel = float(np.dot(self.m_eff, v1 - v0) / (h * self.m_eff.sum()))
         self.traction_force = f1
+        v_mean = float(np.dot(self.m_eff, v1)) / float(self.m_eff.sum())
+        if abs(v_mean) <= p.stiction_speed and self._holds(f1, pres):
+            v1 = np.zeros_like(v1)  # the regularised friction alone would let it creep
+            self.held = True
         self.x, self.v = x1, v1
         fc = self.coupler_forces(x1, v1)
         self.peak_draft = max(self.peak_draft, float(fc.max()))
@@ -565,7 +590,8 @@ class FreightTrain(StatefulCore, Declared):
             values = np.array([self.brake_history[0][1]])
         else:
             arrivals, values = self._arrivals()
-        scalars = np.array([self.traction_force, self.energy, 0.0, 0.0, self.accel, 0.0])
+        scalars = np.array([self.traction_force, self.energy, 0.0, 0.0, self.accel, 0.0,
+                            float(self.held)])
         x, v, pressure = self.x.copy(), self.v.copy(), self.pressure.copy()
         kernels.freight_steps(x, v, pressure, scalars, hs, t0s, t1s, demands,
                               arrivals, values, self.m_eff, self.length,
@@ -577,6 +603,7 @@ class FreightTrain(StatefulCore, Declared):
         self.peak_draft, self.peak_buff = float(scalars[2]), float(scalars[3])
         self.accel = float(scalars[4])
         del self.brake_history[:int(scalars[5])]
+        self.held = bool(scalars[6])
 
     def outputs(self) -> dict[str, float]:
         x, v = self.x, self.v

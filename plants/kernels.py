@@ -102,7 +102,7 @@ else:
  C_ED_P_MAX, C_ED_FADE, C_PMAX, C_FILL_T, C_FILL_E, C_REL_T, C_REL_E, C_R_FULL, C_R_MIN) = range(19)
 N_CONST = 19
 # scalar state vector (in/out)
-S_TRACTION, S_ENERGY, S_PEAK_DRAFT, S_PEAK_BUFF, S_ACCEL, S_FIRST = range(6)
+S_TRACTION, S_ENERGY, S_PEAK_DRAFT, S_PEAK_BUFF, S_ACCEL, S_FIRST, S_HELD = range(7)
 
 
 @njit
@@ -191,6 +191,24 @@ _FREIGHT_SIGNATURE = (f"void({', '.join([_F] * 8)}, float64[:, :], {', '.join([_
                       f"int64[:], int64[:], {_F})")
 
 
+@njit
+def _freight_holds(traction, mean_p, braking, x, length, weight_per_kn, brake_scale, res_a,
+                   xs, cum, slopes, hint_f, hint_r):
+    """Static friction (``FreightTrain._holds``): can the brake shoes at their standstill
+    friction coefficient (0.322) and the constant resistance terms hold the train at rest
+    against traction and the grade/curve forces?"""
+    if not braking:
+        return False
+    grade = 0.0
+    capacity = 0.0
+    for i in range(x.size):
+        c_front, hint_f[i] = _interp(x[i], xs, cum, slopes, hint_f[i])
+        c_rear, hint_r[i] = _interp(x[i] - length[i], xs, cum, slopes, hint_r[i])
+        grade -= weight_per_kn[i] * ((c_front - c_rear) / length[i])
+        capacity += brake_scale[i] * mean_p[i] * 0.322 + res_a[i]
+    return abs(traction + grade) <= capacity
+
+
 @njit_eager(_FREIGHT_SIGNATURE)
 def freight_steps(x, v, pres, sc, hs, t0s, t1s, demands, arrivals, values, m_eff, length,
                   res_a, res_b, res_c, weight_per_kn, brake_scale, xs, cum, slopes, hint_f,
@@ -256,6 +274,13 @@ def freight_steps(x, v, pres, sc, hs, t0s, t1s, demands, arrivals, values, m_eff
             mean_p[i] = 0.5 * (start[i] + pres[i])
             if mean_p[i] != 0.0:
                 braking = True
+        if sc[S_HELD] != 0.0:  # at rest: stays while the brakes hold it
+            if _freight_holds(f_mean, mean_p, braking, x, length, weight_per_kn, brake_scale,
+                              res_a, xs, cum, slopes, hint_f, hint_r):
+                f_trac = f1
+                sc[S_ACCEL] = 0.0
+                continue
+            sc[S_HELD] = 0.0
         # resistance, brake and route forces at the sub-step start / predicted mid-point
         for i in range(n):
             speed = abs(v[i])
@@ -299,12 +324,20 @@ def freight_steps(x, v, pres, sc, hs, t0s, t1s, demands, arrivals, values, m_eff
             v1[i] = rprime[i] - cprime[i] * v1[i + 1]
         sc[S_ENERGY] += f_mean * 0.5 * (v[0] + v1[0]) * h
         momentum = 0.0
+        mean_v1 = 0.0
         for i in range(n):
             momentum += m_eff[i] * (v1[i] - v[i])
+            mean_v1 += m_eff[i] * v1[i]
             x[i] = x[i] + 0.5 * h * (v[i] + v1[i])
-            v[i] = v1[i]
         sc[S_ACCEL] = momentum / (h * m_total)
         f_trac = f1
+        hold = abs(mean_v1 / m_total) <= stiction and _freight_holds(
+            f1, mean_p, braking, x, length, weight_per_kn, brake_scale, res_a, xs, cum, slopes,
+            hint_f, hint_r)
+        for i in range(n):  # the regularised friction alone would let a braked train creep
+            v[i] = 0.0 if hold else v1[i]
+        if hold:
+            sc[S_HELD] = 1.0
         for j in range(n - 1):
             g = x[j] - length[j] - x[j + 1]
             d = v[j] - v[j + 1]

@@ -201,10 +201,11 @@ def test_odd_communication_steps_only_split_sub_steps() -> None:
 
 
 def test_integrator_converges_when_the_sub_step_shrinks() -> None:
-    """Error against a 2 ms run shrinks with max_step; 10 ms is accurate to < 1 mm/s."""
+    """Error against a 2 ms run shrinks with max_step; 10 ms is accurate to < 1 mm/s. At 60 s,
+    while still moving (from about 65 s the brakes hold it at rest: every run gives 0)."""
     def final(max_step: float) -> np.ndarray:
         train = FreightTrain(dataclasses.replace(P, max_step=max_step), _downhill_route())
-        run(train, _schedule, 80.0, 0.2)
+        run(train, _schedule, 60.0, 0.2)
         return train.v
 
     fine = final(0.002)
@@ -414,3 +415,21 @@ def test_slack_is_taken_up_coupler_by_coupler_when_starting() -> None:
     bound = run_with_momentum_bound(train, 30.0, 0.2)
     assert abs(float(np.dot(train.m_eff, train.v)) - momentum0) <= bound
     assert bound < 1e-9 * momentum0
+
+
+def test_braked_train_at_rest_on_a_grade_stays_at_rest_until_released() -> None:
+    """Full service brake on a -4 permille grade: once stopped the train is held (it used to
+    creep 0.46 m in 10 minutes through the regularised friction); released, it rolls again."""
+    from plants.route import StepProfile
+
+    route = Route("down4", 1e6, StepProfile.from_pairs([[-2e3, -4.0]]))
+    train = FreightTrain(P, route)
+    brake = {"pipe_reduction": P.full_service_reduction}
+    run(train, lambda _: brake, 60.0, 0.2)
+    assert train.held and np.all(train.v == 0.0)
+    x_stopped = train.x.copy()
+    run(train, lambda _: brake, 660.0, 0.2)
+    np.testing.assert_array_equal(train.x, x_stopped)
+    assert np.all(train.v == 0.0)
+    run(train, lambda _: {"pipe_reduction": 0.0}, 760.0, 0.2)
+    assert not train.held and train.v[0] > 0.1  # brakes released: downhill it goes

@@ -104,3 +104,33 @@ def test_bad_parameters_are_rejected():
         TubeStopMpc(replace(BASE, q_position=0.0))
     with pytest.raises(ValueError, match="whole number"):
         TubeStopMpc(replace(BASE, brake_delay=0.5))
+
+
+
+@pytest.mark.parametrize("cls", [TubeStopMpc, SelfTriggeredStopMpc])
+def test_infeasible_qp_applies_the_clipped_tube_feedback_law(cls):
+    """The documented fallback (module doc of controllers.mpc.stop_mpc): when the QP has no
+    solution, du = K (x - x_s) clipped to [-du_max, du_max], hold 1, no plan; counted."""
+    p = replace(BASE, horizon=5, position_error_max=0.01, speed_error_max=0.01)
+    core = cls(p)
+    core.compute(0.0, {"v": 20.0, "s": 0.0, "a_c": 0.0})  # anchors the reference at t = 0
+    x0 = core.delay_prediction(0.0, 30.0, 0.0)  # 10 m/s too fast: no tube contains it
+    before = core.qp_infeasible
+    du, hold, plan, _ = core.choose(x0, 0.2)
+    ref = core.reference(0.2, 0)[0]
+    expected = float(np.clip(core.K @ (x0 - ref), -p.du_max, p.du_max))
+    assert core.qp_infeasible == before + 1
+    assert (du, hold, plan) == (expected, 1, [])
+
+
+def test_wall_clock_solve_times_are_bounded_and_not_state():
+    """QP solve times are run-dependent diagnostics: never in the FMU state (which must be
+    deterministic and stays small), and kept over a bounded window only."""
+    from controllers.mpc.stop_mpc import SOLVE_TIME_WINDOW
+
+    p = replace(BASE, horizon=6)
+    core = SelfTriggeredStopMpc(p)
+    for k in range(SOLVE_TIME_WINDOW + 50):
+        core.compute(0.2 * k, {"v": max(20.0 - 0.1 * k, 0.0), "s": 2.0 * k, "a_c": 0.0})
+    assert len(core.solve_times) == SOLVE_TIME_WINDOW
+    assert "solve_times" not in core.get_state()

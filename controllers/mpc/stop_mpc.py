@@ -47,6 +47,7 @@ from __future__ import annotations
 
 import math
 import statistics
+from collections import deque
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, ClassVar
@@ -146,6 +147,7 @@ _DESIGN_FIELDS = ("model", "curve", "route", "N", "Q", "P", "K", "A_cl", "w_boun
                   "w_vertices", "F", "ref_mask", "x_lo", "x_hi", "F_term", "sigma")
 _DESIGNS: dict[tuple, dict[str, Any]] = {}  # (class, params, routes_dir) -> shared design
 _DESIGN_CACHE_SIZE = 64
+SOLVE_TIME_WINDOW = 1001  # events over which qp_solve_time_median is taken (the latest ones)
 
 
 class _StopMpcBase(StatefulCore, Declared):
@@ -175,7 +177,7 @@ class _StopMpcBase(StatefulCore, Declared):
 
     state_fields: ClassVar[tuple[str, ...]] = (
         "history", "command", "last_t", "anchor", "warm", "plan", "hold", "qp_solves",
-        "qp_infeasible", "solve_times", "standstill", "last_v_ref")
+        "qp_infeasible", "standstill", "last_v_ref")  # solve_times: wall clock, not state
     feedforward: ClassVar[bool] = False
     tube: ClassVar[bool] = True
     self_triggered: ClassVar[bool] = False
@@ -211,7 +213,8 @@ class _StopMpcBase(StatefulCore, Declared):
         self.hold = 1
         self.qp_solves = 0
         self.qp_infeasible = 0
-        self.solve_times: list[float] = []
+        # wall-clock diagnostics: bounded, outside the (deterministic, serialized) state
+        self.solve_times: deque[float] = deque(maxlen=SOLVE_TIME_WINDOW)
         self.standstill = False
         self.last_v_ref = 0.0
 

@@ -120,9 +120,12 @@ class FmuSpec:
         """The wrapper class (imports its module)."""
         return getattr(importlib.import_module(self.module), self.cls)
 
-    @property
-    def entry_module(self) -> str:
-        return f"atocosim_{self.identifier.lower()}"
+    def entry_module(self, digest: str) -> str:
+        """The entry module's name: pythonfmu imports it by name and Python caches modules by
+        name, so it carries a digest of the bundled code; a rebuild with other code is then
+        another module, and a process that rebuilds (a notebook, a sweep worker, the tests)
+        runs the new code instead of the first build's."""
+        return f"atocosim_{self.identifier.lower()}_{digest[:12]}"
 
 
 def _wrapper_modules() -> list[str]:
@@ -316,11 +319,14 @@ def build_fmu(spec: FmuSpec, dest: Path = FMU_DIR) -> Path:
             target = bundle / f.relative_to(ROOT)
             target.parent.mkdir(parents=True, exist_ok=True)
             shutil.copy2(f, target)
-        entry = tmp_path / f"{spec.entry_module}.py"
-        entry.write_text(_ENTRY_TEMPLATE.format(
+        digest = bundle_digest(bundle)
+        text = _ENTRY_TEMPLATE.format(
             identifier=spec.identifier, bundle=BUNDLE_DIR, packages=PROJECT_PACKAGES,
             module=spec.module, cls=spec.cls, doc=spec.description.replace('"', "'"),
-            digest=bundle_digest(bundle)))
+            digest=digest)
+        name_digest = hashlib.sha256((digest + text).encode()).hexdigest()
+        entry = tmp_path / f"{spec.entry_module(name_digest)}.py"
+        entry.write_text(text)
         tmp_fmu = tmp_path / "out" / f"{spec.identifier}.fmu"
         tmp_fmu.parent.mkdir()
         FmuBuilder.build_FMU(entry, dest=tmp_fmu, project_files=[bundle])

@@ -340,10 +340,14 @@ class CoreSlave(Fmi2Slave):
     def _set_fmu_state(self, state: dict[str, Any]) -> None:
         if not isinstance(state, dict) or state.get("fmu") != self.modelName:
             raise FmuStateError(f"state does not belong to FMU {self.modelName}")
+        params = [v.name for v in self.variables if v.causality == "parameter"]
+        same_core = self.core is not None and all(
+            self.values.get(n) == state["values"].get(n) for n in params)
         self.values = copy.deepcopy(state["values"])
-        self.core = None
-        self.initialized = False
-        self.ensure_core()
+        if not same_core:  # the core (DARE, sets, route, QP set-up) depends on parameters only
+            self.core = None
+            self.initialized = False
+            self.ensure_core()
         self.core.set_state(copy.deepcopy(state["core"]))
         self.set_slave_state(copy.deepcopy(state["slave"]))
         self.outputs = copy.deepcopy(state["outputs"])
@@ -427,6 +431,11 @@ class CoreSlave(Fmi2Slave):
                     type_attrib["min"] = repr(float(var.min))
                 if var.max is not None:
                     type_attrib["max"] = repr(float(var.max))
+            elif var.type is int:  # declared, so a master checks a horizon N before running
+                if var.min is not None:
+                    type_attrib["min"] = str(int(var.min))
+                if var.max is not None:
+                    type_attrib["max"] = str(int(var.max))
             if var.causality != "output":
                 if var.type is bool:
                     type_attrib["start"] = str(var.start).lower()

@@ -62,6 +62,12 @@ def requested() -> str | None:
     return _requested[0] if _requested else None
 
 
+def check_between(what: str) -> None:
+    """Raise :class:`Interrupted` ("<what> interrupted") if a signal arrived."""
+    if _requested:
+        raise Interrupted(f"{what} interrupted ({_requested[0]})")
+
+
 def check(t: float) -> None:
     """Raise :class:`Interrupted` ("interrupted at t = ... s") if a signal arrived."""
     if _requested:

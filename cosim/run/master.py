@@ -45,12 +45,14 @@ from cosim.run.scenario import (
     Connection,
     Scenario,
     ScenarioError,
+    blame_override,
     check_against_fmus,
     check_timing,
     load_scenario,
 )
 
 ProgressFn = Callable[[float, float], None]
+WARNING_COUNTER = "qp_infeasible"  # an FMU output counting events that needed a fallback
 
 # One extraction per FMU file (and version) per process: pythonfmu caches the FMU's Python
 # module by name, so later instances keep using the first extraction; it stays until exit.
@@ -90,6 +92,73 @@ MAX_HALVINGS = 10
 _FMI2_DISCARD, _FMI2_LAST_SUCCESSFUL_TIME, _FMI2_TERMINATED = 2, 2, 3
 
 
+def read_fmu(sc: Scenario, instance: str, path: Path) -> Any:
+    """The modelDescription of the FMU of ``instance``, after checking the file is an FMU with a
+    co-simulation binary for this platform: otherwise a :class:`ScenarioError` naming the
+    scenario file, the instance and the path (instead of BadZipFile / KeyError later)."""
+    import zipfile
+
+    from fmpy import platform
+
+    where = f"{sc.path}: [fmus.{instance}] fmu = {str(path)!r}"
+    try:
+        with zipfile.ZipFile(path) as archive:
+            names = set(archive.namelist())
+    except (zipfile.BadZipFile, OSError) as err:
+        raise ScenarioError(f"{where}: not an FMU (not a readable zip archive: {err})") from None
+    if "modelDescription.xml" not in names:
+        raise ScenarioError(f"{where}: not an FMU (no modelDescription.xml in the archive)")
+    try:
+        md = read_model_description(str(path))
+    except Exception as err:  # noqa: BLE001 - fmpy raises many kinds on a bad XML
+        raise ScenarioError(f"{where}: modelDescription.xml is not valid: {err}") from None
+    if md.coSimulation is None:
+        raise ScenarioError(f"{where}: not a co-simulation FMU (model exchange only)")
+    ident = md.coSimulation.modelIdentifier
+    ext = {"linux": ".so", "darwin": ".dylib", "win": ".dll"}
+    suffix = next(v for k, v in ext.items() if platform.startswith(k))
+    if f"binaries/{platform}/{ident}{suffix}" not in names:
+        found = sorted({n.split("/")[1] for n in names
+                        if n.startswith("binaries/") and n.count("/") >= 2 and n.split("/")[1]})
+        raise ScenarioError(f"{where}: no binary for this platform ({platform}; the FMU has "
+                            f"{', '.join(found) or 'no binaries'})")
+    return md
+
+
+class FmuCallError(SimulationError):
+    """An FMI call other than doStep failed; ``status`` is the FMI status (3 error, 4 fatal)."""
+
+    def __init__(self, message: str, status: int | None = None) -> None:
+        super().__init__(message)
+        self.status = status
+
+
+class _CheckedSlave:
+    """An fmpy slave whose FMI calls (doStep aside: :meth:`FmuUnit.step_to` handles it) raise
+    :class:`FmuCallError` naming the instance, the call, the time and what the FMU logged,
+    instead of fmpy's bare ``FMICallException``; a failure anywhere keeps the partial results."""
+
+    def __init__(self, slave: FMU2Slave, unit: FmuUnit) -> None:
+        self._slave, self._unit = slave, unit
+
+    def __getattr__(self, name: str) -> Any:
+        attr = getattr(self._slave, name)
+        if name == "doStep" or not callable(attr):
+            return attr
+        unit = self._unit
+
+        def call(*args: Any, **kwargs: Any) -> Any:
+            try:
+                return attr(*args, **kwargs)
+            except Exception as err:
+                raise FmuCallError(f"{unit.name}: {name} at t = "
+                                   f"{to_seconds(unit.time_ticks):g} s failed: "
+                                   f"{unit.fmu_reason(err)}", getattr(err, "status", None)
+                                   ) from err
+
+        return call
+
+
 @dataclass
 class Variable:
     vr: int
@@ -121,9 +190,9 @@ class FmuUnit:
         self.md = md
         self.vars = {v.name: Variable(v.valueReference, v.type, v.causality,
                                       enumeration_items(v)) for v in md.modelVariables}
-        self.slave = FMU2Slave(guid=md.guid, unzipDirectory=unzipdir,
-                               modelIdentifier=md.coSimulation.modelIdentifier,
-                               instanceName=name)
+        self.slave = _CheckedSlave(FMU2Slave(guid=md.guid, unzipDirectory=unzipdir,
+                                             modelIdentifier=md.coSimulation.modelIdentifier,
+                                             instanceName=name), self)
         self.deps = output_dependencies(md)  # absent dependencies attribute: all inputs
         self.feedthrough = any(self.deps.values())
         self.variable_step = bool(md.coSimulation.canHandleVariableCommunicationStepSize)
@@ -144,6 +213,16 @@ class FmuUnit:
     def last_messages(self, n: int = 3) -> str:
         """The FMU's last log messages, for error reports."""
         return " | ".join(m.strip() for m in self.messages[-n:])
+
+    def fmu_reason(self, err: BaseException) -> str:
+        """Why a call failed, in the FMU's words when it said why (our FMUs log the Python
+        exception's message as "<instance>: <call> rejected: <message>"), else fmpy's error
+        and the FMU's last log messages."""
+        for message in reversed(self.messages[-5:]):
+            if " rejected: " in message:
+                return message.split(" rejected: ", 1)[1].strip()
+        said = self.last_messages()
+        return f"{err}" + (f"; FMU says: {said}" if said else "")
 
     # -- values ------------------------------------------------------------------------------
     def get(self, names: list[str]) -> list[Any]:
@@ -184,9 +263,9 @@ class FmuUnit:
         except (FmuTerminated, SimulationError):
             raise
         except Exception as err:  # fmpy raises FMICallException with the status
-            raise SimulationError(f"{self.name}: doStep at t={to_seconds(self.time_ticks)} s, "
-                                  f"h={to_seconds(h)} s failed: {err}; FMU says: "
-                                  f"{self.last_messages()}") from err
+            raise SimulationError(f"{self.name}: doStep at t = {to_seconds(self.time_ticks):g} "
+                                  f"s, h = {to_seconds(h):g} s failed: "
+                                  f"{self.fmu_reason(err)}") from err
         finally:
             self.wall_time += time.perf_counter() - t0
         self.time_ticks = ticks
@@ -439,10 +518,13 @@ class Master:
             if not comp.fmu_path.is_file():
                 raise ScenarioError(f"{sc.path}: [fmus.{comp.name}] fmu = {comp.fmu!r}: "
                                     f"{comp.fmu_path} not found (run `cosim build`)")
+            descriptions[comp.name] = read_fmu(sc, comp.name, comp.fmu_path)
             extracted[comp.fmu_path] = extract_once(comp.fmu_path)
-            descriptions[comp.name] = read_model_description(str(comp.fmu_path))
-        check_against_fmus(sc, descriptions)
-        check_timing(sc, descriptions, self.algorithm_name)
+        try:
+            check_against_fmus(sc, descriptions)
+            check_timing(sc, descriptions, self.algorithm_name)
+        except ScenarioError as err:
+            raise blame_override(err, sc.path, sc.overrides) from None
         by_name: dict[str, FmuUnit] = {}
         for comp in sc.components.values():
             unit = FmuUnit(comp.name, comp.fmu_path, extracted[comp.fmu_path],
@@ -485,20 +567,16 @@ class Master:
                 for name, value in {**params, **comp.inputs}.items():
                     unit.set(name, value)
                 unit.slave.enterInitializationMode()
-            except Exception as err:
+            except FmuCallError as err:
                 raise SimulationError(f"{unit.name} ({comp.fmu}): rejected parameters: "
-                                      f"{err}; FMU says: {unit.last_messages()}") from err
+                                      f"{unit.fmu_reason(err.__cause__ or err)}") from err
         if self.algorithm_name == "jacobi":
             # initial values flow once in initialization mode (plant outputs are valid there)
             for link in self.links:
                 if not link.src.deps.get(link.src_name):
                     self.transfer(link, link.src.get([link.src_name])[0])
         for unit in self.units:
-            try:
-                unit.slave.exitInitializationMode()
-            except Exception as err:
-                raise SimulationError(f"{unit.name}: exitInitializationMode failed: "
-                                      f"{unit.last_messages()}") from err
+            unit.slave.exitInitializationMode()
 
     # -- used by the algorithms ------------------------------------------------------------------
     def transfer(self, link: Link, value: Any) -> None:
@@ -600,6 +678,8 @@ class Master:
         refs: list[str] = list(sc.record) if sc.record is not None else [
             f"{u.name}.{n}" for u in self.units for n, v in u.vars.items()
             if v.causality == "output" and v.type in NUMERIC]
+        # infeasibility counters are always recorded: the summary warns from when they rise
+        refs += [f"{u.name}.{WARNING_COUNTER}" for u in self.units if WARNING_COUNTER in u.vars]
         for value in sc.summary.values():
             for ref in value if isinstance(value, list) else [value]:
                 if isinstance(ref, str) and "." in ref and ref.split(".", 1)[0] in self.by_name:
@@ -667,8 +747,9 @@ def run_scenario(scenario: str | Path | Scenario, overrides: dict[str, Any] | li
             result = master.run()
         except (SimulationError, interrupt.Interrupted, KeyboardInterrupt) as err:
             partial = getattr(master, "partial", None)
-            if out_dir is None or partial is None:
-                raise
+            interrupted = isinstance(err, (interrupt.Interrupted, KeyboardInterrupt))
+            if out_dir is None or partial is None or partial.frame.empty and not interrupted:
+                raise  # a failure before anything was recorded (e.g. a rejected parameter)
             partial.summary = compute_summary(partial)
             where = partial.write(Path(out_dir), plot=plot, force=force)[0].parent
             note = (f"; partial results up to t = {partial.sim_time_s:g} s written to {where} "

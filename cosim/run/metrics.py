@@ -149,8 +149,32 @@ def compute_summary(result: Any) -> dict[str, Any]:
             median = outputs.get("qp_solve_time_median")
             out.setdefault("qp_solve_time_median_s", {})[fmu] = (
                 float(median) if median is not None and math.isfinite(median) else None)
+    out["warnings"] = warnings(result)
     _flatten_single(out, ("qp_solves", "qp_infeasible", "qp_solve_time_median_s"))
     return out
+
+
+def warnings(result: Any) -> list[str]:
+    """Things that went wrong without stopping the run, for the user: today, events whose QP
+    was infeasible (the controller then applied its fallback law), with the count and the
+    first time (from the recorded counter, to the output interval)."""
+    found: list[str] = []
+    frame = result.frame
+    for fmu, outputs in result.final_outputs.items():
+        count = int(outputs.get("qp_infeasible", 0) or 0)
+        if count <= 0:
+            continue
+        solves = int(outputs.get("qp_solves", 0) or 0)
+        column = f"{fmu}.qp_infeasible"
+        first = ""
+        if column in frame.columns and len(frame):
+            rising = np.nonzero(frame[column].to_numpy(dtype=float) > 0)[0]
+            if rising.size:
+                first = f", first by t = {float(frame['time'].iloc[rising[0]]):g} s"
+        solved = f", {solves} QPs solved" if solves else ""
+        found.append(f"{fmu}: infeasible QP at {count} events{first}{solved}; the fallback law "
+                     "was applied (the constraints could not be met)")
+    return found
 
 
 def _flatten_single(out: dict[str, Any], keys: tuple[str, ...]) -> None:

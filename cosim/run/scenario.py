@@ -46,6 +46,13 @@ SCENARIO_DIR = ROOT / "scenarios"
 ALGORITHMS = ("event", "fixed", "jacobi")
 
 
+RECORD_KEYS = ("variables",)
+# what cosim.run.metrics and the plot read (see the cosim.run.metrics module docstring)
+SUMMARY_KEYS = ("position", "speed", "acceleration", "command", "reference_speed",
+                "speed_limit", "power", "coupler_forces", "stop_point", "reference_decel",
+                "planned_arrival_time")
+
+
 class ScenarioError(ValueError):
     """A scenario file or override that cannot be run; the message names file and key."""
 
@@ -92,6 +99,8 @@ class Scenario:
     record: list[str] | None
     summary: dict[str, Any]
     raw: dict[str, Any]
+    # "[fmus.plant.parameters] mass" -> "plant.mass=539000": keys that came from --set
+    overrides: dict[str, str] = field(default_factory=dict)
 
 
 def find_scenario(name_or_path: str | Path) -> Path:
@@ -143,6 +152,40 @@ def apply_overrides(raw: dict[str, Any], overrides: dict[str, Any] | list[str] |
             fmus[head].setdefault("inputs", {})[rest[7:]] = value
         else:
             fmus[head].setdefault("parameters", {})[rest] = value
+
+
+def override_keys(overrides: dict[str, Any] | list[str] | None) -> dict[str, str]:
+    """The scenario key each override replaces, as error messages spell it
+    (``"[fmus.plant.parameters] mass"``), mapped to the ``--set`` text that set it."""
+    if not overrides:
+        return {}
+    items = ([(k, f"{k}={v}") for k, v in overrides.items()] if isinstance(overrides, dict)
+             else [(_split_override(o)[0], o) for o in overrides])
+    keys: dict[str, str] = {}
+    for key, text in items:
+        head, _, rest = key.partition(".")
+        if head in ("simulation", "summary"):
+            keys[f"[{head}] {rest}"] = text
+        elif rest in ("sample_time", "max_step", "fmu"):
+            keys[f"[fmus.{head}] {rest}"] = text
+        elif rest.startswith("inputs."):
+            keys[f"[fmus.{head}.inputs] {rest[7:]}"] = text
+        else:
+            keys[f"[fmus.{head}.parameters] {rest}"] = text
+    return keys
+
+
+def blame_override(err: ScenarioError, path: Path,
+                   overrides: dict[str, str]) -> ScenarioError:
+    """``err`` reworded to name the ``--set`` option when the key at fault came from one."""
+    message = str(err)
+    for key, text in overrides.items():
+        name = key.rpartition("] ")[2]
+        for head, lead in ((f"{path}: {key}: ", ""), (f"{path}: {key} ", f"{name} ")):
+            if message.startswith(head):
+                return ScenarioError(f"--set {text}: {lead}{message[len(head):]} (in place of "
+                                     f"{key} in {path})")
+    return err
 
 
 def _split_override(text: str) -> tuple[str, str]:
@@ -200,8 +243,19 @@ def _split_ref(source: Path, key: str, ref: Any, components: dict[str, Component
 def load_scenario(name_or_path: str | Path,
                   overrides: dict[str, Any] | list[str] | None = None) -> Scenario:
     """Read, override and check the structure of a scenario (variables are checked against
-    the FMUs' modelDescriptions by :func:`check_against_fmus`)."""
+    the FMUs' modelDescriptions by :func:`check_against_fmus`). An error in a value given by
+    an override names the ``--set`` option."""
     path = find_scenario(name_or_path)
+    keys = override_keys(overrides)
+    try:
+        scenario = _load_scenario(path, overrides)
+    except ScenarioError as err:
+        raise blame_override(err, path, keys) from None
+    scenario.overrides = keys
+    return scenario
+
+
+def _load_scenario(path: Path, overrides: dict[str, Any] | list[str] | None) -> Scenario:
     try:
         with open(path, "rb") as f:
             raw = tomllib.load(f)
@@ -276,6 +330,15 @@ def load_scenario(name_or_path: str | Path,
         src, src_var = _split_ref(path, key, src_ref, components)
         connections.append(Connection(src, src_var, dst, dst_var))
 
+    for table, known in (("record", RECORD_KEYS), ("summary", SUMMARY_KEYS)):
+        value = raw.get(table, {})
+        if not isinstance(value, dict):
+            raise ScenarioError(f"{path}: [{table}] must be a table")
+        for bad in sorted(set(value) - set(known)):
+            hint = difflib.get_close_matches(bad, known, n=1)
+            raise ScenarioError(f"{path}: [{table}] {bad}: unknown key"
+                                + (f" (did you mean {hint[0]!r}?)" if hint else
+                                   f"; known: {', '.join(known)}"))
     record = raw.get("record", {}).get("variables")
     if record is not None:
         if not isinstance(record, list) or not all(isinstance(r, str) for r in record):

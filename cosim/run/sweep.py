@@ -3,7 +3,10 @@
 ``run_sweep("seed000_stop_rsmpc", {"controller.N": range(3, 16)}, "runs/sweep", workers=2)``
 runs every grid point with :func:`cosim.run.master.run_scenario` in a process pool, and writes
 
-* ``sweep.csv``: one row per run (scenario, the grid values, the summary figures);
+* ``sweep.csv``: one row per run (scenario, the grid values, ``status`` ok / failed /
+  interrupted, ``error``, the summary figures), appended as each run finishes, so a failed
+  point does not stop the others and an interrupted sweep keeps its finished rows; with
+  ``resume`` the points already ``ok`` in an existing ``sweep.csv`` are not run again;
 * ``sweep.png``: stop error against the first grid key, one line per scenario, with the
   +-0.5 m stop window, and the command switches / controller executions (the paper's Fig. 11
   plus the switch counts).
@@ -14,15 +17,19 @@ inclusive), ``controller.beta=1,2,4`` (list) or a single value.
 
 from __future__ import annotations
 
+import csv
 import itertools
 import multiprocessing
 import os
+import signal
 from collections.abc import Iterable, Sequence
-from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from pathlib import Path
 from typing import Any
 
 import pandas as pd
+
+from cosim.run import interrupt
 
 STOP_WINDOW_M = 0.5  # seed 000: ATO stop window +-50 cm
 
@@ -63,12 +70,22 @@ def grid_points(grid: dict[str, Sequence[Any]]) -> list[dict[str, Any]]:
 
 
 def _run_point(scenario: str, point: dict[str, Any]) -> dict[str, Any]:
-    """One grid point in a worker process: the summary figures of the run."""
-    from cosim.run.master import run_scenario
+    """One grid point (in a worker process): status, error and the summary figures. Never
+    raises for a failing run: the row says what went wrong."""
+    from cosim.run.master import SimulationError, run_scenario
+    from cosim.run.scenario import ScenarioError
 
-    result = run_scenario(scenario, overrides=dict(point), build=False, plot=False)
+    row: dict[str, Any] = {"scenario": Path(str(scenario)).stem, **point, "status": "ok",
+                           "error": ""}
+    for key in (*SUMMARY_COLUMNS, "controller_executions"):
+        row[key] = None
+    try:
+        result = run_scenario(scenario, overrides=dict(point), build=False, plot=False)
+    except interrupt.Interrupted as err:
+        return {**row, "status": "interrupted", "error": str(err)}
+    except (ScenarioError, SimulationError, ValueError, OSError) as err:
+        return {**row, "status": "failed", "error": str(err)}
     summary = result.summary
-    row: dict[str, Any] = {"scenario": Path(str(scenario)).stem, **point}
     for key in SUMMARY_COLUMNS:
         row[key] = summary.get(key)
     execs = summary.get("executions", {})
@@ -76,13 +93,57 @@ def _run_point(scenario: str, point: dict[str, Any]) -> dict[str, Any]:
     return row
 
 
+def _key(scenario: str, point: dict[str, Any]) -> tuple[str, ...]:
+    """A grid point as text, the same whether it comes from the grid or from sweep.csv."""
+    return (Path(str(scenario)).stem, *(f"{k}={_text(v)}" for k, v in point.items()))
+
+
+def _text(value: Any) -> str:
+    if isinstance(value, float) and value.is_integer():
+        return str(int(value))
+    return str(value)
+
+
+def _done_rows(csv_path: Path, keys: list[str]) -> list[dict[str, Any]]:
+    """The ``ok`` rows of an earlier ``sweep.csv`` (for ``resume``)."""
+    if not csv_path.is_file():
+        return []
+    earlier = pd.read_csv(csv_path, keep_default_na=False)
+    if "status" not in earlier.columns or not set(keys) <= set(earlier.columns):
+        raise ValueError(f"{csv_path}: not a sweep over {', '.join(keys)}; cannot resume it")
+    return [row for row in earlier.to_dict("records") if row["status"] == "ok"]
+
+
+class _RowWriter:
+    """Appends rows to sweep.csv as they arrive (header first), flushed after each row."""
+
+    def __init__(self, path: Path, columns: list[str], rows: list[dict[str, Any]]) -> None:
+        self.path, self.columns = path, columns
+        self.file = path.open("w", newline="")
+        self.writer = csv.DictWriter(self.file, fieldnames=columns, extrasaction="ignore")
+        self.writer.writeheader()
+        for row in rows:
+            self.add(row)
+
+    def add(self, row: dict[str, Any]) -> None:
+        self.writer.writerow({k: "" if row.get(k) is None else row.get(k) for k in self.columns})
+        self.file.flush()
+
+    def close(self) -> None:
+        self.file.close()
+
+
 def run_sweep(scenario: str | Sequence[str], grid: dict[str, Sequence[Any]],
               out_dir: str | Path | None = None, workers: int | None = None,
-              plot: bool = True) -> pd.DataFrame:
+              plot: bool = True, resume: bool = False) -> pd.DataFrame:
     """Run every grid point of every scenario in ``workers`` processes (default: CPU count).
 
-    FMUs are built (if stale) once, before the pool starts. Returns one row per run; with
-    ``out_dir`` writes ``sweep.csv`` and, with ``plot``, ``sweep.png``.
+    FMUs are built (if stale) once, before the pool starts. Returns one row per run, in grid
+    order, with ``status`` and ``error``; with ``out_dir`` each row is appended to
+    ``sweep.csv`` as it finishes (``resume``: the ``ok`` rows of an existing one are kept and
+    not run again), then the file is rewritten in grid order and, with ``plot``, ``sweep.png``
+    drawn. SIGINT/SIGTERM: no new point starts, running ones stop (status ``interrupted``),
+    the finished rows are written and :class:`cosim.run.interrupt.Interrupted` is raised.
     """
     from cosim.run.master import ensure_built
     from cosim.run.scenario import find_scenario, load_scenario
@@ -92,27 +153,95 @@ def run_sweep(scenario: str | Sequence[str], grid: dict[str, Sequence[Any]],
         raise ValueError("run_sweep: no scenario given")
     if not grid:
         raise ValueError("run_sweep: empty grid")
+    if workers is not None and workers < 1:
+        raise ValueError(f"--workers {workers}: must be at least 1")
     points = grid_points(grid)
     paths = [str(find_scenario(s)) for s in scenarios]
-    for path in paths:  # fail early on a bad override, and build what is missing
+    for path in paths:  # fail early on a bad scenario or key, and build what is missing
         ensure_built(load_scenario(path, points[0]))
     jobs = [(path, point) for path in paths for point in points]
+    order = {_key(path, point): i for i, (path, point) in enumerate(jobs)}
+    out = Path(out_dir) if out_dir is not None else None
+    done: list[dict[str, Any]] = []
+    if out is not None and resume:
+        done = [r for r in _done_rows(out / "sweep.csv", list(grid))
+                if _key(r["scenario"], {k: r[k] for k in grid}) in order]
+    skip = {_key(r["scenario"], {k: r[k] for k in grid}) for r in done}
+    todo = [(path, point) for path, point in jobs if _key(path, point) not in skip]
+    columns = ["scenario", *grid, "status", "error", *SUMMARY_COLUMNS, "controller_executions"]
+    writer = None
+    if out is not None:
+        out.mkdir(parents=True, exist_ok=True)
+        writer = _RowWriter(out / "sweep.csv", columns, done)
+    rows = list(done)
+
+    def finished(row: dict[str, Any]) -> None:
+        rows.append(row)
+        if writer is not None:
+            writer.add(row)
+
+    try:
+        with interrupt.guard():
+            _execute(todo, workers, finished)
+    finally:
+        if writer is not None:
+            writer.close()
+        rows.sort(key=lambda r: order.get(_key(r["scenario"], {k: r[k] for k in grid}), 0))
+        frame = pd.DataFrame(rows, columns=columns)
+        if out is not None:
+            frame.to_csv(out / "sweep.csv", index=False)
+            if plot and (frame["status"] == "ok").any():
+                plot_sweep(frame[frame["status"] == "ok"], list(grid), out / "sweep.png")
+    return frame
+
+
+def _worker_ignores_signals() -> None:
+    """Pool workers ignore SIGINT/SIGTERM between runs (a Ctrl-C reaches the whole process
+    group); during a run :func:`cosim.run.interrupt.guard` handles them (the run stops)."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
+
+
+def _execute(jobs: list[tuple[str, dict[str, Any]]], workers: int | None, finished) -> None:
+    """Run ``jobs`` (in a spawn process pool when more than one worker), handing each row to
+    ``finished`` as it arrives; on a signal, stop the running points and raise Interrupted."""
+    if not jobs:
+        return
     workers = max(1, min(workers or os.cpu_count() or 1, len(jobs)))
     if workers == 1:
-        rows = [_run_point(path, point) for path, point in jobs]
-    else:
-        ctx = multiprocessing.get_context("spawn")  # fresh interpreters: no inherited FMUs
-        with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
-            futures = [pool.submit(_run_point, path, point) for path, point in jobs]
-            rows = [f.result() for f in futures]
-    frame = pd.DataFrame(rows)
-    if out_dir is not None:
-        out = Path(out_dir)
-        out.mkdir(parents=True, exist_ok=True)
-        frame.to_csv(out / "sweep.csv", index=False)
-        if plot:
-            plot_sweep(frame, list(grid), out / "sweep.png")
-    return frame
+        for path, point in jobs:
+            interrupt.check_between("the sweep")
+            finished(_run_point(path, point))
+        interrupt.check_between("the sweep")
+        return
+    ctx = multiprocessing.get_context("spawn")  # fresh interpreters: no inherited FMUs
+    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx,
+                             initializer=_worker_ignores_signals) as pool:
+        job_of = {pool.submit(_run_point, path, point): (path, point) for path, point in jobs}
+        pending = set(job_of)
+        stopping = False
+        while pending:
+            ready, pending = wait(pending, timeout=0.2, return_when=FIRST_COMPLETED)
+            for future in ready:
+                if future.cancelled():
+                    continue
+                try:
+                    finished(future.result())
+                except Exception as err:  # noqa: BLE001 - a crashed worker fails its point only
+                    path, point = job_of[future]
+                    finished({"scenario": Path(path).stem, **point, "status": "failed",
+                              "error": f"worker process failed: {type(err).__name__}: {err}"})
+            if interrupt.requested() and not stopping:
+                stopping = True
+                for future in pending:
+                    future.cancel()
+                for proc in list(getattr(pool, "_processes", {}).values()):
+                    try:  # the running points stop at their next communication point
+                        os.kill(proc.pid, signal.SIGINT)
+                    except OSError:
+                        pass
+                pending = {f for f in pending if not f.cancelled()}
+    interrupt.check_between("the sweep")
 
 
 def plot_sweep(frame: pd.DataFrame, keys: list[str], path: str | Path) -> None:

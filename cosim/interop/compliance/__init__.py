@@ -53,11 +53,13 @@ from cosim.interop.compliance.common import (
     NOTE,
     RECOMMENDED,
     REQUIRED,
+    SKIPPED,
     STATIC_CHECKS,
     WARNING,
     Problem,
     classify,
     passed,
+    skipped,
 )
 from cosim.interop.compliance.host import _Host
 from cosim.interop.compliance.model_description import check_model_description
@@ -107,9 +109,11 @@ def check_fmu(path: str | Path, options: Options | None = None) -> list[Problem]
     if not opts.dynamic:
         return problems
     loadable = not any(p.check in ("variables", "capabilities") and "unreadable" in p.message
-                       or p.message == "not a co-simulation FMU" for p in problems)
+                       or p.message == "not a co-simulation FMU"
+                       or p.severity == SKIPPED for p in problems)
     if not loadable:
-        return problems
+        return skipped(DYNAMIC_CHECKS, "the FMU could not be read or is not for "
+                       "co-simulation", problems)
     args = {"mode": "single", "paths": [str(path.resolve())], **_worker_options(opts)}
     return classify(problems + _run_worker(args, DYNAMIC_CHECKS, opts.timeout), opts.strict)
 
@@ -134,14 +138,23 @@ def format_report(path: str | Path, problems: list[Problem],
     for check in [*checks, *[c for c in by_check if c not in checks]]:
         found = by_check.get(check, [])
         severities = {p.severity for p in found}
-        label = "FAIL" if ERROR in severities else "warn" if WARNING in severities else "ok"
+        label = ("FAIL" if ERROR in severities else "warn" if WARNING in severities
+                 else "skip" if SKIPPED in severities else "ok")
         clause = CLAUSES.get(check, ("", ""))[0]
+        if label == "skip":
+            reason = next(p.message for p in found if p.severity == SKIPPED)
+            lines.append(f"  {label:<4}  {check:<20}  ({reason.removeprefix('not run: ')})")
+            continue
         lines.append(f"  {label:<4}  {check:<20}" + (f"  [FMI 2.0.4 {clause}]" if clause else ""))
         for p in found:
+            if p.severity == SKIPPED:
+                continue
             basis = f" ({p.requirement})" if p.requirement not in ("", REQUIRED) else ""
             lines.append(f"          {p.severity}{basis}: {p.message}")
     n_err = sum(p.severity == ERROR for p in problems)
     n_warn = sum(p.severity == WARNING for p in problems)
+    n_skip = len({p.check for p in problems if p.severity == SKIPPED})
     verdict = "PASSED" if n_err == 0 else "FAILED"
-    lines.append(f"  {verdict}: {n_err} error(s), {n_warn} warning(s)")
+    lines.append(f"  {verdict}: {n_err} error(s), {n_warn} warning(s)"
+                 + (f", {n_skip} check(s) skipped" if n_skip else ""))
     return "\n".join(lines)

@@ -9,6 +9,7 @@ from pathlib import Path
 from xml.etree import ElementTree
 
 ERROR, WARNING, NOTE = "error", "warning", "note"
+SKIPPED = "skipped"  # a check that could not run (never reported as "ok")
 
 STATIC_CHECKS = ("fmpy-validation", "variables", "units", "model-structure",
                  "default-experiment", "capabilities")
@@ -81,6 +82,13 @@ def classify(problems: list[Problem], strict: bool) -> list[Problem]:
             p = replace(p, severity=WARNING)
         out.append(p)
     return out
+
+
+def skipped(checks: tuple[str, ...], reason: str, problems: list[Problem]) -> list[Problem]:
+    """``problems`` plus a "skipped" entry for each of ``checks`` that has no finding."""
+    seen = {p.check for p in problems}
+    return [*problems, *(Problem(c, f"not run: {reason}", SKIPPED) for c in checks
+                         if c not in seen)]
 
 
 def passed(problems: list[Problem]) -> bool:

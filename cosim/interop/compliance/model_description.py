@@ -8,11 +8,13 @@ from xml.etree import ElementTree
 
 from cosim.interop.compliance.common import (
     CONVENTION,
+    STATIC_CHECKS,
     WARNING,
     Problem,
     _num,
     _read_xml,
     classify,
+    skipped,
 )
 
 # FMI 2.0 Table (sec. 2.2.7): legal causality for each variability
@@ -58,17 +60,20 @@ def _static_checks(path: Path) -> list[Problem]:
     try:
         messages = validate_fmu(str(path))
     except Exception as err:  # a broken archive or XML
-        return [Problem("fmpy-validation", f"cannot be validated: {err}")]
+        return skipped(STATIC_CHECKS, "the archive could not be read",
+                       [Problem("fmpy-validation", f"cannot be validated: {err}")])
     problems += [Problem("fmpy-validation", str(m).strip()) for m in messages]
     try:
         root = _read_xml(path)
         md = read_model_description(str(path), validate=False)
     except Exception as err:
-        return [*problems, Problem("variables", f"modelDescription.xml unreadable: {err}")]
+        return skipped(STATIC_CHECKS, "modelDescription.xml could not be read",
+                       [*problems, Problem("variables", f"modelDescription.xml unreadable: "
+                                                        f"{err}")])
     if root.get("fmiVersion") != "2.0":
         problems.append(Problem("capabilities", f"fmiVersion {root.get('fmiVersion')!r}, "
                                                 "these checks are for FMI 2.0"))
-        return problems
+        return skipped(STATIC_CHECKS, "not an FMI 2.0 FMU", problems)
 
     # variables: causality/variability/initial, start and min/max
     xml_vars = root.find("ModelVariables")

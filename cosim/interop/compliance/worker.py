@@ -21,7 +21,7 @@ from cosim.interop.compliance.calling_sequence import (
     _check_reset,
     _check_two_instances,
 )
-from cosim.interop.compliance.common import _MARK, DYNAMIC_CHECKS, NOTE, Problem
+from cosim.interop.compliance.common import _MARK, DYNAMIC_CHECKS, NOTE, Problem, skipped
 from cosim.interop.compliance.errors import (
     _check_bad_parameters,
     _check_non_finite_inputs,
@@ -173,7 +173,8 @@ def _run_worker(args: dict, checks: tuple[str, ...], timeout: float) -> list[Pro
             tail = err.strip().splitlines()[-1] if err.strip() else f"exit status {code}"
             problems.append(Problem("calling-sequence", f"the host process failed while "
                                     f"loading the FMU: {tail}"))
-            return problems
+            return skipped(tuple(c for c in checks if c not in done),
+                           "the FMU could not be loaded", problems)
         if hung_call is not None:
             pass
         elif hung:
