@@ -100,10 +100,18 @@ def describe_call(method: str, args: tuple = (), kwargs: dict | None = None) -> 
     return f"{name}({', '.join(parts)})"
 
 
+# Set-up calls may legitimately take long (fmi2Instantiate imports the FMU's Python runtime and
+# may compile its kernels on a first run; fmi2ExitInitializationMode builds the core: DARE,
+# invariant sets): they get at least this long before they count as a hang.
+SETUP_CALL_ALLOWANCE = 60.0  # s (below the worker backstop, Options.timeout)
+_SETUP_CALLS = ("fmi2Instantiate", "fmi2ExitInitializationMode")
+
+
 class _Watchdog:
-    """Ends the worker when one FMI call has not returned within ``timeout`` s, after
-    reporting the call and its arguments (``report``); a thread checks every 50 ms. Without
-    :meth:`start` (the FMU run outside the worker) it only keeps the current call."""
+    """Ends the worker when one FMI call has not returned within ``timeout`` s (set-up calls:
+    at least :data:`SETUP_CALL_ALLOWANCE`), after reporting the call and its arguments
+    (``report``); a thread checks every 50 ms. Without :meth:`start` (the FMU run outside the
+    worker) it only keeps the current call."""
 
     def __init__(self) -> None:
         self.current: tuple[str, float] | None = None
@@ -120,8 +128,12 @@ class _Watchdog:
             while True:
                 time.sleep(0.05)
                 current = self.current
-                if current is not None and time.monotonic() - current[1] > timeout:
-                    report(current[0], timeout)
+                if current is None:
+                    continue
+                limit = (max(timeout, SETUP_CALL_ALLOWANCE)
+                         if current[0].startswith(_SETUP_CALLS) else timeout)
+                if time.monotonic() - current[1] > limit:
+                    report(current[0], limit)
                     os._exit(70)
 
         threading.Thread(target=watch, daemon=True, name="fmi-call-watchdog").start()
