@@ -32,6 +32,13 @@ IMPROVED_DESCRIPTIONS = {
                              "profile is tracked)",
 }
 
+# Integer ranges now written into the modelDescription (issue 12: the scenario check catches
+# N = 1000 before anything runs)
+INTEGER_RANGES = {
+    ("FreightTrain", "traction_model"): {"min": "0", "max": "1"},
+    **{(f, "N"): {"min": "2", "max": "60"} for f in ("StopMpc", "StopRmpc", "StopRsmpc")},
+}
+
 # variables added since (FMU -> names), each by the issue that needed it
 ADDED_VARIABLES = {f: {"qp_solver"} for f in ("StopMpc", "StopRmpc", "StopRsmpc")}  # issue 10
 
@@ -49,6 +56,7 @@ def test_model_descriptions_unchanged_but_for_listed_improvements(built_fmus) ->
             expected = dict(old)
             if (identifier, name) in IMPROVED_DESCRIPTIONS:
                 expected["description"] = IMPROVED_DESCRIPTIONS[identifier, name]
+            expected.update(INTEGER_RANGES.get((identifier, name), {}))
             assert now["variables"][name] == expected, (identifier, name)
 
 
