@@ -506,7 +506,6 @@ class Master:
         self.base_step_ticks = to_ticks(base)
         self.units: list[FmuUnit] = []
         self.links: list[Link] = []
-        self.order: list[FmuUnit] = []
         self.wall_time = 0.0
 
     # -- set-up --------------------------------------------------------------------------------
