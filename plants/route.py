@@ -44,6 +44,7 @@ bundled line was made.
 
 from __future__ import annotations
 
+import bisect
 import csv
 import functools
 import math
@@ -136,6 +137,17 @@ class StepProfile:
         out = np.where(length > 0, total / np.where(length > 0, length, 1.0), self.at_array(front))
         return out
 
+    def mean_over_scalar(self, front: float, length: float) -> float:
+        """:meth:`mean_over` for one vehicle (``length > 0``) in plain floats: the same
+        operations as ``np.interp`` (``slope (x - x_j) + y_j``), without array overhead."""
+        xs, ys = self._cumulative_lists
+        return (_interp_scalar(front, xs, ys) - _interp_scalar(front - length, xs, ys)) / length
+
+    @functools.cached_property
+    def _cumulative_lists(self) -> tuple[list[float], list[float]]:
+        xs, ys = self._cumulative
+        return xs.tolist(), ys.tolist()
+
     @functools.cached_property
     def _cumulative(self) -> tuple[np.ndarray, np.ndarray]:
         finite = self.starts[1:]
@@ -147,6 +159,18 @@ class StepProfile:
         vals = self.values  # value on [xs[i], xs[i+1])
         integral = np.concatenate(([0.0], np.cumsum(np.diff(xs) * vals)))
         return xs, integral
+
+
+def _interp_scalar(x: float, xs: list[float], ys: list[float]) -> float:
+    """``np.interp(x, xs, ys)`` for one point (constant beyond the ends)."""
+    if x < xs[0]:
+        return ys[0]
+    if x >= xs[-1]:
+        return ys[-1]
+    j = bisect.bisect_right(xs, x) - 1
+    if xs[j] == x:
+        return ys[j]
+    return (ys[j + 1] - ys[j]) / (xs[j + 1] - xs[j]) * (x - xs[j]) + ys[j]
 
 
 KMH = 1.0 / 3.6  # m/s per km/h

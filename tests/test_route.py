@@ -135,3 +135,21 @@ def test_seed004_reference_changes_at_200_and_600_s() -> None:
     assert ref.accel(199.0) == 0.0 and ref.accel(201.0) > 0.0
     assert ref.accel(599.0) == 0.0 and ref.accel(601.0) < 0.0
     assert ref.speed(800.0) == pytest.approx(30.0)
+
+
+def test_scalar_mean_over_is_the_array_path_in_floats() -> None:
+    """Same operations as np.interp (slope (x - x_j) + y_j): equal to the last bit, also
+    before, after and exactly on the segment starts."""
+    import numpy as np
+
+    from plants.route import load_route
+
+    profile = load_route("freight_20km").additional
+    rng = np.random.default_rng(3)
+    starts = profile.starts[1:]
+    fronts = np.concatenate([rng.uniform(-2e3, 2.5e4, 200), starts, starts + 12.0,
+                             [starts[0] - 1e8, starts[-1] + 1e8]])
+    for length in (12.0, 1331.2):
+        expected = profile.mean_over(fronts, length)
+        got = [profile.mean_over_scalar(float(f), length) for f in fronts]
+        assert got == expected.tolist()

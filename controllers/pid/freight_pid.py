@@ -137,6 +137,8 @@ class FreightPid(StatefulCore, Declared):
         self.m_eff = float(self.model.m_eff.sum())
         self.weight = float(self.model.mass.sum() * GRAVITY)  # N
         self.brake_scale = float(self.model.brake_scale.sum())  # N per Pa per phi
+        m = self.model  # sums of the basic-resistance coefficients (constants)
+        self._res_sums = (float(m.res_a.sum()), float(m.res_b.sum()), float(m.res_c.sum()))
         self.pid = SpeedPid(params.pid)
         self.reduction = 0.0  # Pa, commanded pipe reduction
         self.pressure_estimate = 0.0  # Pa, modelled mean cylinder pressure
@@ -157,9 +159,10 @@ class FreightPid(StatefulCore, Declared):
 
     def resistance_accel(self, v: float, s: float) -> float:
         """Modelled running resistance per unit effective mass (m/s^2)."""
-        m = self.model
-        basic = float(m.res_a.sum() + (m.res_b.sum() + m.res_c.sum() * v) * v)
-        extra = float(self.route.additional_resistance(s, m.train_length)[0]) * self.weight / 1e3
+        a, b, c = self._res_sums
+        basic = a + (b + c * v) * v
+        extra = (self.route.additional.mean_over_scalar(s, self.model.train_length)
+                 * self.weight / 1e3)
         return (basic + extra) / self.m_eff
 
     def air_force(self, pressure: float, v: float) -> float:
