@@ -56,7 +56,9 @@ def test_controller_sampling_independent_of_output_interval(event_run):
 
 def test_pid_stops_inside_window(event_run):
     s = event_run.summary
-    assert abs(s["stop_error_m"]) < 0.5
+    # 14.9 cm (paper: 28.98 cm). No iterative solver in the loop: only rounding differences
+    # between platforms can move it, far below 1 mm, which still catches any regression
+    assert s["stop_error_m"] == pytest.approx(0.14949, abs=1e-3)
     assert s["final_speed_mps"] == 0.0
     assert s["command_switches"] > 0
 

@@ -15,10 +15,12 @@ BASE = StopMpcParams()
 
 
 def test_ideal_mpc_stops_within_10_cm():
+    """Paper: 5.95 cm; here 0.004 cm (the resistance is known exactly). Pinned to 1 mm: what can
+    move it is OSQP's termination tolerance (eps 1e-7 on the moves), worth micrometres here."""
     p = replace(BASE, horizon=10)
     core = IdealStopMpc(p)
     r = run_loop(core, p)
-    assert abs(r.stop_error) <= 0.10
+    assert abs(r.stop_error) <= 1e-3
     assert r.v[-1] == 0.0
     assert core.qp_infeasible == 0
 

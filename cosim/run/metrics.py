@@ -10,7 +10,9 @@ Keys of ``[summary]`` (all optional; variable references are ``FMU.variable``):
   stopping curve ``v_ref(s) = sqrt(2 a0 (s_stop - s))`` at the recorded positions instead of a
   recorded ``reference_speed`` (which a self-triggered controller holds between its events);
 * ``planned_arrival_time`` (s): gives ``arrival_time_error_s`` (time the train came to rest
-  minus the plan).
+  minus the plan);
+* ``ctcs3`` (bool): the scenario is speed tracking under the CTCS-3 rule (seeds 001, 004):
+  gives ``ctcs3_speed_error_ok``, which means nothing for a stopping or freight scenario.
 
 Always present: ``completed`` (False, with ``error``, for the partial results of a failed or
 interrupted run), ``sim_time_s``, ``wall_time_s``, ``real_time_factor``, ``algorithm``,
@@ -114,6 +116,7 @@ def compute_summary(result: Any) -> dict[str, Any]:
         out["speed_mse_kmh2"] = float(np.mean(err_kmh**2))
         out["iae_kmh_s"] = float(np.trapezoid(np.abs(err * KMH_PER_MPS), t))
         out["max_abs_speed_error_kmh"] = float(np.max(np.abs(err_kmh)))
+    if speed is not None and ref is not None and cfg.get("ctcs3") is True:
         out["ctcs3_speed_error_ok"] = ctcs3_speed_error_ok(ref[moving if np.any(moving) else
                                                                slice(None)] * KMH_PER_MPS,
                                                            err_kmh)

@@ -98,6 +98,55 @@ def write_results(result: Any, out_dir: Path, plot: bool = True,
     return written
 
 
+def format_stop_error(error_m: float) -> str:
+    """A stop error in cm under 1 m, otherwise in m."""
+    return f"{error_m * 100:+.1f} cm" if abs(error_m) < 1.0 else f"{error_m:+.2f} m"
+
+
+_UNIT_DISPLAY = {"N": (1e-3, "kN"), "m/s2": (1.0, "m/s²"), "%": (1.0, "%"),
+                 "Pa": (1e-3, "kPa"), "W": (1e-3, "kW"), "m/s": (3.6, "km/h")}
+
+
+def display_unit(unit: str | None) -> tuple[float, str | None]:
+    """(scale, label) to plot a quantity declared in ``unit``: kN for N, m/s² for m/s2, ..."""
+    if unit is None:
+        return 1.0, None
+    return _UNIT_DISPLAY.get(unit, (1.0, unit))
+
+
+def variable_unit(scenario: Any, ref: str) -> str | None:
+    """The declared unit of ``"instance.variable"`` from its FMU's modelDescription."""
+    try:
+        from fmpy import read_model_description
+
+        comp, var = ref.split(".", 1)
+        md = read_model_description(str(scenario.components[comp].fmu_path), validate=False)
+        found = next(v for v in md.modelVariables if v.name == var)
+        if found.unit:
+            return found.unit
+        return found.declaredType.unit if found.declaredType is not None else None
+    except Exception:  # noqa: BLE001 - a plot label must never fail a run
+        return None
+
+
+def _stop_inset(ax: Any, pos: np.ndarray, speed_kmh: np.ndarray, stop: float,
+                x_scale: float) -> None:
+    """A zoom on the last 20 m before the stop point (speed vs position)."""
+    near = pos >= stop - 20.0
+    if not near.any() or len(pos) < 2:
+        return
+    inset = ax.inset_axes([0.40, 0.08, 0.28, 0.34])
+    inset.set_facecolor("white")
+    inset.set_zorder(10)
+    inset.plot(pos[near] / x_scale, speed_kmh[near], color="C0", lw=1.0)
+    inset.axvline(stop / x_scale, color="C3", lw=0.8, ls="-.")
+    right = max(float(pos[near].max()), stop + 2.0)
+    inset.set_xlim((stop - 20.0) / x_scale, right / x_scale)
+    inset.set_title("last 20 m", fontsize=7)
+    inset.tick_params(labelsize=6)
+    inset.grid(True, alpha=0.3)
+
+
 def plot_run(result: Any, path: Path) -> None:
     """Speed (and reference) vs position with the command on a second axis, as the papers'
     figures; coupler forces below when the scenario names them; otherwise outputs vs time."""
@@ -138,13 +187,19 @@ def plot_run(result: Any, path: Path) -> None:
         command = cfg.get("command")
         if command in frame.columns:
             ax2 = ax.twinx()
-            ax2.step(x, frame[command], where="post", color="C2", lw=1.0, label="command")
-            ax2.set_ylabel(command)
+            scale, unit = display_unit(variable_unit(result.scenario, command))
+            ax2.step(x, frame[command] * scale, where="post", color="C2", lw=1.0,
+                     label="command")
+            ax2.set_ylabel(f"command ({unit})" if unit else "command")
             lines = ax.get_legend_handles_labels()[0] + ax2.get_legend_handles_labels()[0]
             labels = ax.get_legend_handles_labels()[1] + ax2.get_legend_handles_labels()[1]
             ax.legend(lines, labels, loc="best", fontsize=8)
         else:
             ax.legend(loc="best", fontsize=8)
+        if "stop_point" in cfg:  # on the topmost axes, opaque
+            _stop_inset(ax.figure.axes[-1], frame[pos].to_numpy(),
+                        frame[speed].to_numpy() * 3.6, float(cfg["stop_point"]),
+                        1e3 if xlabel.endswith("(km)") else 1.0)
     else:
         t = frame["time"]
         for col in frame.columns[1:9]:
@@ -154,7 +209,7 @@ def plot_run(result: Any, path: Path) -> None:
     summary = result.summary
     title = result.scenario.name
     if summary.get("stop_error_m") is not None:
-        title += f"  stop error {summary['stop_error_m'] * 100:+.1f} cm"
+        title += f"  stop error {format_stop_error(summary['stop_error_m'])}"
     if summary.get("command_switches") is not None:
         title += f"  switches {summary['command_switches']}"
     if not summary.get("completed", True):
@@ -166,11 +221,15 @@ def plot_run(result: Any, path: Path) -> None:
         axc = axes[1][0]
         t = frame["time"].to_numpy()
         forces = frame[couplers].to_numpy() / 1e3
-        for i, col in enumerate(couplers[:12]):
-            axc.plot(t, forces[:, i], lw=0.8, label=col.split(".", 1)[1])
-        if len(couplers) > 12:
-            axc.plot(t, forces.max(axis=1), "k", lw=1.2, label="max")
-            axc.plot(t, forces.min(axis=1), "k", lw=1.2, label="min")
+        if len(couplers) <= 3:
+            for i, col in enumerate(couplers):
+                axc.plot(t, forces[:, i], lw=0.8, label=col.split(".", 1)[1])
+        else:  # many couplers oscillating: one readable envelope, not a solid band of lines
+            hi, lo = forces.max(axis=1), forces.min(axis=1)
+            axc.fill_between(t, lo, hi, color="C0", alpha=0.25, lw=0,
+                             label=f"range over {len(couplers)} couplers")
+            axc.plot(t, hi, color="C3", lw=0.9, label="largest draft")
+            axc.plot(t, lo, color="C2", lw=0.9, label="largest buff")
         axc.set_xlabel("time (s)")
         axc.set_ylabel("coupler force (kN)")
         axc.grid(True, alpha=0.3)

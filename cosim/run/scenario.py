@@ -50,7 +50,7 @@ RECORD_KEYS = ("variables",)
 # what cosim.run.metrics and the plot read (see the cosim.run.metrics module docstring)
 SUMMARY_KEYS = ("position", "speed", "acceleration", "command", "reference_speed",
                 "speed_limit", "power", "coupler_forces", "stop_point", "reference_decel",
-                "planned_arrival_time")
+                "planned_arrival_time", "ctcs3")
 
 
 class ScenarioError(ValueError):
