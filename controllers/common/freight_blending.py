@@ -33,14 +33,24 @@ filling) on the nominal brake data of :class:`plants.freight.FreightParams`.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
 
 import numpy as np
 
-from cosim.fmu.declare import param
+from cosim.fmu.declare import Declared, Var, build, param
 from cosim.fmu.state import StatefulCore
 from plants.freight import FreightParams, FreightTrain, friction_coefficient
-from plants.route import GRAVITY, ReferenceProfile, Route
+from plants.route import (
+    GRAVITY,
+    ReferenceProfile,
+    Route,
+    load_route,
+    route_parameter,
+    routes_dir_in,
+)
 
 RELEASED_PA = 1.0  # Pa: a modelled cylinder pressure below this is a released brake
 
@@ -204,3 +214,89 @@ class FreightBlending(StatefulCore):
             force = min(force + air, 0.0)
         self.force = min(max(force, -ed), trac)
         return self.force, self.reduction
+
+
+def load_tracked_route(values: Mapping[str, Any], data_dir: Path) -> Route:
+    """The route named by the ``route`` parameter; it must carry a reference profile."""
+    route = load_route(values["route"], routes_dir_in(data_dir))
+    if route.reference is None:
+        raise ValueError(f"route {values['route']!r} has no reference profile")
+    return route
+
+
+def tracker_outputs(demand_description: str) -> tuple[Var, ...]:
+    """Outputs of every freight speed controller (``accel_demand`` described per family)."""
+    return (
+        Var.output("force_demand", "N", "locomotive force demand (> 0 traction, < 0 electric "
+                   "brake)"),
+        Var.output("pipe_reduction", "Pa", "brake-pipe reduction (0 = released)"),
+        Var.output("accel_demand", "m/s2", demand_description),
+        Var.output("v_ref", "m/s", "reference speed at the measured position"),
+        Var.output("a_ref", "m/s2", "reference acceleration (with preview)"),
+        Var.output("speed_error", "m/s", "v - v_ref"),
+        Var.output("air_brake_estimate", "Pa", "modelled mean cylinder pressure"),
+    )
+
+
+class FreightTracker(StatefulCore, Declared):
+    """Base of the freight speed controllers: measured head speed ``v`` and position ``s``,
+    a core computing the acceleration demand ``a_dem`` (:meth:`accel_demand`, resistance
+    included), the shared blending turning ``M (1 + gamma) a_dem`` into the plant commands.
+
+    Every controller measures the locomotive (head) speed and position and tracks the
+    reference at the head position; ``params_class`` needs ``blending`` and ``sample_time``.
+    """
+
+    state_fields = ("blending", "v_ref", "a_ref", "demand", "speed_error")
+    setup_vars = (route_parameter("freight_20km", "its reference profile is tracked"),)
+    input_vars = (
+        Var.input("v", "m/s", "measured head speed"),
+        Var.input("s", "m", "measured head position"),
+    )
+    output_vars = tracker_outputs("acceleration demand a_dem (resistance included)")
+
+    @classmethod
+    def from_parameters(cls, values: Mapping[str, Any], data_dir: Path,
+                        t0: float = 0.0) -> FreightTracker:
+        route = load_tracked_route(values, data_dir)
+        return cls(build(cls.params_class, values), route.reference, route)
+
+    def __init__(self, params: Any, profile: ReferenceProfile, route: Route) -> None:
+        params.check()
+        self.p = params
+        self.profile = profile
+        self.route = route
+        self.blending = FreightBlending(params.blending, profile, route)
+        self.m_eff = self.blending.m_eff
+        self.v_ref = 0.0
+        self.a_ref = 0.0
+        self.demand = 0.0  # m/s^2
+        self.speed_error = 0.0  # m/s, v - v_ref
+
+    @property
+    def sample_time(self) -> float:
+        return float(self.p.sample_time)
+
+    def accel_demand(self, t: float, v: float, s: float, a_res: float, lo: float,
+                     hi: float) -> float:
+        """The family's demand (m/s^2) within ``[lo, hi]``; sets ``self.a_ref``."""
+        raise NotImplementedError
+
+    def compute(self, t: float, inputs: dict[str, float]) -> tuple[dict[str, float], int]:
+        v, s = float(inputs["v"]), float(inputs["s"])
+        speed = max(v, 0.0)
+        self.v_ref = self.profile.speed(s)
+        self.speed_error = v - self.v_ref
+        a_res = self.blending.resistance_accel(speed, s)
+        lo, hi = self.blending.accel_limits(speed)
+        self.demand = self.accel_demand(t, v, s, a_res, lo, hi)
+        self.blending.blend(t, self.sample_time, v, s, self.m_eff * self.demand, self.v_ref,
+                            self.a_ref, a_res)
+        return self.outputs(), 1
+
+    def outputs(self) -> dict[str, float]:
+        b = self.blending
+        return {"force_demand": b.force, "pipe_reduction": b.reduction,
+                "accel_demand": self.demand, "v_ref": self.v_ref, "a_ref": self.a_ref,
+                "speed_error": self.speed_error,
+                "air_brake_estimate": b.pressure_estimate}
