@@ -32,8 +32,8 @@ def test_sampled_delay_model_reproduces_the_continuous_delayed_plant(tau: float)
         cuts = sorted({k * T, (k + 1) * T, *[c for c in (k * T + tau - np.floor(tau / T) * T,)
                                               if k * T < c < (k + 1) * T]})
         for a, b in zip(cuts[:-1], cuts[1:]):
-            uu = u_at(0.5 * (a + b))
-            sol = solve_ivp(lambda t, y: [y[1] + d[k], (uu - y[1]) / TVB], (a, b), x,
+            uu, dk = u_at(0.5 * (a + b)), d[k]
+            sol = solve_ivp(lambda t, y, uu=uu, dk=dk: [y[1] + dk, (uu - y[1]) / TVB], (a, b), x,
                             rtol=1e-12, atol=1e-14, method="DOP853")
             x = sol.y[:, -1]
         cont.append(x)

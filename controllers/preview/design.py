@@ -16,9 +16,11 @@ disturbance gives the error system (eqs. 30-32) with ``x0 = [e, Delta z]``, ``e 
 Cost (eq. 37) ``sum x0' Q x0 + Delta u' H Delta u``, ``Q = diag(q_e, q_dz I)``. ``P`` solves the
 DARE (eq. 36) of ``(Phi, G_u)``; the control (eqs. 33-35) is::
 
-    Delta u(k) = F0 x0(k) + sum_{j=1}^{M_R} F_R(j) Delta R(k+j) + sum_{j=0}^{M_d} F_d(j) Delta d(k+j)
+    Delta u(k) = F0 x0(k) + sum_{j=1}^{M_R} F_R(j) Delta R(k+j)
+                 + sum_{j=0}^{M_d} F_d(j) Delta d(k+j)
     F0 = -(H + G_u' P G_u)^-1 G_u' P Phi,   xi = Phi + G_u F0
-    F_R(j) = -(H + G_u' P G_u)^-1 G_u' (xi')^(j-1) P G_R,   F_d(j) = -(...)^-1 G_u' (xi')^j P G_d
+    F_R(j) = -(H + G_u' P G_u)^-1 G_u' (xi')^(j-1) P G_R
+    F_d(j) = -(H + G_u' P G_u)^-1 G_u' (xi')^j P G_d
 
 This is the reduced-order solution of the Riccati equation of the enlarged system (eqs. 27-28,
 state ``[x0, Delta R(k+1..k+M_R)]``): its gain is ``[F0, F_R(1..M_R)]`` (tested), computed from
@@ -65,20 +67,20 @@ def lag_delay_model(T: float, tau: float, t_vb: float) -> DelayedModel:
     Ac = np.array([[0.0, 1.0], [0.0, -1.0 / t_vb]])
     Bc = np.array([[0.0], [1.0 / t_vb]])
     Ec = np.array([[1.0], [0.0]])
-    l = int(np.floor(tau / T + 1e-12))
-    m = max(tau - l * T, 0.0)
+    lag = int(np.floor(tau / T + 1e-12))
+    m = max(tau - lag * T, 0.0)
     Phi, _ = _zoh(Ac, Bc, T)
     _, Ed = _zoh(Ac, Ec, T)
     Phi_rest, Gamma0 = _zoh(Ac, Bc, T - m)  # u(k - l) over the last T - m
     _, Gm = _zoh(Ac, Bc, m) if m > 0 else (None, np.zeros((2, 1)))
     Gamma1 = Phi_rest @ Gm  # u(k - l - 1) over the first m
-    nh = l + 1  # held inputs u(k-l-1) .. u(k-1)
+    nh = lag + 1  # held inputs u(k-l-1) .. u(k-1)
     n = 2 + nh
     A = np.zeros((n, n))
     B = np.zeros((n, 1))
     A[:2, :2] = Phi
     A[:2, 2:3] += Gamma1  # u(k-l-1)
-    if l == 0:
+    if lag == 0:
         B[:2] += Gamma0  # u(k) itself acts after the fraction m
     else:
         A[:2, 3:4] += Gamma0  # u(k-l)
@@ -89,7 +91,7 @@ def lag_delay_model(T: float, tau: float, t_vb: float) -> DelayedModel:
     C[0, 0] = 1.0
     E = np.zeros((n, 1))
     E[:2] = Ed
-    return DelayedModel(A, B, C, E, l)
+    return DelayedModel(A, B, C, E, lag)
 
 
 @dataclass(frozen=True)
