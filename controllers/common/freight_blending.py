@@ -60,7 +60,7 @@ class BlendingParams:
     """Air-brake decision and hold times (the nominal train ``train`` is the model)."""
 
     train: FreightParams = field(default_factory=FreightParams)  # nominal model
-    air_preview_time: float = param(6.0, "s", "look-ahead of the planned braking for the "
+    air_preview_time: float = param(2.0, "s", "look-ahead of the planned braking for the "
                                     "air-brake decision", min=0.0)
     ed_share: float = param(0.8, "1", "share of the electric brake used before the air brake "
                             "is applied", min=0.0, max=1.0)
