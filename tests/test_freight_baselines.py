@@ -84,3 +84,35 @@ def test_fuzzy_pid_gains_follow_the_rule_table() -> None:
     fpid.compute(0.2, {"v": v, "s": 2.0})
     assert fpid.kp_now == pytest.approx(p.kp - 2 * p.kp_scale, abs=1e-9)
     assert fpid.ki_now == pytest.approx(p.ki + 2 * p.ki_scale, abs=1e-9)
+
+
+@pytest.mark.parametrize("name", ["preview", "smc", "fpid", "pid"])
+def test_controller_state_restore_reproduces_the_rest(name: str) -> None:
+    """get_state mid-run, continue, set_state, rerun: identical outputs (complete state,
+    blending and its brake model included), on the final braking with the air brake."""
+    from controllers.pid.freight_pid import FreightPid, FreightPidParams
+    from controllers.preview.preview import FreightPreview, PreviewParams
+    from plants.route import load_route
+
+    core_class, params = {"preview": (FreightPreview, PreviewParams()),
+                          "smc": (FreightSlidingMode, SlidingModeParams()),
+                          "fpid": (FreightFuzzyPid, FuzzyPidParams()),
+                          "pid": (FreightPid, FreightPidParams())}[name]
+    route = load_route("freight_20km")
+    core = core_class(params, route.reference, route)
+    rng = np.random.default_rng(5)
+    s = np.linspace(19000.0, 19400.0, 80)
+    v = np.array([route.reference.speed(x) for x in s]) + 0.3 * rng.normal(size=s.size)
+
+    def step(k: int) -> tuple:
+        out, _ = core.compute(0.2 * k, {"v": float(v[k]), "s": float(s[k])})
+        return tuple(sorted(out.items()))
+
+    for k in range(30):
+        step(k)
+    state = core.get_state()
+    first = [step(k) for k in range(30, 80)]
+    core.set_state(state)
+    second = [step(k) for k in range(30, 80)]
+    assert first == second
+    assert any(dict(o)["pipe_reduction"] > 0 for o in first)  # the air brake took part
