@@ -10,11 +10,14 @@ brake < 0, within the HXD1 envelope at the measured speed) and ``pipe_reduction`
   planned braking (reference acceleration now, at the controller's look-ahead and
   ``air_preview_time`` ahead, the air brake being slow, plus resistance) or, at an overspeed
   above ``overspeed``, the demand ``F`` needs more than ``ed_share`` of the electric brake, with a
-  pipe reduction in ``reduction_step`` stages giving the missing force; it may then be deepened,
-  never partly released (Chinese 120 valves release directly), and is released fully when the
-  electric brake alone covers the demand with margin (``release_share``). Hold times: once
-  applied it stays at least ``min_apply_time``; once released it is not re-applied for
-  ``min_release_time`` (auxiliary reservoirs recharge);
+  pipe reduction in ``reduction_step`` stages giving the missing planned force (an overspeed
+  alone: the minimum reduction); it may then be deepened when the planned braking needs more,
+  never for an overspeed (the deeper application could not be taken back short of a full
+  release, and the train would stop far short: measured 80-300 m for the PID, fuzzy PID and
+  sliding mode), never partly released (Chinese 120 valves release directly), and is released
+  fully when the electric brake alone covers the demand with margin (``release_share``).
+  Hold times: once applied it stays at least ``min_apply_time``; once released it is not
+  re-applied for ``min_release_time`` (auxiliary reservoirs recharge);
 * while the air brake acts, the locomotive trims it with the electric brake only: the
   locomotive force is ``min(F + F_air, 0)`` as long as the modelled cylinders hold pressure
   (applied, or released but not yet empty). It never pulls against the air brake (no power
@@ -183,7 +186,8 @@ class FreightBlending(StatefulCore):
         trac, ed = self.model.traction_limits(speed)
         planned = self.m_eff * (min(a_ref, self.profile.accel(s),
                                     self.profile.accel(s + speed * p.air_preview_time)) + a_res)
-        need = max(-planned, -force if v - v_ref > p.overspeed else 0.0)
+        over = v - v_ref > p.overspeed
+        need = max(-planned, -force if over else 0.0)
         applied = self.reduction > 0.0
         since = t - self.changed_at
         # final stop: the reference has come to zero, or the air brake (too strong for the
@@ -196,13 +200,16 @@ class FreightBlending(StatefulCore):
                 self.reduction, self.changed_at = p.hold_reduction, t
             force = 0.0
         elif applied:
-            extra = need - p.ed_share * ed
+            extra = -planned - p.ed_share * ed
             if extra > self.air_force(self.pressure_estimate, speed) and extra > 0:
                 self.reduction = max(self.reduction, self._reduction_for(extra, speed))
             elif since >= p.min_apply_time and need < p.release_share * ed:
                 self.reduction, self.changed_at = 0.0, t
         elif since >= p.min_release_time and need > p.ed_share * ed:
-            self.reduction = self._reduction_for(need - p.ed_share * ed, speed)
+            # planned braking: the reduction giving the missing force; an overspeed alone:
+            # the smallest application
+            self.reduction = (self._reduction_for(-planned - p.ed_share * ed, speed)
+                              if -planned > p.ed_share * ed else p.train.min_reduction)
             self.changed_at = t
         pressures = self.model.step_brakes(t, t + T, self.reduction)
         self.pressure_estimate = float(pressures.mean())
