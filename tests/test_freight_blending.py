@@ -68,3 +68,16 @@ def test_an_overspeed_does_not_deepen_an_applied_air_brake() -> None:
         "distance", np.array([0.0, 1e5]), np.array([15.0, 15.0])), Route.flat())
     _, reduction = fresh.blend(0.0, 0.2, 16.0, 0.0, -1e6, 15.0, 0.0, 0.0)
     assert reduction == BlendingParams().train.min_reduction
+
+
+def test_tabulated_train_resistance_equals_the_length_share_mean() -> None:
+    """The whole-train grade/curve/tunnel resistance table is exact (piecewise linear between
+    the tabulated kinks): equal to Route.additional_resistance to rounding everywhere."""
+    route = load_route("freight_20km")
+    blend = FreightBlending(BlendingParams(), route.reference, route)
+    s = np.random.default_rng(7).uniform(-500.0, 21_000.0, 2000)
+    length = blend.model.train_length
+    exact = route.additional_resistance(s, length) * blend.weight / 1e3 / blend.m_eff
+    # cumulative integrals of up to ~4e7 (N/kN m) differenced: ~1e-8 N/kN, ~1e-13 m/s^2
+    np.testing.assert_allclose(blend.additional_accel(s), exact, rtol=0, atol=1e-12)
+    assert blend.additional_accel(float(s[0])) == pytest.approx(exact[0], abs=1e-12)

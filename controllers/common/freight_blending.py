@@ -113,6 +113,12 @@ class FreightBlending(StatefulCore):
         self._res_a = float(self.model.res_a.sum())
         self._res_b = float(self.model.res_b.sum())
         self._res_c = float(self.model.res_c.sum())
+        steps = route.additional.starts[1:]
+        length = self.model.train_length
+        knots = np.unique(np.concatenate((steps, steps + length, [0.0])))
+        self._add_knots = knots
+        self._add_values = (route.additional_resistance(knots, length)
+                            * self.weight / 1e3 / self.m_eff)
         self.reduction = 0.0  # Pa, commanded pipe reduction
         self.pressure_estimate = 0.0  # Pa, modelled mean cylinder pressure
         self.changed_at = -math.inf  # s, time of the last apply/release
@@ -134,11 +140,13 @@ class FreightBlending(StatefulCore):
         """Modelled basic resistance (eqs. 3-4) per unit effective mass (m/s^2)."""
         return (self._res_a + (self._res_b + self._res_c * v) * v) / self.m_eff
 
-    def additional_accel(self, s: float) -> float:
+    def additional_accel(self, s: float | np.ndarray) -> float | np.ndarray:
         """Grade + curve + tunnel resistance (eq. 5) of the whole train with its front at ``s``,
-        per unit effective mass (m/s^2)."""
-        w = float(self.route.additional_resistance(s, self.model.train_length)[0])
-        return w * self.weight / 1e3 / self.m_eff
+        per unit effective mass (m/s^2). The length-share mean of a step profile is piecewise
+        linear with kinks where a step enters or leaves the train: tabulated there at
+        construction, so this is an exact interpolation."""
+        out = np.interp(s, self._add_knots, self._add_values)
+        return float(out) if np.ndim(s) == 0 else out
 
     def resistance_accel(self, v: float, s: float) -> float:
         """Modelled running resistance per unit effective mass (m/s^2): eq. (17) with sign +."""

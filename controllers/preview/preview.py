@@ -72,8 +72,6 @@ class FreightPreview(FreightTracker):
         self._t_pts, self._x_pts = times[finite], profile.x[finite]
         self._v2 = profile.v**2
         self._horizon = np.arange(max(p.preview_steps, p.disturbance_steps) + 1) * p.sample_time
-        self._length = self.blending.model.train_length
-        self._w_to_accel = self.blending.weight / 1e3 / self.m_eff
         self.z: np.ndarray | None = None  # design-model state z(k) (v measured)
         self.z_prev: np.ndarray | None = None
         self.u_prev = 0.0  # m/s^2, u(k-1)
@@ -87,8 +85,7 @@ class FreightPreview(FreightTracker):
         s_j[0] = s
         R = np.sqrt(np.maximum(np.interp(s_j, self.profile.x, self._v2), 0.0))
         b = self.blending
-        d = -(b._res_a + (b._res_b + b._res_c * R) * R) / self.m_eff \
-            - self.route.additional_resistance(s_j, self._length) * self._w_to_accel
+        d = -(b._res_a + (b._res_b + b._res_c * R) * R) / self.m_eff - b.additional_accel(s_j)
         return R, d
 
     def accel_demand(self, t: float, v: float, s: float, a_res: float, lo: float,
