@@ -37,19 +37,21 @@ CONTROLLERS = {
 }
 
 
-def per_event_us(name: str, repeat: int) -> float:
+def per_event_us(name: str, repeat: int) -> tuple[float, float]:
+    """(wall, CPU) microseconds per event, medians over ``repeat`` passes."""
     core_class, params_class = CONTROLLERS[name]
     route = load_route("freight_20km")
     ref = route.reference
     positions = np.linspace(10.0, 19_900.0, 2000)
-    times = []
+    walls, cpus = [], []
     for _ in range(repeat):
         core = core_class(params_class(), ref, route)
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         for k, s in enumerate(positions):
             core.compute(0.2 * k, {"v": ref.speed(s) * 0.999, "s": float(s)})
-        times.append((time.perf_counter() - t0) / positions.size * 1e6)
-    return statistics.median(times)
+        walls.append((time.perf_counter() - t0) / positions.size * 1e6)
+        cpus.append((time.process_time() - c0) / positions.size * 1e6)
+    return statistics.median(walls), statistics.median(cpus)
 
 
 def main() -> None:
@@ -58,14 +60,17 @@ def main() -> None:
     parser.add_argument("--no-scenarios", action="store_true")
     args = parser.parse_args()
     for name in CONTROLLERS:
-        print(f"{name:8s} per event {per_event_us(name, args.repeat):8.1f} us", flush=True)
+        wall, cpu = per_event_us(name, args.repeat)
+        print(f"{name:8s} per event {wall:8.1f} us wall, {cpu:8.1f} us CPU", flush=True)
     if args.no_scenarios:
         return
     for name in CONTROLLERS:
         result = run_scenario(ROOT / "scenarios" / f"seed002_freight_{name}.toml", plot=False)
         s = result.summary
+        fmu = s.get("fmu_wall_time_s", {})
         print(f"seed002_freight_{name}: {s['sim_time_s']:.0f} s in {s['wall_time_s']:.1f} s, "
-              f"real-time factor {s['real_time_factor']}", flush=True)
+              f"real-time factor {s['real_time_factor']} (plant {fmu.get('plant')} s, "
+              f"controller {fmu.get('controller')} s)", flush=True)
 
 
 if __name__ == "__main__":
