@@ -15,7 +15,8 @@ Keys of ``[summary]`` (all optional; variable references are ``FMU.variable``):
   split by the sign of the reference acceleration into traction (> 0), cruise (0) and braking
   (< 0) and give ``max_abs_speed_error_{traction,cruise,braking}_kmh``; ``final_stop_window``
   (m, with ``stop_point`` and ``position``) leaves the last metres before the stop point out of
-  these and gives ``max_abs_speed_error_outside_stop_kmh`` (seed 002);
+  these and gives ``max_abs_speed_error_outside_stop_kmh`` and ``speed_rmse_kmh`` over the same
+  samples (seed 002);
 * ``accel_command`` (m/s^2): the controllers' acceleration demand, giving
   ``command_min``, ``command_max`` and ``command_total_variation`` (sum of |changes|, the
   chattering measure);
@@ -183,8 +184,8 @@ def _seed002_metrics(out: dict[str, Any], cfg: dict[str, Any], frame: Any,
     if pos is not None and "final_stop_window" in cfg and "stop_point" in cfg:
         keep &= pos < float(cfg["stop_point"]) - float(cfg["final_stop_window"])
     err_kmh = (speed - ref) * KMH_PER_MPS
-    if "speed_rmse_mps" in out:
-        out["speed_rmse_kmh"] = out["speed_rmse_mps"] * KMH_PER_MPS
+    if accel is not None and np.any(keep):
+        out["speed_rmse_kmh"] = float(np.sqrt(np.mean(err_kmh[keep] ** 2)))
     if accel is not None:
         if "final_stop_window" in cfg:
             out["max_abs_speed_error_outside_stop_kmh"] = (
