@@ -128,14 +128,18 @@ def test_no_preview_is_the_plain_servo_and_error_falls_as_the_preview_grows() ->
     assert rms[-1] < 0.1 * rms[0]
 
 
-def test_disturbance_preview_removes_the_grade_error_without_waiting_for_the_integral() -> None:
-    """Constant reference speed, a -2 permille grade (d = +0.0196 m/s^2) from sample 300: without
-    disturbance preview the error appears and the servo's integral removes it; with it the
-    input is changed ahead and the peak error is < 40 % (measured 36 %: the weight on Delta u
-    spreads the change over the samples around the grade)."""
-    R = np.full(1000, 10.0)
-    d = np.where(np.arange(1000) >= 300, 9.81 * 0.002, 0.0)
-    blind = np.abs(_design_loop(0, 0, R, d)).max()
-    seen = np.abs(_design_loop(0, 40, R, d)).max()
-    assert blind > 1e-3
-    assert seen < 0.4 * blind
+def test_disturbance_preview_carries_a_grade_without_integral_action() -> None:
+    """Constant reference speed, a -2 permille grade (d = +0.0196 m/s^2) from sample 300.
+    Without disturbance preview the error appears and the servo's integral of the error must
+    build up the new input (sum e T = -0.12 m); with it the input is changed ahead: the
+    integral of the error stays ~0 (the grade is carried by the feedforward, not by integral
+    action; measured 2.5e-5 m) and the peak error is < 40 % (measured 36 %: the weight on
+    Delta u spreads the change over the samples around the grade)."""
+    R = np.full(1500, 10.0)
+    d = np.where(np.arange(1500) >= 300, 9.81 * 0.002, 0.0)
+    blind = _design_loop(0, 0, R, d)
+    seen = _design_loop(0, 100, R, d)
+    assert abs(blind.sum() * T) > 0.1
+    assert abs(seen.sum() * T) < 1e-3 * abs(blind.sum() * T)
+    assert np.abs(_design_loop(0, 40, R, d)).max() < 0.4 * np.abs(blind).max()
+    assert abs(seen[-1]) < 1e-9 and abs(blind[-1]) < 1e-9  # both settle exactly
