@@ -12,7 +12,19 @@ Keys of ``[summary]`` (all optional; variable references are ``FMU.variable``):
 * ``planned_arrival_time`` (s): gives ``arrival_time_error_s`` (time the train came to rest
   minus the plan);
 * ``ctcs3`` (bool): the scenario is speed tracking under the CTCS-3 rule (seeds 001, 004):
-  gives ``ctcs3_speed_error_ok``, which means nothing for a stopping or freight scenario.
+  gives ``ctcs3_speed_error_ok``, which means nothing for a stopping or freight scenario;
+* ``reference_accel`` (m/s^2, with ``speed`` and ``reference_speed``): the moving samples are
+  split by the sign of the reference acceleration into traction (> 0), cruise (0) and braking
+  (< 0) and give ``max_abs_speed_error_{traction,cruise,braking}_kmh``; ``final_stop_window``
+  (m, with ``stop_point`` and ``position``) leaves the last metres before the stop point out of
+  these and gives ``max_abs_speed_error_outside_stop_kmh`` and ``speed_rmse_kmh`` over the same
+  samples (seed 002);
+* ``accel_command`` (m/s^2): the controllers' acceleration demand, giving
+  ``command_min``, ``command_max`` and ``command_total_variation`` (sum of |changes|, the
+  chattering measure);
+* ``vehicle_speeds`` (list or glob, m/s): the train-mean speed (plain mean over the vehicles)
+  against the reference gives ``train_mean_speed_rmse_kmh`` and
+  ``max_abs_train_mean_speed_error_kmh`` (same samples and window as the mode errors).
 
 Always present: ``completed`` (False, with ``error``, for the partial results of a failed or
 interrupted run), ``sim_time_s``, ``wall_time_s``, ``real_time_factor``, ``algorithm``,
@@ -142,6 +154,7 @@ def compute_summary(result: Any) -> dict[str, Any]:
         else:
             out["arrival_time_error_s"] = None  # never came to rest inside the run
 
+    _seed002_metrics(out, cfg, frame, pos, speed, ref)
     out["executions"] = dict(result.executions)
     out["do_steps"] = dict(result.do_steps)
     out["fmu_wall_time_s"] = {k: round(v, 4) for k, v in result.fmu_wall_time_s.items()}
@@ -185,3 +198,38 @@ def _flatten_single(out: dict[str, Any], keys: tuple[str, ...]) -> None:
     for key in keys:
         if isinstance(out.get(key), dict) and len(out[key]) == 1:
             out[key] = next(iter(out[key].values()))
+
+
+def _seed002_metrics(out: dict[str, Any], cfg: dict[str, Any], frame: Any,
+                     pos: np.ndarray | None, speed: np.ndarray | None,
+                     ref: np.ndarray | None) -> None:
+    """Per-mode speed errors, command range and variation, train-mean errors (seed 002)."""
+    command = _series(frame, cfg.get("accel_command"))
+    if command is not None:
+        out["command_min"] = float(np.min(command))
+        out["command_max"] = float(np.max(command))
+        out["command_total_variation"] = float(np.sum(np.abs(np.diff(command))))
+    accel = _series(frame, cfg.get("reference_accel"))
+    if speed is None or ref is None:
+        return
+    keep = ref > 0.0
+    if pos is not None and "final_stop_window" in cfg and "stop_point" in cfg:
+        keep &= pos < float(cfg["stop_point"]) - float(cfg["final_stop_window"])
+    err_kmh = (speed - ref) * KMH_PER_MPS
+    if accel is not None and np.any(keep):
+        out["speed_rmse_kmh"] = float(np.sqrt(np.mean(err_kmh[keep] ** 2)))
+    if accel is not None:
+        if "final_stop_window" in cfg:
+            out["max_abs_speed_error_outside_stop_kmh"] = (
+                float(np.max(np.abs(err_kmh[keep]))) if np.any(keep) else None)
+        for mode, sel in (("traction", accel > 0), ("cruise", accel == 0),
+                          ("braking", accel < 0)):
+            part = err_kmh[keep & sel]
+            out[f"max_abs_speed_error_{mode}_kmh"] = (float(np.max(np.abs(part)))
+                                                     if part.size else None)
+    cols = _columns(frame, cfg.get("vehicle_speeds"))
+    if cols and np.any(keep):
+        mean = frame[cols].to_numpy(dtype=float).mean(axis=1)
+        e_mean = (mean - ref)[keep] * KMH_PER_MPS
+        out["train_mean_speed_rmse_kmh"] = float(np.sqrt(np.mean(e_mean**2)))
+        out["max_abs_train_mean_speed_error_kmh"] = float(np.max(np.abs(e_mean)))

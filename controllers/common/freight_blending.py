@@ -1,0 +1,317 @@
+"""Traction / electric-brake / air-brake blending of the heavy freight train (seed 002).
+
+Every freight speed controller (PID, optimal preview, sliding mode, fuzzy PID) produces one
+number, the force ``F = M (1 + gamma) a_dem`` (N) the train should get from its brakes and
+traction together (eq. 7, resistance already included by the controller). :class:`FreightBlending`
+turns it into the two plant commands, ``force_demand`` (locomotive: traction > 0, electric
+brake < 0, within the HXD1 envelope at the measured speed) and ``pipe_reduction`` (air brake):
+
+* the air brake is used only when the electric brake is not enough: it is applied when the
+  planned braking (reference acceleration now, at the controller's look-ahead and
+  ``air_preview_time`` ahead, the air brake being slow, plus resistance) or, at an overspeed
+  above ``overspeed``, the demand ``F`` needs more than ``ed_share`` of the electric brake, with a
+  pipe reduction in ``reduction_step`` stages giving the missing planned force (an overspeed
+  alone: the minimum reduction); it may then be deepened when the planned braking needs more,
+  never for an overspeed (the deeper application could not be taken back short of a full
+  release, and the train would stop far short: measured 80-300 m for the PID, fuzzy PID and
+  sliding mode), never partly released (Chinese 120 valves release directly), and is released
+  fully when the electric brake alone covers the demand with margin (``release_share``).
+  Hold times: once applied it stays at least ``min_apply_time``; once released it is not
+  re-applied for ``min_release_time`` (auxiliary reservoirs recharge);
+* while the air brake acts, the locomotive trims it with the electric brake only: the
+  locomotive force is ``min(F + F_air, 0)`` as long as the modelled cylinders hold pressure
+  (applied, or released but not yet empty). It never pulls against the air brake (no power
+  braking): where even the minimum reduction brakes too hard the train decelerates more than
+  planned. :meth:`FreightBlending.accel_limits` gives the controllers this envelope so their
+  integrators and saturations see it;
+* at the end of the profile (zero reference, speed under ``stop_speed``) it holds the train with
+  ``hold_reduction``; also when the air brake stopped the train short on a braking segment
+  (the minimum reduction brakes harder than planned once the electric brake fades below
+  ``ed_fade_speed``: without power braking the train stops some metres early).
+
+The air-brake force estimate runs the plant's brake-pipe model (propagation delays, eq. (9)
+filling) on the nominal brake data of :class:`plants.freight.FreightParams`.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from cosim.fmu.declare import Declared, Var, build, param
+from cosim.fmu.state import StatefulCore
+from plants.freight import FreightParams, FreightTrain, friction_coefficient
+from plants.route import (
+    GRAVITY,
+    ReferenceProfile,
+    Route,
+    load_route,
+    route_parameter,
+    routes_dir_in,
+)
+
+RELEASED_PA = 1.0  # Pa: a modelled cylinder pressure below this is a released brake
+
+
+@dataclass(frozen=True)
+class BlendingParams:
+    """Air-brake decision and hold times (the nominal train ``train`` is the model)."""
+
+    train: FreightParams = field(default_factory=FreightParams)  # nominal model
+    air_preview_time: float = param(2.0, "s", "look-ahead of the planned braking for the "
+                                    "air-brake decision", min=0.0)
+    ed_share: float = param(0.8, "1", "share of the electric brake used before the air brake "
+                            "is applied", min=0.0, max=1.0)
+    release_share: float = param(0.4, "1", "air brake released when the electric brake alone "
+                                 "needs less than this share", min=0.0, max=1.0)
+    min_apply_time: float = param(30.0, "s", "shortest air-brake application", min=0.0)
+    min_release_time: float = param(60.0, "s", "shortest time released before a new "
+                                    "application", min=0.0)
+    reduction_step: float = param(10e3, "Pa", "pipe-reduction stage", min=1.0)
+    overspeed: float = param(2.0 / 3.6, "m/s", "overspeed above which feedback may call the "
+                             "air brake", min=0.0)
+    stop_speed: float = param(0.3, "m/s", "below this speed at the end of the profile the "
+                              "train is held", min=0.0)
+    hold_reduction: float = param(100e3, "Pa", "pipe reduction holding the train at the final "
+                                  "stop", min=0.0)
+
+    def check(self) -> None:
+        self.train.check()
+        for name in ("air_preview_time", "min_apply_time", "min_release_time", "stop_speed",
+                     "hold_reduction"):
+            if not getattr(self, name) >= 0:
+                raise ValueError(f"{name} = {getattr(self, name)} must be >= 0")
+        if not 0 < self.release_share < self.ed_share <= 1:
+            raise ValueError(f"need 0 < release_share ({self.release_share}) < ed_share "
+                             f"({self.ed_share}) <= 1")
+        if not self.reduction_step > 0:
+            raise ValueError(f"reduction_step = {self.reduction_step} must be > 0")
+
+
+class FreightBlending(StatefulCore):
+    """Force demand (N) -> locomotive force demand + pipe reduction, see the module doc."""
+
+    state_fields = ("reduction", "pressure_estimate", "changed_at", "force", "holding",
+                    "brake_model_state")
+
+    def __init__(self, params: BlendingParams, profile: ReferenceProfile, route: Route) -> None:
+        params.check()
+        if profile.kind != "distance":
+            raise ValueError("freight blending needs a speed-distance reference profile")
+        self.p = params
+        self.profile = profile
+        self.route = route
+        self.model = FreightTrain(params.train, route)
+        self.m_eff = float(self.model.m_eff.sum())  # kg, M (1 + gamma)
+        self.weight = float(self.model.mass.sum() * GRAVITY)  # N
+        self.brake_scale = float(self.model.brake_scale.sum())  # N per Pa per phi
+        self._res_a = float(self.model.res_a.sum())
+        self._res_b = float(self.model.res_b.sum())
+        self._res_c = float(self.model.res_c.sum())
+        steps = route.additional.starts[1:]
+        length = self.model.train_length
+        knots = np.unique(np.concatenate((steps, steps + length, [0.0])))
+        self._add_knots = knots
+        self._add_values = (route.additional_resistance(knots, length)
+                            * self.weight / 1e3 / self.m_eff)
+        self.reduction = 0.0  # Pa, commanded pipe reduction
+        self.pressure_estimate = 0.0  # Pa, modelled mean cylinder pressure
+        self.changed_at = -math.inf  # s, time of the last apply/release
+        self.force = 0.0  # N, locomotive force demand
+        self.holding = False  # final-stop holding brake applied
+
+    @property
+    def brake_model_state(self) -> dict:
+        return {"pressure": self.model.pressure.copy(),
+                "history": [list(h) for h in self.model.brake_history]}
+
+    @brake_model_state.setter
+    def brake_model_state(self, state: dict) -> None:
+        self.model.pressure = np.array(state["pressure"], dtype=float)
+        self.model.brake_history = [list(h) for h in state["history"]]
+
+    # -- nominal model ---------------------------------------------------------------------
+    def basic_accel(self, v: float) -> float:
+        """Modelled basic resistance (eqs. 3-4) per unit effective mass (m/s^2)."""
+        return (self._res_a + (self._res_b + self._res_c * v) * v) / self.m_eff
+
+    def additional_accel(self, s: float | np.ndarray) -> float | np.ndarray:
+        """Grade + curve + tunnel resistance (eq. 5) of the whole train with its front at ``s``,
+        per unit effective mass (m/s^2). The length-share mean of a step profile is piecewise
+        linear with kinks where a step enters or leaves the train: tabulated there at
+        construction, so this is an exact interpolation."""
+        out = np.interp(s, self._add_knots, self._add_values)
+        return float(out) if np.ndim(s) == 0 else out
+
+    def resistance_accel(self, v: float, s: float) -> float:
+        """Modelled running resistance per unit effective mass (m/s^2): eq. (17) with sign +."""
+        return self.basic_accel(v) + self.additional_accel(s)
+
+    def air_force(self, pressure: float, v: float) -> float:
+        """Air-brake force (N) of the whole train at a uniform cylinder pressure (Pa)."""
+        return self.brake_scale * pressure * float(friction_coefficient(np.array(v)))
+
+    def air_applied(self) -> bool:
+        """Applied, or released with pressure still in the (modelled) cylinders."""
+        return self.reduction > 0.0 or float(self.model.pressure.max()) > RELEASED_PA
+
+    def accel_limits(self, v: float) -> tuple[float, float]:
+        """(lowest, highest) achievable demand ``F / M(1+gamma)`` (m/s^2) at speed ``v`` now:
+        full electric + air brake below; traction above, or while the air brake acts only
+        the electric brake trimming it (no power braking)."""
+        speed = max(v, 0.0)
+        trac, ed = self.model.traction_limits(speed)
+        full_air = self.air_force(self.p.train.max_cylinder_pressure, speed)
+        if self.air_applied():
+            hi = -self.air_force(self.pressure_estimate, speed)
+        else:
+            hi = trac
+        return -(ed + full_air) / self.m_eff, hi / self.m_eff
+
+    def _reduction_for(self, force: float, v: float) -> float:
+        """Smallest staged pipe reduction (Pa) whose air brake gives ``force`` (N)."""
+        tp = self.p.train
+        per_pa = self.air_force(1.0, v)
+        need = force / per_pa / tp.max_cylinder_pressure * tp.full_service_reduction
+        step = self.p.reduction_step
+        return min(max(math.ceil(need / step) * step, tp.min_reduction),
+                   tp.full_service_reduction)
+
+    # -- one sample ------------------------------------------------------------------------
+    def blend(self, t: float, T: float, v: float, s: float, force: float, v_ref: float,
+              a_ref: float, a_res: float) -> tuple[float, float]:
+        """Commands for the sample ``[t, t + T)``: ``(force_demand N, pipe_reduction Pa)``.
+
+        ``force`` (N) is the controller's demand on the whole train, ``v_ref``/``a_ref`` its
+        reference speed and (look-ahead) acceleration, ``a_res`` the resistance (m/s^2)."""
+        p = self.p
+        speed = max(v, 0.0)
+        trac, ed = self.model.traction_limits(speed)
+        planned = self.m_eff * (min(a_ref, self.profile.accel(s),
+                                    self.profile.accel(s + speed * p.air_preview_time)) + a_res)
+        over = v - v_ref > p.overspeed
+        need = max(-planned, -force if over else 0.0)
+        applied = self.reduction > 0.0
+        since = t - self.changed_at
+        # final stop: the reference has come to zero, or the air brake (too strong for the
+        # last metres once the electric brake fades, and not partly releasable) stopped the
+        # train short on the final braking segment
+        self.holding = (v < p.stop_speed and self.profile.accel(s) <= 0.0
+                        and (v_ref < p.stop_speed or self.reduction > 0.0))
+        if self.holding:
+            if self.reduction < p.hold_reduction:
+                self.reduction, self.changed_at = p.hold_reduction, t
+            force = 0.0
+        elif applied:
+            extra = -planned - p.ed_share * ed
+            if extra > self.air_force(self.pressure_estimate, speed) and extra > 0:
+                self.reduction = max(self.reduction, self._reduction_for(extra, speed))
+            elif since >= p.min_apply_time and need < p.release_share * ed:
+                self.reduction, self.changed_at = 0.0, t
+        elif since >= p.min_release_time and need > p.ed_share * ed:
+            # planned braking: the reduction giving the missing force; an overspeed alone:
+            # the smallest application
+            self.reduction = (self._reduction_for(-planned - p.ed_share * ed, speed)
+                              if -planned > p.ed_share * ed else p.train.min_reduction)
+            self.changed_at = t
+        pressures = self.model.step_brakes(t, t + T, self.reduction)
+        self.pressure_estimate = float(pressures.mean())
+        if not self.holding and self.air_applied():
+            # the locomotive trims the (estimated) air brake with the electric brake only:
+            # never traction against an applied or not yet released air brake
+            air = float(np.dot(self.model.brake_scale, pressures)
+                        * friction_coefficient(np.array(speed)))
+            force = min(force + air, 0.0)
+        self.force = min(max(force, -ed), trac)
+        return self.force, self.reduction
+
+
+def load_tracked_route(values: Mapping[str, Any], data_dir: Path) -> Route:
+    """The route named by the ``route`` parameter; it must carry a reference profile."""
+    route = load_route(values["route"], routes_dir_in(data_dir))
+    if route.reference is None:
+        raise ValueError(f"route {values['route']!r} has no reference profile")
+    return route
+
+
+def tracker_outputs(demand_description: str) -> tuple[Var, ...]:
+    """Outputs of every freight speed controller (``accel_demand`` described per family)."""
+    return (
+        Var.output("force_demand", "N", "locomotive force demand (> 0 traction, < 0 electric "
+                   "brake)"),
+        Var.output("pipe_reduction", "Pa", "brake-pipe reduction (0 = released)"),
+        Var.output("accel_demand", "m/s2", demand_description),
+        Var.output("v_ref", "m/s", "reference speed at the measured position"),
+        Var.output("a_ref", "m/s2", "reference acceleration (with preview)"),
+        Var.output("speed_error", "m/s", "v - v_ref"),
+        Var.output("air_brake_estimate", "Pa", "modelled mean cylinder pressure"),
+    )
+
+
+class FreightTracker(StatefulCore, Declared):
+    """Base of the freight speed controllers: measured head speed ``v`` and position ``s``,
+    a core computing the acceleration demand ``a_dem`` (:meth:`accel_demand`, resistance
+    included), the shared blending turning ``M (1 + gamma) a_dem`` into the plant commands.
+
+    Every controller measures the locomotive (head) speed and position and tracks the
+    reference at the head position; ``params_class`` needs ``blending`` and ``sample_time``.
+    """
+
+    state_fields = ("blending", "v_ref", "a_ref", "demand", "speed_error")
+    setup_vars = (route_parameter("freight_20km", "its reference profile is tracked"),)
+    input_vars = (
+        Var.input("v", "m/s", "measured head speed"),
+        Var.input("s", "m", "measured head position"),
+    )
+    output_vars = tracker_outputs("acceleration demand a_dem (resistance included)")
+
+    @classmethod
+    def from_parameters(cls, values: Mapping[str, Any], data_dir: Path,
+                        t0: float = 0.0) -> FreightTracker:
+        route = load_tracked_route(values, data_dir)
+        return cls(build(cls.params_class, values), route.reference, route)
+
+    def __init__(self, params: Any, profile: ReferenceProfile, route: Route) -> None:
+        params.check()
+        self.p = params
+        self.profile = profile
+        self.route = route
+        self.blending = FreightBlending(params.blending, profile, route)
+        self.m_eff = self.blending.m_eff
+        self.v_ref = 0.0
+        self.a_ref = 0.0
+        self.demand = 0.0  # m/s^2
+        self.speed_error = 0.0  # m/s, v - v_ref
+
+    @property
+    def sample_time(self) -> float:
+        return float(self.p.sample_time)
+
+    def accel_demand(self, t: float, v: float, s: float, a_res: float, lo: float,
+                     hi: float) -> float:
+        """The family's demand (m/s^2) within ``[lo, hi]``; sets ``self.a_ref``."""
+        raise NotImplementedError
+
+    def compute(self, t: float, inputs: dict[str, float]) -> tuple[dict[str, float], int]:
+        v, s = float(inputs["v"]), float(inputs["s"])
+        speed = max(v, 0.0)
+        self.v_ref = self.profile.speed(s)
+        self.speed_error = v - self.v_ref
+        a_res = self.blending.resistance_accel(speed, s)
+        lo, hi = self.blending.accel_limits(speed)
+        self.demand = self.accel_demand(t, v, s, a_res, lo, hi)
+        self.blending.blend(t, self.sample_time, v, s, self.m_eff * self.demand, self.v_ref,
+                            self.a_ref, a_res)
+        return self.outputs(), 1
+
+    def outputs(self) -> dict[str, float]:
+        b = self.blending
+        return {"force_demand": b.force, "pipe_reduction": b.reduction,
+                "accel_demand": self.demand, "v_ref": self.v_ref, "a_ref": self.a_ref,
+                "speed_error": self.speed_error,
+                "air_brake_estimate": b.pressure_estimate}

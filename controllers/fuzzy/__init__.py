@@ -1,0 +1,1 @@
+"""Fuzzy PID speed tracking (seed 002 baseline)."""

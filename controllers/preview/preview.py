@@ -1,0 +1,114 @@
+"""Optimal preview speed-tracking controller of the heavy freight train (seed 002, eqs. 16-37).
+
+Servo feedback on ``x0 = [e, Delta z]`` plus reference preview over the next ``M_R`` samples and
+disturbance preview of the resistance ahead over ``M_d`` samples (gains:
+:mod:`controllers.preview.design`). The controller measures the locomotive (head) speed ``v`` and
+position ``s``; the error is ``e = v_ref(s) - v`` at the head.
+
+* State ``z = [v, a, u(k-l-1), ..., u(k-1)]``: ``v`` measured, the traction acceleration ``a`` and
+  the held inputs from the design model driven by the demands actually passed on (after the
+  envelope of :meth:`controllers.common.freight_blending.FreightBlending.accel_limits`).
+* Reference ahead: the times of the reference profile give where the reference is ``j T`` after
+  the measured position; ``R(k + j)`` is the reference speed there.
+* Disturbance ahead: ``d(k + j) = -(w_basic(R(k+j)) + w_add(s_j))`` per unit effective mass
+  (eqs. 2-6, 17) from the nominal train on the route data the plant uses (grade, curve and
+  tunnel averaged over the train length at the predicted head positions ``s_j``).
+* ``u(k) = u(k-1) + Delta u(k)`` (m/s^2) goes to the shared blending (traction / ED / air brake).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from controllers.common.freight_blending import BlendingParams, FreightTracker, tracker_outputs
+from controllers.preview.design import lag_delay_model, preview_gains
+from cosim.fmu.declare import group, param, sample_time
+from plants.route import ReferenceProfile, Route
+
+
+@dataclass(frozen=True)
+class PreviewParams:
+    blending: BlendingParams = group(BlendingParams(), "")
+    sample_time: float = sample_time(0.2)
+    q_e: float = param(1.0, "1", "weight of the speed error (m/s)^2 in eq. (37)", min=1e-12)
+    q_dz: float = param(0.0, "1", "weight of the state differences Delta z in eq. (37)",
+                        min=0.0)
+    h: float = param(1e4, "1", "weight H of the input difference (m/s^2)^2 in eq. (37)",
+                     min=1e-12)
+    preview_steps: int = param(50, "1", "reference preview M_R (samples)", min=0, max=10000,
+                               name="M_R")
+    disturbance_steps: int = param(50, "1", "disturbance preview M_d (samples)", min=0,
+                                   max=10000, name="M_d")
+    traction_delay: float = param(0.5, "s", "tau of the design model (eq. 15)", min=0.0)
+    traction_time_constant: float = param(1.5, "s", "t_vb of the design model (eq. 15)",
+                                          min=1e-6)
+
+    def check(self) -> None:
+        self.blending.check()
+        if not self.sample_time > 0:
+            raise ValueError(f"sample_time = {self.sample_time} must be > 0")
+        if self.preview_steps < 0 or self.disturbance_steps < 0:
+            raise ValueError(f"M_R = {self.preview_steps} and M_d = {self.disturbance_steps} "
+                             "must be >= 0")
+
+
+class FreightPreview(FreightTracker):
+    """Optimal preview servo (eqs. 33-35) + shared blending."""
+
+    state_fields = (*FreightTracker.state_fields, "z", "z_prev", "u_prev", "d_prev")
+    params_class = PreviewParams
+    output_vars = tracker_outputs("preview control input u(k) = u(k-1) + Delta u(k)")
+
+    def __init__(self, params: PreviewParams, profile: ReferenceProfile, route: Route) -> None:
+        super().__init__(params, profile, route)
+        p = params
+        self.model = lag_delay_model(p.sample_time, p.traction_delay, p.traction_time_constant)
+        self.gains = preview_gains(self.model, p.q_e, p.q_dz, p.h, p.preview_steps,
+                                   p.disturbance_steps)
+        times = profile.times()
+        finite = np.isfinite(times)
+        self._t_pts, self._x_pts = times[finite], profile.x[finite]
+        self._v2 = profile.v**2
+        self._horizon = np.arange(max(p.preview_steps, p.disturbance_steps) + 1) * p.sample_time
+        self.z: np.ndarray | None = None  # design-model state z(k) (v measured)
+        self.z_prev: np.ndarray | None = None
+        self.u_prev = 0.0  # m/s^2, u(k-1)
+        self.d_prev: float | None = None  # m/s^2, d(k-1)
+
+    def ahead(self, s: float) -> tuple[np.ndarray, np.ndarray]:
+        """Reference speeds ``R(k+j)`` and disturbances ``d(k+j)``, ``j = 0..max(M_R, M_d)``,
+        at the head positions the reference reaches ``j T`` after the measured position."""
+        t0 = np.interp(s, self._x_pts, self._t_pts)
+        s_j = np.interp(t0 + self._horizon, self._t_pts, self._x_pts)
+        s_j[0] = s
+        R = np.sqrt(np.maximum(np.interp(s_j, self.profile.x, self._v2), 0.0))
+        b = self.blending
+        d = -(b._res_a + (b._res_b + b._res_c * R) * R) / self.m_eff - b.additional_accel(s_j)
+        return R, d
+
+    def accel_demand(self, t: float, v: float, s: float, a_res: float, lo: float,
+                     hi: float) -> float:
+        p, g, m = self.p, self.gains, self.model
+        self.a_ref = self.profile.accel(s)
+        R, d = self.ahead(s)
+        R[0] = self.v_ref
+        d[0] = -a_res
+        if self.z is None:  # first sample: at rest in the model, no differences yet
+            self.z = np.zeros(m.n)
+            self.z_prev = self.z.copy()
+            self.z[0] = self.z_prev[0] = v
+            self.d_prev = d[0]
+        else:
+            self.z = m.A @ self.z + m.B[:, 0] * self.u_prev + m.E[:, 0] * self.d_prev
+            self.z[0] = v
+        x0 = np.concatenate(([self.v_ref - v], self.z - self.z_prev))
+        dR = np.diff(R[: p.preview_steps + 1])
+        dd = np.diff(np.concatenate(([self.d_prev], d[: p.disturbance_steps + 1])))
+        du = float(g.F0[0] @ x0 + g.FR @ dR + g.Fd @ dd)
+        u = min(max(self.u_prev + du, lo), hi)
+        self.z_prev = self.z.copy()
+        self.u_prev = u
+        self.d_prev = float(d[0])
+        return u

@@ -1,0 +1,1 @@
+"""Sliding-mode speed tracking (seed 002 baseline)."""

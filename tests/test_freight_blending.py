@@ -1,0 +1,83 @@
+"""Shared traction / electric brake / air brake blending of the freight controllers (seed 002)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from controllers.common.freight_blending import BlendingParams, FreightBlending
+from controllers.pid.freight_pid import FreightPid, FreightPidParams
+from plants.route import ReferenceProfile, Route, load_route
+from tests.freight_loop import closed_loop
+
+
+def test_final_stop_never_pulls_against_the_air_brake() -> None:
+    """The last 150 m of freight_20km (0.2 m/s^2 braking to the stop): even the minimum
+    reduction brakes harder than planned once the electric brake fades, and the PID wants
+    traction. While the (modelled) cylinders hold pressure the locomotive may only brake, and
+    the plant's achieved force is never traction while its air brake acts (after the 0.5 s +
+    1.5 s traction lag of an earlier demand has decayed: checked from 10 s after the first
+    application). Before the fix it demanded 760 kN at 0.55 m/s."""
+    route = load_route("freight_20km")
+    s0 = 19850.0
+    pid = FreightPid(FreightPidParams(), route.reference, route)
+    run = closed_loop(pid, route, 60.0, s0=s0, v0=route.reference.speed(s0))
+    air = run["pipe_reduction"] > 0
+    assert np.any(air)  # the air brake was needed
+    first = np.argmax(air)
+    assert np.all(run["force_demand"][first:] <= 0.0)
+    late = run["t"] >= run["t"][first] + 10.0
+    acting = late & (run["air_brake_force"] > 0)
+    assert np.any(acting)
+    assert np.all(run["traction_force"][acting] <= 1e3)  # N: lag tail of a braking demand
+    assert run["v"][-1] < 0.05  # stopped near the stop (cold start 150 m before it) and held
+    assert run["pipe_reduction"][-1] >= BlendingParams().hold_reduction
+    assert abs(run["s"][-1] - 20000.0) < 15.0
+
+
+def test_accel_limits_exclude_traction_while_the_air_brake_acts() -> None:
+    ref = ReferenceProfile("distance", np.array([0.0, 500.0]), np.array([15.0, 0.0]))
+    blend = FreightBlending(BlendingParams(), ref, Route.flat())
+    lo, hi = blend.accel_limits(15.0)
+    assert hi > 0 > lo
+    # planned braking 0.225 m/s^2 needs the air brake: applied, then only braking is allowed
+    force, reduction = blend.blend(0.0, 0.2, 15.0, 0.0, -0.225 * blend.m_eff, 15.0, -0.225,
+                                   0.0)
+    assert reduction > 0 and force <= 0
+    for k in range(1, 50):
+        force, _ = blend.blend(0.2 * k, 0.2, 15.0, 0.0, 1e6, 15.0, -0.225, 0.0)
+        assert force <= 0.0  # a traction demand is not passed through
+    assert blend.accel_limits(15.0)[1] <= 0.0
+    assert blend.accel_limits(15.0)[1] == pytest.approx(
+        -blend.air_force(blend.pressure_estimate, 15.0) / blend.m_eff)
+
+
+def test_an_overspeed_does_not_deepen_an_applied_air_brake() -> None:
+    """A deeper application cannot be taken back short of a full release: an overspeed while
+    the brake is applied is left to the electric brake (the planned braking alone deepens)."""
+    ref = ReferenceProfile("distance", np.array([0.0, 500.0]), np.array([15.0, 0.0]))
+    blend = FreightBlending(BlendingParams(), ref, Route.flat())
+    _, applied = blend.blend(0.0, 0.2, 15.0, 0.0, -0.225 * blend.m_eff, 15.0, -0.225, 0.0)
+    assert applied > 0
+    for k in range(1, 100):  # 3 km/h too fast, the controller asking for everything
+        _, reduction = blend.blend(0.2 * k, 0.2, 15.0, 0.0, -1e8, 15.0 - 3.0 / 3.6, -0.225,
+                                   0.0)
+        assert reduction == applied
+    # not applied yet: an overspeed the electric brake cannot hold applies the minimum
+    fresh = FreightBlending(BlendingParams(), ReferenceProfile(
+        "distance", np.array([0.0, 1e5]), np.array([15.0, 15.0])), Route.flat())
+    _, reduction = fresh.blend(0.0, 0.2, 16.0, 0.0, -1e6, 15.0, 0.0, 0.0)
+    assert reduction == BlendingParams().train.min_reduction
+
+
+def test_tabulated_train_resistance_equals_the_length_share_mean() -> None:
+    """The whole-train grade/curve/tunnel resistance table is exact (piecewise linear between
+    the tabulated kinks): equal to Route.additional_resistance to rounding everywhere."""
+    route = load_route("freight_20km")
+    blend = FreightBlending(BlendingParams(), route.reference, route)
+    s = np.random.default_rng(7).uniform(-500.0, 21_000.0, 2000)
+    length = blend.model.train_length
+    exact = route.additional_resistance(s, length) * blend.weight / 1e3 / blend.m_eff
+    # cumulative integrals of up to ~4e7 (N/kN m) differenced: ~1e-8 N/kN, ~1e-13 m/s^2
+    np.testing.assert_allclose(blend.additional_accel(s), exact, rtol=0, atol=1e-12)
+    assert blend.additional_accel(float(s[0])) == pytest.approx(exact[0], abs=1e-12)
