@@ -14,7 +14,10 @@ traction ``min(F_t,max, P_t,max / v)``, braking ``min(F_b,max, P_b,max / v)`` (c
 then constant power). Inside a neutral section (unit midpoint in it) traction is cut to zero.
 ``w_i`` is an optional white-noise force ``m_i sigma N(0,1)`` held over intervals of
 ``disturbance_interval`` on the absolute time grid, drawn from (seed, interval index), so it does
-not depend on the step sizes or on saved/restored state.
+not depend on the step sizes or on saved/restored state. With ``disturbance_correlation_time``
+``tau > 0`` it is coloured instead (:func:`coloured_noise`): a slowly varying force (gusts,
+grade and resistance model error) with autocorrelation ``exp(-|dt| / tau)``, sampled at the
+start of each interval, again a function of (seed, time) only.
 
 Integration: the coupler part is linear and is solved exactly (matrix exponential, zero-order
 hold on the other forces); the other forces (resistance, clipped commands, route, noise) are
@@ -38,6 +41,7 @@ Configurations (:data:`CONFIGURATIONS`): ``crh380a_3unit`` (seed 001 Table 1), `
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field, replace
 
@@ -89,6 +93,9 @@ class EmuParams:
                                          "force per unit mass", min=0.0)
     disturbance_interval: float = param(0.1, "s", "hold time of each noise sample", min=1e-6)
     disturbance_seed: int = param(0, description="seed of the disturbance noise")
+    disturbance_correlation_time: float = param(
+        0.0, "s", "tau of a coloured disturbance, autocorrelation exp(-|dt|/tau) (0: white "
+        "noise)", min=0.0)
 
     @property
     def n(self) -> int:
@@ -107,7 +114,7 @@ class EmuParams:
         if any(not m > 0 for m in self.masses):
             raise ValueError(f"masses = {self.masses} must be > 0")
         for name in ("coupler_stiffness", "coupler_damping", "rotating_mass_factor",
-                     "disturbance_accel_std"):
+                     "disturbance_accel_std", "disturbance_correlation_time"):
             if not getattr(self, name) >= 0:
                 raise ValueError(f"{name} = {getattr(self, name)} must be >= 0")
         for name in ("max_step", "standstill_speed", "disturbance_interval"):
@@ -184,6 +191,28 @@ def emu_config(name: str, **overrides) -> EmuParams:
     if name not in CONFIGURATIONS:
         raise ValueError(f"configuration {name!r} unknown (known: {sorted(CONFIGURATIONS)})")
     return replace(CONFIGURATIONS[name](), **overrides)
+
+
+COLOURED_COMPONENTS = 64
+
+
+@functools.lru_cache(maxsize=16)
+def _coloured_spectrum(seed: int, n: int, tau: float) -> tuple[np.ndarray, np.ndarray]:
+    rng = np.random.default_rng([seed, 0xC010])
+    u = rng.random((n, COLOURED_COMPONENTS))
+    omega = np.tan(0.5 * np.pi * u) / tau  # half-Cauchy with scale 1/tau: Lorentzian spectrum
+    phase = rng.random((n, COLOURED_COMPONENTS)) * 2.0 * np.pi
+    return omega, phase
+
+
+def coloured_noise(seed: int, n: int, t: float, tau: float) -> np.ndarray:
+    """``n`` independent unit-variance Gaussian-like signals at time ``t`` (s) with
+    autocorrelation ``exp(-|dt| / tau)`` (an Ornstein-Uhlenbeck spectrum): the random-phase
+    sum ``sqrt(2/K) sum_k cos(omega_k t + phi_k)`` of K = 64 components whose frequencies are
+    drawn from the Lorentzian spectrum (half-Cauchy, scale 1/tau; ``E cos(omega s) =
+    exp(-|s|/tau)``). A function of (seed, t) only: no state, any step size."""
+    omega, phase = _coloured_spectrum(int(seed), int(n), float(tau))
+    return math.sqrt(2.0 / COLOURED_COMPONENTS) * np.cos(omega * t + phase).sum(axis=1)
 
 
 @dataclass
@@ -347,9 +376,13 @@ class Emu(StatefulCore, Declared):
             return np.zeros(self.n)
         index = tick // self._noise_ticks
         if self._noise_cache is None or self._noise_cache[0] != index:
-            rng = np.random.default_rng([p.disturbance_seed, index])
-            self._noise_cache = (index, self.m * p.disturbance_accel_std
-                                 * rng.standard_normal(self.n))
+            if p.disturbance_correlation_time > 0:
+                unit = coloured_noise(p.disturbance_seed, self.n,
+                                      to_seconds(index * self._noise_ticks),
+                                      p.disturbance_correlation_time)
+            else:
+                unit = np.random.default_rng([p.disturbance_seed, index]).standard_normal(self.n)
+            self._noise_cache = (index, self.m * p.disturbance_accel_std * unit)
         return self._noise_cache[1]
 
     def _force(self, applied: np.ndarray, v: np.ndarray, route_force: np.ndarray,
