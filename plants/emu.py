@@ -126,11 +126,14 @@ def _crh380a_3unit() -> EmuParams:
     """Seed 001 Table 1: 3 power units 183.6 / 112.3 / 183.6 t, k = 2e7 N/m, d = 5e6 N s/m.
 
     Resistance a, b, c = 5.2, 3.6e-2, 1.2e-3 read as kN per unit with v in m/s (SPEC): about
-    16.5 kN per unit at 300 km/h. Envelope from public CRH380A figures (6M2T, 9,600 kW):
-    power shared by mass (units of 3, 2, 3 cars), starting force 0.55 m/s^2 x mass (264 kN for
-    the train); brake 0.9 m/s^2 x mass up to the speed where a brake power of
-    0.7 m/s^2 x mass x 300 km/h takes over (about 0.7 m/s^2 at 300 km/h). Lengths 76/51/76 m
-    (203 m train).
+    16.5 kN per unit at 300 km/h. Envelope from public CRH380A figures (8 cars, 6M2T): every
+    power unit carries two motor cars (the end units two of their three cars, the middle unit
+    both of its two), so traction is shared equally, not by mass: 24 traction motors of
+    365 kW = 8,760 kW at the wheel (the 9,600 kW often quoted is the rating of the traction
+    equipment), 2,920 kW per unit; starting force 264 kN (0.55 m/s^2 for the 479.5 t train),
+    88 kN per unit. Every car brakes: brake 0.9 m/s^2 x mass up to the speed where a brake
+    power of 0.7 m/s^2 x mass x 300 km/h takes over (about 0.7 m/s^2 at 300 km/h). Lengths
+    76/51/76 m (203 m train).
     """
     masses = (1.836e5, 1.123e5, 1.836e5)
     total = sum(masses)
@@ -138,8 +141,8 @@ def _crh380a_3unit() -> EmuParams:
         masses=masses,
         lengths=(76.0, 51.0, 76.0),
         davis_a=(5.2e3,) * 3, davis_b=(36.0,) * 3, davis_c=(1.2,) * 3,
-        max_traction_force=_t(0.55 * m for m in masses),
-        max_traction_power=_t(9.6e6 * m / total for m in masses),
+        max_traction_force=(0.55 * total / 3,) * 3,
+        max_traction_power=(8.76e6 / 3,) * 3,
         max_brake_force=_t(0.9 * m for m in masses),
         max_brake_power=_t(0.7 * m * 300.0 * KMH for m in masses),
         coupler_stiffness=2.0e7, coupler_damping=5.0e6,
