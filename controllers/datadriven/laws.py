@@ -33,8 +33,10 @@ As ``theta -> inf`` the MPC moves vanish (``|U| <= |Theta'(Lambda s + Psi P)| / 
 ISMPC is its equivalent control alone (ISMC with ``beta = 0``). ``b`` (the Lipschitz constant
 of assumption 2 in eq. 18) and ``theta`` are not given in the paper: see the defaults.
 
-Anti-windup: the sums ``E``, ``F`` are not advanced at a sample where the input saturates in
-the direction the law asked for (a saturated actuator cannot act on the surface).
+Anti-windup: the sums ``E``, ``F`` are not advanced at a sample where every unit's input
+saturates in the direction the law asked for (the train can no longer act on the surface).
+Freezing them when only some units saturate left a steady error: the end units sat at their
+power limit while the middle unit still had room, and the integral action stopped.
 
 FFDL-MFAC (Xiong and Hou 2022, the paper's ref. 18), with weight ``delta`` and step ``rho``::
 
@@ -152,7 +154,7 @@ class SlidingLaw(Law):
     def _finish(self, u_wanted: np.ndarray, lo, hi) -> np.ndarray:
         u = np.clip(u_wanted, lo, hi)
         pushed = ((u_wanted > hi) & (self.s < 0)) | ((u_wanted < lo) & (self.s > 0))
-        if not np.any(pushed):
+        if not np.all(pushed):
             self.E, self.F = self._next
         return self._apply(u)
 
