@@ -14,7 +14,10 @@ traction ``min(F_t,max, P_t,max / v)``, braking ``min(F_b,max, P_b,max / v)`` (c
 then constant power). Inside a neutral section (unit midpoint in it) traction is cut to zero.
 ``w_i`` is an optional white-noise force ``m_i sigma N(0,1)`` held over intervals of
 ``disturbance_interval`` on the absolute time grid, drawn from (seed, interval index), so it does
-not depend on the step sizes or on saved/restored state.
+not depend on the step sizes or on saved/restored state. With ``disturbance_correlation_time``
+``tau > 0`` it is coloured instead (:func:`coloured_noise`): a slowly varying force (gusts,
+grade and resistance model error) with autocorrelation ``exp(-|dt| / tau)``, sampled at the
+start of each interval, again a function of (seed, time) only.
 
 Integration: the coupler part is linear and is solved exactly (matrix exponential, zero-order
 hold on the other forces); the other forces (resistance, clipped commands, route, noise) are
@@ -40,6 +43,7 @@ Configurations (:data:`CONFIGURATIONS`): ``crh380a_3unit`` (seed 001 Table 1), `
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field, replace
 
@@ -91,6 +95,9 @@ class EmuParams:
                                          "force per unit mass", min=0.0)
     disturbance_interval: float = param(0.1, "s", "hold time of each noise sample", min=1e-6)
     disturbance_seed: int = param(0, description="seed of the disturbance noise")
+    disturbance_correlation_time: float = param(
+        0.0, "s", "tau of a coloured disturbance, autocorrelation exp(-|dt|/tau) (0: white "
+        "noise)", min=0.0)
 
     @property
     def n(self) -> int:
@@ -109,7 +116,7 @@ class EmuParams:
         if any(not m > 0 for m in self.masses):
             raise ValueError(f"masses = {self.masses} must be > 0")
         for name in ("coupler_stiffness", "coupler_damping", "rotating_mass_factor",
-                     "disturbance_accel_std"):
+                     "disturbance_accel_std", "disturbance_correlation_time"):
             if not getattr(self, name) >= 0:
                 raise ValueError(f"{name} = {getattr(self, name)} must be >= 0")
         for name in ("max_step", "standstill_speed", "disturbance_interval"):
@@ -121,11 +128,14 @@ def _crh380a_3unit() -> EmuParams:
     """Seed 001 Table 1: 3 power units 183.6 / 112.3 / 183.6 t, k = 2e7 N/m, d = 5e6 N s/m.
 
     Resistance a, b, c = 5.2, 3.6e-2, 1.2e-3 read as kN per unit with v in m/s (SPEC): about
-    16.5 kN per unit at 300 km/h. Envelope from public CRH380A figures (6M2T, 9,600 kW):
-    power shared by mass (units of 3, 2, 3 cars), starting force 0.55 m/s^2 x mass (264 kN for
-    the train); brake 0.9 m/s^2 x mass up to the speed where a brake power of
-    0.7 m/s^2 x mass x 300 km/h takes over (about 0.7 m/s^2 at 300 km/h). Lengths 76/51/76 m
-    (203 m train).
+    16.5 kN per unit at 300 km/h. Envelope from public CRH380A figures (8 cars, 6M2T): every
+    power unit carries two motor cars (the end units two of their three cars, the middle unit
+    both of its two), so traction is shared equally, not by mass: 24 traction motors of
+    365 kW = 8,760 kW at the wheel (the 9,600 kW often quoted is the rating of the traction
+    equipment), 2,920 kW per unit; starting force 264 kN (0.55 m/s^2 for the 479.5 t train),
+    88 kN per unit. Every car brakes: brake 0.9 m/s^2 x mass up to the speed where a brake
+    power of 0.7 m/s^2 x mass x 300 km/h takes over (about 0.7 m/s^2 at 300 km/h). Lengths
+    76/51/76 m (203 m train).
     """
     masses = (1.836e5, 1.123e5, 1.836e5)
     total = sum(masses)
@@ -133,8 +143,8 @@ def _crh380a_3unit() -> EmuParams:
         masses=masses,
         lengths=(76.0, 51.0, 76.0),
         davis_a=(5.2e3,) * 3, davis_b=(36.0,) * 3, davis_c=(1.2,) * 3,
-        max_traction_force=_t(0.55 * m for m in masses),
-        max_traction_power=_t(9.6e6 * m / total for m in masses),
+        max_traction_force=(0.55 * total / 3,) * 3,
+        max_traction_power=(8.76e6 / 3,) * 3,
         max_brake_force=_t(0.9 * m for m in masses),
         max_brake_power=_t(0.7 * m * 300.0 * KMH for m in masses),
         coupler_stiffness=2.0e7, coupler_damping=5.0e6,
@@ -186,6 +196,28 @@ def emu_config(name: str, **overrides) -> EmuParams:
     if name not in CONFIGURATIONS:
         raise ValueError(f"configuration {name!r} unknown (known: {sorted(CONFIGURATIONS)})")
     return replace(CONFIGURATIONS[name](), **overrides)
+
+
+COLOURED_COMPONENTS = 64
+
+
+@functools.lru_cache(maxsize=16)
+def _coloured_spectrum(seed: int, n: int, tau: float) -> tuple[np.ndarray, np.ndarray]:
+    rng = np.random.default_rng([seed, 0xC010])
+    u = rng.random((n, COLOURED_COMPONENTS))
+    omega = np.tan(0.5 * np.pi * u) / tau  # half-Cauchy with scale 1/tau: Lorentzian spectrum
+    phase = rng.random((n, COLOURED_COMPONENTS)) * 2.0 * np.pi
+    return omega, phase
+
+
+def coloured_noise(seed: int, n: int, t: float, tau: float) -> np.ndarray:
+    """``n`` independent unit-variance Gaussian-like signals at time ``t`` (s) with
+    autocorrelation ``exp(-|dt| / tau)`` (an Ornstein-Uhlenbeck spectrum): the random-phase
+    sum ``sqrt(2/K) sum_k cos(omega_k t + phi_k)`` of K = 64 components whose frequencies are
+    drawn from the Lorentzian spectrum (half-Cauchy, scale 1/tau; ``E cos(omega s) =
+    exp(-|s|/tau)``). A function of (seed, t) only: no state, any step size."""
+    omega, phase = _coloured_spectrum(int(seed), int(n), float(tau))
+    return math.sqrt(2.0 / COLOURED_COMPONENTS) * np.cos(omega * t + phase).sum(axis=1)
 
 
 @dataclass
@@ -365,9 +397,13 @@ class Emu(StatefulCore, Declared):
             return np.zeros(self.n)
         index = tick // self._noise_ticks
         if self._noise_cache is None or self._noise_cache[0] != index:
-            rng = np.random.default_rng([p.disturbance_seed, index])
-            self._noise_cache = (index, self.m * p.disturbance_accel_std
-                                 * rng.standard_normal(self.n))
+            if p.disturbance_correlation_time > 0:
+                unit = coloured_noise(p.disturbance_seed, self.n,
+                                      to_seconds(index * self._noise_ticks),
+                                      p.disturbance_correlation_time)
+            else:
+                unit = np.random.default_rng([p.disturbance_seed, index]).standard_normal(self.n)
+            self._noise_cache = (index, self.m * p.disturbance_accel_std * unit)
         return self._noise_cache[1]
 
     def _force(self, applied: np.ndarray, v: np.ndarray, route_force: np.ndarray,

@@ -7,10 +7,18 @@ How the line is made (seed 001 only names the section; its Fig. 4 is not in the 
 * Length and stations: chainage of the Beijing-Shanghai high-speed railway (public station
   table: Jinan West km 419.445, Tai'an 462.730, Qufu East 533.165, Tengzhou East 589.175,
   Zaozhuang West 625.280, Xuzhou East 688.700), so the section is 269.255 km long.
-* Grade, curves and tunnels are synthetic, drawn with a fixed seed within the line's public
-  design figures (maximum grade 20 permille, minimum curve radius mostly 7,000 m): segments of
-  1.5-6 km with grades up to +-6 permille on the plain and +-12 (capped at 20) in the hilly
-  Tai'an - Qufu stretch, where the tunnels are; curves of 7,000-12,000 m every 8-15 km.
+* Grade follows an elevation profile: the track elevation is interpolated linearly between
+  approximate ground elevations of the stations (:data:`STATION_ELEVATION_M`, rounded public
+  topographic figures: the line starts and ends low on the North China / Huang-Huai plain and
+  climbs to about 140 m at Tai'an), plus a random undulation that vanishes at every station
+  (amplitude 10 m on the plain, 30 m in the hilly Tai'an - Qufu stretch, half-sine window
+  between stations). Segments of 1.5-6 km get the grade of that profile (0.5 permille steps,
+  the rounding carried into the next segment, capped at the line's design maximum of 20), so
+  the integrated elevation meets every station's and the section ends 5 m above its start
+  instead of drifting (independent grades had put Xuzhou East 305 m below Jinan West).
+* Curves and tunnels are synthetic, drawn with a fixed seed within the line's public design
+  figures (minimum curve radius mostly 7,000 m): curves of 7,000-12,000 m every 8-15 km;
+  tunnels in the hilly Tai'an - Qufu stretch.
 * Speed limits: 160 km/h over the first and last 2.5 km (station throats), 350 km/h line
   speed, and one 250 km/h temporary restriction (km 150-156 from Jinan West).
 * Neutral sections (200 m) about every 25 km, none in the last 10 km.
@@ -44,6 +52,9 @@ SEED = 2011
 CHAINAGE_KM = [("Jinan West", 419.445), ("Tai'an", 462.730), ("Qufu East", 533.165),
                ("Tengzhou East", 589.175), ("Zaozhuang West", 625.280),
                ("Xuzhou East", 688.700)]
+# approximate ground elevation (m) at each station, rounded public topographic figures
+STATION_ELEVATION_M = {"Jinan West": 35.0, "Tai'an": 140.0, "Qufu East": 65.0,
+                       "Tengzhou East": 65.0, "Zaozhuang West": 70.0, "Xuzhou East": 40.0}
 GRID_M = 25.0
 CRUISE_KMH = 300.0
 TRACTION_SHARE = 0.85
@@ -62,14 +73,28 @@ def make_line(rng: np.random.Generator) -> dict:
     stations = [[name, round((km - origin) * 1000.0, 1)] for name, km in CHAINAGE_KM]
     length = stations[-1][1]
     hilly = (20e3, 120e3)
-    grade, s = [], 0.0
+    st_pos = np.array([pos for _, pos in stations])
+    st_elev = np.array([STATION_ELEVATION_M[name] for name, _ in stations])
+
+    def target(x: float, bump: float) -> float:
+        """Station-interpolated elevation plus ``bump`` x a half-sine vanishing at stations."""
+        k = min(int(np.searchsorted(st_pos, x, side="right")) - 1, st_pos.size - 2)
+        frac = (x - st_pos[k]) / (st_pos[k + 1] - st_pos[k])
+        return float(np.interp(x, st_pos, st_elev)) + bump * math.sin(math.pi * frac)
+
+    bounds, s = [0.0], 0.0
     while s < length:
-        steep = hilly[0] <= s < hilly[1]
-        g = rng.uniform(-12.0, 12.0) if steep else rng.uniform(-6.0, 6.0)
-        if s < 3e3 or s > length - 3e3:
-            g = rng.uniform(-1.0, 1.0)  # station areas are nearly level
-        grade.append([round(s, 1), float(np.clip(_round(g, 0.5), -20.0, 20.0))])
         s += _round(rng.uniform(1.5e3, 6e3), 100.0)
+        bounds.append(min(s, length))
+    if bounds[-1] - bounds[-2] < 500.0 and len(bounds) > 2:
+        del bounds[-2]  # no sliver at the end
+    grade, elev = [], st_elev[0]
+    for a, b in zip(bounds[:-1], bounds[1:], strict=True):
+        amp = 30.0 if hilly[0] <= b < hilly[1] else 10.0
+        goal = target(b, amp * rng.uniform(-1.0, 1.0)) if b < length else st_elev[-1]
+        g = float(np.clip(_round((goal - elev) / (b - a) * 1000.0, 0.5), -20.0, 20.0))
+        grade.append([round(a, 1), g])
+        elev += g * (b - a) / 1000.0
     curves, s = [], 5e3
     while s < length - 8e3:
         s += _round(rng.uniform(8e3, 15e3), 100.0)

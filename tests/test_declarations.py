@@ -44,7 +44,10 @@ INTEGER_RANGES = {
 }
 
 # variables added since (FMU -> names), each by the issue that needed it
-ADDED_VARIABLES = {f: {"qp_solver"} for f in ("StopMpc", "StopRmpc", "StopRsmpc")}  # issue 10
+ADDED_VARIABLES = {
+    **{f: {"qp_solver"} for f in ("StopMpc", "StopRmpc", "StopRsmpc")},  # issue 10
+    **{f: {"disturbance_correlation_time"} for f in ("Emu3", "Emu8")},  # issue 15
+}
 
 
 def test_model_descriptions_unchanged_but_for_listed_improvements(built_fmus) -> None:

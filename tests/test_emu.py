@@ -143,7 +143,9 @@ def _run_steps(p: EmuParams, route: Route, steps: list[float]) -> dict[str, floa
 
 def test_results_do_not_depend_on_the_communication_step() -> None:
     """Steps on the max_step grid: same trajectory to rounding; off the grid (split sub-steps):
-    same to the integrator's accuracy. Noise included (drawn per absolute interval)."""
+    same to the integrator's accuracy. Noise included (drawn per absolute interval). Force
+    outputs are compared to the integrator's accuracy relative to the applied forces (1.2e5 N):
+    a coupler force is a small difference of them (5.3 kN with the equal traction split)."""
     p = emu_config("crh380a_3unit", disturbance_accel_std=0.05, disturbance_interval=0.2,
                    disturbance_seed=3)
     route = Route("g", 1e6, StepProfile.from_pairs([[0.0, 0.0], [300.0, 12.0]]))
@@ -152,7 +154,8 @@ def test_results_do_not_depend_on_the_communication_step() -> None:
                              ([0.07], 1e-4, 1e-2), ([1.0, 0.013, 0.5], 1e-4, 1e-2)):
         other = _run_steps(p, route, steps)
         for key, value in base.items():
-            assert other[key] == pytest.approx(value, rel=rel, abs=abs_), (steps, key)
+            tol = max(abs_, rel * 1.2e5) if "force" in key else abs_
+            assert other[key] == pytest.approx(value, rel=rel, abs=tol), (steps, key)
 
 
 def test_traction_and_brake_envelope() -> None:

@@ -24,7 +24,11 @@ Keys of ``[summary]`` (all optional; variable references are ``FMU.variable``):
   chattering measure);
 * ``vehicle_speeds`` (list or glob, m/s): the train-mean speed (plain mean over the vehicles)
   against the reference gives ``train_mean_speed_rmse_kmh`` and
-  ``max_abs_train_mean_speed_error_kmh`` (same samples and window as the mode errors).
+  ``max_abs_train_mean_speed_error_kmh`` (same samples and window as the mode errors);
+* ``unit_speeds`` (list or ``"plant.v[*]"``, m/s, with ``reference_speed``): the per-power-unit
+  indices of seed 001 (:func:`unit_indices`): ``unit_mse_kmh2`` (eq. 87), ``unit_iae_kmh_s``
+  (eq. 88) and ``unit_ma_mps_per_sample`` (eq. 89) at the sample time ``ma_sample_time``
+  (s, default 1.0; reported as ``ma_sample_time_s``).
 
 Always present: ``completed`` (False, with ``error``, for the partial results of a failed or
 interrupted run), ``sim_time_s``, ``wall_time_s``, ``real_time_factor``, ``algorithm``,
@@ -72,6 +76,30 @@ def _columns(frame: Any, ref: Any) -> list[str]:
         elif r in frame.columns:
             cols.append(r)
     return cols
+
+
+def unit_indices(t: np.ndarray, speeds: np.ndarray, ref: np.ndarray,
+                 ma_sample_time: float) -> dict[str, float]:
+    """Seed 001's indices over the ``n`` power units (``speeds`` (T, n), m/s; ``ref`` (T,)):
+
+    * eq. 87 ``MSE = 1/(nT) sum_i sum_t e_i(t)^2`` over every recorded sample, e in km/h;
+    * eq. 88 ``IAE = 1/n sum_i int |e_i| dt`` (trapezoid), km/h s;
+    * eq. 89 ``MA = max_{t,i} |y_i(t) - y_i(t-1)|``: the largest speed change of a unit over
+      one sample of ``ma_sample_time`` seconds (m/s per sample; speeds interpolated on that
+      grid from the start). With a 1 s sample it equals the largest mean acceleration over
+      1 s in m/s^2, which is what Table 2 lists; it is not ``max_abs_accel_mps2`` (the largest
+      instantaneous train acceleration).
+    """
+    err_kmh = (speeds - ref[:, None]) * KMH_PER_MPS
+    grid = np.arange(t[0], t[-1] + 1e-9, ma_sample_time)
+    sampled = np.column_stack([np.interp(grid, t, speeds[:, i]) for i in range(speeds.shape[1])])
+    ma = float(np.max(np.abs(np.diff(sampled, axis=0)))) if grid.size > 1 else 0.0
+    return {
+        "unit_mse_kmh2": float(np.mean(err_kmh**2)),
+        "unit_iae_kmh_s": float(np.mean(np.trapezoid(np.abs(err_kmh), t, axis=0))),
+        "unit_ma_mps_per_sample": ma,
+        "ma_sample_time_s": float(ma_sample_time),
+    }
 
 
 def _count_changes(x: np.ndarray) -> int:
@@ -132,6 +160,10 @@ def compute_summary(result: Any) -> dict[str, Any]:
         out["ctcs3_speed_error_ok"] = ctcs3_speed_error_ok(ref[moving if np.any(moving) else
                                                                slice(None)] * KMH_PER_MPS,
                                                            err_kmh)
+    unit_cols = _columns(frame, cfg.get("unit_speeds"))
+    if unit_cols and ref is not None:
+        out.update(unit_indices(t, frame[unit_cols].to_numpy(dtype=float), ref,
+                                float(cfg.get("ma_sample_time", 1.0))))
     if accel is not None:
         out["max_abs_accel_mps2"] = float(np.max(np.abs(accel)))
         if accel.size > 1:

@@ -1,0 +1,100 @@
+"""Benchmark of the seed 001 data-driven controllers (prints figures, asserts nothing).
+
+1. Wall time per controller event (median and 99th percentile of ``compute``: scaling,
+   reference look-up, estimator, law, QP when ISMPC's constraints are active), from a direct
+   closed loop of the Emu core (CRH380A, seed001 disturbance) and each controller core over
+   the first ``--seconds`` of the Jinan West - Xuzhou East run.
+2. Real-time factor of each seed-001 scenario (3540 s simulated) through the event-driven
+   master with the FMUs (``--scenarios``; 5 runs of 1-3 min each on this machine).
+
+    python benchmarks/bench_datadriven.py [--seconds 600] [--scenarios]
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path[:0] = [str(ROOT)]
+
+from controllers.datadriven.emu_control import EmuGpc, EmuIsmc, EmuIsmpc, EmuMfac  # noqa: E402
+from controllers.pid.speed_pid import (  # noqa: E402
+    DistributedSpeedPid,
+    DistributedSpeedPidParams,
+)
+from cosim.fmu.state import to_ticks  # noqa: E402
+from plants.emu import Emu, emu_config  # noqa: E402
+from plants.route import load_reference, load_route  # noqa: E402
+
+CONTROLLERS = {"ISMPC": EmuIsmpc, "ISMC": EmuIsmc, "MFAC": EmuMfac, "GPC": EmuGpc}
+SCENARIOS = {"ISMPC": "seed001_emu_ismpc", "ISMC": "seed001_emu_ismc",
+             "MFAC": "seed001_emu_mfac", "GPC": "seed001_emu_gpc", "PID": "seed001_emu_pid"}
+T = 0.2
+
+
+def event_times(controller, seconds: float) -> np.ndarray:
+    """Wall time (s) of each ``compute`` of ``controller`` in closed loop with the Emu core."""
+    emu = Emu(emu_config("crh380a_3unit", disturbance_accel_std=0.05,
+                         disturbance_interval=0.2, disturbance_seed=1),
+              load_route("jinan_xuzhou_east"))
+    times = []
+    for k in range(int(round(seconds / T))):
+        meas = emu.outputs()
+        t0 = time.perf_counter()
+        out, _ = controller.compute(k * T, meas)
+        times.append(time.perf_counter() - t0)
+        emu.advance(to_ticks(k * T), to_ticks(T), out)
+    return np.array(times)
+
+
+def event_table(seconds: float) -> None:
+    profile = load_reference("jinan_xuzhou_east_reference")
+    print(f"Wall time per controller event (direct core loop, first {seconds:.0f} s, "
+          f"T = {T} s)")
+    print(f"{'controller':<8} {'events':>7} {'median ms':>10} {'p99 ms':>8} {'QPs':>6}")
+    cores = {name: cls(cls.params_class(), profile, 3) for name, cls in CONTROLLERS.items()}
+    cores["PID"] = DistributedSpeedPid(DistributedSpeedPidParams(units=3), profile)
+    for name, core in cores.items():
+        ms = event_times(core, seconds) * 1e3
+        qps = getattr(getattr(core, "law", None), "qp_solves", "-")
+        print(f"{name:<8} {ms.size:>7} {np.median(ms):>10.3f} {np.percentile(ms, 99):>8.3f} "
+              f"{qps!s:>6}")
+
+
+def scenario_table() -> None:
+    from cosim.run.master import ensure_built, run_scenario
+    from cosim.run.scenario import load_scenario
+
+    print("\nWhole seed-001 scenarios through the event-driven master (FMUs)")
+    print(f"{'controller':<8} {'sim s':>6} {'wall s':>8} {'x real time':>12} "
+          f"{'controller FMU s':>17} {'plant FMU s':>12}")
+    for name, scenario in SCENARIOS.items():
+        ensure_built(load_scenario(scenario))
+        t0 = time.perf_counter()
+        res = run_scenario(scenario, build=False, plot=False)
+        wall = time.perf_counter() - t0
+        s = res.summary
+        fmu = s["fmu_wall_time_s"]
+        ctl, plant = fmu.get("controller", float("nan")), fmu.get("plant", float("nan"))
+        print(f"{name:<8} {s['sim_time_s']:>6.0f} {wall:>8.1f} {s['sim_time_s'] / wall:>12.1f} "
+              f"{ctl:>17.1f} {plant:>12.1f}")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seconds", type=float, default=600.0)
+    parser.add_argument("--scenarios", action="store_true",
+                        help="also run the five seed-001 scenarios (real-time factors)")
+    args = parser.parse_args()
+    event_table(args.seconds)
+    if args.scenarios:
+        scenario_table()
+
+
+if __name__ == "__main__":
+    main()

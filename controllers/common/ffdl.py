@@ -1,0 +1,190 @@
+"""MIMO full-form dynamic linearisation (FFDL) data model and its pseudo-Jacobian estimator
+(seed 001 eqs. 8-16), shared by the data-driven controllers (MFAC, ISMC, ISMPC).
+
+Data model (eq. 9 / eq. 13), ``n`` outputs and ``n`` inputs, pseudo-orders ``L_y``, ``L_u``::
+
+    dH(t) = [dy(t); ...; dy(t-L_y+1); du(t); ...; du(t-L_u+1)]          (eq. 8)
+    dy(t+1) = Phi(t) dH(t) + dd(t),   Phi = [Phi_1 ... Phi_{L_y+L_u}]     (eqs. 9, 13)
+
+``Phi_{L_y+1}`` (called ``Phi_2`` in the paper's ``L_y = L_u = 1`` notation) is the block that
+multiplies ``du(t)``: the input gain the control laws invert.
+
+Estimator (eq. 16, projection algorithm minimising eq. 15)::
+
+    eps(t)  = dy(t) - dd_hat(t-1) - Phi(t-1) dH(t-1)
+    Phi(t)  = Phi(t-1) + lambda eps(t) dH(t-1)' / (mu + ||dH(t-1)||^2)
+
+Disturbance delay-estimate (eq. 14): ``dd_hat(t) = dy(t) - Phi(t) dH(t-1)``, the part of the
+last output change the model does not explain, used as the estimate of ``dd(t)`` (assumption 3:
+the disturbance changes little between samples). The paper writes eq. 14 with ``Phi(t-1)`` and
+puts ``dd_hat(t)`` into eq. 16; taken literally the innovation of eq. 16 is then identically
+zero and ``Phi`` never moves. Here the estimator uses the previous sample's estimate
+``dd_hat(t-1)`` (a one-step delay-estimate of the disturbance change, assumption 3) and eq. 14
+is evaluated with the updated ``Phi(t)``. ``p(t) = dd(t) - dd_hat(t)`` (eq. 41) is the
+estimation error the sliding-mode laws must absorb; its one-step estimate is
+``p_hat(t-1) = dd_hat(t) - dd_hat(t-1)`` (eq. 70). With ``disturbance = False`` (plain
+FFDL-MFAC) ``dd_hat = 0``.
+
+Reset condition (Hou's FFDL-MFAC): ``Phi`` is not updated while ``||dH(t-1)|| <= excitation``
+(no information), and returns to ``Phi(1)`` when a diagonal entry of the input block becomes
+smaller than ``reset_threshold`` (or changes sign), which keeps the control direction known.
+
+Scaling (what makes ``Phi(1) = 0.5 I`` meaningful): outputs are speeds in km/h
+(``y = 3.6 v``) and inputs are forces per unit mass in m/s^2 (``u_i = F_i / m``, ``m`` the
+mean mass of a power unit). A free unit sampled at ``T`` then has ``dy(t+1) = dy(t) +
+3.6 T du(t)``: ``Phi_1 = I`` and ``Phi_2 = 3.6 T I = 0.72 I`` at ``T = 0.2 s``, so the paper's
+``0.5 I`` is a start of the right sign and size. The stiff couplers make the true ``Phi_2`` of
+the 3-unit train close to rank one (every unit's force moves all speeds), so the control laws
+invert it with the regularised pseudo-inverse :func:`regularised_pinv`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from cosim.fmu.declare import param
+from cosim.fmu.state import StatefulCore
+
+KMH_PER_MPS = 3.6
+
+
+def regularised_pinv(M: np.ndarray, eps: float) -> np.ndarray:
+    """``(M'M + eps I)^-1 M'``: the Tikhonov-regularised inverse of a nearly singular gain.
+
+    Directions with singular value ``sigma >> sqrt(eps)`` are inverted (``1/sigma``), weak ones
+    are damped (``sigma / (sigma^2 + eps)``) instead of amplified."""
+    n = M.shape[1]
+    return np.linalg.solve(M.T @ M + eps * np.eye(n), M.T)
+
+
+def sig(x: np.ndarray, alpha: float) -> np.ndarray:
+    """``sig^alpha(x) = sgn(x) |x|^alpha`` elementwise (lemma 1)."""
+    return np.sign(x) * np.abs(x) ** alpha
+
+
+@dataclass(frozen=True)
+class FfdlParams:
+    """Estimator of the FFDL pseudo-Jacobian (eqs. 15, 16) in the scaled units above."""
+
+    mu: float = param(1.0, "1", "mu: weight on the change of the Phi estimate (eq. 15)",
+                      min=1e-9)
+    step: float = param(0.2, "1", "lambda: step size of the Phi estimator (eq. 16; 0: fixed "
+                        "Phi)", min=0.0, max=2.0, name="lambda")
+    L_y: int = param(1, "1", "output pseudo-order L_y (eq. 8)", min=1, max=10)
+    L_u: int = param(1, "1", "input pseudo-order L_u (eq. 8)", min=1, max=10)
+    phi1_init: float = param(0.5, "1", "diagonal of Phi_1(1), the output blocks", min=0.0)
+    phi2_init: float = param(0.5, "1", "diagonal of Phi_2(1), the input block "
+                             "(km/h per m/s2)", min=1e-6)
+    reset_threshold: float = param(0.01, "1", "reset Phi to Phi(1) when a diagonal entry of "
+                                   "the input block falls below this", min=0.0)
+    excitation: float = param(1e-6, "1", "no update while ||dH(t-1)|| is at most this",
+                              min=0.0)
+    pinv_regularisation: float = param(1e-2, "1", "eps of the regularised inverse "
+                                       "(Phi_2' Phi_2 + eps I)^-1 Phi_2'", min=0.0)
+
+    def check(self) -> None:
+        if not (self.mu > 0 and 0 <= self.step <= 2):
+            raise ValueError(f"mu = {self.mu} must be > 0 and lambda = {self.step} in [0, 2]")
+        if self.L_y < 1 or self.L_u < 1:
+            raise ValueError(f"L_y = {self.L_y}, L_u = {self.L_u} must be >= 1")
+        if not self.phi2_init > 0:
+            raise ValueError(f"phi2_init = {self.phi2_init} must be > 0")
+
+
+class FfdlEstimator(StatefulCore):
+    """Pseudo-Jacobian ``Phi`` (n x n(L_y + L_u)) and disturbance delay-estimate of one plant.
+
+    Call :meth:`observe` once per sample with the measured output ``y(t)`` (before choosing
+    ``u(t)``), then :meth:`applied` with the input ``u(t)`` actually applied.
+    """
+
+    state_fields = ("phi", "y_prev", "dy_hist", "du_hist", "u_prev", "dH_prev", "dd_hat",
+                    "dd_hat_prev", "resets", "started")
+
+    def __init__(self, params: FfdlParams, n: int, disturbance: bool = True) -> None:
+        params.check()
+        self.p = params
+        self.n = n
+        self.disturbance = disturbance
+        self.phi = self.initial_phi()
+        self.y_prev = np.zeros(n)
+        self.dy_hist = np.zeros((params.L_y, n))  # dy(t), dy(t-1), ... (newest first)
+        self.du_hist = np.zeros((params.L_u, n))  # du(t-1), du(t-2), ... (newest first)
+        self.u_prev = np.zeros(n)
+        self.dH_prev = np.zeros(n * (params.L_y + params.L_u))
+        self.dd_hat = np.zeros(n)
+        self.dd_hat_prev = np.zeros(n)
+        self.resets = 0
+        self.started = False
+
+    def initial_phi(self) -> np.ndarray:
+        p, n = self.p, self.n
+        blocks = [p.phi1_init * np.eye(n)] + [np.zeros((n, n))] * (p.L_y - 1)
+        blocks += [p.phi2_init * np.eye(n)] + [np.zeros((n, n))] * (p.L_u - 1)
+        return np.hstack(blocks)
+
+    @property
+    def input_block(self) -> np.ndarray:
+        """``Phi_2``: the block of ``Phi`` multiplying ``du(t)``."""
+        k = self.p.L_y * self.n
+        return self.phi[:, k:k + self.n]
+
+    def start(self, y: np.ndarray, u: np.ndarray) -> None:
+        """First sample: no increments yet; ``u`` is the input held before the first sample."""
+        self.y_prev = np.array(y, float)
+        self.u_prev = np.array(u, float)
+        self.started = True
+
+    def observe(self, y: np.ndarray, adapt: bool = True) -> None:
+        """New measurement ``y(t)``: update ``Phi`` (eq. 16) and ``dd_hat`` (eq. 14)."""
+        y = np.asarray(y, float)
+        if not self.started:
+            self.start(y, self.u_prev)
+            return
+        p = self.p
+        dy = y - self.y_prev
+        self.y_prev = y
+        dH = self.dH_prev  # dH(t-1)
+        norm2 = float(dH @ dH)
+        if adapt and p.step > 0 and math.sqrt(norm2) > p.excitation:
+            known = self.dd_hat if self.disturbance else 0.0
+            eps = dy - known - self.phi @ dH
+            self.phi = self.phi + p.step * np.outer(eps, dH) / (p.mu + norm2)
+            diag = np.diag(self.input_block)
+            if np.any(diag < p.reset_threshold):
+                self.phi = self.initial_phi()
+                self.resets += 1
+        self.dd_hat_prev = self.dd_hat
+        self.dd_hat = dy - self.phi @ dH if self.disturbance else np.zeros(self.n)
+        self.dy_hist = np.vstack([dy, self.dy_hist[:-1]])
+
+    def applied(self, u: np.ndarray) -> None:
+        """The input ``u(t)`` applied at this sample (after saturation)."""
+        u = np.asarray(u, float)
+        du = u - self.u_prev
+        self.u_prev = u
+        self.du_hist = np.vstack([du, self.du_hist[:-1]])
+        self.dH_prev = np.concatenate([self.dy_hist.ravel(), self.du_hist.ravel()])
+
+    def free_response(self) -> np.ndarray:
+        """``sum_{w != L_y+1} Phi_w dH_w(t)``: the predicted ``dy(t+1)`` with ``du(t) = 0``
+        (``Phi_1 dy(t)`` for ``L_y = L_u = 1``)."""
+        p, n = self.p, self.n
+        older_du = self.du_hist[:-1].ravel() if p.L_u > 1 else np.zeros(0)
+        k = p.L_y * n
+        out = self.phi[:, :k] @ self.dy_hist.ravel()
+        if older_du.size:
+            out = out + self.phi[:, k + n:] @ older_du
+        return out
+
+    @property
+    def p_hat(self) -> np.ndarray:
+        """``p_hat(t-1) = dd_hat(t) - dd_hat(t-1)`` (eq. 70)."""
+        return self.dd_hat - self.dd_hat_prev
+
+    def inverse_gain(self) -> np.ndarray:
+        """Regularised pseudo-inverse of ``Phi_2`` (replaces ``Phi_2^-1`` of eqs. 24-26)."""
+        return regularised_pinv(self.input_block, self.p.pinv_regularisation)

@@ -1,0 +1,220 @@
+"""Data-driven speed control of a multi-unit EMU (seed 001): one interface, four laws.
+
+Every controller here is the same core around a different law of :mod:`.laws`
+(FFDL-MFAC, FFDL-ISMC, FFDL-ISMPC, GPC), so swapping one for another is one line of a
+scenario (the FMU name):
+
+* inputs: per-unit measured speeds ``v[i]`` (m/s), the head position ``s`` (m, for the
+  speed-distance reference), and the force each unit can give now, ``traction_limit[i]`` and
+  ``brake_limit[i]`` (N, >= 0: the plant's constant-force / constant-power envelope, zero
+  traction in a neutral section);
+* outputs: per-unit force demands ``force[i]`` (N, traction > 0), their sum ``force_demand``,
+  the reference ``v_ref``, ``a_ref`` and the mean speed error ``speed_error`` = mean v - v_ref.
+
+Scaling (:mod:`controllers.common.ffdl`): ``y_i = 3.6 v_i`` (km/h), ``u_i = F_i / m`` (m/s^2)
+with ``m = M / n`` the mean unit mass. The input box of unit ``i`` is
+``max(-accel_max, -brake_limit_i / m) <= u_i <= min(accel_max, traction_limit_i / m)``:
+the plant's envelope and the comfort limit |a| <= 1 m/s^2 (section 4.3) on each unit's force
+per unit mass (so the train's mean is within it too). The reference of the next sample is
+``y_r(t+1) = 3.6 (v_ref + a_ref T)`` (a ``v(s)`` profile looked up at the head position).
+At the end of the profile (zero reference and the mean speed below ``stop_speed``) every unit
+holds ``hold_accel`` of braking; the laws' data models follow without learning.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, ClassVar
+
+import numpy as np
+
+from controllers.common.ffdl import KMH_PER_MPS
+from controllers.datadriven.laws import (
+    GpcLaw,
+    GpcLawParams,
+    Ismc,
+    IsmcParams,
+    Ismpc,
+    IsmpcParams,
+    Mfac,
+    MfacParams,
+)
+from cosim.fmu.declare import Declared, Var, build, group, param, parameters, sample_time
+from cosim.fmu.state import StatefulCore
+from plants.route import load_reference, routes_dir_in
+
+
+@dataclass(frozen=True)
+class DriveParams:
+    """The interface part shared by the four controllers."""
+
+    mass: float = param(479.5e3, "kg", "train mass M (u_i = F_i n / M)", min=1.0)
+    accel_max: float = param(1.0, "m/s2", "comfort limit on each unit's force per unit mass",
+                             min=0.0)
+    hold_accel: float = param(-0.5, "m/s2", "brake demand holding the train at the final "
+                              "stop", max=0.0)
+    stop_speed: float = param(0.3, "m/s", "below this mean speed with a zero reference the "
+                              "holding brake is applied", min=0.0)
+    sample_time: float = sample_time(0.2)
+
+    def check(self) -> None:
+        if not (self.mass > 0 and self.sample_time > 0 and self.accel_max >= 0):
+            raise ValueError(f"mass = {self.mass}, sample_time = {self.sample_time} must be "
+                             f"> 0 and accel_max = {self.accel_max} >= 0")
+
+
+class DataDrivenEmuControl(StatefulCore, Declared):
+    """Core of the seed-001 controllers; subclasses name ``law_class`` and ``params_class``
+    (a dataclass with the groups ``drive`` (:class:`DriveParams`) and ``law``)."""
+
+    law_class: ClassVar[type]
+    state_fields = ("law", "forces", "v_ref", "a_ref", "speed_error", "holding")
+    setup_vars = (Var("reference", "parameter", "jinan_xuzhou_east_reference", description=
+                      "bundled reference profile name or path of a CSV/TOML profile"),)
+    output_vars = (
+        Var.output("force_demand", "N", "sum of the force demands"),
+        Var.output("v_ref", "m/s", "reference speed"),
+        Var.output("a_ref", "m/s2", "reference acceleration"),
+        Var.output("speed_error", "m/s", "mean unit speed - v_ref"),
+    )
+
+    @classmethod
+    def declarations(cls, units: int = 3) -> tuple[Var, ...]:
+        indices = range(1, units + 1)
+        return (
+            *parameters(cls.params_class()),
+            *cls.setup_vars,
+            *[Var.input(f"v[{i}]", "m/s", f"measured speed of unit {i}") for i in indices],
+            Var.input("s", "m", "measured head position"),
+            *[Var.input(f"traction_limit[{i}]", "N", f"traction force unit {i} can give now")
+              for i in indices],
+            *[Var.input(f"brake_limit[{i}]", "N", f"brake force unit {i} can give now")
+              for i in indices],
+            *[Var.output(f"force[{i}]", "N", f"force command of unit {i}") for i in indices],
+            *cls.output_vars,
+        )
+
+    @classmethod
+    def from_parameters(cls, values: dict[str, Any], data_dir: Path, t0: float = 0.0,
+                        units: int = 3) -> DataDrivenEmuControl:
+        params = build(cls.params_class(), values)
+        profile = load_reference(values["reference"], routes_dir=routes_dir_in(data_dir))
+        return cls(params, profile, units)
+
+    def __init__(self, params: Any, profile, units: int = 3) -> None:
+        params.drive.check()
+        self.p = params
+        self.drive = drive = params.drive
+        self.n = units
+        self.unit_mass = drive.mass / units
+        self.profile = profile
+        self.law = self.law_class(params.law, units)
+        self.forces = [0.0] * units
+        self.v_ref = 0.0
+        self.a_ref = 0.0
+        self.speed_error = 0.0
+        self.holding = False
+
+    def compute(self, t: float, inputs: dict[str, float]) -> tuple[dict[str, float], int]:
+        d, n = self.drive, self.n
+        v = np.array([float(inputs[f"v[{i}]"]) for i in range(1, n + 1)])
+        x = inputs["s"] if self.profile.kind == "distance" else t
+        self.v_ref = v_ref = self.profile.speed(x)
+        self.a_ref = a_ref = self.profile.accel(x)
+        m = self.unit_mass
+        trac = np.array([max(float(inputs[f"traction_limit[{i}]"]), 0.0)
+                         for i in range(1, n + 1)])
+        brake = np.array([max(float(inputs[f"brake_limit[{i}]"]), 0.0)
+                          for i in range(1, n + 1)])
+        hi = np.minimum(d.accel_max, trac / m)
+        lo = np.minimum(np.maximum(-d.accel_max, -brake / m), hi)
+        y = KMH_PER_MPS * v
+        self.holding = v_ref <= 0.0 and a_ref <= 0.0 and float(v.mean()) < d.stop_speed
+        if self.holding:
+            u = np.clip(np.full(n, d.hold_accel), lo, hi)
+            self.law.hold(y, u)
+        else:
+            y_r = KMH_PER_MPS * v_ref
+            y_r_next = KMH_PER_MPS * max(v_ref + a_ref * d.sample_time, 0.0)
+            u = self.law.step(y, y_r, y_r_next, lo, hi)
+        self.forces = [float(f) for f in m * u]
+        self.speed_error = float(v.mean() - v_ref)
+        return self.outputs(), 1
+
+    def outputs(self) -> dict[str, float]:
+        out = {f"force[{i + 1}]": f for i, f in enumerate(self.forces)}
+        out.update({"force_demand": float(sum(self.forces)), "v_ref": self.v_ref,
+                    "a_ref": self.a_ref, "speed_error": self.speed_error})
+        return out
+
+
+@dataclass(frozen=True)
+class EmuMfacParams:
+    """Parameters of the FFDL-MFAC FMU: the common interface part and the law's."""
+
+    drive: DriveParams = group(DriveParams(), "")
+    law: MfacParams = group(MfacParams(), "")
+
+
+class EmuMfac(DataDrivenEmuControl):
+    """FFDL-MFAC baseline."""
+
+    law_class = Mfac
+    params_class = EmuMfacParams
+
+
+@dataclass(frozen=True)
+class EmuIsmcParams:
+    """Parameters of the FFDL-ISMC FMU: the common interface part and the law's."""
+
+    drive: DriveParams = group(DriveParams(), "")
+    law: IsmcParams = group(IsmcParams(), "")
+
+
+class EmuIsmc(DataDrivenEmuControl):
+    """FFDL-ISMC (eq. 26 with the boundary layer of eq. 27)."""
+
+    law_class = Ismc
+    params_class = EmuIsmcParams
+
+
+@dataclass(frozen=True)
+class EmuIsmpcParams:
+    """Parameters of the FFDL-ISMPC FMU: the common interface part and the law's."""
+
+    drive: DriveParams = group(DriveParams(), "")
+    law: IsmpcParams = group(IsmpcParams(), "")
+
+
+class EmuIsmpc(DataDrivenEmuControl):
+    """FFDL-ISMPC (eq. 75): equivalent control + N-step MPC on the sliding variable."""
+
+    law_class = Ismpc
+    params_class = EmuIsmpcParams
+    output_vars = (*DataDrivenEmuControl.output_vars,
+                   Var.output("qp_solves", "1", "QPs handed to DAQP so far (unconstrained "
+                              "MPC moves outside the input box)"),
+                   Var.output("qp_infeasible", "1", "QPs DAQP did not solve (moves set to 0)"))
+
+    def outputs(self) -> dict[str, float]:
+        out = super().outputs()
+        out.update({"qp_solves": float(self.law.qp_solves),
+                    "qp_infeasible": float(self.law.qp_failures)})
+        return out
+
+
+@dataclass(frozen=True)
+class EmuGpcParams:
+    """Parameters of the GPC FMU: the common interface part and the law's."""
+
+    drive: DriveParams = group(DriveParams(), "")
+    law: GpcLawParams = group(GpcLawParams(), "")
+
+
+class EmuGpc(DataDrivenEmuControl):
+    """GPC baseline (RLS on an incremental ARX model)."""
+
+    law_class = GpcLaw
+    params_class = EmuGpcParams
+

@@ -1,0 +1,293 @@
+"""Data-driven control laws of seed 001 on the FFDL data model (no FMI, no train in here):
+FFDL-MFAC, FFDL-ISMC (eqs. 17-27), FFDL-ISMPC (eqs. 52-75) and the GPC baseline.
+
+Every law works in the scaled units of :mod:`controllers.common.ffdl` (outputs ``y`` in km/h,
+inputs ``u`` in m/s^2 of force per unit mass) and has one call per sample::
+
+    u = law.step(y, y_r, y_r_next, lo, hi)      # y(t), y_r(t), y_r(t+1), input box -> u(t)
+    law.hold(y, u)                              # or: u(t) imposed from outside (holding brake)
+
+``u`` is incremental (``u(t) = u(t-1) + du(t)``) and clipped to ``[lo, hi]``; the clipped input
+is what the estimator remembers, so saturation does not wind up the data model.
+
+Sliding surface (eq. 18) with ``e = y - y_r`` (eq. 17), ``E``, ``F`` the running sums of ``e``
+and ``sig^alpha(e)`` (eqs. 19, 20)::
+
+    s(t) = e(t) + k1 E(t-1) + b k2 F(t-1)
+
+Equivalent control (eq. 24, ``Phi_2^-1`` replaced by the regularised inverse ``K``)::
+
+    du_eq = K (s - k1 E(t) - b k2 F(t) - dd_hat(t) + y_r(t+1) - y(t) - Phi_1 dy(t))
+
+ISMC adds ``du_sw = -K beta sat(s / Delta)`` (eq. 26 with the boundary layer of eq. 27).
+ISMPC adds the first move of an ``N``-step MPC on ``s`` (eqs. 58-73)::
+
+    S = Lambda s(t) + Theta U + Psi P_hat,    min ||S||^2 + theta ||U||^2
+
+with ``Theta`` built from the current ``Phi_2`` at every stage (the paper's "parameter values
+held over the horizon", remark 4), ``P_hat`` = the last ``p_hat`` (eq. 70) at every stage, and
+the input box as constraints on the cumulated moves (``u(t-1) + du_eq + sum U``). The
+unconstrained minimiser (eq. 72) is used when it meets them; otherwise DAQP solves the QP,
+warm-started from the previous plan's duals (:class:`controllers.common.qp.DenseQP`).
+As ``theta -> inf`` the MPC moves vanish (``|U| <= |Theta'(Lambda s + Psi P)| / theta``) and
+ISMPC is its equivalent control alone (ISMC with ``beta = 0``). ``b`` (the Lipschitz constant
+of assumption 2 in eq. 18) and ``theta`` are not given in the paper: see the defaults.
+
+Anti-windup: the sums ``E``, ``F`` are not advanced at a sample where every unit's input
+saturates in the direction the law asked for (the train can no longer act on the surface).
+Freezing them when only some units saturate left a steady error: the end units sat at their
+power limit while the middle unit still had room, and the integral action stopped.
+
+FFDL-MFAC (Xiong and Hou 2022, the paper's ref. 18), with weight ``delta`` and step ``rho``::
+
+    du = rho (delta I + Phi_2' Phi_2)^-1 Phi_2' (y_r(t+1) - y(t) - Phi_1 dy(t))
+
+The paper's ``mu = 1, lambda = 0.2`` of MFAC are read as the estimator's (eq. 16), ``delta``
+as the control weight (``lambda`` in Hou's notation) and ``rho`` as the control step.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from controllers.common.ffdl import FfdlEstimator, FfdlParams, sig
+from controllers.common.gpc import Gpc, GpcParams
+from controllers.common.qp import DenseQP
+from cosim.fmu.declare import group, param
+from cosim.fmu.state import StatefulCore
+
+
+class Law(StatefulCore):
+    """Common part of the FFDL laws: estimator and last applied input."""
+
+    state_fields = ("est", "u")
+
+    def __init__(self, ffdl: FfdlParams, n: int, disturbance: bool) -> None:
+        self.n = n
+        self.est = FfdlEstimator(ffdl, n, disturbance=disturbance)
+        self.u = np.zeros(n)
+
+    def hold(self, y: np.ndarray, u: np.ndarray) -> None:
+        """A sample where ``u`` is imposed: the data model follows without learning."""
+        self.est.observe(y, adapt=False)
+        self._apply(np.asarray(u, float))
+
+    def _apply(self, u: np.ndarray) -> np.ndarray:
+        self.est.applied(u)
+        self.u = u
+        return u
+
+
+# -- FFDL-MFAC -------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class MfacParams:
+    """FFDL-MFAC (paper section 4.1, 3): Phi(1) = 0.52 I, mu = 1, lambda = 0.2, delta = 1,
+    rho = 0.85."""
+
+    ffdl: FfdlParams = group(FfdlParams(phi1_init=0.52, phi2_init=0.52), "")
+    delta: float = param(1.0, "1", "delta: weight on the input move", min=0.0)
+    rho: float = param(0.85, "1", "rho: step size of the control law", min=0.0, max=2.0)
+
+
+class Mfac(Law):
+    def __init__(self, params: MfacParams, n: int) -> None:
+        super().__init__(params.ffdl, n, disturbance=False)
+        self.p = params
+
+    def step(self, y, y_r, y_r_next, lo, hi) -> np.ndarray:
+        est = self.est
+        est.observe(y)
+        Phi2 = est.input_block
+        target = y_r_next - y - est.free_response()
+        du = self.p.rho * np.linalg.solve(self.p.delta * np.eye(self.n) + Phi2.T @ Phi2,
+                                          Phi2.T @ target)
+        return self._apply(np.clip(self.u + du, lo, hi))
+
+
+# -- integral sliding surface (eqs. 17-24) ---------------------------------------------------
+
+@dataclass(frozen=True)
+class SurfaceParams:
+    """Integral sliding surface of eq. 18."""
+
+    k1: float = param(0.5, "1", "k1: weight of the error sum E (eq. 18)", min=0.0, max=1.0)
+    k2: float = param(2.0, "1", "k2: weight of the sum F of sig^alpha(e) (eq. 18)", min=0.0)
+    b: float = param(0.01, "1", "b of eq. 18 (Lipschitz constant of assumption 2; not "
+                     "given in the paper)", min=0.0)
+    alpha: float = param(0.65, "1", "alpha: exponent of sig^alpha (eq. 20)", min=1e-3,
+                         max=0.999)
+
+
+class SlidingLaw(Law):
+    """Integral sliding surface and equivalent control shared by ISMC and ISMPC."""
+
+    state_fields = ("est", "u", "E", "F", "s")
+
+    def __init__(self, ffdl: FfdlParams, surface: SurfaceParams, n: int) -> None:
+        super().__init__(ffdl, n, disturbance=True)
+        self.surface = surface
+        self.E = np.zeros(n)
+        self.F = np.zeros(n)
+        self.s = np.zeros(n)
+
+    def equivalent(self, y, y_r, y_r_next) -> tuple[np.ndarray, np.ndarray, np.ndarray,
+                                                     np.ndarray]:
+        """Observe ``y(t)``; returns ``s(t)``, ``du_eq`` (eq. 24), the gain ``K`` and the
+        candidate sums ``E(t)``, ``F(t)`` (committed by :meth:`_finish`)."""
+        c = self.surface
+        est = self.est
+        est.observe(y)
+        e = y - y_r
+        bk2 = c.b * c.k2
+        s = e + c.k1 * self.E + bk2 * self.F
+        E = self.E + e
+        F = self.F + sig(e, c.alpha)
+        K = est.inverse_gain()
+        du_eq = K @ (s - c.k1 * E - bk2 * F - est.dd_hat + y_r_next - y - est.free_response())
+        self.s = s
+        self._next = (E, F)
+        return s, du_eq, K, E
+
+    def _finish(self, u_wanted: np.ndarray, lo, hi) -> np.ndarray:
+        u = np.clip(u_wanted, lo, hi)
+        pushed = ((u_wanted > hi) & (self.s < 0)) | ((u_wanted < lo) & (self.s > 0))
+        if not np.all(pushed):
+            self.E, self.F = self._next
+        return self._apply(u)
+
+    def hold(self, y: np.ndarray, u: np.ndarray) -> None:
+        super().hold(y, u)
+        self.E = np.zeros(self.n)
+        self.F = np.zeros(self.n)
+        self.s = np.zeros(self.n)
+
+
+# -- FFDL-ISMC (eqs. 24-27) ------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class IsmcParams:
+    """FFDL-ISMC (section 4.1, 2): Phi(1) = 0.5 I, mu = 1, lambda = 0.2, beta = 0.05, k1 =
+    0.5, k2 = 2, alpha = 0.65."""
+
+    ffdl: FfdlParams = group(FfdlParams(), "")
+    surface: SurfaceParams = group(SurfaceParams(), "")
+    beta: float = param(0.05, "1", "beta: switching gain (eq. 25, km/h per sample)", min=0.0)
+    boundary_layer: float = param(0.1, "1", "Delta: width of the saturation boundary layer "
+                                  "replacing sgn (eq. 27, km/h)", min=1e-9)
+
+
+class Ismc(SlidingLaw):
+    def __init__(self, params: IsmcParams, n: int) -> None:
+        super().__init__(params.ffdl, params.surface, n)
+        self.p = params
+
+    def step(self, y, y_r, y_r_next, lo, hi) -> np.ndarray:
+        s, du_eq, K, _ = self.equivalent(y, y_r, y_r_next)
+        sat = np.clip(s / self.p.boundary_layer, -1.0, 1.0)
+        du_sw = -K @ (self.p.beta * sat)
+        return self._finish(self.u + du_eq + du_sw, lo, hi)
+
+
+# -- FFDL-ISMPC (eqs. 52-75) -----------------------------------------------------------------
+
+@dataclass(frozen=True)
+class IsmpcParams:
+    """FFDL-ISMPC (section 4.1, 1): Phi(1) = 0.5 I, mu = 1, lambda = 0.2, k1 = 0.5, k2 = 2,
+    alpha = 0.5, N = 10."""
+
+    ffdl: FfdlParams = group(FfdlParams(), "")
+    surface: SurfaceParams = group(SurfaceParams(alpha=0.5), "")
+    horizon: int = param(10, "1", "N: prediction and control horizon (eq. 57)", min=1,
+                         max=50, name="N")
+    theta: float = param(0.05, "1", "theta: weight of ||U||^2 in J_2 (eq. 66; not given in "
+                         "the paper)", min=0.0)
+
+
+class Ismpc(SlidingLaw):
+    state_fields = ("est", "u", "E", "F", "s", "warm_dual", "qp_solves", "qp_failures")
+
+    def __init__(self, params: IsmpcParams, n: int) -> None:
+        super().__init__(params.ffdl, params.surface, n)
+        self.p = params
+        N = params.horizon
+        tril = np.tril(np.ones((N, N)))
+        self.qp = DenseQP(N * n, np.kron(tril, np.eye(n)))
+        self._tt = tril.T @ tril  # Theta'Theta = kron(tril'tril, Phi_2'Phi_2)
+        self._stages = np.arange(1.0, N + 1)[:, None]
+        self.warm_dual = np.zeros(N * n)
+        self.qp_solves = 0
+        self.qp_failures = 0
+
+    def mpc_moves(self, s: np.ndarray, lo_cum: np.ndarray, hi_cum: np.ndarray) -> np.ndarray:
+        """``U`` (N, n) minimising eq. 67 under ``lo_cum <= sum_{j<=k} U_j <= hi_cum``.
+
+        The unconstrained minimiser (eq. 72) is taken when it satisfies the constraints (it is
+        then the QP's solution); otherwise the QP is solved by DAQP, warm-started."""
+        n, N = self.n, self.p.horizon
+        Phi2 = self.est.input_block
+        # S = Lambda s + Theta U + Psi P_hat; stage k (1..N) of the free part: s + k p_hat
+        offset = s + self._stages * self.est.p_hat
+        tails = np.cumsum(offset[::-1], axis=0)[::-1]  # sum_{k >= j} offset_k
+        q = 2.0 * (tails @ Phi2).ravel()  # 2 Theta' (Lambda s + Psi P)
+        H = 2.0 * (np.kron(self._tt, Phi2.T @ Phi2) + self.p.theta * np.eye(N * n))
+        lo_all, hi_all = np.tile(lo_cum, N), np.tile(hi_cum, N)
+        try:
+            x = np.linalg.solve(H, -q)
+        except np.linalg.LinAlgError:
+            x = np.full(N * n, np.nan)
+        cum = np.cumsum(x.reshape(N, n), axis=0).ravel()
+        if np.all(np.isfinite(x)) and np.all(cum >= lo_all) and np.all(cum <= hi_all):
+            dual = np.zeros(N * n)
+        else:
+            x, dual, _ = self.qp.solve(H, q, lo_all, hi_all, self.warm_dual)
+            self.qp_solves += 1
+            if not np.all(np.isfinite(x)):
+                self.qp_failures += 1
+                self.warm_dual = np.zeros(N * n)
+                return np.zeros((N, n))
+        # warm start of the next solve: the plan's active constraints shifted by one stage
+        self.warm_dual = np.concatenate([dual[n:], np.zeros(n)])
+        return x.reshape(N, n)
+
+    def step(self, y, y_r, y_r_next, lo, hi) -> np.ndarray:
+        s, du_eq, _, _ = self.equivalent(y, y_r, y_r_next)
+        base = self.u + du_eq
+        U = self.mpc_moves(s, lo - base, hi - base)
+        return self._finish(base + U[0], lo, hi)
+
+
+# -- GPC -------------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class GpcLawParams:
+    """GPC baseline (section 4.1, 4): Ny = 3, Nu = 2, forgetting factor 0.9."""
+
+    gpc: GpcParams = group(GpcParams(), "")
+
+
+class GpcLaw(StatefulCore):
+    """:class:`controllers.common.gpc.Gpc` behind the common law interface; the reference
+    over the horizon is extrapolated linearly from ``y_r(t)`` and ``y_r(t+1)``."""
+
+    state_fields = ("gpc", "u")
+
+    def __init__(self, params: GpcLawParams, n: int) -> None:
+        self.p = params
+        self.n = n
+        self.gpc = Gpc(params.gpc, n)
+        self.u = np.zeros(n)
+
+    def step(self, y, y_r, y_r_next, lo, hi) -> np.ndarray:
+        self.gpc.observe(y)
+        j = np.arange(1, self.p.gpc.Ny + 1)[:, None]
+        refs = np.maximum(y_r + j * (y_r_next - y_r), 0.0) * np.ones((1, self.n))
+        self.u = self.gpc.control(refs, lo, hi)
+        return self.u
+
+    def hold(self, y: np.ndarray, u: np.ndarray) -> None:
+        self.gpc.observe(y, adapt=False)
+        self.gpc.applied(u)
+        self.u = np.asarray(u, float)

@@ -1,0 +1,253 @@
+"""Seed-001 data-driven laws (controllers/datadriven): ISMC boundary layer, ISMPC limit,
+interface of the EMU cores, and FMU state save/restore in closed loop with Emu3."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from fmi_state_helpers import rerun_after_restore
+
+from controllers.common.ffdl import FfdlParams
+from controllers.common.qp import DenseQP
+from controllers.datadriven.emu_control import (
+    DriveParams,
+    EmuGpc,
+    EmuIsmc,
+    EmuIsmpc,
+    EmuIsmpcParams,
+    EmuMfac,
+)
+from controllers.datadriven.laws import (
+    GpcLaw,
+    GpcLawParams,
+    Ismc,
+    IsmcParams,
+    Ismpc,
+    IsmpcParams,
+    Mfac,
+    MfacParams,
+)
+
+A = np.array([[0.3, 0.1, 0.0], [0.1, 0.3, 0.1], [0.0, 0.1, 0.3]])
+B = np.array([[0.6, 0.2, 0.1], [0.2, 0.5, 0.2], [0.1, 0.2, 0.6]])
+INF = np.full(3, math.inf)
+
+
+def _disturbed_linear_loop(law, steps: int, amp: float = 1.0, omega: float = 0.05,
+                           lo=-INF, hi=INF) -> dict[str, np.ndarray]:
+    """The FFDL-form plant ``dy(t+1) = A dy(t) + B du(t) + dd(t)`` with a smooth output
+    disturbance ``d(t) = amp sin(omega t + phase_i)`` under ``law``, tracking a ramp + sine."""
+    phase = np.array([0.0, 1.0, 2.0])
+
+    def d(t: float) -> np.ndarray:
+        return amp * np.sin(omega * t + phase)
+
+    def ref(t: float) -> np.ndarray:
+        return np.full(3, 5.0 + 0.02 * t + 2.0 * math.sin(0.01 * t))
+
+    y, dy, u_old = np.zeros(3), np.zeros(3), np.zeros(3)
+    out: dict[str, list] = {"s": [], "u": [], "e": []}
+    for t in range(steps):
+        u = law.step(y, ref(t), ref(t + 1), lo, hi)
+        out["u"].append(u.copy())
+        out["e"].append(y - ref(t))
+        out["s"].append(getattr(law, "s", np.zeros(3)).copy())
+        dy = A @ dy + B @ (u - u_old) + (d(t + 1) - d(t))
+        u_old = u.copy()
+        y = y + dy
+    return {k: np.array(v) for k, v in out.items()}
+
+
+def _exact_model() -> FfdlParams:
+    """lambda = 0 (Phi fixed) started at the true [A B], exact inverse: the only uncertainty
+    left is the disturbance, as in the proof of theorem 2."""
+    return FfdlParams(step=0.0, phi1_init=0.0, phi2_init=1.0, pinv_regularisation=0.0)
+
+
+def _with_true_phi(law):
+    law.est.phi = np.hstack([A, B])
+    law.est.initial_phi = lambda: np.hstack([A, B])
+    return law
+
+
+def test_ismc_keeps_the_sliding_variable_in_its_boundary_layer_after_reaching() -> None:
+    """Eq. 44 with sat: outside the layer |s| falls by at least beta - max|p| per sample;
+    inside, s(t+1) = (1 - beta/Delta) s + p stays in it when |p| <= beta (p = dd(t) -
+    dd(t-1) here, at most amp omega^2 = 0.0025 < beta = 0.05)."""
+    params = IsmcParams(ffdl=_exact_model(), beta=0.05, boundary_layer=0.1)
+    law = _with_true_phi(Ismc(params, 3))
+    run = _disturbed_linear_loop(law, 1500)
+    s0 = np.abs(run["s"][0]).max()
+    reach = math.ceil((s0 - params.boundary_layer) / (params.beta - 0.0025)) + 1
+    assert reach < 300
+    assert np.abs(run["s"][reach:]).max() <= params.boundary_layer
+    assert np.abs(run["s"][:reach]).max() > params.boundary_layer  # there was a reaching phase
+    # and the error follows e(t+1) = (1-k1) e - b k2 sig(e) + bounded terms: small at the end
+    assert np.abs(run["e"][-200:]).max() < 0.05
+
+
+def test_ismc_without_switching_drifts_out_of_the_layer() -> None:
+    """Control of the previous test: the same loop with beta = 0 (equivalent control only)
+    does not bring s back into the layer (it only holds s(t+1) = s(t) + p(t))."""
+    law = _with_true_phi(Ismc(IsmcParams(ffdl=_exact_model(), beta=0.0), 3))
+    run = _disturbed_linear_loop(law, 600)
+    assert np.abs(run["s"][300:]).max() > 0.1
+
+
+def test_ismpc_with_an_infinite_mpc_weight_is_its_equivalent_control() -> None:
+    """theta -> inf: |U| <= |Theta'(Lambda s + Psi P)| / theta -> 0, so ISMPC = ISMC with
+    beta = 0. At theta = 1e9 the moves are below 1e-7 and the two closed loops (adaptive
+    estimator, regularised inverse, all defaults otherwise) agree to 1e-6."""
+    ismpc = Ismpc(IsmpcParams(theta=1e9), 3)
+    ismc = Ismc(IsmcParams(beta=0.0, surface=IsmpcParams().surface), 3)
+    a = _disturbed_linear_loop(ismpc, 400)
+    b = _disturbed_linear_loop(ismc, 400)
+    assert np.abs(a["u"] - b["u"]).max() < 1e-6
+    assert np.abs(a["u"]).max() > 0.1  # the loop did something
+
+
+def test_ismpc_drives_the_sliding_variable_faster_than_the_equivalent_control() -> None:
+    """theta small: the MPC part makes s(t+1) ~ p(t) - p_hat(t-1) (eq. 78), far inside
+    what the equivalent control alone leaves."""
+    law = _with_true_phi(Ismpc(IsmpcParams(ffdl=_exact_model(), theta=1e-6), 3))
+    run = _disturbed_linear_loop(law, 600)
+    assert np.abs(run["s"][50:]).max() < 0.01
+
+
+def test_ismpc_respects_the_input_box_through_the_qp() -> None:
+    lo, hi = np.full(3, -0.5), np.full(3, 0.5)
+    law = Ismpc(IsmpcParams(), 3)
+    run = _disturbed_linear_loop(law, 300, lo=lo, hi=hi)
+    assert law.qp_solves > 0 and law.qp_failures == 0
+    assert np.all(run["u"] >= lo) and np.all(run["u"] <= hi)
+
+
+def test_dense_qp_matches_the_clipped_solution_of_a_separable_problem() -> None:
+    qp = DenseQP(4, np.eye(4))
+    h = np.array([1.0, 2.0, 4.0, 0.5])
+    q = np.array([-3.0, 1.0, -1.0, 0.2])
+    lo, hi = np.full(4, -1.0), np.full(4, 1.0)
+    x, _, status = qp.solve(np.diag(h), q, lo, hi)
+    assert status == "solved"
+    assert x == pytest.approx(np.clip(-q / h, lo, hi), rel=1e-12, abs=1e-12)  # active set
+
+
+@pytest.mark.parametrize("law_cls,params", [(Mfac, MfacParams()), (Ismc, IsmcParams()),
+                                            (Ismpc, IsmpcParams()), (GpcLaw, GpcLawParams())])
+def test_every_law_tracks_the_disturbed_linear_plant(law_cls, params) -> None:
+    """Sanity of all four laws with their paper defaults on the same disturbed plant."""
+    run = _disturbed_linear_loop(law_cls(params, 3), 1500, amp=0.2)
+    assert np.abs(run["e"][-500:]).max() < 0.5
+
+
+# -- the EMU cores ---------------------------------------------------------------------------
+
+def _profile():
+    from plants.route import ReferenceProfile
+
+    return ReferenceProfile("distance", np.array([0.0, 1000.0, 5000.0]),
+                            np.array([0.0, 30.0, 30.0]))
+
+
+def _inputs(v: float, s: float, trac: float = 2e5, brake: float = 3e5) -> dict[str, float]:
+    out = {"s": s}
+    for i in (1, 2, 3):
+        out[f"v[{i}]"] = v
+        out[f"traction_limit[{i}]"] = trac
+        out[f"brake_limit[{i}]"] = brake
+    return out
+
+
+@pytest.mark.parametrize("cls", [EmuMfac, EmuIsmc, EmuIsmpc, EmuGpc])
+def test_emu_cores_obey_the_envelope_and_the_comfort_limit(cls) -> None:
+    ctl = cls(cls.params_class(), _profile(), 3)
+    m = DriveParams().mass / 3
+    for k in range(50):  # far too slow: traction, limited by the plant ...
+        out, hold = ctl.compute(0.2 * k, _inputs(0.0, 500.0, trac=5e4))
+        assert hold == 1
+        assert all(0.0 <= out[f"force[{i}]"] <= 5e4 + 1e-6 for i in (1, 2, 3))
+    for k in range(50):  # ... or by |a| <= 1 m/s2 when the plant could give more
+        out, _ = ctl.compute(10 + 0.2 * k, _inputs(0.0, 500.0, trac=1e6))
+        assert all(out[f"force[{i}]"] <= m * 1.0 + 1e-6 for i in (1, 2, 3))
+    assert out["force_demand"] == pytest.approx(sum(out[f"force[{i}]"] for i in (1, 2, 3)))
+    # far too fast: a fresh controller (the sums above wound up on a plant that never moved)
+    ctl = cls(cls.params_class(), _profile(), 3)
+    for k in range(50):
+        out, _ = ctl.compute(0.2 * k, _inputs(60.0, 3000.0, brake=2e4))
+        assert all(-2e4 - 1e-6 <= out[f"force[{i}]"] <= m + 1e-6 for i in (1, 2, 3))
+    assert out["force_demand"] == pytest.approx(-6e4)  # braking, within the brake limit
+
+
+def test_emu_core_holds_the_brake_at_the_end_of_the_profile() -> None:
+    from plants.route import ReferenceProfile
+
+    profile = ReferenceProfile("distance", np.array([0.0, 400.0]), np.array([20.0, 0.0]))
+    ctl = EmuIsmpc(EmuIsmpcParams(drive=DriveParams(hold_accel=-0.4)), profile, 3)
+    out, _ = ctl.compute(0.0, _inputs(0.1, 400.5))
+    m = DriveParams().mass / 3
+    assert [out[f"force[{i}]"] for i in (1, 2, 3)] == pytest.approx([-0.4 * m] * 3)
+
+
+# -- FMUs: state save/restore mid-run reproduces the rest of the run ------------------------
+
+class _Instance:
+    def __init__(self, path, name: str, start: dict[str, float | str] | None = None) -> None:
+        from fmpy import extract, read_model_description
+        from fmpy.fmi2 import FMU2Slave
+
+        self.md = read_model_description(str(path))
+        self.vr = {v.name: v.valueReference for v in self.md.modelVariables}
+        self.fmu = FMU2Slave(guid=self.md.guid, unzipDirectory=extract(str(path)),
+                             instanceName=name,
+                             modelIdentifier=self.md.coSimulation.modelIdentifier)
+        self.fmu.instantiate()
+        self.fmu.setupExperiment(startTime=0.0)
+        self.fmu.enterInitializationMode()
+        for key, value in (start or {}).items():
+            if isinstance(value, str):
+                self.fmu.setString([self.vr[key]], [value])
+            elif isinstance(value, int):
+                self.fmu.setInteger([self.vr[key]], [value])
+            else:
+                self.fmu.setReal([self.vr[key]], [value])
+        self.fmu.exitInitializationMode()
+
+    def get(self, name: str) -> float:
+        return self.fmu.getReal([self.vr[name]])[0]
+
+    def set(self, name: str, value: float) -> None:
+        self.fmu.setReal([self.vr[name]], [value])
+
+
+@pytest.mark.parametrize("identifier", ["EmuMfac3", "EmuIsmc3", "EmuIsmpc3", "EmuGpc3"])
+def test_closed_loop_state_save_restore_reproduces_rest(built_fmus, identifier: str) -> None:
+    """Emu3 (white-noise disturbance) + controller FMU, serialize both states at 20 s of the
+    start, run on to 50 s, restore and rerun: identical forces and speeds (the estimator's
+    memory, the sums E, F, the MPC warm start and the RLS covariance are all state)."""
+    plant = _Instance(built_fmus["Emu3"].path, "plant",
+                      {"disturbance_accel_std": 0.05, "disturbance_interval": 0.2,
+                       "disturbance_seed": 3})
+    ctl = _Instance(built_fmus[identifier].path, "ctl")
+    h = 0.2
+    links = ([(f"v[{i}]", f"v[{i}]") for i in (1, 2, 3)] + [("s", "s")]
+             + [(f"traction_limit[{i}]", f"traction_limit[{i}]") for i in (1, 2, 3)]
+             + [(f"brake_limit[{i}]", f"brake_limit[{i}]") for i in (1, 2, 3)])
+
+    def step(k: int) -> tuple[float, ...]:
+        for dst, src in links:
+            ctl.set(dst, plant.get(src))
+        forces = [ctl.get(f"force[{i}]") for i in (1, 2, 3)]
+        for i, f in enumerate(forces, 1):
+            plant.set(f"force[{i}]", f)
+        plant.fmu.doStep(currentCommunicationPoint=k * h, communicationStepSize=h)
+        ctl.fmu.doStep(currentCommunicationPoint=k * h, communicationStepSize=h)
+        return (*forces, plant.get("v[1]"), plant.get("v[3]"))
+
+    first, second = rerun_after_restore([plant, ctl], step, 100, 250)
+    assert first == second
+    assert first[-1][3] > 5.0  # the train got going (about 0.5 m/s2 for 50 s)
+    for inst in (plant, ctl):
+        inst.fmu.terminate()
+        inst.fmu.freeInstance()
