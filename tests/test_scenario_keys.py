@@ -26,3 +26,26 @@ def test_misspelt_keys_are_rejected(tmp_path, table, line, says):
 def test_every_shipped_scenario_uses_known_keys():
     for path in sorted(SCENARIO_DIR.glob("*.toml")):
         load_scenario(path)
+
+
+def test_the_known_keys_are_those_the_metrics_read():
+    """SUMMARY_KEYS lists exactly the [summary] keys cosim.run.metrics reads (``cfg.get("k")`` /
+    ``cfg["k"]``), so a new metric cannot be rejected as a misspelling, nor a dead key accepted."""
+    import ast
+    from pathlib import Path
+
+    from cosim.run import metrics
+    from cosim.run.scenario import SUMMARY_KEYS
+
+    tree = ast.parse(Path(metrics.__file__).read_text())
+    read = set()
+    for node in ast.walk(tree):
+        if (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute)
+                and node.func.attr == "get" and getattr(node.func.value, "id", "") == "cfg"
+                and node.args and isinstance(node.args[0], ast.Constant)):
+            read.add(node.args[0].value)
+        if (isinstance(node, ast.Subscript) and getattr(node.value, "id", "") == "cfg"
+                and isinstance(node.slice, ast.Constant)):
+            read.add(node.slice.value)
+    plotted = {"speed_limit"}  # drawn by cosim.run.results (the speed panel), not a metric
+    assert read | plotted == set(SUMMARY_KEYS)
