@@ -66,6 +66,7 @@ def _default_params(cls) -> object:
             "FreightTrain": FreightParams,
             "DistributedSpeedPid": lambda: DistributedSpeedPidParams(units=units),
             "HybridMpc": HybridMpcParams,
+            "MoveBlockingMpc": lambda: HybridMpcParams(move_blocks="3:4:3"),
             }[core.__name__]()
 
 

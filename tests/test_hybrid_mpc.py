@@ -12,6 +12,7 @@ from fmi_state_helpers import rerun_after_restore
 from controllers.hybrid.hybrid_mpc import (
     HybridMpc,
     HybridMpcParams,
+    MoveBlockingMpc,
     reference_position,
 )
 from controllers.hybrid.miqp import HybridMiqp, parse_blocks
@@ -105,6 +106,34 @@ def test_traction_mode_gives_no_trailer_force_on_random_states() -> None:
         assert out["force[1]"] >= 0.0 and out["force[3]"] >= 0.0
 
 
+def test_move_blocks_of_length_one_equal_gmpc() -> None:
+    gmpc, mb = _ctl(horizon=3), _ctl(MoveBlockingMpc, horizon=3, move_blocks="1:1:1")
+    rng = np.random.default_rng(2)
+    for _ in range(15):
+        v = rng.uniform(25.0, 40.0)
+        x0, ref = _state(rng, v), _reference(rng, v, 3)
+        a = gmpc.miqp.solve(x0, ref, _limits(), [1, 1, 1])
+        b = mb.miqp.solve(x0, ref, _limits(), [1, 1, 1])
+        assert a.cost == pytest.approx(b.cost, rel=COST_RTOL)
+        np.testing.assert_allclose(a.u0, b.u0, atol=U_TOL)
+
+
+def test_blocked_inputs_are_held_and_cost_no_less() -> None:
+    gmpc, mb = _ctl(horizon=3), _ctl(MoveBlockingMpc, horizon=3, move_blocks="2:1")
+    rng = np.random.default_rng(3)
+    for _ in range(15):
+        v = rng.uniform(25.0, 40.0)
+        x0, ref = _state(rng, v), _reference(rng, v, 3)
+        a = gmpc.miqp.solve(x0, ref, _limits(), [1, 1, 1])
+        b = mb.miqp.solve(x0, ref, _limits(), [1, 1, 1])
+        q = mb.miqp
+        np.testing.assert_array_equal(q.P[0, :3] @ b.V, q.P[1, :3] @ b.V)
+        assert b.cost >= a.cost * (1 - COST_RTOL)
+        enum = q.solve_enumerated(x0, ref, _limits(), [1, 1, 1])
+        assert b.cost == pytest.approx(enum.cost, rel=COST_RTOL, abs=1e-6)
+    assert mb.miqp.nV < gmpc.miqp.nV
+
+
 def test_closed_loop_with_the_plant_core_tracks_and_switches_mode() -> None:
     """Plant core + GMPC (N = 10), a shortened profile: up to 30 m/s, brake to 25 m/s."""
     profile = ReferenceProfile("time", np.array([0.0, 60.0, 80.0, 90.0, 130.0]),
@@ -161,7 +190,7 @@ def test_gmpc_and_mbmpc_fmus_through_the_master(built_fmus) -> None:
     """Gmpc3 / MbMpc3 + Emu3 (seed 004 scenarios, first 120 s): tracking, trailer idle."""
     from cosim.run.master import run_scenario
 
-    for name in ("seed004_crh3_gmpc",):
+    for name in ("seed004_crh3_gmpc", "seed004_crh3_mbmpc"):
         result = run_scenario(f"scenarios/{name}.toml",
                               overrides={"simulation.stop_time": 120.0}, plot=False)
         s = result.summary

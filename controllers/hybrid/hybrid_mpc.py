@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import math
 import statistics
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, ClassVar
 
@@ -280,3 +280,9 @@ class HybridMpc(StatefulCore, Declared):
         })
         return out
 
+
+
+class MoveBlockingMpc(HybridMpc):
+    """MB-MPC (eq. 17): the GMPC with the inputs held over blocks 3:4:3 of N = 10."""
+
+    default_params = replace(HybridMpcParams(), move_blocks="3:4:3")

@@ -7,7 +7,7 @@ configuration and track a speed-time reference.
 
 from __future__ import annotations
 
-from controllers.hybrid.hybrid_mpc import HybridMpc
+from controllers.hybrid.hybrid_mpc import HybridMpc, MoveBlockingMpc
 from cosim.fmu.slave import SampledControllerSlave
 
 
@@ -19,3 +19,8 @@ class Gmpc3Fmu(SampledControllerSlave):
     default_experiment_stop_time = 100.0
     default_experiment_step = 1.0
 
+
+class MbMpc3Fmu(Gmpc3Fmu):
+    """Move-blocking hybrid MPC (inputs held over blocks 3:4:3) for a 3-car EMU (seed 004)."""
+
+    core_class = MoveBlockingMpc
