@@ -117,7 +117,8 @@ class HybridMpc(StatefulCore, Declared):
     default_params: ClassVar[HybridMpcParams] = HybridMpcParams()
     state_fields: ClassVar[tuple[str, ...]] = (
         "forces", "delta", "braking_done", "plan", "v_ref", "s_ref", "speed_error",
-        "qp_solves", "qp_infeasible", "solve_times", "cpu_time", "nodes", "last_failure")
+        "qp_solves", "qp_infeasible", "solve_times", "cpu_time", "nodes", "last_failure",
+        "qp_rescued")
     setup_vars = (Var("reference", "parameter", "seed004_crh3_reference", description=
                       "bundled speed-time reference profile name or path of a CSV/TOML file"),)
     output_vars = (
@@ -129,6 +130,8 @@ class HybridMpc(StatefulCore, Declared):
         Var.output("qp_solves", "1", "MIQPs solved so far", start=0),
         Var.output("qp_infeasible", "1", "events whose MIQP was infeasible (previous plan "
                    "used)", start=0),
+        Var.output("qp_rescued", "1", "events DAQP solved only on a retry with other settings "
+                   "or by enumerating the binaries", start=0),
         Var.output("qp_solve_time_median", "s", "median MIQP time per event so far"),
         Var.output("qp_solve_time_total", "s", "MIQP time summed over all events so far"),
         Var.output("qp_cpu_time_total", "s", "CPU time of the MIQPs summed over all events"),
@@ -185,6 +188,7 @@ class HybridMpc(StatefulCore, Declared):
         self.qp_solves = self.qp_infeasible = self.nodes = 0
         self.solve_times: list[float] = []
         self.cpu_time = 0.0
+        self.qp_rescued = 0
         self.last_failure: tuple[float, str] | None = None
 
     # -- event -----------------------------------------------------------------------------
@@ -243,6 +247,7 @@ class HybridMpc(StatefulCore, Declared):
         self.cpu_time += res.cpu_time
         md = self.model
         if res.feasible:
+            self.qp_rescued += res.status != "solved"
             u = res.u0
             stages = [res.V @ self.miqp.P[s, :self.n].T for s in range(self.N)]
             self.plan = [list(map(float, st)) for st in stages[1:]]
@@ -273,6 +278,7 @@ class HybridMpc(StatefulCore, Declared):
             "speed_error": self.speed_error,
             "qp_solves": self.qp_solves,
             "qp_infeasible": self.qp_infeasible,
+            "qp_rescued": self.qp_rescued,
             "qp_solve_time_median": statistics.median(times) if times else 0.0,
             "qp_solve_time_total": math.fsum(times),
             "qp_cpu_time_total": self.cpu_time,
