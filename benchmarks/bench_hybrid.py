@@ -4,14 +4,14 @@
    :class:`controllers.hybrid.hybrid_mpc.HybridMpc` / ``MoveBlockingMpc``) over the 800 s seed
    004 run: per-event wall and CPU time of the controller's MIQP (median, p99, total), branch
    and bound nodes, for GMPC at N = 10 and N = 3 and MB-MPC 3:4:3 at N = 10.
-2. Solver comparison on the MIQPs of that run (every ``--every``-th event and the 20 with the
-   most free binaries): DAQP (as the controller calls it) against SCIP through pyscipopt
+2. Solver comparison on the MIQPs of that run (every ``--every``-th event and the ``--hardest``
+   with the most branch-and-bound nodes): DAQP (as the controller calls it) against SCIP through pyscipopt
    (convex quadratic objective as a constraint on an epigraph variable, gap 0), objective
    values and times. pyscipopt is not a dependency: give its location with ``--scip-path``
    (e.g. after ``pip install --target /tmp/scipenv pyscipopt``); without it the comparison is
    skipped.
 
-    python benchmarks/bench_hybrid.py [--every 20] [--scip-path DIR]
+    python benchmarks/bench_hybrid.py [--every 200] [--hardest 5] [--scip-path DIR]
 """
 
 from __future__ import annotations
@@ -126,9 +126,9 @@ def solve_scip(H, f, A, lo, hi, binary, nV) -> tuple[float, float, float]:
     return float(m.getObjVal()), float(m.getSolvingTime()), total
 
 
-def compare(ctl: HybridMpc, events: list, stats: list, every: int) -> None:
-    free = np.array([s[2] for s in stats])
-    chosen = sorted(set(range(0, len(events), every)) | set(np.argsort(-free)[:20].tolist()))
+def compare(ctl: HybridMpc, events: list, stats: list, every: int, hardest: int) -> None:
+    nodes = np.array([s[2] for s in stats])
+    chosen = sorted(set(range(0, len(events), every)) | set(np.argsort(-nodes)[:hardest].tolist()))
     daqp_t, scip_t, scip_total, gaps = [], [], [], []
     for k in chosen:
         t, inputs = events[k]
@@ -149,7 +149,9 @@ def compare(ctl: HybridMpc, events: list, stats: list, every: int) -> None:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--every", type=int, default=20, help="compare every n-th event")
+    ap.add_argument("--every", type=int, default=200, help="compare every n-th event")
+    ap.add_argument("--hardest", type=int, default=5,
+                    help="also compare the events with the most nodes")
     ap.add_argument("--scip-path", default="", help="directory holding pyscipopt")
     args = ap.parse_args()
     if args.scip_path:
@@ -169,7 +171,7 @@ def main() -> None:
     for name in ("GMPC N=10", "GMPC N=3"):
         print(f"DAQP vs SCIP on {name}:")
         ctl, events, stats = kept[name]
-        compare(ctl, events, stats, args.every)
+        compare(ctl, events, stats, args.every, args.hardest)
 
 
 if __name__ == "__main__":
