@@ -4,12 +4,12 @@
    :class:`controllers.hybrid.hybrid_mpc.HybridMpc` / ``MoveBlockingMpc``) over the 800 s seed
    004 run: per-event wall and CPU time of the controller's MIQP (median, p99, total), branch
    and bound nodes, for GMPC at N = 10 and N = 3 and MB-MPC 3:4:3 at N = 10.
-2. Solver comparison on the MIQPs of that run (every ``--every``-th event and the ``--hardest``
-   with the most branch-and-bound nodes): DAQP (as the controller calls it) against SCIP through pyscipopt
-   (convex quadratic objective as a constraint on an epigraph variable, gap 0), objective
-   values and times. pyscipopt is not a dependency: give its location with ``--scip-path``
-   (e.g. after ``pip install --target /tmp/scipenv pyscipopt``); without it the comparison is
-   skipped.
+2. Solver comparison on the MIQPs of that run (every ``--every``-th event and the
+   ``--hardest`` with the most branch-and-bound nodes): DAQP (as the controller calls it)
+   against SCIP through pyscipopt (convex quadratic objective as a constraint on an epigraph
+   variable, gap 0), objective values and times. pyscipopt is not a dependency: give its
+   location with ``--scip-path`` (e.g. after ``pip install --target /tmp/scipenv
+   pyscipopt``); without it the comparison is skipped.
 
     python benchmarks/bench_hybrid.py [--every 200] [--hardest 5] [--scip-path DIR]
 """
@@ -42,7 +42,7 @@ MEASURED = ([f"v[{i}]" for i in (1, 2, 3)] + ["s", "coupler_force[1]", "coupler_
 
 def closed_loop(cls: type, **params) -> tuple[HybridMpc, list[tuple[float, dict]], list]:
     """Run the cores for 800 s; returns the controller, the (t, inputs) of every event and
-    per-event (wall s, cpu s, nodes, free binaries)."""
+    per-event (wall s, cpu s, nodes)."""
     ctl = cls(dataclasses.replace(cls.default_params, **params),
               load_reference("seed004_crh3_reference"))
     plant = Emu(emu_config("crh3_3car"), load_route("seed004_level"))
