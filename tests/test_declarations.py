@@ -71,6 +71,7 @@ def test_model_descriptions_unchanged_but_for_listed_improvements(built_fmus) ->
 
 def _default_params(cls) -> object:
     """What the core's declared defaults stand for, written independently of the FMU."""
+    from controllers.hybrid.hybrid_mpc import HybridMpcParams
     from controllers.pid.speed_pid import DistributedSpeedPidParams
     from plants.emu import DEFAULT_CONFIGURATION, emu_config
     from plants.freight import FreightParams
@@ -81,6 +82,8 @@ def _default_params(cls) -> object:
     return {"Emu": lambda: emu_config(DEFAULT_CONFIGURATION[units]),
             "FreightTrain": FreightParams,
             "DistributedSpeedPid": lambda: DistributedSpeedPidParams(units=units),
+            "HybridMpc": HybridMpcParams,
+            "MoveBlockingMpc": lambda: HybridMpcParams(move_blocks="3:4:3"),
             }[core.__name__]()
 
 

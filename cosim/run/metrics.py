@@ -33,7 +33,9 @@ Keys of ``[summary]`` (all optional; variable references are ``FMU.variable``):
 Always present: ``completed`` (False, with ``error``, for the partial results of a failed or
 interrupted run), ``sim_time_s``, ``wall_time_s``, ``real_time_factor``, ``algorithm``,
 ``do_steps``, ``executions``, ``fmu_wall_time_s``; controller counters (``qp_solves``,
-``qp_infeasible``, ``qp_solve_time_median_s``) when an FMU publishes them; ``terminated_by``
+``qp_infeasible``, ``qp_solve_time_median_s``; ``qp_solve_time_total_s`` and
+``qp_cpu_time_total_s``, the wall and CPU time of all solves of the run) when an FMU publishes
+them; ``terminated_by``
 (``{instance, time}``) when an FMU ended the run itself (fmi2Discard with fmi2Terminated, FMI
 2.0.4 sec. 4.2.2; ``completed`` stays true).
 """
@@ -178,6 +180,7 @@ def compute_summary(result: Any) -> dict[str, Any]:
     power = _series(frame, cfg.get("power"))
     if power is not None:
         out["energy_kwh"] = float(np.trapezoid(power, t) / 3.6e6)
+        out["energy_kj"] = out["energy_kwh"] * 3.6e3  # seed 004's unit
     if speed is not None and "planned_arrival_time" in cfg:
         moving_idx = np.nonzero(speed > STANDSTILL_MPS)[0]
         if moving_idx.size and moving_idx[-1] + 1 < speed.size:
@@ -197,8 +200,12 @@ def compute_summary(result: Any) -> dict[str, Any]:
             median = outputs.get("qp_solve_time_median")
             out.setdefault("qp_solve_time_median_s", {})[fmu] = (
                 float(median) if median is not None and math.isfinite(median) else None)
+            for name in ("qp_solve_time_total", "qp_cpu_time_total"):  # whole-run compute
+                if name in outputs:
+                    out.setdefault(f"{name}_s", {})[fmu] = float(outputs[name])
     out["warnings"] = warnings(result)
-    _flatten_single(out, ("qp_solves", "qp_infeasible", "qp_solve_time_median_s"))
+    _flatten_single(out, ("qp_solves", "qp_infeasible", "qp_solve_time_median_s",
+                          "qp_solve_time_total_s", "qp_cpu_time_total_s"))
     return out
 
 

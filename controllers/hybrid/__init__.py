@@ -1,0 +1,1 @@
+"""Hybrid (mixed-integer) MPC of seed 004: GMPC, MB-MPC."""

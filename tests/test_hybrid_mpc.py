@@ -1,0 +1,252 @@
+"""Seed 004 hybrid MPC: the MIQP against enumeration, move blocking, the mode, the FMUs."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+from fmi_state_helpers import rerun_after_restore
+
+from controllers.hybrid.hybrid_mpc import (
+    HybridMpc,
+    HybridMpcParams,
+    MoveBlockingMpc,
+    reference_position,
+)
+from controllers.hybrid.miqp import HybridMiqp, parse_blocks
+from controllers.hybrid.model import Limits
+from cosim.fmu.state import to_ticks
+from plants.emu import Emu, emu_config
+from plants.route import ReferenceProfile, load_reference, load_route
+
+REF = "seed004_crh3_reference"
+# DAQP's primal tolerance is 1e-6 (kN, m/s); the optimum moves by about that in the inputs
+U_TOL = 1e-4  # kN
+COST_RTOL = 1e-7
+
+
+def _ctl(cls=HybridMpc, **kw) -> HybridMpc:
+    return cls(dataclasses.replace(cls.default_params, **kw), load_reference(REF))
+
+
+def _limits() -> Limits:
+    return Limits(np.array([70.75, 0.0, 70.75]), np.array([49.5, 50.4, 54.0]))
+
+
+def _state(rng: np.random.Generator, v: float) -> np.ndarray:
+    speeds = v + rng.normal(0.0, 0.005, 3)
+    return np.concatenate([speeds, [0.0, -1e-4, -2e-4] + rng.normal(0.0, 1e-5, 3)])
+
+
+def _reference(rng: np.random.Generator, v: float, N: int) -> np.ndarray:
+    a = rng.uniform(-0.6, 0.6)
+    ref = np.empty((N + 1, 6))
+    for s in range(N + 1):
+        ref[s, :3] = max(v + a * s, 0.0)
+        ref[s, 3:] = v * s + 0.5 * a * s * s + rng.normal(0.0, 0.5)
+    return ref
+
+
+@pytest.mark.parametrize("mode", ["schedule", "optimise"])
+def test_miqp_equals_enumeration_of_the_binary_sequences(mode: str) -> None:
+    """N = 3, states around the 32.4 m/s breakpoint (binaries free), one solver object."""
+    ctl = _ctl(horizon=3)
+    q, rng = ctl.miqp, np.random.default_rng(40)
+    free_total = 0
+    for i in range(40):
+        v = rng.uniform(29.0, 36.0) if i % 4 else rng.uniform(1.0, 90.0)
+        x0, ref = _state(rng, v), _reference(rng, v, 3)
+        delta = ([None] * 3 if mode == "optimise"
+                 else [int(d) for d in rng.integers(0, 2, 3)])
+        res = q.solve(x0, ref, _limits(), delta)
+        enum = q.solve_enumerated(x0, ref, _limits(), delta)
+        assert res.feasible == enum.feasible
+        if not res.feasible:
+            continue
+        free_total += res.free_binaries
+        assert res.cost == pytest.approx(enum.cost, rel=COST_RTOL, abs=1e-6)
+        np.testing.assert_allclose(res.u0, enum.u0, atol=U_TOL)
+    assert free_total >= 20  # the branch and bound had work to do
+
+
+def test_solution_follows_the_pwa_model_it_predicts() -> None:
+    """The predicted states of the optimum are the PWA trajectory of its inputs."""
+    ctl = _ctl(horizon=10)
+    q, md, rng = ctl.miqp, ctl.model, np.random.default_rng(5)
+    for v in (20.0, 31.0, 32.5, 45.0):
+        x0 = _state(rng, v)
+        res = q.solve(x0, _reference(rng, v, 10), _limits(), [1] * 10)
+        assert res.feasible
+        x = x0
+        for s in range(10):
+            u = q.P[s, :3] @ res.V
+            x = md.pwa_step(x, u)
+            np.testing.assert_allclose(res.states[s + 1], x, atol=1e-5)
+
+
+def test_traction_mode_gives_no_trailer_force_on_random_states() -> None:
+    """Property over random states: delta = 1 (before 600 s) -> trailer 0, motors >= 0."""
+    ctl, rng = _ctl(horizon=3), np.random.default_rng(9)
+    for _ in range(60):
+        v = rng.uniform(0.0, 60.0)
+        t = float(rng.uniform(0.0, 590.0))
+        speeds = v + rng.normal(0.0, 0.01, 3)
+        inputs = {f"v[{i}]": float(speeds[i - 1]) for i in (1, 2, 3)}
+        inputs.update({"s": reference_position(ctl.profile, t) + rng.normal(0.0, 20.0),
+                       "coupler_force[1]": rng.normal(0.0, 2e4),
+                       "coupler_force[2]": rng.normal(0.0, 2e4),
+                       "traction_limit[1]": 70.75e3, "traction_limit[2]": 0.0,
+                       "traction_limit[3]": 70.75e3, "brake_limit[1]": 49.5e3,
+                       "brake_limit[2]": 50.4e3, "brake_limit[3]": 54e3})
+        out, _ = ctl.compute(t, inputs)
+        assert out["delta"] == 1.0
+        assert out["force[2]"] == 0.0
+        assert out["force[1]"] >= 0.0 and out["force[3]"] >= 0.0
+
+
+def test_move_blocks_of_length_one_equal_gmpc() -> None:
+    gmpc, mb = _ctl(horizon=3), _ctl(MoveBlockingMpc, horizon=3, move_blocks="1:1:1")
+    rng = np.random.default_rng(2)
+    for _ in range(15):
+        v = rng.uniform(25.0, 40.0)
+        x0, ref = _state(rng, v), _reference(rng, v, 3)
+        a = gmpc.miqp.solve(x0, ref, _limits(), [1, 1, 1])
+        b = mb.miqp.solve(x0, ref, _limits(), [1, 1, 1])
+        assert a.cost == pytest.approx(b.cost, rel=COST_RTOL)
+        np.testing.assert_allclose(a.u0, b.u0, atol=U_TOL)
+
+
+def test_blocked_inputs_are_held_and_cost_no_less() -> None:
+    gmpc, mb = _ctl(horizon=3), _ctl(MoveBlockingMpc, horizon=3, move_blocks="2:1")
+    rng = np.random.default_rng(3)
+    for _ in range(15):
+        v = rng.uniform(25.0, 40.0)
+        x0, ref = _state(rng, v), _reference(rng, v, 3)
+        a = gmpc.miqp.solve(x0, ref, _limits(), [1, 1, 1])
+        b = mb.miqp.solve(x0, ref, _limits(), [1, 1, 1])
+        q = mb.miqp
+        np.testing.assert_array_equal(q.P[0, :3] @ b.V, q.P[1, :3] @ b.V)
+        assert b.cost >= a.cost * (1 - COST_RTOL)
+        enum = q.solve_enumerated(x0, ref, _limits(), [1, 1, 1])
+        assert b.cost == pytest.approx(enum.cost, rel=COST_RTOL, abs=1e-6)
+    assert mb.miqp.nV < gmpc.miqp.nV
+
+
+def test_closed_loop_with_the_plant_core_tracks_and_switches_mode() -> None:
+    """Plant core + GMPC (N = 10), a shortened profile: up to 30 m/s, brake to 25 m/s."""
+    profile = ReferenceProfile("time", np.array([0.0, 60.0, 80.0, 90.0, 130.0]),
+                               np.array([0.0, 24.0, 30.0, 25.0, 25.0]))
+    params = dataclasses.replace(HybridMpcParams(), horizon=10, brake_from=80.0,
+                                 brake_until_speed=25.0)
+    ctl = HybridMpc(params, profile)
+    plant = Emu(emu_config("crh3_3car"), load_route("seed004_level"))
+    log = []
+    for k in range(130):
+        o = plant.outputs()
+        names = ([f"v[{i}]" for i in (1, 2, 3)] + ["s", "coupler_force[1]", "coupler_force[2]"]
+                 + [f"traction_limit[{i}]" for i in (1, 2, 3)]
+                 + [f"brake_limit[{i}]" for i in (1, 2, 3)])
+        out, _ = ctl.compute(float(k), {n: o[n] for n in names})
+        log.append((k, o["v"], out["v_ref"], out["delta"], out["force[2]"]))
+        plant.advance(to_ticks(k), to_ticks(1.0), {f"force[{i}]": out[f"force[{i}]"]
+                                                   for i in (1, 2, 3)})
+    assert ctl.qp_infeasible == 0
+    errors = [abs(v - r) for k, v, r, _, _ in log if 20 <= k]
+    assert max(errors) < 1.5  # m/s, at the corners of the profile (no preview of delta)
+    assert abs(log[-1][1] - 25.0) < 0.2
+    braking = [k for k, _, _, d, _ in log if d == 0.0]
+    assert braking and braking[0] == 80  # delta = 0 from brake_from ...
+    assert all(f == 0.0 for _, _, _, d, f in log if d == 1.0)  # trailer idle while pulling
+    assert any(f < 0.0 for _, _, _, d, f in log if d == 0.0)  # ... and braking with the rest
+
+
+def test_reference_position_integrates_the_speed_profile() -> None:
+    prof = ReferenceProfile("time", np.array([0.0, 10.0, 20.0]), np.array([0.0, 10.0, 10.0]))
+    assert reference_position(prof, 10.0) == pytest.approx(50.0)
+    assert reference_position(prof, 15.0) == pytest.approx(100.0)
+    assert reference_position(prof, 25.0) == pytest.approx(200.0)
+    assert reference_position(prof, 5.0) == pytest.approx(12.5)
+
+
+def test_bad_settings_are_rejected() -> None:
+    with pytest.raises(ValueError, match="3:4:4"):
+        parse_blocks("3:4:4", 10)
+    with pytest.raises(ValueError, match="move_blocks"):
+        parse_blocks("a:b", 10)
+    with pytest.raises(ValueError, match="delta_mode"):
+        _ctl(delta_mode="sometimes")
+    with pytest.raises(ValueError, match="speed-time"):
+        HybridMpc(HybridMpcParams(), ReferenceProfile("distance", np.array([0.0, 1.0]),
+                                                      np.array([1.0, 1.0])))
+    with pytest.raises(ValueError, match="crh3_8car"):
+        _ctl(configuration="crh3_8car")
+    with pytest.raises(ValueError, match="blocks"):
+        HybridMiqp(_ctl(horizon=3).model, 3, 1.0, 1.0, blocks=[2, 2])
+
+
+def test_gmpc_and_mbmpc_fmus_through_the_master(built_fmus) -> None:
+    """Gmpc3 / MbMpc3 + Emu3 (seed 004 scenarios, first 120 s): tracking, trailer idle."""
+    from cosim.run.master import run_scenario
+
+    for name in ("seed004_crh3_gmpc", "seed004_crh3_mbmpc"):
+        result = run_scenario(f"scenarios/{name}.toml",
+                              overrides={"simulation.stop_time": 120.0}, plot=False)
+        s = result.summary
+        assert s["completed"] and s["qp_infeasible"] == 0 and s["qp_solves"] == 121
+        assert s["max_abs_speed_error_kmh"] < 5.0
+        assert s["qp_cpu_time_total_s"] > 0.0
+        frame = result.frame
+        assert (frame["plant.applied_force[2]"] == 0.0).all()
+        assert math.isclose(frame["plant.v"].iloc[-1], 30.0, abs_tol=0.2)
+
+
+def test_gmpc_fmu_serialized_state_reproduces_the_rest_of_the_run(built_fmus) -> None:
+    """Emu3 + Gmpc3 (N = 3): serialize both states mid-run, finish, restore, rerun."""
+    from fmpy import extract, read_model_description
+    from fmpy.fmi2 import FMU2Slave
+
+    class Inst:
+        def __init__(self, ident: str, strings: dict[str, str], ints: dict[str, int]):
+            path = str(built_fmus[ident].path)
+            md = read_model_description(path)
+            self.vr = {v.name: v.valueReference for v in md.modelVariables}
+            self.fmu = FMU2Slave(guid=md.guid, unzipDirectory=extract(path), instanceName=ident,
+                                 modelIdentifier=md.coSimulation.modelIdentifier)
+            self.fmu.instantiate()
+            self.fmu.setupExperiment(startTime=0.0)
+            self.fmu.enterInitializationMode()
+            for k, v in strings.items():
+                self.fmu.setString([self.vr[k]], [v])
+            for k, v in ints.items():
+                self.fmu.setInteger([self.vr[k]], [v])
+            self.fmu.exitInitializationMode()
+
+        def get(self, names: list[str]) -> list[float]:
+            return self.fmu.getReal([self.vr[n] for n in names])
+
+        def set(self, names: list[str], values: list[float]) -> None:
+            self.fmu.setReal([self.vr[n] for n in names], values)
+
+    plant = Inst("Emu3", {"configuration": "crh3_3car", "route": "seed004_level"}, {})
+    ctl = Inst("Gmpc3", {"reference": REF}, {"N": 3})
+    meas = ([f"v[{i}]" for i in (1, 2, 3)] + ["s", "coupler_force[1]", "coupler_force[2]"]
+            + [f"traction_limit[{i}]" for i in (1, 2, 3)]
+            + [f"brake_limit[{i}]" for i in (1, 2, 3)])
+    forces = [f"force[{i}]" for i in (1, 2, 3)]
+
+    def step(k: int) -> list[float]:
+        ctl.set(meas, plant.get(meas))
+        u = ctl.get(forces)
+        plant.set(forces, u)
+        plant.fmu.doStep(currentCommunicationPoint=float(k), communicationStepSize=1.0)
+        ctl.fmu.doStep(currentCommunicationPoint=float(k), communicationStepSize=1.0)
+        return plant.get(["v", "s", "coupler_force[1]"]) + u
+
+    first, second = rerun_after_restore([plant, ctl], step, 40, 90)
+    assert first == second
+    assert first[-1][0] == pytest.approx(30.0, abs=3.0)  # N = 3 tracks loosely (Case 3)
+    for inst in (plant, ctl):
+        inst.fmu.terminate()
+        inst.fmu.freeInstance()
