@@ -15,7 +15,8 @@ Keys of ``[summary]`` (all optional; variable references are ``FMU.variable``):
 Always present: ``completed`` (False, with ``error``, for the partial results of a failed or
 interrupted run), ``sim_time_s``, ``wall_time_s``, ``real_time_factor``, ``algorithm``,
 ``do_steps``, ``executions``, ``fmu_wall_time_s``; controller counters (``qp_solves``,
-``qp_infeasible``, ``qp_solve_time_median_s``) when an FMU publishes them; ``terminated_by``
+``qp_infeasible``, ``qp_solve_time_median_s``, ``qp_infeasible_after_stop``, ``events_moving``,
+``events_standstill``) when an FMU publishes them; ``terminated_by``
 (``{instance, time}``) when an FMU ended the run itself (fmi2Discard with fmi2Terminated, FMI
 2.0.4 sec. 4.2.2; ``completed`` stays true).
 """
@@ -58,6 +59,10 @@ def _columns(frame: Any, ref: Any) -> list[str]:
         elif r in frame.columns:
             cols.append(r)
     return cols
+
+
+# event counters an FMU may publish (outputs of the same name), reported per FMU like qp_solves
+CONTROLLER_COUNTERS = ("qp_infeasible_after_stop", "events_moving", "events_standstill")
 
 
 def _count_changes(x: np.ndarray) -> int:
@@ -149,7 +154,11 @@ def compute_summary(result: Any) -> dict[str, Any]:
             median = outputs.get("qp_solve_time_median")
             out.setdefault("qp_solve_time_median_s", {})[fmu] = (
                 float(median) if median is not None and math.isfinite(median) else None)
-    _flatten_single(out, ("qp_solves", "qp_infeasible", "qp_solve_time_median_s"))
+        for key in CONTROLLER_COUNTERS:  # published by the seed 000 predictive controllers
+            if key in outputs:
+                out.setdefault(key, {})[fmu] = int(outputs[key])
+    _flatten_single(out, ("qp_solves", "qp_infeasible", "qp_solve_time_median_s",
+                          *CONTROLLER_COUNTERS))
     return out
 
 
