@@ -44,6 +44,7 @@ ADDED_VARIABLES = {
            "qp_infeasible_after_stop", "events_moving", "events_standstill",
            "resistance_estimate"} for f in ("StopMpc", "StopRmpc", "StopRsmpc")},
     "BrakeDelayTrain": {"grade_scale"},  # issue 11: grade mismatch in the perturbation study
+    "StopPid": {"hold_at_stop_point"},  # issue 11: the full-brake rule made a parameter
 }
 
 

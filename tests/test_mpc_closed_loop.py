@@ -96,6 +96,15 @@ def test_rmpc_with_w_a_point_equals_ideal_mpc():
     np.testing.assert_array_equal(rm.u, ideal.u)
 
 
+def test_ideal_mpc_on_the_papers_euler_model_is_no_longer_exact():
+    """Euler rows for v and s (eq. 9) mispredict the plant: the stop moves off by centimetres
+    (the paper's 5.95 cm is of that order), inside the window, unlike the exact model's."""
+    p = replace(BASE, horizon=10, design_model="euler")
+    exact = run_loop(IdealStopMpc(replace(p, design_model="zoh")), p).stop_error
+    euler = run_loop(IdealStopMpc(p), p).stop_error
+    assert abs(exact) < 0.001 and 0.01 < abs(euler) < 0.5
+
+
 def test_counters_split_moving_and_standstill_events():
     p = replace(BASE, horizon=6)
     core = TubeStopMpc(p)
