@@ -5,9 +5,10 @@ Terminal set of the tube controllers (eq. 16-18): the largest set ``O`` with ``C
 
     O = { e : C A^k e <= h - sum_{j<k} h_W((C A^j)') ,  k = 0, 1, ... }
 
-stops at the first ``k`` whose rows are all redundant for the rows already kept (one LP per
-row, HiGHS); then ``O`` is exactly the maximal RPI set. Each new row is kept only when it cuts
-the set, so the polytope stays small. Results are cached per data (the sweep workers build the
+stops at the first ``k`` whose rows are all redundant for the rows already kept (an LP per
+row while the set is unbounded, HiGHS; then the maximum over its vertices, qhull); then ``O``
+is exactly the maximal RPI set. Each new row is kept only when it cuts the set, so the
+polytope stays small. Results are cached per data (the sweep workers build the
 same controller many times).
 """
 
@@ -17,6 +18,7 @@ from functools import lru_cache
 
 import numpy as np
 from scipy.optimize import linprog
+from scipy.spatial import HalfspaceIntersection
 
 
 def _cut(rows: np.ndarray, rhs: np.ndarray, f: np.ndarray, bound: float) -> bool | None:
@@ -30,6 +32,32 @@ def _cut(rows: np.ndarray, rhs: np.ndarray, f: np.ndarray, bound: float) -> bool
         raise RuntimeError(f"terminal set: LP failed ({res.message})")
     slack = 1e-9 * max(1.0, abs(bound))
     return -res.fun > bound + slack
+
+
+def _vertices(rows: np.ndarray, rhs: np.ndarray, bounded: bool) -> np.ndarray | None:
+    """Vertices of ``{rows e <= rhs}`` (qhull) when it is bounded (known, or checked by LPs)
+    with an interior; None while unbounded. Raises ValueError when it is empty."""
+    n = rows.shape[1]
+    norms = np.linalg.norm(rows, axis=1)
+    if bounded and np.all(rhs > 1e-9 * norms * max(1.0, np.abs(rhs).max())):
+        # the origin is interior (W holds 0, so the set does): no LP for a centre
+        return HalfspaceIntersection(np.c_[rows, -rhs], np.zeros(n)).intersections
+    # Chebyshev centre: max r with rows e + |row| r <= rhs (an interior point for qhull)
+    res = linprog(np.r_[np.zeros(n), -1.0], A_ub=np.c_[rows, norms], b_ub=rhs,
+                  bounds=[(None, None)] * n + [(0.0, None)], method="highs")
+    if res.status == 2:
+        raise ValueError("terminal set: empty (W too large for the constraints)")
+    if res.status == 3:
+        return None  # unbounded radius: the set is unbounded
+    if res.status != 0:
+        raise RuntimeError(f"terminal set: LP failed ({res.message})")
+    center, radius = res.x[:n], res.x[n]
+    if radius <= 1e-12 * max(1.0, np.abs(rhs).max()):
+        raise ValueError("terminal set: empty interior (W too large for the constraints)")
+    if not bounded and _bounding_box(rows, rhs) is None:
+        return None
+    hs = HalfspaceIntersection(np.c_[rows, -rhs], center)
+    return hs.intersections
 
 
 def _bounding_box(rows: np.ndarray, rhs: np.ndarray) -> np.ndarray | None:
@@ -68,17 +96,18 @@ def _cached(key: tuple) -> tuple[np.ndarray, np.ndarray]:
         raise ValueError("terminal set: the disturbance set W alone leaves the constraints")
     rows, rhs = C.copy(), h.copy()
     Ck, margin = C.copy(), np.zeros(len(h))
-    box = None  # bounding box of the current set, once it is bounded: cheap redundancy test
-    box_step = 0
-    for step in range(max_steps):
+    verts = None  # vertices of the current set once it is bounded: exact redundancy test
+    for _ in range(max_steps):
         margin = margin + np.max(Ck @ W.T, axis=1)  # sum_{j<=k} h_W(C A^j)
         Ck = Ck @ A
         bound = h - margin
         new = []
         for f, b in zip(Ck, bound, strict=True):
-            if box is not None and np.sum(np.maximum(f * box[0], f * box[1])) \
-                    <= b - 1e-9 * max(1.0, abs(b)):
-                continue  # redundant: the box holds the set and f e <= b on the whole box
+            tol = 1e-9 * max(1.0, abs(b))
+            if verts is not None:
+                if np.max(verts @ f) > b + tol:
+                    new.append((f, b))
+                continue
             cut = _cut(rows, rhs, f, b)
             if cut is None:
                 raise ValueError("terminal set: empty (W too large for the constraints)")
@@ -88,8 +117,5 @@ def _cached(key: tuple) -> tuple[np.ndarray, np.ndarray]:
             return rows, rhs
         rows = np.vstack([rows] + [f[None, :] for f, _ in new])
         rhs = np.concatenate([rhs, [b for _, b in new]])
-        if _cut(rows, rhs, np.zeros(A.shape[0]), 0.0) is None:
-            raise ValueError("terminal set: empty (W too large for the constraints)")
-        if box is None or step - box_step >= 4:  # the set only shrinks: an old box holds it
-            box, box_step = _bounding_box(rows, rhs), step
+        verts = _vertices(rows, rhs, verts is not None)  # bounded stays bounded
     raise ValueError(f"terminal set: not finitely determined within {max_steps} steps")
