@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Any
 
 import typer
 from rich.console import Console
@@ -260,10 +260,17 @@ def sweep(
     resume: Annotated[bool, typer.Option(
         "--resume", help="keep the ok rows of an existing sweep.csv and run only the rest")]
         = False,
+    perturb: Annotated[list[str] | None, typer.Option(
+        "--perturb", help="model-mismatch study: random plant parameter per run, e.g. "
+        "plant.mass=+-10% or plant.brake_time_constant=0.3..0.6 (repeatable)")] = None,
+    samples: Annotated[int, typer.Option(help="with --perturb: draws per grid point")] = 50,
+    seed: Annotated[int, typer.Option(help="with --perturb: random seed of the draws")] = 1,
 ) -> None:
     """Run scenarios over a parameter grid in parallel; write sweep.csv (a row per point as it
     finishes, with status and error) and sweep.png. A failed point does not stop the others
-    (exit status 1 at the end); Ctrl-C keeps the finished rows (exit status 130)."""
+    (exit status 1 at the end); Ctrl-C keeps the finished rows (exit status 130). With
+    --perturb: every grid point on the same seeded random plants (perturb.csv,
+    perturb_summary.csv, perturb.png)."""
     from cosim.run import interrupt
     from cosim.run.master import SimulationError
     from cosim.run.results import check_destination
@@ -275,6 +282,9 @@ def sweep(
         stems = [find_scenario(s).stem for s in scenarios]
         target = out_dir or Path("runs") / ("sweep_" + "_".join(stems))
         check_destination(target)
+        if perturb:
+            _perturbed_sweep(scenarios, grid, perturb, samples, seed, target, workers, no_plot)
+            return
         frame = run_sweep(scenarios, grid, target, workers, plot=not no_plot, resume=resume)
     except interrupt.Interrupted as err:
         console.print(f"[bold yellow]{escape(str(err))}[/]; the finished rows are in "
@@ -311,6 +321,40 @@ def sweep(
                       f"{escape(str(row['error']))}", highlight=False, soft_wrap=True)
     if len(failed):
         raise typer.Exit(1)
+
+
+def _perturbed_sweep(scenarios: list[str], grid: dict[str, list[Any]], perturb: list[str],
+                     samples: int, seed: int, target: Path, workers: int | None,
+                     no_plot: bool) -> None:
+    """The mismatch study of ``cosim sweep --perturb`` and its table."""
+    from cosim.run.perturb import parse_perturb, run_perturbed
+
+    perts = parse_perturb(perturb)
+    _, summary = run_perturbed(scenarios, grid, perts, samples, seed, target, workers,
+                               plot=not no_plot)
+    table = Table(title=f"{samples} perturbed plants (seed {seed}): "
+                        + ", ".join(perturb))
+    columns = [c for c in ["scenario", *grid, "runs", "stop_error_min_m", "stop_error_median_m",
+                           "stop_error_max_m", "inside_window", "executions_median",
+                           "qp_infeasible_total", "qp_infeasible_max",
+                           "qp_infeasible_after_stop_total", "command_min", "command_max"]
+               if c in summary]
+    labels = {"stop_error_min_m": "err min m", "stop_error_median_m": "err median m",
+              "stop_error_max_m": "err max m", "inside_window": "in +-0.5 m",
+              "executions_median": "executions", "qp_infeasible_total": "infeasible",
+              "qp_infeasible_max": "infeasible max/run",
+              "qp_infeasible_after_stop_total": "after stop", "command_min": "u min",
+              "command_max": "u max"}
+    for col in columns:
+        table.add_column(labels.get(col, col.rpartition(".")[2]),
+                         justify="left" if col == "scenario" else "right")
+    for _, row in summary.iterrows():
+        table.add_row(*[f"{row[c]:+.3f}" if c.startswith("stop_error") else
+                        f"{row[c]:g}" if isinstance(row[c], float) else str(row[c])
+                        for c in columns])
+    out.print(table)
+    out.print(f"wrote {target}/perturb.csv, perturb_summary.csv"
+              + ("" if no_plot else ", perturb.png"))
 
 
 @app.command()

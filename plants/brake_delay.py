@@ -49,6 +49,8 @@ class BrakeDelayParams:
     brake_time_constant: float = param(0.4, "s", "tau: first-order brake lag", min=1e-6)
     brake_delay: float = param(1.0, "s", "Td: brake dead time", min=0.0)
     max_step: float = param(0.01, "s", "longest internal integration sub-step", min=1e-6)
+    grade_scale: float = param(1.0, "1", "factor on the route's grades (model mismatch "
+                               "studies)", min=0.0)
 
     def check(self) -> None:
         for name in ("mass", "brake_time_constant", "max_step"):
@@ -111,7 +113,11 @@ class BrakeDelayTrain(StatefulCore, Declared):
     # -- physics -------------------------------------------------------------------------------
     def resistance_accel(self, v: float, s: float) -> float:
         """a_r = a_w(v) + a_g(s) (m/s^2)."""
-        return self.p.davis.force(v) / self.p.mass + self.route.grade_accel(s)
+        return self.p.davis.force(v) / self.p.mass + self.grade_accel(s)
+
+    def grade_accel(self, s: float) -> float:
+        """g i(s)/1000 (m/s^2), the route's grade times ``grade_scale``."""
+        return self.p.grade_scale * self.route.grade_accel(s)
 
     def _accel(self, a_c: float, v: float, grade_accel: float) -> float:
         a = a_c - self.p.davis.force(max(v, 0.0)) / self.p.mass - grade_accel
@@ -150,7 +156,7 @@ class BrakeDelayTrain(StatefulCore, Declared):
         so the result does not depend on where sub-steps fall."""
         remaining = h
         while remaining > 0.0:
-            g = self.route.grade_accel(self.s)
+            g = self.grade_accel(self.s)
             boundary = self._next_grade_change()
             dt = remaining
             v1, s1 = self._rk4(a_t, g, dt)
@@ -198,8 +204,8 @@ class BrakeDelayTrain(StatefulCore, Declared):
         return {
             "v": self.v,
             "s": self.s,
-            "a": self._accel(self.a_c, self.v, self.route.grade_accel(self.s)),
+            "a": self._accel(self.a_c, self.v, self.grade_accel(self.s)),
             "a_c": self.a_c,
             "applied_command": self.delayed_command(t),
-            "grade": self.route.grade.at(self.s),
+            "grade": self.p.grade_scale * self.route.grade.at(self.s),
         }

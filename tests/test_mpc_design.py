@@ -7,7 +7,15 @@ import math
 import numpy as np
 import pytest
 
-from controllers.common.design_model import U_PREV, S, V, brake_delay_model, delay_samples, zoh
+from controllers.common.design_model import (
+    A_C,
+    U_PREV,
+    S,
+    V,
+    brake_delay_model,
+    delay_samples,
+    zoh,
+)
 from controllers.common.qp import HorizonQP, support_of_sum
 from cosim.fmu.state import to_ticks
 from plants.brake_delay import BrakeDelayParams, BrakeDelayTrain
@@ -123,3 +131,13 @@ def test_support_of_sum_of_segment():
     w = np.array([[0.0, -1.0], [0.0, 2.0]])
     rows = np.array([[0.0, 1.0], [0.0, -1.0]])
     np.testing.assert_allclose(support_of_sum([np.eye(2), 2 * np.eye(2)], w, rows), [6.0, 3.0])
+
+
+def test_euler_rows_are_the_papers_eq9():
+    T = 0.2
+    exact = brake_delay_model(0.0107, 0.4, 1.0, T)
+    euler = brake_delay_model(0.0107, 0.4, 1.0, T, euler=True)
+    np.testing.assert_array_equal(euler.A[[A_C, U_PREV]], exact.A[[A_C, U_PREV]])  # lag exact
+    np.testing.assert_array_equal(euler.A[V], [T, 0.0, 1.0, 0.0])
+    np.testing.assert_array_equal(euler.A[S], [0.0, 0.0, T, 1.0])
+    assert euler.b[V] == euler.b[S] == 0.0 and euler.g[V] == -T and euler.g[S] == 0.0

@@ -29,20 +29,23 @@ CASES = [(TubeStopMpc, 10), (IdealStopMpc, 5), (SelfTriggeredStopMpc, 6)]
 
 
 def record(cls, N: int, every: int = 5):
-    """Every ``every``-th QP solved (DAQP) in the closed loop of ``cls`` at horizon N."""
+    """Every ``every``-th feasible QP solved (DAQP) in the closed loop of ``cls`` at horizon N
+    (the tightened problems: not the fallback's, not the infeasible ones at standstill)."""
     calls = []
     original = HorizonQP.solve
 
     def spy(self, x0, ref, d=None, warm_x=None, warm_y=None):
         res = original(self, x0, ref, d, warm_x, warm_y)
-        calls.append((self, x0.copy(), ref.copy(), None if d is None else d.copy(),
-                      None if warm_y is None else np.array(warm_y), res))
+        if res.feasible and self is not core.fallback_qp():
+                calls.append((self, x0.copy(), ref.copy(), None if d is None else d.copy(),
+                          None if warm_y is None else np.array(warm_y), res))
         return res
 
     p = replace(StopMpcParams(), horizon=N)
+    core = cls(p)
     HorizonQP.solve = spy
     try:
-        run_loop(cls(p), p)
+        run_loop(core, p)
     finally:
         HorizonQP.solve = original
     return p, calls[::every]

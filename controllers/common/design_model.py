@@ -82,8 +82,12 @@ class DesignModel:
 
 
 def brake_delay_model(brake_gain: float, brake_time_constant: float, brake_delay: float,
-                      sample_time: float) -> DesignModel:
-    """Model of eq. (9)-(10) from the plant parameters c (m/s^2 per %), tau (s), Td (s), T (s)."""
+                      sample_time: float, euler: bool = False) -> DesignModel:
+    """Model of eq. (9)-(10) from the plant parameters c (m/s^2 per %), tau (s), Td (s), T (s).
+
+    ``euler``: the paper's printed rows for v and s (eq. 9: ``v+ = v + T a_c - T a_r``,
+    ``s+ = s + T v``) instead of the exact ZOH ones; the lag row is exact either way.
+    """
     if not brake_time_constant > 0:
         raise ValueError(f"brake_time_constant = {brake_time_constant} must be > 0")
     tau, c = brake_time_constant, brake_gain
@@ -102,4 +106,12 @@ def brake_delay_model(brake_gain: float, brake_time_constant: float, brake_delay
     b[U_PREV] = 1.0
     g = np.zeros(4)
     g[idx] = br
+    if euler:
+        T = sample_time
+        a[V, :] = 0.0
+        a[S, :] = 0.0
+        a[V, [A_C, V]] = T, 1.0
+        a[S, [V, S]] = T, 1.0
+        b[V] = b[S] = 0.0
+        g[V], g[S] = -T, 0.0
     return DesignModel(a, b, g, delay_samples(brake_delay, sample_time), sample_time, c)

@@ -19,28 +19,45 @@ Choices where the paper is silent (all parameters of :class:`StopMpcParams`):
   ``a0``: ``a_c,s = a_r,ff - a0``, ``u_s = -a_c,s / c``; zero once the reference rests.
 * Ideal MPC feeds the resistance forward (Davis + grade from the route, evaluated along the
   previous plan), with the untightened constraints and no terminal set.
-* Tube RMPC / RSMPC treat the whole resistance as the unknown disturbance ``w = g a_r`` with
-  ``a_r`` in ``W = [a_r_min, a_r_max]``: grade range of the route (permille) times g/1000 plus
-  Davis resistance over ``[0, v_max]`` scaled by ``1 -+ davis_uncertainty`` (seed 000 defaults:
-  ``W = [-0.0500, 0.3103] m/s^2``, -6 permille with 0.8 x Davis(0) to 28 permille with
-  1.2 x Davis(20 m/s)). Nominal prediction
-  uses ``a_r = 0``. Constraints are tightened by support functions of ``R_i`` (eq. 14) or
-  ``R_i^M`` (eq. 26). Constraint set X: ``u in [u_min, u_max]``, ``v <= v_max``,
+* Tube RMPC / RSMPC (``nominal_resistance = true``, default): the nominal model carries the same
+  known resistance as the ideal MPC, and W bounds only what the controller does not know, the
+  spread ``a_r,true - a_r,nominal`` for mass within ``1 -+ mass_uncertainty``, Davis force
+  within ``1 -+ davis_uncertainty`` and grades within ``1 -+ grade_uncertainty`` of nominal
+  (:func:`spread_bounds`; seed 000 defaults 0.1 / 0.2 / 0.2: ``W = [-0.0630, 0.0648] m/s^2``).
+  With ``nominal_resistance = false`` the whole resistance is the disturbance (the paper's
+  reading: ``W = [-0.0500, 0.3103] m/s^2``, :func:`disturbance_bounds`) and the nominal
+  prediction uses ``a_r = 0``. Constraints are tightened by support functions of ``R_i``
+  (eq. 14) or ``R_i^M`` (eq. 26). Constraint set X: ``u in [u_min, u_max]``, ``v <= v_max``,
   ``|v - v_s| <= speed_error_max``, ``|s - s_s| <= position_error_max``; du bounded by
-  ``du_max``. Terminal set: a box on the speed and position error, ``Sigma = terminal_set_scale
-  x`` the symmetric box hull of the mRPI outer bound ``Z`` (eq. 15, truncated series), capped
-  by X (symmetric because W is lopsided: uphill grades dominate); the terminal constraint is
-  ``Sigma (-) R_H``.
+  ``du_max``.
+* Offset-free option (``disturbance_observer``): a one-state observer estimates the resistance
+  error from the measured speed (:meth:`_StopMpcBase.observe`), clipped to the spread, and
+  adds it to the fed-forward resistance. Estimate and true error both lie in the spread S, so
+  the tube uses ``W = S (-) S`` (twice as wide); with the default spread its terminal set is
+  empty (construction fails with a clear error), with ``grade_uncertainty = 0.1`` it is not.
+* Terminal set (eq. 16-18): the maximal robust positively invariant set of the tracking error
+  under the tube law ``du = K e`` inside X (speed and position error, ``|K e| <= du_max`` and,
+  with nominal resistance, the command bounds for the steady-tracking command of the route),
+  computed by :func:`controllers.mpc.terminal.robust_invariant_set`; the terminal constraint
+  of a QP is that set tightened by ``R_H`` (or ``R_H^M``). ``terminal_set_scale`` is unused.
 * RSMPC (eq. 25-29): the held-input problem for hold M predicts ``M + N - 1`` stages (the
   paper writes ``M + N``) so that M = 1 is exactly RMPC with horizon N; it has ``N`` free moves
   (``du_0`` and stages ``M .. M+N-2``); the first M stage costs are scaled by ``1/beta``.
-  M is the largest in ``[1, N-1]`` whose problem is feasible with ``J^M <= J^1``.
-* Infeasible QP: the tube feedback law ``du = K (x_{0|k} - x_s)`` (clipped) is applied and
-  counted in ``qp_infeasible``; nothing raises.
+  M is the largest in ``[1, N-1]`` whose problem is feasible with ``J^M <= J^1``; the M = 1
+  problem is solved first and a longer hold is only taken when feasible.
+* Infeasible tightened QP (RSMPC: its M = 1 problem): the fallback (:meth:`fallback`) tracks the
+  same reference with only the command bounds (always feasible), so the command stays
+  admissible and the train keeps braking along the stopping curve; counted in
+  ``qp_infeasible``; nothing raises. Only an exactly solved QP counts as feasible (DAQP exit 1,
+  OSQP "solved"; never "solved inaccurate").
 * Standstill: once the measured speed is at most ``standstill_speed`` after the reference has
   come to rest or within ``standstill_window`` m of the stop point, the brake is held at
   ``max(u, standstill_command)`` (a train at a platform does not creep); RSMPC then holds
-  its longest hold (``N - 1``) samples.
+  its longest hold (``N - 1``) samples. The QP is still solved there and its infeasibility
+  counted in ``qp_infeasible_after_stop``; events are counted as ``events_moving`` and
+  ``events_standstill``.
+* ``design_model = "euler"``: the paper's printed rows for v and s (eq. 9) instead of the exact
+  ZOH ones (the plant is not that model: a design-model mismatch the ideal MPC then has).
 """
 
 from __future__ import annotations
@@ -58,11 +75,15 @@ from scipy.linalg import solve_discrete_are
 from controllers.common.design_model import A_C, U_PREV, DesignModel, S, V, brake_delay_model
 from controllers.common.qp import QP_SOLVERS, HorizonQP, QPResult, support_of_sum
 from controllers.common.stopping import MEASURED_SPEED_POSITION, u_max_param, u_min_param
+from controllers.mpc.terminal import robust_invariant_set
 from cosim.fmu.declare import Declared, Var, build, group, param, sample_time
 from cosim.fmu.profiles import StoppingCurve, ref_decel_param, stop_point_param
 from cosim.fmu.state import StatefulCore
 from plants.resistance import Davis
 from plants.route import GRAVITY, Route, load_route, routes_dir_in
+
+DESIGN_MODELS = ("zoh", "euler")
+NO_BOUND = 1e30  # "no lower bound" on a terminal row (DAQP's infinity)
 
 
 @dataclass(frozen=True)
@@ -92,13 +113,28 @@ class StopMpcParams:
                                    min=1e-9)
     position_error_max: float = param(20.0, "m", "bound of |s - s_s| in the constraint set X",
                                       min=1e-9)
-    terminal_set_scale: float = param(3.0, "1", "terminal box = scale x box hull of the mRPI "
-                                      "set Z", min=1.0)
+    terminal_set_scale: float = param(3.0, "1", "unused since issue 11 (the terminal set is "
+                                      "the maximal robust positively invariant set)", min=1.0)
     mass: float = param(490e3, "kg", "train mass (resistance model)", min=1.0)
     davis: Davis = group(Davis.from_kn_kmh(5.4, 0.0098, 0.00163), "davis_")
     route: str = param("seed000_stop", description="route (grade profile): bundled name or path")
     davis_uncertainty: float = param(0.2, "1", "relative Davis uncertainty in the disturbance "
                                      "bound W", min=0.0)
+    nominal_resistance: bool = param(True, description="tube controllers: the nominal model "
+                                     "carries the known Davis resistance and the route grade "
+                                     "ahead, W bounds only their spread (false: the whole "
+                                     "resistance is W)")
+    mass_uncertainty: float = param(0.1, "1", "relative mass spread designed for (in W)",
+                                    min=0.0, max=0.9)
+    grade_uncertainty: float = param(0.2, "1", "relative grade spread designed for (in W)",
+                                     min=0.0)
+    disturbance_observer: bool = param(False, description="offset-free: estimate the "
+                                       "resistance error from the measured speed (one-state "
+                                       "observer) and feed it forward")
+    observer_gain: float = param(0.3, "1", "L: share of the speed innovation taken into the "
+                                 "resistance estimate per event", min=0.0, max=1.0)
+    design_model: str = param("zoh", description='design rows for v and s: "zoh" (exact) or '
+                              '"euler" (the paper\'s eq. 9)')
     initial_command: float = param(0.0, "%", "command held before the first event", min=0.0,
                                    max=100.0)
     standstill_speed: float = param(0.02, "m/s", "speed below which a train near the stop "
@@ -130,12 +166,46 @@ class StopMpcParams:
             raise ValueError(f"terminal_set_scale = {self.terminal_set_scale} must be >= 1")
         if not self.u_min < self.u_max:
             raise ValueError(f"u_min = {self.u_min} must be < u_max = {self.u_max}")
+        for name in ("mass_uncertainty", "grade_uncertainty"):
+            if not getattr(self, name) >= 0:
+                raise ValueError(f"{name} = {getattr(self, name)} must be >= 0")
+        if not self.mass_uncertainty < 1.0:
+            raise ValueError(f"mass_uncertainty = {self.mass_uncertainty} must be < 1")
+        if not 0.0 <= self.observer_gain <= 1.0:
+            raise ValueError(f"observer_gain = {self.observer_gain} must be in [0, 1]")
+        if self.design_model not in DESIGN_MODELS:
+            raise ValueError(f"design_model = {self.design_model!r} must be one of "
+                             f"{DESIGN_MODELS}")
         if self.qp_solver not in QP_SOLVERS:
             raise ValueError(f"qp_solver = {self.qp_solver!r} must be one of {QP_SOLVERS}")
 
 
+def nominal_resistance_range(p: StopMpcParams, route: Route) -> tuple[float, float]:
+    """Range of the known resistance a_r = Davis(v)/m + g i/1000 over the route and [0, v_max]."""
+    a_g = GRAVITY * np.asarray(route.grade.values, float) / 1000.0
+    return (float(a_g.min() + p.davis.force(0.0) / p.mass),
+            float(a_g.max() + p.davis.force(p.v_max) / p.mass))
+
+
+def spread_bounds(p: StopMpcParams, route: Route) -> tuple[float, float]:
+    """W with nominal resistance: the interval of ``a_r,true - a_r,nominal`` (m/s^2).
+
+    Davis force within ``1 -+ davis_uncertainty`` of nominal, mass within ``1 -+
+    mass_uncertainty`` (so ``Davis/m`` within ``(1 - d)/(1 + m)`` .. ``(1 + d)/(1 - m)`` of
+    nominal, the largest at ``v_max``), grades within ``1 -+ grade_uncertainty`` of the route's
+    (the largest |grade| of the route). Seed 000 defaults (0.1, 0.2, 0.2):
+    ``W = [-0.0630, 0.0648] m/s^2`` against ``[-0.0500, 0.3103]`` for the whole resistance.
+    """
+    a_w = p.davis.force(p.v_max) / p.mass
+    d, m = p.davis_uncertainty, p.mass_uncertainty
+    grades = np.abs(np.asarray(route.grade.values, float))
+    a_g = p.grade_uncertainty * GRAVITY * float(grades.max()) / 1000.0
+    return (a_w * ((1.0 - d) / (1.0 + m) - 1.0) - a_g, a_w * ((1.0 + d) / (1.0 - m) - 1.0) + a_g)
+
+
 def disturbance_bounds(p: StopMpcParams, route: Route) -> tuple[float, float]:
-    """W as an interval of resistance acceleration a_r (m/s^2): grade range + Davis range."""
+    """W as an interval of resistance acceleration a_r (m/s^2): grade range + Davis range
+    (the whole resistance as disturbance, ``nominal_resistance = false``)."""
     grades = route.grade.values
     a_g = GRAVITY * np.asarray(grades, float) / 1000.0
     a_w_lo = p.davis.force(0.0) / p.mass * (1.0 - p.davis_uncertainty)
@@ -143,8 +213,9 @@ def disturbance_bounds(p: StopMpcParams, route: Route) -> tuple[float, float]:
     return float(a_g.min() + a_w_lo), float(a_g.max() + a_w_hi)
 
 
-_DESIGN_FIELDS = ("model", "curve", "route", "N", "Q", "P", "K", "A_cl", "w_bounds",
-                  "w_vertices", "F", "ref_mask", "x_lo", "x_hi", "F_term", "sigma")
+_DESIGN_FIELDS = ("model", "curve", "route", "N", "Q", "P", "K", "A_cl", "known_resistance",
+                  "observer", "spread", "w_bounds", "w_vertices", "F", "ref_mask", "x_lo",
+                  "x_hi", "F_term", "h_term")
 _DESIGNS: dict[tuple, dict[str, Any]] = {}  # (class, params, routes_dir) -> shared design
 _DESIGN_CACHE_SIZE = 64
 SOLVE_TIME_WINDOW = 1001  # events over which qp_solve_time_median is taken (the latest ones)
@@ -168,6 +239,13 @@ class _StopMpcBase(StatefulCore, Declared):
         Var.output("qp_solve_time_median", "s", "median QP time per event so far"),
         Var.output("hold_steps", "1", "samples the current command is held (RSMPC: M)",
                    start=1),
+        Var.output("qp_infeasible_after_stop", "1", "events at standstill whose QP was "
+                   "infeasible (the brake is held regardless)", start=0),
+        Var.output("events_moving", "1", "controller events while moving", start=0),
+        Var.output("events_standstill", "1", "controller events at standstill (brake held)",
+                   start=0),
+        Var.output("resistance_estimate", "m/s2", "disturbance observer: estimated resistance "
+                   "error added to the nominal resistance (0 without observer)"),
     )
 
     @classmethod
@@ -177,7 +255,9 @@ class _StopMpcBase(StatefulCore, Declared):
 
     state_fields: ClassVar[tuple[str, ...]] = (
         "history", "command", "last_t", "anchor", "warm", "plan", "hold", "qp_solves",
-        "qp_infeasible", "standstill", "last_v_ref")  # solve_times: wall clock, not state
+        "qp_infeasible", "standstill", "last_v_ref", "qp_infeasible_after_stop",
+        "events_moving", "events_standstill", "d_hat", "obs_x", "obs_inputs")
+        # solve_times: wall clock, not state
     feedforward: ClassVar[bool] = False
     tube: ClassVar[bool] = True
     self_triggered: ClassVar[bool] = False
@@ -217,11 +297,19 @@ class _StopMpcBase(StatefulCore, Declared):
         self.solve_times: deque[float] = deque(maxlen=SOLVE_TIME_WINDOW)
         self.standstill = False
         self.last_v_ref = 0.0
+        self.qp_infeasible_after_stop = 0
+        self.events_moving = 0
+        self.events_standstill = 0
+        self.d_hat = 0.0  # observer: estimated a_r,true - a_r,nominal (m/s^2)
+        self.obs_x: list[float] | None = None  # design state measured at the last event
+        self.obs_inputs: list[float] = []  # plant inputs from the last event on
+        self._fallback_qp: HorizonQP | None = None
 
     def _design(self, params: StopMpcParams, routes_dir: Path | None) -> None:
         """Everything derived from the parameters (the attributes in ``_DESIGN_FIELDS``)."""
         self.model: DesignModel = brake_delay_model(
-            params.brake_gain, params.brake_time_constant, params.brake_delay, params.sample_time)
+            params.brake_gain, params.brake_time_constant, params.brake_delay, params.sample_time,
+            euler=params.design_model == "euler")
         self.curve = StoppingCurve(params.ref_decel, params.stop_point)
         self.route = load_route(params.route, routes_dir)
         self.N = int(params.horizon)
@@ -235,7 +323,19 @@ class _StopMpcBase(StatefulCore, Declared):
         if not np.max(np.abs(np.linalg.eigvals(self.A_cl))) < 1.0:
             raise ValueError("the LQR feedback of (A, b, Q, R) does not stabilise the design "
                              "model: check q_speed, q_position, r_du")
-        self.w_bounds = disturbance_bounds(params, self.route) if self.tube else (0.0, 0.0)
+        # nominal resistance fed forward (ideal MPC always; tube controllers by default)
+        self.known_resistance = self.feedforward or (self.tube and params.nominal_resistance)
+        self.observer = bool(params.disturbance_observer) and self.known_resistance
+        self.spread = spread_bounds(params, self.route)
+        if not self.tube:
+            self.w_bounds = (0.0, 0.0)
+        elif not params.nominal_resistance:
+            self.w_bounds = disturbance_bounds(params, self.route)
+        elif self.observer:  # estimate and true error both in the spread: W = spread - spread
+            width = self.spread[1] - self.spread[0]
+            self.w_bounds = (-width, width)
+        else:
+            self.w_bounds = self.spread
         self.w_vertices = np.array([m.g * self.w_bounds[0], m.g * self.w_bounds[1]])
         # constraint rows on x: u_prev (abs), v (abs upper), speed / position error
         self.F = np.array([[0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 1, 0], [0, 0, 0, 1]], float)
@@ -244,8 +344,10 @@ class _StopMpcBase(StatefulCore, Declared):
                               -params.position_error_max])
         self.x_hi = np.array([params.u_max, params.v_max, params.speed_error_max,
                               params.position_error_max])
-        self.F_term = np.array([[0, 0, 1, 0], [0, 0, 0, 1]], float)
-        self.sigma = self._terminal_box()
+        if self.tube:
+            self.F_term, self.h_term = self._terminal_set()
+        else:
+            self.F_term, self.h_term = None, None
 
     # -- tube sets ---------------------------------------------------------------------------
     def reach_mats(self, i: int, hold: int = 1) -> list[np.ndarray]:
@@ -272,15 +374,36 @@ class _StopMpcBase(StatefulCore, Declared):
         return np.concatenate([support_of_sum(mats, self.w_vertices, -rows),
                                support_of_sum(mats, self.w_vertices, rows)])
 
-    def _terminal_box(self) -> np.ndarray:
-        """Sigma (eq. 16): [lo_v, lo_s, hi_v, hi_s] of the terminal error box."""
+    def terminal_constraints(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(C, h)``: the constraint set X (and du bounds under the tube law) on the tracking
+        error ``e = x - x_s``, as ``C e <= h``. The command rows use the range of the
+        steady-tracking command ``u_s = (a0 - a_r)/c`` over the known resistance; without
+        nominal resistance ``u_s`` is not known (the reference's ``a0/c`` is not what the plant
+        needs), so the command bounds are left to the stage constraints."""
         p = self.p
-        cap = np.array([p.speed_error_max, p.position_error_max])
-        if not self.tube:
-            return np.concatenate([-cap, cap])
-        z = self.mrpi_box(self.F_term)
-        half = np.minimum(p.terminal_set_scale * np.maximum(z[:2], z[2:]), cap)
-        return np.concatenate([-half, half])
+        e = np.eye(4)
+        C = np.vstack([e[V], -e[V], e[S], -e[S], self.K, -self.K])
+        h = np.array([p.speed_error_max, p.speed_error_max, p.position_error_max,
+                      p.position_error_max, p.du_max, p.du_max])
+        if self.known_resistance:
+            a_lo, a_hi = nominal_resistance_range(p, self.route)
+            u_s_lo = (p.ref_decel - a_hi) / p.brake_gain
+            u_s_hi = (p.ref_decel - a_lo) / p.brake_gain
+            C = np.vstack([C, e[U_PREV], -e[U_PREV]])
+            h = np.concatenate([h, [p.u_max - u_s_hi, u_s_lo - p.u_min]])
+        return C, h
+
+    def _terminal_set(self) -> tuple[np.ndarray, np.ndarray]:
+        """Sigma (eq. 16-18): the maximal robust positively invariant set of the error under
+        the tube law, ``A_cl Sigma (+) W subset Sigma`` inside X (:mod:`controllers.mpc.terminal`).
+        The terminal constraint of a QP is ``Sigma (-) R_H`` (rows tightened by ``R_H``)."""
+        C, h = self.terminal_constraints()
+        try:
+            return robust_invariant_set(self.A_cl, C, h, self.w_vertices)
+        except ValueError as err:
+            raise ValueError(f"{err}: W = {self.w_bounds} m/s2 (check mass_uncertainty, "
+                             f"davis_uncertainty, grade_uncertainty, the error bounds of X)"
+                             ) from err
 
     def make_qp(self, hold: int) -> HorizonQP:
         """QP for hold length M (eq. 25-26); M = 1 is RMPC (eq. 11, 14) with horizon N."""
@@ -295,14 +418,30 @@ class _StopMpcBase(StatefulCore, Declared):
             dlo, dhi = self.tightening(i, self.F, hold)
             lo[i] = self.x_lo + dlo
             hi[i] = self.x_hi - dhi
-        tlo, thi = self.tightening(H, self.F_term, hold)
-        lo_term = self.sigma[:2] + tlo
-        hi_term = self.sigma[2:] - thi
+        lo_term = hi_term = None
+        if self.F_term is not None:
+            _, thi = self.tightening(H, self.F_term, hold)
+            hi_term = self.h_term - thi
+            lo_term = np.full(len(hi_term), -NO_BOUND)
         return HorizonQP(self.model.A, self.model.b, self.model.g, H, free, self.Q, p.r_du,
                          self.P, stage_scale=scale, F=self.F, ref_mask=self.ref_mask, lo=lo,
-                         hi=hi, F_term=self.F_term if self.tube else None, lo_term=lo_term,
+                         hi=hi, F_term=self.F_term, lo_term=lo_term,
                          hi_term=hi_term, du_min=-p.du_max, du_max=p.du_max, eps=p.eps,
                          solver=p.qp_solver)
+
+    def fallback_qp(self) -> HorizonQP:
+        """The fallback problem: horizon N, the command bounds only (no state, terminal or
+        tightened constraints), so ``du = 0`` is always feasible."""
+        if self._fallback_qp is None:
+            p, N = self.p, self.N
+            F = np.array([[0.0, 1.0, 0.0, 0.0]])
+            lo = np.full((N + 1, 1), p.u_min)
+            hi = np.full((N + 1, 1), p.u_max)
+            self._fallback_qp = HorizonQP(
+                self.model.A, self.model.b, self.model.g, N, list(range(N)), self.Q, p.r_du,
+                self.P, F=F, ref_mask=np.zeros(1), lo=lo, hi=hi, du_min=-p.du_max,
+                du_max=p.du_max, eps=p.eps, solver=p.qp_solver)
+        return self._fallback_qp
 
     def qp(self, hold: int) -> HorizonQP:
         """This core's QP for hold M: a clone of the process-wide template (own solver)."""
@@ -316,15 +455,17 @@ class _StopMpcBase(StatefulCore, Declared):
 
     # -- prediction and reference --------------------------------------------------------------
     def resistance(self, v: float, s: float) -> float:
-        """Known resistance a_r (m/s^2) for feedforward (ideal MPC only)."""
-        return self.p.davis.force(max(v, 0.0)) / self.p.mass + self.route.grade_accel(s)
+        """Known resistance a_r (m/s^2) fed forward: Davis + route grade (+ the observer's
+        estimate)."""
+        return (self.p.davis.force(max(v, 0.0)) / self.p.mass + self.route.grade_accel(s)
+                + self.d_hat)
 
     def delay_prediction(self, a_c: float, v: float, s: float) -> np.ndarray:
         """x_{0|k} = x(k+l) from the measurement and the commands still in the dead time."""
         m = self.model
         x = np.array([a_c, self.history[0], v, s])
         for u in self.history[1:]:
-            a_r = self.resistance(x[V], x[S]) if self.feedforward else 0.0
+            a_r = self.resistance(x[V], x[S]) if self.known_resistance else 0.0
             x = m.step_command(x, u, a_r)
         return x
 
@@ -344,8 +485,8 @@ class _StopMpcBase(StatefulCore, Declared):
         return ref
 
     def feedforward_profile(self, x0: np.ndarray, H: int) -> np.ndarray:
-        """a_r along the previous plan (shifted), for ideal MPC; zeros for the robust ones."""
-        if not self.feedforward:
+        """Known a_r along the previous plan (shifted); zeros without nominal resistance."""
+        if not self.known_resistance:
             return np.zeros(H)
         m = self.model
         plan = list(self.plan[1:]) + [0.0] * H
@@ -358,12 +499,12 @@ class _StopMpcBase(StatefulCore, Declared):
 
     # -- one QP --------------------------------------------------------------------------------
     def solve(self, hold: int, x0: np.ndarray, t: float) -> tuple[QPResult, np.ndarray]:
-        qp = self.qp(hold)
+        qp = self.qp(hold) if hold > 0 else self.fallback_qp()
         d = self.feedforward_profile(x0, qp.H)
-        a_r_ref = np.concatenate([d, d[-1:]]) if self.feedforward else None
+        a_r_ref = np.concatenate([d, d[-1:]]) if self.known_resistance else None
         ref = self.reference(t, qp.H, a_r_ref)
         warm = self.warm.get(hold)
-        res = qp.solve(x0, ref, d if self.feedforward else None,
+        res = qp.solve(x0, ref, d if self.known_resistance else None,
                        warm_x=None if warm is None else warm[0],
                        warm_y=None if warm is None else warm[1])
         self.qp_solves += 1
@@ -371,11 +512,19 @@ class _StopMpcBase(StatefulCore, Declared):
             self.warm[hold] = [res.U, res.dual]
         return res, ref
 
-    def fallback(self, x0: np.ndarray, t: float) -> float:
-        """Tube feedback law du = K (x - x_s), clipped to the bounds."""
+    def fallback(self, x0: np.ndarray, t: float) -> tuple[float, list[float], float]:
+        """Infeasible tightened problem: what a stopping controller in service does is keep
+        braking along the stopping curve within what the brake can do. Solve the same tracking
+        problem with the command bounds only (always feasible: ``du = 0`` is admissible); if
+        even that fails, the tube law ``du = K (x - x_s)`` clipped. Either way the command
+        stays in ``[u_min, u_max]`` and moves by at most ``du_max``, and the next event
+        retries the tightened problem. Returns (du_0, plan, solve time)."""
+        res, _ = self.solve(0, x0, t)
+        if res.feasible:
+            return float(res.du[0]), res.du.tolist(), res.solve_time
         ref = self.reference(t, 0)[0]
         du = float(self.K @ (x0 - ref))
-        return float(np.clip(du, -self.p.du_max, self.p.du_max))
+        return float(np.clip(du, -self.p.du_max, self.p.du_max)), [], res.solve_time
 
     # -- event ---------------------------------------------------------------------------------
     def choose(self, x0: np.ndarray, t: float) -> tuple[float, int, list[float], float]:
@@ -383,7 +532,8 @@ class _StopMpcBase(StatefulCore, Declared):
         res, _ = self.solve(1, x0, t)
         if not res.feasible:
             self.qp_infeasible += 1
-            return self.fallback(x0, t), 1, [], res.solve_time
+            du, plan, elapsed = self.fallback(x0, t)
+            return du, 1, plan, res.solve_time + elapsed
         return float(res.du[0]), 1, res.du.tolist(), res.solve_time
 
     def compute(self, t: float, inputs: dict[str, float]) -> tuple[dict[str, float], int]:
@@ -392,27 +542,57 @@ class _StopMpcBase(StatefulCore, Declared):
         if self.last_t is not None:  # the held command acted for the samples since last event
             elapsed = int(round((t - self.last_t) / m.sample_time))
             self.history = (self.history + [self.command] * elapsed)[-(m.delay_steps + 1):]
+            if self.observer:
+                self.observe(v, elapsed)
         else:
             self.anchor = [t, s]
         self.last_t = t
-        x0 = self.delay_prediction(a_c, v, s)
         ref_now = self.reference(t - m.delay_steps * m.sample_time, 0)[0]
         rest = ref_now[V] <= 0.0 or p.stop_point - s <= p.standstill_window
         if self.standstill or (v <= p.standstill_speed and rest):
             self.standstill = True
+            self.events_standstill += 1
+            # the QP is still solved, to count what the hold hides; its answer is not used
+            res, _ = self.solve(1, self.delay_prediction(a_c, v, s), t)
+            if not res.feasible:
+                self.qp_infeasible_after_stop += 1
             u = max(self.command, p.standstill_command)
             hold = self.max_hold
             self.plan = []
-            elapsed_s = 0.0
+            elapsed_s = res.solve_time
         else:
+            self.events_moving += 1
+            x0 = self.delay_prediction(a_c, v, s)
             du, hold, plan, elapsed_s = self.choose(x0, t)
             u = float(np.clip(x0[U_PREV] + du, p.u_min, p.u_max))
             self.plan = plan
         self.solve_times.append(elapsed_s)
+        if self.observer:  # what the next event compares its measured speed with
+            self.obs_x = [a_c, self.history[0], v, s]
+            self.obs_inputs = self.history[1:] + [u]
         self.command = u
         self.hold = int(hold)
         self.last_v_ref = self.curve.speed(s)
         return self.outputs(), self.hold
+
+    def observe(self, v: float, elapsed: int) -> None:
+        """One-state disturbance observer (offset-free option): predict the speed from the
+        last event's measurement with the nominal resistance plus ``d_hat`` and the plant inputs
+        since, then ``d_hat += L (v - v_pred) / (dv_pred/dd_hat)``, clipped to the spread
+        W. Frozen near standstill (the plant then is not the linear model: it cannot roll)."""
+        if self.obs_x is None or elapsed <= 0 or v <= self.p.standstill_speed:
+            return
+        m = self.model
+        x = np.array(self.obs_x, float)
+        sens = np.zeros(4)  # response of the state to a unit step of d_hat
+        inputs = (self.obs_inputs + [self.obs_inputs[-1]] * elapsed)[:elapsed]
+        for u in inputs:
+            x = m.step_command(x, u, self.resistance(x[V], x[S]))
+            sens = m.A @ sens + m.g
+        if x[V] <= self.p.standstill_speed or abs(sens[V]) < 1e-12:
+            return
+        d = self.d_hat + self.p.observer_gain * (v - x[V]) / sens[V]
+        self.d_hat = float(np.clip(d, *self.spread))
 
     def qp_solve_time_median(self) -> float:
         times = [x for x in self.solve_times if x > 0.0]
@@ -426,6 +606,10 @@ class _StopMpcBase(StatefulCore, Declared):
             "qp_infeasible": self.qp_infeasible,
             "qp_solve_time_median": self.qp_solve_time_median(),
             "hold_steps": self.hold,
+            "qp_infeasible_after_stop": self.qp_infeasible_after_stop,
+            "events_moving": self.events_moving,
+            "events_standstill": self.events_standstill,
+            "resistance_estimate": self.d_hat,
         }
 
 
@@ -454,9 +638,10 @@ class SelfTriggeredStopMpc(_StopMpcBase):
     def choose(self, x0: np.ndarray, t: float) -> tuple[float, int, list[float], float]:
         first, _ = self.solve(1, x0, t)
         elapsed = first.solve_time
-        if not first.feasible:
+        if not first.feasible:  # no hold is tried: M = 1 with the fallback, retried next sample
             self.qp_infeasible += 1
-            return self.fallback(x0, t), 1, [], elapsed
+            du, plan, more = self.fallback(x0, t)
+            return du, 1, plan, elapsed + more
         for hold in range(self.max_hold, 1, -1):
             res, _ = self.solve(hold, x0, t)
             elapsed += res.solve_time

@@ -6,7 +6,13 @@ Error ``e = v - v_ref(s)`` (m/s, positive when too fast); brake command (%)::
 
 clamped to ``[u_min, u_max]``. Anti-windup by conditional integration: the integral is frozen
 while the command is saturated in the direction the error would push it. The derivative acts on
-the error, by backward difference over the sample time.
+the error, by backward difference over the sample time. The feedforward stops at the stop point.
+
+``hold_at_stop_point`` (default true, not in the paper): once at or past the stop point, or at
+rest after the curve has ended, the feedforward becomes ``u_max`` (full brake), which is what
+stops the train near the point with the default gains. The plain PID (false) is the paper's
+baseline; it needs its own gains to stop inside the window (see the seed 000 scenario
+``seed000_stop_pid_plain`` and ``scenarios/reproduce/seed000.toml``).
 """
 
 from __future__ import annotations
@@ -36,6 +42,9 @@ class StopPidParams:
     u_min: float = u_min_param()
     u_max: float = u_max_param()
     sample_time: float = sample_time(0.2)
+    hold_at_stop_point: bool = param(True, description="full brake (u_max) once at or past "
+                                     "the stop point, or once stopped after the curve ended "
+                                     "(not in the paper; false: the plain PID)")
 
     def check(self) -> None:
         if not self.sample_time > 0:
@@ -78,7 +87,7 @@ class StopPid(StatefulCore, Declared):
         v_ref = self.curve.speed(s)
         error = v - v_ref
         u_ff = p.ref_decel / p.brake_gain if p.feedforward and s < p.stop_point else 0.0
-        if s >= p.stop_point or (v_ref == 0.0 and v <= 0.0):
+        if p.hold_at_stop_point and (s >= p.stop_point or (v_ref == 0.0 and v <= 0.0)):
             u_ff = p.u_max  # at or past the stop point: hold the train
         derivative = 0.0 if self.prev_error is None else (error - self.prev_error) / p.sample_time
         self.prev_error = error

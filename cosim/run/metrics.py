@@ -34,7 +34,8 @@ Always present: ``completed`` (False, with ``error``, for the partial results of
 interrupted run), ``sim_time_s``, ``wall_time_s``, ``real_time_factor``, ``algorithm``,
 ``do_steps``, ``executions``, ``fmu_wall_time_s``; controller counters (``qp_solves``,
 ``qp_infeasible``, ``qp_solve_time_median_s``; ``qp_solve_time_total_s`` and
-``qp_cpu_time_total_s``, the wall and CPU time of all solves of the run) when an FMU publishes
+``qp_cpu_time_total_s``, the wall and CPU time of all solves of the run;
+``qp_infeasible_after_stop``, ``events_moving``, ``events_standstill``) when an FMU publishes
 them; ``terminated_by``
 (``{instance, time}``) when an FMU ended the run itself (fmi2Discard with fmi2Terminated, FMI
 2.0.4 sec. 4.2.2; ``completed`` stays true).
@@ -102,6 +103,10 @@ def unit_indices(t: np.ndarray, speeds: np.ndarray, ref: np.ndarray,
         "unit_ma_mps_per_sample": ma,
         "ma_sample_time_s": float(ma_sample_time),
     }
+
+
+# event counters an FMU may publish (outputs of the same name), reported per FMU like qp_solves
+CONTROLLER_COUNTERS = ("qp_infeasible_after_stop", "events_moving", "events_standstill")
 
 
 def _count_changes(x: np.ndarray) -> int:
@@ -203,9 +208,12 @@ def compute_summary(result: Any) -> dict[str, Any]:
             for name in ("qp_solve_time_total", "qp_cpu_time_total"):  # whole-run compute
                 if name in outputs:
                     out.setdefault(f"{name}_s", {})[fmu] = float(outputs[name])
+        for key in CONTROLLER_COUNTERS:  # published by the seed 000 predictive controllers
+            if key in outputs:
+                out.setdefault(key, {})[fmu] = int(outputs[key])
     out["warnings"] = warnings(result)
     _flatten_single(out, ("qp_solves", "qp_infeasible", "qp_solve_time_median_s",
-                          "qp_solve_time_total_s", "qp_cpu_time_total_s"))
+                          "qp_solve_time_total_s", "qp_cpu_time_total_s", *CONTROLLER_COUNTERS))
     return out
 
 

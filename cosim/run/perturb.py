@@ -1,0 +1,255 @@
+"""Model-mismatch studies: a sweep whose runs draw seeded random plant parameters.
+
+``cosim sweep seed000_stop_rmpc --set controller.N=5,10 --perturb plant.mass=+-10%
+--perturb plant.brake_time_constant=0.3..0.6 --samples 50 --seed 1`` runs every scenario at
+every grid point with the same ``samples`` parameter draws (common random numbers: the
+controllers are compared on the same plants). Only the perturbed parameters change; the
+controllers keep their nominal parameters. Forms of ``--perturb KEY=SPEC``:
+
+* ``+-10%``: uniform within 10 % of the nominal value (the scenario's, else the FMU's start);
+* ``+-0.05``: uniform within 0.05 (in the parameter's unit) of the nominal value;
+* ``0.3..0.6``: uniform in ``[0.3, 0.6]``.
+
+Draws: ``numpy.random.default_rng(seed)``, one uniform per sample and key, keys in the order
+given. Writes ``perturb.csv`` (one row per run: scenario, grid values, sample, drawn values,
+the summary figures, the command's least and largest value), ``perturb_summary.csv`` (per
+scenario and grid point: the stop-error distribution, runs inside the stop window, executions,
+infeasible counts) and ``perturb.png`` (box plots of stop error and executions).
+"""
+
+from __future__ import annotations
+
+import math
+import multiprocessing
+import os
+from collections.abc import Iterable, Sequence
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from cosim.run.sweep import STOP_WINDOW_M, SUMMARY_COLUMNS, grid_points
+
+COUNTERS = ("qp_infeasible_after_stop", "events_moving", "events_standstill")
+
+
+@dataclass(frozen=True)
+class Perturbation:
+    """One perturbed parameter: ``kind`` is "relative" (fraction), "absolute" or "range"."""
+
+    key: str
+    kind: str
+    a: float  # relative/absolute: half-width; range: low
+    b: float = math.nan  # range: high
+
+    def interval(self, nominal: float | None) -> tuple[float, float]:
+        if self.kind == "range":
+            return self.a, self.b
+        if nominal is None:
+            raise ValueError(f"--perturb {self.key}: no nominal value to perturb around")
+        half = abs(nominal) * self.a if self.kind == "relative" else self.a
+        return nominal - half, nominal + half
+
+
+def parse_perturb(items: Iterable[str]) -> list[Perturbation]:
+    """``["plant.mass=+-10%", "plant.brake_delay=0.8..1.2"]`` -> perturbations (errors name the
+    item)."""
+    out: list[Perturbation] = []
+    for item in items:
+        key, sep, spec = item.partition("=")
+        key, spec = key.strip(), spec.strip().replace(" ", "")
+        if not sep or "." not in key or not spec:
+            raise ValueError(f"--perturb {item!r}: expected FMU.PARAMETER=SPEC, e.g. "
+                             f"plant.mass=+-10% or plant.brake_time_constant=0.3..0.6")
+        try:
+            if spec.startswith("+-") and spec.endswith("%"):
+                p = Perturbation(key, "relative", float(spec[2:-1]) / 100.0)
+            elif spec.startswith("+-"):
+                p = Perturbation(key, "absolute", float(spec[2:]))
+            elif ".." in spec:
+                lo, _, hi = spec.partition("..")
+                p = Perturbation(key, "range", float(lo), float(hi))
+            else:
+                raise ValueError
+        except ValueError as err:
+            raise ValueError(f"--perturb {item!r}: SPEC must be +-X%, +-X or LOW..HIGH") from err
+        if p.kind != "range" and not p.a >= 0:
+            raise ValueError(f"--perturb {item!r}: the half-width must be >= 0")
+        if p.kind == "range" and not p.a <= p.b:
+            raise ValueError(f"--perturb {item!r}: empty range {p.a}..{p.b}")
+        if any(q.key == key for q in out):
+            raise ValueError(f"--perturb {item!r}: {key} is perturbed twice")
+        out.append(p)
+    return out
+
+
+def nominal_values(scenario: str | Path, keys: Sequence[str]) -> dict[str, float | None]:
+    """The value each ``FMU.parameter`` has in the scenario, else the FMU's start value."""
+    from fmpy import read_model_description
+
+    from cosim.run.scenario import ScenarioError, load_scenario
+
+    sc = load_scenario(scenario)
+    out: dict[str, float | None] = {}
+    starts: dict[str, dict[str, Any]] = {}
+    for key in keys:
+        comp_name, _, name = key.partition(".")
+        comp = sc.components.get(comp_name)
+        if comp is None:
+            raise ScenarioError(f"{sc.path}: --perturb {key}: no FMU named {comp_name!r} "
+                                f"(scenario has {sorted(sc.components)})")
+        if name in comp.parameters:
+            out[key] = float(comp.parameters[name])
+            continue
+        if comp_name not in starts:
+            md = read_model_description(str(comp.fmu_path))
+            starts[comp_name] = {v.name: v.start for v in md.modelVariables}
+        if name not in starts[comp_name]:
+            raise ScenarioError(f"{sc.path}: --perturb {key}: {comp.fmu} has no variable "
+                                f"{name!r}")
+        start = starts[comp_name][name]
+        out[key] = None if start is None else float(start)
+    return out
+
+
+def draw_samples(perts: Sequence[Perturbation], nominals: dict[str, float | None],
+                 samples: int, seed: int) -> list[dict[str, float]]:
+    """``samples`` dicts ``{key: value}``, uniform in each perturbation's interval."""
+    if samples < 1:
+        raise ValueError(f"--samples {samples}: must be >= 1")
+    rng = np.random.default_rng(seed)
+    intervals = [(p.key, *p.interval(nominals.get(p.key))) for p in perts]
+    return [{key: float(rng.uniform(lo, hi)) for key, lo, hi in intervals}
+            for _ in range(samples)]
+
+
+def _run_sample(scenario: str, point: dict[str, Any], index: int,
+                draw: dict[str, float]) -> dict[str, Any]:
+    """One perturbed run in a worker: the drawn values, summary figures and command range."""
+    from cosim.run.master import run_scenario
+
+    result = run_scenario(scenario, overrides={**point, **draw}, build=False, plot=False)
+    summary = result.summary
+    row: dict[str, Any] = {"scenario": Path(str(scenario)).stem, **point, "sample": index,
+                           **draw}
+    for key in (*SUMMARY_COLUMNS, *COUNTERS):
+        value = summary.get(key)
+        row[key] = value if not isinstance(value, dict) else None
+    execs = summary.get("executions", {})
+    row["controller_executions"] = execs.get("controller") if isinstance(execs, dict) else None
+    command = result.scenario.summary.get("command")
+    if isinstance(command, str) and command in result.frame:
+        series = result.frame[command].to_numpy(dtype=float)
+        row["command_min"], row["command_max"] = float(series.min()), float(series.max())
+    row["completed"] = summary.get("completed")
+    return row
+
+
+def run_perturbed(scenario: str | Sequence[str], grid: dict[str, Sequence[Any]],
+                  perts: Sequence[Perturbation], samples: int, seed: int,
+                  out_dir: str | Path | None = None, workers: int | None = None,
+                  plot: bool = True) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """Every scenario at every grid point on the same ``samples`` draws, in ``workers``
+    processes. Returns (one row per run, one row per scenario and grid point)."""
+    from cosim.run.master import ensure_built
+    from cosim.run.scenario import ScenarioError, find_scenario, load_scenario
+
+    scenarios = [scenario] if isinstance(scenario, (str, Path)) else list(scenario)
+    if not scenarios or not perts:
+        raise ValueError("run_perturbed: no scenario or no perturbation given")
+    points = grid_points(grid) if grid else [{}]
+    paths = [str(find_scenario(s)) for s in scenarios]
+    draws: list[dict[str, float]] | None = None
+    for path in paths:
+        ensure_built(load_scenario(path, {**points[0]}))
+        nominals = nominal_values(path, [p.key for p in perts])
+        these = draw_samples(perts, nominals, samples, seed)
+        if draws is None:
+            draws = these
+        elif any(p.kind != "range" for p in perts) and these != draws:
+            raise ScenarioError(f"{path}: its nominal plant differs from {paths[0]}'s: the "
+                                f"samples would not be the same plants")
+    assert draws is not None
+    for path in paths:  # fail early on a bad key or value
+        load_scenario(path, {**points[0], **draws[0]})
+    jobs = [(path, point, i, d) for path in paths for point in points
+            for i, d in enumerate(draws)]
+    workers = max(1, min(workers or os.cpu_count() or 1, len(jobs)))
+    if workers == 1:
+        rows = [_run_sample(*job) for job in jobs]
+    else:
+        ctx = multiprocessing.get_context("spawn")
+        with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
+            rows = [f.result() for f in [pool.submit(_run_sample, *job) for job in jobs]]
+    frame = pd.DataFrame(rows)
+    table = summarize(frame, list(grid))
+    if out_dir is not None:
+        out = Path(out_dir)
+        out.mkdir(parents=True, exist_ok=True)
+        frame.to_csv(out / "perturb.csv", index=False)
+        table.to_csv(out / "perturb_summary.csv", index=False)
+        if plot:
+            plot_perturbed(frame, list(grid), out / "perturb.png")
+    return frame, table
+
+
+def summarize(frame: pd.DataFrame, keys: list[str]) -> pd.DataFrame:
+    """Per scenario and grid point: stop error distribution, window hits, executions,
+    infeasible counts (sum over the runs and the largest in one run)."""
+    rows = []
+    for label, group in frame.groupby(["scenario", *keys], sort=False):
+        label = label if isinstance(label, tuple) else (label,)
+        err = group["stop_error_m"].astype(float)
+        row: dict[str, Any] = dict(zip(["scenario", *keys], label, strict=True))
+        row.update({
+            "runs": len(group),
+            "stop_error_min_m": err.min(), "stop_error_median_m": err.median(),
+            "stop_error_max_m": err.max(), "max_abs_stop_error_m": err.abs().max(),
+            "inside_window": int((err.abs() <= STOP_WINDOW_M).sum()),
+            "executions_median": group["controller_executions"].median(),
+            "executions_max": group["controller_executions"].max(),
+        })
+        for col in ("qp_infeasible", "qp_infeasible_after_stop"):
+            if col in group and group[col].notna().any():
+                row[f"{col}_total"] = int(group[col].fillna(0).sum())
+                row[f"{col}_max"] = int(group[col].fillna(0).max())
+        if "command_min" in group:
+            row["command_min"] = group["command_min"].min()
+            row["command_max"] = group["command_max"].max()
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def plot_perturbed(frame: pd.DataFrame, keys: list[str], path: str | Path) -> None:
+    """Box plots of stop error (cm, with the +-50 cm window) and controller executions, one box
+    per scenario and grid point."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    groups = list(frame.groupby(["scenario", *keys], sort=False))
+    labels = []
+    for label, _ in groups:
+        label = label if isinstance(label, tuple) else (label,)
+        name = str(label[0]).replace("seed000_stop_", "")
+        labels.append("\n".join([name] + [f"{k.rpartition('.')[2]}={v}"
+                                          for k, v in zip(keys, label[1:], strict=True)]))
+    fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(max(6.0, 1.1 * len(groups) + 2), 7),
+                                   sharex=True)
+    ax1.boxplot([100.0 * g["stop_error_m"].astype(float) for _, g in groups], showfliers=True)
+    for sign in (-1, 1):
+        ax1.axhline(sign * 100 * STOP_WINDOW_M, color="red", linestyle=":", linewidth=1)
+    ax1.set_ylabel("stop error (cm)")
+    ax1.set_title(f"Stop error under plant mismatch ({len(groups[0][1])} samples per box)")
+    ax1.grid(True, alpha=0.3)
+    ax2.boxplot([g["controller_executions"].astype(float) for _, g in groups])
+    ax2.set_ylabel("controller executions")
+    ax2.set_xticks(range(1, len(groups) + 1), labels, fontsize=8)
+    ax2.grid(True, alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
