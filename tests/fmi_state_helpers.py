@@ -15,3 +15,32 @@ def rerun_after_restore(instances: list, step, k_save: int, k_end: int) -> tuple
         inst.fmu.setFMUstate(inst.fmu.deSerializeFMUstate(blob))
     second = [step(k) for k in range(k_save, k_end)]
     return first, second
+
+
+class FmuInstance:
+    """An initialised fmpy instance of an FMU file with parameters set by type
+    (``strings``, ``reals``, ``ints``); ``get``/``set`` read and write Reals by name."""
+
+    def __init__(self, path: str, name: str, strings: dict | None = None,
+                 reals: dict | None = None, ints: dict | None = None) -> None:
+        from fmpy import extract, read_model_description
+        from fmpy.fmi2 import FMU2Slave
+
+        md = read_model_description(path)
+        self.vr = {v.name: v.valueReference for v in md.modelVariables}
+        self.fmu = FMU2Slave(guid=md.guid, unzipDirectory=extract(path), instanceName=name,
+                             modelIdentifier=md.coSimulation.modelIdentifier)
+        self.fmu.instantiate()
+        self.fmu.setupExperiment(startTime=0.0)
+        self.fmu.enterInitializationMode()
+        for values, setter in ((strings, self.fmu.setString), (reals, self.fmu.setReal),
+                               (ints, self.fmu.setInteger)):
+            for k, v in (values or {}).items():
+                setter([self.vr[k]], [v])
+        self.fmu.exitInitializationMode()
+
+    def get(self, names: list[str]) -> list[float]:
+        return self.fmu.getReal([self.vr[n] for n in names])
+
+    def set(self, names: list[str], values: list[float]) -> None:
+        self.fmu.setReal([self.vr[n] for n in names], values)

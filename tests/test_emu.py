@@ -7,7 +7,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from fmi_state_helpers import rerun_after_restore
+from fmi_state_helpers import FmuInstance, rerun_after_restore
 from scipy.integrate import solve_ivp
 
 from cosim.fmu.state import to_ticks
@@ -267,30 +267,8 @@ def test_emu_fmus_close_the_loop_through_the_master(built_fmus) -> None:
 
 def test_emu_fmus_serialized_state_reproduces_the_rest_of_the_run(built_fmus) -> None:
     """Emu3 (with noise) + EmuSpeedPid3: serialize both states mid-run, finish, restore, rerun."""
-    from fmpy import extract, read_model_description
-    from fmpy.fmi2 import FMU2Slave
-
-    class Inst:
-        def __init__(self, ident: str, strings: dict[str, str], reals: dict[str, float]):
-            path = str(built_fmus[ident].path)
-            md = read_model_description(path)
-            self.vr = {v.name: v.valueReference for v in md.modelVariables}
-            self.fmu = FMU2Slave(guid=md.guid, unzipDirectory=extract(path), instanceName=ident,
-                                 modelIdentifier=md.coSimulation.modelIdentifier)
-            self.fmu.instantiate()
-            self.fmu.setupExperiment(startTime=0.0)
-            self.fmu.enterInitializationMode()
-            for k, v in strings.items():
-                self.fmu.setString([self.vr[k]], [v])
-            for k, v in reals.items():
-                self.fmu.setReal([self.vr[k]], [v])
-            self.fmu.exitInitializationMode()
-
-        def get(self, names: list[str]) -> list[float]:
-            return self.fmu.getReal([self.vr[n] for n in names])
-
-        def set(self, names: list[str], values: list[float]) -> None:
-            self.fmu.setReal([self.vr[n] for n in names], values)
+    def Inst(ident: str, strings: dict, reals: dict) -> FmuInstance:  # noqa: N802
+        return FmuInstance(str(built_fmus[ident].path), ident, strings, reals=reals)
 
     plant = Inst("Emu3", {"configuration": "crh3_3car", "route": "seed004_level"},
                  {"disturbance_accel_std": 0.05})
