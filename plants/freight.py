@@ -87,7 +87,7 @@ import numpy as np
 from scipy.linalg import solveh_banded
 
 from cosim.fmu.declare import Declared, Var, build, param, parameters
-from cosim.fmu.state import StatefulCore, to_seconds, to_ticks
+from cosim.fmu.state import TICKS_PER_SECOND, StatefulCore, to_seconds, to_ticks
 from plants import dead_time, kernels
 from plants.route import (
     GRAVITY,
@@ -326,6 +326,8 @@ class FreightTrain(StatefulCore, Declared):
             xs, cum = self._additional._cumulative
             self._route_arrays = (xs, cum, np.diff(cum) / np.diff(xs))
             self._hints = (np.zeros(n, dtype=np.int64), np.zeros(n, dtype=np.int64))
+            self._work = np.zeros((kernels.N_WORK, n))
+            self._no_arrivals = np.zeros((1, n))
             self._constants = np.array([
                 p.stiction_speed, p.coupler_stiffness, p.coupler_damping, p.coupler_slack,
                 float(p.traction_model), p.traction_time_constant,
@@ -580,16 +582,27 @@ class FreightTrain(StatefulCore, Declared):
     def _advance_compiled(self, t_ticks: int, cuts: list[int]) -> None:
         """The sub-steps ending at ``cuts`` in one kernel call (same grid and inputs as the
         reference loop: delayed demand per sub-step start, brake commands with arrivals)."""
-        starts = [t_ticks] + cuts[:-1]
-        t0s = np.array([to_seconds(a) for a in starts])
-        t1s = np.array([to_seconds(b) for b in cuts])
-        hs = np.array([to_seconds(b - a) for a, b in zip(starts, cuts)])
-        demands = np.array([self.delayed_demand(a) for a in starts])
+        ends = np.array(cuts, dtype=np.int64)
+        starts = np.empty_like(ends)
+        starts[0] = t_ticks
+        starts[1:] = ends[:-1]
+        # int64 ns -> s: exact conversion, one rounded division, as to_seconds
+        t0s = starts / TICKS_PER_SECOND
+        t1s = ends / TICKS_PER_SECOND
+        hs = (ends - starts) / TICKS_PER_SECOND
+        history = self.traction_history
+        if len(history) == 1:
+            demands = np.full(ends.size, history[0][1])
+        else:  # dead_time.delayed at every sub-step start
+            ticks = np.array([h[0] for h in history], dtype=np.int64)
+            index = np.searchsorted(ticks, starts - self._delay_ticks, side="right") - 1
+            demands = np.array([h[1] for h in history])[np.maximum(index, 0)]
         if len(self.brake_history) == 1:
-            arrivals = np.zeros((1, self.x.size))
+            arrivals = self._no_arrivals
             values = np.array([self.brake_history[0][1]])
         else:
             arrivals, values = self._arrivals()
+            arrivals, values = np.ascontiguousarray(arrivals), np.ascontiguousarray(values)
         scalars = np.array([self.traction_force, self.energy, 0.0, 0.0, self.accel, 0.0,
                             float(self.held)])
         x, v, pressure = self.x.copy(), self.v.copy(), self.pressure.copy()
@@ -597,13 +610,14 @@ class FreightTrain(StatefulCore, Declared):
                               arrivals, values, self.m_eff, self.length,
                               self.res_a, self.res_b, self.res_c, self.weight_per_kn,
                               self.brake_scale, *self._route_arrays, *self._hints,
-                              self._constants)
+                              self._constants, self._work)
         self.x, self.v, self.pressure = x, v, pressure
-        self.traction_force, self.energy = float(scalars[0]), float(scalars[1])
-        self.peak_draft, self.peak_buff = float(scalars[2]), float(scalars[3])
-        self.accel = float(scalars[4])
-        del self.brake_history[:int(scalars[5])]
-        self.held = bool(scalars[6])
+        traction, energy, draft, buff, accel, first, held = scalars.tolist()
+        self.traction_force, self.energy = traction, energy
+        self.peak_draft, self.peak_buff, self.accel = draft, buff, accel
+        if first:
+            del self.brake_history[:int(first)]
+        self.held = bool(held)
 
     def outputs(self) -> dict[str, float]:
         x, v = self.x, self.v

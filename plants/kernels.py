@@ -186,9 +186,12 @@ def _coupler(gap, dv, cp):
     return k, c, 0.0
 
 
-_F = "float64[:]"
-_FREIGHT_SIGNATURE = (f"void({', '.join([_F] * 8)}, float64[:, :], {', '.join([_F] * 11)}, "
-                      f"int64[:], int64[:], {_F})")
+_F = "float64[::1]"  # C-contiguous: unit-stride loads, no stride arithmetic per access
+_FREIGHT_SIGNATURE = (f"void({', '.join([_F] * 8)}, float64[:, ::1], {', '.join([_F] * 11)}, "
+                      f"int64[::1], int64[::1], {_F}, float64[:, ::1])")
+# rows of the freight kernel's work array (n columns; allocated once per train)
+W_START, W_MEAN_P, W_Y, W_W, W_DIAG, W_CPRIME, W_RPRIME, W_V1 = range(8)
+N_WORK = 8
 
 
 @njit
@@ -209,71 +212,94 @@ def _freight_holds(traction, mean_p, braking, x, length, weight_per_kn, brake_sc
     return abs(traction + grade) <= capacity
 
 
+@njit
+def _freight_brakes(pres, start, mean_p, t0, t1, arrivals, values, targets, first, cp):
+    """Cylinder pressures over ``[t0, t1]`` (eq. 9), in place; ``mean_p`` their mean over the
+    sub-step. Returns (any pressure applied, oldest command still travelling)."""
+    n = pres.size
+    K = values.size
+    for i in range(n):
+        start[i] = pres[i]
+    if K - first == 1:
+        target = targets[first]
+        same = True
+        for i in range(n):
+            if pres[i] != target:
+                same = False
+                break
+        if not same:
+            for i in range(n):
+                pres[i] = _evolve(pres[i], target, t1 - t0, cp)
+    else:
+        newest = K
+        for i in range(n):
+            idx0 = first
+            idx1 = first
+            for k in range(first + 1, K):
+                if arrivals[k, i] <= t0:
+                    idx0 = k
+                if arrivals[k, i] <= t1:
+                    idx1 = k
+            switch = min(max(arrivals[idx1, i], t0), t1)
+            mid = _evolve(pres[i], targets[idx0], switch - t0, cp)
+            pres[i] = _evolve(mid, targets[idx1], t1 - switch, cp)
+            newest = min(newest, idx1)
+        if newest > first:
+            first = newest
+    braking = False
+    for i in range(n):
+        mean_p[i] = 0.5 * (start[i] + pres[i])
+        if mean_p[i] != 0.0:
+            braking = True
+    return braking, first
+
+
 @njit_eager(_FREIGHT_SIGNATURE)
 def freight_steps(x, v, pres, sc, hs, t0s, t1s, demands, arrivals, values, m_eff, length,
                   res_a, res_b, res_c, weight_per_kn, brake_scale, xs, cum, slopes, hint_f,
-                  hint_r, cp):
+                  hint_r, cp, work):
     """Advance the freight train over the sub-steps ``hs`` (s) from ``t0s`` to ``t1s``.
 
     ``x``, ``v``, ``pres`` (per vehicle) and ``sc`` (scalars, ``S_*``) are updated in place;
     ``demands`` is the delayed traction demand per sub-step; ``arrivals[k, i]`` the time the
     brake-pipe command ``k`` (reduction ``values[k]``) reaches vehicle ``i``; commands before
     ``sc[S_FIRST]`` are forgotten (all vehicles passed them). Peaks are reset by the caller.
+    ``work`` (``N_WORK`` x n) is scratch space: nothing is allocated per sub-step.
+
+    Per sub-step: one pass builds each vehicle's force (resistance, brake, route at the
+    predicted mid-point, traction, couplers at the start) and runs the forward sweep of the
+    Thomas algorithm on the trapezoidal system; one pass substitutes back; one updates the
+    positions and momentum; one the speeds and coupler peaks. Without slack the system matrix
+    depends only on the sub-step, so its factorisation (diagonal, ``c'``) is computed once per
+    distinct sub-step length of the call. The floating-point operations are those of the
+    numpy reference, in its order, except for the tridiagonal solve.
     """
     n = x.size
     K = values.size
     first = int(sc[S_FIRST])
     f_trac = sc[S_TRACTION]
-    force = np.empty(n)
-    start = np.empty(n)
-    mean_p = np.empty(n)
-    gap = np.empty(max(n - 1, 0))
-    dv = np.empty(max(n - 1, 0))
-    w = np.empty(max(n - 1, 0))
-    cprime = np.empty(n)
-    rprime = np.empty(n)
-    v1 = np.empty(n)
+    start = work[W_START]
+    mean_p = work[W_MEAN_P]
+    y = work[W_Y]
+    w = work[W_W]
+    diag = work[W_DIAG]
+    cprime = work[W_CPRIME]
+    rprime = work[W_RPRIME]
+    v1 = work[W_V1]
+    targets = np.empty(K)  # target pressure of every command, once per call
+    for k in range(first, K):
+        targets[k] = _target_pressure(values[k], cp)
     m_total = 0.0
     for i in range(n):
         m_total += m_eff[i]
     stiction = cp[C_STICTION]
+    slackless = not cp[C_SLACK] > 0
+    factored_h = -1.0  # sub-step length the cached factorisation is for
     for s in range(hs.size):
         h, t0, t1 = hs[s], t0s[s], t1s[s]
         f1, f_mean = _traction(f_trac, demands[s], v[0], h, cp)
-        # air brake: cylinder pressures over [t0, t1], mean over the sub-step
-        for i in range(n):
-            start[i] = pres[i]
-        if K - first == 1:
-            target = _target_pressure(values[first], cp)
-            same = True
-            for i in range(n):
-                if pres[i] != target:
-                    same = False
-                    break
-            if not same:
-                for i in range(n):
-                    pres[i] = _evolve(pres[i], target, t1 - t0, cp)
-        else:
-            newest = K
-            for i in range(n):
-                idx0 = first
-                idx1 = first
-                for k in range(first + 1, K):
-                    if arrivals[k, i] <= t0:
-                        idx0 = k
-                    if arrivals[k, i] <= t1:
-                        idx1 = k
-                switch = min(max(arrivals[idx1, i], t0), t1)
-                mid = _evolve(pres[i], _target_pressure(values[idx0], cp), switch - t0, cp)
-                pres[i] = _evolve(mid, _target_pressure(values[idx1], cp), t1 - switch, cp)
-                newest = min(newest, idx1)
-            if newest > first:
-                first = newest
-        braking = False
-        for i in range(n):
-            mean_p[i] = 0.5 * (start[i] + pres[i])
-            if mean_p[i] != 0.0:
-                braking = True
+        braking, first = _freight_brakes(pres, start, mean_p, t0, t1, arrivals, values,
+                                         targets, first, cp)
         if sc[S_HELD] != 0.0:  # at rest: stays while the brakes hold it
             if _freight_holds(f_mean, mean_p, braking, x, length, weight_per_kn, brake_scale,
                               res_a, xs, cum, slopes, hint_f, hint_r):
@@ -281,7 +307,17 @@ def freight_steps(x, v, pres, sc, hs, t0s, t1s, demands, arrivals, values, m_eff
                 sc[S_ACCEL] = 0.0
                 continue
             sc[S_HELD] = 0.0
-        # resistance, brake and route forces at the sub-step start / predicted mid-point
+        # couplers: trapezoidal rule, engagement (slack) fixed at the sub-step start;
+        # y_j enters vehicle j with - and j+1 with +, w_j couples their new speeds
+        for j in range(n - 1):
+            gap = x[j] - length[j] - x[j + 1]
+            dv = v[j] - v[j + 1]
+            k, c, off = _coupler(gap, dv, cp)
+            y[j] = k * (gap - off) + (0.25 * h * k + 0.5 * c) * dv
+            w[j] = 0.25 * h * h * k + 0.5 * h * c
+        refactor = not slackless or h != factored_h
+        factored_h = h
+        # forces and forward sweep of (diag(m) + W-Laplacian) v1 = m v0 + h force
         for i in range(n):
             speed = abs(v[i])
             diss = res_a[i] + (res_b[i] + res_c[i] * speed) * speed
@@ -293,32 +329,27 @@ def freight_steps(x, v, pres, sc, hs, t0s, t1s, demands, arrivals, values, m_eff
             front = x[i] + 0.5 * h * v[i]
             c_front, hint_f[i] = _interp(front, xs, cum, slopes, hint_f[i])
             c_rear, hint_r[i] = _interp(front - length[i], xs, cum, slopes, hint_r[i])
-            force[i] = -diss * direction - weight_per_kn[i] * ((c_front - c_rear) / length[i])
-        force[0] += f_mean
-        # couplers: trapezoidal rule, engagement (slack) fixed at the sub-step start
-        for j in range(n - 1):
-            gap[j] = x[j] - length[j] - x[j + 1]
-            dv[j] = v[j] - v[j + 1]
-            k, c, off = _coupler(gap[j], dv[j], cp)
-            y = k * (gap[j] - off) + (0.25 * h * k + 0.5 * c) * dv[j]
-            force[j] -= y
-            w[j] = 0.25 * h * h * k + 0.5 * h * c
-        for j in range(n - 1):
-            k, c, off = _coupler(gap[j], dv[j], cp)
-            force[j + 1] += k * (gap[j] - off) + (0.25 * h * k + 0.5 * c) * dv[j]
-        # (diag(m) + W-Laplacian) v1 = m v0 + h force: Thomas algorithm
-        for i in range(n):
-            diag = m_eff[i]
-            if i > 0:
-                diag += w[i - 1]
+            force = -diss * direction - weight_per_kn[i] * ((c_front - c_rear) / length[i])
+            if i == 0:
+                force += f_mean
             if i < n - 1:
-                diag += w[i]
-            rhs = m_eff[i] * v[i] + h * force[i]
+                force -= y[i]
             if i > 0:
-                diag += w[i - 1] * cprime[i - 1]
+                force += y[i - 1]
+            rhs = m_eff[i] * v[i] + h * force
+            if refactor:
+                d = m_eff[i]
+                if i > 0:
+                    d += w[i - 1]
+                if i < n - 1:
+                    d += w[i]
+                if i > 0:
+                    d += w[i - 1] * cprime[i - 1]
+                diag[i] = d
+                cprime[i] = -w[i] / d if i < n - 1 else 0.0
+            if i > 0:
                 rhs += w[i - 1] * rprime[i - 1]
-            cprime[i] = -w[i] / diag if i < n - 1 else 0.0
-            rprime[i] = rhs / diag
+            rprime[i] = rhs / diag[i]
         v1[n - 1] = rprime[n - 1]
         for i in range(n - 2, -1, -1):
             v1[i] = rprime[i] - cprime[i] * v1[i + 1]
@@ -334,19 +365,24 @@ def freight_steps(x, v, pres, sc, hs, t0s, t1s, demands, arrivals, values, m_eff
         hold = abs(mean_v1 / m_total) <= stiction and _freight_holds(
             f1, mean_p, braking, x, length, weight_per_kn, brake_scale, res_a, xs, cum, slopes,
             hint_f, hint_r)
-        for i in range(n):  # the regularised friction alone would let a braked train creep
-            v[i] = 0.0 if hold else v1[i]
         if hold:
             sc[S_HELD] = 1.0
-        for j in range(n - 1):
-            g = x[j] - length[j] - x[j + 1]
-            d = v[j] - v[j + 1]
-            k, c, off = _coupler(g, d, cp)
-            fc = k * (g - off) + c * d
-            if fc > sc[S_PEAK_DRAFT]:
-                sc[S_PEAK_DRAFT] = fc
-            if -fc > sc[S_PEAK_BUFF]:
-                sc[S_PEAK_BUFF] = -fc
+        peak_draft = sc[S_PEAK_DRAFT]
+        peak_buff = sc[S_PEAK_BUFF]
+        for i in range(n):  # the regularised friction alone would let a braked train creep
+            v[i] = 0.0 if hold else v1[i]
+            if i > 0:
+                j = i - 1
+                g = x[j] - length[j] - x[i]
+                d = v[j] - v[i]
+                k, c, off = _coupler(g, d, cp)
+                fc = k * (g - off) + c * d
+                if fc > peak_draft:
+                    peak_draft = fc
+                if -fc > peak_buff:
+                    peak_buff = -fc
+        sc[S_PEAK_DRAFT] = peak_draft
+        sc[S_PEAK_BUFF] = peak_buff
     sc[S_TRACTION] = f_trac
     sc[S_FIRST] = first
 
@@ -426,9 +462,10 @@ def _emu_holds(u, x, offsets, lengths, m, da, ft, pt, fb, pb, xs, cum, slopes, h
     return abs(pos - rf) <= neg + dsum
 
 
+_FA = "float64[:]"  # the EMU kernels take any layout (3 units: no gain)
 _F2 = "float64[:, :]"
-_EMU_SIGNATURE = (f"void({', '.join([_F] * 4)}, float64, {', '.join([_F2] * 5)}, "
-                  f"{', '.join([_F] * 14)}, int64[:], int64[:], {_F}, {_F}, int64[:], {_F})")
+_EMU_SIGNATURE = (f"void({', '.join([_FA] * 4)}, float64, {', '.join([_F2] * 5)}, "
+                  f"{', '.join([_FA] * 14)}, int64[:], int64[:], {_FA}, {_FA}, int64[:], {_FA})")
 
 
 @njit_eager(_EMU_SIGNATURE)
@@ -521,9 +558,9 @@ def emu_steps(x, v, sc, u, h, noise, phi, gamma, hphi, hgamma, m, offsets, lengt
                 sc[EMU_HELD] = 1.0
 
 
-_EMU_OUT_SIGNATURE = (f"void({', '.join([_F] * 4)}, float64, {', '.join([_F] * 15)}, "
-                      f"int64[:], int64[:], {_F}, {_F}, int64[:], {_F}, "
-                      f"{', '.join([_F] * 6)})")
+_EMU_OUT_SIGNATURE = (f"void({', '.join([_FA] * 4)}, float64, {', '.join([_FA] * 15)}, "
+                      f"int64[:], int64[:], {_FA}, {_FA}, int64[:], {_FA}, "
+                      f"{', '.join([_FA] * 6)})")
 
 
 @njit_eager(_EMU_OUT_SIGNATURE)

@@ -185,6 +185,10 @@ class CoreSlave(Fmi2Slave):
             if var.causality in ("parameter", "input"):
                 self.values[var.name] = var.start
         self._by_name = {v.name: v for v in self.variables}
+        self._input_names = tuple(v.name for v in self.variables if v.causality == "input")
+        # value reference -> name of each Real output: get_real reads them in one pass
+        self._real_outputs = {vr: v.name for vr, v in enumerate(self.variables)
+                              if v.causality == "output" and v.type is float}
         for var in self.variables:
             self._register(var)
 
@@ -272,7 +276,8 @@ class CoreSlave(Fmi2Slave):
         """Make ``self.outputs`` current (plants: from state; controllers: run a due event)."""
 
     def inputs(self) -> dict[str, Any]:
-        return {v.name: self.values[v.name] for v in self.variables if v.causality == "input"}
+        values = self.values
+        return {name: values[name] for name in self._input_names}
 
     def ensure_core(self) -> None:
         if self.core is None:
@@ -287,6 +292,22 @@ class CoreSlave(Fmi2Slave):
         self.outputs = dict(self.core_outputs())
 
     # -- FMI calls -----------------------------------------------------------------------------
+    def get_real(self, vrs: list[int]) -> list[float]:
+        """Real outputs in one pass: the outputs are made current once per call, not once per
+        variable (a plant's 100+ recorded outputs cost one dict lookup each); any other
+        variable (or a bad reference) goes through pythonfmu's generic path."""
+        outputs = self._real_outputs
+        try:
+            names = [outputs[vr] for vr in vrs]
+        except (KeyError, TypeError):
+            return super().get_real(vrs)
+        if not names:
+            return []
+        self.ensure_core()
+        self.refresh_outputs()
+        values = self.outputs
+        return [float(values[name]) for name in names]
+
     def __init_subclass__(cls, **kwargs: Any) -> None:
         super().__init_subclass__(**kwargs)
         if cls.core_class is not None and "variables" not in cls.__dict__:
@@ -330,7 +351,7 @@ class CoreSlave(Fmi2Slave):
             "fmu": self.modelName,
             "values": copy.deepcopy(self.values),
             "slave": copy.deepcopy(self.slave_state()),
-            "core": self.core.get_state(),
+            "core": self.core_state(),
             "outputs": copy.deepcopy(self.outputs),
             "executions": self.executions,
             "initialized": self.initialized,
@@ -354,6 +375,10 @@ class CoreSlave(Fmi2Slave):
         self.executions = state["executions"]
         self.initialized = state["initialized"]
         self.mode = state.get("mode", "initialized" if self.initialized else "instantiated")
+
+    def core_state(self) -> Any:
+        """The core state an FMU state holds (a copy)."""
+        return self.core.get_state()
 
     def slave_state(self) -> dict[str, Any]:
         return {}
@@ -486,7 +511,7 @@ class PlantSlave(CoreSlave):
             if isinstance(value, float) and not math.isfinite(value):
                 raise ValueError(f"input {name} = {value} is not finite")
         self.core.advance(to_ticks(current_time), to_ticks(step_size), inputs)
-        self.outputs = dict(self.core.outputs())
+        self.outputs = self.core.outputs()  # a fresh dict per call (core contract)
         self.executions += 1
         return True
 
@@ -516,7 +541,8 @@ class SampledControllerSlave(CoreSlave):
         self.now_ticks = 0
         self.next_event_ticks = 0
         self.event_done_ticks: int | None = None
-        # event computed on a read, not committed: (key, outputs, hold, core state after)
+        # event computed on a read, not committed: (key, outputs, hold, core state *before*);
+        # the live core holds the state after it until the event is committed or undone
         self._tentative: tuple[Any, dict[str, Any], int, Any] | None = None
 
     @classmethod
@@ -546,23 +572,48 @@ class SampledControllerSlave(CoreSlave):
             event += period
         return event
 
+    def _undo_tentative(self) -> None:
+        """Put the core back to its state before an uncommitted (tentative) event."""
+        if self._tentative is not None:
+            saved = self._tentative[3]
+            self._tentative = None
+            self.core.set_state(saved)
+
     def _compute_tentative(self) -> tuple[Any, dict[str, Any], int, Any]:
-        """The due event computed from the current inputs on a copy of the core state."""
+        """The due event computed from the current inputs, not committed.
+
+        The event runs on the live core after saving its state (one copy per event instead of
+        computing on a copy: save, compute, save the result, restore, and restore again at
+        commit); the saved state undoes it when the inputs change at the same instant, and is
+        what ``getFMUstate`` reports while the event is uncommitted."""
         inputs = self.inputs()
         key = (self.now_ticks, tuple(sorted(inputs.items())))
-        if self._tentative is not None and self._tentative[0] == key:
-            return self._tentative
+        if self._tentative is not None:
+            if self._tentative[0] == key:
+                return self._tentative
+            self._undo_tentative()
         for name, value in inputs.items():
             if isinstance(value, float) and not math.isfinite(value):
                 raise ValueError(f"input {name} = {value} is not finite")
         saved = self.core.get_state()
         try:
             outputs, hold = self.core.compute(to_seconds(self.now_ticks), inputs)
-            after = self.core.get_state()
-        finally:
+        except BaseException:
             self.core.set_state(saved)
-        self._tentative = (key, dict(outputs), max(1, int(hold)), after)
+            raise
+        self._tentative = (key, dict(outputs), max(1, int(hold)), saved)
         return self._tentative
+
+    def core_state(self) -> Any:
+        """The committed core state (without an uncommitted tentative event)."""
+        if self._tentative is not None:
+            return copy.deepcopy(self._tentative[3])
+        return super().core_state()
+
+    def after_core_built(self) -> None:
+        self._tentative = None  # a new core: nothing computed on it yet
+        super().after_core_built()
+        self._show({}, self.next_event_ticks, self.executions)
 
     def _show(self, outputs: dict[str, Any], next_event: int, executions: int) -> None:
         self.outputs.update(outputs)
@@ -574,10 +625,6 @@ class SampledControllerSlave(CoreSlave):
             _, outputs, hold, _ = self._compute_tentative()
             self._show(outputs, self._grid_event() + hold * self.sample_ticks(),
                        self.executions + 1)
-
-    def after_core_built(self) -> None:
-        super().after_core_built()
-        self._show({}, self.next_event_ticks, self.executions)
 
     def do_step(self, current_time: float, step_size: float) -> bool:
         self.require_mode("fmi2DoStep", "initialized")
@@ -591,7 +638,7 @@ class SampledControllerSlave(CoreSlave):
         end = to_ticks(current_time + step_size)
         due = self._event_due()
         if due:
-            _, outputs, hold, after = self._compute_tentative()
+            _, outputs, hold, _ = self._compute_tentative()
             following = self._grid_event() + hold * self.sample_ticks()
         else:
             following = self.next_event_ticks
@@ -601,8 +648,7 @@ class SampledControllerSlave(CoreSlave):
                 f"controller's event at t={to_seconds(following)} s (sample_time "
                 f"{self.values['sample_time']} s), which would be skipped: use communication "
                 "steps that end on its sample instants (at most sample_time long)")
-        if due:  # commit the event computed from the inputs of this doStep
-            self.core.set_state(after)
+        if due:  # commit the event computed from the inputs of this doStep (the live core)
             self.next_event_ticks = following
             self.event_done_ticks = self.now_ticks
             self.executions += 1
@@ -619,7 +665,7 @@ class SampledControllerSlave(CoreSlave):
         self.now_ticks = state["now"]
         self.next_event_ticks = state["next"]
         self.event_done_ticks = state["done"]
-        self._tentative = None
+        self._tentative = None  # the core state was just set (committed state)
 
 
 for _name in _FMI_ENTRY_POINTS:  # CoreSlave's own and those inherited from Fmi2Slave

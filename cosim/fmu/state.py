@@ -18,6 +18,19 @@ def to_seconds(ticks: int) -> float:
     return ticks / TICKS_PER_SECOND
 
 
+_IMMUTABLE = (float, int, bool, str, bytes, type(None))
+
+
+def _copy(value: Any) -> Any:
+    """A deep copy; immutable scalars as they are and numeric arrays by ``ndarray.copy``
+    (what ``copy.deepcopy`` does for them, without its per-call dispatch)."""
+    if isinstance(value, _IMMUTABLE):
+        return value
+    if type(value).__name__ == "ndarray" and value.dtype.hasobject is False:
+        return value.copy(order="K")
+    return copy.deepcopy(value)
+
+
 class StatefulCore:
     """Mixin for numerical cores: ``get_state``/``set_state`` over ``state_fields``.
 
@@ -34,7 +47,7 @@ class StatefulCore:
         for name in self.state_fields:
             value = getattr(self, name)
             state[name] = (value.get_state() if isinstance(value, StatefulCore)
-                           else copy.deepcopy(value))
+                           else _copy(value))
         return state
 
     def set_state(self, state: dict[str, Any]) -> None:
@@ -43,4 +56,4 @@ class StatefulCore:
             if isinstance(current, StatefulCore):
                 current.set_state(state[name])
             else:
-                setattr(self, name, copy.deepcopy(state[name]))
+                setattr(self, name, _copy(state[name]))
