@@ -200,6 +200,12 @@ def friction_coefficient(v: np.ndarray) -> np.ndarray:
     return 0.322 * (kmh + 150.0) / (2.0 * kmh + 150.0)
 
 
+def friction_coefficient_at(v: float) -> float:
+    """:func:`friction_coefficient` of one speed (m/s) in plain floats (the same operations)."""
+    kmh = abs(v) / KMH
+    return 0.322 * (kmh + 150.0) / (2.0 * kmh + 150.0)
+
+
 PRESSURE_VEHICLES = (1, 28, 55, 82, 109)  # vehicles whose cylinder pressure is an output
 _RESISTANCE = (("loco_resistance", "locomotive"), ("wagon_resistance", "loaded wagon"))
 _RESISTANCE_TERMS = (("a", "N/kN"), ("b", "N/kN per km/h"), ("c", "N/kN per (km/h)^2"))
@@ -622,6 +628,9 @@ class FreightTrain(StatefulCore, Declared):
     def outputs(self) -> dict[str, float]:
         x, v = self.x, self.v
         fc = self.coupler_forces()
+        # released brakes (most of a run): the force is an exact 0 without the dot product
+        air = (float(np.dot(self.brake_scale * self.pressure, friction_coefficient(v)))
+               if self.pressure.any() else 0.0)
         out = {
             "v": float(v[0]),
             "s": float(x[0]),
@@ -636,8 +645,7 @@ class FreightTrain(StatefulCore, Declared):
             "buff_force_max": max(-float(fc.min()), 0.0) if fc.size else 0.0,
             "draft_force_peak": self.peak_draft,
             "buff_force_peak": self.peak_buff,
-            "air_brake_force": float(np.dot(self.brake_scale * self.pressure,
-                                            friction_coefficient(v))),
+            "air_brake_force": air,
             "grade": self.route.grade.at(float(x[0])),
             "speed_limit": float(self.route.speed_limit.at(float(x[0]))),
             "brake_pipe_reduction": self.brake_history[-1][1],

@@ -121,8 +121,14 @@ class StepProfile:
         return cls(starts, values)
 
     def at(self, s: float) -> float:
-        """Value at position ``s`` (m)."""
-        return float(self.values[np.searchsorted(self.starts, s, side="right") - 1])
+        """Value at position ``s`` (m): ``searchsorted(starts, s, 'right') - 1`` by bisection
+        on plain lists (a tenth of numpy's per-call cost for one scalar)."""
+        starts, values = self._lists
+        return values[bisect.bisect_right(starts, s) - 1]
+
+    @functools.cached_property
+    def _lists(self) -> tuple[list[float], list[float]]:
+        return self.starts.tolist(), [float(v) for v in self.values.tolist()]
 
     def at_array(self, s: np.ndarray) -> np.ndarray:
         return self.values[np.searchsorted(self.starts, s, side="right") - 1]
@@ -282,14 +288,23 @@ class ReferenceProfile:
     def speed(self, x: float) -> float:
         """Reference speed (m/s) at position (m) or time (s) ``x``."""
         if self.kind == "distance":
-            return math.sqrt(max(float(np.interp(x, self.x, self.v**2)), 0.0))
+            return math.sqrt(max(float(np.interp(x, self.x, self._v_squared)), 0.0))
         return float(np.interp(x, self.x, self.v))
+
+    @functools.cached_property
+    def _v_squared(self) -> np.ndarray:
+        return self.v**2
+
+    @functools.cached_property
+    def _accel_lists(self) -> tuple[list[float], list[float]]:
+        return self.x.tolist(), self._segment_accel.tolist()
 
     def accel(self, x: float) -> float:
         """Reference acceleration dv/dt (m/s^2) at ``x``: the constant of its segment."""
-        if x < self.x[0] or x >= self.x[-1]:
+        xs, accel = self._accel_lists
+        if x < xs[0] or x >= xs[-1]:
             return 0.0
-        return float(self._segment_accel[np.searchsorted(self.x, x, side="right") - 1])
+        return accel[bisect.bisect_right(xs, x) - 1]
 
     def times(self) -> np.ndarray:
         """Time (s) at each point; for a distance profile, from ``x[0]`` at t = 0.

@@ -45,7 +45,7 @@ import numpy as np
 
 from cosim.fmu.declare import Declared, Var, build, param
 from cosim.fmu.state import StatefulCore
-from plants.freight import FreightParams, FreightTrain, friction_coefficient
+from plants.freight import FreightParams, FreightTrain, friction_coefficient_at
 from plants.route import (
     GRAVITY,
     ReferenceProfile,
@@ -154,7 +154,7 @@ class FreightBlending(StatefulCore):
 
     def air_force(self, pressure: float, v: float) -> float:
         """Air-brake force (N) of the whole train at a uniform cylinder pressure (Pa)."""
-        return self.brake_scale * pressure * float(friction_coefficient(np.array(v)))
+        return self.brake_scale * pressure * friction_coefficient_at(v)
 
     def air_applied(self) -> bool:
         """Applied, or released with pressure still in the (modelled) cylinders."""
@@ -225,7 +225,7 @@ class FreightBlending(StatefulCore):
             # the locomotive trims the (estimated) air brake with the electric brake only:
             # never traction against an applied or not yet released air brake
             air = float(np.dot(self.model.brake_scale, pressures)
-                        * friction_coefficient(np.array(speed)))
+                        * friction_coefficient_at(speed))
             force = min(force + air, 0.0)
         self.force = min(max(force, -ed), trac)
         return self.force, self.reduction

@@ -22,11 +22,17 @@ _IMMUTABLE = (float, int, bool, str, bytes, type(None))
 
 
 def _copy(value: Any) -> Any:
-    """A deep copy; immutable scalars as they are and numeric arrays by ``ndarray.copy``
-    (what ``copy.deepcopy`` does for them, without its per-call dispatch)."""
+    """A deep copy of a state value (a tree: lists, dicts, numeric arrays, scalars); immutable
+    scalars as they are, numeric arrays by ``ndarray.copy`` (what ``copy.deepcopy`` does for
+    them, without its per-call dispatch); anything else by ``copy.deepcopy``."""
     if isinstance(value, _IMMUTABLE):
         return value
-    if type(value).__name__ == "ndarray" and value.dtype.hasobject is False:
+    kind = type(value)
+    if kind is list:  # e.g. command histories [[tick, value], ...]
+        return [_copy(v) for v in value]
+    if kind is dict:
+        return {k: _copy(v) for k, v in value.items()}
+    if kind.__name__ == "ndarray" and value.dtype.hasobject is False:
         return value.copy(order="K")
     return copy.deepcopy(value)
 
