@@ -347,7 +347,7 @@ class Emu(StatefulCore, Declared):
             [f"{name}[{i + 1}]" for i in range(n)]
             for name in ("v", "s", "a", "applied_force", "traction_limit", "brake_limit")
         ) + ([f"coupler_force[{j + 1}]" for j in range(n - 1)],)
-        want = kernels.KERNELS if kernel is None else bool(kernel) and kernels.KERNELS
+        want = (kernel is None or bool(kernel)) and kernels.compile_kernels()
         self.kernel = want and bool(np.all(self.lengths > 0))  # else mean_over's 0-length case
         if self.kernel:
             xs, cum = route.additional._cumulative

@@ -327,7 +327,7 @@ class FreightTrain(StatefulCore, Declared):
         self._inverse: dict[int, np.ndarray] = {}
         self._names_v = [f"v[{i + 1}]" for i in range(n)]
         self._pressure_index = sorted({0, n // 4, n // 2, (3 * n) // 4, n - 1})
-        self.kernel = kernels.KERNELS if kernel is None else bool(kernel) and kernels.KERNELS
+        self.kernel = (kernel is None or bool(kernel)) and kernels.compile_kernels()
         if self.kernel:
             xs, cum = self._additional._cumulative
             self._route_arrays = (xs, cum, np.diff(cum) / np.diff(xs))

@@ -20,24 +20,28 @@ extraction instead of compiling again (about a second).
 from __future__ import annotations
 
 import hashlib
+import importlib.util
 import math
 import os
 import tempfile
+import threading
 from pathlib import Path
 
 import numpy as np
 
-try:  # numba is a third-party dependency of the plant FMUs, optional at run time
-    import numba
-    from numba.core import caching as _caching
-except ImportError:  # pragma: no cover - exercised where numba is missing
-    numba = None
-    _caching = None
-
-KERNELS = numba is not None and os.environ.get("ATO_COSIM_NO_KERNELS", "") == ""
+# numba is a third-party dependency of the plant FMUs, optional at run time; it is imported
+# (about a second) only when a plant asks for its kernels (compile_kernels), not by importing
+# this module: the catalog, the CLI and the controllers' nominal models do not pay for it
+KERNELS = (importlib.util.find_spec("numba") is not None
+           and os.environ.get("ATO_COSIM_NO_KERNELS", "") == "")
 _SOURCE = Path(__file__).resolve()
 _DIGEST = hashlib.sha256(_SOURCE.read_bytes()).hexdigest()[:20]
 KMH = 1.0 / 3.6
+_OPTIONS = dict(cache=True, nogil=True, fastmath=False, error_model="numpy")
+_HELPERS: list[str] = []  # compiled with the kernels that call them
+_ENTRIES: dict[str, str] = {}  # kernel name -> signature (compiled eagerly)
+_LOCK = threading.Lock()
+_compiled = False
 
 
 def cache_dir() -> Path:
@@ -49,10 +53,26 @@ def cache_dir() -> Path:
     return Path(base) / "ato-cosim" / "numba"
 
 
-if KERNELS:
-    class _ContentCacheLocator(_caching._CacheLocator):
-        """numba cache locator for this file only: by content digest, not path or mtime."""
+def njit(func):
+    """A helper of the kernels: compiled by :func:`compile_kernels` (plain Python before)."""
+    _HELPERS.append(func.__name__)
+    return func
 
+
+def njit_eager(signature: str):
+    """A kernel with its signature: compiled (or loaded from the cache) by
+    :func:`compile_kernels`, which plants call when they are built."""
+    def mark(func):
+        _ENTRIES[func.__name__] = signature
+        return func
+    return mark
+
+
+def _install_locator(caching) -> None:
+    """numba cache locator for this file only: by content digest, not path or mtime."""
+    global _ContentCacheLocator
+
+    class _ContentCacheLocator(caching._CacheLocator):
         def __init__(self, py_func, py_file):
             self._path = str(cache_dir() / _DIGEST)
 
@@ -80,21 +100,70 @@ if KERNELS:
                 return None  # not writable: numba tries its own locators, else no cache
             return locator
 
-    if _ContentCacheLocator not in _caching.CacheImpl._locator_classes:
-        _caching.CacheImpl._locator_classes.insert(0, _ContentCacheLocator)
-    _OPTIONS = dict(cache=True, nogil=True, fastmath=False, error_model="numpy")
-    njit = numba.njit(**_OPTIONS)
+    caching.CacheImpl._locator_classes.insert(0, _ContentCacheLocator)
 
-    def njit_eager(signature):
-        """Compiled (or loaded from the cache) at import: inside an FMU the bundled module is
-        only importable while the FMU imports it, so nothing may compile lazily later."""
-        return numba.njit(signature, **_OPTIONS)
-else:
-    def njit(func):
-        return func
 
-    def njit_eager(signature):
-        return njit
+def compile_kernels() -> bool:
+    """Import numba and compile the kernels (or load them from the on-disk cache), once per
+    process and copy of this module; returns whether compiled kernels are available.
+
+    Called when a plant is built (inside an FMU: at initialisation). Only numba is imported
+    here, nothing of the project: inside an FMU the bundled modules are importable only while
+    the FMU imports them, and this module was imported then. Stale cache folders (other
+    digests of this file) are pruned at the first compilation, see :func:`prune_cache`."""
+    global _compiled
+    if not KERNELS:
+        return False
+    with _LOCK:
+        if _compiled:
+            return True
+        import numba
+        from numba.core import caching
+
+        _install_locator(caching)
+        space = globals()
+        for name in _HELPERS:
+            space[name] = numba.njit(**_OPTIONS)(space[name])
+        for name, signature in _ENTRIES.items():
+            space[name] = numba.njit(signature, **_OPTIONS)(space[name])
+        _compiled = True
+    try:  # mark this version's folder as in use (prune_cache keeps recently used ones)
+        os.utime(cache_dir() / _DIGEST)
+    except OSError:
+        pass
+    prune_cache()
+    return True
+
+
+def prune_cache(keep_days: float = 7.0) -> list[Path]:
+    """Remove cache folders of other versions of this file not used for ``keep_days`` days
+    (by the newest modification time inside; numba rewrites its index when it adds to a
+    folder). Only folders named like a digest holding nothing but numba cache files are
+    touched; errors (another process pruning, permissions) are ignored. Returns the removed."""
+    import shutil
+    import time
+
+    root = cache_dir()
+    removed: list[Path] = []
+    try:
+        folders = [f for f in root.iterdir() if f.is_dir() and f.name != _DIGEST
+                   and len(f.name) == len(_DIGEST) and all(c in "0123456789abcdef"
+                                                           for c in f.name)]
+    except OSError:
+        return removed
+    limit = time.time() - keep_days * 86400.0
+    for folder in folders:
+        try:
+            files = list(folder.iterdir())
+            if any(f.suffix not in (".nbi", ".nbc") or not f.is_file() for f in files):
+                continue
+            newest = max([f.stat().st_mtime for f in files] + [folder.stat().st_mtime])
+            if newest < limit:
+                shutil.rmtree(folder)
+                removed.append(folder)
+        except OSError:
+            continue
+    return removed
 
 
 # constants vector of the freight kernel (indices)

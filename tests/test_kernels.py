@@ -15,6 +15,10 @@ difference could be amplified by ``1 / stiction_speed``.
 
 from __future__ import annotations
 
+import os
+import time
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -93,6 +97,7 @@ def test_freight_kernel_matches_the_numpy_reference(seed: int, slack: float) -> 
 
 def test_cache_locator_is_by_content(tmp_path, monkeypatch) -> None:
     """Compiled code is found by the digest of kernels.py, wherever the file was extracted."""
+    assert kernels.compile_kernels()
     monkeypatch.setenv("ATO_COSIM_NUMBA_CACHE", str(tmp_path))
     assert kernels.cache_dir() == tmp_path
     locator = kernels._ContentCacheLocator.from_function(kernels.freight_steps.py_func,
@@ -102,6 +107,42 @@ def test_cache_locator_is_by_content(tmp_path, monkeypatch) -> None:
     assert locator.get_source_stamp() == kernels._DIGEST
     other = kernels._ContentCacheLocator.from_function(len, str(tmp_path / "elsewhere.py"))
     assert other is None  # other files keep numba's own locators
+
+
+def test_importing_the_plants_does_not_import_numba() -> None:
+    """numba (about a second) is imported when a plant is built, not by the catalog."""
+    import subprocess
+    import sys
+
+    code = ("import sys, plants.freight, plants.emu, controllers.pid.freight_pid; "
+            "print('numba' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True, cwd=Path(kernels.__file__).resolve().parents[1])
+    assert out.stdout.strip() == "False"
+
+
+def test_prune_cache_removes_only_stale_digest_folders(tmp_path, monkeypatch) -> None:
+    monkeypatch.setenv("ATO_COSIM_NUMBA_CACHE", str(tmp_path))
+    old = time.time() - 30 * 86400.0
+
+    def folder(name: str, files: tuple[str, ...], mtime: float) -> Path:
+        path = tmp_path / name
+        path.mkdir()
+        for f in files:
+            (path / f).write_bytes(b"")
+            os.utime(path / f, (mtime, mtime))
+        os.utime(path, (mtime, mtime))
+        return path
+
+    cache_files = ("kernels.freight_steps-1.py311.nbi", "kernels.freight_steps-1.py311.1.nbc")
+    stale = folder("0123456789abcdef0123", cache_files, old)
+    recent = folder("fedcba9876543210fedc", cache_files, time.time())
+    current = folder(kernels._DIGEST, cache_files, old)
+    foreign = folder("00000000000000000000", ("notes.txt",), old)
+    other_name = folder("my-numba-stuff", cache_files, old)
+    assert kernels.prune_cache(keep_days=7.0) == [stale]
+    assert not stale.exists()
+    assert recent.exists() and current.exists() and foreign.exists() and other_name.exists()
 
 
 def emu_pair(config: str, seed: int):
