@@ -21,8 +21,10 @@ if str(ROOT) not in sys.path:
 from cosim.run.scenario import load_scenario  # noqa: E402
 
 
-def raw_fmpy_loop(scenario: str) -> dict[str, float]:
-    """Run ``scenario`` in the minimal loop: {wall_s, sim_s, final values of the records}."""
+def raw_fmpy_loop(scenario: str, split: bool = False) -> dict:
+    """Run ``scenario`` in the minimal loop: {wall_s, cpu_s, sim_s, final values of the
+    records}; ``split``: also the CPU time of each FMI call kind per FMU (``split_cpu_s``;
+    the timers add a little to ``wall_s``)."""
     from fmpy import extract, read_model_description
     from fmpy.fmi2 import FMU2Slave
 
@@ -53,11 +55,12 @@ def raw_fmpy_loop(scenario: str) -> dict[str, float]:
             fmu.exitInitializationMode()
         # inputs of FMUs with direct feedthrough (controllers) first, from their sources
         # (plants, whose outputs do not depend on inputs); then the plants' inputs
-        plan = []
+        plan, plan_names = [], []
         for name in sorted(units, key=lambda n: not units[n]["feedthrough"]):
             links = [c for c in sc.connections if c.dst == name]
             for src in dict.fromkeys(c.src for c in links):
                 mine = [c for c in links if c.src == src]
+                plan_names.append((src, name))
                 plan.append((units[src]["fmu"],
                              [units[src]["vars"][c.src_var].valueReference for c in mine],
                              units[name]["fmu"],
@@ -65,24 +68,57 @@ def raw_fmpy_loop(scenario: str) -> dict[str, float]:
         records = {}
         for ref in sc.record or []:
             comp, var = ref.split(".", 1)
-            records.setdefault(comp, []).append(units[comp]["vars"][var].valueReference)
-        record_calls = [(units[c]["fmu"], refs) for c, refs in records.items()]
-        fmus = [u["fmu"] for u in units.values()]
+            if var.endswith("[*]"):  # every element, as the master expands it
+                stem = var[:-3] + "["
+                refs = [v.valueReference for name, v in units[comp]["vars"].items()
+                        if name.startswith(stem) and name.endswith("]")]
+            else:
+                refs = [units[comp]["vars"][var].valueReference]
+            records.setdefault(comp, []).extend(refs)
+        record_calls = [(c, units[c]["fmu"], refs) for c, refs in records.items()]
+        fmus = [(name, u["fmu"]) for name, u in units.items()]
+        plan = [(src, s_refs, dst, d_refs, names[0], names[1])
+                for (src, s_refs, dst, d_refs), names in zip(plan, plan_names)]
         n_steps = int(round((sc.simulation.stop_time - sc.simulation.start_time) / step))
         t = sc.simulation.start_time
+        parts: dict[str, float] = {}
+        clock = time.thread_time  # CPU time of this thread (the FMUs run in it)
+
+        def timed(key: str, call, *args, **kwargs):
+            t_start = clock()
+            out = call(*args, **kwargs)
+            parts[key] = parts.get(key, 0.0) + clock() - t_start
+            return out
+
         t0 = time.perf_counter()
+        cpu0 = time.process_time()
         for k in range(n_steps):
             t = sc.simulation.start_time + k * step
-            for src, src_refs, dst, dst_refs in plan:
+            if split:
+                for src, src_refs, dst, dst_refs, s_name, d_name in plan:
+                    values = timed(f"getReal {s_name} (inputs of {d_name})", src.getReal,
+                                   src_refs)
+                    timed(f"setReal {d_name}", dst.setReal, dst_refs, values)
+                for name, fmu, refs in record_calls:
+                    timed(f"getReal {name} (record)", fmu.getReal, refs)
+                for name, fmu in fmus:
+                    timed(f"doStep {name}", fmu.doStep, currentCommunicationPoint=t,
+                          communicationStepSize=step)
+                continue
+            for src, src_refs, dst, dst_refs, _, _ in plan:
                 dst.setReal(dst_refs, src.getReal(src_refs))
-            for fmu, refs in record_calls:
+            for _, fmu, refs in record_calls:
                 fmu.getReal(refs)
-            for fmu in fmus:
+            for _, fmu in fmus:
                 fmu.doStep(currentCommunicationPoint=t, communicationStepSize=step)
         wall = time.perf_counter() - t0
+        cpu = time.process_time() - cpu0
         final = {f"{c}.{v}": units[c]["fmu"].getReal([units[c]["vars"][v].valueReference])[0]
                  for c, v in (r.split(".", 1) for r in (sc.record or [])[:2])}
-        return {"wall_s": wall, "sim_s": n_steps * step, **final}
+        out = {"wall_s": wall, "cpu_s": cpu, "sim_s": n_steps * step, **final}
+        if split:
+            out["split_cpu_s"] = parts
+        return out
     finally:
         for u in units.values():
             try:

@@ -10,7 +10,15 @@ issue's target, and writes them to ``benchmarks/results.json``. Asserts nothing.
   the numpy reference path on the same inputs; ratio = numpy wall / kernel wall;
 * RMPC N = 10 QP step (update + solve + result, median over the recorded QPs) with DAQP vs
   DAQP's update + solve alone; and OSQP's whole step;
-* a further FMU instance (instantiate + initialise) vs the first instance in the process.
+* a further FMU instance (instantiate + initialise) vs the first instance in the process;
+* the freight kernel in numba vs the same kernel in C built with gcc (``bench_kernels.py``);
+  ratio = C / numba.
+
+The closed-loop rows also give CPU times (``time.process_time``: less sensitive to the load
+than the wall time on a shared machine) and, per communication step, the CPU time of the
+plant's doStep, of the controller (its event runs when its outputs are read) and of the FMI
+calls around them in the fmpy loop, and the master's overhead (its CPU time minus plant and
+controller).
 
     python benchmarks/run_all.py [--quick]
 """
@@ -34,6 +42,7 @@ sys.path[:0] = [str(ROOT), str(HERE), str(ROOT / "tests")]
 
 import bench_freight  # noqa: E402
 import bench_instances  # noqa: E402
+import bench_kernels  # noqa: E402
 import bench_mpc  # noqa: E402
 import bench_plants  # noqa: E402
 from raw_loop import raw_fmpy_loop  # noqa: E402
@@ -45,18 +54,38 @@ FREIGHT, EMU = "seed002_freight_pid", "seed001_emu_pid"
 
 
 def closed_loop(scenario: str, repeat: int) -> tuple[dict, object]:
-    """Master vs raw fmpy loop on one scenario (medians of ``repeat`` runs)."""
-    walls, raws, result = [], [], None
+    """Master vs raw fmpy loop on one scenario (medians of ``repeat`` runs), with the CPU
+    time of each (less sensitive to the load than the wall time) and where the raw loop's
+    CPU time goes: plant doStep, controller (its event runs when its outputs are read, so
+    getReal of the controller plus its doStep), and the FMI calls around them."""
+    walls, cpus, raws, raw_cpus, result = [], [], [], [], None
     for _ in range(repeat):
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         result = run_scenario(ROOT / "scenarios" / f"{scenario}.toml", build=False, plot=False)
         walls.append(time.perf_counter() - t0)
-        raws.append(raw_fmpy_loop(scenario)["wall_s"])
+        cpus.append(time.process_time() - c0)
+        raw = raw_fmpy_loop(scenario)
+        raws.append(raw["wall_s"])
+        raw_cpus.append(raw["cpu_s"])
     sim = float(result.sim_time_s)
     wall, raw = statistics.median(walls), statistics.median(raws)
+    cpu, raw_cpu = statistics.median(cpus), statistics.median(raw_cpus)
+    parts = raw_fmpy_loop(scenario, split=True)["split_cpu_s"]
+    steps = float(result.summary["do_steps"]["plant"])  # communication steps
+    plant = sum(v for k, v in parts.items() if k == "doStep plant")
+    controller = sum(v for k, v in parts.items()
+                     if k == "doStep controller" or k.startswith("getReal controller"))
+    split = {"plant_doStep_us": plant / steps * 1e6,
+             "controller_us": controller / steps * 1e6,
+             "fmi_calls_us": (sum(parts.values()) - plant - controller) / steps * 1e6,
+             "master_cpu_us": cpu / steps * 1e6, "raw_loop_cpu_us": raw_cpu / steps * 1e6}
+    split["master_overhead_us"] = split["master_cpu_us"] - split["plant_doStep_us"] \
+        - split["controller_us"]
     return {"figure": sim / wall, "unit": "x real time", "reference": sim / raw,
             "reference_name": "minimal fmpy loop, same FMUs (x real time)",
-            "ratio": wall / raw, "ratio_name": "master wall / fmpy loop wall"}, result
+            "ratio": wall / raw, "ratio_name": "master wall / fmpy loop wall",
+            "cpu_real_time_factor": sim / cpu, "raw_loop_cpu_real_time_factor": sim / raw_cpu,
+            "per_step_cpu_us": split}, result
 
 
 def freight_plant(result, repeat: int) -> dict:
@@ -89,6 +118,21 @@ def emu_plant(result, repeat: int) -> dict:
             "ratio": ref / fast, "ratio_name": "numpy / kernel"}
 
 
+def freight_kernel_c(repeat: int) -> dict:
+    """The freight kernel in numba vs the same kernel in C (gcc), cruise and brake wave."""
+    rows = bench_kernels.run(repeat)
+    if not rows:
+        return {"figure": float("nan"), "unit": "us per sub-step (numba)",
+                "reference": float("nan"), "reference_name": "C kernel (gcc): not available",
+                "ratio": float("nan"), "ratio_name": "C / numba"}
+    cruise = rows[0]
+    return {"figure": cruise["numba_us_per_substep"],
+            "unit": "us per sub-step, numba kernel (cruise)",
+            "reference": cruise["c_us_per_substep"],
+            "reference_name": "the same kernel in C, gcc -O2 (us)",
+            "ratio": cruise["c_over_numba"], "ratio_name": "C / numba", "cases": rows}
+
+
 def qp(repeat: int) -> dict:
     r = bench_mpc.qp_step(10, repeat)
     return {"figure": r["daqp_step_us"], "unit": "us median, DAQP whole step",
@@ -110,7 +154,7 @@ def instances() -> dict:
 
 TARGETS = {"freight closed loop": ">= 500 x real time", "EMU closed loop": ">= 1000 x real time",
            "RMPC N=10 QP step": "<= 35 us", "further FMU instance": "<= 10 ms",
-           "freight plant kernel": "", "EMU plant kernel": ""}
+           "freight plant kernel": "", "EMU plant kernel": "", "freight kernel C vs numba": ""}
 
 
 def main() -> None:
@@ -123,16 +167,26 @@ def main() -> None:
     rows: dict[str, dict] = {}
     rows["freight closed loop"], freight_result = closed_loop(FREIGHT, repeat)
     rows["freight plant kernel"] = freight_plant(freight_result, repeat)
+    rows["freight kernel C vs numba"] = freight_kernel_c(2000 if repeat > 1 else 500)
     rows["EMU closed loop"], emu_result = closed_loop(EMU, repeat)
     rows["EMU plant kernel"] = emu_plant(emu_result, repeat)
     rows["RMPC N=10 QP step"] = qp(20 if repeat > 1 else 5)
     rows["further FMU instance"] = instances()
-    print(f"{'benchmark':<22} {'figure':>10}  {'reference':>10}  {'ratio':>7}  target / units")
+    print(f"{'benchmark':<25} {'figure':>10}  {'reference':>10}  {'ratio':>7}  target / units")
     for name, r in rows.items():
         r["target"] = TARGETS[name]
-        print(f"{name:<22} {r['figure']:>10.1f}  {r['reference']:>10.1f}  {r['ratio']:>7.2f}  "
+        print(f"{name:<25} {r['figure']:>10.1f}  {r['reference']:>10.1f}  {r['ratio']:>7.2f}  "
               f"{r['target'] or '-'}; {r['unit']}; ref: {r['reference_name']}; "
               f"ratio: {r['ratio_name']}")
+        if "per_step_cpu_us" in r:
+            split = ", ".join(f"{k} {v:.0f}" for k, v in r["per_step_cpu_us"].items())
+            print(f"{'':<25} CPU: {r['cpu_real_time_factor']:.0f} x real time (master), "
+                  f"{r['raw_loop_cpu_real_time_factor']:.0f} x (fmpy loop); per step (us): "
+                  f"{split}")
+        for case in r.get("cases", ()):
+            print(f"{'':<25} {case['case']}: numba {case['numba_us_per_substep']:.2f}, C "
+                  f"{case['c_us_per_substep']:.2f}, numpy {case['numpy_us_per_substep']:.1f} "
+                  f"us/sub-step; max rel. diff numba-C {case['max_rel_diff_numba_c']:.1e}")
     meta = {"python": platform.python_version(), "machine": platform.machine(),
             "cpus": os.cpu_count(), "load_average": os.getloadavg(),
             "date_utc": time.strftime("%Y-%m-%d %H:%M:%S", time.gmtime())}

@@ -330,6 +330,7 @@ class Emu(StatefulCore, Declared):
         self.regenerated_energy = 0.0  # J
         self.command = np.zeros(n)  # N, last commanded forces (before the envelope)
         self._grid = to_ticks(params.max_step)
+        self._input_names = [f"force[{i + 1}]" for i in range(n)]
         self._noise_ticks = to_ticks(params.disturbance_interval)
         self._noise_cache: tuple[int, np.ndarray] | None = None
         self._props: dict[int, _Propagator] = {}
@@ -484,7 +485,7 @@ class Emu(StatefulCore, Declared):
         if t_ticks != self.t_ticks:
             raise ValueError(f"doStep at t={to_seconds(t_ticks)} s but plant is at "
                              f"t={to_seconds(self.t_ticks)} s")
-        u = np.array([float(inputs[f"force[{i + 1}]"]) for i in range(self.n)])
+        u = np.array([float(inputs[name]) for name in self._input_names])
         end = t_ticks + h_ticks
         grids = (self._grid, self._noise_ticks if self.p.disturbance_accel_std else 0)
         cuts = dead_time.substep_ends(t_ticks, h_ticks, grids)
@@ -509,7 +510,10 @@ class Emu(StatefulCore, Declared):
             while j + 1 < len(cuts) and cuts[j + 1] - cuts[j] == h_ticks:
                 j += 1
             count = j - i + 1
-            if noisy:
+            if noisy and (now // self._noise_ticks
+                          == (now + (count - 1) * h_ticks) // self._noise_ticks):
+                noise = np.repeat(self._noise(now)[None, :], count, axis=0)  # one interval
+            elif noisy:
                 noise = np.array([self._noise(now + k * h_ticks) for k in range(count)])
             else:
                 noise = np.zeros((count, self.n))
