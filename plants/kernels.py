@@ -199,17 +199,26 @@ def _target_pressure(r, cp):
 
 
 @njit
+def _pow(x, e):
+    """``x ** e``; ``x`` itself for ``e = 1`` (what pow returns there, without the call: the
+    default release curve is linear)."""
+    if e == 1.0:
+        return x
+    return x ** e
+
+
+@njit
 def _evolve(pres, target, dt, cp):
     """FreightTrain.evolve_pressure for one vehicle."""
     pmax = cp[C_PMAX]
     frac = min(pres / pmax, 1.0)
     if pres < target:
-        t_up = cp[C_FILL_T] * frac ** (1.0 / cp[C_FILL_E])
-        up = pmax * min((t_up + dt) / cp[C_FILL_T], 1.0) ** cp[C_FILL_E]
+        t_up = cp[C_FILL_T] * _pow(frac, 1.0 / cp[C_FILL_E])
+        up = pmax * _pow(min((t_up + dt) / cp[C_FILL_T], 1.0), cp[C_FILL_E])
         return min(up, target)
     if pres > target:
-        t_down = cp[C_REL_T] * (1.0 - frac) ** (1.0 / cp[C_REL_E])
-        down = pmax * (1.0 - min((t_down + dt) / cp[C_REL_T], 1.0) ** cp[C_REL_E])
+        t_down = cp[C_REL_T] * _pow(1.0 - frac, 1.0 / cp[C_REL_E])
+        down = pmax * (1.0 - _pow(min((t_down + dt) / cp[C_REL_T], 1.0), cp[C_REL_E]))
         return max(down, target)
     return pres
 

@@ -16,6 +16,8 @@ difference could be amplified by ``1 / stiction_speed``.
 from __future__ import annotations
 
 import os
+import shutil
+import sys
 import time
 from pathlib import Path
 
@@ -93,6 +95,35 @@ def test_freight_kernel_matches_the_numpy_reference(seed: int, slack: float) -> 
     # the reference does something: the trains moved and braked
     assert np.max(np.abs(ref.x - state["x"])) > 10.0
     assert np.ptp(ref.pressure) > 1e3
+
+
+@pytest.mark.skipif(shutil.which("gcc") is None, reason="gcc not installed")
+@pytest.mark.parametrize("case", ["cruise", "brake wave"])
+def test_c_kernel_matches_numba(case: str, tmp_path) -> None:
+    """The C version of the freight kernel (benchmarks/c_kernel, measured against numba in
+    benchmarks/bench_kernels.py) stays the same kernel: same operations in the same order, so
+    they differ at most by libm's pow/exp roundings, bounded as against the numpy path."""
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    try:
+        import bench_kernels
+    finally:
+        sys.path.pop(0)
+    dll = bench_kernels.build_c(tmp_path)
+    _, args = bench_kernels.captured_args(case)
+    ours, theirs = (tuple(np.copy(a) for a in args) for _ in range(2))
+    kernels.freight_steps(*ours)
+    bench_kernels.c_call(dll, theirs)()
+    x, v, pres, sc = ours[:4]
+    n, n_sub = x.size, args[4].size
+    tol_v = n_sub * (n + 8) * EPS * np.max(np.abs(v))
+    np.testing.assert_allclose(theirs[1], v, rtol=0, atol=tol_v)
+    np.testing.assert_allclose(theirs[0], x, rtol=0, atol=n_sub * 2 * EPS * np.max(np.abs(x))
+                               + n_sub * 0.01 * tol_v)
+    np.testing.assert_allclose(theirs[2], pres, rtol=0, atol=n_sub * 4 * EPS * 360e3)
+    assert theirs[3][kernels.S_FIRST] == sc[kernels.S_FIRST]
+    assert np.max(np.abs(v - args[1])) > 1e-3  # the step did something
+    if case == "brake wave":
+        assert np.max(np.abs(pres - args[2])) > 1e3
 
 
 def test_cache_locator_is_by_content(tmp_path, monkeypatch) -> None:

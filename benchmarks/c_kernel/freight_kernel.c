@@ -34,17 +34,20 @@ static double target_pressure(double r, const double *cp) {
     return 0.0;
 }
 
+/* x^e; x itself for e = 1 (what pow returns there, without the call) */
+static inline double xpow(double x, double e) { return e == 1.0 ? x : pow(x, e); }
+
 static double evolve(double pres, double target, double dt, const double *cp) {
     double pmax = cp[C_PMAX];
     double frac = dmin(pres / pmax, 1.0);
     if (pres < target) {
-        double t_up = cp[C_FILL_T] * pow(frac, 1.0 / cp[C_FILL_E]);
-        double up = pmax * pow(dmin((t_up + dt) / cp[C_FILL_T], 1.0), cp[C_FILL_E]);
+        double t_up = cp[C_FILL_T] * xpow(frac, 1.0 / cp[C_FILL_E]);
+        double up = pmax * xpow(dmin((t_up + dt) / cp[C_FILL_T], 1.0), cp[C_FILL_E]);
         return dmin(up, target);
     }
     if (pres > target) {
-        double t_down = cp[C_REL_T] * pow(1.0 - frac, 1.0 / cp[C_REL_E]);
-        double down = pmax * (1.0 - pow(dmin((t_down + dt) / cp[C_REL_T], 1.0), cp[C_REL_E]));
+        double t_down = cp[C_REL_T] * xpow(1.0 - frac, 1.0 / cp[C_REL_E]);
+        double down = pmax * (1.0 - xpow(dmin((t_down + dt) / cp[C_REL_T], 1.0), cp[C_REL_E]));
         return dmax(down, target);
     }
     return pres;
