@@ -117,8 +117,11 @@ def compile_kernels() -> bool:
     with _LOCK:
         if _compiled:
             return True
-        import numba
-        from numba.core import caching
+        try:
+            import numba
+            from numba.core import caching
+        except ImportError:  # pragma: no cover - found by find_spec but broken
+            return False
 
         _install_locator(caching)
         space = globals()
