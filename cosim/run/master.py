@@ -345,6 +345,7 @@ class Link:
     dst_name: str
     last: Any = None
     changes: int = 0
+    history: list[Any] | None = None  # every new value (kept only for the summary's command)
 
 
 class Recorder:
@@ -535,8 +536,10 @@ class Master:
             by_name[comp.name] = unit
             self.units.append(unit)
         self.by_name = by_name
+        command = sc.summary.get("command")
         for c in sc.connections:
-            self.links.append(Link(c, by_name[c.src], by_name[c.dst], c.src_var, c.dst_var))
+            self.links.append(Link(c, by_name[c.src], by_name[c.dst], c.src_var, c.dst_var,
+                                   history=[] if command == f"{c.src}.{c.src_var}" else None))
         self.link_order = self._value_flow_order()
 
     def _value_flow_order(self) -> list[Link]:
@@ -581,6 +584,8 @@ class Master:
     def transfer(self, link: Link, value: Any) -> None:
         if link.last is not None and value != link.last:
             link.changes += 1
+        if link.history is not None and (link.last is None or value != link.last):
+            link.history.append(value)
         link.last = value
         link.dst.set(link.dst_name, value)
 
@@ -666,6 +671,8 @@ class Master:
                         for u in self.units},
             fmu_wall_time_s={u.name: u.wall_time for u in self.units},
             connection_changes={f"{lk.conn.src}.{lk.src_name}": lk.changes for lk in self.links},
+            connection_values={f"{lk.conn.src}.{lk.src_name}": lk.history for lk in self.links
+                               if lk.history is not None},
             final_outputs=final_outputs,
             wall_time_s=wall_time,
             sim_time_s=to_seconds(self.end_ticks - self.start_ticks),
@@ -717,6 +724,8 @@ class RunResult:
     completed: bool = True
     error: str | None = None
     terminated_by: dict[str, Any] | None = None  # {instance, time}: an FMU ended the run
+    # the successive values passed on by the summary's command connection (command_switches)
+    connection_values: dict[str, list[Any]] = field(default_factory=dict)
 
     def write(self, out_dir: Path, plot: bool = True, force: bool = False) -> list[Path]:
         from cosim.run.results import write_results
