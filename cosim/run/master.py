@@ -16,6 +16,7 @@ Time is kept in integer nanoseconds.
 from __future__ import annotations
 
 import atexit
+import math
 import re
 import shutil
 import time
@@ -253,22 +254,26 @@ class FmuUnit:
         self.wall_time += time.perf_counter() - t0
 
     def step_to(self, ticks: int) -> None:
-        """doStep from this FMU's own time to ``ticks``."""
-        h = ticks - self.time_ticks
-        if h <= 0:
-            return
+        """doStep from this FMU's own time to ``ticks``, in steps of at most the instance's
+        ``max_step`` (inputs held over them) when a master's step is longer."""
         t0 = time.perf_counter()
         try:
-            self._do_step(self.time_ticks, h)
-        except (FmuTerminated, SimulationError):
-            raise
-        except Exception as err:  # fmpy raises FMICallException with the status
-            raise SimulationError(f"{self.name}: doStep at t = {to_seconds(self.time_ticks):g} "
-                                  f"s, h = {to_seconds(h):g} s failed: "
-                                  f"{self.fmu_reason(err)}") from err
+            while self.time_ticks < ticks:
+                h = ticks - self.time_ticks
+                if self.max_step_ticks:
+                    h = min(h, self.max_step_ticks)
+                try:
+                    self._do_step(self.time_ticks, h)
+                except (FmuTerminated, SimulationError):
+                    raise
+                except Exception as err:  # fmpy raises FMICallException with the status
+                    raise SimulationError(f"{self.name}: doStep at t = "
+                                          f"{to_seconds(self.time_ticks):g} s, h = "
+                                          f"{to_seconds(h):g} s failed: "
+                                          f"{self.fmu_reason(err)}") from err
+                self.time_ticks += h
         finally:
             self.wall_time += time.perf_counter() - t0
-        self.time_ticks = ticks
 
     def _do_step(self, t: int, h: int) -> None:
         """One communication step; fmi2Discard ends the run if the FMU terminated, else the
@@ -321,10 +326,12 @@ class FmuUnit:
     def update_schedule(self, now: int) -> None:
         """Next event after an event at ``now``: announced by the FMU or periodic."""
         if self.has_next_event_output:
-            nxt = to_ticks(self.get(["next_event_time"])[0])
-            if nxt <= now:
-                raise SimulationError(f"{self.name}: next_event_time {to_seconds(nxt)} s is not "
-                                      f"after the current time {to_seconds(now)} s")
+            value = self.get(["next_event_time"])[0]
+            nxt = to_ticks(value) if math.isfinite(value) else None
+            if nxt is None or nxt <= now:  # an FMU fault: never clamped, which would hide it
+                raise SimulationError(f"{self.name}: next_event_time = {value!r} s is not after "
+                                      f"the current time {to_seconds(now)!r} s (an FMU "
+                                      "announcing its next event must give a later time)")
             self.next_event_ticks = nxt
         elif self.sample_ticks is not None:
             self.next_event_ticks = now + self.sample_ticks
@@ -413,10 +420,10 @@ class EventDriven(Algorithm):
         due = set(m.units)
         while True:
             m.propagate(due)
+            m.maybe_record(t)  # first: a bad announced event below still keeps this point
             for unit in due:
                 if unit.scheduled:
                     unit.update_schedule(t)
-            m.maybe_record(t)
             if t >= m.stop_ticks:
                 break
             candidates = [m.stop_ticks, m.next_output_ticks]
