@@ -38,6 +38,7 @@ from fmpy.fmi2 import (
     free,
 )
 
+from cosim.fmu import diagnostics as fmu_diagnostics
 from cosim.fmu.state import to_seconds, to_ticks
 from cosim.run import interrupt
 from cosim.run.dependencies import order_connections, output_dependencies
@@ -631,6 +632,7 @@ class Master:
         self.partial: RunResult | None = None
         final_outputs: dict[str, dict[str, Any]] = {}
         self.terminated_by: dict[str, Any] | None = None
+        self.diagnostics: dict[str, dict[str, float]] = {}
         try:
             interrupt.check(to_seconds(self.start_ticks))
             self.initialize()
@@ -642,6 +644,7 @@ class Master:
             final_outputs = self._final_outputs()
             for unit in self.units:
                 unit.slave.terminate()
+                self.diagnostics[unit.name] = fmu_diagnostics.parse(unit.messages)
         except BaseException as err:
             self.end_ticks = max(u.time_ticks for u in self.units) if self.units else 0
             self.partial = self._result(final_outputs, time.perf_counter() - t0)
@@ -684,6 +687,7 @@ class Master:
             wall_time_s=wall_time,
             sim_time_s=to_seconds(self.end_ticks - self.start_ticks),
             terminated_by=getattr(self, "terminated_by", None),
+            diagnostics={k: v for k, v in getattr(self, "diagnostics", {}).items() if v},
         )
 
     def _recorded_refs(self) -> list[tuple[FmuUnit, str]]:
@@ -733,6 +737,8 @@ class RunResult:
     terminated_by: dict[str, Any] | None = None  # {instance, time}: an FMU ended the run
     # the successive values passed on by the summary's command connection (command_switches)
     connection_values: dict[str, list[Any]] = field(default_factory=dict)
+    # run-dependent figures an FMU logged at fmi2Terminate (solve times): never outputs
+    diagnostics: dict[str, dict[str, float]] = field(default_factory=dict)
 
     def write(self, out_dir: Path, plot: bool = True, force: bool = False) -> list[Path]:
         from cosim.run.results import write_results

@@ -37,8 +37,9 @@ Keys of ``[summary]`` (all optional; variable references are ``FMU.variable``):
 Always present: ``completed`` (False, with ``error``, for the partial results of a failed or
 interrupted run), ``sim_time_s``, ``wall_time_s``, ``real_time_factor``, ``algorithm``,
 ``do_steps``, ``executions``, ``fmu_wall_time_s``; controller counters (``qp_solves``,
-``qp_infeasible``, ``qp_solve_time_median_s``; ``qp_solve_time_total_s`` and
-``qp_cpu_time_total_s``, the wall and CPU time of all solves of the run;
+``qp_infeasible``; ``qp_solve_time_median_s``, ``qp_solve_time_total_s`` and
+``qp_cpu_time_total_s``, the median and total wall time and the total CPU time of the run's
+solves, which the FMU logs at fmi2Terminate (:mod:`cosim.fmu.diagnostics`; never outputs);
 ``qp_infeasible_after_stop``, ``events_moving``, ``events_standstill``) when an FMU publishes
 them; ``terminated_by``
 (``{instance, time}``) when an FMU ended the run itself (fmi2Discard with fmi2Terminated, FMI
@@ -223,12 +224,10 @@ def compute_summary(result: Any) -> dict[str, Any]:
         if "qp_solves" in outputs:
             out.setdefault("qp_solves", {})[fmu] = int(outputs["qp_solves"])
             out.setdefault("qp_infeasible", {})[fmu] = int(outputs.get("qp_infeasible", 0))
-            median = outputs.get("qp_solve_time_median")
-            out.setdefault("qp_solve_time_median_s", {})[fmu] = (
-                float(median) if median is not None and math.isfinite(median) else None)
-            for name in ("qp_solve_time_total", "qp_cpu_time_total"):  # whole-run compute
-                if name in outputs:
-                    out.setdefault(f"{name}_s", {})[fmu] = float(outputs[name])
+        timing = result.diagnostics.get(fmu, {})  # logged at fmi2Terminate, not outputs
+        for name in ("qp_solve_time_median", "qp_solve_time_total", "qp_cpu_time_total"):
+            if name in timing and math.isfinite(timing[name]):
+                out.setdefault(f"{name}_s", {})[fmu] = float(timing[name])
         for key in CONTROLLER_COUNTERS:  # published by the seed 000 predictive controllers
             if key in outputs:
                 out.setdefault(key, {})[fmu] = int(outputs[key])
