@@ -136,9 +136,19 @@ def test_bad_override_is_reported(built_fmus):
 
 
 def test_override_sets_parameter(built_fmus):
-    heavy = run_scenario(PID, build=False, overrides=["plant.brake_gain=0.009",
-                                                      "simulation.stop_time=20"])
-    assert heavy.scenario.components["plant"].parameters["brake_gain"] == 0.009
+    """--set values reach the FMU: it reports them (parameters read back through getReal on
+    every recorded row) and acts on them (a 0.4 s dead time: the first command, computed at
+    t = 0, is applied from 0.4 s instead of the scenario's 1.0 s)."""
+    sc = load_scenario(PID, ["plant.brake_gain=0.009", "plant.brake_delay=0.4",
+                             "simulation.stop_time=20"])
+    sc.record = [*sc.record, "plant.brake_gain", "plant.brake_delay"]
+    heavy = run_scenario(sc, build=False, plot=False)
+    f = heavy.frame
+    assert set(f["plant.brake_gain"]) == {0.009} and set(f["plant.brake_delay"]) == {0.4}
+    applied = f.set_index(f["time"].round(6))["plant.applied_command"]
+    first = f["controller.brake_command"].iloc[0]
+    assert first > 0.0
+    assert applied.loc[0.2] == 0.0 and applied.loc[0.4] == first
     assert heavy.sim_time_s == pytest.approx(20.0)
 
 
