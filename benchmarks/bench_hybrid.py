@@ -52,9 +52,9 @@ def closed_loop(cls: type, **params) -> tuple[HybridMpc, list[tuple[float, dict]
         inputs = {n: o[n] for n in MEASURED}
         events.append((float(k), inputs))
         nodes = ctl.nodes
-        cpu = ctl.cpu_time
+        cpu = ctl.timing.cpu_total
         out, _ = ctl.compute(float(k), inputs)
-        stats.append((ctl.solve_times[-1], ctl.cpu_time - cpu, ctl.nodes - nodes))
+        stats.append((ctl.timing.recent[-1], ctl.timing.cpu_total - cpu, ctl.nodes - nodes))
         if k < STOP:
             plant.advance(to_ticks(k), to_ticks(1.0),
                           {f"force[{i}]": out[f"force[{i}]"] for i in (1, 2, 3)})

@@ -52,7 +52,7 @@ def qp_table(repeat: int) -> None:
                 for hold in range(1, core.max_hold + 1):
                     core.qp(hold)  # build outside the timed region (done once per FMU)
                 r = run_loop(core, p)
-                ev = [x for x in core.solve_times if x > 0.0]
+                ev = [x for x in core.timing.recent if x > 0.0]  # < WINDOW events
                 times += ev
                 solves += core.qp_solves
                 events += len(ev)

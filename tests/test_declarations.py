@@ -60,12 +60,22 @@ ADDED_VARIABLES = {
 }
 
 
+# variables removed since (FMU -> names): issue 12, the run-dependent QP solve time is no
+# output (the FMU logs it at fmi2Terminate, cosim.fmu.diagnostics)
+REMOVED_VARIABLES = {f: {"qp_solve_time_median"} for f in ("StopMpc", "StopRmpc", "StopRsmpc")}
+
+
 def test_model_descriptions_unchanged_but_for_listed_improvements(built_fmus) -> None:
     assert set(BEFORE) <= set(catalog())
     for identifier, before in BEFORE.items():
         with zipfile.ZipFile(built_fmus[identifier].path) as z:
             now = digest_model_description(z.read("modelDescription.xml"))
         added = ADDED_VARIABLES.get(identifier, set())
+        removed = REMOVED_VARIABLES.get(identifier, set())
+        before = {**before, "variables": {k: v for k, v in before["variables"].items()
+                                          if k not in removed},
+                  "output_dependencies": {k: v for k, v in before["output_dependencies"].items()
+                                          if k not in removed}}
         for key in ("description", "default_experiment", "units"):
             assert now[key] == before[key], (identifier, key)
         deps = now["output_dependencies"]  # added outputs bring their own entries

@@ -1,14 +1,18 @@
 """Built FMUs: fmpy validation, many FMUs in one process, closed-loop state save/restore
-through FMI, and an FMU run in a fresh virtual environment without this package."""
+through FMI, an FMU run in a fresh virtual environment without this package, and one value
+check per FMU derived independently of its code (analytic law, invariant or scipy)."""
 
 from __future__ import annotations
 
+import math
 import os
 import subprocess
 import textwrap
 import venv
 from pathlib import Path
+from typing import Any
 
+import numpy as np
 import pytest
 from fmi_state_helpers import rerun_after_restore
 from fmpy import extract, read_model_description
@@ -140,3 +144,269 @@ def test_further_instances_reuse_the_bundled_modules(built_fmus):
         for inst in insts:
             inst.fmu.terminate()
             inst.fmu.freeInstance()
+
+
+# -- one value check per FMU, each derived independently of the FMU's code -------------------
+# (an analytic law computed here by hand, an invariant, or an independent solver); a new FMU
+# must add its check: test_every_fmu_has_a_value_check.
+
+ROUTES = Path(__file__).resolve().parent.parent / "plants" / "routes"
+VALUE_CHECKS: dict[str, Any] = {}
+
+
+def _checks(*identifiers: str):
+    def register(fn):
+        for identifier in identifiers:
+            VALUE_CHECKS[identifier] = fn
+        return fn
+    return register
+
+
+class _Fmu:
+    """An fmpy instance with parameters set by their declared type, started at ``start``."""
+
+    def __init__(self, path: Path, start: float = 0.0, **params: Any) -> None:
+        self.md = read_model_description(str(path))
+        self.vars = {v.name: v for v in self.md.modelVariables}
+        self.fmu = FMU2Slave(guid=self.md.guid, unzipDirectory=extract(str(path)),
+                             instanceName="checked",
+                             modelIdentifier=self.md.coSimulation.modelIdentifier)
+        self.fmu.instantiate()
+        self.fmu.setupExperiment(startTime=start)
+        self.fmu.enterInitializationMode()
+        for name, value in params.items():
+            self.set(name, value)
+        self.fmu.exitInitializationMode()
+        self.t = start
+
+    def set(self, name: str, value: Any) -> None:
+        var = self.vars[name]
+        setter = {"Real": self.fmu.setReal, "Integer": self.fmu.setInteger,
+                  "Boolean": self.fmu.setBoolean, "String": self.fmu.setString}[var.type]
+        setter([var.valueReference], [value])
+
+    def get(self, name: str) -> float:
+        var = self.vars[name]
+        getter = {"Real": self.fmu.getReal, "Integer": self.fmu.getInteger}[var.type]
+        return getter([var.valueReference])[0]
+
+    def start(self, name: str) -> float:
+        return float(self.vars[name].start)
+
+    def step(self, h: float, n: int = 1) -> None:
+        for _ in range(n):
+            self.fmu.doStep(currentCommunicationPoint=self.t, communicationStepSize=h)
+            self.t += h
+
+    def close(self) -> None:
+        self.fmu.terminate()
+        self.fmu.freeInstance()
+
+
+def _distance_reference(csv: Path, x: float) -> float:
+    """Speed (m/s) of a speed-distance profile at ``x``, constant acceleration between its
+    points (v^2 linear in position), read from the CSV (position_m, speed_kmh) here."""
+    pos, kmh = np.loadtxt(csv, delimiter=",", comments="#", skiprows=3, unpack=True)
+    i = int(np.searchsorted(pos, x, side="right")) - 1
+    v0, v1 = kmh[i] / 3.6, kmh[i + 1] / 3.6
+    accel = (v1**2 - v0**2) / (2.0 * (pos[i + 1] - pos[i]))
+    return math.sqrt(v0**2 + 2.0 * accel * (x - pos[i]))
+
+
+# v_ref: O(100 m/s) from a handful of roundings of v^2 = O(1e4 m2/s2): well under 1e-9 m/s
+V_REF_TOL = 1e-9
+
+
+@_checks("BrakeDelayTrain")
+def _coasting_on_level_track(path: Path) -> None:
+    """No brake, grades scaled to 0: m dv/dt = -(a + b v + c v^2), ds/dt = v, solved by scipy
+    (rtol 1e-12). The FMU's RK4 at h = 0.01 s on a resistance changing over m v / R ~ 800 s
+    errs by ~(h / 800 s)^4 relative: 1e-9 m/s and 1e-7 m after 60 s are far above that."""
+    from scipy.integrate import solve_ivp
+
+    fmu = _Fmu(path, grade_scale=0.0, v0=20.0)
+    try:
+        fmu.step(0.2, 300)
+        m, a, b, c = (fmu.start(n) for n in ("mass", "davis_a", "davis_b", "davis_c"))
+        sol = solve_ivp(lambda t, y: [-(a + b * y[0] + c * y[0] ** 2) / m, y[0]], (0.0, 60.0),
+                        [20.0, 0.0], rtol=1e-12, atol=1e-12, method="DOP853")
+        v, s = sol.y[:, -1]
+        assert abs(fmu.get("v") - v) < 1e-9 and abs(fmu.get("s") - s) < 1e-7
+        assert 18.0 < v < 19.0  # it did coast: 1.7 m/s lost to resistance
+        assert fmu.get("a_c") == 0.0 and fmu.get("applied_command") == 0.0
+    finally:
+        fmu.close()
+
+
+@_checks("Emu3", "Emu8")
+def _emu_coasting_on_level_track(path: Path) -> None:
+    """Zero force on level track from 80 m/s: the mass-weighted mean speed obeys
+    M dv/dt = -sum_i R_i(v_i) (couplers are internal), solved by scipy with every unit at the
+    mean speed. That lumping errs by at most sum_i (b_i + c_i (|v_i| + |v|)) |v_i - v| / M per
+    second, bounded here from the unit speeds the FMU reports; the FMU's second-order
+    (exponential midpoint) integrator adds about (h^2 / 12) T |f' f| (f = dv/dt at 80 m/s,
+    h = max_step): allowed with a factor 12 (measured 4.5e-9 m/s for Emu8)."""
+    from scipy.integrate import solve_ivp
+
+    from plants.emu import DEFAULT_CONFIGURATION, emu_config
+
+    units = sum(1 for n in read_model_description(str(path)).modelVariables
+                if n.name.startswith("force["))
+    p = emu_config(DEFAULT_CONFIGURATION[units])
+    m = np.array(p.masses)
+    a, b, c = (np.array(x) for x in (p.davis_a, p.davis_b, p.davis_c))
+    fmu = _Fmu(path, route="seed004_level", v0=80.0)
+    try:
+        bound, h = 0.0, 0.2
+        for _ in range(300):
+            fmu.step(h)
+            vi = np.array([fmu.get(f"v[{i}]") for i in range(1, units + 1)])
+            vm = fmu.get("v")
+            bound += h * float(np.sum((b + c * (np.abs(vi) + abs(vm))) * np.abs(vi - vm)))
+        sol = solve_ivp(lambda t, y: [-np.sum(a + b * y[0] + c * y[0] ** 2) / m.sum()],
+                        (0.0, 60.0), [80.0], rtol=1e-12, atol=1e-12, method="DOP853")
+        f = np.sum(a + b * 80.0 + c * 80.0**2) / m.sum()
+        df = np.sum(b + 2.0 * c * 80.0) / m.sum()
+        integrator = fmu.start("max_step") ** 2 * 60.0 * f * df
+        assert abs(fmu.get("v") - sol.y[0, -1]) <= bound / m.sum() + integrator
+        assert 70.0 < sol.y[0, -1] < 78.0  # it did coast
+        assert fmu.get("power") == 0.0
+    finally:
+        fmu.close()
+
+
+@_checks("FreightTrain")
+def _freight_at_rest_stays_at_rest(path: Path, tmp_path: Path) -> None:
+    """At rest on a level route with no force and the brakes released, nothing moves: every
+    vehicle stays where it was for 60 s (static resistance holds it), and the tail is one
+    train length behind the head."""
+    route = tmp_path / "level.toml"
+    route.write_text('name = "level"\nlength_m = 5000.0\ngrade = [[0.0, 0.0]]\n')
+    fmu = _Fmu(path, route=str(route), v0=0.0, s0=1000.0)
+    try:
+        tail = fmu.get("s_tail")
+        fmu.step(0.5, 120)
+        assert (fmu.get("s"), fmu.get("s_tail")) == (1000.0, tail)
+        # speeds at rounding level of the coupler solve (u |F| h / m ~ 1e-16 1e6 0.5 / 1e5)
+        assert abs(fmu.get("v")) < 1e-15 and abs(fmu.get("v_tail")) < 1e-15
+        length = fmu.start("loco_length") + 108 * fmu.start("wagon_length")
+        assert 1000.0 - tail == pytest.approx(length, rel=1e-12)
+    finally:
+        fmu.close()
+
+
+@_checks("StopPid")
+def _pid_first_output(path: Path) -> None:
+    """Eq. (sec. 4.1): u = a0/c + kp e + ki e T (no derivative at the first sample), with
+    v_ref(0) = sqrt(2 a0 s_stop) = 20 m/s and e = 0.05 m/s."""
+    fmu = _Fmu(path)
+    try:
+        fmu.set("v", 20.05)
+        fmu.set("s", 0.0)
+        e = 20.05 - math.sqrt(2 * 0.5 * 400.0)
+        expected = 0.5 / 0.0107 + 60.0 * e + 10.0 * e * 0.2
+        assert fmu.get("brake_command") == pytest.approx(expected, rel=1e-14)
+        assert fmu.get("v_ref") == 20.0
+    finally:
+        fmu.close()
+
+
+@_checks("StopMpc", "StopRmpc", "StopRsmpc")
+def _mpc_holds_at_the_stop_point(path: Path) -> None:
+    """At rest at the stop point the predictive controllers hold the train (standstill rule):
+    the command is max(previous = 0, standstill_command), the reference speed 0."""
+    fmu = _Fmu(path)
+    try:
+        fmu.set("v", 0.0)
+        fmu.set("s", fmu.start("stop_point"))
+        assert fmu.get("brake_command") == max(0.0, fmu.start("standstill_command")) > 0.0
+        assert fmu.get("v_ref") == 0.0
+    finally:
+        fmu.close()
+
+
+def _set_emu_inputs(fmu: _Fmu, v: list[float], s: float, limit: float = 3e5) -> None:
+    for name in fmu.vars:
+        if name.startswith(("traction_limit[", "brake_limit[")):
+            fmu.set(name, limit)
+    if "v[1]" in fmu.vars:
+        for i, vi in enumerate(v, 1):
+            fmu.set(f"v[{i}]", vi)
+    else:
+        fmu.set("v", float(np.mean(v)))
+    fmu.set("s", s)
+
+
+@_checks("EmuSpeedPid3", "EmuSpeedPid8", "EmuMfac3", "EmuIsmc3", "EmuIsmpc3", "EmuGpc3")
+def _emu_controller_reference_and_total(path: Path) -> None:
+    """v_ref at the measured head position is the bundled speed-distance profile there
+    (computed here from the CSV); speed_error = mean speed - v_ref; force_demand is the sum
+    of the unit forces, each within the limits the plant gave."""
+    fmu = _Fmu(path)
+    try:
+        units = sum(1 for n in fmu.vars if n.startswith("force["))
+        v = [30.0 + 0.1 * i for i in range(units)]
+        _set_emu_inputs(fmu, v, 1234.5)
+        v_ref = _distance_reference(ROUTES / "jinan_xuzhou_east_reference.csv", 1234.5)
+        assert abs(fmu.get("v_ref") - v_ref) < V_REF_TOL
+        assert fmu.get("speed_error") == pytest.approx(np.mean(v) - fmu.get("v_ref"),
+                                                       abs=1e-12)
+        forces = [fmu.get(f"force[{i}]") for i in range(1, units + 1)]
+        assert fmu.get("force_demand") == pytest.approx(sum(forces), rel=1e-12, abs=1e-6)
+        assert all(-3e5 <= f <= 3e5 for f in forces)
+    finally:
+        fmu.close()
+
+
+@_checks("Gmpc3", "MbMpc3")
+def _hybrid_mpc_reference_at_100_s(path: Path) -> None:
+    """Started at t = 100 s on the seed 004 speed-time reference (0 -> 30 m/s over 75 s, then
+    30 m/s): v_ref = 30 m/s and s_ref = 30 * 75 / 2 + 30 * 25 = 1875 m by hand; the trailer
+    (car 2 of crh3_3car) gives no force; the total is the sum of the car forces."""
+    fmu = _Fmu(path, start=100.0)
+    try:
+        _set_emu_inputs(fmu, [30.0, 30.0, 30.0], 1875.0)
+        assert fmu.get("v_ref") == 30.0
+        assert fmu.get("s_ref") == pytest.approx(1875.0, rel=1e-12)
+        forces = [fmu.get(f"force[{i}]") for i in (1, 2, 3)]
+        assert forces[1] == 0.0
+        assert fmu.get("force_demand") == pytest.approx(sum(forces), rel=1e-12, abs=1e-6)
+    finally:
+        fmu.close()
+
+
+@_checks("FreightPid", "FreightFpid", "FreightPreview", "FreightSmc")
+def _freight_controller_reference_and_final_hold(path: Path) -> None:
+    """v_ref at the measured position is the route's speed-distance profile (computed here
+    from the CSV); at rest at the end of the profile the train is held by the pipe reduction
+    hold_reduction with no locomotive force (the shared final-stop rule)."""
+    csv = ROUTES / "freight_20km_reference.csv"
+    fmu = _Fmu(path)
+    try:
+        fmu.set("v", 10.0)
+        fmu.set("s", 1234.5)
+        assert abs(fmu.get("v_ref") - _distance_reference(csv, 1234.5)) < V_REF_TOL
+        assert fmu.get("speed_error") == 10.0 - fmu.get("v_ref")
+    finally:
+        fmu.close()
+    end = float(np.loadtxt(csv, delimiter=",", comments="#", skiprows=3)[-1, 0])
+    fmu = _Fmu(path)
+    try:
+        fmu.set("v", 0.0)
+        fmu.set("s", end)
+        assert fmu.get("v_ref") == 0.0
+        assert fmu.get("pipe_reduction") == fmu.start("hold_reduction") > 0.0
+        assert fmu.get("force_demand") == 0.0
+    finally:
+        fmu.close()
+
+
+def test_every_fmu_has_a_value_check(built_fmus):
+    assert set(built_fmus) == set(VALUE_CHECKS)
+
+
+@pytest.mark.parametrize("identifier", sorted(VALUE_CHECKS))
+def test_fmu_value(built_fmus, identifier, tmp_path):
+    check = VALUE_CHECKS[identifier]
+    args = (built_fmus[identifier].path, tmp_path)
+    check(*args[:check.__code__.co_argcount])

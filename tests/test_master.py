@@ -63,14 +63,33 @@ def test_pid_stops_inside_window(event_run):
     assert s["command_switches"] > 0
 
 
-def test_jacobi_delays_command_by_one_step(event_run):
-    jac = run_scenario(PID, algorithm="jacobi", build=False)
-    ev = event_run.frame
-    jf = jac.frame
-    # Gauss-Seidel: the command computed at t is applied at t; Jacobi: one step later
-    assert ev["controller.brake_command"].iloc[0] == jf["controller.brake_command"].iloc[0]
-    assert abs(jac.summary["stop_error_m"]) < 0.5
-    assert _max_diff(event_run, jac) > 1e-3
+def _with_inputs_recorded(algorithm: str):
+    sc = load_scenario(PID)
+    sc.record = [*sc.record, "plant.brake_command", "controller.speed_error"]
+    return run_scenario(sc, algorithm=algorithm, build=False, plot=False)
+
+
+@pytest.mark.parametrize("algorithm, delay", [("jacobi", 1), ("event", 0), ("fixed", 0)])
+def test_jacobi_delays_command_by_one_step(built_fmus, algorithm, delay):
+    """Jacobi (all outputs read, then all inputs set, as libcosim): the controller's event at
+    t_k computes from the plant outputs of t_(k-1), and the plant is recorded at t_k with the
+    command of t_(k-1) (the next one is set after the recording). Gauss-Seidel (event, fixed):
+    both from t_k. Checked on every sample against the PID's error law
+    ``e = v - sqrt(2 a0 (s_stop - s))`` evaluated here on the recorded plant outputs."""
+    from cosim.fmu.profiles import StoppingCurve
+
+    f = _with_inputs_recorded(algorithm).frame
+    assert np.allclose(np.diff(f["time"]), 0.2, rtol=0, atol=1e-12)  # one row per event
+    curve = StoppingCurve(0.5, 400.0)
+    v, s = f["plant.v"].to_numpy(), f["plant.s"].to_numpy()
+    error = f["controller.speed_error"].to_numpy()
+    measured = np.arange(1, len(f)) - delay
+    assert list(error[1:]) == [v[k] - curve.speed(s[k]) for k in measured]
+    assert error[0] == v[0] - curve.speed(s[0])  # initial values flow in initialization
+    command = f["controller.brake_command"].to_numpy()
+    applied = f["plant.brake_command"].to_numpy()
+    assert list(applied[1:]) == list(command[1 - delay:len(f) - delay])
+    assert np.count_nonzero(np.diff(command)) > 100  # a changing command: the check can fail
 
 
 def test_sample_time_override_changes_schedule(built_fmus):
@@ -117,9 +136,19 @@ def test_bad_override_is_reported(built_fmus):
 
 
 def test_override_sets_parameter(built_fmus):
-    heavy = run_scenario(PID, build=False, overrides=["plant.brake_gain=0.009",
-                                                      "simulation.stop_time=20"])
-    assert heavy.scenario.components["plant"].parameters["brake_gain"] == 0.009
+    """--set values reach the FMU: it reports them (parameters read back through getReal on
+    every recorded row) and acts on them (a 0.4 s dead time: the first command, computed at
+    t = 0, is applied from 0.4 s instead of the scenario's 1.0 s)."""
+    sc = load_scenario(PID, ["plant.brake_gain=0.009", "plant.brake_delay=0.4",
+                             "simulation.stop_time=20"])
+    sc.record = [*sc.record, "plant.brake_gain", "plant.brake_delay"]
+    heavy = run_scenario(sc, build=False, plot=False)
+    f = heavy.frame
+    assert set(f["plant.brake_gain"]) == {0.009} and set(f["plant.brake_delay"]) == {0.4}
+    applied = f.set_index(f["time"].round(6))["plant.applied_command"]
+    first = f["controller.brake_command"].iloc[0]
+    assert first > 0.0
+    assert applied.loc[0.2] == 0.0 and applied.loc[0.4] == first
     assert heavy.sim_time_s == pytest.approx(20.0)
 
 

@@ -23,8 +23,6 @@ Forces are output in N. MB-MPC is the same controller with ``move_blocks = "3:4:
 
 from __future__ import annotations
 
-import math
-import statistics
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, ClassVar
@@ -34,6 +32,7 @@ import numpy as np
 from controllers.hybrid.miqp import HybridMiqp, MiqpResult, parse_blocks
 from controllers.hybrid.model import KN, ChainModel, Limits, PwlResistance
 from cosim.fmu.declare import Declared, Var, build, param, parameters, sample_time
+from cosim.fmu.diagnostics import SolveTimes
 from cosim.fmu.state import StatefulCore
 from plants.emu import CONFIGURATIONS, EmuParams, emu_config
 from plants.route import ReferenceProfile, load_reference, routes_dir_in
@@ -117,7 +116,7 @@ class HybridMpc(StatefulCore, Declared):
     default_params: ClassVar[HybridMpcParams] = HybridMpcParams()
     state_fields: ClassVar[tuple[str, ...]] = (
         "forces", "delta", "braking_done", "plan", "v_ref", "s_ref", "speed_error",
-        "qp_solves", "qp_infeasible", "solve_times", "cpu_time", "nodes", "last_failure",
+        "qp_solves", "qp_infeasible", "nodes", "last_failure",
         "qp_rescued")
     setup_vars = (Var("reference", "parameter", "seed004_crh3_reference", description=
                       "bundled speed-time reference profile name or path of a CSV/TOML file"),)
@@ -132,9 +131,6 @@ class HybridMpc(StatefulCore, Declared):
                    "used)", start=0),
         Var.output("qp_rescued", "1", "events DAQP solved only on a retry with other settings "
                    "or by enumerating the binaries", start=0),
-        Var.output("qp_solve_time_median", "s", "median MIQP time per event so far"),
-        Var.output("qp_solve_time_total", "s", "MIQP time summed over all events so far"),
-        Var.output("qp_cpu_time_total", "s", "CPU time of the MIQPs summed over all events"),
         Var.output("bnb_nodes", "1", "branch-and-bound nodes summed over all events", start=0),
     )
 
@@ -186,8 +182,9 @@ class HybridMpc(StatefulCore, Declared):
         self.plan: list[list[float]] = []
         self.v_ref = self.s_ref = self.speed_error = 0.0
         self.qp_solves = self.qp_infeasible = self.nodes = 0
-        self.solve_times: list[float] = []
-        self.cpu_time = 0.0
+        # MIQP wall and CPU times: run-dependent, so neither state nor outputs; bounded;
+        # logged at fmi2Terminate (cosim.fmu.diagnostics)
+        self.timing = SolveTimes()
         self.qp_rescued = 0
         self.last_failure: tuple[float, str] | None = None
 
@@ -243,8 +240,7 @@ class HybridMpc(StatefulCore, Declared):
         res, delta = self.solve(t, inputs)
         self.qp_solves += 1
         self.nodes += res.nodes
-        self.solve_times.append(res.solve_time)
-        self.cpu_time += res.cpu_time
+        self.timing.add(res.solve_time, res.cpu_time)
         md = self.model
         if res.feasible:
             self.qp_rescued += res.status != "solved"
@@ -267,9 +263,12 @@ class HybridMpc(StatefulCore, Declared):
         self.speed_error = float(md.c[:self.n] @ v) - self.v_ref
         return self.outputs(), 1
 
+    def diagnostics(self) -> dict[str, float]:
+        """MIQP wall and CPU times of the events computed by this instance (run-dependent)."""
+        return self.timing.diagnostics()
+
     def outputs(self) -> dict[str, Any]:
         out: dict[str, Any] = {f"force[{i + 1}]": f for i, f in enumerate(self.forces)}
-        times = self.solve_times
         out.update({
             "force_demand": float(sum(self.forces)),
             "delta": float(self.delta),
@@ -279,9 +278,6 @@ class HybridMpc(StatefulCore, Declared):
             "qp_solves": self.qp_solves,
             "qp_infeasible": self.qp_infeasible,
             "qp_rescued": self.qp_rescued,
-            "qp_solve_time_median": statistics.median(times) if times else 0.0,
-            "qp_solve_time_total": math.fsum(times),
-            "qp_cpu_time_total": self.cpu_time,
             "bnb_nodes": self.nodes,
         })
         return out

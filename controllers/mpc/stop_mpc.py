@@ -63,8 +63,6 @@ Choices where the paper is silent (all parameters of :class:`StopMpcParams`):
 from __future__ import annotations
 
 import math
-import statistics
-from collections import deque
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, ClassVar
@@ -77,6 +75,7 @@ from controllers.common.qp import QP_SOLVERS, HorizonQP, QPResult, support_of_su
 from controllers.common.stopping import MEASURED_SPEED_POSITION, u_max_param, u_min_param
 from controllers.mpc.terminal import robust_invariant_set
 from cosim.fmu.declare import Declared, Var, build, group, param, sample_time
+from cosim.fmu.diagnostics import SolveTimes
 from cosim.fmu.profiles import StoppingCurve, ref_decel_param, stop_point_param
 from cosim.fmu.state import StatefulCore
 from plants.resistance import Davis
@@ -218,7 +217,6 @@ _DESIGN_FIELDS = ("model", "curve", "route", "N", "Q", "P", "K", "A_cl", "known_
                   "x_hi", "F_term", "h_term")
 _DESIGNS: dict[tuple, dict[str, Any]] = {}  # (class, params, routes_dir) -> shared design
 _DESIGN_CACHE_SIZE = 64
-SOLVE_TIME_WINDOW = 1001  # events over which qp_solve_time_median is taken (the latest ones)
 
 
 class _StopMpcBase(StatefulCore, Declared):
@@ -236,7 +234,6 @@ class _StopMpcBase(StatefulCore, Declared):
         Var.output("qp_solves", "1", "QPs solved so far", start=0),
         Var.output("qp_infeasible", "1", "events whose QP was infeasible (fallback law used)",
                    start=0),
-        Var.output("qp_solve_time_median", "s", "median QP time per event so far"),
         Var.output("hold_steps", "1", "samples the current command is held (RSMPC: M)",
                    start=1),
         Var.output("qp_infeasible_after_stop", "1", "events at standstill whose QP was "
@@ -257,7 +254,7 @@ class _StopMpcBase(StatefulCore, Declared):
         "history", "command", "last_t", "anchor", "warm", "plan", "hold", "qp_solves",
         "qp_infeasible", "standstill", "last_v_ref", "qp_infeasible_after_stop",
         "events_moving", "events_standstill", "d_hat", "obs_x", "obs_inputs")
-        # solve_times: wall clock, not state
+        # timing (wall clock): not state, reported through the FMI log at termination
     feedforward: ClassVar[bool] = False
     tube: ClassVar[bool] = True
     self_triggered: ClassVar[bool] = False
@@ -293,8 +290,9 @@ class _StopMpcBase(StatefulCore, Declared):
         self.hold = 1
         self.qp_solves = 0
         self.qp_infeasible = 0
-        # wall-clock diagnostics: bounded, outside the (deterministic, serialized) state
-        self.solve_times: deque[float] = deque(maxlen=SOLVE_TIME_WINDOW)
+        # wall-clock diagnostics: bounded, outside the (deterministic, serialized) state and
+        # the outputs; logged at fmi2Terminate (cosim.fmu.diagnostics)
+        self.timing = SolveTimes()
         self.standstill = False
         self.last_v_ref = 0.0
         self.qp_infeasible_after_stop = 0
@@ -566,7 +564,7 @@ class _StopMpcBase(StatefulCore, Declared):
             du, hold, plan, elapsed_s = self.choose(x0, t)
             u = float(np.clip(x0[U_PREV] + du, p.u_min, p.u_max))
             self.plan = plan
-        self.solve_times.append(elapsed_s)
+        self.timing.add(elapsed_s)
         if self.observer:  # what the next event compares its measured speed with
             self.obs_x = [a_c, self.history[0], v, s]
             self.obs_inputs = self.history[1:] + [u]
@@ -594,9 +592,9 @@ class _StopMpcBase(StatefulCore, Declared):
         d = self.d_hat + self.p.observer_gain * (v - x[V]) / sens[V]
         self.d_hat = float(np.clip(d, *self.spread))
 
-    def qp_solve_time_median(self) -> float:
-        times = [x for x in self.solve_times if x > 0.0]
-        return statistics.median(times) if times else 0.0
+    def diagnostics(self) -> dict[str, float]:
+        """QP solve times of the events computed by this instance (run-dependent)."""
+        return self.timing.diagnostics()
 
     def outputs(self) -> dict[str, Any]:
         return {
@@ -604,7 +602,6 @@ class _StopMpcBase(StatefulCore, Declared):
             "v_ref": self.last_v_ref,
             "qp_solves": self.qp_solves,
             "qp_infeasible": self.qp_infeasible,
-            "qp_solve_time_median": self.qp_solve_time_median(),
             "hold_steps": self.hold,
             "qp_infeasible_after_stop": self.qp_infeasible_after_stop,
             "events_moving": self.events_moving,

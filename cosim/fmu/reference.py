@@ -101,7 +101,10 @@ def fmu_reference() -> str:
             f"{spec.description} Wrapper `{spec.module}.{spec.cls}`, core "
             f"`{cls.core_class.__module__}.{cls.core_class.__name__}`. Default experiment: "
             f"0 to {cls.default_experiment_stop_time:g} s, step {cls.default_experiment_step:g} s."
-            f" Needs: {', '.join(third_party_imports(spec.module))}.",
+            f" Needs: {', '.join(third_party_imports(spec.module))}."
+            + (" Logs its solver times at fmi2Terminate (`diagnostics {...}`: "
+               "run-dependent, so neither outputs nor FMU state; `cosim.fmu.diagnostics`)."
+               if callable(getattr(cls.core_class, "diagnostics", None)) else ""),
             "",
             "| variable | causality | type | unit | range | start | description |",
             "| --- | --- | --- | --- | --- | --- | --- |",

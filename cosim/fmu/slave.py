@@ -34,6 +34,7 @@ import numpy as np
 from pythonfmu import Boolean, Fmi2Causality, Fmi2Slave, Fmi2Variability, Integer, Real, String
 from pythonfmu.enums import Fmi2Status
 
+from cosim.fmu import diagnostics
 from cosim.fmu.declare import UNITS, Var
 from cosim.fmu.state import to_seconds, to_ticks
 
@@ -342,6 +343,9 @@ class CoreSlave(Fmi2Slave):
 
     def terminate(self) -> None:
         self.require_mode("fmi2Terminate", "initialized")
+        report = getattr(self.core, "diagnostics", None)
+        if callable(report):  # run-dependent timings: logged once, never outputs or state
+            self.log(diagnostics.message(self.instance_name, report()), Fmi2Status.ok)
         self.mode = "terminated"
 
     # -- FMU state: the whole core, not only registered variables -------------------------------

@@ -16,6 +16,7 @@ Time is kept in integer nanoseconds.
 from __future__ import annotations
 
 import atexit
+import math
 import re
 import shutil
 import time
@@ -37,6 +38,7 @@ from fmpy.fmi2 import (
     free,
 )
 
+from cosim.fmu import diagnostics as fmu_diagnostics
 from cosim.fmu.state import to_seconds, to_ticks
 from cosim.run import interrupt
 from cosim.run.dependencies import order_connections, output_dependencies
@@ -253,22 +255,26 @@ class FmuUnit:
         self.wall_time += time.perf_counter() - t0
 
     def step_to(self, ticks: int) -> None:
-        """doStep from this FMU's own time to ``ticks``."""
-        h = ticks - self.time_ticks
-        if h <= 0:
-            return
+        """doStep from this FMU's own time to ``ticks``, in steps of at most the instance's
+        ``max_step`` (inputs held over them) when a master's step is longer."""
         t0 = time.perf_counter()
         try:
-            self._do_step(self.time_ticks, h)
-        except (FmuTerminated, SimulationError):
-            raise
-        except Exception as err:  # fmpy raises FMICallException with the status
-            raise SimulationError(f"{self.name}: doStep at t = {to_seconds(self.time_ticks):g} "
-                                  f"s, h = {to_seconds(h):g} s failed: "
-                                  f"{self.fmu_reason(err)}") from err
+            while self.time_ticks < ticks:
+                h = ticks - self.time_ticks
+                if self.max_step_ticks:
+                    h = min(h, self.max_step_ticks)
+                try:
+                    self._do_step(self.time_ticks, h)
+                except (FmuTerminated, SimulationError):
+                    raise
+                except Exception as err:  # fmpy raises FMICallException with the status
+                    raise SimulationError(f"{self.name}: doStep at t = "
+                                          f"{to_seconds(self.time_ticks):g} s, h = "
+                                          f"{to_seconds(h):g} s failed: "
+                                          f"{self.fmu_reason(err)}") from err
+                self.time_ticks += h
         finally:
             self.wall_time += time.perf_counter() - t0
-        self.time_ticks = ticks
 
     def _do_step(self, t: int, h: int) -> None:
         """One communication step; fmi2Discard ends the run if the FMU terminated, else the
@@ -321,10 +327,12 @@ class FmuUnit:
     def update_schedule(self, now: int) -> None:
         """Next event after an event at ``now``: announced by the FMU or periodic."""
         if self.has_next_event_output:
-            nxt = to_ticks(self.get(["next_event_time"])[0])
-            if nxt <= now:
-                raise SimulationError(f"{self.name}: next_event_time {to_seconds(nxt)} s is not "
-                                      f"after the current time {to_seconds(now)} s")
+            value = self.get(["next_event_time"])[0]
+            nxt = to_ticks(value) if math.isfinite(value) else None
+            if nxt is None or nxt <= now:  # an FMU fault: never clamped, which would hide it
+                raise SimulationError(f"{self.name}: next_event_time = {value!r} s is not after "
+                                      f"the current time {to_seconds(now)!r} s (an FMU "
+                                      "announcing its next event must give a later time)")
             self.next_event_ticks = nxt
         elif self.sample_ticks is not None:
             self.next_event_ticks = now + self.sample_ticks
@@ -345,6 +353,7 @@ class Link:
     dst_name: str
     last: Any = None
     changes: int = 0
+    history: list[Any] | None = None  # every new value (kept only for the summary's command)
 
 
 class Recorder:
@@ -412,10 +421,10 @@ class EventDriven(Algorithm):
         due = set(m.units)
         while True:
             m.propagate(due)
+            m.maybe_record(t)  # first: a bad announced event below still keeps this point
             for unit in due:
                 if unit.scheduled:
                     unit.update_schedule(t)
-            m.maybe_record(t)
             if t >= m.stop_ticks:
                 break
             candidates = [m.stop_ticks, m.next_output_ticks]
@@ -535,8 +544,10 @@ class Master:
             by_name[comp.name] = unit
             self.units.append(unit)
         self.by_name = by_name
+        command = sc.summary.get("command")
         for c in sc.connections:
-            self.links.append(Link(c, by_name[c.src], by_name[c.dst], c.src_var, c.dst_var))
+            self.links.append(Link(c, by_name[c.src], by_name[c.dst], c.src_var, c.dst_var,
+                                   history=[] if command == f"{c.src}.{c.src_var}" else None))
         self.link_order = self._value_flow_order()
 
     def _value_flow_order(self) -> list[Link]:
@@ -581,6 +592,8 @@ class Master:
     def transfer(self, link: Link, value: Any) -> None:
         if link.last is not None and value != link.last:
             link.changes += 1
+        if link.history is not None and (link.last is None or value != link.last):
+            link.history.append(value)
         link.last = value
         link.dst.set(link.dst_name, value)
 
@@ -619,6 +632,7 @@ class Master:
         self.partial: RunResult | None = None
         final_outputs: dict[str, dict[str, Any]] = {}
         self.terminated_by: dict[str, Any] | None = None
+        self.diagnostics: dict[str, dict[str, float]] = {}
         try:
             interrupt.check(to_seconds(self.start_ticks))
             self.initialize()
@@ -630,6 +644,7 @@ class Master:
             final_outputs = self._final_outputs()
             for unit in self.units:
                 unit.slave.terminate()
+                self.diagnostics[unit.name] = fmu_diagnostics.parse(unit.messages)
         except BaseException as err:
             self.end_ticks = max(u.time_ticks for u in self.units) if self.units else 0
             self.partial = self._result(final_outputs, time.perf_counter() - t0)
@@ -666,10 +681,13 @@ class Master:
                         for u in self.units},
             fmu_wall_time_s={u.name: u.wall_time for u in self.units},
             connection_changes={f"{lk.conn.src}.{lk.src_name}": lk.changes for lk in self.links},
+            connection_values={f"{lk.conn.src}.{lk.src_name}": lk.history for lk in self.links
+                               if lk.history is not None},
             final_outputs=final_outputs,
             wall_time_s=wall_time,
             sim_time_s=to_seconds(self.end_ticks - self.start_ticks),
             terminated_by=getattr(self, "terminated_by", None),
+            diagnostics={k: v for k, v in getattr(self, "diagnostics", {}).items() if v},
         )
 
     def _recorded_refs(self) -> list[tuple[FmuUnit, str]]:
@@ -717,6 +735,10 @@ class RunResult:
     completed: bool = True
     error: str | None = None
     terminated_by: dict[str, Any] | None = None  # {instance, time}: an FMU ended the run
+    # the successive values passed on by the summary's command connection (command_switches)
+    connection_values: dict[str, list[Any]] = field(default_factory=dict)
+    # run-dependent figures an FMU logged at fmi2Terminate (solve times): never outputs
+    diagnostics: dict[str, dict[str, float]] = field(default_factory=dict)
 
     def write(self, out_dir: Path, plot: bool = True, force: bool = False) -> list[Path]:
         from cosim.run.results import write_results

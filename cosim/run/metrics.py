@@ -5,6 +5,10 @@ Keys of ``[summary]`` (all optional; variable references are ``FMU.variable``):
 * ``position`` (m), ``speed`` (m/s), ``acceleration`` (m/s^2), ``command``, ``reference_speed``
   (m/s), ``speed_limit`` (m/s), ``power`` (W, traction minus regenerated),
   ``coupler_forces`` (list or ``"plant.coupler_force[*]"``, N);
+* ``command``: gives ``command_switches``, the changes of the command (between successive
+  values passed to the plant, or recorded when it is not connected) larger than
+  ``command_resolution`` (command units; default 1e-6 of max |command| over the run), and
+  ``command_switch_resolution``, the resolution used;
 * ``stop_point`` (m): gives ``stop_error_m`` = final position - stop point (signed);
 * ``reference_decel`` (m/s^2, with ``stop_point``): the speed metrics compare the speed with the
   stopping curve ``v_ref(s) = sqrt(2 a0 (s_stop - s))`` at the recorded positions instead of a
@@ -33,8 +37,9 @@ Keys of ``[summary]`` (all optional; variable references are ``FMU.variable``):
 Always present: ``completed`` (False, with ``error``, for the partial results of a failed or
 interrupted run), ``sim_time_s``, ``wall_time_s``, ``real_time_factor``, ``algorithm``,
 ``do_steps``, ``executions``, ``fmu_wall_time_s``; controller counters (``qp_solves``,
-``qp_infeasible``, ``qp_solve_time_median_s``; ``qp_solve_time_total_s`` and
-``qp_cpu_time_total_s``, the wall and CPU time of all solves of the run;
+``qp_infeasible``; ``qp_solve_time_median_s``, ``qp_solve_time_total_s`` and
+``qp_cpu_time_total_s``, the median and total wall time and the total CPU time of the run's
+solves, which the FMU logs at fmi2Terminate (:mod:`cosim.fmu.diagnostics`; never outputs);
 ``qp_infeasible_after_stop``, ``events_moving``, ``events_standstill``) when an FMU publishes
 them; ``terminated_by``
 (``{instance, time}``) when an FMU ended the run itself (fmi2Discard with fmi2Terminated, FMI
@@ -109,8 +114,24 @@ def unit_indices(t: np.ndarray, speeds: np.ndarray, ref: np.ndarray,
 CONTROLLER_COUNTERS = ("qp_infeasible_after_stop", "events_moving", "events_standstill")
 
 
-def _count_changes(x: np.ndarray) -> int:
-    return int(np.count_nonzero(np.diff(x) != 0.0)) if x.size > 1 else 0
+# default switch resolution, relative to the command's full scale (max |u| over the run): a
+# change below a millionth of full scale is rounding or solver noise (DAQP solves exactly; the
+# seed 000 counts are unchanged by it but for 3 of RMPC's 199), not a decision of the controller
+COMMAND_RESOLUTION_REL = 1e-6
+
+
+def command_switches(values: Any, resolution: float | None = None) -> tuple[int, float]:
+    """``(switches, resolution)``: how many times the command changed by more than
+    ``resolution`` from one value to the next (a step between two successive values; a
+    flat command with solver or rounding noise below the resolution has none, a slow ramp
+    whose every step is below it neither). ``resolution`` (command units) defaults to
+    ``COMMAND_RESOLUTION_REL`` times the command's full scale, max |u| over the run."""
+    u = np.asarray(values, dtype=float)
+    u = u[np.isfinite(u)]
+    if resolution is None:
+        resolution = COMMAND_RESOLUTION_REL * float(np.max(np.abs(u))) if u.size else 0.0
+    count = int(np.count_nonzero(np.abs(np.diff(u)) > resolution)) if u.size > 1 else 0
+    return count, float(resolution)
 
 
 def compute_summary(result: Any) -> dict[str, Any]:
@@ -147,13 +168,14 @@ def compute_summary(result: Any) -> dict[str, Any]:
         out["final_speed_mps"] = float(speed[-1])
     command = cfg.get("command")
     if isinstance(command, str):
-        src = command
-        if src in result.connection_changes:
-            out["command_switches"] = result.connection_changes[src]
-        else:
-            series = _series(frame, src)
-            if series is not None:
-                out["command_switches"] = _count_changes(series)
+        # every value the master passed on when the command is connected, else the recording
+        values = result.connection_values.get(command)
+        if values is None:
+            values = _series(frame, command)
+        if values is not None:
+            res = cfg.get("command_resolution")
+            out["command_switches"], out["command_switch_resolution"] = command_switches(
+                values, None if res is None else float(res))
     if speed is not None and ref is not None:
         err = speed - ref
         moving = ref > 0.0
@@ -202,12 +224,10 @@ def compute_summary(result: Any) -> dict[str, Any]:
         if "qp_solves" in outputs:
             out.setdefault("qp_solves", {})[fmu] = int(outputs["qp_solves"])
             out.setdefault("qp_infeasible", {})[fmu] = int(outputs.get("qp_infeasible", 0))
-            median = outputs.get("qp_solve_time_median")
-            out.setdefault("qp_solve_time_median_s", {})[fmu] = (
-                float(median) if median is not None and math.isfinite(median) else None)
-            for name in ("qp_solve_time_total", "qp_cpu_time_total"):  # whole-run compute
-                if name in outputs:
-                    out.setdefault(f"{name}_s", {})[fmu] = float(outputs[name])
+        timing = result.diagnostics.get(fmu, {})  # logged at fmi2Terminate, not outputs
+        for name in ("qp_solve_time_median", "qp_solve_time_total", "qp_cpu_time_total"):
+            if name in timing and math.isfinite(timing[name]):
+                out.setdefault(f"{name}_s", {})[fmu] = float(timing[name])
         for key in CONTROLLER_COUNTERS:  # published by the seed 000 predictive controllers
             if key in outputs:
                 out.setdefault(key, {})[fmu] = int(outputs[key])

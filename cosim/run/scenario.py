@@ -49,7 +49,8 @@ ALGORITHMS = ("event", "fixed", "jacobi")
 RECORD_KEYS = ("variables",)
 # what cosim.run.metrics and the plot read (see the cosim.run.metrics module docstring)
 # (tests/test_scenario_keys.py checks this list against the keys metrics.py reads)
-SUMMARY_KEYS = ("position", "speed", "acceleration", "command", "reference_speed",
+SUMMARY_KEYS = ("position", "speed", "acceleration", "command", "command_resolution",
+                "reference_speed",
                 "speed_limit", "power", "coupler_forces", "stop_point", "reference_decel",
                 "planned_arrival_time", "ctcs3", "unit_speeds", "ma_sample_time",
                 "reference_accel", "final_stop_window", "accel_command", "vehicle_speeds")
