@@ -80,14 +80,18 @@ def solve_one(qp, algorithm: str):
     return solve_mpqp(prog, getattr(mpqp_algorithm, algorithm))
 
 
-def bounding_box(E: np.ndarray, e: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def bounding_box(E: np.ndarray, e: np.ndarray, box: np.ndarray
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """Bounding box of ``{E theta <= e} & box`` (PPOPT may leave the parameter box out of a
+    region's rows; the controller clips theta into the box before the lookup)."""
     nth = E.shape[1]
     lo, hi = np.empty(nth), np.empty(nth)
     for d in range(nth):
         c = np.zeros(nth)
         c[d] = 1.0
         for sign, out in ((1.0, lo), (-1.0, hi)):
-            r = linprog(sign * c, A_ub=E, b_ub=e, bounds=[(None, None)] * nth, method="highs")
+            r = linprog(sign * c, A_ub=E, b_ub=e, bounds=[tuple(b) for b in box],
+                        method="highs")
             if r.status != 0:
                 raise RuntimeError(f"bounding box LP failed: {r.message}")
             out[d] = r.x[d]
@@ -129,7 +133,7 @@ def main() -> None:
             E_all, e_all, rows, F, f, lo, hi = [], [], [0], [], [], [], []
             for cr in regs:
                 E, e = np.asarray(cr.E), np.asarray(cr.f).ravel()
-                blo, bhi = bounding_box(E, e)
+                blo, bhi = bounding_box(E, e, box)
                 E_all.append(E)
                 e_all.append(e)
                 rows.append(rows[-1] + E.shape[0])
