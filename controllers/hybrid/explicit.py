@@ -292,9 +292,8 @@ class ExplicitLaw:
     def load(cls, path: Path) -> ExplicitLaw:
         with np.load(path, allow_pickle=False) as z:
             data = {k: z[k] for k in z.files}
-        meta = {str(k): (v.item() if v.ndim == 0 else v) for k, v in
-                zip(data["meta_keys"], data["meta_values"], strict=True)}
-        meta = {k: (float(v) if _is_number(v) else str(v)) for k, v in meta.items()}
+        meta = {str(k): str(v) for k, v in zip(data["meta_keys"], data["meta_values"],
+                                                strict=True)}  # as written; compared by type
         sets, boxes = {}, {}
         for key in data["keys"]:
             mode, seg = (int(x) for x in key)
@@ -318,10 +317,3 @@ class ExplicitLaw:
                            p + "box": self.boxes[mode, seg]})
         np.savez_compressed(path, **arrays)
 
-
-def _is_number(v: object) -> bool:
-    try:
-        float(str(v))
-    except ValueError:
-        return False
-    return True

@@ -129,7 +129,7 @@ class ExplicitMpc(HybridMpc):
             same = (math.isclose(float(have), float(value)) if isinstance(value, float)
                     and have is not None else str(have) == str(value))
             if not same:
-                raise ValueError(f"regions = {path.name!r} were built for {key} = {have!r}, "
+                raise ValueError(f"regions = {path.name!r} were built for {key} = {have}, "
                                  f"this controller has {value!r}: regenerate them with "
                                  "scripts/make_empc_regions.py")
         self.ratio = {m: self.limit_ratio(self.train, m) for m in (0, 1)}
