@@ -162,3 +162,35 @@ def test_empc_fmu_serialized_state_reproduces_the_rest_of_the_run(built_fmus) ->
     for inst in (plant, ctl):
         inst.fmu.terminate()
         inst.fmu.freeInstance()
+
+
+@pytest.mark.slow
+def test_table3_trends_and_empc_over_the_whole_run(built_fmus) -> None:
+    """Whole 800 s runs (seed 004 Table 3 and 4): Case 2 (3 R) keeps a steady error and uses
+    less energy and smaller coupler forces than Case 1; Case 3 (N = 3) loses tracking; EMPC
+    tracks like GMPC, uses the same energy and never leaves its regions."""
+    from cosim.run.master import run_scenario
+
+    s = {name: run_scenario(f"scenarios/seed004_crh3_{name}.toml", plot=False).summary
+         for name in ("gmpc_case1", "gmpc_case2", "gmpc_case3", "empc")}
+    c1, c2, c3, em = s["gmpc_case1"], s["gmpc_case2"], s["gmpc_case3"], s["empc"]
+    assert all(x["completed"] and x["qp_infeasible"] == 0 for x in s.values())
+    assert c2["energy_kj"] < c1["energy_kj"]
+    assert c2["max_coupler_force_kn"] < c1["max_coupler_force_kn"]
+    assert c2["speed_rmse_mps"] > 1.5 * c1["speed_rmse_mps"]  # the steady error
+    assert c3["speed_rmse_mps"] > 10 * c1["speed_rmse_mps"]  # tracking lost
+    assert c3["energy_kj"] < c1["energy_kj"]
+    assert em["speed_rmse_mps"] < 2 * c1["speed_rmse_mps"]
+    assert em["energy_kj"] == pytest.approx(c1["energy_kj"], rel=0.01)
+
+
+@pytest.mark.slow
+def test_empc_core_never_leaves_its_regions_over_the_whole_run() -> None:
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "benchmarks"))
+    from bench_hybrid import closed_loop
+
+    ctl, _, _ = closed_loop(ExplicitMpc)
+    assert ctl.outside == 0 and ctl.qp_infeasible == 0 and ctl.qp_solves == 801
