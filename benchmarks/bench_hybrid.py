@@ -1,9 +1,12 @@
-"""Per-event MIQP time of the seed 004 hybrid MPCs, and DAQP against SCIP (prints, asserts nothing).
+"""Per-event solve time of the seed 004 hybrid MPCs, and DAQP against SCIP (prints only).
 
 1. Closed loop of the cores (plant :class:`plants.emu.Emu`, controller
-   :class:`controllers.hybrid.hybrid_mpc.HybridMpc` / ``MoveBlockingMpc``) over the 800 s seed
-   004 run: per-event wall and CPU time of the controller's MIQP (median, p99, total), branch
-   and bound nodes, for GMPC at N = 10 and N = 3 and MB-MPC 3:4:3 at N = 10.
+   :class:`controllers.hybrid.hybrid_mpc.HybridMpc` / ``MoveBlockingMpc`` /
+   :class:`controllers.hybrid.explicit_mpc.ExplicitMpc`) over the 800 s seed 004 run:
+   per-event wall and CPU time of the controller (MIQP, or the region lookup of EMPC: median,
+   p99, total), branch and bound nodes, for GMPC, MB-MPC and EMPC at N = 10 (blocks 3:4:3 for
+   MB-MPC and EMPC) and at N = 3 (MB-MPC 1:2; EMPC unblocked, region data
+   ``seed004_empc_crh3_3car_n3``).
 2. Solver comparison on the MIQPs of that run (every ``--every``-th event and the
    ``--hardest`` with the most branch-and-bound nodes): DAQP (as the controller calls it)
    against SCIP through pyscipopt (convex quadratic objective as a constraint on an epigraph
@@ -27,6 +30,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
+from controllers.hybrid.explicit_mpc import ExplicitMpc, regions_path  # noqa: E402
 from controllers.hybrid.hybrid_mpc import HybridMpc, MoveBlockingMpc  # noqa: E402
 from controllers.hybrid.miqp import _BINARY, _INF  # noqa: E402
 from controllers.hybrid.model import KN, Limits  # noqa: E402
@@ -40,11 +44,13 @@ MEASURED = ([f"v[{i}]" for i in (1, 2, 3)] + ["s", "coupler_force[1]", "coupler_
             + [f"brake_limit[{i}]" for i in (1, 2, 3)])
 
 
-def closed_loop(cls: type, **params) -> tuple[HybridMpc, list[tuple[float, dict]], list]:
+def closed_loop(cls: type, regions: str | None = None, **params
+                ) -> tuple[HybridMpc, list[tuple[float, dict]], list]:
     """Run the cores for 800 s; returns the controller, the (t, inputs) of every event and
     per-event (wall s, cpu s, nodes)."""
+    extra = {} if regions is None else {"regions": regions_path(regions)}
     ctl = cls(dataclasses.replace(cls.default_params, **params),
-              load_reference("seed004_crh3_reference"))
+              load_reference("seed004_crh3_reference"), **extra)
     plant = Emu(emu_config("crh3_3car"), load_route("seed004_level"))
     events, stats = [], []
     for k in range(STOP + 1):
@@ -157,7 +163,11 @@ def main() -> None:
     if args.scip_path:
         sys.path.insert(0, args.scip_path)
     runs = [("GMPC N=10", HybridMpc, {}), ("MB-MPC 3:4:3 N=10", MoveBlockingMpc, {}),
-            ("GMPC N=3", HybridMpc, {"horizon": 3})]
+            ("EMPC 3:4:3 N=10", ExplicitMpc, {}),
+            ("GMPC N=3", HybridMpc, {"horizon": 3}),
+            ("MB-MPC 1:2 N=3", MoveBlockingMpc, {"horizon": 3, "move_blocks": "1:2"}),
+            ("EMPC N=3", ExplicitMpc, {"horizon": 3, "move_blocks": "",
+                                       "regions": "seed004_empc_crh3_3car_n3"})]
     kept = {}
     for name, cls, params in runs:
         ctl, events, stats = closed_loop(cls, **params)

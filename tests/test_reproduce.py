@@ -97,3 +97,38 @@ def test_bad_entries_name_the_file_and_key(tmp_path: Path, patch: str, message: 
 def test_unknown_entry_lists_the_known_ones() -> None:
     with pytest.raises(ReproduceError, match="seed000"):
         load_entry("seed999")
+
+
+def test_repeated_run_gives_median_and_spread_and_ratio(built_fmus, tmp_path: Path) -> None:
+    """``repeat = 3``: three runs; a deterministic metric has min = median = max, a timing
+    metric lies in [min, max]; ``ratio_to`` divides the medians (ours and the paper's)."""
+    path = tmp_path / "entry.toml"
+    path.write_text(ENTRY.replace('set = { "controller.kp" = 30.0 }',
+                                  'set = { "controller.kp" = 30.0 }\nrepeat = 3')
+                    + '[[metrics]]\nkey = "fmu_wall_time_s.controller"\nratio_to = "PID"\n'
+                    + '[[paper]]\nrun = "PID"\nmetric = "fmu_wall_time_s.controller"\n'
+                    + 'value = 2.0\n[[paper]]\nrun = "PID kp=30"\n'
+                    + 'metric = "fmu_wall_time_s.controller"\nvalue = 1.0\n')
+    table = reproduce(str(path), tmp_path / "out", workers=1)
+    rows = pd.read_csv(tmp_path / "out" / "table.csv")
+    rep = rows[rows.run == "PID kp=30"].set_index("metric")
+    assert (tmp_path / "out/runs/pid_kp_30/repeat_03/summary.json").is_file()
+    err = rep.loc["stop_error_m"]
+    assert err.repeats == 3 and err.ours_min == err.ours == err.ours_max
+    wall = rep.loc["fmu_wall_time_s.controller"]
+    assert wall.ours_min <= wall.ours <= wall.ours_max
+    pid_wall = rows[(rows.run == "PID") & (rows.metric == "fmu_wall_time_s.controller")]
+    assert wall.ratio == pytest.approx(wall.ours / pid_wall.ours.iloc[0], rel=1e-12)
+    assert wall.paper_ratio == pytest.approx(0.5, rel=1e-12)
+    assert "ratio to PID" in table.read_text() and "median [min, max]" in table.read_text()
+
+
+def test_bad_repeat_and_ratio_name_the_key(tmp_path: Path) -> None:
+    path = tmp_path / "bad.toml"
+    path.write_text(ENTRY.replace('scenario = "seed000_stop_pid"\n[[runs]]',
+                                  'scenario = "seed000_stop_pid"\nrepeat = 0\n[[runs]]', 1))
+    with pytest.raises(ReproduceError, match="repeat = 0"):
+        load_entry(str(path))
+    path.write_text(ENTRY + '[[metrics]]\nkey = "x"\nratio_to = "nobody"\n')
+    with pytest.raises(ReproduceError, match="ratio_to 'nobody'"):
+        load_entry(str(path))

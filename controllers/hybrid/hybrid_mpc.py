@@ -38,6 +38,7 @@ from plants.emu import CONFIGURATIONS, EmuParams, emu_config
 from plants.route import ReferenceProfile, load_reference, routes_dir_in
 
 DELTA_MODES = ("schedule", "optimise")
+POSITION_REFERENCES = ("horizon", "timetable")
 
 
 @dataclass(frozen=True)
@@ -62,6 +63,11 @@ class HybridMpcParams:
                                      min=1.0)
     speed_max: float = param(350.0 / 3.6, "m/s", "speed limit of every car (state "
                              "constraint)", min=0.0)
+    position_reference: str = param("horizon", description='"horizon": the displacement '
+                                    "reference of stage s is the reference distance from now, "
+                                    "int_t^(t+s Ts) v_ref (eq. 9 on the speed-position curve, "
+                                    'no memory of past error); "timetable": s_ref(t + s Ts) - s '
+                                    "(the accumulated position error is corrected)")
     delta_mode: str = param("schedule", description='"schedule": delta fixed as in section 3; '
                             '"optimise": delta a decision of the MIQP')
     brake_from: float = param(600.0, "s", "delta = 0 (braking) from this time ...")
@@ -72,6 +78,9 @@ class HybridMpcParams:
         if int(self.horizon) != self.horizon or self.horizon < 1:
             raise ValueError(f"N = {self.horizon} must be an integer >= 1")
         parse_blocks(self.move_blocks, int(self.horizon))
+        if self.position_reference not in POSITION_REFERENCES:
+            raise ValueError(f"position_reference = {self.position_reference!r} must be one of "
+                             f"{POSITION_REFERENCES}")
         if self.delta_mode not in DELTA_MODES:
             raise ValueError(f"delta_mode = {self.delta_mode!r} must be one of {DELTA_MODES}")
         if self.configuration not in CONFIGURATIONS:
@@ -217,10 +226,12 @@ class HybridMpc(StatefulCore, Declared):
     def references(self, t: float, s_head: float) -> np.ndarray:
         n, Ts = self.n, self.p.sample_time
         ref = np.empty((self.N + 1, 2 * n))
+        origin = (reference_position(self.profile, t) if self.p.position_reference == "horizon"
+                  else s_head)
         for s in range(self.N + 1):
             ts = t + s * Ts
             ref[s, :n] = self.profile.speed(ts)
-            ref[s, n:] = reference_position(self.profile, ts) - s_head
+            ref[s, n:] = reference_position(self.profile, ts) - origin
         return ref
 
     def solve(self, t: float, inputs: dict[str, float]) -> tuple[MiqpResult, list[int | None]]:

@@ -205,7 +205,7 @@ def bundled_files(module: str) -> list[Path]:
         todo.extend(_imports_of(path, mod))
     for pkg_dir in {f.parent for f in files}:
         for data in pkg_dir.rglob("*"):
-            if data.is_file() and data.suffix in (".toml", ".csv", ".json"):
+            if data.is_file() and data.suffix in (".toml", ".csv", ".json", ".npz"):
                 files.add(data)
     return sorted(files)
 

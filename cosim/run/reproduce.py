@@ -9,9 +9,14 @@ live there, not in code)::
     name = "RMPC N=5"
     scenario = "seed000_stop_rmpc"
     set = { "controller.N" = 5 }   # optional overrides (as --set)
+    repeat = 10                    # optional: run it 10 times; numeric metrics are shown as
+                                   # "median [min, max]" (e.g. computation times); the first
+                                   # repetition's results feed the figures
     [[metrics]]                    # table columns: summary.json keys ('.' for nested keys)
     key = "stop_error_m"
     label = "stop error (m)"
+    ratio_to = "PID"               # optional: also a column ours / that run's (medians), and
+                                   # the paper's ratio where the paper gives both figures
     [[paper]]                      # the paper's figure for (run, metric)
     run = "PID"
     metric = "stop_error_m"
@@ -60,8 +65,8 @@ except ModuleNotFoundError:  # Python < 3.11
 REPRODUCE_DIR = SCENARIO_DIR / "reproduce"
 
 _ENTRY_KEYS = {"title", "notes", "runs", "metrics", "paper", "sweeps", "figures"}
-_RUN_KEYS = {"name", "scenario", "set"}
-_METRIC_KEYS = {"key", "label"}
+_RUN_KEYS = {"name", "scenario", "set", "repeat"}
+_METRIC_KEYS = {"key", "label", "ratio_to"}
 _PAPER_KEYS = {"run", "metric", "value", "range", "tolerance", "source"}
 _SWEEP_KEYS = {"name", "scenarios", "grid"}
 _FIGURE_KEYS = {"file", "title", "kind", "x", "y", "y_scale", "ylabel", "xlabel", "runs"}
@@ -113,12 +118,19 @@ def load_entry(name: str | Path) -> Entry:
     runs = data["runs"]
     for i, run in enumerate(runs):
         _check_keys(f"{path}: [[runs]] #{i + 1}", run, _RUN_KEYS, ("name", "scenario"))
+        rep = run.get("repeat", 1)
+        if isinstance(rep, bool) or not isinstance(rep, int) or rep < 1:
+            raise ReproduceError(f"{path}: [[runs]] #{i + 1}: repeat = {rep!r} must be an "
+                                 "integer >= 1")
     names = [r["name"] for r in runs]
     if len(set(names)) != len(names):
         raise ReproduceError(f"{path}: [[runs]] names repeat: {names}")
     metrics = data.get("metrics", [])
     for i, metric in enumerate(metrics):
         _check_keys(f"{path}: [[metrics]] #{i + 1}", metric, _METRIC_KEYS, ("key",))
+        if "ratio_to" in metric and metric["ratio_to"] not in names:
+            raise ReproduceError(f"{path}: [[metrics]] #{i + 1}: ratio_to "
+                                 f"{metric['ratio_to']!r} is not one of {names}")
     keys = {m["key"] for m in metrics}
     for i, ref in enumerate(data.get("paper", [])):
         where = f"{path}: [[paper]] #{i + 1}"
@@ -170,23 +182,67 @@ def _run_one(scenario: str, overrides: dict[str, Any], out_dir: str) -> dict[str
     return result.summary
 
 
+def _merge_repeats(summaries: list[dict[str, Any]]) -> dict[str, Any]:
+    """The first summary, each numeric value replaced by the median over the repetitions;
+    ``repeats`` holds every repetition's summary."""
+    import statistics
+
+    def merge(values: list[Any]) -> Any:
+        first = values[0]
+        if isinstance(first, dict):
+            return {k: merge([v.get(k) if isinstance(v, dict) else None for v in values])
+                    for k in first}
+        nums = [v for v in values if isinstance(v, (int, float)) and not isinstance(v, bool)]
+        if len(nums) == len(values) and not isinstance(first, bool):
+            return statistics.median(nums)
+        return first
+
+    merged = merge(summaries)
+    merged["repeats"] = summaries
+    return merged
+
+
+def repeat_spread(summary: dict[str, Any], key: str) -> tuple[float, float, int] | None:
+    """``(min, max, n)`` of a metric over a repeated run's repetitions (None if not repeated
+    or not numeric)."""
+    reps = summary.get("repeats")
+    if not reps:
+        return None
+    vals = [summary_value(r, key) for r in reps]
+    if not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in vals):
+        return None
+    return float(min(vals)), float(max(vals)), len(vals)
+
+
 def run_entry(entry: Entry, out_dir: Path, workers: int | None = None
               ) -> dict[str, dict[str, Any]]:
-    """Run every run of ``entry`` (``workers`` processes); returns run name -> summary."""
+    """Run every run of ``entry`` (``workers`` processes; a run with ``repeat = k`` k times,
+    repetitions 2.. under ``runs/<run>/repeat_NN``); returns run name -> summary (medians and
+    ``repeats`` for a repeated run)."""
     from cosim.run.master import ensure_built
     from cosim.run.scenario import load_scenario
 
     for run in entry.runs:  # bad overrides fail here, before anything runs; build once
         ensure_built(load_scenario(run["scenario"], run.get("set", {})))
-    jobs = [(run["name"], run["scenario"], dict(run.get("set", {})),
-             str(out_dir / "runs" / slug(run["name"]))) for run in entry.runs]
+    jobs = []
+    for run in entry.runs:
+        base = out_dir / "runs" / slug(run["name"])
+        for k in range(int(run.get("repeat", 1))):
+            out = base if k == 0 else base / f"repeat_{k + 1:02d}"
+            jobs.append(((run["name"], k), run["scenario"], dict(run.get("set", {})), str(out)))
     workers = max(1, min(workers or os.cpu_count() or 1, len(jobs)))
     if workers == 1:
-        return {name: _run_one(sc, ov, out) for name, sc, ov, out in jobs}
-    ctx = multiprocessing.get_context("spawn")
-    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
-        futures = {name: pool.submit(_run_one, sc, ov, out) for name, sc, ov, out in jobs}
-        return {name: f.result() for name, f in futures.items()}
+        done = {key: _run_one(sc, ov, out) for key, sc, ov, out in jobs}
+    else:
+        ctx = multiprocessing.get_context("spawn")
+        with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
+            futures = {key: pool.submit(_run_one, sc, ov, out) for key, sc, ov, out in jobs}
+            done = {key: f.result() for key, f in futures.items()}
+    result = {}
+    for run in entry.runs:
+        reps = [done[run["name"], k] for k in range(int(run.get("repeat", 1)))]
+        result[run["name"]] = reps[0] if len(reps) == 1 else _merge_repeats(reps)
+    return result
 
 
 def _fmt(value: Any) -> str:
@@ -209,9 +265,21 @@ def table_rows(entry: Entry, summaries: dict[str, dict[str, Any]]) -> list[dict[
             ref = refs.get((run["name"], metric["key"]))
             ref = ref or {}
             band = ref.get("range")
+            spread = repeat_spread(summaries[run["name"]], metric["key"])
             row = {"run": run["name"], "metric": metric["key"], "ours": ours,
+                   "ours_min": spread[0] if spread else None,
+                   "ours_max": spread[1] if spread else None,
+                   "repeats": spread[2] if spread else 1,
                    "paper": ref.get("value"), "paper_range": band,
                    "tolerance": ref.get("tolerance"), "source": ref.get("source", "")}
+            base_run = metric.get("ratio_to")
+            if base_run is not None:
+                base = summary_value(summaries[base_run], metric["key"])
+                base_ref = refs.get((base_run, metric["key"]), {}).get("value")
+                row["ratio"] = (float(ours) / float(base) if ours is not None and base
+                                else None)
+                row["paper_ratio"] = (float(ref["value"]) / float(base_ref)
+                                      if ref.get("value") is not None and base_ref else None)
             within = None
             if ours is not None and band is not None:
                 within = band[0] <= float(ours) <= band[1]
@@ -229,6 +297,8 @@ def table_markdown(entry: Entry, rows: list[dict[str, Any]]) -> str:
     for metric in entry.metrics:
         label = metric.get("label", metric["key"])
         header += [f"{label}", "paper"]
+        if "ratio_to" in metric:
+            header += [f"ratio to {metric['ratio_to']}", "paper"]
     lines = ["| " + " | ".join(header) + " |", "|" + " --- |" * len(header)]
     by = {(r["run"], r["metric"]): r for r in rows}
     for run in entry.runs:
@@ -240,11 +310,20 @@ def table_markdown(entry: Entry, rows: list[dict[str, Any]]) -> str:
             if r["paper_range"] is not None:
                 band = f"in [{_fmt(r['paper_range'][0])}, {_fmt(r['paper_range'][1])}]"
                 paper = band if r["paper"] is None else f"{paper} ({band})"
-            cells += [_fmt(r["ours"]) + mark, paper]
+            ours = _fmt(r["ours"])
+            if r["ours_min"] is not None:
+                ours = f"{ours} [{_fmt(r['ours_min'])}, {_fmt(r['ours_max'])}]"
+            cells += [ours + mark, paper]
+            if "ratio_to" in metric:
+                cells += [_fmt(r["ratio"]), _fmt(r["paper_ratio"])]
         lines.append("| " + " | ".join(cells) + " |")
     sources = sorted({f"{r['run']} / {r['metric']}: {r['source']}" for r in rows if r["source"]})
     if sources:
         lines += ["", "Paper figures: " + "; ".join(sources) + "."]
+    repeated = sorted({r["repeats"] for r in rows if r["repeats"] > 1})
+    if repeated:
+        lines += ["", "a [b, c]: median [min, max] over the repetitions of a repeated run ("
+                  + ", ".join(f"{n}" for n in repeated) + " runs)."]
     if any(r["within"] is not None for r in rows):
         lines += ["", "✓ / ✗: inside / outside the paper's band or the tolerance stated in the "
                   "entry."]

@@ -1,0 +1,196 @@
+"""Explicit hybrid MPC of seed 004 (issue 14 item 4): region data against the online QP it was
+built from, point location against a scan, the FMU in closed loop and across a state restore."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+from controllers.hybrid.explicit import (
+    PARAM_NAMES,
+    BoxTree,
+    ExplicitLaw,
+    parametric_qp,
+    solve_parametric,
+    theta_maps,
+)
+from controllers.hybrid.explicit_mpc import ExplicitMpc, regions_path
+from controllers.hybrid.hybrid_mpc import chain_model
+from controllers.hybrid.miqp import parse_blocks
+from plants.emu import emu_config
+from plants.route import load_reference
+from tests.fmi_state_helpers import FmuInstance, rerun_after_restore
+
+REF = "seed004_crh3_reference"
+LAW = ExplicitLaw.load(regions_path("seed004_empc_crh3_3car"))
+P = ExplicitMpc.default_params
+TRAIN = emu_config(P.configuration)
+MODEL = chain_model(TRAIN, P)
+KEYS = sorted(LAW.sets)
+
+
+def _qp(mode: int, seg: int):
+    q = [P.q_speed] * 3 + [P.q_position] * 3
+    return parametric_qp(MODEL, P.horizon, parse_blocks(P.move_blocks, P.horizon), q,
+                         P.r_force, mode, seg, LAW.boxes[mode, seg],
+                         ExplicitMpc.limit_ratio(TRAIN, mode))
+
+
+def _samples(box: np.ndarray, count: int, seed: int) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    return box[:, 0] + rng.random((count, box.shape[0])) * (box[:, 1] - box[:, 0])
+
+
+def test_region_data_cover_every_mode_and_segment_of_the_default_design() -> None:
+    assert KEYS == [(m, s) for m in (0, 1) for s in range(3)]
+    want = ExplicitMpc.design_meta(P)
+    assert set(LAW.meta) == set(want)
+    for key, value in want.items():
+        assert (float(LAW.meta[key]) == value if isinstance(value, float)
+                else LAW.meta[key] == value), key
+    for key in KEYS:
+        assert LAW.sets[key].count >= 1
+        assert LAW.boxes[key].shape == (len(PARAM_NAMES), 2)
+
+
+@pytest.mark.parametrize("key", KEYS)
+def test_explicit_law_equals_the_online_qp_at_random_parameters(key: tuple[int, int]) -> None:
+    """u = F_i theta + f_i of the located region equals DAQP's solution of the same mp-QP at
+    that theta. Forces are O(10..100) kN; both sides solve the same KKT system (PPOPT
+    symbolically per active set, DAQP numerically), so they agree to rounding times the
+    condition of the reduced Hessian (~1e4 here): 1e-6 kN (1 mN) leaves a wide margin and
+    still catches a wrong region (laws of neighbours differ by O(1) kN a short way in)."""
+    qp, regions = _qp(*key), LAW.sets[key]
+    for theta in _samples(LAW.boxes[key], 60, seed=14 + 10 * key[0] + key[1]):
+        i, viol = regions.locate(theta)
+        assert i >= 0 and viol <= regions.tol, theta
+        U = solve_parametric(qp, theta)
+        np.testing.assert_allclose(regions.control(i, theta), U[:qp.n_first], rtol=0,
+                                   atol=1e-6)
+
+
+@pytest.mark.parametrize("key", KEYS)
+def test_point_location_equals_a_brute_force_scan(key: tuple[int, int]) -> None:
+    """The tree's region holds theta, and the scan finds no region the tree could miss: the
+    region it returns is one the scan returns (overlaps only on shared facets, same law)."""
+    regions = LAW.sets[key]
+    for theta in _samples(LAW.boxes[key], 200, seed=40 + 10 * key[0] + key[1]):
+        i, _ = regions.locate(theta)
+        found = regions.scan(theta)
+        assert i in found
+        for j in found:  # on a shared facet both laws give the same force (continuity)
+            np.testing.assert_allclose(regions.control(j, theta), regions.control(i, theta),
+                                       atol=1e-6)
+
+
+def test_box_tree_candidates_hold_every_box_containing_the_point() -> None:
+    rng = np.random.default_rng(7)
+    lo = rng.random((300, 3)) * 10
+    hi = lo + rng.random((300, 3)) * 3
+    tree = BoxTree(lo, hi, leaf_size=4)
+    assert tree.depth >= 4
+    for p in rng.random((500, 3)) * 12:
+        inside = set(np.flatnonzero(np.all((lo <= p) & (p <= hi), axis=1)).tolist())
+        cand = tree.candidates(p)
+        assert inside <= set(cand.tolist())
+        assert cand.size < 300
+
+
+def test_theta_maps_rebuild_the_controllers_state() -> None:
+    """theta -> x0 (speeds from the mean and differences, displacements from the coupler
+    forces) is the inverse of how the controller reads its measurements."""
+    ctl = ExplicitMpc(P, load_reference(REF))
+    inputs = {"v[1]": 30.01, "v[2]": 30.0102, "v[3]": 30.0099, "s": 1000.0,
+              "coupler_force[1]": 12e3, "coupler_force[2]": -3e3,
+              **{f"traction_limit[{i}]": 70.75e3 * (i != 2) for i in (1, 2, 3)},
+              **{f"brake_limit[{i}]": 0.9 * m for i, m in enumerate(TRAIN.masses, 1)}}
+    theta = ctl.theta(300.0, inputs, 1)
+    Tx, tx = theta_maps(MODEL)
+    np.testing.assert_allclose(Tx @ theta + tx, ctl.state_vector(inputs), rtol=0, atol=1e-12)
+    assert theta[PARAM_NAMES.index("limit")] == pytest.approx(70.75)
+    assert theta[PARAM_NAMES.index("a_ref")] == 0.0  # the reference is flat at 300 s
+
+
+def test_regions_built_for_another_design_are_refused(tmp_path) -> None:
+    with pytest.raises(ValueError, match="built for R = 0.5"):
+        ExplicitMpc(dataclasses.replace(P, r_force=1.5), load_reference(REF))
+    with pytest.raises(ValueError, match="no such file"):
+        ExplicitMpc(P, load_reference(REF), regions=tmp_path / "none.npz")
+    with pytest.raises(ValueError, match="scheduled"):
+        ExplicitMpc(dataclasses.replace(P, delta_mode="optimise"), load_reference(REF))
+
+
+def test_empc_fmu_through_the_master(built_fmus) -> None:
+    """Empc3 + Emu3 (seed004_crh3_empc, first 120 s): tracks, trailer idle while pulling,
+    every parameter inside the regions."""
+    from cosim.run.master import run_scenario
+
+    result = run_scenario("scenarios/seed004_crh3_empc.toml",
+                          overrides={"simulation.stop_time": 120.0}, plot=False)
+    s = result.summary
+    assert s["completed"] and s["qp_infeasible"] == 0 and s["qp_solves"] == 121
+    assert s["max_abs_speed_error_kmh"] < 5.0
+    frame = result.frame
+    assert (frame["plant.applied_force[2]"] == 0.0).all()
+    assert math.isclose(frame["plant.v"].iloc[-1], 30.0, abs_tol=0.2)
+
+
+def test_empc_fmu_serialized_state_reproduces_the_rest_of_the_run(built_fmus) -> None:
+    """Emu3 + Empc3: serialize both states mid-run, finish, restore, rerun: identical."""
+    plant = FmuInstance(str(built_fmus["Emu3"].path), "Emu3",
+                        {"configuration": "crh3_3car", "route": "seed004_level"})
+    ctl = FmuInstance(str(built_fmus["Empc3"].path), "Empc3", {"reference": REF})
+    meas = ([f"v[{i}]" for i in (1, 2, 3)] + ["s", "coupler_force[1]", "coupler_force[2]"]
+            + [f"traction_limit[{i}]" for i in (1, 2, 3)]
+            + [f"brake_limit[{i}]" for i in (1, 2, 3)])
+    forces = [f"force[{i}]" for i in (1, 2, 3)]
+
+    def step(k: int) -> list[float]:
+        ctl.set(meas, plant.get(meas))
+        u = ctl.get(forces)
+        plant.set(forces, u)
+        plant.fmu.doStep(currentCommunicationPoint=float(k), communicationStepSize=1.0)
+        ctl.fmu.doStep(currentCommunicationPoint=float(k), communicationStepSize=1.0)
+        return plant.get(["v", "s", "coupler_force[1]"]) + u
+
+    first, second = rerun_after_restore([plant, ctl], step, 60, 110)
+    assert first == second
+    assert first[-1][0] == pytest.approx(30.0, abs=1.0)
+    for inst in (plant, ctl):
+        inst.fmu.terminate()
+        inst.fmu.freeInstance()
+
+
+@pytest.mark.slow
+def test_table3_trends_and_empc_over_the_whole_run(built_fmus) -> None:
+    """Whole 800 s runs (seed 004 Table 3 and 4): Case 2 (3 R) keeps a steady error and uses
+    less energy and smaller coupler forces than Case 1; Case 3 (N = 3) loses tracking; EMPC
+    tracks like GMPC, uses the same energy and never leaves its regions."""
+    from cosim.run.master import run_scenario
+
+    s = {name: run_scenario(f"scenarios/seed004_crh3_{name}.toml", plot=False).summary
+         for name in ("gmpc_case1", "gmpc_case2", "gmpc_case3", "empc")}
+    c1, c2, c3, em = s["gmpc_case1"], s["gmpc_case2"], s["gmpc_case3"], s["empc"]
+    assert all(x["completed"] and x["qp_infeasible"] == 0 for x in s.values())
+    assert c2["energy_kj"] < c1["energy_kj"]
+    assert c2["max_coupler_force_kn"] < c1["max_coupler_force_kn"]
+    assert c2["speed_rmse_mps"] > 1.5 * c1["speed_rmse_mps"]  # the steady error
+    assert c3["speed_rmse_mps"] > 10 * c1["speed_rmse_mps"]  # tracking lost
+    assert c3["energy_kj"] < c1["energy_kj"]
+    assert em["speed_rmse_mps"] < 2 * c1["speed_rmse_mps"]
+    assert em["energy_kj"] == pytest.approx(c1["energy_kj"], rel=0.01)
+
+
+@pytest.mark.slow
+def test_empc_core_never_leaves_its_regions_over_the_whole_run() -> None:
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "benchmarks"))
+    from bench_hybrid import closed_loop
+
+    ctl, _, _ = closed_loop(ExplicitMpc)
+    assert ctl.outside == 0 and ctl.qp_infeasible == 0 and ctl.qp_solves == 801
