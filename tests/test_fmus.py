@@ -358,7 +358,7 @@ def _emu_controller_reference_and_total(path: Path) -> None:
         fmu.close()
 
 
-@_checks("Gmpc3", "MbMpc3")
+@_checks("Gmpc3", "MbMpc3", "Empc3")
 def _hybrid_mpc_reference_at_100_s(path: Path) -> None:
     """Started at t = 100 s on the seed 004 speed-time reference (0 -> 30 m/s over 75 s, then
     30 m/s): v_ref = 30 m/s and s_ref = 30 * 75 / 2 + 30 * 25 = 1875 m by hand; the trailer

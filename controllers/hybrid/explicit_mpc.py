@@ -182,8 +182,7 @@ class ExplicitMpc(HybridMpc):
         self.delta = mode
         self.forces = [float(f) * KN for f in u]
         self.qp_solves += 1
-        self.solve_times.append(time.perf_counter() - t0)
-        self.cpu_time += time.thread_time() - c0
+        self.timing.add(time.perf_counter() - t0, time.thread_time() - c0)
         self.v_ref = self.profile.speed(t)
         self.s_ref = reference_position(self.profile, t)
         self.speed_error = vm - self.v_ref
