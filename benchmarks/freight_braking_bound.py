@@ -82,6 +82,15 @@ def bound(lag: bool, power_braking: bool, before: float = 25.0, after: float = 4
                 G[k, i] = (1 - a) * a ** (k - delay - 1 - i)
     else:
         G = np.eye(K)
+    # free response of f to the history: u = f_init (cruise force on the reference) before
+    # the window, f_0 = f_init; zero input u from k = 0 on
+    f_init = res[0] + m * (v_ref[1] - v_ref[0]) / H
+    f_free = np.zeros(K)
+    if lag:
+        f = f_init
+        for k in range(K):
+            f_free[k] = f
+            f = a * f + (1 - a) * (f_init if k < delay else 0.0)
     # cumulative sum: v_k - v_0 = h/m sum_{i<k} f_i ... for k = 1..K
     L = np.tril(np.ones((K, K))) * H / m
     best = (math.inf, math.nan, math.nan)
@@ -92,7 +101,7 @@ def bound(lag: bool, power_braking: bool, before: float = 25.0, after: float = 4
         for k_app in range(int((before + apply_from) / H), int((before + apply_to) / H) + 1, 2):
             air = np.zeros(K)
             air[k_app:] = air_scale[: K - k_app] * mu[k_app:K]
-            free = v_ref[0] + L @ (-air - res[:K]) - v_ref[1:]  # v_k - v_ref_k without f
+            free = v_ref[0] + L @ (f_free - air - res[:K]) - v_ref[1:]  # v_k - v_ref_k, u = 0
             lo = -ed[:K]
             hi = trac[:K].copy()
             if not power_braking:
@@ -101,7 +110,7 @@ def bound(lag: bool, power_braking: bool, before: float = 25.0, after: float = 4
             M = L @ G
             A = np.vstack((np.hstack((M, -np.ones((K, 1)))), np.hstack((-M, -np.ones((K, 1)))),
                            np.hstack((G, np.zeros((K, 1)))), np.hstack((-G, np.zeros((K, 1))))))
-            b = np.concatenate((-free, free, hi, -lo))
+            b = np.concatenate((-free, free, hi - f_free, f_free - lo))
             c = np.zeros(K + 1)
             c[-1] = 1.0
             bounds = [(lo[i], trac[i]) for i in range(K)] + [(0, None)]
