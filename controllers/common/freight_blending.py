@@ -199,20 +199,25 @@ class FreightBlending(StatefulCore):
 
     def predicted_stop(self, v: float, s: float, release: bool, share: float = 1.0,
                        released_for: float = 0.0, h: float = 0.25,
-                       horizon: float = 180.0) -> float:
+                       horizon: float = 120.0) -> float:
         """Head position (m) where the train stops with the air brake held as it is now and no
         electric brake (``release`` False), or with the air brake released ``released_for`` s
         ago (each cylinder empties along the release wave,
         :meth:`plants.freight.FreightTrain.evolve_pressure`) and the electric brake going to
         ``share`` of its limit through the eq. (15) lag (``release`` True). One mass (eq. 7)
-        with the modelled resistance; explicit midpoint steps of ``h`` s."""
+        with the modelled resistance; explicit midpoint steps of ``h`` s (inf: not stopped
+        within ``horizon`` s)."""
         model, tp = self.model, self.p.train
         pres = model.pressure
         n = int(horizon / h) + 1
         if release:
             wait = np.maximum(model.release_delay - released_for, 0.0)
-            dt = np.maximum(np.arange(n)[:, None] * h - wait[None, :], 0.0)
-            air_scale = model.evolve_pressure(pres[None, :], 0.0, dt) @ model.brake_scale
+            empty = float(np.max(wait + tp.brake_release_time
+                                 * np.minimum(pres / tp.max_cylinder_pressure, 1.0)))
+            n_air = min(int(empty / h) + 2, n)  # every cylinder empty from there on
+            dt = np.maximum(np.arange(n_air)[:, None] * h - wait[None, :], 0.0)
+            air_scale = np.zeros(n)
+            air_scale[:n_air] = model.evolve_pressure(pres[None, :], 0.0, dt) @ model.brake_scale
         else:
             air_scale = np.full(n, float(pres @ model.brake_scale))
         decay = math.exp(-h / tp.traction_time_constant)
