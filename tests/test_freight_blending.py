@@ -143,3 +143,14 @@ def test_final_approach_brings_the_train_to_the_stop_point() -> None:
     assert abs(run["s"][-1] - 20000.0) < 1.5
     assert run["v"][-1] < 0.05
     assert run["pipe_reduction"][-1] >= BlendingParams().hold_reduction
+
+
+def test_approach_force_is_finite_when_coasting_would_not_stop_within_the_horizon() -> None:
+    """Released, empty cylinders, 5 m/s 25 m before the stop: the resistance alone would need
+    ~9 min (the prediction says inf); the electric brake is then used in full (was nan)."""
+    route = load_route("freight_20km")
+    blend = FreightBlending(BlendingParams(), route.reference, route)
+    blend.final_approach, blend.approach_stop, blend.changed_at = True, 20000.0, 0.0
+    assert blend.predicted_stop(5.0, 19975.0, True, 0.0, 100.0) == np.inf
+    force = blend._approach_force(100.0, 5.0, 19975.0)
+    assert force == -blend.model.traction_limits(5.0)[1]

@@ -199,7 +199,7 @@ class FreightBlending(StatefulCore):
 
     def predicted_stop(self, v: float, s: float, release: bool, share: float = 1.0,
                        released_for: float = 0.0, h: float = 0.25,
-                       horizon: float = 120.0) -> float:
+                       horizon: float = 180.0) -> float:
         """Head position (m) where the train stops with the air brake held as it is now and no
         electric brake (``release`` False), or with the air brake released ``released_for`` s
         ago (each cylinder empties along the release wave,
@@ -273,8 +273,9 @@ class FreightBlending(StatefulCore):
         if coast <= self.approach_stop:
             return 0.0
         full = self.predicted_stop(v, s, True, 1.0, released_for)
-        if full >= self.approach_stop or coast - full <= 1e-9 or gap <= 0.0:
-            share = 1.0
+        if (full >= self.approach_stop or not math.isfinite(coast) or coast - full <= 1e-9
+                or gap <= 0.0):
+            share = 1.0  # coasting would not stop within the horizon: full electric brake
         else:
             share = (coast - self.approach_stop) / (coast - full)
         return -share * self.model.traction_limits(max(v, 0.0))[1]
