@@ -12,6 +12,7 @@ freight scenario (prints figures, asserts nothing).
 from __future__ import annotations
 
 import argparse
+import os
 import statistics
 import sys
 import time
@@ -65,12 +66,17 @@ def main() -> None:
     if args.no_scenarios:
         return
     for name in CONTROLLERS:
+        load0 = os.getloadavg()[0]
+        c0 = time.process_time()
         result = run_scenario(ROOT / "scenarios" / f"seed002_freight_{name}.toml", plot=False)
+        cpu = time.process_time() - c0  # this process: master + both FMUs (in-process)
         s = result.summary
         fmu = s.get("fmu_wall_time_s", {})
-        print(f"seed002_freight_{name}: {s['sim_time_s']:.0f} s in {s['wall_time_s']:.1f} s, "
-              f"real-time factor {s['real_time_factor']} (plant {fmu.get('plant')} s, "
-              f"controller {fmu.get('controller')} s)", flush=True)
+        print(f"seed002_freight_{name}: {s['sim_time_s']:.0f} s in {s['wall_time_s']:.1f} s "
+              f"wall, {cpu:.1f} s CPU (build and load included), real-time factor "
+              f"{s['real_time_factor']} wall / {s['sim_time_s'] / cpu:.0f} CPU (plant "
+              f"{fmu.get('plant')} s, controller {fmu.get('controller')} s wall), load average "
+              f"{load0:.1f} -> {os.getloadavg()[0]:.1f}", flush=True)
 
 
 if __name__ == "__main__":

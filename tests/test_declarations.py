@@ -57,6 +57,8 @@ ADDED_VARIABLES = {
     "BrakeDelayTrain": {"grade_scale"},  # issue 11: grade mismatch in the perturbation study
     "StopPid": {"hold_at_stop_point"},  # issue 11: the full-brake rule made a parameter
     **{f: {"disturbance_correlation_time"} for f in ("Emu3", "Emu8")},  # issue 15
+    # issue 16: the shared freight blending's electric-brake final approach
+    "FreightPid": {"final_approach_distance", "stop_tolerance"},
 }
 
 

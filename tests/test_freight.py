@@ -287,11 +287,12 @@ def test_full_run_stops_at_20_km_with_one_air_application() -> None:
     # brake is saturated, and the locomotive never pulls against it (no power braking)
     assert np.max(np.abs(err_kmh[moving])) < 2.5
     # no power braking: the minimum reduction brakes harder than planned once the electric
-    # brake fades, so the train stops some metres short (measured 9.3 m) and is held there
-    assert -15.0 < train.x[0] - 20000.0 < 2.0
+    # brake fades (it stopped the train 9.3 m short); the blending's final approach releases
+    # it and stops the head at the stop point with the electric brake, then holds it
+    assert abs(train.x[0] - 20000.0) < 1.5
     assert abs(train.v[0]) < 0.1
     applications = np.count_nonzero(np.diff((rows[:, 3] > 0).astype(int)) == 1)
-    assert applications <= 2  # the final braking and (at most) the holding brake
+    assert applications <= 2  # the final braking and the holding brake
 
 
 def test_fmus_validate_and_the_plant_fmu_reproduces_the_core(built_fmus) -> None:

@@ -81,3 +81,76 @@ def test_tabulated_train_resistance_equals_the_length_share_mean() -> None:
     # cumulative integrals of up to ~4e7 (N/kN m) differenced: ~1e-8 N/kN, ~1e-13 m/s^2
     np.testing.assert_allclose(blend.additional_accel(s), exact, rtol=0, atol=1e-12)
     assert blend.additional_accel(float(s[0])) == pytest.approx(exact[0], abs=1e-12)
+
+
+def _applied_on_final_braking(s: float, v: float) -> FreightBlending:
+    """Blending on freight_20km with the minimum reduction applied long enough to have filled
+    every cylinder, the train at ``s`` / ``v`` (m, m/s) on the final braking."""
+    route = load_route("freight_20km")
+    blend = FreightBlending(BlendingParams(final_approach_distance=0.0), route.reference, route)
+    blend.reduction, blend.changed_at = blend.p.train.min_reduction, 0.0
+    blend.model.step_brakes(0.0, 40.0, blend.reduction)
+    blend.pressure_estimate = float(blend.model.pressure.mean())
+    return blend
+
+
+def test_predicted_stop_is_ordered_by_the_braking_it_assumes() -> None:
+    """Held air brake < released with the full electric brake < released, coasting (the
+    resistance alone, 0.009 m/s^2, needs longer than the 180 s horizon: inf); a faster train
+    stops later."""
+    blend = _applied_on_final_braking(19900.0, 5.0)
+    held = blend.predicted_stop(5.0, 19900.0, release=False)
+    full = blend.predicted_stop(5.0, 19900.0, release=True, share=1.0)
+    coast = blend.predicted_stop(5.0, 19900.0, release=True, share=0.0)
+    assert 19900.0 < held < full < coast
+    assert blend.predicted_stop(6.0, 19900.0, release=False) > held
+    # held: ~0.2 m/s^2 of air brake, so about v^2 / (2 * 0.2) = 62 m (the friction coefficient
+    # grows as the speed falls: somewhat less)
+    assert 40.0 < held - 19900.0 < 65.0
+
+
+def test_final_approach_releases_only_when_the_air_brake_would_stop_short() -> None:
+    """Air-brake alone stopping short and the released train able to stop before the stop
+    point: release (the stop point returned); too fast for the electric brake, or too far from
+    the stop, or no air brake applied: keep the air brake."""
+    blend = _applied_on_final_braking(19900.0, 5.0)
+    blend.p = BlendingParams()  # final_approach_distance back to its default (300 m)
+    stop = 20000.0
+    assert blend.next_stop(19900.0) == stop
+    short = blend.predicted_stop(2.5, 19975.0, release=False)
+    assert short < stop - blend.p.stop_tolerance
+    assert blend._final_approach(2.5, 19975.0) == stop
+    assert blend._final_approach(6.0, 19940.0) is None  # released it would overshoot
+    assert blend._final_approach(2.5, 19975.0 - 400.0) is None  # beyond the distance
+    blend.reduction = 0.0
+    assert blend._final_approach(2.5, 19975.0) is None
+
+
+def test_final_approach_brings_the_train_to_the_stop_point() -> None:
+    """The minimum air brake stops the train several metres short once the electric brake
+    fades (measured 9.8 m for the PID over the whole route before); the final approach
+    releases it and stops the head within 1.5 m of the stop point (the prediction is one
+    mass; the head also carries the train's stretch), without power braking, and holds it."""
+    route = load_route("freight_20km")
+    pid = FreightPid(FreightPidParams(), route.reference, route)
+    s0 = 19700.0  # on the reference, 300 m before the stop
+    run = closed_loop(pid, route, 100.0, s0=s0, v0=route.reference.speed(s0))
+    assert np.any(run["pipe_reduction"][: len(run["t"]) // 2] > 0)  # air brake was applied
+    released = np.flatnonzero(np.diff((run["pipe_reduction"] > 0).astype(int)) == -1)
+    assert released.size >= 1  # ... and released for the final approach, before the stop
+    assert run["s"][released[0] + 1] < 20000.0 - 5.0
+    assert np.all(run["force_demand"][released[0]:] <= 0.0)  # never traction after it
+    assert abs(run["s"][-1] - 20000.0) < 1.5
+    assert run["v"][-1] < 0.05
+    assert run["pipe_reduction"][-1] >= BlendingParams().hold_reduction
+
+
+def test_approach_force_is_finite_when_coasting_would_not_stop_within_the_horizon() -> None:
+    """Released, empty cylinders, 5 m/s 25 m before the stop: the resistance alone would need
+    ~9 min (the prediction says inf); the electric brake is then used in full (was nan)."""
+    route = load_route("freight_20km")
+    blend = FreightBlending(BlendingParams(), route.reference, route)
+    blend.final_approach, blend.approach_stop, blend.changed_at = True, 20000.0, 0.0
+    assert blend.predicted_stop(5.0, 19975.0, True, 0.0, 100.0) == np.inf
+    force = blend._approach_force(100.0, 5.0, 19975.0)
+    assert force == -blend.model.traction_limits(5.0)[1]

@@ -79,11 +79,17 @@ class BlendingParams:
                               "train is held", min=0.0)
     hold_reduction: float = param(100e3, "Pa", "pipe reduction holding the train at the final "
                                   "stop", min=0.0)
+    final_approach_distance: float = param(300.0, "m", "within this distance of a stop the "
+                                           "air brake may be released for an electric-brake "
+                                           "final approach (0: never)", min=0.0)
+    stop_tolerance: float = param(1.0, "m", "final approach: released when the applied air "
+                                  "brake alone would stop the train more than this short",
+                                  min=0.0)
 
     def check(self) -> None:
         self.train.check()
         for name in ("air_preview_time", "min_apply_time", "min_release_time", "stop_speed",
-                     "hold_reduction"):
+                     "hold_reduction", "final_approach_distance", "stop_tolerance"):
             if not getattr(self, name) >= 0:
                 raise ValueError(f"{name} = {getattr(self, name)} must be >= 0")
         if not 0 < self.release_share < self.ed_share <= 1:
@@ -97,7 +103,7 @@ class FreightBlending(StatefulCore):
     """Force demand (N) -> locomotive force demand + pipe reduction, see the module doc."""
 
     state_fields = ("reduction", "pressure_estimate", "changed_at", "force", "holding",
-                    "brake_model_state")
+                    "final_approach", "approach_stop", "brake_model_state")
 
     def __init__(self, params: BlendingParams, profile: ReferenceProfile, route: Route) -> None:
         params.check()
@@ -124,6 +130,9 @@ class FreightBlending(StatefulCore):
         self.changed_at = -math.inf  # s, time of the last apply/release
         self.force = 0.0  # N, locomotive force demand
         self.holding = False  # final-stop holding brake applied
+        self.final_approach = False  # air released for the electric-brake final approach
+        self.approach_stop = math.inf  # m, its stop point
+        self._stops = np.asarray(profile.x, dtype=float)[np.asarray(profile.v) <= 0.0]
 
     @property
     def brake_model_state(self) -> dict:
@@ -182,6 +191,95 @@ class FreightBlending(StatefulCore):
         return min(max(math.ceil(need / step) * step, tp.min_reduction),
                    tp.full_service_reduction)
 
+    # -- final approach --------------------------------------------------------------------
+    def next_stop(self, s: float) -> float:
+        """Position (m) of the next zero of the reference at or ahead of ``s`` (inf: none)."""
+        ahead = self._stops[self._stops >= s - 1e-6]
+        return float(ahead[0]) if ahead.size else math.inf
+
+    def predicted_stop(self, v: float, s: float, release: bool, share: float = 1.0,
+                       released_for: float = 0.0, h: float = 0.25,
+                       horizon: float = 180.0) -> float:
+        """Head position (m) where the train stops with the air brake held as it is now and no
+        electric brake (``release`` False), or with the air brake released ``released_for`` s
+        ago (each cylinder empties along the release wave,
+        :meth:`plants.freight.FreightTrain.evolve_pressure`) and the electric brake going to
+        ``share`` of its limit through the eq. (15) lag (``release`` True). One mass (eq. 7)
+        with the modelled resistance; explicit midpoint steps of ``h`` s (inf: not stopped
+        within ``horizon`` s)."""
+        model, tp = self.model, self.p.train
+        pres = model.pressure
+        n = int(horizon / h) + 1
+        if release:
+            wait = np.maximum(model.release_delay - released_for, 0.0)
+            empty = float(np.max(wait + tp.brake_release_time
+                                 * np.minimum(pres / tp.max_cylinder_pressure, 1.0)))
+            n_air = min(int(empty / h) + 2, n)  # every cylinder empty from there on
+            dt = np.maximum(np.arange(n_air)[:, None] * h - wait[None, :], 0.0)
+            air_scale = np.zeros(n)
+            air_scale[:n_air] = model.evolve_pressure(pres[None, :], 0.0, dt) @ model.brake_scale
+        else:
+            air_scale = np.full(n, float(pres @ model.brake_scale))
+        decay = math.exp(-h / tp.traction_time_constant)
+        force = min(self.force, 0.0)  # N, electric brake now (< 0)
+        lag_steps = int(round(tp.traction_delay / h))
+
+        def decel(k: int, vk: float, sk: float, f_loco: float) -> float:
+            mu = friction_coefficient_at(vk)  # vk >= 0 here: the same operations
+            return (air_scale[k] * mu - f_loco) / self.m_eff + self.resistance_accel(vk, sk)
+
+        vk, sk = max(v, 0.0), s
+        for k in range(n - 1):
+            if release and k >= lag_steps:
+                target = -share * self.model.traction_limits(vk)[1]
+                force = target + (force - target) * decay
+            a0 = decel(k, vk, sk, force)
+            if a0 <= 0.0 and vk <= 0.0:
+                return sk
+            vm = vk - 0.5 * h * a0
+            if vm <= 0.0:
+                return sk + vk * vk / (2.0 * a0)
+            am = decel(k, vm, sk + 0.5 * h * vk, force)
+            v1 = vk - h * am
+            if v1 <= 0.0:
+                return sk + vk * vk / (2.0 * am)
+            sk += 0.5 * h * (vk + v1)
+            vk = v1
+        return math.inf
+
+    def _final_approach(self, v: float, s: float) -> float | None:
+        """The stop point (m) if the air brake is to be released now for an electric-brake final
+        approach, else None: when the applied air brake alone would stop the train more than
+        ``stop_tolerance`` short of the next stop (it cannot be partly released and the
+        locomotive may not pull against it) and the train, released now with the full electric
+        brake, would stop that much before the stop point."""
+        p = self.p
+        stop = self.next_stop(s)
+        if not (self.reduction > 0.0 and 0.0 < stop - s <= p.final_approach_distance):
+            return None
+        if self.predicted_stop(v, s, release=False) >= stop - p.stop_tolerance:
+            return None
+        return stop if self.predicted_stop(v, s, release=True) <= stop - p.stop_tolerance \
+            else None
+
+    def _approach_force(self, t: float, v: float, s: float) -> float:
+        """Final approach: the electric brake force (N, <= 0) whose share ``phi`` of the limit
+        makes the predicted stop (:meth:`predicted_stop`, air brake releasing) the stop point,
+        ``phi`` interpolated between the predictions with no and with the full electric
+        brake and applied afresh every sample (feedback on the predicted stop)."""
+        released_for = t - self.changed_at
+        gap = self.approach_stop - s
+        coast = self.predicted_stop(v, s, True, 0.0, released_for)
+        if coast <= self.approach_stop:
+            return 0.0
+        full = self.predicted_stop(v, s, True, 1.0, released_for)
+        if (full >= self.approach_stop or not math.isfinite(coast) or coast - full <= 1e-9
+                or gap <= 0.0):
+            share = 1.0  # coasting would not stop within the horizon: full electric brake
+        else:
+            share = (coast - self.approach_stop) / (coast - full)
+        return -share * self.model.traction_limits(max(v, 0.0))[1]
+
     # -- one sample ------------------------------------------------------------------------
     def blend(self, t: float, T: float, v: float, s: float, force: float, v_ref: float,
               a_ref: float, a_res: float) -> tuple[float, float]:
@@ -202,11 +300,19 @@ class FreightBlending(StatefulCore):
         # last metres once the electric brake fades, and not partly releasable) stopped the
         # train short on the final braking segment
         self.holding = (v < p.stop_speed and self.profile.accel(s) <= 0.0
-                        and (v_ref < p.stop_speed or self.reduction > 0.0))
+                        and (v_ref < p.stop_speed or self.reduction > 0.0
+                             or self.final_approach
+                             and (v <= 0.0 or self.approach_stop - s <= p.stop_tolerance)))
         if self.holding:
             if self.reduction < p.hold_reduction:
                 self.reduction, self.changed_at = p.hold_reduction, t
+            self.final_approach = False
             force = 0.0
+        elif self.final_approach:
+            pass  # released for the final approach: no new application before the stop
+        elif applied and (stop := self._final_approach(v, s)) is not None:
+            self.reduction, self.changed_at, self.final_approach = 0.0, t, True
+            self.approach_stop = stop
         elif applied:
             extra = -planned - p.ed_share * ed
             if extra > self.air_force(self.pressure_estimate, speed) and extra > 0:
@@ -221,7 +327,9 @@ class FreightBlending(StatefulCore):
             self.changed_at = t
         pressures = self.model.step_brakes(t, t + T, self.reduction)
         self.pressure_estimate = float(pressures.mean())
-        if not self.holding and self.air_applied():
+        if self.final_approach:
+            force = self._approach_force(t, v, s)
+        elif not self.holding and self.air_applied():
             # the locomotive trims the (estimated) air brake with the electric brake only:
             # never traction against an applied or not yet released air brake
             air = float(np.dot(self.model.brake_scale, pressures)
