@@ -18,6 +18,22 @@ def to_seconds(ticks: int) -> float:
     return ticks / TICKS_PER_SECOND
 
 
+_IMMUTABLE = (int, float, bool, str, bytes, type(None))
+
+
+def copy_value(value: Any) -> Any:
+    """An independent copy of one state value, faster than ``copy.deepcopy`` for the common
+    cases (per controller event the FMU copies the whole core state up to four times):
+    immutable scalars are shared, numeric numpy arrays are copied with ``ndarray.copy``
+    (numpy is not imported here: this module is stdlib only), the rest is deep-copied."""
+    if isinstance(value, _IMMUTABLE):
+        return value
+    if type(value).__module__ == "numpy" and getattr(value, "dtype", None) is not None \
+            and value.dtype.hasobject is False and hasattr(value, "copy"):
+        return value.copy()
+    return copy.deepcopy(value)
+
+
 class StatefulCore:
     """Mixin for numerical cores: ``get_state``/``set_state`` over ``state_fields``.
 
@@ -34,7 +50,7 @@ class StatefulCore:
         for name in self.state_fields:
             value = getattr(self, name)
             state[name] = (value.get_state() if isinstance(value, StatefulCore)
-                           else copy.deepcopy(value))
+                           else copy_value(value))
         return state
 
     def set_state(self, state: dict[str, Any]) -> None:
@@ -43,4 +59,4 @@ class StatefulCore:
             if isinstance(current, StatefulCore):
                 current.set_state(state[name])
             else:
-                setattr(self, name, copy.deepcopy(state[name]))
+                setattr(self, name, copy_value(state[name]))
