@@ -123,6 +123,9 @@ class SurfaceParams:
                               "from their mean force removed per sample, in the null space "
                               "of the laws' Phi_2 (0: off; not in the paper)", min=0.0,
                               max=1.0)
+    disturbance_estimate: bool = param(True, description="use the one-step delay-estimate "
+                                       "of the disturbance change (eq. 14) and p_hat (eq. 70); "
+                                       "false: dd_hat = 0 (a diagnostic, not the paper's law)")
     common_integral: float = param(1.0, "1", "fraction of the units' departures from the "
                                    "mean of the sums E, F (eqs. 19, 20) removed per sample "
                                    "(1: every unit integrates the mean; 0: the paper's "
@@ -135,7 +138,7 @@ class SlidingLaw(Law):
     state_fields = ("est", "u", "E", "F", "s")
 
     def __init__(self, ffdl: FfdlParams, surface: SurfaceParams, n: int) -> None:
-        super().__init__(ffdl, n, disturbance=True)
+        super().__init__(ffdl, n, disturbance=surface.disturbance_estimate)
         self.surface = surface
         self.E = np.zeros(n)
         self.F = np.zeros(n)
@@ -154,13 +157,13 @@ class SlidingLaw(Law):
         E = self.E + e
         F = self.F + sig(e, c.alpha)
         if c.common_integral > 0:  # the units' speed differences integrate to coupler stretch
-            E = E - c.common_integral * (E - E.mean())
-            F = F - c.common_integral * (F - F.mean())
+            E = E - c.common_integral * (E - E.sum() / self.n)
+            F = F - c.common_integral * (F - F.sum() / self.n)
         gain = est.control_gain()
         Phi2, K = gain.M, gain.K
         du_eq = K @ (s - c.k1 * E - bk2 * F - est.dd_hat + y_r_next - y - est.free_response())
         if c.share_gain > 0:
-            dev = self.u - self.u.mean()
+            dev = self.u - self.u.sum() / self.n
             du_eq = du_eq - c.share_gain * (dev - K @ (Phi2 @ dev))
         self.s = s
         self._gain = gain
