@@ -518,6 +518,10 @@ class SampledControllerSlave(CoreSlave):
         self.event_done_ticks: int | None = None
         # event computed on a read, not committed: (key, outputs, hold, core state after)
         self._tentative: tuple[Any, dict[str, Any], int, Any] | None = None
+        # inputs set so far, and (time, that count) when the tentative event was last checked:
+        # reading the N outputs one by one then costs one comparison each, not N dict builds
+        self._input_serial = 0
+        self._tentative_checked: tuple[int, int] | None = None
 
     @classmethod
     def declared_variables(cls) -> tuple[Var, ...]:
@@ -546,11 +550,19 @@ class SampledControllerSlave(CoreSlave):
             event += period
         return event
 
+    def on_input(self, name: str) -> None:
+        super().on_input(name)
+        self._input_serial += 1
+
     def _compute_tentative(self) -> tuple[Any, dict[str, Any], int, Any]:
         """The due event computed from the current inputs on a copy of the core state."""
+        checked = (self.now_ticks, self._input_serial)
+        if self._tentative is not None and self._tentative_checked == checked:
+            return self._tentative  # no input set since it was computed at this instant
         inputs = self.inputs()
         key = (self.now_ticks, tuple(sorted(inputs.items())))
         if self._tentative is not None and self._tentative[0] == key:
+            self._tentative_checked = checked
             return self._tentative
         for name, value in inputs.items():
             if isinstance(value, float) and not math.isfinite(value):
@@ -562,6 +574,7 @@ class SampledControllerSlave(CoreSlave):
         finally:
             self.core.set_state(saved)
         self._tentative = (key, dict(outputs), max(1, int(hold)), after)
+        self._tentative_checked = checked
         return self._tentative
 
     def _show(self, outputs: dict[str, Any], next_event: int, executions: int) -> None:
