@@ -233,7 +233,12 @@ class Ismpc(SlidingLaw):
         self.p = params
         N = params.horizon
         tril = np.tril(np.ones((N, N)))
-        self.qp = DenseQP(N * n, np.kron(tril, np.eye(n)))
+        # the QP in the cumulated moves z_k = sum_{j<=k} U_j (U = D z): the input box becomes
+        # simple bounds on z and Theta U = (I (x) Phi_2) z (tril D = I)
+        self.qp = DenseQP(N * n)
+        diff = np.linalg.inv(tril)  # D
+        self._move_weight = 2.0 * params.theta * np.kron(diff.T @ diff, np.eye(n))
+        self._eye_N = np.eye(N)
         self._tt = tril.T @ tril  # Theta'Theta = kron(tril'tril, Phi_2'Phi_2)
         self._tt_eig, self._tt_vec = np.linalg.eigh(self._tt)
         self._eye = np.eye(N * n)
@@ -267,12 +272,16 @@ class Ismpc(SlidingLaw):
         if (cum >= lo_cum).all() and (cum <= hi_cum).all():
             x, dual = X.ravel(), self._zero_dual
         else:
+            # J = sum_k ||offset_k + Phi_2 z_k||^2 + theta ||D z||^2, lo_cum <= z_k <= hi_cum
             PtP = Phi2.T @ Phi2
-            H = (self._tt[:, None, :, None] * PtP[None, :, None, :]).reshape(N * n, N * n)
-            H = 2.0 * (H + self.p.theta * self._eye)  # 2 (tt (x) P'P + theta I)
+            H = (self._eye_N[:, None, :, None] * PtP[None, :, None, :]).reshape(N * n, N * n)
+            H = 2.0 * H + self._move_weight
             lo_all = np.broadcast_to(lo_cum, (N, n)).ravel()
             hi_all = np.broadcast_to(hi_cum, (N, n)).ravel()
-            x, dual, _ = self.qp.solve(H, 2.0 * grad.ravel(), lo_all, hi_all, self.warm_dual)
+            z, dual, _ = self.qp.solve(H, 2.0 * (offset @ Phi2).ravel(), lo_all, hi_all,
+                                       self.warm_dual)
+            zm = z.reshape(N, n)
+            x = np.concatenate([zm[:1], np.diff(zm, axis=0)]).ravel()
             self.qp_solves += 1
             if not np.all(np.isfinite(x)):
                 self.qp_failures += 1
