@@ -522,6 +522,7 @@ class SampledControllerSlave(CoreSlave):
         # reading the N outputs one by one then costs one comparison each, not N dict builds
         self._input_serial = 0
         self._tentative_checked: tuple[int, int] | None = None
+        self._tentative_shown: tuple[int, int] | None = None
 
     @classmethod
     def declared_variables(cls) -> tuple[Var, ...]:
@@ -584,9 +585,13 @@ class SampledControllerSlave(CoreSlave):
 
     def refresh_outputs(self) -> None:
         if self.initialized and self._event_due():
+            checked = (self.now_ticks, self._input_serial)
+            if self._tentative is not None and self._tentative_shown == checked:
+                return  # the outputs already show this tentative event
             _, outputs, hold, _ = self._compute_tentative()
             self._show(outputs, self._grid_event() + hold * self.sample_ticks(),
                        self.executions + 1)
+            self._tentative_shown = checked
 
     def after_core_built(self) -> None:
         super().after_core_built()
