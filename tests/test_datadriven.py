@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from fmi_state_helpers import rerun_after_restore
 
-from controllers.common.ffdl import FfdlParams
+from controllers.common.ffdl import FfdlParams, regularised_pinv, truncated_gain
 from controllers.common.qp import DenseQP
 from controllers.datadriven.emu_control import (
     DriveParams,
@@ -28,6 +28,7 @@ from controllers.datadriven.laws import (
     IsmpcParams,
     Mfac,
     MfacParams,
+    SurfaceParams,
 )
 
 A = np.array([[0.3, 0.1, 0.0], [0.1, 0.3, 0.1], [0.0, 0.1, 0.3]])
@@ -61,9 +62,16 @@ def _disturbed_linear_loop(law, steps: int, amp: float = 1.0, omega: float = 0.0
 
 
 def _exact_model() -> FfdlParams:
-    """lambda = 0 (Phi fixed) started at the true [A B], exact inverse: the only uncertainty
-    left is the disturbance, as in the proof of theorem 2."""
-    return FfdlParams(step=0.0, phi1_init=0.0, phi2_init=1.0, pinv_regularisation=0.0)
+    """lambda = 0 (Phi fixed) started at the true [A B], exact inverse (no direction of Phi_2
+    dropped): the only uncertainty left is the disturbance, as in the proof of theorem 2."""
+    return FfdlParams(step=0.0, phi1_init=0.0, phi2_init=1.0, pinv_regularisation=0.0,
+                      pinv_cutoff=0.0)
+
+
+def _paper_surface(alpha: float) -> SurfaceParams:
+    """Eq. 18 with per-unit sums and no force sharing: the paper's law on a plant whose
+    outputs are independently controllable (B above is well conditioned)."""
+    return SurfaceParams(alpha=alpha, share_gain=0.0, common_integral=0.0)
 
 
 def _with_true_phi(law):
@@ -76,7 +84,8 @@ def test_ismc_keeps_the_sliding_variable_in_its_boundary_layer_after_reaching() 
     """Eq. 44 with sat: outside the layer |s| falls by at least beta - max|p| per sample;
     inside, s(t+1) = (1 - beta/Delta) s + p stays in it when |p| <= beta (p = dd(t) -
     dd(t-1) here, at most amp omega^2 = 0.0025 < beta = 0.05)."""
-    params = IsmcParams(ffdl=_exact_model(), beta=0.05, boundary_layer=0.1)
+    params = IsmcParams(ffdl=_exact_model(), surface=_paper_surface(0.65), beta=0.05,
+                        boundary_layer=0.1)
     law = _with_true_phi(Ismc(params, 3))
     run = _disturbed_linear_loop(law, 1500)
     s0 = np.abs(run["s"][0]).max()
@@ -91,7 +100,8 @@ def test_ismc_keeps_the_sliding_variable_in_its_boundary_layer_after_reaching() 
 def test_ismc_without_switching_drifts_out_of_the_layer() -> None:
     """Control of the previous test: the same loop with beta = 0 (equivalent control only)
     does not bring s back into the layer (it only holds s(t+1) = s(t) + p(t))."""
-    law = _with_true_phi(Ismc(IsmcParams(ffdl=_exact_model(), beta=0.0), 3))
+    law = _with_true_phi(Ismc(IsmcParams(ffdl=_exact_model(), surface=_paper_surface(0.65),
+                                         beta=0.0), 3))
     run = _disturbed_linear_loop(law, 600)
     assert np.abs(run["s"][300:]).max() > 0.1
 
@@ -111,9 +121,53 @@ def test_ismpc_with_an_infinite_mpc_weight_is_its_equivalent_control() -> None:
 def test_ismpc_drives_the_sliding_variable_faster_than_the_equivalent_control() -> None:
     """theta small: the MPC part makes s(t+1) ~ p(t) - p_hat(t-1) (eq. 78), far inside
     what the equivalent control alone leaves."""
-    law = _with_true_phi(Ismpc(IsmpcParams(ffdl=_exact_model(), theta=1e-6), 3))
+    law = _with_true_phi(Ismpc(IsmpcParams(ffdl=_exact_model(), surface=_paper_surface(0.5),
+                                           theta=1e-6), 3))
     run = _disturbed_linear_loop(law, 600)
     assert np.abs(run["s"][50:]).max() < 0.01
+
+
+def test_truncated_gain_drops_the_weak_directions_and_keeps_the_rest() -> None:
+    """cutoff 0 is the regularised inverse; a cutoff above the weak singular values leaves
+    the rank-one part: K M_r is the projector on the strong input direction."""
+    M = 0.24 * np.ones((3, 3)) + 0.006 * np.diag([1.0, -1.0, 0.5])  # train-like, cond ~120
+    full = truncated_gain(M, 0.01, 0.0)
+    assert full.K == pytest.approx(regularised_pinv(M, 0.01), abs=1e-12)  # O(1) entries
+    g = truncated_gain(M, 0.0, 0.5)
+    assert g.sv.size == 1
+    v = g.Vt[0]
+    assert g.K @ g.M == pytest.approx(np.outer(v, v), abs=1e-12)
+    assert np.abs(v) == pytest.approx(np.full(3, 3 ** -0.5), abs=0.01)  # the common mode
+
+
+def _train_loop(law, steps: int) -> dict[str, np.ndarray]:
+    """A stiffly coupled 'train' in FFDL form: every unit's input moves every output alike
+    (``B_t`` nearly rank one), independent slowly varying disturbances per output."""
+    Bt = 0.24 * np.ones((3, 3)) + 0.006 * np.diag([1.0, -1.0, 0.5])
+    global B
+    saved, B = B, Bt
+    try:
+        return _disturbed_linear_loop(law, steps, amp=0.3)
+    finally:
+        B = saved
+
+
+def test_force_sharing_and_common_integral_keep_the_units_inputs_together() -> None:
+    """On a nearly rank-one input map the paper's per-unit sums (eqs. 19, 20) wind up the
+    input differences, which move no output (the couplers take them); with the mean sums and
+    the null-space sharing the inputs stay together and the tracking is as good."""
+    def run(surface):
+        law = Ismc(IsmcParams(surface=surface), 3)
+        law.est.phi = np.hstack([np.zeros((3, 3)), 0.24 * np.ones((3, 3))
+                                 + 0.006 * np.diag([1.0, -1.0, 0.5])])
+        return _train_loop(law, 1500)
+
+    paper = run(_paper_surface(0.65))
+    ours = run(SurfaceParams(alpha=0.65))
+    spread = lambda r: np.ptp(r["u"][-500:], axis=1).max()  # noqa: E731
+    assert spread(ours) < 0.1 * spread(paper)
+    assert np.abs(ours["u"][-500:].mean(axis=1)).max() > 0.1  # the common input works
+    assert np.abs(ours["e"][-500:]).max() < 2.0 * np.abs(paper["e"][-500:]).max()
 
 
 def test_ismpc_respects_the_input_box_through_the_qp() -> None:

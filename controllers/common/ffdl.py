@@ -42,6 +42,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -58,6 +59,33 @@ def regularised_pinv(M: np.ndarray, eps: float) -> np.ndarray:
     are damped (``sigma / (sigma^2 + eps)``) instead of amplified."""
     n = M.shape[1]
     return np.linalg.solve(M.T @ M + eps * np.eye(n), M.T)
+
+
+class TruncatedGain(NamedTuple):
+    """:func:`truncated_gain`: ``M_r = U_r diag(sv) V_r'``, ``K``, and ``sv``, ``V_r'``."""
+
+    M: np.ndarray
+    K: np.ndarray
+    sv: np.ndarray
+    Vt: np.ndarray
+
+
+def truncated_gain(M: np.ndarray, eps: float, cutoff: float) -> TruncatedGain:
+    """``M`` without its singular directions weaker than ``cutoff`` times the strongest
+    (``M_r = U_r S_r V_r'``) and its regularised inverse
+    ``K = V_r diag(sigma / (sigma^2 + eps)) U_r'``.
+
+    Seed 001's train: the couplers (Table 1: k = 2e7 N/m, d = 5e6 N s/m) settle a force moved
+    between units within about 0.1 s, so over a 0.2 s sample every unit's force moves every
+    unit's speed alike and the input block of ``Phi`` is nearly rank one (condition number
+    about 40). Its weak directions (force differences between units) act on nothing but the
+    coupler stretch; inverting them (eqs. 24, 25, 72 invert ``Phi_2``) turns the noise in the
+    speed differences into force differences of 100-200 kN between units. ``cutoff = 0``
+    keeps every direction (then ``K`` is :func:`regularised_pinv`)."""
+    U, sv, Vt = np.linalg.svd(M)
+    keep = sv >= cutoff * sv[0]
+    U, sv, Vt = U[:, keep], sv[keep], Vt[keep]
+    return TruncatedGain((U * sv) @ Vt, (Vt.T * (sv / (sv * sv + eps))) @ U.T, sv, Vt)
 
 
 def sig(x: np.ndarray, alpha: float) -> np.ndarray:
@@ -84,6 +112,10 @@ class FfdlParams:
                               min=0.0)
     pinv_regularisation: float = param(1e-2, "1", "eps of the regularised inverse "
                                        "(Phi_2' Phi_2 + eps I)^-1 Phi_2'", min=0.0)
+    pinv_cutoff: float = param(0.5, "1", "the control laws drop the directions of Phi_2 "
+                               "whose singular value is below this fraction of the largest "
+                               "(force differences between stiffly coupled units; 0: keep "
+                               "all)", min=0.0, max=1.0)
 
     def check(self) -> None:
         if not (self.mu > 0 and 0 <= self.step <= 2):
@@ -187,4 +219,11 @@ class FfdlEstimator(StatefulCore):
 
     def inverse_gain(self) -> np.ndarray:
         """Regularised pseudo-inverse of ``Phi_2`` (replaces ``Phi_2^-1`` of eqs. 24-26)."""
-        return regularised_pinv(self.input_block, self.p.pinv_regularisation)
+        return self.control_gain()[1]
+
+    def control_gain(self) -> TruncatedGain:
+        """``(Phi_2r, K, sv, V')``: the input block the laws use (weak directions dropped,
+        :func:`truncated_gain`) and its regularised pseudo-inverse (for ``Phi_2^-1`` of eqs.
+        24-26 and ``Phi_2`` in ``Theta`` of eq. 64)."""
+        return truncated_gain(self.input_block, self.p.pinv_regularisation,
+                              self.p.pinv_cutoff)

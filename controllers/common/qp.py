@@ -323,10 +323,12 @@ class DenseQP:
     a Hessian update, DAQP keeps no state between calls, so the result depends only on the
     data and the warm start the caller keeps (FMU state save/restore reproduces it)."""
 
-    def __init__(self, n: int, C: np.ndarray) -> None:
+    def __init__(self, n: int, C: np.ndarray | None = None) -> None:
+        """``C = None``: bounds on ``x`` only (DAQP's simple bounds, cheaper than rows)."""
         self.n = int(n)
+        C = np.zeros((0, self.n)) if C is None else C
         self.C = np.ascontiguousarray(np.atleast_2d(np.asarray(C, float)))
-        self.n_con = self.C.shape[0]
+        self.n_con = self.C.shape[0] or self.n
         self._sense = np.zeros(self.n_con, dtype=np.int32)
 
     def solve(self, H: np.ndarray, q: np.ndarray, lo: np.ndarray, hi: np.ndarray,

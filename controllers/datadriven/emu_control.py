@@ -130,7 +130,7 @@ class DataDrivenEmuControl(StatefulCore, Declared):
         hi = np.minimum(d.accel_max, trac / m)
         lo = np.minimum(np.maximum(-d.accel_max, -brake / m), hi)
         y = KMH_PER_MPS * v
-        self.holding = v_ref <= 0.0 and a_ref <= 0.0 and float(v.mean()) < d.stop_speed
+        self.holding = v_ref <= 0.0 and a_ref <= 0.0 and float(v.sum()) < d.stop_speed * n
         if self.holding:
             u = np.clip(np.full(n, d.hold_accel), lo, hi)
             self.law.hold(y, u)
@@ -139,7 +139,7 @@ class DataDrivenEmuControl(StatefulCore, Declared):
             y_r_next = KMH_PER_MPS * max(v_ref + a_ref * d.sample_time, 0.0)
             u = self.law.step(y, y_r, y_r_next, lo, hi)
         self.forces = [float(f) for f in m * u]
-        self.speed_error = float(v.mean() - v_ref)
+        self.speed_error = float(v.sum()) / n - v_ref
         return self.outputs(), 1
 
     def outputs(self) -> dict[str, float]:

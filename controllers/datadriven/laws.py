@@ -119,6 +119,17 @@ class SurfaceParams:
                      "given in the paper)", min=0.0)
     alpha: float = param(0.65, "1", "alpha: exponent of sig^alpha (eq. 20)", min=1e-3,
                          max=0.999)
+    share_gain: float = param(0.2, "1", "force sharing: fraction of the units' departure "
+                              "from their mean force removed per sample, in the null space "
+                              "of the laws' Phi_2 (0: off; not in the paper)", min=0.0,
+                              max=1.0)
+    disturbance_estimate: bool = param(True, description="use the one-step delay-estimate "
+                                       "of the disturbance change (eq. 14) and p_hat (eq. 70); "
+                                       "false: dd_hat = 0 (a diagnostic, not the paper's law)")
+    common_integral: float = param(1.0, "1", "fraction of the units' departures from the "
+                                   "mean of the sums E, F (eqs. 19, 20) removed per sample "
+                                   "(1: every unit integrates the mean; 0: the paper's "
+                                   "per-unit sums)", min=0.0, max=1.0)
 
 
 class SlidingLaw(Law):
@@ -127,7 +138,7 @@ class SlidingLaw(Law):
     state_fields = ("est", "u", "E", "F", "s")
 
     def __init__(self, ffdl: FfdlParams, surface: SurfaceParams, n: int) -> None:
-        super().__init__(ffdl, n, disturbance=True)
+        super().__init__(ffdl, n, disturbance=surface.disturbance_estimate)
         self.surface = surface
         self.E = np.zeros(n)
         self.F = np.zeros(n)
@@ -145,9 +156,17 @@ class SlidingLaw(Law):
         s = e + c.k1 * self.E + bk2 * self.F
         E = self.E + e
         F = self.F + sig(e, c.alpha)
-        K = est.inverse_gain()
+        if c.common_integral > 0:  # the units' speed differences integrate to coupler stretch
+            E = E - c.common_integral * (E - E.sum() / self.n)
+            F = F - c.common_integral * (F - F.sum() / self.n)
+        gain = est.control_gain()
+        Phi2, K = gain.M, gain.K
         du_eq = K @ (s - c.k1 * E - bk2 * F - est.dd_hat + y_r_next - y - est.free_response())
+        if c.share_gain > 0:
+            dev = self.u - self.u.sum() / self.n
+            du_eq = du_eq - c.share_gain * (dev - K @ (Phi2 @ dev))
         self.s = s
+        self._gain = gain
         self._next = (E, F)
         return s, du_eq, K, E
 
@@ -214,8 +233,16 @@ class Ismpc(SlidingLaw):
         self.p = params
         N = params.horizon
         tril = np.tril(np.ones((N, N)))
-        self.qp = DenseQP(N * n, np.kron(tril, np.eye(n)))
+        # the QP in the cumulated moves z_k = sum_{j<=k} U_j (U = D z): the input box becomes
+        # simple bounds on z and Theta U = (I (x) Phi_2) z (tril D = I)
+        self.qp = DenseQP(N * n)
+        diff = np.linalg.inv(tril)  # D
+        self._move_weight = 2.0 * params.theta * np.kron(diff.T @ diff, np.eye(n))
+        self._eye_N = np.eye(N)
         self._tt = tril.T @ tril  # Theta'Theta = kron(tril'tril, Phi_2'Phi_2)
+        self._tt_eig, self._tt_vec = np.linalg.eigh(self._tt)
+        self._eye = np.eye(N * n)
+        self._zero_dual = np.zeros(N * n)
         self._stages = np.arange(1.0, N + 1)[:, None]
         self.warm_dual = np.zeros(N * n)
         self.qp_solves = 0
@@ -227,22 +254,34 @@ class Ismpc(SlidingLaw):
         The unconstrained minimiser (eq. 72) is taken when it satisfies the constraints (it is
         then the QP's solution); otherwise the QP is solved by DAQP, warm-started."""
         n, N = self.n, self.p.horizon
-        Phi2 = self.est.input_block
+        gain = self._gain  # the truncated block of equivalent() and its SVD
+        Phi2 = gain.M
         # S = Lambda s + Theta U + Psi P_hat; stage k (1..N) of the free part: s + k p_hat
         offset = s + self._stages * self.est.p_hat
         tails = np.cumsum(offset[::-1], axis=0)[::-1]  # sum_{k >= j} offset_k
-        q = 2.0 * (tails @ Phi2).ravel()  # 2 Theta' (Lambda s + Psi P)
-        H = 2.0 * (np.kron(self._tt, Phi2.T @ Phi2) + self.p.theta * np.eye(N * n))
-        lo_all, hi_all = np.tile(lo_cum, N), np.tile(hi_cum, N)
-        try:
-            x = np.linalg.solve(H, -q)
-        except np.linalg.LinAlgError:
-            x = np.full(N * n, np.nan)
-        cum = np.cumsum(x.reshape(N, n), axis=0).ravel()
-        if np.all(np.isfinite(x)) and np.all(cum >= lo_all) and np.all(cum <= hi_all):
-            dual = np.zeros(N * n)
+        grad = tails @ Phi2  # Theta' (Lambda s + Psi P) as (N, n)
+        # unconstrained minimiser (eq. 72) in the eigenvectors of the Kronecker factors of
+        # Theta'Theta = tt (x) Phi_2'Phi_2 (Phi_2'Phi_2 = V diag(sv^2) V'): with X (N, n),
+        # (tt (x) P'P + theta I) vec X = vec(tt X P'P + theta X) is diagonal in Q' X V. The
+        # rows of grad lie in the span of V, so directions outside it get no move.
+        Q, W = self._tt_vec, gain.Vt.T
+        den = self._tt_eig[:, None] * (gain.sv * gain.sv)[None, :] + self.p.theta
+        inv = np.divide(1.0, den, out=np.zeros_like(den), where=den > 1e-12)
+        X = -(Q @ (((Q.T @ grad) @ W) * inv) @ gain.Vt)
+        cum = np.cumsum(X, axis=0)
+        if (cum >= lo_cum).all() and (cum <= hi_cum).all():
+            x, dual = X.ravel(), self._zero_dual
         else:
-            x, dual, _ = self.qp.solve(H, q, lo_all, hi_all, self.warm_dual)
+            # J = sum_k ||offset_k + Phi_2 z_k||^2 + theta ||D z||^2, lo_cum <= z_k <= hi_cum
+            PtP = Phi2.T @ Phi2
+            H = (self._eye_N[:, None, :, None] * PtP[None, :, None, :]).reshape(N * n, N * n)
+            H = 2.0 * H + self._move_weight
+            lo_all = np.broadcast_to(lo_cum, (N, n)).ravel()
+            hi_all = np.broadcast_to(hi_cum, (N, n)).ravel()
+            z, dual, _ = self.qp.solve(H, 2.0 * (offset @ Phi2).ravel(), lo_all, hi_all,
+                                       self.warm_dual)
+            zm = z.reshape(N, n)
+            x = np.concatenate([zm[:1], np.diff(zm, axis=0)]).ravel()
             self.qp_solves += 1
             if not np.all(np.isfinite(x)):
                 self.qp_failures += 1

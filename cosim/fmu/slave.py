@@ -548,6 +548,11 @@ class SampledControllerSlave(CoreSlave):
         # event computed on a read, not committed: (key, outputs, hold, core state *before*);
         # the live core holds the state after it until the event is committed or undone
         self._tentative: tuple[Any, dict[str, Any], int, Any] | None = None
+        # inputs set so far, and (time, that count) when the tentative event was last checked:
+        # reading the N outputs one by one then costs one comparison each, not N dict builds
+        self._input_serial = 0
+        self._tentative_checked: tuple[int, int] | None = None
+        self._tentative_shown: tuple[int, int] | None = None
 
     @classmethod
     def declared_variables(cls) -> tuple[Var, ...]:
@@ -583,17 +588,26 @@ class SampledControllerSlave(CoreSlave):
             self._tentative = None
             self.core.set_state(saved)
 
+    def on_input(self, name: str) -> None:
+        super().on_input(name)
+        self._input_serial += 1
+
     def _compute_tentative(self) -> tuple[Any, dict[str, Any], int, Any]:
         """The due event computed from the current inputs, not committed.
 
         The event runs on the live core after saving its state (one copy per event instead of
         computing on a copy: save, compute, save the result, restore, and restore again at
         commit); the saved state undoes it when the inputs change at the same instant, and is
-        what ``getFMUstate`` reports while the event is uncommitted."""
+        what ``getFMUstate`` reports while the event is uncommitted. Reading the N outputs one
+        by one costs one comparison each while no input was set since (the input serial)."""
+        checked = (self.now_ticks, self._input_serial)
+        if self._tentative is not None and self._tentative_checked == checked:
+            return self._tentative  # no input set since it was computed at this instant
         inputs = self.inputs()
         key = (self.now_ticks, tuple(sorted(inputs.items())))
         if self._tentative is not None:
             if self._tentative[0] == key:
+                self._tentative_checked = checked
                 return self._tentative
             self._undo_tentative()
         for name, value in inputs.items():
@@ -606,6 +620,7 @@ class SampledControllerSlave(CoreSlave):
             self.core.set_state(saved)
             raise
         self._tentative = (key, dict(outputs), max(1, int(hold)), saved)
+        self._tentative_checked = checked
         return self._tentative
 
     def core_state(self) -> Any:
@@ -626,9 +641,13 @@ class SampledControllerSlave(CoreSlave):
 
     def refresh_outputs(self) -> None:
         if self.initialized and self._event_due():
+            checked = (self.now_ticks, self._input_serial)
+            if self._tentative is not None and self._tentative_shown == checked:
+                return  # the outputs already show this tentative event
             _, outputs, hold, _ = self._compute_tentative()
             self._show(outputs, self._grid_event() + hold * self.sample_ticks(),
                        self.executions + 1)
+            self._tentative_shown = checked
 
     def do_step(self, current_time: float, step_size: float) -> bool:
         self.require_mode("fmi2DoStep", "initialized")
