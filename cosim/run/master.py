@@ -23,6 +23,7 @@ from abc import ABC, abstractmethod
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from time import perf_counter
 from typing import Any
 
 import numpy as np
@@ -38,9 +39,9 @@ from fmpy.fmi2 import (
 )
 
 from cosim.fmu.state import to_seconds, to_ticks
-from cosim.run import interrupt
+from cosim.run import exchange, interrupt
 from cosim.run.dependencies import order_connections, output_dependencies
-from cosim.run.fmi_types import NUMERIC, enumeration_items, get_values, set_values, to_fmi
+from cosim.run.fmi_types import FUNCTIONS, NUMERIC, enumeration_items, to_fmi
 from cosim.run.scenario import (
     Connection,
     Scenario,
@@ -136,7 +137,8 @@ class FmuCallError(SimulationError):
 class _CheckedSlave:
     """An fmpy slave whose FMI calls (doStep aside: :meth:`FmuUnit.step_to` handles it) raise
     :class:`FmuCallError` naming the instance, the call, the time and what the FMU logged,
-    instead of fmpy's bare ``FMICallException``; a failure anywhere keeps the partial results."""
+    instead of fmpy's bare ``FMICallException``; a failure anywhere keeps the partial results.
+    Each wrapped method is built once, on first use, and then found as a plain attribute."""
 
     def __init__(self, slave: FMU2Slave, unit: FmuUnit) -> None:
         self._slave, self._unit = slave, unit
@@ -156,6 +158,7 @@ class _CheckedSlave:
                                    f"{unit.fmu_reason(err)}", getattr(err, "status", None)
                                    ) from err
 
+        setattr(self, name, call)
         return call
 
 
@@ -199,11 +202,19 @@ class FmuUnit:
         self.time_ticks = 0
         self.do_steps = 0
         self.wall_time = 0.0
+        self.loop_wall_time = 0.0  # s, the communication points alone (benchmarks)
         self.sample_ticks: int | None = None
         self.max_step_ticks: int | None = None
         self.next_event_ticks: int | None = None
         self.has_next_event_output = "next_event_time" in self.vars
         self.messages: list[str] = []
+        slave = self.slave
+        self._getters: dict[str, Callable[[list[int]], list[Any]]] = {
+            "Real": slave.getReal, "Integer": slave.getInteger, "Boolean": slave.getBoolean,
+            "String": self._read_strings}
+        self._setters: dict[str, Callable[[list[int], list[Any]], None]] = {
+            "Real": slave.setReal, "Integer": slave.setInteger, "Boolean": slave.setBoolean,
+            "String": slave.setString}
         # kept referenced while the FMU lives
         self._callbacks = logging_callbacks(lambda status, text: self.messages.append(text))
 
@@ -225,32 +236,47 @@ class FmuUnit:
         return f"{err}" + (f"; FMU says: {said}" if said else "")
 
     # -- values ------------------------------------------------------------------------------
-    def get(self, names: list[str]) -> list[Any]:
-        t0 = time.perf_counter()
-        out: list[Any] = []
-        for name in names:
-            var = self.vars[name]
-            value = get_values(self.slave, var.type, [var.vr])[0]
-            out.append(value.decode("utf-8") if isinstance(value, bytes) else value)
-        self.wall_time += time.perf_counter() - t0
-        return out
-
-    def get_reals(self, vrs: list[int]) -> list[float]:
-        t0 = time.perf_counter()
-        values = self.slave.getReal(vrs)
-        self.wall_time += time.perf_counter() - t0
+    def read(self, family: str, vrs: list[int]) -> list[Any]:
+        """One fmi2Get<family> (``Real``, ``Integer``, ``Boolean``, ``String``) of ``vrs``;
+        Strings decoded."""
+        t0 = perf_counter()
+        values = self._getters[family](vrs)
+        self.wall_time += perf_counter() - t0
         return values
+
+    def write(self, family: str, vrs: list[int], values: list[Any]) -> None:
+        """One fmi2Set<family> of ``vrs`` (values as the getters return them or as
+        :func:`cosim.run.fmi_types.to_fmi` converts them)."""
+        t0 = perf_counter()
+        self._setters[family](vrs, values)
+        self.wall_time += perf_counter() - t0
+
+    def _read_strings(self, vrs: list[int]) -> list[str]:
+        return [v.decode("utf-8") if isinstance(v, bytes) else v
+                for v in self.slave.getString(vrs)]
+
+    def batches(self, names: list[str]) -> list[tuple[str, list[int], list[int]]]:
+        """``names`` grouped by FMI function family: (family, value references, positions in
+        ``names``), one FMI call each, families in first-appearance order."""
+        groups: dict[str, tuple[str, list[int], list[int]]] = {}
+        for i, name in enumerate(names):
+            var = self.vars[name]
+            group = groups.setdefault(FUNCTIONS[var.type], (FUNCTIONS[var.type], [], []))
+            group[1].append(var.vr)
+            group[2].append(i)
+        return list(groups.values())
+
+    def get(self, names: list[str]) -> list[Any]:
+        """Values of ``names``: one FMI call per function family."""
+        out: list[Any] = [None] * len(names)
+        for family, vrs, where in self.batches(names):
+            for i, value in zip(where, self.read(family, vrs)):
+                out[i] = value
+        return out
 
     def set(self, name: str, value: Any) -> None:
         var = self.vars[name]
-        t0 = time.perf_counter()
-        set_values(self.slave, var.type, [var.vr], [to_fmi(var.type, value, var.items)])
-        self.wall_time += time.perf_counter() - t0
-
-    def set_reals(self, vrs: list[int], values: list[float]) -> None:
-        t0 = time.perf_counter()
-        self.slave.setReal(vrs, values)
-        self.wall_time += time.perf_counter() - t0
+        self.write(FUNCTIONS[var.type], [var.vr], [to_fmi(var.type, value, var.items)])
 
     def step_to(self, ticks: int) -> None:
         """doStep from this FMU's own time to ``ticks``."""
@@ -318,10 +344,12 @@ class FmuUnit:
         except Exception:  # noqa: BLE001 - optional in FMI 2.0 (fmi2Discard)
             return default
 
-    def update_schedule(self, now: int) -> None:
-        """Next event after an event at ``now``: announced by the FMU or periodic."""
+    def update_schedule(self, now: int, announced: float | None = None) -> None:
+        """Next event after an event at ``now``: announced by the FMU (its
+        ``next_event_time``, read now unless ``announced`` gives it) or periodic."""
         if self.has_next_event_output:
-            nxt = to_ticks(self.get(["next_event_time"])[0])
+            nxt = to_ticks(announced if announced is not None
+                           else self.get(["next_event_time"])[0])
             if nxt <= now:
                 raise SimulationError(f"{self.name}: next_event_time {to_seconds(nxt)} s is not "
                                       f"after the current time {to_seconds(now)} s")
@@ -349,7 +377,9 @@ class Link:
 
 class Recorder:
     """Records named variables at output points into a preallocated array (numbers: Real,
-    Integer, Boolean, Enumeration values) and lists (String variables)."""
+    Integer, Boolean, Enumeration values) and lists (String variables): one FMI call per FMU
+    and function family per output point. An FMU announcing its next event
+    (``next_event_time``) has it read in the same call (:attr:`next_event`)."""
 
     def __init__(self, refs: list[tuple[FmuUnit, str]], n_points: int) -> None:
         self.refs = refs
@@ -358,25 +388,52 @@ class Recorder:
         self.rows = 0
         self.strings = {col + 1: (unit, name, []) for col, (unit, name) in enumerate(refs)
                         if unit.vars[name].type == "String"}
-        by_unit: dict[str, tuple[FmuUnit, list[int], list[int]]] = {}
+        groups: dict[tuple[str, str], tuple[FmuUnit, str, list[int], list[int]]] = {}
         for col, (unit, name) in enumerate(refs):
-            if col + 1 in self.strings:
-                continue
-            entry = by_unit.setdefault(unit.name, (unit, [], []))
-            entry[1].append(name)  # type: ignore[arg-type]
-            entry[2].append(col + 1)
-        self._by_unit = list(by_unit.values())
+            var = unit.vars[name]
+            family = FUNCTIONS[var.type]
+            group = groups.setdefault((unit.name, family), (unit, family, [], []))
+            group[2].append(var.vr)
+            group[3].append(col + 1)
+        # (unit, family, value references, target columns or string lists, next-event slot)
+        self._reads: list[tuple[FmuUnit, str, list[int], Any, bool]] = []
+        for unit, family, vrs, cols in groups.values():
+            extra = (family == "Real" and unit.has_next_event_output
+                     and unit.vars["next_event_time"].type == "Real")
+            if extra:
+                vrs = [*vrs, unit.vars["next_event_time"].vr]
+            target = ([self.strings[c][2] for c in cols] if family == "String"
+                      else slice(cols[0], cols[-1] + 1) if cols == list(range(cols[0],
+                                                                             cols[-1] + 1))
+                      else np.asarray(cols, dtype=np.intp))
+            self._reads.append((unit, family, vrs, target, extra))
+        self.next_event: dict[FmuUnit, float] = {}  # read at the last sampled point
 
-    def record(self, ticks: int) -> None:
+    def sample(self, ticks: int) -> None:
+        """Read the values at ``ticks`` into the next row (:meth:`commit` keeps it)."""
         if self.rows == len(self.data):
             self.data = np.vstack([self.data, np.full_like(self.data, np.nan)])
         row = self.data[self.rows]
         row[0] = to_seconds(ticks)
-        for unit, names, cols in self._by_unit:
-            row[cols] = unit.get(names)  # type: ignore[arg-type]
-        for unit, name, values in self.strings.values():
-            values.append(unit.get([name])[0])
+        self._pending: list[tuple[list[Any], Any]] = []
+        for unit, family, vrs, target, extra in self._reads:
+            values = unit.read(family, vrs)
+            if extra:
+                self.next_event[unit] = values.pop()
+            if family == "String":
+                self._pending.append((target, values))
+            else:
+                row[target] = values
+
+    def commit(self) -> None:
+        for lists, values in self._pending:
+            for column, value in zip(lists, values):
+                column.append(value)
         self.rows += 1
+
+    def record(self, ticks: int) -> None:
+        self.sample(ticks)
+        self.commit()
 
     def frame(self):
         import pandas as pd
@@ -408,25 +465,34 @@ class EventDriven(Algorithm):
 
     def run(self) -> None:
         m = self.m
+        rec = m.recorder
         t = m.start_ticks
-        due = set(m.units)
+        units = m.units
+        scheduled = [u for u in units if u.scheduled]
+        limited = [u for u in units if not u.scheduled and u.max_step_ticks]
+        due = set(units)
         while True:
             m.propagate(due)
-            for unit in due:
-                if unit.scheduled:
-                    unit.update_schedule(t)
-            m.maybe_record(t)
+            recording = m.output_point(t)
+            if recording:
+                rec.sample(t)
+            for unit in scheduled:
+                if unit in due:
+                    unit.update_schedule(t, rec.next_event.get(unit) if recording else None)
+            if recording:
+                rec.commit()
+                m.advance_output(t)
             if t >= m.stop_ticks:
                 break
-            candidates = [m.stop_ticks, m.next_output_ticks]
-            for u in m.units:
-                if u.scheduled:
-                    candidates.append(u.next_event_ticks)
-                elif u.max_step_ticks:
-                    candidates.append(u.time_ticks + u.max_step_ticks)
-            t_next = min(candidates)
-            due = {u for u in m.units if not u.scheduled or u.next_event_ticks == t_next}
-            for unit in m.units:
+            t_next = min(m.stop_ticks, m.next_output_ticks)
+            for u in scheduled:
+                if u.next_event_ticks < t_next:  # type: ignore[operator]
+                    t_next = u.next_event_ticks  # type: ignore[assignment]
+            for u in limited:
+                if u.time_ticks + u.max_step_ticks < t_next:
+                    t_next = u.time_ticks + u.max_step_ticks
+            due = {u for u in units if not u.scheduled or u.next_event_ticks == t_next}
+            for unit in units:
                 if unit in due:
                     unit.step_to(t_next)
             t = t_next
@@ -440,11 +506,12 @@ class FixedStep(Algorithm):
     name = "fixed"
 
     def exchange(self, t: int) -> None:
-        self.m.propagate(set(self.m.units))
+        self.m.propagate(self.everyone)
         self.m.maybe_record(t)
 
     def run(self) -> None:
         m = self.m
+        self.everyone = set(m.units)
         k, t = 0, m.start_ticks
         while True:
             self.exchange(t)
@@ -466,10 +533,11 @@ class Jacobi(FixedStep):
 
     def exchange(self, t: int) -> None:
         m = self.m
-        values = [link.src.get([link.src_name])[0] for link in m.links]
+        if not hasattr(self, "_all"):
+            self._all = exchange.stage(m.links)  # one stage: all reads before all writes
+        values = self._all.read()
         m.maybe_record(t)
-        for link, value in zip(m.links, values):
-            m.transfer(link, value)
+        self._all.write(values)
 
 
 ALGORITHM_CLASSES: dict[str, type[Algorithm]] = {
@@ -506,6 +574,7 @@ class Master:
         self.base_step_ticks = to_ticks(base)
         self.units: list[FmuUnit] = []
         self.links: list[Link] = []
+        self._plans: dict[frozenset[FmuUnit], list[exchange.Stage]] = {}
         self.wall_time = 0.0
 
     # -- set-up --------------------------------------------------------------------------------
@@ -585,20 +654,35 @@ class Master:
         link.dst.set(link.dst_name, value)
 
     def propagate(self, due: set[FmuUnit]) -> None:
-        """Set the inputs of every due FMU from its sources, in value-flow order."""
-        for link in self.link_order:
-            if link.dst in due:
-                self.transfer(link, link.src.get([link.src_name])[0])
+        """Set the inputs of every due FMU from its sources, in value-flow order, as stages of
+        one get per source and one set per destination (:mod:`cosim.run.exchange`); the plan
+        of each set of due FMUs is built once."""
+        key = frozenset(due)
+        stages = self._plans.get(key)
+        if stages is None:
+            stages = self._plans[key] = exchange.plan(
+                [link for link in self.link_order if link.dst in due])
+        for st in stages:
+            st.run()
+
+    def output_point(self, ticks: int) -> bool:
+        """Is ``ticks`` an output point (or the stop time)?"""
+        return ticks >= self.next_output_ticks or ticks >= self.stop_ticks
+
+    def advance_output(self, ticks: int) -> None:
+        """The next output point after one recorded at ``ticks``."""
+        while self.next_output_ticks <= ticks:
+            self.next_output_ticks += self.output_ticks
+        self.next_output_ticks = min(self.next_output_ticks, self.stop_ticks)
 
     def maybe_record(self, ticks: int) -> None:
-        if ticks >= self.next_output_ticks or ticks >= self.stop_ticks:
+        if self.output_point(ticks):
             self.recorder.record(ticks)
-            while self.next_output_ticks <= ticks:
-                self.next_output_ticks += self.output_ticks
-            self.next_output_ticks = min(self.next_output_ticks, self.stop_ticks)
+            self.advance_output(ticks)
 
     def progress(self, ticks: int) -> None:
-        interrupt.check(to_seconds(ticks))
+        if interrupt.requested():
+            interrupt.check(to_seconds(ticks))
         if self._progress_fn is not None:
             self._progress_fn(to_seconds(ticks - self.start_ticks),
                               to_seconds(self.stop_ticks - self.start_ticks))
@@ -623,10 +707,12 @@ class Master:
             interrupt.check(to_seconds(self.start_ticks))
             self.initialize()
             interrupt.check(to_seconds(self.start_ticks))
+            loop_start = time.perf_counter()
             try:
                 ALGORITHM_CLASSES[self.algorithm_name](self).run()
             except FmuTerminated as stop:
                 self._end_at(stop)
+            self.loop_wall_time = time.perf_counter() - loop_start
             final_outputs = self._final_outputs()
             for unit in self.units:
                 unit.slave.terminate()
