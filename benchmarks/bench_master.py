@@ -34,12 +34,12 @@ from cosim.run.scenario import load_scenario  # noqa: E402
 SCENARIOS = ("seed000_stop_pid", "seed002_freight_pid", "seed001_emu_pid")
 
 
-def master_run(scenario: str) -> tuple[float, float]:
-    """(loop, run) wall seconds of the event-driven master on ``scenario``."""
+def master_run(scenario: str) -> tuple[float, float, float]:
+    """(loop wall, run wall, loop CPU) seconds of the event-driven master on ``scenario``."""
     master = Master(load_scenario(ROOT / "scenarios" / f"{scenario}.toml"))
     t0 = time.perf_counter()
     master.run()
-    return master.loop_wall_time, time.perf_counter() - t0
+    return master.loop_wall_time, time.perf_counter() - t0, master.loop_cpu_time
 
 
 def master_vs_raw(scenario: str, repeat: int = 3) -> dict[str, float]:
@@ -48,14 +48,15 @@ def master_vs_raw(scenario: str, repeat: int = 3) -> dict[str, float]:
     raw_fmpy_loop(scenario)
     pairs = []
     for _ in range(repeat):
-        loop, run = master_run(scenario)
+        loop, run, cpu = master_run(scenario)
         raw = raw_fmpy_loop(scenario)
-        pairs.append((loop, run, raw["wall_s"], raw["total_s"]))
-    med = [statistics.median(p[i] for p in pairs) for i in range(4)]
+        pairs.append((loop, run, raw["wall_s"], raw["total_s"], cpu, raw["cpu_s"]))
+    med = [statistics.median(p[i] for p in pairs) for i in range(6)]
     return {"master_loop_s": med[0], "master_run_s": med[1], "raw_loop_s": med[2],
-            "raw_run_s": med[3],
+            "raw_run_s": med[3], "master_loop_cpu_s": med[4], "raw_loop_cpu_s": med[5],
             "loop_ratio": statistics.median(p[0] / p[2] for p in pairs),
             "run_ratio": statistics.median(p[1] / p[3] for p in pairs),
+            "loop_cpu_ratio": statistics.median(p[4] / p[5] for p in pairs),
             "load_average": os.getloadavg()[0]}
 
 
@@ -68,7 +69,8 @@ def main() -> None:
         r = master_vs_raw(scenario, args.repeat)
         print(f"{scenario:<22} loop {r['master_loop_s']:.3f} s vs raw {r['raw_loop_s']:.3f} s: "
               f"{r['loop_ratio']:.3f}x; whole run {r['master_run_s']:.3f} s vs raw "
-              f"{r['raw_run_s']:.3f} s: {r['run_ratio']:.3f}x (load {r['load_average']:.1f})",
+              f"{r['raw_run_s']:.3f} s: {r['run_ratio']:.3f}x; loop CPU {r['loop_cpu_ratio']:.3f}x "
+              f"(load {r['load_average']:.1f})",
               flush=True)
 
 

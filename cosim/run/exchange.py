@@ -22,57 +22,46 @@ from cosim.run.fmi_types import FUNCTIONS
 
 
 @dataclass
-class Read:
-    """One fmi2Get<family> of ``vrs`` on ``unit``."""
-
-    unit: Any
-    family: str
-    vrs: list[int]
-
-
-@dataclass
 class Write:
-    """One fmi2Set<family> of ``vrs`` on ``unit``; the values are ``take`` (indices into the
-    stage's read values, concatenated in read order; None: all of them, in order), and
-    ``links`` the connections they travel along (for the change counts)."""
+    """One fmi2Set<family> (``batch``); ``copy``: (position in the batch, read buffer,
+    position there) of each value, or None when the batch shares its read's buffer (it takes
+    all that read's values, in order)."""
 
-    unit: Any
-    family: str
-    vrs: list[int]
-    take: list[int] | None
-    links: list[Any] = field(default_factory=list)
+    batch: Any
+    copy: list[tuple[int, Any, int]] | None
 
 
 @dataclass
 class Stage:
-    """The reads, then the writes, of one Gauss-Seidel level."""
+    """The reads, then the writes, of one Gauss-Seidel level; ``sources``: each connection
+    with the buffer and position its value is read into (for the change counts)."""
 
-    reads: list[Read]
+    reads: list[Any]
     writes: list[Write]
+    sources: list[tuple[Any, Any, int]] = field(default_factory=list)
 
-    def read(self) -> list[Any]:
-        """Every value this stage moves, the reads concatenated."""
-        reads = self.reads
-        if len(reads) == 1:
-            r = reads[0]
-            return r.unit.read(r.family, r.vrs)
-        values: list[Any] = []
-        for r in reads:
-            values += r.unit.read(r.family, r.vrs)
-        return values
+    def read(self) -> None:
+        """Read every output this stage moves (into the read buffers)."""
+        for batch in self.reads:
+            batch.get()
 
-    def write(self, values: list[Any]) -> None:
-        """Set every destination input from ``values`` (:meth:`read`), counting changes."""
+    def write(self) -> None:
+        """Set every destination input from the read buffers, counting value changes."""
+        for link, buf, i in self.sources:
+            value = buf[i]
+            if link.last is not None and value != link.last:
+                link.changes += 1
+            link.last = value
         for w in self.writes:
-            out = values if w.take is None else [values[i] for i in w.take]
-            for link, value in zip(w.links, out):
-                if link.last is not None and value != link.last:
-                    link.changes += 1
-                link.last = value
-            w.unit.write(w.family, w.vrs, out)
+            if w.copy is not None:
+                out = w.batch.buf
+                for j, buf, i in w.copy:
+                    out[j] = buf[i]
+            w.batch.set()
 
     def run(self) -> None:
-        self.write(self.read())
+        self.read()
+        self.write()
 
 
 def levels(links: Sequence[Any]) -> list[int]:
@@ -91,35 +80,41 @@ def levels(links: Sequence[Any]) -> list[int]:
 
 
 def stage(links: Sequence[Any]) -> Stage:
-    """One stage moving ``links``: each source variable read once, in first-use order."""
-    reads: dict[tuple[str, str], Read] = {}
-    slots: dict[tuple[str, str], tuple[Read, int]] = {}
+    """One stage moving ``links``: each source variable read once (one batch per source FMU
+    and function family, in first-use order), one write batch per destination and family.
+    Units provide ``batch(family, vrs, setter, buffer=None)`` (:class:`cosim.run.fmi_batch.
+    Batch`)."""
+    reads: dict[tuple[str, str], tuple[Any, list[int]]] = {}
+    slots: dict[tuple[str, str], tuple[tuple[str, str], int]] = {}
     for lk in links:
         key = (lk.src.name, lk.src_name)
         if key in slots:
             continue
         var = lk.src.vars[lk.src_name]
-        family = FUNCTIONS[var.type]
-        read = reads.setdefault((lk.src.name, family), Read(lk.src, family, []))
-        slots[key] = (read, len(read.vrs))
-        read.vrs.append(var.vr)
-    offsets, n = {}, 0
-    for read in reads.values():
-        offsets[id(read)] = n
-        n += len(read.vrs)
-    writes: dict[tuple[str, str], Write] = {}
+        group = (lk.src.name, FUNCTIONS[var.type])
+        vrs = reads.setdefault(group, (lk.src, []))[1]
+        slots[key] = (group, len(vrs))
+        vrs.append(var.vr)
+    batches = {group: unit.batch(group[1], vrs, False) for group, (unit, vrs) in reads.items()}
+    wanted: dict[tuple[str, str], tuple[Any, list[int], list[tuple[tuple[str, str], int]]]] = {}
+    sources = []
     for lk in links:
         var = lk.dst.vars[lk.dst_name]
-        family = FUNCTIONS[var.type]
-        write = writes.setdefault((lk.dst.name, family), Write(lk.dst, family, [], []))
-        read, pos = slots[(lk.src.name, lk.src_name)]
-        write.vrs.append(var.vr)
-        write.take.append(offsets[id(read)] + pos)  # type: ignore[union-attr]
-        write.links.append(lk)
-    for write in writes.values():
-        if write.take == list(range(n)):
-            write.take = None
-    return Stage(list(reads.values()), list(writes.values()))
+        group, pos = slots[(lk.src.name, lk.src_name)]
+        entry = wanted.setdefault((lk.dst.name, FUNCTIONS[var.type]), (lk.dst, [], []))
+        entry[1].append(var.vr)
+        entry[2].append((group, pos))
+        sources.append((lk, batches[group].buf, pos))
+    writes = []
+    for (_, family), (unit, vrs, taken) in wanted.items():
+        group = taken[0][0]
+        if taken == [(group, i) for i in range(len(reads[group][1]))]:
+            writes.append(Write(unit.batch(family, vrs, True, buffer=batches[group].buf), None))
+        else:
+            batch = unit.batch(family, vrs, True)
+            writes.append(Write(batch, [(j, batches[g].buf, i)
+                                        for j, (g, i) in enumerate(taken)]))
+    return Stage(list(batches.values()), writes, sources)
 
 
 def plan(links: Sequence[Any]) -> list[Stage]:

@@ -16,6 +16,7 @@ Time is kept in integer nanoseconds.
 from __future__ import annotations
 
 import atexit
+import ctypes
 import re
 import shutil
 import time
@@ -28,6 +29,7 @@ from typing import Any
 
 import numpy as np
 from fmpy import extract, read_model_description
+from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import (
     FMU2Slave,
     calloc,
@@ -41,6 +43,7 @@ from fmpy.fmi2 import (
 from cosim.fmu.state import to_seconds, to_ticks
 from cosim.run import exchange, interrupt
 from cosim.run.dependencies import order_connections, output_dependencies
+from cosim.run.fmi_batch import Batch
 from cosim.run.fmi_types import FUNCTIONS, NUMERIC, enumeration_items, to_fmi
 from cosim.run.scenario import (
     Connection,
@@ -90,7 +93,8 @@ class FmuTerminated(Exception):  # noqa: N818 - a normal end of the run, not an 
 # Discard policy: a refused step is retried from the FMU's last successful time in pieces of
 # half the refused size, down to 1/2**MAX_HALVINGS of the communication step.
 MAX_HALVINGS = 10
-_FMI2_DISCARD, _FMI2_LAST_SUCCESSFUL_TIME, _FMI2_TERMINATED = 2, 2, 3
+_FMI2_WARNING, _FMI2_DISCARD = 1, 2
+_FMI2_LAST_SUCCESSFUL_TIME, _FMI2_TERMINATED = 2, 3
 
 
 def read_fmu(sc: Scenario, instance: str, path: Path) -> Any:
@@ -153,10 +157,8 @@ class _CheckedSlave:
             try:
                 return attr(*args, **kwargs)
             except Exception as err:
-                raise FmuCallError(f"{unit.name}: {name} at t = "
-                                   f"{to_seconds(unit.time_ticks):g} s failed: "
-                                   f"{unit.fmu_reason(err)}", getattr(err, "status", None)
-                                   ) from err
+                raise FmuCallError(unit.call_error_text(name, err),
+                                   getattr(err, "status", None)) from err
 
         setattr(self, name, call)
         return call
@@ -203,6 +205,7 @@ class FmuUnit:
         self.do_steps = 0
         self.wall_time = 0.0
         self.loop_wall_time = 0.0  # s, the communication points alone (benchmarks)
+        self.loop_cpu_time = 0.0  # s, CPU time of this process over the same
         self.sample_ticks: int | None = None
         self.max_step_ticks: int | None = None
         self.next_event_ticks: int | None = None
@@ -250,6 +253,20 @@ class FmuUnit:
         t0 = perf_counter()
         self._setters[family](vrs, values)
         self.wall_time += perf_counter() - t0
+
+    def batch(self, family: str, vrs: list[int], setter: bool, buffer: Any = None) -> Batch:
+        """A reusable fmi2Get/Set<family> of ``vrs`` (after instantiation)."""
+        return Batch(self, family, vrs, setter, self.call_failed, buffer)
+
+    def call_failed(self, call: str, status: int) -> None:
+        """Raise the :class:`FmuCallError` of a failed FMI call (``call`` as fmpy names it)."""
+        err = FMICallException(function=f"fmi2{call[0].upper()}{call[1:]}", status=status)
+        raise FmuCallError(self.call_error_text(call, err), status) from err
+
+    def call_error_text(self, call: str, err: BaseException) -> str:
+        """The message of a failed FMI call: instance, call, time and the FMU's reason."""
+        return (f"{self.name}: {call} at t = {to_seconds(self.time_ticks):g} s failed: "
+                f"{self.fmu_reason(err)}")
 
     def _read_strings(self, vrs: list[int]) -> list[str]:
         return [v.decode("utf-8") if isinstance(v, bytes) else v
@@ -300,21 +317,16 @@ class FmuUnit:
         """One communication step; fmi2Discard ends the run if the FMU terminated, else the
         step is retried in smaller pieces (``MAX_HALVINGS``) if the FMU handles variable steps.
         Inputs keep the values set at ``t`` over every piece."""
-        from fmpy.fmi1 import FMICallException
-
         end, piece, halvings = t + h, h, 0
         while t < end:
             piece = min(piece, end - t)
-            try:
-                self.slave.doStep(currentCommunicationPoint=to_seconds(t),
-                                  communicationStepSize=to_seconds(piece))
-                self.do_steps += 1
+            status = self._c_do_step(to_seconds(t), to_seconds(piece))
+            self.do_steps += 1
+            if status <= _FMI2_WARNING:
                 t += piece
                 continue
-            except FMICallException as err:
-                if err.status != _FMI2_DISCARD:
-                    raise
-            self.do_steps += 1
+            if status != _FMI2_DISCARD:
+                raise FMICallException(function="fmi2DoStep", status=status)
             if self._status("getBooleanStatus", _FMI2_TERMINATED, False):
                 last = self._status("getRealStatus", _FMI2_LAST_SUCCESSFUL_TIME, None)
                 raise FmuTerminated(self, to_ticks(last) if last is not None else t)
@@ -336,6 +348,29 @@ class FmuUnit:
                     f"steps down to h={to_seconds(piece)} s ({MAX_HALVINGS} halvings of the "
                     f"communication step): giving up; FMU says: {self.last_messages()}")
             piece //= 2
+
+    def _c_do_step(self, t: float, h: float) -> int:
+        """fmi2DoStep(t, h, noSetFMUStatePriorToCurrentPoint = true): its status. The C
+        function directly (the first call looks it up), or fmpy's doStep."""
+        raw = self.slave._slave
+        if hasattr(raw, "dll") and hasattr(raw, "component"):
+            fn = raw.dll["fmi2DoStep"]  # a private function object: our argtypes
+            fn.argtypes = [ctypes.c_void_p, ctypes.c_double, ctypes.c_double, ctypes.c_int]
+            fn.restype = ctypes.c_int
+            component = raw.component
+
+            def do_step(t: float, h: float) -> int:
+                return fn(component, t, h, 1)
+        else:
+            def do_step(t: float, h: float) -> int:
+                try:
+                    raw.doStep(currentCommunicationPoint=t, communicationStepSize=h)
+                except FMICallException as err:
+                    return int(err.status)
+                return 0
+
+        self._c_do_step = do_step  # type: ignore[method-assign]
+        return do_step(t, h)
 
     def _status(self, method: str, kind: int, default: Any) -> Any:
         """fmi2Get<type>Status(kind), or ``default`` if the FMU does not provide it."""
@@ -376,15 +411,15 @@ class Link:
 
 
 class Recorder:
-    """Records named variables at output points into a preallocated array (numbers: Real,
-    Integer, Boolean, Enumeration values) and lists (String variables): one FMI call per FMU
-    and function family per output point. An FMU announcing its next event
+    """Records named variables at output points (numbers: Real, Integer, Boolean, Enumeration
+    values; String variables in lists): one FMI call per FMU and function family per output
+    point, Reals read by the FMU straight into the row of a preallocated array (columns in
+    read order, put in the declared order by :meth:`frame`). An FMU announcing its next event
     (``next_event_time``) has it read in the same call (:attr:`next_event`)."""
 
     def __init__(self, refs: list[tuple[FmuUnit, str]], n_points: int) -> None:
         self.refs = refs
         self.columns = [f"{u.name}.{n}" for u, n in refs]
-        self.data = np.full((n_points, len(refs) + 1), np.nan)
         self.rows = 0
         self.strings = {col + 1: (unit, name, []) for col, (unit, name) in enumerate(refs)
                         if unit.vars[name].type == "String"}
@@ -395,35 +430,63 @@ class Recorder:
             group = groups.setdefault((unit.name, family), (unit, family, [], []))
             group[2].append(var.vr)
             group[3].append(col + 1)
-        # (unit, family, value references, target columns or string lists, next-event slot)
-        self._reads: list[tuple[FmuUnit, str, list[int], Any, bool]] = []
+        # storage: time, then each numeric group's values (+ its next_event_time) in read order
+        self._groups: list[tuple[FmuUnit, str, list[int], list[int], bool, int]] = []
+        width = 1
         for unit, family, vrs, cols in groups.values():
             extra = (family == "Real" and unit.has_next_event_output
                      and unit.vars["next_event_time"].type == "Real")
             if extra:
                 vrs = [*vrs, unit.vars["next_event_time"].vr]
-            target = ([self.strings[c][2] for c in cols] if family == "String"
-                      else slice(cols[0], cols[-1] + 1) if cols == list(range(cols[0],
-                                                                             cols[-1] + 1))
-                      else np.asarray(cols, dtype=np.intp))
-            self._reads.append((unit, family, vrs, target, extra))
+            self._groups.append((unit, family, vrs, cols, extra, width))
+            if family != "String":
+                width += len(vrs)
+        self._width = width
+        self._store = np.full((n_points, width), np.nan)
+        self._positions = [p for g in self._groups if g[1] != "String"
+                           for p in range(g[5], g[5] + len(g[3]))]
+        self._reads: list[tuple[Batch, Any, int, Any]] | None = None
         self.next_event: dict[FmuUnit, float] = {}  # read at the last sampled point
+
+    def bind(self) -> None:
+        """Allocate the FMI calls (after the FMUs are instantiated)."""
+        self._reads = []
+        for unit, family, vrs, cols, extra, offset in self._groups:
+            batch = unit.batch(family, vrs, False)
+            target = ([self.strings[c][2] for c in cols] if family == "String"
+                      else offset if batch.fast and family == "Real"
+                      else slice(offset, offset + len(vrs)))
+            self._reads.append((batch, target, offset + len(vrs) - 1 if extra else -1, unit))
+
+    @property
+    def data(self) -> np.ndarray:
+        """The recorded rows, columns as :attr:`columns` (with time first)."""
+        out = np.full((len(self._store), len(self.columns) + 1), np.nan)
+        out[:, [0, *[c for g in self._groups if g[1] != "String" for c in g[3]]]] = \
+            self._store[:, [0, *self._positions]]
+        return out
 
     def sample(self, ticks: int) -> None:
         """Read the values at ``ticks`` into the next row (:meth:`commit` keeps it)."""
-        if self.rows == len(self.data):
-            self.data = np.vstack([self.data, np.full_like(self.data, np.nan)])
-        row = self.data[self.rows]
+        if self._reads is None:
+            self.bind()
+        if self.rows == len(self._store):
+            self._store = np.vstack([self._store, np.full_like(self._store, np.nan)])
+        row = self._store[self.rows]
         row[0] = to_seconds(ticks)
-        self._pending: list[tuple[list[Any], Any]] = []
-        for unit, family, vrs, target, extra in self._reads:
-            values = unit.read(family, vrs)
-            if extra:
-                self.next_event[unit] = values.pop()
-            if family == "String":
-                self._pending.append((target, values))
+        address = row.ctypes.data
+        self._pending: list[tuple[list[Any], list[Any]]] = []
+        for batch, target, extra, unit in self._reads:  # type: ignore[union-attr]
+            if target.__class__ is int:
+                batch.get(address + 8 * target)
             else:
-                row[target] = values
+                batch.get()
+                if target.__class__ is list:
+                    self._pending.append((target, batch.values()))
+                else:
+                    row[target] = batch.buf
+            if extra >= 0:
+                self.next_event[unit] = float(row[extra])
 
     def commit(self) -> None:
         for lists, values in self._pending:
@@ -434,6 +497,9 @@ class Recorder:
     def record(self, ticks: int) -> None:
         self.sample(ticks)
         self.commit()
+
+    def last_time(self) -> float | None:
+        return float(self._store[self.rows - 1, 0]) if self.rows else None
 
     def frame(self):
         import pandas as pd
@@ -535,9 +601,9 @@ class Jacobi(FixedStep):
         m = self.m
         if not hasattr(self, "_all"):
             self._all = exchange.stage(m.links)  # one stage: all reads before all writes
-        values = self._all.read()
+        self._all.read()
         m.maybe_record(t)
-        self._all.write(values)
+        self._all.write()
 
 
 ALGORITHM_CLASSES: dict[str, type[Algorithm]] = {
@@ -707,12 +773,13 @@ class Master:
             interrupt.check(to_seconds(self.start_ticks))
             self.initialize()
             interrupt.check(to_seconds(self.start_ticks))
-            loop_start = time.perf_counter()
+            loop_start, loop_cpu = time.perf_counter(), time.process_time()
             try:
                 ALGORITHM_CLASSES[self.algorithm_name](self).run()
             except FmuTerminated as stop:
                 self._end_at(stop)
             self.loop_wall_time = time.perf_counter() - loop_start
+            self.loop_cpu_time = time.process_time() - loop_cpu
             final_outputs = self._final_outputs()
             for unit in self.units:
                 unit.slave.terminate()
@@ -736,7 +803,7 @@ class Master:
         """An FMU ended the simulation: a last output point at its last successful time."""
         self.terminated_by = {"instance": stop.unit.name, "time": to_seconds(stop.ticks)}
         stop.unit.time_ticks = stop.ticks
-        last = self.recorder.data[self.recorder.rows - 1, 0] if self.recorder.rows else None
+        last = self.recorder.last_time()
         if last is None or to_ticks(last) < stop.ticks:
             self.recorder.record(stop.ticks)
         self.end_ticks = stop.ticks
