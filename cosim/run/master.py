@@ -54,6 +54,7 @@ from cosim.run.scenario import (
     check_timing,
     load_scenario,
 )
+from cosim.run.threads import one_blas_thread
 
 ProgressFn = Callable[[float, float], None]
 WARNING_COUNTER = "qp_infeasible"  # an FMU output counting events that needed a fallback
@@ -204,6 +205,7 @@ class FmuUnit:
         self.time_ticks = 0
         self.do_steps = 0
         self.wall_time = 0.0
+        self._blas_refresh: Callable[[], None] = lambda: None  # see run()
         self.loop_wall_time = 0.0  # s, the communication points alone (benchmarks)
         self.loop_cpu_time = 0.0  # s, CPU time of this process over the same
         self.sample_ticks: int | None = None
@@ -691,6 +693,7 @@ class Master:
         for unit in self.units:
             comp = sc.components[unit.name]
             unit.instantiate()
+            self._blas_refresh()  # the FMU's modules may have loaded a BLAS library
             unit.slave.setupExperiment(startTime=sc.simulation.start_time,
                                        stopTime=sc.simulation.stop_time)
             unit.time_ticks = self.start_ticks
@@ -769,33 +772,34 @@ class Master:
         self.partial: RunResult | None = None
         final_outputs: dict[str, dict[str, Any]] = {}
         self.terminated_by: dict[str, Any] | None = None
-        try:
-            interrupt.check(to_seconds(self.start_ticks))
-            self.initialize()
-            interrupt.check(to_seconds(self.start_ticks))
-            loop_start, loop_cpu = time.perf_counter(), time.process_time()
+        with one_blas_thread() as self._blas_refresh:  # one BLAS thread per run
             try:
-                ALGORITHM_CLASSES[self.algorithm_name](self).run()
-            except FmuTerminated as stop:
-                self._end_at(stop)
-            self.loop_wall_time = time.perf_counter() - loop_start
-            self.loop_cpu_time = time.process_time() - loop_cpu
-            final_outputs = self._final_outputs()
-            for unit in self.units:
-                unit.slave.terminate()
-        except BaseException as err:
-            self.end_ticks = max(u.time_ticks for u in self.units) if self.units else 0
-            self.partial = self._result(final_outputs, time.perf_counter() - t0)
-            self.partial.completed = False
-            self.partial.error = (str(err) if isinstance(err, interrupt.Interrupted)
-                                  else f"{type(err).__name__}: {err}")
-            raise
-        finally:
-            for unit in self.units:
+                interrupt.check(to_seconds(self.start_ticks))
+                self.initialize()
+                interrupt.check(to_seconds(self.start_ticks))
+                loop_start, loop_cpu = time.perf_counter(), time.process_time()
                 try:
-                    unit.slave.freeInstance()
-                except Exception:  # noqa: BLE001 - freeing must not hide the real error
-                    pass
+                    ALGORITHM_CLASSES[self.algorithm_name](self).run()
+                except FmuTerminated as stop:
+                    self._end_at(stop)
+                self.loop_wall_time = time.perf_counter() - loop_start
+                self.loop_cpu_time = time.process_time() - loop_cpu
+                final_outputs = self._final_outputs()
+                for unit in self.units:
+                    unit.slave.terminate()
+            except BaseException as err:
+                self.end_ticks = max(u.time_ticks for u in self.units) if self.units else 0
+                self.partial = self._result(final_outputs, time.perf_counter() - t0)
+                self.partial.completed = False
+                self.partial.error = (str(err) if isinstance(err, interrupt.Interrupted)
+                                      else f"{type(err).__name__}: {err}")
+                raise
+            finally:
+                for unit in self.units:
+                    try:
+                        unit.slave.freeInstance()
+                    except Exception:  # noqa: BLE001 - freeing must not hide the real error
+                        pass
         self.wall_time = time.perf_counter() - t0
         return self._result(final_outputs, self.wall_time)
 
