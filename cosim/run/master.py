@@ -71,6 +71,20 @@ def extract_once(path: Path) -> str:
     return _EXTRACTED[key]
 
 
+def warm_up(path: Path) -> None:
+    """Extract ``path`` (once per process) and instantiate it once, so its bundled modules are
+    imported (and shared by processes forked afterwards); failures are left to the runs."""
+    try:
+        md = read_model_description(str(path))
+        slave = FMU2Slave(guid=md.guid, unzipDirectory=extract_once(path),
+                          modelIdentifier=md.coSimulation.modelIdentifier,
+                          instanceName="warm-up")
+        slave.instantiate(loggingOn=False)
+        slave.freeInstance()
+    except Exception:  # noqa: BLE001 - the run of a point reports what is wrong
+        pass
+
+
 @atexit.register
 def _remove_extractions() -> None:
     for d in _EXTRACTED.values():
