@@ -20,6 +20,20 @@ TIMINGS = ["wall_time_s", "qp_solve_time_median_s"]  # measured, not computed
 GRID = {"plant.mass": [-1.0, 470000.0, 490000.0]}  # -1: outside the parameter's range
 
 
+def test_dask_in_process_cluster_gives_the_local_rows(built_fmus, tmp_path):
+    """The cheap check of the default suite: a Dask cluster of one worker thread in this
+    process (uploaded FMUs written, loaded and run there) gives the local pool's rows."""
+    grid = {"plant.mass": [-1.0, 480000.0]}
+    run_sweep("seed000_stop_pid", grid, tmp_path / "local", workers=1, plot=False)
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
+                                  dashboard_address=None, silence_logs=logging.ERROR) as c:
+        run_sweep("seed000_stop_pid", grid, tmp_path / "dask", plot=False,
+                  scheduler=c.scheduler_address)
+    pd.testing.assert_frame_equal(_rows(tmp_path / "dask"), _rows(tmp_path / "local"))
+    assert list(_rows(tmp_path / "dask")["status"]) == ["failed", "ok"]
+    assert any("ato-cosim-fmus" in p for p in _extracted_fmus())
+
+
 @pytest.fixture(scope="module")
 def cluster():
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
@@ -37,6 +51,7 @@ def _extracted_fmus() -> list[str]:
     return [path for path, _ in master._EXTRACTED]
 
 
+@pytest.mark.slow  # a LocalCluster of two processes starts in 5-20 s on the 2-core machine
 def test_dask_rows_equal_the_local_pool(built_fmus, cluster, tmp_path):
     run_sweep("seed000_stop_pid", GRID, tmp_path / "local", workers=1, plot=False)
     local = _rows(tmp_path / "local")
@@ -55,7 +70,7 @@ def test_dask_rows_equal_the_local_pool(built_fmus, cluster, tmp_path):
     assert str(built_fmus["BrakeDelayTrain"].path.resolve()) in extracted
 
 
-@pytest.mark.slow  # a second LocalCluster when pytest-xdist runs it in another process
+@pytest.mark.slow
 def test_dask_resume_and_interrupt_keep_the_finished_rows(built_fmus, cluster, tmp_path,
                                                            monkeypatch):
     run_sweep("seed000_stop_pid", {"plant.mass": [490000.0]}, tmp_path, workers=1,
