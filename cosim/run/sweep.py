@@ -226,10 +226,10 @@ def _pool_context(jobs: list[tuple[str, dict[str, Any]]]) -> Any:
     (with 2 workers on 2 cores that was a third of the sweep). Elsewhere: spawn."""
     if sys.platform != "linux" or "fork" not in multiprocessing.get_all_start_methods():
         return multiprocessing.get_context("spawn")
+    import cosim.run.master  # noqa: F401 - the imports, here, once
+    import cosim.run.metrics  # noqa: F401
     from cosim.run.master import warm_up
     from cosim.run.scenario import load_scenario
-
-    worker_setup()  # the imports, here, once
     fmus: dict[str, None] = {}
     for path, point in jobs:
         try:
