@@ -12,7 +12,11 @@ issue's target, and writes them to ``benchmarks/results.json``. Asserts nothing.
   DAQP's update + solve alone; and OSQP's whole step;
 * a further FMU instance (instantiate + initialise) vs the first instance in the process;
 * the freight kernel in numba vs the same kernel in C built with gcc (``bench_kernels.py``);
-  ratio = C / numba.
+  ratio = C / numba;
+* the master's loop vs the minimal fmpy loop on seed000_stop_pid, the freight and the EMU
+  scenario (``bench_master.py``, alternating pairs; CPU-time and whole-run ratios beside);
+* ``cosim sweep seed000_stop_rmpc seed000_stop_rsmpc --set controller.N=3..15`` with 2 workers
+  vs 1 (``bench_sweep.py``, end to end, load averages before and after).
 
 The closed-loop rows also give CPU times (``time.process_time``: less sensitive to the load
 than the wall time on a shared machine) and, per communication step, the CPU time of the
@@ -43,8 +47,10 @@ sys.path[:0] = [str(ROOT), str(HERE), str(ROOT / "tests")]
 import bench_freight  # noqa: E402
 import bench_instances  # noqa: E402
 import bench_kernels  # noqa: E402
+import bench_master  # noqa: E402
 import bench_mpc  # noqa: E402
 import bench_plants  # noqa: E402
+import bench_sweep  # noqa: E402
 from raw_loop import raw_fmpy_loop  # noqa: E402
 
 from cosim.fmu.build import build_stale  # noqa: E402
@@ -152,9 +158,32 @@ def instances() -> dict:
             "ratio_name": "further / first", "per_fmu": rows}
 
 
+def master_overhead(scenario: str, repeat: int) -> dict:
+    """The master's loop against the minimal fmpy loop, alternating pairs (bench_master)."""
+    r = bench_master.master_vs_raw(scenario, repeat)
+    return {"figure": r["master_loop_s"], "unit": "s, master loop (communication points)",
+            "reference": r["raw_loop_s"], "reference_name": "minimal fmpy loop, same FMUs (s)",
+            "ratio": r["loop_ratio"], "ratio_name": "master / fmpy loop, wall (median of pairs)",
+            "cpu_ratio": r["loop_cpu_ratio"], "whole_run_ratio": r["run_ratio"],
+            "load_average": r["load_average"]}
+
+
+def sweep_speedup(repeat: int) -> dict:
+    """``cosim sweep seed000_stop_rmpc seed000_stop_rsmpc --set controller.N=3..15``, 2 vs 1
+    workers (bench_sweep)."""
+    r = bench_sweep.speedup(repeat)
+    return {"figure": r["workers_2_s"], "unit": "s, --workers 2 (end to end)",
+            "reference": r["workers_1_s"], "reference_name": "--workers 1 (s)",
+            "ratio": r["speedup"], "ratio_name": "speed-up, workers 1 / workers 2",
+            "cpu_s": {"workers_1": r["workers_1_cpu_s"], "workers_2": r["workers_2_cpu_s"]},
+            "load_average": [r["load_before"], r["load_after"]]}
+
+
 TARGETS = {"freight closed loop": ">= 500 x real time", "EMU closed loop": ">= 1000 x real time",
            "RMPC N=10 QP step": "<= 35 us", "further FMU instance": "<= 10 ms",
-           "freight plant kernel": "", "EMU plant kernel": "", "freight kernel C vs numba": ""}
+           "freight plant kernel": "", "EMU plant kernel": "", "freight kernel C vs numba": "",
+           "master/raw seed000_stop_pid": "ratio <= 1.10", "master/raw seed002_freight_pid": "",
+           "master/raw seed001_emu_pid": "", "sweep 2 vs 1 workers": "speed-up >= 1.7"}
 
 
 def main() -> None:
@@ -172,19 +201,23 @@ def main() -> None:
     rows["EMU plant kernel"] = emu_plant(emu_result, repeat)
     rows["RMPC N=10 QP step"] = qp(20 if repeat > 1 else 5)
     rows["further FMU instance"] = instances()
-    print(f"{'benchmark':<25} {'figure':>10}  {'reference':>10}  {'ratio':>7}  target / units")
+    for scenario in bench_master.SCENARIOS:
+        rows[f"master/raw {scenario}"] = master_overhead(scenario, repeat if scenario == FREIGHT
+                                                         or scenario == EMU else 5 * repeat)
+    rows["sweep 2 vs 1 workers"] = sweep_speedup(repeat - 1 or 1)
+    print(f"{'benchmark':<30} {'figure':>10}  {'reference':>10}  {'ratio':>7}  target / units")
     for name, r in rows.items():
         r["target"] = TARGETS[name]
-        print(f"{name:<25} {r['figure']:>10.1f}  {r['reference']:>10.1f}  {r['ratio']:>7.2f}  "
+        print(f"{name:<30} {r['figure']:>10.1f}  {r['reference']:>10.1f}  {r['ratio']:>7.2f}  "
               f"{r['target'] or '-'}; {r['unit']}; ref: {r['reference_name']}; "
               f"ratio: {r['ratio_name']}")
         if "per_step_cpu_us" in r:
             split = ", ".join(f"{k} {v:.0f}" for k, v in r["per_step_cpu_us"].items())
-            print(f"{'':<25} CPU: {r['cpu_real_time_factor']:.0f} x real time (master), "
+            print(f"{'':<30} CPU: {r['cpu_real_time_factor']:.0f} x real time (master), "
                   f"{r['raw_loop_cpu_real_time_factor']:.0f} x (fmpy loop); per step (us): "
                   f"{split}")
         for case in r.get("cases", ()):
-            print(f"{'':<25} {case['case']}: numba {case['numba_us_per_substep']:.2f}, C "
+            print(f"{'':<30} {case['case']}: numba {case['numba_us_per_substep']:.2f}, C "
                   f"{case['c_us_per_substep']:.2f}, numpy {case['numpy_us_per_substep']:.1f} "
                   f"us/sub-step; max rel. diff numba-C {case['max_rel_diff_numba_c']:.1e}")
     meta = {"python": platform.python_version(), "machine": platform.machine(),

@@ -265,12 +265,19 @@ def sweep(
         "plant.mass=+-10% or plant.brake_time_constant=0.3..0.6 (repeatable)")] = None,
     samples: Annotated[int, typer.Option(help="with --perturb: draws per grid point")] = 50,
     seed: Annotated[int, typer.Option(help="with --perturb: random seed of the draws")] = 1,
+    scheduler: Annotated[str | None, typer.Option(
+        help="run the points on a Dask distributed cluster: its scheduler address (e.g. "
+        "tcp://10.0.0.5:8786), or 'local-dask' to start a local one of --workers processes; "
+        "needs the 'dask' extra (pip install 'ato-cosim[dask]')")] = None,
+    shared_fmus: Annotated[bool, typer.Option(
+        "--shared-fmus", help="with --scheduler: the workers read the FMUs at this machine's "
+        "paths (a shared file system) instead of receiving uploaded copies")] = False,
 ) -> None:
     """Run scenarios over a parameter grid in parallel; write sweep.csv (a row per point as it
     finishes, with status and error) and sweep.png. A failed point does not stop the others
     (exit status 1 at the end); Ctrl-C keeps the finished rows (exit status 130). With
-    --perturb: every grid point on the same seeded random plants (perturb.csv,
-    perturb_summary.csv, perturb.png)."""
+    --scheduler: the same grid on a Dask cluster. With --perturb: every grid point on the same
+    seeded random plants (perturb.csv, perturb_summary.csv, perturb.png)."""
     from cosim.run import interrupt
     from cosim.run.master import SimulationError
     from cosim.run.results import check_destination
@@ -282,10 +289,17 @@ def sweep(
         stems = [find_scenario(s).stem for s in scenarios]
         target = out_dir or Path("runs") / ("sweep_" + "_".join(stems))
         check_destination(target)
+        if shared_fmus and scheduler is None:
+            raise ValueError("--shared-fmus is for --scheduler runs (local workers read the "
+                             "FMUs where they are)")
+        if perturb and scheduler is not None:
+            raise ValueError("--perturb runs in the local process pool; --scheduler is not "
+                             "supported with it")
         if perturb:
             _perturbed_sweep(scenarios, grid, perturb, samples, seed, target, workers, no_plot)
             return
-        frame = run_sweep(scenarios, grid, target, workers, plot=not no_plot, resume=resume)
+        frame = run_sweep(scenarios, grid, target, workers, plot=not no_plot, resume=resume,
+                          scheduler=scheduler, shared_fmus=shared_fmus)
     except interrupt.Interrupted as err:
         console.print(f"[bold yellow]{escape(str(err))}[/]; the finished rows are in "
                       f"{escape(str(target))}/sweep.csv", highlight=False, soft_wrap=True)

@@ -57,6 +57,12 @@ def guard(restore: bool = True) -> Iterator[None]:
 _active: list[bool] = []
 
 
+def reset() -> None:
+    """Forget any guard and signal (a process forked from a guarded one)."""
+    _active.clear()
+    _requested.clear()
+
+
 def requested() -> str | None:
     """The name of the signal received while guarded (``"SIGINT"``), or None."""
     return _requested[0] if _requested else None

@@ -16,6 +16,7 @@ Time is kept in integer nanoseconds.
 from __future__ import annotations
 
 import atexit
+import ctypes
 import math
 import re
 import shutil
@@ -24,10 +25,12 @@ from abc import ABC, abstractmethod
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from time import perf_counter
 from typing import Any
 
 import numpy as np
 from fmpy import extract, read_model_description
+from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import (
     FMU2Slave,
     calloc,
@@ -40,9 +43,10 @@ from fmpy.fmi2 import (
 
 from cosim.fmu import diagnostics as fmu_diagnostics
 from cosim.fmu.state import to_seconds, to_ticks
-from cosim.run import interrupt
+from cosim.run import exchange, interrupt
 from cosim.run.dependencies import order_connections, output_dependencies
-from cosim.run.fmi_types import NUMERIC, enumeration_items, get_values, set_values, to_fmi
+from cosim.run.fmi_batch import Batch
+from cosim.run.fmi_types import FUNCTIONS, NUMERIC, enumeration_items, to_fmi
 from cosim.run.scenario import (
     Connection,
     Scenario,
@@ -52,6 +56,7 @@ from cosim.run.scenario import (
     check_timing,
     load_scenario,
 )
+from cosim.run.threads import one_blas_thread
 
 ProgressFn = Callable[[float, float], None]
 WARNING_COUNTER = "qp_infeasible"  # an FMU output counting events that needed a fallback
@@ -66,6 +71,20 @@ def extract_once(path: Path) -> str:
     if key not in _EXTRACTED:
         _EXTRACTED[key] = extract(str(path))
     return _EXTRACTED[key]
+
+
+def warm_up(path: Path) -> None:
+    """Extract ``path`` (once per process) and instantiate it once, so its bundled modules are
+    imported (and shared by processes forked afterwards); failures are left to the runs."""
+    try:
+        md = read_model_description(str(path))
+        slave = FMU2Slave(guid=md.guid, unzipDirectory=extract_once(path),
+                          modelIdentifier=md.coSimulation.modelIdentifier,
+                          instanceName="warm-up")
+        slave.instantiate(loggingOn=False)
+        slave.freeInstance()
+    except Exception:  # noqa: BLE001 - the run of a point reports what is wrong
+        pass
 
 
 @atexit.register
@@ -91,7 +110,8 @@ class FmuTerminated(Exception):  # noqa: N818 - a normal end of the run, not an 
 # Discard policy: a refused step is retried from the FMU's last successful time in pieces of
 # half the refused size, down to 1/2**MAX_HALVINGS of the communication step.
 MAX_HALVINGS = 10
-_FMI2_DISCARD, _FMI2_LAST_SUCCESSFUL_TIME, _FMI2_TERMINATED = 2, 2, 3
+_FMI2_WARNING, _FMI2_DISCARD = 1, 2
+_FMI2_LAST_SUCCESSFUL_TIME, _FMI2_TERMINATED = 2, 3
 
 
 def read_fmu(sc: Scenario, instance: str, path: Path) -> Any:
@@ -138,7 +158,8 @@ class FmuCallError(SimulationError):
 class _CheckedSlave:
     """An fmpy slave whose FMI calls (doStep aside: :meth:`FmuUnit.step_to` handles it) raise
     :class:`FmuCallError` naming the instance, the call, the time and what the FMU logged,
-    instead of fmpy's bare ``FMICallException``; a failure anywhere keeps the partial results."""
+    instead of fmpy's bare ``FMICallException``; a failure anywhere keeps the partial results.
+    Each wrapped method is built once, on first use, and then found as a plain attribute."""
 
     def __init__(self, slave: FMU2Slave, unit: FmuUnit) -> None:
         self._slave, self._unit = slave, unit
@@ -153,11 +174,10 @@ class _CheckedSlave:
             try:
                 return attr(*args, **kwargs)
             except Exception as err:
-                raise FmuCallError(f"{unit.name}: {name} at t = "
-                                   f"{to_seconds(unit.time_ticks):g} s failed: "
-                                   f"{unit.fmu_reason(err)}", getattr(err, "status", None)
-                                   ) from err
+                raise FmuCallError(unit.call_error_text(name, err),
+                                   getattr(err, "status", None)) from err
 
+        setattr(self, name, call)
         return call
 
 
@@ -201,11 +221,21 @@ class FmuUnit:
         self.time_ticks = 0
         self.do_steps = 0
         self.wall_time = 0.0
+        self._blas_refresh: Callable[[], None] = lambda: None  # see run()
+        self.loop_wall_time = 0.0  # s, the communication points alone (benchmarks)
+        self.loop_cpu_time = 0.0  # s, CPU time of this process over the same
         self.sample_ticks: int | None = None
         self.max_step_ticks: int | None = None
         self.next_event_ticks: int | None = None
         self.has_next_event_output = "next_event_time" in self.vars
         self.messages: list[str] = []
+        slave = self.slave
+        self._getters: dict[str, Callable[[list[int]], list[Any]]] = {
+            "Real": slave.getReal, "Integer": slave.getInteger, "Boolean": slave.getBoolean,
+            "String": self._read_strings}
+        self._setters: dict[str, Callable[[list[int], list[Any]], None]] = {
+            "Real": slave.setReal, "Integer": slave.setInteger, "Boolean": slave.setBoolean,
+            "String": slave.setString}
         # kept referenced while the FMU lives
         self._callbacks = logging_callbacks(lambda status, text: self.messages.append(text))
 
@@ -227,32 +257,61 @@ class FmuUnit:
         return f"{err}" + (f"; FMU says: {said}" if said else "")
 
     # -- values ------------------------------------------------------------------------------
-    def get(self, names: list[str]) -> list[Any]:
-        t0 = time.perf_counter()
-        out: list[Any] = []
-        for name in names:
-            var = self.vars[name]
-            value = get_values(self.slave, var.type, [var.vr])[0]
-            out.append(value.decode("utf-8") if isinstance(value, bytes) else value)
-        self.wall_time += time.perf_counter() - t0
-        return out
-
-    def get_reals(self, vrs: list[int]) -> list[float]:
-        t0 = time.perf_counter()
-        values = self.slave.getReal(vrs)
-        self.wall_time += time.perf_counter() - t0
+    def read(self, family: str, vrs: list[int]) -> list[Any]:
+        """One fmi2Get<family> (``Real``, ``Integer``, ``Boolean``, ``String``) of ``vrs``;
+        Strings decoded."""
+        t0 = perf_counter()
+        values = self._getters[family](vrs)
+        self.wall_time += perf_counter() - t0
         return values
+
+    def write(self, family: str, vrs: list[int], values: list[Any]) -> None:
+        """One fmi2Set<family> of ``vrs`` (values as the getters return them or as
+        :func:`cosim.run.fmi_types.to_fmi` converts them)."""
+        t0 = perf_counter()
+        self._setters[family](vrs, values)
+        self.wall_time += perf_counter() - t0
+
+    def batch(self, family: str, vrs: list[int], setter: bool, buffer: Any = None) -> Batch:
+        """A reusable fmi2Get/Set<family> of ``vrs`` (after instantiation)."""
+        return Batch(self, family, vrs, setter, self.call_failed, buffer)
+
+    def call_failed(self, call: str, status: int) -> None:
+        """Raise the :class:`FmuCallError` of a failed FMI call (``call`` as fmpy names it)."""
+        err = FMICallException(function=f"fmi2{call[0].upper()}{call[1:]}", status=status)
+        raise FmuCallError(self.call_error_text(call, err), status) from err
+
+    def call_error_text(self, call: str, err: BaseException) -> str:
+        """The message of a failed FMI call: instance, call, time and the FMU's reason."""
+        return (f"{self.name}: {call} at t = {to_seconds(self.time_ticks):g} s failed: "
+                f"{self.fmu_reason(err)}")
+
+    def _read_strings(self, vrs: list[int]) -> list[str]:
+        return [v.decode("utf-8") if isinstance(v, bytes) else v
+                for v in self.slave.getString(vrs)]
+
+    def batches(self, names: list[str]) -> list[tuple[str, list[int], list[int]]]:
+        """``names`` grouped by FMI function family: (family, value references, positions in
+        ``names``), one FMI call each, families in first-appearance order."""
+        groups: dict[str, tuple[str, list[int], list[int]]] = {}
+        for i, name in enumerate(names):
+            var = self.vars[name]
+            group = groups.setdefault(FUNCTIONS[var.type], (FUNCTIONS[var.type], [], []))
+            group[1].append(var.vr)
+            group[2].append(i)
+        return list(groups.values())
+
+    def get(self, names: list[str]) -> list[Any]:
+        """Values of ``names``: one FMI call per function family."""
+        out: list[Any] = [None] * len(names)
+        for family, vrs, where in self.batches(names):
+            for i, value in zip(where, self.read(family, vrs)):
+                out[i] = value
+        return out
 
     def set(self, name: str, value: Any) -> None:
         var = self.vars[name]
-        t0 = time.perf_counter()
-        set_values(self.slave, var.type, [var.vr], [to_fmi(var.type, value, var.items)])
-        self.wall_time += time.perf_counter() - t0
-
-    def set_reals(self, vrs: list[int], values: list[float]) -> None:
-        t0 = time.perf_counter()
-        self.slave.setReal(vrs, values)
-        self.wall_time += time.perf_counter() - t0
+        self.write(FUNCTIONS[var.type], [var.vr], [to_fmi(var.type, value, var.items)])
 
     def step_to(self, ticks: int) -> None:
         """doStep from this FMU's own time to ``ticks``, in steps of at most the instance's
@@ -280,21 +339,16 @@ class FmuUnit:
         """One communication step; fmi2Discard ends the run if the FMU terminated, else the
         step is retried in smaller pieces (``MAX_HALVINGS``) if the FMU handles variable steps.
         Inputs keep the values set at ``t`` over every piece."""
-        from fmpy.fmi1 import FMICallException
-
         end, piece, halvings = t + h, h, 0
         while t < end:
             piece = min(piece, end - t)
-            try:
-                self.slave.doStep(currentCommunicationPoint=to_seconds(t),
-                                  communicationStepSize=to_seconds(piece))
-                self.do_steps += 1
+            status = self._c_do_step(to_seconds(t), to_seconds(piece))
+            self.do_steps += 1
+            if status <= _FMI2_WARNING:
                 t += piece
                 continue
-            except FMICallException as err:
-                if err.status != _FMI2_DISCARD:
-                    raise
-            self.do_steps += 1
+            if status != _FMI2_DISCARD:
+                raise FMICallException(function="fmi2DoStep", status=status)
             if self._status("getBooleanStatus", _FMI2_TERMINATED, False):
                 last = self._status("getRealStatus", _FMI2_LAST_SUCCESSFUL_TIME, None)
                 raise FmuTerminated(self, to_ticks(last) if last is not None else t)
@@ -317,6 +371,29 @@ class FmuUnit:
                     f"communication step): giving up; FMU says: {self.last_messages()}")
             piece //= 2
 
+    def _c_do_step(self, t: float, h: float) -> int:
+        """fmi2DoStep(t, h, noSetFMUStatePriorToCurrentPoint = true): its status. The C
+        function directly (the first call looks it up), or fmpy's doStep."""
+        raw = self.slave._slave
+        if hasattr(raw, "dll") and hasattr(raw, "component"):
+            fn = raw.dll["fmi2DoStep"]  # a private function object: our argtypes
+            fn.argtypes = [ctypes.c_void_p, ctypes.c_double, ctypes.c_double, ctypes.c_int]
+            fn.restype = ctypes.c_int
+            component = raw.component
+
+            def do_step(t: float, h: float) -> int:
+                return fn(component, t, h, 1)
+        else:
+            def do_step(t: float, h: float) -> int:
+                try:
+                    raw.doStep(currentCommunicationPoint=t, communicationStepSize=h)
+                except FMICallException as err:
+                    return int(err.status)
+                return 0
+
+        self._c_do_step = do_step  # type: ignore[method-assign]
+        return do_step(t, h)
+
     def _status(self, method: str, kind: int, default: Any) -> Any:
         """fmi2Get<type>Status(kind), or ``default`` if the FMU does not provide it."""
         try:
@@ -324,10 +401,11 @@ class FmuUnit:
         except Exception:  # noqa: BLE001 - optional in FMI 2.0 (fmi2Discard)
             return default
 
-    def update_schedule(self, now: int) -> None:
-        """Next event after an event at ``now``: announced by the FMU or periodic."""
+    def update_schedule(self, now: int, announced: float | None = None) -> None:
+        """Next event after an event at ``now``: announced by the FMU (its
+        ``next_event_time``, read now unless ``announced`` gives it) or periodic."""
         if self.has_next_event_output:
-            value = self.get(["next_event_time"])[0]
+            value = announced if announced is not None else self.get(["next_event_time"])[0]
             nxt = to_ticks(value) if math.isfinite(value) else None
             if nxt is None or nxt <= now:  # an FMU fault: never clamped, which would hide it
                 raise SimulationError(f"{self.name}: next_event_time = {value!r} s is not after "
@@ -357,35 +435,95 @@ class Link:
 
 
 class Recorder:
-    """Records named variables at output points into a preallocated array (numbers: Real,
-    Integer, Boolean, Enumeration values) and lists (String variables)."""
+    """Records named variables at output points (numbers: Real, Integer, Boolean, Enumeration
+    values; String variables in lists): one FMI call per FMU and function family per output
+    point, Reals read by the FMU straight into the row of a preallocated array (columns in
+    read order, put in the declared order by :meth:`frame`). An FMU announcing its next event
+    (``next_event_time``) has it read in the same call (:attr:`next_event`)."""
 
     def __init__(self, refs: list[tuple[FmuUnit, str]], n_points: int) -> None:
         self.refs = refs
         self.columns = [f"{u.name}.{n}" for u, n in refs]
-        self.data = np.full((n_points, len(refs) + 1), np.nan)
         self.rows = 0
         self.strings = {col + 1: (unit, name, []) for col, (unit, name) in enumerate(refs)
                         if unit.vars[name].type == "String"}
-        by_unit: dict[str, tuple[FmuUnit, list[int], list[int]]] = {}
+        groups: dict[tuple[str, str], tuple[FmuUnit, str, list[int], list[int]]] = {}
         for col, (unit, name) in enumerate(refs):
-            if col + 1 in self.strings:
-                continue
-            entry = by_unit.setdefault(unit.name, (unit, [], []))
-            entry[1].append(name)  # type: ignore[arg-type]
-            entry[2].append(col + 1)
-        self._by_unit = list(by_unit.values())
+            var = unit.vars[name]
+            family = FUNCTIONS[var.type]
+            group = groups.setdefault((unit.name, family), (unit, family, [], []))
+            group[2].append(var.vr)
+            group[3].append(col + 1)
+        # storage: time, then each numeric group's values (+ its next_event_time) in read order
+        self._groups: list[tuple[FmuUnit, str, list[int], list[int], bool, int]] = []
+        width = 1
+        for unit, family, vrs, cols in groups.values():
+            extra = (family == "Real" and unit.has_next_event_output
+                     and unit.vars["next_event_time"].type == "Real")
+            if extra:
+                vrs = [*vrs, unit.vars["next_event_time"].vr]
+            self._groups.append((unit, family, vrs, cols, extra, width))
+            if family != "String":
+                width += len(vrs)
+        self._width = width
+        self._store = np.full((n_points, width), np.nan)
+        self._positions = [p for g in self._groups if g[1] != "String"
+                           for p in range(g[5], g[5] + len(g[3]))]
+        self._reads: list[tuple[Batch, Any, int, Any]] | None = None
+        self.next_event: dict[FmuUnit, float] = {}  # read at the last sampled point
+
+    def bind(self) -> None:
+        """Allocate the FMI calls (after the FMUs are instantiated)."""
+        self._reads = []
+        for unit, family, vrs, cols, extra, offset in self._groups:
+            batch = unit.batch(family, vrs, False)
+            target = ([self.strings[c][2] for c in cols] if family == "String"
+                      else offset if batch.fast and family == "Real"
+                      else slice(offset, offset + len(vrs)))
+            self._reads.append((batch, target, offset + len(vrs) - 1 if extra else -1, unit))
+
+    @property
+    def data(self) -> np.ndarray:
+        """The recorded rows, columns as :attr:`columns` (with time first)."""
+        out = np.full((len(self._store), len(self.columns) + 1), np.nan)
+        out[:, [0, *[c for g in self._groups if g[1] != "String" for c in g[3]]]] = \
+            self._store[:, [0, *self._positions]]
+        return out
+
+    def sample(self, ticks: int) -> None:
+        """Read the values at ``ticks`` into the next row (:meth:`commit` keeps it)."""
+        if self._reads is None:
+            self.bind()
+        if self.rows == len(self._store):
+            self._store = np.vstack([self._store, np.full_like(self._store, np.nan)])
+        row = self._store[self.rows]
+        row[0] = to_seconds(ticks)
+        address = row.ctypes.data
+        self._pending: list[tuple[list[Any], list[Any]]] = []
+        for batch, target, extra, unit in self._reads:  # type: ignore[union-attr]
+            if target.__class__ is int:
+                batch.get(address + 8 * target)
+            else:
+                batch.get()
+                if target.__class__ is list:
+                    self._pending.append((target, batch.values()))
+                else:
+                    row[target] = batch.buf
+            if extra >= 0:
+                self.next_event[unit] = float(row[extra])
+
+    def commit(self) -> None:
+        for lists, values in self._pending:
+            for column, value in zip(lists, values):
+                column.append(value)
+        self.rows += 1
 
     def record(self, ticks: int) -> None:
-        if self.rows == len(self.data):
-            self.data = np.vstack([self.data, np.full_like(self.data, np.nan)])
-        row = self.data[self.rows]
-        row[0] = to_seconds(ticks)
-        for unit, names, cols in self._by_unit:
-            row[cols] = unit.get(names)  # type: ignore[arg-type]
-        for unit, name, values in self.strings.values():
-            values.append(unit.get([name])[0])
-        self.rows += 1
+        self.sample(ticks)
+        self.commit()
+
+    def last_time(self) -> float | None:
+        return float(self._store[self.rows - 1, 0]) if self.rows else None
 
     def frame(self):
         import pandas as pd
@@ -417,25 +555,33 @@ class EventDriven(Algorithm):
 
     def run(self) -> None:
         m = self.m
+        rec = m.recorder
         t = m.start_ticks
-        due = set(m.units)
+        units = m.units
+        scheduled = [u for u in units if u.scheduled]
+        limited = [u for u in units if not u.scheduled and u.max_step_ticks]
+        due = set(units)
         while True:
             m.propagate(due)
-            m.maybe_record(t)  # first: a bad announced event below still keeps this point
-            for unit in due:
-                if unit.scheduled:
-                    unit.update_schedule(t)
+            recording = m.output_point(t)
+            if recording:  # first: a bad announced event below still keeps this point
+                rec.sample(t)
+                rec.commit()
+                m.advance_output(t)
+            for unit in scheduled:
+                if unit in due:
+                    unit.update_schedule(t, rec.next_event.get(unit) if recording else None)
             if t >= m.stop_ticks:
                 break
-            candidates = [m.stop_ticks, m.next_output_ticks]
-            for u in m.units:
-                if u.scheduled:
-                    candidates.append(u.next_event_ticks)
-                elif u.max_step_ticks:
-                    candidates.append(u.time_ticks + u.max_step_ticks)
-            t_next = min(candidates)
-            due = {u for u in m.units if not u.scheduled or u.next_event_ticks == t_next}
-            for unit in m.units:
+            t_next = min(m.stop_ticks, m.next_output_ticks)
+            for u in scheduled:
+                if u.next_event_ticks < t_next:  # type: ignore[operator]
+                    t_next = u.next_event_ticks  # type: ignore[assignment]
+            for u in limited:
+                if u.time_ticks + u.max_step_ticks < t_next:
+                    t_next = u.time_ticks + u.max_step_ticks
+            due = {u for u in units if not u.scheduled or u.next_event_ticks == t_next}
+            for unit in units:
                 if unit in due:
                     unit.step_to(t_next)
             t = t_next
@@ -449,11 +595,12 @@ class FixedStep(Algorithm):
     name = "fixed"
 
     def exchange(self, t: int) -> None:
-        self.m.propagate(set(self.m.units))
+        self.m.propagate(self.everyone)
         self.m.maybe_record(t)
 
     def run(self) -> None:
         m = self.m
+        self.everyone = set(m.units)
         k, t = 0, m.start_ticks
         while True:
             self.exchange(t)
@@ -475,10 +622,11 @@ class Jacobi(FixedStep):
 
     def exchange(self, t: int) -> None:
         m = self.m
-        values = [link.src.get([link.src_name])[0] for link in m.links]
+        if not hasattr(self, "_all"):
+            self._all = exchange.stage(m.links)  # one stage: all reads before all writes
+        self._all.read()
         m.maybe_record(t)
-        for link, value in zip(m.links, values):
-            m.transfer(link, value)
+        self._all.write()
 
 
 ALGORITHM_CLASSES: dict[str, type[Algorithm]] = {
@@ -515,6 +663,7 @@ class Master:
         self.base_step_ticks = to_ticks(base)
         self.units: list[FmuUnit] = []
         self.links: list[Link] = []
+        self._plans: dict[frozenset[FmuUnit], list[exchange.Stage]] = {}
         self.wall_time = 0.0
 
     # -- set-up --------------------------------------------------------------------------------
@@ -567,6 +716,7 @@ class Master:
         for unit in self.units:
             comp = sc.components[unit.name]
             unit.instantiate()
+            self._blas_refresh()  # the FMU's modules may have loaded a BLAS library
             unit.slave.setupExperiment(startTime=sc.simulation.start_time,
                                        stopTime=sc.simulation.stop_time)
             unit.time_ticks = self.start_ticks
@@ -598,20 +748,35 @@ class Master:
         link.dst.set(link.dst_name, value)
 
     def propagate(self, due: set[FmuUnit]) -> None:
-        """Set the inputs of every due FMU from its sources, in value-flow order."""
-        for link in self.link_order:
-            if link.dst in due:
-                self.transfer(link, link.src.get([link.src_name])[0])
+        """Set the inputs of every due FMU from its sources, in value-flow order, as stages of
+        one get per source and one set per destination (:mod:`cosim.run.exchange`); the plan
+        of each set of due FMUs is built once."""
+        key = frozenset(due)
+        stages = self._plans.get(key)
+        if stages is None:
+            stages = self._plans[key] = exchange.plan(
+                [link for link in self.link_order if link.dst in due])
+        for st in stages:
+            st.run()
+
+    def output_point(self, ticks: int) -> bool:
+        """Is ``ticks`` an output point (or the stop time)?"""
+        return ticks >= self.next_output_ticks or ticks >= self.stop_ticks
+
+    def advance_output(self, ticks: int) -> None:
+        """The next output point after one recorded at ``ticks``."""
+        while self.next_output_ticks <= ticks:
+            self.next_output_ticks += self.output_ticks
+        self.next_output_ticks = min(self.next_output_ticks, self.stop_ticks)
 
     def maybe_record(self, ticks: int) -> None:
-        if ticks >= self.next_output_ticks or ticks >= self.stop_ticks:
+        if self.output_point(ticks):
             self.recorder.record(ticks)
-            while self.next_output_ticks <= ticks:
-                self.next_output_ticks += self.output_ticks
-            self.next_output_ticks = min(self.next_output_ticks, self.stop_ticks)
+            self.advance_output(ticks)
 
     def progress(self, ticks: int) -> None:
-        interrupt.check(to_seconds(ticks))
+        if interrupt.requested():
+            interrupt.check(to_seconds(ticks))
         if self._progress_fn is not None:
             self._progress_fn(to_seconds(ticks - self.start_ticks),
                               to_seconds(self.stop_ticks - self.start_ticks))
@@ -633,31 +798,35 @@ class Master:
         final_outputs: dict[str, dict[str, Any]] = {}
         self.terminated_by: dict[str, Any] | None = None
         self.diagnostics: dict[str, dict[str, float]] = {}
-        try:
-            interrupt.check(to_seconds(self.start_ticks))
-            self.initialize()
-            interrupt.check(to_seconds(self.start_ticks))
+        with one_blas_thread() as self._blas_refresh:  # one BLAS thread per run
             try:
-                ALGORITHM_CLASSES[self.algorithm_name](self).run()
-            except FmuTerminated as stop:
-                self._end_at(stop)
-            final_outputs = self._final_outputs()
-            for unit in self.units:
-                unit.slave.terminate()
-                self.diagnostics[unit.name] = fmu_diagnostics.parse(unit.messages)
-        except BaseException as err:
-            self.end_ticks = max(u.time_ticks for u in self.units) if self.units else 0
-            self.partial = self._result(final_outputs, time.perf_counter() - t0)
-            self.partial.completed = False
-            self.partial.error = (str(err) if isinstance(err, interrupt.Interrupted)
-                                  else f"{type(err).__name__}: {err}")
-            raise
-        finally:
-            for unit in self.units:
+                interrupt.check(to_seconds(self.start_ticks))
+                self.initialize()
+                interrupt.check(to_seconds(self.start_ticks))
+                loop_start, loop_cpu = time.perf_counter(), time.process_time()
                 try:
-                    unit.slave.freeInstance()
-                except Exception:  # noqa: BLE001 - freeing must not hide the real error
-                    pass
+                    ALGORITHM_CLASSES[self.algorithm_name](self).run()
+                except FmuTerminated as stop:
+                    self._end_at(stop)
+                self.loop_wall_time = time.perf_counter() - loop_start
+                self.loop_cpu_time = time.process_time() - loop_cpu
+                final_outputs = self._final_outputs()
+                for unit in self.units:
+                    unit.slave.terminate()
+                    self.diagnostics[unit.name] = fmu_diagnostics.parse(unit.messages)
+            except BaseException as err:
+                self.end_ticks = max(u.time_ticks for u in self.units) if self.units else 0
+                self.partial = self._result(final_outputs, time.perf_counter() - t0)
+                self.partial.completed = False
+                self.partial.error = (str(err) if isinstance(err, interrupt.Interrupted)
+                                      else f"{type(err).__name__}: {err}")
+                raise
+            finally:
+                for unit in self.units:
+                    try:
+                        unit.slave.freeInstance()
+                    except Exception:  # noqa: BLE001 - freeing must not hide the real error
+                        pass
         self.wall_time = time.perf_counter() - t0
         return self._result(final_outputs, self.wall_time)
 
@@ -665,7 +834,7 @@ class Master:
         """An FMU ended the simulation: a last output point at its last successful time."""
         self.terminated_by = {"instance": stop.unit.name, "time": to_seconds(stop.ticks)}
         stop.unit.time_ticks = stop.ticks
-        last = self.recorder.data[self.recorder.rows - 1, 0] if self.recorder.rows else None
+        last = self.recorder.last_time()
         if last is None or to_ticks(last) < stop.ticks:
             self.recorder.record(stop.ticks)
         self.end_ticks = stop.ticks

@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from cosim.run.sweep import STOP_WINDOW_M, SUMMARY_COLUMNS, grid_points
+from cosim.run.sweep import STOP_WINDOW_M, SUMMARY_COLUMNS, grid_points, worker_setup
 
 COUNTERS = ("qp_infeasible_after_stop", "events_moving", "events_standstill")
 
@@ -182,7 +182,8 @@ def run_perturbed(scenario: str | Sequence[str], grid: dict[str, Sequence[Any]],
         rows = [_run_sample(*job) for job in jobs]
     else:
         ctx = multiprocessing.get_context("spawn")
-        with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
+        with ProcessPoolExecutor(max_workers=workers, mp_context=ctx,
+                                 initializer=worker_setup) as pool:
             rows = [f.result() for f in [pool.submit(_run_sample, *job) for job in jobs]]
     frame = pd.DataFrame(rows)
     table = summarize(frame, list(grid))

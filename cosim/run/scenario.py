@@ -221,6 +221,9 @@ def _resolve_fmu(source: Path, key: str, fmu: Any) -> Path:
         if not path.is_file():
             raise ScenarioError(f"{source}: {key} = {fmu!r}: file {path} does not exist")
         return path
+    built = FMU_DIR / f"{fmu}.fmu"
+    if built.is_file():  # a built catalog FMU: no need to import every wrapper module
+        return built
     from cosim.fmu.build import catalog
 
     known = catalog()

@@ -22,6 +22,7 @@ import itertools
 import multiprocessing
 import os
 import signal
+import sys
 from collections.abc import Iterable, Sequence
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from pathlib import Path
@@ -69,18 +70,21 @@ def grid_points(grid: dict[str, Sequence[Any]]) -> list[dict[str, Any]]:
             for values in itertools.product(*(list(grid[k]) for k in keys))]
 
 
-def _run_point(scenario: str, point: dict[str, Any]) -> dict[str, Any]:
-    """One grid point (in a worker process): status, error and the summary figures. Never
-    raises for a failing run: the row says what went wrong."""
+def _run_point(scenario: Any, point: dict[str, Any]) -> dict[str, Any]:
+    """One grid point (in a worker): status, error and the summary figures. ``scenario`` is
+    a path (loaded here with ``point`` as overrides) or a loaded :class:`Scenario` (already
+    overridden). Never raises for a failing run: the row says what went wrong."""
     from cosim.run.master import SimulationError, run_scenario
-    from cosim.run.scenario import ScenarioError
+    from cosim.run.scenario import Scenario, ScenarioError
 
-    row: dict[str, Any] = {"scenario": Path(str(scenario)).stem, **point, "status": "ok",
-                           "error": ""}
+    loaded = isinstance(scenario, Scenario)
+    name = Path(str(scenario.path if loaded else scenario)).stem
+    row: dict[str, Any] = {"scenario": name, **point, "status": "ok", "error": ""}
     for key in (*SUMMARY_COLUMNS, "controller_executions"):
         row[key] = None
     try:
-        result = run_scenario(scenario, overrides=dict(point), build=False, plot=False)
+        result = run_scenario(scenario, overrides=None if loaded else dict(point), build=False,
+                              plot=False)
     except interrupt.Interrupted as err:
         return {**row, "status": "interrupted", "error": str(err)}
     except (ScenarioError, SimulationError, ValueError, OSError) as err:
@@ -135,8 +139,11 @@ class _RowWriter:
 
 def run_sweep(scenario: str | Sequence[str], grid: dict[str, Sequence[Any]],
               out_dir: str | Path | None = None, workers: int | None = None,
-              plot: bool = True, resume: bool = False) -> pd.DataFrame:
-    """Run every grid point of every scenario in ``workers`` processes (default: CPU count).
+              plot: bool = True, resume: bool = False, scheduler: str | None = None,
+              shared_fmus: bool = False) -> pd.DataFrame:
+    """Run every grid point of every scenario in ``workers`` processes (default: CPU count),
+    or on a Dask cluster (``scheduler``: its address, or ``"local-dask"`` for a
+    ``LocalCluster`` of ``workers`` processes; :mod:`cosim.run.dask_sweep`).
 
     FMUs are built (if stale) once, before the pool starts. Returns one row per run, in grid
     order, with ``status`` and ``error``; with ``out_dir`` each row is appended to
@@ -144,6 +151,9 @@ def run_sweep(scenario: str | Sequence[str], grid: dict[str, Sequence[Any]],
     not run again), then the file is rewritten in grid order and, with ``plot``, ``sweep.png``
     drawn. SIGINT/SIGTERM: no new point starts, running ones stop (status ``interrupted``),
     the finished rows are written and :class:`cosim.run.interrupt.Interrupted` is raised.
+    Each worker runs with one BLAS thread and is reused for many points (the imports and FMU
+    extractions happen once per worker). On Dask the FMU files are uploaded to the workers,
+    or, with ``shared_fmus``, read by them from the same paths (a shared file system).
     """
     from cosim.run.master import ensure_built
     from cosim.run.scenario import find_scenario, load_scenario
@@ -155,6 +165,14 @@ def run_sweep(scenario: str | Sequence[str], grid: dict[str, Sequence[Any]],
         raise ValueError("run_sweep: empty grid")
     if workers is not None and workers < 1:
         raise ValueError(f"--workers {workers}: must be at least 1")
+    if scheduler is not None:
+        from cosim.run import dask_sweep
+
+        dask_sweep.check_available()
+        if workers is not None and scheduler != dask_sweep.LOCAL:
+            raise ValueError(f"--workers {workers} with --scheduler {scheduler}: a cluster's "
+                             "workers are its own (--workers sizes the local pool or "
+                             f"--scheduler {dask_sweep.LOCAL})")
     points = grid_points(grid)
     paths = [str(find_scenario(s)) for s in scenarios]
     for path in paths:  # fail early on a bad scenario or key, and build what is missing
@@ -182,7 +200,12 @@ def run_sweep(scenario: str | Sequence[str], grid: dict[str, Sequence[Any]],
 
     try:
         with interrupt.guard():
-            _execute(todo, workers, finished)
+            if scheduler is None:
+                _execute(todo, workers, finished)
+            else:
+                from cosim.run import dask_sweep
+
+                dask_sweep.execute(todo, scheduler, workers, finished, shared_fmus)
     finally:
         if writer is not None:
             writer.close()
@@ -195,28 +218,70 @@ def run_sweep(scenario: str | Sequence[str], grid: dict[str, Sequence[Any]],
     return frame
 
 
-def _worker_ignores_signals() -> None:
-    """Pool workers ignore SIGINT/SIGTERM between runs (a Ctrl-C reaches the whole process
-    group); during a run :func:`cosim.run.interrupt.guard` handles them (the run stops)."""
+def _pool_context(jobs: list[tuple[str, dict[str, Any]]]) -> Any:
+    """How pool workers start. On Linux they are forked from this process after it imported
+    the master and loaded every FMU of the sweep once (extracted, its bundled modules
+    imported, the instance freed again): a worker then starts with nothing left to import or
+    extract, where a spawned interpreter paid ~1.5 s CPU of imports before its first point
+    (with 2 workers on 2 cores that was a third of the sweep). Elsewhere: spawn."""
+    if sys.platform != "linux" or "fork" not in multiprocessing.get_all_start_methods():
+        return multiprocessing.get_context("spawn")
+    import cosim.run.master  # noqa: F401 - the imports, here, once
+    import cosim.run.metrics  # noqa: F401
+    from cosim.run.master import warm_up
+    from cosim.run.scenario import load_scenario
+    fmus: dict[str, None] = {}
+    for path, point in jobs:
+        try:
+            for comp in load_scenario(path, dict(point)).components.values():
+                fmus.setdefault(str(comp.fmu_path))
+        except (ValueError, OSError):
+            continue  # the point fails in its worker, with this error
+    for fmu in fmus:
+        warm_up(Path(fmu))
+    return multiprocessing.get_context("fork")
+
+
+def _worker_init() -> None:
+    """A pool worker, once: ignore SIGINT/SIGTERM between runs (a Ctrl-C reaches the whole
+    process group; during a run :func:`cosim.run.interrupt.guard` handles them and the run
+    stops: a forked worker starts with the sweep's guard state, which is cleared), then
+    :func:`worker_setup`."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    interrupt.reset()
+    worker_setup()
+
+
+def worker_setup() -> None:
+    """A worker process, once: one BLAS thread for good, and the master's imports done before
+    the first point."""
+    import cosim.run.master  # noqa: F401 - fmpy, numpy, the scenario code
+    import cosim.run.metrics  # noqa: F401
+    from cosim.run.threads import limit_blas_for_process
+
+    limit_blas_for_process()
+
+
+def pool_size(workers: int | None, jobs: int) -> int:
+    """Processes for ``jobs`` points: ``workers`` (default: CPU count), at most one a point."""
+    return max(1, min(workers or os.cpu_count() or 1, jobs))
 
 
 def _execute(jobs: list[tuple[str, dict[str, Any]]], workers: int | None, finished) -> None:
-    """Run ``jobs`` (in a spawn process pool when more than one worker), handing each row to
+    """Run ``jobs`` (in a process pool when more than one worker), handing each row to
     ``finished`` as it arrives; on a signal, stop the running points and raise Interrupted."""
     if not jobs:
         return
-    workers = max(1, min(workers or os.cpu_count() or 1, len(jobs)))
+    workers = pool_size(workers, len(jobs))
     if workers == 1:
         for path, point in jobs:
             interrupt.check_between("the sweep")
             finished(_run_point(path, point))
         interrupt.check_between("the sweep")
         return
-    ctx = multiprocessing.get_context("spawn")  # fresh interpreters: no inherited FMUs
-    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx,
-                             initializer=_worker_ignores_signals) as pool:
+    with ProcessPoolExecutor(max_workers=workers, mp_context=_pool_context(jobs),
+                             initializer=_worker_init) as pool:
         job_of = {pool.submit(_run_point, path, point): (path, point) for path, point in jobs}
         pending = set(job_of)
         stopping = False
