@@ -48,6 +48,7 @@ class FakeLink:
     dst_name: str
     last: object = None
     changes: int = 0
+    history: list | None = None
 
 
 def unit(name, variables, deps=None):
