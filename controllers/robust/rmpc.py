@@ -38,6 +38,7 @@ from cosim.fmu.declare import param, sample_time
 from cosim.fmu.state import StatefulCore
 
 G = 9.81
+STANDSTILL_KMH = 0.01  # below this, now and one sample before, the train is at rest
 VERTEX_SETS = ("neighbours", "all", "nominal")
 MODEL_SETS = ("identified", "paper")
 DATA_DIR = Path(__file__).resolve().parent / "data"
@@ -169,7 +170,9 @@ class RobustMpcLaw(StatefulCore):
         one sample ahead; returns the force (N)."""
         p, m = self.p, self.models
         y = 3.6 * v
-        if self.y_prev is not None:
+        # at standstill (now and before) the ARX models say nothing: no switching, no update
+        moving = self.y_prev is not None and max(y, self.y_prev) > STANDSTILL_KMH
+        if moving:
             self.active = self.switch.update(y, self.y_prev, self.u_prev)
             i = self.active
             resid = y - (m.a[i] * self.y_prev + m.b[i] * self.u_prev + m.c[i])
