@@ -149,6 +149,13 @@ class EcoTracker(StatefulCore, Declared):
         scheduled = float(values["scheduled_time"])
         profile = generate(kind, route, scheduled if scheduled > 0 else None, track.train(),
                            track.settings())
+        return cls.build_core(params, profile, t0, data_dir)
+
+    @classmethod
+    def build_core(cls, params: Any, profile: SpeedProfile, t0: float,
+                   data_dir: Path) -> EcoTracker:
+        """The core from its parameters and profile; a law with bundled data reads it from
+        ``data_dir`` (the FMU's resources or the project tree)."""
         return cls(params, profile, t0)
 
     def __init__(self, params: Any, profile: SpeedProfile, t0: float = 0.0) -> None:

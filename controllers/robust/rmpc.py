@@ -36,7 +36,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from controllers.common.lmi import LMI_SOLVERS, KothareLmi
-from controllers.common.speed_profiles import SpeedProfile
+from controllers.common.speed_profiles import PHASE_BRAKE, SpeedProfile
 from controllers.eco.tracking import EcoTracker, EcoTrackingParams
 from controllers.robust.multimodel import ArxSet, SwitchingIndex
 from cosim.fmu.declare import Var, group, param
@@ -91,6 +91,11 @@ class RmpcParams:
             raise ValueError(f"solver = {self.solver!r} must be one of {LMI_SOLVERS}")
         if int(self.switch_horizon) != self.switch_horizon:
             raise ValueError(f"switch_horizon = {self.switch_horizon} must be an integer")
+
+
+def models_dir_in(data_dir: Path) -> Path:
+    """The bundled model-set folder under an FMU's data folder (or the project tree)."""
+    return Path(data_dir) / "controllers" / "robust" / "data"
 
 
 def load_model_set(name: str, data_dir: Path | None = None) -> ArxSet:
@@ -230,18 +235,31 @@ class Crh3Rmpc(EcoTracker):
         Var.output("qp_solve_time_total", "s", "LMI solve time summed over all events"),
     )
 
-    def __init__(self, params: Crh3RmpcParams, profile: SpeedProfile, t0: float = 0.0
-                 ) -> None:
+    @classmethod
+    def build_core(cls, params: Crh3RmpcParams, profile: SpeedProfile, t0: float,
+                   data_dir: Path) -> Crh3Rmpc:
+        models = load_model_set(params.rmpc.model_set, models_dir_in(data_dir))
+        return cls(params, profile, t0, models)
+
+    def __init__(self, params: Crh3RmpcParams, profile: SpeedProfile, t0: float = 0.0,
+                 models: ArxSet | None = None) -> None:
         super().__init__(params, profile, t0)
-        self.law = RobustMpcLaw(params.rmpc, load_model_set(params.rmpc.model_set),
-                                params.track.sample_time)
+        if models is None:
+            models = load_model_set(params.rmpc.model_set)
+        self.law = RobustMpcLaw(params.rmpc, models, params.track.sample_time)
         # u (m/s^2) -> daN/kN: F = M (1 + gamma) u = u_unit M g / 100
         self.to_unit = 100.0 * (1.0 + params.track.rotating_mass_factor) / G
         self.z = 0.0  # position error (m): integral of the speed error against the references
         self.ref_now: float | None = None  # r(k) (m/s): the previous event's refs[0]
 
     def law_control(self, y: float, refs: np.ndarray, lo: float, hi: float) -> float:
-        T = self.track.sample_time
+        T, tr = self.track.sample_time, self.track
+        if y < tr.stop_speed and float(refs[0]) < tr.stop_speed and self.phase == PHASE_BRAKE:
+            # the last centimetres of the distance-indexed braking (v_ref < stop_speed: at most
+            # stop_speed^2 / (2 brake_decel) = 9 cm to go): stop and hold instead of creeping
+            u = min(max(tr.hold_accel, lo), hi)
+            self.law_hold(y, u)
+            return u
         r_now = y if self.ref_now is None else self.ref_now
         u_unit = self.law.control(3.6 * y, 3.6 * r_now, 3.6 * float(refs[0]), self.z,
                                   lo * self.to_unit, hi * self.to_unit)
