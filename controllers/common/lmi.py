@@ -29,6 +29,7 @@ import time
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+import clarabel  # noqa: F401  (cvxpy's SDP solver used by default: missing = error at import)
 import cvxpy as cp
 import numpy as np
 
