@@ -10,7 +10,9 @@ issue's target, and writes them to ``benchmarks/results.json``. Asserts nothing.
   the numpy reference path on the same inputs; ratio = numpy wall / kernel wall;
 * RMPC N = 10 QP step (update + solve + result, median over the recorded QPs) with DAQP vs
   DAQP's update + solve alone; and OSQP's whole step;
-* a further FMU instance (instantiate + initialise) vs the first instance in the process.
+* a further FMU instance (instantiate + initialise) vs the first instance in the process;
+* seed 003's robust MPC: the LMI problem of an event (median over the closed loop's problems,
+  replayed) with Clarabel vs SCS, and the eco scenario's real-time factor (``bench_seed003``).
 
     python benchmarks/run_all.py [--quick]
 """
@@ -36,6 +38,7 @@ import bench_freight  # noqa: E402
 import bench_instances  # noqa: E402
 import bench_mpc  # noqa: E402
 import bench_plants  # noqa: E402
+import bench_seed003  # noqa: E402
 from raw_loop import raw_fmpy_loop  # noqa: E402
 
 from cosim.fmu.build import build_stale  # noqa: E402
@@ -108,9 +111,25 @@ def instances() -> dict:
             "ratio_name": "further / first", "per_fmu": rows}
 
 
+def seed003_lmi(quick: bool) -> dict:
+    ctl, problems = bench_seed003.record_problems(150 if quick else 600)
+    r = bench_seed003.replay(ctl, problems, 5)
+    sc = bench_seed003.scenario()
+    return {"figure": r["clarabel"]["median_ms"], "unit": "ms median per event, Clarabel "
+            "(replayed closed-loop LMIs)", "reference": r["scs"]["median_ms"],
+            "reference_name": "SCS at 1e-4 on the same LMIs (ms)",
+            "ratio": r["scs"]["median_ms"] / r["clarabel"]["median_ms"],
+            "ratio_name": "SCS / Clarabel", "clarabel_p99_ms": r["clarabel"]["p99_ms"],
+            "scs_p99_ms": r["scs"]["p99_ms"], "scs_failures": r["scs"]["failures"],
+            "scs_max_rel_gain_diff": r["scs"]["max_rel_gain_diff"],
+            "scenario_real_time_factor": sc["real_time_factor"],
+            "scenario_lmi_median_ms": sc["lmi_median_ms"]}
+
+
 TARGETS = {"freight closed loop": ">= 500 x real time", "EMU closed loop": ">= 1000 x real time",
            "RMPC N=10 QP step": "<= 35 us", "further FMU instance": "<= 10 ms",
-           "freight plant kernel": "", "EMU plant kernel": ""}
+           "freight plant kernel": "", "EMU plant kernel": "",
+           "seed 003 RMPC LMI event": "<= 20 ms median"}
 
 
 def main() -> None:
@@ -127,6 +146,7 @@ def main() -> None:
     rows["EMU plant kernel"] = emu_plant(emu_result, repeat)
     rows["RMPC N=10 QP step"] = qp(20 if repeat > 1 else 5)
     rows["further FMU instance"] = instances()
+    rows["seed 003 RMPC LMI event"] = seed003_lmi(args.quick)
     print(f"{'benchmark':<22} {'figure':>10}  {'reference':>10}  {'ratio':>7}  target / units")
     for name, r in rows.items():
         r["target"] = TARGETS[name]
