@@ -105,7 +105,11 @@ def main(argv: list[str] | None = None) -> int:
         import tomllib
 
         shipped = ArxSet.from_toml(tomllib.loads(args.out.read_text()), str(args.out))
-        same = np.allclose(shipped.a, fit.a, atol=1e-9) and np.allclose(shipped.b, fit.b)
+        # rounding (BLAS, FCM iterations) moves the fit by far less than 1e-6, the models of
+        # the set are >= 4e-4 apart in a
+        same = (np.allclose(shipped.a, fit.a, rtol=0, atol=1e-6)
+                and np.allclose(shipped.b, fit.b, rtol=1e-6)
+                and np.allclose(shipped.c, fit.c, rtol=0, atol=1e-4))
         print("bundled set is current" if same else f"bundled set {args.out} differs")
         return 0 if same else 1
     comment = (f"Seed 003 multi-model set identified from our CRH3 plant\n"
