@@ -47,6 +47,7 @@ class LmiSolution:
     Y: np.ndarray
     status: str
     solve_time: float  # wall time of cvxpy's solve call (s)
+    cpu_time: float = 0.0  # CPU time of this process during that call (s; load-independent)
 
     @property
     def ok(self) -> bool:
@@ -132,22 +133,22 @@ class KothareLmi:
         for (A, B), pa, pb in zip(vertices, self.A, self.B, strict=True):
             pa.value = np.asarray(A, float).reshape(self.n, self.n)
             pb.value = np.asarray(B, float).reshape(self.n, self.m)
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         try:
             self.problem.solve(**self.solver_options())
             status = str(self.problem.status)
         except cp.error.SolverError as exc:
             status = f"solver error: {exc}"
-        dt = time.perf_counter() - t0
+        dt, cpu = time.perf_counter() - t0, time.process_time() - c0
         self.solves += 1
         if status not in _SOLVED or self.Qv.value is None:
             nan = np.full((self.m, self.n), math.nan)
             return LmiSolution(nan, math.nan, np.full((self.n, self.n), math.nan), nan,
-                               status, dt)
+                               status, dt, cpu)
         Qv = np.asarray(self.Qv.value, float)
         Y = np.asarray(self.Y.value, float).reshape(self.m, self.n)
         F = np.linalg.solve(Qv.T, Y.T).T  # Y Qv^-1
-        return LmiSolution(F, float(self.gamma.value), Qv, Y, status, dt)
+        return LmiSolution(F, float(self.gamma.value), Qv, Y, status, dt, cpu)
 
     def vertex_matrices(self, sol: LmiSolution,
                         vertices: Sequence[tuple[np.ndarray, np.ndarray]]

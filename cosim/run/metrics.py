@@ -216,7 +216,8 @@ def compute_summary(result: Any) -> dict[str, Any]:
             median = outputs.get("qp_solve_time_median")
             out.setdefault("qp_solve_time_median_s", {})[fmu] = (
                 float(median) if median is not None and math.isfinite(median) else None)
-            for name in ("qp_solve_time_total", "qp_cpu_time_total"):  # whole-run compute
+            for name in ("qp_solve_time_total", "qp_cpu_time_total",  # whole-run compute
+                         "lmi_cpu_time_median"):  # seed 003 RMPC: CPU per event
                 if name in outputs:
                     out.setdefault(f"{name}_s", {})[fmu] = float(outputs[name])
         for key in CONTROLLER_COUNTERS:  # published by the seed 000 predictive controllers
@@ -224,7 +225,8 @@ def compute_summary(result: Any) -> dict[str, Any]:
                 out.setdefault(key, {})[fmu] = int(outputs[key])
     out["warnings"] = warnings(result)
     _flatten_single(out, ("qp_solves", "qp_infeasible", "qp_solve_time_median_s",
-                          "qp_solve_time_total_s", "qp_cpu_time_total_s", *CONTROLLER_COUNTERS))
+                          "qp_solve_time_total_s", "qp_cpu_time_total_s",
+                          "lmi_cpu_time_median_s", *CONTROLLER_COUNTERS))
     return out
 
 
