@@ -23,6 +23,8 @@ than the wall time on a shared machine) and, per communication step, the CPU tim
 plant's doStep, of the controller (its event runs when its outputs are read) and of the FMI
 calls around them in the fmpy loop, and the master's overhead (its CPU time minus plant and
 controller).
+* seed 003's robust MPC: the LMI problem of an event (median over the closed loop's problems,
+  replayed) with Clarabel vs SCS, and the eco scenario's real-time factor (``bench_seed003``).
 
     python benchmarks/run_all.py [--quick]
 """
@@ -50,6 +52,7 @@ import bench_kernels  # noqa: E402
 import bench_master  # noqa: E402
 import bench_mpc  # noqa: E402
 import bench_plants  # noqa: E402
+import bench_seed003  # noqa: E402
 import bench_sweep  # noqa: E402
 from raw_loop import raw_fmpy_loop  # noqa: E402
 
@@ -179,11 +182,27 @@ def sweep_speedup(repeat: int) -> dict:
             "load_average": [r["load_before"], r["load_after"]]}
 
 
+def seed003_lmi(quick: bool) -> dict:
+    ctl, problems = bench_seed003.record_problems(150 if quick else 600)
+    r = bench_seed003.replay(ctl, problems, 5)
+    sc = bench_seed003.scenario()
+    return {"figure": r["clarabel"]["median_ms"], "unit": "ms median per event, Clarabel "
+            "(replayed closed-loop LMIs)", "reference": r["scs"]["median_ms"],
+            "reference_name": "SCS at 1e-4 on the same LMIs (ms)",
+            "ratio": r["scs"]["median_ms"] / r["clarabel"]["median_ms"],
+            "ratio_name": "SCS / Clarabel", "clarabel_p99_ms": r["clarabel"]["p99_ms"],
+            "scs_p99_ms": r["scs"]["p99_ms"], "scs_failures": r["scs"]["failures"],
+            "scs_max_rel_gain_diff": r["scs"]["max_rel_gain_diff"],
+            "scenario_real_time_factor": sc["real_time_factor"],
+            "scenario_lmi_median_ms": sc["lmi_median_ms"]}
+
+
 TARGETS = {"freight closed loop": ">= 500 x real time", "EMU closed loop": ">= 1000 x real time",
            "RMPC N=10 QP step": "<= 35 us", "further FMU instance": "<= 10 ms",
            "freight plant kernel": "", "EMU plant kernel": "", "freight kernel C vs numba": "",
            "master/raw seed000_stop_pid": "ratio <= 1.10", "master/raw seed002_freight_pid": "",
-           "master/raw seed001_emu_pid": "", "sweep 2 vs 1 workers": "speed-up >= 1.7"}
+           "master/raw seed001_emu_pid": "", "sweep 2 vs 1 workers": "speed-up >= 1.7",
+           "seed 003 RMPC LMI event": "<= 20 ms median"}
 
 
 def main() -> None:
@@ -205,6 +224,7 @@ def main() -> None:
         rows[f"master/raw {scenario}"] = master_overhead(scenario, repeat if scenario == FREIGHT
                                                          or scenario == EMU else 5 * repeat)
     rows["sweep 2 vs 1 workers"] = sweep_speedup(repeat - 1 or 1)
+    rows["seed 003 RMPC LMI event"] = seed003_lmi(args.quick)
     print(f"{'benchmark':<30} {'figure':>10}  {'reference':>10}  {'ratio':>7}  target / units")
     for name, r in rows.items():
         r["target"] = TARGETS[name]

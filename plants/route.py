@@ -12,11 +12,14 @@ A route file is TOML with segments along the line (positions in metres from the 
     stations = [["Jinan West", 0.0], ["Tai'an", 43285.0]]  # [name, position_m]
     tunnel_coefficient = 0.00013                           # N/kN per m of tunnel length
     reference = "line_reference.csv"                       # optional reference profile file
+    scheduled_time_s = 1290.0                              # optional timetable running time
 
 ``grade`` and ``speed_limits`` are ``[start, value]`` steps: each value holds from its start up to
 the next start (the first value also before it). ``curves``, ``tunnels`` and ``neutral_sections``
 are ``[start, end(, value)]`` intervals; outside them the line is straight / open / powered.
 ``reference`` names a reference-profile file relative to the route file (see below).
+``scheduled_time_s`` is the timetable's running time from the first to the last station (s),
+running-time supplement included: the time the energy-saving profiles of seed 003 use up.
 
 Additional resistance (N/kN, i.e. per unit weight) is stored as step profiles so that the
 length-share average over a vehicle is exact (``StepProfile.mean_over``, seed 002 sec. 1):
@@ -216,6 +219,7 @@ class Route:
     neutral: StepProfile = field(default_factory=_zero)
     stations: tuple[tuple[str, float], ...] = ()
     reference: ReferenceProfile | None = None
+    scheduled_time_s: float | None = None
 
     def grade_accel(self, s: float) -> float:
         """Grade resistance as an acceleration (m/s^2): ``g * i(s) / 1000``, uphill positive."""
@@ -417,6 +421,9 @@ def _parse_route(path: Path) -> Route:
             if not c[2] > 0:
                 raise ValueError(f"curve radius {c[2]} must be > 0")
         reference = data.get("reference")
+        scheduled = data.get("scheduled_time_s")
+        if scheduled is not None and not float(scheduled) > 0:
+            raise ValueError(f"scheduled_time_s = {scheduled} must be > 0")
         return Route(
             name=str(data.get("name", path.stem)),
             length_m=float(data["length_m"]),
@@ -431,6 +438,7 @@ def _parse_route(path: Path) -> Route:
             neutral=StepProfile.from_intervals(data.get("neutral_sections"), 0.0, value=1.0),
             stations=tuple((str(n), float(x)) for n, x in data.get("stations", [])),
             reference=(load_reference(reference, base=path.parent) if reference else None),
+            scheduled_time_s=None if scheduled is None else float(scheduled),
         )
     except (KeyError, ValueError, TypeError, IndexError) as err:
         raise ValueError(f"{path}: bad route data: {err}") from err

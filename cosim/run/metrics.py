@@ -33,6 +33,16 @@ Keys of ``[summary]`` (all optional; variable references are ``FMU.variable``):
   indices of seed 001 (:func:`unit_indices`): ``unit_mse_kmh2`` (eq. 87), ``unit_iae_kmh_s``
   (eq. 88) and ``unit_ma_mps_per_sample`` (eq. 89) at the sample time ``ma_sample_time``
   (s, default 1.0; reported as ``ma_sample_time_s``).
+* ``energy_traction``, ``energy_regen``, ``energy_aux`` (recorded cumulative energies in J,
+  seed 003 eq. 9: traction / eta_M, regenerated eta_b int(B v dt), auxiliary e0 t): give
+  ``energy_traction_mj``, ``energy_regen_mj``, ``energy_aux_mj`` and ``energy_net_mj`` =
+  traction - regen + aux (MJ), each counted from the first sample up to the arrival (the first
+  sample of the final standstill, as for ``arrival_time_error_s``; the end of the run if the
+  train never came to rest), so that standing at the terminus does not add auxiliary energy;
+* ``phase`` (with the three energies: a recorded phase index, 1 accelerate, 2 run, 3 brake, as
+  the seed-003 controllers publish it from their profile): ``energy_accelerate_mj``,
+  ``energy_run_mj``, ``energy_brake_mj``, the net energy of eq. 9 over the output intervals
+  that start in each phase (Table 2; the same window as ``energy_net_mj``, so they sum to it).
 
 Always present: ``completed`` (False, with ``error``, for the partial results of a failed or
 interrupted run), ``sim_time_s``, ``wall_time_s``, ``real_time_factor``, ``algorithm``,
@@ -208,13 +218,14 @@ def compute_summary(result: Any) -> dict[str, Any]:
     if power is not None:
         out["energy_kwh"] = float(np.trapezoid(power, t) / 3.6e6)
         out["energy_kj"] = out["energy_kwh"] * 3.6e3  # seed 004's unit
+    arrival_idx = _arrival_index(speed)
     if speed is not None and "planned_arrival_time" in cfg:
-        moving_idx = np.nonzero(speed > STANDSTILL_MPS)[0]
-        if moving_idx.size and moving_idx[-1] + 1 < speed.size:
-            arrival = t[moving_idx[-1] + 1]
+        if arrival_idx is not None:
+            arrival = t[arrival_idx]
             out["arrival_time_error_s"] = float(arrival - float(cfg["planned_arrival_time"]))
         else:
             out["arrival_time_error_s"] = None  # never came to rest inside the run
+    _energy_metrics(out, cfg, frame, arrival_idx)
 
     _seed002_metrics(out, cfg, frame, pos, speed, ref)
     out["executions"] = dict(result.executions)
@@ -225,7 +236,8 @@ def compute_summary(result: Any) -> dict[str, Any]:
             out.setdefault("qp_solves", {})[fmu] = int(outputs["qp_solves"])
             out.setdefault("qp_infeasible", {})[fmu] = int(outputs.get("qp_infeasible", 0))
         timing = result.diagnostics.get(fmu, {})  # logged at fmi2Terminate, not outputs
-        for name in ("qp_solve_time_median", "qp_solve_time_total", "qp_cpu_time_total"):
+        for name in ("qp_solve_time_median", "qp_solve_time_total", "qp_cpu_time_total",
+                     "lmi_cpu_time_median"):  # seed 003 RMPC: CPU time per LMI event
             if name in timing and math.isfinite(timing[name]):
                 out.setdefault(f"{name}_s", {})[fmu] = float(timing[name])
         for key in CONTROLLER_COUNTERS:  # published by the seed 000 predictive controllers
@@ -233,8 +245,42 @@ def compute_summary(result: Any) -> dict[str, Any]:
                 out.setdefault(key, {})[fmu] = int(outputs[key])
     out["warnings"] = warnings(result)
     _flatten_single(out, ("qp_solves", "qp_infeasible", "qp_solve_time_median_s",
-                          "qp_solve_time_total_s", "qp_cpu_time_total_s", *CONTROLLER_COUNTERS))
+                          "qp_solve_time_total_s", "qp_cpu_time_total_s",
+                          "lmi_cpu_time_median_s", *CONTROLLER_COUNTERS))
     return out
+
+
+def _arrival_index(speed: np.ndarray | None) -> int | None:
+    """Index of the first sample of the final standstill (None: still moving at the end)."""
+    if speed is None:
+        return None
+    moving_idx = np.nonzero(speed > STANDSTILL_MPS)[0]
+    if moving_idx.size and moving_idx[-1] + 1 < speed.size:
+        return int(moving_idx[-1] + 1)
+    return None
+
+
+PHASES = ((1, "accelerate"), (2, "run"), (3, "brake"))
+
+
+def _energy_metrics(out: dict[str, Any], cfg: dict[str, Any], frame: Any,
+                    arrival_idx: int | None) -> None:
+    """Seed 003 energy account (eq. 9) and Table 2's energy per phase, in MJ."""
+    series = (_series(frame, cfg.get("energy_traction")), _series(frame, cfg.get("energy_regen")),
+              _series(frame, cfg.get("energy_aux")))
+    if any(v is None for v in series):
+        return
+    end = arrival_idx if arrival_idx is not None else len(frame) - 1
+    trac, regen, aux = (values[: end + 1] for values in series)
+    net = trac - regen + aux
+    for key, values in (("traction", trac), ("regen", regen), ("aux", aux), ("net", net)):
+        out[f"energy_{key}_mj"] = float(values[-1] - values[0]) / 1e6
+    phase = _series(frame, cfg.get("phase"))
+    if phase is None:
+        return
+    steps = np.diff(net)  # interval i: samples i -> i + 1, in the phase of sample i
+    for index, name in PHASES:
+        out[f"energy_{name}_mj"] = float(np.sum(steps[phase[:end] == index])) / 1e6
 
 
 def warnings(result: Any) -> list[str]:

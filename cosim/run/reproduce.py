@@ -24,6 +24,15 @@ live there, not in code)::
     range = [-0.5, 0.5]            # the band the paper requires (shown when there is no value)
     tolerance = 0.5                # optional verdict: |ours - value| <= tolerance, or ours in range
     source = "sec. 4.1"
+    [[derived]]                    # optional: a figure computed from two runs' summaries
+    name = "eco saving, net energy"
+    kind = "saving_percent"        # 100 (1 - run / baseline); the only kind so far
+    metric = "energy_net_mj"       # a summary key ('.' for nested keys)
+    run = "Eco"                    # [[runs]] names
+    baseline = "Conventional"
+    value = 17.7                   # optional, as in [[paper]]: value, range, tolerance, source
+    range = [15.0, 22.0]
+    source = "sec. 3.1 text"
     [[sweeps]]                     # optional: a cosim sweep (sweep.csv, sweep.png)
     name = "fig11"
     scenarios = ["seed000_stop_rmpc", "seed000_stop_rsmpc"]
@@ -40,7 +49,8 @@ live there, not in code)::
 
 The command runs every run (in parallel processes), writes each run's results under
 ``runs/``, then ``table.md`` and ``table.csv`` (ours beside the paper's, with the verdict where
-a tolerance is given), the sweeps and the figures. ``all`` runs every entry and writes one
+a tolerance is given; derived figures follow the table, and are rows of ``table.csv`` with
+``metric = "<kind>:<metric>"``), the sweeps and the figures. ``all`` runs every entry and writes one
 ``REPRODUCTION.md``.
 """
 
@@ -64,7 +74,10 @@ except ModuleNotFoundError:  # Python < 3.11
 
 REPRODUCE_DIR = SCENARIO_DIR / "reproduce"
 
-_ENTRY_KEYS = {"title", "notes", "runs", "metrics", "paper", "sweeps", "figures"}
+_ENTRY_KEYS = {"title", "notes", "runs", "metrics", "paper", "derived", "sweeps", "figures"}
+_DERIVED_KEYS = {"name", "kind", "metric", "run", "baseline", "value", "range", "tolerance",
+                 "source"}
+DERIVED_KINDS = ("saving_percent",)
 _RUN_KEYS = {"name", "scenario", "set", "repeat"}
 _METRIC_KEYS = {"key", "label", "ratio_to"}
 _PAPER_KEYS = {"run", "metric", "value", "range", "tolerance", "source"}
@@ -84,6 +97,7 @@ class Entry:
     runs: list[dict[str, Any]]
     metrics: list[dict[str, Any]]
     paper: list[dict[str, Any]] = field(default_factory=list)
+    derived: list[dict[str, Any]] = field(default_factory=list)
     sweeps: list[dict[str, Any]] = field(default_factory=list)
     figures: list[dict[str, Any]] = field(default_factory=list)
     notes: str = ""
@@ -146,6 +160,14 @@ def load_entry(name: str | Path) -> Entry:
             raise ReproduceError(f"{where}: run {ref['run']!r} is not one of {names}")
         if ref["metric"] not in keys:
             raise ReproduceError(f"{where}: metric {ref['metric']!r} is not in [[metrics]]")
+    for i, der in enumerate(data.get("derived", [])):
+        where = f"{path}: [[derived]] #{i + 1}"
+        _check_keys(where, der, _DERIVED_KEYS, ("name", "kind", "metric", "run", "baseline"))
+        if der["kind"] not in DERIVED_KINDS:
+            raise ReproduceError(f"{where}: kind {der['kind']!r} (known: {DERIVED_KINDS})")
+        for key in ("run", "baseline"):
+            if der[key] not in names:
+                raise ReproduceError(f"{where}: {key} {der[key]!r} is not one of {names}")
     for i, sweep in enumerate(data.get("sweeps", [])):
         _check_keys(f"{path}: [[sweeps]] #{i + 1}", sweep, _SWEEP_KEYS,
                     ("name", "scenarios", "grid"))
@@ -158,7 +180,8 @@ def load_entry(name: str | Path) -> Entry:
         if unknown_runs:
             raise ReproduceError(f"{where}: runs {unknown_runs} are not in [[runs]]")
     return Entry(path.stem, path, data["title"], runs, metrics, data.get("paper", []),
-                 data.get("sweeps", []), data.get("figures", []), data.get("notes", ""))
+                 data.get("derived", []), data.get("sweeps", []), data.get("figures", []),
+                 data.get("notes", ""))
 
 
 def slug(name: str) -> str:
@@ -291,6 +314,43 @@ def table_rows(entry: Entry, summaries: dict[str, dict[str, Any]]) -> list[dict[
     return rows
 
 
+def derived_rows(entry: Entry, summaries: dict[str, dict[str, Any]]) -> list[dict[str, Any]]:
+    """One row per ``[[derived]]`` figure, in the long format of :func:`table_rows`."""
+    rows = []
+    for der in entry.derived:
+        ours = None
+        run = summary_value(summaries[der["run"]], der["metric"])
+        base = summary_value(summaries[der["baseline"]], der["metric"])
+        if run is not None and base not in (None, 0):
+            ours = 100.0 * (1.0 - float(run) / float(base))  # saving_percent
+        band = der.get("range")
+        within = None
+        if ours is not None and band is not None:
+            within = band[0] <= ours <= band[1]
+        if ours is not None and der.get("tolerance") is not None:
+            close = abs(ours - float(der["value"])) <= der["tolerance"]
+            within = close if within is None else within and close
+        rows.append({"run": der["name"], "metric": f"{der['kind']}:{der['metric']}",
+                     "ours": ours, "paper": der.get("value"), "paper_range": band,
+                     "tolerance": der.get("tolerance"), "source": der.get("source", ""),
+                     "within": within,
+                     "of": f"{der['run']} against {der['baseline']}"})
+    return rows
+
+
+def derived_markdown(rows: list[dict[str, Any]]) -> str:
+    lines = ["| derived figure | of | ours | paper | source |", "| --- | --- | --- | --- | --- |"]
+    for r in rows:
+        mark = "" if r["within"] is None else (" ✓" if r["within"] else " ✗")
+        paper = _fmt(r["paper"])
+        if r["paper_range"] is not None:
+            band = f"in [{_fmt(r['paper_range'][0])}, {_fmt(r['paper_range'][1])}]"
+            paper = band if r["paper"] is None else f"{paper} ({band})"
+        lines.append(f"| {r['run']} ({r['metric']}) | {r['of']} | {_fmt(r['ours'])}{mark} | "
+                     f"{paper} | {r['source']} |")
+    return "\n".join(lines)
+
+
 def table_markdown(entry: Entry, rows: list[dict[str, Any]]) -> str:
     """Wide table: a row per run, per metric "ours" and "paper" columns."""
     header = ["run"]
@@ -377,9 +437,12 @@ def reproduce(name: str, out_dir: str | Path | None = None, workers: int | None 
     out.mkdir(parents=True, exist_ok=True)
     summaries = run_entry(entry, out, workers)
     rows = table_rows(entry, summaries)
-    pd.DataFrame(rows).to_csv(out / "table.csv", index=False)
+    derived = derived_rows(entry, summaries)
+    pd.DataFrame(rows + derived).to_csv(out / "table.csv", index=False)
     parts = [f"## {entry.title}", "", f"`cosim reproduce {entry.name}` (entry "
              f"`scenarios/reproduce/{entry.path.name}`)", "", table_markdown(entry, rows)]
+    if derived:
+        parts += ["", derived_markdown(derived)]
     for sweep in entry.sweeps:
         grid = parse_grid(f"{k}={v}" for k, v in sweep["grid"].items())
         target = out / slug(sweep["name"])

@@ -1,0 +1,168 @@
+"""Kothare-style robust MPC as an LMI problem (seed 003, eqs. 22-26), built once with cvxpy.
+
+For a polytopic model ``x+ = A(k) x + B(k) u``, ``[A, B] in Co{[A_j, B_j]}`` (eqs. 16-17), the
+min-max of the infinite-horizon cost ``sum x'Q1 x + u'R u`` (eqs. 18-19) is bounded by
+``V(x) = x' P x`` with ``P = gamma Qv^-1`` when (eq. 22) ``V`` decreases by at least the stage
+cost at every vertex. With the state feedback ``u = F x``, ``F = Y Qv^-1``, the controller solves
+at each event ::
+
+    min gamma  over  gamma, Qv = Qv' > 0, Y
+    [1, x'; x, Qv] >= 0                                                     (eq. 23)
+    [Qv, (A_j Qv + B_j Y)', Qv Q1^.5, Y' R^.5;
+     A_j Qv + B_j Y, Qv, 0, 0;
+     Q1^.5 Qv, 0, gamma I, 0;
+     R^.5 Y, 0, 0, gamma I] >= 0                   for every vertex j       (eq. 24)
+    [u_max^2 I, Y; Y', Qv] >= 0                                             (eq. 25)
+    [Qv, (A_j Qv + B_j Y)' C'; C (A_j Qv + B_j Y), y_max^2 I] >= 0  (optional, eq. 26)
+
+(Kothare, Balakrishnan and Morari 1996, Automatica 32(10), Theorem 2 and section 3.2). The
+problem is parametrised (cvxpy ``Parameter`` for ``x`` and every vertex ``A_j``, ``B_j``) and
+disciplined-parametrised (DPP), so it is canonicalised once and an event only refills the
+parameters. The paper's disturbance column ``D_j`` of eq. 24 is not used: the seed 003
+controller absorbs the disturbance with integral action instead (``controllers.robust``).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import clarabel  # noqa: F401  (cvxpy's SDP solver used by default: missing = error at import)
+import cvxpy as cp
+import numpy as np
+
+LMI_SOLVERS = ("clarabel", "scs")
+_SOLVED = (cp.OPTIMAL,)
+
+
+@dataclass(frozen=True)
+class LmiSolution:
+    """One event's solution: gain ``F`` (u = F x), ``gamma``, ``Qv``, ``Y``, solver data."""
+
+    F: np.ndarray
+    gamma: float
+    Qv: np.ndarray
+    Y: np.ndarray
+    status: str
+    solve_time: float  # wall time of cvxpy's solve call (s)
+    cpu_time: float = 0.0  # CPU time of this process during that call (s; load-independent)
+
+    @property
+    def ok(self) -> bool:
+        return self.status in _SOLVED
+
+
+def _sqrtm_psd(M: np.ndarray) -> np.ndarray:
+    w, V = np.linalg.eigh(0.5 * (M + M.T))
+    return (V * np.sqrt(np.clip(w, 0.0, None))) @ V.T
+
+
+class KothareLmi:
+    """The LMI problem of eqs. 23-26 for ``n_vertices`` vertices of size ``(n, m)``.
+
+    ``Q1`` (n x n, >= 0) and ``R`` (m x m, > 0) are fixed; ``u_max`` (per input; ``None``: no
+    input LMI), ``C`` and ``y_max`` (``None``: no output LMI) too. :meth:`solve` takes the state
+    and the vertices of this event.
+    """
+
+    def __init__(self, n: int, m: int, n_vertices: int, Q1: np.ndarray, R: np.ndarray,
+                 u_max: Sequence[float] | None = None, C: np.ndarray | None = None,
+                 y_max: Sequence[float] | None = None, solver: str = "clarabel") -> None:
+        if solver not in LMI_SOLVERS:
+            raise ValueError(f"solver = {solver!r} must be one of {LMI_SOLVERS}")
+        if n_vertices < 1:
+            raise ValueError(f"n_vertices = {n_vertices} must be >= 1")
+        self.n, self.m, self.L, self.solver = n, m, n_vertices, solver
+        Q1h, Rh = _sqrtm_psd(np.asarray(Q1, float)), _sqrtm_psd(np.asarray(R, float))
+        self.x = cp.Parameter(n, name="x")
+        self.A = [cp.Parameter((n, n), name=f"A{j}") for j in range(n_vertices)]
+        self.B = [cp.Parameter((n, m), name=f"B{j}") for j in range(n_vertices)]
+        self.gamma = cp.Variable(name="gamma")
+        self.Qv = cp.Variable((n, n), symmetric=True, name="Qv")
+        self.Y = cp.Variable((m, n), name="Y")
+        Qv, Y, g = self.Qv, self.Y, self.gamma
+        xc = cp.reshape(self.x, (n, 1), order="F")
+        cons = [cp.bmat([[np.ones((1, 1)), xc.T], [xc, Qv]]) >> 0]              # eq. 23
+        Zn, Zm, In, Im = np.zeros((n, n)), np.zeros((n, m)), np.eye(n), np.eye(m)
+        for A, B in zip(self.A, self.B, strict=True):
+            AQBY = A @ Qv + B @ Y
+            M = cp.bmat([[Qv, AQBY.T, Qv @ Q1h, Y.T @ Rh],
+                         [AQBY, Qv, Zn, Zm],
+                         [Q1h @ Qv, Zn, g * In, Zm],
+                         [Rh @ Y, Zm.T, Zm.T, g * Im]])
+            cons.append(0.5 * (M + M.T) >> 0)                                   # eq. 24
+        self.u_max = None if u_max is None else np.asarray(u_max, float).reshape(m)
+        if self.u_max is not None:
+            X = cp.Variable((m, m), symmetric=True, name="X")
+            cons += [cp.bmat([[X, Y], [Y.T, Qv]]) >> 0,                         # eq. 25
+                     cp.diag(X) <= self.u_max ** 2]
+        self.C = None if C is None else np.atleast_2d(np.asarray(C, float))
+        if self.C is not None and y_max is not None:
+            ymax = np.asarray(y_max, float).reshape(self.C.shape[0])
+            for A, B in zip(self.A, self.B, strict=True):
+                CA = self.C @ (A @ Qv + B @ Y)
+                M = cp.bmat([[Qv, CA.T], [CA, np.diag(ymax ** 2)]])
+                cons.append(0.5 * (M + M.T) >> 0)                               # eq. 26
+        self.problem = cp.Problem(cp.Minimize(g), cons)
+        if not self.problem.is_dpp():
+            raise AssertionError("Kothare LMI problem is not DPP")
+        self.Q1, self.R = np.asarray(Q1, float), np.asarray(R, float)
+        self.solves = 0
+
+    def solver_options(self) -> dict:
+        """The solver and its tolerances: Clarabel's defaults (gap and feasibility 1e-8); SCS
+        (first order) at 1e-4, its default accuracy (at 1e-6 it does not converge in 20000
+        iterations on these problems; at 1e-4 it takes thousands, ~40x Clarabel's time)."""
+        if self.solver == "clarabel":
+            return {"solver": cp.CLARABEL}
+        return {"solver": cp.SCS, "eps_abs": 1e-4, "eps_rel": 1e-4, "max_iters": 100000}
+
+    @property
+    def tolerance(self) -> float:
+        """Relative accuracy the solver is asked for (gap / feasibility)."""
+        return 1e-8 if self.solver == "clarabel" else 1e-4
+
+    def solve(self, x: np.ndarray, vertices: Sequence[tuple[np.ndarray, np.ndarray]]
+              ) -> LmiSolution:
+        """Solve at state ``x`` for the vertices ``[(A_j, B_j)]`` (exactly ``n_vertices``)."""
+        if len(vertices) != self.L:
+            raise ValueError(f"{len(vertices)} vertices given, problem built for {self.L}")
+        self.x.value = np.asarray(x, float).reshape(self.n)
+        for (A, B), pa, pb in zip(vertices, self.A, self.B, strict=True):
+            pa.value = np.asarray(A, float).reshape(self.n, self.n)
+            pb.value = np.asarray(B, float).reshape(self.n, self.m)
+        t0, c0 = time.perf_counter(), time.process_time()
+        try:
+            self.problem.solve(**self.solver_options())
+            status = str(self.problem.status)
+        except cp.error.SolverError as exc:
+            status = f"solver error: {exc}"
+        dt, cpu = time.perf_counter() - t0, time.process_time() - c0
+        self.solves += 1
+        if status not in _SOLVED or self.Qv.value is None:
+            nan = np.full((self.m, self.n), math.nan)
+            return LmiSolution(nan, math.nan, np.full((self.n, self.n), math.nan), nan,
+                               status, dt, cpu)
+        Qv = np.asarray(self.Qv.value, float)
+        Y = np.asarray(self.Y.value, float).reshape(self.m, self.n)
+        F = np.linalg.solve(Qv.T, Y.T).T  # Y Qv^-1
+        return LmiSolution(F, float(self.gamma.value), Qv, Y, status, dt, cpu)
+
+    def vertex_matrices(self, sol: LmiSolution,
+                        vertices: Sequence[tuple[np.ndarray, np.ndarray]]
+                        ) -> list[np.ndarray]:
+        """The numeric left-hand sides of eqs. 23-25 at a solution (for checks)."""
+        n, m = self.n, self.m
+        Q1h, Rh = _sqrtm_psd(self.Q1), _sqrtm_psd(self.R)
+        Qv, Y, g = sol.Qv, sol.Y, sol.gamma
+        x = np.asarray(self.x.value, float).reshape(n, 1)
+        out = [np.block([[np.ones((1, 1)), x.T], [x, Qv]])]
+        for A, B in vertices:
+            AQBY = A @ Qv + B @ Y
+            out.append(np.block([[Qv, AQBY.T, Qv @ Q1h, Y.T @ Rh],
+                                 [AQBY, Qv, np.zeros((n, n)), np.zeros((n, m))],
+                                 [Q1h @ Qv, np.zeros((n, n)), g * np.eye(n), np.zeros((n, m))],
+                                 [Rh @ Y, np.zeros((m, n)), np.zeros((m, n)), g * np.eye(m)]]))
+        return out

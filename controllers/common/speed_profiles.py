@@ -1,0 +1,311 @@
+"""Target speed profiles of seed 003 (sec. 3.1): conventional and energy-saving ("eco").
+
+Both are computed on a nominal single-mass model of the train (:class:`plants.crh3.Crh3Params`:
+mass, rotating-mass factor, Table 1 resistance, traction envelope) over the route's grade, curve
+and tunnel resistance, on a distance grid of ``ds`` metres with constant acceleration over each
+step (``v^2`` linear in ``s``). Limits of the paper: ``-1 <= a <= 1`` m/s^2, cruising speed
+``V_act`` (330 km/h) and line limit ``V_lim`` (350 km/h).
+
+* **Conventional** (Fig. 1: depart, accelerate, cruise, brake, stop): traction at
+  ``traction_share`` of the envelope (and at most ``accel_max``) up to ``V_act``; cruise at
+  ``V_act`` (where ``traction_share`` of the envelope cannot hold it uphill the speed sags and
+  recovers with that traction); brake at the constant ``brake_decel`` onto the stop point
+  (``v_b(s) = sqrt(2 a_b (L - s))``). It is the timetable's shortest run, ``T_conv``.
+* **Eco** (Fig. 2: accelerate, coast, re-accelerate, ..., brake): the same start; then the
+  *switching rule*: coast (no force) from ``V_act`` until the speed has fallen to ``V_low``,
+  re-accelerate (as in the start) to ``V_act``, coast again, ...; on a down grade a coasting
+  train that reaches ``V_lim`` is held there; wherever the run meets the braking curve ``v_b``
+  it brakes to the stop. ``V_low`` is the one free number: the lower it is, the longer the run
+  (monotone up to the jump when a cycle drops out before the braking curve), and it is found by
+  bisection so that the arrival time equals the scheduled running time ``T_s`` (the route's
+  ``scheduled_time_s``: ``T_conv`` plus the running-time supplement) to within
+  ``time_tolerance``. If ``T_s <= T_conv`` there is no margin and the eco profile is the
+  conventional one. Because the last run time found is within ``time_tolerance`` (default
+  0.5 s) of ``T_s`` and the paper allows an arrival error of ``Delta T_max = 5`` s, the eco
+  profile keeps the arrival within the margin; ``tests/test_speed_profiles.py`` checks it.
+
+Phases (Table 2, used by the energy-per-phase metrics): ``accelerate`` from the start until the
+profile first reaches ``V_act``; ``brake`` from the start of the final braking; ``run`` between.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from plants.crh3 import Crh3Params
+from plants.resistance import KMH
+from plants.route import GRAVITY, Route, StepProfile
+
+# mode of each profile step
+TRACTION, CRUISE, COAST, REACCELERATE, HOLD_LIMIT, BRAKE = 1, 2, 3, 4, 5, 6
+# Table 2 phases
+PHASE_ACCELERATE, PHASE_RUN, PHASE_BRAKE = 1, 2, 3
+PROFILE_KINDS = ("conventional", "eco")
+
+
+@dataclass(frozen=True)
+class ProfileSettings:
+    """Limits and rates of the profile generator (SI)."""
+
+    cruise_speed: float = 330.0 * KMH  # V_act
+    limit_speed: float = 350.0 * KMH  # V_lim
+    accel_max: float = 1.0  # m/s^2
+    brake_decel: float = 0.5  # m/s^2, constant service braking to the stop (<= 1)
+    traction_share: float = 0.9  # share of the traction envelope the profile plans with
+    ds: float = 10.0  # m, distance grid
+    time_tolerance: float = 0.5  # s, eco arrival within this of the scheduled time
+    min_low_speed: float = 150.0 * KMH  # lowest V_low the bisection considers
+
+    def check(self) -> None:
+        if not 0 < self.cruise_speed <= self.limit_speed:
+            raise ValueError(f"need 0 < V_act = {self.cruise_speed} <= V_lim = "
+                             f"{self.limit_speed} (m/s)")
+        if not (0 < self.accel_max <= 1.0 and 0 < self.brake_decel <= 1.0):
+            raise ValueError(f"accel_max = {self.accel_max} and brake_decel = "
+                             f"{self.brake_decel} must be in (0, 1] m/s2 (seed 003)")
+        if not 0 < self.traction_share <= 1 or not self.ds > 0:
+            raise ValueError(f"traction_share = {self.traction_share} must be in (0, 1] and "
+                             f"ds = {self.ds} > 0")
+
+
+@dataclass(frozen=True)
+class SpeedProfile:
+    """A target profile on a distance grid: positions ``s`` (m), speeds ``v`` (m/s), times
+    ``t`` (s, from departure), ``mode`` of the step starting at each point (last: BRAKE)."""
+
+    kind: str
+    s: np.ndarray
+    v: np.ndarray
+    t: np.ndarray
+    mode: np.ndarray
+    low_speed: float  # V_low of the eco rule (V_act for the conventional profile)
+    scheduled_time: float  # s, T_s
+
+    @property
+    def arrival_time(self) -> float:
+        """Planned running time (s)."""
+        return float(self.t[-1])
+
+    @property
+    def stop_point(self) -> float:
+        return float(self.s[-1])
+
+    @functools.cached_property
+    def accel(self) -> np.ndarray:
+        """Acceleration (m/s^2) of the step starting at each point (0 at the end)."""
+        a = np.diff(self.v**2) / (2.0 * np.diff(self.s))
+        return np.append(a, 0.0)
+
+    @functools.cached_property
+    def accelerate_end_index(self) -> int:
+        """First point at which the first traction phase has ended (V_act reached)."""
+        idx = np.nonzero(self.mode != TRACTION)[0]
+        return int(idx[0]) if idx.size else len(self.s) - 1
+
+    @functools.cached_property
+    def brake_start_index(self) -> int:
+        """First point of the final braking."""
+        idx = np.nonzero(self.mode != BRAKE)[0]
+        return int(idx[-1]) + 1 if idx.size else 0
+
+    @property
+    def accelerate_end_time(self) -> float:
+        return float(self.t[self.accelerate_end_index])
+
+    @property
+    def brake_start_position(self) -> float:
+        return float(self.s[self.brake_start_index])
+
+    @property
+    def brake_start_time(self) -> float:
+        return float(self.t[self.brake_start_index])
+
+    def _segment_by_time(self, t: float) -> int:
+        return int(min(max(np.searchsorted(self.t, t, side="right") - 1, 0), len(self.t) - 2))
+
+    def at_time(self, t: float) -> tuple[float, float, float]:
+        """(s_ref (m), v_ref (m/s), a_ref (m/s^2)) at time ``t`` after departure (constant
+        acceleration in each step; before 0 and after arrival: at the ends, at rest)."""
+        if t <= 0.0:
+            return float(self.s[0]), float(self.v[0]), float(self.accel[0]) if t == 0 else 0.0
+        if t >= self.t[-1]:
+            return float(self.s[-1]), 0.0, 0.0
+        i = self._segment_by_time(t)
+        a = float(self.accel[i])
+        tau = t - float(self.t[i])
+        v = max(float(self.v[i]) + a * tau, 0.0)
+        s = float(self.s[i]) + float(self.v[i]) * tau + 0.5 * a * tau * tau
+        return min(s, float(self.s[i + 1])), v, a
+
+    def at_position(self, s: float) -> tuple[float, float]:
+        """(v_ref (m/s), a_ref (m/s^2)) at position ``s`` (``v^2`` linear in each step)."""
+        if s >= self.s[-1]:
+            return 0.0, 0.0
+        if s <= self.s[0]:
+            return float(self.v[0]), float(self.accel[0])
+        i = int(np.searchsorted(self.s, s, side="right") - 1)
+        a = float(self.accel[i])
+        return math.sqrt(max(float(self.v[i]) ** 2 + 2.0 * a * (s - float(self.s[i])), 0.0)), a
+
+    def phase_at_time(self, t: float) -> int:
+        """Table 2 phase at time ``t`` (PHASE_ACCELERATE / PHASE_RUN / PHASE_BRAKE)."""
+        if t < self.accelerate_end_time:
+            return PHASE_ACCELERATE
+        if t < self.brake_start_time:
+            return PHASE_RUN
+        return PHASE_BRAKE
+
+
+class _Model:
+    """Nominal single-mass model the profiles are planned on."""
+
+    def __init__(self, train: Crh3Params, route: Route, settings: ProfileSettings) -> None:
+        self.train, self.settings = train, settings
+        self.m_eff = train.effective_mass
+        self.mg = train.mass * GRAVITY / 1000.0
+        additional = StepProfile.sum(route.grade, route.curve_resistance,
+                                     route.tunnel_resistance)
+        self.add_starts = additional.starts.tolist()
+        self.add_values = additional.values.tolist()
+        self.limit_starts = route.speed_limit.starts.tolist()
+        self.limit_values = route.speed_limit.values.tolist()
+
+    def drag(self, v: float, s: float) -> float:
+        """Resistance + grade + curve + tunnel as a deceleration (m/s^2)."""
+        import bisect
+
+        d = self.train.davis
+        w = self.add_values[bisect.bisect_right(self.add_starts, s) - 1]
+        return (d.a + (d.b + d.c * v) * v + self.mg * w) / self.m_eff
+
+    def traction_accel(self, v: float, s: float) -> float:
+        st = self.settings
+        return min(st.accel_max, st.traction_share * self.train.traction_limit(v) / self.m_eff
+                   - self.drag(v, s))
+
+    def ceiling(self, s: float) -> float:
+        import bisect
+
+        line = self.limit_values[bisect.bisect_right(self.limit_starts, s) - 1]
+        return min(self.settings.limit_speed, line)
+
+
+def _run(model: _Model, length: float, kind: str, low: float) -> tuple[np.ndarray, ...]:
+    """One forward pass: (s, v, mode) on the grid; ``low`` = V_low (eco)."""
+    st = model.settings
+    n = max(int(math.ceil(length / st.ds)), 1)
+    s = np.linspace(0.0, length, n + 1)
+    step = length / n
+    v = np.zeros(n + 1)
+    mode = np.full(n + 1, BRAKE, dtype=np.int64)
+    v_act = st.cruise_speed
+    state, first = TRACTION, True
+    vi = 0.0
+    for i in range(n):
+        x = float(s[i])
+        vb2 = 2.0 * st.brake_decel * (length - float(s[i + 1]))  # braking curve at the end
+        cap = min(model.ceiling(x), model.ceiling(float(s[i + 1])))
+        if state == TRACTION:
+            target = min(v_act, cap)
+            v2 = vi * vi + 2.0 * model.traction_accel(vi, x) * step
+            mode[i] = TRACTION if first else REACCELERATE
+            if v2 >= target * target:
+                v2 = target * target
+                state, first = (CRUISE if kind == "conventional" else COAST), False
+        elif state == CRUISE:
+            target = min(v_act, cap)
+            v2 = min(vi * vi + 2.0 * model.traction_accel(vi, x) * step, target * target)
+            mode[i] = CRUISE
+        elif state == COAST:
+            v2 = vi * vi - 2.0 * model.drag(vi, x) * step
+            mode[i] = COAST
+            if v2 >= cap * cap:
+                v2, mode[i] = cap * cap, HOLD_LIMIT
+            if v2 <= low * low:
+                state = TRACTION
+        else:
+            v2 = vb2
+        if v2 >= vb2:  # met the braking curve: brake to the stop from here
+            v2, state = vb2, BRAKE
+        vi = math.sqrt(max(v2, 0.0))
+        v[i + 1] = vi
+    v[-1] = 0.0
+    return s, v, mode
+
+
+def _times(s: np.ndarray, v: np.ndarray) -> np.ndarray:
+    vsum = v[:-1] + v[1:]
+    dt = 2.0 * np.diff(s) / np.where(vsum > 0, vsum, np.inf)
+    return np.concatenate(([0.0], np.cumsum(dt)))
+
+
+def _finish(kind: str, s: np.ndarray, v: np.ndarray, mode: np.ndarray, low: float,
+            scheduled: float) -> SpeedProfile:
+    # the final braking: every step from the last non-braking one on whose speed falls along
+    # the braking curve is marked BRAKE (the last cruise/coast step may end on the curve)
+    return SpeedProfile(kind, s, v, _times(s, v), mode, low, scheduled)
+
+
+def generate(kind: str, route: Route, scheduled_time: float | None = None,
+             train: Crh3Params | None = None,
+             settings: ProfileSettings | None = None) -> SpeedProfile:
+    """The ``kind`` ("conventional" | "eco") profile from the route's first station (or 0) to
+    its end (``length_m``, the stop point) within ``scheduled_time`` (s; default the route's
+    ``scheduled_time_s``)."""
+    if kind not in PROFILE_KINDS:
+        raise ValueError(f"profile {kind!r} must be one of {PROFILE_KINDS}")
+    train = train or Crh3Params()
+    settings = settings or ProfileSettings()
+    settings.check()
+    if scheduled_time is None or scheduled_time <= 0:
+        scheduled_time = route.scheduled_time_s
+    if kind == "eco" and scheduled_time is None:
+        raise ValueError(f"route {route.name!r} has no scheduled_time_s: give scheduled_time")
+    key = (kind, id(route), float(scheduled_time or 0.0), train, settings)
+    hit = _CACHE.get(key)
+    if hit is None or hit[0] is not route:
+        if len(_CACHE) > 32:
+            _CACHE.clear()
+        hit = _CACHE[key] = (route, _generate(kind, route, key[2], train, settings))
+    return hit[1]
+
+
+# per process (routes are frozen; the route is kept with its profile so its id stays unique)
+_CACHE: dict[tuple, tuple[Route, SpeedProfile]] = {}
+
+
+def _generate(kind: str, route: Route, scheduled: float, train: Crh3Params,
+                     settings: ProfileSettings) -> SpeedProfile:
+    model = _Model(train, route, settings)
+    length = float(route.length_m)
+    v_act = settings.cruise_speed
+    s, v, mode = _run(model, length, "conventional", v_act)
+    conventional = _finish("conventional", s, v, mode, v_act, scheduled)
+    if kind == "conventional" or scheduled <= conventional.arrival_time:
+        return conventional if kind == "conventional" else _finish(
+            "eco", s, v, mode, v_act, scheduled)
+    lo, hi = settings.min_low_speed, v_act  # time(lo) >= time(hi)
+    best: SpeedProfile | None = None
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        prof = _finish("eco", *_run(model, length, "eco", mid), mid, scheduled)
+        if best is None or (abs(prof.arrival_time - scheduled)
+                            < abs(best.arrival_time - scheduled)):
+            best = prof
+        if abs(prof.arrival_time - scheduled) <= settings.time_tolerance:
+            return prof
+        if prof.arrival_time > scheduled:
+            lo = mid
+        else:
+            hi = mid
+        if hi - lo < 1e-6:
+            break
+    if best is None or abs(best.arrival_time - scheduled) > settings.time_tolerance:
+        raise ValueError(f"route {route.name!r}: no eco profile arrives within "
+                         f"{settings.time_tolerance} s of scheduled_time = {scheduled} s "
+                         f"(closest {best.arrival_time if best else float('nan'):.1f} s)")
+    return best

@@ -1,0 +1,1 @@
+"""Robust (multi-model, LMI) predictive control of seed 003."""

@@ -1,0 +1,106 @@
+"""Seed 003 trackers: the common interface (controllers/eco/tracking.py) and the GPC baseline
+(controllers/eco/gpc.py, sharing controllers/common/gpc.py with seed 001)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from controllers.common import speed_profiles as sp
+from controllers.eco.gpc import Crh3Gpc, Crh3GpcParams
+from cosim.fmu.state import to_ticks
+from plants.crh3 import Crh3Params, Crh3Train
+from plants.route import load_route
+
+ROUTE = load_route("seed003_crh3")
+
+
+def _controller(kind: str = "eco") -> Crh3Gpc:
+    params = Crh3GpcParams()
+    prof = sp.generate(kind, ROUTE, None, params.track.train(), params.track.settings())
+    return Crh3Gpc(params, prof)
+
+
+def _closed_loop(kind: str, t_end: float | None = None) -> tuple[np.ndarray, Crh3Gpc]:
+    """Plant and controller cores, T = 1 s; rows (t, v, s, v_ref, u, phase)."""
+    ctl = _controller(kind)
+    plant = Crh3Train(Crh3Params(), ROUTE)
+    t_end = ctl.profile.arrival_time + 30.0 if t_end is None else t_end
+    rows = []
+    for k in range(int(t_end)):
+        o = plant.outputs()
+        out, hold = ctl.compute(float(k), {n: o[n] for n in ("v", "s", "traction_limit",
+                                                             "brake_limit")})
+        assert hold == 1
+        rows.append((k, o["v"], o["s"], out["v_ref"], out["accel_demand"], out["phase"]))
+        plant.advance(to_ticks(k), to_ticks(1.0), {"force": out["force"]})
+    return np.array(rows), ctl
+
+
+def test_input_box_is_the_envelope_and_the_comfort_limit() -> None:
+    ctl = _controller()
+    m = ctl.m_eff
+    assert ctl.input_box(1e9, 1e9) == (-1.0, 1.0)
+    lo, hi = ctl.input_box(0.2 * m, 0.3 * m)
+    assert (lo, hi) == pytest.approx((-0.3, 0.2), rel=1e-12)
+    assert ctl.input_box(0.0, 0.0) == (0.0, 0.0)
+
+
+def test_references_follow_time_then_distance_in_the_final_braking() -> None:
+    ctl = _controller()
+    prof = ctl.profile
+    s_p, v_p, _ = prof.at_time(600.0)
+    ahead = ctl.references(600.0, s_p + 50.0, 3)  # 50 m ahead: slower, by the gain
+    on = ctl.references(600.0, s_p, 3)
+    assert on[0] == pytest.approx(prof.at_time(601.0)[1], rel=1e-12)
+    assert on - ahead == pytest.approx(np.full(3, ctl.track.position_gain * 50.0), rel=1e-9)
+    assert ctl.phase == sp.PHASE_RUN
+    s_brake = prof.brake_start_position + 1000.0
+    refs = ctl.references(0.0, s_brake, 3)  # in the final braking: by position, any time
+    v_d, a_d = prof.at_position(s_brake)
+    assert refs == pytest.approx(v_d + a_d * np.arange(1, 4), rel=1e-12)
+    assert ctl.phase == sp.PHASE_BRAKE and a_d == pytest.approx(-0.5, rel=1e-9)
+
+
+def test_gpc_tracks_the_eco_profile_arrives_on_time_and_stops_at_the_point() -> None:
+    rows, ctl = _closed_loop("eco")
+    t, v, s, v_ref, u, phase = rows.T
+    err_kmh = (v - v_ref) * 3.6
+    assert np.sqrt(np.mean(err_kmh**2)) < 0.5  # km/h
+    assert np.max(np.abs(err_kmh[t > 20])) < 3.0  # transients at the mode switches
+    assert np.all(np.abs(u) <= 1.0 + 1e-12)
+    arrival = t[np.nonzero(v > 1e-3)[0][-1] + 1]
+    assert abs(arrival - ROUTE.scheduled_time_s) <= 5.0  # Delta T_max
+    assert abs(s[-1] - ROUTE.length_m) <= 0.5  # Delta l_max
+    assert list(np.unique(phase)) == [1.0, 2.0, 3.0] and np.all(np.diff(phase) >= 0)
+
+
+def test_held_at_the_stop_the_gpc_keeps_its_data() -> None:
+    ctl = _controller("conventional")
+    ctl.compute(0.0, {"v": 0.0, "s": 0.0, "traction_limit": 6e5, "brake_limit": 8e5})
+    out, _ = ctl.compute(5000.0, {"v": 0.0, "s": ROUTE.length_m, "traction_limit": 6e5,
+                                  "brake_limit": 8e5})
+    assert ctl.holding and out["accel_demand"] == ctl.track.hold_accel
+    assert out["force"] == pytest.approx(ctl.m_eff * ctl.track.hold_accel, rel=1e-12)
+    assert ctl.gpc.u_prev[0] == ctl.track.hold_accel
+
+
+@pytest.mark.slow
+def test_scenarios_reproduce_the_eco_saving(tmp_path) -> None:
+    """The shipped GPC scenarios through the master: eco saves 15-22 % (issue 9), on time and
+    at the stop point (sec. 4 limits); phases sum to the total."""
+    from cosim.run.master import run_scenario
+
+    summaries = {}
+    for kind in sp.PROFILE_KINDS:
+        run_scenario(f"seed003_crh3_gpc_{kind}", out_dir=tmp_path / kind)
+        summaries[kind] = json.loads((tmp_path / kind / "summary.json").read_text())
+    for summary in summaries.values():
+        assert abs(summary["arrival_time_error_s"]) <= 5.0
+        assert abs(summary["stop_error_m"]) <= 0.5
+        parts = sum(summary[f"energy_{p}_mj"] for p in ("accelerate", "run", "brake"))
+        assert parts == pytest.approx(summary["energy_net_mj"], rel=1e-9)
+    saving = 1.0 - summaries["eco"]["energy_net_mj"] / summaries["conventional"]["energy_net_mj"]
+    assert 0.15 <= saving <= 0.22

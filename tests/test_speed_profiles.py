@@ -1,0 +1,124 @@
+"""Seed 003 target profiles (controllers/common/speed_profiles.py): limits, the eco switching
+rule, arrival within the running-time margin, phases."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from controllers.common import speed_profiles as sp
+from cosim.run.scenario import load_scenario
+from plants.crh3 import Crh3Params
+from plants.resistance import KMH
+from plants.route import Route, StepProfile, load_route
+
+ROUTE = load_route("seed003_crh3")
+SCENARIOS = Path(__file__).resolve().parents[1] / "scenarios"
+DELTA_T_MAX = 5.0  # s, sec. 4
+
+
+def test_conventional_accelerates_cruises_at_v_act_and_brakes() -> None:
+    prof = sp.generate("conventional", ROUTE)
+    st = sp.ProfileSettings()
+    assert prof.v[0] == 0.0 and prof.v[-1] == 0.0 and prof.stop_point == ROUTE.length_m
+    assert np.max(prof.v) == pytest.approx(st.cruise_speed, abs=1e-9)
+    assert set(np.unique(prof.mode[:-1])) <= {sp.TRACTION, sp.CRUISE, sp.BRAKE}
+    assert np.all(np.abs(prof.accel) <= 1.0 + 1e-12)
+    braking = prof.mode[:-1] == sp.BRAKE
+    assert np.allclose(prof.accel[:-1][braking], -st.brake_decel, rtol=1e-9)
+    # the shortest run: the time the timetable's supplement is added to
+    assert prof.arrival_time < ROUTE.scheduled_time_s
+
+
+def test_eco_meets_the_scheduled_time_within_the_margin() -> None:
+    eco = sp.generate("eco", ROUTE)
+    st = sp.ProfileSettings()
+    assert abs(eco.arrival_time - ROUTE.scheduled_time_s) <= st.time_tolerance
+    assert st.time_tolerance < DELTA_T_MAX
+    modes = set(np.unique(eco.mode[:-1]))
+    assert {sp.TRACTION, sp.COAST, sp.REACCELERATE, sp.BRAKE} <= modes
+    assert sp.CRUISE not in modes
+    assert np.max(eco.v) <= st.limit_speed + 1e-9 and np.all(np.abs(eco.accel) <= 1.0 + 1e-12)
+    # the rule: re-acceleration starts where the coasting speed has fallen to V_low
+    starts = np.nonzero((eco.mode[1:] == sp.REACCELERATE) & (eco.mode[:-1] == sp.COAST))[0] + 1
+    assert starts.size >= 1
+    assert np.all(eco.v[starts] <= eco.low_speed + 1e-9)
+    assert np.all(eco.v[starts - 1] > eco.low_speed)
+
+
+@pytest.mark.parametrize("scheduled", [1900.0, 2200.0])
+def test_eco_arrival_follows_any_feasible_schedule(scheduled: float) -> None:
+    eco = sp.generate("eco", ROUTE, scheduled)
+    assert abs(eco.arrival_time - scheduled) <= sp.ProfileSettings().time_tolerance
+
+
+def test_without_a_margin_eco_is_the_conventional_profile() -> None:
+    conv = sp.generate("conventional", ROUTE)
+    eco = sp.generate("eco", ROUTE, conv.arrival_time - 10.0)
+    assert np.array_equal(eco.v, conv.v) and eco.arrival_time == conv.arrival_time
+
+
+def test_eco_needs_less_mechanical_work_than_conventional() -> None:
+    """Along the profiles, the traction work of the nominal model is smaller for eco."""
+    p = Crh3Params()
+
+    def traction_work(prof: sp.SpeedProfile) -> float:
+        vm = 0.5 * (prof.v[:-1] + prof.v[1:])
+        grade = np.array([ROUTE.grade.at(x) for x in prof.s[:-1]]) * p.mass * 9.81 / 1000
+        force = p.effective_mass * prof.accel[:-1] + p.davis.force(vm) + grade
+        return float(np.sum(np.maximum(force, 0.0) * np.diff(prof.s)))
+
+    conv, eco = (sp.generate(k, ROUTE) for k in sp.PROFILE_KINDS)
+    assert traction_work(eco) < 0.9 * traction_work(conv)
+
+
+def test_lookups_by_time_and_position_agree() -> None:
+    prof = sp.generate("eco", ROUTE)
+    for t in (10.0, 400.0, 1000.0, 1500.0, 2050.0):
+        s, v, _ = prof.at_time(t)
+        v_s, _ = prof.at_position(s)
+        # v linear in t inside a step but v^2 linear in s: they differ by O(a^2 dt^2 / v)
+        assert v_s == pytest.approx(v, abs=1e-3)
+    assert prof.at_time(-1.0)[1] == 0.0 and prof.at_time(1e5) == (ROUTE.length_m, 0.0, 0.0)
+    assert prof.phase_at_time(1.0) == sp.PHASE_ACCELERATE
+    assert prof.phase_at_time(prof.accelerate_end_time + 1.0) == sp.PHASE_RUN
+    assert prof.phase_at_time(prof.arrival_time - 1.0) == sp.PHASE_BRAKE
+    assert prof.accelerate_end_time < prof.brake_start_time
+
+
+def test_a_down_grade_caps_coasting_at_v_lim() -> None:
+    steep = Route("down", 60000.0, StepProfile.from_pairs([[0.0, 0.0], [25000.0, -20.0],
+                                                          [45000.0, 0.0]]),
+                  speed_limit=StepProfile.from_pairs([[0.0, 350.0 * KMH]]))
+    st = sp.ProfileSettings()
+    _, v, mode = sp._run(sp._Model(Crh3Params(), steep, st), steep.length_m, "eco",
+                         300.0 * KMH)
+    assert sp.HOLD_LIMIT in set(mode)
+    assert np.max(v) == pytest.approx(st.limit_speed, abs=1e-9)
+    # faster than the conventional run whatever V_low: such a schedule is refused, by name
+    with pytest.raises(ValueError, match="'down': no eco profile arrives"):
+        sp.generate("eco", steep, sp.generate("conventional", steep).arrival_time + 20.0)
+
+
+def test_scenarios_plan_the_generated_arrival_times() -> None:
+    for kind in sp.PROFILE_KINDS:
+        sc = load_scenario(SCENARIOS / f"seed003_crh3_gpc_{kind}.toml")
+        planned = float(sc.summary["planned_arrival_time"])
+        prof = sp.generate(kind, ROUTE)
+        assert abs(prof.arrival_time - planned) <= sp.ProfileSettings().time_tolerance
+        assert sc.summary["stop_point"] == prof.stop_point
+
+
+def test_errors_name_the_problem() -> None:
+    with pytest.raises(ValueError, match="profile 'fast'"):
+        sp.generate("fast", ROUTE)
+    with pytest.raises(ValueError, match="no scheduled_time_s"):
+        sp.generate("eco", Route.flat(1e4))
+    with pytest.raises(ValueError, match="accel_max"):
+        sp.generate("conventional", ROUTE,
+                    settings=dataclasses.replace(sp.ProfileSettings(), accel_max=1.5))
+    assert math.isfinite(sp.generate("conventional", Route.flat(1e4)).arrival_time)
