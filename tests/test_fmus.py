@@ -401,6 +401,53 @@ def _freight_controller_reference_and_final_hold(path: Path) -> None:
         fmu.close()
 
 
+@_checks("Crh3Train")
+def _crh3_coasting_on_level_track(path: Path) -> None:
+    """No force on the level first 20 km of the seed 003 route from 80 m/s: M (1 + gamma)
+    dv/dt = -(a + b v + c v^2) (eq. 1 with the Davis form of w0), solved by scipy (rtol 1e-12).
+    The FMU's RK4 at h <= 0.2 s on a resistance changing over v / |dv/dt| ~ 1000 s errs by
+    ~(h / 1000 s)^4 relative per step: 1e-9 m/s and 1e-7 m after 60 s are far above that.
+    Energy (eq. 9): no traction, no regeneration, auxiliary e0 t exactly."""
+    from scipy.integrate import solve_ivp
+
+    fmu = _Fmu(path, v0=80.0, s0=1000.0)
+    try:
+        fmu.step(0.2, 300)
+        m = fmu.start("mass") * (1.0 + fmu.start("rotating_mass_factor"))
+        a, b, c = (fmu.start(n) for n in ("davis_a", "davis_b", "davis_c"))
+        sol = solve_ivp(lambda t, y: [-(a + b * y[0] + c * y[0] ** 2) / m, y[0]], (0.0, 60.0),
+                        [80.0, 1000.0], rtol=1e-12, atol=1e-12, method="DOP853")
+        v, s = sol.y[:, -1]
+        assert abs(fmu.get("v") - v) < 1e-9 and abs(fmu.get("s") - s) < 1e-7
+        assert 70.0 < v < 78.0  # it did coast (6.3 m/s lost to resistance)
+        assert fmu.get("energy_traction") == 0.0 and fmu.get("energy_regen") == 0.0
+        assert fmu.get("energy_aux") == pytest.approx(fmu.start("aux_power") * 60.0, rel=1e-12)
+    finally:
+        fmu.close()
+
+
+@_checks("Crh3Gpc", "Crh3Rmpc")
+def _crh3_tracker_first_event(path: Path) -> None:
+    """At rest at the origin at t = 0 both seed 003 trackers start the profile's accelerating
+    phase: phase 1, a traction demand within the plant's limit and the comfort limit, force =
+    M (1 + gamma) u (the interface's definition), speed_error = v - v_ref."""
+    fmu = _Fmu(path)
+    try:
+        fmu.set("v", 0.0)
+        fmu.set("s", 0.0)
+        fmu.set("traction_limit", 6.0e5)
+        fmu.set("brake_limit", 6.0e5)
+        u = fmu.get("accel_demand")
+        m = fmu.start("mass") * (1.0 + fmu.start("rotating_mass_factor"))
+        assert fmu.get("phase") == 1.0
+        assert 0.0 < u <= fmu.start("accel_max")
+        assert fmu.get("force") == pytest.approx(m * u, rel=1e-12)
+        assert fmu.get("force") <= 6.0e5
+        assert fmu.get("speed_error") == pytest.approx(-fmu.get("v_ref"), abs=1e-12)
+    finally:
+        fmu.close()
+
+
 def test_every_fmu_has_a_value_check(built_fmus):
     assert set(built_fmus) == set(VALUE_CHECKS)
 
@@ -410,3 +457,4 @@ def test_fmu_value(built_fmus, identifier, tmp_path):
     check = VALUE_CHECKS[identifier]
     args = (built_fmus[identifier].path, tmp_path)
     check(*args[:check.__code__.co_argcount])
+
