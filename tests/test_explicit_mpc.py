@@ -22,7 +22,6 @@ from controllers.hybrid.hybrid_mpc import chain_model
 from controllers.hybrid.miqp import parse_blocks
 from plants.emu import emu_config
 from plants.route import load_reference
-from tests.fmi_state_helpers import FmuInstance, rerun_after_restore
 
 REF = "seed004_crh3_reference"
 LAW = ExplicitLaw.load(regions_path("seed004_empc_crh3_3car"))
@@ -136,32 +135,6 @@ def test_empc_fmu_through_the_master(built_fmus) -> None:
     frame = result.frame
     assert (frame["plant.applied_force[2]"] == 0.0).all()
     assert math.isclose(frame["plant.v"].iloc[-1], 30.0, abs_tol=0.2)
-
-
-def test_empc_fmu_serialized_state_reproduces_the_rest_of_the_run(built_fmus) -> None:
-    """Emu3 + Empc3: serialize both states mid-run, finish, restore, rerun: identical."""
-    plant = FmuInstance(str(built_fmus["Emu3"].path), "Emu3",
-                        {"configuration": "crh3_3car", "route": "seed004_level"})
-    ctl = FmuInstance(str(built_fmus["Empc3"].path), "Empc3", {"reference": REF})
-    meas = ([f"v[{i}]" for i in (1, 2, 3)] + ["s", "coupler_force[1]", "coupler_force[2]"]
-            + [f"traction_limit[{i}]" for i in (1, 2, 3)]
-            + [f"brake_limit[{i}]" for i in (1, 2, 3)])
-    forces = [f"force[{i}]" for i in (1, 2, 3)]
-
-    def step(k: int) -> list[float]:
-        ctl.set(meas, plant.get(meas))
-        u = ctl.get(forces)
-        plant.set(forces, u)
-        plant.fmu.doStep(currentCommunicationPoint=float(k), communicationStepSize=1.0)
-        ctl.fmu.doStep(currentCommunicationPoint=float(k), communicationStepSize=1.0)
-        return plant.get(["v", "s", "coupler_force[1]"]) + u
-
-    first, second = rerun_after_restore([plant, ctl], step, 60, 110)
-    assert first == second
-    assert first[-1][0] == pytest.approx(30.0, abs=1.0)
-    for inst in (plant, ctl):
-        inst.fmu.terminate()
-        inst.fmu.freeInstance()
 
 
 @pytest.mark.slow
