@@ -53,6 +53,8 @@ def _run(plant: Crh3Train, t_end: float, step: float) -> float:
 def test_envelope_is_constant_force_then_constant_power() -> None:
     p = Crh3Params()
     v_corner = p.max_traction_power / p.max_traction_force  # 31.1 m/s = 112 km/h
+    # rel=1e-12 below: each side is a handful of IEEE roundings of O(1)-conditioned products and
+    # quotients (<= ~10 ulp = 2e-15 relative), so 1e-12 leaves ~500x margin on any CPU
     assert p.traction_limit(0.5 * v_corner) == p.max_traction_force
     assert p.traction_limit(2.0 * v_corner) == pytest.approx(0.5 * p.max_traction_force,
                                                              rel=1e-12)
@@ -78,7 +80,9 @@ def test_first_order_lag_of_the_force_is_exact() -> None:
             plant.advance(to_ticks(k * step), to_ticks(step), {"force": u})
             k += 1
         expected = u * (1.0 - math.exp(-1.0 / p.traction_time_constant))
-        # the lag is solved in closed form: only rounding separates the two
+        # the lag is solved in closed form per step: at most 20 steps, each a few roundings and
+        # one exp (<= 1 ulp) of a contraction, so <= ~100 ulp = 2e-14 relative apart: 1e-12
+        # leaves ~50x margin on any CPU
         assert plant.applied_force == pytest.approx(expected, rel=1e-12)
 
 
@@ -144,12 +148,12 @@ def test_energy_account_closes_to_the_integration_bound(length: float) -> None:
     assert abs(imbalance) <= bound, (imbalance, bound)
     assert bound < 5e-4 * plant.work_traction  # a real check against the works (7.6 GJ)
     e = plant.outputs()
-    assert e["energy_traction"] == pytest.approx(plant.work_traction / p.motor_efficiency,
-                                                 rel=1e-15)
-    assert e["energy_regen"] == pytest.approx(p.regen_efficiency * plant.work_brake, rel=1e-15)
-    assert e["energy_aux"] == pytest.approx(p.aux_power * 800.0, rel=1e-15)
-    assert e["energy_net"] == pytest.approx(e["energy_traction"] - e["energy_regen"]
-                                            + e["energy_aux"], rel=1e-15)
+    # the eq. 9 terms are these very operations on the kept works (t - t0 = 800 s exactly in
+    # integer ns), so IEEE arithmetic gives identical doubles on any CPU: compared exactly
+    assert e["energy_traction"] == plant.work_traction / p.motor_efficiency
+    assert e["energy_regen"] == p.regen_efficiency * plant.work_brake
+    assert e["energy_aux"] == p.aux_power * 800.0
+    assert e["energy_net"] == e["energy_traction"] - e["energy_regen"] + e["energy_aux"]
     assert plant.work_brake > 0.0 and plant.work_resistance > 0.0
 
 
@@ -174,6 +178,8 @@ def test_outputs_are_consistent() -> None:
     assert out["brake_limit"] == p.brake_limit(plant.v) > 0.0
     assert out["speed_limit"] == pytest.approx(350.0 * KMH)
     expected_a = (out["applied_force"] - p.davis.force(plant.v)) / p.effective_mass
+    # a and power: a few roundings of O(1)-conditioned terms (no cancellation at 2e5 N traction
+    # against ~5e4 N resistance): ~10 ulp, so rel=1e-12 has ~500x margin on any CPU
     assert out["a"] == pytest.approx(expected_a, rel=1e-12)  # level line at 1 km
     assert out["power"] == pytest.approx(out["applied_force"] * plant.v / p.motor_efficiency
                                          + p.aux_power, rel=1e-12)
