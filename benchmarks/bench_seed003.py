@@ -113,7 +113,7 @@ def main() -> None:
     print(f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
     ctl, problems = record_problems(args.seconds)
     t = np.array(ctl.law.timing.recent) * 1e3  # the latest 1001 events (SolveTimes)
-    c = np.array(ctl.law.cpu_recent) * 1e3
+    c = np.array(ctl.law.timing.recent_cpu) * 1e3
     print(f"closed loop (cores, eco, {args.seconds} s): LMI per event wall median "
           f"{np.median(t):.2f} ms, p99 {np.percentile(t, 99):.2f} ms; CPU median "
           f"{np.median(c):.2f} ms, p99 {np.percentile(c, 99):.2f} ms; failures "

@@ -105,9 +105,10 @@ def test_window_bounds_the_memory():
     for x in (0.0, 1.0, 2.0, 3.0, 4.0):
         times.add(x, cpu_s=0.5)
     assert list(times.recent) == [2.0, 3.0, 4.0]
+    assert list(times.recent_cpu) == [0.5, 0.5, 0.5]
     assert times.diagnostics() == pytest.approx({
         "qp_solve_time_median": 3.0, "qp_solve_time_total": 10.0, "qp_solve_events": 5,
-        "qp_cpu_time_total": 2.5})
+        "qp_cpu_time_total": 2.5, "qp_cpu_time_median": 0.5})
 
 
 def test_bundled_with_every_fmu(built_fmus):

@@ -27,8 +27,6 @@ converts from and to m/s and m/s^2 (``u_unit = 100 (1 + gamma) u / g``).
 
 from __future__ import annotations
 
-import statistics
-from collections import deque
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, ClassVar
@@ -145,7 +143,6 @@ class RobustMpcLaw(StatefulCore):
         # run-dependent solve times: bounded, outside the state and the outputs (issue 12),
         # reported once at fmi2Terminate (cosim.fmu.diagnostics)
         self.timing = SolveTimes()
-        self.cpu_recent: deque[float] = deque(maxlen=self.timing.recent.maxlen)
         self.lmi_failures = 0
         self.last_status = ""
 
@@ -189,7 +186,6 @@ class RobustMpcLaw(StatefulCore):
         sol = self.lmi.solve(x_lmi, [self.vertex(j) for j in self.vertex_indices(i)])
         self.lmi_solves += 1
         self.timing.add(sol.solve_time, sol.cpu_time)
-        self.cpu_recent.append(sol.cpu_time)
         self.last_status = sol.status
         if sol.ok:
             self.gain = [float(sol.F[0, 0]), float(sol.F[0, 1])]
@@ -215,11 +211,8 @@ class RobustMpcLaw(StatefulCore):
 
     def diagnostics(self) -> dict[str, float]:
         """LMI solve times of the events computed by this instance (run-dependent): wall
-        median and totals, and the median CPU time per event."""
-        out = self.timing.diagnostics()
-        if self.cpu_recent:
-            out["lmi_cpu_time_median"] = statistics.median(self.cpu_recent)
-        return out
+        and CPU medians per event and totals."""
+        return self.timing.diagnostics()
 
 
 @dataclass(frozen=True)
