@@ -505,6 +505,20 @@ def _emu_neutral(x, offsets, lengths, nstarts, nvalues, hint_n, cp, out):
 
 
 @njit
+def _affine(phi, gamma, state, f, out):
+    """out = phi state + gamma f (the exact ZOH step of the EMU chain), each row summed in
+    index order: the same operations for the half and the whole step."""
+    for r in range(phi.shape[0]):
+        acc = 0.0
+        for c in range(phi.shape[1]):
+            acc += phi[r, c] * state[c]
+        acc2 = 0.0
+        for c in range(gamma.shape[1]):
+            acc2 += gamma[r, c] * f[c]
+        out[r] = acc + acc2
+
+
+@njit
 def _emu_limits(v, neutral, ft, pt, fb, pb, hi, lo):
     for i in range(v.size):
         va = max(abs(v[i]), 1e-9)
@@ -593,28 +607,14 @@ def emu_steps(x, v, sc, u, h, noise, phi, gamma, hphi, hgamma, m, offsets, lengt
         for i in range(n):
             applied[i] = max(min(u[i], hi[i]), -lo[i])
         _emu_force(applied, v, route, noise[s], da, db, dc, standstill, f)
-        for r in range(2 * n):
-            acc = 0.0
-            for c in range(2 * n):
-                acc += hphi[r, c] * state[c]
-            acc2 = 0.0
-            for c in range(n):
-                acc2 += hgamma[r, c] * f[c]
-            mid[r] = acc + acc2
+        _affine(hphi, hgamma, state, f, mid)
         for i in range(n):
             v_mid[i] = mid[n + i]
         _emu_limits(v_mid, neutral, ft, pt, fb, pb, hi, lo)
         for i in range(n):
             applied[i] = max(min(u[i], hi[i]), -lo[i])
         _emu_force(applied, v_mid, route, noise[s], da, db, dc, standstill, f)
-        for r in range(2 * n):
-            acc = 0.0
-            for c in range(2 * n):
-                acc += phi[r, c] * state[c]
-            acc2 = 0.0
-            for c in range(n):
-                acc2 += gamma[r, c] * f[c]
-            new[r] = acc + acc2
+        _affine(phi, gamma, state, f, new)
         trac = 0.0
         regen = 0.0
         mv_before = 0.0
