@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import ast
 import atexit
+import functools
 import hashlib
 import importlib
 import inspect
@@ -137,7 +138,30 @@ def _wrapper_modules() -> list[str]:
 
 
 def catalog() -> dict[str, FmuSpec]:
-    """All FMUs this project builds, by identifier (wrapper class name without 'Fmu')."""
+    """All FMUs this project builds, by identifier (wrapper class name without 'Fmu').
+
+    Read from the wrapper modules' source (``*_fmu.py`` under plants/ and controllers/: every
+    top-level class whose name ends in ``Fmu``), without importing them: importing every
+    wrapper costs ~1 s (cvxpy, scipy.stats), and a run, sweep or reproduction needs one or two
+    of them. :func:`_imported_catalog` is the check by import (a test compares the two)."""
+    specs: dict[str, FmuSpec] = {}
+    for mod_name in _wrapper_modules():
+        path = _module_file(mod_name)
+        tree = ast.parse(path.read_text(), filename=str(path))
+        for node in tree.body:
+            if isinstance(node, ast.ClassDef) and node.name.endswith("Fmu"):
+                identifier = node.name[:-3]
+                doc = (ast.get_docstring(node) or identifier).strip().splitlines()[0]
+                if identifier in specs:
+                    raise ValueError(f"two FMUs named {identifier}: {specs[identifier].module} "
+                                     f"and {mod_name}")
+                specs[identifier] = FmuSpec(identifier, mod_name, node.name, doc)
+    return specs
+
+
+def _imported_catalog() -> dict[str, FmuSpec]:
+    """The catalog found by importing every wrapper module: each slave class defined there
+    with variables (the reference for :func:`catalog`)."""
     from cosim.fmu.slave import CoreSlave
 
     specs: dict[str, FmuSpec] = {}
@@ -148,9 +172,6 @@ def catalog() -> dict[str, FmuSpec]:
                     and obj.variables):
                 identifier = name[:-3] if name.endswith("Fmu") else name
                 doc = (obj.__doc__ or identifier).strip().splitlines()[0]
-                if identifier in specs:
-                    raise ValueError(f"two FMUs named {identifier}: {specs[identifier].module} "
-                                     f"and {mod_name}")
                 specs[identifier] = FmuSpec(identifier, mod_name, name, doc)
     return specs
 
@@ -167,7 +188,13 @@ def _module_file(name: str) -> Path | None:
     return None
 
 
-def _imports_of(path: Path, module: str) -> set[str]:
+def _imports_of(path: Path, module: str) -> frozenset[str]:
+    """Project modules imported by ``path`` (cached per file and modification time)."""
+    return _imports_cached(path, module, path.stat().st_mtime_ns)
+
+
+@functools.cache
+def _imports_cached(path: Path, module: str, mtime_ns: int) -> frozenset[str]:
     tree = ast.parse(path.read_text(), filename=str(path))
     package = module if path.name == "__init__.py" else module.rpartition(".")[0]
     found: set[str] = set()
@@ -181,7 +208,7 @@ def _imports_of(path: Path, module: str) -> set[str]:
                 base = ".".join(anchor + ([base] if base else []))
             found.add(base)
             found.update(f"{base}.{alias.name}" for alias in node.names)
-    return {m for m in found if _module_file(m) is not None}
+    return frozenset(m for m in found if _module_file(m) is not None)
 
 
 def bundled_files(module: str) -> list[Path]:

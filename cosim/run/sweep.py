@@ -282,7 +282,11 @@ def _execute(jobs: list[tuple[str, dict[str, Any]]], workers: int | None, finish
         return
     with ProcessPoolExecutor(max_workers=workers, mp_context=_pool_context(jobs),
                              initializer=_worker_init) as pool:
-        job_of = {pool.submit(_run_point, path, point): (path, point) for path, point in jobs}
+        # the last grid points first: along a swept horizon or resolution the cost grows, so
+        # the long runs start first and the short ones fill the end (the workers finish
+        # together; rows are put back in grid order by the caller)
+        job_of = {pool.submit(_run_point, path, point): (path, point)
+                  for path, point in reversed(jobs)}
         pending = set(job_of)
         stopping = False
         while pending:
