@@ -41,8 +41,6 @@ from typing import ClassVar
 
 import daqp
 import numpy as np
-import osqp
-import scipy.sparse as sp
 
 QP_SOLVERS = ("daqp", "osqp")
 _OSQP_SOLVED = "solved"
@@ -203,6 +201,9 @@ class HorizonQP:
         """A fresh solver workspace for this QP (OSQP, or DAQP with H factorised once)."""
         nu, eps, max_iter = self.nu, self._eps, self._max_iter
         if self.solver_name == "osqp":
+            import osqp  # here, not at the top: with DAQP (the default) a process never
+            import scipy.sparse as sp  # pays its ~0.1 s import (jinja2, scipy.sparse)
+
             self.solver = osqp.OSQP()
             self.solver.setup(sp.csc_matrix(np.triu(2.0 * self.Hhalf)), np.zeros(nu),
                               sp.csc_matrix(self.Acon), -np.ones(self.n_con),
