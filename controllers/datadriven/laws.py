@@ -35,6 +35,9 @@ of assumption 2 in eq. 18) and ``theta`` are not given in the paper: see the def
 
 Anti-windup: the sums ``E``, ``F`` are not advanced at a sample where every unit's input
 saturates in the direction the law asked for (the train can no longer act on the surface).
+ISMPC's QP keeps its moves inside the box, so its inputs stop *on* the bound: an input within
+``BOUND_TOL`` of its bound counts as saturated (before, ISMPC's sums wound up over every
+power-limited stretch, to ``s = -31 km/h`` at zero error, and it overshot by 4 km/h after).
 Freezing them when only some units saturate left a steady error: the end units sat at their
 power limit while the middle unit still had room, and the integral action stopped.
 
@@ -136,6 +139,7 @@ class SlidingLaw(Law):
     """Integral sliding surface and equivalent control shared by ISMC and ISMPC."""
 
     state_fields = ("est", "u", "E", "F", "s")
+    BOUND_TOL = 1e-9  # m/s2: an input this close to its bound counts as saturated
 
     def __init__(self, ffdl: FfdlParams, surface: SurfaceParams, n: int) -> None:
         super().__init__(ffdl, n, disturbance=surface.disturbance_estimate)
@@ -172,7 +176,11 @@ class SlidingLaw(Law):
 
     def _finish(self, u_wanted: np.ndarray, lo, hi) -> np.ndarray:
         u = np.clip(u_wanted, lo, hi)
-        pushed = ((u_wanted > hi) & (self.s < 0)) | ((u_wanted < lo) & (self.s > 0))
+        # at or beyond the bound: ISMPC's QP returns moves on the bound itself (its box
+        # constraints), ISMC's law goes beyond it; both are "pushed"
+        tol = self.BOUND_TOL
+        pushed = (((u_wanted >= hi - tol) & (self.s < 0))
+                  | ((u_wanted <= lo + tol) & (self.s > 0)))
         if not np.all(pushed):
             self.E, self.F = self._next
         return self._apply(u)
