@@ -229,8 +229,12 @@ class IsmpcParams:
     surface: SurfaceParams = group(SurfaceParams(alpha=0.5), "")
     horizon: int = param(10, "1", "N: prediction and control horizon (eq. 57)", min=1,
                          max=50, name="N")
-    theta: float = param(0.05, "1", "theta: weight of ||U||^2 in J_2 (eq. 66; not given in "
-                         "the paper)", min=0.0)
+    theta: float = param(10.0, "1", "theta: weight of ||U||^2 in J_2 (eq. 66; not given in "
+                         "the paper; chosen by a sweep, README seed 001)", min=0.0)
+    error_prediction: bool = param(True, description="P_hat of eqs. 70-72: every stage k of "
+                                   "the MPC's prediction adds k p_hat(t-1), p_hat(t-1) = "
+                                   "dd_hat(t) - dd_hat(t-1) (the paper's law); false: P_hat = "
+                                   "0 (a diagnostic, not the paper's law)")
 
 
 class Ismpc(SlidingLaw):
@@ -265,7 +269,8 @@ class Ismpc(SlidingLaw):
         gain = self._gain  # the truncated block of equivalent() and its SVD
         Phi2 = gain.M
         # S = Lambda s + Theta U + Psi P_hat; stage k (1..N) of the free part: s + k p_hat
-        offset = s + self._stages * self.est.p_hat
+        p_hat = self.est.p_hat if self.p.error_prediction else np.zeros(self.n)
+        offset = s + self._stages * p_hat
         tails = np.cumsum(offset[::-1], axis=0)[::-1]  # sum_{k >= j} offset_k
         grad = tails @ Phi2  # Theta' (Lambda s + Psi P) as (N, n)
         # unconstrained minimiser (eq. 72) in the eigenvectors of the Kronecker factors of
