@@ -33,6 +33,14 @@ As ``theta -> inf`` the MPC moves vanish (``|U| <= |Theta'(Lambda s + Psi P)| / 
 ISMPC is its equivalent control alone (ISMC with ``beta = 0``). ``b`` (the Lipschitz constant
 of assumption 2 in eq. 18) and ``theta`` are not given in the paper: see the defaults.
 
+First-move gains of the MPC (N = 10, scalar Phi_2 = 0.72): on ``s`` 0.92 / 0.51 / 0.20 at
+``theta`` = 0.05 / 1 / 10, on ``p_hat`` 1.00 / 1.00 / 0.82. ISMC's layer pulls ``s`` back by
+``beta / Delta = 0.5`` per sample and has no ``p_hat`` term. ``p_hat`` (eq. 70) is a second
+difference of ``dd_hat``, which holds the model error ``(Phi_2 - Phi_2_hat) du(t-1)`` as well as
+the disturbance: fed back with gain ~1 it excites the loop (forces jumping 50-88 kN at start-up
+on a smooth disturbance where the true ``p`` is ~0), and on white noise ``p_hat`` is
+anti-correlated with ``p``. ``error_prediction = false`` (``P_hat = 0``) is the diagnostic.
+
 Anti-windup: the sums ``E``, ``F`` are not advanced at a sample where every unit's input
 saturates in the direction the law asked for (the train can no longer act on the surface).
 ISMPC's QP keeps its moves inside the box, so its inputs stop *on* the bound: an input within
