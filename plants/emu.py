@@ -48,6 +48,7 @@ import math
 from dataclasses import dataclass, field, replace
 
 import numpy as np
+from scipy import special
 from scipy.linalg import expm
 
 from cosim.fmu.declare import Declared, Var, build, param, parameters
@@ -98,6 +99,10 @@ class EmuParams:
     disturbance_correlation_time: float = param(
         0.0, "s", "tau of a coloured disturbance, autocorrelation exp(-|dt|/tau) (0: white "
         "noise)", min=0.0)
+    disturbance_smooth: bool = param(False, description="coloured disturbance with a Gaussian "
+                                     "spectrum, autocorrelation exp(-dt^2/(2 tau^2)) (smooth: "
+                                     "its second differences over a sample are negligible, "
+                                     "seed 001 assumption 3, eq. 28) instead of exp(-|dt|/tau)")
 
     @property
     def n(self) -> int:
@@ -202,21 +207,30 @@ COLOURED_COMPONENTS = 64
 
 
 @functools.lru_cache(maxsize=16)
-def _coloured_spectrum(seed: int, n: int, tau: float) -> tuple[np.ndarray, np.ndarray]:
+def _coloured_spectrum(seed: int, n: int, tau: float,
+                       smooth: bool = False) -> tuple[np.ndarray, np.ndarray]:
     rng = np.random.default_rng([seed, 0xC010])
     u = rng.random((n, COLOURED_COMPONENTS))
-    omega = np.tan(0.5 * np.pi * u) / tau  # half-Cauchy with scale 1/tau: Lorentzian spectrum
+    if smooth:  # |N(0, 1/tau^2)|: Gaussian spectrum, the same uniforms through its inverse CDF
+        omega = np.abs(special.ndtri(0.5 + 0.5 * u)) / tau
+    else:
+        omega = np.tan(0.5 * np.pi * u) / tau  # half-Cauchy, scale 1/tau: Lorentzian spectrum
     phase = rng.random((n, COLOURED_COMPONENTS)) * 2.0 * np.pi
     return omega, phase
 
 
-def coloured_noise(seed: int, n: int, t: float, tau: float) -> np.ndarray:
+def coloured_noise(seed: int, n: int, t: float, tau: float, smooth: bool = False) -> np.ndarray:
     """``n`` independent unit-variance Gaussian-like signals at time ``t`` (s) with
     autocorrelation ``exp(-|dt| / tau)`` (an Ornstein-Uhlenbeck spectrum): the random-phase
     sum ``sqrt(2/K) sum_k cos(omega_k t + phi_k)`` of K = 64 components whose frequencies are
     drawn from the Lorentzian spectrum (half-Cauchy, scale 1/tau; ``E cos(omega s) =
-    exp(-|s|/tau)``). A function of (seed, t) only: no state, any step size."""
-    omega, phase = _coloured_spectrum(int(seed), int(n), float(tau))
+    exp(-|s|/tau)``). A function of (seed, t) only: no state, any step size.
+
+    ``smooth``: frequencies from a Gaussian spectrum instead (``omega ~ |N(0, 1/tau^2)|``,
+    ``E cos(omega s) = exp(-s^2 / (2 tau^2))``): no fast components, so over a sample ``T``
+    the second difference is of order ``(T / tau)^2`` of the level (seed 001 assumption 3,
+    eq. 28), where the Ornstein-Uhlenbeck signal's increments are nearly white."""
+    omega, phase = _coloured_spectrum(int(seed), int(n), float(tau), bool(smooth))
     return math.sqrt(2.0 / COLOURED_COMPONENTS) * np.cos(omega * t + phase).sum(axis=1)
 
 
@@ -401,7 +415,8 @@ class Emu(StatefulCore, Declared):
             if p.disturbance_correlation_time > 0:
                 unit = coloured_noise(p.disturbance_seed, self.n,
                                       to_seconds(index * self._noise_ticks),
-                                      p.disturbance_correlation_time)
+                                      p.disturbance_correlation_time,
+                                      smooth=p.disturbance_smooth)
             else:
                 unit = np.random.default_rng([p.disturbance_seed, index]).standard_normal(self.n)
             self._noise_cache = (index, self.m * p.disturbance_accel_std * unit)

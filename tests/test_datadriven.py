@@ -306,3 +306,20 @@ def test_closed_loop_state_save_restore_reproduces_rest(built_fmus, identifier: 
     for inst in (plant, ctl):
         inst.fmu.terminate()
         inst.fmu.freeInstance()
+
+
+@pytest.mark.parametrize("law", [Ismpc(IsmpcParams(), 3), Ismc(IsmcParams(), 3)],
+                         ids=["ISMPC", "ISMC"])
+def test_sliding_sums_freeze_while_every_input_is_on_its_bound(law) -> None:
+    """Anti-windup: output 10 km/h below the reference with the input box [-0.01, 0.01] m/s2
+    (the units at their power limit): every input ends on its upper bound (ISMPC's QP puts it
+    exactly there, ISMC's law beyond it), so E and F stay 0; with room again they move."""
+    y, y_r = np.full(3, 90.0), np.full(3, 100.0)
+    lo, hi = np.full(3, -0.01), np.full(3, 0.01)
+    for _ in range(20):
+        u = law.step(y, y_r, y_r, lo, hi)
+        y = y + 0.72 * 0.001
+    assert u == pytest.approx(hi, abs=law.BOUND_TOL)  # the bound up to rounding of the moves
+    assert np.abs(law.E).max() == 0.0 and np.abs(law.F).max() == 0.0
+    law.step(y, y_r, y_r, np.full(3, -1e3), np.full(3, 1e3))  # room enough
+    assert np.all(law.E < -9.0)

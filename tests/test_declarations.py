@@ -56,7 +56,8 @@ ADDED_VARIABLES = {
            "resistance_estimate"} for f in ("StopMpc", "StopRmpc", "StopRsmpc")},
     "BrakeDelayTrain": {"grade_scale"},  # issue 11: grade mismatch in the perturbation study
     "StopPid": {"hold_at_stop_point"},  # issue 11: the full-brake rule made a parameter
-    **{f: {"disturbance_correlation_time"} for f in ("Emu3", "Emu8")},  # issue 15
+    **{f: {"disturbance_correlation_time", "disturbance_smooth"}  # issue 15
+       for f in ("Emu3", "Emu8")},
     # issue 16: the shared freight blending's electric-brake final approach
     "FreightPid": {"final_approach_distance", "stop_tolerance"},
 }

@@ -45,3 +45,26 @@ def test_coloured_disturbance_is_a_function_of_seed_and_time_only() -> None:
 def test_negative_correlation_time_is_rejected() -> None:
     with pytest.raises(ValueError, match="disturbance_correlation_time"):
         Emu(emu_config("crh380a_3unit", disturbance_correlation_time=-1.0), Route.flat())
+
+
+def test_smooth_disturbance_has_the_gaussian_correlation_and_small_second_differences() -> None:
+    """``smooth``: E x(t) x(t+s) = E cos(omega s) = exp(-s^2 / (2 tau^2)) (same ensemble and
+    4-sigma tolerances as above), and the second difference over T = 0.2 s (assumption 3, eq.
+    28) has E (d2 x)^2 = 6 - 8 r(T) + 2 r(2T) ~ 3 (T / tau)^4, far below the Ornstein-Uhlenbeck
+    signal's 4 T / tau (its increments are nearly white; its 64 frequencies cover the tail
+    sparsely, hence 0.1 of it)."""
+    tau, t0, T = 10.0, 1234.5, 0.2
+    def at(t: float, smooth: bool) -> np.ndarray:
+        return np.concatenate([coloured_noise(seed, 3, t, tau, smooth=smooth)
+                               for seed in range(300)])
+
+    x0 = at(t0, True)
+    assert np.mean(x0**2) == pytest.approx(1.0, abs=0.2)
+    for lag in (2.0, tau, 2 * tau):
+        assert np.mean(x0 * at(t0 + lag, True)) == pytest.approx(
+            math.exp(-lag**2 / (2 * tau**2)), abs=0.12)
+    def d2(smooth: bool) -> float:
+        x = [at(t0 + k * T, smooth) for k in range(3)]
+        return float(np.mean((x[2] - 2 * x[1] + x[0]) ** 2))
+    assert d2(True) < 10 * 3 * (T / tau) ** 4   # ensemble spread of the 64 frequencies
+    assert d2(False) > 0.1 * 4 * T / tau

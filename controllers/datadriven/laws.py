@@ -33,8 +33,19 @@ As ``theta -> inf`` the MPC moves vanish (``|U| <= |Theta'(Lambda s + Psi P)| / 
 ISMPC is its equivalent control alone (ISMC with ``beta = 0``). ``b`` (the Lipschitz constant
 of assumption 2 in eq. 18) and ``theta`` are not given in the paper: see the defaults.
 
+First-move gains of the MPC (N = 10, scalar Phi_2 = 0.72): on ``s`` 0.92 / 0.51 / 0.20 at
+``theta`` = 0.05 / 1 / 10, on ``p_hat`` 1.00 / 1.00 / 0.82. ISMC's layer pulls ``s`` back by
+``beta / Delta = 0.5`` per sample and has no ``p_hat`` term. ``p_hat`` (eq. 70) is a second
+difference of ``dd_hat``, which holds the model error ``(Phi_2 - Phi_2_hat) du(t-1)`` as well as
+the disturbance: fed back with gain ~1 it excites the loop (forces jumping 50-88 kN at start-up
+on a smooth disturbance where the true ``p`` is ~0), and on white noise ``p_hat`` is
+anti-correlated with ``p``. ``error_prediction = false`` (``P_hat = 0``) is the diagnostic.
+
 Anti-windup: the sums ``E``, ``F`` are not advanced at a sample where every unit's input
 saturates in the direction the law asked for (the train can no longer act on the surface).
+ISMPC's QP keeps its moves inside the box, so its inputs stop *on* the bound: an input within
+``BOUND_TOL`` of its bound counts as saturated (before, ISMPC's sums wound up over every
+power-limited stretch, to ``s = -31 km/h`` at zero error, and it overshot by 4 km/h after).
 Freezing them when only some units saturate left a steady error: the end units sat at their
 power limit while the middle unit still had room, and the integral action stopped.
 
@@ -136,6 +147,7 @@ class SlidingLaw(Law):
     """Integral sliding surface and equivalent control shared by ISMC and ISMPC."""
 
     state_fields = ("est", "u", "E", "F", "s")
+    BOUND_TOL = 1e-9  # m/s2: an input this close to its bound counts as saturated
 
     def __init__(self, ffdl: FfdlParams, surface: SurfaceParams, n: int) -> None:
         super().__init__(ffdl, n, disturbance=surface.disturbance_estimate)
@@ -172,7 +184,11 @@ class SlidingLaw(Law):
 
     def _finish(self, u_wanted: np.ndarray, lo, hi) -> np.ndarray:
         u = np.clip(u_wanted, lo, hi)
-        pushed = ((u_wanted > hi) & (self.s < 0)) | ((u_wanted < lo) & (self.s > 0))
+        # at or beyond the bound: ISMPC's QP returns moves on the bound itself (its box
+        # constraints), ISMC's law goes beyond it; both are "pushed"
+        tol = self.BOUND_TOL
+        pushed = (((u_wanted >= hi - tol) & (self.s < 0))
+                  | ((u_wanted <= lo + tol) & (self.s > 0)))
         if not np.all(pushed):
             self.E, self.F = self._next
         return self._apply(u)
@@ -221,8 +237,12 @@ class IsmpcParams:
     surface: SurfaceParams = group(SurfaceParams(alpha=0.5), "")
     horizon: int = param(10, "1", "N: prediction and control horizon (eq. 57)", min=1,
                          max=50, name="N")
-    theta: float = param(0.05, "1", "theta: weight of ||U||^2 in J_2 (eq. 66; not given in "
-                         "the paper)", min=0.0)
+    theta: float = param(10.0, "1", "theta: weight of ||U||^2 in J_2 (eq. 66; not given in "
+                         "the paper; chosen by a sweep, README seed 001)", min=0.0)
+    error_prediction: bool = param(True, description="P_hat of eqs. 70-72: every stage k of "
+                                   "the MPC's prediction adds k p_hat(t-1), p_hat(t-1) = "
+                                   "dd_hat(t) - dd_hat(t-1) (the paper's law); false: P_hat = "
+                                   "0 (a diagnostic, not the paper's law)")
 
 
 class Ismpc(SlidingLaw):
@@ -257,7 +277,8 @@ class Ismpc(SlidingLaw):
         gain = self._gain  # the truncated block of equivalent() and its SVD
         Phi2 = gain.M
         # S = Lambda s + Theta U + Psi P_hat; stage k (1..N) of the free part: s + k p_hat
-        offset = s + self._stages * self.est.p_hat
+        p_hat = self.est.p_hat if self.p.error_prediction else np.zeros(self.n)
+        offset = s + self._stages * p_hat
         tails = np.cumsum(offset[::-1], axis=0)[::-1]  # sum_{k >= j} offset_k
         grad = tails @ Phi2  # Theta' (Lambda s + Psi P) as (N, n)
         # unconstrained minimiser (eq. 72) in the eigenvectors of the Kronecker factors of
