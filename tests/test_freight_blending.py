@@ -159,23 +159,13 @@ def test_approach_force_is_finite_when_coasting_would_not_stop_within_the_horizo
 def _reference_predicted_stop(blend: FreightBlending, v: float, s: float, release: bool,
                               share: float, released_for: float, h: float = 0.25,
                               horizon: float = 180.0) -> float:
-    """The stop prediction as first written (numpy interpolation, the model's methods): the
-    reference for the inlined plain-float loop that runs in the controllers."""
+    """The stop prediction's loop as first written (numpy interpolation, the model's methods):
+    the reference for the inlined plain-float loop that runs in the controllers."""
     from plants.freight import friction_coefficient_at
 
     model, tp = blend.model, blend.p.train
-    pres = model.pressure
     n = int(horizon / h) + 1
-    if release:
-        wait = np.maximum(model.release_delay - released_for, 0.0)
-        empty = float(np.max(wait + tp.brake_release_time
-                             * np.minimum(pres / tp.max_cylinder_pressure, 1.0)))
-        n_air = min(int(empty / h) + 2, n)
-        dt = np.maximum(np.arange(n_air)[:, None] * h - wait[None, :], 0.0)
-        air_scale = np.zeros(n)
-        air_scale[:n_air] = model.evolve_pressure(pres[None, :], 0.0, dt) @ model.brake_scale
-    else:
-        air_scale = np.full(n, float(pres @ model.brake_scale))
+    air_scale = blend.air_scale_schedule(release, released_for, h, n)
     decay = np.exp(-h / tp.traction_time_constant)
     force = min(blend.force, 0.0)
     lag_steps = int(round(tp.traction_delay / h))

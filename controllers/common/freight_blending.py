@@ -209,24 +209,31 @@ class FreightBlending(StatefulCore):
         ``share`` of its limit through the eq. (15) lag (``release`` True). One mass (eq. 7)
         with the modelled resistance; explicit midpoint steps of ``h`` s (inf: not stopped
         within ``horizon`` s)."""
-        model, tp = self.model, self.p.train
-        pres = model.pressure
+        tp = self.p.train
         n = int(horizon / h) + 1
-        if release:
-            wait = np.maximum(model.release_delay - released_for, 0.0)
-            empty = float(np.max(wait + tp.brake_release_time
-                                 * np.minimum(pres / tp.max_cylinder_pressure, 1.0)))
-            n_air = min(int(empty / h) + 2, n)  # every cylinder empty from there on
-            dt = np.maximum(np.arange(n_air)[:, None] * h - wait[None, :], 0.0)
-            air_scale = np.zeros(n)
-            air_scale[:n_air] = model.evolve_pressure(pres[None, :], 0.0, dt) @ model.brake_scale
-        else:
-            air_scale = np.full(n, float(pres @ model.brake_scale))
+        air_scale = self.air_scale_schedule(release, released_for, h, n)
         decay = math.exp(-h / tp.traction_time_constant)
         force = min(self.force, 0.0)  # N, electric brake now (< 0)
         lag_steps = int(round(tp.traction_delay / h))
         return _integrate_stop(max(v, 0.0), s, h, n, air_scale.tolist(), force, decay,
                                lag_steps, share if release else None, self._stop_constants())
+
+    def air_scale_schedule(self, release: bool, released_for: float, h: float,
+                           n: int) -> np.ndarray:
+        """Air-brake force per unit friction coefficient (N) at ``k h``, k < n, for
+        :meth:`predicted_stop`: held as now, or releasing since ``released_for`` s."""
+        model, tp = self.model, self.p.train
+        pres = model.pressure
+        if not release:
+            return np.full(n, float(pres @ model.brake_scale))
+        wait = np.maximum(model.release_delay - released_for, 0.0)
+        empty = float(np.max(wait + tp.brake_release_time
+                             * np.minimum(pres / tp.max_cylinder_pressure, 1.0)))
+        n_air = min(int(empty / h) + 2, n)  # every cylinder empty from there on
+        dt = np.maximum(np.arange(n_air)[:, None] * h - wait[None, :], 0.0)
+        air_scale = np.zeros(n)
+        air_scale[:n_air] = model.evolve_pressure(pres[None, :], 0.0, dt) @ model.brake_scale
+        return air_scale
 
     def _stop_constants(self) -> tuple:
         """The plain-float constants of :func:`_integrate_stop`, made once."""
