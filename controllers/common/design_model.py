@@ -1,6 +1,8 @@
 """Discrete design models for predictive controllers; the project's one ZOH discretisation.
 
-:func:`zoh` discretises any LTI system exactly (zero-order hold, matrix exponential).
+:func:`zoh` discretises any LTI system exactly (zero-order hold, matrix exponential);
+:func:`dare` solves the discrete Riccati equation. Both keep their results in the on-disk design
+cache (:mod:`cosim.fmu.disk_cache`): a further process gets the same floats without scipy.
 :func:`brake_delay_model` builds the seed 000 delay-augmented model of eqs. (9)-(10)::
 
     x(k+1) = A x(k) + b du(k - l) + g a_r(k),   x = [a_c, u_prev, v, s]
@@ -19,14 +21,18 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.linalg import expm
+
+from cosim.fmu.disk_cache import cached_arrays, source_digest
+
+_VERSION = source_digest(__file__)
 
 
 def zoh(a_cont: np.ndarray, b_cont: np.ndarray,
         sample_time: float) -> tuple[np.ndarray, np.ndarray]:
     """Exact zero-order-hold discretisation of ``dx/dt = A x + B u`` over ``sample_time`` (s).
 
-    Returns ``(Ad, Bd)`` with ``Ad = e^{A T}``, ``Bd = int_0^T e^{A t} dt B`` (block exponential).
+    Returns ``(Ad, Bd)`` with ``Ad = e^{A T}``, ``Bd = int_0^T e^{A t} dt B`` (block exponential;
+    kept in the design cache, :mod:`cosim.fmu.disk_cache`, so a further process needs no scipy).
     """
     a_cont = np.atleast_2d(np.asarray(a_cont, dtype=float))
     b_cont = np.asarray(b_cont, dtype=float)
@@ -40,8 +46,28 @@ def zoh(a_cont: np.ndarray, b_cont: np.ndarray,
     block = np.zeros((n + m, n + m))
     block[:n, :n] = a_cont
     block[:n, n:] = b_cont
-    phi = expm(block * sample_time)
+
+    def exponential() -> tuple[np.ndarray]:
+        from scipy.linalg import expm
+
+        return (expm(block * sample_time),)
+
+    phi, = cached_arrays("zoh", _VERSION, [block, float(sample_time)], exponential)
     return phi[:n, :n], phi[:n, n:]
+
+
+def dare(a: np.ndarray, b: np.ndarray, q: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """Stabilising solution P of the discrete algebraic Riccati equation
+    ``A'PA - P - A'PB (R + B'PB)^-1 B'PA + Q = 0`` (scipy's ``solve_discrete_are``, kept in the
+    design cache like :func:`zoh`)."""
+    def solve() -> tuple[np.ndarray]:
+        from scipy.linalg import solve_discrete_are
+
+        return (solve_discrete_are(a, b, q, r),)
+
+    p, = cached_arrays("dare", _VERSION, [np.atleast_2d(a), np.atleast_2d(b), np.atleast_2d(q),
+                                          np.atleast_2d(r)], solve)
+    return p
 
 
 def delay_samples(delay: float, sample_time: float) -> int:

@@ -68,9 +68,16 @@ from pathlib import Path
 from typing import Any, ClassVar
 
 import numpy as np
-from scipy.linalg import solve_discrete_are
 
-from controllers.common.design_model import A_C, U_PREV, DesignModel, S, V, brake_delay_model
+from controllers.common.design_model import (
+    A_C,
+    U_PREV,
+    DesignModel,
+    S,
+    V,
+    brake_delay_model,
+    dare,
+)
 from controllers.common.qp import QP_SOLVERS, HorizonQP, QPResult, support_of_sum
 from controllers.common.stopping import MEASURED_SPEED_POSITION, u_max_param, u_min_param
 from controllers.mpc.terminal import robust_invariant_set
@@ -314,7 +321,7 @@ class _StopMpcBase(StatefulCore, Declared):
         m = self.model
         Q = np.diag([0.0, 0.0, params.q_speed, params.q_position])
         self.Q = Q
-        self.P = solve_discrete_are(m.A, m.b[:, None], Q, np.array([[params.r_du]]))
+        self.P = dare(m.A, m.b[:, None], Q, np.array([[params.r_du]]))
         bPb = float(m.b @ self.P @ m.b)
         self.K = -(m.b @ self.P @ m.A) / (params.r_du + bPb)  # du = K e
         self.A_cl = m.A + np.outer(m.b, self.K)

@@ -8,8 +8,9 @@ Terminal set of the tube controllers (eq. 16-18): the largest set ``O`` with ``C
 stops at the first ``k`` whose rows are all redundant for the rows already kept (an LP per
 row while the set is unbounded, HiGHS; then the maximum over its vertices, qhull); then ``O``
 is exactly the maximal RPI set. Each new row is kept only when it cuts the set, so the
-polytope stays small. Results are cached per data (the sweep workers build the
-same controller many times).
+polytope stays small. Results are cached per data, in the process (the sweep workers build the
+same controller many times) and on disk (:mod:`cosim.fmu.disk_cache`: a further process needs
+neither the LPs nor scipy's ~0.3 s of imports).
 """
 
 from __future__ import annotations
@@ -17,12 +18,16 @@ from __future__ import annotations
 from functools import lru_cache
 
 import numpy as np
-from scipy.optimize import linprog
-from scipy.spatial import HalfspaceIntersection
+
+from cosim.fmu.disk_cache import cached_arrays, source_digest
+
+_VERSION = source_digest(__file__)
 
 
 def _cut(rows: np.ndarray, rhs: np.ndarray, f: np.ndarray, bound: float) -> bool | None:
     """Does ``f e <= bound`` cut ``{rows e <= rhs}``? None if that set is empty."""
+    from scipy.optimize import linprog
+
     res = linprog(-f, A_ub=rows, b_ub=rhs, bounds=[(None, None)] * len(f), method="highs")
     if res.status == 2:
         return None
@@ -37,6 +42,9 @@ def _cut(rows: np.ndarray, rhs: np.ndarray, f: np.ndarray, bound: float) -> bool
 def _vertices(rows: np.ndarray, rhs: np.ndarray, bounded: bool) -> np.ndarray | None:
     """Vertices of ``{rows e <= rhs}`` (qhull) when it is bounded (known, or checked by LPs)
     with an interior; None while unbounded. Raises ValueError when it is empty."""
+    from scipy.optimize import linprog
+    from scipy.spatial import HalfspaceIntersection
+
     n = rows.shape[1]
     norms = np.linalg.norm(rows, axis=1)
     if bounded and np.all(rhs > 1e-9 * norms * max(1.0, np.abs(rhs).max())):
@@ -62,6 +70,8 @@ def _vertices(rows: np.ndarray, rhs: np.ndarray, bounded: bool) -> np.ndarray | 
 
 def _bounding_box(rows: np.ndarray, rhs: np.ndarray) -> np.ndarray | None:
     """``[lo, hi]`` of ``{rows e <= rhs}`` per coordinate, None while unbounded."""
+    from scipy.optimize import linprog
+
     n = rows.shape[1]
     box = np.zeros((2, n))
     for i in range(n):
@@ -92,6 +102,14 @@ def _cached(key: tuple) -> tuple[np.ndarray, np.ndarray]:
     C = np.frombuffer(c_b).reshape(c_shape)
     h = np.frombuffer(h_b).copy()
     W = np.frombuffer(w_b).reshape(w_shape)
+    rows, rhs = cached_arrays("mrpi", _VERSION, [A, C, h, W, max_steps],
+                              lambda: _maximal_rpi(A, C, h, W, max_steps))
+    return rows, rhs
+
+
+def _maximal_rpi(A: np.ndarray, C: np.ndarray, h: np.ndarray, W: np.ndarray,
+                 max_steps: int) -> tuple[np.ndarray, np.ndarray]:
+    """The recursion of the module docstring (uncached)."""
     if np.any(np.max(C @ W.T, axis=1) > h):
         raise ValueError("terminal set: the disturbance set W alone leaves the constraints")
     rows, rhs = C.copy(), h.copy()
