@@ -9,6 +9,11 @@ share one session's part of the CPUs, so at a load far above the core count a se
 gains nothing (the CPU times then show the cost of parallelism: equal CPU = no overhead).
 Optionally the same grid on ``--scheduler local-dask`` (its cluster start-up included).
 
+The MPC designs (DARE, terminal set) come from the on-disk design cache
+(:mod:`cosim.fmu.disk_cache`) once one sweep has filled it: the alternating pairs measure that
+warm case (every sweep after the first on a machine). One further pair runs each command with
+its own empty cache (``cold``: the designs computed and scipy imported in every process).
+
     python benchmarks/bench_sweep.py [--repeat N] [--dask] [--grid controller.N=3..15]
 """
 
@@ -29,13 +34,16 @@ SCENARIOS = ("seed000_stop_rmpc", "seed000_stop_rsmpc")
 GRID = "controller.N=3..15"
 
 
-def sweep_wall(workers: int, grid: str = GRID, scheduler: str | None = None
-               ) -> tuple[float, float]:
+def sweep_wall(workers: int, grid: str = GRID, scheduler: str | None = None,
+               cold: bool = False) -> tuple[float, float]:
     """(wall, CPU) seconds of one ``cosim sweep`` of both seed-000 MPC scenarios over
-    ``grid``; CPU: user + system of the command and its worker processes."""
+    ``grid``; CPU: user + system of the command and its worker processes. ``cold``: with an
+    empty design cache of its own."""
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(
         p for p in (str(ROOT), os.environ.get("PYTHONPATH", "")) if p)}
     with tempfile.TemporaryDirectory() as tmp:
+        if cold:
+            env["ATO_COSIM_CACHE"] = str(Path(tmp) / "cache")
         cmd = [sys.executable, "-m", "cosim.cli", "sweep", *SCENARIOS, "--set", grid,
                "--workers", str(workers), "--no-plot", "--out", str(Path(tmp) / "out")]
         if scheduler:
@@ -54,6 +62,7 @@ def sweep_wall(workers: int, grid: str = GRID, scheduler: str | None = None
 def speedup(repeat: int = 2, grid: str = GRID, dask: bool = False) -> dict[str, float]:
     """Median walls of workers 1 and 2 (alternating) and their ratio, with load averages."""
     load_before = os.getloadavg()[0]
+    sweep_wall(1, grid)  # fills the design cache (a first sweep on this machine)
     one, two, local_dask = [], [], []
     for _ in range(repeat):
         one.append(sweep_wall(1, grid))
@@ -65,7 +74,11 @@ def speedup(repeat: int = 2, grid: str = GRID, dask: bool = False) -> dict[str, 
            "speedup": statistics.median(a[0] / b[0] for a, b in zip(one, two)),
            "workers_1_cpu_s": statistics.median(c for _, c in one),
            "workers_2_cpu_s": statistics.median(c for _, c in two),
-           "load_before": load_before, "load_after": os.getloadavg()[0]}
+           "load_before": load_before}
+    cold_one, cold_two = sweep_wall(1, grid, cold=True), sweep_wall(2, grid, cold=True)
+    out.update({"cold_workers_1_s": cold_one[0], "cold_workers_2_s": cold_two[0],
+                "cold_speedup": cold_one[0] / cold_two[0],
+                "load_after": os.getloadavg()[0]})
     if dask:
         out["local_dask_2_s"] = statistics.median(w for w, _ in local_dask)
     return out
@@ -81,6 +94,8 @@ def main() -> None:
     print(f"cosim sweep {' '.join(SCENARIOS)} --set {args.grid}: --workers 1 "
           f"{r['workers_1_s']:.1f} s, --workers 2 {r['workers_2_s']:.1f} s, speed-up "
           f"{r['speedup']:.2f}x; CPU {r['workers_1_cpu_s']:.1f} s vs {r['workers_2_cpu_s']:.1f} s"
+          + f"; cold design cache {r['cold_workers_1_s']:.1f} s vs {r['cold_workers_2_s']:.1f} s,"
+          f" {r['cold_speedup']:.2f}x"
           + (f", local-dask (2 workers) {r['local_dask_2_s']:.1f} s"
                                     if args.dask else "")
           + f" (load {r['load_before']:.1f} -> {r['load_after']:.1f})")

@@ -179,6 +179,9 @@ def sweep_speedup(repeat: int) -> dict:
             "reference": r["workers_1_s"], "reference_name": "--workers 1 (s)",
             "ratio": r["speedup"], "ratio_name": "speed-up, workers 1 / workers 2",
             "cpu_s": {"workers_1": r["workers_1_cpu_s"], "workers_2": r["workers_2_cpu_s"]},
+            "cold_design_cache_s": {"workers_1": r["cold_workers_1_s"],
+                                    "workers_2": r["cold_workers_2_s"],
+                                    "speedup": r["cold_speedup"]},
             "load_average": [r["load_before"], r["load_after"]]}
 
 
