@@ -86,6 +86,11 @@ class BlendingParams:
     stop_tolerance: float = param(1.0, "m", "final approach: released when the applied air "
                                   "brake alone would stop the train more than this short",
                                   min=0.0)
+    stop_ed_share: float = param(0.5, "1", "share of the electric brake the reference's "
+                                 "final braking is planned with (scripts/make_freight_20km.py): "
+                                 "the smallest reduction is applied where the reference brakes "
+                                 "harder than that (0: no planned application)", min=0.0,
+                                 max=1.0)
 
     def check(self) -> None:
         self.train.check()
@@ -98,6 +103,8 @@ class BlendingParams:
                              f"({self.ed_share}) <= 1")
         if not self.reduction_step > 0:
             raise ValueError(f"reduction_step = {self.reduction_step} must be > 0")
+        if not 0 <= self.stop_ed_share <= 1:
+            raise ValueError(f"stop_ed_share = {self.stop_ed_share} must be in [0, 1]")
 
 
 class FreightBlending(StatefulCore):
@@ -134,6 +141,7 @@ class FreightBlending(StatefulCore):
         self.final_approach = False  # air released for the electric-brake final approach
         self.approach_stop = math.inf  # m, its stop point
         self._stops = np.asarray(profile.x, dtype=float)[np.asarray(profile.v) <= 0.0]
+        self._onsets = [(onset, self.next_stop(onset)) for onset in self.planned_onsets()]
         self._stop_consts: tuple | None = None  # plain floats for _integrate_stop
 
     @property
@@ -192,6 +200,40 @@ class FreightBlending(StatefulCore):
         step = self.p.reduction_step
         return min(max(math.ceil(need / step) * step, tp.min_reduction),
                    tp.full_service_reduction)
+
+    # -- planned stop application ----------------------------------------------------------
+    def planned_onsets(self) -> np.ndarray:
+        """Position (m) of the planned air-brake application of each stop of the profile: the
+        start of the run of segments ending at the stop over which the reference brakes harder
+        than ``stop_ed_share`` of the electric brake (the reference's final braking ramps the
+        electric brake to that share, then adds the smallest air-brake stage; see
+        ``scripts/make_freight_20km.py``). Empty when ``stop_ed_share`` is 0."""
+        share = self.p.stop_ed_share
+        x, v = self.profile.x, self.profile.v
+        if share <= 0.0:
+            return np.empty(0)
+        acc = self.profile._segment_accel
+        mid = 0.5 * (x[:-1] + x[1:])
+        speed = np.sqrt(0.5 * (v[:-1] ** 2 + v[1:] ** 2))
+        ed = np.array([self.model.traction_limits(u)[1] for u in speed])
+        need = -(acc + np.array([self.basic_accel(u) for u in speed])
+                 + self.additional_accel(mid)) * self.m_eff
+        harder = need > share * ed + 1e-3 * self.p.train.max_ed_force
+        onsets = []
+        for j in np.nonzero((v[1:] <= 0.0) & (v[:-1] > 0.0))[0]:
+            k = j
+            while k > 0 and harder[k - 1] and v[k] > 0.0:
+                k -= 1
+            if harder[j]:
+                onsets.append(float(x[k]))
+        return np.array(onsets)
+
+    def _onset_ahead(self, s: float) -> tuple[float, float]:
+        """(planned application point, its stop) of the next planned stop (inf, inf: none)."""
+        for onset, stop in self._onsets:
+            if s < stop:
+                return onset, stop
+        return math.inf, math.inf
 
     # -- final approach --------------------------------------------------------------------
     def next_stop(self, s: float) -> float:
@@ -287,8 +329,18 @@ class FreightBlending(StatefulCore):
         p = self.p
         speed = max(v, 0.0)
         trac, ed = self.model.traction_limits(speed)
-        planned = self.m_eff * (min(a_ref, self.profile.accel(s),
-                                    self.profile.accel(s + speed * p.air_preview_time)) + a_res)
+        onset, onset_stop = self._onset_ahead(s)
+        if s + 0.5 * speed * T < onset:
+            # the planned braking never looks past a planned application (applied there)
+            ahead = min(s + speed * p.air_preview_time, onset - 1e-6)
+            planned = self.m_eff * (min(self.profile.accel(s), self.profile.accel(ahead))
+                                    + a_res)
+            if not math.isfinite(onset):
+                planned = min(planned, self.m_eff * (a_ref + a_res))
+        else:
+            planned = self.m_eff * (min(a_ref, self.profile.accel(s),
+                                        self.profile.accel(s + speed * p.air_preview_time))
+                                    + a_res)
         over = v - v_ref > p.overspeed
         need = max(-planned, -force if over else 0.0)
         applied = self.reduction > 0.0
@@ -316,6 +368,10 @@ class FreightBlending(StatefulCore):
                 self.reduction = max(self.reduction, self._reduction_for(extra, speed))
             elif since >= p.min_apply_time and need < p.release_share * ed:
                 self.reduction, self.changed_at = 0.0, t
+        elif since >= p.min_release_time and onset <= s + 0.5 * speed * T < onset_stop:
+            # the planned application of a stop: the smallest stage, where the reference
+            # plans it (to the nearest half sample)
+            self.reduction, self.changed_at = p.train.min_reduction, t
         elif since >= p.min_release_time and need > p.ed_share * ed:
             # planned braking: the reduction giving the missing force; an overspeed alone:
             # the smallest application
