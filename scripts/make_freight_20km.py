@@ -53,6 +53,7 @@ NAME = "freight_20km"
 RUN_TIME_S = 22.8 * 60.0
 GRID_M = 10.0
 MAX_POINT_TIME = 1.0  # s, at most between two written points
+MIN_SPACING_M = 0.5  # m, at least between a timed point and a grid point
 DT = 0.05  # s, time step of the plan
 TRACTION_SHARE = 0.8
 MAX_REF_ACCEL = 0.05  # m/s^2
@@ -229,8 +230,12 @@ def sample(x: np.ndarray, v: np.ndarray, extra: tuple[float, ...]) -> tuple[np.n
     x, v = x[ok], v[ok]
     t = np.concatenate(([0.0], np.cumsum(2.0 * np.diff(x) / np.maximum(v[:-1] + v[1:], 1e-9))))
     timed = np.interp(np.arange(0.0, t[-1], MAX_POINT_TIME), t, x)
-    pts = np.unique(np.round(np.concatenate((np.arange(0.0, end + GRID_M / 2, GRID_M), timed,
-                                             extra)), 3))
+    grid = np.unique(np.round(np.concatenate((np.arange(0.0, end + GRID_M / 2, GRID_M),
+                                              extra)), 3))
+    # a timed point within MIN_SPACING_M of a grid point would make a segment whose
+    # acceleration is rounding noise: left out
+    gap = np.abs(timed[:, None] - grid[None, :]).min(axis=1)
+    pts = np.unique(np.round(np.concatenate((grid, timed[gap >= MIN_SPACING_M])), 3))
     speeds = np.sqrt(np.maximum(np.interp(pts, x, v**2), 0.0))
     speeds[-1] = 0.0
     return pts, speeds

@@ -368,10 +368,17 @@ class FreightBlending(StatefulCore):
                 self.reduction = max(self.reduction, self._reduction_for(extra, speed))
             elif since >= p.min_apply_time and need < p.release_share * ed:
                 self.reduction, self.changed_at = 0.0, t
-        elif since >= p.min_release_time and onset <= s + 0.5 * speed * T < onset_stop:
-            # the planned application of a stop: the smallest stage, where the reference
-            # plans it (to the nearest half sample)
-            self.reduction, self.changed_at = p.train.min_reduction, t
+        elif (since >= p.min_release_time
+              and onset <= s + 0.5 * speed * T < min(onset + speed * T, onset_stop)):
+            # the planned application of a stop, at the sample nearest to where the reference
+            # plans it: the stage giving what the planned braking ``air_preview_time`` ahead
+            # needs beyond the planned electric-brake share (the smallest stage on a reference
+            # planned with it); a train already past it without the air brake, e.g. started
+            # there, gets the generic rule below
+            ahead = self.profile.accel(s + speed * p.air_preview_time)
+            extra = -self.m_eff * (min(ahead, self.profile.accel(s)) + a_res)
+            self.reduction = self._reduction_for(extra - p.stop_ed_share * ed, speed)
+            self.changed_at = t
         elif since >= p.min_release_time and need > p.ed_share * ed:
             # planned braking: the reduction giving the missing force; an overspeed alone:
             # the smallest application
