@@ -82,9 +82,10 @@ class Planner:
         lim = route.speed_limit.at_array(self.s_fine)
         lowest = lim.copy()
         for k in range(1, len(starts)):  # a limit stays under the train until its tail clears
-            if np.isfinite(starts[k]) and route.speed_limit.values[k] > route.speed_limit.values[k - 1]:
+            values = route.speed_limit.values
+            if np.isfinite(starts[k]) and values[k] > values[k - 1]:
                 behind = (self.s_fine >= starts[k]) & (self.s_fine < starts[k] + self.length)
-                lowest[behind] = np.minimum(lowest[behind], route.speed_limit.values[k - 1])
+                lowest[behind] = np.minimum(lowest[behind], values[k - 1])
         self.ceiling_fine = lowest - LIMIT_MARGIN_KMH * KMH
         self.last_limit_start = float(starts[-1])
         # additional resistance per unit effective mass, exact at the kinks of its mean
@@ -156,6 +157,12 @@ class Planner:
             vs.append(v)
         return np.array(xs[::-1]), np.array(vs[::-1])
 
+    def _decel(self, v: float, s: float, k_air: int, force: float) -> float:
+        """Deceleration (m/s^2) with the locomotive force ``force`` (N) and the air brake
+        applied ``k_air`` steps ago (< 0: not applied)."""
+        air = self.air_scale[k_air] * friction_coefficient_at(v) if k_air >= 0 else 0.0
+        return (air - force + self.resistance(v, s)) / self.m_eff
+
     def stop(self, s0: float, v0: float, a0: float) -> tuple[np.ndarray, np.ndarray, float]:
         """Final braking from ``(s0, v0, a0)``: positions and speeds every ``DT`` to the stop,
         and the position where the air brake is applied."""
@@ -175,13 +182,9 @@ class Planner:
             else:
                 force = target
 
-            def decel(vel: float, pos: float, k: int) -> float:
-                air = self.air_scale[k] * friction_coefficient_at(vel) if k >= 0 else 0.0
-                return (air - force + self.resistance(vel, pos)) / m
-
-            d0 = decel(v, s, k_air)
+            d0 = self._decel(v, s, k_air, force)
             vm = v - 0.5 * DT * d0
-            dm = decel(max(vm, 0.0), s + 0.5 * DT * v, k_air)
+            dm = self._decel(max(vm, 0.0), s + 0.5 * DT * v, k_air, force)
             v1 = v - DT * dm
             if v1 <= 0.0:
                 xs.append(s + v * v / (2.0 * dm))
