@@ -18,6 +18,11 @@ brake < 0, within the HXD1 envelope at the measured speed) and ``pipe_reduction`
   fully when the electric brake alone covers the demand with margin (``release_share``).
   Hold times: once applied it stays at least ``min_apply_time``; once released it is not
   re-applied for ``min_release_time`` (auxiliary reservoirs recharge);
+* a stop the reference plans with the air brake (its final braking ramps the electric brake to
+  ``stop_ed_share`` and then needs more: ``scripts/make_freight_20km.py``) gets the stage its
+  braking needs beyond that share (the smallest on that reference) at the sample nearest to
+  the planned onset (:meth:`FreightBlending.planned_onsets`); before it the look-ahead of the
+  rule above stops at the onset, so every controller applies the air brake where the plan does;
 * while the air brake acts, the locomotive trims it with the electric brake only: the
   locomotive force is ``min(F + F_air, 0)`` as long as the modelled cylinders hold pressure
   (applied, or released but not yet empty). It never pulls against the air brake (no power
