@@ -7,6 +7,7 @@ import pytest
 
 from controllers.common.freight_blending import BlendingParams, FreightBlending
 from controllers.pid.freight_pid import FreightPid, FreightPidParams
+from plants.freight import FreightTrain, friction_coefficient_at
 from plants.route import ReferenceProfile, Route, load_route
 from tests.freight_loop import closed_loop
 
@@ -258,3 +259,41 @@ def test_interp_at_equals_np_interp() -> None:
     np.testing.assert_allclose(fast, np.interp(x, xp, fp), rtol=0,
                                atol=np.spacing(np.abs(fp).max()))
     assert interp_at(float(xp[3]), xp.tolist(), fp.tolist()) == fp[3]
+
+
+@pytest.mark.parametrize("case", ["planned application", "release overtaken by a re-application"])
+def test_air_force_ahead_equals_the_plant_brake_model_stepped_forward(case: str) -> None:
+    """The blending's prediction of the air-brake force ahead (the optimal preview's air-brake
+    disturbance) equals the plant's brake-pipe model stepped to each time at the plant's
+    0.01 s step with the same commands: from rest with a planned application 2 s ahead, and
+    a release whose slower wave a re-application 1 s later overtakes at the rear vehicles
+    (the plant's latest-arrived rule). eq. (9) composes exactly over sub-steps, so the
+    tolerance is rounding of the powers (1e-9 relative)."""
+    route = load_route("freight_20km")
+    blend = FreightBlending(BlendingParams(), route.reference, route)
+    plant = FreightTrain(BlendingParams().train, route)
+    if case == "planned application":
+        commands, now, planned = [], 0.0, (2.0, 50e3)
+    else:
+        commands, now, planned = [(0.0, 60e3), (8.0, 0.0)], 8.4, (9.0, 50e3)
+    for t0, r in commands:  # the blending's model has seen the commands up to now
+        blend.model.brake_history.append([t0, r])
+    k_now = round(now / 0.2)
+    for k in range(k_now):
+        blend.model.step_brakes(0.2 * k, 0.2 * (k + 1), blend.model.brake_history[-1][1])
+    times = now + np.arange(0.0, 40.0, 0.5)
+    speeds = np.linspace(20.0, 8.0, times.size)
+    predicted = blend.air_force_ahead(now, times, speeds, planned)
+    schedule = [*commands, planned]
+    expected, t, h = [], 0.0, 0.01
+    for t_j, v_j in zip(times, speeds):
+        while t < t_j - 1e-9:
+            r = [c for c in schedule if c[0] <= t + 1e-9]
+            plant.step_brakes(t, t + h, r[-1][1] if r else 0.0)
+            t += h
+        expected.append(float(plant.brake_scale @ plant.pressure) * friction_coefficient_at(v_j))
+    expected = np.array(expected)
+    assert expected.max() > 1e6  # N: the brakes act within the horizon
+    np.testing.assert_allclose(predicted, expected, rtol=1e-9, atol=1e-3)
+    if case != "planned application":  # the re-application reached every vehicle
+        assert np.all(plant.pressure > 0.0)

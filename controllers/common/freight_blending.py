@@ -51,7 +51,13 @@ import numpy as np
 
 from cosim.fmu.declare import Declared, Var, build, param
 from cosim.fmu.state import StatefulCore
-from plants.freight import KMH, FreightParams, FreightTrain, friction_coefficient_at
+from plants.freight import (
+    KMH,
+    FreightParams,
+    FreightTrain,
+    friction_coefficient,
+    friction_coefficient_at,
+)
 from plants.route import (
     GRAVITY,
     ReferenceProfile,
@@ -233,6 +239,53 @@ class FreightBlending(StatefulCore):
                 onsets.append(float(x[k]))
         return np.array(onsets)
 
+    def planned_reduction(self, s: float, v: float, a_res: float) -> float:
+        """Pipe reduction (Pa) of the planned application at head position ``s`` and speed
+        ``v``: the stage giving what the planned braking ``air_preview_time`` ahead needs
+        beyond the planned electric-brake share (``a_res`` the resistance, m/s^2)."""
+        p = self.p
+        ahead = self.profile.accel(s + v * p.air_preview_time)
+        extra = -self.m_eff * (min(ahead, self.profile.accel(s)) + a_res)
+        return self._reduction_for(extra - p.stop_ed_share * self.model.traction_limits(v)[1],
+                                   v)
+
+    def air_force_ahead(self, t: float, times: np.ndarray, speeds: np.ndarray,
+                        planned: tuple[float, float] | None = None) -> np.ndarray:
+        """Air-brake force (N) of the whole train at ``times`` (s, >= ``t``, the end of the
+        last :meth:`blend`) at train speeds ``speeds`` (m/s): the plant's brake-pipe model on the
+        nominal data (arrival of each command at each vehicle, eq. (9) filling and its release
+        mirror, :meth:`plants.freight.FreightTrain.evolve_pressure`) from the modelled
+        cylinder pressures now, the commanded reduction held, plus ``planned`` = (time s,
+        reduction Pa), a command still to come (the planned application of a stop)."""
+        model = self.model
+        hist = [list(h) for h in model.brake_history]
+        if planned is not None and planned[1] != hist[-1][1]:
+            hist.append([float(planned[0]), float(planned[1])])
+        values = np.array([h[1] for h in hist])
+        rising = np.concatenate(([True], values[1:] >= values[:-1]))
+        arrivals = np.array([h[0] for h in hist])[:, None] + np.where(
+            rising[:, None], model.apply_delay[None, :], model.release_delay[None, :])
+        times = np.asarray(times, dtype=float)[:, None]
+        seen = model._seen(arrivals, t)  # command each vehicle follows now
+        target = np.broadcast_to(model.target_pressure(values[seen]), (times.shape[0],
+                                                                     seen.size))
+        pres = np.broadcast_to(model.pressure, target.shape)
+        now = np.full(target.shape, float(t))
+        # a command counts at a vehicle from its arrival until a later one arrives (the
+        # plant's latest-arrived rule): one overtaken by a later command never acts there
+        overtaken = np.minimum.accumulate(arrivals[::-1], axis=0)[::-1]
+        for k in range(int(seen.min()) + 1, len(hist)):  # commands still travelling
+            arrive = arrivals[k][None, :]
+            acts = (k > seen) & ((k == len(hist) - 1) | (arrivals[k] < overtaken[min(
+                k + 1, len(hist) - 1)]))
+            arrive = np.where(acts[None, :], arrive, np.inf)
+            later = (arrive > now) & (arrive <= times)  # reaches the vehicle within the horizon
+            pres = np.where(later, model.evolve_pressure(pres, target, arrive - now), pres)
+            now = np.where(later, arrive, now)
+            target = np.where(arrive <= times, model.target_pressure(values[k]), target)
+        pres = model.evolve_pressure(pres, target, np.maximum(times - now, 0.0))
+        return (pres @ model.brake_scale) * friction_coefficient(np.asarray(speeds))
+
     def _onset_ahead(self, s: float) -> tuple[float, float]:
         """(planned application point, its stop) of the next planned stop (inf, inf: none)."""
         for onset, stop in self._onsets:
@@ -326,11 +379,13 @@ class FreightBlending(StatefulCore):
 
     # -- one sample ------------------------------------------------------------------------
     def blend(self, t: float, T: float, v: float, s: float, force: float, v_ref: float,
-              a_ref: float, a_res: float) -> tuple[float, float]:
+              a_ref: float, a_res: float, locomotive: bool = False) -> tuple[float, float]:
         """Commands for the sample ``[t, t + T)``: ``(force_demand N, pipe_reduction Pa)``.
 
-        ``force`` (N) is the controller's demand on the whole train, ``v_ref``/``a_ref`` its
-        reference speed and (look-ahead) acceleration, ``a_res`` the resistance (m/s^2)."""
+        ``force`` (N) is the controller's demand on the whole train (``locomotive``: on the
+        locomotive alone, the controller having counted the air brake as a disturbance),
+        ``v_ref``/``a_ref`` its reference speed and (look-ahead) acceleration, ``a_res`` the
+        resistance (m/s^2)."""
         p = self.p
         speed = max(v, 0.0)
         trac, ed = self.model.traction_limits(speed)
@@ -380,9 +435,7 @@ class FreightBlending(StatefulCore):
             # needs beyond the planned electric-brake share (the smallest stage on a reference
             # planned with it); a train already past it without the air brake, e.g. started
             # there, gets the generic rule below
-            ahead = self.profile.accel(s + speed * p.air_preview_time)
-            extra = -self.m_eff * (min(ahead, self.profile.accel(s)) + a_res)
-            self.reduction = self._reduction_for(extra - p.stop_ed_share * ed, speed)
+            self.reduction = self.planned_reduction(s, speed, a_res)
             self.changed_at = t
         elif since >= p.min_release_time and need > p.ed_share * ed:
             # planned braking: the reduction giving the missing force; an overspeed alone:
@@ -397,8 +450,8 @@ class FreightBlending(StatefulCore):
         elif not self.holding and self.air_applied():
             # the locomotive trims the (estimated) air brake with the electric brake only:
             # never traction against an applied or not yet released air brake
-            air = float(np.dot(self.model.brake_scale, pressures)
-                        * friction_coefficient_at(speed))
+            air = 0.0 if locomotive else float(np.dot(self.model.brake_scale, pressures)
+                                               * friction_coefficient_at(speed))
             force = min(force + air, 0.0)
         self.force = min(max(force, -ed), trac)
         return self.force, self.reduction
@@ -465,6 +518,11 @@ class FreightTracker(StatefulCore, Declared):
     def sample_time(self) -> float:
         return float(self.p.sample_time)
 
+    #: a family that counts the air brake as a disturbance sets its locomotive's part of
+    #: the demand (m/s^2) here in :meth:`accel_demand`; the blending then passes it on as it
+    #: is (electric brake only while the air brake acts) instead of trimming the air brake
+    locomotive_demand: float | None = None
+
     def accel_demand(self, t: float, v: float, s: float, a_res: float, lo: float,
                      hi: float) -> float:
         """The family's demand (m/s^2) within ``[lo, hi]``; sets ``self.a_ref``."""
@@ -478,8 +536,10 @@ class FreightTracker(StatefulCore, Declared):
         a_res = self.blending.resistance_accel(speed, s)
         lo, hi = self.blending.accel_limits(speed)
         self.demand = self.accel_demand(t, v, s, a_res, lo, hi)
-        self.blending.blend(t, self.sample_time, v, s, self.m_eff * self.demand, self.v_ref,
-                            self.a_ref, a_res)
+        loco = self.locomotive_demand
+        self.blending.blend(t, self.sample_time, v, s,
+                            self.m_eff * (self.demand if loco is None else loco), self.v_ref,
+                            self.a_ref, a_res, locomotive=loco is not None)
         return self.outputs(), 1
 
     def outputs(self) -> dict[str, float]:
