@@ -61,7 +61,9 @@ ADDED_VARIABLES = {
     # issue 16: the shared freight blending's electric-brake final approach and the planned
     # stop application (stop_ed_share)
     "FreightPid": {"final_approach_distance", "stop_tolerance", "stop_ed_share"},
-    **{f: {"stop_ed_share"} for f in ("FreightFpid", "FreightPreview", "FreightSmc")},
+    **{f: {"stop_ed_share"} for f in ("FreightFpid", "FreightSmc")},
+    # issue 16: the preview counts the air brake as a previewed disturbance
+    "FreightPreview": {"stop_ed_share", "air_brake_preview"},
 }
 
 
