@@ -25,7 +25,9 @@ brake < 0, within the HXD1 envelope at the measured speed) and ``pipe_reduction`
   rule above stops at the onset, so every controller applies the air brake where the plan does;
 * while the air brake acts, the locomotive trims it with the electric brake only: the
   locomotive force is ``min(F + F_air, 0)`` as long as the modelled cylinders hold pressure
-  (applied, or released but not yet empty). It never pulls against the air brake (no power
+  (applied, or released but not yet empty); a controller that counts the air brake as a
+  disturbance itself (the optimal preview: :meth:`FreightBlending.air_force_ahead`) passes the
+  locomotive's part, ``min(F, 0)`` then. It never pulls against the air brake (no power
   braking): where even the minimum reduction brakes too hard the train decelerates more than
   planned. :meth:`FreightBlending.accel_limits` gives the controllers this envelope so their
   integrators and saturations see it;

@@ -12,8 +12,16 @@ position ``s``; the error is ``e = v_ref(s) - v`` at the head.
   the measured position; ``R(k + j)`` is the reference speed there.
 * Disturbance ahead: ``d(k + j) = -(w_basic(R(k+j)) + w_add(s_j))`` per unit effective mass
   (eqs. 2-6, 17) from the nominal train on the route data the plant uses (grade, curve and
-  tunnel averaged over the train length at the predicted head positions ``s_j``).
-* ``u(k) = u(k-1) + Delta u(k)`` (m/s^2) goes to the shared blending (traction / ED / air brake).
+  tunnel averaged over the train length at the predicted head positions ``s_j``), and
+  (``air_brake_preview``, our addition on the paper's eq. 34-37 reasoning: a known resistance
+  ahead) minus the air-brake deceleration the shared blending's brake-pipe model predicts
+  (the plant's model and nominal data, as the design model takes the plant's traction lag):
+  commanded reduction held, the planned stop application at the sample the reference reaches
+  its onset.
+* ``u(k) = u(k-1) + Delta u(k)`` (m/s^2) goes to the shared blending (traction / ED / air brake):
+  with ``air_brake_preview`` it is the locomotive's part (electric brake only while the air
+  brake acts, no power braking) and ``accel_demand`` the train's demand ``u - a_air``; without,
+  it is the train's demand and the blending trims the air brake with it.
 """
 
 from __future__ import annotations
