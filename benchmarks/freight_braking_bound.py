@@ -1,7 +1,10 @@
 """Lower bound on the speed error of any freight controller at the final braking of seed 002
 (prints figures, asserts nothing; evidence for issue 16).
 
-The reference steps from cruise to -0.2 m/s^2 at the final braking. The plant can brake that
+The onset is the reference's planned air-brake application
+(:meth:`controllers.common.freight_blending.FreightBlending.planned_onsets`; the start of the
+last braking segment for a reference without one). On the first reference (issue 16) the final
+braking stepped from cruise to -0.2 m/s^2; the plant can brake that
 hard only with its air brake, which it applies in pipe-reduction stages (the smallest, 50 kPa,
 already gives about -0.19 m/s^2), which builds up from head to tail over seconds (eq. 9,
 propagation along the pipe) and which is not partly releasable; while it acts the locomotive
@@ -61,7 +64,9 @@ def bound(lag: bool, power_braking: bool, before: float = 25.0, after: float = 4
     tp = blend.p.train
     times = profile.times()
     ok = np.isfinite(times)
-    t_on = float(np.interp(braking_onset(profile), profile.x[ok], times[ok]))
+    planned = blend.planned_onsets()  # the reference's planned air-brake application
+    s_on = float(planned[-1]) if planned.size else braking_onset(profile)
+    t_on = float(np.interp(s_on, profile.x[ok], times[ok]))
     t = t_on + np.arange(-before, after + 1e-9, H)
     s_ref = np.interp(t, times[ok], profile.x[ok])
     v_ref = np.array([profile.speed(x) for x in s_ref])

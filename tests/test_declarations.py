@@ -58,8 +58,12 @@ ADDED_VARIABLES = {
     "StopPid": {"hold_at_stop_point"},  # issue 11: the full-brake rule made a parameter
     **{f: {"disturbance_correlation_time", "disturbance_smooth"}  # issue 15
        for f in ("Emu3", "Emu8")},
-    # issue 16: the shared freight blending's electric-brake final approach
-    "FreightPid": {"final_approach_distance", "stop_tolerance"},
+    # issue 16: the shared freight blending's electric-brake final approach and the planned
+    # stop application (stop_ed_share)
+    "FreightPid": {"final_approach_distance", "stop_tolerance", "stop_ed_share"},
+    **{f: {"stop_ed_share"} for f in ("FreightFpid", "FreightSmc")},
+    # issue 16: the preview counts the air brake as a previewed disturbance
+    "FreightPreview": {"stop_ed_share", "air_brake_preview"},
 }
 
 

@@ -7,21 +7,40 @@ import pytest
 
 from controllers.common.freight_blending import BlendingParams, FreightBlending
 from controllers.pid.freight_pid import FreightPid, FreightPidParams
+from plants.freight import FreightTrain, friction_coefficient_at
 from plants.route import ReferenceProfile, Route, load_route
 from tests.freight_loop import closed_loop
 
 
+def _constant_decel_reference(route: Route, cruise: float = 69.2 / 3.6,
+                              decel: float = 0.2) -> ReferenceProfile:
+    """Cruise, then a constant ``decel`` (m/s^2) to the end of ``route``: the final braking
+    of the first freight_20km reference, not planned with the air brake (issue 16)."""
+    end = route.length_m
+    s = np.arange(0.0, end + 5.0, 10.0)
+    v = np.minimum(cruise, np.sqrt(np.maximum(2.0 * decel * (end - s), 0.0)))
+    v[0] = cruise
+    return ReferenceProfile("distance", s, v)
+
+
+def _unplanned_pid(route: Route, ref: ReferenceProfile) -> FreightPid:
+    """PID on ``ref`` with the blending's generic air-brake rule only (no planned stop)."""
+    params = FreightPidParams(blending=BlendingParams(stop_ed_share=0.0))
+    return FreightPid(params, ref, route)
+
+
 def test_final_stop_never_pulls_against_the_air_brake() -> None:
-    """The last 150 m of freight_20km (0.2 m/s^2 braking to the stop): even the minimum
-    reduction brakes harder than planned once the electric brake fades, and the PID wants
-    traction. While the (modelled) cylinders hold pressure the locomotive may only brake, and
-    the plant's achieved force is never traction while its air brake acts (after the 0.5 s +
-    1.5 s traction lag of an earlier demand has decayed: checked from 10 s after the first
-    application). Before the fix it demanded 760 kN at 0.55 m/s."""
+    """The last 150 m of a 0.2 m/s^2 braking to the stop (the first freight_20km reference):
+    even the minimum reduction brakes harder than planned once the electric brake fades, and
+    the PID wants traction. While the (modelled) cylinders hold pressure the locomotive may
+    only brake, and the plant's achieved force is never traction while its air brake acts
+    (after the 0.5 s + 1.5 s traction lag of an earlier demand has decayed: checked from 10 s
+    after the first application). Before the fix it demanded 760 kN at 0.55 m/s."""
     route = load_route("freight_20km")
     s0 = 19850.0
-    pid = FreightPid(FreightPidParams(), route.reference, route)
-    run = closed_loop(pid, route, 60.0, s0=s0, v0=route.reference.speed(s0))
+    ref = _constant_decel_reference(route)
+    pid = _unplanned_pid(route, ref)
+    run = closed_loop(pid, route, 60.0, s0=s0, v0=ref.speed(s0))
     air = run["pipe_reduction"] > 0
     assert np.any(air)  # the air brake was needed
     first = np.argmax(air)
@@ -132,9 +151,10 @@ def test_final_approach_brings_the_train_to_the_stop_point() -> None:
     releases it and stops the head within 1.5 m of the stop point (the prediction is one
     mass; the head also carries the train's stretch), without power braking, and holds it."""
     route = load_route("freight_20km")
-    pid = FreightPid(FreightPidParams(), route.reference, route)
+    ref = _constant_decel_reference(route)
+    pid = _unplanned_pid(route, ref)
     s0 = 19700.0  # on the reference, 300 m before the stop
-    run = closed_loop(pid, route, 100.0, s0=s0, v0=route.reference.speed(s0))
+    run = closed_loop(pid, route, 100.0, s0=s0, v0=ref.speed(s0))
     assert np.any(run["pipe_reduction"][: len(run["t"]) // 2] > 0)  # air brake was applied
     released = np.flatnonzero(np.diff((run["pipe_reduction"] > 0).astype(int)) == -1)
     assert released.size >= 1  # ... and released for the final approach, before the stop
@@ -239,3 +259,41 @@ def test_interp_at_equals_np_interp() -> None:
     np.testing.assert_allclose(fast, np.interp(x, xp, fp), rtol=0,
                                atol=np.spacing(np.abs(fp).max()))
     assert interp_at(float(xp[3]), xp.tolist(), fp.tolist()) == fp[3]
+
+
+@pytest.mark.parametrize("case", ["planned application", "release overtaken by a re-application"])
+def test_air_force_ahead_equals_the_plant_brake_model_stepped_forward(case: str) -> None:
+    """The blending's prediction of the air-brake force ahead (the optimal preview's air-brake
+    disturbance) equals the plant's brake-pipe model stepped to each time at the plant's
+    0.01 s step with the same commands: from rest with a planned application 2 s ahead, and
+    a release whose slower wave a re-application 1 s later overtakes at the rear vehicles
+    (the plant's latest-arrived rule). eq. (9) composes exactly over sub-steps, so the
+    tolerance is rounding of the powers (1e-9 relative)."""
+    route = load_route("freight_20km")
+    blend = FreightBlending(BlendingParams(), route.reference, route)
+    plant = FreightTrain(BlendingParams().train, route)
+    if case == "planned application":
+        commands, now, planned = [], 0.0, (2.0, 50e3)
+    else:
+        commands, now, planned = [(0.0, 60e3), (8.0, 0.0)], 8.4, (9.0, 50e3)
+    for t0, r in commands:  # the blending's model has seen the commands up to now
+        blend.model.brake_history.append([t0, r])
+    k_now = round(now / 0.2)
+    for k in range(k_now):
+        blend.model.step_brakes(0.2 * k, 0.2 * (k + 1), blend.model.brake_history[-1][1])
+    times = now + np.arange(0.0, 40.0, 0.5)
+    speeds = np.linspace(20.0, 8.0, times.size)
+    predicted = blend.air_force_ahead(now, times, speeds, planned)
+    schedule = [*commands, planned]
+    expected, t, h = [], 0.0, 0.01
+    for t_j, v_j in zip(times, speeds):
+        while t < t_j - 1e-9:
+            r = [c for c in schedule if c[0] <= t + 1e-9]
+            plant.step_brakes(t, t + h, r[-1][1] if r else 0.0)
+            t += h
+        expected.append(float(plant.brake_scale @ plant.pressure) * friction_coefficient_at(v_j))
+    expected = np.array(expected)
+    assert expected.max() > 1e6  # N: the brakes act within the horizon
+    np.testing.assert_allclose(predicted, expected, rtol=1e-9, atol=1e-3)
+    if case != "planned application":  # the re-application reached every vehicle
+        assert np.all(plant.pressure > 0.0)

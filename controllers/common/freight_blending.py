@@ -18,9 +18,16 @@ brake < 0, within the HXD1 envelope at the measured speed) and ``pipe_reduction`
   fully when the electric brake alone covers the demand with margin (``release_share``).
   Hold times: once applied it stays at least ``min_apply_time``; once released it is not
   re-applied for ``min_release_time`` (auxiliary reservoirs recharge);
+* a stop the reference plans with the air brake (its final braking ramps the electric brake to
+  ``stop_ed_share`` and then needs more: ``scripts/make_freight_20km.py``) gets the stage its
+  braking needs beyond that share (the smallest on that reference) at the sample nearest to
+  the planned onset (:meth:`FreightBlending.planned_onsets`); before it the look-ahead of the
+  rule above stops at the onset, so every controller applies the air brake where the plan does;
 * while the air brake acts, the locomotive trims it with the electric brake only: the
   locomotive force is ``min(F + F_air, 0)`` as long as the modelled cylinders hold pressure
-  (applied, or released but not yet empty). It never pulls against the air brake (no power
+  (applied, or released but not yet empty); a controller that counts the air brake as a
+  disturbance itself (the optimal preview: :meth:`FreightBlending.air_force_ahead`) passes the
+  locomotive's part, ``min(F, 0)`` then. It never pulls against the air brake (no power
   braking): where even the minimum reduction brakes too hard the train decelerates more than
   planned. :meth:`FreightBlending.accel_limits` gives the controllers this envelope so their
   integrators and saturations see it;
@@ -46,7 +53,13 @@ import numpy as np
 
 from cosim.fmu.declare import Declared, Var, build, param
 from cosim.fmu.state import StatefulCore
-from plants.freight import KMH, FreightParams, FreightTrain, friction_coefficient_at
+from plants.freight import (
+    KMH,
+    FreightParams,
+    FreightTrain,
+    friction_coefficient,
+    friction_coefficient_at,
+)
 from plants.route import (
     GRAVITY,
     ReferenceProfile,
@@ -86,6 +99,11 @@ class BlendingParams:
     stop_tolerance: float = param(1.0, "m", "final approach: released when the applied air "
                                   "brake alone would stop the train more than this short",
                                   min=0.0)
+    stop_ed_share: float = param(0.5, "1", "share of the electric brake the reference's "
+                                 "final braking is planned with (scripts/make_freight_20km.py): "
+                                 "the smallest reduction is applied where the reference brakes "
+                                 "harder than that (0: no planned application)", min=0.0,
+                                 max=1.0)
 
     def check(self) -> None:
         self.train.check()
@@ -98,6 +116,8 @@ class BlendingParams:
                              f"({self.ed_share}) <= 1")
         if not self.reduction_step > 0:
             raise ValueError(f"reduction_step = {self.reduction_step} must be > 0")
+        if not 0 <= self.stop_ed_share <= 1:
+            raise ValueError(f"stop_ed_share = {self.stop_ed_share} must be in [0, 1]")
 
 
 class FreightBlending(StatefulCore):
@@ -134,6 +154,7 @@ class FreightBlending(StatefulCore):
         self.final_approach = False  # air released for the electric-brake final approach
         self.approach_stop = math.inf  # m, its stop point
         self._stops = np.asarray(profile.x, dtype=float)[np.asarray(profile.v) <= 0.0]
+        self._onsets = [(onset, self.next_stop(onset)) for onset in self.planned_onsets()]
         self._stop_consts: tuple | None = None  # plain floats for _integrate_stop
 
     @property
@@ -192,6 +213,87 @@ class FreightBlending(StatefulCore):
         step = self.p.reduction_step
         return min(max(math.ceil(need / step) * step, tp.min_reduction),
                    tp.full_service_reduction)
+
+    # -- planned stop application ----------------------------------------------------------
+    def planned_onsets(self) -> np.ndarray:
+        """Position (m) of the planned air-brake application of each stop of the profile: the
+        start of the run of segments ending at the stop over which the reference brakes harder
+        than ``stop_ed_share`` of the electric brake (the reference's final braking ramps the
+        electric brake to that share, then adds the smallest air-brake stage; see
+        ``scripts/make_freight_20km.py``). Empty when ``stop_ed_share`` is 0."""
+        share = self.p.stop_ed_share
+        x, v = self.profile.x, self.profile.v
+        if share <= 0.0:
+            return np.empty(0)
+        acc = self.profile._segment_accel
+        mid = 0.5 * (x[:-1] + x[1:])
+        speed = np.sqrt(0.5 * (v[:-1] ** 2 + v[1:] ** 2))
+        ed = np.array([self.model.traction_limits(u)[1] for u in speed])
+        need = -(acc + np.array([self.basic_accel(u) for u in speed])
+                 + self.additional_accel(mid)) * self.m_eff
+        harder = need > share * ed + 1e-3 * self.p.train.max_ed_force
+        onsets = []
+        for j in np.nonzero((v[1:] <= 0.0) & (v[:-1] > 0.0))[0]:
+            k = j
+            while k > 0 and harder[k - 1] and v[k] > 0.0:
+                k -= 1
+            if harder[j]:
+                onsets.append(float(x[k]))
+        return np.array(onsets)
+
+    def planned_reduction(self, s: float, v: float, a_res: float) -> float:
+        """Pipe reduction (Pa) of the planned application at head position ``s`` and speed
+        ``v``: the stage giving what the planned braking ``air_preview_time`` ahead needs
+        beyond the planned electric-brake share (``a_res`` the resistance, m/s^2)."""
+        p = self.p
+        ahead = self.profile.accel(s + v * p.air_preview_time)
+        extra = -self.m_eff * (min(ahead, self.profile.accel(s)) + a_res)
+        return self._reduction_for(extra - p.stop_ed_share * self.model.traction_limits(v)[1],
+                                   v)
+
+    def air_force_ahead(self, t: float, times: np.ndarray, speeds: np.ndarray,
+                        planned: tuple[float, float] | None = None) -> np.ndarray:
+        """Air-brake force (N) of the whole train at ``times`` (s, >= ``t``, the end of the
+        last :meth:`blend`) at train speeds ``speeds`` (m/s): the plant's brake-pipe model on the
+        nominal data (arrival of each command at each vehicle, eq. (9) filling and its release
+        mirror, :meth:`plants.freight.FreightTrain.evolve_pressure`) from the modelled
+        cylinder pressures now, the commanded reduction held, plus ``planned`` = (time s,
+        reduction Pa), a command still to come (the planned application of a stop)."""
+        model = self.model
+        hist = [list(h) for h in model.brake_history]
+        if planned is not None and planned[1] != hist[-1][1]:
+            hist.append([float(planned[0]), float(planned[1])])
+        values = np.array([h[1] for h in hist])
+        rising = np.concatenate(([True], values[1:] >= values[:-1]))
+        arrivals = np.array([h[0] for h in hist])[:, None] + np.where(
+            rising[:, None], model.apply_delay[None, :], model.release_delay[None, :])
+        times = np.asarray(times, dtype=float)[:, None]
+        seen = model._seen(arrivals, t)  # command each vehicle follows now
+        target = np.broadcast_to(model.target_pressure(values[seen]), (times.shape[0],
+                                                                     seen.size))
+        pres = np.broadcast_to(model.pressure, target.shape)
+        now = np.full(target.shape, float(t))
+        # a command counts at a vehicle from its arrival until a later one arrives (the
+        # plant's latest-arrived rule): one overtaken by a later command never acts there
+        overtaken = np.minimum.accumulate(arrivals[::-1], axis=0)[::-1]
+        for k in range(int(seen.min()) + 1, len(hist)):  # commands still travelling
+            arrive = arrivals[k][None, :]
+            acts = (k > seen) & ((k == len(hist) - 1) | (arrivals[k] < overtaken[min(
+                k + 1, len(hist) - 1)]))
+            arrive = np.where(acts[None, :], arrive, np.inf)
+            later = (arrive > now) & (arrive <= times)  # reaches the vehicle within the horizon
+            pres = np.where(later, model.evolve_pressure(pres, target, arrive - now), pres)
+            now = np.where(later, arrive, now)
+            target = np.where(arrive <= times, model.target_pressure(values[k]), target)
+        pres = model.evolve_pressure(pres, target, np.maximum(times - now, 0.0))
+        return (pres @ model.brake_scale) * friction_coefficient(np.asarray(speeds))
+
+    def _onset_ahead(self, s: float) -> tuple[float, float]:
+        """(planned application point, its stop) of the next planned stop (inf, inf: none)."""
+        for onset, stop in self._onsets:
+            if s < stop:
+                return onset, stop
+        return math.inf, math.inf
 
     # -- final approach --------------------------------------------------------------------
     def next_stop(self, s: float) -> float:
@@ -279,16 +381,28 @@ class FreightBlending(StatefulCore):
 
     # -- one sample ------------------------------------------------------------------------
     def blend(self, t: float, T: float, v: float, s: float, force: float, v_ref: float,
-              a_ref: float, a_res: float) -> tuple[float, float]:
+              a_ref: float, a_res: float, locomotive: bool = False) -> tuple[float, float]:
         """Commands for the sample ``[t, t + T)``: ``(force_demand N, pipe_reduction Pa)``.
 
-        ``force`` (N) is the controller's demand on the whole train, ``v_ref``/``a_ref`` its
-        reference speed and (look-ahead) acceleration, ``a_res`` the resistance (m/s^2)."""
+        ``force`` (N) is the controller's demand on the whole train (``locomotive``: on the
+        locomotive alone, the controller having counted the air brake as a disturbance),
+        ``v_ref``/``a_ref`` its reference speed and (look-ahead) acceleration, ``a_res`` the
+        resistance (m/s^2)."""
         p = self.p
         speed = max(v, 0.0)
         trac, ed = self.model.traction_limits(speed)
-        planned = self.m_eff * (min(a_ref, self.profile.accel(s),
-                                    self.profile.accel(s + speed * p.air_preview_time)) + a_res)
+        onset, onset_stop = self._onset_ahead(s)
+        if s + 0.5 * speed * T < onset:
+            # the planned braking never looks past a planned application (applied there)
+            ahead = min(s + speed * p.air_preview_time, onset - 1e-6)
+            planned = self.m_eff * (min(self.profile.accel(s), self.profile.accel(ahead))
+                                    + a_res)
+            if not math.isfinite(onset):
+                planned = min(planned, self.m_eff * (a_ref + a_res))
+        else:
+            planned = self.m_eff * (min(a_ref, self.profile.accel(s),
+                                        self.profile.accel(s + speed * p.air_preview_time))
+                                    + a_res)
         over = v - v_ref > p.overspeed
         need = max(-planned, -force if over else 0.0)
         applied = self.reduction > 0.0
@@ -316,6 +430,15 @@ class FreightBlending(StatefulCore):
                 self.reduction = max(self.reduction, self._reduction_for(extra, speed))
             elif since >= p.min_apply_time and need < p.release_share * ed:
                 self.reduction, self.changed_at = 0.0, t
+        elif (since >= p.min_release_time
+              and onset <= s + 0.5 * speed * T < min(onset + speed * T, onset_stop)):
+            # the planned application of a stop, at the sample nearest to where the reference
+            # plans it: the stage giving what the planned braking ``air_preview_time`` ahead
+            # needs beyond the planned electric-brake share (the smallest stage on a reference
+            # planned with it); a train already past it without the air brake, e.g. started
+            # there, gets the generic rule below
+            self.reduction = self.planned_reduction(s, speed, a_res)
+            self.changed_at = t
         elif since >= p.min_release_time and need > p.ed_share * ed:
             # planned braking: the reduction giving the missing force; an overspeed alone:
             # the smallest application
@@ -329,8 +452,8 @@ class FreightBlending(StatefulCore):
         elif not self.holding and self.air_applied():
             # the locomotive trims the (estimated) air brake with the electric brake only:
             # never traction against an applied or not yet released air brake
-            air = float(np.dot(self.model.brake_scale, pressures)
-                        * friction_coefficient_at(speed))
+            air = 0.0 if locomotive else float(np.dot(self.model.brake_scale, pressures)
+                                               * friction_coefficient_at(speed))
             force = min(force + air, 0.0)
         self.force = min(max(force, -ed), trac)
         return self.force, self.reduction
@@ -397,6 +520,11 @@ class FreightTracker(StatefulCore, Declared):
     def sample_time(self) -> float:
         return float(self.p.sample_time)
 
+    #: a family that counts the air brake as a disturbance sets its locomotive's part of
+    #: the demand (m/s^2) here in :meth:`accel_demand`; the blending then passes it on as it
+    #: is (electric brake only while the air brake acts) instead of trimming the air brake
+    locomotive_demand: float | None = None
+
     def accel_demand(self, t: float, v: float, s: float, a_res: float, lo: float,
                      hi: float) -> float:
         """The family's demand (m/s^2) within ``[lo, hi]``; sets ``self.a_ref``."""
@@ -410,8 +538,10 @@ class FreightTracker(StatefulCore, Declared):
         a_res = self.blending.resistance_accel(speed, s)
         lo, hi = self.blending.accel_limits(speed)
         self.demand = self.accel_demand(t, v, s, a_res, lo, hi)
-        self.blending.blend(t, self.sample_time, v, s, self.m_eff * self.demand, self.v_ref,
-                            self.a_ref, a_res)
+        loco = self.locomotive_demand
+        self.blending.blend(t, self.sample_time, v, s,
+                            self.m_eff * (self.demand if loco is None else loco), self.v_ref,
+                            self.a_ref, a_res, locomotive=loco is not None)
         return self.outputs(), 1
 
     def outputs(self) -> dict[str, float]:

@@ -12,12 +12,21 @@ position ``s``; the error is ``e = v_ref(s) - v`` at the head.
   the measured position; ``R(k + j)`` is the reference speed there.
 * Disturbance ahead: ``d(k + j) = -(w_basic(R(k+j)) + w_add(s_j))`` per unit effective mass
   (eqs. 2-6, 17) from the nominal train on the route data the plant uses (grade, curve and
-  tunnel averaged over the train length at the predicted head positions ``s_j``).
-* ``u(k) = u(k-1) + Delta u(k)`` (m/s^2) goes to the shared blending (traction / ED / air brake).
+  tunnel averaged over the train length at the predicted head positions ``s_j``), and
+  (``air_brake_preview``, our addition on the paper's eq. 34-37 reasoning: a known resistance
+  ahead) minus the air-brake deceleration the shared blending's brake-pipe model predicts
+  (the plant's model and nominal data, as the design model takes the plant's traction lag):
+  commanded reduction held, the planned stop application at the sample the reference reaches
+  its onset.
+* ``u(k) = u(k-1) + Delta u(k)`` (m/s^2) goes to the shared blending (traction / ED / air brake):
+  with ``air_brake_preview`` it is the locomotive's part (electric brake only while the air
+  brake acts, no power braking) and ``accel_demand`` the train's demand ``u - a_air``; without,
+  it is the train's demand and the blending trims the air brake with it.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -37,13 +46,18 @@ class PreviewParams:
                         min=0.0)
     h: float = param(1e4, "1", "weight H of the input difference (m/s^2)^2 in eq. (37)",
                      min=1e-12)
-    preview_steps: int = param(50, "1", "reference preview M_R (samples)", min=0, max=10000,
+    preview_steps: int = param(150, "1", "reference preview M_R (samples)", min=0, max=10000,
                                name="M_R")
-    disturbance_steps: int = param(50, "1", "disturbance preview M_d (samples)", min=0,
+    disturbance_steps: int = param(150, "1", "disturbance preview M_d (samples)", min=0,
                                    max=10000, name="M_d")
     traction_delay: float = param(0.5, "s", "tau of the design model (eq. 15)", min=0.0)
     traction_time_constant: float = param(1.5, "s", "t_vb of the design model (eq. 15)",
                                           min=1e-6)
+    air_brake_preview: bool = param(True, description="the air-brake deceleration is a "
+                                    "previewed disturbance (the blending's brake-pipe model, "
+                                    "its planned stop application included) and u the "
+                                    "locomotive's part; off: u is the whole train's demand, the "
+                                    "blending trims the air brake with it")
 
     def check(self) -> None:
         self.blending.check()
@@ -95,6 +109,13 @@ class FreightPreview(FreightTracker):
         R, d = self.ahead(s)
         R[0] = self.v_ref
         d[0] = -a_res
+        air = np.zeros(0)
+        if p.air_brake_preview:  # u is the locomotive's part: its envelope, air as disturbance
+            air = self.air_ahead(t, s, R)
+            if air.size:
+                d -= air
+            trac, ed = self.blending.model.traction_limits(max(v, 0.0))
+            lo, hi = -ed / self.m_eff, (0.0 if self.blending.air_applied() else trac / self.m_eff)
         if self.z is None:  # first sample: at rest in the model, no differences yet
             self.z = np.zeros(m.n)
             self.z_prev = self.z.copy()
@@ -111,4 +132,31 @@ class FreightPreview(FreightTracker):
         self.z_prev = self.z.copy()
         self.u_prev = u
         self.d_prev = float(d[0])
-        return u
+        if not p.air_brake_preview:
+            return u
+        self.locomotive_demand = u
+        return u - (float(air[0]) if air.size else 0.0)  # the train's demand, air included
+
+    def air_ahead(self, t: float, s: float, R: np.ndarray) -> np.ndarray:
+        """Air-brake deceleration (m/s^2, >= 0) over the samples ``k + j`` (at their midpoints,
+        friction coefficient at the reference speeds ``R``): the blending's brake-pipe model
+        (:meth:`controllers.common.freight_blending.FreightBlending.air_force_ahead`) with the
+        commanded reduction held and, before a stop's planned application, that application at
+        the sample the reference reaches its onset (the stage
+        :meth:`~controllers.common.freight_blending.FreightBlending.planned_reduction` gives
+        there). Empty while no air brake acts or is planned within the horizon."""
+        b, T = self.blending, self.p.sample_time
+        planned = None
+        if not b.air_applied():
+            onset, _ = b._onset_ahead(s)
+            if not math.isfinite(onset):
+                return np.zeros(0)
+            t_s, t_on = np.interp([s, onset], self._x_pts, self._t_pts)
+            lead = T * round(float(t_on - t_s) / T)
+            if lead > self._horizon[-1] or onset < s:
+                return np.zeros(0)
+            v_on = self.profile.speed(onset)
+            a_res = b.resistance_accel(v_on, onset)
+            planned = (t + lead, b.planned_reduction(onset, v_on, a_res))
+        times = t + self._horizon + 0.5 * T
+        return b.air_force_ahead(t, times, R, planned) / self.m_eff
