@@ -108,9 +108,10 @@ def test_ismc_without_switching_drifts_out_of_the_layer() -> None:
 
 def test_ismpc_with_an_infinite_mpc_weight_is_its_equivalent_control() -> None:
     """theta -> inf: |U| <= |Theta'(Lambda s + Psi P)| / theta -> 0, so ISMPC = ISMC with
-    beta = 0. At theta = 1e9 the moves are below 1e-7 and the two closed loops (adaptive
-    estimator, regularised inverse, all defaults otherwise) agree to 1e-6."""
-    ismpc = Ismpc(IsmpcParams(theta=1e9), 3)
+    beta = 0. The two closed loops (adaptive estimator, regularised inverse, all defaults
+    otherwise) differ by O(1/theta) (1.7e3 / theta measured over these 400 samples: the
+    loop accumulates the moves); at theta = 1e12 they agree to 1e-6 with a margin of 500."""
+    ismpc = Ismpc(IsmpcParams(theta=1e12), 3)
     ismc = Ismc(IsmcParams(beta=0.0, surface=IsmpcParams().surface), 3)
     a = _disturbed_linear_loop(ismpc, 400)
     b = _disturbed_linear_loop(ismc, 400)
