@@ -7,7 +7,7 @@ times (this process) are printed beside them.
    reference look-up, estimator, law, QP when ISMPC's constraints are active), from a direct
    closed loop of the Emu core (CRH380A, seed001 disturbance) and each controller core over
    the first ``--seconds`` of the Jinan West - Xuzhou East run.
-2. Real-time factor of each seed-001 scenario (3540 s simulated) through the event-driven
+2. Real-time factor of each seed-001 scenario (3600 s simulated) through the event-driven
    master with the FMUs (``--scenarios``; 5 runs of 1-3 min each on this machine), by wall
    time and by the CPU time of the process (plant and controller FMUs run in it), and the
    controller FMU's share of the FMU wall time.

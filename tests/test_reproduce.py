@@ -12,9 +12,11 @@ import pytest
 from cosim.run.master import run_scenario
 from cosim.run.reproduce import (
     ReproduceError,
+    draw_speed_classes,
     entry_names,
     load_entry,
     reproduce,
+    speed_class_errors,
     summary_value,
 )
 
@@ -85,6 +87,11 @@ def test_reproduce_writes_ours_beside_the_paper(built_fmus, tmp_path: Path) -> N
     ('[[paper]]\nrun = "PID"\nmetric = "stop_error_m"\nrange = [1, 0]\n', "must be [low, high]"),
     ('[[figures]]\nfile = "x.png"\nx = "time"\ny = ["plant.v"]\nkind = "pie"\n', "kind 'pie'"),
     ('colour = "red"\n', "unknown key(s) ['colour']"),
+    ('[[figures]]\nfile = "c.png"\nkind = "speed_classes"\ny = ["plant.v"]\nclasses = [0, 30]\n'
+     'limit_kmh = 2.0\nlimit_below_kmh = 30.0\nlimit_fraction = 0.02\n', "missing key(s) ['ref']"),
+    ('[[figures]]\nfile = "c.png"\nkind = "speed_classes"\ny = ["plant.v"]\nref = "r"\n'
+     'classes = [0, 50, 30]\nlimit_kmh = 2.0\nlimit_below_kmh = 30.0\nlimit_fraction = 0.02\n',
+     "must be increasing edges"),
 ])
 def test_bad_entries_name_the_file_and_key(tmp_path: Path, patch: str, message: str) -> None:
     path = tmp_path / "bad.toml"
@@ -132,3 +139,57 @@ def test_bad_repeat_and_ratio_name_the_key(tmp_path: Path) -> None:
     path.write_text(ENTRY + '[[metrics]]\nkey = "x"\nratio_to = "nobody"\n')
     with pytest.raises(ReproduceError, match="ratio_to 'nobody'"):
         load_entry(str(path))
+
+
+CLASSES = {"file": "fig8.png", "kind": "speed_classes", "ref": "v_ref", "y": ["v1", "v2"],
+           "y_scale": 3.6, "classes": [0, 30, 50, 300], "limit_kmh": 2.0,
+           "limit_below_kmh": 30.0, "limit_fraction": 0.02}
+
+
+def _graded_frame() -> pd.DataFrame:
+    """A reference ramp 0 -> 300 km/h; unit 1 is 1.5 km/h fast below 30 km/h (within +-2),
+    unit 2 is 0.7 km/h slow from 30 to 40 km/h (beyond 2 % of the speed below 35 km/h) and
+    1 % slow above 50 km/h (within 2 %)."""
+    import numpy as np
+
+    v_kmh = np.concatenate([[0.0], 0.05 + 0.1 * np.arange(3000)])  # rest, then off the edges
+    e1 = np.where(v_kmh <= 30.0, 1.5, 0.0)
+    e2 = np.where((v_kmh > 30.0) & (v_kmh <= 40.0), -0.7,
+                  np.where(v_kmh > 50.0, -0.01 * v_kmh, 0.0))
+    return pd.DataFrame({"v_ref": v_kmh / 3.6, "v1": (v_kmh + e1) / 3.6,
+                         "v2": (v_kmh + e2) / 3.6})
+
+
+def test_speed_classes_grade_the_error_against_ctcs3() -> None:
+    """Fig. 8 (seed 001): per class, the max |error| over the units and the CTCS-3 verdict
+    per sample (2 km/h at or below 30 km/h, 2 % of the speed above)."""
+    rows = {r["class"]: r for r in speed_class_errors(_graded_frame(), CLASSES)}
+    tol = 1e-9  # km/h: the m/s round trip of the synthetic speeds
+    low, mid, high = rows["0-30"], rows["30-50"], rows["50-300"]
+    assert low["max_abs_error"] == pytest.approx(1.5, abs=tol) and low["met"]
+    assert low["limit"] == 2.0 and low["samples"] == 300  # v = 0 (at rest) is not graded
+    assert mid["max_abs_error"] == pytest.approx(0.7, abs=tol) and not mid["met"]
+    assert mid["limit"] == pytest.approx(0.02 * 30.05, abs=tol)  # the class's lowest sample
+    assert high["max_abs_error"] == pytest.approx(2.9995, abs=tol) and high["met"]
+
+
+def test_seed001_declares_figures_6_to_10() -> None:
+    """Issue 15: Figs. 6-10 of seed 001, Fig. 8 graded by CTCS-3 as data (2 km/h, 30 km/h, 2 %)."""
+    figs = {re.match(r"fig(\d+)_", f["file"]).group(1): f for f in load_entry("seed001").figures}
+    assert sorted(figs, key=int) == ["6", "7", "8", "9", "10"]
+    fig8 = figs["8"]
+    assert fig8["kind"] == "speed_classes" and fig8["classes"][:3] == [0, 30, 50]
+    assert (fig8["limit_kmh"], fig8["limit_below_kmh"], fig8["limit_fraction"]) == (2.0, 30.0,
+                                                                                     0.02)
+
+
+def test_speed_classes_figure_writes_table_and_csv(tmp_path: Path) -> None:
+    for name in ("a", "b"):
+        (tmp_path / name).mkdir()
+        _graded_frame().to_csv(tmp_path / name / "results.csv", index=False)
+    text = draw_speed_classes({**CLASSES, "paper": "A fails at 30"},
+                              {"A": tmp_path / "a", "B": tmp_path / "b"}, tmp_path / "fig8.png")
+    assert (tmp_path / "fig8.png").stat().st_size > 10_000
+    csv = pd.read_csv(tmp_path / "fig8.csv")
+    assert len(csv) == 6 and set(csv.run) == {"A", "B"}
+    assert "| 30-50 | 0.601 | 0.7 ✗ | 0.7 ✗ |" in text and "Paper: A fails at 30" in text

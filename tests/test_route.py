@@ -126,7 +126,35 @@ def test_bundled_jinan_xuzhou_east_line() -> None:
     for a, b in sections:
         inside = (s[:-1] >= a) & (s[:-1] < b)
         assert np.all(accel[inside] <= 0.0)
-    assert 3000.0 < ref.run_time() < 4000.0  # about 58 min at 300 km/h
+    assert 3000.0 < ref.run_time() < 4000.0  # about 59 min at 300 km/h
+
+
+def test_jinan_xuzhou_east_reference_keeps_a_traction_reserve() -> None:
+    """The reference needs at most the traction envelope minus 3 sigma of the slowly varying
+    disturbance of the seed 001 reproduction (its coloured rows), on every 25 m segment: the
+    force m a + resistance + line resistance at the segment's start speed."""
+    from cosim.run.reproduce import load_entry
+    from plants.emu import emu_config
+
+    sigmas = [r["set"]["plant.disturbance_accel_std"] for r in load_entry("seed001").runs
+              if r.get("set", {}).get("plant.disturbance_correlation_time", 0.0) > 0.0]
+    reserve = 3.0 * max(sigmas)  # m/s^2: 0.09
+    route = load_route("jinan_xuzhou_east")
+    ref, p = route.reference, emu_config("crh380a_3unit")
+    mass, length = sum(p.masses), sum(p.lengths)
+    s, v = ref.x[:-1], ref.v[:-1]
+    accel = np.array([ref.accel(x) for x in s])
+    resist = sum(p.davis_a) + sum(p.davis_b) * v + sum(p.davis_c) * v * v
+    line = mass * GRAVITY * route.additional_resistance(s, length) / 1000.0
+    needed = (mass * accel + resist + line) / mass
+    envelope = np.minimum(sum(p.max_traction_force),
+                          sum(p.max_traction_power) / np.maximum(v, 1e-3)) / mass
+    # 1e-3 m/s^2: the CSV's 1e-4 km/h rounding over 25 m (5e-5 m/s^2 at 300 km/h) and the
+    # envelope's change over a segment (3e-5); 85 % of the envelope (the old profile) leaves
+    # 0.033 m/s^2 at 300 km/h and fails this by 0.057 m/s^2
+    assert np.max(needed - (envelope - reserve)) <= 1e-3
+    # and it uses that envelope: somewhere the reserve is all that is left
+    assert np.min(envelope - needed) == pytest.approx(reserve, abs=1e-3)
 
 
 def test_seed004_reference_changes_at_200_and_600_s() -> None:

@@ -9,21 +9,26 @@ Data model (eq. 9 / eq. 13), ``n`` outputs and ``n`` inputs, pseudo-orders ``L_y
 ``Phi_{L_y+1}`` (called ``Phi_2`` in the paper's ``L_y = L_u = 1`` notation) is the block that
 multiplies ``du(t)``: the input gain the control laws invert.
 
-Estimator (eq. 16, projection algorithm minimising eq. 15)::
+Estimator (eq. 16, projection algorithm minimising eq. 15, in the form the paper analyses in
+eq. 30: the innovation is the model's a-priori error, without ``dd_hat``)::
 
-    eps(t)  = dy(t) - dd_hat(t-1) - Phi(t-1) dH(t-1)
+    eps(t)  = dy(t) - Phi(t-1) dH(t-1)
     Phi(t)  = Phi(t-1) + lambda eps(t) dH(t-1)' / (mu + ||dH(t-1)||^2)
 
-Disturbance delay-estimate (eq. 14): ``dd_hat(t) = dy(t) - Phi(t) dH(t-1)``, the part of the
-last output change the model does not explain, used as the estimate of ``dd(t)`` (assumption 3:
-the disturbance changes little between samples). The paper writes eq. 14 with ``Phi(t-1)`` and
-puts ``dd_hat(t)`` into eq. 16; taken literally the innovation of eq. 16 is then identically
-zero and ``Phi`` never moves. Here the estimator uses the previous sample's estimate
-``dd_hat(t-1)`` (a one-step delay-estimate of the disturbance change, assumption 3) and eq. 14
-is evaluated with the updated ``Phi(t)``. ``p(t) = dd(t) - dd_hat(t)`` (eq. 41) is the
-estimation error the sliding-mode laws must absorb; its one-step estimate is
-``p_hat(t-1) = dd_hat(t) - dd_hat(t-1)`` (eq. 70). With ``disturbance = False`` (plain
-FFDL-MFAC) ``dd_hat = 0``.
+Disturbance delay-estimate (eq. 14, as printed, with ``Phi(t-1)``): ``dd_hat(t) = dy(t) -
+Phi(t-1) dH(t-1)``, the part of the last output change the model does not explain, used as the
+estimate of ``dd(t)`` (assumption 3: the disturbance changes little between samples). The paper
+also puts ``dd_hat(t)`` into eq. 16; taken literally that innovation is identically zero and
+``Phi`` never moves, while its proof of boundedness (eqs. 30-32) uses the innovation above.
+``innovation_dd_hat = true`` is the other way out, used here before (a diagnostic, not the
+paper's): ``eps(t) = dy(t) - dd_hat(t-1) - Phi(t-1) dH(t-1)`` and eq. 14 with the updated
+``Phi(t)``. That innovation is a *difference* of a-priori errors, so it only sees changes of
+``dH``: on the train (smooth ``dy``, small ``du``) ``Phi_1`` stayed near its start ``0.5 I``
+(true ``~I``) for about 1000 s, and ``dd_hat`` carried the model error ``(I - Phi_1) dy(t-1)``,
+half of every speed change (unbiased on a ramp disturbance, though: the test keeps that).
+``p(t) = dd(t) - dd_hat(t)`` (eq. 41) is the estimation error the sliding-mode laws must absorb;
+its one-step estimate is ``p_hat(t-1) = dd_hat(t) - dd_hat(t-1)`` (eq. 70). With ``disturbance
+= False`` (plain FFDL-MFAC) ``dd_hat = 0``.
 
 Reset condition (Hou's FFDL-MFAC): ``Phi`` is not updated while ``||dH(t-1)|| <= excitation``
 (no information), and returns to ``Phi(1)`` when a diagonal entry of the input block becomes
@@ -116,6 +121,10 @@ class FfdlParams:
                                "whose singular value is below this fraction of the largest "
                                "(force differences between stiffly coupled units; 0: keep "
                                "all)", min=0.0, max=1.0)
+    innovation_dd_hat: bool = param(False, description="subtract the previous sample's "
+                                    "dd_hat in the innovation of eq. 16 and evaluate eq. 14 "
+                                    "with the updated Phi (a diagnostic; false: eqs. 30, 14 "
+                                    "as printed)")
 
     def check(self) -> None:
         if not (self.mu > 0 and 0 <= self.step <= 2):
@@ -181,16 +190,20 @@ class FfdlEstimator(StatefulCore):
         self.y_prev = y
         dH = self.dH_prev  # dH(t-1)
         norm2 = float(dH @ dH)
+        prior = self.phi @ dH  # eq. 14's prediction with Phi(t-1)
         if adapt and p.step > 0 and math.sqrt(norm2) > p.excitation:
-            known = self.dd_hat if self.disturbance else 0.0
-            eps = dy - known - self.phi @ dH
+            known = self.dd_hat if self.disturbance and p.innovation_dd_hat else 0.0
+            eps = dy - known - prior
             self.phi = self.phi + p.step * np.outer(eps, dH) / (p.mu + norm2)
             diag = np.diag(self.input_block)
             if np.any(diag < p.reset_threshold):
                 self.phi = self.initial_phi()
                 self.resets += 1
         self.dd_hat_prev = self.dd_hat
-        self.dd_hat = dy - self.phi @ dH if self.disturbance else np.zeros(self.n)
+        if not self.disturbance:
+            self.dd_hat = np.zeros(self.n)
+        else:
+            self.dd_hat = dy - (self.phi @ dH if p.innovation_dd_hat else prior)
         self.dy_hist = np.vstack([dy, self.dy_hist[:-1]])
 
     def applied(self, u: np.ndarray) -> None:

@@ -22,24 +22,35 @@ Equivalent control (eq. 24, ``Phi_2^-1`` replaced by the regularised inverse ``K
 ISMC adds ``du_sw = -K beta sat(s / Delta)`` (eq. 26 with the boundary layer of eq. 27).
 ISMPC adds the first move of an ``N``-step MPC on ``s`` (eqs. 58-73)::
 
-    S = Lambda s(t) + Theta U + Psi P_hat,    min ||S||^2 + theta ||U||^2
+    S = Lambda s(t) + Theta U - Psi P_hat,    min ||S||^2 + theta ||U||^2
 
 with ``Theta`` built from the current ``Phi_2`` at every stage (the paper's "parameter values
 held over the horizon", remark 4), ``P_hat`` = the last ``p_hat`` (eq. 70) at every stage, and
 the input box as constraints on the cumulated moves (``u(t-1) + du_eq + sum U``). The
 unconstrained minimiser (eq. 72) is used when it meets them; otherwise DAQP solves the QP,
 warm-started from the previous plan's duals (:class:`controllers.common.qp.DenseQP`).
-As ``theta -> inf`` the MPC moves vanish (``|U| <= |Theta'(Lambda s + Psi P)| / theta``) and
+As ``theta -> inf`` the MPC moves vanish (``|U| <= |Theta'(Lambda s - Psi P)| / theta``) and
 ISMPC is its equivalent control alone (ISMC with ``beta = 0``). ``b`` (the Lipschitz constant
 of assumption 2 in eq. 18) and ``theta`` are not given in the paper: see the defaults.
 
+The sign of ``Psi P_hat``: eqs. 72, 73, 75 print ``Lambda s + Psi P_hat``; the proof of
+theorem 3 (eq. 78, and eq. 83 after it) uses ``Lambda s - Psi P_hat``, which gives ``s(t+1) =
+p_hat(t-1) + p(t) = dd(t) - dd_hat(t-1)``; under assumption 3 both signs keep ``|s(t+1)| <=
+2 gamma``. They differ under model error, which is what ``p_hat`` mostly carries on a data
+model: ``dd_hat`` (eq. 14) holds ``(Phi_2 - Phi_2_hat) du(t-1)``, ``r = (Phi_2 - Phi_2_hat) /
+Phi_2_hat``. The moves of the ``du`` loop alone (``c`` the MPC's first-move gain on ``p_hat``,
+0.82 at N = 10, theta = 10, Phi_2 = 0.72) obey ``z^2 + r (1 + c) z - c r = 0`` with eq. 72's
+sign, stable for ``-1 < r < 1 / (1 + 2c) = 0.38``, and ``z^2 + r (1 - c) z + c r = 0`` with
+eq. 78's, stable for ``-1 < r < 1 / c = 1.2``. With the ``s`` loop (test_datadriven, a fixed
+``Phi_2_hat = Phi_2 / (1 + r)``, theta = 10) eq. 72's sign diverges from ``r = 0.15``, ``P_hat
+= 0`` from 0.3, eq. 78's at 0.7 (converges at 0.5). The paper's start ``Phi_2(1) = 0.5``
+against the train's about 0.72 is ``r = 0.44``: eq. 72's sign made the forces jump between 50
+and 88 kN at start-up. The default is eq. 78's
+(``error_prediction = "eq78"``), eq. 72's is ``"eq72"``, ``"off"`` is ``P_hat = 0``.
+
 First-move gains of the MPC (N = 10, scalar Phi_2 = 0.72): on ``s`` 0.92 / 0.51 / 0.20 at
 ``theta`` = 0.05 / 1 / 10, on ``p_hat`` 1.00 / 1.00 / 0.82. ISMC's layer pulls ``s`` back by
-``beta / Delta = 0.5`` per sample and has no ``p_hat`` term. ``p_hat`` (eq. 70) is a second
-difference of ``dd_hat``, which holds the model error ``(Phi_2 - Phi_2_hat) du(t-1)`` as well as
-the disturbance: fed back with gain ~1 it excites the loop (forces jumping 50-88 kN at start-up
-on a smooth disturbance where the true ``p`` is ~0), and on white noise ``p_hat`` is
-anti-correlated with ``p``. ``error_prediction = false`` (``P_hat = 0``) is the diagnostic.
+``beta / Delta = 0.5`` per sample and has no ``p_hat`` term.
 
 Anti-windup: the sums ``E``, ``F`` are not advanced at a sample where every unit's input
 saturates in the direction the law asked for (the train can no longer act on the surface).
@@ -239,18 +250,30 @@ class IsmpcParams:
                          max=50, name="N")
     theta: float = param(10.0, "1", "theta: weight of ||U||^2 in J_2 (eq. 66; not given in "
                          "the paper; chosen by a sweep, README seed 001)", min=0.0)
-    error_prediction: bool = param(True, description="P_hat of eqs. 70-72: every stage k of "
-                                   "the MPC's prediction adds k p_hat(t-1), p_hat(t-1) = "
-                                   "dd_hat(t) - dd_hat(t-1) (the paper's law); false: P_hat = "
-                                   "0 (a diagnostic, not the paper's law)")
+    error_prediction: str = param("eq78", description='P_hat of eqs. 70-72 (every stage k of '
+                                  "the MPC's prediction adds k p_hat(t-1), p_hat(t-1) = "
+                                  'dd_hat(t) - dd_hat(t-1)) with the sign of the law theorem 3 '
+                                  'proves, "eq78" (Lambda s - Psi P_hat), or as eqs. 72, 73, 75 '
+                                  'print it, "eq72" (+ Psi P_hat); "off": P_hat = 0 (a '
+                                  'diagnostic)')
+
+    def check(self) -> None:
+        if self.error_prediction not in P_HAT_SIGN:
+            raise ValueError(f"error_prediction = {self.error_prediction!r}: one of "
+                             f"{sorted(P_HAT_SIGN)}")
+
+
+P_HAT_SIGN = {"eq78": -1.0, "eq72": 1.0, "off": 0.0}
 
 
 class Ismpc(SlidingLaw):
     state_fields = ("est", "u", "E", "F", "s", "warm_dual", "qp_solves", "qp_failures")
 
     def __init__(self, params: IsmpcParams, n: int) -> None:
+        params.check()
         super().__init__(params.ffdl, params.surface, n)
         self.p = params
+        self._p_hat_sign = P_HAT_SIGN[params.error_prediction]
         N = params.horizon
         tril = np.tril(np.ones((N, N)))
         # the QP in the cumulated moves z_k = sum_{j<=k} U_j (U = D z): the input box becomes
@@ -276,8 +299,8 @@ class Ismpc(SlidingLaw):
         n, N = self.n, self.p.horizon
         gain = self._gain  # the truncated block of equivalent() and its SVD
         Phi2 = gain.M
-        # S = Lambda s + Theta U + Psi P_hat; stage k (1..N) of the free part: s + k p_hat
-        p_hat = self.est.p_hat if self.p.error_prediction else np.zeros(self.n)
+        # S = Lambda s + Theta U -/+ Psi P_hat; stage k (1..N) of the free part: s -/+ k p_hat
+        p_hat = self._p_hat_sign * self.est.p_hat
         offset = s + self._stages * p_hat
         tails = np.cumsum(offset[::-1], axis=0)[::-1]  # sum_{k >= j} offset_k
         grad = tails @ Phi2  # Theta' (Lambda s + Psi P) as (N, n)

@@ -69,10 +69,17 @@ KMH_PER_MPS = 3.6
 STANDSTILL_MPS = 1e-3
 
 
+def ctcs3_allowance_kmh(v_ref_kmh: np.ndarray, limit_kmh: float = 2.0,
+                        below_kmh: float = 30.0, fraction: float = 0.02) -> np.ndarray:
+    """CTCS-3 speed-error allowance: ``limit_kmh`` at or below ``below_kmh``, else
+    ``fraction`` of the speed (seed 001, sec. 4.2: 2 km/h, 30 km/h, 2 %)."""
+    v = np.asarray(v_ref_kmh, dtype=float)
+    return np.where(v <= below_kmh, limit_kmh, fraction * v)
+
+
 def ctcs3_speed_error_ok(v_ref_kmh: np.ndarray, error_kmh: np.ndarray) -> bool:
     """CTCS-3 rule: |error| <= 2 km/h at or below 30 km/h, <= 2 % of the speed above."""
-    allowed = np.where(v_ref_kmh <= 30.0, 2.0, 0.02 * v_ref_kmh)
-    return bool(np.all(np.abs(error_kmh) <= allowed + 1e-12))
+    return bool(np.all(np.abs(error_kmh) <= ctcs3_allowance_kmh(v_ref_kmh) + 1e-12))
 
 
 def _series(frame: Any, ref: Any) -> np.ndarray | None:

@@ -46,6 +46,17 @@ live there, not in code)::
     y_scale = 3.6                  # optional factor (m/s -> km/h)
     ylabel = "speed (km/h)"
     runs = ["PID", "MPC"]          # optional, default all
+    [[figures]]                    # graded speed error (seed 001's Fig. 8): the max |error| of
+    file = "fig8.png"              # each run per class of the reference speed, with the limit
+    kind = "speed_classes"         # |e| <= max(limit_kmh if v <= limit_below_kmh, fraction v)
+    ref = "controller.v_ref"       # the reference speed column (classes are of it)
+    y = ["plant.v[1]"]             # speeds; error = y - ref; y_scale converts both (3.6: km/h)
+    y_scale = 3.6
+    classes = [0, 30, 50, 100]     # class edges (km/h): (0, 30], (30, 50], (50, 100]
+    limit_kmh = 2.0                # CTCS-3: 2 km/h at or below 30 km/h, 2 % of the speed above
+    limit_below_kmh = 30.0
+    limit_fraction = 0.02
+    paper = "what the paper reports"   # optional, shown under the figure
 
 The command runs every run (in parallel processes), writes each run's results under
 ``runs/``, then ``table.md`` and ``table.csv`` (ours beside the paper's, with the verdict where
@@ -83,6 +94,9 @@ _METRIC_KEYS = {"key", "label", "ratio_to"}
 _PAPER_KEYS = {"run", "metric", "value", "range", "tolerance", "source"}
 _SWEEP_KEYS = {"name", "scenarios", "grid"}
 _FIGURE_KEYS = {"file", "title", "kind", "x", "y", "y_scale", "ylabel", "xlabel", "runs"}
+_CLASS_KEYS = {"file", "title", "kind", "y", "y_scale", "ylabel", "runs", "ref", "classes",
+               "limit_kmh", "limit_below_kmh", "limit_fraction", "paper"}
+FIGURE_KINDS = ("overlay", "panels", "speed_classes")
 
 
 class ReproduceError(ValueError):
@@ -173,9 +187,17 @@ def load_entry(name: str | Path) -> Entry:
                     ("name", "scenarios", "grid"))
     for i, fig in enumerate(data.get("figures", [])):
         where = f"{path}: [[figures]] #{i + 1}"
-        _check_keys(where, fig, _FIGURE_KEYS, ("file", "x", "y"))
-        if fig.get("kind", "overlay") not in ("overlay", "panels"):
-            raise ReproduceError(f"{where}: kind {fig['kind']!r} (overlay or panels)")
+        if fig.get("kind", "overlay") not in FIGURE_KINDS:
+            raise ReproduceError(f"{where}: kind {fig['kind']!r} (known: {FIGURE_KINDS})")
+        if fig.get("kind") == "speed_classes":
+            _check_keys(where, fig, _CLASS_KEYS, ("file", "y", "ref", "classes", "limit_kmh",
+                                                  "limit_below_kmh", "limit_fraction"))
+            edges = fig["classes"]
+            if len(edges) < 2 or any(b <= a for a, b in zip(edges[:-1], edges[1:],
+                                                            strict=True)):
+                raise ReproduceError(f"{where}: classes {edges!r} must be increasing edges")
+        else:
+            _check_keys(where, fig, _FIGURE_KEYS, ("file", "x", "y"))
         unknown_runs = sorted(set(fig.get("runs", names)) - set(names))
         if unknown_runs:
             raise ReproduceError(f"{where}: runs {unknown_runs} are not in [[runs]]")
@@ -425,6 +447,97 @@ def draw_figure(spec: dict[str, Any], run_dirs: dict[str, Path], path: Path) -> 
     plt.close(fig)
 
 
+def speed_class_errors(frame: Any, spec: dict[str, Any]) -> list[dict[str, Any]]:
+    """Graded speed error of one run (a ``speed_classes`` figure, seed 001's Fig. 8).
+
+    Per class (lo, hi] of the reference speed (samples with the reference above zero): the
+    max |error| over the ``y`` columns, the class's strictest allowance (at its lowest sample
+    speed) and whether every sample keeps its own allowance (all in the figure's units)."""
+    import numpy as np
+
+    from cosim.run.metrics import ctcs3_allowance_kmh
+
+    scale = float(spec.get("y_scale", 1.0))
+    ys = spec["y"] if isinstance(spec["y"], list) else [spec["y"]]
+    for col in [*ys, spec["ref"]]:
+        if col not in frame:
+            raise ReproduceError(f"figure {spec['file']}: no recorded {col!r}")
+    ref = frame[spec["ref"]].to_numpy(dtype=float) * scale
+    vals = frame[ys].to_numpy(dtype=float) * scale
+    err = np.abs(vals - ref[:, None]).max(axis=1)
+    edges = [float(e) for e in spec["classes"]]
+    rows = []
+    for lo, hi in zip(edges[:-1], edges[1:], strict=True):
+        sel = (ref > max(lo, 0.0)) & (ref <= hi)
+        row: dict[str, Any] = {"class": f"{lo:g}-{hi:g}", "samples": int(sel.sum()),
+                               "max_abs_error": None, "limit": None, "met": None}
+        if np.any(sel):
+            allowed = ctcs3_allowance_kmh(ref[sel], float(spec["limit_kmh"]),
+                                          float(spec["limit_below_kmh"]),
+                                          float(spec["limit_fraction"]))
+            row.update(max_abs_error=float(err[sel].max()), limit=float(allowed.min()),
+                       met=bool(np.all(err[sel] <= allowed + 1e-12)))
+        rows.append(row)
+    return rows
+
+
+def draw_speed_classes(spec: dict[str, Any], run_dirs: dict[str, Path], path: Path) -> str:
+    """Grouped bars of :func:`speed_class_errors` per run with each class's limit; writes
+    ``<file>.csv`` beside the figure and returns the markdown table."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+    import pandas as pd
+
+    names = list(spec.get("runs", list(run_dirs)))
+    per_run = {n: speed_class_errors(pd.read_csv(run_dirs[n] / "results.csv"), spec)
+               for n in names}
+    classes = [r["class"] for r in per_run[names[0]]]
+    limits = [next((per_run[n][k]["limit"] for n in names if per_run[n][k]["limit"]
+                    is not None), None) for k in range(len(classes))]
+    pd.DataFrame([{"run": n, **r} for n in names for r in per_run[n]]).to_csv(
+        path.with_suffix(".csv"), index=False)
+    fig, ax = plt.subplots(figsize=(10.5, 4.5))
+    x = np.arange(len(classes))
+    width = 0.8 / (len(names) + 1)
+    for i, n in enumerate(names):
+        heights = [r["max_abs_error"] or 0.0 for r in per_run[n]]
+        bars = ax.bar(x + (i - len(names) / 2) * width, heights, width, label=n)
+        for bar, r in zip(bars, per_run[n], strict=True):
+            if r["met"] is False:
+                ax.annotate("x", (bar.get_x() + bar.get_width() / 2, bar.get_height()),
+                            ha="center", va="bottom", color="red", fontsize=8)
+    lim = [v if v is not None else np.nan for v in limits]
+    ax.bar(x + (len(names) / 2) * width, lim, width, color="none", edgecolor="black",
+           hatch="//", label="limit (strictest in class)")
+    ax.set_yscale("log")
+    ax.set_xticks(x, classes)
+    ax.set_xlabel("reference speed class (km/h)")
+    ax.set_ylabel(spec.get("ylabel", "max |speed error|"))
+    ax.grid(True, axis="y", alpha=0.3)
+    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0))
+    fig.suptitle(spec.get("title", ""))
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    lines = ["| class | limit | " + " | ".join(names) + " |", "|" + " --- |" * (len(names) + 2)]
+    for k, cls in enumerate(classes):
+        cells = []
+        for n in names:
+            r = per_run[n][k]
+            cells.append("-" if r["max_abs_error"] is None else
+                         f"{_fmt(r['max_abs_error'])} {'✓' if r['met'] else '✗'}")
+        lines.append(f"| {cls} | {_fmt(limits[k]) if limits[k] is not None else '-'} | "
+                     + " | ".join(cells) + " |")
+    lines += ["", "max |error| per class of the reference speed over the units (✓ / ✗: every "
+              "sample within its own allowance); limit: the class's strictest allowance."]
+    if spec.get("paper"):
+        lines += ["", f"Paper: {spec['paper']}"]
+    return "\n".join(lines)
+
+
 def reproduce(name: str, out_dir: str | Path | None = None, workers: int | None = None
               ) -> Path:
     """Run one entry; write table.md/table.csv, sweeps and figures; return table.md."""
@@ -453,6 +566,11 @@ def reproduce(name: str, out_dir: str | Path | None = None, workers: int | None 
                   f"![{sweep['name']}]({target.name}/sweep.png)"]
     run_dirs = {r["name"]: out / "runs" / slug(r["name"]) for r in entry.runs}
     for spec in entry.figures:
+        if spec.get("kind") == "speed_classes":
+            table_md = draw_speed_classes(spec, run_dirs, out / spec["file"])
+            parts += ["", f"![{spec.get('title', spec['file'])}]({spec['file']})", "",
+                      table_md]
+            continue
         draw_figure(spec, run_dirs, out / spec["file"])
         parts += ["", f"![{spec.get('title', spec['file'])}]({spec['file']})"]
     if entry.notes:
