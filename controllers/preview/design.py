@@ -33,16 +33,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.linalg import expm, solve_discrete_are
 
-
-def _zoh(Ac: np.ndarray, Bc: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray]:
-    """``(e^{A h}, int_0^h e^{A s} ds B)`` of a continuous system."""
-    n, m = Bc.shape
-    M = np.zeros((n + m, n + m))
-    M[:n, :n], M[:n, n:] = Ac, Bc
-    Md = expm(M * h)
-    return Md[:n, :n], Md[:n, n:]
+from controllers.common.design_model import dare, zoh
 
 
 @dataclass(frozen=True)
@@ -69,10 +61,10 @@ def lag_delay_model(T: float, tau: float, t_vb: float) -> DelayedModel:
     Ec = np.array([[1.0], [0.0]])
     lag = int(np.floor(tau / T + 1e-12))
     m = max(tau - lag * T, 0.0)
-    Phi, _ = _zoh(Ac, Bc, T)
-    _, Ed = _zoh(Ac, Ec, T)
-    Phi_rest, Gamma0 = _zoh(Ac, Bc, T - m)  # u(k - l) over the last T - m
-    _, Gm = _zoh(Ac, Bc, m) if m > 0 else (None, np.zeros((2, 1)))
+    Phi, _ = zoh(Ac, Bc, T)
+    _, Ed = zoh(Ac, Ec, T)
+    Phi_rest, Gamma0 = zoh(Ac, Bc, T - m)  # u(k - l) over the last T - m
+    _, Gm = zoh(Ac, Bc, m) if m > 0 else (None, np.zeros((2, 1)))
     Gamma1 = Phi_rest @ Gm  # u(k - l - 1) over the first m
     nh = lag + 1  # held inputs u(k-l-1) .. u(k-1)
     n = 2 + nh
@@ -132,7 +124,7 @@ def preview_gains(model: DelayedModel, q_e: float, q_dz: float, h: float, m_r: i
     Phi, Gu, GR, Gd = error_system(model)
     Q = np.diag([q_e] + [q_dz] * model.n)
     H = np.array([[h]])
-    P = solve_discrete_are(Phi, Gu, Q, H)
+    P = dare(Phi, Gu, Q, H)
     K = np.linalg.solve(H + Gu.T @ P @ Gu, Gu.T)  # (H + G_u' P G_u)^-1 G_u'
     F0 = -K @ P @ Phi
     xi_t = (Phi + Gu @ F0).T
