@@ -86,6 +86,8 @@ def test_reproduce_writes_ours_beside_the_paper(built_fmus, tmp_path: Path) -> N
     ('[[paper]]\nrun = "PID"\nmetric = "nope"\nvalue = 1.0\n', "metric 'nope'"),
     ('[[paper]]\nrun = "PID"\nmetric = "stop_error_m"\nrange = [1, 0]\n', "must be [low, high]"),
     ('[[figures]]\nfile = "x.png"\nx = "time"\ny = ["plant.v"]\nkind = "pie"\n', "kind 'pie'"),
+    ('[[figures]]\nfile = "x.png"\nx = "time"\ny = ["plant.v[*]"]\ny_reduce = "max"\n',
+     "y_reduce 'max'"),
     ('colour = "red"\n', "unknown key(s) ['colour']"),
     ('[[figures]]\nfile = "c.png"\nkind = "speed_classes"\ny = ["plant.v"]\nclasses = [0, 30]\n'
      'limit_kmh = 2.0\nlimit_below_kmh = 30.0\nlimit_fraction = 0.02\n', "missing key(s) ['ref']"),
@@ -193,3 +195,25 @@ def test_speed_classes_figure_writes_table_and_csv(tmp_path: Path) -> None:
     csv = pd.read_csv(tmp_path / "fig8.csv")
     assert len(csv) == 6 and set(csv.run) == {"A", "B"}
     assert "| 30-50 | 0.601 | 0.7 ✗ | 0.7 ✗ |" in text and "Paper: A fails at 30" in text
+
+
+def test_figure_series_mean_of_pattern_minus_reference() -> None:
+    """``y_reduce = "mean"`` over ``plant.v[*]`` and ``y_minus``: the train-mean speed error
+    of seed 002's figure, exactly the mean of the vehicle columns less the reference."""
+    from cosim.run.reproduce import figure_series
+
+    frame = pd.DataFrame({"time": [0.0, 1.0], "plant.v[1]": [1.0, 4.0], "plant.v[2]": [3.0, 8.0],
+                          "plant.v_tail": [100.0, 100.0], "controller.v_ref": [0.5, 5.0]})
+    spec = {"file": "f.png", "y_reduce": "mean", "y_minus": "controller.v_ref"}
+    assert figure_series(frame, spec, "plant.v[*]", "A").tolist() == [1.5, 1.0]
+    assert figure_series(frame, {"file": "f.png"}, "plant.v[2]", "A").tolist() == [3.0, 8.0]
+    with pytest.raises(ReproduceError, match="run 'A' recorded no 'plant.a'"):
+        figure_series(frame, {"file": "f.png"}, "plant.a", "A")
+    with pytest.raises(ReproduceError, match="recorded no 'controller.x'"):
+        figure_series(frame, {**spec, "y_minus": "controller.x"}, "plant.v[*]", "A")
+
+
+def test_seed002_plots_the_train_mean_error() -> None:
+    """Issue 16: the 0.3 km/h target is judged on the train-mean speed; its error is a figure."""
+    figs = [f for f in load_entry("seed002").figures if f.get("y_reduce") == "mean"]
+    assert [(f["y"], f["y_minus"]) for f in figs] == [(["plant.v[*]"], "controller.v_ref")]

@@ -89,7 +89,9 @@ def _series(frame: Any, ref: Any) -> np.ndarray | None:
     return None
 
 
-def _columns(frame: Any, ref: Any) -> list[str]:
+def matching_columns(frame: Any, ref: Any) -> list[str]:
+    """The recorded columns named by ``ref``: a name, ``"plant.v[*]"`` (every column of that
+    pattern) or a list of those; absent ones are left out."""
     refs = ref if isinstance(ref, list) else [ref]
     cols: list[str] = []
     for r in refs:
@@ -206,7 +208,7 @@ def compute_summary(result: Any) -> dict[str, Any]:
         out["ctcs3_speed_error_ok"] = ctcs3_speed_error_ok(ref[moving if np.any(moving) else
                                                                slice(None)] * KMH_PER_MPS,
                                                            err_kmh)
-    unit_cols = _columns(frame, cfg.get("unit_speeds"))
+    unit_cols = matching_columns(frame, cfg.get("unit_speeds"))
     if unit_cols and ref is not None:
         out.update(unit_indices(t, frame[unit_cols].to_numpy(dtype=float), ref,
                                 float(cfg.get("ma_sample_time", 1.0))))
@@ -218,7 +220,7 @@ def compute_summary(result: Any) -> dict[str, Any]:
                 moving = (speed[:-1] > STANDSTILL_MPS) & (speed[1:] > STANDSTILL_MPS)
                 jerk = jerk[moving]
             out["max_jerk_mps3"] = float(np.max(np.abs(jerk))) if jerk.size else 0.0
-    cols = _columns(frame, cfg.get("coupler_forces"))
+    cols = matching_columns(frame, cfg.get("coupler_forces"))
     if cols and len(frame):
         out["max_coupler_force_kn"] = float(np.max(np.abs(frame[cols].to_numpy())) / 1e3)
     power = _series(frame, cfg.get("power"))
@@ -347,7 +349,7 @@ def _seed002_metrics(out: dict[str, Any], cfg: dict[str, Any], frame: Any,
             part = err_kmh[keep & sel]
             out[f"max_abs_speed_error_{mode}_kmh"] = (float(np.max(np.abs(part)))
                                                      if part.size else None)
-    cols = _columns(frame, cfg.get("vehicle_speeds"))
+    cols = matching_columns(frame, cfg.get("vehicle_speeds"))
     if cols and np.any(keep):
         mean = frame[cols].to_numpy(dtype=float).mean(axis=1)
         e_mean = (mean - ref)[keep] * KMH_PER_MPS

@@ -42,7 +42,8 @@ live there, not in code)::
     title = "Speed against position"
     kind = "overlay"               # overlay (one line per run) | panels (one panel per run)
     x = "plant.s"                  # a recorded column or "time"
-    y = ["plant.v"]
+    y = ["plant.v"]                # columns; "plant.v[*]" with y_reduce = "mean": their mean
+    y_minus = "controller.v_ref"   # optional: plot y - this column (an error)
     y_scale = 3.6                  # optional factor (m/s -> km/h)
     ylabel = "speed (km/h)"
     runs = ["PID", "MPC"]          # optional, default all
@@ -93,7 +94,8 @@ _RUN_KEYS = {"name", "scenario", "set", "repeat"}
 _METRIC_KEYS = {"key", "label", "ratio_to"}
 _PAPER_KEYS = {"run", "metric", "value", "range", "tolerance", "source"}
 _SWEEP_KEYS = {"name", "scenarios", "grid"}
-_FIGURE_KEYS = {"file", "title", "kind", "x", "y", "y_scale", "ylabel", "xlabel", "runs"}
+_FIGURE_KEYS = {"file", "title", "kind", "x", "y", "y_scale", "ylabel", "xlabel", "runs",
+                "y_reduce", "y_minus"}
 _CLASS_KEYS = {"file", "title", "kind", "y", "y_scale", "ylabel", "runs", "ref", "classes",
                "limit_kmh", "limit_below_kmh", "limit_fraction", "paper"}
 FIGURE_KINDS = ("overlay", "panels", "speed_classes")
@@ -198,6 +200,8 @@ def load_entry(name: str | Path) -> Entry:
                 raise ReproduceError(f"{where}: classes {edges!r} must be increasing edges")
         else:
             _check_keys(where, fig, _FIGURE_KEYS, ("file", "x", "y"))
+            if fig.get("y_reduce", "mean") != "mean":
+                raise ReproduceError(f"{where}: y_reduce {fig['y_reduce']!r} (known: 'mean')")
         unknown_runs = sorted(set(fig.get("runs", names)) - set(names))
         if unknown_runs:
             raise ReproduceError(f"{where}: runs {unknown_runs} are not in [[runs]]")
@@ -431,10 +435,10 @@ def draw_figure(spec: dict[str, Any], run_dirs: dict[str, Path], path: Path) -> 
         ax = axes[i if panels else 0][0]
         x = frame["time"] if spec["x"] == "time" else frame[spec["x"]]
         for y in ys:
-            if y not in frame:
-                raise ReproduceError(f"figure {spec['file']}: run {name!r} recorded no {y!r}")
             label = y if panels else (name if len(ys) == 1 else f"{name}: {y}")
-            ax.plot(x, frame[y] * scale, label=label, linewidth=1.0)
+            if "y_reduce" in spec:
+                label = f"{spec['y_reduce']} of {label}"
+            ax.plot(x, figure_series(frame, spec, y, name) * scale, label=label, linewidth=1.0)
         if panels:
             ax.set_title(name, fontsize=9)
         ax.set_ylabel(spec.get("ylabel", ys[0]))
@@ -445,6 +449,20 @@ def draw_figure(spec: dict[str, Any], run_dirs: dict[str, Path], path: Path) -> 
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
+
+
+def figure_series(frame: Any, spec: dict[str, Any], y: str, run: str) -> Any:
+    """The values a figure plots for ``y`` of one run (before ``y_scale``): the column, or with
+    ``y_reduce = "mean"`` the mean of the columns ``y`` names (``"plant.v[*]"``), minus the
+    ``y_minus`` column where given."""
+    from cosim.run.metrics import matching_columns
+
+    cols = matching_columns(frame, y) if "y_reduce" in spec else [y] if y in frame else []
+    minus = spec.get("y_minus")
+    for missing in ([] if cols else [y]) + ([minus] if minus and minus not in frame else []):
+        raise ReproduceError(f"figure {spec['file']}: run {run!r} recorded no {missing!r}")
+    values = frame[cols].to_numpy(dtype=float).mean(axis=1)
+    return values - frame[minus].to_numpy(dtype=float) if minus else values
 
 
 def speed_class_errors(frame: Any, spec: dict[str, Any]) -> list[dict[str, Any]]:

@@ -155,11 +155,11 @@ def plot_run(result: Any, path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from cosim.run.metrics import _columns
+    from cosim.run.metrics import matching_columns
 
     cfg = result.scenario.summary
     frame = result.frame
-    couplers = _columns(frame, cfg.get("coupler_forces"))
+    couplers = matching_columns(frame, cfg.get("coupler_forces"))
     rows = 2 if couplers else 1
     fig, axes = plt.subplots(rows, 1, figsize=(9, 4.5 * rows), squeeze=False)
     ax = axes[0][0]
