@@ -54,7 +54,7 @@ from scipy.linalg import expm
 from cosim.fmu.declare import Declared, Var, build, param, parameters
 from cosim.fmu.state import StatefulCore, to_seconds, to_ticks
 from plants import dead_time, kernels
-from plants.resistance import Davis
+from plants.resistance import KMH, Davis
 from plants.route import (
     GRAVITY,
     Route,
@@ -63,8 +63,6 @@ from plants.route import (
     route_parameter,
     routes_dir_in,
 )
-
-KMH = 1.0 / 3.6
 
 
 def _t(values) -> tuple[float, ...]:

@@ -57,6 +57,7 @@ from pathlib import Path
 import numpy as np
 
 from cosim.fmu.declare import Var
+from plants.resistance import KMH  # noqa: F401 - m/s per km/h, also for route's importers
 
 try:
     import tomllib
@@ -182,7 +183,6 @@ def _interp_scalar(x: float, xs: list[float], ys: list[float]) -> float:
     return (ys[j + 1] - ys[j]) / (xs[j + 1] - xs[j]) * (x - xs[j]) + ys[j]
 
 
-KMH = 1.0 / 3.6  # m/s per km/h
 TUNNEL_COEFFICIENT = 0.00013  # N/kN per m of tunnel length (seed 003, Chinese traction rules)
 
 
