@@ -13,17 +13,19 @@ knows, on the design model of eq. (15)/(18) (:func:`controllers.preview.design.l
   observed speed) and the nominal resistance (eqs. 3-6) at the observed speed and the measured
   head position (grade, curve, tunnel averaged over the train length), the speed terms scaled
   by ``v_c / stiction_speed`` at standstill as the plant does;
-* a correction toward the measured head speed, ``v_c += (1 - exp(-T / t_c)) (v_head - v_c)``
-  at every sample: the head and the mean differ by the train-stretch modes (period about 18 s)
-  and, at the start, by the stretch rate, which ``t_c`` much longer than them leaves in the
-  estimate, while model error (mass, resistance, the air-brake force) cannot make it drift.
+* a slow correction toward the measured head speed with an acceleration-bias state ``b``
+  (a critically damped second-order observer of bandwidth ``1 / t_c``): at every sample, with
+  the innovation ``r = v_head - v_c`` after the prediction, ``v_c += (2 T / t_c) r`` and
+  ``b += (T / t_c^2) r``, ``b`` added to the predicted acceleration. The head and the mean
+  differ by the train-stretch modes (period about 18 s) and, at the start, by the stretch
+  rate, which ``t_c`` much longer than them leaves in the estimate; model error (mass,
+  resistance, the air-brake force: a slowly varying acceleration bias) goes into ``b``, so it
+  leaves no steady offset (a correction on ``v_c`` alone would leave ``t_c`` times the bias).
 
 Our addition, not the paper's (its design model is one mass, so its measured speed is this one).
 """
 
 from __future__ import annotations
-
-import math
 
 import numpy as np
 
@@ -34,9 +36,10 @@ from plants.freight import friction_coefficient_at
 
 
 class MeanSpeedObserver(StatefulCore):
-    """``v_c`` from the force balance of the whole train with a slow head-speed correction."""
+    """``v_c`` from the force balance of the whole train with a slow head-speed correction
+    (speed and acceleration bias)."""
 
-    state_fields = ("z", "u", "air", "s")
+    state_fields = ("z", "bias", "u", "air", "s")
 
     def __init__(self, model: DelayedModel, blending: FreightBlending, sample_time: float,
                  correction_time: float) -> None:
@@ -46,9 +49,14 @@ class MeanSpeedObserver(StatefulCore):
         self.model = model
         self.blending = blending
         self.T = float(sample_time)
-        self.gain = -math.expm1(-self.T / correction_time)  # 1 - exp(-T / t_c)
+        self.speed_gain = 2.0 * self.T / correction_time  # critically damped, 1 / t_c
+        self.bias_gain = self.T / correction_time**2
+        if self.speed_gain >= 1.0:
+            raise ValueError(f"correction_time = {correction_time} s must exceed 2 sample "
+                             f"times ({2 * self.T} s)")
         self.stiction = float(blending.p.train.stiction_speed)
         self.z: np.ndarray | None = None  # model state [v_c, a, held inputs]; None: not started
+        self.bias = 0.0  # m/s^2, estimated acceleration the model misses
         self.u = 0.0  # m/s^2, locomotive demand over the last sample
         self.air = 0.0  # N, mean modelled cylinder pressures of the last sample (force / mu)
         self.s = 0.0  # m, head position at the last sample
@@ -69,10 +77,12 @@ class MeanSpeedObserver(StatefulCore):
         vc = float(self.z[0])
         scale = max(min(vc / self.stiction, 1.0), -1.0)  # regularised friction (the plant's)
         s_mid = self.s + 0.5 * self.T * vc
-        d = -(scale * (b.basic_accel(abs(vc)) + self.air * friction_coefficient_at(vc)
-                       / b.m_eff) + b.additional_accel(s_mid))
+        d = self.bias - (scale * (b.basic_accel(abs(vc)) + self.air * friction_coefficient_at(vc)
+                              / b.m_eff) + b.additional_accel(s_mid))
         self.z = m.A @ self.z + m.B[:, 0] * self.u + m.E[:, 0] * d
-        self.z[0] += self.gain * (v_head - self.z[0])
+        r = v_head - float(self.z[0])
+        self.z[0] += self.speed_gain * r
+        self.bias += self.bias_gain * r
         return float(self.z[0])
 
     def record(self, force: float, pressures: np.ndarray, s_head: float) -> None:
@@ -82,3 +92,4 @@ class MeanSpeedObserver(StatefulCore):
         self.u = float(force) / b.m_eff
         self.air = float(np.dot(b.model.brake_scale, pressures))
         self.s = float(s_head)
+

@@ -64,10 +64,10 @@ class PreviewParams:
                                     "its planned stop application included) and u the "
                                     "locomotive's part; off: u is the whole train's demand, the "
                                     "blending trims the air brake with it")
-    mean_weight: float = param(0.0, "1", "weight w of the observed train-mean speed in the "
+    mean_weight: float = param(0.7, "1", "weight w of the observed train-mean speed in the "
                                "fed-back speed (1 - w) v_head + w v_mean (0: the head alone)",
                                min=0.0, max=1.0)
-    observer_correction_time: float = param(120.0, "s", "time constant t_c of the mean-speed "
+    observer_correction_time: float = param(45.0, "s", "time constant t_c of the mean-speed "
                                             "observer's correction toward the head speed",
                                             min=1e-3)
 
