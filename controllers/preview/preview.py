@@ -68,8 +68,9 @@ class PreviewParams:
                                "fed-back speed (1 - w) v_head + w v_mean (0: the head alone)",
                                min=0.0, max=1.0)
     observer_correction_time: float = param(45.0, "s", "time constant t_c of the mean-speed "
-                                            "observer's correction toward the head speed",
-                                            min=1e-3)
+                                            "observer's correction toward the head speed "
+                                            "(speed and acceleration bias; > 2 sample times)",
+                                            min=1.0)
 
     def check(self) -> None:
         self.blending.check()
