@@ -62,8 +62,10 @@ ADDED_VARIABLES = {
     # stop application (stop_ed_share)
     "FreightPid": {"final_approach_distance", "stop_tolerance", "stop_ed_share"},
     **{f: {"stop_ed_share"} for f in ("FreightFpid", "FreightSmc")},
-    # issue 16: the preview counts the air brake as a previewed disturbance
-    "FreightPreview": {"stop_ed_share", "air_brake_preview"},
+    # issue 16: the preview counts the air brake as a previewed disturbance and feeds back a
+    # blend of the head speed and its train-mean speed observer
+    "FreightPreview": {"stop_ed_share", "air_brake_preview", "mean_weight",
+                       "observer_correction_time", "v_mean_estimate"},
 }
 
 

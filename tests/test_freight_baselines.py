@@ -92,7 +92,8 @@ def test_fuzzy_pid_gains_follow_the_rule_table() -> None:
 @pytest.mark.parametrize("name", ["preview", "smc", "fpid", "pid"])
 def test_controller_state_restore_reproduces_the_rest(name: str) -> None:
     """get_state mid-run, continue, set_state, rerun: identical outputs (complete state,
-    blending and its brake model included), on the final braking with the air brake."""
+    blending and its brake model included, the preview's train-mean observer), on the final
+    braking with the air brake."""
     from controllers.pid.freight_pid import FreightPid, FreightPidParams
     from controllers.preview.preview import FreightPreview, PreviewParams
     from plants.route import load_route

@@ -3,11 +3,16 @@
 Servo feedback on ``x0 = [e, Delta z]`` plus reference preview over the next ``M_R`` samples and
 disturbance preview of the resistance ahead over ``M_d`` samples (gains:
 :mod:`controllers.preview.design`). The controller measures the locomotive (head) speed ``v`` and
-position ``s``; the error is ``e = v_ref(s) - v`` at the head.
+position ``s``; the servo's speed is ``v_f = (1 - w) v + w v_c`` (``mean_weight`` w, our
+addition), ``v_c`` the train-mean speed of :class:`controllers.preview.mean_observer.
+MeanSpeedObserver` (the force balance of the whole train from the locomotive's demand and the
+modelled air brake and resistance, slowly corrected toward ``v``), and the error
+``e = v_ref(s) - v_f`` at the head position (w = 0: the head speed alone, the paper's one mass).
 
-* State ``z = [v, a, u(k-l-1), ..., u(k-1)]``: ``v`` measured, the traction acceleration ``a`` and
-  the held inputs from the design model driven by the demands actually passed on (after the
-  envelope of :meth:`controllers.common.freight_blending.FreightBlending.accel_limits`).
+* State ``z = [v, a, u(k-l-1), ..., u(k-1)]``: ``v`` the fed-back ``v_f``, the traction
+  acceleration ``a`` and the held inputs from the design model driven by the demands actually
+  passed on (after the envelope of
+  :meth:`controllers.common.freight_blending.FreightBlending.accel_limits`).
 * Reference ahead: the times of the reference profile give where the reference is ``j T`` after
   the measured position; ``R(k + j)`` is the reference speed there.
 * Disturbance ahead: ``d(k + j) = -(w_basic(R(k+j)) + w_add(s_j))`` per unit effective mass
@@ -33,7 +38,8 @@ import numpy as np
 
 from controllers.common.freight_blending import BlendingParams, FreightTracker, tracker_outputs
 from controllers.preview.design import lag_delay_model, preview_gains
-from cosim.fmu.declare import group, param, sample_time
+from controllers.preview.mean_observer import MeanSpeedObserver
+from cosim.fmu.declare import Var, group, param, sample_time
 from plants.route import ReferenceProfile, Route
 
 
@@ -58,6 +64,13 @@ class PreviewParams:
                                     "its planned stop application included) and u the "
                                     "locomotive's part; off: u is the whole train's demand, the "
                                     "blending trims the air brake with it")
+    mean_weight: float = param(0.7, "1", "weight w of the observed train-mean speed in the "
+                               "fed-back speed (1 - w) v_head + w v_mean (0: the head alone)",
+                               min=0.0, max=1.0)
+    observer_correction_time: float = param(45.0, "s", "time constant t_c of the mean-speed "
+                                            "observer's correction toward the head speed "
+                                            "(speed and acceleration bias; > 2 sample times)",
+                                            min=1.0)
 
     def check(self) -> None:
         self.blending.check()
@@ -66,14 +79,19 @@ class PreviewParams:
         if self.preview_steps < 0 or self.disturbance_steps < 0:
             raise ValueError(f"M_R = {self.preview_steps} and M_d = {self.disturbance_steps} "
                              "must be >= 0")
+        if not 0.0 <= self.mean_weight <= 1.0:
+            raise ValueError(f"mean_weight = {self.mean_weight} must be in [0, 1]")
 
 
 class FreightPreview(FreightTracker):
     """Optimal preview servo (eqs. 33-35) + shared blending."""
 
-    state_fields = (*FreightTracker.state_fields, "z", "z_prev", "u_prev", "d_prev")
+    state_fields = (*FreightTracker.state_fields, "z", "z_prev", "u_prev", "d_prev",
+                    "observer", "v_feedback")
     params_class = PreviewParams
-    output_vars = tracker_outputs("preview control input u(k) = u(k-1) + Delta u(k)")
+    output_vars = (*tracker_outputs("preview control input u(k) = u(k-1) + Delta u(k)"),
+                   Var.output("v_mean_estimate", "m/s", "observed train-mean (centre-of-mass) "
+                              "speed"))
 
     def __init__(self, params: PreviewParams, profile: ReferenceProfile, route: Route) -> None:
         super().__init__(params, profile, route)
@@ -90,6 +108,25 @@ class FreightPreview(FreightTracker):
         self.z_prev: np.ndarray | None = None
         self.u_prev = 0.0  # m/s^2, u(k-1)
         self.d_prev: float | None = None  # m/s^2, d(k-1)
+        self.observer = MeanSpeedObserver(self.model, self.blending, p.sample_time,
+                                          p.observer_correction_time)
+        self.v_feedback = 0.0  # m/s, the fed-back speed (1 - w) v_head + w v_mean
+
+    def compute(self, t: float, inputs: dict[str, float]) -> tuple[dict[str, float], int]:
+        """Observer update, the servo on the fed-back speed (:meth:`accel_demand`), blending;
+        then the sample's locomotive force and modelled air brake go to the observer."""
+        v, s = float(inputs["v"]), float(inputs["s"])
+        v_mean = self.observer.update(v, s)
+        w = self.p.mean_weight
+        self.v_feedback = v if w == 0.0 else (1.0 - w) * v + w * v_mean
+        before = self.blending.model.pressure.copy()
+        out, n = super().compute(t, inputs)
+        self.observer.record(self.blending.force, 0.5 * (before + self.blending.model.pressure),
+                             s)
+        return out, n
+
+    def outputs(self) -> dict[str, float]:
+        return {**super().outputs(), "v_mean_estimate": self.observer.speed}
 
     def ahead(self, s: float) -> tuple[np.ndarray, np.ndarray]:
         """Reference speeds ``R(k+j)`` and disturbances ``d(k+j)``, ``j = 0..max(M_R, M_d)``,
@@ -116,15 +153,16 @@ class FreightPreview(FreightTracker):
                 d -= air
             trac, ed = self.blending.model.traction_limits(max(v, 0.0))
             lo, hi = -ed / self.m_eff, (0.0 if self.blending.air_applied() else trac / self.m_eff)
+        vf = self.v_feedback  # the head speed, or its blend with the observed mean
         if self.z is None:  # first sample: at rest in the model, no differences yet
             self.z = np.zeros(m.n)
             self.z_prev = self.z.copy()
-            self.z[0] = self.z_prev[0] = v
+            self.z[0] = self.z_prev[0] = vf
             self.d_prev = d[0]
         else:
             self.z = m.A @ self.z + m.B[:, 0] * self.u_prev + m.E[:, 0] * self.d_prev
-            self.z[0] = v
-        x0 = np.concatenate(([self.v_ref - v], self.z - self.z_prev))
+            self.z[0] = vf
+        x0 = np.concatenate(([self.v_ref - vf], self.z - self.z_prev))
         dR = np.diff(R[: p.preview_steps + 1])
         dd = np.diff(np.concatenate(([self.d_prev], d[: p.disturbance_steps + 1])))
         du = float(g.F0[0] @ x0 + g.FR @ dR + g.Fd @ dd)
