@@ -410,7 +410,7 @@ class FreightTrain(StatefulCore, Declared):
         delay = np.where(rising[:, None], self.apply_delay[None, :], self.release_delay[None, :])
         return times[:, None] + delay, values
 
-    def _seen(self, arrivals: np.ndarray, t: float) -> np.ndarray:
+    def commands_seen(self, arrivals: np.ndarray, t: float) -> np.ndarray:
         """Index of the latest command (by command time) that has reached each vehicle at t."""
         k = np.arange(arrivals.shape[0])[:, None]
         return np.max(np.where(arrivals <= t, k, 0), axis=0)
@@ -425,7 +425,7 @@ class FreightTrain(StatefulCore, Declared):
             end = self.evolve_pressure(start, np.broadcast_to(target, start.shape), t1 - t0)
         else:
             arrivals, values = self._arrivals()
-            idx0, idx1 = self._seen(arrivals, t0), self._seen(arrivals, t1)
+            idx0, idx1 = self.commands_seen(arrivals, t0), self.commands_seen(arrivals, t1)
             cols = np.arange(start.size)
             target0 = self.target_pressure(values[idx0])
             target1 = self.target_pressure(values[idx1])

@@ -283,7 +283,8 @@ class ReferenceProfile:
         object.__setattr__(self, "v", v)
 
     @functools.cached_property
-    def _segment_accel(self) -> np.ndarray:
+    def segment_accel(self) -> np.ndarray:
+        """Reference acceleration (m/s^2) on each segment between the profile's points."""
         dx = np.diff(self.x)
         if self.kind == "distance":
             return np.diff(self.v**2) / (2.0 * dx)
@@ -301,7 +302,7 @@ class ReferenceProfile:
 
     @functools.cached_property
     def _accel_lists(self) -> tuple[list[float], list[float]]:
-        return self.x.tolist(), self._segment_accel.tolist()
+        return self.x.tolist(), self.segment_accel.tolist()
 
     def accel(self, x: float) -> float:
         """Reference acceleration dv/dt (m/s^2) at ``x``: the constant of its segment."""

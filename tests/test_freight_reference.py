@@ -33,7 +33,7 @@ def plan() -> dict:
     ref = route.reference
     blend = FreightBlending(BlendingParams(), ref, route)
     x, v = ref.x, ref.v
-    acc = ref._segment_accel
+    acc = ref.segment_accel
     mid = 0.5 * (x[:-1] + x[1:])
     speed = np.sqrt(0.5 * (v[:-1] ** 2 + v[1:] ** 2))  # v at the segment's middle
     force = blend.m_eff * acc + np.array([blend.resistance_accel(u, s) * blend.m_eff

@@ -225,7 +225,7 @@ class FreightBlending(StatefulCore):
         x, v = self.profile.x, self.profile.v
         if share <= 0.0:
             return np.empty(0)
-        acc = self.profile._segment_accel
+        acc = self.profile.segment_accel
         mid = 0.5 * (x[:-1] + x[1:])
         speed = np.sqrt(0.5 * (v[:-1] ** 2 + v[1:] ** 2))
         ed = np.array([self.model.traction_limits(u)[1] for u in speed])
@@ -268,7 +268,7 @@ class FreightBlending(StatefulCore):
         arrivals = np.array([h[0] for h in hist])[:, None] + np.where(
             rising[:, None], model.apply_delay[None, :], model.release_delay[None, :])
         times = np.asarray(times, dtype=float)[:, None]
-        seen = model._seen(arrivals, t)  # command each vehicle follows now
+        seen = model.commands_seen(arrivals, t)  # command each vehicle follows now
         target = np.broadcast_to(model.target_pressure(values[seen]), (times.shape[0],
                                                                      seen.size))
         pres = np.broadcast_to(model.pressure, target.shape)
