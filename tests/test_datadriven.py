@@ -3,6 +3,7 @@ interface of the EMU cores, and FMU state save/restore in closed loop with Emu3.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -15,9 +16,12 @@ from controllers.datadriven.emu_control import (
     DriveParams,
     EmuGpc,
     EmuIsmc,
+    EmuIsmcParams,
     EmuIsmpc,
     EmuIsmpcParams,
     EmuMfac,
+    EmuMfacParams,
+    rescaled,
 )
 from controllers.datadriven.laws import (
     GpcLaw,
@@ -267,10 +271,55 @@ def test_emu_core_holds_the_brake_at_the_end_of_the_profile() -> None:
     from plants.route import ReferenceProfile
 
     profile = ReferenceProfile("distance", np.array([0.0, 400.0]), np.array([20.0, 0.0]))
-    ctl = EmuIsmpc(EmuIsmpcParams(drive=DriveParams(hold_accel=-0.4)), profile, 3)
+    defaults = EmuIsmpcParams()  # the FFDL scaling: hold_accel is converted to u and back
+    assert defaults.drive.input_scale != 1.0
+    params = dataclasses.replace(defaults,
+                                 drive=dataclasses.replace(defaults.drive, hold_accel=-0.4))
+    ctl = EmuIsmpc(params, profile, 3)
     out, _ = ctl.compute(0.0, _inputs(0.1, 400.5))
     m = DriveParams().mass / 3
     assert [out[f"force[{i}]"] for i in (1, 2, 3)] == pytest.approx([-0.4 * m] * 3)
+
+
+def _point_mass_forces(ctl, steps: int = 300) -> np.ndarray:
+    """Forces of ``ctl`` on a rigid 3-unit train (M dv/dt = sum F, no resistance), limits
+    wide enough to bind only at the comfort limit."""
+    M, T, v, s = DriveParams().mass, 0.2, 0.0, 0.0
+    forces = []
+    for k in range(steps):
+        out, _ = ctl.compute(T * k, _inputs(v, s, trac=1e6, brake=1e6))
+        f = [out[f"force[{i}]"] for i in (1, 2, 3)]
+        forces.append(f)
+        s += v * T
+        v += sum(f) / M * T
+    return np.array(forces)
+
+
+@pytest.mark.parametrize("cls,params_cls", [(EmuMfac, EmuMfacParams), (EmuIsmc, EmuIsmcParams),
+                                            (EmuIsmpc, EmuIsmpcParams)])
+def test_a_common_data_scaling_only_changes_mu_and_beta(cls, params_cls) -> None:
+    """Scaling y and u by the same factor g keeps Phi; with ours converted by ``rescaled``,
+    the laws differ only through the paper's mu (against ||dH||^2, x g^2) and ISMC's beta (in
+    units of y, x g). With those two converted too, the forces are those of km/h, m/s2 up to
+    rounding (the two computations differ by multiplications by g; 1e-9 of full scale is far
+    below the effect of mu itself, which moves them by more than 1e-3, checked)."""
+    g = 9.667
+    km_h = params_cls(drive=DriveParams(), law=params_cls().law.__class__())
+    base = _point_mass_forces(cls(km_h, _profile(), 3))
+
+    def scaled(mu_factor: float) -> np.ndarray:
+        law = rescaled(km_h.law, g, g)
+        law = dataclasses.replace(law, ffdl=dataclasses.replace(law.ffdl,
+                                                                mu=law.ffdl.mu * mu_factor))
+        if hasattr(law, "beta"):
+            law = dataclasses.replace(law, beta=law.beta * g)
+        drive = DriveParams(output_scale=3.6 * g, input_scale=g)
+        return _point_mass_forces(cls(params_cls(drive=drive, law=law), _profile(), 3))
+
+    full = np.abs(base).max()
+    assert full > 5e4  # the train was driven
+    assert np.abs(scaled(g * g) - base).max() <= 1e-9 * full
+    assert np.abs(scaled(1.0) - base).max() > 1e-3 * full  # mu = 1 in the new units
 
 
 # -- FMUs: state save/restore mid-run reproduces the rest of the run ------------------------

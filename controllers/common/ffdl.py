@@ -34,13 +34,18 @@ Reset condition (Hou's FFDL-MFAC): ``Phi`` is not updated while ``||dH(t-1)|| <=
 (no information), and returns to ``Phi(1)`` when a diagonal entry of the input block becomes
 smaller than ``reset_threshold`` (or changes sign), which keeps the control direction known.
 
-Scaling (what makes ``Phi(1) = 0.5 I`` meaningful): outputs are speeds in km/h
-(``y = 3.6 v``) and inputs are forces per unit mass in m/s^2 (``u_i = F_i / m``, ``m`` the
-mean mass of a power unit). A free unit sampled at ``T`` then has ``dy(t+1) = dy(t) +
-3.6 T du(t)``: ``Phi_1 = I`` and ``Phi_2 = 3.6 T I = 0.72 I`` at ``T = 0.2 s``, so the paper's
-``0.5 I`` is a start of the right sign and size. The stiff couplers make the true ``Phi_2`` of
-the 3-unit train close to rank one (every unit's force moves all speeds), so the control laws
-invert it with the regularised pseudo-inverse :func:`regularised_pinv`.
+Scaling (what makes ``Phi(1) = 0.5 I`` and ``mu = 1`` meaningful; ours, the seed-001 FMUs'
+``output_scale``, ``input_scale``): here outputs are speeds and inputs forces per unit mass,
+in units of the caller's choice. With ``y`` in km/h (``y = 3.6 v``) and ``u`` in m/s^2
+(``u_i = F_i / m``, ``m`` the mean mass of a power unit), a free unit sampled at ``T`` has
+``dy(t+1) = dy(t) + 3.6 T du(t)``: ``Phi_1 = I`` and ``Phi_2 = 3.6 T I = 0.72 I`` at ``T = 0.2
+s``, so the paper's ``0.5 I`` is a start of the right sign and size; scaling ``y`` and ``u`` by
+the same factor keeps ``Phi`` and changes only ``||dH||^2`` against ``mu`` (the step of eq. 16
+is ``lambda ||dH||^2 / (mu + ||dH||^2)``). The seed-001 FMUs use km/h and m/s^2 times
+``FFDL_SCALE`` = 9.667 (:mod:`controllers.datadriven.emu_control`). The stiff couplers make
+the true ``Phi_2`` of the 3-unit train close to rank one (every unit's force moves all
+speeds), so the control laws invert it with the regularised pseudo-inverse
+:func:`regularised_pinv`.
 """
 
 from __future__ import annotations
@@ -110,7 +115,7 @@ class FfdlParams:
     L_u: int = param(1, "1", "input pseudo-order L_u (eq. 8)", min=1, max=10)
     phi1_init: float = param(0.5, "1", "diagonal of Phi_1(1), the output blocks", min=0.0)
     phi2_init: float = param(0.5, "1", "diagonal of Phi_2(1), the input block "
-                             "(km/h per m/s2)", min=1e-6)
+                             "(units of y per unit of u)", min=1e-6)
     reset_threshold: float = param(0.01, "1", "reset Phi to Phi(1) when a diagonal entry of "
                                    "the input block falls below this", min=0.0)
     excitation: float = param(1e-6, "1", "no update while ||dH(t-1)|| is at most this",

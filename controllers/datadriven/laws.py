@@ -1,8 +1,10 @@
 """Data-driven control laws of seed 001 on the FFDL data model (no FMI, no train in here):
 FFDL-MFAC, FFDL-ISMC (eqs. 17-27), FFDL-ISMPC (eqs. 52-75) and the GPC baseline.
 
-Every law works in the scaled units of :mod:`controllers.common.ffdl` (outputs ``y`` in km/h,
-inputs ``u`` in m/s^2 of force per unit mass) and has one call per sample::
+Every law works in the scaled units of :mod:`controllers.common.ffdl` (outputs ``y`` a speed,
+inputs ``u`` a force per unit mass; the defaults here, ours, are set for km/h and m/s^2, and
+:func:`controllers.datadriven.emu_control.rescaled` converts them) and has one call per
+sample::
 
     u = law.step(y, y_r, y_r_next, lo, hi)      # y(t), y_r(t), y_r(t+1), input box -> u(t)
     law.hold(y, u)                              # or: u(t) imposed from outside (holding brake)
@@ -220,9 +222,10 @@ class IsmcParams:
 
     ffdl: FfdlParams = group(FfdlParams(), "")
     surface: SurfaceParams = group(SurfaceParams(), "")
-    beta: float = param(0.05, "1", "beta: switching gain (eq. 25, km/h per sample)", min=0.0)
+    beta: float = param(0.05, "1", "beta: switching gain (eq. 25, units of y per "
+                  "sample)", min=0.0)
     boundary_layer: float = param(0.1, "1", "Delta: width of the saturation boundary layer "
-                                  "replacing sgn (eq. 27, km/h)", min=1e-9)
+                                  "replacing sgn (eq. 27, units of y)", min=1e-9)
 
 
 class Ismc(SlidingLaw):
