@@ -9,12 +9,12 @@ in closed loop with each controller core for a list of scalings and prints Table
 singular value of Phi_2) at 100 s, 1000 s and the end, and the median / 90th percentile of
 ``||dH||^2`` (the estimator's step is ``lambda ||dH||^2 / (mu + ||dH||^2)``).
 
-The FFDL laws start from the laws' own defaults (the paper's values; ours set for km/h and
-m/s2), not the FMUs' (which are set for ``FFDL_SCALE``). ``--keep-meaning`` converts ours
-(Delta, b, theta, the estimator's reset threshold, excitation gate and pinv eps) with
-:func:`controllers.datadriven.emu_control.rescaled` so that they keep their physical meaning
-under the new scaling (the FMUs' defaults are ``--scale 34.8012,9.667 --keep-meaning``);
-without it they keep their numbers. GPC runs its FMU defaults (km/h, m/s2) unless
+The FFDL laws start from the laws' own defaults (the paper's values; ours declared for km/h
+and m/s2). With ``--keep-meaning`` ours (Delta, b, theta, the estimator's reset threshold,
+excitation gate and pinv eps) keep their physical meaning under the new scaling, as in the
+FMUs (the core converts them with :func:`controllers.datadriven.emu_control.rescaled`; the
+FMUs' defaults are ``--scale 34.8012,9.667 --keep-meaning``); without it they keep their
+numbers in the new units. GPC runs its FMU defaults (km/h, m/s2) unless
 ``--gpc-too``.
 
     python benchmarks/seed001_scaling_sweep.py --scale 3.6,1 --scale 1,0.4 [--white]
@@ -69,8 +69,8 @@ def run(args: tuple) -> dict:
     drive = DriveParams(output_scale=cy, input_scale=cu)
     if name in LAWS:
         law = LAWS[name]()  # the laws' own defaults: the paper's values, ours for km/h, m/s2
-        if keep:
-            law = rescaled(law, cy / 3.6, cu)
+        if not keep:  # the core converts ours (rescaled); undo it: ours as numbers in y, u
+            law = rescaled(law, 3.6 / cy, 1.0 / cu)
         params = cls.params_class(drive=drive, law=law)
     elif gpc_too:
         params = dataclasses.replace(params, drive=drive)

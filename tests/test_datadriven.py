@@ -21,7 +21,6 @@ from controllers.datadriven.emu_control import (
     EmuIsmpcParams,
     EmuMfac,
     EmuMfacParams,
-    rescaled,
 )
 from controllers.datadriven.laws import (
     GpcLaw,
@@ -298,17 +297,18 @@ def _point_mass_forces(ctl, steps: int = 300) -> np.ndarray:
 @pytest.mark.parametrize("cls,params_cls", [(EmuMfac, EmuMfacParams), (EmuIsmc, EmuIsmcParams),
                                             (EmuIsmpc, EmuIsmpcParams)])
 def test_a_common_data_scaling_only_changes_mu_and_beta(cls, params_cls) -> None:
-    """Scaling y and u by the same factor g keeps Phi; with ours converted by ``rescaled``,
-    the laws differ only through the paper's mu (against ||dH||^2, x g^2) and ISMC's beta (in
-    units of y, x g). With those two converted too, the forces are those of km/h, m/s2 up to
-    rounding (the two computations differ by multiplications by g; 1e-9 of full scale is far
-    below the effect of mu itself, which moves them by more than 1e-3, checked)."""
+    """Scaling y and u by the same factor g keeps Phi; with ours converted by the core
+    (``rescaled``), the laws differ only through the paper's mu (against ||dH||^2, x g^2) and
+    ISMC's beta (in units of y, x g). With those two converted too, the forces are those of
+    km/h, m/s2 up to rounding (the two computations differ by multiplications by g; 1e-9 of
+    full scale is far below the effect of mu itself, which moves them by more than 1e-3,
+    checked)."""
     g = 9.667
     km_h = params_cls(drive=DriveParams(), law=params_cls().law.__class__())
     base = _point_mass_forces(cls(km_h, _profile(), 3))
 
     def scaled(mu_factor: float) -> np.ndarray:
-        law = rescaled(km_h.law, g, g)
+        law = km_h.law  # ours (Delta, b, theta, thresholds): the core converts them
         law = dataclasses.replace(law, ffdl=dataclasses.replace(law.ffdl,
                                                                 mu=law.ffdl.mu * mu_factor))
         if hasattr(law, "beta"):

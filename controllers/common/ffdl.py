@@ -117,11 +117,14 @@ class FfdlParams:
     phi2_init: float = param(0.5, "1", "diagonal of Phi_2(1), the input block "
                              "(units of y per unit of u)", min=1e-6)
     reset_threshold: float = param(0.01, "1", "reset Phi to Phi(1) when a diagonal entry of "
-                                   "the input block falls below this", min=0.0)
-    excitation: float = param(1e-6, "1", "no update while ||dH(t-1)|| is at most this",
+                                   "the input block falls below this (km/h per m/s2; the "
+                                   "seed-001 core converts it with the scaling)", min=0.0)
+    excitation: float = param(1e-6, "1", "no update while ||dH(t-1)|| is at most this "
+                              "(km/h or m/s2; converted with the scaling)",
                               min=0.0)
     pinv_regularisation: float = param(1e-2, "1", "eps of the regularised inverse "
-                                       "(Phi_2' Phi_2 + eps I)^-1 Phi_2'", min=0.0)
+                                       "(Phi_2' Phi_2 + eps I)^-1 Phi_2' (for km/h per m/s2; "
+                                       "converted with the scaling)", min=0.0)
     pinv_cutoff: float = param(0.5, "1", "the control laws drop the directions of Phi_2 "
                                "whose singular value is below this fraction of the largest "
                                "(force differences between stiffly coupled units; 0: keep "

@@ -60,7 +60,10 @@ class DriveParams:
     stop_speed: float = param(0.3, "m/s", "below this mean speed with a zero reference the "
                               "holding brake is applied", min=0.0)
     output_scale: float = param(KMH_PER_MPS, "s/m", "data scaling of the outputs: y_i = "
-                                "output_scale v_i (3.6: km/h; not in the paper)", min=1e-6)
+                                "output_scale v_i (3.6: km/h; not in the paper; the FFDL laws' "
+                                "own Delta, b, theta and thresholds are converted with it, the "
+                                "paper's values and GPC's weights are numbers in these units)",
+                                min=1e-6)
     input_scale: float = param(1.0, "s2/m", "data scaling of the inputs: u_i = input_scale "
                                "F_i / m (1: m/s2 per mean unit mass; not in the paper)",
                                min=1e-6)
@@ -87,9 +90,11 @@ FFDL_SCALE = 9.667
 def rescaled(law: Any, gy: float, gu: float) -> Any:
     """``law``'s parameters (MFAC, ISMC or ISMPC, set for y in km/h and u in m/s2) for the
     scaling ``y = gy`` km/h, ``u = gu`` m/s2, with the paper's values unchanged and ours
-    converted to keep their meaning: the boundary layer Delta (x gy), b of eq. 18 (x gy^(1 -
-    alpha): F sums sig^alpha(e)), theta of eq. 66 (x (gy / gu)^2), and the estimator's reset
-    threshold (x gy / gu), excitation gate (x min(gy, gu)) and pinv eps (x (gy / gu)^2)."""
+    converted to keep their meaning (the core does this with its ``output_scale`` /
+    ``input_scale``, so ours are declared for km/h and m/s2 whatever the scaling): the
+    boundary layer Delta (x gy), b of eq. 18 (x gy^(1 - alpha): F sums sig^alpha(e)), theta of
+    eq. 66 (x (gy / gu)^2), and the estimator's reset threshold (x gy / gu), excitation gate
+    (x min(gy, gu)) and pinv eps (x (gy / gu)^2)."""
     g = gy / gu  # factor on Phi_2
     f = law.ffdl
     changes: dict[str, Any] = {"ffdl": dataclasses.replace(
@@ -153,7 +158,12 @@ class DataDrivenEmuControl(StatefulCore, Declared):
         self.n = units
         self.unit_mass = drive.mass / units
         self.profile = profile
-        self.law = self.law_class(params.law, units)
+        # ours (Delta, b, theta, the estimator's thresholds) are declared for km/h and m/s2;
+        # the paper's values (mu, lambda, beta, ...) are numbers in the scaled units
+        law = params.law
+        if hasattr(law, "ffdl"):
+            law = rescaled(law, drive.output_scale / KMH_PER_MPS, drive.input_scale)
+        self.law = self.law_class(law, units)
         self.forces = [0.0] * units
         self.v_ref = 0.0
         self.a_ref = 0.0
@@ -200,7 +210,7 @@ class EmuMfacParams:
     """Parameters of the FFDL-MFAC FMU: the common interface part and the law's."""
 
     drive: DriveParams = group(FFDL_DRIVE, "")
-    law: MfacParams = group(rescaled(MfacParams(), FFDL_SCALE, FFDL_SCALE), "")
+    law: MfacParams = group(MfacParams(), "")
 
 
 class EmuMfac(DataDrivenEmuControl):
@@ -215,7 +225,7 @@ class EmuIsmcParams:
     """Parameters of the FFDL-ISMC FMU: the common interface part and the law's."""
 
     drive: DriveParams = group(FFDL_DRIVE, "")
-    law: IsmcParams = group(rescaled(IsmcParams(), FFDL_SCALE, FFDL_SCALE), "")
+    law: IsmcParams = group(IsmcParams(), "")
 
 
 class EmuIsmc(DataDrivenEmuControl):
@@ -230,7 +240,7 @@ class EmuIsmpcParams:
     """Parameters of the FFDL-ISMPC FMU: the common interface part and the law's."""
 
     drive: DriveParams = group(FFDL_DRIVE, "")
-    law: IsmpcParams = group(rescaled(IsmpcParams(), FFDL_SCALE, FFDL_SCALE), "")
+    law: IsmpcParams = group(IsmpcParams(), "")
 
 
 class EmuIsmpc(DataDrivenEmuControl):

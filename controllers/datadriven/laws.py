@@ -140,7 +140,7 @@ class SurfaceParams:
     k1: float = param(0.5, "1", "k1: weight of the error sum E (eq. 18)", min=0.0, max=1.0)
     k2: float = param(2.0, "1", "k2: weight of the sum F of sig^alpha(e) (eq. 18)", min=0.0)
     b: float = param(0.01, "1", "b of eq. 18 (Lipschitz constant of assumption 2; not "
-                     "given in the paper)", min=0.0)
+                     "given in the paper; for y in km/h, converted with output_scale)", min=0.0)
     alpha: float = param(0.65, "1", "alpha: exponent of sig^alpha (eq. 20)", min=1e-3,
                          max=0.999)
     share_gain: float = param(0.2, "1", "force sharing: fraction of the units' departure "
@@ -225,7 +225,8 @@ class IsmcParams:
     beta: float = param(0.05, "1", "beta: switching gain (eq. 25, units of y per "
                   "sample)", min=0.0)
     boundary_layer: float = param(0.1, "1", "Delta: width of the saturation boundary layer "
-                                  "replacing sgn (eq. 27, units of y)", min=1e-9)
+                                  "replacing sgn (eq. 27, km/h; converted to the units of y)",
+                                  min=1e-9)
 
 
 class Ismc(SlidingLaw):
@@ -252,7 +253,8 @@ class IsmpcParams:
     horizon: int = param(10, "1", "N: prediction and control horizon (eq. 57)", min=1,
                          max=50, name="N")
     theta: float = param(10.0, "1", "theta: weight of ||U||^2 in J_2 (eq. 66; not given in "
-                         "the paper; chosen by a sweep, README seed 001)", min=0.0)
+                         "the paper; chosen by a sweep, README seed 001; for km/h and m/s2, "
+                         "converted with the scaling)", min=0.0)
     error_prediction: str = param("eq78", description='P_hat of eqs. 70-72 (every stage k of '
                                   "the MPC's prediction adds k p_hat(t-1), p_hat(t-1) = "
                                   'dd_hat(t) - dd_hat(t-1)) with the sign of the law theorem 3 '
