@@ -27,11 +27,12 @@ where the planned time between two points would exceed 1 s):
   ``m_eff MAX_JERK`` up to the breakaway resistance (the constant terms, 97 kN), the train
   (one mass) at rest while the head takes up the stretch (``START_*``), then the traction
   pass; the head's planned position is the one-mass position plus the quasi-static
-  head-to-mean stretch of the planned force (:meth:`Planner.stretch`; held from the end of
-  the start's jerk ramp on, a trailing average over ``START_SMOOTHING_S`` so that the head's
-  planned speed never falls) up to the first ceiling, where the constant speed absorbs it. A one-mass
-  position read at the head would put the head that stretch (up to 1.6 m) ahead in the plan,
-  seconds of planned time at walking speed;
+  head-to-mean stretch of the planned force (:meth:`Planner.stretch`; at the end of the
+  start's jerk ramp its growth ends within the jerk bound, :meth:`Planner._fade`, then it is
+  held; a trailing average over ``START_SMOOTHING_S`` starts the creep smoothly, and the
+  head's planned speed never falls) up to the first ceiling, where the constant speed
+  absorbs it. A one-mass position read at the head would put the head that stretch (up to
+  1.6 m) ahead in the plan, seconds of planned time at walking speed;
 * the final stop is planned with the air brake as the blending applies it
   (:mod:`controllers.common.freight_blending`): from the speed on the line, the locomotive
   force ramps (``MAX_JERK``) to ``stop_ed_share`` of the electric brake; then the smallest
@@ -194,12 +195,16 @@ class Planner:
         shift = [self.stretch(rate * t * share + float(self.train.res_a[0]), 0.0, 0.0)
                  if t > 0 else 0.0 for t in creep]
         mean = [0.0] * creep.size
-        held = None
+        fade = None  # (stretch, its rate, time) at the end of the jerk ramp
         for i in range(xf.size):
-            if held is None and i > 0 and af[i] <= af[i - 1]:
-                held = shift[-1]  # the end of the jerk ramp: the stretch held from here
-            force = self.resistance(vf[i], xf[i]) + self.m_eff * af[i]
-            shift.append(self.stretch(force, af[i], vf[i]) if held is None else held)
+            if fade is None and i > 0 and af[i] - af[i - 1] < 0.999 * MAX_JERK * DT:
+                fade = (shift[-1], (shift[-1] - shift[-2]) / DT, 0.0)  # the ramp's end
+            if fade is None:
+                force = self.resistance(vf[i], xf[i]) + self.m_eff * af[i]
+                shift.append(self.stretch(force, af[i], vf[i]))
+            else:
+                fade = (fade[0], fade[1], fade[2] + DT)
+                shift.append(self._fade(*fade))
             mean.append(xf[i])
             if i > 0 and af[i] <= 0.0:  # the first ceiling
                 break
@@ -215,6 +220,20 @@ class Planner:
         speed[-1] = vf[i]
         head = np.concatenate(([0.0], np.cumsum(0.5 * (speed[1:] + speed[:-1]) * DT)))
         return head, speed
+
+    @staticmethod
+    def _fade(held: float, rate: float, u: float) -> float:
+        """Stretch (m) ``u`` s after the end of the start's jerk ramp, where it was ``held``
+        growing at ``rate`` (m/s): the growth ends with its second derivative ramping at
+        ``MAX_JERK`` down and back (over ``2 sqrt(rate / MAX_JERK)``), so the head's planned
+        jerk stays within ``MAX_JERK``; then held."""
+        rate = max(rate, 0.0)
+        tau = math.sqrt(rate / MAX_JERK)
+        if u < tau:
+            return held + rate * u - MAX_JERK * u**3 / 6.0
+        if u < 2.0 * tau:
+            return held + rate * tau - MAX_JERK * (2.0 * tau - u) ** 3 / 6.0
+        return held + rate * tau
 
     def _decel(self, v: float, s: float, k_air: int, force: float) -> float:
         """Deceleration (m/s^2) with the locomotive force ``force`` (N) and the air brake
@@ -289,8 +308,8 @@ def plan(cruise: float, planner: Planner) -> tuple[np.ndarray, np.ndarray, float
 def sample(x: np.ndarray, v: np.ndarray, extra: tuple[float, ...],
            start_end: float) -> tuple[np.ndarray, np.ndarray]:
     """The written points: the 10 m grid, points at most ``MAX_POINT_TIME`` apart in the
-    planned time (all of them before ``start_end``: the planned start), and ``extra``
-    positions; positions to 1e-6 m."""
+    planned time, and ``extra`` positions; positions to 1e-6 m. ``start_end``: the end of the
+    planned start."""
     end = x[-1]
     ok = np.concatenate(([True], np.diff(x) > 0))
     x, v = x[ok], v[ok]
@@ -300,9 +319,13 @@ def sample(x: np.ndarray, v: np.ndarray, extra: tuple[float, ...],
                                               extra)), 6))
     # past the start, a timed point within MIN_SPACING_M of a grid point would make a
     # segment whose acceleration is rounding noise: left out
+    # (in the planned start, within half the distance planned between two timed points:
+    # positions are written to 1e-6 m)
     gap = np.abs(timed[:, None] - grid[None, :]).min(axis=1)
-    pts = np.unique(np.round(np.concatenate(
-        (grid, timed[(gap >= MIN_SPACING_M) | (timed < start_end)])), 6))
+    spacing = np.where(timed < start_end,
+                       np.minimum(MIN_SPACING_M, 0.5 * MAX_POINT_TIME
+                                  * np.sqrt(np.interp(timed, x, v**2))), MIN_SPACING_M)
+    pts = np.unique(np.round(np.concatenate((grid, timed[gap >= spacing])), 6))
     speeds = np.sqrt(np.maximum(np.interp(pts, x, v**2), 0.0))
     speeds[-1] = 0.0
     return pts, speeds
