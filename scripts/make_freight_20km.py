@@ -22,6 +22,17 @@ where the planned time between two points would exceed 1 s):
   train-mean speed then differs from the head speed by ``N dF/dt / (3 k)`` (``N`` couplings of
   stiffness ``k`` carrying a force falling linearly along the train), 0.11 km/h at this
   ``MAX_JERK``;
+* a planned start, written in the head's coordinate (the controllers read the reference at
+  the locomotive): the locomotive force rises from zero at the jerk rule's rate
+  ``m_eff MAX_JERK`` up to the breakaway resistance (the constant terms, 97 kN), the train
+  (one mass) at rest while the head takes up the stretch (``START_*``), then the traction
+  pass; the head's planned position is the one-mass position plus the quasi-static
+  head-to-mean stretch of the planned force (:meth:`Planner.stretch`; at the end of the
+  start's jerk ramp its growth ends within the jerk bound, :meth:`Planner._fade`, then it is
+  held; a trailing average over ``START_SMOOTHING_S`` starts the creep smoothly, and the
+  head's planned speed never falls) up to the first ceiling, where the constant speed
+  absorbs it. A one-mass position read at the head would put the head that stretch (up to
+  1.6 m) ahead in the plan, seconds of planned time at walking speed;
 * the final stop is planned with the air brake as the blending applies it
   (:mod:`controllers.common.freight_blending`): from the speed on the line, the locomotive
   force ramps (``MAX_JERK``) to ``stop_ed_share`` of the electric brake; then the smallest
@@ -31,7 +42,9 @@ where the planned time between two points would exceed 1 s):
   braking is found by bisection so that the train stops at 20 km. The locomotive then trims
   the planned braking either way by the rest of its electric brake. The last speed limit (the
   throat in front of the stop) is met by this curve (checked), not by a backward pass;
-* ``V_c`` is found by bisection so that the run takes 22.8 min (1,368 s), the paper's figure.
+* ``V_c`` is found by bisection so that the run takes 22.8 min (1,368 s), the paper's figure;
+  it reaches its 78 km/h ceiling, and the run takes 1,383.0 s (the planned start's take-up
+  and its jerk ramp cannot be made up).
 """
 
 from __future__ import annotations
@@ -61,6 +74,7 @@ MAX_JERK = 1e-3  # m/s^3
 LIMIT_MARGIN_KMH = 2.0
 ED_SHARE = 0.5  # share of the electric brake for slowing to lower limits
 DECEL_LIMIT = 0.1  # m/s^2, at most, ahead of a lower speed limit
+START_SMOOTHING_S = 2.0  # s, moving average of the planned start's stretch
 
 
 class Planner:
@@ -157,6 +171,72 @@ class Planner:
             vs.append(v)
         return np.array(xs[::-1]), np.array(vs[::-1])
 
+    def stretch(self, force: float, a: float, v: float) -> float:
+        """Head-to-mean displacement (m) of the train hauled by ``force`` (N) at acceleration
+        ``a`` and speed ``v`` (quasi-static: identical wagons, so the coupler forces fall
+        linearly from the first coupler's, the locomotive's force less its own inertia and
+        resistance, to zero behind the tail; about ``N F / (3 k)``)."""
+        t = self.train
+        first = force - t.m_eff[0] * a - (t.res_a[0] + (t.res_b[0] + t.res_c[0] * v) * v)
+        n = t.m_eff.size - 1
+        couplers = max(first, 0.0) * np.arange(n, 0, -1) / n
+        behind = np.concatenate(([0.0], np.cumsum(couplers / self.p.coupler_stiffness)))
+        return float(behind.mean())
+
+    def start(self, forward: tuple[np.ndarray, np.ndarray, np.ndarray]) -> tuple[np.ndarray,
+                                                                                  np.ndarray]:
+        """Planned start in the head's coordinate (see the module doc): head positions and
+        speeds every ``DT`` from rest to the first ceiling of the traction pass ``forward``
+        (its positions, speeds, accelerations every ``DT`` from rest)."""
+        xf, vf, af = forward
+        rate = self.m_eff * MAX_JERK  # N/s, the jerk rule's force rate
+        breakaway = self.resistance(0.0, 0.0)
+        creep = np.arange(0.0, breakaway / rate, DT)
+        # at rest the constant resistance terms take their share of the rising force
+        share = 1.0 - float(self.train.res_a[0]) / breakaway
+        shift = [self.stretch(rate * t * share + float(self.train.res_a[0]), 0.0, 0.0)
+                 if t > 0 else 0.0 for t in creep]
+        mean = [0.0] * creep.size
+        fade = None  # (stretch, its rate, time) at the end of the jerk ramp
+        for i in range(xf.size):
+            if fade is None and i > 0 and af[i] - af[i - 1] < 0.999 * MAX_JERK * DT:
+                fade = (shift[-1], (shift[-1] - shift[-2]) / DT, 0.0)  # the ramp's end
+            if fade is None:
+                force = self.resistance(vf[i], xf[i]) + self.m_eff * af[i]
+                shift.append(self.stretch(force, af[i], vf[i]))
+            else:
+                fade = (fade[0], fade[1], fade[2] + DT)
+                shift.append(self._fade(*fade))
+            mean.append(xf[i])
+            if i > 0 and af[i] <= 0.0:  # the first ceiling
+                break
+        else:
+            raise SystemExit("the traction pass reaches no ceiling")
+        shift, mean = np.array(shift), np.array(mean)
+        width = max(int(round(START_SMOOTHING_S / DT)), 1)  # trailing average, 0 before
+        shift = np.convolve(np.concatenate((np.zeros(width - 1), shift)),
+                            np.ones(width) / width, mode="valid")
+        speed = np.gradient(mean + shift, DT)
+        speed[0] = 0.0
+        speed = np.maximum.accumulate(speed)  # never falling (clips rounding-size dips)
+        speed[-1] = vf[i]
+        head = np.concatenate(([0.0], np.cumsum(0.5 * (speed[1:] + speed[:-1]) * DT)))
+        return head, speed
+
+    @staticmethod
+    def _fade(held: float, rate: float, u: float) -> float:
+        """Stretch (m) ``u`` s after the end of the start's jerk ramp, where it was ``held``
+        growing at ``rate`` (m/s): the growth ends with its second derivative ramping at
+        ``MAX_JERK`` down and back (over ``2 sqrt(rate / MAX_JERK)``), so the head's planned
+        jerk stays within ``MAX_JERK``; then held."""
+        rate = max(rate, 0.0)
+        tau = math.sqrt(rate / MAX_JERK)
+        if u < tau:
+            return held + rate * u - MAX_JERK * u**3 / 6.0
+        if u < 2.0 * tau:
+            return held + rate * tau - MAX_JERK * (2.0 * tau - u) ** 3 / 6.0
+        return held + rate * tau
+
     def _decel(self, v: float, s: float, k_air: int, force: float) -> float:
         """Deceleration (m/s^2) with the locomotive force ``force`` (N) and the air brake
         applied ``k_air`` steps ago (< 0: not applied)."""
@@ -198,9 +278,9 @@ class Planner:
             vs.append(v)
 
 
-def plan(cruise: float, planner: Planner) -> tuple[np.ndarray, np.ndarray, float, float]:
+def plan(cruise: float, planner: Planner) -> tuple[np.ndarray, np.ndarray, float, float, float]:
     """Dense (positions, speeds) of the whole run for ``cruise`` (m/s), the start of the final
-    braking and the air-brake application point (m)."""
+    braking, the air-brake application point and the end of the planned start (m)."""
     end = planner.route.length_m
     forward = planner.forward(cruise)
     xb, vb = planner.backward(forward, planner.last_limit_start - 1.0)
@@ -217,28 +297,37 @@ def plan(cruise: float, planner: Planner) -> tuple[np.ndarray, np.ndarray, float
     start = 0.5 * (lo + hi)
     xs, vs, applied = planner.stop(start, float(np.interp(start, grid, base)),
                                    float(np.interp(start, grid, accel)))
-    keep = grid < start
-    x = np.concatenate((grid[keep], xs))
-    v = np.concatenate((base[keep], vs))
+    head, speed = planner.start(forward)
+    keep = (grid > head[-1]) & (grid < start)
+    if abs(float(np.interp(head[-1], grid, base)) - speed[-1]) > 1e-9:
+        raise SystemExit(f"the planned start ends at {head[-1]:.1f} m off the ceiling")
+    x = np.concatenate((head, grid[keep], xs))
+    v = np.concatenate((speed, base[keep], vs))
     x[-1], v[-1] = end, 0.0
-    return x, v, start, applied
+    return x, v, start, applied, float(head[-1])
 
 
-def sample(x: np.ndarray, v: np.ndarray, extra: tuple[float, ...]) -> tuple[np.ndarray,
-                                                                                 np.ndarray]:
+def sample(x: np.ndarray, v: np.ndarray, extra: tuple[float, ...],
+           start_end: float) -> tuple[np.ndarray, np.ndarray]:
     """The written points: the 10 m grid, points at most ``MAX_POINT_TIME`` apart in the
-    planned time, and ``extra`` positions."""
+    planned time, and ``extra`` positions; positions to 1e-6 m. ``start_end``: the end of the
+    planned start."""
     end = x[-1]
     ok = np.concatenate(([True], np.diff(x) > 0))
     x, v = x[ok], v[ok]
     t = np.concatenate(([0.0], np.cumsum(2.0 * np.diff(x) / np.maximum(v[:-1] + v[1:], 1e-9))))
     timed = np.interp(np.arange(0.0, t[-1], MAX_POINT_TIME), t, x)
     grid = np.unique(np.round(np.concatenate((np.arange(0.0, end + GRID_M / 2, GRID_M),
-                                              extra)), 3))
-    # a timed point within MIN_SPACING_M of a grid point would make a segment whose
-    # acceleration is rounding noise: left out
+                                              extra)), 6))
+    # past the start, a timed point within MIN_SPACING_M of a grid point would make a
+    # segment whose acceleration is rounding noise: left out
+    # (in the planned start, within half the distance planned between two timed points:
+    # positions are written to 1e-6 m)
     gap = np.abs(timed[:, None] - grid[None, :]).min(axis=1)
-    pts = np.unique(np.round(np.concatenate((grid, timed[gap >= MIN_SPACING_M])), 3))
+    spacing = np.where(timed < start_end,
+                       np.minimum(MIN_SPACING_M, 0.5 * MAX_POINT_TIME
+                                  * np.sqrt(np.interp(timed, x, v**2))), MIN_SPACING_M)
+    pts = np.unique(np.round(np.concatenate((grid, timed[gap >= spacing])), 6))
     speeds = np.sqrt(np.maximum(np.interp(pts, x, v**2), 0.0))
     speeds[-1] = 0.0
     return pts, speeds
@@ -254,22 +343,22 @@ def main() -> None:
     lo, hi = 40.0 * KMH, 78.0 * KMH
     for _ in range(40):
         mid = 0.5 * (lo + hi)
-        x, v, _, _ = plan(mid, planner)
+        x, v, _, _, _ = plan(mid, planner)
         lo, hi = (mid, hi) if ReferenceProfile("distance", x, v).run_time() > RUN_TIME_S \
             else (lo, mid)
     cruise = 0.5 * (lo + hi)
-    x, v, start, applied = plan(cruise, planner)
+    x, v, start, applied, start_end = plan(cruise, planner)
     over = v - np.array([planner.ceiling(xi, math.inf) for xi in x])
     if over.max() > 1e-6:
         raise SystemExit(f"the plan exceeds the ceiling by {over.max() / KMH:.2f} km/h at "
                          f"{x[np.argmax(over)]:.0f} m")
-    pts, speeds = sample(x, v, (start, applied))
+    pts, speeds = sample(x, v, (start, applied), start_end)
     lines = [f"# Reference speed-distance profile of {NAME} (HXD1 + 108 C80, 22.8 min run, "
              f"cruise {cruise / KMH:.2f} km/h, final braking from {start:.1f} m, air brake "
              f"applied at {applied:.1f} m);",
              "# generated by scripts/make_freight_20km.py, see plants/routes/README.md",
              "position_m,speed_kmh"]
-    lines += [f"{si:.3f},{vi / KMH:.6f}" for si, vi in zip(pts, speeds, strict=True)]
+    lines += [f"{si:.6f},{vi / KMH:.6f}" for si, vi in zip(pts, speeds, strict=True)]
     csv_path.write_text("\n".join(lines) + "\n")
     run = ReferenceProfile("distance", pts, speeds).run_time()
     print(f"{csv_path}: {pts.size} points, run time {run:.1f} s, cruise "

@@ -264,18 +264,20 @@ def _closed_loop(t_end: float) -> tuple[FreightTrain, np.ndarray]:
 
 
 def test_pid_tracks_the_reference_in_traction() -> None:
-    """Start-up on the jerk-limited reference (issue 16; the couplers stretch from the
-    locomotive back) leads by at most 0.17 km/h at the head (in the first 2 s); after the
-    first 30 s the error stays within 0.041 km/h, 0.012 km/h rms (the first reference's
-    acceleration steps gave 0.87 / 0.58 / 0.063). Pinned: no iterative solver in this loop,
-    only rounding differences between platforms can move these figures (far below 1e-3
-    km/h), so 0.005 km/h catches a regression of either core."""
+    """Start-up on the planned start of the jerk-limited reference (issue 16: the head creeps
+    at 0.10 km/h while the force rises to the breakaway resistance and the couplers stretch,
+    then accelerates): the head lags by at most 0.20 km/h (at 1.8 s, the creep's speed reached
+    in 2 s); after the first 30 s the error stays within 0.061 km/h, 0.012 km/h rms (the
+    one-mass start read at the head: 0.17 / 0.041 / 0.012; the first reference's acceleration
+    steps: 0.87 / 0.58 / 0.063). Pinned: no iterative solver in this loop, only rounding
+    differences between platforms can move these figures (far below 1e-3 km/h), so
+    0.005 km/h catches a regression of either core."""
     _, rows = _closed_loop(300.0)
     err_kmh = (rows[:, 1] - rows[:, 2]) / KMH
     assert rows[-1, 1] > 10.0  # accelerated along the reference
-    assert np.max(np.abs(err_kmh)) == pytest.approx(0.1677, abs=0.005)
-    assert np.max(np.abs(err_kmh[150:])) == pytest.approx(0.0412, abs=0.005)
-    assert np.sqrt(np.mean(err_kmh[150:] ** 2)) == pytest.approx(0.0116, abs=0.001)
+    assert np.max(np.abs(err_kmh)) == pytest.approx(0.1970, abs=0.005)
+    assert np.max(np.abs(err_kmh[150:])) == pytest.approx(0.0608, abs=0.005)
+    assert np.sqrt(np.mean(err_kmh[150:] ** 2)) == pytest.approx(0.0115, abs=0.001)
     assert np.all(rows[:, 3] == 0.0)  # no air brake while pulling
 
 

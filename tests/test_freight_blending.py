@@ -297,3 +297,21 @@ def test_air_force_ahead_equals_the_plant_brake_model_stepped_forward(case: str)
     np.testing.assert_allclose(predicted, expected, rtol=1e-9, atol=1e-3)
     if case != "planned application":  # the re-application reached every vehicle
         assert np.all(plant.pressure > 0.0)
+
+
+def test_a_start_creep_under_stop_speed_is_not_held() -> None:
+    """A reference that starts with a creep under ``stop_speed`` at zero acceleration (the
+    planned start of freight_20km: the head takes up the stretch at 0.1 km/h) is not the end of
+    the profile: no holding brake there, the locomotive pulls; at the profile's end, below
+    ``stop_speed`` and nothing faster ahead, the train is held."""
+    creep = 0.03  # m/s
+    ref = ReferenceProfile("distance", np.array([0.0, 0.01, 0.3, 10.0, 400.0, 500.0]),
+                           np.array([0.0, creep, creep, 2.0, 2.0, 0.0]))
+    blend = FreightBlending(BlendingParams(), ref, Route.flat())
+    assert ref.accel(0.1) == 0.0 and creep < blend.p.stop_speed
+    assert blend.peak_ahead(0.1) == 2.0 and blend.peak_ahead(499.9) == 0.0
+    force, reduction = blend.blend(0.0, 0.2, creep, 0.1, 1e5, creep, 0.0, 0.0)
+    assert not blend.holding and reduction == 0.0 and force == 1e5
+    end = FreightBlending(BlendingParams(), ref, Route.flat())
+    _, reduction = end.blend(0.0, 0.2, 0.1, 499.9, 0.0, ref.speed(499.9), 0.0, 0.0)
+    assert end.holding and reduction == BlendingParams().hold_reduction

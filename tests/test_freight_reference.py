@@ -7,7 +7,6 @@ the plan does. Checked on the shipped CSV against the nominal one-mass model of
 from __future__ import annotations
 
 import importlib.util
-import math
 from pathlib import Path
 
 import numpy as np
@@ -113,11 +112,74 @@ def test_final_stop_is_planned_with_the_smallest_air_brake_stage(plan: dict) -> 
 
 def test_reference_respects_the_ceiling_and_the_run_time(plan: dict) -> None:
     """At least LIMIT_MARGIN_KMH under the head's speed limit everywhere; the run takes the
-    paper's 22.8 min (to 0.1 min: the cruise speed is at its 78 km/h ceiling)."""
+    paper's 22.8 min plus what the cruise speed, at its 78 km/h ceiling, cannot make up: the
+    planned start's take-up of the stretch (breakaway / (m_eff MAX_JERK) = 8.6 s) and its
+    jerk ramp written as planned (the one-mass start's first 0.55 m was one
+    constant-acceleration segment, 5 s short): 1,383.0 s, 0.25 min over (1,369.5 s before)."""
     route, ref = plan["route"], plan["ref"]
     margin = plan["script"].LIMIT_MARGIN_KMH * KMH
     assert np.all(ref.v <= route.speed_limit.at_array(ref.x) - margin + 1e-6)
-    assert math.isclose(ref.run_time() / 60.0, 22.8, abs_tol=0.05)
+    assert 22.8 < ref.run_time() / 60.0 < 22.8 + 0.3
+
+
+def _planner(plan: dict):
+    from controllers.common.freight_blending import BlendingParams as Blend
+    from plants.freight import FreightParams
+
+    return plan["script"].Planner(plan["route"], FreightParams(), Blend().stop_ed_share)
+
+
+def test_stretch_is_the_plants_quasi_static_stretch(plan: dict) -> None:
+    """Planner.stretch (coupler forces falling linearly from the first coupler's) is the
+    head-to-mean displacement the plant settles to under a constant 300 kN on level track:
+    after 1,200 s the slowest stretch mode (period 18.7 s, damping ratio about 0.02, so it
+    decays as exp(-t / 160 s)) has decayed to ~1e-3 of its start; 0.76 m (N F / (3 k):
+    0.79 m)."""
+    from cosim.fmu.state import to_ticks
+    from plants.freight import FreightParams, FreightTrain
+    from plants.route import Route
+
+    params, force = FreightParams(), 3e5
+    train = FreightTrain(params, Route.flat())
+    offset = train.x[0] - train.x.mean()
+    step = to_ticks(1.0)
+    for k in range(1200):
+        train.advance(k * step, step, {"force_demand": force})
+    moved = train.x[0] - train.x.mean() - offset
+    expected = _planner(plan).stretch(force, train.accel, float(train.v.mean()))
+    assert moved == pytest.approx(expected, rel=2e-3)
+    assert 0.7 < moved < params.n_wagons * force / (3.0 * params.coupler_stiffness)
+
+
+def test_planned_start_takes_up_the_stretch_then_accelerates(plan: dict) -> None:
+    """The reference's start in the head's coordinate: the head's planned speed never falls
+    up to the first ceiling (43 km/h, reached at 1,929 m); in the creep (3-7 s) it is the stretch
+    rate of the force rising at m_eff MAX_JERK, d stretch / dF times that rate, 0.10 km/h:
+    the train-mean lag of the planned start is the jerk rule's (N m_eff J / (3 k) =
+    0.11 km/h), and the head has taken up the breakaway stretch (97 kN) when the train
+    starts to move."""
+    script, ref, times = plan["script"], plan["ref"], plan["times"]
+    planner = _planner(plan)
+    start = ref.x <= 1930.0
+    assert ref.v[start].max() == pytest.approx(43.0 * KMH, abs=1e-6 * KMH)
+    assert np.all(np.diff(ref.v[start]) >= 0.0)
+    rate = planner.m_eff * script.MAX_JERK  # N/s
+    breakaway = planner.resistance(0.0, 0.0)
+    slope = (planner.stretch(2e5, 0.0, 0.0) - planner.stretch(1e5, 0.0, 0.0)) / 1e5  # m/N
+    share = 1.0 - float(planner.train.res_a[0]) / breakaway  # the locomotive's static part
+    creep = (times > 3.0) & (times < 7.0)
+    # speeds written to 1e-6 km/h
+    np.testing.assert_allclose(ref.v[creep], slope * rate * share, rtol=0, atol=1e-6 * KMH)
+    assert slope * rate < 0.11 * KMH
+    # the trailing average over START_SMOOTHING_S (samples DT apart) delays the linear
+    # creep by (W - DT) / 2; the written times lag the plan's by the first segments (v^2
+    # linear in x for a speed rising linearly in time: ~0.02 s at 0.03 m/s, 0.6 mm)
+    t0 = breakaway / rate
+    delayed = t0 - 0.5 * (script.START_SMOOTHING_S - script.DT)
+    expected = planner.stretch(rate * delayed * share + float(planner.train.res_a[0]), 0.0, 0.0)
+    assert float(np.interp(t0, times, ref.x)) == pytest.approx(expected, abs=2e-3)
+    # the breakaway stretch taken up but for the 1 s of the average (89 %)
+    assert expected > 0.85 * planner.stretch(breakaway, 0.0, 0.0)
 
 
 def test_blending_applies_the_smallest_stage_where_the_plan_does() -> None:

@@ -31,8 +31,9 @@ brake < 0, within the HXD1 envelope at the measured speed) and ``pipe_reduction`
   braking): where even the minimum reduction brakes too hard the train decelerates more than
   planned. :meth:`FreightBlending.accel_limits` gives the controllers this envelope so their
   integrators and saturations see it;
-* at the end of the profile (zero reference, speed under ``stop_speed``) it holds the train with
-  ``hold_reduction``; also when the air brake stopped the train short on a braking segment
+* at the end of the profile (zero reference, speed under ``stop_speed``, and the reference
+  ahead never rising to ``stop_speed`` again: not a planned start's creep) it holds the train
+  with ``hold_reduction``; also when the air brake stopped the train short on a braking segment
   (the minimum reduction brakes harder than planned once the electric brake fades below
   ``ed_fade_speed``: without power braking the train stops some metres early).
 
@@ -154,6 +155,9 @@ class FreightBlending(StatefulCore):
         self.final_approach = False  # air released for the electric-brake final approach
         self.approach_stop = math.inf  # m, its stop point
         self._stops = np.asarray(profile.x, dtype=float)[np.asarray(profile.v) <= 0.0]
+        # highest reference speed from each point on (the end of the profile: below stop_speed)
+        self._points = np.asarray(profile.x, dtype=float).tolist()
+        self._peak_ahead = np.maximum.accumulate(np.asarray(profile.v)[::-1])[::-1].tolist()
         self._onsets = [(onset, self.next_stop(onset)) for onset in self.planned_onsets()]
         self._stop_consts: tuple | None = None  # plain floats for _integrate_stop
 
@@ -168,6 +172,12 @@ class FreightBlending(StatefulCore):
         self.model.brake_history = [list(h) for h in state["history"]]
 
     # -- nominal model ---------------------------------------------------------------------
+    def peak_ahead(self, s: float) -> float:
+        """Highest reference speed (m/s) at the profile's points beyond ``s`` (0 past the
+        last): below ``stop_speed`` only on the way into a stop, not in a start's creep."""
+        j = bisect_right(self._points, s)
+        return self._peak_ahead[j] if j < len(self._points) else 0.0
+
     def basic_accel(self, v: float) -> float:
         """Modelled basic resistance (eqs. 3-4) per unit effective mass (m/s^2)."""
         return (self._res_a + (self._res_b + self._res_c * v) * v) / self.m_eff
@@ -411,7 +421,8 @@ class FreightBlending(StatefulCore):
         # last metres once the electric brake fades, and not partly releasable) stopped the
         # train short on the final braking segment
         self.holding = (v < p.stop_speed and self.profile.accel(s) <= 0.0
-                        and (v_ref < p.stop_speed or self.reduction > 0.0
+                        and (v_ref < p.stop_speed and self.peak_ahead(s) < p.stop_speed
+                             or self.reduction > 0.0
                              or self.final_approach
                              and (v <= 0.0 or self.approach_stop - s <= p.stop_tolerance)))
         if self.holding:
