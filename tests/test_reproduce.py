@@ -15,6 +15,8 @@ from cosim.run.reproduce import (
     draw_speed_classes,
     entry_names,
     load_entry,
+    ranking_markdown,
+    ranking_rows,
     reproduce,
     speed_class_errors,
     summary_value,
@@ -89,6 +91,10 @@ def test_reproduce_writes_ours_beside_the_paper(built_fmus, tmp_path: Path) -> N
     ('[[figures]]\nfile = "x.png"\nx = "time"\ny = ["plant.v[*]"]\ny_reduce = "max"\n',
      "y_reduce 'max'"),
     ('colour = "red"\n', "unknown key(s) ['colour']"),
+    ('[[rankings]]\nmetric = "nope"\nruns = ["PID"]\n', "metric 'nope' is not in [[metrics]]"),
+    ('[[rankings]]\nmetric = "stop_error_m"\nruns = ["PID", "PID"]\n', "must be distinct"),
+    ('[[rankings]]\nmetric = "stop_error_m"\nruns = ["PID", "PID kp=30"]\npaper = ["PID"]\n',
+     "must order the same runs"),
     ('[[figures]]\nfile = "c.png"\nkind = "speed_classes"\ny = ["plant.v"]\nclasses = [0, 30]\n'
      'limit_kmh = 2.0\nlimit_below_kmh = 30.0\nlimit_fraction = 0.02\n', "missing key(s) ['ref']"),
     ('[[figures]]\nfile = "c.png"\nkind = "speed_classes"\ny = ["plant.v"]\nref = "r"\n'
@@ -101,6 +107,35 @@ def test_bad_entries_name_the_file_and_key(tmp_path: Path, patch: str, message: 
     with pytest.raises(ReproduceError, match=re.escape(message)) as err:
         load_entry(str(path))
     assert str(path) in str(err.value)
+
+
+def test_ranking_orders_the_runs_and_names_the_pairs_the_other_way_round(
+        tmp_path: Path) -> None:
+    """Lowest first; ties keep the entry's order; a run without the figure ranks last; the
+    verdict lists every pair of the paper's order that ours reverses."""
+    path = tmp_path / "entry.toml"
+    path.write_text(ENTRY.replace('[[runs]]\nname = "PID kp=30"', '[[runs]]\nname = "A"\n'
+                                  'scenario = "seed000_stop_pid"\n[[runs]]\nname = "B"\n'
+                                  'scenario = "seed000_stop_pid"\n[[runs]]\nname = "PID kp=30"')
+                    + '[[rankings]]\nname = "main"\nmetric = "stop_error_m"\n'
+                      'runs = ["PID", "A", "B", "PID kp=30"]\n'
+                      'paper = ["PID", "A", "B", "PID kp=30"]\n'
+                      '[[rankings]]\nmetric = "stop_error_m"\nruns = ["A", "B"]\n')
+    entry = load_entry(str(path))
+    summaries = {"PID": {"stop_error_m": 0.3}, "A": {"stop_error_m": 0.1},
+                 "B": {"stop_error_m": 0.1}, "PID kp=30": {}}
+    main, plain = ranking_rows(entry, summaries)
+    assert main["ours"] == "A < B < PID < PID kp=30"
+    assert main["paper"] == "PID < A < B < PID kp=30"
+    assert main["source"] == "A < PID; B < PID" and main["within"] is False
+    assert main["metric"] == "rank:stop_error_m" and main["label"] == "stop error (m)"
+    assert plain["ours"] == "A < B" and plain["paper"] is None and plain["within"] is None
+    summaries["PID"]["stop_error_m"] = 0.05
+    (agree, _) = ranking_rows(entry, summaries)
+    assert agree["within"] is True and agree["source"] == ""
+    text = ranking_markdown([agree, plain])
+    assert "| stop error (m) | main | PID < A < B < PID kp=30 ✓ |" in text
+    assert "| stop error (m) |  | A < B | - | - |" in text
 
 
 def test_unknown_entry_lists_the_known_ones() -> None:

@@ -33,6 +33,12 @@ live there, not in code)::
     value = 17.7                   # optional, as in [[paper]]: value, range, tolerance, source
     range = [15.0, 22.0]
     source = "sec. 3.1 text"
+    [[rankings]]                   # optional: the runs ordered by a metric, lowest first
+    name = "main rows"             # shown with the ranking
+    metric = "unit_mse_kmh2"       # a [[metrics]] key
+    runs = ["ISMPC", "ISMC", "MFAC", "GPC"]   # [[runs]] names
+    paper = ["ISMPC", "ISMC", "MFAC", "GPC"]  # optional: the paper's order of the same runs;
+                                   # the verdict names the pairs ours orders the other way
     [[sweeps]]                     # optional: a cosim sweep (sweep.csv, sweep.png)
     name = "fig11"
     scenarios = ["seed000_stop_rmpc", "seed000_stop_rsmpc"]
@@ -61,8 +67,9 @@ live there, not in code)::
 
 The command runs every run (in parallel processes), writes each run's results under
 ``runs/``, then ``table.md`` and ``table.csv`` (ours beside the paper's, with the verdict where
-a tolerance is given; derived figures follow the table, and are rows of ``table.csv`` with
-``metric = "<kind>:<metric>"``), the sweeps and the figures. ``all`` runs every entry and writes one
+a tolerance is given; derived figures and rankings follow the table, and are rows of
+``table.csv`` with ``metric = "<kind>:<metric>"`` / ``"rank:<metric>"``), the sweeps and the
+figures. ``all`` runs every entry and writes one
 ``REPRODUCTION.md``.
 """
 
@@ -86,7 +93,9 @@ except ModuleNotFoundError:  # Python < 3.11
 
 REPRODUCE_DIR = SCENARIO_DIR / "reproduce"
 
-_ENTRY_KEYS = {"title", "notes", "runs", "metrics", "paper", "derived", "sweeps", "figures"}
+_ENTRY_KEYS = {"title", "notes", "runs", "metrics", "paper", "derived", "rankings", "sweeps",
+               "figures"}
+_RANKING_KEYS = {"name", "metric", "runs", "paper"}
 _DERIVED_KEYS = {"name", "kind", "metric", "run", "baseline", "value", "range", "tolerance",
                  "source"}
 DERIVED_KINDS = ("saving_percent",)
@@ -117,6 +126,7 @@ class Entry:
     sweeps: list[dict[str, Any]] = field(default_factory=list)
     figures: list[dict[str, Any]] = field(default_factory=list)
     notes: str = ""
+    rankings: list[dict[str, Any]] = field(default_factory=list)
 
 
 def entry_names() -> list[str]:
@@ -184,6 +194,18 @@ def load_entry(name: str | Path) -> Entry:
         for key in ("run", "baseline"):
             if der[key] not in names:
                 raise ReproduceError(f"{where}: {key} {der[key]!r} is not one of {names}")
+    for i, rank in enumerate(data.get("rankings", [])):
+        where = f"{path}: [[rankings]] #{i + 1}"
+        _check_keys(where, rank, _RANKING_KEYS, ("metric", "runs"))
+        if rank["metric"] not in keys:
+            raise ReproduceError(f"{where}: metric {rank['metric']!r} is not in [[metrics]]")
+        unknown_runs = sorted(set(rank["runs"]) - set(names))
+        if unknown_runs or len(set(rank["runs"])) != len(rank["runs"]) or not rank["runs"]:
+            raise ReproduceError(f"{where}: runs {rank['runs']!r} must be distinct [[runs]] "
+                                 f"names (unknown: {unknown_runs})")
+        if "paper" in rank and sorted(rank["paper"]) != sorted(rank["runs"]):
+            raise ReproduceError(f"{where}: paper {rank['paper']!r} must order the same runs "
+                                 f"as runs {rank['runs']!r}")
     for i, sweep in enumerate(data.get("sweeps", [])):
         _check_keys(f"{path}: [[sweeps]] #{i + 1}", sweep, _SWEEP_KEYS,
                     ("name", "scenarios", "grid"))
@@ -207,7 +229,7 @@ def load_entry(name: str | Path) -> Entry:
             raise ReproduceError(f"{where}: runs {unknown_runs} are not in [[runs]]")
     return Entry(path.stem, path, data["title"], runs, metrics, data.get("paper", []),
                  data.get("derived", []), data.get("sweeps", []), data.get("figures", []),
-                 data.get("notes", ""))
+                 data.get("notes", ""), data.get("rankings", []))
 
 
 def slug(name: str) -> str:
@@ -294,6 +316,11 @@ def run_entry(entry: Entry, out_dir: Path, workers: int | None = None
     return result
 
 
+def _row(cells: list[str]) -> str:
+    """A markdown table row; a ``|`` inside a cell (``max |e|``) is escaped."""
+    return "| " + " | ".join(str(c).replace("|", "\\|") for c in cells) + " |"
+
+
 def _fmt(value: Any) -> str:
     if value is None:
         return "-"
@@ -364,6 +391,43 @@ def derived_rows(entry: Entry, summaries: dict[str, dict[str, Any]]) -> list[dic
     return rows
 
 
+def ranking_rows(entry: Entry, summaries: dict[str, dict[str, Any]]) -> list[dict[str, Any]]:
+    """One row per ``[[rankings]]``: the runs ordered by the metric (lowest first; equal values
+    keep the entry's order), the paper's order and the pairs ordered the other way round
+    (``within``: no such pair). A run without the metric ranks last."""
+    def value(run: str, metric: str) -> float:
+        v = summary_value(summaries[run], metric)
+        return math.inf if v is None or (isinstance(v, float) and math.isnan(v)) else float(v)
+
+    rows = []
+    for rank in entry.rankings:
+        ours = sorted(rank["runs"], key=lambda run, m=rank["metric"]: value(run, m))
+        paper = rank.get("paper")
+        swapped = []
+        if paper is not None:
+            place = {run: i for i, run in enumerate(ours)}
+            swapped = [f"{b} < {a}" for i, a in enumerate(paper) for b in paper[i + 1:]
+                       if place[b] < place[a]]
+        label = next(m.get("label", m["key"]) for m in entry.metrics
+                     if m["key"] == rank["metric"])
+        rows.append({"run": rank.get("name", ""), "metric": f"rank:{rank['metric']}",
+                     "label": label, "ours": " < ".join(ours),
+                     "paper": " < ".join(paper) if paper is not None else None,
+                     "within": None if paper is None else not swapped,
+                     "source": "; ".join(swapped)})
+    return rows
+
+
+def ranking_markdown(rows: list[dict[str, Any]]) -> str:
+    lines = ["| ranking (lowest first) | runs | ours | paper | the other way round |",
+             "| --- | --- | --- | --- | --- |"]
+    for r in rows:
+        mark = "" if r["within"] is None else (" ✓" if r["within"] else " ✗")
+        lines.append(_row([r["label"], r["run"], r["ours"] + mark, _fmt(r["paper"]),
+                           r["source"] or "-"]))
+    return "\n".join(lines)
+
+
 def derived_markdown(rows: list[dict[str, Any]]) -> str:
     lines = ["| derived figure | of | ours | paper | source |", "| --- | --- | --- | --- | --- |"]
     for r in rows:
@@ -372,8 +436,8 @@ def derived_markdown(rows: list[dict[str, Any]]) -> str:
         if r["paper_range"] is not None:
             band = f"in [{_fmt(r['paper_range'][0])}, {_fmt(r['paper_range'][1])}]"
             paper = band if r["paper"] is None else f"{paper} ({band})"
-        lines.append(f"| {r['run']} ({r['metric']}) | {r['of']} | {_fmt(r['ours'])}{mark} | "
-                     f"{paper} | {r['source']} |")
+        lines.append(_row([f"{r['run']} ({r['metric']})", r["of"], _fmt(r["ours"]) + mark,
+                           paper, r["source"]]))
     return "\n".join(lines)
 
 
@@ -385,7 +449,7 @@ def table_markdown(entry: Entry, rows: list[dict[str, Any]]) -> str:
         header += [f"{label}", "paper"]
         if "ratio_to" in metric:
             header += [f"ratio to {metric['ratio_to']}", "paper"]
-    lines = ["| " + " | ".join(header) + " |", "|" + " --- |" * len(header)]
+    lines = [_row(header), "|" + " --- |" * len(header)]
     by = {(r["run"], r["metric"]): r for r in rows}
     for run in entry.runs:
         cells = [run["name"]]
@@ -402,7 +466,7 @@ def table_markdown(entry: Entry, rows: list[dict[str, Any]]) -> str:
             cells += [ours + mark, paper]
             if "ratio_to" in metric:
                 cells += [_fmt(r["ratio"]), _fmt(r["paper_ratio"])]
-        lines.append("| " + " | ".join(cells) + " |")
+        lines.append(_row(cells))
     sources = sorted({f"{r['run']} / {r['metric']}: {r['source']}" for r in rows if r["source"]})
     if sources:
         lines += ["", "Paper figures: " + "; ".join(sources) + "."]
@@ -569,11 +633,14 @@ def reproduce(name: str, out_dir: str | Path | None = None, workers: int | None 
     summaries = run_entry(entry, out, workers)
     rows = table_rows(entry, summaries)
     derived = derived_rows(entry, summaries)
-    pd.DataFrame(rows + derived).to_csv(out / "table.csv", index=False)
+    ranked = ranking_rows(entry, summaries)
+    pd.DataFrame(rows + derived + ranked).to_csv(out / "table.csv", index=False)
     parts = [f"## {entry.title}", "", f"`cosim reproduce {entry.name}` (entry "
              f"`scenarios/reproduce/{entry.path.name}`)", "", table_markdown(entry, rows)]
     if derived:
         parts += ["", derived_markdown(derived)]
+    if ranked:
+        parts += ["", ranking_markdown(ranked)]
     for sweep in entry.sweeps:
         grid = parse_grid(f"{k}={v}" for k, v in sweep["grid"].items())
         target = out / slug(sweep["name"])
@@ -600,9 +667,9 @@ def reproduce(name: str, out_dir: str | Path | None = None, workers: int | None 
 
 def _frame_markdown(frame: Any) -> str:
     cols = list(frame.columns)
-    lines = ["| " + " | ".join(cols) + " |", "|" + " --- |" * len(cols)]
+    lines = [_row(cols), "|" + " --- |" * len(cols)]
     for _, row in frame.iterrows():
-        lines.append("| " + " | ".join(_fmt(row[c]) for c in cols) + " |")
+        lines.append(_row([_fmt(row[c]) for c in cols]))
     return "\n".join(lines)
 
 
