@@ -91,6 +91,7 @@ def test_reproduce_writes_ours_beside_the_paper(built_fmus, tmp_path: Path) -> N
     ('[[figures]]\nfile = "x.png"\nx = "time"\ny = ["plant.v[*]"]\ny_reduce = "max"\n',
      "y_reduce 'max'"),
     ('colour = "red"\n', "unknown key(s) ['colour']"),
+    ('table = "../t"\n', "must be a file name"),
     ('[[rankings]]\nmetric = "nope"\nruns = ["PID"]\n', "metric 'nope' is not in [[metrics]]"),
     ('[[rankings]]\nmetric = "stop_error_m"\nruns = ["PID", "PID"]\n', "must be distinct"),
     ('[[rankings]]\nmetric = "stop_error_m"\nruns = ["PID", "PID kp=30"]\npaper = ["PID"]\n',
@@ -103,7 +104,8 @@ def test_reproduce_writes_ours_beside_the_paper(built_fmus, tmp_path: Path) -> N
 ])
 def test_bad_entries_name_the_file_and_key(tmp_path: Path, patch: str, message: str) -> None:
     path = tmp_path / "bad.toml"
-    path.write_text(patch + "\n" + ENTRY if patch.startswith("colour") else ENTRY + patch)
+    top = patch.startswith(("colour", "table"))  # top-level keys go before the first table
+    path.write_text(patch + "\n" + ENTRY if top else ENTRY + patch)
     with pytest.raises(ReproduceError, match=re.escape(message)) as err:
         load_entry(str(path))
     assert str(path) in str(err.value)
@@ -147,14 +149,16 @@ def test_repeated_run_gives_median_and_spread_and_ratio(built_fmus, tmp_path: Pa
     """``repeat = 3``: three runs; a deterministic metric has min = median = max, a timing
     metric lies in [min, max]; ``ratio_to`` divides the medians (ours and the paper's)."""
     path = tmp_path / "entry.toml"
-    path.write_text(ENTRY.replace('set = { "controller.kp" = 30.0 }',
-                                  'set = { "controller.kp" = 30.0 }\nrepeat = 3')
+    path.write_text('table = "table2"\n'  # the entry names its table files
+                    + ENTRY.replace('set = { "controller.kp" = 30.0 }',
+                                    'set = { "controller.kp" = 30.0 }\nrepeat = 3')
                     + '[[metrics]]\nkey = "fmu_wall_time_s.controller"\nratio_to = "PID"\n'
                     + '[[paper]]\nrun = "PID"\nmetric = "fmu_wall_time_s.controller"\n'
                     + 'value = 2.0\n[[paper]]\nrun = "PID kp=30"\n'
                     + 'metric = "fmu_wall_time_s.controller"\nvalue = 1.0\n')
     table = reproduce(str(path), tmp_path / "out", workers=1)
-    rows = pd.read_csv(tmp_path / "out" / "table.csv")
+    assert table.name == "table2.md" and not (tmp_path / "out" / "table.md").exists()
+    rows = pd.read_csv(tmp_path / "out" / "table2.csv")
     rep = rows[rows.run == "PID kp=30"].set_index("metric")
     assert (tmp_path / "out/runs/pid_kp_30/repeat_03/summary.json").is_file()
     err = rep.loc["stop_error_m"]

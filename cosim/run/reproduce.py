@@ -5,6 +5,7 @@ live there, not in code)::
 
     title = "Seed 000: ..."
     notes = "why our figures differ from the paper's"     # optional, markdown
+    table = "table2"               # optional: the table's file name (default "table")
     [[runs]]                       # one table row per run
     name = "RMPC N=5"
     scenario = "seed000_stop_rmpc"
@@ -66,10 +67,10 @@ live there, not in code)::
     paper = "what the paper reports"   # optional, shown under the figure
 
 The command runs every run (in parallel processes), writes each run's results under
-``runs/``, then ``table.md`` and ``table.csv`` (ours beside the paper's, with the verdict where
-a tolerance is given; derived figures and rankings follow the table, and are rows of
-``table.csv`` with ``metric = "<kind>:<metric>"`` / ``"rank:<metric>"``), the sweeps and the
-figures. ``all`` runs every entry and writes one
+``runs/``, then ``table.md`` and ``table.csv`` (or the entry's ``table`` name; ours beside
+the paper's, with the verdict where a tolerance is given; derived figures and rankings follow
+the table, and are rows of ``table.csv`` with ``metric = "<kind>:<metric>"`` /
+``"rank:<metric>"``), the sweeps and the figures. ``all`` runs every entry and writes one
 ``REPRODUCTION.md``.
 """
 
@@ -93,8 +94,8 @@ except ModuleNotFoundError:  # Python < 3.11
 
 REPRODUCE_DIR = SCENARIO_DIR / "reproduce"
 
-_ENTRY_KEYS = {"title", "notes", "runs", "metrics", "paper", "derived", "rankings", "sweeps",
-               "figures"}
+_ENTRY_KEYS = {"title", "notes", "table", "runs", "metrics", "paper", "derived", "rankings",
+               "sweeps", "figures"}
 _RANKING_KEYS = {"name", "metric", "runs", "paper"}
 _DERIVED_KEYS = {"name", "kind", "metric", "run", "baseline", "value", "range", "tolerance",
                  "source"}
@@ -127,6 +128,7 @@ class Entry:
     figures: list[dict[str, Any]] = field(default_factory=list)
     notes: str = ""
     rankings: list[dict[str, Any]] = field(default_factory=list)
+    table: str = "table"
 
 
 def entry_names() -> list[str]:
@@ -155,6 +157,10 @@ def load_entry(name: str | Path) -> Entry:
     except tomllib.TOMLDecodeError as err:
         raise ReproduceError(f"{path}: not valid TOML: {err}") from err
     _check_keys(str(path), data, _ENTRY_KEYS, ("title", "runs"))
+    table = data.get("table", "table")
+    if not (isinstance(table, str) and re.fullmatch(r"[A-Za-z0-9_-]+", table)):
+        raise ReproduceError(f"{path}: table = {table!r} must be a file name without folder or "
+                             "suffix (letters, digits, '_', '-')")
     runs = data["runs"]
     for i, run in enumerate(runs):
         _check_keys(f"{path}: [[runs]] #{i + 1}", run, _RUN_KEYS, ("name", "scenario"))
@@ -229,7 +235,7 @@ def load_entry(name: str | Path) -> Entry:
             raise ReproduceError(f"{where}: runs {unknown_runs} are not in [[runs]]")
     return Entry(path.stem, path, data["title"], runs, metrics, data.get("paper", []),
                  data.get("derived", []), data.get("sweeps", []), data.get("figures", []),
-                 data.get("notes", ""), data.get("rankings", []))
+                 data.get("notes", ""), data.get("rankings", []), table)
 
 
 def slug(name: str) -> str:
@@ -622,7 +628,8 @@ def draw_speed_classes(spec: dict[str, Any], run_dirs: dict[str, Path], path: Pa
 
 def reproduce(name: str, out_dir: str | Path | None = None, workers: int | None = None
               ) -> Path:
-    """Run one entry; write table.md/table.csv, sweeps and figures; return table.md."""
+    """Run one entry; write table.md/table.csv (``entry.table``), sweeps and figures; return
+    the table's markdown file."""
     import pandas as pd
 
     from cosim.run.sweep import parse_grid, run_sweep
@@ -634,7 +641,7 @@ def reproduce(name: str, out_dir: str | Path | None = None, workers: int | None 
     rows = table_rows(entry, summaries)
     derived = derived_rows(entry, summaries)
     ranked = ranking_rows(entry, summaries)
-    pd.DataFrame(rows + derived + ranked).to_csv(out / "table.csv", index=False)
+    pd.DataFrame(rows + derived + ranked).to_csv(out / f"{entry.table}.csv", index=False)
     parts = [f"## {entry.title}", "", f"`cosim reproduce {entry.name}` (entry "
              f"`scenarios/reproduce/{entry.path.name}`)", "", table_markdown(entry, rows)]
     if derived:
@@ -660,7 +667,7 @@ def reproduce(name: str, out_dir: str | Path | None = None, workers: int | None 
         parts += ["", f"![{spec.get('title', spec['file'])}]({spec['file']})"]
     if entry.notes:
         parts += ["", "### Where we differ from the paper, and why", "", entry.notes.strip()]
-    table = out / "table.md"
+    table = out / f"{entry.table}.md"
     table.write_text("\n".join(parts) + "\n")
     return table
 
