@@ -12,9 +12,12 @@ has its front at ``x_i`` (m along the line) and speed ``v_i`` (m/s)::
 stiffness is the secant stiffness of two MT-2 friction draft gears in series (public MT-2
 figures: 83 mm travel, 2.27 MN at full travel, so 2.27 MN / 0.166 m = 1.37e7 N/m per coupling);
 the damping ``c`` = 1.5e6 N s/m is an equivalent viscous damping of friction draft gears
-(friction forces of some hundred kN at relative speeds of a few tenths of m/s); a smaller value
-(e.g. 20 % of critical for the two-wagon mode, 3e5) leaves the slow whole-train modes (period
-~18 s) almost undamped, which friction gears do not. Slack is optional (``coupler_slack``, the
+(friction forces of some hundred kN at relative speeds of a few tenths of m/s). Even so the
+slowest whole-train mode (period 18.7 s, omega = 0.34 /s) is lightly damped: its damping ratio
+is c omega / (2 k) = 0.02 (it decays as exp(-t / 160 s); measured in
+``tests/test_freight_reference.py``), against 0.004 with a smaller value (e.g. 20 % of critical
+for the two-wagon mode, 3e5): these are the head-to-tail stretch oscillations the seed-002 notes
+measure. Slack is optional (``coupler_slack``, the
 total free play of a coupling, default 0): the paper's eq. (1) has none and speed tracking
 hardly depends on it, but run-in/run-out peaks do. With slack the draft gear (spring and
 damper) acts only beyond +-slack/2; engagement is decided at each sub-step start (contact is
