@@ -310,6 +310,10 @@ def test_next_reference_is_the_profile_where_the_head_will_be(cls, at_next_posit
     # inside a segment both readings agree: v^2 linear in s, so the reference at s + v T + a T^2
     # / 2 is v + a T exactly for a train on it
     assert seen[1] / c == pytest.approx(v_curve - 0.5 * T, rel=1e-12)
+    # nearly stopped (v_1 T < -a_ref T^2 / 2): the head does not move back up the curve
+    end = 1700.0 - 0.001  # v_ref = sqrt(0.001) = 0.032 m/s
+    assert ctl.next_reference(end, np.full(3, 0.02), math.sqrt(0.001), -0.5) == pytest.approx(
+        math.sqrt(0.001) if at_next_position else 0.0, rel=1e-12)
     # a time profile: the reference at t + T
     timed = ReferenceProfile("time", np.array([0.0, 10.0, 20.0]), np.array([0.0, 10.0, 10.0]))
     ctl = cls(params, timed, 3)

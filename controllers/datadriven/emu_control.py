@@ -68,8 +68,9 @@ class DriveParams:
                                "F_i / m (1: m/s2 per mean unit mass; not in the paper)",
                                min=1e-6)
     reference_at_next_position: bool = param(True, description="y_r(t+1) is the profile at "
-                                             "the predicted head position s + v_1 T + a_ref "
-                                             "T^2 / 2 (time profiles: at t + T); false: v_ref "
+                                             "the predicted head position s + max(v_1 T + "
+                                             "a_ref T^2 / 2, 0) (time profiles: at t + T); "
+                                             "false: v_ref "
                                              "+ a_ref T, the slope of the current segment, "
                                              "which misses a profile point crossed within the "
                                              "sample (the reading before issue 15's sixth "
@@ -207,7 +208,8 @@ class DataDrivenEmuControl(StatefulCore, Declared):
     def next_reference(self, x: float, v: np.ndarray, v_ref: float, a_ref: float) -> float:
         """The reference speed (m/s) at the next sample, ``y_r(t+1) / c_y`` of eqs. 17, 24,
         26, 75: the profile at the head position predicted from the head unit's speed and the
-        reference's acceleration, ``s + v_1 T + a_ref T^2 / 2`` (a time profile: at ``t + T``).
+        reference's acceleration, ``s + max(v_1 T + a_ref T^2 / 2, 0)`` (a time profile: at
+        ``t + T``).
         ``v_ref + a_ref T`` (``reference_at_next_position`` false) is the same inside a segment
         of the profile but misses a point crossed within the sample: at the seed-001
         profile's kinks it was off by up to 0.33 km/h."""
@@ -216,7 +218,8 @@ class DataDrivenEmuControl(StatefulCore, Declared):
             return max(v_ref + a_ref * T, 0.0)
         if self.profile.kind != "distance":
             return self.profile.speed(x + T)
-        return self.profile.speed(x + max(float(v[0]), 0.0) * T + 0.5 * a_ref * T * T)
+        # a braking train stops, it does not reverse: the displacement is >= 0
+        return self.profile.speed(x + max(float(v[0]) * T + 0.5 * a_ref * T * T, 0.0))
 
     def outputs(self) -> dict[str, float]:
         out = {f"force[{i + 1}]": f for i, f in enumerate(self.forces)}
