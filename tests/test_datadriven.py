@@ -280,6 +280,47 @@ def test_emu_core_holds_the_brake_at_the_end_of_the_profile() -> None:
     assert [out[f"force[{i}]"] for i in (1, 2, 3)] == pytest.approx([-0.4 * m] * 3)
 
 
+@pytest.mark.parametrize("cls", [EmuMfac, EmuIsmc, EmuIsmpc, EmuGpc])
+@pytest.mark.parametrize("at_next_position", [True, False])
+def test_next_reference_is_the_profile_where_the_head_will_be(cls, at_next_position) -> None:
+    """y_r(t+1) handed to the law: the profile at s + v_1 T + a_ref T^2 / 2, also when a
+    profile point lies inside the sample (the segment's slope alone would miss the kink)."""
+    from plants.route import ReferenceProfile
+
+    # 40 m/s up to 100 m, then braking at 0.5 m/s2 (v^2 linear in s) to rest at 1700 m
+    profile = ReferenceProfile("distance", np.array([0.0, 100.0, 1700.0]),
+                               np.array([40.0, 40.0, 0.0]))
+    defaults = cls.params_class()
+    params = dataclasses.replace(defaults, drive=dataclasses.replace(
+        defaults.drive, reference_at_next_position=at_next_position))
+    ctl = cls(params, profile, 3)
+    seen = []
+    step = ctl.law.step
+    ctl.law.step = lambda y, y_r, y_r_next, lo, hi: (seen.append(y_r_next), step(y, y_r, y_r_next,
+                                                                              lo, hi))[1]
+    c, T = params.drive.output_scale, params.drive.sample_time
+    kink = 95.0  # 0.2 s at 40 m/s: 8 m on, 3 m past the kink
+    on_curve = 400.0  # v_ref = sqrt(1600 - (400 - 100)) = 36.06 m/s, a_ref = -0.5
+    v_curve = math.sqrt(1600.0 - (on_curve - 100.0))
+    ctl.compute(0.0, _inputs(40.0, kink))
+    ctl.compute(T, _inputs(v_curve, on_curve))
+    # past the kink: 3 m on the braking curve; the segment's slope (0 before it) misses it
+    assert seen[0] / c == pytest.approx(math.sqrt(1600.0 - 3.0) if at_next_position else 40.0,
+                                        rel=1e-12)
+    # inside a segment both readings agree: v^2 linear in s, so the reference at s + v T + a T^2
+    # / 2 is v + a T exactly for a train on it
+    assert seen[1] / c == pytest.approx(v_curve - 0.5 * T, rel=1e-12)
+    # nearly stopped (v_1 T < -a_ref T^2 / 2): the head does not move back up the curve
+    end = 1700.0 - 0.001  # v_ref = sqrt(0.001) = 0.032 m/s
+    assert ctl.next_reference(end, np.full(3, 0.02), math.sqrt(0.001), -0.5) == pytest.approx(
+        math.sqrt(0.001) if at_next_position else 0.0, rel=1e-12)
+    # a time profile: the reference at t + T
+    timed = ReferenceProfile("time", np.array([0.0, 10.0, 20.0]), np.array([0.0, 10.0, 10.0]))
+    ctl = cls(params, timed, 3)
+    assert ctl.next_reference(9.9, np.full(3, 9.9), 9.9, 1.0) == pytest.approx(
+        10.0 if at_next_position else 10.1, rel=1e-12)
+
+
 def _point_mass_forces(ctl, steps: int = 300) -> np.ndarray:
     """Forces of ``ctl`` on a rigid 3-unit train (M dv/dt = sum F, no resistance), limits
     wide enough to bind only at the comfort limit."""

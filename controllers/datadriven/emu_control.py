@@ -17,8 +17,8 @@ for GPC (3.6, 1), km/h and m/s^2 times ``FFDL_SCALE`` for the FFDL laws (below).
 box of unit ``i`` is ``c_u max(-accel_max, -brake_limit_i / m) <= u_i <= c_u min(accel_max,
 traction_limit_i / m)``: the plant's envelope and the comfort limit |a| <= 1 m/s^2 (section
 4.3) on each unit's force per unit mass (so the train's mean is within it too). The reference
-of the next sample is ``y_r(t+1) = c_y (v_ref + a_ref T)`` (a ``v(s)`` profile looked up at
-the head position).
+of the next sample is ``y_r(t+1) = c_y v_ref(s + v_1 T + a_ref T^2 / 2)``: a ``v(s)`` profile
+looked up at the head position predicted for the next sample (:meth:`next_reference`).
 At the end of the profile (zero reference and the mean speed below ``stop_speed``) every unit
 holds ``hold_accel`` of braking; the laws' data models follow without learning.
 """
@@ -67,6 +67,14 @@ class DriveParams:
     input_scale: float = param(1.0, "s2/m", "data scaling of the inputs: u_i = input_scale "
                                "F_i / m (1: m/s2 per mean unit mass; not in the paper)",
                                min=1e-6)
+    reference_at_next_position: bool = param(True, description="y_r(t+1) is the profile at "
+                                             "the predicted head position s + max(v_1 T + "
+                                             "a_ref T^2 / 2, 0) (time profiles: at t + T); "
+                                             "false: v_ref "
+                                             "+ a_ref T, the slope of the current segment, "
+                                             "which misses a profile point crossed within the "
+                                             "sample (the reading before issue 15's sixth "
+                                             "pass, a diagnostic)")
     sample_time: float = sample_time(0.2)
 
     def check(self) -> None:
@@ -191,12 +199,27 @@ class DataDrivenEmuControl(StatefulCore, Declared):
             u = np.clip(np.full(n, d.hold_accel * d.input_scale), lo, hi)
             self.law.hold(y, u)
         else:
-            y_r = c * v_ref
-            y_r_next = c * max(v_ref + a_ref * d.sample_time, 0.0)
-            u = self.law.step(y, y_r, y_r_next, lo, hi)
+            u = self.law.step(y, c * v_ref, c * self.next_reference(x, v, v_ref, a_ref),
+                              lo, hi)
         self.forces = [float(f) for f in m * u]
         self.speed_error = float(v.sum()) / n - v_ref
         return self.outputs(), 1
+
+    def next_reference(self, x: float, v: np.ndarray, v_ref: float, a_ref: float) -> float:
+        """The reference speed (m/s) at the next sample, ``y_r(t+1) / c_y`` of eqs. 17, 24,
+        26, 75: the profile at the head position predicted from the head unit's speed and the
+        reference's acceleration, ``s + max(v_1 T + a_ref T^2 / 2, 0)`` (a time profile: at
+        ``t + T``).
+        ``v_ref + a_ref T`` (``reference_at_next_position`` false) is the same inside a segment
+        of the profile but misses a point crossed within the sample: at the seed-001
+        profile's kinks it was off by up to 0.33 km/h."""
+        T = self.drive.sample_time
+        if not self.drive.reference_at_next_position:
+            return max(v_ref + a_ref * T, 0.0)
+        if self.profile.kind != "distance":
+            return self.profile.speed(x + T)
+        # a braking train stops, it does not reverse: the displacement is >= 0
+        return self.profile.speed(x + max(float(v[0]) * T + 0.5 * a_ref * T * T, 0.0))
 
     def outputs(self) -> dict[str, float]:
         out = {f"force[{i + 1}]": f for i, f in enumerate(self.forces)}
