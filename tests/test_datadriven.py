@@ -299,6 +299,9 @@ def test_next_reference_is_the_profile_where_the_head_will_be(cls, at_next_posit
     ctl.law.step = lambda y, y_r, y_r_next, lo, hi: (seen.append(y_r_next), step(y, y_r, y_r_next,
                                                                               lo, hi))[1]
     c, T = params.drive.output_scale, params.drive.sample_time
+    # rel=1e-12 below: each expected value is a few IEEE operations (a linear interpolation of
+    # v^2, a correctly rounded sqrt, a product and a quotient by c), ~1e-15 relative on any
+    # CPU; 1e-12 leaves a thousandfold margin, far below the 1e-3 the old reading misses by
     kink = 95.0  # 0.2 s at 40 m/s: 8 m on, 3 m past the kink
     on_curve = 400.0  # v_ref = sqrt(1600 - (400 - 100)) = 36.06 m/s, a_ref = -0.5
     v_curve = math.sqrt(1600.0 - (on_curve - 100.0))

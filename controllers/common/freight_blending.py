@@ -178,7 +178,7 @@ class FreightBlending(StatefulCore):
         j = bisect_right(self._points, s)
         return self._peak_ahead[j] if j < len(self._points) else 0.0
 
-    def basic_accel(self, v: float) -> float:
+    def basic_accel(self, v: float | np.ndarray) -> float | np.ndarray:
         """Modelled basic resistance (eqs. 3-4) per unit effective mass (m/s^2)."""
         return (self._res_a + (self._res_b + self._res_c * v) * v) / self.m_eff
 

@@ -136,7 +136,7 @@ class FreightPreview(FreightTracker):
         s_j[0] = s
         R = np.sqrt(np.maximum(np.interp(s_j, self.profile.x, self._v2), 0.0))
         b = self.blending
-        d = -(b._res_a + (b._res_b + b._res_c * R) * R) / self.m_eff - b.additional_accel(s_j)
+        d = -b.basic_accel(R) - b.additional_accel(s_j)
         return R, d
 
     def accel_demand(self, t: float, v: float, s: float, a_res: float, lo: float,

@@ -610,15 +610,14 @@ def draw_speed_classes(spec: dict[str, Any], run_dirs: dict[str, Path], path: Pa
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
-    lines = ["| class | limit | " + " | ".join(names) + " |", "|" + " --- |" * (len(names) + 2)]
+    lines = [_row(["class", "limit", *names]), "|" + " --- |" * (len(names) + 2)]
     for k, cls in enumerate(classes):
         cells = []
         for n in names:
             r = per_run[n][k]
             cells.append("-" if r["max_abs_error"] is None else
                          f"{_fmt(r['max_abs_error'])} {'✓' if r['met'] else '✗'}")
-        lines.append(f"| {cls} | {_fmt(limits[k]) if limits[k] is not None else '-'} | "
-                     + " | ".join(cells) + " |")
+        lines.append(_row([cls, _fmt(limits[k]) if limits[k] is not None else "-", *cells]))
     lines += ["", "max |error| per class of the reference speed over the units (✓ / ✗: every "
               "sample within its own allowance); limit: the class's strictest allowance."]
     if spec.get("paper"):
