@@ -63,10 +63,11 @@ def disturbance(white: bool, seed: int) -> dict:
 
 
 def run(args: tuple) -> dict:
-    name, cy, cu, white, seed, keep, gpc_too = args
+    name, cy, cu, white, seed, keep, gpc_too, T = args
     cls = CONTROLLERS[name]
     params = cls.params_class()
-    drive = DriveParams(output_scale=cy, input_scale=cu)
+    params = dataclasses.replace(params, drive=dataclasses.replace(params.drive, sample_time=T))
+    drive = DriveParams(output_scale=cy, input_scale=cu, sample_time=T)
     if name in LAWS:
         law = LAWS[name]()  # the laws' own defaults: the paper's values, ours for km/h, m/s2
         if not keep:  # the core converts ours (rescaled); undo it: ours as numbers in y, u
@@ -94,7 +95,7 @@ def run(args: tuple) -> dict:
             dh2.append(float(est.dH_prev @ est.dH_prev))
             dys.append(est.dH_prev[:3] / cy)  # physical: m/s per sample
             dus.append(est.dH_prev[-3:] / cu)  # m/s2 per sample
-            if k in (500, 5000, steps):
+            if k in (round(100 / T), round(1000 / T), steps):
                 gain[k * T] = float(np.linalg.svd(est.input_block, compute_uv=False)[0])
         if k < steps:
             emu.advance(to_ticks(k * T), to_ticks(T), out)
@@ -119,6 +120,7 @@ def main() -> None:
     ap.add_argument("--seeds", default="1")
     ap.add_argument("--laws", default="ISMPC,ISMC,MFAC,GPC")
     ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--sample-time", type=float, default=T, help="controller sample time, s")
     ap.add_argument("--keep-meaning", action="store_true")
     ap.add_argument("--gpc-too", action="store_true",
                     help="GPC on the same scalings too (a diagnostic; its default is km/h, m/s2)")
@@ -130,7 +132,8 @@ def main() -> None:
             for name in a.laws.split(","):
                 if name == "GPC" and (cy, cu) != scales[0] and not a.gpc_too:
                     continue  # GPC keeps its own scaling: one row per seed
-                jobs.append((name, cy, cu, a.white, seed, a.keep_meaning, a.gpc_too))
+                jobs.append((name, cy, cu, a.white, seed, a.keep_meaning, a.gpc_too,
+                             a.sample_time))
     print(f"# {'white' if a.white else 'smooth'}, keep_meaning={a.keep_meaning}, "
           f"load average {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
     print(f"{'law':<6} {'c_y':>6} {'c_u':>6} {'seed':>4} {'MSE':>9} {'IAE':>7} {'MA':>5} "

@@ -1,0 +1,110 @@
+"""Seed 001: one tuning protocol for the parameters the paper does not give (issue 15).
+
+Each law's own free parameter (ours) is picked the same way: ISMC's boundary layer Delta
+(eq. 27), ISMPC's move weight theta (eq. 66) and GPC's control weight; MFAC has none (its
+delta, rho are the paper's), and b of eq. 18 is shared by the two sliding laws (kept). The
+criterion is the mean over the *calibration* seeds 4-6 of log(MSE x IAE) (eqs. 87, 88, the
+paper's tracking indices with equal weight) on the main rows (smooth disturbance, 0.03 m/s2,
+tau = 10 s); Table 2's rows are then run on seeds 1-3, which the pick never sees. Direct core
+loops (the FMU runs give the same figures), the shipped sample time and data scaling.
+
+    python benchmarks/seed001_tuning.py [--seeds 4,5,6] [--workers 2] [--white]
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import math
+import os
+import sys
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path[:0] = [str(ROOT), str(ROOT / "benchmarks")]
+
+from seed001_scaling_sweep import disturbance  # noqa: E402
+
+from controllers.datadriven.emu_control import EmuGpc, EmuIsmc, EmuIsmpc  # noqa: E402
+from cosim.fmu.state import to_ticks  # noqa: E402
+from cosim.run.metrics import unit_indices  # noqa: E402
+from plants.emu import Emu, emu_config  # noqa: E402
+from plants.route import load_reference, load_route  # noqa: E402
+
+STOP = 3600.0
+GRIDS = {  # law: (core, parameter, values); Delta in km/h and theta for km/h, m/s2 (declared)
+    "ISMC": (EmuIsmc, "boundary_layer", (0.1, 0.2, 0.36, 0.5, 0.7, 1.0, 1.4, 2.0, 3.6)),
+    "ISMPC": (EmuIsmpc, "theta", (0.3, 1.0, 3.0, 10.0, 30.0, 100.0, 150.0, 200.0, 300.0, 500.0,
+                                  1000.0)),
+    "GPC": (EmuGpc, "control_weight", (0.01, 0.03, 0.1, 0.3, 1.0)),
+}
+
+
+def with_value(cls, key: str, value: float):
+    params = cls.params_class()
+    law = params.law
+    if key == "control_weight":
+        law = dataclasses.replace(law, gpc=dataclasses.replace(law.gpc, control_weight=value))
+    else:
+        law = dataclasses.replace(law, **{key: value})
+    return dataclasses.replace(params, law=law)
+
+
+def run(job: tuple) -> dict:
+    name, value, white, seed = job
+    cls, key, _ = GRIDS[name]
+    params = with_value(cls, key, value)
+    ctl = cls(params, load_reference("jinan_xuzhou_east_reference"), 3)
+    emu = Emu(emu_config("crh380a_3unit", **disturbance(white, seed)),
+              load_route("jinan_xuzhou_east"))
+    T = params.drive.sample_time
+    steps = int(round(STOP / T))
+    v = np.zeros((steps + 1, 3))
+    ref = np.zeros(steps + 1)
+    for k in range(steps + 1):
+        meas = emu.outputs()
+        out, _ = ctl.compute(k * T, meas)
+        v[k] = [meas[f"v[{i}]"] for i in (1, 2, 3)]
+        ref[k] = out["v_ref"]
+        if k < steps:
+            emu.advance(to_ticks(k * T), to_ticks(T), out)
+    m = unit_indices(np.arange(steps + 1) * T, v, ref, 1.0)
+    return dict(name=name, value=value, seed=seed, mse=m["unit_mse_kmh2"],
+                iae=m["unit_iae_kmh_s"])
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--seeds", default="4,5,6")
+    ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--white", action="store_true", help="white noise instead of the main rows")
+    ap.add_argument("--laws", default=",".join(GRIDS))
+    a = ap.parse_args()
+    seeds = [int(s) for s in a.seeds.split(",")]
+    jobs = [(name, value, a.white, seed) for name in a.laws.split(",")
+            for value in GRIDS[name][2] for seed in seeds]
+    print(f"# {'white' if a.white else 'main rows'}, seeds {a.seeds}, load average "
+          f"{' '.join(f'{x:.2f}' for x in os.getloadavg())}")
+    print(f"{'law':<6} {'parameter':<15} {'value':>7} {'MSE per seed':>32} "
+          f"{'IAE per seed':>24} {'mean log(MSE IAE)':>18}")
+    with ProcessPoolExecutor(a.workers) as pool:
+        results = list(pool.map(run, jobs))
+    for name in a.laws.split(","):
+        best = None
+        for value in GRIDS[name][2]:
+            rs = [r for r in results if r["name"] == name and r["value"] == value]
+            crit = sum(math.log(r["mse"] * r["iae"]) for r in rs) / len(rs)
+            if best is None or crit < best[1]:
+                best = (value, crit)
+            mse = " ".join(f"{r['mse']:.3e}" for r in rs)
+            iae = " ".join(f"{r['iae']:7.1f}" for r in rs)
+            print(f"{name:<6} {GRIDS[name][1]:<15} {value:>7g} {mse:>32} {iae:>24} "
+                  f"{crit:>18.3f}", flush=True)
+        print(f"{name:<6} pick: {GRIDS[name][1]} = {best[0]:g}")
+
+
+if __name__ == "__main__":
+    main()
