@@ -13,12 +13,14 @@ The FFDL laws start from the laws' own defaults (the paper's values; ours declar
 and m/s2). With ``--keep-meaning`` ours (Delta, b, theta, the estimator's reset threshold,
 excitation gate and pinv eps) keep their physical meaning under the new scaling, as in the
 FMUs (the core converts them with :func:`controllers.datadriven.emu_control.rescaled`; the
-FMUs' defaults are ``--scale 34.8012,9.667 --keep-meaning``); without it they keep their
+FMUs' defaults are ``--scale 1,1 --keep-meaning --sample-time 1``; before issue 15's seventh pass
+``--scale 34.8012,9.667 --keep-meaning`` at 0.2 s); without it they keep their
 numbers in the new units. GPC runs its FMU defaults (km/h, m/s2) unless
 ``--gpc-too``.
 
     python benchmarks/seed001_scaling_sweep.py --scale 3.6,1 --scale 1,0.4 [--white]
         [--seeds 1] [--laws ISMPC,ISMC,MFAC,GPC] [--workers 2] [--keep-meaning] [--gpc-too]
+        [--sample-time 0.2]   (the default 0.2 s keeps the commands of the earlier notes)
 """
 
 from __future__ import annotations

@@ -41,10 +41,10 @@ in units of the caller's choice. With ``y`` in km/h (``y = 3.6 v``) and ``u`` in
 ``dy(t+1) = dy(t) + 3.6 T du(t)``: ``Phi_1 = I`` and ``Phi_2 = 3.6 T I = 0.72 I`` at ``T = 0.2
 s``, so the paper's ``0.5 I`` is a start of the right sign and size; scaling ``y`` and ``u`` by
 the same factor keeps ``Phi`` and changes only ``||dH||^2`` against ``mu`` (the step of eq. 16
-is ``lambda ||dH||^2 / (mu + ||dH||^2)``). The seed-001 FMUs use km/h and m/s^2 times
-``FFDL_SCALE`` = 9.667 (:mod:`controllers.datadriven.emu_control`). The stiff couplers make
-the true ``Phi_2`` of the 3-unit train close to rank one (every unit's force moves all
-speeds), so the control laws invert it with the regularised pseudo-inverse
+is ``lambda ||dH||^2 / (mu + ||dH||^2)``). The seed-001 FMUs sample at 1 s with ``y`` in m/s
+and ``u`` in m/s^2, where ``Phi_2 = T I = I`` (:mod:`controllers.datadriven.emu_control`).
+The stiff couplers make the true ``Phi_2`` of the 3-unit train close to rank one (every
+unit's force moves all speeds), so the control laws invert it with the regularised pseudo-inverse
 :func:`regularised_pinv`.
 """
 
