@@ -64,6 +64,29 @@ def disturbance(white: bool, seed: int) -> dict:
                 disturbance_smooth=True, disturbance_correlation_time=10.0)
 
 
+def closed_loop(ctl, white: bool, seed: int, T: float, each=None) -> tuple[np.ndarray, ...]:
+    """``ctl`` (a seed-001 controller core) sampled every ``T`` in closed loop with the Emu
+    core over ``STOP`` s; ``each(k)`` after sample ``k``. Returns the units' speeds, the
+    reference and the train's acceleration at the samples (m/s, m/s, m/s2)."""
+    emu = Emu(emu_config("crh380a_3unit", **disturbance(white, seed)),
+              load_route("jinan_xuzhou_east"))
+    steps = int(round(STOP / T))
+    v = np.zeros((steps + 1, 3))
+    ref = np.zeros(steps + 1)
+    acc = np.zeros(steps + 1)
+    for k in range(steps + 1):
+        meas = emu.outputs()
+        out, _ = ctl.compute(k * T, meas)
+        v[k] = [meas[f"v[{i}]"] for i in (1, 2, 3)]
+        acc[k] = meas["a"]  # the train's (the summary's max_abs_accel_mps2)
+        ref[k] = out["v_ref"]
+        if each is not None:
+            each(k)
+        if k < steps:
+            emu.advance(to_ticks(k * T), to_ticks(T), out)
+    return v, ref, acc
+
+
 def run(args: tuple) -> dict:
     name, cy, cu, white, seed, keep, gpc_too, T = args
     cls = CONTROLLERS[name]
@@ -78,20 +101,11 @@ def run(args: tuple) -> dict:
     elif gpc_too:
         params = dataclasses.replace(params, drive=drive)
     ctl = cls(params, load_reference("jinan_xuzhou_east_reference"), 3)
-    emu = Emu(emu_config("crh380a_3unit", **disturbance(white, seed)),
-              load_route("jinan_xuzhou_east"))
-    steps = int(round(STOP / T))
-    v = np.zeros((steps + 1, 3))
-    ref = np.zeros(steps + 1)
-    acc = np.zeros(steps + 1)
     gain = {}
     dh2, dys, dus = [], [], []
-    for k in range(steps + 1):
-        meas = emu.outputs()
-        out, _ = ctl.compute(k * T, meas)
-        v[k] = [meas[f"v[{i}]"] for i in (1, 2, 3)]
-        acc[k] = meas["a"]  # the train's (the summary's max_abs_accel_mps2)
-        ref[k] = out["v_ref"]
+    steps = int(round(STOP / T))
+
+    def each(k: int) -> None:
         est = getattr(ctl.law, "est", None)
         if est is not None:
             dh2.append(float(est.dH_prev @ est.dH_prev))
@@ -99,8 +113,9 @@ def run(args: tuple) -> dict:
             dus.append(est.dH_prev[-3:] / cu)  # m/s2 per sample
             if k in (round(100 / T), round(1000 / T), steps):
                 gain[k * T] = float(np.linalg.svd(est.input_block, compute_uv=False)[0])
-        if k < steps:
-            emu.advance(to_ticks(k * T), to_ticks(T), out)
+
+    v, ref, acc = closed_loop(ctl, white, seed, T, each)
+    est = getattr(ctl.law, "est", None)
     t = np.arange(steps + 1) * T
     m = unit_indices(t, v, ref, 1.0)
     m["max_abs_speed_error_kmh"] = float(np.abs(v - ref[:, None]).max() * 3.6)

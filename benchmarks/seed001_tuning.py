@@ -26,15 +26,12 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path[:0] = [str(ROOT), str(ROOT / "benchmarks")]
 
-from seed001_scaling_sweep import disturbance  # noqa: E402
+from seed001_scaling_sweep import closed_loop  # noqa: E402
 
 from controllers.datadriven.emu_control import EmuGpc, EmuIsmc, EmuIsmpc  # noqa: E402
-from cosim.fmu.state import to_ticks  # noqa: E402
 from cosim.run.metrics import unit_indices  # noqa: E402
-from plants.emu import Emu, emu_config  # noqa: E402
-from plants.route import load_reference, load_route  # noqa: E402
+from plants.route import load_reference  # noqa: E402
 
-STOP = 3600.0
 GRIDS = {  # law: (core, parameter, values); Delta in km/h and theta for km/h, m/s2 (declared)
     "ISMC": (EmuIsmc, "boundary_layer", (0.1, 0.2, 0.36, 0.5, 0.7, 1.0, 1.4, 2.0, 3.6)),
     "ISMPC": (EmuIsmpc, "theta", (0.3, 1.0, 3.0, 10.0, 30.0, 100.0, 150.0, 200.0, 300.0, 500.0,
@@ -58,20 +55,9 @@ def run(job: tuple) -> dict:
     cls, key, _ = GRIDS[name]
     params = with_value(cls, key, value)
     ctl = cls(params, load_reference("jinan_xuzhou_east_reference"), 3)
-    emu = Emu(emu_config("crh380a_3unit", **disturbance(white, seed)),
-              load_route("jinan_xuzhou_east"))
     T = params.drive.sample_time
-    steps = int(round(STOP / T))
-    v = np.zeros((steps + 1, 3))
-    ref = np.zeros(steps + 1)
-    for k in range(steps + 1):
-        meas = emu.outputs()
-        out, _ = ctl.compute(k * T, meas)
-        v[k] = [meas[f"v[{i}]"] for i in (1, 2, 3)]
-        ref[k] = out["v_ref"]
-        if k < steps:
-            emu.advance(to_ticks(k * T), to_ticks(T), out)
-    m = unit_indices(np.arange(steps + 1) * T, v, ref, 1.0)
+    v, ref, _ = closed_loop(ctl, white, seed, T)
+    m = unit_indices(np.arange(len(ref)) * T, v, ref, 1.0)
     return dict(name=name, value=value, seed=seed, mse=m["unit_mse_kmh2"],
                 iae=m["unit_iae_kmh_s"])
 

@@ -55,7 +55,8 @@ from plants.route import load_reference, routes_dir_in
 # per mean unit mass, where a free unit has Phi_1 = I, Phi_2 = T I = I: the paper's start
 # Phi(1) = 0.5 I (0.52 I for MFAC) is of the truth's size, as the paper's mu = 1, beta = 0.05,
 # delta = 1 then are in these units. (Before: 0.2 s, ours, with y, u in 9.667 x km/h, m/s2;
-# README seed 001 keeps rows of it.) GPC keeps its own km/h, m/s2 (its control weight).
+# scenarios/reproduce/seed001.toml keeps rows of it.) GPC keeps its own km/h, m/s2 (its
+# control weight).
 PAPER_SAMPLE_TIME = 1.0
 
 
