@@ -85,6 +85,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from cosim.run.claims import ClaimsError, Ensemble, check_claims, check_ensemble
 from cosim.run.scenario import SCENARIO_DIR
 
 try:
@@ -95,7 +96,7 @@ except ModuleNotFoundError:  # Python < 3.11
 REPRODUCE_DIR = SCENARIO_DIR / "reproduce"
 
 _ENTRY_KEYS = {"title", "notes", "table", "runs", "metrics", "paper", "derived", "rankings",
-               "sweeps", "figures"}
+               "sweeps", "figures", "ensemble", "claims"}
 _RANKING_KEYS = {"name", "metric", "runs", "paper"}
 _DERIVED_KEYS = {"name", "kind", "metric", "run", "baseline", "value", "range", "tolerance",
                  "source"}
@@ -129,6 +130,8 @@ class Entry:
     notes: str = ""
     rankings: list[dict[str, Any]] = field(default_factory=list)
     table: str = "table"
+    ensemble: Ensemble = field(default_factory=Ensemble)
+    claims: list[dict[str, Any]] = field(default_factory=list)
 
 
 def entry_names() -> list[str]:
@@ -233,9 +236,14 @@ def load_entry(name: str | Path) -> Entry:
         unknown_runs = sorted(set(fig.get("runs", names)) - set(names))
         if unknown_runs:
             raise ReproduceError(f"{where}: runs {unknown_runs} are not in [[runs]]")
+    try:
+        ensemble = check_ensemble(str(path), data.get("ensemble"))
+        claims = check_claims(str(path), data.get("claims", []), names, ensemble)
+    except ClaimsError as err:
+        raise ReproduceError(str(err)) from err
     return Entry(path.stem, path, data["title"], runs, metrics, data.get("paper", []),
                  data.get("derived", []), data.get("sweeps", []), data.get("figures", []),
-                 data.get("notes", ""), data.get("rankings", []), table)
+                 data.get("notes", ""), data.get("rankings", []), table, ensemble, claims)
 
 
 def slug(name: str) -> str:
@@ -625,12 +633,14 @@ def draw_speed_classes(spec: dict[str, Any], run_dirs: dict[str, Path], path: Pa
     return "\n".join(lines)
 
 
-def reproduce(name: str, out_dir: str | Path | None = None, workers: int | None = None
-              ) -> Path:
-    """Run one entry; write table.md/table.csv (``entry.table``), sweeps and figures; return
-    the table's markdown file."""
+def reproduce(name: str, out_dir: str | Path | None = None, workers: int | None = None,
+              seeds: int | None = None, rounding: bool = True) -> Path:
+    """Run one entry; write table.md/table.csv (``entry.table``), sweeps and figures, and with
+    claims claims.csv/claims.md over ``seeds`` members (default 20; :mod:`cosim.run.ensemble`,
+    ``rounding``: also the perturbed floating-point rerun); return the table's markdown file."""
     import pandas as pd
 
+    from cosim.run.ensemble import compact_table, run_claims
     from cosim.run.sweep import parse_grid, run_sweep
 
     entry = load_entry(name)
@@ -664,6 +674,14 @@ def reproduce(name: str, out_dir: str | Path | None = None, workers: int | None 
             continue
         draw_figure(spec, run_dirs, out / spec["file"])
         parts += ["", f"![{spec.get('title', spec['file'])}]({spec['file']})"]
+    if entry.claims:
+        k = seeds if seeds is not None else min(20, len(entry.ensemble.report_seeds))
+        try:
+            claim_rows = run_claims(entry, out, k, workers, rounding)
+        except ValueError as err:
+            raise ReproduceError(str(err)) from err
+        parts += ["", "### Claims", "", (out / "claims.md").read_text().split("\n", 2)[2]]
+        print(compact_table(claim_rows))
     if entry.notes:
         parts += ["", "### Where we differ from the paper, and why", "", entry.notes.strip()]
     table = out / f"{entry.table}.md"
@@ -679,14 +697,29 @@ def _frame_markdown(frame: Any) -> str:
     return "\n".join(lines)
 
 
-def reproduce_all(out_dir: str | Path | None = None, workers: int | None = None) -> Path:
-    """Every entry; one ``REPRODUCTION.md`` linking each entry's figures."""
+def reproduce_all(out_dir: str | Path | None = None, workers: int | None = None,
+                  seeds: int | None = None, rounding: bool = True) -> Path:
+    """Every entry; one ``REPRODUCTION.md`` with the claims held / failed / inconclusive per
+    paper and each entry's tables and figures."""
+    import pandas as pd
+
     out = Path(out_dir) if out_dir is not None else Path("runs") / "reproduce"
     out.mkdir(parents=True, exist_ok=True)
+    tables = {name: reproduce(name, out / name, workers, seeds, rounding)
+              for name in entry_names()}
     parts = ["# Reproduced results", "", "Made by `cosim reproduce all`; each section by "
-             "`cosim reproduce NAME` from the entry in `scenarios/reproduce/`."]
-    for name in entry_names():
-        table = reproduce(name, out / name, workers)
+             "`cosim reproduce NAME` from the entry in `scenarios/reproduce/`.", "",
+             _row(["entry", "claims", "holds", "fails", "inconclusive", "rounding-sensitive"]),
+             "|" + " --- |" * 6]
+    for name in tables:
+        csv = out / name / "claims.csv"
+        if not (load_entry(name).claims and csv.is_file()):
+            parts.append(_row([name, "0", "-", "-", "-", "-"]))
+            continue
+        verdicts = list(pd.read_csv(csv)["verdict"])
+        parts.append(_row([name, str(len(verdicts)), *(str(verdicts.count(v)) for v in (
+            "holds", "fails", "inconclusive", "rounding-sensitive"))]))
+    for name, table in tables.items():
         text = table.read_text()
         # relative links from out/: prefix the entry folder
         text = re.sub(r"\]\((?!http)([^)]+)\)", rf"]({name}/\1)", text)
