@@ -130,10 +130,46 @@ class Progress:
               f"ETA {eta:.0f} s", file=sys.stderr, flush=True)
 
 
-def execute(jobs: list[Job], workers: int | None, label: str = "claims"
+def _execute_dask(todo: list[Job], scheduler: str, workers: int | None, label: str,
+                  out: dict[Any, Any], progress: Progress) -> None:
+    """``todo`` on a Dask cluster (``"local-dask"``: a LocalCluster of ``workers`` processes,
+    one thread each, started here so that it inherits this process's environment)."""
+    import logging
+
+    from distributed import Client, LocalCluster, as_completed
+
+    from cosim.run.dask_sweep import LOCAL, check_available
+
+    check_available()
+    cluster = None
+    if scheduler == LOCAL:
+        cluster = LocalCluster(n_workers=max(1, min(workers or os.cpu_count() or 1,
+                                                    len(todo))),
+                               threads_per_worker=1, processes=True, dashboard_address=None,
+                               silence_logs=logging.ERROR)
+    try:
+        with Client(cluster if cluster is not None else scheduler) as client:
+            client.run(_worker_setup)
+            futures = {client.submit(_run_member, sc, ov, pure=False): key
+                       for key, sc, ov in todo}
+            for fut in as_completed(futures):
+                try:
+                    out[futures[fut]] = fut.result()
+                except Exception as err:  # noqa: BLE001 - a failed run: metric missing
+                    print(f"{label}: {futures[fut]} failed: {err}", file=sys.stderr)
+                    out[futures[fut]] = None
+                progress.step()
+    finally:
+        if cluster is not None:
+            cluster.close()
+
+
+def execute(jobs: list[Job], workers: int | None, label: str = "claims",
+            scheduler: str | None = None
             ) -> dict[tuple[str, str, int, bool], dict[str, Any] | None]:
-    """Run the jobs (main path and rounding path in separate spawned pools, the latter with
-    ``ATO_COSIM_NO_KERNELS=1``); a failed run gives None (its metrics are missing)."""
+    """Run the jobs (main path and rounding path in separate spawned pools or Dask clusters,
+    the latter with ``ATO_COSIM_NO_KERNELS=1``); a failed run gives None (its metrics are
+    missing)."""
     from cosim.run import interrupt
 
     out: dict[tuple[str, str, int, bool], dict[str, Any] | None] = {}
@@ -147,6 +183,9 @@ def execute(jobs: list[Job], workers: int | None, label: str = "claims"
         if rnd:
             os.environ["ATO_COSIM_NO_KERNELS"] = "1"  # inherited by the spawned workers
         try:
+            if scheduler is not None:
+                _execute_dask(todo, scheduler, workers, label, out, progress)
+                continue
             ctx = multiprocessing.get_context("spawn")
             with interrupt.guard(), ProcessPoolExecutor(
                     max_workers=n, mp_context=ctx, initializer=_worker_setup) as pool:
@@ -241,7 +280,7 @@ def compact_table(rows: list[dict[str, Any]]) -> str:
 
 
 def run_claims(entry: Any, out: Path, k: int, workers: int | None = None,
-               rounding: bool = True) -> list[dict[str, Any]]:
+               rounding: bool = True, scheduler: str | None = None) -> list[dict[str, Any]]:
     """Run and evaluate the entry's claims; write ``claims.csv`` and ``claims.md``."""
     import pandas as pd
 
@@ -255,7 +294,7 @@ def run_claims(entry: Any, out: Path, k: int, workers: int | None = None,
         if scenario not in built:
             ensure_built(sc)
             built.add(scenario)
-    summaries = execute(jobs, workers, f"{entry.name} claims")
+    summaries = execute(jobs, workers, f"{entry.name} claims", scheduler)
     rows = evaluate(entry, summaries, k, rounding)
     out.mkdir(parents=True, exist_ok=True)
     pd.DataFrame(rows).to_csv(out / "claims.csv", index=False)

@@ -66,6 +66,35 @@ live there, not in code)::
     limit_fraction = 0.02
     paper = "what the paper reports"   # optional, shown under the figure
 
+    [ensemble]                     # optional (claims): how a run is varied over seeds
+    seed_key = "plant.disturbance_seed"   # override key taking the seed (absent: no random
+                                   # input; a "disturbance" claim is then one run)
+    report_seeds = "1..20"         # --seeds K takes the first K (default 20)
+    calibration_seeds = "101..110" # tuning only; disjoint from report_seeds (checked)
+    perturb = ["plant.mass=+-10%"] # mismatch distribution (as --perturb), for "mismatch"
+    perturb_seed = 1               # optional: seed of the mismatch draws (default 0)
+    rounding_perturb = ["plant.v0"]  # optional: parameters scaled by 1 + 1e-12 on the
+                                   # perturbed floating-point rerun (besides the plants'
+                                   # numpy reference path, ATO_COSIM_NO_KERNELS=1)
+    [[claims]]                     # a claim of the paper, tested over the ensemble
+    id = "ismpc_mse_below_ismc"    # unique, [a-z0-9_]
+    source = "Table 2"
+    text = "ISMPC has a lower MSE than ISMC"
+    paper = "0.052 vs 0.161 (km/h)^2"   # the paper's value(s), as text
+    metric = "unit_mse_kmh2"       # a summary key ('.' for nested keys; a bool counts 1 / 0)
+    kind = "less"                  # less | greater: runs[0] vs runs[1], paired by member;
+                                   # below | above: runs[0] against threshold;
+                                   # inside: runs[0]'s median within range
+    runs = ["ISMPC", "ISMC"]
+    threshold = 0.2                # below / above
+    range = [-0.5, 0.5]            # inside
+    ensemble = "disturbance"       # disturbance (report seeds) | mismatch (perturb samples)
+    origin = "paper"               # paper | ours
+
+The claims are evaluated by :mod:`cosim.run.claims` (statistics and verdicts) over the runs
+of :mod:`cosim.run.ensemble` (members, perturbed floating-point rerun), which write
+``claims.csv`` and ``claims.md``; ``table.md`` includes the claims table.
+
 The command runs every run (in parallel processes), writes each run's results under
 ``runs/``, then ``table.md`` and ``table.csv`` (or the entry's ``table`` name; ours beside
 the paper's, with the verdict where a tolerance is given; derived figures and rankings follow
@@ -634,7 +663,8 @@ def draw_speed_classes(spec: dict[str, Any], run_dirs: dict[str, Path], path: Pa
 
 
 def reproduce(name: str, out_dir: str | Path | None = None, workers: int | None = None,
-              seeds: int | None = None, rounding: bool = True) -> Path:
+              seeds: int | None = None, rounding: bool = True, scheduler: str | None = None
+              ) -> Path:
     """Run one entry; write table.md/table.csv (``entry.table``), sweeps and figures, and with
     claims claims.csv/claims.md over ``seeds`` members (default 20; :mod:`cosim.run.ensemble`,
     ``rounding``: also the perturbed floating-point rerun); return the table's markdown file."""
@@ -677,7 +707,7 @@ def reproduce(name: str, out_dir: str | Path | None = None, workers: int | None 
     if entry.claims:
         k = seeds if seeds is not None else min(20, len(entry.ensemble.report_seeds))
         try:
-            claim_rows = run_claims(entry, out, k, workers, rounding)
+            claim_rows = run_claims(entry, out, k, workers, rounding, scheduler)
         except ValueError as err:
             raise ReproduceError(str(err)) from err
         parts += ["", "### Claims", "", (out / "claims.md").read_text().split("\n", 2)[2]]
@@ -698,14 +728,15 @@ def _frame_markdown(frame: Any) -> str:
 
 
 def reproduce_all(out_dir: str | Path | None = None, workers: int | None = None,
-                  seeds: int | None = None, rounding: bool = True) -> Path:
+                  seeds: int | None = None, rounding: bool = True,
+                  scheduler: str | None = None) -> Path:
     """Every entry; one ``REPRODUCTION.md`` with the claims held / failed / inconclusive per
     paper and each entry's tables and figures."""
     import pandas as pd
 
     out = Path(out_dir) if out_dir is not None else Path("runs") / "reproduce"
     out.mkdir(parents=True, exist_ok=True)
-    tables = {name: reproduce(name, out / name, workers, seeds, rounding)
+    tables = {name: reproduce(name, out / name, workers, seeds, rounding, scheduler)
               for name in entry_names()}
     parts = ["# Reproduced results", "", "Made by `cosim reproduce all`; each section by "
              "`cosim reproduce NAME` from the entry in `scenarios/reproduce/`.", "",
