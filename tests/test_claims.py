@@ -138,3 +138,24 @@ def test_every_entry_claim_gets_a_verdict(name: str, tmp_path: Path) -> None:
     assert all(r["verdict"] in ("holds", "fails", "inconclusive", "rounding-sensitive")
                for r in rows)
     assert (tmp_path / "claims.csv").is_file() and (tmp_path / "claims.md").is_file()
+
+
+def test_ensemble_figure_draws_median_and_band(tmp_path: Path) -> None:
+    import pandas as pd
+
+    from cosim.run.ensemble import draw_ensemble_figure
+
+    dirs = []
+    for i in range(4):
+        d = tmp_path / f"m{i}"
+        d.mkdir()
+        t = np.linspace(0.0, 10.0, 11)
+        pd.DataFrame({"time": t, "plant.v": t + i, "controller.v_ref": t}).to_csv(
+            d / "results.csv", index=False)
+        dirs.append(d)
+    spec = {"file": "f.png", "x": "time", "y": ["plant.v"], "y_minus": "controller.v_ref"}
+    draw_ensemble_figure(spec, {"A": dirs}, tmp_path / "f_ensemble.png")
+    assert (tmp_path / "f_ensemble.png").stat().st_size > 0
+    spec["y"] = ["plant.missing"]
+    with pytest.raises(ReproduceError, match="recorded no 'plant.missing'"):
+        draw_ensemble_figure(spec, {"A": dirs}, tmp_path / "g.png")

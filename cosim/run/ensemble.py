@@ -99,10 +99,59 @@ def claim_jobs(entry: Any, k: int, rounding: bool = True) -> list[Job]:
     return list(jobs.values())
 
 
-def _run_member(scenario: str, overrides: dict[str, Any]) -> dict[str, Any]:
+def _run_member(scenario: str, overrides: dict[str, Any], out_dir: str | None = None
+                ) -> dict[str, Any]:
     from cosim.run.master import run_scenario
 
-    return run_scenario(scenario, overrides=overrides, build=False, plot=False).summary
+    return run_scenario(scenario, overrides=overrides, out_dir=out_dir, build=False,
+                        plot=False).summary
+
+
+def member_dir(out: Path, key: tuple[str, str, int, bool]) -> Path:
+    """Where a main-path member writes results.csv (``ensemble/<run>/<ensemble>_<i>``)."""
+    from cosim.run.reproduce import slug
+
+    return out / "ensemble" / slug(key[0]) / f"{key[1]}_{key[2] + 1:02d}"
+
+
+def draw_ensemble_figure(spec: dict[str, Any], dirs: dict[str, list[Path]], path: Path
+                         ) -> None:
+    """An overlay figure over an ensemble: per run the median over the members and a 5-95 %
+    band (members sampled on the first member's x grid; x = "time" or a recorded column)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import pandas as pd
+
+    from cosim.run.reproduce import figure_series
+
+    ys = spec["y"] if isinstance(spec["y"], list) else [spec["y"]]
+    scale = float(spec.get("y_scale", 1.0))
+    fig, ax = plt.subplots(figsize=(8, 4.5))
+    for name, members_ in dirs.items():
+        frames = [pd.read_csv(d / "results.csv") for d in members_]
+        x0 = frames[0]["time"] if spec["x"] == "time" else frames[0][spec["x"]]
+        for y in ys:
+            curves = []
+            for frame in frames:
+                x = frame["time"] if spec["x"] == "time" else frame[spec["x"]]
+                curves.append(np.interp(x0, x, figure_series(frame, spec, y, name) * scale))
+            stack = np.vstack(curves)
+            label = name if len(ys) == 1 else f"{name}: {y}"
+            line, = ax.plot(x0, np.median(stack, axis=0), linewidth=1.0,
+                            label=f"{label} (median of {len(frames)})")
+            ax.fill_between(x0, np.percentile(stack, 5, axis=0),
+                            np.percentile(stack, 95, axis=0), color=line.get_color(),
+                            alpha=0.25, linewidth=0)
+    ax.set_xlabel(spec.get("xlabel", "time (s)" if spec["x"] == "time" else spec["x"]))
+    ax.set_ylabel(spec.get("ylabel", ys[0]))
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=7)
+    fig.suptitle(f"{spec.get('title', '')} (median, 5-95 % band over the seeds)")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
 
 
 def _worker_setup() -> None:
@@ -131,7 +180,7 @@ class Progress:
 
 
 def _execute_dask(todo: list[Job], scheduler: str, workers: int | None, label: str,
-                  out: dict[Any, Any], progress: Progress) -> None:
+                  out: dict[Any, Any], progress: Progress, dirs: dict[Any, str]) -> None:
     """``todo`` on a Dask cluster (``"local-dask"``: a LocalCluster of ``workers`` processes,
     one thread each, started here so that it inherits this process's environment)."""
     import logging
@@ -150,7 +199,7 @@ def _execute_dask(todo: list[Job], scheduler: str, workers: int | None, label: s
     try:
         with Client(cluster if cluster is not None else scheduler) as client:
             client.run(_worker_setup)
-            futures = {client.submit(_run_member, sc, ov, pure=False): key
+            futures = {client.submit(_run_member, sc, ov, dirs.get(key), pure=False): key
                        for key, sc, ov in todo}
             for fut in as_completed(futures):
                 try:
@@ -165,13 +214,14 @@ def _execute_dask(todo: list[Job], scheduler: str, workers: int | None, label: s
 
 
 def execute(jobs: list[Job], workers: int | None, label: str = "claims",
-            scheduler: str | None = None
+            scheduler: str | None = None, dirs: dict[Any, str] | None = None
             ) -> dict[tuple[str, str, int, bool], dict[str, Any] | None]:
     """Run the jobs (main path and rounding path in separate spawned pools or Dask clusters,
     the latter with ``ATO_COSIM_NO_KERNELS=1``); a failed run gives None (its metrics are
-    missing)."""
+    missing). ``dirs``: job key -> folder for the run's results (others write none)."""
     from cosim.run import interrupt
 
+    dirs = dirs or {}
     out: dict[tuple[str, str, int, bool], dict[str, Any] | None] = {}
     progress = Progress(len(jobs), label)
     for rnd in (False, True):
@@ -184,12 +234,13 @@ def execute(jobs: list[Job], workers: int | None, label: str = "claims",
             os.environ["ATO_COSIM_NO_KERNELS"] = "1"  # inherited by the spawned workers
         try:
             if scheduler is not None:
-                _execute_dask(todo, scheduler, workers, label, out, progress)
+                _execute_dask(todo, scheduler, workers, label, out, progress, dirs)
                 continue
             ctx = multiprocessing.get_context("spawn")
             with interrupt.guard(), ProcessPoolExecutor(
                     max_workers=n, mp_context=ctx, initializer=_worker_setup) as pool:
-                futures = {pool.submit(_run_member, sc, ov): key for key, sc, ov in todo}
+                futures = {pool.submit(_run_member, sc, ov, dirs.get(key)): key
+                           for key, sc, ov in todo}
                 pending = set(futures)
                 while pending:
                     ready, pending = wait(pending, timeout=0.5, return_when=FIRST_COMPLETED)
@@ -294,9 +345,26 @@ def run_claims(entry: Any, out: Path, k: int, workers: int | None = None,
         if scenario not in built:
             ensure_built(sc)
             built.add(scenario)
-    summaries = execute(jobs, workers, f"{entry.name} claims", scheduler)
+    # the members of overlay figures' runs keep their results (disturbance seeds, main path)
+    banded = {r for f in entry.figures if f.get("kind", "overlay") == "overlay"
+              for r in f.get("runs", [x["name"] for x in entry.runs])}
+    dirs = {key: str(member_dir(out, key)) for key, _sc, _ov in jobs
+            if key[0] in banded and key[1] == "disturbance" and not key[3]}
+    summaries = execute(jobs, workers, f"{entry.name} claims", scheduler, dirs)
     rows = evaluate(entry, summaries, k, rounding)
     out.mkdir(parents=True, exist_ok=True)
+    n = len(members(entry, "disturbance", k))
+    for spec in entry.figures if n > 1 else []:
+        if spec.get("kind", "overlay") != "overlay":
+            continue
+        runs = [r for r in spec.get("runs", [x["name"] for x in entry.runs])
+                if all((r, "disturbance", i, False) in dirs
+                       and summaries.get((r, "disturbance", i, False)) is not None
+                       for i in range(n))]
+        if runs:
+            draw_ensemble_figure(spec, {r: [member_dir(out, (r, "disturbance", i, False))
+                                            for i in range(n)] for r in runs},
+                                 out / (Path(spec["file"]).stem + "_ensemble.png"))
     pd.DataFrame(rows).to_csv(out / "claims.csv", index=False)
     (out / "claims.md").write_text(f"## Claims of {entry.title}\n\n"
                                    + claims_markdown(rows, k) + "\n")
