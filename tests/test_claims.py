@@ -159,3 +159,16 @@ def test_ensemble_figure_draws_median_and_band(tmp_path: Path) -> None:
     spec["y"] = ["plant.missing"]
     with pytest.raises(ReproduceError, match="recorded no 'plant.missing'"):
         draw_ensemble_figure(spec, {"A": dirs}, tmp_path / "g.png")
+
+
+def test_reproduction_summary_counts_verdicts(tmp_path: Path) -> None:
+    import pandas as pd
+
+    from cosim.run.reproduce import claims_summary
+
+    (tmp_path / "a").mkdir()
+    pd.DataFrame({"id": ["x", "y", "z"], "verdict": ["holds", "fails", "holds"]}).to_csv(
+        tmp_path / "a" / "claims.csv", index=False)
+    lines = claims_summary(tmp_path, ["a", "b"]).splitlines()
+    assert lines[2] == "| a | 3 | 2 | 1 | 0 | 0 |"
+    assert lines[3] == "| b | 0 | - | - | - | - |"

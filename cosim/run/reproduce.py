@@ -727,29 +727,35 @@ def _frame_markdown(frame: Any) -> str:
     return "\n".join(lines)
 
 
+def claims_summary(out: Path, names: list[str]) -> str:
+    """Claims held / failed / inconclusive / rounding-sensitive per entry, from each entry's
+    ``out/<name>/claims.csv`` (an entry without one: no claims)."""
+    import pandas as pd
+
+    verdicts = ("holds", "fails", "inconclusive", "rounding-sensitive")
+    lines = [_row(["entry", "claims", *verdicts]), "|" + " --- |" * 6]
+    for name in names:
+        csv = out / name / "claims.csv"
+        if not csv.is_file():
+            lines.append(_row([name, "0", "-", "-", "-", "-"]))
+            continue
+        got = list(pd.read_csv(csv)["verdict"])
+        lines.append(_row([name, str(len(got)), *(str(got.count(v)) for v in verdicts)]))
+    return "\n".join(lines)
+
+
 def reproduce_all(out_dir: str | Path | None = None, workers: int | None = None,
                   seeds: int | None = None, rounding: bool = True,
                   scheduler: str | None = None) -> Path:
     """Every entry; one ``REPRODUCTION.md`` with the claims held / failed / inconclusive per
     paper and each entry's tables and figures."""
-    import pandas as pd
-
     out = Path(out_dir) if out_dir is not None else Path("runs") / "reproduce"
     out.mkdir(parents=True, exist_ok=True)
     tables = {name: reproduce(name, out / name, workers, seeds, rounding, scheduler)
               for name in entry_names()}
     parts = ["# Reproduced results", "", "Made by `cosim reproduce all`; each section by "
              "`cosim reproduce NAME` from the entry in `scenarios/reproduce/`.", "",
-             _row(["entry", "claims", "holds", "fails", "inconclusive", "rounding-sensitive"]),
-             "|" + " --- |" * 6]
-    for name in tables:
-        csv = out / name / "claims.csv"
-        if not (load_entry(name).claims and csv.is_file()):
-            parts.append(_row([name, "0", "-", "-", "-", "-"]))
-            continue
-        verdicts = list(pd.read_csv(csv)["verdict"])
-        parts.append(_row([name, str(len(verdicts)), *(str(verdicts.count(v)) for v in (
-            "holds", "fails", "inconclusive", "rounding-sensitive"))]))
+             claims_summary(out, list(tables))]
     for name, table in tables.items():
         text = table.read_text()
         # relative links from out/: prefix the entry folder
