@@ -407,7 +407,7 @@ def check_against_fmus(scenario: Scenario, descriptions: dict[str, Any]) -> None
         key = f"[connections] \"{c.dst}.{c.dst_var}\""
         dv = lookup(c.dst, c.dst_var, key, ("input",))
         sv = lookup(c.src, c.src_var, key, ("output",))
-        if dv.type != sv.type:
+        if not fmi_types.same_type(sv.type, dv.type):
             raise ScenarioError(f"{src}: {key}: type mismatch: {c.src}.{c.src_var} is "
                                 f"{sv.type}, {c.dst}.{c.dst_var} is {dv.type}")
         src_items, dst_items = (fmi_types.enumeration_items(sv),
