@@ -395,10 +395,23 @@ def run_scenario(scenario: str | Path | Scenario, overrides: dict[str, Any] | li
 
 
 def ensure_built(sc: Scenario) -> list[Path]:
-    """Build the scenario's catalog FMUs that are missing or older than their sources."""
-    from cosim.fmu.build import FMU_DIR, build_stale, catalog
+    """Build the scenario's catalog FMUs that are missing or older than their sources, in the
+    scenario's FMI version ([simulation] fmi_version)."""
+    from cosim.fmu.build import build_stale, catalog
+    from cosim.run.scenario import catalog_path
 
+    version = sc.simulation.fmi_version
     specs = catalog()
     wanted = [specs[c.fmu] for c in sc.components.values()
-              if c.fmu in specs and c.fmu_path.parent == FMU_DIR]
-    return build_stale(wanted)
+              if c.fmu in specs and c.fmu_path == catalog_path(c.fmu, version)]
+    if version == 2:
+        return build_stale(wanted)
+    if not wanted:
+        return []
+    import inspect
+
+    if "fmi_version" not in inspect.signature(build_stale).parameters:
+        raise ScenarioError(f"{sc.path}: [simulation] fmi_version = 3: this installation cannot "
+                            "build FMI 3.0 FMUs (cosim.fmu.build has no FMI 3 builds); give "
+                            "explicit .fmu paths or fmi_version = 2")
+    return build_stale(wanted, fmi_version=version)
