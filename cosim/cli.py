@@ -103,6 +103,10 @@ def run(
     set_: Annotated[list[str] | None, typer.Option(
         "--set", help="override, e.g. plant.mass=539000, controller.N=10, "
                       "simulation.stop_time=80 (repeatable)")] = None,
+    fmi: Annotated[int | None, typer.Option(
+        "--fmi", help=escape("2 or 3: run the FMI 2.0 or FMI 3.0 builds of catalog FMUs "
+                             "(fmus/<Id>.fmu or fmus/fmi3/<Id>.fmu); overrides [simulation] "
+                             "fmi_version"))] = None,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="no progress bar")] = False,
     no_plot: Annotated[bool, typer.Option("--no-plot", help="skip plot.png")] = False,
     force: Annotated[bool, typer.Option(
@@ -133,7 +137,9 @@ def run(
             _fail(str(err))
         with _progress(path.stem, quiet) as on_progress:
             try:
-                result = run_scenario(path, overrides=set_ or [], algorithm=algorithm,
+                overrides = [*(set_ or []),
+                             *([f"simulation.fmi_version={fmi}"] if fmi is not None else [])]
+                result = run_scenario(path, overrides=overrides, algorithm=algorithm,
                                       out_dir=target, progress=on_progress, plot=not no_plot,
                                       force=force)
             except interrupt.Interrupted as err:
