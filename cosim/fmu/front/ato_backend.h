@@ -70,6 +70,11 @@
 extern "C" {
 #endif
 
+/* Value reference of the FMI 3 independent variable `time` (Float64, s; FMI 3.0 sec. 2.4.7.4
+ * requires exactly one independent variable): the front answers fmi3GetFloat64 of it with the
+ * instance's current time itself, so a backend must not use this value reference. */
+#define ATO_TIME_VR 2147483647u
+
 typedef struct ato_backend {
     const char* name; /* for messages, e.g. "pythonfmu (FMI 2) via the shim" */
     long event_time_vr;   /* see above; -1: no events */
