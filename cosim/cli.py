@@ -223,8 +223,12 @@ def validate(
     fmus: Annotated[list[str] | None, typer.Argument(
         help="FMU identifiers or .fmu paths (default: every FMU of the catalog)")] = None,
     as_json: Annotated[bool, typer.Option("--json", help="machine-readable report")] = False,
+    fmi: Annotated[str, typer.Option(
+        "--fmi", help="for our FMUs named by identifier: check the FMI 2 build (2), the FMI 3 "
+        "build (3) or both (all)")] = "2",
     lenient: Annotated[bool, typer.Option(
-        "--lenient", help="for third-party FMUs: only what FMI 2.0.4 requires is an error; "
+        "--lenient", help="for third-party FMUs: only what FMI 2.0.4 / FMI 3.0 requires is "
+        "an error; "
         "what it recommends or leaves to the FMU, and our project conventions (units "
         "everywhere, explicit output dependencies, default step size), are warnings")] = False,
     call_timeout: Annotated[float, typer.Option(
@@ -234,9 +238,11 @@ def validate(
         help="seconds one FMU's whole check may take (a backstop for hangs the per-call "
         "watchdog misses)")] = 120.0,
 ) -> None:
-    """FMI 2.0 compliance checks (cosim.interop.compliance) on FMUs; non-zero exit on an error."""
+    """FMI 2.0 / FMI 3.0 compliance checks (cosim.interop.compliance, chosen by the FMU's
+    fmiVersion) on FMUs; non-zero exit on an error."""
     from cosim.fmu.build import build_fmu, catalog
 
+    versions = _fmi_versions(fmi)
     specs = catalog()
     paths: list[Path] = []
     for name in fmus or list(specs):
@@ -245,9 +251,11 @@ def validate(
                 _fail(f"{name}: no such file")
             paths.append(Path(name))
         elif name in specs:
-            if not specs[name].path.is_file():
-                build_fmu(specs[name])
-            paths.append(specs[name].path)
+            for version in versions:
+                path = specs[name].path_for(version)
+                if not path.is_file():
+                    build_fmu(specs[name], fmi_version=version)
+                paths.append(path)
         else:
             _fail(f"unknown FMU {name!r}; known: {sorted(specs)}")
     from cosim.interop.compliance import Options, check_fmu, format_report, passed

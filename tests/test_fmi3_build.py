@@ -20,7 +20,7 @@ from fmpy.fmi2 import FMU2Slave
 from fmpy.fmi3 import FMU3Slave, fmi3Error
 from fmpy.validation import validate_fmu
 
-from cosim.fmu.build import build_stale, catalog
+from cosim.fmu.build import catalog
 from cosim.fmu.fmi3 import TIME_VR, model_description
 
 SPECS = catalog()
@@ -30,9 +30,8 @@ IRREPRODUCIBLE = ("*wall_time*", "*solve_time*", "*cpu_time*")
 
 
 @pytest.fixture(scope="module")
-def fmi3_builds(built_fmus):
-    build_stale(fmi_version=3)
-    return {i: SPECS[i].path_fmi3 for i in IDENTIFIERS}
+def fmi3_builds(built_fmus_fmi3):
+    return {i: s.path_fmi3 for i, s in built_fmus_fmi3.items()}
 
 
 def _is_controller(identifier: str) -> bool:
