@@ -42,7 +42,7 @@ FMI2_SUFFIX = "_fmi2"  # <id>_fmi2.so: the FMI 2 binary (shim) the front's backe
 
 _TYPES = {"Real": "Float64", "Integer": "Int32", "Boolean": "Boolean", "String": "String",
           "Enumeration": "Enumeration"}
-# FMI 2 CoSimulation attributes with the same meaning in FMI 3.0 (sec. 4.3.1), renamed
+# FMI 2 CoSimulation attributes with the same meaning in FMI 3.0 (sec. 4.4), renamed
 _COSIM_ATTRIBUTES = {
     "modelIdentifier": "modelIdentifier",
     "needsExecutionTool": "needsExecutionTool",
@@ -87,7 +87,7 @@ def model_description(fmi2_xml: bytes) -> tuple[bytes, int]:
         cs["mightReturnEarlyFromDoStep"] = "true"
     ET.SubElement(root, "CoSimulation", cs)
 
-    units = src.find("UnitDefinitions")  # identical in FMI 3.0 (sec. 2.4.3)
+    units = src.find("UnitDefinitions")  # identical in FMI 3.0 (sec. 2.4, UnitDefinitions)
     if units is None:
         units = ET.Element("UnitDefinitions")
     if not any(u.get("name") == "s" for u in units):  # the unit of `time`
@@ -106,7 +106,7 @@ def model_description(fmi2_xml: bytes) -> tuple[bytes, int]:
         root.append(experiment)
 
     node = ET.SubElement(root, "ModelVariables")
-    # FMI 3.0 sec. 2.4.7.4: exactly one independent variable; the front answers it
+    # FMI 3.0 sec. 2.4 (ModelVariables): exactly one independent variable; the front answers it
     ET.SubElement(node, "Float64", {"name": "time", "valueReference": str(TIME_VR),
                                     "description": "simulation time", "causality": "independent",
                                     "variability": "continuous", "unit": "s"})

@@ -5,18 +5,18 @@
  * `cosim build --fmi 3` compiles this file with one backend into every FMI 3 FMU's
  * binaries/x86_64-linux/<modelIdentifier>.so. The front
  *
- * 1. keeps the FMI 3.0 co-simulation state machine (FMI 3.0 sec. 4.2, fig. "Calling sequence
- *    of Co-Simulation"): Instantiated -> Initialization Mode -> (Event Mode <-> Step Mode) ->
+ * 1. keeps the FMI 3.0 co-simulation state machine (FMI 3.0 sec. 4.2, State Machine for
+ *    Co-Simulation): Instantiated -> Initialization Mode -> (Event Mode <-> Step Mode) ->
  *    Terminated, with fmi3Reset back to Instantiated; a call made in a state where the
  *    standard does not allow it is answered with fmi3Error and a message naming the call and
  *    the state, and the backend is not called;
- * 2. implements Event Mode (hasEventMode, FMI 3.0 sec. 4.1.3 / 4.2.4) for a backend that has
+ * 2. implements Event Mode (hasEventMode, FMI 3.0 sec. 4.1 and 4.2) for a backend that has
  *    an event-time output (ato_backend.event_time_vr): fmi3UpdateDiscreteStates returns
  *    nextEventTimeDefined = true and nextEventTime = that output; fmi3DoStep sets
  *    eventHandlingNeeded when the step ends at the announced event; and, when the importer
  *    instantiated with earlyReturnAllowed, a step that would pass over the announced event is
  *    stepped only up to it and returns earlyReturn = true with lastSuccessfulTime = the event
- *    time (FMI 3.0 sec. 4.2.3 "Early Return"). Without early return the full step is
+ *    time (FMI 3.0 sec. 4.1 and 4.2, fmi3DoStep "earlyReturn"). Without early return the full step is
  *    forwarded: the FMU then behaves exactly as its FMI 2 twin (which computes or refuses it);
  * 3. converts FMI 3 arguments to FMI 2 ones: Float64 -> Real, Int32 -> Integer, Boolean
  *    (bool) -> Boolean (int), String -> String; the other FMI 3 types (and clocks, binaries,
@@ -253,7 +253,7 @@ fmi3Instance fmi3InstantiateCoSimulation(
     }
     if (eventModeUsed && backend->event_time_vr < 0) {
         snprintf(text, sizeof text, "%s: eventModeUsed = true, but this FMU declares "
-                 "hasEventMode = false (FMI 3.0 sec. 4.2.1 fmi3InstantiateCoSimulation)",
+                 "hasEventMode = false (FMI 3.0 sec. 4.2, fmi3InstantiateCoSimulation)",
                  instanceName ? instanceName : "");
         host_error(instanceEnvironment, logMessage, text);
         return NULL;
@@ -261,7 +261,7 @@ fmi3Instance fmi3InstantiateCoSimulation(
     if (nRequiredIntermediateVariables > 0) {
         snprintf(text, sizeof text, "%s: this FMU provides no intermediate update "
                  "(providesIntermediateUpdate = false); requiredIntermediateVariables must be "
-                 "empty (FMI 3.0 sec. 4.2.1)", instanceName ? instanceName : "");
+                 "empty (FMI 3.0 sec. 4.2, fmi3InstantiateCoSimulation)", instanceName ? instanceName : "");
         host_error(instanceEnvironment, logMessage, text);
         return NULL;
     }
@@ -369,7 +369,7 @@ fmi3Status fmi3ExitInitializationMode(fmi3Instance instance)
     if (!backend->exit_initialization_mode)
         return missing(f, "fmi3ExitInitializationMode");
     fmi3Status s = forwarded(f, backend->exit_initialization_mode(f->inner));
-    if (s <= fmi3Warning) /* FMI 3.0 sec. 4.2.1: Event Mode if eventModeUsed, else Step Mode */
+    if (s <= fmi3Warning) /* FMI 3.0 sec. 4.2: Event Mode if eventModeUsed, else Step Mode */
         f->mode = f->eventModeUsed ? MODE_EVENT : MODE_STEP;
     return s;
 }
@@ -381,7 +381,7 @@ fmi3Status fmi3EnterEventMode(fmi3Instance instance)
         return fmi3Error;
     if (!f->eventModeUsed) {
         front_log(f, fmi3Error, "logStatusError", "%s: fmi3EnterEventMode: the FMU was "
-                  "instantiated with eventModeUsed = false (FMI 3.0 sec. 4.2.1)", f->name);
+                  "instantiated with eventModeUsed = false (FMI 3.0 sec. 4.2, fmi3EnterEventMode)", f->name);
         return fmi3Error;
     }
     f->mode = MODE_EVENT;
@@ -475,7 +475,7 @@ fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunicationPoi
     if (!(h > 0.0) || !isfinite(h) || !isfinite(t)) {
         front_log(f, fmi3Error, "logStatusError", "%s: fmi3DoStep(currentCommunicationPoint "
                   "= %.17g, communicationStepSize = %.17g): the step size must be positive and "
-                  "finite (FMI 3.0 sec. 4.2.3)", f->name, t, h);
+                  "finite (FMI 3.0 sec. 4.2, fmi3DoStep)", f->name, t, h);
         return fmi3Error;
     }
     if (f->eventModeUsed || f->earlyReturnAllowed) {
@@ -484,7 +484,7 @@ fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunicationPoi
             return fmi3Error;
         if (announced && ticks(te) > ticks(t) && ticks(te) < ticks(end) &&
             f->earlyReturnAllowed) {
-            /* FMI 3.0 sec. 4.2.3: return early at the event the FMU announced */
+            /* FMI 3.0 sec. 4.2, fmi3DoStep: return early at the event the FMU announced */
             h = te - t;
             end = te;
             early = 1;
@@ -550,7 +550,7 @@ static int scalars(Front* f, const char* call, size_t nvr, size_t nValues)
     if (nvr == nValues)
         return 1;
     front_log(f, fmi3Error, "logStatusError", "%s: %s: nValues = %zu but %zu value references: "
-              "this FMU has scalar variables only (FMI 3.0 sec. 2.2.6.2)", f->name, call,
+              "this FMU has scalar variables only (FMI 3.0 sec. 2.2, getting and setting variable values)", f->name, call,
               nValues, nvr);
     return 0;
 }
@@ -607,7 +607,7 @@ fmi3Status fmi3SetFloat64(fmi3Instance instance, const fmi3ValueReference vr[], 
     for (size_t i = 0; i < nvr; ++i)
         if (vr[i] == ATO_TIME_VR) {
             front_log(f, fmi3Error, "logStatusError", "%s: fmi3SetFloat64: `time` is the "
-                      "independent variable and cannot be set (FMI 3.0 sec. 2.4.7.4)",
+                      "independent variable and cannot be set (FMI 3.0 sec. 2.4, causality independent)",
                       f->name);
             return fmi3Error;
         }
@@ -766,7 +766,7 @@ fmi3Status fmi3SetClock(fmi3Instance instance, const fmi3ValueReference vr[], si
     return nvr == 0 ? fmi3OK : unsupported(instance, "fmi3SetClock", "no clocks");
 }
 
-/* -- FMU state (the backend's; FMI 3.0 sec. 2.3.5) ----------------------------------------------- */
+/* -- FMU state (the backend's; FMI 3.0 sec. 2.2) ----------------------------------------------- */
 #define STATE_MODES (ALLOW_INSTANTIATED | ALLOW_INITIALIZATION | ALLOW_EVENT | ALLOW_STEP |    \
                      ALLOW_TERMINATED)
 

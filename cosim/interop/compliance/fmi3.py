@@ -42,7 +42,7 @@ from cosim.interop.compliance.common import (
     skipped,
 )
 
-# FMI 3.0 sec. 2.4.7.4: legal causality for each variability (structural parameters aside)
+# FMI 3.0 sec. 2.4 (ModelVariables): legal causality for each variability (structural parameters aside)
 _LEGAL = {
     "constant": {"output", "local"},
     "fixed": {"parameter", "calculatedParameter", "structuralParameter", "local"},
@@ -89,14 +89,14 @@ def static_checks(path: Path) -> list[Problem]:
             independents.append(name)
             if kind not in _FLOAT or var.get("start") is not None or initial is not None:
                 problems.append(Problem("fmi3-variables", f"{name}: the independent variable "
-                                        "must be a float without start or initial (2.4.7.4)"))
+                                        "must be a float without start or initial (2.4)"))
         if variability not in _LEGAL:
             problems.append(Problem("fmi3-variables", f"{name}: unknown variability "
                                                       f"{variability!r}"))
             continue
         if causality not in _LEGAL[variability]:
             problems.append(Problem("fmi3-variables", f"{name}: causality {causality!r} with "
-                                    f"variability {variability!r} is not allowed (2.4.7.4)"))
+                                    f"variability {variability!r} is not allowed (2.4)"))
         if kind not in _FLOAT and variability == "continuous":
             problems.append(Problem("fmi3-variables", f"{name}: a {kind} cannot be continuous"))
         start = var.get("start")
@@ -104,12 +104,12 @@ def static_checks(path: Path) -> list[Problem]:
             starts = var.findall("Start")
             start = starts[0].get("value") if starts else start
         if (causality in ("parameter", "input", "structuralParameter") and start is None
-                and kind != "Clock"):  # a clock has no start value (2.4.7.5)
+                and kind != "Clock"):  # a clock has no start value (2.4)
             problems.append(Problem("fmi3-variables", f"{name}: a start value is required "
-                                                      f"({causality}, 2.4.7.5)"))
+                                                      f"({causality}, 2.4)"))
         if initial == "calculated" and start is not None:
             problems.append(Problem("fmi3-variables", f"{name}: initial=calculated with a "
-                                                      "start value (2.4.7.5)"))
+                                                      "start value (2.4)"))
         lo, hi = _num(var.get("min")), _num(var.get("max"))
         values = [_num(s) for s in (start or "").split()] if kind not in ("String",
                                                                           "Binary") else []
@@ -122,14 +122,14 @@ def static_checks(path: Path) -> list[Problem]:
         unit = var.get("unit")
         if unit and declared_units and unit not in declared_units:
             problems.append(Problem("fmi3-variables", f"{name}: unit {unit!r} is not declared "
-                                                      "in UnitDefinitions (2.4.3)"))
+                                                      "in UnitDefinitions (2.4)"))
         if kind in _FLOAT and not unit and not var.get("declaredType") and causality in (
                 "input", "output", "parameter"):
             problems.append(Problem("fmi3-variables", f"{name}: float variable without a unit",
                                     requirement=CONVENTION))
     if len(independents) != 1:
         problems.append(Problem("fmi3-variables", f"{len(independents)} independent variables "
-                                "(exactly one is required, 2.4.7.4)"))
+                                "(exactly one is required, 2.4)"))
     # model structure
     structure = root.find("ModelStructure")
     listed = {}
@@ -400,7 +400,7 @@ def _check_early_return(host: _Host3, ctx: dict) -> list[Problem]:
         k += 1
         if early:
             if not host.might_return_early:
-                # an importer that allowed early return copes; the capability flag (4.3.1)
+                # an importer that allowed early return copes; the capability flag (4.4)
                 # should announce it
                 problems.append(Problem("fmi3-early-return", f"fmi3DoStep at t={t} returned "
                                         "early, but the FMU declares "
