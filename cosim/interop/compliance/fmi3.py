@@ -42,7 +42,7 @@ from cosim.interop.compliance.common import (
     skipped,
 )
 
-# FMI 3.0 sec. 2.4 (ModelVariables): legal causality for each variability (structural parameters aside)
+# FMI 3.0 sec. 2.4 (ModelVariables): legal causality for each variability
 _LEGAL = {
     "constant": {"output", "local"},
     "fixed": {"parameter", "calculatedParameter", "structuralParameter", "local"},
