@@ -150,9 +150,16 @@ _front_cache: dict[int, Path] = {}
 _front_dir: list[Path] = []
 
 
+def _gcc(args: list[str], what: str) -> None:
+    done = subprocess.run(args, capture_output=True, text=True)
+    if done.returncode != 0:
+        raise Fmi3BuildError(f"gcc failed on {what}: {done.stderr.strip()[-2000:]}")
+
+
 def front_binary(event_vr: int) -> Path:
-    """The front and its dlopen backend compiled for event-time value reference ``event_vr``
-    (-1: none), once per process and value reference."""
+    """The front linked with its dlopen backend for event-time value reference ``event_vr``
+    (-1: none): the front compiled once per process, the small backend once per value
+    reference."""
     if event_vr in _front_cache:
         return _front_cache[event_vr]
     gcc = shutil.which("gcc")
@@ -163,17 +170,22 @@ def front_binary(event_vr: int) -> Path:
                              f"({FRONT_SOURCES[0]}); gcc not found")
     import fmpy
 
+    flags = ["-fPIC", "-O2", "-std=c99", "-fvisibility=hidden", "-Wall",
+             f"-I{Path(fmpy.__file__).parent / 'c-code'}", f"-I{FRONT_DIR}"]
     if not _front_dir:
         _front_dir.append(Path(tempfile.mkdtemp(prefix="atocosim_front_")))
         atexit.register(shutil.rmtree, _front_dir[0], True)
-    out = _front_dir[0] / f"fmi3_front_{event_vr if event_vr >= 0 else 'none'}.so"
-    cmd = [gcc, "-shared", "-fPIC", "-O2", "-std=c99", "-fvisibility=hidden", "-Wall",
-           f"-I{Path(fmpy.__file__).parent / 'c-code'}", f"-I{FRONT_DIR}",
-           f"-DATO_EVENT_TIME_VR={int(event_vr)}", "-o", str(out),
-           *(str(s) for s in FRONT_SOURCES), "-ldl", "-lm"]
-    done = subprocess.run(cmd, capture_output=True, text=True)
-    if done.returncode != 0:
-        raise Fmi3BuildError(f"gcc failed on the FMI 3 front: {done.stderr.strip()[-2000:]}")
+    folder = _front_dir[0]
+    front = folder / "fmi3_front.o"
+    if not front.is_file():
+        _gcc([gcc, "-c", *flags, "-o", str(front), str(FRONT_SOURCES[0])], "the FMI 3 front")
+    label = event_vr if event_vr >= 0 else "none"
+    backend = folder / f"backend_{label}.o"
+    _gcc([gcc, "-c", *flags, f"-DATO_EVENT_TIME_VR={int(event_vr)}", "-o", str(backend),
+          str(FRONT_SOURCES[1])], "the FMI 3 front's backend")
+    out = folder / f"fmi3_front_{label}.so"
+    _gcc([gcc, "-shared", "-o", str(out), str(front), str(backend), "-ldl", "-lm"],
+         "linking the FMI 3 front")
     _front_cache[event_vr] = out
     return out
 
