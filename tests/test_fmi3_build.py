@@ -392,3 +392,71 @@ def test_without_early_return_a_long_step_does_what_the_fmi2_twin_does(identifie
         assert _read(three, outs, fmi3=True) == _read(two, outs, fmi3=False)
     for fmu in (two, three):
         fmu.freeInstance()
+
+
+def _closed_loop(plant_path: Path, ctrl_path: Path, tmp: Path, fmi3: bool, n_events: int
+                 ) -> list[tuple]:
+    """The BrakeDelayTrain plant and the self-triggered StopRsmpc, communicating only at the
+    controller's announced events (FMI 3: nextEventTime in Event Mode; FMI 2: the
+    ``next_event_time`` output); per event (t, hold in samples, executions, u, v, s)."""
+    made = []
+    for name, path in (("plant", plant_path), ("ctrl", ctrl_path)):
+        md = read_model_description(str(path))
+        unzip = extract(str(path), unzipdir=str(tmp / f"{name}{int(fmi3)}"))
+        cls = FMU3Slave if fmi3 else FMU2Slave
+        fmu = cls(guid=md.guid, unzipDirectory=unzip,
+                  modelIdentifier=md.coSimulation.modelIdentifier, instanceName=name)
+        if fmi3:
+            fmu.instantiate(eventModeUsed=name == "ctrl")
+            fmu.enterInitializationMode(startTime=0.0)
+        else:
+            fmu.instantiate()
+            fmu.setupExperiment(startTime=0.0)
+            fmu.enterInitializationMode()
+        fmu.exitInitializationMode()
+        made.append((fmu, {v.name: v.valueReference for v in md.modelVariables}, md))
+    (plant, pv, _), (ctrl, cv, cmd) = made
+    get, set_ = ("getFloat64", "setFloat64") if fmi3 else ("getReal", "setReal")
+    get_int = ctrl.getInt32 if fmi3 else ctrl.getInteger
+    T = _sample_time(cmd)
+    rows, t = [], 0.0
+    for _ in range(n_events):
+        for name in ("v", "s", "a_c"):
+            getattr(ctrl, set_)([cv[name]], getattr(plant, get)([pv[name]]))
+        u = getattr(ctrl, get)([cv["brake_command"]])[0]
+        if fmi3:
+            *_, defined, announced = ctrl.updateDiscreteStates()
+            assert defined
+            ctrl.enterStepMode()
+        else:
+            announced = ctrl.getReal([cv["next_event_time"]])[0]
+        rows.append((t, round((announced - t) / T), get_int([cv["executions"]])[0], u,
+                     *getattr(plant, get)([pv["v"], pv["s"]])))
+        getattr(plant, set_)([pv["brake_command"]], [u])
+        plant.doStep(t, announced - t)
+        if fmi3:
+            event, _, early, _ = ctrl.doStep(t, announced - t)
+            assert event and not early
+            ctrl.enterEventMode()
+        else:
+            ctrl.doStep(t, announced - t)
+        t = announced
+    for fmu, _, _ in made:
+        fmu.terminate()
+        fmu.freeInstance()
+    return rows
+
+
+def test_self_triggered_controller_closed_loop_fmi3_equals_fmi2(built_fmus_fmi3, tmp_path):
+    """Closed loop stepped from announced event to announced event: each event executes the
+    controller exactly once (executions 1, 2, 3, ...), it holds more than one sample at some
+    events (self-triggered), and the FMI 3 pair gives the FMI 2 pair's numbers bit for bit."""
+    specs = built_fmus_fmi3
+    n = 60
+    rows3 = _closed_loop(specs["BrakeDelayTrain"].path_fmi3, specs["StopRsmpc"].path_fmi3,
+                         tmp_path, True, n)
+    rows2 = _closed_loop(specs["BrakeDelayTrain"].path, specs["StopRsmpc"].path, tmp_path,
+                         False, n)
+    assert [r[2] for r in rows3] == list(range(1, n + 1))
+    assert max(r[1] for r in rows3) > 1 and min(r[1] for r in rows3) >= 1
+    assert rows3 == rows2
