@@ -3,9 +3,9 @@
 An FMI 3 FMU holds the same resources (the Python bundle, pythonfmu's slave module) as its FMI
 2 twin, and in ``binaries/x86_64-linux/``:
 
-* ``<id>.so``: the FMI 3.0 front (``cosim/fmu/front/fmi3_front.c``) linked with the dlopen
-  backend (``ato_backend_fmi2dl.c``), compiled once per process for each event-time value
-  reference;
+* ``<id>.so``: the FMI 3.0 front (``cosim/fmu/front/fmi3_front.c``, compiled once per
+  process) linked with the dlopen backend (``ato_backend_fmi2dl.c``, compiled for the FMU's
+  event-time value reference);
 * ``<id>_fmi2.so``: the FMI 2 shim (``cosim/fmu/pythonfmu_shim.c``) the backend loads;
 * ``<id>_fmi2_pythonfmu.so``: pythonfmu's binary the shim loads.
 
