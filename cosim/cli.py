@@ -23,20 +23,40 @@ def _fail(message: str, code: int = 2) -> None:
     raise typer.Exit(code)
 
 
+FMI_CHOICES = {"2": (2,), "3": (3,), "all": (2, 3)}
+
+
+def _fmi_versions(fmi: str) -> tuple[int, ...]:
+    if fmi not in FMI_CHOICES:
+        _fail(f"--fmi {fmi!r}: expected one of {', '.join(FMI_CHOICES)}")
+    return FMI_CHOICES[fmi]
+
+
 @app.command()
 def build(names: Annotated[list[str] | None, typer.Argument(
-        help="FMU identifiers (default: all)")] = None) -> None:
+        help="FMU identifiers (default: all)")] = None,
+          fmi: Annotated[str, typer.Option(
+              "--fmi", help="FMI version to build: 2 (fmus/<id>.fmu), 3 (fmus/fmi3/<id>.fmu, "
+              "co-simulation with Event Mode for the controllers) or all. Default all: the "
+              "FMI 3 build is derived from the same FMI 2 build (same Python bundle, a C "
+              "front in front of it), so both cost little more than one")] = "all") -> None:
     """Build FMUs into fmus/ (all, or the named ones)."""
-    from cosim.fmu.build import build_fmu, resolve
+    from cosim.fmu.build import build_fmus, resolve
+    from cosim.fmu.fmi3 import Fmi3BuildError
 
+    versions = _fmi_versions(fmi)
     try:
         specs = resolve(names)
     except ValueError as err:
         _fail(str(err))
     for spec in specs:
-        path = build_fmu(spec)
-        shown = path.relative_to(Path.cwd()) if path.is_relative_to(Path.cwd()) else path
-        out.print(f"built {shown}  ({spec.description})", highlight=False, markup=False)
+        try:
+            paths = build_fmus(spec, fmi_versions=versions)
+        except Fmi3BuildError as err:
+            _fail(f"{spec.identifier}: {err}")
+        for path in paths:
+            shown = path.relative_to(Path.cwd()) if path.is_relative_to(Path.cwd()) else path
+            out.print(f"built {shown}  ({spec.description})", highlight=False, markup=False)
 
 
 @app.command("list")
@@ -47,11 +67,12 @@ def list_() -> None:
 
     table = Table(title="FMUs", show_edge=False)
     table.add_column("identifier")
-    table.add_column("built")
+    table.add_column("FMI 2")
+    table.add_column("FMI 3")
     table.add_column("description")
     for spec in catalog().values():
-        table.add_row(escape(spec.identifier), "yes" if spec.path.is_file() else "no",
-                      escape(spec.description))
+        table.add_row(escape(spec.identifier), "built" if spec.path.is_file() else "no",
+                      "built" if spec.path_fmi3.is_file() else "no", escape(spec.description))
     out.print(table)
     table = Table(title="Scenarios", show_edge=False)
     table.add_column("name")
@@ -208,8 +229,12 @@ def validate(
     fmus: Annotated[list[str] | None, typer.Argument(
         help="FMU identifiers or .fmu paths (default: every FMU of the catalog)")] = None,
     as_json: Annotated[bool, typer.Option("--json", help="machine-readable report")] = False,
+    fmi: Annotated[str, typer.Option(
+        "--fmi", help="for our FMUs named by identifier: check the FMI 2 build (2), the FMI 3 "
+        "build (3) or both (all)")] = "2",
     lenient: Annotated[bool, typer.Option(
-        "--lenient", help="for third-party FMUs: only what FMI 2.0.4 requires is an error; "
+        "--lenient", help="for third-party FMUs: only what FMI 2.0.4 / FMI 3.0 requires is "
+        "an error; "
         "what it recommends or leaves to the FMU, and our project conventions (units "
         "everywhere, explicit output dependencies, default step size), are warnings")] = False,
     call_timeout: Annotated[float, typer.Option(
@@ -219,9 +244,11 @@ def validate(
         help="seconds one FMU's whole check may take (a backstop for hangs the per-call "
         "watchdog misses)")] = 120.0,
 ) -> None:
-    """FMI 2.0 compliance checks (cosim.interop.compliance) on FMUs; non-zero exit on an error."""
+    """FMI 2.0 / FMI 3.0 compliance checks (cosim.interop.compliance, chosen by the FMU's
+    fmiVersion) on FMUs; non-zero exit on an error."""
     from cosim.fmu.build import build_fmu, catalog
 
+    versions = _fmi_versions(fmi)
     specs = catalog()
     paths: list[Path] = []
     for name in fmus or list(specs):
@@ -230,9 +257,11 @@ def validate(
                 _fail(f"{name}: no such file")
             paths.append(Path(name))
         elif name in specs:
-            if not specs[name].path.is_file():
-                build_fmu(specs[name])
-            paths.append(specs[name].path)
+            for version in versions:
+                path = specs[name].path_for(version)
+                if not path.is_file():
+                    build_fmu(specs[name], fmi_version=version)
+                paths.append(path)
         else:
             _fail(f"unknown FMU {name!r}; known: {sorted(specs)}")
     from cosim.interop.compliance import Options, check_fmu, format_report, passed
