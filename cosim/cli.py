@@ -25,10 +25,17 @@ def _fail(message: str, code: int = 2) -> None:
 
 @app.command()
 def build(names: Annotated[list[str] | None, typer.Argument(
-        help="FMU identifiers (default: all)")] = None) -> None:
+        help="FMU identifiers (default: all)")] = None,
+        native: Annotated[bool, typer.Option(
+            "--native", help="build the native C FMUs (FMI 2.0, no Python needed) into "
+            "fmus/native/ instead: linux64 with gcc, win64 too when x86_64-w64-mingw32-gcc "
+            "is installed; the named ones or all that have a C model")] = False) -> None:
     """Build FMUs into fmus/ (all, or the named ones)."""
     from cosim.fmu.build import build_fmu, resolve
 
+    if native:
+        _build_native(names)
+        return
     try:
         specs = resolve(names)
     except ValueError as err:
@@ -37,6 +44,18 @@ def build(names: Annotated[list[str] | None, typer.Argument(
         path = build_fmu(spec)
         shown = path.relative_to(Path.cwd()) if path.is_relative_to(Path.cwd()) else path
         out.print(f"built {shown}  ({spec.description})", highlight=False, markup=False)
+
+
+def _build_native(names: list[str] | None) -> None:
+    from cosim.fmu.native_build import NATIVE, CompilerMissing, build_native
+
+    for name in names or sorted(NATIVE):
+        try:
+            path = build_native(name)
+        except (ValueError, CompilerMissing, RuntimeError) as err:
+            _fail(str(err))
+        shown = path.relative_to(Path.cwd()) if path.is_relative_to(Path.cwd()) else path
+        out.print(f"built {shown}  (native C, FMI 2.0)", highlight=False, markup=False)
 
 
 @app.command("list")
