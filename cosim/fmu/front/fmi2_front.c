@@ -9,6 +9,7 @@
  * forwarded to the backend unchanged.
  */
 #include <stdarg.h>
+#include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -224,38 +225,87 @@ fmi2Status fmi2GetStringStatus(fmi2Component c, const fmi2StatusKind k, fmi2Stri
     return no_status(c, "fmi2GetStringStatus");
 }
 
+/* FMU state: the backend's state plus the front's mode (FMI 2.0.4 sec. 2.1.8: a state
+ * restores the FMU's situation in the calling sequence too); serialized as one int32 mode
+ * followed by the backend's bytes */
+typedef struct { int mode; fmi2FMUstate model; } front_state;
+
 fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate* s) {
     front* f = c;
     if (!allowed(f, "fmi2GetFMUstate", ANY)) return fmi2Error;
     if (!f->be->get_fmu_state) return missing(f, "fmi2GetFMUstate");
-    return after(f, f->be->get_fmu_state(f->model, s));
+    front_state* fs = *s ? (front_state*)*s : calloc(1, sizeof(front_state));
+    fmi2Status st = f->be->get_fmu_state(f->model, &fs->model);
+    if (st > fmi2Warning) {
+        if (!*s) free(fs);
+        return after(f, st);
+    }
+    fs->mode = f->mode;
+    *s = fs;
+    return st;
 }
 fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate s) {
     front* f = c;
     if (!allowed(f, "fmi2SetFMUstate", ANY)) return fmi2Error;
     if (!f->be->set_fmu_state) return missing(f, "fmi2SetFMUstate");
-    return after(f, f->be->set_fmu_state(f->model, s));
+    if (!s) {
+        front_error(&f->cb, f->name, "fmi2SetFMUstate: no state given");
+        return fmi2Error;
+    }
+    front_state* fs = s;
+    fmi2Status st = f->be->set_fmu_state(f->model, fs->model);
+    if (st <= fmi2Warning) f->mode = fs->mode;
+    return after(f, st);
 }
 fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate* s) {
     front* f = c;
+    if (!s || !*s) return fmi2OK;
     if (!f->be->free_fmu_state) return missing(f, "fmi2FreeFMUstate");
-    return after(f, f->be->free_fmu_state(f->model, s));
+    front_state* fs = *s;
+    fmi2Status st = f->be->free_fmu_state(f->model, &fs->model);
+    free(fs);
+    *s = NULL;
+    return after(f, st);
 }
 fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate s, size_t* n) {
     front* f = c;
     if (!f->be->serialized_fmu_state_size) return missing(f, "fmi2SerializedFMUstateSize");
-    return after(f, f->be->serialized_fmu_state_size(f->model, s, n));
+    fmi2Status st = f->be->serialized_fmu_state_size(f->model, ((front_state*)s)->model, n);
+    *n += 4;
+    return after(f, st);
 }
 fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate s, fmi2Byte b[], size_t n) {
     front* f = c;
     if (!f->be->serialize_fmu_state) return missing(f, "fmi2SerializeFMUstate");
-    return after(f, f->be->serialize_fmu_state(f->model, s, b, n));
+    if (n < 4) {
+        front_error(&f->cb, f->name, "fmi2SerializeFMUstate: buffer of %zu bytes too small", n);
+        return fmi2Error;
+    }
+    int32_t mode = ((front_state*)s)->mode;
+    memcpy(b, &mode, 4);
+    return after(f, f->be->serialize_fmu_state(f->model, ((front_state*)s)->model, b + 4,
+                                               n - 4));
 }
 fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte b[], size_t n,
                                    fmi2FMUstate* s) {
     front* f = c;
     if (!f->be->deserialize_fmu_state) return missing(f, "fmi2DeSerializeFMUstate");
-    return after(f, f->be->deserialize_fmu_state(f->model, b, n, s));
+    int32_t mode = 0;
+    if (n >= 4) memcpy(&mode, b, 4);
+    if (n < 4 || !(mode == INSTANTIATED || mode == INIT || mode == STEP || mode == TERMINATED ||
+                   mode == ERROR_)) {
+        front_error(&f->cb, f->name, "fmi2DeSerializeFMUstate: not a state of this FMU");
+        return fmi2Error;
+    }
+    front_state* fs = *s ? (front_state*)*s : calloc(1, sizeof(front_state));
+    fmi2Status st = f->be->deserialize_fmu_state(f->model, b + 4, n - 4, &fs->model);
+    if (st > fmi2Warning) {
+        if (!*s) free(fs);
+        return after(f, st);
+    }
+    fs->mode = mode;
+    *s = fs;
+    return st;
 }
 
 fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReference u[],
