@@ -3,7 +3,7 @@
  * model BACKEND that has FMI 2.0-shaped functions.
  *
  * The front implements the whole FMI 3.0 co-simulation API (fmi3Functions.h): the calling-
- * sequence state machine (FMI 3.0 sec. 4.2.1 / 2.3), Event Mode (hasEventMode), early return
+ * sequence state machine (FMI 3.0 sec. 2.3 and 4.2), Event Mode (hasEventMode), early return
  * from fmi3DoStep, the FMI 3 type and argument conversions and logging (errors reach the host's
  * logMessage even when logging is off). It forwards every model call to one backend, a table
  * of functions with the FMI 2.0 co-simulation signatures (fmi2FunctionTypes.h), so that
@@ -69,6 +69,11 @@
 #ifdef __cplusplus
 extern "C" {
 #endif
+
+/* Value reference of the FMI 3 independent variable `time` (Float64, s; FMI 3.0 sec. 2.4
+ * requires exactly one independent variable): the front answers fmi3GetFloat64 of it with the
+ * instance's current time itself, so a backend must not use this value reference. */
+#define ATO_TIME_VR 2147483647u
 
 typedef struct ato_backend {
     const char* name; /* for messages, e.g. "pythonfmu (FMI 2) via the shim" */
