@@ -39,11 +39,18 @@ def build(names: Annotated[list[str] | None, typer.Argument(
               "--fmi", help="FMI version to build: 2 (fmus/<id>.fmu), 3 (fmus/fmi3/<id>.fmu, "
               "co-simulation with Event Mode for the controllers) or all. Default all: the "
               "FMI 3 build is derived from the same FMI 2 build (same Python bundle, a C "
-              "front in front of it), so both cost little more than one")] = "all") -> None:
+              "front in front of it), so both cost little more than one")] = "all",
+          native: Annotated[bool, typer.Option(
+              "--native", help="build the native C FMUs (FMI 2.0, no Python needed) into "
+              "fmus/native/ instead: linux64 with gcc, win64 too when x86_64-w64-mingw32-gcc "
+              "is installed; the named ones or all that have a C model")] = False) -> None:
     """Build FMUs into fmus/ (all, or the named ones)."""
     from cosim.fmu.build import build_fmus, resolve
     from cosim.fmu.fmi3 import Fmi3BuildError
 
+    if native:
+        _build_native(names)
+        return
     versions = _fmi_versions(fmi)
     try:
         specs = resolve(names)
@@ -57,6 +64,18 @@ def build(names: Annotated[list[str] | None, typer.Argument(
         for path in paths:
             shown = path.relative_to(Path.cwd()) if path.is_relative_to(Path.cwd()) else path
             out.print(f"built {shown}  ({spec.description})", highlight=False, markup=False)
+
+
+def _build_native(names: list[str] | None) -> None:
+    from cosim.fmu.native_build import NATIVE, CompilerMissing, build_native
+
+    for name in names or sorted(NATIVE):
+        try:
+            path = build_native(name)
+        except (ValueError, CompilerMissing, RuntimeError) as err:
+            _fail(str(err))
+        shown = path.relative_to(Path.cwd()) if path.is_relative_to(Path.cwd()) else path
+        out.print(f"built {shown}  (native C, FMI 2.0)", highlight=False, markup=False)
 
 
 @app.command("list")
