@@ -1,4 +1,4 @@
-"""Compiled plant kernels (numba), one call per communication step (issue 10).
+"""Compiled plant kernels (numba), one call per communication step.
 
 :func:`freight_steps` advances :class:`plants.freight.FreightTrain` over a run of sub-steps with
 the equations of its numpy reference (``FreightTrain._substep``, kept and tested against this):

@@ -13,8 +13,8 @@ brake < 0, within the HXD1 envelope at the measured speed) and ``pipe_reduction`
   pipe reduction in ``reduction_step`` stages giving the missing planned force (an overspeed
   alone: the minimum reduction); it may then be deepened when the planned braking needs more,
   never for an overspeed (the deeper application could not be taken back short of a full
-  release, and the train would stop far short: measured 80-300 m for the PID, fuzzy PID and
-  sliding mode), never partly released (Chinese 120 valves release directly), and is released
+  release, and the train would stop far short of the stop point), never partly released
+  (Chinese 120 valves release directly), and is released
   fully when the electric brake alone covers the demand with margin (``release_share``).
   Hold times: once applied it stays at least ``min_apply_time``; once released it is not
   re-applied for ``min_release_time`` (auxiliary reservoirs recharge);
@@ -566,7 +566,8 @@ class FreightTracker(StatefulCore, Declared):
 def interp_at(x: float, xp: list[float], fp: list[float]) -> float:
     """``np.interp(x, xp, fp)`` of one float on strictly increasing ``xp``, in plain floats
     with numpy's operations (its binary search, slope ``(fp[j+1] - fp[j]) / (xp[j+1] - xp[j])``
-    and ``slope (x - xp[j]) + fp[j]``), so the result is the same float, ~10x faster."""
+    and ``slope (x - xp[j]) + fp[j]``), so the result is the same float
+    without numpy's per-call overhead."""
     if x <= xp[0]:
         return fp[0]
     if x >= xp[-1]:
