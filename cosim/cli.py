@@ -104,7 +104,9 @@ def run(
         "--set", help="override, e.g. plant.mass=539000, controller.N=10, "
                       "simulation.stop_time=80 (repeatable)")] = None,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="no progress bar")] = False,
-    no_plot: Annotated[bool, typer.Option("--no-plot", help="skip plot.png")] = False,
+    no_plot: Annotated[bool, typer.Option("--no-plot", help="skip the plot")] = False,
+    plot_format: Annotated[str, typer.Option(
+        "--format", help="plot file format: png (200 dpi), svg or pdf")] = "png",
     force: Annotated[bool, typer.Option(
         "--force", help="let partial results replace a complete earlier run in --out "
         "(otherwise they go to <out>.partial)")] = False,
@@ -119,13 +121,15 @@ def run(
     at once."""
     from cosim.run import interrupt
     from cosim.run.master import SimulationError, run_scenario
-    from cosim.run.results import OutputError, check_destination
+    from cosim.run.results import PLOT_FORMATS, OutputError, check_destination
     from cosim.run.scenario import ScenarioError, find_scenario
 
     with interrupt.guard(restore=False):
         if not console.is_terminal and not quiet:
             console.print(f"cosim run {scenario}", highlight=False, markup=False)
         try:
+            if plot_format not in PLOT_FORMATS:
+                raise OutputError(f"--format {plot_format}: one of {', '.join(PLOT_FORMATS)}")
             path = find_scenario(scenario)
             target = out_dir or Path("runs") / path.stem
             check_destination(target)
@@ -135,7 +139,7 @@ def run(
             try:
                 result = run_scenario(path, overrides=set_ or [], algorithm=algorithm,
                                       out_dir=target, progress=on_progress, plot=not no_plot,
-                                      force=force)
+                                      force=force, plot_format=plot_format)
             except interrupt.Interrupted as err:
                 on_progress.stop()
                 console.print(f"[bold yellow]{escape(str(err))}[/]", highlight=False,
@@ -145,7 +149,8 @@ def run(
                 on_progress.stop()
                 _fail(str(err))
         print_summary(result.summary, f"{path.stem} ({result.algorithm})")
-        out.print(f"wrote {target}/results.csv, summary.json" + ("" if no_plot else ", plot.png"),
+        out.print(f"wrote {target}/results.csv, summary.json"
+                  + ("" if no_plot else f", plot.{plot_format}"),
                   highlight=False, markup=False)
         for warning in result.summary.get("warnings", []):
             console.print(f"[bold yellow]warning:[/] {escape(warning)}", highlight=False,
