@@ -76,19 +76,38 @@ SUMMARY_KEYS = ("stop_error_m", "final_speed_mps", "command_switches", "speed_rm
                 "executions", "do_steps", "sim_time_s", "wall_time_s", "real_time_factor")
 
 
+# bookkeeping of summary.json that the printed summary leaves to the file
+_NOT_PRINTED = {"completed", "error", "algorithm", "warnings", "fmu_wall_time_s", "do_steps",
+                "command_switch_resolution", "terminated_by", "ma_sample_time_s"}
+
+
+def summary_rows(summary: dict) -> list[tuple[str, str]]:
+    """(metric, value) rows of the printed summary: the usual metrics in SUMMARY_KEYS' order,
+    then every further scalar metric the scenario's [summary] produced (each family's
+    headline figures), dictionaries shortened; the bookkeeping stays in summary.json."""
+    keys = [k for k in SUMMARY_KEYS if k in summary and k not in _NOT_PRINTED]
+    keys += [k for k, v in summary.items() if k not in keys and k not in _NOT_PRINTED
+             and isinstance(v, (int, float, bool, str))]
+    rows = []
+    for key in keys:
+        value = summary[key]
+        if isinstance(value, float):
+            value = f"{value:.6g}"
+        elif isinstance(value, dict):
+            value = ", ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}"
+                              for k, v in value.items())
+        rows.append((key, str(value)))
+    return rows
+
+
 def print_summary(summary: dict, title: str) -> None:
-    table = Table(title=escape(title), show_header=False, show_edge=False)
-    table.add_column("metric", style="bold")
-    table.add_column("value")
-    for key in SUMMARY_KEYS:
-        if key in summary:
-            value = summary[key]
-            if isinstance(value, float):
-                value = f"{value:.6g}"
-            elif isinstance(value, dict):
-                value = ", ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}"
-                                  for k, v in value.items())
-            table.add_row(key, escape(str(value)))
+    """The summary as a two-column table at most 80 columns wide (long values wrap)."""
+    table = Table(title=escape(title), show_header=False, show_edge=False,
+                  width=min(80, out.width))
+    table.add_column("metric", style="bold", no_wrap=True)
+    table.add_column("value", overflow="fold")
+    for key, value in summary_rows(summary):
+        table.add_row(key, escape(value))
     out.print(table)
 
 
