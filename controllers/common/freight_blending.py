@@ -55,7 +55,6 @@ import numpy as np
 from cosim.fmu.declare import Declared, Var, build, param
 from cosim.fmu.state import StatefulCore
 from plants.freight import (
-    KMH,
     FreightParams,
     FreightTrain,
     friction_coefficient,
@@ -600,8 +599,7 @@ def _integrate_stop(v: float, s: float, h: float, n: int, air_scale: list[float]
             force = target + (force - target) * decay
         air = air_scale[k]
         # decel at (vk, sk), then at the midpoint (the same expression twice, inlined)
-        kmh = abs(vk) / KMH
-        mu = 0.322 * (kmh + 150.0) / (2.0 * kmh + 150.0)
+        mu = friction_coefficient_at(vk)
         a0 = ((air * mu - force) / m_eff
               + ((ra + (rb + rc * vk) * vk) / m_eff + interp_at(sk, knots, values)))
         if a0 <= 0.0 and vk <= 0.0:
@@ -609,8 +607,7 @@ def _integrate_stop(v: float, s: float, h: float, n: int, air_scale: list[float]
         vm = vk - 0.5 * h * a0
         if vm <= 0.0:
             return sk + vk * vk / (2.0 * a0)
-        kmh = abs(vm) / KMH
-        mu = 0.322 * (kmh + 150.0) / (2.0 * kmh + 150.0)
+        mu = friction_coefficient_at(vm)
         am = ((air * mu - force) / m_eff
               + ((ra + (rb + rc * vm) * vm) / m_eff + interp_at(sk + 0.5 * h * vk, knots, values)))
         v1 = vk - h * am
