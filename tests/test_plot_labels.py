@@ -147,3 +147,33 @@ def test_plot_format_and_resolution(rsmpc_run, tmp_path, fmt):
         assert PLOT_DPI >= 200 and width >= 8 * PLOT_DPI
     with pytest.raises(ValueError, match="plot format 'gif'"):
         write_results(rsmpc_run, tmp_path / "x", plot_format="gif")
+
+
+@pytest.mark.parametrize("errors_m,zoomed", [([1e-5, 4e-5, 7e-5], True), ([0.1, -0.3, 0.6], False)])
+def test_sweep_axes_fit_the_data(errors_m, zoomed):
+    """Stop errors far inside the +-50 cm window: the axis zooms to them (not flat lines on a
+    +-50 cm axis); errors reaching the window: window and data both in view. Legends sit
+    outside both axes."""
+    import matplotlib.pyplot as plt
+    import pandas as pd
+
+    from cosim.run.sweep import draw_sweep
+
+    frame = pd.DataFrame({"scenario": "s", "controller.N": [3, 4, 5], "stop_error_m": errors_m,
+                          "command_switches": [10, 9, 8], "controller_executions": [30, 20, 10]})
+    fig = draw_sweep(frame, ["controller.N"])
+    fig.canvas.draw()
+    ax1, ax2 = fig.axes[:2]
+    lo, hi = ax1.get_ylim()
+    cm = [100 * e for e in errors_m]
+    assert lo <= min(cm) and max(cm) <= hi
+    if zoomed:
+        assert hi - lo < 0.01 * 100  # far narrower than the 100-cm window
+    else:
+        assert lo <= -50 and hi >= 50
+    assert ax1.yaxis.get_major_formatter().get_offset() == ""
+    renderer = fig.canvas.get_renderer()
+    for ax in (ax1, ax2):
+        box = ax.get_legend().get_window_extent(renderer)
+        assert not any(box.overlaps(other.get_window_extent(renderer)) for other in (ax1, ax2))
+    plt.close(fig)

@@ -192,7 +192,30 @@ def _stop_inset(ax: Any, pos: np.ndarray, speed_kmh: np.ndarray, stop: float) ->
     return inset
 
 
-def _legend_below(ax: Any, handles: list[Any], labels: list[str]) -> Any:
+def fit_band(ax: Any, values: Any, lo: float, hi: float, zoom: float = 0.2) -> bool:
+    """Draw the band [lo, hi] (dotted lines) on ``ax`` and fit the y axis: the band and the
+    data when the data reach beyond ``zoom`` of the band's half width, else the data alone
+    (with a note that the band lies outside the view), so sub-band results are not flat
+    lines. Returns True when zoomed in."""
+    data = np.asarray(values, dtype=float)
+    data = data[np.isfinite(data)]
+    for edge in (lo, hi):
+        ax.axhline(edge, color="red", linestyle=":", linewidth=1)
+    half = 0.5 * (hi - lo)
+    if data.size and np.max(np.abs(data - 0.5 * (lo + hi))) < zoom * half:
+        span = max(float(data.max() - data.min()), 1e-4 * half)
+        ax.set_ylim(float(data.min()) - 0.15 * span, float(data.max()) + 0.15 * span)
+        ax.text(0.01, 0.98, f"band [{lo:g}, {hi:g}] outside the view", transform=ax.transAxes,
+                va="top", fontsize=7, color="red")
+        return True
+    top = max(hi, float(data.max()) if data.size else hi)
+    bottom = min(lo, float(data.min()) if data.size else lo)
+    pad = 0.05 * (top - bottom)
+    ax.set_ylim(bottom - pad, top + pad)
+    return False
+
+
+def legend_below(ax: Any, handles: list[Any], labels: list[str]) -> Any:
     """The legend under the axes (outside them: no curve, inset or twin axis can cover it)."""
     return ax.legend(handles, labels, loc="upper center", bbox_to_anchor=(0.5, -0.14),
                      ncol=min(len(labels), 4), fontsize=8, frameon=False)
@@ -266,7 +289,7 @@ def draw_run(result: Any) -> Any:
         if "stop_point" in cfg:  # on the topmost axes, opaque
             _stop_inset(ax.figure.axes[-1], frame[pos].to_numpy(),
                         frame[speed].to_numpy() * 3.6, float(cfg["stop_point"]))
-        _legend_below(ax, handles, labels)
+        legend_below(ax, handles, labels)
     else:
         t = frame["time"]
         units = set()
@@ -280,7 +303,7 @@ def draw_run(result: Any) -> Any:
         if len(units) == 1 and None not in units:
             ax.set_ylabel(units.pop())
         ax.ticklabel_format(useOffset=False, style="plain")
-        _legend_below(ax, *ax.get_legend_handles_labels())
+        legend_below(ax, *ax.get_legend_handles_labels())
     summary = result.summary
     title = result.scenario.name
     if summary.get("stop_error_m") is not None:
@@ -309,6 +332,6 @@ def draw_run(result: Any) -> Any:
         axc.set_ylabel("coupler force (kN)")
         axc.grid(True, alpha=0.3)
         axc.ticklabel_format(useOffset=False, style="plain")
-        _legend_below(axc, *axc.get_legend_handles_labels())
+        legend_below(axc, *axc.get_legend_handles_labels())
     fig.tight_layout()
     return fig
