@@ -177,3 +177,24 @@ def test_sweep_axes_fit_the_data(errors_m, zoomed):
         box = ax.get_legend().get_window_extent(renderer)
         assert not any(box.overlaps(other.get_window_extent(renderer)) for other in (ax1, ax2))
     plt.close(fig)
+
+
+def test_perturbed_boxes_are_not_collapsed(monkeypatch, tmp_path):
+    """Millimetre stop errors under plant mismatch: the box plot's axis is on the boxes, not on
+    the +-50 cm window (where they would collapse to a line)."""
+    import numpy as np
+    import pandas as pd
+    from matplotlib.figure import Figure
+
+    from cosim.run.perturb import plot_perturbed
+
+    drawn = []
+    real = Figure.savefig
+    monkeypatch.setattr(Figure, "savefig", lambda self, *a, **k: (drawn.append(self),
+                                                                  real(self, *a, **k)))
+    errors = np.random.default_rng(1).normal(0.0, 0.002, 20)
+    frame = pd.DataFrame({"scenario": "seed000_stop_rmpc", "controller.N": 10,
+                          "stop_error_m": errors, "controller_executions": 100})
+    plot_perturbed(frame, ["controller.N"], tmp_path / "perturb.png")
+    lo, hi = drawn[0].axes[0].get_ylim()
+    assert lo <= 100 * errors.min() and 100 * errors.max() <= hi and hi - lo < 5.0
