@@ -136,7 +136,7 @@ class HybridMpc(StatefulCore, Declared):
         Var.output("s_ref", "m", "reference position (integral of v_ref)"),
         Var.output("speed_error", "m/s", "mean speed - v_ref"),
         Var.output("qp_solves", "1", "MIQPs solved so far", start=0),
-        Var.output("qp_infeasible", "1", "events whose MIQP was infeasible (previous plan "
+        Var.output("qp_infeasible", "1", "events with an infeasible MIQP (previous plan "
                    "used)", start=0),
         Var.output("qp_rescued", "1", "events DAQP solved only on a retry with other settings "
                    "or by enumerating the binaries", start=0),

@@ -11,7 +11,7 @@ imported modules are kept per process under the digest of the bundled files (mod
 same FMU) does not import them again: it only builds its own state. After a bundle's first
 import the entry calls ``gc.freeze()`` (objects existing then go to the permanent generation),
 so that later full collections do not traverse the large, process-long module graphs
-(numba's above all) at every further instance: 23 -> 2 ms per Emu3 instance.
+(numba's above all) at every further instance (benchmarks/bench_instances.py measures it).
 
 On Linux the FMU's ``binaries/linux64/<identifier>.so`` is a small C shim
 (``cosim/fmu/pythonfmu_shim.c``, compiled once per process with gcc against fmpy's FMI 2 headers)
@@ -328,7 +328,7 @@ def add_bytecode(fmu: Path, bundle: Path) -> None:
     """Add the bundle's compiled modules to the FMU (``__pycache__``, this interpreter's tag),
     as checked-hash pycs (PEP 552): valid whatever time stamps the extraction gives the files,
     and ignored by another Python version or when the source differs. Every process that
-    imports the FMU then skips compiling its ~60 modules (~45 ms); pythonfmu leaves
+    imports the FMU then skips compiling its modules; pythonfmu leaves
     ``__pycache__`` out of the zip."""
     import compileall
     import py_compile
@@ -453,8 +453,8 @@ def is_stale(spec: FmuSpec, fmi_version: int = 2) -> bool:
 
 def _newest_project_file() -> float:
     """Newest modification time of any file in the project packages (a superset of what any
-    FMU bundles, and the builder: cosim/fmu/front is in cosim): ~1 ms, where the exact per-FMU
-    import scan costs ~15 ms."""
+    FMU bundles, and the builder: cosim/fmu/front is in cosim): a cheaper bound than the exact
+    per-FMU import scan."""
     newest = max(Path(__file__).stat().st_mtime, SHIM_SOURCE.stat().st_mtime
                  if SHIM_SOURCE.is_file() else 0.0)
     for package in PROJECT_PACKAGES:

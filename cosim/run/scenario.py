@@ -60,6 +60,31 @@ SUMMARY_KEYS = ("position", "speed", "acceleration", "command", "command_resolut
                 "energy_traction", "energy_regen", "energy_aux", "phase")
 
 
+# [summary] keys holding a number; a string "instance.parameter" there reads that parameter's
+# value as the scenario sets it (after --set), so the summary never keeps a stale copy
+SUMMARY_PARAMETER_KEYS = ("stop_point", "planned_arrival_time", "final_stop_window",
+                          "ma_sample_time", "command_resolution", "reference_decel")
+
+
+def resolve_parameter_refs(path: Path, summary: dict[str, Any],
+                           components: dict[str, Any]) -> dict[str, Any]:
+    """``summary`` with each ``"instance.parameter"`` value of a numeric key replaced by the
+    parameter's value in ``[fmus.instance.parameters]``."""
+    resolved = dict(summary)
+    for key in SUMMARY_PARAMETER_KEYS:
+        value = summary.get(key)
+        if not isinstance(value, str):
+            continue
+        comp, _, name = value.partition(".")
+        if comp not in components or name not in components[comp].parameters:
+            raise ScenarioError(f"{path}: [summary] {key} = {value!r}: a reference reads a "
+                                f"parameter set in [fmus.{comp}.parameters], and "
+                                + (f"{comp!r} sets no {name!r}" if comp in components
+                                   else f"there is no FMU instance {comp!r}"))
+        resolved[key] = components[comp].parameters[name]
+    return resolved
+
+
 class ScenarioError(ValueError):
     """A scenario file or override that cannot be run; the message names file and key."""
 
@@ -371,6 +396,7 @@ def _load_scenario(path: Path, overrides: dict[str, Any] | list[str] | None) -> 
     summary = raw.get("summary", {})
     if not isinstance(summary, dict):
         raise ScenarioError(f"{path}: [summary] must be a table")
+    summary = resolve_parameter_refs(path, summary, components)
     return Scenario(path=path, name=path.stem, description=str(raw.get("description", "")),
                     simulation=sim, components=components, connections=connections,
                     record=record, summary=summary, raw=raw)

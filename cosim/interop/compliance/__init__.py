@@ -1,7 +1,7 @@
 """FMI 2.0 co-simulation compliance checks for any FMU (ours or a third party's).
 
 ``check_fmu(path)`` returns a list of :class:`Problem`; ``format_report`` renders it. The
-checks are those of issue 5:
+checks:
 
 * static (read from the file, nothing loaded): fmpy validation; legal causality / variability /
   initial combinations (FMI 2.0 sec. 2.2.7); start values present where required and inside

@@ -348,16 +348,19 @@ class RunResult:
     # run-dependent figures an FMU logged at fmi2Terminate (solve times): never outputs
     diagnostics: dict[str, dict[str, float]] = field(default_factory=dict)
 
-    def write(self, out_dir: Path, plot: bool = True, force: bool = False) -> list[Path]:
+    def write(self, out_dir: Path, plot: bool = True, force: bool = False,
+              plot_format: str = "png") -> list[Path]:
         from cosim.run.results import write_results
 
-        return write_results(self, Path(out_dir), plot=plot, force=force)
+        return write_results(self, Path(out_dir), plot=plot, force=force,
+                             plot_format=plot_format)
 
 
 def run_scenario(scenario: str | Path | Scenario, overrides: dict[str, Any] | list[str] | None
                  = None, algorithm: str | None = None, out_dir: str | Path | None = None,
                  progress: ProgressFn | None = None, build: bool = True,
-                 plot: bool = True, force: bool = False) -> RunResult:
+                 plot: bool = True, force: bool = False, plot_format: str = "png"
+                 ) -> RunResult:
     """Load (and override) a scenario, build missing or stale FMUs, run it, compute the summary
     and, with ``out_dir``, write results.csv, summary.json and plot.png (see
     :func:`cosim.run.results.write_results` for ``force``). A failure raises
@@ -380,7 +383,8 @@ def run_scenario(scenario: str | Path | Scenario, overrides: dict[str, Any] | li
             if out_dir is None or partial is None or partial.frame.empty and not interrupted:
                 raise  # a failure before anything was recorded (e.g. a rejected parameter)
             partial.summary = compute_summary(partial)
-            where = partial.write(Path(out_dir), plot=plot, force=force)[0].parent
+            where = partial.write(Path(out_dir), plot=plot, force=force,
+                                  plot_format=plot_format)[0].parent
             note = (f"; partial results up to t = {partial.sim_time_s:g} s written to {where} "
                     f"(summary.json has \"completed\": false)")
             if isinstance(err, interrupt.Interrupted):
@@ -390,7 +394,7 @@ def run_scenario(scenario: str | Path | Scenario, overrides: dict[str, Any] | li
             raise SimulationError(f"{err}{note}") from err
         result.summary = compute_summary(result)
         if out_dir is not None:
-            result.write(Path(out_dir), plot=plot, force=force)
+            result.write(Path(out_dir), plot=plot, force=force, plot_format=plot_format)
     return result
 
 
