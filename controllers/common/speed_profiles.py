@@ -24,17 +24,28 @@ step (``v^2`` linear in ``s``). Limits of the paper: ``-1 <= a <= 1`` m/s^2, cru
   0.5 s) of ``T_s`` and the paper allows an arrival error of ``Delta T_max = 5`` s, the eco
   profile keeps the arrival within the margin; ``tests/test_speed_profiles.py`` checks it.
 
+* **Cruise** (ours, the same-schedule conventional baseline): the conventional shape
+  (accelerate, cruise, brake) at the one constant cruising speed ``V_c <= V_act`` whose run
+  time equals ``T_s``, found by Brent's root finder (``scipy.optimize.brentq``) on the run time
+  as a function of ``V_c`` (continuous and decreasing) to within ``time_tolerance``. It
+  compares a strategy with the conventional one at equal arrival time; ``low_speed`` holds
+  ``V_c``. If ``T_s <= T_conv`` it is the conventional profile.
+
+:func:`traction_work` is the mechanical traction work of any profile on the nominal model.
+
 Phases (Table 2, used by the energy-per-phase metrics): ``accelerate`` from the start until the
 profile first reaches ``V_act``; ``brake`` from the start of the final braking; ``run`` between.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import math
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.optimize
 
 from plants.crh3 import Crh3Params
 from plants.resistance import KMH
@@ -44,7 +55,7 @@ from plants.route import GRAVITY, Route, StepProfile
 TRACTION, CRUISE, COAST, REACCELERATE, HOLD_LIMIT, BRAKE = 1, 2, 3, 4, 5, 6
 # Table 2 phases
 PHASE_ACCELERATE, PHASE_RUN, PHASE_BRAKE = 1, 2, 3
-PROFILE_KINDS = ("conventional", "eco")
+PROFILE_KINDS = ("conventional", "eco", "cruise")
 
 
 @dataclass(frozen=True)
@@ -253,8 +264,8 @@ def _finish(kind: str, s: np.ndarray, v: np.ndarray, mode: np.ndarray, low: floa
 def generate(kind: str, route: Route, scheduled_time: float | None = None,
              train: Crh3Params | None = None,
              settings: ProfileSettings | None = None) -> SpeedProfile:
-    """The ``kind`` ("conventional" | "eco") profile from the route's first station (or 0) to
-    its end (``length_m``, the stop point) within ``scheduled_time`` (s; default the route's
+    """The ``kind`` ("conventional" | "eco" | "cruise") profile from the route's first station
+    (or 0) to its end (``length_m``, the stop point) within ``scheduled_time`` (s; default the route's
     ``scheduled_time_s``)."""
     if kind not in PROFILE_KINDS:
         raise ValueError(f"profile {kind!r} must be one of {PROFILE_KINDS}")
@@ -264,6 +275,8 @@ def generate(kind: str, route: Route, scheduled_time: float | None = None,
     if scheduled_time is None or scheduled_time <= 0:
         scheduled_time = route.scheduled_time_s
     if kind == "eco" and scheduled_time is None:
+        raise ValueError(f"route {route.name!r} has no scheduled_time_s: give scheduled_time")
+    if kind == "cruise" and scheduled_time is None:
         raise ValueError(f"route {route.name!r} has no scheduled_time_s: give scheduled_time")
     key = (kind, id(route), float(scheduled_time or 0.0), train, settings)
     hit = _CACHE.get(key)
@@ -287,7 +300,9 @@ def _generate(kind: str, route: Route, scheduled: float, train: Crh3Params,
     conventional = _finish("conventional", s, v, mode, v_act, scheduled)
     if kind == "conventional" or scheduled <= conventional.arrival_time:
         return conventional if kind == "conventional" else _finish(
-            "eco", s, v, mode, v_act, scheduled)
+            kind, s, v, mode, v_act, scheduled)
+    if kind == "cruise":
+        return _cruise(train, route, scheduled, settings)
     lo, hi = settings.min_low_speed, v_act  # time(lo) >= time(hi)
     best: SpeedProfile | None = None
     for _ in range(60):
@@ -309,3 +324,40 @@ def _generate(kind: str, route: Route, scheduled: float, train: Crh3Params,
                          f"{settings.time_tolerance} s of scheduled_time = {scheduled} s "
                          f"(closest {best.arrival_time if best else float('nan'):.1f} s)")
     return best
+
+
+def _cruise(train: Crh3Params, route: Route, scheduled: float,
+            settings: ProfileSettings) -> SpeedProfile:
+    """The conventional shape at the cruising speed whose run time is ``scheduled``."""
+    length = float(route.length_m)
+
+    def profile(speed: float) -> SpeedProfile:
+        st = dataclasses.replace(settings, cruise_speed=speed)
+        s, v, mode = _run(_Model(train, route, st), length, "conventional", speed)
+        return _finish("cruise", s, v, mode, speed, scheduled)
+
+    lo, hi = settings.min_low_speed, settings.cruise_speed
+    slowest = profile(lo)
+    if slowest.arrival_time < scheduled:
+        raise ValueError(f"route {route.name!r}: cruising at min_low_speed = {lo:.2f} m/s "
+                         f"arrives at {slowest.arrival_time:.1f} s, before scheduled_time = "
+                         f"{scheduled} s")
+    # run time falls by about L / V^2 per m/s: xtol 1e-6 m/s is well inside time_tolerance
+    speed = scipy.optimize.brentq(lambda x: profile(x).arrival_time - scheduled, lo, hi,
+                                  xtol=1e-6)
+    best = profile(speed)
+    if abs(best.arrival_time - scheduled) > settings.time_tolerance:
+        raise ValueError(f"route {route.name!r}: no cruise profile arrives within "
+                         f"{settings.time_tolerance} s of scheduled_time = {scheduled} s "
+                         f"(closest {best.arrival_time:.1f} s at {speed:.3f} m/s)")
+    return best
+
+
+def traction_work(profile: SpeedProfile, route: Route, train: Crh3Params | None = None) -> float:
+    """Mechanical traction work (J) along ``profile`` on the nominal model: the sum over the
+    steps of ``max(m_eff a + m_eff drag(v_mean, s), 0) ds`` (braking and coasting cost none)."""
+    model = _Model(train or Crh3Params(), route, ProfileSettings())
+    vm = 0.5 * (profile.v[:-1] + profile.v[1:])
+    drag = np.array([model.drag(float(v), float(x)) for v, x in zip(vm, profile.s[:-1])])
+    force = model.m_eff * (profile.accel[:-1] + drag)
+    return float(np.sum(np.maximum(force, 0.0) * np.diff(profile.s)))
