@@ -265,8 +265,8 @@ def generate(kind: str, route: Route, scheduled_time: float | None = None,
              train: Crh3Params | None = None,
              settings: ProfileSettings | None = None) -> SpeedProfile:
     """The ``kind`` ("conventional" | "eco" | "cruise") profile from the route's first station
-    (or 0) to its end (``length_m``, the stop point) within ``scheduled_time`` (s; default the route's
-    ``scheduled_time_s``)."""
+    (or 0) to its end (``length_m``, the stop point) within ``scheduled_time`` (s; default the
+    route's ``scheduled_time_s``)."""
     if kind not in PROFILE_KINDS:
         raise ValueError(f"profile {kind!r} must be one of {PROFILE_KINDS}")
     train = train or Crh3Params()
