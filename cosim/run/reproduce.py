@@ -95,8 +95,9 @@ except ModuleNotFoundError:  # Python < 3.11
 
 REPRODUCE_DIR = SCENARIO_DIR / "reproduce"
 
+# "ensemble" and "claims": the claims schema (docs of the claims framework), read there
 _ENTRY_KEYS = {"title", "notes", "table", "runs", "metrics", "paper", "derived", "rankings",
-               "sweeps", "figures"}
+               "sweeps", "figures", "ensemble", "claims"}
 _RANKING_KEYS = {"name", "metric", "runs", "paper"}
 _DERIVED_KEYS = {"name", "kind", "metric", "run", "baseline", "value", "range", "tolerance",
                  "source"}
