@@ -125,6 +125,7 @@ def draw_ensemble_figure(spec: dict[str, Any], dirs: dict[str, list[Path]], path
     import pandas as pd
 
     from cosim.run.reproduce import figure_series
+    from cosim.run.results import PLOT_DPI
 
     ys = spec["y"] if isinstance(spec["y"], list) else [spec["y"]]
     scale = float(spec.get("y_scale", 1.0))
@@ -150,7 +151,8 @@ def draw_ensemble_figure(spec: dict[str, Any], dirs: dict[str, list[Path]], path
     ax.legend(fontsize=7)
     fig.suptitle(f"{spec.get('title', '')} (median, 5-95 % band over the seeds)")
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    fig.savefig(path, dpi=PLOT_DPI, format=Path(path).suffix.lstrip(".") or "png",
+                bbox_inches="tight")
     plt.close(fig)
 
 
