@@ -477,9 +477,19 @@ def reproduce(
                                                  "(default runs/reproduce/<name>)")] = None,
     workers: Annotated[int | None, typer.Option(
         help="parallel processes (default: CPUs)", min=1)] = None,
+    seeds: Annotated[int | None, typer.Option(
+        help="members of each claim's ensemble: the first K report seeds (default 20)",
+        min=1)] = None,
+    no_rounding: Annotated[bool, typer.Option(
+        "--no-rounding", help="skip the claims' rerun on the perturbed floating-point "
+        "path (then no claim is marked rounding-robust)")] = False,
+    scheduler: Annotated[str | None, typer.Option(
+        help="run the claims' ensemble on a Dask cluster: its address, or 'local-dask' for "
+        "a local cluster of --workers processes")] = None,
 ) -> None:
     """Reproduce a paper's results: run its scenarios, write the table (ours beside the
-    paper's), the sweeps and the figures; 'all' writes one REPRODUCTION.md."""
+    paper's), the sweeps and the figures, and test its claims over K seeds (claims.csv,
+    claims.md: median [95 % CI], k of K, verdict); 'all' writes one REPRODUCTION.md."""
     from cosim.run.master import SimulationError
     from cosim.run.reproduce import ReproduceError, entry_names, reproduce_all
     from cosim.run.reproduce import reproduce as reproduce_entry
@@ -487,12 +497,13 @@ def reproduce(
 
     try:
         if name == "all":
-            path = reproduce_all(out_dir, workers)
+            path = reproduce_all(out_dir, workers, seeds, not no_rounding, scheduler)
         else:
             if name not in entry_names() and not Path(name).is_file():
                 raise ReproduceError(f"no reproduction entry {name!r} "
                                      f"(known: {', '.join(entry_names())}, all)")
-            path = reproduce_entry(name, out_dir, workers)
+            path = reproduce_entry(name, out_dir, workers, seeds, not no_rounding,
+                                    scheduler)
     except (ReproduceError, ScenarioError, SimulationError) as err:
         _fail(str(err))
     out.print(path.read_text(), markup=False, highlight=False)
