@@ -268,7 +268,7 @@ def sweep(
     scheduler: Annotated[str | None, typer.Option(
         help="run the points on a Dask distributed cluster: its scheduler address (e.g. "
         "tcp://10.0.0.5:8786), or 'local-dask' to start a local one of --workers processes; "
-        "needs the 'dask' extra (pip install 'ato-cosim[dask]')")] = None,
+        "needs the 'dask' extra (pip install 'ato-cosim\\[dask]')")] = None,
     shared_fmus: Annotated[bool, typer.Option(
         "--shared-fmus", help="with --scheduler: the workers read the FMUs at this machine's "
         "paths (a shared file system) instead of receiving uploaded copies")] = False,

@@ -117,7 +117,7 @@ def _variant(tmp_path, old: str, new: str):
     ("base_step = 0.2", "base_step = 0", "base_step = 0.0: must be positive"),
     ('"plant.brake_command" = "controller.brake_command"',
      '"plant.brake_command" = "controller.executions"', "type mismatch"),
-    ("brake_delay = 1.0", "brake_delay = -1.0", r"brake_delay = -1.0 outside \[0.0"),
+    ("brake_delay = 1.0", "brake_delay = -1.0", "brake_delay = -1.0: must be at least 0.0"),
     ('algorithm = "event"', 'algorithm = "gauss"', "algorithm = 'gauss'"),
     ('"controller.v" = "plant.v"', '"controller.v" = "plant.speed"', "no variable 'speed'"),
 ])

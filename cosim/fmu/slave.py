@@ -35,7 +35,7 @@ from pythonfmu import Boolean, Fmi2Causality, Fmi2Slave, Fmi2Variability, Intege
 from pythonfmu.enums import Fmi2Status
 
 from cosim.fmu import diagnostics
-from cosim.fmu.declare import UNITS, Var
+from cosim.fmu.declare import UNITS, Var, out_of_range
 from cosim.fmu.state import to_seconds, to_ticks
 
 BUNDLE_DIR = "atocosim_bundle"  # project code and data inside an FMU's resources folder
@@ -238,7 +238,7 @@ class CoreSlave(Fmi2Slave):
                     raise ValueError(f"{var.name} = {value}: not a finite number")
             if var.min is not None and value < var.min or var.max is not None and value > var.max:
                 if var.causality == "parameter":
-                    raise ValueError(f"{var.name} = {value} outside [{var.min}, {var.max}]")
+                    raise ValueError(f"{var.name} = {out_of_range(value, var.min, var.max)}")
             self.values[var.name] = kind(value)
             if var.causality == "parameter":
                 self.core = None  # rebuilt from the new parameters on next use

@@ -11,6 +11,8 @@ from __future__ import annotations
 import math
 from typing import Any
 
+from cosim.fmu.declare import out_of_range
+
 TYPES = ("Real", "Integer", "Boolean", "String", "Enumeration")
 NUMERIC = ("Real", "Integer", "Boolean", "Enumeration")  # recordable as numbers
 
@@ -83,6 +85,6 @@ def check_value(variable: Any, value: Any) -> str | None:
         hi = float(variable.max) if variable.max is not None else math.inf
         if not lo <= float(value) <= hi:
             unit = getattr(variable, "unit", None)
-            return (f"= {value} outside [{variable.min}, {variable.max}]"
+            return (f"= {out_of_range(value, variable.min, variable.max)}"
                     + (f" ({unit or 'no unit'})" if kind == "Real" else ""))
     return None
