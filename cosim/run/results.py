@@ -81,7 +81,7 @@ def write_results(result: Any, out_dir: Path, plot: bool = True,
     out_dir.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=".writing-", dir=out_dir))
     try:
-        result.frame.to_csv(tmp / "results.csv", index=False, float_format="%.10g")
+        result.frame.to_csv(tmp / "results.csv", index=False)  # repr: round-trip exact
         (tmp / "summary.json").write_text(json.dumps(_json_safe(result.summary), indent=2)
                                           + "\n")
         if plot:
