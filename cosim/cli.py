@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 from contextlib import contextmanager
 from pathlib import Path
@@ -42,7 +43,7 @@ def build(names: Annotated[list[str] | None, typer.Argument(
 @app.command("list")
 def list_() -> None:
     """List the FMUs this project builds and the shipped scenarios, a line each."""
-    from cosim.fmu.build import catalog
+    from cosim.fmu.build import catalog, is_intact
     from cosim.run.scenario import SCENARIO_DIR
 
     table = Table(title="FMUs", show_edge=False)
@@ -50,7 +51,9 @@ def list_() -> None:
     table.add_column("built")
     table.add_column("description")
     for spec in catalog().values():
-        table.add_row(escape(spec.identifier), "yes" if spec.path.is_file() else "no",
+        built = ("no" if not spec.path.is_file() else "yes" if is_intact(spec.path) else
+                 "corrupt (rebuilt on next use)")
+        table.add_row(escape(spec.identifier), built,
                       escape(spec.description))
     out.print(table)
     table = Table(title="Scenarios", show_edge=False)
@@ -119,16 +122,17 @@ def run(
     at once."""
     from cosim.run import interrupt
     from cosim.run.master import SimulationError, run_scenario
-    from cosim.run.results import OutputError, check_destination
+    from cosim.run.results import OutputError, check_destination, locked_destination
     from cosim.run.scenario import ScenarioError, find_scenario
 
-    with interrupt.guard(restore=False):
+    with contextlib.ExitStack() as held, interrupt.guard(restore=False):
         if not console.is_terminal and not quiet:
             console.print(f"cosim run {scenario}", highlight=False, markup=False)
         try:
             path = find_scenario(scenario)
             target = out_dir or Path("runs") / path.stem
             check_destination(target)
+            held.enter_context(locked_destination(target))
         except (ScenarioError, OutputError) as err:
             _fail(str(err))
         with _progress(path.stem, quiet) as on_progress:

@@ -458,3 +458,35 @@ def test_fmu_value(built_fmus, identifier, tmp_path):
     args = (built_fmus[identifier].path, tmp_path)
     check(*args[:check.__code__.co_argcount])
 
+
+
+def test_a_truncated_fmu_is_stale_and_not_listed_as_built(built_fmus, tmp_path, monkeypatch):
+    """A truncated or garbled archive newer than its sources is rebuilt (zip CRCs checked, not
+    only the mtime) and ``cosim list`` does not call it built."""
+    import os
+    import shutil
+    import subprocess
+    import sys
+
+    from cosim.fmu import build
+
+    good = built_fmus["StopPid"].path
+    monkeypatch.setattr(build, "FMU_DIR", tmp_path)
+    spec = build.catalog()["StopPid"]
+    assert spec.path == tmp_path / "StopPid.fmu"
+    shutil.copy2(good, spec.path)
+    assert build.is_intact(spec.path) and not build.is_stale(spec)
+    data = good.read_bytes()
+    for broken in (data[: len(data) // 2], data[:-300] + bytes(300),
+                   data[:4000] + bytes(64) + data[4064:]):
+        spec.path.write_bytes(broken)
+        os.utime(spec.path, None)  # newer than every source file
+        assert not build.is_intact(spec.path)
+        assert build.is_stale(spec)
+    done = subprocess.run(
+        [sys.executable, "-c", "import sys; from cosim.fmu import build; "
+         f"build.FMU_DIR = __import__('pathlib').Path({str(tmp_path)!r}); "
+         "from cosim import cli; sys.argv = ['cosim', 'list']; cli.main()"],
+        capture_output=True, text=True, timeout=120)
+    row = next(line for line in done.stdout.splitlines() if line.split()[:1] == ["StopPid"])
+    assert "corrupt" in row and "yes" not in row.split("│")[1], done.stdout

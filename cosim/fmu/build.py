@@ -385,9 +385,20 @@ def build_fmu(spec: FmuSpec, dest: Path = FMU_DIR) -> Path:
     return final
 
 
+def is_intact(path: Path) -> bool:
+    """True when ``path`` is a readable FMU archive: a zip whose every member passes its CRC
+    (a truncated or overwritten file fails) and that holds a modelDescription.xml."""
+    try:
+        with zipfile.ZipFile(path) as archive:
+            return archive.testzip() is None and "modelDescription.xml" in archive.namelist()
+    except (zipfile.BadZipFile, OSError, EOFError, ValueError):
+        return False
+
+
 def is_stale(spec: FmuSpec) -> bool:
-    """True when the FMU is missing or older than any file it bundles or the builder."""
-    if not spec.path.is_file():
+    """True when the FMU is missing, not an intact archive (:func:`is_intact`), or older than
+    any file it bundles or the builder."""
+    if not spec.path.is_file() or not is_intact(spec.path):
         return True
     built = spec.path.stat().st_mtime
     if built >= _newest_project_file():  # no project file changed since: no import scan
