@@ -183,3 +183,23 @@ def test_failure_mid_run_keeps_partial_results(built_fmus, tmp_path, monkeypatch
     assert summary["completed"] is False and "test fault" in summary["error"]
     assert summary["sim_time_s"] == pytest.approx(10.0)
     assert (tmp_path / "plot.png").exists()
+
+
+def test_a_recording_larger_than_memory_is_refused_before_the_run(built_fmus, monkeypatch):
+    """stop_time = 1e9 s at 0.2 s: 5e9 output points would not fit; the run is refused
+    before any step, saying how much the recording needs (points x values x 8 bytes)."""
+    from cosim.run import master as master_module
+    from cosim.run.master import SimulationError, run_scenario
+
+    steps: list[float] = []
+    with pytest.raises(SimulationError, match=r"the recording needs \d.* GiB \(5000000002 output "
+                                              r"points x \d+ values x 8 bytes"):
+        run_scenario("seed000_stop_pid", overrides=["simulation.stop_time=1e9"],
+                     progress=lambda t, total: steps.append(t))
+    assert not steps
+    # the same bound for a small run when memory is short: 302 points x 8 values x 8 bytes
+    monkeypatch.setattr(master_module, "available_memory", lambda: 3 * 302 * 8 * 8 - 1)
+    with pytest.raises(SimulationError, match=r"302 output points x 8 values"):
+        run_scenario("seed000_stop_pid", overrides=["simulation.stop_time=60"])
+    monkeypatch.setattr(master_module, "available_memory", lambda: 3 * 302 * 8 * 8)
+    assert run_scenario("seed000_stop_pid", overrides=["simulation.stop_time=60"]).completed

@@ -97,6 +97,18 @@ class SimulationError(RuntimeError):
     """An FMU call failed during a run; the message names the FMU, the call and the time."""
 
 
+def available_memory() -> int | None:
+    """Bytes of memory available to a new allocation (Linux MemAvailable), None if unknown."""
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    return None
+
+
 class FmuTerminated(Exception):  # noqa: N818 - a normal end of the run, not an error
     """An FMU ended the simulation: doStep returned fmi2Discard with fmi2Terminated true
     (FMI 2.0.4 sec. 4.2.2); ``ticks`` is its fmi2LastSuccessfulTime."""
@@ -466,11 +478,28 @@ class Recorder:
             if family != "String":
                 width += len(vrs)
         self._width = width
+        self.check_fits(n_points, width)
         self._store = np.full((n_points, width), np.nan)
         self._positions = [p for g in self._groups if g[1] != "String"
                            for p in range(g[5], g[5] + len(g[3]))]
         self._reads: list[tuple[Batch, Any, int, Any]] | None = None
         self.next_event: dict[FmuUnit, float] = {}  # read at the last sampled point
+
+    # the store, the ordered copy :meth:`frame` makes and the pandas table built from it
+    COPIES = 3
+
+    def check_fits(self, n_points: int, width: int) -> None:
+        """Refuse, before any step, a recording larger than the memory available: it needs
+        ``n_points x width x 8`` bytes, :attr:`COPIES` times while the results are written."""
+        need = n_points * width * 8
+        available = available_memory()
+        if available is not None and self.COPIES * need > available:
+            raise SimulationError(
+                f"the recording needs {need / 2**30:.3g} GiB ({n_points} output points x "
+                f"{width} values x 8 bytes; {self.COPIES * need / 2**30:.3g} GiB with the "
+                f"results table), more than the {available / 2**30:.3g} GiB of memory "
+                "available: shorten [simulation] stop_time, lengthen output_interval or "
+                "record fewer [record] variables")
 
     def bind(self) -> None:
         """Allocate the FMI calls (after the FMUs are instantiated)."""
