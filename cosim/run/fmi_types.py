@@ -50,8 +50,9 @@ def to_fmi(kind: str, value: Any, items: dict[str, int] | None = None) -> Any:
     return str(value)
 
 
-def check_value(variable: Any, value: Any) -> str | None:
-    """None when ``value`` is a valid scenario value for ``variable``, else why not."""
+def check_value(variable: Any, value: Any, ranges: bool = True) -> str | None:
+    """None when ``value`` is a valid scenario value for ``variable`` (within its [min, max]
+    unless ``ranges`` is False), else why not."""
     kind = variable.type
     if kind == "Real":
         if isinstance(value, bool) or not isinstance(value, (int, float)):
@@ -80,7 +81,7 @@ def check_value(variable: Any, value: Any) -> str | None:
             return f"is an Enumeration, {value} is not an item value: {choices}"
     else:
         return f"has type {kind!r}, which FMI 2.0 does not define"
-    if kind in ("Real", "Integer", "Enumeration"):
+    if ranges and kind in ("Real", "Integer", "Enumeration"):
         lo = float(variable.min) if variable.min is not None else -math.inf
         hi = float(variable.max) if variable.max is not None else math.inf
         if not lo <= float(value) <= hi:

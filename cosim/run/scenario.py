@@ -366,8 +366,10 @@ def _load_scenario(path: Path, overrides: dict[str, Any] | list[str] | None) -> 
                     record=record, summary=summary, raw=raw)
 
 
-def check_against_fmus(scenario: Scenario, descriptions: dict[str, Any]) -> None:
-    """Check names, causalities, types and units of everything the scenario refers to.
+def check_against_fmus(scenario: Scenario, descriptions: dict[str, Any],
+                       ranges: bool = True) -> None:
+    """Check names, causalities, types and units of everything the scenario refers to, and
+    (``ranges``) that values lie within the variables' [min, max].
 
     ``descriptions`` maps component name to its fmpy ``ModelDescription``.
     """
@@ -389,7 +391,7 @@ def check_against_fmus(scenario: Scenario, descriptions: dict[str, Any]) -> None
         return v
 
     def check_value(comp: str, var: str, key: str, value: Any, v: Any) -> None:
-        why = fmi_types.check_value(v, value)
+        why = fmi_types.check_value(v, value, ranges)
         if why is not None:
             raise ScenarioError(f"{src}: {key}: {comp}.{var} {why}")
 
