@@ -409,9 +409,12 @@ def reproduce(
     from cosim.run.master import SimulationError
     from cosim.run.reproduce import ReproduceError, entry_names, reproduce_all
     from cosim.run.reproduce import reproduce as reproduce_entry
+    from cosim.run.results import OutputError, check_destination
     from cosim.run.scenario import ScenarioError
 
     try:
+        if out_dir is not None:
+            check_destination(out_dir)
         if name == "all":
             path = reproduce_all(out_dir, workers)
         else:
@@ -419,8 +422,10 @@ def reproduce(
                 raise ReproduceError(f"no reproduction entry {name!r} "
                                      f"(known: {', '.join(entry_names())}, all)")
             path = reproduce_entry(name, out_dir, workers)
-    except (ReproduceError, ScenarioError, SimulationError) as err:
+    except (ReproduceError, ScenarioError, SimulationError, OutputError) as err:
         _fail(str(err))
+    except OSError as err:  # a folder that became unwritable during the run
+        _fail(f"cannot write {err.filename or out_dir}: {err.strerror or err}")
     out.print(path.read_text(), markup=False, highlight=False)
     out.print(f"wrote {path}")
 
