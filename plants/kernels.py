@@ -1,4 +1,4 @@
-"""Compiled plant kernels (numba), one call per communication step (issue 10).
+"""Compiled plant kernels (numba), one call per communication step.
 
 :func:`freight_steps` advances :class:`plants.freight.FreightTrain` over a run of sub-steps with
 the equations of its numpy reference (``FreightTrain._substep``, kept and tested against this):
@@ -229,6 +229,14 @@ S_TRACTION, S_ENERGY, S_PEAK_DRAFT, S_PEAK_BUFF, S_ACCEL, S_FIRST, S_HELD = rang
 
 
 @njit
+def shoe_friction(kmh):
+    """Converted friction coefficient of high-friction composite brake shoes (TB/T 1407):
+    ``phi = 0.322 (v + 150) / (2 v + 150)``, v in km/h (>= 0). The one definition: the plant's
+    numpy path, the controllers and the compiled kernels all call it."""
+    return 0.322 * (kmh + 150.0) / (2.0 * kmh + 150.0)
+
+
+@njit
 def _interp(x, xs, cum, slopes, j):
     """``np.interp(x, xs, cum)`` walking from segment hint ``j``; returns (value, segment)."""
     n = xs.size
@@ -340,7 +348,7 @@ def _freight_holds(traction, mean_p, braking, x, length, weight_per_kn, brake_sc
         c_front, hint_f[i] = _interp(x[i], xs, cum, slopes, hint_f[i])
         c_rear, hint_r[i] = _interp(x[i] - length[i], xs, cum, slopes, hint_r[i])
         grade -= weight_per_kn[i] * ((c_front - c_rear) / length[i])
-        capacity += brake_scale[i] * mean_p[i] * 0.322 + res_a[i]
+        capacity += brake_scale[i] * mean_p[i] * shoe_friction(0.0) + res_a[i]
     return abs(traction + grade) <= capacity
 
 
@@ -455,8 +463,7 @@ def freight_steps(x, v, pres, sc, hs, t0s, t1s, demands, arrivals, values, m_eff
             diss = res_a[i] + (res_b[i] + res_c[i] * speed) * speed
             if braking:
                 kmh = abs(v[i]) / KMH
-                diss = diss + brake_scale[i] * mean_p[i] * (
-                    0.322 * (kmh + 150.0) / (2.0 * kmh + 150.0))
+                diss = diss + brake_scale[i] * mean_p[i] * shoe_friction(kmh)
             direction = max(min(v[i] / stiction, 1.0), -1.0)
             front = x[i] + 0.5 * h * v[i]
             c_front, hint_f[i] = _interp(front, xs, cum, slopes, hint_f[i])

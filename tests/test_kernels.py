@@ -321,3 +321,21 @@ def test_a_poisoned_cache_never_fails_the_kernels(tmp_path) -> None:
         _planted(folder, kind)
         run()
         assert kernels._cache_entries_valid()
+
+
+def test_shoe_friction_is_one_law_written_once():
+    """TB/T 1407's phi = 0.322 (v + 150) / (2 v + 150): its values, and one definition that
+    the plant's numpy path, the blending and the compiled kernels all call."""
+    from pathlib import Path
+
+    from plants.freight import KMH, friction_coefficient, friction_coefficient_at
+    from plants.kernels import shoe_friction
+
+    assert shoe_friction(0.0) == 0.322
+    assert shoe_friction(150.0) == pytest.approx(0.322 * 300.0 / 450.0, rel=1e-15)
+    assert friction_coefficient_at(-150.0 * KMH) == shoe_friction(150.0 * KMH / KMH)
+    assert friction_coefficient(np.array([150.0 * KMH]))[0] == friction_coefficient_at(150 * KMH)
+    root = Path(__file__).resolve().parent.parent
+    writers = [p.relative_to(root).as_posix() for part in ("plants", "controllers")
+               for p in (root / part).rglob("*.py") if "0.322 *" in p.read_text()]
+    assert writers == ["plants/kernels.py"]

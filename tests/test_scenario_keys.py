@@ -98,3 +98,22 @@ def test_a_range_with_one_bound_is_said_in_words(lo, hi, says):
     variable = SimpleNamespace(type="Real", min=lo, max=hi, unit="m")
     assert check_value(variable, value) == f"= {says} (m)"
     assert "None" not in check_value(variable, value)
+
+
+def test_summary_reads_a_parameter_by_reference(tmp_path):
+    """``stop_point = "controller.stop_point"`` follows ``--set controller.stop_point=450``
+    (no stale copy); a reference to a parameter the scenario does not set names file and key."""
+    import pytest
+
+    from cosim.run.scenario import ScenarioError, load_scenario
+
+    sc = load_scenario("seed000_stop_pid", ["controller.stop_point=450"])
+    assert sc.summary["stop_point"] == 450.0
+    assert load_scenario("seed000_stop_pid").summary["stop_point"] == 400.0
+    text = (load_scenario("seed000_stop_pid").path.read_text()
+            .replace('stop_point = "controller.stop_point"', 'stop_point = "controller.nope"'))
+    bad = tmp_path / "bad.toml"
+    bad.write_text(text)
+    with pytest.raises(ScenarioError, match=r"bad.toml: \[summary\] stop_point = "
+                                            r"'controller.nope'.*'controller' sets no 'nope'"):
+        load_scenario(bad)

@@ -85,6 +85,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from cosim.run.results import PLOT_DPI
 from cosim.run.scenario import SCENARIO_DIR
 
 try:
@@ -94,8 +95,9 @@ except ModuleNotFoundError:  # Python < 3.11
 
 REPRODUCE_DIR = SCENARIO_DIR / "reproduce"
 
+# "ensemble" and "claims": the claims schema (docs of the claims framework), read there
 _ENTRY_KEYS = {"title", "notes", "table", "runs", "metrics", "paper", "derived", "rankings",
-               "sweeps", "figures"}
+               "sweeps", "figures", "ensemble", "claims"}
 _RANKING_KEYS = {"name", "metric", "runs", "paper"}
 _DERIVED_KEYS = {"name", "kind", "metric", "run", "baseline", "value", "range", "tolerance",
                  "source"}
@@ -517,7 +519,8 @@ def draw_figure(spec: dict[str, Any], run_dirs: dict[str, Path], path: Path) -> 
     axes[-1][0].set_xlabel(spec.get("xlabel", "time (s)" if spec["x"] == "time" else spec["x"]))
     fig.suptitle(spec.get("title", ""))
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    fig.savefig(path, dpi=PLOT_DPI, format=Path(path).suffix.lstrip(".") or "png",
+                bbox_inches="tight")
     plt.close(fig)
 
 
@@ -608,7 +611,8 @@ def draw_speed_classes(spec: dict[str, Any], run_dirs: dict[str, Path], path: Pa
     ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0))
     fig.suptitle(spec.get("title", ""))
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    fig.savefig(path, dpi=PLOT_DPI, format=Path(path).suffix.lstrip(".") or "png",
+                bbox_inches="tight")
     plt.close(fig)
     lines = [_row(["class", "limit", *names]), "|" + " --- |" * (len(names) + 2)]
     for k, cls in enumerate(classes):

@@ -371,15 +371,31 @@ def _execute(jobs: list[tuple[str, dict[str, Any]]], workers: int | None, finish
 
 
 def plot_sweep(frame: pd.DataFrame, keys: list[str], path: str | Path) -> None:
-    """Fig.-11-style plot: stop error (cm) and command switches / executions vs the first key."""
+    """:func:`draw_sweep` saved to ``path`` (its suffix: png at 200 dpi, svg or pdf)."""
+    import matplotlib.pyplot as plt
+
+    from cosim.run.results import PLOT_DPI
+
+    fig = draw_sweep(frame, keys)
+    fig.savefig(path, dpi=PLOT_DPI, format=Path(path).suffix.lstrip(".") or "png",
+                bbox_inches="tight")
+    plt.close(fig)
+
+
+def draw_sweep(frame: pd.DataFrame, keys: list[str]) -> Any:
+    """Fig.-11-style figure: stop error (cm) and command switches / executions vs the first
+    key; the stop window drawn, the axis zoomed to the data when they lie far inside it;
+    legends right of the axes."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    from cosim.run.results import fit_band
+
     x = keys[0]
     others = keys[1:]
-    fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(7.5, 7), sharex=True)
+    fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(7.5, 8), sharex=True)
     for label, group in frame.groupby(["scenario", *others], sort=False):
         name = label if isinstance(label, str) else " ".join(
             [str(label[0])] + [f"{k}={v}" for k, v in zip(others, label[1:], strict=True)])
@@ -390,16 +406,16 @@ def plot_sweep(frame: pd.DataFrame, keys: list[str], path: str | Path) -> None:
         if group["controller_executions"].notna().all():
             ax2.plot(group[x], group["controller_executions"], marker="^", linestyle="--",
                      color=line.get_color(), label=f"{name}: executions")
-    for sign in (-1, 1):
-        ax1.axhline(sign * 100 * STOP_WINDOW_M, color="red", linestyle=":", linewidth=1)
+    fit_band(ax1, 100.0 * frame["stop_error_m"], -100 * STOP_WINDOW_M, 100 * STOP_WINDOW_M)
     ax1.set_ylabel("stop error (cm)")
     ax1.set_title("Stop error and command switches vs " + x)
     ax1.grid(True, alpha=0.3)
-    ax1.legend(fontsize=8)
+    ax1.ticklabel_format(useOffset=False, style="plain", axis="y")
+    ax1.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
     ax2.set_xlabel(x)
     ax2.set_ylabel("count")
     ax2.grid(True, alpha=0.3)
-    ax2.legend(fontsize=8)
+    ax2.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
+    ax2.xaxis.set_tick_params(labelbottom=True)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    return fig
