@@ -17,6 +17,7 @@ model performs the core's IEEE operations in the core's order; its only libm cal
 
 from __future__ import annotations
 
+import importlib
 import math
 import os
 import shutil
@@ -128,12 +129,12 @@ def build_description(identifier: str, sources: list[str]) -> bytes:
 def route_tables() -> dict[str, str]:
     """``<name>.grade`` text per bundled route: its grade steps ``start permille`` (%.17g via
     repr, which reads back exactly), the first start ``-inf``."""
-    from plants.route import ROUTES_DIR, load_route
-
+    # by name, as the catalog imports the wrappers: cosim.fmu never imports plants statically
+    route = importlib.import_module("plants.route")
     tables = {}
-    for toml in sorted(ROUTES_DIR.glob("*.toml")):
+    for toml in sorted(route.ROUTES_DIR.glob("*.toml")):
         try:
-            grade = load_route(toml.stem).grade
+            grade = route.load_route(toml.stem).grade
         except ValueError:  # a reference-profile TOML beside the routes, not a route
             continue
         rows = [f"{'-inf' if math.isinf(s) else repr(float(s))} {float(g)!r}"
