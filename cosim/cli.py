@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 from contextlib import contextmanager
 from pathlib import Path
@@ -78,6 +79,15 @@ def _build_native(names: list[str] | None) -> None:
         out.print(f"built {shown}  (native C, FMI 2.0)", highlight=False, markup=False)
 
 
+def _built(path: Path) -> str:
+    """``cosim list``'s cell for one FMU file: built, no, or corrupt (rebuilt on next use)."""
+    from cosim.fmu.build import is_intact
+
+    if not path.is_file():
+        return "no"
+    return "built" if is_intact(path) else "corrupt (rebuilt on next use)"
+
+
 @app.command("list")
 def list_() -> None:
     """List the FMUs this project builds and the shipped scenarios, a line each."""
@@ -90,8 +100,8 @@ def list_() -> None:
     table.add_column("FMI 3")
     table.add_column("description")
     for spec in catalog().values():
-        table.add_row(escape(spec.identifier), "built" if spec.path.is_file() else "no",
-                      "built" if spec.path_fmi3.is_file() else "no", escape(spec.description))
+        table.add_row(escape(spec.identifier), _built(spec.path), _built(spec.path_fmi3),
+                      escape(spec.description))
     out.print(table)
     table = Table(title="Scenarios", show_edge=False)
     table.add_column("name")
@@ -184,10 +194,10 @@ def run(
     at once."""
     from cosim.run import interrupt
     from cosim.run.master import SimulationError, run_scenario
-    from cosim.run.results import PLOT_FORMATS, OutputError, check_destination
+    from cosim.run.results import PLOT_FORMATS, OutputError, check_destination, locked_destination
     from cosim.run.scenario import ScenarioError, find_scenario
 
-    with interrupt.guard(restore=False):
+    with contextlib.ExitStack() as held, interrupt.guard(restore=False):
         if not console.is_terminal and not quiet:
             console.print(f"cosim run {scenario}", highlight=False, markup=False)
         try:
@@ -196,6 +206,7 @@ def run(
             path = find_scenario(scenario)
             target = out_dir or Path("runs") / path.stem
             check_destination(target)
+            held.enter_context(locked_destination(target))
         except (ScenarioError, OutputError) as err:
             _fail(str(err))
         with _progress(path.stem, quiet) as on_progress:
@@ -346,7 +357,7 @@ def sweep(
     scheduler: Annotated[str | None, typer.Option(
         help="run the points on a Dask distributed cluster: its scheduler address (e.g. "
         "tcp://10.0.0.5:8786), or 'local-dask' to start a local one of --workers processes; "
-        "needs the 'dask' extra (pip install 'ato-cosim[dask]')")] = None,
+        "needs the 'dask' extra (pip install 'ato-cosim\\[dask]')")] = None,
     shared_fmus: Annotated[bool, typer.Option(
         "--shared-fmus", help="with --scheduler: the workers read the FMUs at this machine's "
         "paths (a shared file system) instead of receiving uploaded copies")] = False,
@@ -493,9 +504,12 @@ def reproduce(
     from cosim.run.master import SimulationError
     from cosim.run.reproduce import ReproduceError, entry_names, reproduce_all
     from cosim.run.reproduce import reproduce as reproduce_entry
+    from cosim.run.results import OutputError, check_destination
     from cosim.run.scenario import ScenarioError
 
     try:
+        if out_dir is not None:
+            check_destination(out_dir)
         if name == "all":
             path = reproduce_all(out_dir, workers, seeds, not no_rounding, scheduler)
         else:
@@ -504,8 +518,10 @@ def reproduce(
                                      f"(known: {', '.join(entry_names())}, all)")
             path = reproduce_entry(name, out_dir, workers, seeds, not no_rounding,
                                     scheduler)
-    except (ReproduceError, ScenarioError, SimulationError) as err:
+    except (ReproduceError, ScenarioError, SimulationError, OutputError) as err:
         _fail(str(err))
+    except OSError as err:  # a folder that became unwritable during the run
+        _fail(f"cannot write {err.filename or out_dir}: {err.strerror or err}")
     out.print(path.read_text(), markup=False, highlight=False)
     out.print(f"wrote {path}")
 

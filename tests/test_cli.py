@@ -43,7 +43,7 @@ def test_run_with_set_and_algorithm(built_fmus, tmp_path):
 
 @pytest.mark.parametrize("args,message", [
     (("run", "seed000_stop_pdi"), "did you mean 'seed000_stop_pid'"),
-    (("run", "seed000_stop_pid", "--set", "plant.mass=-1"), "mass = -1 outside"),
+    (("run", "seed000_stop_pid", "--set", "plant.mass=-1"), "mass = -1: must be at least 1.0"),
     (("run", "seed000_stop_pid", "--set", "plant.nope=1"), "no variable 'nope'"),
     (("build", "NoSuchFmu"), "unknown FMU"),
 ])

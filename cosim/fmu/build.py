@@ -429,6 +429,16 @@ def build_fmus(spec: FmuSpec, dest: Path = FMU_DIR, fmi_versions: tuple[int, ...
     return finals
 
 
+def is_intact(path: Path) -> bool:
+    """True when ``path`` is a readable FMU archive: a zip whose every member passes its CRC
+    (a truncated or overwritten file fails) and that holds a modelDescription.xml."""
+    try:
+        with zipfile.ZipFile(path) as archive:
+            return archive.testzip() is None and "modelDescription.xml" in archive.namelist()
+    except (zipfile.BadZipFile, OSError, EOFError, ValueError):
+        return False
+
+
 def _builder_files(fmi_version: int) -> list[Path]:
     from cosim.fmu import fmi3
 
@@ -437,10 +447,10 @@ def _builder_files(fmi_version: int) -> list[Path]:
 
 
 def is_stale(spec: FmuSpec, fmi_version: int = 2) -> bool:
-    """True when the FMU's build of ``fmi_version`` is missing or older than any file it
-    bundles or the builder."""
+    """True when the FMU's build of ``fmi_version`` is missing, not an intact archive
+    (:func:`is_intact`), or older than any file it bundles or the builder."""
     path = spec.path_for(fmi_version)
-    if not path.is_file():
+    if not path.is_file() or not is_intact(path):
         return True
     built = path.stat().st_mtime
     if built >= _newest_project_file():  # no project file changed since: no import scan

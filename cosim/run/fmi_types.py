@@ -14,6 +14,8 @@ from __future__ import annotations
 import math
 from typing import Any
 
+from cosim.fmu.declare import out_of_range
+
 FLOATS = ("Real", "Float64", "Float32")
 # FMI 3 integer types and their ranges (FMI 2 Integer: 32 bits)
 INTEGERS = {"Integer": (-2**31, 2**31 - 1),
@@ -67,8 +69,9 @@ def to_fmi(kind: str, value: Any, items: dict[str, int] | None = None) -> Any:
     return str(value)
 
 
-def check_value(variable: Any, value: Any) -> str | None:
-    """None when ``value`` is a valid scenario value for ``variable``, else why not."""
+def check_value(variable: Any, value: Any, ranges: bool = True) -> str | None:
+    """None when ``value`` is a valid scenario value for ``variable`` (within its [min, max]
+    unless ``ranges`` is False), else why not."""
     kind = variable.type
     if kind in FLOATS:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
@@ -105,11 +108,11 @@ def check_value(variable: Any, value: Any) -> str | None:
             return f"is an Enumeration, {value} is not an item value: {choices}"
     else:
         return f"has type {kind!r}, which the master cannot set"
-    if kind in FLOATS or kind in INTEGERS or kind == "Enumeration":
+    if ranges and (kind in FLOATS or kind in INTEGERS or kind == "Enumeration"):
         lo = float(variable.min) if variable.min is not None else -math.inf
         hi = float(variable.max) if variable.max is not None else math.inf
         if not lo <= float(value) <= hi:
             unit = getattr(variable, "unit", None)
-            return (f"= {value} outside [{variable.min}, {variable.max}]"
+            return (f"= {out_of_range(value, variable.min, variable.max)}"
                     + (f" ({unit or 'no unit'})" if kind in FLOATS else ""))
     return None

@@ -8,11 +8,14 @@ to each other. Partial results never replace a complete earlier run unless force
 
 from __future__ import annotations
 
+import contextlib
+import fcntl
 import json
 import math
 import os
 import shutil
 import tempfile
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -51,6 +54,34 @@ def check_destination(path: Path, option: str = "--out", is_dir: bool = True) ->
                           f"{err.strerror or err}") from None
 
 
+LOCK_FILE = ".cosim-run.lock"
+
+
+@contextlib.contextmanager
+def locked_destination(path: Path, option: str = "--out") -> Iterator[None]:
+    """Hold an exclusive ``fcntl`` lock on ``path/.cosim-run.lock`` while a run writes into the
+    folder ``path`` (created); a second run into the same folder meanwhile fails at once with
+    :class:`OutputError` instead of one result silently replacing the other. The kernel drops
+    the lock when the process ends, however it ends."""
+    path = Path(path)
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+        handle = open(path / LOCK_FILE, "a+")  # noqa: SIM115 - held for the with-block
+    except OSError as err:
+        raise OutputError(f"{option} {path}: cannot write in it: {err.strerror or err}") from None
+    with handle:
+        try:
+            fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            raise OutputError(f"{option} {path}: another cosim run is writing into this folder "
+                              f"(it holds {path / LOCK_FILE}); wait for it to end or give "
+                              "another --out") from None
+        try:
+            yield
+        finally:
+            fcntl.flock(handle, fcntl.LOCK_UN)
+
+
 def _is_complete_run(out_dir: Path) -> bool:
     try:
         return json.loads((out_dir / "summary.json").read_text()).get("completed") is True
@@ -86,7 +117,7 @@ def write_results(result: Any, out_dir: Path, plot: bool = True,
     out_dir.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=".writing-", dir=out_dir))
     try:
-        result.frame.to_csv(tmp / "results.csv", index=False, float_format="%.10g")
+        result.frame.to_csv(tmp / "results.csv", index=False)  # repr: round-trip exact
         (tmp / "summary.json").write_text(json.dumps(_json_safe(result.summary), indent=2)
                                           + "\n")
         if plot:

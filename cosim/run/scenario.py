@@ -228,6 +228,17 @@ def _split_override(text: str) -> tuple[str, str]:
     return key.strip(), value.strip()
 
 
+def _refuse_unknown(source: Path, table: str, given: dict[str, Any],
+                    known: tuple[str, ...]) -> None:
+    """Raise naming the first key of ``given`` that is not in ``known``, with the closest known
+    key (difflib) or the list of known keys."""
+    for bad in sorted(set(given) - set(known)):
+        hint = difflib.get_close_matches(bad, known, n=1)
+        raise ScenarioError(f"{source}: {table} {bad}: unknown key"
+                            + (f" (did you mean {hint[0]!r}?)" if hint else
+                               f"; known: {', '.join(known)}"))
+
+
 def _number(source: str, key: str, value: Any, positive: bool = True,
             allow_zero: bool = False) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)):
@@ -303,18 +314,16 @@ def _load_scenario(path: Path, overrides: dict[str, Any] | list[str] | None) -> 
     except tomllib.TOMLDecodeError as err:
         raise ScenarioError(f"{path}: not valid TOML: {err}") from err
     apply_overrides(raw, overrides, str(path))
-    unknown = set(raw) - {"description", "simulation", "fmus", "connections", "record",
-                          "summary"}
-    if unknown:
-        raise ScenarioError(f"{path}: unknown top-level key(s) {sorted(unknown)}")
+    _refuse_unknown(path, "top level", raw, ("description", "simulation", "fmus",
+                                              "connections", "record", "summary"))
 
     sim_raw = raw.get("simulation")
+    if isinstance(sim_raw, dict):  # an unknown key first: `stoptime` is a misspelt stop_time
+        _refuse_unknown(path, "[simulation]", sim_raw, ("stop_time", "start_time",
+                                                        "output_interval", "algorithm",
+                                                        "base_step", "fmi_version"))
     if not isinstance(sim_raw, dict) or "stop_time" not in sim_raw:
         raise ScenarioError(f"{path}: [simulation] stop_time is required")
-    bad = set(sim_raw) - {"stop_time", "start_time", "output_interval", "algorithm", "base_step",
-                          "fmi_version"}
-    if bad:
-        raise ScenarioError(f"{path}: [simulation] unknown key(s) {sorted(bad)}")
     algorithm = sim_raw.get("algorithm", "event")
     if algorithm not in ALGORITHMS:
         raise ScenarioError(f"{path}: [simulation] algorithm = {algorithm!r}: expected one of "
@@ -346,9 +355,8 @@ def _load_scenario(path: Path, overrides: dict[str, Any] | list[str] | None) -> 
         key = f"[fmus.{name}]"
         if not isinstance(spec, dict):
             raise ScenarioError(f"{path}: {key} must be a table")
-        bad = set(spec) - {"fmu", "sample_time", "max_step", "parameters", "inputs"}
-        if bad:
-            raise ScenarioError(f"{path}: {key} unknown key(s) {sorted(bad)}")
+        _refuse_unknown(path, key, spec, ("fmu", "sample_time", "max_step", "parameters",
+                                          "inputs"))
         if "fmu" not in spec:
             raise ScenarioError(f"{path}: {key} fmu is required")
         for table in ("parameters", "inputs"):
@@ -381,11 +389,7 @@ def _load_scenario(path: Path, overrides: dict[str, Any] | list[str] | None) -> 
         value = raw.get(table, {})
         if not isinstance(value, dict):
             raise ScenarioError(f"{path}: [{table}] must be a table")
-        for bad in sorted(set(value) - set(known)):
-            hint = difflib.get_close_matches(bad, known, n=1)
-            raise ScenarioError(f"{path}: [{table}] {bad}: unknown key"
-                                + (f" (did you mean {hint[0]!r}?)" if hint else
-                                   f"; known: {', '.join(known)}"))
+        _refuse_unknown(path, f"[{table}]", value, tuple(known))
     record = raw.get("record", {}).get("variables")
     if record is not None:
         if not isinstance(record, list) or not all(isinstance(r, str) for r in record):
@@ -402,8 +406,10 @@ def _load_scenario(path: Path, overrides: dict[str, Any] | list[str] | None) -> 
                     record=record, summary=summary, raw=raw)
 
 
-def check_against_fmus(scenario: Scenario, descriptions: dict[str, Any]) -> None:
-    """Check names, causalities, types and units of everything the scenario refers to.
+def check_against_fmus(scenario: Scenario, descriptions: dict[str, Any],
+                       ranges: bool = True) -> None:
+    """Check names, causalities, types and units of everything the scenario refers to, and
+    (``ranges``) that values lie within the variables' [min, max].
 
     ``descriptions`` maps component name to its fmpy ``ModelDescription``.
     """
@@ -425,7 +431,7 @@ def check_against_fmus(scenario: Scenario, descriptions: dict[str, Any]) -> None
         return v
 
     def check_value(comp: str, var: str, key: str, value: Any, v: Any) -> None:
-        why = fmi_types.check_value(v, value)
+        why = fmi_types.check_value(v, value, ranges)
         if why is not None:
             raise ScenarioError(f"{src}: {key}: {comp}.{var} {why}")
 

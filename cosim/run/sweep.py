@@ -18,6 +18,7 @@ inclusive), ``controller.beta=1,2,4`` (list) or a single value.
 from __future__ import annotations
 
 import csv
+import functools
 import itertools
 import multiprocessing
 import os
@@ -97,6 +98,40 @@ def _run_point(scenario: Any, point: dict[str, Any]) -> dict[str, Any]:
     return row
 
 
+# summary counts: integers, empty for a failed point
+COUNT_COLUMNS = ("command_switches", "qp_solves", "qp_infeasible", "controller_executions")
+
+
+def check_point(path: str, point: dict[str, Any]) -> None:
+    """Raise :class:`cosim.run.scenario.ScenarioError` (naming the ``--set`` option) when a grid
+    point names no variable or gives a value of the wrong type (``controller.N=abc`` for an
+    Integer). A value outside [min, max] is left to the point's run, which fails alone: a
+    sweep may probe a range's edge on purpose."""
+    from cosim.run.scenario import ScenarioError, blame_override, check_against_fmus, load_scenario
+
+    sc = load_scenario(path, point)
+    descriptions = {c.name: _description(c.fmu_path)
+                    for c in sc.components.values() if c.fmu_path.is_file()}
+    if len(descriptions) < len(sc.components):
+        return  # a missing FMU: the run of the point says which
+    try:
+        check_against_fmus(sc, descriptions, ranges=False)
+    except ScenarioError as err:
+        raise blame_override(err, sc.path, sc.overrides) from None
+
+
+@functools.lru_cache(maxsize=64)
+def _cached_description(path: Path, mtime_ns: int) -> Any:
+    from fmpy import read_model_description
+
+    return read_model_description(str(path))
+
+
+def _description(path: Path) -> Any:
+    """The FMU's modelDescription, read once per file version."""
+    return _cached_description(path, path.stat().st_mtime_ns)
+
+
 def _key(scenario: str, point: dict[str, Any]) -> tuple[str, ...]:
     """A grid point as text, the same whether it comes from the grid or from sweep.csv."""
     return (Path(str(scenario)).stem, *(f"{k}={_text(v)}" for k, v in point.items()))
@@ -115,7 +150,24 @@ def _done_rows(csv_path: Path, keys: list[str]) -> list[dict[str, Any]]:
     earlier = pd.read_csv(csv_path, keep_default_na=False)
     if "status" not in earlier.columns or not set(keys) <= set(earlier.columns):
         raise ValueError(f"{csv_path}: not a sweep over {', '.join(keys)}; cannot resume it")
-    return [row for row in earlier.to_dict("records") if row["status"] == "ok"]
+    text_columns = {"scenario", "status", "error"}
+    return [{k: v if k in text_columns else _cell(v) for k, v in row.items()}
+            for row in earlier.to_dict("records") if row["status"] == "ok"]
+
+
+def _cell(value: Any) -> Any:
+    """A sweep.csv cell read as text back to what was written: None for an empty cell, an int
+    or a float for a number (a column with empty cells is read as text, not as numbers)."""
+    if not isinstance(value, str):
+        return value
+    if value == "":
+        return None
+    for kind in (int, float):
+        try:
+            return kind(value)
+        except ValueError:
+            pass
+    return value
 
 
 class _RowWriter:
@@ -177,6 +229,8 @@ def run_sweep(scenario: str | Sequence[str], grid: dict[str, Sequence[Any]],
     paths = [str(find_scenario(s)) for s in scenarios]
     for path in paths:  # fail early on a bad scenario or key, and build what is missing
         ensure_built(load_scenario(path, points[0]))
+        for point in points:  # every point's values against the FMUs, before any runs
+            check_point(path, point)
     jobs = [(path, point) for path in paths for point in points]
     order = {_key(path, point): i for i, (path, point) in enumerate(jobs)}
     out = Path(out_dir) if out_dir is not None else None
@@ -212,7 +266,10 @@ def run_sweep(scenario: str | Sequence[str], grid: dict[str, Sequence[Any]],
         rows.sort(key=lambda r: order.get(_key(r["scenario"], {k: r[k] for k in grid}), 0))
         frame = pd.DataFrame(rows, columns=columns)
         if out is not None:
-            frame.to_csv(out / "sweep.csv", index=False)
+            written = frame.copy()
+            for col in COUNT_COLUMNS:  # integers with empty cells (a failed point): not 245.0
+                written[col] = pd.to_numeric(written[col]).round().astype("Int64")
+            written.to_csv(out / "sweep.csv", index=False)
             if plot and (frame["status"] == "ok").any():
                 plot_sweep(frame[frame["status"] == "ok"], list(grid), out / "sweep.png")
     return frame

@@ -14,11 +14,24 @@ import numpy as np
 
 from cosim.fmu.state import to_seconds
 from cosim.run.fmi_batch import Batch
+from cosim.run.master.errors import SimulationError
 from cosim.run.master.unit import Unit
 
 # families recorded as Python objects in list columns (not numbers)
 LIST_FAMILIES = ("String", "Binary")
 
+
+
+def available_memory() -> int | None:
+    """Bytes of memory available to a new allocation (Linux MemAvailable), None if unknown."""
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    return None
 
 class Observer:
     """Called at each output point ``ticks`` (after the values flowed) and at the end."""
@@ -59,11 +72,29 @@ class Recorder(Observer):
             if family not in LIST_FAMILIES:
                 width += len(vrs)
         self._width = width
+        self.check_fits(n_points, width)
         self._store = np.full((n_points, width), np.nan)
         self._positions = [p for g in self._groups if g[1] not in LIST_FAMILIES
                            for p in range(g[5], g[5] + len(g[3]))]
         self._reads: list[tuple[Batch, Any, int, Any]] | None = None
         self.next_event: dict[Unit, float] = {}  # read at the last sampled point
+
+
+    # the store, the ordered copy the results frame is made from and the pandas table
+    COPIES = 3
+
+    def check_fits(self, n_points: int, width: int) -> None:
+        """Refuse, before any step, a recording larger than the memory available: it needs
+        ``n_points x width x 8`` bytes, :attr:`COPIES` times while the results are written."""
+        need = n_points * width * 8
+        available = available_memory()
+        if available is not None and self.COPIES * need > available:
+            raise SimulationError(
+                f"the recording needs {need / 2**30:.3g} GiB ({n_points} output points x "
+                f"{width} values x 8 bytes; {self.COPIES * need / 2**30:.3g} GiB with the "
+                f"results table), more than the {available / 2**30:.3g} GiB of memory "
+                "available: shorten [simulation] stop_time, lengthen output_interval or "
+                "record fewer [record] variables")
 
     def bind(self) -> None:
         """Allocate the FMI calls (after the FMUs are instantiated)."""
