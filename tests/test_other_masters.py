@@ -98,3 +98,22 @@ def test_fmpy_replays_plant_from_recorded_inputs(path, built_fmus):
     assert len(replay) == len(frame)
     assert max(diffs.values()) <= 1e-9, diffs
     assert max(np.ptp(frame[f"{plant.name}.{o}"]) for o in outputs) > 0  # something moved
+
+
+def test_a_parameter_out_of_its_declared_range_is_refused_before_libcosim(built_fmus):
+    from cosim.run.scenario import ScenarioError
+
+    with pytest.raises(ScenarioError, match="mass"):
+        run_libcosim("seed000_stop_pid", {"plant.mass": -1.0})
+
+
+def test_libcosim_aborting_its_process_is_an_error_here_not_an_exit(built_fmus):
+    """A start value the FMU rejects at initialisation makes libcosim throw through its C API
+    (std::terminate, SIGABRT): in the child process that ends only the child, and the error
+    carries libcosim's report."""
+    from cosim.interop.libcosim import LibcosimError, _isolated
+    from cosim.run.scenario import load_scenario
+
+    sc = load_scenario("seed000_stop_pid", {"plant.mass": -1.0})  # past cosim's range check
+    with pytest.raises(LibcosimError, match="(?s)ended its process.*fmi2Error"):
+        _isolated("_run_libcosim", sc, None, None)

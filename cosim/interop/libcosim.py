@@ -159,13 +159,68 @@ def _record_refs(sc: Scenario, slaves: _Slaves, record: list[str] | None) -> lis
     return out
 
 
+def _isolated(function: str, *args: Any) -> pd.DataFrame:
+    """Call ``function`` of this module in a child Python process and return its frame.
+
+    libcosim aborts its process on some refusals (an FMU rejecting a start value at
+    initialisation, an SSP Enumeration connector: "Don't know how to handle Enumeration
+    type!"), which no Python exception can catch. In a child the abort ends only the child;
+    the error raised here carries what libcosim and the FMU wrote to the child's stderr."""
+    import os
+    import pickle
+    import subprocess
+    import sys
+    import tempfile
+
+    with tempfile.TemporaryDirectory(prefix="ato-libcosim-") as tmp:
+        request, reply = Path(tmp) / "request.pkl", Path(tmp) / "reply.pkl"
+        request.write_bytes(pickle.dumps((function, args)))
+        env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p))
+        proc = subprocess.run([sys.executable, "-m", "cosim.interop.libcosim", str(request),
+                               str(reply)], env=env, capture_output=True, text=True)
+        if reply.is_file():
+            ok, value = pickle.loads(reply.read_bytes())
+            if ok:
+                return value
+            raise LibcosimError(value)
+        tail = "\n".join(proc.stderr.strip().splitlines()[-12:])
+        raise LibcosimError(f"libcosim ended its process (exit status {proc.returncode}) in "
+                            f"{function.removeprefix('_')}"
+                            + (f"; it reported:\n{tail}" if tail else ""))
+
+
+def _child(request: str, reply: str) -> None:
+    """The child of :func:`_isolated`: run the request, pickle ``(ok, frame or message)``."""
+    import pickle
+
+    function, args = pickle.loads(Path(request).read_bytes())
+    try:
+        result = (True, globals()[function](*args))
+    except Exception as err:  # reported to the parent as a LibcosimError
+        result = (False, str(err) if isinstance(err, LibcosimError)
+                  else f"{type(err).__name__}: {err}")
+    Path(reply).write_bytes(pickle.dumps(result))
+
+
 def run_libcosim(scenario: str | Path | Scenario, overrides: dict[str, Any] | None = None,
                  step: float | None = None, record: list[str] | None = None) -> pd.DataFrame:
     """Run a scenario's FMUs under libcosim's fixed-step master (base step: ``step``, else the
     scenario's ``base_step``, else its ``output_interval``). Returns a frame with ``time`` (s,
-    from h to stop_time) and the recorded ``component.variable`` columns."""
-    CosimExecution, CosimSlave, _, enums = _lc()
+    from h to stop_time) and the recorded ``component.variable`` columns. libcosim runs in a
+    child process (:func:`_isolated`), so its aborts become a :class:`LibcosimError`."""
+    from fmpy import read_model_description
+
+    from cosim.run.scenario import check_against_fmus
+
     sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario, overrides)
+    # what cosim run refuses (names, types, ranges) is refused here too, naming the key
+    check_against_fmus(sc, {c.name: read_model_description(str(c.fmu_path))
+                            for c in sc.components.values()})
+    return _isolated("_run_libcosim", sc, step, record)
+
+
+def _run_libcosim(sc: Scenario, step: float | None, record: list[str] | None) -> pd.DataFrame:
+    CosimExecution, CosimSlave, _, enums = _lc()
     sim = sc.simulation
     if sim.start_time != 0.0:
         raise LibcosimError("libcosim runs start at t = 0 here")
@@ -192,7 +247,12 @@ def run_libcosim(scenario: str | Path | Scenario, overrides: dict[str, Any] | No
 
 def run_ssp(ssp_path: str | Path, record: list[str], stop_time: float,
             step: float) -> pd.DataFrame:
-    """Run an SSP (e.g. from ``cosim export --ssp``) with libcosim's fixed-step master."""
+    """Run an SSP (e.g. from ``cosim export --ssp``) with libcosim's fixed-step master, in a
+    child process as :func:`run_libcosim`."""
+    return _isolated("_run_ssp", str(ssp_path), list(record), float(stop_time), float(step))
+
+
+def _run_ssp(ssp_path: str, record: list[str], stop_time: float, step: float) -> pd.DataFrame:
     CosimExecution, _, _, _ = _lc()
     step_ticks = to_ticks(step)
     execution = CosimExecution.CosimExecution.from_ssp_file(str(ssp_path), step_ticks)
@@ -243,3 +303,9 @@ def simulate_single(fmu_path: str | Path, frame: pd.DataFrame, inputs: dict[str,
                           step_size=h, output_interval=h, start_values=parameters or {},
                           input=signal, output=outputs, fmi_type="CoSimulation")
     return pd.DataFrame({name: result[name] for name in result.dtype.names})
+
+
+if __name__ == "__main__":  # the child of _isolated
+    import sys
+
+    _child(sys.argv[1], sys.argv[2])
