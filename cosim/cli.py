@@ -468,16 +468,19 @@ def export(
         "--set", help="override NAME.key=value (repeatable)")] = None,
 ) -> None:
     """Export a scenario and its FMUs as an SSP 1.0 package (SystemStructure.ssd + FMUs)."""
-    from cosim.interop.ssp import export_ssp
+    from cosim.interop.ssp import export_notes, export_ssp
     from cosim.run.results import check_destination
-    from cosim.run.scenario import ScenarioError
+    from cosim.run.scenario import ScenarioError, load_scenario
 
     try:
         check_destination(ssp, "--ssp", is_dir=False)
-        path = export_ssp(scenario, ssp, overrides=set_ or None)
+        sc = load_scenario(scenario, set_ or None)
+        path = export_ssp(sc, ssp)
     except (ScenarioError, ValueError, FileNotFoundError) as err:
         _fail(str(err))
     out.print(f"wrote {path}", highlight=False, markup=False)
+    for note in export_notes(sc):
+        console.print(f"note: {note}", highlight=False, markup=False)
 
 
 @app.command()

@@ -33,7 +33,9 @@ SSD = "http://ssp-standard.org/SSP1/SystemStructureDescription"
 SSC = "http://ssp-standard.org/SSP1/SystemStructureCommon"
 SSV = "http://ssp-standard.org/SSP1/SystemStructureParameterValues"
 OSP = "http://opensimulationplatform.com/SSP/OSPAnnotations"
-for _prefix, _uri in (("ssd", SSD), ("ssc", SSC), ("ssv", SSV), ("osp", OSP)):
+ATO = "urn:ato-cosim:ssp"  # our annotation: a component's max_step (s)
+ANNOTATION_TYPE = "org.ato-cosim.timing"
+for _prefix, _uri in (("ssd", SSD), ("ssc", SSC), ("ssv", SSV), ("osp", OSP), ("ato", ATO)):
     register_namespace(_prefix, _uri)
 
 _BASE_UNIT_KEYS = ("kg", "m", "s", "A", "K", "mol", "cd", "rad")
@@ -134,6 +136,10 @@ def build_ssd(sc: Scenario, sources: dict[str, str]) -> Element:
                      | {c.dst_var for c in sc.connections if c.dst == comp.name})
         used_units |= _component(elements, comp.name, sources[comp.name], md, values, connected,
                                  enumerations)
+        if comp.max_step is not None:  # SSP 1.0 has no such field: an annotation keeps it
+            note = SubElement(SubElement(elements[-1], _q(SSD, "Annotations")),
+                              _q(SSC, "Annotation"), {"type": ANNOTATION_TYPE})
+            SubElement(note, _q(ATO, "Timing"), {"maxStep": repr(float(comp.max_step))})
     if sc.connections:  # an empty ssd:Connections violates the schema
         connections = SubElement(system, _q(SSD, "Connections"))
     for c in sc.connections:
@@ -229,3 +235,12 @@ def export_ssp(scenario: str | Path | Scenario, out: str | Path,
         for path, target in files.items():
             z.write(path, target)
     return out
+
+
+def export_notes(sc: Scenario) -> list[str]:
+    """What an SSP 1.0 importer will not honour in the exported scenario: each component's
+    ``max_step``, written as an ``org.ato-cosim.timing`` annotation that libcosim ignores."""
+    return [f"[fmus.{c.name}] max_step = {c.max_step:g} s is kept as an SSP annotation "
+            f"({ANNOTATION_TYPE}); SSP 1.0 has no such field and libcosim ignores it: run the "
+            f"SSP with a base step of at most {c.max_step:g} s"
+            for c in sc.components.values() if c.max_step is not None]

@@ -60,3 +60,39 @@ def test_an_fmi3_component_is_refused_not_exported_without_connectors(c_fmus3, t
     with pytest.raises(ScenarioError, match=r"\[fmus.term\].*FMI 3.0 FMU.*SSP 1.0"):
         export_ssp(sc, out, build=False)
     assert not out.exists()
+
+
+def test_libcosim_refusing_an_enumeration_is_an_error_not_an_abort(c_fmus, tmp_path):
+    """libcosim cannot handle Enumeration connectors and aborts its process on them ("Don't
+    know how to handle Enumeration type!"); run_ssp runs it in a child process, so this is a
+    LibcosimError carrying that report and the calling process goes on."""
+    from cosim.interop.libcosim import LibcosimError, run_ssp
+
+    f = c_fmus["AllTypes"]
+    inputs = {"mode": "fast", "u": 1.0, "ui": 2, "ub": True, "us": "z"}
+    path = write_scenario(tmp_path, {"A": (f, {}, inputs),
+                                     "B": (f, {}, {k: v for k, v in inputs.items()
+                                                   if k != "mode"})},
+                          {"B.mode": "A.next_mode"})
+    out = export_ssp(path, tmp_path / "enum.ssp", build=False)
+    with pytest.raises(LibcosimError, match="Enumeration"):
+        run_ssp(out, ["B.mode"], 1.0, 0.1)
+
+
+def test_a_max_step_is_kept_as_an_annotation_and_named_in_the_notes(c_fmus, tmp_path):
+    from cosim.interop.ssp import ANNOTATION_TYPE, export_notes
+    from cosim.run.scenario import load_scenario
+
+    f = c_fmus["AllTypes"]
+    inputs = {"mode": "fast", "u": 1.0, "ui": 2, "ub": True, "us": "z"}
+    path = write_scenario(tmp_path, {"A": (f, {}, inputs)}, {})
+    text = path.read_text().replace("[fmus.A]\n", "[fmus.A]\nmax_step = 0.05\n", 1)
+    path.write_text(text)
+    sc = load_scenario(path)
+    assert sc.components["A"].max_step == 0.05
+    out = export_ssp(sc, tmp_path / "step.ssp", build=False)
+    read_ssd(str(out), validate=True)  # the annotation keeps the SSD schema-valid
+    xml = zipfile.ZipFile(out).read("SystemStructure.ssd").decode()
+    assert f'type="{ANNOTATION_TYPE}"' in xml and 'maxStep="0.05"' in xml
+    notes = export_notes(sc)
+    assert len(notes) == 1 and "[fmus.A] max_step = 0.05 s" in notes[0]
