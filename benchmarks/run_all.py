@@ -57,6 +57,7 @@ import bench_sweep  # noqa: E402
 from raw_loop import raw_fmpy_loop  # noqa: E402
 
 from cosim.fmu.build import build_stale  # noqa: E402
+from cosim.run import docs_pages  # noqa: E402
 from cosim.run.master import run_scenario  # noqa: E402
 
 FREIGHT, EMU = "seed002_freight_pid", "seed001_emu_pid"
@@ -250,6 +251,10 @@ def main() -> None:
                                    default=float) + "\n")
     print(f"wrote {args.out} (load average {meta['load_average'][0]:.1f} on {meta['cpus']} "
           "cores: figures scale with it)")
+    if args.out == docs_pages.BENCHMARKS_JSON:  # the site's page follows its source
+        page = docs_pages.DOCS / "benchmarks.md"
+        page.write_text(docs_pages.benchmarks_page(args.out))
+        print(f"wrote {page}")
 
 
 if __name__ == "__main__":

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 from contextlib import contextmanager
 from pathlib import Path
@@ -23,20 +24,68 @@ def _fail(message: str, code: int = 2) -> None:
     raise typer.Exit(code)
 
 
+FMI_CHOICES = {"2": (2,), "3": (3,), "all": (2, 3)}
+
+
+def _fmi_versions(fmi: str) -> tuple[int, ...]:
+    if fmi not in FMI_CHOICES:
+        _fail(f"--fmi {fmi!r}: expected one of {', '.join(FMI_CHOICES)}")
+    return FMI_CHOICES[fmi]
+
+
 @app.command()
 def build(names: Annotated[list[str] | None, typer.Argument(
-        help="FMU identifiers (default: all)")] = None) -> None:
+        help="FMU identifiers (default: all)")] = None,
+          fmi: Annotated[str, typer.Option(
+              "--fmi", help="FMI version to build: 2 (fmus/<id>.fmu), 3 (fmus/fmi3/<id>.fmu, "
+              "co-simulation with Event Mode for the controllers) or all. Default all: the "
+              "FMI 3 build is derived from the same FMI 2 build (same Python bundle, a C "
+              "front in front of it), so both cost little more than one")] = "all",
+          native: Annotated[bool, typer.Option(
+              "--native", help="build the native C FMUs (FMI 2.0, no Python needed) into "
+              "fmus/native/ instead: linux64 with gcc, win64 too when x86_64-w64-mingw32-gcc "
+              "is installed; the named ones or all that have a C model")] = False) -> None:
     """Build FMUs into fmus/ (all, or the named ones)."""
-    from cosim.fmu.build import build_fmu, resolve
+    from cosim.fmu.build import build_fmus, resolve
+    from cosim.fmu.fmi3 import Fmi3BuildError
 
+    if native:
+        _build_native(names)
+        return
+    versions = _fmi_versions(fmi)
     try:
         specs = resolve(names)
     except ValueError as err:
         _fail(str(err))
     for spec in specs:
-        path = build_fmu(spec)
+        try:
+            paths = build_fmus(spec, fmi_versions=versions)
+        except Fmi3BuildError as err:
+            _fail(f"{spec.identifier}: {err}")
+        for path in paths:
+            shown = path.relative_to(Path.cwd()) if path.is_relative_to(Path.cwd()) else path
+            out.print(f"built {shown}  ({spec.description})", highlight=False, markup=False)
+
+
+def _build_native(names: list[str] | None) -> None:
+    from cosim.fmu.native_build import NATIVE, CompilerMissing, build_native
+
+    for name in names or sorted(NATIVE):
+        try:
+            path = build_native(name)
+        except (ValueError, CompilerMissing, RuntimeError) as err:
+            _fail(str(err))
         shown = path.relative_to(Path.cwd()) if path.is_relative_to(Path.cwd()) else path
-        out.print(f"built {shown}  ({spec.description})", highlight=False, markup=False)
+        out.print(f"built {shown}  (native C, FMI 2.0)", highlight=False, markup=False)
+
+
+def _built(path: Path) -> str:
+    """``cosim list``'s cell for one FMU file: built, no, or corrupt (rebuilt on next use)."""
+    from cosim.fmu.build import is_intact
+
+    if not path.is_file():
+        return "no"
+    return "built" if is_intact(path) else "corrupt (rebuilt on next use)"
 
 
 @app.command("list")
@@ -47,10 +96,11 @@ def list_() -> None:
 
     table = Table(title="FMUs", show_edge=False)
     table.add_column("identifier")
-    table.add_column("built")
+    table.add_column("FMI 2")
+    table.add_column("FMI 3")
     table.add_column("description")
     for spec in catalog().values():
-        table.add_row(escape(spec.identifier), "yes" if spec.path.is_file() else "no",
+        table.add_row(escape(spec.identifier), _built(spec.path), _built(spec.path_fmi3),
                       escape(spec.description))
     out.print(table)
     table = Table(title="Scenarios", show_edge=False)
@@ -76,19 +126,38 @@ SUMMARY_KEYS = ("stop_error_m", "final_speed_mps", "command_switches", "speed_rm
                 "executions", "do_steps", "sim_time_s", "wall_time_s", "real_time_factor")
 
 
+# bookkeeping of summary.json that the printed summary leaves to the file
+_NOT_PRINTED = {"completed", "error", "algorithm", "warnings", "fmu_wall_time_s", "do_steps",
+                "command_switch_resolution", "terminated_by", "ma_sample_time_s"}
+
+
+def summary_rows(summary: dict) -> list[tuple[str, str]]:
+    """(metric, value) rows of the printed summary: the usual metrics in SUMMARY_KEYS' order,
+    then every further scalar metric the scenario's [summary] produced (each family's
+    headline figures), dictionaries shortened; the bookkeeping stays in summary.json."""
+    keys = [k for k in SUMMARY_KEYS if k in summary and k not in _NOT_PRINTED]
+    keys += [k for k, v in summary.items() if k not in keys and k not in _NOT_PRINTED
+             and isinstance(v, (int, float, bool, str))]
+    rows = []
+    for key in keys:
+        value = summary[key]
+        if isinstance(value, float):
+            value = f"{value:.6g}"
+        elif isinstance(value, dict):
+            value = ", ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}"
+                              for k, v in value.items())
+        rows.append((key, str(value)))
+    return rows
+
+
 def print_summary(summary: dict, title: str) -> None:
-    table = Table(title=escape(title), show_header=False, show_edge=False)
-    table.add_column("metric", style="bold")
-    table.add_column("value")
-    for key in SUMMARY_KEYS:
-        if key in summary:
-            value = summary[key]
-            if isinstance(value, float):
-                value = f"{value:.6g}"
-            elif isinstance(value, dict):
-                value = ", ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}"
-                                  for k, v in value.items())
-            table.add_row(key, escape(str(value)))
+    """The summary as a two-column table at most 80 columns wide (long values wrap)."""
+    table = Table(title=escape(title), show_header=False, show_edge=False,
+                  width=min(80, out.width))
+    table.add_column("metric", style="bold", no_wrap=True)
+    table.add_column("value", overflow="fold")
+    for key, value in summary_rows(summary):
+        table.add_row(key, escape(value))
     out.print(table)
 
 
@@ -103,8 +172,14 @@ def run(
     set_: Annotated[list[str] | None, typer.Option(
         "--set", help="override, e.g. plant.mass=539000, controller.N=10, "
                       "simulation.stop_time=80 (repeatable)")] = None,
+    fmi: Annotated[int | None, typer.Option(
+        "--fmi", help=escape("2 or 3: run the FMI 2.0 or FMI 3.0 builds of catalog FMUs "
+                             "(fmus/<Id>.fmu or fmus/fmi3/<Id>.fmu); overrides [simulation] "
+                             "fmi_version"))] = None,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="no progress bar")] = False,
-    no_plot: Annotated[bool, typer.Option("--no-plot", help="skip plot.png")] = False,
+    no_plot: Annotated[bool, typer.Option("--no-plot", help="skip the plot")] = False,
+    plot_format: Annotated[str, typer.Option(
+        "--format", help="plot file format: png (200 dpi), svg or pdf")] = "png",
     force: Annotated[bool, typer.Option(
         "--force", help="let partial results replace a complete earlier run in --out "
         "(otherwise they go to <out>.partial)")] = False,
@@ -119,23 +194,28 @@ def run(
     at once."""
     from cosim.run import interrupt
     from cosim.run.master import SimulationError, run_scenario
-    from cosim.run.results import OutputError, check_destination
+    from cosim.run.results import PLOT_FORMATS, OutputError, check_destination, locked_destination
     from cosim.run.scenario import ScenarioError, find_scenario
 
-    with interrupt.guard(restore=False):
+    with contextlib.ExitStack() as held, interrupt.guard(restore=False):
         if not console.is_terminal and not quiet:
             console.print(f"cosim run {scenario}", highlight=False, markup=False)
         try:
+            if plot_format not in PLOT_FORMATS:
+                raise OutputError(f"--format {plot_format}: one of {', '.join(PLOT_FORMATS)}")
             path = find_scenario(scenario)
             target = out_dir or Path("runs") / path.stem
             check_destination(target)
+            held.enter_context(locked_destination(target))
         except (ScenarioError, OutputError) as err:
             _fail(str(err))
         with _progress(path.stem, quiet) as on_progress:
             try:
-                result = run_scenario(path, overrides=set_ or [], algorithm=algorithm,
+                overrides = [*(set_ or []),
+                             *([f"simulation.fmi_version={fmi}"] if fmi is not None else [])]
+                result = run_scenario(path, overrides=overrides, algorithm=algorithm,
                                       out_dir=target, progress=on_progress, plot=not no_plot,
-                                      force=force)
+                                      force=force, plot_format=plot_format)
             except interrupt.Interrupted as err:
                 on_progress.stop()
                 console.print(f"[bold yellow]{escape(str(err))}[/]", highlight=False,
@@ -145,7 +225,8 @@ def run(
                 on_progress.stop()
                 _fail(str(err))
         print_summary(result.summary, f"{path.stem} ({result.algorithm})")
-        out.print(f"wrote {target}/results.csv, summary.json" + ("" if no_plot else ", plot.png"),
+        out.print(f"wrote {target}/results.csv, summary.json"
+                  + ("" if no_plot else f", plot.{plot_format}"),
                   highlight=False, markup=False)
         for warning in result.summary.get("warnings", []):
             console.print(f"[bold yellow]warning:[/] {escape(warning)}", highlight=False,
@@ -202,8 +283,12 @@ def validate(
     fmus: Annotated[list[str] | None, typer.Argument(
         help="FMU identifiers or .fmu paths (default: every FMU of the catalog)")] = None,
     as_json: Annotated[bool, typer.Option("--json", help="machine-readable report")] = False,
+    fmi: Annotated[str, typer.Option(
+        "--fmi", help="for our FMUs named by identifier: check the FMI 2 build (2), the FMI 3 "
+        "build (3) or both (all)")] = "2",
     lenient: Annotated[bool, typer.Option(
-        "--lenient", help="for third-party FMUs: only what FMI 2.0.4 requires is an error; "
+        "--lenient", help="for third-party FMUs: only what FMI 2.0.4 / FMI 3.0 requires is "
+        "an error; "
         "what it recommends or leaves to the FMU, and our project conventions (units "
         "everywhere, explicit output dependencies, default step size), are warnings")] = False,
     call_timeout: Annotated[float, typer.Option(
@@ -213,9 +298,11 @@ def validate(
         help="seconds one FMU's whole check may take (a backstop for hangs the per-call "
         "watchdog misses)")] = 120.0,
 ) -> None:
-    """FMI 2.0 compliance checks (cosim.interop.compliance) on FMUs; non-zero exit on an error."""
+    """FMI 2.0 / FMI 3.0 compliance checks (cosim.interop.compliance, chosen by the FMU's
+    fmiVersion) on FMUs; non-zero exit on an error."""
     from cosim.fmu.build import build_fmu, catalog
 
+    versions = _fmi_versions(fmi)
     specs = catalog()
     paths: list[Path] = []
     for name in fmus or list(specs):
@@ -224,9 +311,11 @@ def validate(
                 _fail(f"{name}: no such file")
             paths.append(Path(name))
         elif name in specs:
-            if not specs[name].path.is_file():
-                build_fmu(specs[name])
-            paths.append(specs[name].path)
+            for version in versions:
+                path = specs[name].path_for(version)
+                if not path.is_file():
+                    build_fmu(specs[name], fmi_version=version)
+                paths.append(path)
         else:
             _fail(f"unknown FMU {name!r}; known: {sorted(specs)}")
     from cosim.interop.compliance import Options, check_fmu, format_report, passed
@@ -268,7 +357,7 @@ def sweep(
     scheduler: Annotated[str | None, typer.Option(
         help="run the points on a Dask distributed cluster: its scheduler address (e.g. "
         "tcp://10.0.0.5:8786), or 'local-dask' to start a local one of --workers processes; "
-        "needs the 'dask' extra (pip install 'ato-cosim[dask]')")] = None,
+        "needs the 'dask' extra (pip install 'ato-cosim\\[dask]')")] = None,
     shared_fmus: Annotated[bool, typer.Option(
         "--shared-fmus", help="with --scheduler: the workers read the FMUs at this machine's "
         "paths (a shared file system) instead of receiving uploaded copies")] = False,
@@ -399,42 +488,97 @@ def reproduce(
                                                  "(default runs/reproduce/<name>)")] = None,
     workers: Annotated[int | None, typer.Option(
         help="parallel processes (default: CPUs)", min=1)] = None,
+    seeds: Annotated[int | None, typer.Option(
+        help="members of each claim's ensemble: the first K report seeds (default 20)",
+        min=1)] = None,
+    no_rounding: Annotated[bool, typer.Option(
+        "--no-rounding", help="skip the claims' rerun on the perturbed floating-point "
+        "path (then no claim is marked rounding-robust)")] = False,
+    scheduler: Annotated[str | None, typer.Option(
+        help="run the claims' ensemble on a Dask cluster: its address, or 'local-dask' for "
+        "a local cluster of --workers processes")] = None,
 ) -> None:
     """Reproduce a paper's results: run its scenarios, write the table (ours beside the
-    paper's), the sweeps and the figures; 'all' writes one REPRODUCTION.md."""
+    paper's), the sweeps and the figures, and test its claims over K seeds (claims.csv,
+    claims.md: median [95 % CI], k of K, verdict); 'all' writes one REPRODUCTION.md."""
     from cosim.run.master import SimulationError
     from cosim.run.reproduce import ReproduceError, entry_names, reproduce_all
     from cosim.run.reproduce import reproduce as reproduce_entry
+    from cosim.run.results import OutputError, check_destination
     from cosim.run.scenario import ScenarioError
 
     try:
+        if out_dir is not None:
+            check_destination(out_dir)
         if name == "all":
-            path = reproduce_all(out_dir, workers)
+            path = reproduce_all(out_dir, workers, seeds, not no_rounding, scheduler)
         else:
             if name not in entry_names() and not Path(name).is_file():
                 raise ReproduceError(f"no reproduction entry {name!r} "
                                      f"(known: {', '.join(entry_names())}, all)")
-            path = reproduce_entry(name, out_dir, workers)
-    except (ReproduceError, ScenarioError, SimulationError) as err:
+            path = reproduce_entry(name, out_dir, workers, seeds, not no_rounding,
+                                    scheduler)
+    except (ReproduceError, ScenarioError, SimulationError, OutputError) as err:
         _fail(str(err))
+    except OSError as err:  # a folder that became unwritable during the run
+        _fail(f"cannot write {err.filename or out_dir}: {err.strerror or err}")
     out.print(path.read_text(), markup=False, highlight=False)
     out.print(f"wrote {path}")
 
 
+def cli_reference() -> str:
+    """``docs/cli.md``: every command's usage, help text and options, read from the click
+    command tree typer builds (so the page says what ``--help`` says)."""
+    group = typer.main.get_command(app)
+    ctx = group.context_class(group, info_name="cosim")
+    lines = ["# CLI reference", "",
+             "Generated by `cosim docs` from the commands themselves; do not edit by hand. "
+             "`cosim COMMAND --help` prints the same.", "", group.help or "", ""]
+    for name in group.list_commands(ctx):
+        cmd = group.get_command(ctx, name)
+        sub = cmd.context_class(cmd, info_name=name, parent=ctx)
+        lines += [f"## cosim {name}", "", "```text", cmd.get_usage(sub).replace(
+            "Usage: ", ""), "```", "", (cmd.help or "").strip(), ""]
+        rows = []
+        for param in cmd.params:
+            if param.name == "help":
+                continue
+            text = getattr(param, "help", "") or ""
+            if param.param_type_name == "option":
+                names = ", ".join(param.opts + param.secondary_opts)
+                if not getattr(param, "is_flag", False) and param.default not in (None, [], ()):
+                    text += f" (default: {param.default})"
+            else:
+                names = (param.name or "").upper()
+            rows.append(f"| `{names}` | {' '.join(text.split()).replace('|', chr(92) + '|')} |")
+        if rows:
+            lines += ["| argument or option | meaning |", "| --- | --- |", *rows, ""]
+    return "\n".join(lines).rstrip() + "\n"
+
+
 @app.command()
 def docs(check: Annotated[bool, typer.Option(
-        "--check", help="exit 1 if docs/fmus.md is out of date instead of writing it")] = False,
-         ) -> None:
-    """Write docs/fmus.md, the FMU reference generated from the cores' declarations."""
-    from cosim.fmu.reference import REFERENCE_PATH, fmu_reference, write_reference
+        "--check", help="exit 1 if a generated page is out of date instead of writing it")
+        ] = False) -> None:
+    """Write the generated pages of the documentation site: the CLI reference (docs/cli.md),
+    the FMU reference (docs/fmus.md, from the cores' declarations), the benchmarks
+    (docs/benchmarks.md, from benchmarks/results.json) and a page per paper
+    (docs/papers/NAME.md, from runs/reproduce/NAME/ where it exists)."""
+    from cosim.run.docs_pages import DOCS, generated_pages, stale, write
+
+    def pages():
+        yield DOCS / "cli.md", cli_reference().encode()
+        yield from generated_pages()
 
     if check:
-        current = REFERENCE_PATH.read_text() if REFERENCE_PATH.is_file() else ""
-        if current != fmu_reference():
-            _fail(f"{REFERENCE_PATH} is out of date: run `cosim docs`", code=1)
-        out.print(f"{REFERENCE_PATH} is up to date")
+        old = stale(pages())
+        if old:
+            _fail("out of date: " + ", ".join(str(p) for p in old) + ": run `cosim docs`",
+                  code=1)
+        out.print("generated pages are up to date")
         return
-    out.print(f"wrote {write_reference()}")
+    for path in write(pages()):
+        out.print(f"wrote {path}", highlight=False, markup=False)
 
 
 def main() -> None:  # pragma: no cover - console entry point

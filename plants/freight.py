@@ -92,6 +92,7 @@ from scipy.linalg import solveh_banded
 from cosim.fmu.declare import Declared, Var, build, param, parameters
 from cosim.fmu.state import TICKS_PER_SECOND, StatefulCore, to_seconds, to_ticks
 from plants import dead_time, kernels
+from plants.kernels import shoe_friction as _shoe_friction  # the plain-Python definition
 from plants.route import (
     GRAVITY,
     KMH,
@@ -199,14 +200,12 @@ class FreightParams:
 
 def friction_coefficient(v: np.ndarray) -> np.ndarray:
     """Converted friction coefficient of high-friction composite shoes, v in m/s (TB/T 1407)."""
-    kmh = np.abs(v) / KMH
-    return 0.322 * (kmh + 150.0) / (2.0 * kmh + 150.0)
+    return _shoe_friction(np.abs(v) / KMH)
 
 
 def friction_coefficient_at(v: float) -> float:
     """:func:`friction_coefficient` of one speed (m/s) in plain floats (the same operations)."""
-    kmh = abs(v) / KMH
-    return 0.322 * (kmh + 150.0) / (2.0 * kmh + 150.0)
+    return _shoe_friction(abs(v) / KMH)
 
 
 PRESSURE_VEHICLES = (1, 28, 55, 82, 109)  # vehicles whose cylinder pressure is an output

@@ -1,4 +1,4 @@
-"""Compiled plant kernels (numba), one call per communication step (issue 10).
+"""Compiled plant kernels (numba), one call per communication step.
 
 :func:`freight_steps` advances :class:`plants.freight.FreightTrain` over a run of sub-steps with
 the equations of its numpy reference (``FreightTrain._substep``, kept and tested against this):
@@ -26,6 +26,7 @@ import os
 import tempfile
 import threading
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -125,10 +126,18 @@ def compile_kernels() -> bool:
 
         _install_locator(caching)
         space = globals()
-        for name in _HELPERS:
-            space[name] = numba.njit(**_OPTIONS)(space[name])
-        for name, signature in _ENTRIES.items():
-            space[name] = numba.njit(signature, **_OPTIONS)(space[name])
+        originals = {name: space[name] for name in (*_HELPERS, *_ENTRIES)}
+        if not _cache_entries_valid():
+            _discard_cache()
+        for cache in (True, False):  # a cache that fails to load: compile without it
+            try:
+                _jit(numba, space, originals, cache)
+                break
+            except Exception:  # noqa: BLE001 - any failure of a cache entry or of numba
+                space.update(originals)
+                if not cache:
+                    return False  # the plants run their numpy reference
+                _discard_cache()
         _compiled = True
     try:  # mark this version's folder as in use (prune_cache keeps recently used ones)
         os.utime(cache_dir() / _DIGEST)
@@ -136,6 +145,48 @@ def compile_kernels() -> bool:
         pass
     prune_cache()
     return True
+
+
+def _jit(numba: Any, space: dict[str, Any], originals: dict[str, Any], cache: bool) -> None:
+    """Compile every helper and kernel from its Python function (``cache``: through the
+    on-disk cache); the eager kernels compile, or load their cache entries, here."""
+    options = {**_OPTIONS, "cache": cache}
+    for name in _HELPERS:
+        space[name] = numba.njit(**options)(originals[name])
+    for name, signature in _ENTRIES.items():
+        space[name] = numba.njit(signature, **options)(originals[name])
+
+
+# numba cache entries that only the process which wrote them can load: a function of a module
+# that was not importable by name is pickled as the module '<dynamic>'
+_UNLOADABLE = (b"<dynamic>",)
+
+
+def _cache_entries_valid() -> bool:
+    """False when this version's cache folder holds an entry no other process can load
+    (:data:`_UNLOADABLE`) or an empty file; a garbled or truncated entry is found when numba
+    fails to load it (see :func:`compile_kernels`)."""
+    folder = cache_dir() / _DIGEST
+    try:
+        for entry in folder.iterdir():
+            if entry.suffix in (".nbi", ".nbc"):
+                data = entry.read_bytes()
+                if not data or any(mark in data for mark in _UNLOADABLE):
+                    return False
+    except OSError:
+        return True  # no folder yet (or unreadable: numba then uses no cache)
+    return True
+
+
+def _discard_cache() -> None:
+    """Remove this version's numba cache files (they are rebuilt by the next compilation)."""
+    folder = cache_dir() / _DIGEST
+    try:
+        for entry in folder.iterdir():
+            if entry.suffix in (".nbi", ".nbc"):
+                entry.unlink(missing_ok=True)
+    except OSError:
+        pass
 
 
 def prune_cache(keep_days: float = 7.0) -> list[Path]:
@@ -175,6 +226,14 @@ def prune_cache(keep_days: float = 7.0) -> list[Path]:
 N_CONST = 19
 # scalar state vector (in/out)
 S_TRACTION, S_ENERGY, S_PEAK_DRAFT, S_PEAK_BUFF, S_ACCEL, S_FIRST, S_HELD = range(7)
+
+
+@njit
+def shoe_friction(kmh):
+    """Converted friction coefficient of high-friction composite brake shoes (TB/T 1407):
+    ``phi = 0.322 (v + 150) / (2 v + 150)``, v in km/h (>= 0). The one definition: the plant's
+    numpy path, the controllers and the compiled kernels all call it."""
+    return 0.322 * (kmh + 150.0) / (2.0 * kmh + 150.0)
 
 
 @njit
@@ -289,7 +348,7 @@ def _freight_holds(traction, mean_p, braking, x, length, weight_per_kn, brake_sc
         c_front, hint_f[i] = _interp(x[i], xs, cum, slopes, hint_f[i])
         c_rear, hint_r[i] = _interp(x[i] - length[i], xs, cum, slopes, hint_r[i])
         grade -= weight_per_kn[i] * ((c_front - c_rear) / length[i])
-        capacity += brake_scale[i] * mean_p[i] * 0.322 + res_a[i]
+        capacity += brake_scale[i] * mean_p[i] * shoe_friction(0.0) + res_a[i]
     return abs(traction + grade) <= capacity
 
 
@@ -404,8 +463,7 @@ def freight_steps(x, v, pres, sc, hs, t0s, t1s, demands, arrivals, values, m_eff
             diss = res_a[i] + (res_b[i] + res_c[i] * speed) * speed
             if braking:
                 kmh = abs(v[i]) / KMH
-                diss = diss + brake_scale[i] * mean_p[i] * (
-                    0.322 * (kmh + 150.0) / (2.0 * kmh + 150.0))
+                diss = diss + brake_scale[i] * mean_p[i] * shoe_friction(kmh)
             direction = max(min(v[i] / stiction, 1.0), -1.0)
             front = x[i] + 0.5 * h * v[i]
             c_front, hint_f[i] = _interp(front, xs, cum, slopes, hint_f[i])

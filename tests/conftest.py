@@ -13,3 +13,10 @@ def built_fmus() -> dict:
     build_stale()
     return catalog()
 
+
+@pytest.fixture(scope="session")
+def built_fmus_fmi3(built_fmus) -> dict:
+    """Every catalog FMU's FMI 3.0 build, up to date: identifier -> FmuSpec (``.path_fmi3``)."""
+    build_stale(fmi_version=3)
+    return built_fmus
+

@@ -43,7 +43,7 @@ def test_run_with_set_and_algorithm(built_fmus, tmp_path):
 
 @pytest.mark.parametrize("args,message", [
     (("run", "seed000_stop_pdi"), "did you mean 'seed000_stop_pid'"),
-    (("run", "seed000_stop_pid", "--set", "plant.mass=-1"), "mass = -1 outside"),
+    (("run", "seed000_stop_pid", "--set", "plant.mass=-1"), "mass = -1: must be at least 1.0"),
     (("run", "seed000_stop_pid", "--set", "plant.nope=1"), "no variable 'nope'"),
     (("build", "NoSuchFmu"), "unknown FMU"),
 ])
@@ -71,3 +71,32 @@ def test_error_keeps_the_scenario_keys(built_fmus, tmp_path):
     assert done.returncode == 2
     assert ("[fmus.controller] sample_time = 0.2 s is not a multiple of [simulation] "
             "base_step = 1.0 s") in " ".join(done.stderr.split() + done.stdout.split())
+
+
+def test_printed_summary_has_the_family_metrics_and_fits_80_columns() -> None:
+    """Every scalar metric the scenario's [summary] produced is printed (seed 002's speed error
+    outside the stop window too), bookkeeping stays in summary.json, and the table fits 80
+    columns."""
+    import io
+
+    from rich.console import Console
+
+    from cosim import cli
+
+    summary = {"completed": True, "algorithm": "event", "warnings": [], "stop_error_m": 0.5,
+               "max_abs_speed_error_outside_stop_kmh": 0.64, "executions": {"plant": 7},
+               "command_switch_resolution": 1e-6, "real_time_factor": 462.1,
+               "scenario": "x" * 200}
+    rows = dict(cli.summary_rows(summary))
+    assert rows["max_abs_speed_error_outside_stop_kmh"] == "0.64"
+    assert rows["executions"] == "plant=7"
+    assert not {"completed", "algorithm", "warnings", "command_switch_resolution"} & set(rows)
+    buffer = io.StringIO()
+    old = cli.out
+    cli.out = Console(file=buffer, width=120)
+    try:
+        cli.print_summary(summary, "title")
+    finally:
+        cli.out = old
+    assert max(len(line) for line in buffer.getvalue().splitlines()) <= 80
+    assert "0.64" in buffer.getvalue()

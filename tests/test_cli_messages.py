@@ -56,3 +56,8 @@ def test_non_tty_run_prints_progress_every_tenth_and_set_takes_effect(built_fmus
 
     frame = pd.read_csv(tmp_path / "results.csv")
     assert frame["plant.v"].iloc[0] == 15.0  # the value the FMU received, not the file's 20
+
+
+def test_sweep_help_keeps_the_bracketed_extra():
+    done = cosim("sweep", "--help")
+    assert "ato-cosim[dask]" in done.stdout.replace("\n", " ").replace("│", "").replace(" ", "")

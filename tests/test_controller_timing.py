@@ -27,16 +27,18 @@ def stop_pid(built_fmus, tmp_path_factory):
 class Instance:
     """fmpy FMU2Slave of StopPid with its log kept."""
 
-    def __init__(self, stop_pid, name: str = "pid") -> None:
+    def __init__(self, stop_pid, name: str = "pid", strict: bool = False,
+                 logging: bool = True) -> None:
         md, unzipdir = stop_pid
         self.vr = {v.name: v.valueReference for v in md.modelVariables}
         self.messages: list[str] = []
         self._cb = logging_callbacks(lambda status, text: self.messages.append(text))
         self.fmu = FMU2Slave(guid=md.guid, unzipDirectory=unzipdir, instanceName=name,
                              modelIdentifier=md.coSimulation.modelIdentifier)
-        self.fmu.instantiate(callbacks=self._cb, loggingOn=True)
+        self.fmu.instantiate(callbacks=self._cb, loggingOn=logging)
         self.fmu.setupExperiment(startTime=0.0)
         self.fmu.setReal([self.vr["sample_time"]], [T])
+        self.fmu.setBoolean([self.vr["strict_steps"]], [strict])
         self.fmu.enterInitializationMode()
         self.fmu.exitInitializationMode()
 
@@ -51,13 +53,37 @@ class Instance:
         self.fmu.freeInstance()
 
 
-def test_step_over_a_sample_instant_is_refused(stop_pid):
-    pid = Instance(stop_pid)
+@pytest.mark.parametrize("logging", [True, False])
+def test_step_over_a_sample_instant_is_refused_when_strict(stop_pid, logging):
+    """strict_steps: the refusal, and its reason logged even with logging off (fmpy's
+    default), as the Reference FMUs log their errors."""
+    pid = Instance(stop_pid, strict=True, logging=logging)
     pid.set(v=20.0, s=0.0)
     with pytest.raises(FMICallException):
         pid.fmu.doStep(currentCommunicationPoint=0.0, communicationStepSize=1.0)
     assert any("passes over this controller's event at t=0.2 s" in m for m in pid.messages)
     pid.free()
+
+
+def test_events_inside_a_long_step_run_with_the_inputs_held(stop_pid):
+    """A 1 s step over a 0.2 s controller executes its 5 events (t = 0, 0.2, ..., 0.8) with
+    the inputs of the step's start, as five 0.2 s steps with the same inputs do; said once."""
+    long, short = Instance(stop_pid, "long"), Instance(stop_pid, "short")
+    for pid in (long, short):
+        pid.set(v=20.0, s=0.0)
+    for k in range(2):
+        long.fmu.doStep(currentCommunicationPoint=float(k), communicationStepSize=1.0)
+        for j in range(5):
+            short.fmu.doStep(currentCommunicationPoint=round(k + j * T, 9),
+                             communicationStepSize=T)
+    names = ("brake_command", "next_event_time")
+    assert long.get(*names) == short.get(*names)
+    count = [pid.fmu.getInteger([pid.vr["executions"]]) for pid in (long, short)]
+    assert count[0] == count[1] == [11]  # 10 committed, the one at t = 2 s shown
+    held = [m for m in long.messages if "executed with the inputs held" in m]
+    assert len(held) == 1 and not any("inputs held" in m for m in short.messages)
+    long.free()
+    short.free()
 
 
 def test_step_must_continue_from_own_time(stop_pid):

@@ -1,7 +1,7 @@
-"""Declare once: FMU variables come from the cores' declarations (issue 8).
+"""Declare once: FMU variables come from the cores' declarations.
 
-* the built FMUs' modelDescriptions equal those from before the move (digest in
-  ``tests/data/model_descriptions_before_issue8.json``) except the improvements listed here;
+* every built FMU's modelDescription publishes exactly its declarations (name, causality,
+  type, unit, range, start, description), and its descriptions say what is, never what was;
 * declarations and :func:`build` are inverse, groups flatten, per-configuration values keep;
 * no wrapper declares a variable of its own, and ``docs/fmus.md`` is current.
 """
@@ -10,96 +10,67 @@ from __future__ import annotations
 
 import ast
 import dataclasses
-import json
-import zipfile
+import re
 from pathlib import Path
 
 import pytest
+from fmpy import read_model_description
 
 from cosim.fmu.build import ROOT, catalog
 from cosim.fmu.declare import KEEP, Var, build, group, param, parameters
 from cosim.fmu.reference import REFERENCE_PATH, fmu_reference
-from cosim.run.model_digest import digest_model_description
 
-BEFORE = json.loads((ROOT / "tests/data/model_descriptions_before_issue8.json").read_text())
+_TYPES = {float: "Real", int: "Integer", bool: "Boolean", str: "String"}
 
-# (FMU, variable) -> description after issue 8: one shared declaration, one wording.
-IMPROVED_DESCRIPTIONS = {
-    **{(f, "s0"): "initial position of the train front" for f in ("BrakeDelayTrain", "Emu3",
-                                                               "Emu8")},
-    **{(f, "stop_point"): "stop position s_stop" for f in ("StopMpc", "StopRmpc", "StopRsmpc")},
-    ("FreightPid", "route"): "bundled route name or path of a route TOML file (its reference "
-                             "profile is tracked)",
-    **{(f, "terminal_set_scale"): "unused since issue 11 (the terminal set is the maximal "
-                                  "robust positively invariant set)"
-       for f in ("StopMpc", "StopRmpc", "StopRsmpc")},
-}
-# (FMU, variable) -> start changed on purpose since: issue 16 (the shared freight blending
-# decides the air brake 2 s ahead: without power braking an earlier application slows the
-# cruising train before the reference does)
-CHANGED_STARTS = {("FreightPid", "air_preview_time"): "2.0"}
-
-# Integer ranges now written into the modelDescription (issue 12: the scenario check catches
-# N = 1000 before anything runs)
-INTEGER_RANGES = {
-    ("FreightTrain", "traction_model"): {"min": "0", "max": "1"},
-    **{(f, "N"): {"min": "2", "max": "60"} for f in ("StopMpc", "StopRmpc", "StopRsmpc")},
-}
-
-# variables added since (FMU -> names), each by the issue that needed it
-ADDED_VARIABLES = {
-    **{f: {"qp_solver",  # issue 10
-           # issue 11: nominal resistance, spread W, observer, Euler design rows, counters
-           "nominal_resistance", "mass_uncertainty", "grade_uncertainty",
-           "disturbance_observer", "observer_gain", "design_model",
-           "qp_infeasible_after_stop", "events_moving", "events_standstill",
-           "resistance_estimate"} for f in ("StopMpc", "StopRmpc", "StopRsmpc")},
-    "BrakeDelayTrain": {"grade_scale"},  # issue 11: grade mismatch in the perturbation study
-    "StopPid": {"hold_at_stop_point"},  # issue 11: the full-brake rule made a parameter
-    **{f: {"disturbance_correlation_time", "disturbance_smooth"}  # issue 15
-       for f in ("Emu3", "Emu8")},
-    # issue 16: the shared freight blending's electric-brake final approach and the planned
-    # stop application (stop_ed_share)
-    "FreightPid": {"final_approach_distance", "stop_tolerance", "stop_ed_share"},
-    **{f: {"stop_ed_share"} for f in ("FreightFpid", "FreightSmc")},
-    # issue 16: the preview counts the air brake as a previewed disturbance and feeds back a
-    # blend of the head speed and its train-mean speed observer
-    "FreightPreview": {"stop_ed_share", "air_brake_preview", "mean_weight",
-                       "observer_correction_time", "v_mean_estimate"},
-}
+# narration of the project's past, which belongs in CHANGELOG.md and git, not in what an FMU
+# publishes: issue numbers, "was", "no longer", "used to", "(before)", "previously", passes
+HISTORY = re.compile(
+    r"\bissues? \d+|#\d+|\bwas\b|\bwere\b|\bno longer\b|\bused to\b|\(before\)|\bpreviously\b"
+    r"|\bformerly\b|\bunused\b|\bsince (issue|the fix|then)\b|\b(first|second|third|fourth|fifth"
+    r"|sixth|seventh|eighth) pass\b|\bbefore (issue|the fix|the change)\b|\bthe old\b", re.I)
 
 
-# variables removed since (FMU -> names): issue 12, the run-dependent QP solve time is no
-# output (the FMU logs it at fmi2Terminate, cosim.fmu.diagnostics)
-REMOVED_VARIABLES = {f: {"qp_solve_time_median"} for f in ("StopMpc", "StopRmpc", "StopRsmpc")}
+def test_history_pattern_catches_narration_and_spares_present_tense() -> None:
+    for text in ("the reading before issue 15's sixth pass", "unused since issue 11",
+                 "was 0.2 s", "no longer used", "rows '0.2 s (before)'", "used to be 3"):
+        assert HISTORY.search(text), text
+    for text in ("brake command held before the start", "energy since the start (eq. 9)",
+                 "time constant of the derivative low-pass", "events with an infeasible QP"):
+        assert not HISTORY.search(text), text
 
 
-def test_model_descriptions_unchanged_but_for_listed_improvements(built_fmus) -> None:
-    assert set(BEFORE) <= set(catalog())
-    for identifier, before in BEFORE.items():
-        with zipfile.ZipFile(built_fmus[identifier].path) as z:
-            now = digest_model_description(z.read("modelDescription.xml"))
-        added = ADDED_VARIABLES.get(identifier, set())
-        removed = REMOVED_VARIABLES.get(identifier, set())
-        before = {**before, "variables": {k: v for k, v in before["variables"].items()
-                                          if k not in removed},
-                  "output_dependencies": {k: v for k, v in before["output_dependencies"].items()
-                                          if k not in removed}}
-        for key in ("description", "default_experiment", "units"):
-            assert now[key] == before[key], (identifier, key)
-        deps = now["output_dependencies"]  # added outputs bring their own entries
-        assert set(deps) - set(before["output_dependencies"]) <= added, identifier
-        assert {k: deps[k] for k in before["output_dependencies"]} \
-            == before["output_dependencies"], identifier
-        assert set(now["variables"]) == set(before["variables"]) | added, identifier
-        for name, old in before["variables"].items():
-            expected = dict(old)
-            if (identifier, name) in IMPROVED_DESCRIPTIONS:
-                expected["description"] = IMPROVED_DESCRIPTIONS[identifier, name]
-            expected.update(INTEGER_RANGES.get((identifier, name), {}))
-            if (identifier, name) in CHANGED_STARTS:
-                expected["start"] = CHANGED_STARTS[identifier, name]
-            assert now["variables"][name] == expected, (identifier, name)
+@pytest.mark.parametrize("identifier", sorted(catalog()))
+def test_published_descriptions_say_what_is(identifier: str) -> None:
+    spec = catalog()[identifier]
+    cls = spec.load()
+    texts = {"<fmu>": spec.description} | {v.name: v.description for v in cls.variables}
+    bad = {name: text for name, text in texts.items() if HISTORY.search(text or "")}
+    assert not bad, bad
+
+
+def test_fmu_reference_says_what_is() -> None:
+    bad = [line for line in REFERENCE_PATH.read_text().splitlines() if HISTORY.search(line)]
+    assert not bad, bad
+
+
+def test_model_descriptions_publish_the_declarations(built_fmus) -> None:
+    for identifier, spec in built_fmus.items():
+        md = read_model_description(str(spec.path))
+        published = {v.name: v for v in md.modelVariables}
+        declared = spec.load().variables
+        assert set(published) == {v.name for v in declared}, identifier
+        for var in declared:
+            got = published[var.name]
+            assert (got.causality, got.type, got.description or "") == (
+                var.causality, _TYPES[var.type], var.description), (identifier, var.name)
+            if var.type is float:
+                assert got.unit == var.unit, (identifier, var.name)
+            for bound in ("min", "max"):
+                want = getattr(var, bound)
+                value = getattr(got, bound)
+                assert (None if value is None else float(value)) == (
+                    None if want is None or var.type is str else float(want)), (
+                    identifier, var.name, bound)
 
 
 def _default_params(cls) -> object:

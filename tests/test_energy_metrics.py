@@ -65,7 +65,7 @@ def test_derived_saving_rows(tmp_path) -> None:
                               "energy_traction_mj": 70.0}
     rows = {r["run"]: r for r in derived_rows(entry, summaries)}
     text = rows["eco saving, total (paper text)"]
-    assert text["ours"] == pytest.approx(18.0) and text["within"] is True
+    assert text["ours"] == pytest.approx(18.0) and text["paper"] == pytest.approx(17.7)
     assert rows["eco saving, run phase"]["ours"] == pytest.approx(20.0)
     bad = tmp_path / "bad.toml"
     bad.write_text(entry.path.read_text().replace('kind = "saving_percent"',

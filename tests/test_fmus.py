@@ -458,3 +458,64 @@ def test_fmu_value(built_fmus, identifier, tmp_path):
     args = (built_fmus[identifier].path, tmp_path)
     check(*args[:check.__code__.co_argcount])
 
+
+
+def test_a_truncated_fmu_is_stale_and_not_listed_as_built(built_fmus, tmp_path, monkeypatch):
+    """A truncated or garbled archive newer than its sources is rebuilt (zip CRCs checked, not
+    only the mtime) and ``cosim list`` does not call it built."""
+    import os
+    import shutil
+    import subprocess
+    import sys
+
+    from cosim.fmu import build
+
+    good = built_fmus["StopPid"].path
+    monkeypatch.setattr(build, "FMU_DIR", tmp_path)
+    spec = build.catalog()["StopPid"]
+    assert spec.path == tmp_path / "StopPid.fmu"
+    shutil.copy2(good, spec.path)
+    assert build.is_intact(spec.path) and not build.is_stale(spec)
+    data = good.read_bytes()
+    for broken in (data[: len(data) // 2], data[:-300] + bytes(300),
+                   data[:4000] + bytes(64) + data[4064:]):
+        spec.path.write_bytes(broken)
+        os.utime(spec.path, None)  # newer than every source file
+        assert not build.is_intact(spec.path)
+        assert build.is_stale(spec)
+    done = subprocess.run(
+        [sys.executable, "-c", "import sys; from cosim.fmu import build; "
+         f"build.FMU_DIR = __import__('pathlib').Path({str(tmp_path)!r}); "
+         "from cosim import cli; sys.argv = ['cosim', 'list']; cli.main()"],
+        capture_output=True, text=True, timeout=120)
+    row = next(line for line in done.stdout.splitlines() if line.split()[:1] == ["StopPid"])
+    assert "corrupt" in row and "yes" not in row.split("│")[1], done.stdout
+
+
+def _fmu_ids() -> list[str]:
+    from cosim.fmu.build import catalog
+
+    return list(catalog())
+
+
+@pytest.mark.parametrize("identifier", _fmu_ids())
+def test_every_fmu_runs_in_fmpy_at_the_compliance_checkers_step(built_fmus, identifier):
+    """fmpy.simulate_fmu with its defaults but the stop time, at the FMU Compliance Checker's
+    step (stop time / 500), here twice the FMU's default step: a controller executes the
+    events inside each step with the inputs held (no refusal, no error)."""
+    from fmpy import read_model_description, simulate_fmu
+
+    path = str(built_fmus[identifier].path)
+    step = 2.0 * float(read_model_description(path).defaultExperiment.stepSize)
+    result = simulate_fmu(path, stop_time=500 * step, output_interval=step)
+    assert len(result) == 501
+    assert result["time"][-1] == pytest.approx(500 * step)
+
+
+@pytest.mark.parametrize("identifier", _fmu_ids())
+def test_every_fmu_runs_in_fmpy_with_default_arguments(built_fmus, identifier):
+    """``fmpy.simulate_fmu(path)``: the FMU's default experiment, fmpy's default step."""
+    from fmpy import simulate_fmu
+
+    result = simulate_fmu(str(built_fmus[identifier].path))
+    assert len(result) > 1

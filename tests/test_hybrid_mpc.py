@@ -15,7 +15,7 @@ from controllers.hybrid.hybrid_mpc import (
     MoveBlockingMpc,
     reference_position,
 )
-from controllers.hybrid.miqp import HybridMiqp, parse_blocks
+from controllers.hybrid.miqp import HybridMiqp, parse_blocks, split_blocks
 from controllers.hybrid.model import Limits
 from cosim.fmu.state import to_ticks
 from plants.emu import Emu, emu_config
@@ -132,6 +132,41 @@ def test_blocked_inputs_are_held_and_cost_no_less() -> None:
         enum = q.solve_enumerated(x0, ref, _limits(), [1, 1, 1])
         assert b.cost == pytest.approx(enum.cost, rel=COST_RTOL, abs=1e-6)
     assert mb.miqp.nV < gmpc.miqp.nV
+
+
+def test_split_blocks_cuts_only_at_a_change_of_the_fixed_mode() -> None:
+    assert split_blocks([3, 4, 3], [1] * 10) == [3, 4, 3]
+    assert split_blocks([3, 4, 3], [1, 1, 1, 1, 0, 0, 0, 0, 0, 0]) == [3, 1, 3, 3]
+    assert split_blocks([3, 4, 3], [1, 0, 1, 1, 1, 1, 0, 0, 0, 0]) == [1, 1, 1, 3, 1, 3]
+    assert split_blocks([3, 4, 3], [1, 1, 0] + [0] * 7) == [2, 1, 4, 3]
+    assert split_blocks([3, 4, 3], [None] * 10) == [3, 4, 3]
+    assert split_blocks([4], [1, None, 0, 0]) == [4]
+
+
+def test_mode_change_inside_a_block_keeps_each_stage_mode() -> None:
+    """MB-MPC 3:4:3 with braking from stage 4 (inside the 4-block) on a decelerating
+    reference: the traction stage of the 4-block pulls (held across the change, the block
+    could only apply 0), and the optimum is that of the blocks 3:1:3:3."""
+    mb = _ctl(MoveBlockingMpc)
+    cut = HybridMiqp(mb.model, 10, [10.0] * 3 + [10.0] * 3, 0.5, [3, 1, 3, 3])
+    delta = [1, 1, 1, 1, 0, 0, 0, 0, 0, 0]
+    rng = np.random.default_rng(11)
+    for v in (20.0, 45.0, 70.0):
+        x0 = _state(rng, v)
+        ref = np.empty((11, 6))
+        for s in range(11):  # +0.4 m/s2 for 4 s, then -0.6 m/s2 (traction, then braking)
+            ref[s, :3] = v + 0.4 * s if s <= 4 else v + 1.6 - 0.6 * (s - 4)
+            ref[s, 3:] = (v * s + 0.2 * s * s if s <= 4
+                          else v * s + 3.2 + 1.6 * (s - 4) - 0.3 * (s - 4) ** 2)
+        res = mb.miqp.solve(x0, ref, _limits(), delta)
+        assert res.feasible and res.blocks == (3, 1, 3, 3)
+        u = res.stage_w[:, :3].sum(axis=1)  # kN, total force per stage
+        assert u[3] > 1.0  # the traction stage of the cut block pulls
+        assert np.all(u[:4] >= -U_TOL) and np.all(u[4:] <= U_TOL)  # every stage its mode
+        assert np.all(u[7:] < -1.0)  # and the braking brakes
+        direct = cut.solve(x0, ref, _limits(), delta)
+        assert res.cost == pytest.approx(direct.cost, rel=COST_RTOL)
+        np.testing.assert_allclose(res.u0, direct.u0, atol=U_TOL)
 
 
 def test_closed_loop_with_the_plant_core_tracks_and_switches_mode() -> None:

@@ -246,3 +246,96 @@ def test_emu_kernel_matches_the_numpy_reference(config: str, seed: int) -> None:
             key = f"{name}[{i + 1}]"
             assert abs(out_fast[key] - out_ref[key]) <= bound, key
     assert np.max(np.abs(ref.x - x_start)) > 50.0  # it moved
+
+
+def _planted(folder, kind: str) -> None:
+    """Poison every numba cache file in ``folder``: truncated, garbage or '<dynamic>'."""
+    for entry in sorted(folder.iterdir()):
+        data = entry.read_bytes()
+        if kind == "truncated" and entry.suffix == ".nbc":
+            entry.write_bytes(data[:50])
+        elif kind == "garbage" and entry.suffix == ".nbi":
+            entry.write_bytes(b"garbage\n")
+        elif kind == "dynamic" and entry.suffix == ".nbi":
+            entry.write_bytes(data + b"<dynamic>")
+
+
+def test_unloadable_cache_entries_are_found_and_discarded(tmp_path, monkeypatch) -> None:
+    monkeypatch.setenv("ATO_COSIM_NUMBA_CACHE", str(tmp_path))
+    folder = tmp_path / kernels._DIGEST
+    folder.mkdir()
+    (folder / "kernels._affine-x.py311.nbi").write_bytes(b"\x80\x04 index")
+    (folder / "kernels._affine-x.py311.1.nbc").write_bytes(b"\x80\x04 data")
+    (folder / "notes.txt").write_text("not numba's")
+    assert kernels._cache_entries_valid()
+    _planted(folder, "dynamic")
+    assert not kernels._cache_entries_valid()
+    (folder / "kernels._affine-x.py311.nbi").write_bytes(b"")
+    assert not kernels._cache_entries_valid()
+    kernels._discard_cache()
+    assert sorted(p.name for p in folder.iterdir()) == ["notes.txt"]
+    assert kernels._cache_entries_valid()
+
+
+# kernels.py loaded from its file as plants.kernels, then no longer importable by that name
+# (an FMU's bundle leaves sys.path): the kernels must compile or load, whatever the cache holds
+_OUTSIDE = """
+import importlib.util, math, sys
+spec = importlib.util.spec_from_file_location("plants.kernels", sys.argv[1])
+mod = importlib.util.module_from_spec(spec)
+sys.modules["plants.kernels"] = mod
+spec.loader.exec_module(mod)
+del sys.modules["plants.kernels"]
+assert "plants" not in sys.modules
+assert mod.compile_kernels() is True
+assert hasattr(mod._pow, "py_func")  # compiled, not the Python function
+assert abs(mod._pow(2.0, 0.5) - math.sqrt(2.0)) < 1e-15
+print("ok")
+"""
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not kernels.KERNELS, reason="numba not installed")
+def test_a_poisoned_cache_never_fails_the_kernels(tmp_path) -> None:
+    """A truncated, garbled or '<dynamic>' cache (what a host without the package importable
+    once wrote) is discarded and rebuilt; the next process loads the rebuilt one. The
+    processes run without this repository on sys.path (numba installed, package not)."""
+    import os
+    import subprocess
+    import sys
+
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+    env["ATO_COSIM_NUMBA_CACHE"] = str(tmp_path)
+    script = tmp_path / "outside.py"
+    script.write_text(_OUTSIDE)
+
+    def run() -> None:
+        done = subprocess.run([sys.executable, str(script), kernels.__file__], env=env,
+                              cwd=tmp_path, capture_output=True, text=True, timeout=600)
+        assert done.returncode == 0 and done.stdout.strip() == "ok", done.stderr[-2000:]
+
+    run()  # compiles into the empty cache
+    folder = tmp_path / kernels._DIGEST
+    assert any(p.suffix == ".nbc" for p in folder.iterdir())
+    for kind in ("truncated", "garbage", "dynamic"):
+        _planted(folder, kind)
+        run()
+        assert kernels._cache_entries_valid()
+
+
+def test_shoe_friction_is_one_law_written_once():
+    """TB/T 1407's phi = 0.322 (v + 150) / (2 v + 150): its values, and one definition that
+    the plant's numpy path, the blending and the compiled kernels all call."""
+    from pathlib import Path
+
+    from plants.freight import KMH, friction_coefficient, friction_coefficient_at
+    from plants.kernels import shoe_friction
+
+    assert shoe_friction(0.0) == 0.322
+    assert shoe_friction(150.0) == pytest.approx(0.322 * 300.0 / 450.0, rel=1e-15)
+    assert friction_coefficient_at(-150.0 * KMH) == shoe_friction(150.0 * KMH / KMH)
+    assert friction_coefficient(np.array([150.0 * KMH]))[0] == friction_coefficient_at(150 * KMH)
+    root = Path(__file__).resolve().parent.parent
+    writers = [p.relative_to(root).as_posix() for part in ("plants", "controllers")
+               for p in (root / part).rglob("*.py") if "0.322 *" in p.read_text()]
+    assert writers == ["plants/kernels.py"]

@@ -117,7 +117,7 @@ def _variant(tmp_path, old: str, new: str):
     ("base_step = 0.2", "base_step = 0", "base_step = 0.0: must be positive"),
     ('"plant.brake_command" = "controller.brake_command"',
      '"plant.brake_command" = "controller.executions"', "type mismatch"),
-    ("brake_delay = 1.0", "brake_delay = -1.0", r"brake_delay = -1.0 outside \[0.0"),
+    ("brake_delay = 1.0", "brake_delay = -1.0", "brake_delay = -1.0: must be at least 0.0"),
     ('algorithm = "event"', 'algorithm = "gauss"', "algorithm = 'gauss'"),
     ('"controller.v" = "plant.v"', '"controller.v" = "plant.speed"', "no variable 'speed'"),
 ])
@@ -183,3 +183,23 @@ def test_failure_mid_run_keeps_partial_results(built_fmus, tmp_path, monkeypatch
     assert summary["completed"] is False and "test fault" in summary["error"]
     assert summary["sim_time_s"] == pytest.approx(10.0)
     assert (tmp_path / "plot.png").exists()
+
+
+def test_a_recording_larger_than_memory_is_refused_before_the_run(built_fmus, monkeypatch):
+    """stop_time = 1e9 s at 0.2 s: 5e9 output points would not fit; the run is refused
+    before any step, saying how much the recording needs (points x values x 8 bytes)."""
+    from cosim.run.master import SimulationError, run_scenario
+    from cosim.run.master import observers as master_module
+
+    steps: list[float] = []
+    with pytest.raises(SimulationError, match=r"the recording needs \d.* GiB \(5000000002 output "
+                                              r"points x \d+ values x 8 bytes"):
+        run_scenario("seed000_stop_pid", overrides=["simulation.stop_time=1e9"],
+                     progress=lambda t, total: steps.append(t))
+    assert not steps
+    # the same bound for a small run when memory is short: 302 points x 8 values x 8 bytes
+    monkeypatch.setattr(master_module, "available_memory", lambda: 3 * 302 * 8 * 8 - 1)
+    with pytest.raises(SimulationError, match=r"302 output points x 8 values"):
+        run_scenario("seed000_stop_pid", overrides=["simulation.stop_time=60"])
+    monkeypatch.setattr(master_module, "available_memory", lambda: 3 * 302 * 8 * 8)
+    assert run_scenario("seed000_stop_pid", overrides=["simulation.stop_time=60"]).completed

@@ -70,7 +70,7 @@ def test_partial_stopping_run_is_marked_and_zoomed(monkeypatch, tmp_path):
     assert any("-10.00 m" in t for t in titles)
     inset = [child for ax in fig.axes for child in ax.child_axes
              if child.get_title() == "last 20 m"]
-    assert len(inset) == 1 and inset[0].get_xlim()[0] == pytest.approx(380.0)
+    assert len(inset) == 1 and inset[0].get_xlim()[0] == pytest.approx(-20.0)  # m to stop
 
 
 def test_many_couplers_are_one_envelope(monkeypatch, tmp_path):
@@ -90,3 +90,111 @@ def test_many_couplers_are_one_envelope(monkeypatch, tmp_path):
     assert len(panel.collections) == 1 and len(panel.get_lines()) == 2
     top = panel.get_lines()[0].get_ydata()
     assert np.max(top) == pytest.approx(np.max(np.stack(list(forces.values()))) / 1e3)
+
+
+@pytest.fixture(scope="module")
+def rsmpc_run(built_fmus):
+    """A whole self-triggered stopping run (seconds)."""
+    from cosim.run.master import run_scenario
+
+    return run_scenario("seed000_stop_rsmpc", build=False)
+
+
+def test_run_figure_reads_as_a_paper_figure(rsmpc_run):
+    """Legend outside the axes and clear of the 'last 20 m' inset; the command axis named by
+    its declared description and unit; held signals (the command, the self-triggered
+    controller's v_ref) drawn as steps, the measured speed as a line; no offset notation."""
+    import matplotlib.pyplot as plt
+
+    from cosim.run.results import draw_run
+
+    fig = draw_run(rsmpc_run)
+    fig.canvas.draw()
+    renderer = fig.canvas.get_renderer()
+    main = fig.axes[0]
+    legend = main.get_legend()
+    assert legend is not None
+    inset = next(c for ax in fig.axes for c in ax.child_axes if c.get_title() == "last 20 m")
+    box_legend = legend.get_window_extent(renderer)
+    assert not box_legend.overlaps(inset.get_window_extent(renderer))
+    assert not box_legend.overlaps(main.get_window_extent(renderer))  # outside the axes
+    labels = [t.get_text() for t in legend.get_texts()]
+    assert "speed" in labels and "stop point" in labels
+    assert not any(name.startswith(("plant.", "controller.")) for name in labels), labels
+    twin = fig.axes[1]
+    assert twin.get_ylabel() == "brake command u (%)"
+    lines = {line.get_label(): line for ax in fig.axes for line in ax.get_lines()}
+    assert lines["speed"].get_drawstyle() == "default"
+    assert lines["reference (as held by the controller)"].get_drawstyle() == "steps-post"
+    assert lines["brake command u"].get_drawstyle() == "steps-post"
+    for ax in (main, twin, inset):
+        for axis in (ax.xaxis, ax.yaxis):
+            assert axis.get_major_formatter().get_offset() == "", (ax, axis)
+    plt.close(fig)
+
+
+@pytest.mark.parametrize("fmt", ["png", "svg", "pdf"])
+def test_plot_format_and_resolution(rsmpc_run, tmp_path, fmt):
+    from cosim.run.results import PLOT_DPI, write_results
+
+    written = write_results(rsmpc_run, tmp_path, plot_format=fmt)
+    assert tmp_path / f"plot.{fmt}" in written
+    if fmt == "png":
+        from matplotlib.image import imread
+
+        height, width = imread(tmp_path / "plot.png").shape[:2]
+        # a 9-inch-wide figure at PLOT_DPI, its white margins cropped (bbox_inches="tight")
+        assert PLOT_DPI >= 200 and width >= 8 * PLOT_DPI
+    with pytest.raises(ValueError, match="plot format 'gif'"):
+        write_results(rsmpc_run, tmp_path / "x", plot_format="gif")
+
+
+@pytest.mark.parametrize("errors_m,zoomed", [([1e-5, 4e-5, 7e-5], True), ([0.1, -0.3, 0.6], False)])
+def test_sweep_axes_fit_the_data(errors_m, zoomed):
+    """Stop errors far inside the +-50 cm window: the axis zooms to them (not flat lines on a
+    +-50 cm axis); errors reaching the window: window and data both in view. Legends sit
+    outside both axes."""
+    import matplotlib.pyplot as plt
+    import pandas as pd
+
+    from cosim.run.sweep import draw_sweep
+
+    frame = pd.DataFrame({"scenario": "s", "controller.N": [3, 4, 5], "stop_error_m": errors_m,
+                          "command_switches": [10, 9, 8], "controller_executions": [30, 20, 10]})
+    fig = draw_sweep(frame, ["controller.N"])
+    fig.canvas.draw()
+    ax1, ax2 = fig.axes[:2]
+    lo, hi = ax1.get_ylim()
+    cm = [100 * e for e in errors_m]
+    assert lo <= min(cm) and max(cm) <= hi
+    if zoomed:
+        assert hi - lo < 0.01 * 100  # far narrower than the 100-cm window
+    else:
+        assert lo <= -50 and hi >= 50
+    assert ax1.yaxis.get_major_formatter().get_offset() == ""
+    renderer = fig.canvas.get_renderer()
+    for ax in (ax1, ax2):
+        box = ax.get_legend().get_window_extent(renderer)
+        assert not any(box.overlaps(other.get_window_extent(renderer)) for other in (ax1, ax2))
+    plt.close(fig)
+
+
+def test_perturbed_boxes_are_not_collapsed(monkeypatch, tmp_path):
+    """Millimetre stop errors under plant mismatch: the box plot's axis is on the boxes, not on
+    the +-50 cm window (where they would collapse to a line)."""
+    import numpy as np
+    import pandas as pd
+    from matplotlib.figure import Figure
+
+    from cosim.run.perturb import plot_perturbed
+
+    drawn = []
+    real = Figure.savefig
+    monkeypatch.setattr(Figure, "savefig", lambda self, *a, **k: (drawn.append(self),
+                                                                  real(self, *a, **k)))
+    errors = np.random.default_rng(1).normal(0.0, 0.002, 20)
+    frame = pd.DataFrame({"scenario": "seed000_stop_rmpc", "controller.N": 10,
+                          "stop_error_m": errors, "controller_executions": 100})
+    plot_perturbed(frame, ["controller.N"], tmp_path / "perturb.png")
+    lo, hi = drawn[0].axes[0].get_ylim()
+    assert lo <= 100 * errors.min() and 100 * errors.max() <= hi and hi - lo < 5.0

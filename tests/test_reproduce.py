@@ -256,3 +256,32 @@ def test_seed002_plots_the_train_mean_error() -> None:
     """Issue 16: the 0.3 km/h target is judged on the train-mean speed; its error is a figure."""
     figs = [f for f in load_entry("seed002").figures if f.get("y_reduce") == "mean"]
     assert [(f["y"], f["y_minus"]) for f in figs] == [(["plant.v[*]"], "controller.v_ref")]
+
+
+def test_reproduce_out_that_cannot_be_written_is_a_clear_error(tmp_path: Path,
+                                                               monkeypatch) -> None:
+    """--out under a file is refused before any run; a write refused during the run (a folder
+    made read-only) names the file and the reason instead of an OSError traceback."""
+    from typer.testing import CliRunner
+
+    from cosim import cli
+    from cosim.run import reproduce as reproduce_module
+
+    blocker = tmp_path / "a_file"
+    blocker.write_text("")
+    ran: list[str] = []
+    monkeypatch.setattr(reproduce_module, "reproduce", lambda *a, **k: ran.append("run"))
+    result = CliRunner().invoke(cli.app, ["reproduce", "seed000", "--out", str(blocker / "x")])
+    assert result.exit_code == 2 and not ran
+    assert f"--out {blocker / 'x'}: {blocker} is a file, not a folder" in " ".join(
+        result.output.split())
+
+    def refused(*args, **kwargs):
+        raise PermissionError(13, "Permission denied", str(tmp_path / "ro" / "table.md"))
+
+    monkeypatch.setattr(reproduce_module, "reproduce", refused)
+    result = CliRunner().invoke(cli.app, ["reproduce", "seed000", "--out", str(tmp_path / "ro")])
+    assert result.exit_code == 2 and result.exception is not None  # typer.Exit, no traceback
+    assert isinstance(result.exception, SystemExit)
+    assert f"cannot write {tmp_path / 'ro' / 'table.md'}: Permission denied" in " ".join(
+        result.output.split())

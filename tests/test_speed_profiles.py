@@ -64,16 +64,41 @@ def test_without_a_margin_eco_is_the_conventional_profile() -> None:
 
 def test_eco_needs_less_mechanical_work_than_conventional() -> None:
     """Along the profiles, the traction work of the nominal model is smaller for eco."""
-    p = Crh3Params()
+    conv, eco = (sp.generate(k, ROUTE) for k in ("conventional", "eco"))
+    assert sp.traction_work(eco, ROUTE) < 0.9 * sp.traction_work(conv, ROUTE)
 
-    def traction_work(prof: sp.SpeedProfile) -> float:
-        vm = 0.5 * (prof.v[:-1] + prof.v[1:])
-        grade = np.array([ROUTE.grade.at(x) for x in prof.s[:-1]]) * p.mass * 9.81 / 1000
-        force = p.effective_mass * prof.accel[:-1] + p.davis.force(vm) + grade
-        return float(np.sum(np.maximum(force, 0.0) * np.diff(prof.s)))
 
-    conv, eco = (sp.generate(k, ROUTE) for k in sp.PROFILE_KINDS)
-    assert traction_work(eco) < 0.9 * traction_work(conv)
+def test_traction_work_of_a_level_cruise_is_resistance_times_distance() -> None:
+    """Analytic check: on level track at constant speed the work is Davis(v) x distance."""
+    flat, p = Route.flat(8e4), Crh3Params()  # 33 km to reach V_act
+    prof = sp.generate("conventional", flat)
+    steps = np.flatnonzero((prof.mode[:-1] == sp.CRUISE) & (prof.accel[:-1] == 0.0))
+    a, b = steps[1], steps[-1]  # interior steps at V_act (no entry/exit step)
+    part = dataclasses.replace(prof, s=prof.s[a:b + 1], v=prof.v[a:b + 1], t=prof.t[a:b + 1],
+                               mode=prof.mode[a:b + 1])
+    v = sp.ProfileSettings().cruise_speed
+    expected = p.davis.force(v) * (part.s[-1] - part.s[0])
+    assert sp.traction_work(part, flat) == pytest.approx(expected, rel=1e-12)
+
+
+@pytest.mark.parametrize("scheduled", [1900.0, 2100.0, 2200.0])
+def test_cruise_meets_the_schedule_at_one_constant_speed(scheduled: float) -> None:
+    """The same-schedule baseline: accelerate, cruise at V_c, brake; arrival within the
+    profile tolerance; a later schedule gives a lower V_c."""
+    st = sp.ProfileSettings()
+    prof = sp.generate("cruise", ROUTE, scheduled)
+    assert abs(prof.arrival_time - scheduled) <= st.time_tolerance
+    assert set(np.unique(prof.mode[:-1])) <= {sp.TRACTION, sp.CRUISE, sp.BRAKE}
+    assert np.max(prof.v) == pytest.approx(prof.low_speed, abs=1e-9)
+    assert prof.low_speed < st.cruise_speed
+    if scheduled > 1900.0:
+        assert prof.low_speed < sp.generate("cruise", ROUTE, 1900.0).low_speed
+
+
+def test_without_a_margin_cruise_is_the_conventional_profile() -> None:
+    conv = sp.generate("conventional", ROUTE)
+    cruise = sp.generate("cruise", ROUTE, conv.arrival_time - 10.0)
+    assert np.array_equal(cruise.v, conv.v)
 
 
 def test_lookups_by_time_and_position_agree() -> None:
@@ -118,6 +143,10 @@ def test_errors_name_the_problem() -> None:
         sp.generate("fast", ROUTE)
     with pytest.raises(ValueError, match="no scheduled_time_s"):
         sp.generate("eco", Route.flat(1e4))
+    with pytest.raises(ValueError, match="no scheduled_time_s"):
+        sp.generate("cruise", Route.flat(1e4))
+    with pytest.raises(ValueError, match="before scheduled_time"):
+        sp.generate("cruise", Route.flat(1e4), 1e5)
     with pytest.raises(ValueError, match="accel_max"):
         sp.generate("conventional", ROUTE,
                     settings=dataclasses.replace(sp.ProfileSettings(), accel_max=1.5))

@@ -29,7 +29,7 @@ def test_a_failed_point_does_not_stop_the_others(built_fmus, tmp_path):
     assert result.exit_code == 1, result.output
     rows = pd.read_csv(tmp_path / "sweep.csv", keep_default_na=False)
     assert list(rows["status"]) == ["failed", "ok"]
-    assert "plant.mass = -1 outside" in rows["error"][0]
+    assert "plant.mass = -1: must be at least 1.0" in rows["error"][0]
     assert rows["error"][1] == "" and abs(float(rows["stop_error_m"][1])) < 0.5
     assert "failed: seed000_stop_pid plant.mass=-1" in result.output
 
@@ -75,3 +75,31 @@ def test_interrupted_sweep_keeps_its_finished_rows(built_fmus, tmp_path):
     rows = pd.read_csv(csv_path, keep_default_na=False)
     assert 1 <= len(rows) < 12
     assert set(rows["status"]) <= {"ok", "interrupted"} and (rows["status"] == "ok").any()
+
+
+def test_resume_after_a_failed_point_plots_and_keeps_numbers(built_fmus, tmp_path):
+    """sweep.csv with a failed row has empty cells, so its columns read back as text: the
+    resumed rows are numbers again (the plot draws them, counts stay integers)."""
+    first = CliRunner().invoke(app, ["sweep", "seed000_stop_pid", "--set", "plant.mass=-1,490000",
+                                     "--workers", "1", "--out", str(tmp_path)])
+    assert first.exit_code == 1, first.output
+    result = CliRunner().invoke(app, ["sweep", "seed000_stop_pid", "--set",
+                                      "plant.mass=490000,500000", "--workers", "1", "--resume",
+                                      "--out", str(tmp_path)])
+    assert result.exit_code == 0, result.output
+    assert (tmp_path / "sweep.png").is_file()
+    rows = pd.read_csv(tmp_path / "sweep.csv")
+    assert list(rows["plant.mass"]) == [490000, 500000]
+    assert rows["command_switches"].dtype.kind == "i"
+    assert rows["stop_error_m"].dtype.kind == "f"
+
+
+def test_a_bad_grid_value_is_refused_before_any_point_runs(built_fmus, tmp_path):
+    """controller.N=abc (N is an Integer) fails at once naming the --set option; the good
+    point 20 is not run first."""
+    result = CliRunner().invoke(app, ["sweep", "seed000_stop_mpc", "--no-plot", "--set",
+                                      "controller.N=20,abc", "--out", str(tmp_path)])
+    assert result.exit_code == 2, result.output
+    assert "--set controller.N=abc: controller.N is Integer, got 'abc'" in " ".join(
+        result.output.split())
+    assert not (tmp_path / "sweep.csv").exists()

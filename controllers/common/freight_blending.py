@@ -13,8 +13,8 @@ brake < 0, within the HXD1 envelope at the measured speed) and ``pipe_reduction`
   pipe reduction in ``reduction_step`` stages giving the missing planned force (an overspeed
   alone: the minimum reduction); it may then be deepened when the planned braking needs more,
   never for an overspeed (the deeper application could not be taken back short of a full
-  release, and the train would stop far short: measured 80-300 m for the PID, fuzzy PID and
-  sliding mode), never partly released (Chinese 120 valves release directly), and is released
+  release, and the train would stop far short of the stop point), never partly released
+  (Chinese 120 valves release directly), and is released
   fully when the electric brake alone covers the demand with margin (``release_share``).
   Hold times: once applied it stays at least ``min_apply_time``; once released it is not
   re-applied for ``min_release_time`` (auxiliary reservoirs recharge);
@@ -55,7 +55,6 @@ import numpy as np
 from cosim.fmu.declare import Declared, Var, build, param
 from cosim.fmu.state import StatefulCore
 from plants.freight import (
-    KMH,
     FreightParams,
     FreightTrain,
     friction_coefficient,
@@ -566,7 +565,8 @@ class FreightTracker(StatefulCore, Declared):
 def interp_at(x: float, xp: list[float], fp: list[float]) -> float:
     """``np.interp(x, xp, fp)`` of one float on strictly increasing ``xp``, in plain floats
     with numpy's operations (its binary search, slope ``(fp[j+1] - fp[j]) / (xp[j+1] - xp[j])``
-    and ``slope (x - xp[j]) + fp[j]``), so the result is the same float, ~10x faster."""
+    and ``slope (x - xp[j]) + fp[j]``), so the result is the same float
+    without numpy's per-call overhead."""
     if x <= xp[0]:
         return fp[0]
     if x >= xp[-1]:
@@ -599,8 +599,7 @@ def _integrate_stop(v: float, s: float, h: float, n: int, air_scale: list[float]
             force = target + (force - target) * decay
         air = air_scale[k]
         # decel at (vk, sk), then at the midpoint (the same expression twice, inlined)
-        kmh = abs(vk) / KMH
-        mu = 0.322 * (kmh + 150.0) / (2.0 * kmh + 150.0)
+        mu = friction_coefficient_at(vk)
         a0 = ((air * mu - force) / m_eff
               + ((ra + (rb + rc * vk) * vk) / m_eff + interp_at(sk, knots, values)))
         if a0 <= 0.0 and vk <= 0.0:
@@ -608,8 +607,7 @@ def _integrate_stop(v: float, s: float, h: float, n: int, air_scale: list[float]
         vm = vk - 0.5 * h * a0
         if vm <= 0.0:
             return sk + vk * vk / (2.0 * a0)
-        kmh = abs(vm) / KMH
-        mu = 0.322 * (kmh + 150.0) / (2.0 * kmh + 150.0)
+        mu = friction_coefficient_at(vm)
         am = ((air * mu - force) / m_eff
               + ((ra + (rb + rc * vm) * vm) / m_eff + interp_at(sk + 0.5 * h * vk, knots, values)))
         v1 = vk - h * am

@@ -24,17 +24,45 @@ step (``v^2`` linear in ``s``). Limits of the paper: ``-1 <= a <= 1`` m/s^2, cru
   0.5 s) of ``T_s`` and the paper allows an arrival error of ``Delta T_max = 5`` s, the eco
   profile keeps the arrival within the margin; ``tests/test_speed_profiles.py`` checks it.
 
+* **Cruise** (ours, the same-schedule conventional baseline): the conventional shape
+  (accelerate, cruise, brake) at the one constant cruising speed ``V_c <= V_act`` whose run
+  time equals ``T_s``, found by Brent's root finder (``scipy.optimize.brentq``) on the run time
+  as a function of ``V_c`` (continuous and decreasing) to within ``time_tolerance``. It
+  compares a strategy with the conventional one at equal arrival time; ``low_speed`` holds
+  ``V_c``. If ``T_s <= T_conv`` it is the conventional profile.
+
+* **Optimal** (ours, beyond the paper): the energy-optimal control sequence of optimal train
+  control (Pontryagin's maximum principle; Howlett, Pudney and Albrecht): maximum traction
+  (the planning envelope, ``traction_share``, at most ``accel_max``) up to a holding speed
+  ``V_h``; speed holding (full traction where a grade pulls the speed below ``V_h``; on a
+  down grade the train is held at ``V_h`` by braking); coasting from a point ``s_c`` (held at
+  the line limit if a down grade reaches it); braking at ``brake_decel`` (the service rate of
+  every profile here, so that the trackers can follow it; the theory's maximum braking
+  would be the plant's full brake) onto the stop point. The two switching parameters are
+  found for the schedule: for each ``V_h`` the coasting point whose run time is ``T_s``
+  (``brentq``), and ``V_h`` minimising the nominal eq. 9 energy (:func:`net_energy`:
+  traction / eta_M minus the regenerated eta_b x braking work; the auxiliary energy is fixed
+  by the schedule), with ``scipy.optimize.minimize_scalar``. On level track this family
+  contains the optimum; on grades the exact optimum may add short power/coast phases around
+  steep sections, which this family lacks (a test compares it with a dynamic programme on
+  a short level route).
+  The cruise profile is the member with no coasting, so the optimal one never needs more.
+
+:func:`traction_work` is the mechanical traction work of any profile on the nominal model.
+
 Phases (Table 2, used by the energy-per-phase metrics): ``accelerate`` from the start until the
 profile first reaches ``V_act``; ``brake`` from the start of the final braking; ``run`` between.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import math
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.optimize
 
 from plants.crh3 import Crh3Params
 from plants.resistance import KMH
@@ -44,7 +72,7 @@ from plants.route import GRAVITY, Route, StepProfile
 TRACTION, CRUISE, COAST, REACCELERATE, HOLD_LIMIT, BRAKE = 1, 2, 3, 4, 5, 6
 # Table 2 phases
 PHASE_ACCELERATE, PHASE_RUN, PHASE_BRAKE = 1, 2, 3
-PROFILE_KINDS = ("conventional", "eco")
+PROFILE_KINDS = ("conventional", "eco", "cruise", "optimal")
 
 
 @dataclass(frozen=True)
@@ -194,8 +222,10 @@ class _Model:
         return min(self.settings.limit_speed, line)
 
 
-def _run(model: _Model, length: float, kind: str, low: float) -> tuple[np.ndarray, ...]:
-    """One forward pass: (s, v, mode) on the grid; ``low`` = V_low (eco)."""
+def _run(model: _Model, length: float, kind: str, low: float,
+         coast_from: float = math.inf) -> tuple[np.ndarray, ...]:
+    """One forward pass: (s, v, mode) on the grid; ``low`` = V_low (eco); from ``coast_from``
+    (m) on, a cruising train coasts to the braking curve (optimal)."""
     st = model.settings
     n = max(int(math.ceil(length / st.ds)), 1)
     s = np.linspace(0.0, length, n + 1)
@@ -216,6 +246,10 @@ def _run(model: _Model, length: float, kind: str, low: float) -> tuple[np.ndarra
             if v2 >= target * target:
                 v2 = target * target
                 state, first = (CRUISE if kind == "conventional" else COAST), False
+        elif state == CRUISE and x >= coast_from:
+            state, low = COAST, 0.0
+            v2 = vi * vi - 2.0 * model.drag(vi, x) * step
+            mode[i] = COAST
         elif state == CRUISE:
             target = min(v_act, cap)
             v2 = min(vi * vi + 2.0 * model.traction_accel(vi, x) * step, target * target)
@@ -253,9 +287,9 @@ def _finish(kind: str, s: np.ndarray, v: np.ndarray, mode: np.ndarray, low: floa
 def generate(kind: str, route: Route, scheduled_time: float | None = None,
              train: Crh3Params | None = None,
              settings: ProfileSettings | None = None) -> SpeedProfile:
-    """The ``kind`` ("conventional" | "eco") profile from the route's first station (or 0) to
-    its end (``length_m``, the stop point) within ``scheduled_time`` (s; default the route's
-    ``scheduled_time_s``)."""
+    """The ``kind`` ("conventional" | "eco" | "cruise") profile from the route's first station
+    (or 0) to its end (``length_m``, the stop point) within ``scheduled_time`` (s; default the
+    route's ``scheduled_time_s``)."""
     if kind not in PROFILE_KINDS:
         raise ValueError(f"profile {kind!r} must be one of {PROFILE_KINDS}")
     train = train or Crh3Params()
@@ -264,6 +298,8 @@ def generate(kind: str, route: Route, scheduled_time: float | None = None,
     if scheduled_time is None or scheduled_time <= 0:
         scheduled_time = route.scheduled_time_s
     if kind == "eco" and scheduled_time is None:
+        raise ValueError(f"route {route.name!r} has no scheduled_time_s: give scheduled_time")
+    if kind in ("cruise", "optimal") and scheduled_time is None:
         raise ValueError(f"route {route.name!r} has no scheduled_time_s: give scheduled_time")
     key = (kind, id(route), float(scheduled_time or 0.0), train, settings)
     hit = _CACHE.get(key)
@@ -287,7 +323,11 @@ def _generate(kind: str, route: Route, scheduled: float, train: Crh3Params,
     conventional = _finish("conventional", s, v, mode, v_act, scheduled)
     if kind == "conventional" or scheduled <= conventional.arrival_time:
         return conventional if kind == "conventional" else _finish(
-            "eco", s, v, mode, v_act, scheduled)
+            kind, s, v, mode, v_act, scheduled)
+    if kind == "cruise":
+        return _cruise(train, route, scheduled, settings)
+    if kind == "optimal":
+        return _optimal(train, route, scheduled, settings)
     lo, hi = settings.min_low_speed, v_act  # time(lo) >= time(hi)
     best: SpeedProfile | None = None
     for _ in range(60):
@@ -309,3 +349,100 @@ def _generate(kind: str, route: Route, scheduled: float, train: Crh3Params,
                          f"{settings.time_tolerance} s of scheduled_time = {scheduled} s "
                          f"(closest {best.arrival_time if best else float('nan'):.1f} s)")
     return best
+
+
+def _cruise(train: Crh3Params, route: Route, scheduled: float,
+            settings: ProfileSettings) -> SpeedProfile:
+    """The conventional shape at the cruising speed whose run time is ``scheduled``."""
+    length = float(route.length_m)
+
+    def profile(speed: float) -> SpeedProfile:
+        st = dataclasses.replace(settings, cruise_speed=speed)
+        s, v, mode = _run(_Model(train, route, st), length, "conventional", speed)
+        return _finish("cruise", s, v, mode, speed, scheduled)
+
+    lo, hi = settings.min_low_speed, settings.cruise_speed
+    slowest = profile(lo)
+    if slowest.arrival_time < scheduled:
+        raise ValueError(f"route {route.name!r}: cruising at min_low_speed = {lo:.2f} m/s "
+                         f"arrives at {slowest.arrival_time:.1f} s, before scheduled_time = "
+                         f"{scheduled} s")
+    # run time falls by about L / V^2 per m/s: xtol 1e-6 m/s is well inside time_tolerance
+    speed = scipy.optimize.brentq(lambda x: profile(x).arrival_time - scheduled, lo, hi,
+                                  xtol=1e-6)
+    best = profile(speed)
+    if abs(best.arrival_time - scheduled) > settings.time_tolerance:
+        raise ValueError(f"route {route.name!r}: no cruise profile arrives within "
+                         f"{settings.time_tolerance} s of scheduled_time = {scheduled} s "
+                         f"(closest {best.arrival_time:.1f} s at {speed:.3f} m/s)")
+    return best
+
+
+def _optimal(train: Crh3Params, route: Route, scheduled: float,
+             settings: ProfileSettings) -> SpeedProfile:
+    """Hold ``V_h``, coast from ``s_c``, brake: both found for the schedule (module text)."""
+    length = float(route.length_m)
+
+    def run(speed: float, coast_from: float) -> SpeedProfile:
+        st = dataclasses.replace(settings, cruise_speed=speed)
+        s, v, mode = _run(_Model(train, route, st), length, "conventional", speed, coast_from)
+        return _finish("optimal", s, v, mode, speed, scheduled)
+
+    def for_schedule(speed: float) -> SpeedProfile | None:
+        """The coasting point of holding speed ``speed`` that meets the schedule."""
+        late = run(speed, 0.0)  # coasts as soon as V_h is reached: the longest run
+        if run(speed, length).arrival_time > scheduled + settings.time_tolerance:
+            return None  # too slow even without coasting
+        if late.arrival_time < scheduled:
+            return None  # early even coasting from V_h on (V_h too high for this family)
+        c = scipy.optimize.brentq(lambda x: run(speed, x).arrival_time - scheduled, 0.0,
+                                  length, xtol=0.5 * settings.ds)
+        # the run time is a step function of c on the ds grid: take the closer grid point
+        best = min((run(speed, c + d) for d in (-settings.ds, 0.0, settings.ds)),
+                   key=lambda p: abs(p.arrival_time - scheduled))
+        return best if abs(best.arrival_time - scheduled) <= settings.time_tolerance else None
+
+    cruise = _cruise(train, route, scheduled, settings)
+
+    def work(speed: float) -> float:
+        prof = for_schedule(speed)
+        return math.inf if prof is None else net_energy(prof, route, train)
+
+    # V_h ranges from the cruise speed (no coasting) to the speed that meets the schedule
+    # coasting from the moment it is reached (above it the run is early whatever s_c)
+    top = settings.cruise_speed
+    if run(top, 0.0).arrival_time < scheduled:
+        top = scipy.optimize.brentq(lambda x: run(x, 0.0).arrival_time - scheduled,
+                                    cruise.low_speed, top, xtol=1e-4)
+    res = scipy.optimize.minimize_scalar(work, bounds=(cruise.low_speed, top),
+                                         method="bounded", options={"xatol": 1e-3})
+    best = for_schedule(float(res.x))
+    if best is None or net_energy(best, route, train) > net_energy(cruise, route, train):
+        return dataclasses.replace(cruise, kind="optimal")  # no coasting pays
+    return best
+
+
+def step_forces(profile: SpeedProfile, route: Route, train: Crh3Params | None = None
+                ) -> np.ndarray:
+    """Force (N) of each step of ``profile`` on the nominal model: ``m_eff (a + drag(v_mean,
+    s))`` (> 0 traction, < 0 braking)."""
+    model = _Model(train or Crh3Params(), route, ProfileSettings())
+    vm = 0.5 * (profile.v[:-1] + profile.v[1:])
+    drag = np.array([model.drag(float(v), float(x)) for v, x in zip(vm, profile.s[:-1])])
+    return model.m_eff * (profile.accel[:-1] + drag)
+
+
+def traction_work(profile: SpeedProfile, route: Route, train: Crh3Params | None = None) -> float:
+    """Mechanical traction work (J) along ``profile`` on the nominal model: the sum over the
+    steps of ``max(force, 0) ds`` (:func:`step_forces`; braking and coasting cost none)."""
+    force = step_forces(profile, route, train)
+    return float(np.sum(np.maximum(force, 0.0) * np.diff(profile.s)))
+
+
+def net_energy(profile: SpeedProfile, route: Route, train: Crh3Params | None = None) -> float:
+    """Eq. 9 energy (J) of ``profile`` on the nominal model without the auxiliary part:
+    traction work / eta_M minus eta_b x braking work (all braking regenerative)."""
+    train = train or Crh3Params()
+    force = step_forces(profile, route, train) * np.diff(profile.s)
+    return float(np.sum(np.maximum(force, 0.0)) / train.motor_efficiency
+                 + train.regen_efficiency * np.sum(np.minimum(force, 0.0)))

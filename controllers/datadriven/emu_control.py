@@ -47,7 +47,7 @@ from cosim.fmu.declare import Declared, Var, build, group, param, parameters, sa
 from cosim.fmu.state import StatefulCore
 from plants.route import load_reference, routes_dir_in
 
-# The paper's sample (issue 15, seventh pass): eq. 89 defines MA = max |y_i(t) - y_i(t-1)|
+# The paper's sample: eq. 89 defines MA = max |y_i(t) - y_i(t-1)|
 # over the control samples t and Table 2 gives it in m/s2, equal to the largest acceleration
 # the text reports for every law (ISMPC 0.9249, MFAC 0.9749, GPC 1.0124 m/s2, sec. 4.3 and the
 # abstract): a speed change per sample equals an acceleration only for y in m/s sampled every
@@ -85,8 +85,7 @@ class DriveParams:
                                              "false: v_ref "
                                              "+ a_ref T, the slope of the current segment, "
                                              "which misses a profile point crossed within the "
-                                             "sample (the reading before issue 15's sixth "
-                                             "pass, a diagnostic)")
+                                             "sample (a diagnostic)")
     sample_time: float = sample_time(PAPER_SAMPLE_TIME)
 
     def check(self) -> None:

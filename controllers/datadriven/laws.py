@@ -50,8 +50,8 @@ against the train's about 0.72 is ``r = 0.44``: eq. 72's sign made the forces ju
 and 88 kN at start-up. The default is eq. 78's
 (``error_prediction = "eq78"``), eq. 72's is ``"eq72"``, ``"off"`` is ``P_hat = 0``.
 
-(The figures above and below are for the 0.2-s sample in km/h, m/s^2 used before issue 15's
-seventh pass; the seed-001 laws now sample at 1 s in m/s, m/s^2, where Phi_2 is about I.)
+(The figures above and below are for a 0.2-s sample with y in km/h and u in m/s^2; the
+seed-001 laws sample at 1 s with y in m/s and u in m/s^2, where Phi_2 is about I.)
 First-move gains of the MPC (N = 10, scalar Phi_2 = 0.72): on ``s`` 0.92 / 0.51 / 0.20 at
 ``theta`` = 0.05 / 1 / 10, on ``p_hat`` 1.00 / 1.00 / 0.82. ISMC's layer pulls ``s`` back by
 ``beta / Delta = 0.5`` per sample and has no ``p_hat`` term.

@@ -102,11 +102,13 @@ class EcoTrackingParams:
 
 PROFILE_VARS: tuple[Var, ...] = (
     Var("profile", "parameter", "conventional", description="target profile: "
-        "'conventional' (accelerate, cruise, brake) or 'eco' (accelerate, coast, "
-        "re-accelerate, ..., brake)"),
+        "'conventional' (accelerate, cruise at V_act, brake), 'eco' (accelerate, coast, "
+        "re-accelerate, ..., brake), 'cruise' (accelerate, cruise at the constant speed "
+        "that meets the schedule, brake) or 'optimal' (maximum traction, speed holding, "
+        "coasting, braking; energy-optimal for the schedule)"),
     route_parameter("seed003_crh3", "the profile's line"),
-    Var("scheduled_time", "parameter", -1.0, "s", "scheduled running time the eco profile "
-        "uses up (-1: the route's scheduled_time_s)"),
+    Var("scheduled_time", "parameter", -1.0, "s", "scheduled running time the eco, "
+        "cruise and optimal profiles use up (-1: the route's scheduled_time_s)"),
 )
 TRACKER_INPUTS: tuple[Var, ...] = (
     Var.input("v", "m/s", "measured speed"),

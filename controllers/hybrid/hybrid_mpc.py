@@ -12,7 +12,8 @@ At every sample (Ts = 1 s) the controller
    leaves delta to the MIQP instead);
 4. solves the MIQP of eq. 15 (:class:`controllers.hybrid.miqp.HybridMiqp`, DAQP's branch and
    bound) with the envelope read from the plant (``traction_limit[i]``, ``brake_limit[i]``,
-   held over the horizon) and applies the first input. An infeasible MIQP (none seen in the
+   held over the horizon; a move block spanning a mode change is cut there, so each stage
+   keeps its mode) and applies the first input. An infeasible MIQP (none seen in the
    seed 004 runs) applies the previous plan's next input, counted in ``qp_infeasible``.
 
 The control model (:class:`controllers.hybrid.model.ChainModel`) takes the train data of a
@@ -136,7 +137,7 @@ class HybridMpc(StatefulCore, Declared):
         Var.output("s_ref", "m", "reference position (integral of v_ref)"),
         Var.output("speed_error", "m/s", "mean speed - v_ref"),
         Var.output("qp_solves", "1", "MIQPs solved so far", start=0),
-        Var.output("qp_infeasible", "1", "events whose MIQP was infeasible (previous plan "
+        Var.output("qp_infeasible", "1", "events with an infeasible MIQP (previous plan "
                    "used)", start=0),
         Var.output("qp_rescued", "1", "events DAQP solved only on a retry with other settings "
                    "or by enumerating the binaries", start=0),
@@ -256,9 +257,8 @@ class HybridMpc(StatefulCore, Declared):
         if res.feasible:
             self.qp_rescued += res.status != "solved"
             u = res.u0
-            stages = [res.V @ self.miqp.P[s, :self.n].T for s in range(self.N)]
-            self.plan = [list(map(float, st)) for st in stages[1:]]
-            d0 = int(round(float(self.miqp.P[0, md.i_delta] @ res.V)))
+            self.plan = [list(map(float, st)) for st in res.stage_w[1:, :self.n]]
+            d0 = int(round(float(res.stage_w[0, md.i_delta])))
         else:
             self.qp_infeasible += 1
             self.last_failure = (t, res.status)

@@ -50,6 +50,27 @@ ENUMERATE_MAX_FREE = 10  # last resort after the retries: every binary assignmen
 EPS_REG = 1e-6
 
 
+def split_blocks(blocks: Sequence[int], delta: Sequence[int | None]) -> list[int]:
+    """``blocks`` cut wherever the fixed mode changes between two stages of one block.
+
+    A block holds one input vector; a traction stage needs it >= 0 and a braking stage <= 0,
+    so a block spanning both could only apply 0. Cut at the change, each stage keeps its mode
+    (``delta[s]`` None, a free mode, never cuts: the MIQP picks it)."""
+    out: list[int] = []
+    s = 0
+    for length in blocks:
+        start = s
+        for t in range(s + 1, s + length):
+            a = delta[t - 1] if t - 1 < len(delta) else None
+            b = delta[t] if t < len(delta) else None
+            if a is not None and b is not None and a != b:
+                out.append(t - start)
+                start = t
+        s += length
+        out.append(s - start)
+    return out
+
+
 def parse_blocks(text: str, horizon: int) -> list[int]:
     """Block lengths from ``"3:4:3"`` (or ``""``: every stage its own move); they sum to N."""
     if not text.strip():
@@ -77,6 +98,8 @@ class MiqpResult:
     nodes: int = 0
     cpu_time: float = 0.0  # s, CPU time of this thread for the same (immune to a busy machine)
     free_binaries: int = 0
+    stage_w: np.ndarray | None = None  # (N, nw): [u, delta, b, z] of every stage
+    blocks: tuple[int, ...] = ()  # the blocking of the problem solved (split at mode changes)
 
 
 class HybridMiqp:
@@ -90,6 +113,8 @@ class HybridMiqp:
         if N < 1 or sum(blocks) != N or any(b < 1 for b in blocks):
             raise ValueError(f"blocks {blocks} must be positive and sum to N = {N}")
         self.md, self.N, self.blocks = md, N, blocks
+        self._weights = (q, r)
+        self._split: dict[tuple[int, ...], HybridMiqp] = {}
         nb = len(blocks)
         self.nV = nV = n * nb + N * (1 + 2 * K)
         # stage vectors w_s = P_s V
@@ -182,7 +207,8 @@ class HybridMiqp:
         sense = np.zeros(nV + self.n_rows, dtype=np.int32)
         wlo, whi = md.input_bounds(lim)
         # a fixed delta goes into the input bounds (0 <= u <= T or -B <= u <= 0, intersected
-        # over a block) and its rows are dropped: duplicate active constraints made DAQP cycle
+        # over a block: solve() first cuts the blocks at mode changes) and its rows are
+        # dropped: duplicate active constraints made DAQP cycle
         stage_block = np.repeat(np.arange(self._nb), self.blocks)
         ulo = np.tile(wlo[:n], (self._nb, 1))
         uhi = np.tile(whi[:n], (self._nb, 1))
@@ -282,9 +308,25 @@ class HybridMiqp:
         const = float(np.einsum("sx,xy,sy->", e[1:], self.Q, e[1:]))
         return f, const
 
+    def for_modes(self, delta: Sequence[int | None]) -> HybridMiqp:
+        """The problem whose blocks respect the mode schedule ``delta``: this one, or (built
+        once, cached) the same horizon and weights with the blocks cut at the mode changes
+        (:func:`split_blocks`)."""
+        blocks = split_blocks(self.blocks, delta)
+        if blocks == self.blocks:
+            return self
+        key = tuple(blocks)
+        if key not in self._split:
+            self._split[key] = HybridMiqp(self.md, self.N, *self._weights, blocks)
+        return self._split[key]
+
     def solve(self, x0: np.ndarray, ref: np.ndarray, lim: Limits,
               delta: Sequence[int | None]) -> MiqpResult:
-        """The MIQP for state ``x0``, references ``ref`` (N+1, 2n), limits, mode schedule."""
+        """The MIQP for state ``x0``, references ``ref`` (N+1, 2n), limits, mode schedule;
+        a block that spans a change of the fixed mode is cut there (:meth:`for_modes`)."""
+        problem = self.for_modes(delta)
+        if problem is not self:
+            return problem.solve(x0, ref, lim, delta)
         t0, c0 = time.perf_counter(), time.thread_time()
         f, const = self.linear_term(x0, ref)
         lo, hi, sense, free = self.bounds(x0, lim, delta)
@@ -325,17 +367,23 @@ class HybridMiqp:
         cost = float(0.5 * V @ self.H @ V + f @ V + const)
         states = self.stage_states_free(x0) + self.Gam @ V
         return MiqpResult(self.P[0, :self.md.n] @ V, V, states, cost, True, status,
-                          time.perf_counter() - t0, nodes=nodes, free_binaries=free)
+                          time.perf_counter() - t0, nodes=nodes, free_binaries=free,
+                          stage_w=self.P @ V, blocks=tuple(self.blocks))
 
     def _failed(self, status: str, t0: float, free: int, nodes: int = 0) -> MiqpResult:
         n = self.md.n
         return MiqpResult(np.full(n, np.nan), np.full(self.nV, np.nan),
                           np.full((self.N + 1, 2 * n), np.nan), math.inf, False, status,
-                          time.perf_counter() - t0, nodes=nodes, free_binaries=free)
+                          time.perf_counter() - t0, nodes=nodes, free_binaries=free,
+                          stage_w=np.full((self.N, self.md.nw), np.nan),
+                          blocks=tuple(self.blocks))
 
     def solve_enumerated(self, x0: np.ndarray, ref: np.ndarray, lim: Limits,
                          delta: Sequence[int | None]) -> MiqpResult:
         """Reference solution: every assignment of the free binaries as a QP (tests, N small)."""
+        problem = self.for_modes(delta)
+        if problem is not self:
+            return problem.solve_enumerated(x0, ref, lim, delta)
         t0 = time.perf_counter()
         f, const = self.linear_term(x0, ref)
         lo, hi, sense, free = self.bounds(x0, lim, delta)

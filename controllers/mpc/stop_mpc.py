@@ -39,7 +39,7 @@ Choices where the paper is silent (all parameters of :class:`StopMpcParams`):
   under the tube law ``du = K e`` inside X (speed and position error, ``|K e| <= du_max`` and,
   with nominal resistance, the command bounds for the steady-tracking command of the route),
   computed by :func:`controllers.mpc.terminal.robust_invariant_set`; the terminal constraint
-  of a QP is that set tightened by ``R_H`` (or ``R_H^M``). ``terminal_set_scale`` is unused.
+  of a QP is that set tightened by ``R_H`` (or ``R_H^M``).
 * RSMPC (eq. 25-29): the held-input problem for hold M predicts ``M + N - 1`` stages (the
   paper writes ``M + N``) so that M = 1 is exactly RMPC with horizon N; it has ``N`` free moves
   (``du_0`` and stages ``M .. M+N-2``); the first M stage costs are scaled by ``1/beta``.
@@ -119,8 +119,6 @@ class StopMpcParams:
                                    min=1e-9)
     position_error_max: float = param(20.0, "m", "bound of |s - s_s| in the constraint set X",
                                       min=1e-9)
-    terminal_set_scale: float = param(3.0, "1", "unused since issue 11 (the terminal set is "
-                                      "the maximal robust positively invariant set)", min=1.0)
     mass: float = param(490e3, "kg", "train mass (resistance model)", min=1.0)
     davis: Davis = group(Davis.from_kn_kmh(5.4, 0.0098, 0.00163), "davis_")
     route: str = param("seed000_stop", description="route (grade profile): bundled name or path")
@@ -168,8 +166,6 @@ class StopMpcParams:
                              f"position target; without it the tube feedback is not stabilising)")
         if not self.beta >= 1.0:
             raise ValueError(f"beta = {self.beta} must be >= 1")
-        if not self.terminal_set_scale >= 1.0:
-            raise ValueError(f"terminal_set_scale = {self.terminal_set_scale} must be >= 1")
         if not self.u_min < self.u_max:
             raise ValueError(f"u_min = {self.u_min} must be < u_max = {self.u_max}")
         for name in ("mass_uncertainty", "grade_uncertainty"):
@@ -239,12 +235,12 @@ class _StopMpcBase(StatefulCore, Declared):
         Var.output("brake_command", "%", "brake command u"),
         Var.output("v_ref", "m/s", "stopping-curve speed at the measured position"),
         Var.output("qp_solves", "1", "QPs solved so far", start=0),
-        Var.output("qp_infeasible", "1", "events whose QP was infeasible (fallback law used)",
+        Var.output("qp_infeasible", "1", "events with an infeasible QP (fallback law used)",
                    start=0),
         Var.output("hold_steps", "1", "samples the current command is held (RSMPC: M)",
                    start=1),
-        Var.output("qp_infeasible_after_stop", "1", "events at standstill whose QP was "
-                   "infeasible (the brake is held regardless)", start=0),
+        Var.output("qp_infeasible_after_stop", "1", "events at standstill with an infeasible "
+                   "QP (the brake is held regardless)", start=0),
         Var.output("events_moving", "1", "controller events while moving", start=0),
         Var.output("events_standstill", "1", "controller events at standstill (brake held)",
                    start=0),

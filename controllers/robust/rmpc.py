@@ -140,7 +140,7 @@ class RobustMpcLaw(StatefulCore):
         self.active = 0
         self.gamma = 0.0
         self.lmi_solves = 0
-        # run-dependent solve times: bounded, outside the state and the outputs (issue 12),
+        # run-dependent solve times: bounded, outside the state and the outputs,
         # reported once at fmi2Terminate (cosim.fmu.diagnostics)
         self.timing = SolveTimes()
         self.lmi_failures = 0
@@ -235,7 +235,7 @@ class Crh3Rmpc(EcoTracker):
         Var.output("disturbance_estimate", "1", "xi_hat: filtered one-step residual of the "
                    "active model (km/h)"),
         Var.output("qp_solves", "1", "LMI (SDP) problems solved so far", start=0),
-        Var.output("qp_infeasible", "1", "events whose LMI problem was not solved (previous "
+        Var.output("qp_infeasible", "1", "events whose LMI problem has no solution (previous "
                    "gain kept)", start=0),
     )
 
@@ -282,5 +282,5 @@ class Crh3Rmpc(EcoTracker):
         return out
 
     def diagnostics(self) -> dict[str, float]:
-        """LMI solve times (wall and CPU), logged once at fmi2Terminate (issue 12)."""
+        """LMI solve times (wall and CPU), logged once at fmi2Terminate."""
         return self.law.diagnostics()

@@ -11,7 +11,7 @@ imported modules are kept per process under the digest of the bundled files (mod
 same FMU) does not import them again: it only builds its own state. After a bundle's first
 import the entry calls ``gc.freeze()`` (objects existing then go to the permanent generation),
 so that later full collections do not traverse the large, process-long module graphs
-(numba's above all) at every further instance: 23 -> 2 ms per Emu3 instance.
+(numba's above all) at every further instance (benchmarks/bench_instances.py measures it).
 
 On Linux the FMU's ``binaries/linux64/<identifier>.so`` is a small C shim
 (``cosim/fmu/pythonfmu_shim.c``, compiled once per process with gcc against fmpy's FMI 2 headers)
@@ -19,6 +19,9 @@ in front of pythonfmu's binary, which is kept as ``<identifier>_pythonfmu.so``: 
 libpython this FMU was built with when the host has no Python, and reports pythonfmu's
 fmi2Fatal for a rejected call as fmi2Error. Without gcc the FMU keeps pythonfmu's binary (a
 warning says so). The win64 binary is pythonfmu's.
+
+The FMI 3.0 build of an FMU (``fmus/fmi3/<identifier>.fmu``) is derived from the same FMI 2
+build by :mod:`cosim.fmu.fmi3` (an FMI 3 front in C in front of the shim; needs gcc).
 """
 
 from __future__ import annotations
@@ -115,7 +118,17 @@ class FmuSpec:
 
     @property
     def path(self) -> Path:
+        """The FMI 2.0 build."""
         return FMU_DIR / f"{self.identifier}.fmu"
+
+    @property
+    def path_fmi3(self) -> Path:
+        """The FMI 3.0 build (:mod:`cosim.fmu.fmi3`)."""
+        return FMU_DIR / "fmi3" / f"{self.identifier}.fmu"
+
+    def path_for(self, fmi_version: int) -> Path:
+        """The build of FMI version ``fmi_version`` (2 or 3)."""
+        return self.path if _checked_version(fmi_version) == 2 else self.path_fmi3
 
     def load(self) -> type:
         """The wrapper class (imports its module)."""
@@ -315,7 +328,7 @@ def add_bytecode(fmu: Path, bundle: Path) -> None:
     """Add the bundle's compiled modules to the FMU (``__pycache__``, this interpreter's tag),
     as checked-hash pycs (PEP 552): valid whatever time stamps the extraction gives the files,
     and ignored by another Python version or when the source differs. Every process that
-    imports the FMU then skips compiling its ~60 modules (~45 ms); pythonfmu leaves
+    imports the FMU then skips compiling its modules; pythonfmu leaves
     ``__pycache__`` out of the zip."""
     import compileall
     import py_compile
@@ -351,11 +364,33 @@ def install_shim(fmu: Path, identifier: str, shim: Path) -> None:
     os.replace(staged, fmu)
 
 
-def build_fmu(spec: FmuSpec, dest: Path = FMU_DIR) -> Path:
-    """Build one FMU into ``dest`` and return its path."""
+FMI_VERSIONS = (2, 3)
+
+
+def _checked_version(fmi_version: int) -> int:
+    if fmi_version not in FMI_VERSIONS:
+        raise ValueError(f"fmi_version {fmi_version!r}: expected one of {FMI_VERSIONS}")
+    return fmi_version
+
+
+def build_fmu(spec: FmuSpec, dest: Path = FMU_DIR, fmi_version: int = 2) -> Path:
+    """Build one FMU of FMI version ``fmi_version`` into ``dest`` (FMI 3: ``dest/fmi3``) and
+    return its path."""
+    return build_fmus(spec, dest, (fmi_version,))[0]
+
+
+def build_fmus(spec: FmuSpec, dest: Path = FMU_DIR, fmi_versions: tuple[int, ...] = (2, 3)
+               ) -> list[Path]:
+    """Build one FMU in each of ``fmi_versions`` from one FMI 2 build (the FMI 3 one derives
+    from it: :mod:`cosim.fmu.fmi3`); the paths in the order given."""
     from pythonfmu.builder import FmuBuilder
 
+    from cosim.fmu import fmi3
+
+    for version in fmi_versions:
+        _checked_version(version)
     dest.mkdir(parents=True, exist_ok=True)
+    finals = []
     with tempfile.TemporaryDirectory(prefix="atocosim_build_") as tmp:
         tmp_path = Path(tmp)
         bundle = tmp_path / BUNDLE_DIR
@@ -378,29 +413,58 @@ def build_fmu(spec: FmuSpec, dest: Path = FMU_DIR) -> Path:
         shim = shim_binary()
         if shim is not None:
             install_shim(tmp_fmu, spec.identifier, shim)
-        final = dest / f"{spec.identifier}.fmu"
-        staged = dest / f".{spec.identifier}.fmu.{os.getpid()}.tmp"
-        shutil.copy2(tmp_fmu, staged)
-        os.replace(staged, final)  # atomic: a reader never sees a half-written FMU
-    return final
+        for version in fmi_versions:
+            made = tmp_fmu
+            folder = dest
+            if version == 3:
+                folder = dest / "fmi3"
+                made = fmi3.package(tmp_fmu, spec.identifier,
+                                    tmp_path / "out3" / f"{spec.identifier}.fmu")
+            folder.mkdir(parents=True, exist_ok=True)
+            final = folder / f"{spec.identifier}.fmu"
+            staged = folder / f".{spec.identifier}.fmu.{os.getpid()}.tmp"
+            shutil.copy2(made, staged)
+            os.replace(staged, final)  # atomic: a reader never sees a half-written FMU
+            finals.append(final)
+    return finals
 
 
-def is_stale(spec: FmuSpec) -> bool:
-    """True when the FMU is missing or older than any file it bundles or the builder."""
-    if not spec.path.is_file():
+def is_intact(path: Path) -> bool:
+    """True when ``path`` is a readable FMU archive: a zip whose every member passes its CRC
+    (a truncated or overwritten file fails) and that holds a modelDescription.xml."""
+    try:
+        with zipfile.ZipFile(path) as archive:
+            return archive.testzip() is None and "modelDescription.xml" in archive.namelist()
+    except (zipfile.BadZipFile, OSError, EOFError, ValueError):
+        return False
+
+
+def _builder_files(fmi_version: int) -> list[Path]:
+    from cosim.fmu import fmi3
+
+    files = [Path(__file__).resolve(), SHIM_SOURCE]
+    return files + fmi3.builder_files() if fmi_version == 3 else files
+
+
+def is_stale(spec: FmuSpec, fmi_version: int = 2) -> bool:
+    """True when the FMU's build of ``fmi_version`` is missing, not an intact archive
+    (:func:`is_intact`), or older than any file it bundles or the builder."""
+    path = spec.path_for(fmi_version)
+    if not path.is_file() or not is_intact(path):
         return True
-    built = spec.path.stat().st_mtime
+    built = path.stat().st_mtime
     if built >= _newest_project_file():  # no project file changed since: no import scan
         return False
-    builder = [Path(__file__).resolve(), SHIM_SOURCE]
-    newest = max(f.stat().st_mtime for f in [*bundled_files(spec.module), *builder]
+    newest = max(f.stat().st_mtime for f in [*bundled_files(spec.module),
+                                             *_builder_files(fmi_version)]
                  if f.is_file())
-    return spec.path.stat().st_mtime < newest
+    return built < newest
 
 
 def _newest_project_file() -> float:
     """Newest modification time of any file in the project packages (a superset of what any
-    FMU bundles) and the builder: ~1 ms, where the exact per-FMU import scan costs ~15 ms."""
+    FMU bundles, and the builder: cosim/fmu/front is in cosim): a cheaper bound than the exact
+    per-FMU import scan."""
     newest = max(Path(__file__).stat().st_mtime, SHIM_SOURCE.stat().st_mtime
                  if SHIM_SOURCE.is_file() else 0.0)
     for package in PROJECT_PACKAGES:
@@ -411,10 +475,12 @@ def _newest_project_file() -> float:
     return newest
 
 
-def build_stale(specs: list[FmuSpec] | None = None) -> list[Path]:
-    """Build the given (default: all) FMUs that are missing or out of date."""
-    return [build_fmu(s) for s in (specs if specs is not None else catalog().values())
-            if is_stale(s)]
+def build_stale(specs: list[FmuSpec] | None = None, fmi_version: int = 2) -> list[Path]:
+    """Build the given (default: all) FMUs whose build of ``fmi_version`` is missing or out of
+    date."""
+    return [build_fmu(s, fmi_version=fmi_version)
+            for s in (specs if specs is not None else catalog().values())
+            if is_stale(s, fmi_version)]
 
 
 def resolve(names: list[str] | None) -> list[FmuSpec]:

@@ -62,6 +62,16 @@ _SPEC = "atocosim_declaration"
 _GROUP = "atocosim_group"
 
 
+
+def out_of_range(value: Any, lo: Any, hi: Any) -> str:
+    """``value`` and the bound it breaks, in words: ``5 outside [0, 2]`` when both bounds are
+    declared, ``0.5: must be at least 1.0`` (or ``at most``) when only one is."""
+    if lo is not None and hi is not None:
+        return f"{value} outside [{lo}, {hi}]"
+    if lo is not None:
+        return f"{value}: must be at least {lo}"
+    return f"{value}: must be at most {hi}"
+
 @dataclass(frozen=True)
 class Var:
     """One declared scalar: a parameter, an input or an output.

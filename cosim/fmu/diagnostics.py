@@ -1,5 +1,5 @@
 """Run-dependent diagnostics of an FMU (solver wall and CPU times): kept out of the FMU state
-and of the outputs, which must be deterministic (issue 12), bounded in memory, and reported
+and of the outputs, which must be deterministic, bounded in memory, and reported
 once, through the FMI log at fmi2Terminate (bundled into every FMU; stdlib only).
 
 The log message is ``"<instance>: diagnostics {json}"`` (:data:`TAG`), read by the master into

@@ -22,6 +22,11 @@
  *    freed and other instances are unaffected (fmi2Fatal would mean all instances are lost).
  * 4. keeps pythonfmu's binary loaded until the process exits and then tears it down from an
  *    exit handler, avoiding pythonfmu 0.7's heap corruption at exit (see load()).
+ * 5. delivers warnings and errors whatever the host's logging flag (pythonfmu 0.7 passes its
+ *    messages to the logger only with logging on, so it is instantiated with logging on and
+ *    the shim drops the fmi2OK messages while the host's loggingOn / fmi2SetDebugLogging is
+ *    off), as the Reference FMUs do: with fmpy's default (logging off) the user sees why a
+ *    call failed.
  *
  * Instances are wrapped: the shim passes pythonfmu its own callback structure (pythonfmu keeps
  * a pointer to it) whose logger maps the status and calls the host's logger with the host's
@@ -82,6 +87,7 @@ typedef struct {
     fmi2CallbackFunctions host;   /* the host's callbacks */
     fmi2CallbackFunctions mine;   /* given to pythonfmu: our logger, this struct as env */
     char name[256];               /* instance name, for the shim's own messages */
+    fmi2Boolean logging_on;       /* the host's loggingOn / fmi2SetDebugLogging */
 } Shim;
 
 static fmi2Status mapped(fmi2Status status)
@@ -97,6 +103,8 @@ static void shim_logger(fmi2ComponentEnvironment env, fmi2String instanceName,
     Shim* s = (Shim*)env;
     if (!s || !s->host.logger)
         return;
+    if (status == fmi2OK && !s->logging_on)
+        return; /* pythonfmu runs with logging on (see 5.); ok messages only when asked */
     if (status == fmi2Fatal && message && strncmp(message, prefix, sizeof prefix - 1) == 0) {
         /* pythonfmu's wording for any Python exception; the call was rejected, see above */
         char text[8192];
@@ -247,10 +255,18 @@ const char* fmi2GetVersion(void)
     return loaded() && inner.fmi2GetVersion ? inner.fmi2GetVersion() : fmi2Version;
 }
 
-FORWARD(fmi2SetDebugLogging,
-        (fmi2Component c, fmi2Boolean loggingOn, size_t nCategories,
-         const fmi2String categories[]),
-        (s->inner, loggingOn, nCategories, categories))
+fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean loggingOn, size_t nCategories,
+                               const fmi2String categories[])
+{
+    /* pythonfmu keeps logging on (see 5.): the shim filters the ok messages itself */
+    Shim* s = (Shim*)c;
+    if (!s || !s->inner)
+        return fmi2Error;
+    s->logging_on = loggingOn;
+    (void)nCategories;
+    (void)categories;
+    return fmi2OK;
+}
 
 /* -- creation and destruction -------------------------------------------------------------- */
 fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2String fmuGUID,
@@ -277,8 +293,9 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
     s->mine.stepFinished = NULL;
     s->mine.componentEnvironment = s;
     snprintf(s->name, sizeof s->name, "%s", instanceName ? instanceName : "");
+    s->logging_on = loggingOn;
     s->inner = inner.fmi2Instantiate(instanceName, fmuType, fmuGUID, fmuResourceLocation,
-                                     &s->mine, visible, loggingOn);
+                                     &s->mine, visible, fmi2True);
     if (!s->inner) {
         char text[8192];
         Dl_info info;

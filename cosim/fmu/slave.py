@@ -12,8 +12,10 @@ What it adds to pythonfmu's ``Fmi2Slave``:
 * FMU state (get/set/serialize) covering the *whole* core state, not only registered variables;
 * the timing contract of ``SPEC.md`` for sampled and self-triggered controllers: at an event,
   outputs are computed on read from the current inputs (nothing committed) and the event is
-  committed by doStep from the inputs it is given; outputs hold until the next event; a doStep
-  that would pass over an event, or does not continue from the controller's time, is refused.
+  committed by doStep from the inputs it is given; outputs hold until the next event; the
+  events inside a longer doStep are executed with the inputs held at the step's start (said
+  once in the log; the parameter ``strict_steps`` refuses such a step instead), and a doStep
+  that does not continue from the controller's time is refused.
 
 Times are kept in integer nanoseconds so that sample times ``k * T`` never drift.
 """
@@ -35,7 +37,7 @@ from pythonfmu import Boolean, Fmi2Causality, Fmi2Slave, Fmi2Variability, Intege
 from pythonfmu.enums import Fmi2Status
 
 from cosim.fmu import diagnostics
-from cosim.fmu.declare import UNITS, Var
+from cosim.fmu.declare import UNITS, Var, out_of_range
 from cosim.fmu.state import to_seconds, to_ticks
 
 BUNDLE_DIR = "atocosim_bundle"  # project code and data inside an FMU's resources folder
@@ -47,6 +49,9 @@ CONTROLLER_TIMING_VARS: tuple[Var, ...] = (
     Var("next_event_time", "output", 0.0, "s",
         "time of this controller's next event (sample or self-triggered)"),
     Var("executions", "output", 0, "1", "number of events computed so far"),
+    Var("strict_steps", "parameter", False, description=(
+        "true: refuse a doStep that passes over one of this controller's events; false: "
+        "execute every event inside the step with the inputs held at the step's start")),
 )
 
 
@@ -238,7 +243,7 @@ class CoreSlave(Fmi2Slave):
                     raise ValueError(f"{var.name} = {value}: not a finite number")
             if var.min is not None and value < var.min or var.max is not None and value > var.max:
                 if var.causality == "parameter":
-                    raise ValueError(f"{var.name} = {value} outside [{var.min}, {var.max}]")
+                    raise ValueError(f"{var.name} = {out_of_range(value, var.min, var.max)}")
             self.values[var.name] = kind(value)
             if var.causality == "parameter":
                 self.core = None  # rebuilt from the new parameters on next use
@@ -533,9 +538,11 @@ class SampledControllerSlave(CoreSlave):
       copy of the core state (nothing is committed): inputs set again at the same instant, as an
       iterating master does, give outputs of the new inputs; doStep commits the event computed
       from the inputs it is given (reusing the last read's result when the inputs are the same);
-    * doStep must continue from the controller's own time, and a step may not pass over one of
-      its sample instants (that event would be skipped): such a doStep is refused with
-      fmi2Error and a message naming the event, so no event is ever dropped silently.
+    * doStep must continue from the controller's own time; a step longer than the time to the
+      next event executes every event inside it, as a discrete-time block does, with the
+      inputs held at the step's start (logged once with fmi2Warning), so no event is ever
+      dropped; with ``strict_steps`` such a doStep is refused with fmi2Error and a message
+      naming the event.
     """
 
     output_variability = "discrete"
@@ -553,6 +560,7 @@ class SampledControllerSlave(CoreSlave):
         self._input_serial = 0
         self._tentative_checked: tuple[int, int] | None = None
         self._tentative_shown: tuple[int, int] | None = None
+        self._held_inputs_logged = False  # the message on events inside a step, said once
 
     @classmethod
     def declared_variables(cls) -> tuple[Var, ...]:
@@ -659,24 +667,36 @@ class SampledControllerSlave(CoreSlave):
                              f"t={to_seconds(self.now_ticks)} s (a step must continue from "
                              "the end of the previous one)")
         end = to_ticks(current_time + step_size)
-        due = self._event_due()
-        if due:
-            _, outputs, hold, _ = self._compute_tentative()
-            following = self._grid_event() + hold * self.sample_ticks()
-        else:
-            following = self.next_event_ticks
-        if following < end:
-            raise ValueError(
-                f"doStep from t={current_time} s to t={to_seconds(end)} s passes over this "
-                f"controller's event at t={to_seconds(following)} s (sample_time "
-                f"{self.values['sample_time']} s), which would be skipped: use communication "
-                "steps that end on its sample instants (at most sample_time long)")
-        if due:  # commit the event computed from the inputs of this doStep (the live core)
-            self.next_event_ticks = following
-            self.event_done_ticks = self.now_ticks
-            self.executions += 1
-            self._show(outputs, following, self.executions)
-            self._tentative = None
+        while True:  # each event in [now, end): those after the first with the inputs held
+            due = self._event_due()
+            if due:
+                _, outputs, hold, _ = self._compute_tentative()
+                following = self._grid_event() + hold * self.sample_ticks()
+            else:
+                following = self.next_event_ticks
+            if following < end and self.values.get("strict_steps", False):
+                raise ValueError(
+                    f"doStep from t={current_time} s to t={to_seconds(end)} s passes over "
+                    f"this controller's event at t={to_seconds(following)} s (sample_time "
+                    f"{self.values['sample_time']} s) and strict_steps is true: use "
+                    "communication steps that end on its sample instants (at most "
+                    "sample_time long)")
+            if due:  # commit the event computed from the inputs of this doStep (live core)
+                self.next_event_ticks = following
+                self.event_done_ticks = self.now_ticks
+                self.executions += 1
+                self._show(outputs, following, self.executions)
+                self._tentative = None
+            if following >= end:
+                break
+            if not self._held_inputs_logged:
+                self._held_inputs_logged = True
+                self.log(f"{self.instance_name}: doStep from t={current_time} s to "
+                         f"t={to_seconds(end)} s is longer than this controller's sample "
+                         f"({self.values['sample_time']} s): its events inside a step are "
+                         "executed with the inputs held at the step's start (said once; "
+                         "strict_steps = true refuses such steps)", Fmi2Status.warning)
+            self.now_ticks = following
         self.now_ticks = end
         return True
 

@@ -71,6 +71,9 @@ def _component(system_elements: Element, name: str, source: str, md: Any,
         if v.causality not in ("input", "output") and v.name not in values:
             continue
         if v.type not in ("Real", "Integer", "Boolean", "String", "Enumeration"):
+            if v.name in connected or v.name in values:
+                raise ValueError(f"{name}: {v.name} has type {v.type}, which SSP 1.0 "
+                                 f"connectors cannot carry ({source})")
             continue
         kind = v.causality if v.causality in ("input", "output") else "parameter"
         conn = SubElement(connectors, _q(SSD, "Connector"), {"name": v.name, "kind": kind})
@@ -188,6 +191,14 @@ def export_ssp(scenario: str | Path | Scenario, out: str | Path,
         if not comp.fmu_path.is_file():
             raise FileNotFoundError(f"{comp.name}: {comp.fmu_path} not found (run cosim build)")
         descriptions[comp.name] = read_model_description(str(comp.fmu_path))
+        version = str(descriptions[comp.name].fmiVersion)
+        if not version.startswith("2"):
+            raise ScenarioError(
+                f"{sc.path}: [fmus.{comp.name}] fmu = {comp.fmu!r}: an FMI {version} FMU "
+                f"({comp.fmu_path}): SSP 1.0 connectors carry FMI 2.0 types only (ssc:Real, "
+                "Integer, Boolean, String, Enumeration) and the SSP importers we target "
+                "(libcosim) run FMI 2.0 only, so the export is refused; export the FMI 2.0 "
+                "builds ([simulation] fmi_version = 2) or run the scenario with `cosim run`")
     check_against_fmus(sc, descriptions)
     check_timing(sc, descriptions, "jacobi")  # libcosim steps every FMU at the base step
     try:

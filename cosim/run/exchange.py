@@ -18,8 +18,6 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-from cosim.run.fmi_types import FUNCTIONS
-
 
 @dataclass
 class Write:
@@ -93,7 +91,7 @@ def stage(links: Sequence[Any]) -> Stage:
         if key in slots:
             continue
         var = lk.src.vars[lk.src_name]
-        group = (lk.src.name, FUNCTIONS[var.type])
+        group = (lk.src.name, var.family)
         vrs = reads.setdefault(group, (lk.src, []))[1]
         slots[key] = (group, len(vrs))
         vrs.append(var.vr)
@@ -103,14 +101,18 @@ def stage(links: Sequence[Any]) -> Stage:
     for lk in links:
         var = lk.dst.vars[lk.dst_name]
         group, pos = slots[(lk.src.name, lk.src_name)]
-        entry = wanted.setdefault((lk.dst.name, FUNCTIONS[var.type]), (lk.dst, [], []))
+        entry = wanted.setdefault((lk.dst.name, var.family), (lk.dst, [], []))
         entry[1].append(var.vr)
         entry[2].append((group, pos))
         sources.append((lk, batches[group].buf, pos))
     writes = []
     for (_, family), (unit, vrs, taken) in wanted.items():
         group = taken[0][0]
-        if taken == [(group, i) for i in range(len(reads[group][1]))]:
+        # a buffer is shared only between C functions of one value type (an FMI 2 Boolean
+        # is an int, an FMI 3 Boolean a bool)
+        same_memory = (getattr(batches[group], "ctype", None)
+                       is getattr(unit, "C_TYPES", {}).get(family))
+        if same_memory and taken == [(group, i) for i in range(len(reads[group][1]))]:
             writes.append(Write(unit.batch(family, vrs, True, buffer=batches[group].buf), None))
         else:
             batch = unit.batch(family, vrs, True)

@@ -2,14 +2,16 @@
 
 A :class:`Batch` is built once per (FMU instance, function family, value references): the
 value-reference array and the value buffer are allocated once and the FMU's C function
-(``fmi2GetReal`` ...; FMI 2.0.4 sec. 2.1.7) is called directly through ctypes with them, so a
-call costs the FMU's own work plus ~1 us (fmpy's ``getReal`` allocates both arrays and goes
-through a logging wrapper on every call: ~4 us more). The buffer can also be caller memory (a
+(``fmi2GetReal``, ``fmi3GetFloat64`` ...; FMI 2.0.4 sec. 2.1.7, FMI 3.0 sec. 2.2.6.2) is called
+directly through ctypes with them, so a call costs the FMU's own work plus ~1 us (fmpy's
+``getReal`` allocates both arrays and goes through a logging wrapper on every call: ~4 us
+more). The buffer can also be caller memory (a
 row of the recorder's array), so recorded values are never copied through Python lists.
 
-A non-OK status (above fmi2Warning) goes to ``on_error(call, status)``, which raises the
-master's error naming the instance, the call and the time. Strings, and FMUs loaded by an fmpy
-without the ``dll``/``component`` attributes, go through fmpy's ``get<Type>``/``set<Type>``.
+A non-OK status (above Warning) goes to ``on_error(call, status)``, which raises the
+master's error naming the instance, the call and the time. Strings (and Binary, and FMI 3 array
+elements), and FMUs loaded by an fmpy without the ``dll``/``component`` attributes, go through
+the unit's ``read``/``write``.
 """
 
 from __future__ import annotations
@@ -19,28 +21,32 @@ from collections.abc import Callable
 from time import perf_counter
 from typing import Any
 
-C_TYPES = {"Real": ctypes.c_double, "Integer": ctypes.c_int, "Boolean": ctypes.c_int}
-_FMI2_WARNING = 1
+_WARNING = 1  # fmi2Warning, fmi3Warning
 
 
 class Batch:
-    """fmi2Get<family> (``get``) or fmi2Set<family> (``set``) of ``vrs`` on ``unit`` (an
-    :class:`cosim.run.master.FmuUnit` after instantiation: ``slave``, ``wall_time``)."""
+    """Get<family> (``get``) or Set<family> (``set``) of ``vrs`` on ``unit`` (a
+    :class:`cosim.run.master.unit.Unit` after instantiation: ``raw_slave()``, ``read``,
+    ``write``, ``wall_time``, and its ``C_TYPES``, ``C_PREFIX``, ``C_COUNTS``)."""
 
     def __init__(self, unit: Any, family: str, vrs: list[int], setter: bool,
                  on_error: Callable[[str, int], None], buffer: Any = None) -> None:
         self.unit, self.family, self.vrs, self.n = unit, family, list(vrs), len(vrs)
         self.call = f"{'set' if setter else 'get'}{family}"
         self.on_error = on_error
-        raw = unit.slave._slave if hasattr(unit.slave, "_slave") else unit.slave
-        ctype = C_TYPES.get(family)
+        raw = unit.raw_slave()
+        ctype = unit.C_TYPES.get(family)
         self.fast = ctype is not None and hasattr(raw, "dll") and hasattr(raw, "component")
+        self.ctype = ctype if self.fast else None
         if not self.fast:
-            self._fmpy = getattr(unit.slave, self.call)
+            self._setter = setter
             self.buf: Any = buffer if buffer is not None else [None] * self.n
             return
-        fn = raw.dll[f"fmi2{'Set' if setter else 'Get'}{family}"]  # a private function object
-        fn.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_size_t, ctypes.c_void_p]
+        # a private function object
+        fn = raw.dll[f"{unit.C_PREFIX}{'Set' if setter else 'Get'}{family}"]
+        self._counts = unit.C_COUNTS  # FMI 3: (..., values, nValues)
+        fn.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_size_t, ctypes.c_void_p,
+                       *([ctypes.c_size_t] if self._counts else [])]
         fn.restype = ctypes.c_int
         self._fn, self._component = fn, raw.component
         self._vr = (ctypes.c_uint * self.n)(*self.vrs)
@@ -50,27 +56,27 @@ class Batch:
         """Read into :attr:`buf`, or into the memory at address ``into``."""
         t0 = perf_counter()
         if self.fast:
-            status = self._fn(self._component, self._vr, self.n,
-                              self.buf if into is None else into)
+            target = self.buf if into is None else into
+            status = (self._fn(self._component, self._vr, self.n, target, self.n)
+                      if self._counts else self._fn(self._component, self._vr, self.n, target))
             self.unit.wall_time += perf_counter() - t0
-            if status > _FMI2_WARNING:
+            if status > _WARNING:
                 self.on_error(self.call, status)
         else:
-            values = self._fmpy(self.vrs)
-            self.unit.wall_time += perf_counter() - t0
-            self.buf[:] = [v.decode("utf-8") if isinstance(v, bytes) else v for v in values]
+            values = self.unit.read(self.family, self.vrs)  # timed by the unit
+            self.buf[:] = values
 
     def set(self) -> None:
         """Write :attr:`buf`."""
         t0 = perf_counter()
         if self.fast:
-            status = self._fn(self._component, self._vr, self.n, self.buf)
+            status = (self._fn(self._component, self._vr, self.n, self.buf, self.n)
+                      if self._counts else self._fn(self._component, self._vr, self.n, self.buf))
             self.unit.wall_time += perf_counter() - t0
-            if status > _FMI2_WARNING:
+            if status > _WARNING:
                 self.on_error(self.call, status)
         else:
-            self._fmpy(self.vrs, list(self.buf))
-            self.unit.wall_time += perf_counter() - t0
+            self.unit.write(self.family, self.vrs, list(self.buf))  # timed by the unit
 
     def values(self) -> list[Any]:
         return self.buf[:]

@@ -195,7 +195,15 @@ def compute_summary(result: Any) -> dict[str, Any]:
             res = cfg.get("command_resolution")
             out["command_switches"], out["command_switch_resolution"] = command_switches(
                 values, None if res is None else float(res))
-    if speed is not None and ref is not None:
+    notes: list[str] = []  # metrics the recording cannot resolve: reported, never 0
+    if speed is not None and ref is not None and np.count_nonzero(ref > 0.0) < 2:
+        notes.append(f"speed-tracking metrics undefined: {np.count_nonzero(ref > 0.0)} recorded "
+                     f"sample(s) while the reference is moving (output_interval "
+                     f"{result.scenario.simulation.output_interval:g} s); they need at least "
+                     "2: lower simulation.output_interval")
+        for key in ("speed_rmse_mps", "speed_mse_kmh2", "iae_kmh_s", "max_abs_speed_error_kmh"):
+            out[key] = None
+    elif speed is not None and ref is not None:
         err = speed - ref
         moving = ref > 0.0
         err_m = err[moving] if np.any(moving) else err
@@ -204,7 +212,7 @@ def compute_summary(result: Any) -> dict[str, Any]:
         out["speed_mse_kmh2"] = float(np.mean(err_kmh**2))
         out["iae_kmh_s"] = float(np.trapezoid(np.abs(err * KMH_PER_MPS), t))
         out["max_abs_speed_error_kmh"] = float(np.max(np.abs(err_kmh)))
-    if speed is not None and ref is not None and cfg.get("ctcs3") is True:
+    if out.get("max_abs_speed_error_kmh") is not None and cfg.get("ctcs3") is True:
         out["ctcs3_speed_error_ok"] = ctcs3_speed_error_ok(ref[moving if np.any(moving) else
                                                                slice(None)] * KMH_PER_MPS,
                                                            err_kmh)
@@ -219,7 +227,12 @@ def compute_summary(result: Any) -> dict[str, Any]:
             if speed is not None:  # while moving: the step to rest at the stop is not ride jerk
                 moving = (speed[:-1] > STANDSTILL_MPS) & (speed[1:] > STANDSTILL_MPS)
                 jerk = jerk[moving]
-            out["max_jerk_mps3"] = float(np.max(np.abs(jerk))) if jerk.size else 0.0
+            if jerk.size:
+                out["max_jerk_mps3"] = float(np.max(np.abs(jerk)))
+            else:
+                out["max_jerk_mps3"] = None
+                notes.append("max_jerk_mps3 undefined: fewer than 2 recorded samples while "
+                             "moving: lower simulation.output_interval")
     cols = matching_columns(frame, cfg.get("coupler_forces"))
     if cols and len(frame):
         out["max_coupler_force_kn"] = float(np.max(np.abs(frame[cols].to_numpy())) / 1e3)
@@ -252,7 +265,7 @@ def compute_summary(result: Any) -> dict[str, Any]:
         for key in CONTROLLER_COUNTERS:  # published by the seed 000 predictive controllers
             if key in outputs:
                 out.setdefault(key, {})[fmu] = int(outputs[key])
-    out["warnings"] = warnings(result)
+    out["warnings"] = warnings(result) + notes
     _flatten_single(out, ("qp_solves", "qp_infeasible", "qp_solve_time_median_s",
                           "qp_solve_time_total_s", "qp_cpu_time_total_s",
                           "qp_cpu_time_median_s", *CONTROLLER_COUNTERS))

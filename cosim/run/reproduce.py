@@ -66,6 +66,35 @@ live there, not in code)::
     limit_fraction = 0.02
     paper = "what the paper reports"   # optional, shown under the figure
 
+    [ensemble]                     # optional (claims): how a run is varied over seeds
+    seed_key = "plant.disturbance_seed"   # override key taking the seed (absent: no random
+                                   # input; a "disturbance" claim is then one run)
+    report_seeds = "1..20"         # --seeds K takes the first K (default 20)
+    calibration_seeds = "101..110" # tuning only; disjoint from report_seeds (checked)
+    perturb = ["plant.mass=+-10%"] # mismatch distribution (as --perturb), for "mismatch"
+    perturb_seed = 1               # optional: seed of the mismatch draws (default 0)
+    rounding_perturb = ["plant.v0"]  # optional: parameters scaled by 1 + 1e-12 on the
+                                   # perturbed floating-point rerun (besides the plants'
+                                   # numpy reference path, ATO_COSIM_NO_KERNELS=1)
+    [[claims]]                     # a claim of the paper, tested over the ensemble
+    id = "ismpc_mse_below_ismc"    # unique, [a-z0-9_]
+    source = "Table 2"
+    text = "ISMPC has a lower MSE than ISMC"
+    paper = "0.052 vs 0.161 (km/h)^2"   # the paper's value(s), as text
+    metric = "unit_mse_kmh2"       # a summary key ('.' for nested keys; a bool counts 1 / 0)
+    kind = "less"                  # less | greater: runs[0] vs runs[1], paired by member;
+                                   # below | above: runs[0] against threshold;
+                                   # inside: runs[0]'s median within range
+    runs = ["ISMPC", "ISMC"]
+    threshold = 0.2                # below / above
+    range = [-0.5, 0.5]            # inside
+    ensemble = "disturbance"       # disturbance (report seeds) | mismatch (perturb samples)
+    origin = "paper"               # paper | ours
+
+The claims are evaluated by :mod:`cosim.run.claims` (statistics and verdicts) over the runs
+of :mod:`cosim.run.ensemble` (members, perturbed floating-point rerun), which write
+``claims.csv`` and ``claims.md``; ``table.md`` includes the claims table.
+
 The command runs every run (in parallel processes), writes each run's results under
 ``runs/``, then ``table.md`` and ``table.csv`` (or the entry's ``table`` name; ours beside
 the paper's, with the verdict where a tolerance is given; derived figures and rankings follow
@@ -85,6 +114,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from cosim.run.claims import ClaimsError, Ensemble, check_claims, check_ensemble
+from cosim.run.results import PLOT_DPI
 from cosim.run.scenario import SCENARIO_DIR
 
 try:
@@ -94,8 +125,9 @@ except ModuleNotFoundError:  # Python < 3.11
 
 REPRODUCE_DIR = SCENARIO_DIR / "reproduce"
 
+# "ensemble" and "claims": the claims schema (docs of the claims framework), read there
 _ENTRY_KEYS = {"title", "notes", "table", "runs", "metrics", "paper", "derived", "rankings",
-               "sweeps", "figures"}
+               "sweeps", "figures", "ensemble", "claims"}
 _RANKING_KEYS = {"name", "metric", "runs", "paper"}
 _DERIVED_KEYS = {"name", "kind", "metric", "run", "baseline", "value", "range", "tolerance",
                  "source"}
@@ -129,6 +161,8 @@ class Entry:
     notes: str = ""
     rankings: list[dict[str, Any]] = field(default_factory=list)
     table: str = "table"
+    ensemble: Ensemble = field(default_factory=Ensemble)
+    claims: list[dict[str, Any]] = field(default_factory=list)
 
 
 def entry_names() -> list[str]:
@@ -233,9 +267,14 @@ def load_entry(name: str | Path) -> Entry:
         unknown_runs = sorted(set(fig.get("runs", names)) - set(names))
         if unknown_runs:
             raise ReproduceError(f"{where}: runs {unknown_runs} are not in [[runs]]")
+    try:
+        ensemble = check_ensemble(str(path), data.get("ensemble"))
+        claims = check_claims(str(path), data.get("claims", []), names, ensemble)
+    except ClaimsError as err:
+        raise ReproduceError(str(err)) from err
     return Entry(path.stem, path, data["title"], runs, metrics, data.get("paper", []),
                  data.get("derived", []), data.get("sweeps", []), data.get("figures", []),
-                 data.get("notes", ""), data.get("rankings", []), table)
+                 data.get("notes", ""), data.get("rankings", []), table, ensemble, claims)
 
 
 def slug(name: str) -> str:
@@ -517,7 +556,8 @@ def draw_figure(spec: dict[str, Any], run_dirs: dict[str, Path], path: Path) -> 
     axes[-1][0].set_xlabel(spec.get("xlabel", "time (s)" if spec["x"] == "time" else spec["x"]))
     fig.suptitle(spec.get("title", ""))
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    fig.savefig(path, dpi=PLOT_DPI, format=Path(path).suffix.lstrip(".") or "png",
+                bbox_inches="tight")
     plt.close(fig)
 
 
@@ -608,7 +648,8 @@ def draw_speed_classes(spec: dict[str, Any], run_dirs: dict[str, Path], path: Pa
     ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0))
     fig.suptitle(spec.get("title", ""))
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    fig.savefig(path, dpi=PLOT_DPI, format=Path(path).suffix.lstrip(".") or "png",
+                bbox_inches="tight")
     plt.close(fig)
     lines = [_row(["class", "limit", *names]), "|" + " --- |" * (len(names) + 2)]
     for k, cls in enumerate(classes):
@@ -625,12 +666,15 @@ def draw_speed_classes(spec: dict[str, Any], run_dirs: dict[str, Path], path: Pa
     return "\n".join(lines)
 
 
-def reproduce(name: str, out_dir: str | Path | None = None, workers: int | None = None
+def reproduce(name: str, out_dir: str | Path | None = None, workers: int | None = None,
+              seeds: int | None = None, rounding: bool = True, scheduler: str | None = None
               ) -> Path:
-    """Run one entry; write table.md/table.csv (``entry.table``), sweeps and figures; return
-    the table's markdown file."""
+    """Run one entry; write table.md/table.csv (``entry.table``), sweeps and figures, and with
+    claims claims.csv/claims.md over ``seeds`` members (default 20; :mod:`cosim.run.ensemble`,
+    ``rounding``: also the perturbed floating-point rerun); return the table's markdown file."""
     import pandas as pd
 
+    from cosim.run.ensemble import compact_table, run_claims
     from cosim.run.sweep import parse_grid, run_sweep
 
     entry = load_entry(name)
@@ -664,6 +708,14 @@ def reproduce(name: str, out_dir: str | Path | None = None, workers: int | None 
             continue
         draw_figure(spec, run_dirs, out / spec["file"])
         parts += ["", f"![{spec.get('title', spec['file'])}]({spec['file']})"]
+    if entry.claims:
+        k = seeds if seeds is not None else min(20, len(entry.ensemble.report_seeds))
+        try:
+            claim_rows = run_claims(entry, out, k, workers, rounding, scheduler)
+        except ValueError as err:
+            raise ReproduceError(str(err)) from err
+        parts += ["", "### Claims", "", (out / "claims.md").read_text().split("\n", 2)[2]]
+        print(compact_table(claim_rows))
     if entry.notes:
         parts += ["", "### Where we differ from the paper, and why", "", entry.notes.strip()]
     table = out / f"{entry.table}.md"
@@ -679,14 +731,36 @@ def _frame_markdown(frame: Any) -> str:
     return "\n".join(lines)
 
 
-def reproduce_all(out_dir: str | Path | None = None, workers: int | None = None) -> Path:
-    """Every entry; one ``REPRODUCTION.md`` linking each entry's figures."""
+def claims_summary(out: Path, names: list[str]) -> str:
+    """Claims held / failed / inconclusive / rounding-sensitive per entry, from each entry's
+    ``out/<name>/claims.csv`` (an entry without one: no claims)."""
+    import pandas as pd
+
+    verdicts = ("holds", "fails", "inconclusive", "rounding-sensitive")
+    lines = [_row(["entry", "claims", *verdicts]), "|" + " --- |" * 6]
+    for name in names:
+        csv = out / name / "claims.csv"
+        if not csv.is_file():
+            lines.append(_row([name, "0", "-", "-", "-", "-"]))
+            continue
+        got = list(pd.read_csv(csv)["verdict"])
+        lines.append(_row([name, str(len(got)), *(str(got.count(v)) for v in verdicts)]))
+    return "\n".join(lines)
+
+
+def reproduce_all(out_dir: str | Path | None = None, workers: int | None = None,
+                  seeds: int | None = None, rounding: bool = True,
+                  scheduler: str | None = None) -> Path:
+    """Every entry; one ``REPRODUCTION.md`` with the claims held / failed / inconclusive per
+    paper and each entry's tables and figures."""
     out = Path(out_dir) if out_dir is not None else Path("runs") / "reproduce"
     out.mkdir(parents=True, exist_ok=True)
+    tables = {name: reproduce(name, out / name, workers, seeds, rounding, scheduler)
+              for name in entry_names()}
     parts = ["# Reproduced results", "", "Made by `cosim reproduce all`; each section by "
-             "`cosim reproduce NAME` from the entry in `scenarios/reproduce/`."]
-    for name in entry_names():
-        table = reproduce(name, out / name, workers)
+             "`cosim reproduce NAME` from the entry in `scenarios/reproduce/`.", "",
+             claims_summary(out, list(tables))]
+    for name, table in tables.items():
         text = table.read_text()
         # relative links from out/: prefix the entry folder
         text = re.sub(r"\]\((?!http)([^)]+)\)", rf"]({name}/\1)", text)

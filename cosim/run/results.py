@@ -8,17 +8,22 @@ to each other. Partial results never replace a complete earlier run unless force
 
 from __future__ import annotations
 
+import contextlib
+import fcntl
 import json
 import math
 import os
 import shutil
 import tempfile
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-FILES = ("results.csv", "summary.json", "plot.png")
+PLOT_FORMATS = ("png", "svg", "pdf")
+PLOT_DPI = 200  # raster figures (png) at print resolution
+FILES = ("results.csv", "summary.json", *(f"plot.{fmt}" for fmt in PLOT_FORMATS))
 
 
 class OutputError(ValueError):
@@ -49,6 +54,34 @@ def check_destination(path: Path, option: str = "--out", is_dir: bool = True) ->
                           f"{err.strerror or err}") from None
 
 
+LOCK_FILE = ".cosim-run.lock"
+
+
+@contextlib.contextmanager
+def locked_destination(path: Path, option: str = "--out") -> Iterator[None]:
+    """Hold an exclusive ``fcntl`` lock on ``path/.cosim-run.lock`` while a run writes into the
+    folder ``path`` (created); a second run into the same folder meanwhile fails at once with
+    :class:`OutputError` instead of one result silently replacing the other. The kernel drops
+    the lock when the process ends, however it ends."""
+    path = Path(path)
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+        handle = open(path / LOCK_FILE, "a+")  # noqa: SIM115 - held for the with-block
+    except OSError as err:
+        raise OutputError(f"{option} {path}: cannot write in it: {err.strerror or err}") from None
+    with handle:
+        try:
+            fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            raise OutputError(f"{option} {path}: another cosim run is writing into this folder "
+                              f"(it holds {path / LOCK_FILE}); wait for it to end or give "
+                              "another --out") from None
+        try:
+            yield
+        finally:
+            fcntl.flock(handle, fcntl.LOCK_UN)
+
+
 def _is_complete_run(out_dir: Path) -> bool:
     try:
         return json.loads((out_dir / "summary.json").read_text()).get("completed") is True
@@ -71,27 +104,30 @@ def _json_safe(obj: Any) -> Any:
 
 
 def write_results(result: Any, out_dir: Path, plot: bool = True,
-                  force: bool = False) -> list[Path]:
-    """Write results.csv, summary.json and (unless ``plot`` is False) plot.png into ``out_dir``
+                  force: bool = False, plot_format: str = "png") -> list[Path]:
+    """Write results.csv, summary.json and (unless ``plot`` is False) the plot
+    (``plot.<plot_format>``: png, svg or pdf) into ``out_dir``
     (into ``<out_dir>.partial`` for a partial result when ``out_dir`` holds a complete run and
     ``force`` is False). Returns the paths written."""
     out_dir = Path(out_dir)
+    if plot_format not in PLOT_FORMATS:
+        raise ValueError(f"plot format {plot_format!r}: one of {', '.join(PLOT_FORMATS)}")
     if not result.summary.get("completed", True) and not force and _is_complete_run(out_dir):
         out_dir = out_dir.with_name(out_dir.name + ".partial")
     out_dir.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=".writing-", dir=out_dir))
     try:
-        result.frame.to_csv(tmp / "results.csv", index=False, float_format="%.10g")
+        result.frame.to_csv(tmp / "results.csv", index=False)  # repr: round-trip exact
         (tmp / "summary.json").write_text(json.dumps(_json_safe(result.summary), indent=2)
                                           + "\n")
         if plot:
-            plot_run(result, tmp / "plot.png")
+            plot_run(result, tmp / f"plot.{plot_format}")
         written = []
         for name in FILES:  # three renames: the window between them is microseconds
             if (tmp / name).exists():
                 os.replace(tmp / name, out_dir / name)
                 written.append(out_dir / name)
-            elif name == "plot.png" and (out_dir / name).exists():
+            elif name.startswith("plot.") and (out_dir / name).exists():
                 (out_dir / name).unlink()  # a plot of another run must not stay next to these
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
@@ -114,42 +150,123 @@ def display_unit(unit: str | None) -> tuple[float, str | None]:
     return _UNIT_DISPLAY.get(unit, (1.0, unit))
 
 
-def variable_unit(scenario: Any, ref: str) -> str | None:
-    """The declared unit of ``"instance.variable"`` from its FMU's modelDescription."""
+def variable_info(scenario: Any, ref: str) -> tuple[str, str | None]:
+    """(description, declared unit) of ``"instance.variable"`` from its FMU's
+    modelDescription; the name itself and None where it has none."""
     try:
         from fmpy import read_model_description
 
         comp, var = ref.split(".", 1)
+        base = var.split("[", 1)[0]
         md = read_model_description(str(scenario.components[comp].fmu_path), validate=False)
-        found = next(v for v in md.modelVariables if v.name == var)
-        if found.unit:
-            return found.unit
-        return found.declaredType.unit if found.declaredType is not None else None
+        found = next(v for v in md.modelVariables if v.name in (var, base))
+        unit = found.unit or (found.declaredType.unit if found.declaredType is not None
+                              else None)
+        text = found.description or ref
+        if found.name != var:  # one element of a vector variable: name it
+            text += f" {var[len(base):]}"
+        return text, unit
     except Exception:  # noqa: BLE001 - a plot label must never fail a run
-        return None
+        return ref, None
 
 
-def _stop_inset(ax: Any, pos: np.ndarray, speed_kmh: np.ndarray, stop: float,
-                x_scale: float) -> None:
-    """A zoom on the last 20 m before the stop point (speed vs position)."""
+def variable_unit(scenario: Any, ref: str) -> str | None:
+    """The declared unit of ``"instance.variable"`` from its FMU's modelDescription."""
+    return variable_info(scenario, ref)[1]
+
+
+def axis_label(text: str, unit: str | None) -> str:
+    """``text (unit)`` in the display unit, ``text`` for a dimensionless quantity."""
+    label = display_unit(unit)[1]
+    return f"{text} ({label})" if label and label != "1" else text
+
+
+def _held(scenario: Any, ref: str) -> bool:
+    """True for an output of a sampled or self-triggered FMU (a ``sample_time`` in the
+    scenario, or a ``sample_time`` parameter or ``next_event_time`` output declared): it is
+    held between the FMU's events, so it is drawn as steps."""
+    try:
+        from fmpy import read_model_description
+
+        component = scenario.components[ref.split(".", 1)[0]]
+        if component.sample_time:
+            return True
+        md = read_model_description(str(component.fmu_path), validate=False)
+        return any(v.name in ("sample_time", "next_event_time") for v in md.modelVariables)
+    except Exception:  # noqa: BLE001 - a plot must never fail a run
+        return False
+
+
+def _stop_inset(ax: Any, pos: np.ndarray, speed_kmh: np.ndarray, stop: float) -> Any:
+    """A zoom on the last 20 m before the stop point: speed against the distance to the stop
+    point in metres (plain numbers, no offset), in the upper right corner, where the speed
+    of a train braking to a stop is low; the legend is outside the axes."""
+    from matplotlib.ticker import MaxNLocator
+
     near = pos >= stop - 20.0
     if not near.any() or len(pos) < 2:
-        return
-    inset = ax.inset_axes([0.40, 0.08, 0.28, 0.34])
+        return None
+    inset = ax.inset_axes([0.64, 0.50, 0.33, 0.42])
     inset.set_facecolor("white")
     inset.set_zorder(10)
-    inset.plot(pos[near] / x_scale, speed_kmh[near], color="C0", lw=1.0)
-    inset.axvline(stop / x_scale, color="C3", lw=0.8, ls="-.")
-    right = max(float(pos[near].max()), stop + 2.0)
-    inset.set_xlim((stop - 20.0) / x_scale, right / x_scale)
+    inset.plot(pos[near] - stop, speed_kmh[near], color="C0", lw=1.0)
+    inset.axvline(0.0, color="C3", lw=0.8, ls="-.")
+    right = max(float(pos[near].max()) - stop, 2.0)
+    inset.set_xlim(-20.0, right)
+    inset.set_xlabel("to stop point (m)", fontsize=7)
+    inset.set_ylabel("km/h", fontsize=7)
     inset.set_title("last 20 m", fontsize=7)
     inset.tick_params(labelsize=6)
+    inset.ticklabel_format(useOffset=False, style="plain")
+    inset.xaxis.set_major_locator(MaxNLocator(5))
     inset.grid(True, alpha=0.3)
+    return inset
+
+
+def fit_band(ax: Any, values: Any, lo: float, hi: float, zoom: float = 0.2) -> bool:
+    """Draw the band [lo, hi] (dotted lines) on ``ax`` and fit the y axis: the band and the
+    data when the data reach beyond ``zoom`` of the band's half width, else the data alone
+    (with a note that the band lies outside the view), so sub-band results are not flat
+    lines. Returns True when zoomed in."""
+    data = np.asarray(values, dtype=float)
+    data = data[np.isfinite(data)]
+    for edge in (lo, hi):
+        ax.axhline(edge, color="red", linestyle=":", linewidth=1)
+    half = 0.5 * (hi - lo)
+    if data.size and np.max(np.abs(data - 0.5 * (lo + hi))) < zoom * half:
+        span = max(float(data.max() - data.min()), 1e-4 * half)
+        ax.set_ylim(float(data.min()) - 0.15 * span, float(data.max()) + 0.15 * span)
+        ax.text(0.01, 0.98, f"band [{lo:g}, {hi:g}] outside the view", transform=ax.transAxes,
+                va="top", fontsize=7, color="red")
+        return True
+    top = max(hi, float(data.max()) if data.size else hi)
+    bottom = min(lo, float(data.min()) if data.size else lo)
+    pad = 0.05 * (top - bottom)
+    ax.set_ylim(bottom - pad, top + pad)
+    return False
+
+
+def legend_below(ax: Any, handles: list[Any], labels: list[str]) -> Any:
+    """The legend under the axes (outside them: no curve, inset or twin axis can cover it)."""
+    return ax.legend(handles, labels, loc="upper center", bbox_to_anchor=(0.5, -0.14),
+                     ncol=min(len(labels), 4), fontsize=8, frameon=False)
 
 
 def plot_run(result: Any, path: Path) -> None:
-    """Speed (and reference) vs position with the command on a second axis, as the papers'
-    figures; coupler forces below when the scenario names them; otherwise outputs vs time."""
+    """:func:`draw_run` saved to ``path`` (its suffix: png at ``PLOT_DPI``, svg or pdf)."""
+    import matplotlib.pyplot as plt
+
+    fig = draw_run(result)
+    fig.savefig(path, dpi=PLOT_DPI, format=Path(path).suffix.lstrip(".") or "png",
+                bbox_inches="tight")
+    plt.close(fig)
+
+
+def draw_run(result: Any) -> Any:
+    """The run's figure: speed (and reference) vs position with the command on a second axis,
+    as the papers' figures; coupler forces below when the scenario names them; otherwise
+    outputs vs time. Curves and axes are labelled with the declared descriptions and units;
+    outputs of sampled or self-triggered FMUs (held between events) are drawn as steps."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -161,7 +278,7 @@ def plot_run(result: Any, path: Path) -> None:
     frame = result.frame
     couplers = matching_columns(frame, cfg.get("coupler_forces"))
     rows = 2 if couplers else 1
-    fig, axes = plt.subplots(rows, 1, figsize=(9, 4.5 * rows), squeeze=False)
+    fig, axes = plt.subplots(rows, 1, figsize=(9, 5.0 * rows), squeeze=False)
     ax = axes[0][0]
     pos, speed = cfg.get("position"), cfg.get("speed")
     if frame.empty:
@@ -177,35 +294,47 @@ def plot_run(result: Any, path: Path) -> None:
                                   ("speed_limit", ":", "speed limit")):
             ref = cfg.get(key)
             if ref in frame.columns:
-                ax.plot(x, frame[ref] * 3.6, style, label=label,
-                        color="k" if key == "reference_speed" else "C3")
+                held = _held(result.scenario, ref)
+                ax.plot(x, frame[ref] * 3.6, style, label=label + (
+                    " (as held by the controller)" if held else ""),
+                        color="k" if key == "reference_speed" else "C3",
+                        drawstyle="steps-post" if held else "default")
         ax.set_xlabel(xlabel)
         ax.set_ylabel("speed (km/h)")
+        ax.ticklabel_format(useOffset=False, style="plain")
         if "stop_point" in cfg:
             stop = float(cfg["stop_point"]) / (1e3 if xlabel.endswith("(km)") else 1.0)
             ax.axvline(stop, color="C3", lw=0.8, ls="-.", label="stop point")
+        handles, labels = ax.get_legend_handles_labels()
         command = cfg.get("command")
         if command in frame.columns:
             ax2 = ax.twinx()
-            scale, unit = display_unit(variable_unit(result.scenario, command))
-            ax2.step(x, frame[command] * scale, where="post", color="C2", lw=1.0,
-                     label="command")
-            ax2.set_ylabel(f"command ({unit})" if unit else "command")
-            lines = ax.get_legend_handles_labels()[0] + ax2.get_legend_handles_labels()[0]
-            labels = ax.get_legend_handles_labels()[1] + ax2.get_legend_handles_labels()[1]
-            ax.legend(lines, labels, loc="best", fontsize=8)
-        else:
-            ax.legend(loc="best", fontsize=8)
+            text, unit = variable_info(result.scenario, command)
+            scale = display_unit(unit)[0]
+            ax2.plot(x, frame[command] * scale, color="C2", lw=1.0, label=text,
+                     drawstyle="steps-post" if _held(result.scenario, command) else "default")
+            ax2.set_ylabel(axis_label(text, unit))
+            ax2.ticklabel_format(useOffset=False, style="plain")
+            more, more_labels = ax2.get_legend_handles_labels()
+            handles, labels = handles + more, labels + more_labels
         if "stop_point" in cfg:  # on the topmost axes, opaque
             _stop_inset(ax.figure.axes[-1], frame[pos].to_numpy(),
-                        frame[speed].to_numpy() * 3.6, float(cfg["stop_point"]),
-                        1e3 if xlabel.endswith("(km)") else 1.0)
+                        frame[speed].to_numpy() * 3.6, float(cfg["stop_point"]))
+        legend_below(ax, handles, labels)
     else:
         t = frame["time"]
+        units = set()
         for col in frame.columns[1:9]:
-            ax.plot(t, frame[col], label=col)
+            text, unit = variable_info(result.scenario, col)
+            scale = display_unit(unit)[0]
+            units.add(display_unit(unit)[1])
+            ax.plot(t, frame[col] * scale, label=axis_label(text, unit),
+                    drawstyle="steps-post" if _held(result.scenario, col) else "default")
         ax.set_xlabel("time (s)")
-        ax.legend(loc="best", fontsize=8)
+        if len(units) == 1 and None not in units:
+            ax.set_ylabel(units.pop())
+        ax.ticklabel_format(useOffset=False, style="plain")
+        legend_below(ax, *ax.get_legend_handles_labels())
     summary = result.summary
     title = result.scenario.name
     if summary.get("stop_error_m") is not None:
@@ -223,7 +352,7 @@ def plot_run(result: Any, path: Path) -> None:
         forces = frame[couplers].to_numpy() / 1e3
         if len(couplers) <= 3:
             for i, col in enumerate(couplers):
-                axc.plot(t, forces[:, i], lw=0.8, label=col.split(".", 1)[1])
+                axc.plot(t, forces[:, i], lw=0.8, label=variable_info(result.scenario, col)[0])
         else:  # many couplers oscillating: one readable envelope, not a solid band of lines
             hi, lo = forces.max(axis=1), forces.min(axis=1)
             axc.fill_between(t, lo, hi, color="C0", alpha=0.25, lw=0,
@@ -233,7 +362,7 @@ def plot_run(result: Any, path: Path) -> None:
         axc.set_xlabel("time (s)")
         axc.set_ylabel("coupler force (kN)")
         axc.grid(True, alpha=0.3)
-        axc.legend(loc="best", fontsize=7, ncol=3)
+        axc.ticklabel_format(useOffset=False, style="plain")
+        legend_below(axc, *axc.get_legend_handles_labels())
     fig.tight_layout()
-    fig.savefig(path, dpi=110, format="png")
-    plt.close(fig)
+    return fig

@@ -9,6 +9,8 @@ Format (see ``scenarios/seed000_stop_pid.toml``)::
     output_interval = 0.2     # s, spacing of the recorded time series
     algorithm = "event"       # event | fixed | jacobi
     base_step = 0.2           # s, communication step of the fixed-step algorithms
+    fmi_version = 2           # 2 | 3: catalog FMU names resolve to fmus/<Id>.fmu (FMI 2.0)
+                              # or fmus/fmi3/<Id>.fmu (FMI 3.0); .fmu paths are used as given
     [fmus.NAME]
     fmu = "BrakeDelayTrain"   # FMU identifier in fmus/ (built on demand) or a path to a .fmu
     sample_time = 0.2         # s, optional: periodic events of a sampled FMU (also set as its
@@ -44,6 +46,7 @@ from cosim.run import fmi_types
 
 SCENARIO_DIR = ROOT / "scenarios"
 ALGORITHMS = ("event", "fixed", "jacobi")
+FMI_VERSIONS = (2, 3)
 
 
 RECORD_KEYS = ("variables",)
@@ -55,6 +58,31 @@ SUMMARY_KEYS = ("position", "speed", "acceleration", "command", "command_resolut
                 "planned_arrival_time", "ctcs3", "unit_speeds", "ma_sample_time",
                 "reference_accel", "final_stop_window", "accel_command", "vehicle_speeds",
                 "energy_traction", "energy_regen", "energy_aux", "phase")
+
+
+# [summary] keys holding a number; a string "instance.parameter" there reads that parameter's
+# value as the scenario sets it (after --set), so the summary never keeps a stale copy
+SUMMARY_PARAMETER_KEYS = ("stop_point", "planned_arrival_time", "final_stop_window",
+                          "ma_sample_time", "command_resolution", "reference_decel")
+
+
+def resolve_parameter_refs(path: Path, summary: dict[str, Any],
+                           components: dict[str, Any]) -> dict[str, Any]:
+    """``summary`` with each ``"instance.parameter"`` value of a numeric key replaced by the
+    parameter's value in ``[fmus.instance.parameters]``."""
+    resolved = dict(summary)
+    for key in SUMMARY_PARAMETER_KEYS:
+        value = summary.get(key)
+        if not isinstance(value, str):
+            continue
+        comp, _, name = value.partition(".")
+        if comp not in components or name not in components[comp].parameters:
+            raise ScenarioError(f"{path}: [summary] {key} = {value!r}: a reference reads a "
+                                f"parameter set in [fmus.{comp}.parameters], and "
+                                + (f"{comp!r} sets no {name!r}" if comp in components
+                                   else f"there is no FMU instance {comp!r}"))
+        resolved[key] = components[comp].parameters[name]
+    return resolved
 
 
 class ScenarioError(ValueError):
@@ -90,6 +118,7 @@ class Simulation:
     output_interval: float = 0.1
     algorithm: str = "event"
     base_step: float | None = None
+    fmi_version: int = 2  # which builds of catalog FMUs the scenario runs
 
 
 @dataclass
@@ -199,6 +228,17 @@ def _split_override(text: str) -> tuple[str, str]:
     return key.strip(), value.strip()
 
 
+def _refuse_unknown(source: Path, table: str, given: dict[str, Any],
+                    known: tuple[str, ...]) -> None:
+    """Raise naming the first key of ``given`` that is not in ``known``, with the closest known
+    key (difflib) or the list of known keys."""
+    for bad in sorted(set(given) - set(known)):
+        hint = difflib.get_close_matches(bad, known, n=1)
+        raise ScenarioError(f"{source}: {table} {bad}: unknown key"
+                            + (f" (did you mean {hint[0]!r}?)" if hint else
+                               f"; known: {', '.join(known)}"))
+
+
 def _number(source: str, key: str, value: Any, positive: bool = True,
             allow_zero: bool = False) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)):
@@ -212,7 +252,12 @@ def _number(source: str, key: str, value: Any, positive: bool = True,
     return value
 
 
-def _resolve_fmu(source: Path, key: str, fmu: Any) -> Path:
+def catalog_path(identifier: str, fmi_version: int = 2) -> Path:
+    """Where the FMI ``fmi_version`` build of catalog FMU ``identifier`` lives."""
+    return (FMU_DIR / "fmi3" if fmi_version == 3 else FMU_DIR) / f"{identifier}.fmu"
+
+
+def _resolve_fmu(source: Path, key: str, fmu: Any, fmi_version: int = 2) -> Path:
     if not isinstance(fmu, str) or not fmu:
         raise ScenarioError(f"{source}: {key} = {fmu!r}: expected an FMU identifier or path")
     if fmu.endswith(".fmu"):
@@ -222,7 +267,7 @@ def _resolve_fmu(source: Path, key: str, fmu: Any) -> Path:
         if not path.is_file():
             raise ScenarioError(f"{source}: {key} = {fmu!r}: file {path} does not exist")
         return path
-    built = FMU_DIR / f"{fmu}.fmu"
+    built = catalog_path(fmu, fmi_version)
     if built.is_file():  # a built catalog FMU: no need to import every wrapper module
         return built
     from cosim.fmu.build import catalog
@@ -233,7 +278,7 @@ def _resolve_fmu(source: Path, key: str, fmu: Any) -> Path:
         raise ScenarioError(f"{source}: {key} = {fmu!r}: unknown FMU"
                             + (f" (did you mean {hint[0]!r}?)" if hint else "")
                             + f"; known: {sorted(known)}")
-    return FMU_DIR / f"{fmu}.fmu"
+    return built
 
 
 def _split_ref(source: Path, key: str, ref: Any, components: dict[str, Component]
@@ -269,22 +314,26 @@ def _load_scenario(path: Path, overrides: dict[str, Any] | list[str] | None) -> 
     except tomllib.TOMLDecodeError as err:
         raise ScenarioError(f"{path}: not valid TOML: {err}") from err
     apply_overrides(raw, overrides, str(path))
-    unknown = set(raw) - {"description", "simulation", "fmus", "connections", "record",
-                          "summary"}
-    if unknown:
-        raise ScenarioError(f"{path}: unknown top-level key(s) {sorted(unknown)}")
+    _refuse_unknown(path, "top level", raw, ("description", "simulation", "fmus",
+                                              "connections", "record", "summary"))
 
     sim_raw = raw.get("simulation")
+    if isinstance(sim_raw, dict):  # an unknown key first: `stoptime` is a misspelt stop_time
+        _refuse_unknown(path, "[simulation]", sim_raw, ("stop_time", "start_time",
+                                                        "output_interval", "algorithm",
+                                                        "base_step", "fmi_version"))
     if not isinstance(sim_raw, dict) or "stop_time" not in sim_raw:
         raise ScenarioError(f"{path}: [simulation] stop_time is required")
-    bad = set(sim_raw) - {"stop_time", "start_time", "output_interval", "algorithm", "base_step"}
-    if bad:
-        raise ScenarioError(f"{path}: [simulation] unknown key(s) {sorted(bad)}")
     algorithm = sim_raw.get("algorithm", "event")
     if algorithm not in ALGORITHMS:
         raise ScenarioError(f"{path}: [simulation] algorithm = {algorithm!r}: expected one of "
                             f"{list(ALGORITHMS)}")
+    fmi_version = sim_raw.get("fmi_version", 2)
+    if fmi_version not in FMI_VERSIONS or isinstance(fmi_version, bool):
+        raise ScenarioError(f"{path}: [simulation] fmi_version = {fmi_version!r}: expected one "
+                            f"of {list(FMI_VERSIONS)} (which builds of catalog FMUs to run)")
     sim = Simulation(
+        fmi_version=int(fmi_version),
         stop_time=_number(path, "[simulation] stop_time", sim_raw["stop_time"]),
         start_time=_number(path, "[simulation] start_time", sim_raw.get("start_time", 0.0),
                            positive=False),
@@ -306,9 +355,8 @@ def _load_scenario(path: Path, overrides: dict[str, Any] | list[str] | None) -> 
         key = f"[fmus.{name}]"
         if not isinstance(spec, dict):
             raise ScenarioError(f"{path}: {key} must be a table")
-        bad = set(spec) - {"fmu", "sample_time", "max_step", "parameters", "inputs"}
-        if bad:
-            raise ScenarioError(f"{path}: {key} unknown key(s) {sorted(bad)}")
+        _refuse_unknown(path, key, spec, ("fmu", "sample_time", "max_step", "parameters",
+                                          "inputs"))
         if "fmu" not in spec:
             raise ScenarioError(f"{path}: {key} fmu is required")
         for table in ("parameters", "inputs"):
@@ -317,7 +365,7 @@ def _load_scenario(path: Path, overrides: dict[str, Any] | list[str] | None) -> 
         components[name] = Component(
             name=name,
             fmu=spec["fmu"],
-            fmu_path=_resolve_fmu(path, f"{key} fmu", spec["fmu"]),
+            fmu_path=_resolve_fmu(path, f"{key} fmu", spec["fmu"], sim.fmi_version),
             sample_time=(_number(path, f"{key} sample_time", spec["sample_time"])
                          if "sample_time" in spec else None),
             max_step=(_number(path, f"{key} max_step", spec["max_step"])
@@ -341,11 +389,7 @@ def _load_scenario(path: Path, overrides: dict[str, Any] | list[str] | None) -> 
         value = raw.get(table, {})
         if not isinstance(value, dict):
             raise ScenarioError(f"{path}: [{table}] must be a table")
-        for bad in sorted(set(value) - set(known)):
-            hint = difflib.get_close_matches(bad, known, n=1)
-            raise ScenarioError(f"{path}: [{table}] {bad}: unknown key"
-                                + (f" (did you mean {hint[0]!r}?)" if hint else
-                                   f"; known: {', '.join(known)}"))
+        _refuse_unknown(path, f"[{table}]", value, tuple(known))
     record = raw.get("record", {}).get("variables")
     if record is not None:
         if not isinstance(record, list) or not all(isinstance(r, str) for r in record):
@@ -356,13 +400,16 @@ def _load_scenario(path: Path, overrides: dict[str, Any] | list[str] | None) -> 
     summary = raw.get("summary", {})
     if not isinstance(summary, dict):
         raise ScenarioError(f"{path}: [summary] must be a table")
+    summary = resolve_parameter_refs(path, summary, components)
     return Scenario(path=path, name=path.stem, description=str(raw.get("description", "")),
                     simulation=sim, components=components, connections=connections,
                     record=record, summary=summary, raw=raw)
 
 
-def check_against_fmus(scenario: Scenario, descriptions: dict[str, Any]) -> None:
-    """Check names, causalities, types and units of everything the scenario refers to.
+def check_against_fmus(scenario: Scenario, descriptions: dict[str, Any],
+                       ranges: bool = True) -> None:
+    """Check names, causalities, types and units of everything the scenario refers to, and
+    (``ranges``) that values lie within the variables' [min, max].
 
     ``descriptions`` maps component name to its fmpy ``ModelDescription``.
     """
@@ -384,7 +431,7 @@ def check_against_fmus(scenario: Scenario, descriptions: dict[str, Any]) -> None
         return v
 
     def check_value(comp: str, var: str, key: str, value: Any, v: Any) -> None:
-        why = fmi_types.check_value(v, value)
+        why = fmi_types.check_value(v, value, ranges)
         if why is not None:
             raise ScenarioError(f"{src}: {key}: {comp}.{var} {why}")
 
@@ -407,7 +454,7 @@ def check_against_fmus(scenario: Scenario, descriptions: dict[str, Any]) -> None
         key = f"[connections] \"{c.dst}.{c.dst_var}\""
         dv = lookup(c.dst, c.dst_var, key, ("input",))
         sv = lookup(c.src, c.src_var, key, ("output",))
-        if dv.type != sv.type:
+        if not fmi_types.same_type(sv.type, dv.type):
             raise ScenarioError(f"{src}: {key}: type mismatch: {c.src}.{c.src_var} is "
                                 f"{sv.type}, {c.dst}.{c.dst_var} is {dv.type}")
         src_items, dst_items = (fmi_types.enumeration_items(sv),

@@ -18,6 +18,7 @@ inclusive), ``controller.beta=1,2,4`` (list) or a single value.
 from __future__ import annotations
 
 import csv
+import functools
 import itertools
 import multiprocessing
 import os
@@ -97,6 +98,40 @@ def _run_point(scenario: Any, point: dict[str, Any]) -> dict[str, Any]:
     return row
 
 
+# summary counts: integers, empty for a failed point
+COUNT_COLUMNS = ("command_switches", "qp_solves", "qp_infeasible", "controller_executions")
+
+
+def check_point(path: str, point: dict[str, Any]) -> None:
+    """Raise :class:`cosim.run.scenario.ScenarioError` (naming the ``--set`` option) when a grid
+    point names no variable or gives a value of the wrong type (``controller.N=abc`` for an
+    Integer). A value outside [min, max] is left to the point's run, which fails alone: a
+    sweep may probe a range's edge on purpose."""
+    from cosim.run.scenario import ScenarioError, blame_override, check_against_fmus, load_scenario
+
+    sc = load_scenario(path, point)
+    descriptions = {c.name: _description(c.fmu_path)
+                    for c in sc.components.values() if c.fmu_path.is_file()}
+    if len(descriptions) < len(sc.components):
+        return  # a missing FMU: the run of the point says which
+    try:
+        check_against_fmus(sc, descriptions, ranges=False)
+    except ScenarioError as err:
+        raise blame_override(err, sc.path, sc.overrides) from None
+
+
+@functools.lru_cache(maxsize=64)
+def _cached_description(path: Path, mtime_ns: int) -> Any:
+    from fmpy import read_model_description
+
+    return read_model_description(str(path))
+
+
+def _description(path: Path) -> Any:
+    """The FMU's modelDescription, read once per file version."""
+    return _cached_description(path, path.stat().st_mtime_ns)
+
+
 def _key(scenario: str, point: dict[str, Any]) -> tuple[str, ...]:
     """A grid point as text, the same whether it comes from the grid or from sweep.csv."""
     return (Path(str(scenario)).stem, *(f"{k}={_text(v)}" for k, v in point.items()))
@@ -115,7 +150,24 @@ def _done_rows(csv_path: Path, keys: list[str]) -> list[dict[str, Any]]:
     earlier = pd.read_csv(csv_path, keep_default_na=False)
     if "status" not in earlier.columns or not set(keys) <= set(earlier.columns):
         raise ValueError(f"{csv_path}: not a sweep over {', '.join(keys)}; cannot resume it")
-    return [row for row in earlier.to_dict("records") if row["status"] == "ok"]
+    text_columns = {"scenario", "status", "error"}
+    return [{k: v if k in text_columns else _cell(v) for k, v in row.items()}
+            for row in earlier.to_dict("records") if row["status"] == "ok"]
+
+
+def _cell(value: Any) -> Any:
+    """A sweep.csv cell read as text back to what was written: None for an empty cell, an int
+    or a float for a number (a column with empty cells is read as text, not as numbers)."""
+    if not isinstance(value, str):
+        return value
+    if value == "":
+        return None
+    for kind in (int, float):
+        try:
+            return kind(value)
+        except ValueError:
+            pass
+    return value
 
 
 class _RowWriter:
@@ -177,6 +229,8 @@ def run_sweep(scenario: str | Sequence[str], grid: dict[str, Sequence[Any]],
     paths = [str(find_scenario(s)) for s in scenarios]
     for path in paths:  # fail early on a bad scenario or key, and build what is missing
         ensure_built(load_scenario(path, points[0]))
+        for point in points:  # every point's values against the FMUs, before any runs
+            check_point(path, point)
     jobs = [(path, point) for path in paths for point in points]
     order = {_key(path, point): i for i, (path, point) in enumerate(jobs)}
     out = Path(out_dir) if out_dir is not None else None
@@ -212,7 +266,10 @@ def run_sweep(scenario: str | Sequence[str], grid: dict[str, Sequence[Any]],
         rows.sort(key=lambda r: order.get(_key(r["scenario"], {k: r[k] for k in grid}), 0))
         frame = pd.DataFrame(rows, columns=columns)
         if out is not None:
-            frame.to_csv(out / "sweep.csv", index=False)
+            written = frame.copy()
+            for col in COUNT_COLUMNS:  # integers with empty cells (a failed point): not 245.0
+                written[col] = pd.to_numeric(written[col]).round().astype("Int64")
+            written.to_csv(out / "sweep.csv", index=False)
             if plot and (frame["status"] == "ok").any():
                 plot_sweep(frame[frame["status"] == "ok"], list(grid), out / "sweep.png")
     return frame
@@ -314,15 +371,31 @@ def _execute(jobs: list[tuple[str, dict[str, Any]]], workers: int | None, finish
 
 
 def plot_sweep(frame: pd.DataFrame, keys: list[str], path: str | Path) -> None:
-    """Fig.-11-style plot: stop error (cm) and command switches / executions vs the first key."""
+    """:func:`draw_sweep` saved to ``path`` (its suffix: png at 200 dpi, svg or pdf)."""
+    import matplotlib.pyplot as plt
+
+    from cosim.run.results import PLOT_DPI
+
+    fig = draw_sweep(frame, keys)
+    fig.savefig(path, dpi=PLOT_DPI, format=Path(path).suffix.lstrip(".") or "png",
+                bbox_inches="tight")
+    plt.close(fig)
+
+
+def draw_sweep(frame: pd.DataFrame, keys: list[str]) -> Any:
+    """Fig.-11-style figure: stop error (cm) and command switches / executions vs the first
+    key; the stop window drawn, the axis zoomed to the data when they lie far inside it;
+    legends right of the axes."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    from cosim.run.results import fit_band
+
     x = keys[0]
     others = keys[1:]
-    fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(7.5, 7), sharex=True)
+    fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(7.5, 8), sharex=True)
     for label, group in frame.groupby(["scenario", *others], sort=False):
         name = label if isinstance(label, str) else " ".join(
             [str(label[0])] + [f"{k}={v}" for k, v in zip(others, label[1:], strict=True)])
@@ -333,16 +406,16 @@ def plot_sweep(frame: pd.DataFrame, keys: list[str], path: str | Path) -> None:
         if group["controller_executions"].notna().all():
             ax2.plot(group[x], group["controller_executions"], marker="^", linestyle="--",
                      color=line.get_color(), label=f"{name}: executions")
-    for sign in (-1, 1):
-        ax1.axhline(sign * 100 * STOP_WINDOW_M, color="red", linestyle=":", linewidth=1)
+    fit_band(ax1, 100.0 * frame["stop_error_m"], -100 * STOP_WINDOW_M, 100 * STOP_WINDOW_M)
     ax1.set_ylabel("stop error (cm)")
     ax1.set_title("Stop error and command switches vs " + x)
     ax1.grid(True, alpha=0.3)
-    ax1.legend(fontsize=8)
+    ax1.ticklabel_format(useOffset=False, style="plain", axis="y")
+    ax1.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
     ax2.set_xlabel(x)
     ax2.set_ylabel("count")
     ax2.grid(True, alpha=0.3)
-    ax2.legend(fontsize=8)
+    ax2.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
+    ax2.xaxis.set_tick_params(labelbottom=True)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    return fig

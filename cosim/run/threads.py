@@ -2,7 +2,7 @@
 
 The controllers' linear algebra is on matrices of a few dozen rows; OpenBLAS would still start a
 second thread on each call and keep it spinning, so one run already kept two cores busy and
-parallel sweep workers slowed each other down (issue 10). :func:`one_blas_thread` limits every
+parallel sweep workers slow each other down. :func:`one_blas_thread` limits every
 BLAS library loaded in the process to one thread for the duration of a run and restores the
 previous limits afterwards; its ``refresh`` also limits libraries loaded meanwhile (an FMU's
 bundled modules importing SciPy at instantiation).

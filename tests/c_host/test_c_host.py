@@ -142,3 +142,31 @@ def test_plain_pythonfmu_binary_needs_libpython_loaded_first(host, plant, shim):
                     binary=md.coSimulation.modelIdentifier + SHIM_SUFFIX)
     assert done.returncode == 2
     assert "undefined symbol" in done.stderr and "Py" in done.stderr
+
+
+def _fmu_ids() -> list[str]:
+    from cosim.fmu.build import catalog
+
+    return list(catalog())
+
+
+@pytest.mark.parametrize("identifier", _fmu_ids())
+def test_c_host_runs_every_fmu_at_the_compliance_checkers_step(host, shim, built_fmus,
+                                                               identifier, tmp_path):
+    """The C host (no Python of its own), logging off, at the FMU Compliance Checker's step
+    (stop time / 500, here twice the default step): 50 steps succeed for every FMU."""
+    path = built_fmus[identifier].path
+    md = read_model_description(str(path))
+    unzipdir = extract(str(path), unzipdir=str(tmp_path / "fmu"))
+    step = 2.0 * float(md.defaultExperiment.stepSize)
+    outputs = [v.valueReference for v in md.modelVariables
+               if v.causality == "output" and v.type == "Real"][:3]
+    env = {k: v for k, v in os.environ.items() if k not in ("LD_PRELOAD", "PYTHONHOME")}
+    env["PYTHONPATH"] = os.pathsep.join([*site.getsitepackages(),
+                                         os.environ.get("PYTHONPATH", "")])
+    done = subprocess.run([str(host), unzipdir, md.coSimulation.modelIdentifier, md.guid,
+                           repr(step), "50", *[f"out:{vr}" for vr in outputs]],
+                          capture_output=True, text=True, timeout=300, env=env)
+    assert done.returncode == 0, done.stderr[-2000:]
+    rows = [line.split(",") for line in done.stdout.split()]
+    assert len(rows) == 50 and float(rows[-1][0]) == pytest.approx(50 * step)

@@ -15,3 +15,13 @@ def c_fmus(tmp_path_factory) -> dict[str, Path]:
     if shutil.which("gcc") is None:
         pytest.skip("gcc not installed: the C test FMUs cannot be built")
     return build_all(tmp_path_factory.mktemp("c_fmus"))
+
+
+@pytest.fixture(scope="session")
+def c_fmus3(tmp_path_factory) -> dict[str, Path]:
+    """Name -> path of every C FMI 3.0 test FMU (gcc + fmpy's FMI 3 headers), built once."""
+    if shutil.which("gcc") is None:
+        pytest.skip("gcc not installed: the C test FMUs cannot be built")
+    from third_party_fmus3 import build_all3
+
+    return build_all3(tmp_path_factory.mktemp("c_fmus3"))

@@ -213,3 +213,35 @@ def test_self_connection_through_a_state_output_runs(c_fmus, tmp_path):
                           {"f.u": "f.z"})
     with pytest.raises(ScenarioError, match="algebraic loop"):
         load_scenario(path) and run_scenario(path, build=False, plot=False)
+
+
+def test_event_master_steps_a_fixed_step_fmu_on_its_own_grid(c_fmus, tmp_path, monkeypatch):
+    """canHandleVariableCommunicationStepSize = false (issue 24): among the points another
+    FMU's max_step = 0.05 s and the 0.125 s output grid make, the event algorithm steps it by
+    0.125 s (base_step) only, every step the same size."""
+    from cosim.run import master as master_mod
+
+    sizes: dict[str, set[int]] = {}
+    real = master_mod.Fmi2Unit._do_step
+
+    def do_step(self, t, h):
+        sizes.setdefault(self.name, set()).add(h)
+        return real(self, t, h)
+
+    monkeypatch.setattr(master_mod.Fmi2Unit, "_do_step", do_step)
+    sc = write_scenario(tmp_path, {"fixed": (c_fmus["DiscarderFixed"], {}, {"u": 1.0}),
+                                   "other": (c_fmus["Feedthrough"], {"k": 1.0}, {"u": 1.0})},
+                        extra={"other": {"max_step": 0.05}})
+    r = run_scenario(sc, build=False)
+    assert sizes["fixed"] == {125_000_000}
+    assert len(sizes["other"]) > 1  # the points between are there
+    np.testing.assert_allclose(r.frame["fixed.x"], r.frame["time"], rtol=0, atol=1e-12)
+
+
+def test_fixed_step_fmu_on_a_grid_that_misses_the_stop_time_asks_for_a_max_step(c_fmus,
+                                                                               tmp_path):
+    sc = write_scenario(tmp_path, {"fixed": (c_fmus["DiscarderFixed"], {}, {"u": 1.0})},
+                        stop=1.1, base_step=0.125)
+    with pytest.raises(SimulationError, match=r"\[fmus.fixed\].*cannot handle variable.*"
+                                              r"algorithm = \"fixed\""):
+        run_scenario(sc, build=False)

@@ -52,3 +52,11 @@ def test_export_checks_the_scenario_like_run(c_fmus, tmp_path, fmus, connections
     with pytest.raises(ScenarioError, match=message):
         export_ssp(path, tmp_path / "bad.ssp", build=False)
     assert not (tmp_path / "bad.ssp").exists()
+
+
+def test_an_fmi3_component_is_refused_not_exported_without_connectors(c_fmus3, tmp_path):
+    sc = write_scenario(tmp_path, {"term": (c_fmus3["Terminator3"], {"stop_at": 0.5}, {})})
+    out = tmp_path / "out.ssp"
+    with pytest.raises(ScenarioError, match=r"\[fmus.term\].*FMI 3.0 FMU.*SSP 1.0"):
+        export_ssp(sc, out, build=False)
+    assert not out.exists()

@@ -1,7 +1,7 @@
 """FMI 2.0 co-simulation compliance checks for any FMU (ours or a third party's).
 
 ``check_fmu(path)`` returns a list of :class:`Problem`; ``format_report`` renders it. The
-checks are those of issue 5:
+checks:
 
 * static (read from the file, nothing loaded): fmpy validation; legal causality / variability /
   initial combinations (FMI 2.0 sec. 2.2.7); start values present where required and inside
@@ -50,6 +50,9 @@ from cosim.interop.compliance.common import (
     CONVENTION,
     DYNAMIC_CHECKS,
     ERROR,
+    FMI3_CHECKS,
+    FMI3_DYNAMIC_CHECKS,
+    FMI3_STATIC_CHECKS,
     NOTE,
     RECOMMENDED,
     REQUIRED,
@@ -57,15 +60,18 @@ from cosim.interop.compliance.common import (
     STATIC_CHECKS,
     WARNING,
     Problem,
+    _read_xml,
     classify,
     passed,
     skipped,
+    standard_of,
 )
 from cosim.interop.compliance.host import _Host
 from cosim.interop.compliance.model_description import check_model_description
 from cosim.interop.compliance.worker import _run_worker
 
-__all__ = ["ALL_CHECKS", "CLAUSES", "CONVENTION", "DYNAMIC_CHECKS", "ERROR", "NOTE",
+__all__ = ["ALL_CHECKS", "CLAUSES", "CONVENTION", "DYNAMIC_CHECKS", "ERROR", "FMI3_CHECKS",
+           "FMI3_DYNAMIC_CHECKS", "FMI3_STATIC_CHECKS", "NOTE", "checks_for",
            "RECOMMENDED", "REQUIRED", "STATIC_CHECKS", "WARNING", "Options", "Problem", "_Host",
            "check_fmu", "check_model_description", "check_together", "classify",
            "format_report", "passed"]
@@ -105,6 +111,8 @@ def check_fmu(path: str | Path, options: Options | None = None) -> list[Problem]
     path = Path(path)
     if not path.is_file():
         return [Problem("fmpy-validation", f"{path}: no such file")]
+    if fmi_version(path) == "3.0":
+        return _check_fmi3(path, opts)
     problems = check_model_description(path, strict=opts.strict)
     if not opts.dynamic:
         return problems
@@ -118,6 +126,36 @@ def check_fmu(path: str | Path, options: Options | None = None) -> list[Problem]
     return classify(problems + _run_worker(args, DYNAMIC_CHECKS, opts.timeout), opts.strict)
 
 
+def fmi_version(path: Path) -> str | None:
+    """The fmiVersion attribute of an FMU's modelDescription.xml (None if unreadable)."""
+    try:
+        return _read_xml(path).get("fmiVersion")
+    except Exception:
+        return None
+
+
+def checks_for(path: str | Path) -> tuple[str, ...]:
+    """The checks :func:`check_fmu` runs on this FMU (FMI 2.0 or FMI 3.0 ones)."""
+    return FMI3_CHECKS if fmi_version(Path(path)) == "3.0" else ALL_CHECKS
+
+
+def _check_fmi3(path: Path, opts: Options) -> list[Problem]:
+    """The FMI 3.0 checks (:mod:`cosim.interop.compliance.fmi3`)."""
+    from cosim.interop.compliance.fmi3 import static_checks
+
+    problems = static_checks(path)
+    if not opts.dynamic:
+        return classify(problems, opts.strict)
+    runnable = not any(p.check == "fmi3-capabilities" and p.severity != NOTE
+                       or p.severity == SKIPPED for p in problems)
+    if not runnable:
+        return classify(skipped(FMI3_DYNAMIC_CHECKS, "the FMU cannot be run here (see "
+                                "fmi3-capabilities)", problems), opts.strict)
+    args = {"mode": "fmi3", "paths": [str(path.resolve())], **_worker_options(opts)}
+    return classify(problems + _run_worker(args, FMI3_DYNAMIC_CHECKS, opts.timeout),
+                    opts.strict)
+
+
 def check_together(paths: list[str | Path], options: Options | None = None) -> list[Problem]:
     """Load all ``paths`` in one process and check each runs as it does alone."""
     opts = options or Options()
@@ -127,10 +165,12 @@ def check_together(paths: list[str | Path], options: Options | None = None) -> l
 
 
 def format_report(path: str | Path, problems: list[Problem],
-                  checks: tuple[str, ...] = ALL_CHECKS) -> str:
+                  checks: tuple[str, ...] | None = None) -> str:
     """A readable report: one line per check (ok / FAIL / warn) with the FMI 2.0.4 clause it
     enforces, then the findings (with what they rest on when the standard does not require
     it: ``recommended`` or a project ``convention``)."""
+    if checks is None:
+        checks = FMI3_CHECKS if any(p.check in FMI3_CHECKS for p in problems) else ALL_CHECKS
     lines = [f"FMU {path}"]
     by_check: dict[str, list[Problem]] = {}
     for p in problems:
@@ -145,7 +185,8 @@ def format_report(path: str | Path, problems: list[Problem],
             reason = next(p.message for p in found if p.severity == SKIPPED)
             lines.append(f"  {label:<4}  {check:<20}  ({reason.removeprefix('not run: ')})")
             continue
-        lines.append(f"  {label:<4}  {check:<20}" + (f"  [FMI 2.0.4 {clause}]" if clause else ""))
+        lines.append(f"  {label:<4}  {check:<21}"
+                     + (f"  [{standard_of(check)} {clause}]" if clause else ""))
         for p in found:
             if p.severity == SKIPPED:
                 continue

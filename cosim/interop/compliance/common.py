@@ -53,6 +53,41 @@ CLAUSES: dict[str, tuple[str, str]] = {
                  REQUIRED),
 }
 
+FMI3_STATIC_CHECKS = ("fmi3-validation", "fmi3-variables", "fmi3-model-structure",
+                      "fmi3-capabilities")
+FMI3_DYNAMIC_CHECKS = ("fmi3-calling-sequence", "fmi3-event-mode", "fmi3-early-return",
+                       "fmi3-fmu-state", "fmi3-wrong-state")
+FMI3_CHECKS = FMI3_STATIC_CHECKS + FMI3_DYNAMIC_CHECKS
+
+# check -> (FMI 3.0 clause, requirement of its findings unless a finding says otherwise)
+FMI3_CLAUSES: dict[str, tuple[str, str]] = {
+    "fmi3-validation": ("2.4 (FMI Description Schema, modelDescription rules)", REQUIRED),
+    "fmi3-variables": ("2.4 (ModelVariables: causality, variability, initial, start, "
+                       "min/max, units; exactly one independent variable)", REQUIRED),
+    "fmi3-model-structure": ("2.4 (ModelStructure: every output listed as Output)",
+                             REQUIRED),
+    "fmi3-capabilities": ("4.4 (the CoSimulation element) and 2.5 (binaries/<platform>)",
+                          REQUIRED),
+    "fmi3-calling-sequence": ("4.2 (co-simulation state machine: instantiate, initialise, "
+                              "fmi3DoStep, terminate)", REQUIRED),
+    "fmi3-event-mode": ("4.1, 4.2 (Event Mode: fmi3UpdateDiscreteStates, nextEventTime, "
+                        "eventHandlingNeeded)", REQUIRED),
+    "fmi3-early-return": ("4.1, 4.2 (fmi3DoStep earlyReturn, lastSuccessfulTime; "
+                          "mightReturnEarlyFromDoStep)", REQUIRED),
+    "fmi3-fmu-state": ("2.2 (fmi3Get/SetFMUState, serialisation restore the FMU state)",
+                       REQUIRED),
+    "fmi3-wrong-state": ("4.2 (calls outside the state machine are the importer's error; an "
+                         "FMU should detect them)", RECOMMENDED),
+}
+
+CLAUSES.update(FMI3_CLAUSES)
+
+
+def standard_of(check: str) -> str:
+    """The standard (and edition) a check's clause refers to."""
+    return "FMI 3.0" if check in FMI3_CLAUSES else "FMI 2.0.4"
+
+
 _FATAL = "rejected with fmi2Fatal, expected fmi2Error"
 _MARK = "@@compliance "  # worker protocol lines on stdout (the FMU may print too)
 

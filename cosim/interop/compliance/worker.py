@@ -21,7 +21,14 @@ from cosim.interop.compliance.calling_sequence import (
     _check_reset,
     _check_two_instances,
 )
-from cosim.interop.compliance.common import _MARK, DYNAMIC_CHECKS, NOTE, Problem, skipped
+from cosim.interop.compliance.common import (
+    _MARK,
+    DYNAMIC_CHECKS,
+    FMI3_DYNAMIC_CHECKS,
+    NOTE,
+    Problem,
+    skipped,
+)
 from cosim.interop.compliance.errors import (
     _check_bad_parameters,
     _check_non_finite_inputs,
@@ -68,6 +75,9 @@ def _worker(args: dict) -> None:
     paths = [Path(p) for p in args["paths"]]
     unzipdirs = [extract(str(p)) for p in paths]
     try:
+        if args["mode"] == "fmi3":
+            _fmi3_worker(args, paths[0], unzipdirs[0])
+            return
         hosts = [_Host(p, d, args["n_steps"], tuple(args["irreproducible"]),
                        tuple(args["step_dependent"])) for p, d in zip(paths, unzipdirs)]
         if args["mode"] == "together":
@@ -102,6 +112,27 @@ def _worker(args: dict) -> None:
     finally:
         for d in unzipdirs:
             shutil.rmtree(d, ignore_errors=True)
+
+
+def _fmi3_worker(args: dict, path: Path, unzipdir: str) -> None:
+    """The FMI 3.0 dynamic checks (:mod:`cosim.interop.compliance.fmi3`), same protocol."""
+    from cosim.interop.compliance.fmi3 import DYNAMIC, _Failed3, _Host3
+
+    host = _Host3(path, unzipdir, args["n_steps"], tuple(args["irreproducible"]))
+    ctx: dict[str, Any] = {}
+    for name in FMI3_DYNAMIC_CHECKS:
+        if name in args["skip"]:
+            continue
+        _emit("begin", name)
+        try:
+            problems = DYNAMIC[name](host, ctx)
+        except _Failed3 as err:
+            problems = [Problem(name, str(err))]
+        except Exception as err:  # a bug in the FMU surfacing as a host exception
+            problems = [Problem(name, f"{type(err).__name__}: {err}")]
+        for p in problems:
+            _emit("problem", asdict(p))
+        _emit("end", name)
 
 
 def _together(hosts: list[_Host]) -> list[Problem]:

@@ -1,0 +1,229 @@
+"""FMI 3.0 co-simulation builds of our FMUs, derived from their FMI 2.0 builds.
+
+An FMI 3 FMU holds the same resources (the Python bundle, pythonfmu's slave module) as its FMI
+2 twin, and in ``binaries/x86_64-linux/``:
+
+* ``<id>.so``: the FMI 3.0 front (``cosim/fmu/front/fmi3_front.c``, compiled once per
+  process) linked with the dlopen backend (``ato_backend_fmi2dl.c``, compiled for the FMU's
+  event-time value reference);
+* ``<id>_fmi2.so``: the FMI 2 shim (``cosim/fmu/pythonfmu_shim.c``) the backend loads;
+* ``<id>_fmi2_pythonfmu.so``: pythonfmu's binary the shim loads.
+
+Its modelDescription.xml is the FMI 2 one (itself written from the core's declarations by
+:meth:`cosim.fmu.slave.CoreSlave.to_xml`) in FMI 3.0 terms: the same variable names, value
+references, units, ranges, starts, descriptions and dependencies, plus the independent variable
+``time`` that FMI 3.0 requires (value reference :data:`TIME_VR`); ``instantiationToken`` is
+the FMI 2 ``guid``; a model with a ``next_event_time`` output (the sampled and self-triggered
+controllers, :data:`cosim.fmu.slave.CONTROLLER_TIMING_VARS`) declares ``hasEventMode`` and
+``mightReturnEarlyFromDoStep`` (the front announces that output as ``nextEventTime`` and
+returns early there when allowed); every model declares
+``canHandleVariableCommunicationStepSize`` as its FMI 2 twin does. The win64 binary is not
+carried over: the front is compiled here, for x86-64 Linux only.
+"""
+
+from __future__ import annotations
+
+import atexit
+import shutil
+import subprocess
+import sys
+import tempfile
+import zipfile
+from pathlib import Path
+from xml.etree import ElementTree as ET
+
+FRONT_DIR = Path(__file__).resolve().parent / "front"
+FRONT_SOURCES = (FRONT_DIR / "fmi3_front.c", FRONT_DIR / "ato_backend_fmi2dl.c")
+FRONT_HEADER = FRONT_DIR / "ato_backend.h"
+PLATFORM = "x86_64-linux"
+EVENT_TIME_OUTPUT = "next_event_time"  # the controllers' announced next event (slave.py)
+TIME_VR = 2147483647  # the independent variable `time`: ATO_TIME_VR of front/ato_backend.h
+FMI2_SUFFIX = "_fmi2"  # <id>_fmi2.so: the FMI 2 binary (shim) the front's backend loads
+
+_TYPES = {"Real": "Float64", "Integer": "Int32", "Boolean": "Boolean", "String": "String",
+          "Enumeration": "Enumeration"}
+# FMI 2 CoSimulation attributes with the same meaning in FMI 3.0 (sec. 4.4), renamed
+_COSIM_ATTRIBUTES = {
+    "modelIdentifier": "modelIdentifier",
+    "needsExecutionTool": "needsExecutionTool",
+    "canBeInstantiatedOnlyOncePerProcess": "canBeInstantiatedOnlyOncePerProcess",
+    "canGetAndSetFMUstate": "canGetAndSetFMUState",
+    "canSerializeFMUstate": "canSerializeFMUState",
+    "canHandleVariableCommunicationStepSize": "canHandleVariableCommunicationStepSize",
+}
+
+
+class Fmi3BuildError(RuntimeError):
+    """The FMI 3 build cannot be made here (no gcc, not Linux, compile error)."""
+
+
+def model_description(fmi2_xml: bytes) -> tuple[bytes, int]:
+    """The FMI 3.0 modelDescription.xml of an FMU whose FMI 2.0 one is ``fmi2_xml``, and the
+    value reference of its event-time output (-1: none)."""
+    src = ET.fromstring(fmi2_xml)
+    if src.get("fmiVersion") != "2.0":
+        raise ValueError(f"not an FMI 2.0 modelDescription (fmiVersion={src.get('fmiVersion')})")
+    variables = src.find("ModelVariables")
+    scalars = list(variables) if variables is not None else []
+    event_vr = next((int(sv.get("valueReference")) for sv in scalars
+                     if sv.get("name") == EVENT_TIME_OUTPUT and sv.get("causality") == "output"),
+                    -1)
+    root_attrib = {"fmiVersion": "3.0"}
+    for key in ("modelName", "description", "author", "version", "copyright", "license",
+                "generationTool", "generationDateAndTime", "variableNamingConvention"):
+        if src.get(key) is not None:
+            root_attrib[key] = src.get(key)
+    root_attrib["instantiationToken"] = src.get("guid", "")
+    root = ET.Element("fmiModelDescription", root_attrib)
+
+    cs_src = src.find("CoSimulation")
+    if cs_src is None:
+        raise ValueError("the FMI 2.0 modelDescription has no CoSimulation element")
+    cs = {new: cs_src.get(old) for old, new in _COSIM_ATTRIBUTES.items()
+          if cs_src.get(old) is not None}
+    cs["providesIntermediateUpdate"] = "false"
+    if event_vr >= 0:
+        cs["hasEventMode"] = "true"
+        cs["mightReturnEarlyFromDoStep"] = "true"
+    ET.SubElement(root, "CoSimulation", cs)
+
+    units = src.find("UnitDefinitions")  # identical in FMI 3.0 (sec. 2.4, UnitDefinitions)
+    if units is None:
+        units = ET.Element("UnitDefinitions")
+    if not any(u.get("name") == "s" for u in units):  # the unit of `time`
+        ET.SubElement(ET.SubElement(units, "Unit", {"name": "s"}), "BaseUnit", {"s": "1"})
+    root.append(units)
+    categories = src.find("LogCategories")
+    if categories is not None:
+        node = ET.SubElement(root, "LogCategories")
+        for c in categories:
+            attrib = dict(c.attrib)
+            if "description" in attrib:
+                attrib["description"] = attrib["description"].replace("fmi2", "fmi3")
+            ET.SubElement(node, "Category", attrib)
+    experiment = src.find("DefaultExperiment")
+    if experiment is not None:
+        root.append(experiment)
+
+    node = ET.SubElement(root, "ModelVariables")
+    # FMI 3.0 sec. 2.4 (ModelVariables): exactly one independent variable; the front answers it
+    ET.SubElement(node, "Float64", {"name": "time", "valueReference": str(TIME_VR),
+                                    "description": "simulation time", "causality": "independent",
+                                    "variability": "continuous", "unit": "s"})
+    vr_of_index: dict[int, str] = {}
+    for index, sv in enumerate(scalars, start=1):
+        vr_of_index[index] = sv.get("valueReference")
+        typed = sv[0]
+        kind = _TYPES.get(typed.tag)
+        if kind is None or kind == "Enumeration":
+            raise ValueError(f"variable {sv.get('name')}: type {typed.tag} has no FMI 3 mapping "
+                             "here")
+        attrib = {k: sv.get(k) for k in ("name", "valueReference", "description", "causality",
+                                         "variability", "initial") if sv.get(k) is not None}
+        start = typed.get("start")
+        for k in ("unit", "min", "max", "nominal", "quantity", "displayUnit"):
+            if typed.get(k) is not None:
+                attrib[k] = typed.get(k)
+        if start is not None and kind != "String":
+            attrib["start"] = start
+        var = ET.SubElement(node, kind, attrib)
+        if start is not None and kind == "String":
+            ET.SubElement(var, "Start", {"value": start})
+
+    structure = ET.SubElement(root, "ModelStructure")
+    src_structure = src.find("ModelStructure")
+    if src_structure is not None:
+        for tag, new in (("Outputs", "Output"), ("InitialUnknowns", "InitialUnknown")):
+            group = src_structure.find(tag)
+            for unknown in group if group is not None else []:
+                attrib = {"valueReference": vr_of_index[int(unknown.get("index"))]}
+                deps = unknown.get("dependencies")
+                if deps is not None:
+                    attrib["dependencies"] = " ".join(vr_of_index[int(i)] for i in deps.split())
+                ET.SubElement(structure, new, attrib)
+    ET.indent(root, "\t")
+    text = ET.tostring(root, encoding="unicode")
+    return ('<?xml version="1.0" encoding="UTF-8"?>\n' + text + "\n").encode(), event_vr
+
+
+_front_cache: dict[int, Path] = {}
+_front_dir: list[Path] = []
+
+
+def _gcc(args: list[str], what: str) -> None:
+    done = subprocess.run(args, capture_output=True, text=True)
+    if done.returncode != 0:
+        raise Fmi3BuildError(f"gcc failed on {what}: {done.stderr.strip()[-2000:]}")
+
+
+def front_binary(event_vr: int) -> Path:
+    """The front linked with its dlopen backend for event-time value reference ``event_vr``
+    (-1: none): the front compiled once per process, the small backend once per value
+    reference."""
+    if event_vr in _front_cache:
+        return _front_cache[event_vr]
+    gcc = shutil.which("gcc")
+    if not sys.platform.startswith("linux"):
+        raise Fmi3BuildError(f"FMI 3 builds are made on Linux only (this is {sys.platform})")
+    if gcc is None:
+        raise Fmi3BuildError("FMI 3 builds need gcc to compile the front "
+                             f"({FRONT_SOURCES[0]}); gcc not found")
+    import fmpy
+
+    flags = ["-fPIC", "-O2", "-std=c99", "-fvisibility=hidden", "-Wall",
+             f"-I{Path(fmpy.__file__).parent / 'c-code'}", f"-I{FRONT_DIR}"]
+    if not _front_dir:
+        _front_dir.append(Path(tempfile.mkdtemp(prefix="atocosim_front_")))
+        atexit.register(shutil.rmtree, _front_dir[0], True)
+    folder = _front_dir[0]
+    front = folder / "fmi3_front.o"
+    if not front.is_file():
+        _gcc([gcc, "-c", *flags, "-o", str(front), str(FRONT_SOURCES[0])], "the FMI 3 front")
+    label = event_vr if event_vr >= 0 else "none"
+    backend = folder / f"backend_{label}.o"
+    _gcc([gcc, "-c", *flags, f"-DATO_EVENT_TIME_VR={int(event_vr)}", "-o", str(backend),
+          str(FRONT_SOURCES[1])], "the FMI 3 front's backend")
+    out = folder / f"fmi3_front_{label}.so"
+    _gcc([gcc, "-shared", "-o", str(out), str(front), str(backend), "-ldl", "-lm"],
+         "linking the FMI 3 front")
+    _front_cache[event_vr] = out
+    return out
+
+
+def package(fmi2_fmu: Path, identifier: str, out: Path) -> Path:
+    """Write the FMI 3 FMU ``out`` from the FMI 2 FMU ``fmi2_fmu`` (built with the shim)."""
+    shim = f"binaries/linux64/{identifier}.so"
+    inner = f"binaries/linux64/{identifier}_pythonfmu.so"
+    target = f"binaries/{PLATFORM}/{identifier}"
+    with zipfile.ZipFile(fmi2_fmu) as zin:
+        names = set(zin.namelist())
+        if shim not in names or inner not in names:
+            raise Fmi3BuildError(f"{fmi2_fmu}: the FMI 3 build needs the FMI 2 build's shim "
+                                 f"({shim}) and pythonfmu's binary ({inner}); see the warning "
+                                 "of the FMI 2 build")
+        md, event_vr = model_description(zin.read("modelDescription.xml"))
+        front = front_binary(event_vr)
+        out.parent.mkdir(parents=True, exist_ok=True)
+        with zipfile.ZipFile(out, "w", zipfile.ZIP_DEFLATED) as zout:
+            for item in zin.infolist():
+                name = item.filename
+                if name.startswith("binaries/"):
+                    continue
+                data = md if name == "modelDescription.xml" else zin.read(item)
+                zout.writestr(item, data)
+            stamp = zin.getinfo(shim).date_time
+            attr = zin.getinfo(shim).external_attr
+            for name, payload in ((f"{target}.so", front.read_bytes()),
+                                  (f"{target}{FMI2_SUFFIX}.so", zin.read(shim)),
+                                  (f"{target}{FMI2_SUFFIX}_pythonfmu.so", zin.read(inner))):
+                info = zipfile.ZipInfo(name, date_time=stamp)
+                info.compress_type = zipfile.ZIP_DEFLATED
+                info.external_attr = attr
+                zout.writestr(info, payload)
+    return out
+
+
+def builder_files() -> list[Path]:
+    """The files an FMI 3 build depends on besides the FMI 2 build's."""
+    return [Path(__file__).resolve(), *FRONT_SOURCES, FRONT_HEADER]
+

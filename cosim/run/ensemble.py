@@ -1,0 +1,373 @@
+"""Run an entry's claims over their ensembles and write ``claims.csv`` / ``claims.md``.
+
+Members of a claim's ensemble (K = ``--seeds``, the first K report seeds):
+
+- ``disturbance``: member i sets ``[ensemble].seed_key`` to report seed i; without a seed key
+  the plant has no random input and the ensemble is one (deterministic) run.
+- ``mismatch``: member i is plant-mismatch sample i drawn from ``[ensemble].perturb``
+  (:func:`cosim.run.perturb.draw_samples`, seeded by ``[ensemble].perturb_seed``; the first K
+  of the same sequence for every K), with report seed i where there is a seed key.
+
+Every member runs twice: on the main path and on a perturbed floating-point path (the plants'
+numpy reference path, ``ATO_COSIM_NO_KERNELS=1`` in the worker, and each
+``[ensemble].rounding_perturb`` parameter scaled by 1 + 1e-12). Workers are spawned processes
+with one BLAS thread each; progress (runs done / total, elapsed, ETA) goes to stderr.
+"""
+
+from __future__ import annotations
+
+import math
+import multiprocessing
+import os
+import sys
+import time
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from cosim.run.claims import ROUNDING_RELATIVE, ours_text, verdict, with_rounding
+
+Job = tuple[tuple[str, str, int, bool], str, dict[str, Any]]  # (run, ensemble, i, rounding)
+
+
+def members(entry: Any, ensemble: str, k: int) -> list[dict[str, Any]]:
+    """Overrides of each member (before the run's own ``set``) of one ensemble kind."""
+    ens = entry.ensemble
+    if k < 1:
+        raise ValueError(f"--seeds {k}: must be at least 1")
+    if k > len(ens.report_seeds):
+        raise ValueError(f"--seeds {k}: {entry.path} [ensemble] report_seeds has only "
+                         f"{len(ens.report_seeds)} seeds")
+    seeds = ens.report_seeds[:k]
+    if ensemble == "disturbance":
+        if ens.seed_key is None:
+            return [{}]
+        return [{ens.seed_key: s} for s in seeds]
+    return [dict(d, **({ens.seed_key: s} if ens.seed_key else {}))
+            for d, s in zip(_draws(entry, k), seeds, strict=True)]
+
+
+def _draws(entry: Any, k: int) -> list[dict[str, float]]:
+    from cosim.run.perturb import draw_samples, nominal_values, parse_perturb
+
+    perts = parse_perturb(entry.ensemble.perturb)
+    scenario = next(r["scenario"] for r in entry.runs
+                    if any(c.get("ensemble") == "mismatch" and r["name"] in c["runs"]
+                           for c in entry.claims))
+    nominals = nominal_values(scenario, [p.key for p in perts])
+    return draw_samples(perts, nominals, k, entry.ensemble.perturb_seed)
+
+
+def _rounding_overrides(entry: Any, run: dict[str, Any], base: dict[str, Any]
+                        ) -> dict[str, Any]:
+    from cosim.run.perturb import nominal_values
+
+    out: dict[str, Any] = {}
+    for key in entry.ensemble.rounding_perturb:
+        value = base.get(key, run.get("set", {}).get(key))
+        if value is None:
+            value = nominal_values(run["scenario"], [key])[key]
+        if value is None:
+            raise ValueError(f"{entry.path}: [ensemble] rounding_perturb {key!r}: no nominal "
+                             "value to perturb")
+        out[key] = float(value) * (1.0 + ROUNDING_RELATIVE)
+    return out
+
+
+def claim_jobs(entry: Any, k: int, rounding: bool = True) -> list[Job]:
+    """Every (run, ensemble, member, path) the claims need, once."""
+    runs = {r["name"]: r for r in entry.runs}
+    jobs: dict[tuple[str, str, int, bool], Job] = {}
+    cache: dict[str, list[dict[str, Any]]] = {}
+    for claim in entry.claims:
+        ens = claim.get("ensemble", "disturbance")
+        if ens not in cache:
+            cache[ens] = members(entry, ens, k)
+        for name in claim["runs"]:
+            run = runs[name]
+            for i, member in enumerate(cache[ens]):
+                for rnd in (False, True) if rounding else (False,):
+                    key = (name, ens, i, rnd)
+                    overrides = {**member, **run.get("set", {})}
+                    if ens == "mismatch":  # the drawn plant wins over the run's nominal
+                        overrides.update(member)
+                    if rnd:
+                        overrides.update(_rounding_overrides(entry, run, overrides))
+                    jobs.setdefault(key, (key, run["scenario"], overrides))
+    return list(jobs.values())
+
+
+def _run_member(scenario: str, overrides: dict[str, Any], out_dir: str | None = None
+                ) -> dict[str, Any]:
+    from cosim.run.master import run_scenario
+
+    return run_scenario(scenario, overrides=overrides, out_dir=out_dir, build=False,
+                        plot=False).summary
+
+
+def member_dir(out: Path, key: tuple[str, str, int, bool]) -> Path:
+    """Where a main-path member writes results.csv (``ensemble/<run>/<ensemble>_<i>``)."""
+    from cosim.run.reproduce import slug
+
+    return out / "ensemble" / slug(key[0]) / f"{key[1]}_{key[2] + 1:02d}"
+
+
+def draw_ensemble_figure(spec: dict[str, Any], dirs: dict[str, list[Path]], path: Path
+                         ) -> None:
+    """An overlay figure over an ensemble: per run the median over the members and a 5-95 %
+    band (members sampled on the first member's x grid; x = "time" or a recorded column)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import pandas as pd
+
+    from cosim.run.reproduce import figure_series
+    from cosim.run.results import PLOT_DPI
+
+    ys = spec["y"] if isinstance(spec["y"], list) else [spec["y"]]
+    scale = float(spec.get("y_scale", 1.0))
+    fig, ax = plt.subplots(figsize=(8, 4.5))
+    for name, members_ in dirs.items():
+        frames = [pd.read_csv(d / "results.csv") for d in members_]
+        x0 = frames[0]["time"] if spec["x"] == "time" else frames[0][spec["x"]]
+        for y in ys:
+            curves = []
+            for frame in frames:
+                x = frame["time"] if spec["x"] == "time" else frame[spec["x"]]
+                curves.append(np.interp(x0, x, figure_series(frame, spec, y, name) * scale))
+            stack = np.vstack(curves)
+            label = name if len(ys) == 1 else f"{name}: {y}"
+            line, = ax.plot(x0, np.median(stack, axis=0), linewidth=1.0,
+                            label=f"{label} (median of {len(frames)})")
+            ax.fill_between(x0, np.percentile(stack, 5, axis=0),
+                            np.percentile(stack, 95, axis=0), color=line.get_color(),
+                            alpha=0.25, linewidth=0)
+    ax.set_xlabel(spec.get("xlabel", "time (s)" if spec["x"] == "time" else spec["x"]))
+    ax.set_ylabel(spec.get("ylabel", ys[0]))
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=7)
+    fig.suptitle(f"{spec.get('title', '')} (median, 5-95 % band over the seeds)")
+    fig.tight_layout()
+    fig.savefig(path, dpi=PLOT_DPI, format=Path(path).suffix.lstrip(".") or "png",
+                bbox_inches="tight")
+    plt.close(fig)
+
+
+def _worker_setup() -> None:
+    from cosim.run.threads import limit_blas_for_process
+
+    limit_blas_for_process()
+
+
+class Progress:
+    """``runs done / total, elapsed, ETA`` lines on stderr (one every ~2 s, and the last)."""
+
+    def __init__(self, total: int, label: str) -> None:
+        self.total, self.label, self.done = total, label, 0
+        self.start = self.last = time.monotonic()
+
+    def step(self) -> None:
+        self.done += 1
+        now = time.monotonic()
+        if now - self.last < 2.0 and self.done < self.total:
+            return
+        self.last = now
+        elapsed = now - self.start
+        eta = elapsed / self.done * (self.total - self.done)
+        print(f"{self.label}: {self.done}/{self.total} runs, {elapsed:.0f} s elapsed, "
+              f"ETA {eta:.0f} s", file=sys.stderr, flush=True)
+
+
+def _execute_dask(todo: list[Job], scheduler: str, workers: int | None, label: str,
+                  out: dict[Any, Any], progress: Progress, dirs: dict[Any, str]) -> None:
+    """``todo`` on a Dask cluster (``"local-dask"``: a LocalCluster of ``workers`` processes,
+    one thread each, started here so that it inherits this process's environment)."""
+    import logging
+
+    from distributed import Client, LocalCluster, as_completed
+
+    from cosim.run.dask_sweep import LOCAL, check_available
+
+    check_available()
+    cluster = None
+    if scheduler == LOCAL:
+        cluster = LocalCluster(n_workers=max(1, min(workers or os.cpu_count() or 1,
+                                                    len(todo))),
+                               threads_per_worker=1, processes=True, dashboard_address=None,
+                               silence_logs=logging.ERROR)
+    try:
+        with Client(cluster if cluster is not None else scheduler) as client:
+            client.run(_worker_setup)
+            futures = {client.submit(_run_member, sc, ov, dirs.get(key), pure=False): key
+                       for key, sc, ov in todo}
+            for fut in as_completed(futures):
+                try:
+                    out[futures[fut]] = fut.result()
+                except Exception as err:  # noqa: BLE001 - a failed run: metric missing
+                    print(f"{label}: {futures[fut]} failed: {err}", file=sys.stderr)
+                    out[futures[fut]] = None
+                progress.step()
+    finally:
+        if cluster is not None:
+            cluster.close()
+
+
+def execute(jobs: list[Job], workers: int | None, label: str = "claims",
+            scheduler: str | None = None, dirs: dict[Any, str] | None = None
+            ) -> dict[tuple[str, str, int, bool], dict[str, Any] | None]:
+    """Run the jobs (main path and rounding path in separate spawned pools or Dask clusters,
+    the latter with ``ATO_COSIM_NO_KERNELS=1``); a failed run gives None (its metrics are
+    missing). ``dirs``: job key -> folder for the run's results (others write none)."""
+    from cosim.run import interrupt
+
+    dirs = dirs or {}
+    out: dict[tuple[str, str, int, bool], dict[str, Any] | None] = {}
+    progress = Progress(len(jobs), label)
+    for rnd in (False, True):
+        todo = [j for j in jobs if j[0][3] == rnd]
+        if not todo:
+            continue
+        n = max(1, min(workers or os.cpu_count() or 1, len(todo)))
+        old = os.environ.get("ATO_COSIM_NO_KERNELS")
+        if rnd:
+            os.environ["ATO_COSIM_NO_KERNELS"] = "1"  # inherited by the spawned workers
+        try:
+            if scheduler is not None:
+                _execute_dask(todo, scheduler, workers, label, out, progress, dirs)
+                continue
+            ctx = multiprocessing.get_context("spawn")
+            with interrupt.guard(), ProcessPoolExecutor(
+                    max_workers=n, mp_context=ctx, initializer=_worker_setup) as pool:
+                futures = {pool.submit(_run_member, sc, ov, dirs.get(key)): key
+                           for key, sc, ov in todo}
+                pending = set(futures)
+                while pending:
+                    ready, pending = wait(pending, timeout=0.5, return_when=FIRST_COMPLETED)
+                    for fut in ready:
+                        try:
+                            out[futures[fut]] = fut.result()
+                        except Exception as err:  # noqa: BLE001 - a failed run: metric missing
+                            print(f"{label}: {futures[fut]} failed: {err}", file=sys.stderr)
+                            out[futures[fut]] = None
+                        progress.step()
+                    if interrupt.requested():
+                        for fut in pending:
+                            fut.cancel()
+                        interrupt.check_between("the claims' runs")
+        finally:
+            if rnd:
+                if old is None:
+                    os.environ.pop("ATO_COSIM_NO_KERNELS", None)
+                else:
+                    os.environ["ATO_COSIM_NO_KERNELS"] = old
+    return out
+
+
+def _metric(summaries: dict[Any, dict[str, Any] | None], run: str, ens: str, n: int,
+            rnd: bool, metric: str) -> np.ndarray:
+    from cosim.run.reproduce import summary_value
+
+    vals = []
+    for i in range(n):
+        s = summaries.get((run, ens, i, rnd))
+        v = None if s is None else summary_value(s, metric)
+        ok = isinstance(v, (int, float))  # a bool (a rule met) counts as 1 / 0
+        vals.append(float(v) if ok else math.nan)
+    return np.array(vals)
+
+
+def evaluate(entry: Any, summaries: dict[Any, dict[str, Any] | None], k: int,
+             rounding: bool = True) -> list[dict[str, Any]]:
+    """One row per claim (see :func:`cosim.run.claims.verdict`)."""
+    rows = []
+    for claim in entry.claims:
+        ens = claim.get("ensemble", "disturbance")
+        n = len(members(entry, ens, k))
+        results = []
+        for rnd in (False, True) if rounding else (False,):
+            a = _metric(summaries, claim["runs"][0], ens, n, rnd, claim["metric"])
+            b = (_metric(summaries, claim["runs"][1], ens, n, rnd, claim["metric"])
+                 if len(claim["runs"]) > 1 else None)
+            results.append(verdict(claim, a, b))
+        row = with_rounding(results[0], results[1] if rounding else None)
+        rows.append({"id": claim["id"], "source": claim.get("source", ""),
+                     "text": claim["text"], "paper": claim.get("paper", ""),
+                     "metric": claim["metric"], "kind": claim["kind"],
+                     "runs": " vs ".join(claim["runs"]), "ensemble": ens,
+                     "origin": claim.get("origin", "paper"),
+                     "threshold": claim.get("threshold", claim.get("range")), **row})
+    return rows
+
+
+def claims_markdown(rows: list[dict[str, Any]], k: int) -> str:
+    from cosim.run.reproduce import _row
+
+    lines = [_row(["claim", "source", "paper", "ours: median [95 % CI]", "k of K", "verdict",
+                   "rounding-robust"]), "|" + " --- |" * 7]
+    for r in rows:
+        what = {"less": "A - B", "greater": "A - B"}.get(r["kind"], r["metric"])
+        robust = "-" if r["rounding_robust"] is None else "yes" if r["rounding_robust"] else "no"
+        lines.append(_row([f"{r['id']}: {r['text']} ({r['runs']}; {r['metric']}, "
+                           f"{r['ensemble']})", r["source"], r["paper"],
+                           f"{what}: {ours_text(r)}", f"{r['k']} of {r['K']}", r["verdict"],
+                           robust]))
+    counts = {v: sum(r["verdict"] == v for r in rows)
+              for v in ("holds", "fails", "inconclusive", "rounding-sensitive")}
+    lines += ["", f"--seeds {k}. " + ", ".join(f"{v}: {n}" for v, n in counts.items()) + ". "
+              "A - B: the paired difference per member (same seed / mismatch sample); k of K: "
+              "members on the claimed side. Verdict from the 95 % bootstrap CI of the median; "
+              "rounding-sensitive: the verdict differs on the perturbed floating-point rerun."]
+    return "\n".join(lines)
+
+
+def compact_table(rows: list[dict[str, Any]]) -> str:
+    """The claims in at most 80 columns (id, k of K, verdict)."""
+    lines = [f"{'claim':<44} {'k/K':>7}  verdict", "-" * 72]
+    for r in rows:
+        flag = "" if r["rounding_robust"] in (None, True) else " (r)"
+        lines.append(f"{r['id'][:44]:<44} {r['k']:>3}/{r['K']:<3}  {r['verdict']}{flag}")
+    return "\n".join(lines)
+
+
+def run_claims(entry: Any, out: Path, k: int, workers: int | None = None,
+               rounding: bool = True, scheduler: str | None = None) -> list[dict[str, Any]]:
+    """Run and evaluate the entry's claims; write ``claims.csv`` and ``claims.md``."""
+    import pandas as pd
+
+    from cosim.run.master import ensure_built
+    from cosim.run.scenario import load_scenario
+
+    jobs = claim_jobs(entry, k, rounding)
+    built: set[str] = set()
+    for _key, scenario, overrides in jobs:  # bad overrides fail before anything runs
+        sc = load_scenario(scenario, overrides)
+        if scenario not in built:
+            ensure_built(sc)
+            built.add(scenario)
+    # the members of overlay figures' runs keep their results (disturbance seeds, main path)
+    banded = {r for f in entry.figures if f.get("kind", "overlay") == "overlay"
+              for r in f.get("runs", [x["name"] for x in entry.runs])}
+    dirs = {key: str(member_dir(out, key)) for key, _sc, _ov in jobs
+            if key[0] in banded and key[1] == "disturbance" and not key[3]}
+    summaries = execute(jobs, workers, f"{entry.name} claims", scheduler, dirs)
+    rows = evaluate(entry, summaries, k, rounding)
+    out.mkdir(parents=True, exist_ok=True)
+    n = len(members(entry, "disturbance", k))
+    for spec in entry.figures if n > 1 else []:
+        if spec.get("kind", "overlay") != "overlay":
+            continue
+        runs = [r for r in spec.get("runs", [x["name"] for x in entry.runs])
+                if all((r, "disturbance", i, False) in dirs
+                       and summaries.get((r, "disturbance", i, False)) is not None
+                       for i in range(n))]
+        if runs:
+            draw_ensemble_figure(spec, {r: [member_dir(out, (r, "disturbance", i, False))
+                                            for i in range(n)] for r in runs},
+                                 out / (Path(spec["file"]).stem + "_ensemble.png"))
+    pd.DataFrame(rows).to_csv(out / "claims.csv", index=False)
+    (out / "claims.md").write_text(f"## Claims of {entry.title}\n\n"
+                                   + claims_markdown(rows, k) + "\n")
+    return rows

@@ -1,0 +1,421 @@
+"""The master: loads a scenario's FMUs, initialises and wires them, runs an algorithm over them
+and keeps what the observers saw (libcosim's execution).
+
+Values flow at each communication point in dependency order (SPEC timing contract): outputs of
+FMUs without direct feedthrough (plants) -> inputs of feedthrough FMUs (controllers) -> their
+outputs -> inputs of the plants, so a command computed from the measurement at t acts from t.
+Time is kept in integer nanoseconds. The FMUs are :class:`cosim.run.master.unit.Unit` s of
+either FMI version, side by side.
+"""
+
+from __future__ import annotations
+
+import re
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from cosim.fmu import diagnostics as fmu_diagnostics
+from cosim.fmu.state import to_seconds, to_ticks
+from cosim.run import exchange, interrupt
+from cosim.run.dependencies import order_connections
+from cosim.run.master.algorithms import ALGORITHM_CLASSES
+from cosim.run.master.errors import FmuCallError, FmuTerminated, SimulationError
+from cosim.run.master.loading import extract_once, read_fmu, unit_class
+from cosim.run.master.observers import LIST_FAMILIES, Recorder
+from cosim.run.master.unit import Unit
+from cosim.run.scenario import (
+    Connection,
+    Scenario,
+    ScenarioError,
+    blame_override,
+    check_against_fmus,
+    check_timing,
+    load_scenario,
+)
+from cosim.run.threads import one_blas_thread
+
+ProgressFn = Callable[[float, float], None]
+WARNING_COUNTER = "qp_infeasible"  # an FMU output counting events that needed a fallback
+
+
+@dataclass
+class Link:
+    """A resolved connection with value references, and its change count."""
+
+    conn: Connection
+    src: Unit
+    dst: Unit
+    src_name: str
+    dst_name: str
+    last: Any = None
+    changes: int = 0
+    history: list[Any] | None = None  # every new value (kept only for the summary's command)
+
+
+def _expand(units: dict[str, Unit], ref: str) -> list[tuple[Unit, str]]:
+    comp, var = ref.split(".", 1)
+    unit = units[comp]
+    if "*" not in var:
+        return [(unit, var)]
+    pattern = re.compile(re.escape(var).replace(r"\*", ".*") + "$")
+    return [(unit, n) for n in unit.vars if pattern.match(n)]
+
+
+class Master:
+    """Loads the FMUs of a scenario, initialises and wires them, and runs an algorithm."""
+
+    def __init__(self, scenario: Scenario, algorithm: str | None = None,
+                 progress: ProgressFn | None = None) -> None:
+        self.scenario = scenario
+        self.algorithm_name = algorithm or scenario.simulation.algorithm
+        if self.algorithm_name not in ALGORITHM_CLASSES:
+            raise ScenarioError(f"unknown algorithm {self.algorithm_name!r}; expected one of "
+                                f"{sorted(ALGORITHM_CLASSES)}")
+        self._progress_fn = progress
+        sim = scenario.simulation
+        self.start_ticks = to_ticks(sim.start_time)
+        self.stop_ticks = to_ticks(sim.stop_time)
+        self.output_ticks = to_ticks(sim.output_interval)
+        self.next_output_ticks = self.start_ticks
+        base = sim.base_step if sim.base_step is not None else sim.output_interval
+        self.base_step_ticks = to_ticks(base)
+        self.units: list[Unit] = []
+        self.links: list[Link] = []
+        self._plans: dict[frozenset[Unit], list[exchange.Stage]] = {}
+        self.wall_time = 0.0
+
+    # -- set-up --------------------------------------------------------------------------------
+    def load(self) -> None:
+        sc = self.scenario
+        descriptions = {}
+        extracted: dict[Path, str] = {}
+        for comp in sc.components.values():
+            if not comp.fmu_path.is_file():
+                raise ScenarioError(f"{sc.path}: [fmus.{comp.name}] fmu = {comp.fmu!r}: "
+                                    f"{comp.fmu_path} not found (run `cosim build`)")
+            descriptions[comp.name] = read_fmu(sc, comp.name, comp.fmu_path)
+            extracted[comp.fmu_path] = extract_once(comp.fmu_path)
+        views = {name: unit_class(md).scenario_view(md) for name, md in descriptions.items()}
+        try:
+            check_against_fmus(sc, views)
+            check_timing(sc, views, self.algorithm_name)
+        except ScenarioError as err:
+            raise blame_override(err, sc.path, sc.overrides) from None
+        by_name: dict[str, Unit] = {}
+        for comp in sc.components.values():
+            md = descriptions[comp.name]
+            unit = unit_class(md)(comp.name, comp.fmu_path, extracted[comp.fmu_path], md)
+            if comp.sample_time is not None:
+                unit.sample_ticks = to_ticks(comp.sample_time)
+            if comp.max_step is not None:
+                unit.max_step_ticks = to_ticks(comp.max_step)
+            by_name[comp.name] = unit
+            self.units.append(unit)
+        self.by_name = by_name
+        command = sc.summary.get("command")
+        for c in sc.connections:
+            self.links.append(Link(c, by_name[c.src], by_name[c.dst], c.src_var, c.dst_var,
+                                   history=[] if command == f"{c.src}.{c.src_var}" else None))
+        self.link_order = self._value_flow_order()
+        self.eventful: list[Unit] = []  # FMUs whose events the algorithm handles (initialize)
+
+    def _value_flow_order(self) -> list[Link]:
+        """Connections in value-flow order by the per-variable dependency graph
+        (:mod:`cosim.run.dependencies`); an algebraic loop, also of one FMU wired to itself,
+        is a :class:`ScenarioError`."""
+        try:
+            order = order_connections([lk.conn for lk in self.links],
+                                      {u.name: u.deps for u in self.units},
+                                      f"{self.scenario.path}: [connections]: ")
+        except ValueError as err:
+            raise ScenarioError(str(err)) from err
+        return [self.links[i] for i in order]
+
+    def initialize(self) -> None:
+        sc = self.scenario
+        for unit in self.units:
+            comp = sc.components[unit.name]
+            unit.instantiate(event_mode=ALGORITHM_CLASSES[self.algorithm_name].event_mode)
+            self._blas_refresh()  # the FMU's modules may have loaded a BLAS library
+            unit.time_ticks = self.start_ticks
+            params = dict(comp.parameters)
+            if comp.sample_time is not None and "sample_time" in unit.vars:
+                params.setdefault("sample_time", comp.sample_time)
+            try:
+                for name, value in {**params, **comp.inputs}.items():
+                    unit.set(name, value)
+                unit.enter_initialization(sc.simulation.start_time, sc.simulation.stop_time)
+            except FmuCallError as err:
+                raise SimulationError(f"{unit.name} ({comp.fmu}): rejected parameters: "
+                                      f"{unit.fmu_reason(err.__cause__ or err)}") from err
+        self.eventful = [u for u in self.units if u.has_events]
+        if self.algorithm_name == "jacobi":
+            # initial values flow once in initialization mode (plant outputs are valid there)
+            for link in self.links:
+                if not link.src.deps.get(link.src_name):
+                    self.transfer(link, link.src.get([link.src_name])[0])
+        for unit in self.units:
+            unit.exit_initialization()
+
+    # -- used by the algorithms ------------------------------------------------------------------
+    def transfer(self, link: Link, value: Any) -> None:
+        if link.last is not None and value != link.last:
+            link.changes += 1
+        if link.history is not None and (link.last is None or value != link.last):
+            link.history.append(value)
+        link.last = value
+        link.dst.set(link.dst_name, value)
+
+    def propagate(self, due: set[Unit], ticks: int) -> None:
+        """Set the inputs of every due FMU from its sources, in value-flow order, as stages of
+        one get per source and one set per destination (:mod:`cosim.run.exchange`); the plan
+        of each set of due FMUs is built once. An FMU with an event at ``ticks`` enters Event
+        Mode first (its inputs are set there) and handles the event just before its outputs
+        are first read (after the inputs they depend on are set), else after every stage."""
+        key = frozenset(due)
+        stages = self._plans.get(key)
+        if stages is None:
+            stages = self._plans[key] = exchange.plan(
+                [link for link in self.link_order if link.dst in due])
+        pending = [u for u in self.eventful if u.event_pending(ticks)] if self.eventful else ()
+        if not pending:
+            for st in stages:
+                st.run()
+            return
+        for unit in pending:
+            unit.begin_event(ticks)
+        open_events = set(pending)
+        for st in stages:
+            for batch in st.reads:
+                if batch.unit in open_events:
+                    open_events.discard(batch.unit)
+                    batch.unit.complete_event(ticks)
+            st.run()
+        for unit in pending:
+            if unit in open_events:
+                unit.complete_event(ticks)
+
+    def output_point(self, ticks: int) -> bool:
+        """Is ``ticks`` an output point (or the stop time)?"""
+        return ticks >= self.next_output_ticks or ticks >= self.stop_ticks
+
+    def advance_output(self, ticks: int) -> None:
+        """The next output point after one recorded at ``ticks``."""
+        while self.next_output_ticks <= ticks:
+            self.next_output_ticks += self.output_ticks
+        self.next_output_ticks = min(self.next_output_ticks, self.stop_ticks)
+
+    def maybe_record(self, ticks: int) -> None:
+        if self.output_point(ticks):
+            self.recorder.record(ticks)
+            self.advance_output(ticks)
+
+    def progress(self, ticks: int) -> None:
+        if interrupt.requested():
+            interrupt.check(to_seconds(ticks))
+        if self._progress_fn is not None:
+            self._progress_fn(to_seconds(ticks - self.start_ticks),
+                              to_seconds(self.stop_ticks - self.start_ticks))
+
+    def finish(self, ticks: int) -> None:
+        self.end_ticks = ticks
+
+    # -- run -----------------------------------------------------------------------------------
+    def run(self) -> RunResult:
+        """Run to the stop time. On a failure or an interrupt the result recorded so far is
+        kept in ``self.partial`` (a :class:`RunResult` with ``completed`` False)."""
+        t0 = time.perf_counter()
+        self.load()
+        refs = self._recorded_refs()
+        n_points = int((self.stop_ticks - self.start_ticks) // self.output_ticks) + 2
+        self.recorder = Recorder(refs, n_points)
+        self.end_ticks = self.start_ticks
+        self.partial: RunResult | None = None
+        final_outputs: dict[str, dict[str, Any]] = {}
+        self.terminated_by: dict[str, Any] | None = None
+        self.diagnostics: dict[str, dict[str, float]] = {}
+        with one_blas_thread() as self._blas_refresh:  # one BLAS thread per run
+            try:
+                interrupt.check(to_seconds(self.start_ticks))
+                self.initialize()
+                interrupt.check(to_seconds(self.start_ticks))
+                loop_start, loop_cpu = time.perf_counter(), time.process_time()
+                try:
+                    ALGORITHM_CLASSES[self.algorithm_name](self).run()
+                except FmuTerminated as stop:
+                    self._end_at(stop)
+                self.loop_wall_time = time.perf_counter() - loop_start
+                self.loop_cpu_time = time.process_time() - loop_cpu
+                final_outputs = self._final_outputs()
+                for unit in self.units:
+                    unit.terminate()
+                    self.diagnostics[unit.name] = fmu_diagnostics.parse(unit.messages)
+            except BaseException as err:
+                self.end_ticks = max(u.time_ticks for u in self.units) if self.units else 0
+                self.partial = self._result(final_outputs, time.perf_counter() - t0)
+                self.partial.completed = False
+                self.partial.error = (str(err) if isinstance(err, interrupt.Interrupted)
+                                      else f"{type(err).__name__}: {err}")
+                raise
+            finally:
+                for unit in self.units:
+                    try:
+                        unit.free()
+                    except Exception:  # noqa: BLE001 - freeing must not hide the real error
+                        pass
+        self.wall_time = time.perf_counter() - t0
+        return self._result(final_outputs, self.wall_time)
+
+    def _end_at(self, stop: FmuTerminated) -> None:
+        """An FMU ended the simulation: a last output point at its last successful time."""
+        self.terminated_by = {"instance": stop.unit.name, "time": to_seconds(stop.ticks)}
+        stop.unit.time_ticks = stop.ticks
+        last = self.recorder.last_time()
+        if last is None or to_ticks(last) < stop.ticks:
+            self.recorder.record(stop.ticks)
+        self.end_ticks = stop.ticks
+
+    def _result(self, final_outputs: dict[str, dict[str, Any]], wall_time: float) -> RunResult:
+        return RunResult(
+            scenario=self.scenario,
+            algorithm=self.algorithm_name,
+            frame=self.recorder.frame(),
+            do_steps={u.name: u.do_steps for u in self.units},
+            executions={u.name: int(final_outputs.get(u.name, {}).get("executions",
+                                                                      u.do_steps))
+                        for u in self.units},
+            fmu_wall_time_s={u.name: u.wall_time for u in self.units},
+            connection_changes={f"{lk.conn.src}.{lk.src_name}": lk.changes for lk in self.links},
+            connection_values={f"{lk.conn.src}.{lk.src_name}": lk.history for lk in self.links
+                               if lk.history is not None},
+            final_outputs=final_outputs,
+            wall_time_s=wall_time,
+            sim_time_s=to_seconds(self.end_ticks - self.start_ticks),
+            terminated_by=getattr(self, "terminated_by", None),
+            diagnostics={k: v for k, v in getattr(self, "diagnostics", {}).items() if v},
+        )
+
+    def _recorded_refs(self) -> list[tuple[Unit, str]]:
+        sc = self.scenario
+        refs: list[str] = list(sc.record) if sc.record is not None else [
+            f"{u.name}.{n}" for u in self.units for n, v in u.vars.items()
+            if v.causality == "output" and v.family not in LIST_FAMILIES]
+        # infeasibility counters are always recorded: the summary warns from when they rise
+        refs += [f"{u.name}.{WARNING_COUNTER}" for u in self.units if WARNING_COUNTER in u.vars]
+        for value in sc.summary.values():
+            for ref in value if isinstance(value, list) else [value]:
+                if isinstance(ref, str) and "." in ref and ref.split(".", 1)[0] in self.by_name:
+                    refs.append(ref)
+        seen: set[tuple[str, str]] = set()
+        out: list[tuple[Unit, str]] = []
+        for ref in refs:
+            for unit, name in _expand(self.by_name, ref):
+                if (unit.name, name) not in seen:
+                    seen.add((unit.name, name))
+                    out.append((unit, name))
+        return out
+
+    def _final_outputs(self) -> dict[str, dict[str, Any]]:
+        out: dict[str, dict[str, Any]] = {}
+        for unit in self.units:
+            names = [n for n, v in unit.vars.items()
+                     if v.causality == "output" and v.family not in LIST_FAMILIES]
+            out[unit.name] = dict(zip(names, unit.get(names)))
+        return out
+
+
+@dataclass
+class RunResult:
+    scenario: Scenario
+    algorithm: str
+    frame: Any  # pandas.DataFrame, first column "time" (s)
+    do_steps: dict[str, int]
+    executions: dict[str, int]
+    fmu_wall_time_s: dict[str, float]
+    connection_changes: dict[str, int]
+    final_outputs: dict[str, dict[str, Any]]
+    wall_time_s: float
+    sim_time_s: float
+    summary: dict[str, Any] = field(default_factory=dict)
+    completed: bool = True
+    error: str | None = None
+    terminated_by: dict[str, Any] | None = None  # {instance, time}: an FMU ended the run
+    # the successive values passed on by the summary's command connection (command_switches)
+    connection_values: dict[str, list[Any]] = field(default_factory=dict)
+    # run-dependent figures an FMU logged at fmi2Terminate (solve times): never outputs
+    diagnostics: dict[str, dict[str, float]] = field(default_factory=dict)
+
+    def write(self, out_dir: Path, plot: bool = True, force: bool = False,
+              plot_format: str = "png") -> list[Path]:
+        from cosim.run.results import write_results
+
+        return write_results(self, Path(out_dir), plot=plot, force=force,
+                             plot_format=plot_format)
+
+
+def run_scenario(scenario: str | Path | Scenario, overrides: dict[str, Any] | list[str] | None
+                 = None, algorithm: str | None = None, out_dir: str | Path | None = None,
+                 progress: ProgressFn | None = None, build: bool = True,
+                 plot: bool = True, force: bool = False, plot_format: str = "png"
+                 ) -> RunResult:
+    """Load (and override) a scenario, build missing or stale FMUs, run it, compute the summary
+    and, with ``out_dir``, write results.csv, summary.json and plot.png (see
+    :func:`cosim.run.results.write_results` for ``force``). A failure raises
+    :class:`SimulationError`, SIGINT/SIGTERM :class:`cosim.run.interrupt.Interrupted`, both
+    after writing the partial results."""
+    from cosim.run.metrics import compute_summary
+
+    sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario, overrides)
+    if build:
+        ensure_built(sc)
+    master = Master(sc, algorithm, progress)
+    # SIGINT/SIGTERM only set a flag while the FMUs run (never an exception inside their code);
+    # the master stops at the next communication point and what was recorded is written
+    with interrupt.guard():
+        try:
+            result = master.run()
+        except (SimulationError, interrupt.Interrupted, KeyboardInterrupt) as err:
+            partial = getattr(master, "partial", None)
+            interrupted = isinstance(err, (interrupt.Interrupted, KeyboardInterrupt))
+            if out_dir is None or partial is None or partial.frame.empty and not interrupted:
+                raise  # a failure before anything was recorded (e.g. a rejected parameter)
+            partial.summary = compute_summary(partial)
+            where = partial.write(Path(out_dir), plot=plot, force=force,
+                                  plot_format=plot_format)[0].parent
+            note = (f"; partial results up to t = {partial.sim_time_s:g} s written to {where} "
+                    f"(summary.json has \"completed\": false)")
+            if isinstance(err, interrupt.Interrupted):
+                raise interrupt.Interrupted(f"{err}{note}") from err
+            if isinstance(err, KeyboardInterrupt):
+                raise interrupt.Interrupted(f"{partial.error}{note}") from err
+            raise SimulationError(f"{err}{note}") from err
+        result.summary = compute_summary(result)
+        if out_dir is not None:
+            result.write(Path(out_dir), plot=plot, force=force, plot_format=plot_format)
+    return result
+
+
+def ensure_built(sc: Scenario) -> list[Path]:
+    """Build the scenario's catalog FMUs that are missing or older than their sources, in the
+    scenario's FMI version ([simulation] fmi_version)."""
+    from cosim.fmu.build import build_stale, catalog
+    from cosim.run.scenario import catalog_path
+
+    version = sc.simulation.fmi_version
+    specs = catalog()
+    wanted = [specs[c.fmu] for c in sc.components.values()
+              if c.fmu in specs and c.fmu_path == catalog_path(c.fmu, version)]
+    if version == 2:
+        return build_stale(wanted)
+    if not wanted:
+        return []
+    import inspect
+
+    if "fmi_version" not in inspect.signature(build_stale).parameters:
+        raise ScenarioError(f"{sc.path}: [simulation] fmi_version = 3: this installation cannot "
+                            "build FMI 3.0 FMUs (cosim.fmu.build has no FMI 3 builds); give "
+                            "explicit .fmu paths or fmi_version = 2")
+    return build_stale(wanted, fmi_version=version)

@@ -1,0 +1,360 @@
+"""The FMI 3.0 co-simulation unit on fmpy's ``FMU3Slave`` (FMI 3.0 sec. 4).
+
+* Types: Float64/32, Int8..UInt64, Boolean, String, Binary (bytes), Enumeration (its Int64
+  functions, FMI 3.0 sec. 2.4.7.4). An array variable ``x`` of n elements appears as the
+  variables ``x[1]`` .. ``x[n]`` (the FMI 2 flattening, so ``x[*]`` globs match); an element
+  is read and written through the whole array (one get, or one get and one set).
+* Event Mode (sec. 4.1.3), when the algorithm handles events and the FMU ``hasEventMode``:
+  after initialisation and at every event the master calls fmi3UpdateDiscreteStates until no
+  update is needed; ``nextEventTimeDefined`` / ``nextEventTime`` make that time a
+  communication point with an event; a doStep returning ``eventHandlingNeeded`` gives an
+  event at the time reached; early return (``earlyReturnAllowed``) ends the communication
+  point at ``lastSuccessfulTime``; ``terminateSimulation`` ends the run
+  (:class:`FmuTerminated`).
+* Input clocks (sec. 2.2.9, 5.2.2): a periodic clock (``constant``: ``intervalDecimal`` and
+  ``shiftDecimal`` of the modelDescription; ``fixed``/``tunable``: fmi3GetIntervalDecimal
+  after initialisation) ticks at start + shift + k interval; a ``countdown`` clock's interval
+  is read with fmi3GetIntervalDecimal in every Event Mode and, when the FMU says
+  ``fmi3IntervalChanged``, it ticks once that long after. A tick is an event where the master
+  activates the clock (fmi3SetClock) before fmi3UpdateDiscreteStates. Output clocks are the
+  FMU's business (their ticks come as ``eventHandlingNeeded``).
+"""
+
+from __future__ import annotations
+
+import copy
+import ctypes
+import math
+from collections.abc import Callable
+from pathlib import Path
+from time import perf_counter
+from typing import Any
+
+from fmpy.fmi1 import FMICallException
+from fmpy.fmi3 import FMU3Slave, fmi3IntervalChanged
+
+from cosim.fmu.state import to_seconds, to_ticks
+from cosim.run.fmi_types import enumeration_items
+from cosim.run.master.errors import FmuTerminated, SimulationError
+from cosim.run.master.fmi2 import CheckedSlave
+from cosim.run.master.unit import Unit, Variable
+
+NUMBERS = ("Float64", "Float32", "Int8", "UInt8", "Int16", "UInt16", "Int32", "UInt32",
+           "Int64", "UInt64")
+C_NUMBER_TYPES = {"Float64": ctypes.c_double, "Float32": ctypes.c_float,
+                  "Int8": ctypes.c_int8, "UInt8": ctypes.c_uint8, "Int16": ctypes.c_int16,
+                  "UInt16": ctypes.c_uint16, "Int32": ctypes.c_int32, "UInt32": ctypes.c_uint32,
+                  "Int64": ctypes.c_int64, "UInt64": ctypes.c_uint64,
+                  "Boolean": ctypes.c_bool}
+ARRAY = "Array"  # the family of array elements (read and written through their array)
+MAX_EVENT_ITERATIONS = 1000  # fmi3UpdateDiscreteStates calls at one event before giving up
+_WARNING, _DISCARD = 1, 2
+
+
+def family_of(kind: str) -> str:
+    return "Int64" if kind == "Enumeration" else kind
+
+
+def elements(md: Any) -> list[tuple[Any, str, int | None, int]]:
+    """(fmpy variable, name, element index or None, array size) of every non-Clock variable;
+    an array's elements are ``name[1]`` ... (row-major, FMI 3.0 sec. 2.4.7.6)."""
+    out = []
+    for v in md.modelVariables:
+        if v.type == "Clock":
+            continue
+        size = math.prod(getattr(v, "shape", ()) or ())
+        if getattr(v, "dimensions", None):
+            out += [(v, f"{v.name}[{i + 1}]", i, size) for i in range(size)]
+        else:
+            out.append((v, v.name, None, 1))
+    return out
+
+
+def scenario_view(md: Any) -> Any:
+    """``md`` as the scenario checks see it: array elements as variables, no clocks."""
+    view = copy.copy(md)
+    variables = []
+    for v, name, index, _ in elements(md):
+        if index is None:
+            variables.append(v)
+        else:
+            element = copy.copy(v)
+            element.name = name
+            element.start = None
+            variables.append(element)
+    view.modelVariables = variables
+    return view
+
+
+class Fmi3Unit(Unit):
+    """An FMI 3.0 co-simulation FMU instance."""
+
+    fmi_version = "3.0"
+    C_TYPES = C_NUMBER_TYPES
+    C_PREFIX = "fmi3"
+    C_COUNTS = True
+
+    def __init__(self, name: str, path: Path, unzipdir: str, md: Any) -> None:
+        self._arrays: dict[int, tuple[int, str, int, int]] = {}  # element id -> array info
+        super().__init__(name, path, unzipdir, md)
+        cs = md.coSimulation
+        self.slave = CheckedSlave(FMU3Slave(guid=md.guid, unzipDirectory=unzipdir,
+                                            modelIdentifier=cs.modelIdentifier,
+                                            instanceName=name), self)
+        self.can_event_mode = bool(cs.hasEventMode)
+        self.input_clocks = [v for v in md.modelVariables
+                             if v.type == "Clock" and v.causality == "input"]
+        self.event_mode = False
+        self._in_event = False
+        self._needs_event = False
+        self._announced: int | None = None
+        self._clock_next: dict[int, int | None] = {}
+        self._clock_period: dict[int, tuple[int, int, int]] = {}  # vr -> (origin, period, k)
+        self._expand_dependencies()
+        slave = self.slave
+        self._getters: dict[str, Callable[[list[int]], list[Any]]] = {
+            kind: getattr(slave, f"get{kind}") for kind in (*NUMBERS, "Boolean", "Binary")}
+        self._getters["String"] = self._read_strings
+        self._getters[ARRAY] = self._read_elements
+        self._setters: dict[str, Callable[[list[int], list[Any]], None]] = {
+            kind: getattr(slave, f"set{kind}")
+            for kind in (*NUMBERS, "Boolean", "Binary", "String")}
+        self._setters[ARRAY] = self._write_elements
+
+    scenario_view = staticmethod(scenario_view)
+
+    def variables(self, md: Any) -> dict[str, Variable]:
+        out: dict[str, Variable] = {}
+        for v, name, index, size in elements(md):
+            if index is None:
+                out[name] = Variable(v.valueReference, v.type, v.causality,
+                                     enumeration_items(v), family_of(v.type))
+            else:
+                key = len(self._arrays)
+                self._arrays[key] = (v.valueReference, family_of(v.type), index, size)
+                out[name] = Variable(key, v.type, v.causality, enumeration_items(v), ARRAY,
+                                     (size, index))
+        return out
+
+    def _expand_dependencies(self) -> None:
+        """Output dependencies by element name (an array depends as a whole)."""
+        names: dict[str, list[str]] = {}
+        for _, name, index, _ in elements(self.md):
+            base = name.rsplit("[", 1)[0] if index is not None else name
+            names.setdefault(base, []).append(name)
+        deps: dict[str, set[str]] = {}
+        for out, inputs in self.deps.items():
+            flat = {n for i in inputs for n in names.get(i, [i])}
+            for element in names.get(out, [out]):
+                deps[element] = flat
+        self.deps = deps
+        self.feedthrough = any(deps.values())
+
+    def raw_slave(self) -> Any:
+        return self.slave._slave
+
+    # -- life cycle ----------------------------------------------------------------------------
+    def instantiate(self, event_mode: bool = False) -> None:
+        self.event_mode = event_mode and self.can_event_mode
+        if self.input_clocks and not self.event_mode:
+            names = ", ".join(v.name for v in self.input_clocks)
+            why = ("the FMU has no Event Mode (hasEventMode is false)" if not self.can_event_mode
+                   else "this algorithm does not handle events")
+            raise SimulationError(f"{self.name}: input clocks ({names}) tick only in Event Mode "
+                                  f"and {why}: run with algorithm = \"event\"")
+        self.has_events = self.event_mode
+        self.may_return_early = self.event_mode
+
+        def log(env: Any, status: int, category: Any, message: Any) -> None:
+            self.messages.append(message.decode("utf-8", "replace") if message else "")
+
+        self.slave.instantiate(loggingOn=True, eventModeUsed=self.event_mode,
+                               earlyReturnAllowed=self.event_mode, logMessage=log)
+
+    def enter_initialization(self, start: float, stop: float) -> None:
+        self._start_ticks = to_ticks(start)
+        self.slave.enterInitializationMode(startTime=start, stopTime=stop)
+
+    def exit_initialization(self) -> None:
+        self.slave.exitInitializationMode()
+        if self.event_mode:  # FMI 3.0 sec. 4.2.1: now in Event Mode
+            self._in_event = True
+            for clock in self.input_clocks:
+                self._clock_next[clock.valueReference] = None
+                kind = clock.intervalVariability
+                if kind in ("constant", "fixed", "tunable"):
+                    period = (clock.intervalDecimal if kind == "constant"
+                              else self._intervals([clock.valueReference])[0][0])
+                    shift = to_ticks(clock.shiftDecimal or 0.0)
+                    if period is None or not period > 0:
+                        raise SimulationError(f"{self.name}: periodic clock {clock.name} has "
+                                              f"interval {period!r} s (must be positive)")
+                    origin = self._start_ticks + shift
+                    self._clock_period[clock.valueReference] = (origin, to_ticks(period), 0)
+                    self._clock_next[clock.valueReference] = origin
+                elif kind != "countdown":
+                    raise SimulationError(f"{self.name}: input clock {clock.name} has "
+                                          f"intervalVariability {kind!r}: the master ticks "
+                                          "periodic and countdown clocks only")
+
+    def terminate(self) -> None:
+        self.slave.terminate()
+
+    def free(self) -> None:
+        self.slave.freeInstance()
+
+    def get_state(self) -> Any:
+        return self.slave.getFMUState()
+
+    def set_state(self, state: Any) -> None:
+        self.slave.setFMUState(state)
+
+    # -- values ------------------------------------------------------------------------------
+    def read(self, family: str, vrs: list[int]) -> list[Any]:
+        t0 = perf_counter()
+        values = self._getters[family](vrs)
+        self.wall_time += perf_counter() - t0
+        return list(values)
+
+    def write(self, family: str, vrs: list[int], values: list[Any]) -> None:
+        t0 = perf_counter()
+        self._setters[family](vrs, values)
+        self.wall_time += perf_counter() - t0
+
+    def _read_strings(self, vrs: list[int]) -> list[str]:
+        return [v.decode("utf-8") if isinstance(v, bytes) else v
+                for v in self.slave.getString(vrs)]
+
+    def _whole(self, vr: int, family: str, size: int) -> list[Any]:
+        if family == "String":
+            return [v.decode("utf-8") if isinstance(v, bytes) else v
+                    for v in self.slave.getString([vr], nValues=size)]
+        return list(getattr(self.slave, f"get{family}")([vr], nValues=size))
+
+    def _read_elements(self, keys: list[int]) -> list[Any]:
+        arrays: dict[int, list[Any]] = {}
+        out = []
+        for key in keys:
+            vr, family, index, size = self._arrays[key]
+            if vr not in arrays:
+                arrays[vr] = self._whole(vr, family, size)
+            out.append(arrays[vr][index])
+        return out
+
+    def _write_elements(self, keys: list[int], values: list[Any]) -> None:
+        arrays: dict[int, tuple[str, list[Any]]] = {}
+        for key, value in zip(keys, values):
+            vr, family, index, size = self._arrays[key]
+            if vr not in arrays:
+                arrays[vr] = (family, self._whole(vr, family, size))
+            arrays[vr][1][index] = value
+        for vr, (family, whole) in arrays.items():
+            getattr(self.slave, f"set{family}")([vr], whole)
+
+    # -- stepping ----------------------------------------------------------------------------
+    def _do_step(self, t: int, h: int) -> int:
+        status = self._c_do_step(to_seconds(t), to_seconds(h))
+        self.do_steps += 1
+        event, terminate, early, last = (f.value for f in self._flags)
+        if status > _DISCARD:
+            raise FMICallException(function="fmi3DoStep", status=status)
+        if terminate:
+            raise FmuTerminated(self, to_ticks(last) if status == _DISCARD or early
+                                else t + h)
+        if status == _DISCARD:
+            raise SimulationError(f"{self.name}: doStep at t={to_seconds(t)} s, "
+                                  f"h={to_seconds(h)} s returned fmi3Discard (step refused, "
+                                  "no terminateSimulation): give [fmus."
+                                  f"{self.name}] a smaller max_step, or a smaller base_step; "
+                                  f"FMU says: {self.last_messages()}")
+        self.returned_early = bool(early) and self.event_mode
+        reached = to_ticks(last) if self.returned_early else t + h
+        if self.returned_early and not t < reached <= t + h:
+            raise SimulationError(f"{self.name}: doStep at t={to_seconds(t)} s returned early "
+                                  f"at lastSuccessfulTime = {last!r} s, outside "
+                                  f"({to_seconds(t)}, {to_seconds(t + h)}] s")
+        if event and self.event_mode:
+            self._needs_event = True
+        return reached
+
+    def _c_do_step(self, t: float, h: float) -> int:
+        """fmi3DoStep(t, h, noSetFMUStatePriorToCurrentPoint = true, ...): its status, the
+        flags in ``self._flags``. The C function directly (looked up on the first call)."""
+        raw = self.slave._slave
+        fn = raw.dll["fmi3DoStep"]  # a private function object: our argtypes
+        p_bool, p_double = ctypes.POINTER(ctypes.c_bool), ctypes.POINTER(ctypes.c_double)
+        fn.argtypes = [ctypes.c_void_p, ctypes.c_double, ctypes.c_double, ctypes.c_bool,
+                       p_bool, p_bool, p_bool, p_double]
+        fn.restype = ctypes.c_int
+        self._flags = (ctypes.c_bool(), ctypes.c_bool(), ctypes.c_bool(), ctypes.c_double())
+        pointers = [ctypes.pointer(f) for f in self._flags]
+        component = raw.component
+
+        def do_step(t: float, h: float) -> int:
+            return fn(component, t, h, True, *pointers)
+
+        self._c_do_step = do_step  # type: ignore[method-assign]
+        return do_step(t, h)
+
+    # -- events --------------------------------------------------------------------------------
+    def event_time(self) -> int | None:
+        times = [t for t in (self._announced, *self._clock_next.values()) if t is not None]
+        return min(times) if times else None
+
+    def event_pending(self, ticks: int) -> bool:
+        return (self._in_event or self._needs_event or self._announced == ticks
+                or ticks in self._clock_next.values())
+
+    def begin_event(self, ticks: int) -> None:
+        if not self._in_event:
+            self.slave.enterEventMode()
+            self._in_event = True
+
+    def complete_event(self, ticks: int) -> None:
+        ticking = [vr for vr, nxt in self._clock_next.items() if nxt == ticks]
+        if ticking:
+            self.slave.setClock(ticking, [True] * len(ticking))
+        for _ in range(MAX_EVENT_ITERATIONS):
+            update, terminate, _, _, defined, nxt = self.slave.updateDiscreteStates()
+            if terminate:
+                raise FmuTerminated(self, ticks)
+            if not update:
+                break
+        else:
+            raise SimulationError(f"{self.name}: fmi3UpdateDiscreteStates at t = "
+                                  f"{to_seconds(ticks):g} s still needs an update after "
+                                  f"{MAX_EVENT_ITERATIONS} calls (an event iteration that "
+                                  "does not converge)")
+        self._announced = None
+        if defined:
+            announced = to_ticks(nxt) if math.isfinite(nxt) else None
+            if announced is None or announced <= ticks:
+                raise SimulationError(f"{self.name}: nextEventTime = {nxt!r} s is not after the "
+                                      f"current time {to_seconds(ticks)!r} s (an FMU announcing "
+                                      "its next event must give a later time)")
+            self._announced = announced
+        for vr in ticking:
+            self._clock_next[vr] = None
+            if vr in self._clock_period:
+                origin, period, k = self._clock_period[vr]
+                self._clock_period[vr] = (origin, period, k + 1)
+                self._clock_next[vr] = origin + (k + 1) * period
+        countdown = [c.valueReference for c in self.input_clocks
+                     if c.intervalVariability == "countdown"]
+        if countdown:
+            for vr, (interval, qualifier) in zip(countdown, self._intervals(countdown)):
+                if qualifier == fmi3IntervalChanged:
+                    if not interval > 0:
+                        raise SimulationError(f"{self.name}: countdown clock (value reference "
+                                              f"{vr}) interval {interval!r} s at t = "
+                                              f"{to_seconds(ticks):g} s (must be positive)")
+                    self._clock_next[vr] = ticks + to_ticks(interval)
+        self.slave.enterStepMode()
+        self._in_event = self._needs_event = False
+
+    def _intervals(self, vrs: list[int]) -> list[tuple[float, int]]:
+        """fmi3GetIntervalDecimal of ``vrs``: (interval s, qualifier) each."""
+        n = len(vrs)
+        intervals, qualifiers = (ctypes.c_double * n)(), (ctypes.c_int * n)()
+        self.slave.getIntervalDecimal((ctypes.c_uint * n)(*vrs), intervals, qualifiers)
+        return list(zip(intervals, qualifiers))

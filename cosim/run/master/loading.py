@@ -1,0 +1,109 @@
+"""Opening FMU files: the checks before a run, one extraction per file, the unit class of
+each FMI version."""
+
+from __future__ import annotations
+
+import atexit
+import shutil
+import zipfile
+from pathlib import Path
+from typing import Any
+
+from fmpy import extract, read_model_description
+
+from cosim.run.master.unit import Unit
+from cosim.run.scenario import Scenario, ScenarioError
+
+# One extraction per FMU file (and version) per process: pythonfmu caches the FMU's Python
+# module by name, so later instances keep using the first extraction; it stays until exit.
+_EXTRACTED: dict[tuple[str, float], str] = {}
+
+
+def extract_once(path: Path) -> str:
+    key = (str(path.resolve()), path.stat().st_mtime)
+    if key not in _EXTRACTED:
+        _EXTRACTED[key] = extract(str(path))
+    return _EXTRACTED[key]
+
+
+@atexit.register
+def _remove_extractions() -> None:
+    for d in _EXTRACTED.values():
+        shutil.rmtree(d, ignore_errors=True)
+
+
+def unit_class(md: Any) -> type[Unit]:
+    """The unit class of the FMI version ``md`` declares."""
+    if str(md.fmiVersion).startswith("3"):
+        from cosim.run.master.fmi3 import Fmi3Unit
+
+        return Fmi3Unit
+    from cosim.run.master.fmi2 import Fmi2Unit
+
+    return Fmi2Unit
+
+
+def warm_up(path: Path) -> None:
+    """Extract ``path`` (once per process) and instantiate it once, so its bundled modules are
+    imported (and shared by processes forked afterwards); failures are left to the runs."""
+    try:
+        md = read_model_description(str(path))
+        unit = unit_class(md)("warm-up", path, extract_once(path), md)
+        unit.instantiate()
+        unit.free()
+    except Exception:  # noqa: BLE001 - the run of a point reports what is wrong
+        pass
+
+
+def binary_dirs(md: Any) -> tuple[str, list[str]]:
+    """(this platform's binaries folder, every folder that would do) for ``md``'s version:
+    FMI 2 ``linux64`` (FMI 2.0.4 sec. 2.4), FMI 3 ``x86_64-linux`` (FMI 3.0 sec. 2.5.1.1)."""
+    from fmpy import platform, platform_tuple
+
+    return (platform_tuple, [platform_tuple]) if str(md.fmiVersion).startswith("3") \
+        else (platform, [platform])
+
+
+def read_fmu(sc: Scenario, instance: str, path: Path) -> Any:
+    """The modelDescription of the FMU of ``instance``, after checking the file is an FMU with a
+    co-simulation binary for this platform: otherwise a :class:`ScenarioError` naming the
+    scenario file, the instance and the path (instead of BadZipFile / KeyError later)."""
+    where = f"{sc.path}: [fmus.{instance}] fmu = {str(path)!r}"
+    try:
+        with zipfile.ZipFile(path) as archive:
+            names = set(archive.namelist())
+    except (zipfile.BadZipFile, OSError) as err:
+        raise ScenarioError(f"{where}: not an FMU (not a readable zip archive: {err})") from None
+    if "modelDescription.xml" not in names:
+        raise ScenarioError(f"{where}: not an FMU (no modelDescription.xml in the archive)")
+    try:
+        md = read_model_description(str(path))
+    except Exception as err:  # noqa: BLE001 - fmpy raises many kinds on a bad XML
+        raise ScenarioError(f"{where}: modelDescription.xml is not valid: {err}") from None
+    version = str(md.fmiVersion)
+    if md.coSimulation is None:
+        kinds = [k for k, part in (("model exchange", md.modelExchange),
+                                   ("scheduled execution",
+                                    getattr(md, "scheduledExecution", None))) if part]
+        if "scheduled execution" in kinds:
+            raise ScenarioError(
+                f"{where}: an FMI {version} Scheduled Execution FMU ("
+                f"{' and '.join(kinds)}, no co-simulation): the master runs co-simulation "
+                "FMUs only; Scheduled Execution is not supported")
+        raise ScenarioError(f"{where}: not a co-simulation FMU "
+                            f"({' and '.join(kinds) or 'no interface'} only)")
+    if not (version.startswith("2") or version.startswith("3")):
+        raise ScenarioError(f"{where}: FMI {version}: the master runs FMI 2.0 and 3.0 FMUs")
+    ident = md.coSimulation.modelIdentifier
+    ext = {"linux": ".so", "darwin": ".dylib", "win": ".dll"}
+    from fmpy import platform
+
+    suffix = next(v for k, v in ext.items() if platform.startswith(k))
+    folder, _ = binary_dirs(md)
+    if f"binaries/{folder}/{ident}{suffix}" not in names:
+        found = sorted({n.split("/")[1] for n in names
+                        if n.startswith("binaries/") and n.count("/") >= 2 and n.split("/")[1]})
+        raise ScenarioError(f"{where}: no binary for this platform ({folder}; the FMU has "
+                            f"{', '.join(found) or 'no binaries'}): FMI {version} looks for "
+                            f"binaries/{folder}/{ident}{suffix}")
+    return md

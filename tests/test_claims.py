@@ -1,0 +1,174 @@
+"""Claims as data: statistics on synthetic samples with known answers, the schema's errors,
+disjoint seeds, rounding-sensitive marking, and (slow) every entry's claims at small K."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cosim.run.claims import (
+    ClaimsError,
+    check_claims,
+    check_ensemble,
+    median_ci,
+    parse_seeds,
+    verdict,
+    with_rounding,
+)
+from cosim.run.reproduce import ReproduceError, entry_names, load_entry
+
+LESS = {"id": "a_below_b", "text": "A below B", "metric": "m", "kind": "less",
+        "runs": ["A", "B"]}
+RNG = np.random.default_rng(7)
+NOISE = RNG.standard_normal(20)
+
+
+def test_planted_difference_holds() -> None:
+    # A = B - 1 on every seed (plus the same seed noise): the paired difference is -1 exactly
+    b = 5.0 + NOISE
+    r = verdict(LESS, b - 1.0 + 0.01 * RNG.standard_normal(20), b)
+    assert r["verdict"] == "holds" and r["k"] == 20 and r["K"] == 20
+    assert r["ci_low"] <= r["median"] <= r["ci_high"] < 0.0
+
+
+def test_no_difference_is_inconclusive() -> None:
+    # independent N(0, 1) pairs: the median difference's CI covers 0 for this fixed sample
+    a, b = RNG.standard_normal(20), RNG.standard_normal(20)
+    r = verdict(LESS, a, b)
+    assert r["ci_low"] < 0.0 < r["ci_high"]
+    assert r["verdict"] == "inconclusive"
+
+
+def test_reversed_difference_fails() -> None:
+    b = 5.0 + NOISE
+    r = verdict(LESS, b + 1.0, b)
+    assert r["verdict"] == "fails" and r["k"] == 0
+    assert verdict({**LESS, "kind": "greater"}, b + 1.0, b)["verdict"] == "holds"
+
+
+def test_threshold_and_range_kinds() -> None:
+    x = 0.1 + 0.01 * NOISE
+    assert verdict({**LESS, "kind": "below", "threshold": 0.2, "runs": ["A"]}, x)["verdict"] \
+        == "holds"
+    assert verdict({**LESS, "kind": "above", "threshold": 0.2, "runs": ["A"]}, x)["verdict"] \
+        == "fails"
+    inside = {**LESS, "kind": "inside", "range": [-0.5, 0.5], "runs": ["A"]}
+    assert verdict(inside, x)["verdict"] == "holds"
+    assert verdict(inside, x + 1.0)["verdict"] == "fails"
+    assert verdict(inside, x + 0.4)["verdict"] == "inconclusive"  # CI straddles 0.5
+
+
+def test_degenerate_samples_give_a_stated_verdict() -> None:
+    # all equal (a deterministic run): the CI is the value itself
+    med, lo, hi, note = median_ci(np.full(5, 2.0))
+    assert (med, lo, hi, note) == (2.0, 2.0, 2.0, "all equal")
+    assert verdict(LESS, np.array([1.0]), np.array([2.0]))["verdict"] == "holds"
+    assert verdict(LESS, np.array([2.0]), np.array([2.0]))["verdict"] == "inconclusive"
+    # NaN / missing metric and K < 3
+    r = verdict(LESS, np.array([1.0, np.nan, 1.0]), np.array([2.0, 2.0, 2.0]))
+    assert r["verdict"] == "inconclusive" and r["note"] == "metric missing"
+    r = verdict(LESS, np.array([1.0, 1.5]), np.array([2.0, 2.0]))
+    assert r["verdict"] == "inconclusive" and r["note"] == "K < 3"
+
+
+def test_rounding_sensitive_is_never_holds() -> None:
+    b = 5.0 + NOISE
+    main = verdict(LESS, b - 1.0, b)
+    fake_perturbed = verdict(LESS, b + 1.0, b)  # a perturbed path that flips the order
+    out = with_rounding(main, fake_perturbed)
+    assert main["verdict"] == "holds"
+    assert out["verdict"] == "rounding-sensitive" and out["rounding_robust"] is False
+    assert out["main_verdict"] == "holds" and out["rounding_verdict"] == "fails"
+    same = with_rounding(main, verdict(LESS, b - 1.0 + 1e-12, b))
+    assert same["verdict"] == "holds" and same["rounding_robust"] is True
+
+
+def test_seeds_parse_and_must_be_disjoint() -> None:
+    assert parse_seeds("x", "report_seeds", "1..3, 7..8") == [1, 2, 3, 7, 8]
+    with pytest.raises(ClaimsError, match="report_seeds = '3..1'"):
+        parse_seeds("x", "report_seeds", "3..1")
+    with pytest.raises(ClaimsError, match=r"share \[4\].*disjoint"):
+        check_ensemble("e.toml", {"report_seeds": "1..5", "calibration_seeds": "4, 9"})
+    ens = check_ensemble("e.toml", {"report_seeds": "1..3", "calibration_seeds": "4..6"})
+    assert ens.report_seeds == [1, 2, 3] and ens.calibration_seeds == [4, 5, 6]
+
+
+@pytest.mark.parametrize(("change", "message"), [
+    ({"kind": "smaller"}, "kind = 'smaller'"),
+    ({"runs": ["A", "C"]}, "runs: 'C' is not one of"),
+    ({"runs": ["A"]}, "compares 2 run"),
+    ({"id": "Bad-Id"}, "id = 'Bad-Id'"),
+    ({"kind": "below", "runs": ["A"]}, "threshold = None"),
+    ({"kind": "inside", "runs": ["A"], "range": [1, 0]}, "range = \\[1, 0\\]"),
+    ({"ensemble": "mismatch"}, "needs \\[ensemble\\] perturb"),
+    ({"colour": 1}, "unknown key"),
+])
+def test_claim_schema_errors_name_file_key_and_value(change: dict, message: str) -> None:
+    with pytest.raises(ClaimsError, match=f"e.toml: \\[\\[claims\\]\\].*{message}"):
+        check_claims("e.toml", [{**LESS, **change}], ["A", "B"], check_ensemble("e.toml", {}))
+
+
+def test_entry_with_bad_claim_fails_on_load(tmp_path: Path) -> None:
+    path = tmp_path / "bad.toml"
+    path.write_text('title = "t"\n[[runs]]\nname = "A"\nscenario = "seed000_stop_pid"\n'
+                    '[[claims]]\nid = "x"\ntext = "t"\nmetric = "m"\nkind = "below"\n'
+                    'runs = ["A"]\nthreshold = "high"\n')
+    with pytest.raises(ReproduceError, match=r"bad.toml: \[\[claims\]\] 'x': threshold = "
+                                             "'high'"):
+        load_entry(path)
+
+
+def test_shipped_entries_claims_load() -> None:
+    for name in entry_names():
+        entry = load_entry(name)
+        for claim in entry.claims:
+            assert claim["runs"][0] in {r["name"] for r in entry.runs}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", [n for n in entry_names() if load_entry(n).claims])
+def test_every_entry_claim_gets_a_verdict(name: str, tmp_path: Path) -> None:
+    from cosim.run.ensemble import run_claims
+
+    entry = load_entry(name)
+    rows = run_claims(entry, tmp_path, 3, workers=2)
+    assert [r["id"] for r in rows] == [c["id"] for c in entry.claims]
+    assert all(r["verdict"] in ("holds", "fails", "inconclusive", "rounding-sensitive")
+               for r in rows)
+    assert (tmp_path / "claims.csv").is_file() and (tmp_path / "claims.md").is_file()
+
+
+def test_ensemble_figure_draws_median_and_band(tmp_path: Path) -> None:
+    import pandas as pd
+
+    from cosim.run.ensemble import draw_ensemble_figure
+
+    dirs = []
+    for i in range(4):
+        d = tmp_path / f"m{i}"
+        d.mkdir()
+        t = np.linspace(0.0, 10.0, 11)
+        pd.DataFrame({"time": t, "plant.v": t + i, "controller.v_ref": t}).to_csv(
+            d / "results.csv", index=False)
+        dirs.append(d)
+    spec = {"file": "f.png", "x": "time", "y": ["plant.v"], "y_minus": "controller.v_ref"}
+    draw_ensemble_figure(spec, {"A": dirs}, tmp_path / "f_ensemble.png")
+    assert (tmp_path / "f_ensemble.png").stat().st_size > 0
+    spec["y"] = ["plant.missing"]
+    with pytest.raises(ReproduceError, match="recorded no 'plant.missing'"):
+        draw_ensemble_figure(spec, {"A": dirs}, tmp_path / "g.png")
+
+
+def test_reproduction_summary_counts_verdicts(tmp_path: Path) -> None:
+    import pandas as pd
+
+    from cosim.run.reproduce import claims_summary
+
+    (tmp_path / "a").mkdir()
+    pd.DataFrame({"id": ["x", "y", "z"], "verdict": ["holds", "fails", "holds"]}).to_csv(
+        tmp_path / "a" / "claims.csv", index=False)
+    lines = claims_summary(tmp_path, ["a", "b"]).splitlines()
+    assert lines[2] == "| a | 3 | 2 | 1 | 0 | 0 |"
+    assert lines[3] == "| b | 0 | - | - | - | - |"

@@ -1,0 +1,238 @@
+/* Small FMI 3.0 co-simulation FMUs for the tests (one model per MODEL_* define):
+   TimeEvents (announces nextEventTime, or returns early), Feedthrough (y_T = u_T for every
+   type, an array), Terminator (terminateSimulation at stop_at), Countdown (a countdown input
+   clock whose interval doubles at every tick). */
+#include <stdlib.h>
+#include <string.h>
+#include <math.h>
+#include "fmi3Functions.h"
+
+#define EPS 1e-9
+#define NT 14 /* Feedthrough: Float64 Float32 Int8 UInt8 Int16 UInt16 Int32 UInt32 Int64 UInt64
+                 Boolean String Binary Enumeration: u_T has vr 2i+1, y_T vr 2i+2 */
+
+typedef struct {
+    fmi3Float64 time, period, u, q, next, stop_at, interval, first;
+    fmi3Int32 n;
+    fmi3Boolean announce, eventMode, earlyReturn, tick, pending;
+    double num[NT]; /* numeric and Boolean feedthrough values (as double, exact up to 2^53) */
+    char *str;
+    fmi3Byte bin[64]; size_t binSize;
+    fmi3Float64 arr[3];
+    fmi3LogMessageCallback log; fmi3InstanceEnvironment env;
+} M;
+
+static void say(M *m, const char *msg) { if (m->log) m->log(m->env, fmi3OK, "log", msg); }
+
+fmi3Instance fmi3InstantiateCoSimulation(fmi3String name, fmi3String token, fmi3String res,
+    fmi3Boolean visible, fmi3Boolean loggingOn, fmi3Boolean eventModeUsed,
+    fmi3Boolean earlyReturnAllowed, const fmi3ValueReference req[], size_t nReq,
+    fmi3InstanceEnvironment env, fmi3LogMessageCallback log,
+    fmi3IntermediateUpdateCallback upd) {
+    (void)name; (void)token; (void)res; (void)visible; (void)loggingOn; (void)req; (void)nReq;
+    (void)upd;
+    M *m = calloc(1, sizeof(M));
+    m->period = 0.1; m->announce = fmi3True; m->stop_at = 0.75; m->first = 0.1;
+    m->eventMode = eventModeUsed; m->earlyReturn = earlyReturnAllowed;
+    m->str = strdup("in"); m->log = log; m->env = env;
+    return m;
+}
+void fmi3FreeInstance(fmi3Instance i) { M *m = i; if (m) { free(m->str); free(m); } }
+const char *fmi3GetVersion(void) { return fmi3Version; }
+fmi3Status fmi3SetDebugLogging(fmi3Instance i, fmi3Boolean on, size_t n, const fmi3String c[]) {
+    (void)i; (void)on; (void)n; (void)c; return fmi3OK; }
+fmi3Status fmi3EnterInitializationMode(fmi3Instance i, fmi3Boolean td, fmi3Float64 tol,
+    fmi3Float64 start, fmi3Boolean sd, fmi3Float64 stop) {
+    M *m = i; (void)td; (void)tol; (void)sd; (void)stop; m->time = start; return fmi3OK; }
+fmi3Status fmi3ExitInitializationMode(fmi3Instance i) {
+    M *m = i; m->next = m->time + m->period; m->interval = m->first; m->pending = fmi3True;
+    return fmi3OK; }
+fmi3Status fmi3EnterEventMode(fmi3Instance i) { (void)i; return fmi3OK; }
+fmi3Status fmi3EnterStepMode(fmi3Instance i) { (void)i; return fmi3OK; }
+fmi3Status fmi3Terminate(fmi3Instance i) { say(i, "terminated"); return fmi3OK; }
+fmi3Status fmi3Reset(fmi3Instance i) { (void)i; return fmi3OK; }
+
+static inline void time_event(M *m) { m->n++; m->q = m->u; m->next += m->period; }
+
+fmi3Status fmi3UpdateDiscreteStates(fmi3Instance i, fmi3Boolean *need, fmi3Boolean *term,
+    fmi3Boolean *nom, fmi3Boolean *vals, fmi3Boolean *defined, fmi3Float64 *next) {
+    M *m = i; (void)m;
+    *need = fmi3False; *term = fmi3False; *nom = fmi3False; *vals = fmi3False;
+    *defined = fmi3False; *next = 0.0;
+#if defined(MODEL_TIMEEVENTS)
+    if (m->time >= m->next - EPS) time_event(m);
+    *defined = m->announce; *next = m->next;
+#elif defined(MODEL_COUNTDOWN)
+    if (m->tick) { m->n++; m->q = m->u; m->interval *= 2; m->pending = fmi3True;
+                   m->tick = fmi3False; }
+#endif
+    return fmi3OK;
+}
+
+fmi3Status fmi3DoStep(fmi3Instance i, fmi3Float64 t, fmi3Float64 h, fmi3Boolean noSet,
+    fmi3Boolean *event, fmi3Boolean *term, fmi3Boolean *early, fmi3Float64 *last) {
+    M *m = i; (void)noSet;
+    double end = t + h;
+    *event = fmi3False; *term = fmi3False; *early = fmi3False; *last = end;
+#if defined(MODEL_TIMEEVENTS)
+    if (m->eventMode) {
+        if (end > m->next + EPS) {  /* passes over the event */
+            if (!m->earlyReturn) { say(m, "doStep passes over an event"); return fmi3Error; }
+            *early = fmi3True; *event = fmi3True; *last = m->next; m->time = m->next;
+            return fmi3OK;
+        }
+        if (fabs(end - m->next) <= EPS && !m->announce) *event = fmi3True;
+    } else {
+        while (m->next <= end + EPS) time_event(m);
+    }
+#elif defined(MODEL_TERMINATOR)
+    if (end >= m->stop_at - EPS) { *term = fmi3True; *last = end; }
+#endif
+    m->time = end;
+    return fmi3OK;
+}
+
+/* ---- variables ---- */
+#define GETSET(T, CT) \
+fmi3Status fmi3Get##T(fmi3Instance i, const fmi3ValueReference vr[], size_t n, CT v[], size_t nv) { \
+    M *m = i; size_t k = 0; (void)nv; \
+    for (size_t j = 0; j < n; j++) { \
+        if (!get_num(m, vr[j], &v[k], sizeof(CT), #T)) return fmi3Error; \
+        k += vr[j] == 101 || vr[j] == 102 ? 3 : 1; } \
+    return fmi3OK; } \
+fmi3Status fmi3Set##T(fmi3Instance i, const fmi3ValueReference vr[], size_t n, const CT v[], size_t nv) { \
+    M *m = i; size_t k = 0; (void)nv; \
+    for (size_t j = 0; j < n; j++) { \
+        if (!set_num(m, vr[j], &v[k], #T)) return fmi3Error; \
+        k += vr[j] == 101 || vr[j] == 102 ? 3 : 1; } \
+    return fmi3OK; }
+
+static double *slot(M *m, fmi3ValueReference vr) {
+#if defined(MODEL_FEEDTHROUGH)
+    if (vr >= 1 && vr <= 2 * NT) return &m->num[(vr - 1) / 2];
+    if (vr == 101 || vr == 102) return m->arr;
+#else
+    switch (vr) {
+    case 0: return &m->period;
+    case 1: return &m->u;
+    case 2: return &m->q;
+    case 5: return &m->stop_at;
+    case 6: return &m->time;
+    case 7: return &m->first;
+    }
+#endif
+    return NULL;
+}
+
+static int is(const char *a, const char *b) { return strcmp(a, b) == 0; }
+
+static int get_num(M *m, fmi3ValueReference vr, void *out, size_t size, const char *type) {
+#if !defined(MODEL_FEEDTHROUGH)
+    if (vr == 3 && is(type, "Int32")) { *(fmi3Int32 *)out = m->n; return 1; }
+    if (vr == 4 && is(type, "Boolean")) { *(fmi3Boolean *)out = m->announce; return 1; }
+#endif
+    double *s = slot(m, vr);
+    if (!s) return 0;
+    int count = (vr == 101 || vr == 102) ? 3 : 1;
+    for (int c = 0; c < count; c++) {
+        double x = s[c];
+        char *o = (char *)out + c * size;
+        if (is(type, "Float64")) *(fmi3Float64 *)o = x;
+        else if (is(type, "Float32")) *(fmi3Float32 *)o = (fmi3Float32)x;
+        else if (is(type, "Int8")) *(fmi3Int8 *)o = (fmi3Int8)x;
+        else if (is(type, "UInt8")) *(fmi3UInt8 *)o = (fmi3UInt8)x;
+        else if (is(type, "Int16")) *(fmi3Int16 *)o = (fmi3Int16)x;
+        else if (is(type, "UInt16")) *(fmi3UInt16 *)o = (fmi3UInt16)x;
+        else if (is(type, "Int32")) *(fmi3Int32 *)o = (fmi3Int32)x;
+        else if (is(type, "UInt32")) *(fmi3UInt32 *)o = (fmi3UInt32)x;
+        else if (is(type, "Int64")) *(fmi3Int64 *)o = (fmi3Int64)x;
+        else if (is(type, "UInt64")) *(fmi3UInt64 *)o = (fmi3UInt64)x;
+        else if (is(type, "Boolean")) *(fmi3Boolean *)o = x != 0;
+        else return 0;
+    }
+    return 1;
+}
+
+static int set_num(M *m, fmi3ValueReference vr, const void *in, const char *type) {
+#if !defined(MODEL_FEEDTHROUGH)
+    if (vr == 4 && is(type, "Boolean")) { m->announce = *(const fmi3Boolean *)in; return 1; }
+#endif
+    double *s = slot(m, vr);
+    if (!s) return 0;
+    int count = (vr == 101 || vr == 102) ? 3 : 1;
+    size_t size = is(type, "Float64") || is(type, "Int64") || is(type, "UInt64") ? 8
+        : is(type, "Float32") || is(type, "Int32") || is(type, "UInt32") ? 4
+        : is(type, "Int16") || is(type, "UInt16") ? 2 : 1;
+    for (int c = 0; c < count; c++) {
+        const char *p = (const char *)in + c * size;
+        double x;
+        if (is(type, "Float64")) x = *(const fmi3Float64 *)p;
+        else if (is(type, "Float32")) x = *(const fmi3Float32 *)p;
+        else if (is(type, "Int8")) x = *(const fmi3Int8 *)p;
+        else if (is(type, "UInt8")) x = *(const fmi3UInt8 *)p;
+        else if (is(type, "Int16")) x = *(const fmi3Int16 *)p;
+        else if (is(type, "UInt16")) x = *(const fmi3UInt16 *)p;
+        else if (is(type, "Int32")) x = *(const fmi3Int32 *)p;
+        else if (is(type, "UInt32")) x = *(const fmi3UInt32 *)p;
+        else if (is(type, "Int64")) x = (double)*(const fmi3Int64 *)p;
+        else if (is(type, "UInt64")) x = (double)*(const fmi3UInt64 *)p;
+        else if (is(type, "Boolean")) x = *(const fmi3Boolean *)p;
+        else return 0;
+        s[c] = x;
+#if defined(MODEL_FEEDTHROUGH)
+        if (vr % 2 == 1) slot(m, vr + 1)[c] = x;  /* y_T = u_T */
+        if (vr == 101) m->arr[c] = x;
+#endif
+    }
+    return 1;
+}
+
+GETSET(Float64, fmi3Float64) GETSET(Float32, fmi3Float32) GETSET(Int8, fmi3Int8)
+GETSET(UInt8, fmi3UInt8) GETSET(Int16, fmi3Int16) GETSET(UInt16, fmi3UInt16)
+GETSET(Int32, fmi3Int32) GETSET(UInt32, fmi3UInt32) GETSET(Int64, fmi3Int64)
+GETSET(UInt64, fmi3UInt64) GETSET(Boolean, fmi3Boolean)
+
+fmi3Status fmi3GetString(fmi3Instance i, const fmi3ValueReference vr[], size_t n,
+                         fmi3String v[], size_t nv) {
+    M *m = i; (void)nv;
+    for (size_t j = 0; j < n; j++) { if (vr[j] != 23 && vr[j] != 24) return fmi3Error;
+                                     v[j] = m->str; }
+    return fmi3OK; }
+fmi3Status fmi3SetString(fmi3Instance i, const fmi3ValueReference vr[], size_t n,
+                         const fmi3String v[], size_t nv) {
+    M *m = i; (void)nv;
+    for (size_t j = 0; j < n; j++) { if (vr[j] != 23) return fmi3Error;
+                                     free(m->str); m->str = strdup(v[j]); }
+    return fmi3OK; }
+fmi3Status fmi3GetBinary(fmi3Instance i, const fmi3ValueReference vr[], size_t n,
+                         size_t sizes[], fmi3Binary v[], size_t nv) {
+    M *m = i; (void)nv;
+    for (size_t j = 0; j < n; j++) { if (vr[j] != 25 && vr[j] != 26) return fmi3Error;
+                                     v[j] = m->bin; sizes[j] = m->binSize; }
+    return fmi3OK; }
+fmi3Status fmi3SetBinary(fmi3Instance i, const fmi3ValueReference vr[], size_t n,
+                         const size_t sizes[], const fmi3Binary v[], size_t nv) {
+    M *m = i; (void)nv;
+    for (size_t j = 0; j < n; j++) {
+        if (vr[j] != 25 || sizes[j] > sizeof m->bin) return fmi3Error;
+        memcpy(m->bin, v[j], sizes[j]); m->binSize = sizes[j]; }
+    return fmi3OK; }
+
+/* ---- clocks (Countdown: the clock "tick", value reference 10) ---- */
+fmi3Status fmi3SetClock(fmi3Instance i, const fmi3ValueReference vr[], size_t n,
+                        const fmi3Clock v[]) {
+    M *m = i;
+    for (size_t j = 0; j < n; j++) { if (vr[j] != 10) return fmi3Error; if (v[j]) m->tick = 1; }
+    return fmi3OK; }
+fmi3Status fmi3GetClock(fmi3Instance i, const fmi3ValueReference vr[], size_t n, fmi3Clock v[]) {
+    (void)i; (void)vr; for (size_t j = 0; j < n; j++) v[j] = fmi3ClockInactive; return fmi3OK; }
+fmi3Status fmi3GetIntervalDecimal(fmi3Instance i, const fmi3ValueReference vr[], size_t n,
+                                  fmi3Float64 iv[], fmi3IntervalQualifier q[]) {
+    M *m = i;
+    for (size_t j = 0; j < n; j++) {
+        if (vr[j] != 10) return fmi3Error;
+        iv[j] = m->interval;
+        q[j] = m->pending ? fmi3IntervalChanged : fmi3IntervalUnchanged;
+    }
+    m->pending = fmi3False;
+    return fmi3OK; }

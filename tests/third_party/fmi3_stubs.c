@@ -1,0 +1,36 @@
+/* FMI 3.0 functions the test models do not implement: they fail (fmi3Error). Compiled
+   without the FMI headers so that one prototype serves them all. */
+int fmi3ActivateModelPartition(void) { return 3; }
+int fmi3CompletedIntegratorStep(void) { return 3; }
+int fmi3DeserializeFMUState(void) { return 3; }
+int fmi3EnterConfigurationMode(void) { return 3; }
+int fmi3EnterContinuousTimeMode(void) { return 3; }
+int fmi3EvaluateDiscreteStates(void) { return 3; }
+int fmi3ExitConfigurationMode(void) { return 3; }
+int fmi3FreeFMUState(void) { return 3; }
+int fmi3GetAdjointDerivative(void) { return 3; }
+int fmi3GetContinuousStateDerivatives(void) { return 3; }
+int fmi3GetContinuousStates(void) { return 3; }
+int fmi3GetDirectionalDerivative(void) { return 3; }
+int fmi3GetEventIndicators(void) { return 3; }
+int fmi3GetFMUState(void) { return 3; }
+int fmi3GetIntervalFraction(void) { return 3; }
+int fmi3GetNominalsOfContinuousStates(void) { return 3; }
+int fmi3GetNumberOfContinuousStates(void) { return 3; }
+int fmi3GetNumberOfEventIndicators(void) { return 3; }
+int fmi3GetNumberOfVariableDependencies(void) { return 3; }
+int fmi3GetOutputDerivatives(void) { return 3; }
+int fmi3GetShiftDecimal(void) { return 3; }
+int fmi3GetShiftFraction(void) { return 3; }
+int fmi3GetVariableDependencies(void) { return 3; }
+int fmi3InstantiateModelExchange(void) { return 3; }
+int fmi3InstantiateScheduledExecution(void) { return 3; }
+int fmi3SerializeFMUState(void) { return 3; }
+int fmi3SerializedFMUStateSize(void) { return 3; }
+int fmi3SetContinuousStates(void) { return 3; }
+int fmi3SetFMUState(void) { return 3; }
+int fmi3SetIntervalDecimal(void) { return 3; }
+int fmi3SetIntervalFraction(void) { return 3; }
+int fmi3SetShiftDecimal(void) { return 3; }
+int fmi3SetShiftFraction(void) { return 3; }
+int fmi3SetTime(void) { return 3; }

@@ -1,0 +1,135 @@
+"""Our master with third-party FMI 3.0 co-simulation FMUs (plain C, fmi3_models.c): every
+type and an array through a Feedthrough (equal to ``fmpy.simulate_fmu``), an FMU ending the run
+with terminateSimulation (equal to fmpy), announced time events (nextEventTime) and early
+return, a countdown clock (analytic oracles: fmpy schedules neither), FMI 2 and FMI 3 FMUs in
+one scenario."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from fmpy import simulate_fmu
+from test_master_third_party import H, write_scenario
+
+from cosim.run.master import SimulationError, run_scenario
+
+VALUES = {"Float64": 0.1, "Float32": 0.25, "Int8": -100, "UInt8": 200, "Int16": -30000,
+          "UInt16": 60000, "Int32": -2**31, "UInt32": 2**32 - 1, "Int64": -2**40,
+          "UInt64": 2**40, "Boolean": True, "String": "hello", "Binary": "00ff10",
+          "Enumeration": "fast"}
+
+
+def test_feedthrough_of_every_type_and_an_array_equals_fmpy(c_fmus3, tmp_path):
+    fmu = c_fmus3["Feedthrough3"]
+    inputs = {f"u_{k}": v for k, v in VALUES.items()}
+    inputs.update({f"\"ua[{i}]\"": float(i) for i in (1, 2, 3)})
+    numeric = [k for k in VALUES if k not in ("String", "Binary")]
+    record = [f"ft.y_{k}" for k in numeric] + ["ft.ya[*]", "ft.y_String", "ft.y_Binary"]
+    sc = write_scenario(tmp_path, {"ft": (fmu, {}, inputs)}, stop=0.5, record=record)
+    r = run_scenario(sc, build=False)
+    f = r.frame
+    for kind in numeric:
+        expected = {"Float32": np.float32(0.25), "Boolean": 1.0, "Enumeration": 3.0}.get(
+            kind, VALUES[kind])
+        assert (f[f"ft.y_{kind}"] == float(expected)).all(), kind
+    assert list(f[["ft.ya[1]", "ft.ya[2]", "ft.ya[3]"]].iloc[-1]) == [1.0, 2.0, 3.0]
+    assert set(f["ft.y_String"]) == {"hello"}
+    assert set(f["ft.y_Binary"]) == {bytes.fromhex("00ff10")}
+    start = {f"u_{k}": v for k, v in VALUES.items()
+             if k not in ("String", "Binary", "Enumeration")}
+    ref = simulate_fmu(str(fmu), stop_time=0.5, output_interval=H, start_values=start,
+                       output=[f"y_{k}" for k in numeric if k != "Enumeration"])
+    np.testing.assert_array_equal(f["time"].to_numpy(), ref["time"])
+    for kind in numeric:
+        if kind != "Enumeration":
+            np.testing.assert_array_equal(f[f"ft.y_{kind}"].to_numpy(dtype=float),
+                                          ref[f"y_{kind}"].astype(float), err_msg=kind)
+
+
+def test_an_out_of_range_value_names_the_key(c_fmus3, tmp_path):
+    from cosim.run.scenario import ScenarioError
+
+    sc = write_scenario(tmp_path, {"ft": (c_fmus3["Feedthrough3"], {}, {"u_UInt8": 256})})
+    with pytest.raises(ScenarioError, match=r"\[fmus.ft.inputs\] u_UInt8.*range of UInt8"):
+        run_scenario(sc, build=False)
+
+
+@pytest.mark.parametrize("algorithm", ["event", "fixed"])
+def test_terminate_simulation_ends_the_run_like_fmpy(c_fmus3, tmp_path, algorithm):
+    fmu = c_fmus3["Terminator3"]
+    sc = write_scenario(tmp_path, {"term": (fmu, {"stop_at": 0.625}, {})}, algorithm=algorithm)
+    r = run_scenario(sc, build=False)
+    assert r.terminated_by == {"instance": "term", "time": 0.625}
+    ref = simulate_fmu(str(fmu), stop_time=1.0, output_interval=H,
+                       start_values={"stop_at": 0.625}, output=["x"])
+    _, first = np.unique(ref["time"], return_index=True)
+    np.testing.assert_array_equal(r.frame["time"].to_numpy(), ref["time"][first])
+    np.testing.assert_array_equal(r.frame["term.x"].to_numpy(), ref["x"][first])
+
+
+@pytest.mark.parametrize("announce", [True, False])
+def test_announced_events_and_early_return_are_communication_points(c_fmus3, tmp_path,
+                                                                    announce):
+    """period 0.3 s on a 0.125 s output grid: each event k 0.3 s becomes a communication point
+    (announced as nextEventTime, or by an early return from doStep), where the FMU samples its
+    input u = the time from the Terminator3 (x = t): q jumps to exactly k 0.3."""
+    sc = write_scenario(tmp_path, {
+        "ev": (c_fmus3["TimeEvents3"], {"period": 0.3, "announce": announce}, {}),
+        "clock": (c_fmus3["Terminator3"], {"stop_at": 10.0}, {})},
+        connections={"ev.u": "clock.x"}, stop=1.0)
+    r = run_scenario(sc, build=False)
+    f = r.frame
+    times = f["time"].to_numpy()
+    n = np.floor(times / 0.3 + 1e-9)
+    np.testing.assert_array_equal(f["ev.n"].to_numpy(), n)
+    np.testing.assert_allclose(f["ev.q"].to_numpy(), n * 0.3, rtol=0, atol=1e-15)
+    # one extra communication point per event (0.3, 0.6, 0.9) besides the 9 output points
+    assert r.do_steps["clock"] == 8 + 3
+
+
+def test_countdown_clock_ticks_at_the_intervals_the_fmu_gives(c_fmus3, tmp_path):
+    """first 0.1 s, doubling: ticks at 0.1, 0.3, 0.7, 1.5 s (sum of 0.1 2^k)."""
+    sc = write_scenario(tmp_path, {
+        "cd": (c_fmus3["Countdown3"], {"first": 0.1}, {}),
+        "clock": (c_fmus3["Terminator3"], {"stop_at": 10.0}, {})},
+        connections={"cd.u": "clock.x"}, stop=2.0)
+    r = run_scenario(sc, build=False)
+    f = r.frame
+    ticks = np.array([0.1, 0.3, 0.7, 1.5])
+    times = f["time"].to_numpy()
+    n = (times[:, None] >= ticks[None, :] - 1e-12).sum(axis=1)
+    np.testing.assert_array_equal(f["cd.n"].to_numpy(), n)
+    last = np.array([ticks[k - 1] if k else 0.0 for k in n])
+    np.testing.assert_allclose(f["cd.q"].to_numpy(), last, rtol=0, atol=1e-15)
+
+
+def test_clocks_need_the_event_algorithm(c_fmus3, tmp_path):
+    sc = write_scenario(tmp_path, {"cd": (c_fmus3["Countdown3"], {}, {"u": 1.0})},
+                        algorithm="fixed")
+    with pytest.raises(SimulationError, match="input clocks \\(tick\\).*algorithm = \"event\""):
+        run_scenario(sc, build=False)
+
+
+def test_fmi2_and_fmi3_in_one_scenario(c_fmus, c_fmus3, tmp_path):
+    """FMI 2 Feedthrough (y = k u, Real) feeding the FMI 3 Feedthrough (Float64) and back."""
+    sc = write_scenario(tmp_path, {
+        "f2": (c_fmus["Feedthrough"], {"k": 2.0}, {}),
+        "f3": (c_fmus3["Feedthrough3"], {}, {})},
+        connections={"f3.u_Float64": "f2.z", "f2.u": "f3.y_Float32"},
+        record=["f2.z", "f3.y_Float64"], stop=0.5)
+    # f2.u is fed by f3.y_Float32 (declared Float32: a type mismatch the checks refuse)
+    from cosim.run.scenario import ScenarioError
+
+    with pytest.raises(ScenarioError, match="type mismatch"):
+        run_scenario(sc, build=False)
+    sc = write_scenario(tmp_path, {
+        "f2": (c_fmus["Feedthrough"], {"k": 2.0}, {"u": 0.5}),
+        "f3": (c_fmus3["Feedthrough3"], {}, {
+            **{f"u_{k}": v for k, v in VALUES.items() if k != "Float64"},
+            **{f"\"ua[{i}]\"": 0.0 for i in (1, 2, 3)}})},
+        connections={"f3.u_Float64": "f2.z"}, record=["f2.z", "f3.y_Float64"], stop=0.5)
+    r = run_scenario(sc, build=False)
+    np.testing.assert_array_equal(r.frame["f3.y_Float64"], r.frame["f2.z"])
+    assert not math.isnan(r.frame["f2.z"].iloc[-1])

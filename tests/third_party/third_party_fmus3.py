@@ -1,0 +1,156 @@
+"""Small FMI 3.0 co-simulation FMUs written in C (tests/third_party/fmi3_models.c), built as a
+third-party tool would ship them: gcc against fmpy's FMI 3 headers, zipped with a
+modelDescription.xml (binaries/x86_64-linux, FMI 3.0 sec. 2.5.1.1).
+
+Variables are ``(name, type, causality, variability, value reference, start, extra)``;
+``extra`` may hold ``dimension`` (array size), ``unit``, ``intervalVariability``."""
+
+from __future__ import annotations
+
+import hashlib
+import shutil
+import subprocess
+import zipfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from xml.etree.ElementTree import Element, SubElement, indent, tostring
+
+import fmpy
+
+HERE = Path(__file__).resolve().parent
+MODE_ITEMS = ("slow", "normal", "fast")  # Enumeration type Mode: values 1, 2, 3
+# the Feedthrough's types in value-reference order: u_T = 2 i + 1, y_T = 2 i + 2
+TYPES = ("Float64", "Float32", "Int8", "UInt8", "Int16", "UInt16", "Int32", "UInt32", "Int64",
+         "UInt64", "Boolean", "String", "Binary", "Enumeration")
+
+
+@dataclass(frozen=True)
+class Spec3:
+    name: str
+    model: str  # MODEL_<model> in fmi3_models.c
+    variables: tuple[tuple, ...]
+    dependencies: dict[str, tuple[str, ...]] = field(default_factory=dict)
+    event_mode: bool = False
+    stop_time: float = 1.0
+    step: float = 0.125
+
+
+def _start(kind: str) -> str:
+    return {"Boolean": "false", "String": "in", "Binary": "", "Enumeration": "1"}.get(
+        kind, "1.5" if kind.startswith("Float") else "1")
+
+
+FEEDTHROUGH3 = Spec3("Feedthrough3", "FEEDTHROUGH", (
+    *[v for i, kind in enumerate(TYPES) for v in (
+        (f"u_{kind}", kind, "input", "discrete" if not kind.startswith("Float") else
+         "continuous", 2 * i + 1, _start(kind), {}),
+        (f"y_{kind}", kind, "output", "discrete" if not kind.startswith("Float") else
+         "continuous", 2 * i + 2, None, {}))],
+    ("ua", "Float64", "input", "continuous", 101, "0 0 0", {"dimension": 3}),
+    ("ya", "Float64", "output", "continuous", 102, None, {"dimension": 3}),
+), dependencies={**{f"y_{k}": (f"u_{k}",) for k in TYPES}, "ya": ("ua",)})
+
+TIME_EVENTS3 = Spec3("TimeEvents3", "TIMEEVENTS", (
+    ("period", "Float64", "parameter", "fixed", 0, "0.1", {"unit": "s"}),
+    ("announce", "Boolean", "parameter", "fixed", 4, "true", {}),
+    ("u", "Float64", "input", "continuous", 1, "0.0", {}),
+    ("q", "Float64", "output", "discrete", 2, None, {}),
+    ("n", "Int32", "output", "discrete", 3, None, {}),
+), dependencies={"q": (), "n": ()}, event_mode=True)
+
+TERMINATOR3 = Spec3("Terminator3", "TERMINATOR", (
+    ("stop_at", "Float64", "parameter", "fixed", 5, "0.75", {"unit": "s"}),
+    ("x", "Float64", "output", "continuous", 6, None, {"unit": "s"}),
+), dependencies={"x": ()})
+
+COUNTDOWN3 = Spec3("Countdown3", "COUNTDOWN", (
+    ("first", "Float64", "parameter", "fixed", 7, "0.1", {"unit": "s"}),
+    ("tick", "Clock", "input", "discrete", 10, None, {"intervalVariability": "countdown"}),
+    ("u", "Float64", "input", "continuous", 1, "0.0", {}),
+    ("q", "Float64", "output", "discrete", 2, None, {}),
+    ("n", "Int32", "output", "discrete", 3, None, {}),
+), dependencies={"q": (), "n": ()}, event_mode=True, stop_time=2.0)
+
+SPECS3 = (FEEDTHROUGH3, TIME_EVENTS3, TERMINATOR3, COUNTDOWN3)
+
+
+def model_description(spec: Spec3) -> bytes:
+    root = Element("fmiModelDescription", {
+        "fmiVersion": "3.0", "modelName": spec.name,
+        "instantiationToken": "{" + hashlib.md5(spec.name.encode()).hexdigest() + "}",
+        "generationTool": "tests/third_party (C)", "variableNamingConvention": "structured"})
+    SubElement(root, "CoSimulation", {
+        "modelIdentifier": spec.name, "canHandleVariableCommunicationStepSize": "true",
+        "hasEventMode": "true" if spec.event_mode else "false",
+        "mightReturnEarlyFromDoStep": "true" if spec.event_mode else "false"})
+    units = sorted({v[6]["unit"] for v in spec.variables if "unit" in v[6]})
+    if units:
+        defs = SubElement(root, "UnitDefinitions")
+        for unit in units:
+            SubElement(SubElement(defs, "Unit", {"name": unit}), "BaseUnit", {"s": "1"})
+    if any(v[1] == "Enumeration" for v in spec.variables):
+        types = SubElement(root, "TypeDefinitions")
+        enum = SubElement(types, "EnumerationType", {"name": "Mode"})
+        for value, item in enumerate(MODE_ITEMS, start=1):
+            SubElement(enum, "Item", {"name": item, "value": str(value)})
+    SubElement(root, "DefaultExperiment", {"startTime": "0.0", "stopTime": repr(spec.stop_time),
+                                           "stepSize": repr(spec.step)})
+    mv = SubElement(root, "ModelVariables")
+    SubElement(mv, "Float64", {"name": "time", "valueReference": "999",
+                               "causality": "independent", "variability": "continuous"})
+    vrs = {}
+    for name, kind, causality, variability, vr, start, extra in spec.variables:
+        vrs[name] = vr
+        attrib = {"name": name, "valueReference": str(vr), "causality": causality,
+                  "variability": variability}
+        if "unit" in extra:
+            attrib["unit"] = extra["unit"]
+        if kind == "Clock":
+            attrib["intervalVariability"] = extra["intervalVariability"]
+        if kind == "Enumeration":
+            attrib["declaredType"] = "Mode"
+        if causality == "output":
+            attrib["initial"] = "calculated"
+        elif causality == "parameter":
+            attrib["initial"] = "exact"
+        if start is not None and kind not in ("String", "Binary"):
+            attrib["start"] = start
+        var = SubElement(mv, kind, attrib)
+        if start is not None and kind in ("String", "Binary"):
+            SubElement(var, "Start", {"value": start})
+        if "dimension" in extra:
+            SubElement(var, "Dimension", {"start": str(extra["dimension"])})
+    ms = SubElement(root, "ModelStructure")
+    for name, _kind, causality, *_ in spec.variables:
+        if causality == "output":
+            attrib = {"valueReference": str(vrs[name])}
+            if name in spec.dependencies:
+                attrib["dependencies"] = " ".join(str(vrs[d]) for d in spec.dependencies[name])
+            SubElement(ms, "Output", attrib)
+    for name, _kind, causality, *_ in spec.variables:
+        if causality == "output":
+            SubElement(ms, "InitialUnknown", {"valueReference": str(vrs[name])})
+    indent(root)
+    return b'<?xml version="1.0" encoding="UTF-8"?>\n' + tostring(root, encoding="utf-8")
+
+
+def build(spec: Spec3, out_dir: Path, work: Path) -> Path:
+    headers = Path(fmpy.__file__).parent / "c-code"
+    lib = work / f"{spec.name}.so"
+    subprocess.run(["gcc", "-std=c99", "-D_DEFAULT_SOURCE", "-Wall", "-Wextra", "-Werror",
+                    "-shared", "-fPIC", "-O1", f"-I{headers}", f"-DMODEL_{spec.model}",
+                    "-o", str(lib), str(HERE / "fmi3_models.c"), str(HERE / "fmi3_stubs.c"), "-lm"],
+                   check=True, capture_output=True, text=True)
+    path = out_dir / f"{spec.name}.fmu"
+    with zipfile.ZipFile(path, "w") as z:
+        z.writestr("modelDescription.xml", model_description(spec))
+        z.write(lib, f"binaries/x86_64-linux/{spec.name}.so")
+    return path
+
+
+def build_all3(out_dir: Path) -> dict[str, Path]:
+    if shutil.which("gcc") is None:
+        raise FileNotFoundError("gcc is not installed")
+    work = out_dir / "build3"
+    work.mkdir(parents=True, exist_ok=True)
+    return {spec.name: build(spec, out_dir, work) for spec in SPECS3}
