@@ -1,13 +1,14 @@
-"""Seed 001: one tuning protocol for the parameters the paper does not give (issue 15).
+"""Seed 001: one tuning protocol for the parameters the paper does not give.
 
 Each law's own free parameter (ours) is picked the same way: ISMC's boundary layer Delta
 (eq. 27), ISMPC's move weight theta (eq. 66) and GPC's control weight; MFAC has none (its
 delta, rho are the paper's), and b of eq. 18 is shared by the two sliding laws (kept). The
 criterion is the mean over the *calibration* seeds 101-106 of log(MSE x IAE) (eqs. 87, 88, the
 paper's tracking indices with equal weight) on the main rows (smooth disturbance, 0.03 m/s2,
-tau = 10 s); Every law gets the same budget, BUDGET points of a log grid; the report seeds 1-20 are
-never seen by the pick. Direct core
-loops (the FMU runs give the same figures), the shipped sample time and data scaling.
+tau = 10 s). Every law gets the same budget, BUDGET points of a log grid; the report
+seeds 1-20 are never seen by the pick. Direct core loops (the FMU runs
+give the same figures), the shipped sample
+time and data scaling.
 
     python benchmarks/seed001_tuning.py [--seeds 101,...,106] [--workers 2] [--white]
 """
