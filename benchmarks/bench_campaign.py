@@ -1,4 +1,4 @@
-"""Campaign benchmark: seed 001's claims over an ensemble (issue 25, "Throughput").
+"""Campaign benchmark: seed 001's claims over an ensemble (throughput of the claims runner).
 
 Runs the claims' runs of ``scenarios/reproduce/seed001.toml`` at K report seeds (main and
 perturbed floating-point path, :func:`cosim.run.ensemble.run_claims`) three ways in one run:

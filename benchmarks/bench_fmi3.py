@@ -1,4 +1,4 @@
-"""Master overhead of the FMI 3.0 path against the FMI 2.0 path on the same scenario (issue 28).
+"""Master overhead of the FMI 3.0 path against the FMI 2.0 path on the same scenario.
 
 Our FMUs' FMI 3.0 builds are not used here: the pair is the plain-C test FMUs of
 tests/third_party, one per standard, of the same trivial model (a clock x = t feeding a

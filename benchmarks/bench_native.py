@@ -9,7 +9,7 @@ Native plants so far: BrakeDelayTrain (seed 000). For it:
 * closed loop: every shipped seed-000 scenario through the event-driven master with the Python
   plant FMU and with the native one (the controllers are the Python FMUs in both).
 
-The bare-C-kernel column of issue 29 (benchmarks/c_kernel) is the freight kernel; the freight
+The bare C kernel (benchmarks/c_kernel) is the freight kernel; the freight
 plant has no native FMU yet, so that comparison is not made here.
 
     python benchmarks/bench_native.py [--repeat 3]
