@@ -567,7 +567,7 @@ def docs(check: Annotated[bool, typer.Option(
     the FMU reference (docs/fmus.md, from the cores' declarations), the benchmarks
     (docs/benchmarks.md, from benchmarks/results.json) and a page per paper
     (docs/papers/NAME.md, from runs/reproduce/NAME/ where it exists)."""
-    from cosim.run.docs_pages import DOCS, generated_pages, stale, write
+    from cosim.run.docs_pages import DOCS, generated_pages, stale, stale_papers, write
 
     def pages():
         yield DOCS / "cli.md", cli_reference().encode()
@@ -578,10 +578,15 @@ def docs(check: Annotated[bool, typer.Option(
         if old:
             _fail("out of date: " + ", ".join(str(p) for p in old) + ": run `cosim docs`",
                   code=1)
+        papers = stale_papers()
+        if papers:
+            _fail("paper pages not made from this tree:\n  " + "\n  ".join(papers), code=1)
         out.print("generated pages are up to date")
         return
     for path in write(pages()):
         out.print(f"wrote {path}", highlight=False, markup=False)
+    for line in stale_papers():
+        out.print(f"[yellow]stale:[/] {line}", highlight=False)
 
 
 def main() -> None:  # pragma: no cover - console entry point
