@@ -55,7 +55,10 @@ def test_stale_papers_names_runs_and_pages_made_from_other_inputs(tmp_path, monk
     assert "other inputs" in line and "cosim reproduce seed000" in line
     (run / "claims.md").unlink()  # no run here: the committed page's header decides
     committed = docs_pages.DOCS / "papers" / "seed000.md"
-    text = committed.read_text() if committed.is_file() else ""
-    expect_stale = docs_pages._INPUTS.search(text) is None or (
-        docs_pages._INPUTS.search(text).group(1) != entry_digest("seed000"))
+    text = committed.read_text() if committed.is_file() else docs_pages.NOT_REPRODUCED
+    found = docs_pages._INPUTS.search(text)
+    if found is None:  # the page saying how to make it carries no result: not stale
+        expect_stale = text != docs_pages.NOT_REPRODUCED.format(name="seed000")
+    else:
+        expect_stale = found.group(1) != entry_digest("seed000")
     assert bool(docs_pages.stale_papers(tmp_path)) == expect_stale

@@ -33,6 +33,8 @@ DOCS = ROOT / "docs"
 BENCHMARKS_JSON = ROOT / "benchmarks" / "results.json"
 REPRODUCE_DIR = Path("runs") / "reproduce"
 INPUTS_FILE = "inputs.sha256"
+NOT_REPRODUCED = ("# {name}\n\nNot reproduced here yet: `cosim reproduce {name}` writes "
+                  "`runs/reproduce/{name}/`, then `cosim docs` makes this page.\n")
 _INPUTS = re.compile(r"^<!-- inputs ([0-9a-f]{64}) -->$", re.M)
 _LINK = re.compile(r"(!?\[[^\]]*\])\((?!https?:|#)([^)\s]+)\)")
 
@@ -125,10 +127,12 @@ def stale_papers(reproduce_dir: Path = REPRODUCE_DIR) -> list[str]:
                            f"`cosim reproduce {name}`, then `cosim docs`")
             continue
         page = DOCS / "papers" / f"{name}.md"
-        found = _INPUTS.search(page.read_text()) if page.is_file() else None
+        text = page.read_text() if page.is_file() else NOT_REPRODUCED.format(name=name)
+        found = _INPUTS.search(text)
         if found is None:
-            out.append(f"{page.relative_to(ROOT)} holds no reproduction: run `cosim reproduce {name}`, then "
-                       "`cosim docs`")
+            if text != NOT_REPRODUCED.format(name=name):  # results without their inputs
+                out.append(f"{page.relative_to(ROOT)} does not say which inputs made it: run "
+                           f"`cosim reproduce {name}`, then `cosim docs`")
         elif found.group(1) != current:
             out.append(f"{page.relative_to(ROOT)} was made from other inputs than this tree's: run "
                        f"`cosim reproduce {name}`, then `cosim docs`")
@@ -193,10 +197,7 @@ def generated_pages(reproduce_dir: Path = REPRODUCE_DIR) -> Iterator[tuple[Path,
         elif (DOCS / "papers" / f"{name}.md").is_file():
             present.add(name)
         else:  # never reproduced here: a page that says how (listed in mkdocs.yml's nav)
-            yield DOCS / "papers" / f"{name}.md", (
-                f"# {name}\n\nNot reproduced on this machine yet: `cosim reproduce {name}` "
-                "writes `runs/reproduce/{name}/`, then `cosim docs` makes this page.\n"
-            ).replace("{name}", name).encode()
+            yield DOCS / "papers" / f"{name}.md", NOT_REPRODUCED.format(name=name).encode()
     yield DOCS / "papers" / "index.md", papers_index(present).encode()
 
 
