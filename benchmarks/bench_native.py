@@ -1,7 +1,12 @@
 """Real-time factors of the native C plant FMU against the Python FMU and the Python core,
 in one run (prints figures, asserts nothing).
 
-Native plants so far: BrakeDelayTrain (seed 000). For it:
+Plant only, for every native plant model (BrakeDelayTrain, Crh3Train, Emu3, Emu8): the Python
+FMU and the native FMU stepped over the same simulated time with a fixed input, in the step of
+the plant's shipped scenarios, through fmpy ``FMU2Slave`` (one setReal/doStep/getReal of every
+output per step); their real-time factors and the ratio, in the same run.
+
+For BrakeDelayTrain (seed 000) also:
 
 * plant only: the seed-000 plant (scenario parameters of seed000_stop_pid) stepped over 60 s
   in 0.2-s communication steps with a fixed braking command, through the plant core (no FMI),
@@ -79,6 +84,65 @@ def run_fmu(path: Path, params: dict) -> float:
     return time.perf_counter() - t0
 
 
+# plant-only runs of the other native plants: (identifier, scenario giving the parameters,
+# communication step s, simulated time s, inputs held)
+PLANTS = (
+    ("Crh3Train", "seed003_crh3_gpc_eco", 1.0, 600.0, {"force": 3e5}),
+    ("Emu3", "seed001_emu_pid", 0.2, 120.0, {f"force[{i}]": 6e4 for i in (1, 2, 3)}),
+    ("Emu8", "seed001_emu_pid", 0.2, 120.0, {f"force[{i}]": 2e4 for i in range(1, 9)}),
+)
+
+
+def run_plant_fmu(path: Path, params: dict, step: float, stop: float, inputs: dict) -> float:
+    """Wall time (s) of ``stop`` simulated seconds of the plant FMU at ``path``."""
+    md = read_model_description(str(path))
+    unzipdir = extract(str(path))
+    vr = {v.name: v.valueReference for v in md.modelVariables}
+    types = {v.name: v.type for v in md.modelVariables}
+    outs = [v.valueReference for v in md.modelVariables if v.causality == "output"]
+    ins = [vr[n] for n in inputs]
+    values = list(inputs.values())
+    t0 = time.perf_counter()
+    fmu = FMU2Slave(guid=md.guid, unzipDirectory=unzipdir, instanceName="bench",
+                    modelIdentifier=md.coSimulation.modelIdentifier)
+    fmu.instantiate()
+    fmu.setupExperiment(startTime=0.0)
+    fmu.enterInitializationMode()
+    for name, value in params.items():
+        if name not in vr:
+            continue
+        {"String": fmu.setString, "Integer": fmu.setInteger,
+         "Boolean": fmu.setBoolean}.get(types[name], fmu.setReal)([vr[name]], [value])
+    fmu.exitInitializationMode()
+    for k in range(round(stop / step)):
+        fmu.setReal(ins, values)
+        fmu.doStep(k * step, step)
+        fmu.getReal(outs)
+    fmu.terminate()
+    fmu.freeInstance()
+    return time.perf_counter() - t0
+
+
+def plants_only(repeat: int) -> None:
+    """Plant-only real-time factors of the other native plants, Python FMU against native."""
+    specs = catalog()
+    build_stale([specs[ident] for ident, *_ in PLANTS])
+    for ident, scenario, step, stop, inputs in PLANTS:
+        native = build_native(ident, windows=False)
+        sc = load_scenario(ROOT / "scenarios" / f"{scenario}.toml")
+        params = dict(sc.components["plant"].parameters)
+        if ident == "Emu8":  # the 8-car train: its own configuration, the line and noise
+            params.pop("configuration", None)
+        medians = {}
+        for label, path in (("Python FMU", specs[ident].path), ("native FMU", native)):
+            run_plant_fmu(path, params, step, stop, inputs)  # warm-up (extraction, imports)
+            medians[label] = statistics.median(
+                run_plant_fmu(path, params, step, stop, inputs) for _ in range(repeat))
+        py, nat = medians["Python FMU"], medians["native FMU"]
+        print(f"  {ident:14s} {stop:5g} s in {step:g}-s steps: real-time factor Python FMU "
+              f"{stop / py:9.0f}, native {stop / nat:9.0f}   native / Python {py / nat:6.1f}x")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeat", type=int, default=3)
@@ -103,6 +167,8 @@ def main() -> None:
         print(f"  {name:14s} {medians[name] * 1e3:8.2f} ms   real-time factor "
               f"{STOP / medians[name]:10.0f}")
     print(f"  native / Python FMU speed-up: {medians['Python FMU'] / medians['native FMU']:.1f}x")
+    print(f"\nplant only, other native plants (median of {args.repeat}):")
+    plants_only(args.repeat)
     print("\nclosed loop, event master (plant FMU wall time and whole-run real-time factor):")
     for sc in sorted(p.stem for p in (ROOT / "scenarios").glob("seed000_*.toml")):
         res = {}
