@@ -266,6 +266,11 @@ def test_errors_reach_the_log_with_logging_off(native):
     with pytest.raises(FMICallException):
         fmu.setInteger([vr["traction_model"]], [2])
     assert any("traction_model = 2 outside [0, 1]" in m for m in messages), messages
+    fmu.setReal([vr["max_traction_force"]], [0.0])  # declared above 0 (exclusive)
+    with pytest.raises(FMICallException):
+        fmu.exitInitializationMode()
+    assert any("max_traction_force = 0: must be greater than 0" in m for m in messages)
+    fmu.setReal([vr["max_traction_force"]], [760e3])
     fmu.setReal([vr["coupler_slack"]], [0.05])
     fmu.setReal([vr["max_step"]], [0.05])  # contact too stiff for this sub-step
     with pytest.raises(FMICallException):

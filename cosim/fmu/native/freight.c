@@ -241,52 +241,18 @@ static void free_core(inst* m) {
     m->have_core = 0;
 }
 
-/* FreightParams.check: messages name the parameter */
+/* FreightParams.check_relations, and the one declared bound the variable table cannot hold
+ * (max_traction_force is declared above 0, exclusive; the table's min is inclusive). Every
+ * other declared range (min/max, the integer traction_model in [0, 1]) is enforced where the
+ * value is set (set_number, from the generated ATO_VARS). Messages name the parameter. */
 static int check_parameters(inst* m) {
     const double* r = m->r;
-    static const struct { const char* name; int vr; } positive[] = {
-        {"loco_mass", ATO_VR_loco_mass}, {"loco_length", ATO_VR_loco_length},
-        {"wagon_mass", ATO_VR_wagon_mass}, {"wagon_length", ATO_VR_wagon_length},
-        {"coupler_stiffness", ATO_VR_coupler_stiffness},
-        {"max_traction_force", ATO_VR_max_traction_force},
-        {"max_traction_power", ATO_VR_max_traction_power},
-        {"max_ed_power", ATO_VR_max_ed_power},
-        {"traction_time_constant", ATO_VR_traction_time_constant},
-        {"traction_ramp_time", ATO_VR_traction_ramp_time},
-        {"brake_propagation_speed", ATO_VR_brake_propagation_speed},
-        {"brake_release_propagation_speed", ATO_VR_brake_release_propagation_speed},
-        {"brake_fill_time", ATO_VR_brake_fill_time},
-        {"brake_fill_exponent", ATO_VR_brake_fill_exponent},
-        {"brake_release_time", ATO_VR_brake_release_time},
-        {"brake_release_exponent", ATO_VR_brake_release_exponent},
-        {"max_cylinder_pressure", ATO_VR_max_cylinder_pressure},
-        {"full_service_reduction", ATO_VR_full_service_reduction},
-        {"stiction_speed", ATO_VR_stiction_speed}, {"max_step", ATO_VR_max_step},
-    };
-    static const struct { const char* name; int vr; } non_negative[] = {
-        {"coupler_damping", ATO_VR_coupler_damping}, {"coupler_slack", ATO_VR_coupler_slack},
-        {"max_ed_force", ATO_VR_max_ed_force}, {"ed_fade_speed", ATO_VR_ed_fade_speed},
-        {"traction_delay", ATO_VR_traction_delay},
-        {"brake_apply_delay", ATO_VR_brake_apply_delay},
-        {"brake_release_delay", ATO_VR_brake_release_delay},
-        {"min_reduction", ATO_VR_min_reduction},
-        {"loco_braking_ratio", ATO_VR_loco_braking_ratio},
-        {"wagon_braking_ratio", ATO_VR_wagon_braking_ratio},
-        {"loco_rotating_mass_factor", ATO_VR_loco_rotating_mass_factor},
-        {"wagon_rotating_mass_factor", ATO_VR_wagon_rotating_mass_factor},
-    };
-    for (size_t i = 0; i < sizeof positive / sizeof *positive; i++)
-        if (!(r[positive[i].vr] > 0)) {
-            logm(m, fmi2Error, "logStatusError", "bad parameter: %s = %.17g must be > 0",
-                 positive[i].name, r[positive[i].vr]);
-            return 0;
-        }
-    for (size_t i = 0; i < sizeof non_negative / sizeof *non_negative; i++)
-        if (!(r[non_negative[i].vr] >= 0)) {
-            logm(m, fmi2Error, "logStatusError", "bad parameter: %s = %.17g must be >= 0",
-                 non_negative[i].name, r[non_negative[i].vr]);
-            return 0;
-        }
+    if (!(r[ATO_VR_max_traction_force] > 0)) {
+        logm(m, fmi2Error, "logStatusError",
+             "bad parameter: max_traction_force = %.17g: must be greater than 0",
+             r[ATO_VR_max_traction_force]);
+        return 0;
+    }
     if (r[ATO_VR_coupler_slack] > 0) {
         double lighter = r[ATO_VR_loco_mass] < r[ATO_VR_wagon_mass] ? r[ATO_VR_loco_mass]
                                                                     : r[ATO_VR_wagon_mass];
@@ -299,17 +265,6 @@ static int check_parameters(inst* m) {
                  sqrt(0.5 / stiffness) * h);
             return 0;
         }
-    }
-    double model = r[ATO_VR_traction_model];
-    if (model != 0.0 && model != 1.0) {
-        logm(m, fmi2Error, "logStatusError",
-             "bad parameter: traction_model = %g must be 0 (lag) or 1 (ramp)", model);
-        return 0;
-    }
-    if (r[ATO_VR_v0] < 0) {
-        logm(m, fmi2Error, "logStatusError", "bad parameter: v0 = %.17g must be >= 0",
-             r[ATO_VR_v0]);
-        return 0;
     }
     return 1;
 }
