@@ -4,7 +4,9 @@ A native FMU has the same variables as its Python FMU: its modelDescription.xml 
 wrapper's own (``CoreSlave.to_xml``: value references, units, ranges, starts, structure), and
 the C header ``<id>_decl.h`` (value references, starts, ranges as ``ato_var`` rows) is written
 from the same declarations at build time, so nothing is declared twice. Route data are exported
-from the bundled route files (parsed by :mod:`plants.route`) to ``resources/routes/<name>.grade``.
+from the bundled route files (parsed by :mod:`plants.route`) to ``resources/routes/<name>.grade``
+and, for the models that read them, ``<name>.<profile>`` (:data:`ROUTE_PROFILES`) or the
+step profiles of :data:`STEP_PROFILES` in ``<name>.profiles``.
 
 The FMU holds ``binaries/linux64/<id>.so`` (gcc), ``binaries/win64/<id>.dll`` when the
 mingw-w64 cross compiler ``x86_64-w64-mingw32-gcc`` is installed, and ``sources/`` (the C
@@ -12,7 +14,9 @@ files, the generated header, the FMI 2 headers and ``buildDescription.xml``) so 
 compile it. Native FMUs are built to ``fmus/native/<id>.fmu`` (``cosim build --native``).
 
 Compiled with ``-std=c99 -ffp-contract=off`` (no fused multiply-add, no fast math), so the C
-model performs the core's IEEE operations in the core's order; its only libm call is ``exp``.
+model performs the core's IEEE operations in the core's order (libm calls: ``exp``, and
+``pow`` in the freight brake cylinders, ``log1p`` in numpy's normal draws, ``log2`` in the
+choice of squarings of the Emu's matrix exponential).
 """
 
 from __future__ import annotations
@@ -44,14 +48,19 @@ WINDOWS_CC = "x86_64-w64-mingw32-gcc"
 
 @dataclass(frozen=True)
 class NativeSpec:
-    """A native model: the C file of its backend (in cosim/fmu/native/), the shared C files it
-    links (``shared``, also in cosim/fmu/native/), for a model with named train data
+    """A native model: the C file of its backend (in cosim/fmu/native/), further C files it
+    links (``helpers``, same folder) and the route profiles it reads besides the grade steps
+    (``route_profiles``, keys of :data:`ROUTE_PROFILES`); files it shares with other
+    models (``shared``, C and headers, same folder; with ``ato_plant.c`` the route's step
+    profiles ``<name>.profiles`` are exported), for a model with named train data
     ``configurations``: ``"module:NAME"`` of a mapping configuration name -> factory of a
     declared dataclass, written to ``<id>_config.h`` (:func:`config_header`), and the headers
     of :data:`GENERATED` it includes (``generated``)."""
 
     identifier: str
     source: str
+    helpers: tuple[str, ...] = ()
+    route_profiles: tuple[str, ...] = ()
     shared: tuple[str, ...] = ()
     configurations: str | None = None
     generated: tuple[str, ...] = ()
@@ -69,9 +78,12 @@ NUMPY_RANDOM = ("ato_numpy_random.h", "ato_numpy_random.c")
 
 NATIVE: dict[str, NativeSpec] = {
     "BrakeDelayTrain": NativeSpec("BrakeDelayTrain", "brake_delay.c"),
-    "Crh3Train": NativeSpec("Crh3Train", "crh3.c", PLANT_SHARED),
-    **{identifier: NativeSpec(identifier, "emu.c", (*PLANT_SHARED, *NUMPY_RANDOM),
-                              "plants.emu:CONFIGURATIONS", ("ato_numpy_normal.h",))
+    "FreightTrain": NativeSpec("FreightTrain", "freight.c", ("freight_kernel.c",),
+                               ("speed_limit", "additional")),
+    "Crh3Train": NativeSpec("Crh3Train", "crh3.c", shared=PLANT_SHARED),
+    **{identifier: NativeSpec(identifier, "emu.c", shared=(*PLANT_SHARED, *NUMPY_RANDOM),
+                              configurations="plants.emu:CONFIGURATIONS",
+                              generated=("ato_numpy_normal.h",))
        for identifier in ("Emu3", "Emu8")},
 }
 
@@ -84,16 +96,16 @@ def _c_string(text: str) -> str:
     return '"' + text.replace("\\", "\\\\").replace('"', '\\"') + '"'
 
 
+def c_identifier(name: str) -> str:
+    """A variable name as a C identifier: ``v[12]`` -> ``v_12`` (``[`` -> ``_``, ``]`` dropped)."""
+    return name.replace("[", "_").replace("]", "")
+
+
 def _c_double(value: float) -> str:
     """A double literal that reads back to the same float (hex, exact)."""
     if math.isinf(value):
         return "INFINITY" if value > 0 else "-INFINITY"
     return float(value).hex()
-
-
-def c_name(name: str) -> str:
-    """A variable name as a C identifier part: ``force[2]`` -> ``force_2``."""
-    return re.sub(r"\W", "_", name).strip("_")
 
 
 def decl_header(identifier: str, variables, guid: str) -> str:
@@ -108,7 +120,7 @@ def decl_header(identifier: str, variables, guid: str) -> str:
              f"#define ATO_MODEL_IDENTIFIER {_c_string(identifier)}",
              f"#define ATO_GUID {_c_string(guid)}",
              f"#define ATO_N_VARS {len(variables)}", "enum {"]
-    lines += [f"    ATO_VR_{c_name(v.name)} = {vr}," for vr, v in enumerate(variables)]
+    lines += [f"    ATO_VR_{c_identifier(v.name)} = {vr}," for vr, v in enumerate(variables)]
     lines += ["};"]
     indexed: dict[str, list[int]] = {}
     for vr, v in enumerate(variables):
@@ -179,9 +191,45 @@ def route_tables() -> dict[str, str]:
     return tables
 
 
+def _step_rows(starts, values) -> list[str]:
+    return [f"{'-inf' if math.isinf(s) and s < 0 else repr(float(s))} {float(g)!r}"
+            for s, g in zip(starts.tolist(), values.tolist())]
+
+
+def _speed_limit_table(route) -> tuple[str, list[str]]:
+    limit = route.speed_limit
+    return "speed limit steps: start_m limit_m_per_s", _step_rows(limit.starts, limit.values)
+
+
+def _additional_table(route) -> tuple[str, list[str]]:
+    xs, cum = route.additional._cumulative  # the knots the compiled kernels interpolate on
+    return ("additional resistance (grade + curve + tunnel), cumulative over position: "
+            "position_m integral_N_per_kN_m", _step_rows(xs, cum))
+
+
+ROUTE_PROFILES = {"speed_limit": _speed_limit_table, "additional": _additional_table}
+
+
+def route_profile_tables(kinds: tuple[str, ...]) -> dict[str, str]:
+    """``<name>.<kind>`` text per bundled route and profile kind (:data:`ROUTE_PROFILES`):
+    rows of two floats (repr, which reads back exactly; ``inf`` where a value is infinite)."""
+    route = importlib.import_module("plants.route")
+    tables = {}
+    for toml in sorted(route.ROUTES_DIR.glob("*.toml")):
+        try:
+            loaded = route.load_route(toml.stem)
+        except ValueError:  # a reference-profile TOML beside the routes, not a route
+            continue
+        for kind in kinds:
+            title, rows = ROUTE_PROFILES[kind](loaded)
+            tables[f"{toml.stem}.{kind}"] = f"# {title} of route {toml.stem}\n" + \
+                "\n".join(rows) + "\n"
+    return tables
+
+
 # the step profiles of a route a native plant reads (plants.route.Route fields); sums such as
 # Route.additional are formed in C by the same operations as StepProfile.sum
-ROUTE_PROFILES = ("grade", "curve_resistance", "tunnel_resistance", "speed_limit", "neutral")
+STEP_PROFILES = ("grade", "curve_resistance", "tunnel_resistance", "speed_limit", "neutral")
 
 
 def _bits(value: float) -> str:
@@ -189,8 +237,8 @@ def _bits(value: float) -> str:
     return f"{struct.unpack('<Q', struct.pack('<d', float(value)))[0]:016x}"
 
 
-def route_profiles() -> dict[str, str]:
-    """``<name>.profiles`` text per bundled route: for each of :data:`ROUTE_PROFILES` a line
+def step_profile_tables() -> dict[str, str]:
+    """``<name>.profiles`` text per bundled route: for each of :data:`STEP_PROFILES` a line
     ``profile <field> <count>`` and ``count`` lines ``<start bits> <value bits>`` (IEEE bits
     in hex, the decimal value after ``#``), the first start ``-inf``."""
     route = importlib.import_module("plants.route")
@@ -201,7 +249,7 @@ def route_profiles() -> dict[str, str]:
         except ValueError:  # a reference-profile TOML beside the routes, not a route
             continue
         lines = [f"# step profiles of route {toml.stem}: start_m value (IEEE bits, hex)"]
-        for field in ROUTE_PROFILES:
+        for field in STEP_PROFILES:
             profile = getattr(loaded, field)
             lines.append(f"profile {field} {profile.starts.size}")
             lines += [f"{_bits(a)} {_bits(b)}  # {a!r} {b!r}"
@@ -381,14 +429,16 @@ def build_native(identifier: str, dest: Path = NATIVE_FMU_DIR, windows: bool | N
     slave_class = catalog()[identifier].load()
     guid = "{" + str(uuid.uuid4()) + "}"
     headers = Path(fmpy.__file__).parent / "c-code"
-    c_files = ["fmi2_front.c", spec.source, *(f for f in spec.shared if f.endswith(".c"))]
+    c_files = ["fmi2_front.c", spec.source, *spec.helpers,
+               *(f for f in spec.shared if f.endswith(".c"))]
     with tempfile.TemporaryDirectory(prefix="atocosim_native_") as tmp:
         root = Path(tmp) / "fmu"
         src = root / "sources"
         src.mkdir(parents=True)
         shutil.copy2(FRONT_DIR / "fmi2_front.c", src)
         shutil.copy2(FRONT_DIR / "ato_backend.h", src)
-        shutil.copy2(NATIVE_DIR / spec.source, src)
+        for name in (spec.source, *spec.helpers):
+            shutil.copy2(NATIVE_DIR / name, src)
         shutil.copy2(NATIVE_DIR / "ato_vars.h", src)
         for name in spec.shared:
             shutil.copy2(NATIVE_DIR / name, src)
@@ -412,8 +462,11 @@ def build_native(identifier: str, dest: Path = NATIVE_FMU_DIR, windows: bool | N
         routes.mkdir(parents=True)
         for name, text in route_tables().items():
             (routes / f"{name}.grade").write_text(text)
-        for name, text in route_profiles().items():
-            (routes / f"{name}.profiles").write_text(text)
+        for name, text in route_profile_tables(spec.route_profiles).items():
+            (routes / name).write_text(text)
+        if "ato_plant.c" in spec.shared:
+            for name, text in step_profile_tables().items():
+                (routes / f"{name}.profiles").write_text(text)
         (root / "binaries" / "linux64").mkdir(parents=True)
         compile_binary(gcc, src, root / "binaries" / "linux64" / f"{identifier}.so", False)
         if mingw:
