@@ -463,6 +463,8 @@ def test_emu_whole_closed_loops_within_the_bound(natives, scenario):
     if not outside:
         return
     reference = reference_summary(scenario)
+    print(f"{scenario}: the loop amplifies rounding; outside the bound: native {outside}, "
+          f"numpy reference {summaries_outside(python.summary, reference, relative, positions)}")
     assert summaries_outside(python.summary, reference, relative, positions), (
         f"native plant outside the bound in {outside}; the numpy reference path within it")
 
