@@ -20,7 +20,7 @@ Tolerances, from the numerics (compiled -std=c99 -ffp-contract=off: no fused mul
   so over K sub-steps of h the state differs by at most K (1 + K h / 1 s) EPS of its scale;
   the closed loops' summaries are asserted within that relative bound of their values or of
   the position scale (for the stop error, a difference of positions). A loop that amplifies
-  rounding-level differences exponentially (the adaptive seed-001 laws) cannot meet any
+  rounding-level differences exponentially over the run cannot meet any
   bound of this kind with any other rounding; for it the Python core's own numpy reference
   path (ATO_COSIM_NO_KERNELS: the same equations, other summation orders) must leave the
   bound as well, so that the native plant is shown not to be the cause.
