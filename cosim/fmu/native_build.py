@@ -25,9 +25,11 @@ import subprocess
 import tempfile
 import uuid
 import zipfile
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from xml.etree.ElementTree import Element, SubElement, indent, tostring
+
+import numpy as np
 
 from cosim.fmu.build import FMU_DIR, bundled_files, catalog
 
@@ -66,6 +68,9 @@ NATIVE: dict[str, NativeSpec] = {
                                                                "ato_profile.h"), ("references",)),
     "EmuSpeedPid8": NativeSpec("EmuSpeedPid8", "speed_pid.c", (*CONTROLLER, "ato_profile.c",
                                                                "ato_profile.h"), ("references",)),
+    "Empc3": NativeSpec("Empc3", "explicit_mpc.c", (*CONTROLLER, "ato_profile.c",
+                                                    "ato_profile.h"),
+                        ("references", "empc_regions")),
 }
 
 
@@ -183,8 +188,54 @@ def reference_tables() -> dict[str, str]:
     return tables
 
 
+def _numbers(key: str, values) -> str:
+    flat = [float(x) for x in np.asarray(values, dtype=float).ravel().tolist()]
+    return f"{key} {len(flat)} " + " ".join(repr(x) for x in flat)
+
+
+def empc_tables() -> dict[str, str]:
+    """``regions/<name>.empc`` per bundled EMPC region file (controllers/hybrid/data/*.npz):
+    its design settings (``meta key value``), the design constants of the online law
+    (mean-speed weights ``c``, PWA ``breakpoints``, ``motored`` cars, per-mode limit ratios)
+    and per mode and segment the parameter box, the regions (E, e, row offsets, first-move
+    F, f, tolerance) and the bounding-box tree :class:`controllers.hybrid.explicit.BoxTree`
+    built from them; one ``key count values...`` line per array (%.17g via repr: exact)."""
+    explicit = importlib.import_module("controllers.hybrid.explicit")  # by name: layering
+    empc = importlib.import_module("controllers.hybrid.explicit_mpc")
+    hybrid = importlib.import_module("controllers.hybrid.hybrid_mpc")
+    emu = importlib.import_module("plants.emu")
+    tables = {}
+    for path in sorted(explicit.DATA_DIR.glob("*.npz")):
+        law = explicit.ExplicitLaw.load(path)
+        meta = law.meta
+        train = emu.emu_config(str(meta["configuration"]))
+        params = replace(hybrid.HybridMpcParams(), fit_speed_max=float(meta["fit_speed_max"]),
+                         sample_time=float(meta["sample_time"]),
+                         configuration=str(meta["configuration"]))
+        model = hybrid.chain_model(train, params)
+        lines = [f"# EMPC region data {path.stem} (from {path.name}; generated)"]
+        lines += [f"meta {key} {value}" for key, value in meta.items()]
+        lines += [_numbers("c", model.c[:model.n]), _numbers("breakpoints",
+                                                             model.res.breakpoints),
+                  _numbers("motored", model.motored),
+                  *(_numbers(f"ratio{m}", empc.ExplicitMpc.limit_ratio(train, m))
+                    for m in explicit.MODES),
+                  _numbers("keys", sorted(law.sets))]
+        for (mode, seg), rs in sorted(law.sets.items()):
+            p = f"m{mode}s{seg}_"
+            tree = rs.tree
+            lines += [_numbers(p + "box", law.boxes[mode, seg]), _numbers(p + "E", rs.E),
+                      _numbers(p + "e", rs.e), _numbers(p + "rows", rs.rows),
+                      _numbers(p + "na", [rs.F.shape[1]]), _numbers(p + "F", rs.F),
+                      _numbers(p + "f", rs.f), _numbers(p + "tol", [rs.tol]),
+                      *(_numbers(p + name, getattr(tree, name))
+                        for name in ("dim", "thr", "left", "right", "start", "stop", "items"))]
+        tables[f"regions/{path.stem}.empc"] = "\n".join(lines) + "\n"
+    return tables
+
+
 # generated resources a native model may ask for (NativeSpec.data)
-DATA = {"references": reference_tables}
+DATA = {"references": reference_tables, "empc_regions": empc_tables}
 
 
 def _compiler(name: str) -> str:

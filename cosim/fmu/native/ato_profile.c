@@ -41,7 +41,19 @@ double ato_profile_accel(const ato_profile* p, double x) {
     return p->accel[bisect_right(p->x, p->n, x) - 1];
 }
 
+double ato_profile_position(const ato_profile* p, double t) {
+    const double *x = p->x, *v = p->v;
+    int n = p->n;
+    if (t <= x[0]) return v[0] * (t - x[0]);
+    if (t >= x[n - 1]) return p->cum[n - 1] + v[n - 1] * (t - x[n - 1]);
+    int i = bisect_right(x, n, t) - 1;
+    double dt = t - x[i];
+    double a = (v[i + 1] - v[i]) / (x[i + 1] - x[i]);
+    return p->cum[i] + v[i] * dt + 0.5 * a * dt * dt;
+}
+
 void ato_profile_free(ato_profile* p) {
+    free(p->cum);
     free(p->x);
     free(p->v);
     free(p->f);
@@ -101,6 +113,10 @@ int ato_profile_load(ato_profile* p, const char* resources, const char* name, ch
     p->n = k;
     p->f = malloc(k * sizeof(double));
     p->accel = malloc((k - 1) * sizeof(double));
+    p->cum = malloc(k * sizeof(double));
+    p->cum[0] = 0.0; /* cumsum of (dx 0.5) (v_i + v_i+1), in order */
+    for (int i = 0; i + 1 < k; i++)
+        p->cum[i + 1] = p->cum[i] + (p->x[i + 1] - p->x[i]) * 0.5 * (p->v[i] + p->v[i + 1]);
     for (int i = 0; i < k; i++) p->f[i] = kind ? p->v[i] * p->v[i] : p->v[i];
     for (int i = 0; i + 1 < k; i++) {
         double dx = p->x[i + 1] - p->x[i];

@@ -19,6 +19,7 @@ typedef struct ato_profile {
     double* v;
     double* f;     /* the interpolated values: v^2 (distance) or v (time) */
     double* accel; /* per segment (n - 1) */
+    double* cum;   /* time profiles: integral of v from x[0] to each point (m) */
 } ato_profile;
 
 /* Load the bundled profile `name` from `resources`; 0 after a message in err. */
@@ -27,6 +28,9 @@ int ato_profile_load(ato_profile* p, const char* resources, const char* name, ch
 void ato_profile_free(ato_profile* p);
 double ato_profile_speed(const ato_profile* p, double x);
 double ato_profile_accel(const ato_profile* p, double x);
+/* s_ref(t) = int_0^t v_ref (m) of a time profile (controllers/hybrid/hybrid_mpc.py
+ * reference_position: v linear between points, the end speeds outside them) */
+double ato_profile_position(const ato_profile* p, double t);
 /* numpy.interp(x, xp, fp) for a scalar x */
 double ato_interp(double x, const double* xp, const double* fp, int n);
 
