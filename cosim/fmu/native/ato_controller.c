@@ -85,6 +85,18 @@ static void logm(inst* m, fmi2Status status, const char* fmt, ...) {
 static int64_t to_ticks(double seconds) { return (int64_t)llrint(seconds * 1e9); }
 static double to_seconds(int64_t ticks) { return (double)ticks / 1e9; }
 
+/* the shortest decimal that reads back as x (Python's repr), for messages */
+typedef struct { char s[40]; } num;
+static num fmt(double x) {
+    num out;
+    for (int digits = 1; digits <= 17; digits++) {
+        snprintf(out.s, sizeof out.s, "%.*g", digits, x);
+        if (strtod(out.s, NULL) == x) break;
+    }
+    if (!strpbrk(out.s, ".eEni")) strcat(out.s, ".0"); /* 2.0, not 2 */
+    return out;
+}
+
 static char* dup(const char* s) {
     char* d = malloc(strlen(s) + 1);
     strcpy(d, s);
@@ -360,8 +372,8 @@ static int set_value(inst* m, fmi2ValueReference vr, int type, const char* call,
     }
     if (v->causality == ATO_PARAMETER && ((v->has_min && value < v->min) ||
                                           (v->has_max && value > v->max))) {
-        logm(m, fmi2Error, "%s: %s = %.17g outside [%g, %g]", call, v->name, value,
-             v->has_min ? v->min : -INFINITY, v->has_max ? v->max : INFINITY);
+        logm(m, fmi2Error, "%s: %s = %s outside [%s, %s]", call, v->name, fmt(value).s,
+             fmt(v->has_min ? v->min : -INFINITY).s, fmt(v->has_max ? v->max : INFINITY).s);
         return 0;
     }
     m->v[vr] = value;
@@ -451,8 +463,8 @@ static fmi2Status c_do_step(fmi2Component comp, fmi2Real t, fmi2Real h, fmi2Bool
         return fmi2Error;
     }
     if (!isfinite(t) || to_ticks(t) != m->now) {
-        logm(m, fmi2Error, "doStep at t=%.17g s, but this controller is at t=%.17g s (a step "
-             "must continue from the end of the previous one)", t, to_seconds(m->now));
+        logm(m, fmi2Error, "doStep at t=%s s, but this controller is at t=%s s (a step must "
+             "continue from the end of the previous one)", fmt(t).s, fmt(to_seconds(m->now)).s);
         return fmi2Error;
     }
     int64_t end = to_ticks(t + h);
@@ -466,11 +478,11 @@ static fmi2Status c_do_step(fmi2Component comp, fmi2Real t, fmi2Real h, fmi2Bool
             following = m->next;
         }
         if (following < end && m->v[ATO_VR_strict_steps] != 0.0) {
-            logm(m, fmi2Error, "%s: doStep from t=%.17g s to t=%.17g s passes over this "
-                 "controller's event at t=%.17g s (sample_time %.17g s) and strict_steps is "
-                 "true: use communication steps that end on its sample instants (at most "
-                 "sample_time long)", m->name, t, to_seconds(end), to_seconds(following),
-                 m->v[ATO_VR_sample_time]);
+            logm(m, fmi2Error, "%s: doStep from t=%s s to t=%s s passes over this "
+                 "controller's event at t=%s s (sample_time %s s) and strict_steps is true: "
+                 "use communication steps that end on its sample instants (at most "
+                 "sample_time long)", m->name, fmt(t).s, fmt(to_seconds(end)).s,
+                 fmt(to_seconds(following)).s, fmt(m->v[ATO_VR_sample_time]).s);
             return fmi2Error;
         }
         if (due) { /* commit the event computed from the inputs of this doStep */
@@ -485,10 +497,11 @@ static fmi2Status c_do_step(fmi2Component comp, fmi2Real t, fmi2Real h, fmi2Bool
         if (following >= end) break;
         if (!m->held_logged) {
             m->held_logged = 1;
-            logm(m, fmi2Warning, "%s: doStep from t=%.17g s to t=%.17g s is longer than this "
-                 "controller's sample (%.17g s): its events inside a step are executed with "
-                 "the inputs held at the step's start (said once; strict_steps = true refuses "
-                 "such steps)", m->name, t, to_seconds(end), m->v[ATO_VR_sample_time]);
+            logm(m, fmi2Warning, "%s: doStep from t=%s s to t=%s s is longer than this "
+                 "controller's sample (%s s): its events inside a step are executed with the "
+                 "inputs held at the step's start (said once; strict_steps = true refuses "
+                 "such steps)", m->name, fmt(t).s, fmt(to_seconds(end)).s,
+                 fmt(m->v[ATO_VR_sample_time]).s);
         }
         m->now = following;
     }
