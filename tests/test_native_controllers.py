@@ -32,6 +32,7 @@ import fnmatch
 import functools
 import math
 import random
+import re
 import shutil
 import tempfile
 
@@ -414,3 +415,57 @@ def test_compliance_suite_passes_the_native_controllers(ident, tmp_path):
                           env=dict(os.environ, PYTHONPATH=str(root)))
     assert done.returncode == 0, done.stdout + done.stderr
     assert "0 error(s), 0 warning(s)" in done.stdout
+
+
+@pytest.mark.parametrize(("ident", "params", "message"), [
+    ("StopPid", {"u_min": 50.0, "u_max": 40.0}, "u_min = 50.0 must be < u_max = 40.0"),
+    ("EmuSpeedPid3", {"accel_min": 1.0, "accel_max": 0.5},
+     "accel_min = 1.0 must be < accel_max = 0.5"),
+    ("Empc3", {"N": 5}, "move_blocks = '3:4:3': positive lengths summing to N = 5"),
+    ("Empc3", {"N": 5, "move_blocks": "5"},
+     "regions = 'seed004_empc_crh3_3car.npz' were built for N = 10.0, this controller has 5.0"),
+    ("Empc3", {"configuration": "crh380a_3unit"}, "were built for configuration = crh3_3car, "
+     "this controller has 'crh380a_3unit'"),
+])
+def test_bad_parameters_are_refused_by_both(natives, ident, params, message):
+    md, unzipdir = natives[ident]
+    vr = {v.name: v for v in md.modelVariables}
+    logged: list[str] = []
+
+    def logger(component, instance, status, category, text):
+        logged.append(text.decode())
+
+    fmu = FMU2Slave(guid=md.guid, unzipDirectory=unzipdir, instanceName="native",
+                    modelIdentifier=md.coSimulation.modelIdentifier)
+    fmu.instantiate(callbacks=_callbacks(logger))
+    fmu.setupExperiment(startTime=0.0)
+    fmu.enterInitializationMode()
+    py = catalog()[ident].load()(instance_name="python", resources=tempfile.mkdtemp())
+    for name, value in params.items():
+        ref = [vr[name].valueReference]
+        if vr[name].type == "Integer":
+            fmu.setInteger(ref, [value])
+            py.set_integer(ref, [value])
+        elif vr[name].type == "String":
+            fmu.setString(ref, [value])
+            py.set_string(ref, [value])
+        else:
+            fmu.setReal(ref, [value])
+            py.set_real(ref, [value])
+    with pytest.raises(FMICallException):
+        fmu.exitInitializationMode()
+    assert any(message in text for text in logged), logged
+    py.setup_experiment(0.0)
+    py.enter_initialization_mode()
+    with pytest.raises(ValueError, match=re.escape(message)):
+        py.exit_initialization_mode()
+
+
+def _callbacks(logger):
+    from fmpy.fmi2 import defaultCallbacks, fmi2CallbackFunctions, fmi2CallbackLoggerTYPE
+
+    cb = fmi2CallbackFunctions()
+    cb.logger = fmi2CallbackLoggerTYPE(logger)
+    cb.allocateMemory = defaultCallbacks.allocateMemory
+    cb.freeMemory = defaultCallbacks.freeMemory
+    return cb

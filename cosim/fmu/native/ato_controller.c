@@ -85,16 +85,58 @@ static void logm(inst* m, fmi2Status status, const char* fmt, ...) {
 static int64_t to_ticks(double seconds) { return (int64_t)llrint(seconds * 1e9); }
 static double to_seconds(int64_t ticks) { return (double)ticks / 1e9; }
 
-/* the shortest decimal that reads back as x (Python's repr), for messages */
+/* the shortest decimal that reads back as x, laid out as Python's repr: fixed notation for
+ * decimal exponents -4 .. 15 (with ".0" for a whole number), else d.ddde+XX */
 typedef struct { char s[40]; } num;
 static num fmt(double x) {
     num out;
-    for (int digits = 1; digits <= 17; digits++) {
-        snprintf(out.s, sizeof out.s, "%.*g", digits, x);
-        if (strtod(out.s, NULL) == x) break;
+    if (!isfinite(x)) {
+        snprintf(out.s, sizeof out.s, "%s", isnan(x) ? "nan" : x > 0 ? "inf" : "-inf");
+        return out;
     }
-    if (!strpbrk(out.s, ".eEni")) strcat(out.s, ".0"); /* 2.0, not 2 */
+    char e[40];
+    int digits = 1;
+    for (; digits < 17; digits++) {
+        snprintf(e, sizeof e, "%.*e", digits - 1, x);
+        if (strtod(e, NULL) == x) break;
+    }
+    snprintf(e, sizeof e, "%.*e", digits - 1, x);
+    char* ep = strchr(e, 'e');
+    int exp10 = atoi(ep + 1);
+    *ep = 0;
+    char mant[24];
+    int k = 0;
+    for (const char* q = e; *q; q++)
+        if (*q >= '0' && *q <= '9') mant[k++] = *q;
+    mant[k] = 0;
+    while (k > 1 && mant[k - 1] == '0') mant[--k] = 0; /* trailing zeros of the digits */
+    const char* sign = signbit(x) ? "-" : "";
+    if (exp10 < -4 || exp10 >= 16) {
+        snprintf(out.s, sizeof out.s, "%s%c%s%s%se%c%02d", sign, mant[0], k > 1 ? "." : "",
+                 mant + 1, "", exp10 < 0 ? '-' : '+', abs(exp10));
+        return out;
+    }
+    char body[40];
+    int at = 0;
+    if (exp10 < 0) {
+        at += snprintf(body + at, sizeof body - at, "0.");
+        for (int i = 0; i < -exp10 - 1; i++) body[at++] = '0';
+        at += snprintf(body + at, sizeof body - at, "%s", mant);
+    } else {
+        for (int i = 0; i <= exp10; i++) body[at++] = i < k ? mant[i] : '0';
+        body[at++] = '.';
+        if (exp10 + 1 < k) at += snprintf(body + at, sizeof body - at, "%s", mant + exp10 + 1);
+        else body[at++] = '0';
+    }
+    body[at] = 0;
+    snprintf(out.s, sizeof out.s, "%s%s", sign, body);
     return out;
+}
+
+const char* ato_repr(double x, char buf[40]) {
+    num n = fmt(x);
+    memcpy(buf, n.s, sizeof n.s);
+    return buf;
 }
 
 static char* dup(const char* s) {
@@ -131,9 +173,31 @@ static void show(inst* m, const double* outputs, int64_t next_event, long execut
     m->out[ATO_VR_executions] = (double)executions;
 }
 
+/* check_declared (cosim/fmu/declare.py) for the declared ranges of the generated table: the
+ * first parameter outside its [min, max]; NULL when all keep them */
+static int declared_ranges_hold(inst* m, char* err, size_t n) {
+    for (int i = 0; i < ATO_N_VARS; i++) {
+        const ato_var* v = &ATO_VARS[i];
+        if (v->causality != ATO_PARAMETER || v->type == ATO_STRING || v->type == ATO_BOOLEAN)
+            continue;
+        double x = m->v[i];
+        int low = v->has_min && !(x >= v->min), high = v->has_max && !(x <= v->max);
+        if (low || high) {
+            snprintf(err, n, "%s = %s: must be at %s %s", v->name, fmt(x).s,
+                     low ? "least" : "most", fmt(low ? v->min : v->max).s);
+            return 0;
+        }
+    }
+    return 1;
+}
+
 static int ensure_core(inst* m) {
     if (m->core) return 1;
     char err[1024] = "";
+    if (!declared_ranges_hold(m, err, sizeof err)) {
+        logm(m, fmi2Error, "%s: bad parameter: %s", m->name, err);
+        return 0;
+    }
     ato_values p = values_of(m);
     m->core = law_make(&p, to_seconds(m->start_ticks), err, sizeof err);
     if (!m->core) {

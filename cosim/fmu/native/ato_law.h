@@ -43,6 +43,10 @@ void law_set_state(law_core* c, const void* in);
 int law_compute(law_core* c, double t, const ato_values* p, double* out, char* err,
                 size_t err_size);
 
+/* x as the shortest decimal that reads back exactly (Python's repr of a float), in buf;
+ * returns buf (for messages that name a value as the Python core's do) */
+const char* ato_repr(double x, char buf[40]);
+
 /* The outputs shown before the first event (the core's outputs()), into out[vr]. */
 void law_outputs(const law_core* c, double* out);
 

@@ -184,6 +184,42 @@ static int load_set(region_set* s, const table* t, int mode, int seg, char* err,
 }
 
 /* -- construction ------------------------------------------------------------------------- */
+/* controllers/hybrid/miqp.py parse_blocks: "3:4:3" (or blank: one stage per block), positive
+ * lengths summing to N; 0 after a message */
+static int parse_blocks(const char* text, int horizon, char* err, size_t n) {
+    const char* q = text;
+    while (*q == ' ' || *q == '\t') q++;
+    if (!*q) return 1;
+    long sum = 0;
+    int positive = 1;
+    const char* p = text;
+    for (;;) {
+        char* end;
+        while (*p == ' ' || *p == '\t') p++;
+        long b = strtol(p, &end, 10);
+        if (end == p) {
+            snprintf(err, n, "move_blocks = '%s': expected lengths like '3:4:3'", text);
+            return 0;
+        }
+        p = end;
+        while (*p == ' ' || *p == '\t') p++;
+        positive &= b >= 1;
+        sum += b;
+        if (!*p) break;
+        if (*p != ':' && *p != ',') {
+            snprintf(err, n, "move_blocks = '%s': expected lengths like '3:4:3'", text);
+            return 0;
+        }
+        p++;
+    }
+    if (!positive || sum != horizon) {
+        snprintf(err, n, "move_blocks = '%s': positive lengths summing to N = %d", text,
+                 horizon);
+        return 0;
+    }
+    return 1;
+}
+
 static int isclose(double a, double b) {
     return a == b || fabs(a - b) <= 1e-9 * pymax(fabs(a), fabs(b));
 }
@@ -210,7 +246,8 @@ law_core* law_make(const ato_values* p, double t0, char* err, size_t n) {
     c->brake_until_speed = v[ATO_VR_brake_until_speed];
     c->sample_time = v[ATO_VR_sample_time];
     c->horizon = (int)v[ATO_VR_N];
-    /* HybridMpcParams.check (the parameters the online law reads or the data fix) */
+    /* HybridMpcParams.check, in its order */
+    if (!parse_blocks(s[ATO_VR_move_blocks], c->horizon, err, n)) return fail(c, NULL);
     const char* posref = s[ATO_VR_position_reference];
     if (strcmp(posref, "horizon") != 0 && strcmp(posref, "timetable") != 0) {
         snprintf(err, n, "position_reference = '%s' must be one of ('horizon', 'timetable')",
@@ -226,14 +263,16 @@ law_core* law_make(const ato_values* p, double t0, char* err, size_t n) {
     const int nonneg_vr[] = {ATO_VR_q_speed, ATO_VR_q_position};
     for (int i = 0; i < 2; i++)
         if (!(v[nonneg_vr[i]] >= 0)) {
-            snprintf(err, n, "%s = %.17g must be >= 0", nonneg[i], v[nonneg_vr[i]]);
+            char a[40];
+            snprintf(err, n, "%s = %s must be >= 0", nonneg[i], ato_repr(v[nonneg_vr[i]], a));
             return fail(c, NULL);
         }
     const char* pos[] = {"r_force", "sample_time", "coupler_force_max"};
     const int pos_vr[] = {ATO_VR_R, ATO_VR_sample_time, ATO_VR_coupler_force_max};
     for (int i = 0; i < 3; i++)
         if (!(v[pos_vr[i]] > 0)) {
-            snprintf(err, n, "%s = %.17g must be > 0", pos[i], v[pos_vr[i]]);
+            char a[40];
+            snprintf(err, n, "%s = %s must be > 0", pos[i], ato_repr(v[pos_vr[i]], a));
             return fail(c, NULL);
         }
     if (!ato_profile_load(&c->profile, p->resources, s[ATO_VR_reference], err, n))
@@ -278,9 +317,10 @@ law_core* law_make(const ato_values* p, double t0, char* err, size_t n) {
     for (int i = 0; i < 6; i++) {
         const char* have = table_meta(&t, fkeys[i]);
         if (!have || !isclose(strtod(have, NULL), fvals[i])) {
-            snprintf(err, n, "regions = '%s' were built for %s = %s, this controller has "
-                     "%.17g: regenerate them with scripts/make_empc_regions.py", name,
-                     fkeys[i], have ? have : "None", fvals[i]);
+            char a[40];
+            snprintf(err, n, "regions = '%s.npz' were built for %s = %s, this controller has "
+                     "%s: regenerate them with scripts/make_empc_regions.py", name,
+                     fkeys[i], have ? have : "None", ato_repr(fvals[i], a));
             return fail(c, &t);
         }
     }
@@ -289,7 +329,7 @@ law_core* law_make(const ato_values* p, double t0, char* err, size_t n) {
     for (int i = 0; i < 3; i++) {
         const char* have = table_meta(&t, skeys[i]);
         if (!have || strcmp(have, svals[i]) != 0) {
-            snprintf(err, n, "regions = '%s' were built for %s = %s, this controller has "
+            snprintf(err, n, "regions = '%s.npz' were built for %s = %s, this controller has "
                      "'%s': regenerate them with scripts/make_empc_regions.py", name, skeys[i],
                      have ? have : "None", svals[i]);
             return fail(c, &t);

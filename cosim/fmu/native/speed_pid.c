@@ -56,29 +56,11 @@ law_core* law_make(const ato_values* p, double t0, char* err, size_t n) {
     c.mass = v[ATO_VR_mass];
     c.hold_accel = v[ATO_VR_hold_accel];
     c.stop_speed = v[ATO_VR_stop_speed];
-    /* DistributedSpeedPidParams.check and SpeedPidParams.check */
-    if (!(c.sample_time > 0)) {
-        snprintf(err, n, "sample_time = %.17g must be > 0", c.sample_time);
-        return NULL;
-    }
+    /* DistributedSpeedPidParams.check_relations (the declared ranges: ato_controller.c) */
     if (!(c.accel_min < c.accel_max)) {
-        snprintf(err, n, "accel_min = %.17g must be < accel_max = %.17g", c.accel_min,
-                 c.accel_max);
-        return NULL;
-    }
-    const char* names[] = {"kp", "ki", "kd", "derivative_filter", "rate_limit"};
-    const double values[] = {c.kp, c.ki, c.kd, c.derivative_filter, c.rate_limit};
-    for (int i = 0; i < 5; i++)
-        if (!(isfinite(values[i]) && values[i] >= 0)) {
-            snprintf(err, n, "%s = %.17g must be finite and >= 0", names[i], values[i]);
-            return NULL;
-        }
-    if (!(c.mass > 0)) {
-        snprintf(err, n, "mass = %.17g must be > 0", c.mass);
-        return NULL;
-    }
-    if (!(c.hold_accel <= 0)) {
-        snprintf(err, n, "hold_accel = %.17g must be <= 0", c.hold_accel);
+        char a[40], b[40];
+        snprintf(err, n, "accel_min = %s must be < accel_max = %s", ato_repr(c.accel_min, a),
+                 ato_repr(c.accel_max, b));
         return NULL;
     }
     if (!ato_profile_load(&c.profile, p->resources, p->s[ATO_VR_reference], err, n))

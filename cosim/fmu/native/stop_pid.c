@@ -49,21 +49,11 @@ law_core* law_make(const ato_values* p, double t0, char* err, size_t n) {
     c.sample_time = v[ATO_VR_sample_time];
     c.feedforward = v[ATO_VR_feedforward] != 0.0;
     c.hold_at_stop_point = v[ATO_VR_hold_at_stop_point] != 0.0;
-    /* StopPidParams.check */
-    if (!(c.sample_time > 0)) {
-        snprintf(err, n, "sample_time = %.17g must be > 0", c.sample_time);
-        return NULL;
-    }
+    /* StopPidParams.check_relations (the declared ranges: ato_controller.c) */
     if (!(c.u_min < c.u_max)) {
-        snprintf(err, n, "u_min = %.17g must be < u_max = %.17g", c.u_min, c.u_max);
-        return NULL;
-    }
-    if (!(c.ref_decel > 0)) {
-        snprintf(err, n, "ref_decel = %.17g must be > 0", c.ref_decel);
-        return NULL;
-    }
-    if (!(c.brake_gain > 0)) {
-        snprintf(err, n, "brake_gain = %.17g must be > 0", c.brake_gain);
+        char a[40], b[40];
+        snprintf(err, n, "u_min = %s must be < u_max = %s", ato_repr(c.u_min, a),
+                 ato_repr(c.u_max, b));
         return NULL;
     }
     law_core* out = malloc(sizeof c);
