@@ -4,7 +4,8 @@ A native FMU has the same variables as its Python FMU: its modelDescription.xml 
 wrapper's own (``CoreSlave.to_xml``: value references, units, ranges, starts, structure), and
 the C header ``<id>_decl.h`` (value references, starts, ranges as ``ato_var`` rows) is written
 from the same declarations at build time, so nothing is declared twice. Route data are exported
-from the bundled route files (parsed by :mod:`plants.route`) to ``resources/routes/<name>.grade``.
+from the bundled route files (parsed by :mod:`plants.route`) to ``resources/routes/<name>.grade``
+and, for the models that read them, ``<name>.<profile>`` (:data:`ROUTE_PROFILES`).
 
 The FMU holds ``binaries/linux64/<id>.so`` (gcc), ``binaries/win64/<id>.dll`` when the
 mingw-w64 cross compiler ``x86_64-w64-mingw32-gcc`` is installed, and ``sources/`` (the C
@@ -12,7 +13,8 @@ files, the generated header, the FMI 2 headers and ``buildDescription.xml``) so 
 compile it. Native FMUs are built to ``fmus/native/<id>.fmu`` (``cosim build --native``).
 
 Compiled with ``-std=c99 -ffp-contract=off`` (no fused multiply-add, no fast math), so the C
-model performs the core's IEEE operations in the core's order; its only libm call is ``exp``.
+model performs the core's IEEE operations in the core's order (libm calls: ``exp``, and
+``pow`` in the freight brake cylinders).
 """
 
 from __future__ import annotations
@@ -44,14 +46,16 @@ WINDOWS_CC = "x86_64-w64-mingw32-gcc"
 
 @dataclass(frozen=True)
 class NativeSpec:
-    """A native model: the C file of its backend (in cosim/fmu/native/); ``extra``: further C
-    files and headers from there (a controller's law links with ``ato_controller.c``);
-    ``data``: the generated resources it reads (keys of :data:`DATA`: reference profiles,
-    region tables)."""
+    """A native model: the C file of its backend (in cosim/fmu/native/), further C files it
+    links and headers it includes (``helpers``, same folder; a controller's law links with
+    ``ato_controller.c``), the route profiles it reads besides the grade steps
+    (``route_profiles``, keys of :data:`ROUTE_PROFILES`) and the other generated resources it
+    reads (``data``, keys of :data:`DATA`: reference profiles, region tables)."""
 
     identifier: str
     source: str
-    extra: tuple[str, ...] = ()
+    helpers: tuple[str, ...] = ()
+    route_profiles: tuple[str, ...] = ()
     data: tuple[str, ...] = ()
 
     @property
@@ -60,17 +64,19 @@ class NativeSpec:
 
 
 CONTROLLER = ("ato_controller.c", "ato_law.h")  # the sampled-controller backend of a law
+PROFILE = ("ato_profile.c", "ato_profile.h")  # reference profiles (resources/references)
 
 NATIVE: dict[str, NativeSpec] = {
     "BrakeDelayTrain": NativeSpec("BrakeDelayTrain", "brake_delay.c"),
     "StopPid": NativeSpec("StopPid", "stop_pid.c", CONTROLLER),
-    "EmuSpeedPid3": NativeSpec("EmuSpeedPid3", "speed_pid.c", (*CONTROLLER, "ato_profile.c",
-                                                               "ato_profile.h"), ("references",)),
-    "EmuSpeedPid8": NativeSpec("EmuSpeedPid8", "speed_pid.c", (*CONTROLLER, "ato_profile.c",
-                                                               "ato_profile.h"), ("references",)),
-    "Empc3": NativeSpec("Empc3", "explicit_mpc.c", (*CONTROLLER, "ato_profile.c",
-                                                    "ato_profile.h"),
-                        ("references", "empc_regions")),
+    "EmuSpeedPid3": NativeSpec("EmuSpeedPid3", "speed_pid.c", (*CONTROLLER, *PROFILE),
+                               data=("references",)),
+    "EmuSpeedPid8": NativeSpec("EmuSpeedPid8", "speed_pid.c", (*CONTROLLER, *PROFILE),
+                               data=("references",)),
+    "Empc3": NativeSpec("Empc3", "explicit_mpc.c", (*CONTROLLER, *PROFILE),
+                        data=("references", "empc_regions")),
+    "FreightTrain": NativeSpec("FreightTrain", "freight.c", ("freight_kernel.c",),
+                               ("speed_limit", "additional")),
 }
 
 
@@ -82,6 +88,11 @@ def _c_string(text: str) -> str:
     return '"' + text.replace("\\", "\\\\").replace('"', '\\"') + '"'
 
 
+def c_identifier(name: str) -> str:
+    """A variable name as a C identifier: ``v[12]`` -> ``v_12`` (``[`` -> ``_``, ``]`` dropped)."""
+    return name.replace("[", "_").replace("]", "")
+
+
 def _c_double(value: float) -> str:
     """A double literal that reads back to the same float (hex, exact)."""
     if math.isinf(value):
@@ -89,15 +100,10 @@ def _c_double(value: float) -> str:
     return float(value).hex()
 
 
-def c_name(name: str) -> str:
-    """A variable name as a C identifier: ``force[1]`` -> ``force_1_``."""
-    return "".join(ch if ch.isalnum() or ch == "_" else "_" for ch in name)
-
-
 def decl_header(identifier: str, variables, guid: str, options: dict | None = None) -> str:
     """``<id>_decl.h``: model identifier, GUID, one ``ATO_VR_<name>`` per variable (name as
-    :func:`c_name`), the ``ATO_VARS`` table (causality, type, start, range) in value-reference
-    order, and ``ATO_OPTION_<key>`` per integer core option (e.g. ``units``)."""
+    :func:`c_identifier`), the ``ATO_VARS`` table (causality, type, start, range) in
+    value-reference order, and ``ATO_OPTION_<key>`` per integer core option (e.g. ``units``)."""
     types = {float: "ATO_REAL", int: "ATO_INTEGER", bool: "ATO_BOOLEAN", str: "ATO_STRING"}
     causality = {"parameter": "ATO_PARAMETER", "input": "ATO_INPUT", "output": "ATO_OUTPUT"}
     lines = [f"/* generated by cosim/fmu/native_build.py from the declarations of {identifier};"
@@ -106,7 +112,7 @@ def decl_header(identifier: str, variables, guid: str, options: dict | None = No
              f"#define ATO_MODEL_IDENTIFIER {_c_string(identifier)}",
              f"#define ATO_GUID {_c_string(guid)}",
              f"#define ATO_N_VARS {len(variables)}", "enum {"]
-    lines += [f"    ATO_VR_{c_name(v.name)} = {vr}," for vr, v in enumerate(variables)]
+    lines += [f"    ATO_VR_{c_identifier(v.name)} = {vr}," for vr, v in enumerate(variables)]
     lines += ["};"]
     lines += [f"#define ATO_OPTION_{key} {int(value)}" for key, value in (options or {}).items()]
     lines += ["static const ato_var ATO_VARS[ATO_N_VARS] = {"]
@@ -166,6 +172,42 @@ def route_tables() -> dict[str, str]:
                 for s, g in zip(grade.starts.tolist(), grade.values.tolist())]
         tables[toml.stem] = f"# grade steps of route {toml.stem}: start_m permille\n" + \
             "\n".join(rows) + "\n"
+    return tables
+
+
+def _step_rows(starts, values) -> list[str]:
+    return [f"{'-inf' if math.isinf(s) and s < 0 else repr(float(s))} {float(g)!r}"
+            for s, g in zip(starts.tolist(), values.tolist())]
+
+
+def _speed_limit_table(route) -> tuple[str, list[str]]:
+    limit = route.speed_limit
+    return "speed limit steps: start_m limit_m_per_s", _step_rows(limit.starts, limit.values)
+
+
+def _additional_table(route) -> tuple[str, list[str]]:
+    xs, cum = route.additional._cumulative  # the knots the compiled kernels interpolate on
+    return ("additional resistance (grade + curve + tunnel), cumulative over position: "
+            "position_m integral_N_per_kN_m", _step_rows(xs, cum))
+
+
+ROUTE_PROFILES = {"speed_limit": _speed_limit_table, "additional": _additional_table}
+
+
+def route_profile_tables(kinds: tuple[str, ...]) -> dict[str, str]:
+    """``<name>.<kind>`` text per bundled route and profile kind (:data:`ROUTE_PROFILES`):
+    rows of two floats (repr, which reads back exactly; ``inf`` where a value is infinite)."""
+    route = importlib.import_module("plants.route")
+    tables = {}
+    for toml in sorted(route.ROUTES_DIR.glob("*.toml")):
+        try:
+            loaded = route.load_route(toml.stem)
+        except ValueError:  # a reference-profile TOML beside the routes, not a route
+            continue
+        for kind in kinds:
+            title, rows = ROUTE_PROFILES[kind](loaded)
+            tables[f"{toml.stem}.{kind}"] = f"# {title} of route {toml.stem}\n" + \
+                "\n".join(rows) + "\n"
     return tables
 
 
@@ -266,7 +308,7 @@ def native_sources(identifier: str) -> list[Path]:
     this builder and the Python wrapper's files (declarations, bundled data)."""
     spec = NATIVE[identifier]
     return [NATIVE_DIR / spec.source, NATIVE_DIR / "ato_vars.h",
-            *(NATIVE_DIR / name for name in spec.extra), FRONT_DIR / "fmi2_front.c",
+            *(NATIVE_DIR / name for name in spec.helpers), FRONT_DIR / "fmi2_front.c",
             FRONT_DIR / "ato_backend.h", Path(__file__),
             *bundled_files(catalog()[identifier].module)]
 
@@ -302,17 +344,16 @@ def build_native(identifier: str, dest: Path = NATIVE_FMU_DIR, windows: bool | N
     slave_class = catalog()[identifier].load()
     guid = "{" + str(uuid.uuid4()) + "}"
     headers = Path(fmpy.__file__).parent / "c-code"
-    c_files = ["fmi2_front.c", spec.source, *(f for f in spec.extra if f.endswith(".c"))]
+    c_files = ["fmi2_front.c", spec.source, *(f for f in spec.helpers if f.endswith(".c"))]
     with tempfile.TemporaryDirectory(prefix="atocosim_native_") as tmp:
         root = Path(tmp) / "fmu"
         src = root / "sources"
         src.mkdir(parents=True)
         shutil.copy2(FRONT_DIR / "fmi2_front.c", src)
         shutil.copy2(FRONT_DIR / "ato_backend.h", src)
-        shutil.copy2(NATIVE_DIR / spec.source, src)
-        shutil.copy2(NATIVE_DIR / "ato_vars.h", src)
-        for name in spec.extra:
+        for name in (spec.source, *spec.helpers):
             shutil.copy2(NATIVE_DIR / name, src)
+        shutil.copy2(NATIVE_DIR / "ato_vars.h", src)
         for h in ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h"):
             shutil.copy2(headers / h, src)
         (src / f"{identifier}_decl.h").write_text(
@@ -327,14 +368,13 @@ def build_native(identifier: str, dest: Path = NATIVE_FMU_DIR, windows: bool | N
         routes.mkdir(parents=True)
         for name, text in route_tables().items():
             (routes / f"{name}.grade").write_text(text)
+        for name, text in route_profile_tables(spec.route_profiles).items():
+            (routes / name).write_text(text)
         for kind in spec.data:
             for rel, content in DATA[kind]().items():
                 target = root / "resources" / rel
                 target.parent.mkdir(parents=True, exist_ok=True)
-                if isinstance(content, bytes):
-                    target.write_bytes(content)
-                else:
-                    target.write_text(content)
+                target.write_text(content)
         (root / "binaries" / "linux64").mkdir(parents=True)
         compile_binary(gcc, src, root / "binaries" / "linux64" / f"{identifier}.so", False)
         if mingw:

@@ -406,7 +406,7 @@ void law_outputs(const law_core* c, double* out) {
     const empc_state* st = &c->st;
     double total = 0.0;
     for (int i = 0; i < UNITS; i++) {
-        out[ATO_VR_force_1_ + i] = st->forces[i];
+        out[ATO_VR_force_1 + i] = st->forces[i];
         total += st->forces[i];
     }
     out[ATO_VR_force_demand] = total;
@@ -427,7 +427,7 @@ int law_compute(law_core* c, double t, const ato_values* p, double* out, char* e
     empc_state* st = &c->st;
     const double* in = p->v;
     double v[UNITS];
-    for (int i = 0; i < UNITS; i++) v[i] = in[ATO_VR_v_1_ + i];
+    for (int i = 0; i < UNITS; i++) v[i] = in[ATO_VR_v_1 + i];
     double vm = 0.0;
     for (int i = 0; i < UNITS; i++) vm += c->c[i] * v[i];
     /* HybridMpc.schedule, stage 0 */
@@ -451,13 +451,14 @@ int law_compute(law_core* c, double t, const ato_values* p, double* out, char* e
     int first = 1;
     for (int i = 0; i < UNITS; i++) {
         if (mode == 1 && !(ratio[i] > 0)) continue;
-        double limit = mode == 1 ? in[ATO_VR_traction_limit_1_ + i] : in[ATO_VR_brake_limit_1_ + i];
+        double limit = mode == 1 ? in[ATO_VR_traction_limit_1 + i]
+                                 : in[ATO_VR_brake_limit_1 + i];
         double x = limit / KN / ratio[i];
         if (first || x < lim) lim = x;
         first = 0;
     }
     double theta[NTHETA] = {vm - vd, 1e3 * (v[0] - v[1]), 1e3 * (v[1] - v[2]),
-                            in[ATO_VR_coupler_force_1_] / KN, in[ATO_VR_coupler_force_2_] / KN,
+                            in[ATO_VR_coupler_force_1] / KN, in[ATO_VR_coupler_force_2] / KN,
                             vd, slope, pymax(lim, 0.0)};
     const region_set* rs = &c->sets[mode][seg];
     double clipped[NTHETA];

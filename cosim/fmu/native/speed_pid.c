@@ -118,7 +118,7 @@ static double update(law_core* c, double v, double v_ref, double a_ref, double a
 
 void law_outputs(const law_core* c, double* out) {
     const pid_state* st = &c->st;
-    for (int i = 0; i < UNITS; i++) out[ATO_VR_force_1_ + i] = st->forces[i];
+    for (int i = 0; i < UNITS; i++) out[ATO_VR_force_1 + i] = st->forces[i];
     out[ATO_VR_force_demand] = c->mass * st->demand;
     out[ATO_VR_accel_demand] = st->demand;
     out[ATO_VR_v_ref] = st->v_ref;
@@ -136,8 +136,8 @@ int law_compute(law_core* c, double t, const ato_values* p, double* out, char* e
     double v = in[ATO_VR_v];
     double trac[UNITS], brake[UNITS], total_trac = 0.0, total_brake = 0.0;
     for (int i = 0; i < UNITS; i++) {
-        trac[i] = pymax(in[ATO_VR_traction_limit_1_ + i], 0.0);
-        brake[i] = pymax(in[ATO_VR_brake_limit_1_ + i], 0.0);
+        trac[i] = pymax(in[ATO_VR_traction_limit_1 + i], 0.0);
+        brake[i] = pymax(in[ATO_VR_brake_limit_1 + i], 0.0);
     }
     for (int i = 0; i < UNITS; i++) total_trac += trac[i];
     for (int i = 0; i < UNITS; i++) total_brake += brake[i];
