@@ -5,7 +5,10 @@ wrapper's own (``CoreSlave.to_xml``: value references, units, ranges, starts, st
 the C header ``<id>_decl.h`` (value references, starts, ranges as ``ato_var`` rows) is written
 from the same declarations at build time, so nothing is declared twice. Route data are exported
 from the bundled route files (parsed by :mod:`plants.route`) to ``resources/routes/<name>.grade``
-and, for the models that read them, ``<name>.<profile>`` (:data:`ROUTE_PROFILES`).
+and, for the models that read them, ``<name>.<profile>`` (:data:`ROUTE_PROFILES`); the
+bundled reference profiles and EMPC region tables (:data:`DATA`) to ``resources/references``
+and ``resources/regions``. A controller is its law's C file linked with ``ato_controller.c``,
+the C twin of the sampled-controller timing of :mod:`cosim.fmu.slave`.
 
 The FMU holds ``binaries/linux64/<id>.so`` (gcc), ``binaries/win64/<id>.dll`` when the
 mingw-w64 cross compiler ``x86_64-w64-mingw32-gcc`` is installed, and ``sources/`` (the C
@@ -14,7 +17,7 @@ compile it. Native FMUs are built to ``fmus/native/<id>.fmu`` (``cosim build --n
 
 Compiled with ``-std=c99 -ffp-contract=off`` (no fused multiply-add, no fast math), so the C
 model performs the core's IEEE operations in the core's order (libm calls: ``exp``, and
-``pow`` in the freight brake cylinders).
+``pow`` in the freight brake cylinders; ``sqrt``, correctly rounded, in the controllers).
 """
 
 from __future__ import annotations
