@@ -90,7 +90,8 @@ class Native:
 
     def core_state(self, n: int) -> dict:
         """The Emu core's state fields from the native FMU's serialized state (layout of
-        ato_model.c: front mode, magic, variables, strings, flags, start, executions, core)."""
+        ato_plant_backend.c: front mode, magic, variables, strings, flags, start, executions,
+        core)."""
         state = self.fmu.getFMUstate()
         data = bytes(self.fmu.serializeFMUstate(state))
         self.fmu.freeFMUstate(state)

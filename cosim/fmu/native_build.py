@@ -5,8 +5,12 @@ wrapper's own (``CoreSlave.to_xml``: value references, units, ranges, starts, st
 the C header ``<id>_decl.h`` (value references, starts, ranges as ``ato_var`` rows) is written
 from the same declarations at build time, so nothing is declared twice. Route data are exported
 from the bundled route files (parsed by :mod:`plants.route`) to ``resources/routes/<name>.grade``
-and, for the models that read them, ``<name>.<profile>`` (:data:`ROUTE_PROFILES`) or the
-step profiles of :data:`STEP_PROFILES` in ``<name>.profiles``.
+and, for the models that read them, ``<name>.<profile>`` (:data:`ROUTE_PROFILES`); the
+bundled reference profiles and EMPC region tables (:data:`DATA`) to ``resources/references``
+and ``resources/regions``. A controller is its law's C file linked with ``ato_controller.c``,
+the C twin of the sampled-controller timing of :mod:`cosim.fmu.slave`.
+The Crh3Train and Emu plants read the step profiles of :data:`STEP_PROFILES` from
+``<name>.profiles`` and link the generic plant backend ``ato_plant_backend.c``.
 
 The FMU holds ``binaries/linux64/<id>.so`` (gcc), ``binaries/win64/<id>.dll`` when the
 mingw-w64 cross compiler ``x86_64-w64-mingw32-gcc`` is installed, and ``sources/`` (the C
@@ -15,8 +19,9 @@ compile it. Native FMUs are built to ``fmus/native/<id>.fmu`` (``cosim build --n
 
 Compiled with ``-std=c99 -ffp-contract=off`` (no fused multiply-add, no fast math), so the C
 model performs the core's IEEE operations in the core's order (libm calls: ``exp``, and
-``pow`` in the freight brake cylinders, ``log1p`` in numpy's normal draws, ``log2`` in the
-choice of squarings of the Emu's matrix exponential).
+``pow`` in the freight brake cylinders; ``sqrt``, correctly rounded, in the controllers;
+``log1p`` in numpy's normal draws and ``log2`` in the choice of squarings of the Emu's matrix
+exponential).
 """
 
 from __future__ import annotations
@@ -31,11 +36,13 @@ import subprocess
 import tempfile
 import uuid
 import zipfile
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from xml.etree.ElementTree import Element, SubElement, indent, tostring
 
-from cosim.fmu.build import FMU_DIR, catalog
+import numpy as np
+
+from cosim.fmu.build import FMU_DIR, bundled_files, catalog
 
 HERE = Path(__file__).resolve().parent
 NATIVE_DIR = HERE / "native"
@@ -49,10 +56,12 @@ WINDOWS_CC = "x86_64-w64-mingw32-gcc"
 @dataclass(frozen=True)
 class NativeSpec:
     """A native model: the C file of its backend (in cosim/fmu/native/), further C files it
-    links (``helpers``, same folder) and the route profiles it reads besides the grade steps
-    (``route_profiles``, keys of :data:`ROUTE_PROFILES`); files it shares with other
-    models (``shared``, C and headers, same folder; with ``ato_plant.c`` the route's step
-    profiles ``<name>.profiles`` are exported), for a model with named train data
+    links and headers it includes (``helpers``, same folder; a controller's law links with
+    ``ato_controller.c``), the route profiles it reads besides the grade steps
+    (``route_profiles``, keys of :data:`ROUTE_PROFILES`) and the other generated resources it
+    reads (``data``, keys of :data:`DATA`: reference profiles, region tables); files it shares
+    with other plant models (``shared``, C and headers, same folder; with ``ato_plant.c`` the
+    route's step profiles ``<name>.profiles`` are exported), for a model with named train data
     ``configurations``: ``"module:NAME"`` of a mapping configuration name -> factory of a
     declared dataclass, written to ``<id>_config.h`` (:func:`config_header`), and the headers
     of :data:`GENERATED` it includes (``generated``)."""
@@ -61,6 +70,7 @@ class NativeSpec:
     source: str
     helpers: tuple[str, ...] = ()
     route_profiles: tuple[str, ...] = ()
+    data: tuple[str, ...] = ()
     shared: tuple[str, ...] = ()
     configurations: str | None = None
     generated: tuple[str, ...] = ()
@@ -70,14 +80,23 @@ class NativeSpec:
         return NATIVE_FMU_DIR / f"{self.identifier}.fmu"
 
 
-# the generic backend (ato_model.c: FMI 2-shaped functions, variables, FMU state) and the
-# plant helpers (ato_plant.c: route profiles, envelope, resistance) of the plant models
-PLANT_SHARED = ("ato_model.h", "ato_model.c", "ato_plant.h", "ato_plant.c")
+CONTROLLER = ("ato_controller.c", "ato_law.h")  # the sampled-controller backend of a law
+PROFILE = ("ato_profile.c", "ato_profile.h")  # reference profiles (resources/references)
+# the generic plant backend (ato_plant_backend.c: FMI 2-shaped functions, variables, FMU
+# state) and the plant helpers (ato_plant.c: route profiles, envelope, resistance)
+PLANT_SHARED = ("ato_plant_backend.h", "ato_plant_backend.c", "ato_plant.h", "ato_plant.c")
 # numpy's default_rng(seed words).standard_normal in C (seeded disturbances)
 NUMPY_RANDOM = ("ato_numpy_random.h", "ato_numpy_random.c")
 
 NATIVE: dict[str, NativeSpec] = {
     "BrakeDelayTrain": NativeSpec("BrakeDelayTrain", "brake_delay.c"),
+    "StopPid": NativeSpec("StopPid", "stop_pid.c", CONTROLLER),
+    "EmuSpeedPid3": NativeSpec("EmuSpeedPid3", "speed_pid.c", (*CONTROLLER, *PROFILE),
+                               data=("references",)),
+    "EmuSpeedPid8": NativeSpec("EmuSpeedPid8", "speed_pid.c", (*CONTROLLER, *PROFILE),
+                               data=("references",)),
+    "Empc3": NativeSpec("Empc3", "explicit_mpc.c", (*CONTROLLER, *PROFILE),
+                        data=("references", "empc_regions")),
     "FreightTrain": NativeSpec("FreightTrain", "freight.c", ("freight_kernel.c",),
                                ("speed_limit", "additional")),
     "Crh3Train": NativeSpec("Crh3Train", "crh3.c", shared=PLANT_SHARED),
@@ -108,10 +127,12 @@ def _c_double(value: float) -> str:
     return float(value).hex()
 
 
-def decl_header(identifier: str, variables, guid: str) -> str:
-    """``<id>_decl.h``: model identifier, GUID, one ``ATO_VR_<name>`` per variable (indexed
-    names ``x[i]`` as ``ATO_VR_x_i``, and per base name ``ATO_N_x`` and ``ATO_VRS_x[]``) and
-    the ``ATO_VARS`` table (causality, type, start, range) in value-reference order."""
+def decl_header(identifier: str, variables, guid: str, options: dict | None = None) -> str:
+    """``<id>_decl.h``: model identifier, GUID, one ``ATO_VR_<name>`` per variable (name as
+    :func:`c_identifier`), the ``ATO_VARS`` table (causality, type, start, range) in
+    value-reference order, ``ATO_OPTION_<key>`` per integer core option (e.g. ``units``), and
+    for indexed names ``x[i]`` per base name ``ATO_N_x`` and ``ATO_VRS_x[]`` (value references
+    in index order)."""
     types = {float: "ATO_REAL", int: "ATO_INTEGER", bool: "ATO_BOOLEAN", str: "ATO_STRING"}
     causality = {"parameter": "ATO_PARAMETER", "input": "ATO_INPUT", "output": "ATO_OUTPUT"}
     lines = [f"/* generated by cosim/fmu/native_build.py from the declarations of {identifier};"
@@ -122,6 +143,7 @@ def decl_header(identifier: str, variables, guid: str) -> str:
              f"#define ATO_N_VARS {len(variables)}", "enum {"]
     lines += [f"    ATO_VR_{c_identifier(v.name)} = {vr}," for vr, v in enumerate(variables)]
     lines += ["};"]
+    lines += [f"#define ATO_OPTION_{key} {int(value)}" for key, value in (options or {}).items()]
     indexed: dict[str, list[int]] = {}
     for vr, v in enumerate(variables):
         found = re.fullmatch(r"(\w+)\[(\d+)\]", v.name)
@@ -225,6 +247,75 @@ def route_profile_tables(kinds: tuple[str, ...]) -> dict[str, str]:
             tables[f"{toml.stem}.{kind}"] = f"# {title} of route {toml.stem}\n" + \
                 "\n".join(rows) + "\n"
     return tables
+
+
+def reference_tables() -> dict[str, str]:
+    """``references/<name>.ref`` per bundled reference profile (:func:`plants.route.
+    load_reference`): the line ``kind distance|time`` then its points ``x v`` (SI, %.17g via
+    repr, which reads back exactly)."""
+    route = importlib.import_module("plants.route")  # by name: layering
+    tables = {}
+    for path in sorted([*route.ROUTES_DIR.glob("*.csv"), *route.ROUTES_DIR.glob("*.toml")]):
+        try:
+            profile = route.load_reference(path.stem)
+        except (ValueError, AttributeError):  # a route, not a reference profile
+            continue
+        rows = [f"{float(x)!r} {float(v)!r}" for x, v in zip(profile.x.tolist(),
+                                                              profile.v.tolist())]
+        tables[f"references/{path.stem}.ref"] = (
+            f"# reference profile {path.stem}: x (m or s) v (m/s)\nkind {profile.kind}\n"
+            + "\n".join(rows) + "\n")
+    return tables
+
+
+def _numbers(key: str, values) -> str:
+    flat = [float(x) for x in np.asarray(values, dtype=float).ravel().tolist()]
+    return f"{key} {len(flat)} " + " ".join(repr(x) for x in flat)
+
+
+def empc_tables() -> dict[str, str]:
+    """``regions/<name>.empc`` per bundled EMPC region file (controllers/hybrid/data/*.npz):
+    its design settings (``meta key value``), the design constants of the online law
+    (mean-speed weights ``c``, PWA ``breakpoints``, ``motored`` cars, per-mode limit ratios)
+    and per mode and segment the parameter box, the regions (E, e, row offsets, first-move
+    F, f, tolerance) and the bounding-box tree :class:`controllers.hybrid.explicit.BoxTree`
+    built from them; one ``key count values...`` line per array (%.17g via repr: exact)."""
+    explicit = importlib.import_module("controllers.hybrid.explicit")  # by name: layering
+    empc = importlib.import_module("controllers.hybrid.explicit_mpc")
+    hybrid = importlib.import_module("controllers.hybrid.hybrid_mpc")
+    emu = importlib.import_module("plants.emu")
+    tables = {}
+    for path in sorted(explicit.DATA_DIR.glob("*.npz")):
+        law = explicit.ExplicitLaw.load(path)
+        meta = law.meta
+        train = emu.emu_config(str(meta["configuration"]))
+        params = replace(hybrid.HybridMpcParams(), fit_speed_max=float(meta["fit_speed_max"]),
+                         sample_time=float(meta["sample_time"]),
+                         configuration=str(meta["configuration"]))
+        model = hybrid.chain_model(train, params)
+        lines = [f"# EMPC region data {path.stem} (from {path.name}; generated)"]
+        lines += [f"meta {key} {value}" for key, value in meta.items()]
+        lines += [_numbers("c", model.c[:model.n]), _numbers("breakpoints",
+                                                             model.res.breakpoints),
+                  _numbers("motored", model.motored),
+                  *(_numbers(f"ratio{m}", empc.ExplicitMpc.limit_ratio(train, m))
+                    for m in explicit.MODES),
+                  _numbers("keys", sorted(law.sets))]
+        for (mode, seg), rs in sorted(law.sets.items()):
+            p = f"m{mode}s{seg}_"
+            tree = rs.tree
+            lines += [_numbers(p + "box", law.boxes[mode, seg]), _numbers(p + "E", rs.E),
+                      _numbers(p + "e", rs.e), _numbers(p + "rows", rs.rows),
+                      _numbers(p + "na", [rs.F.shape[1]]), _numbers(p + "F", rs.F),
+                      _numbers(p + "f", rs.f), _numbers(p + "tol", [rs.tol]),
+                      *(_numbers(p + name, getattr(tree, name))
+                        for name in ("dim", "thr", "left", "right", "start", "stop", "items"))]
+        tables[f"regions/{path.stem}.empc"] = "\n".join(lines) + "\n"
+    return tables
+
+
+# generated resources a native model may ask for (NativeSpec.data)
+DATA = {"references": reference_tables, "empc_regions": empc_tables}
 
 
 # the step profiles of a route a native plant reads (plants.route.Route fields); sums such as
@@ -408,6 +499,26 @@ def compile_binary(cc: str, src_dir: Path, out: Path, windows: bool) -> None:
         raise RuntimeError(f"{cc} failed on {out.name}:\n{done.stderr.strip()[-3000:]}")
 
 
+def native_sources(identifier: str) -> list[Path]:
+    """Every file the native FMU ``identifier`` is made from: its C files, the FMI 2 front,
+    this builder and the Python wrapper's files (declarations, bundled data)."""
+    spec = NATIVE[identifier]
+    return [NATIVE_DIR / spec.source, NATIVE_DIR / "ato_vars.h",
+            *(NATIVE_DIR / name for name in spec.helpers), FRONT_DIR / "fmi2_front.c",
+            FRONT_DIR / "ato_backend.h", Path(__file__),
+            *bundled_files(catalog()[identifier].module)]
+
+
+def native_is_stale(identifier: str) -> bool:
+    """True when the native FMU ``identifier`` is missing or older than a file it is made
+    from (:func:`native_sources`)."""
+    path = NATIVE[identifier].path
+    if not path.is_file():
+        return True
+    built = path.stat().st_mtime
+    return any(f.is_file() and f.stat().st_mtime > built for f in native_sources(identifier))
+
+
 def build_native(identifier: str, dest: Path = NATIVE_FMU_DIR, windows: bool | None = None
                  ) -> Path:
     """Build the native FMU ``identifier`` into ``dest``; ``windows``: also the win64 DLL
@@ -429,8 +540,8 @@ def build_native(identifier: str, dest: Path = NATIVE_FMU_DIR, windows: bool | N
     slave_class = catalog()[identifier].load()
     guid = "{" + str(uuid.uuid4()) + "}"
     headers = Path(fmpy.__file__).parent / "c-code"
-    c_files = ["fmi2_front.c", spec.source, *spec.helpers,
-               *(f for f in spec.shared if f.endswith(".c"))]
+    c_files = ["fmi2_front.c", spec.source,
+               *(f for f in (*spec.helpers, *spec.shared) if f.endswith(".c"))]
     with tempfile.TemporaryDirectory(prefix="atocosim_native_") as tmp:
         root = Path(tmp) / "fmu"
         src = root / "sources"
@@ -447,14 +558,17 @@ def build_native(identifier: str, dest: Path = NATIVE_FMU_DIR, windows: bool | N
         if spec.configurations:
             (src / f"{identifier}_config.h").write_text(
                 config_header(identifier, spec.configurations))
-        if spec.shared:  # the model file includes this FMU's headers by one name
+        if spec.shared:  # the plant model includes this FMU's headers by one name
             (src / "ato_model_decl.h").write_text(
                 f'#include "{identifier}_decl.h"\n'
                 + (f'#include "{identifier}_config.h"\n' if spec.configurations else ""))
         for h in ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h"):
             shutil.copy2(headers / h, src)
         (src / f"{identifier}_decl.h").write_text(
-            decl_header(identifier, slave_class.variables, guid))
+            decl_header(identifier, slave_class.variables, guid,
+                        getattr(slave_class, "core_options", None)))
+        (src / "ato_model.h").write_text(  # the model's header for the shared C files
+            f'/* generated by cosim/fmu/native_build.py */\n#include "{identifier}_decl.h"\n')
         (src / "buildDescription.xml").write_bytes(build_description(identifier, c_files))
         (root / "modelDescription.xml").write_bytes(
             model_description(identifier, slave_class, c_files, guid))
@@ -467,6 +581,11 @@ def build_native(identifier: str, dest: Path = NATIVE_FMU_DIR, windows: bool | N
         if "ato_plant.c" in spec.shared:
             for name, text in step_profile_tables().items():
                 (routes / f"{name}.profiles").write_text(text)
+        for kind in spec.data:
+            for rel, content in DATA[kind]().items():
+                target = root / "resources" / rel
+                target.parent.mkdir(parents=True, exist_ok=True)
+                target.write_text(content)
         (root / "binaries" / "linux64").mkdir(parents=True)
         compile_binary(gcc, src, root / "binaries" / "linux64" / f"{identifier}.so", False)
         if mingw:
