@@ -76,7 +76,8 @@ void ato_pcg64_seed(ato_pcg64* g, const uint64_t* ints, int n) {
         words[i] = v;
     }
     uint64_t seed[4];
-    for (int i = 0; i < 4; i++) seed[i] = (uint64_t)words[2 * i] | ((uint64_t)words[2 * i + 1] << 32);
+    for (int i = 0; i < 4; i++)
+        seed[i] = (uint64_t)words[2 * i] | ((uint64_t)words[2 * i + 1] << 32);
     ato_u128 initstate = {seed[0], seed[1]}, initseq = {seed[2], seed[3]};
     g->state.hi = g->state.lo = 0;
     g->inc.hi = (initseq.hi << 1) | (initseq.lo >> 63);

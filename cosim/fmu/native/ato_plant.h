@@ -13,7 +13,7 @@
 #ifndef ATO_PLANT_H
 #define ATO_PLANT_H
 
-#include "ato_model.h"
+#include "ato_plant_backend.h"
 
 #define ATO_GRAVITY 9.81 /* m/s^2, plants.route.GRAVITY */
 

@@ -1,5 +1,6 @@
 /*
- * ato_model.c: the generic native backend over one model (ATO_MODEL, see ato_model.h).
+ * ato_plant_backend.c: the generic native backend over one plant model (ATO_MODEL, see
+ * ato_plant_backend.h).
  *
  * FMI 2-shaped functions (ato_backend.h) for the fmi2 front: variables by value reference
  * from the generated table, the declared ranges of parameters checked on set, parameters
@@ -13,7 +14,7 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "ato_model.h"
+#include "ato_plant_backend.h"
 
 #define NV (ATO_MODEL.n_vars)
 #define VARS (ATO_MODEL.vars)
@@ -502,7 +503,7 @@ static fmi2Status am_deserialize(fmi2Component comp, const fmi2Byte in[], size_t
 }
 
 static const ato_backend BACKEND = {
-    "native C model (ato_model.c)", -1, 1,
+    "native C model (ato_plant_backend.c)", -1, 1,
     am_instantiate, am_free, am_set_debug_logging,
     am_setup, am_enter_init, am_exit_init, am_terminate, am_reset,
     am_get_real, am_get_integer, am_get_boolean, am_get_string,

@@ -1,7 +1,8 @@
 /*
- * ato_model.h: the generic native backend (ato_model.c) and the interface of a model to it.
+ * ato_plant_backend.h: the generic native backend of the plant models (ato_plant_backend.c)
+ * and the interface of a model to it.
  *
- * ato_model.c is an FMI 2-shaped backend (ato_backend.h) for any native model whose
+ * ato_plant_backend.c is an FMI 2-shaped backend (ato_backend.h) for any native model whose
  * variables are the generated ATO_VARS table: instantiation (GUID, resource URI), Real /
  * Integer / Boolean / String variables with the declared ranges, parameters fixed after
  * initialisation, doStep checks, errors logged with logging off, and the FMU state as a byte
@@ -10,8 +11,8 @@
  *
  * Integer and Boolean variables are kept as doubles in inst->r (exact for int32 and 0/1).
  */
-#ifndef ATO_MODEL_H
-#define ATO_MODEL_H
+#ifndef ATO_PLANT_BACKEND_H
+#define ATO_PLANT_BACKEND_H
 
 #include <stddef.h>
 #include <stdint.h>

@@ -249,7 +249,8 @@ static const double* noise_at(emu* e, int64_t tick) {
         uint64_t ints[2] = {(uint64_t)e->seed, (uint64_t)index};
         ato_pcg64 g;
         ato_pcg64_seed(&g, ints, 2);
-        for (int i = 0; i < N; i++) e->noise_cache[i] = e->m[i] * e->sigma * ato_standard_normal(&g);
+        for (int i = 0; i < N; i++)
+            e->noise_cache[i] = e->m[i] * e->sigma * ato_standard_normal(&g);
         e->noise_index = index;
     }
     return e->noise_cache;
