@@ -129,12 +129,14 @@ def parse_rows(stdout: str, version: int) -> np.ndarray:
     return rows[:, :-1] if version == 3 else rows  # the FMI 3 host adds nextEventTime
 
 
-def run_bare(exe: Path, args: list[str], tmp: Path) -> tuple[np.ndarray, list[str]]:
-    """Run a C host with an empty environment (``env -i``) but for the dynamic loader's trace
-    (LD_DEBUG=libs, to a file); returns its stdout and every library the loader initialised."""
+def run_bare(exe: Path, args: list[str], tmp: Path, env: dict[str, str] | None = None
+             ) -> tuple[str, list[str]]:
+    """Run a C host with an empty environment (``env -i``; ``env``: only these variables) but
+    for the dynamic loader's trace (LD_DEBUG=libs, to a file in ``tmp``); returns its stdout
+    and every library the loader initialised."""
     trace = tmp / "ld"
     done = subprocess.run([str(exe), *args], capture_output=True, text=True, timeout=120,
-                          env={"LD_DEBUG": "libs", "LD_DEBUG_OUTPUT": str(trace),
+                          env={**(env or {}), "LD_DEBUG": "libs", "LD_DEBUG_OUTPUT": str(trace),
                                "FMU_HOST_PLAIN_EXIT": "1"})
     assert done.returncode == 0, done.stderr
     assert "freed" in done.stderr
@@ -170,6 +172,23 @@ def test_c_hosts_run_both_builds_without_python(native, hosts, identifier, tmp_p
             np.testing.assert_array_equal(results[2], fmpy_rows(path, unzipdir))
     assert results[2].shape == (N_STEPS, 1 + len(probe(md2)[1]))
     np.testing.assert_array_equal(results[3], results[2])
+
+
+def test_the_loader_trace_lists_libpython_for_a_python_fmu(hosts, tmp_path):
+    """The trace the test above reads does see libpython where it is loaded: our Python FMI 3
+    build of the first native model, in the FMI 3 host, given only the PYTHONPATH it needs."""
+    import site
+
+    from cosim.fmu.build import build_stale, catalog
+
+    spec = catalog()[IDENTIFIERS[0]]
+    build_stale([spec], fmi_version=3)
+    md = read_model_description(str(spec.path_fmi3))
+    unzipdir = extract(str(spec.path_fmi3), unzipdir=str(tmp_path / "fmu"))
+    _, loaded = run_bare(hosts[3], host_args(3, str(unzipdir), md, md.instantiationToken),
+                         tmp_path, {"PYTHONPATH": os.pathsep.join([*site.getsitepackages(),
+                                                                    str(ROOT)])})
+    assert any("libpython" in Path(lib).name for lib in loaded), loaded
 
 
 @pytest.mark.parametrize("identifier", IDENTIFIERS)
@@ -336,3 +355,18 @@ def test_cli_native_errors_name_the_value(args, message):
     done = _cosim(*args)
     assert done.returncode == 2
     assert message in done.stderr.replace("\n", " "), done.stderr
+
+
+def test_windows_build_without_mingw_names_it(monkeypatch, tmp_path):
+    import cosim.fmu.native_build as nb
+
+    real = shutil.which
+    monkeypatch.setattr(nb.shutil, "which", lambda name: None if name == nb.WINDOWS_CC
+                        else real(name))
+    if real(nb.LINUX_CC) is None:
+        pytest.skip("gcc not installed")
+    with pytest.raises(nb.CompilerMissing, match=r"'x86_64-w64-mingw32-gcc'.*mingw-w64"):
+        build_natives(IDENTIFIERS[0], dest=tmp_path, windows=True)
+    with pytest.raises(ValueError, match=r"fmi_version 4: expected one of \[2, 3\]"):
+        build_natives(IDENTIFIERS[0], (2, 4), dest=tmp_path)
+    assert not list(tmp_path.iterdir())  # refused before anything was written
