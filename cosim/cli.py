@@ -288,19 +288,19 @@ def _progress(label: str, quiet: bool):
 def _native_paths(names: list[str] | None, versions: tuple[int, ...]) -> list[Path]:
     """The native builds of the identifiers ``names`` (None: every native FMU) in
     ``versions``, built where missing."""
-    from cosim.fmu.native_build import NATIVE, CompilerMissing, build_natives
+    from cosim.fmu.native_build import NATIVE, CompilerMissing, build_natives, native_path
 
     paths: list[Path] = []
     for name in sorted(NATIVE) if names is None else names:
         if name not in NATIVE:
             _fail(f"no native model of {name!r}; native: {sorted(NATIVE)}")
-        missing = tuple(v for v in versions if not NATIVE[name].path_for(v).is_file())
+        missing = tuple(v for v in versions if not native_path(name, v).is_file())
         if missing:
             try:
                 build_natives(name, missing)
             except (CompilerMissing, RuntimeError) as err:
                 _fail(str(err))
-        paths += [NATIVE[name].path_for(v) for v in versions]
+        paths += [native_path(name, v) for v in versions]
     return paths
 
 

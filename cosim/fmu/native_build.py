@@ -1,31 +1,19 @@
-"""Native C FMUs (FMI 2.0 and FMI 3.0): the C twin of a core behind one of our C fronts, no
-Python needed.
+"""Native C FMUs (FMI 2.0, and FMI 3.0 derived from them): the C twin of a core behind our C
+fronts, no Python needed.
 
-A native model (``cosim/fmu/native/<model>.c``) is a backend with FMI 2-shaped functions
-(``cosim/fmu/front/ato_backend.h``: it defines ``ato_backend_get()``). The same model file is
-linked statically with either front, with nothing else in between:
+A native FMU has the same variables as its Python FMU: its modelDescription.xml is the Python
+wrapper's own (``CoreSlave.to_xml``: value references, units, ranges, starts, structure), and
+the C header ``<id>_decl.h`` (value references, starts, ranges as ``ato_var`` rows) is written
+from the same declarations at build time, so nothing is declared twice. Route data are exported
+from the bundled route files (parsed by :mod:`plants.route`) to ``resources/routes/<name>.grade``.
 
-* FMI 2.0: ``cosim/fmu/front/fmi2_front.c``; ``binaries/linux64/<id>.so`` and
-  ``binaries/win64/<id>.dll``; built to ``fmus/native/<id>.fmu``;
-* FMI 3.0: ``cosim/fmu/front/fmi3_front.c`` (the front of our FMI 3 builds of the Python FMUs,
-  there over a backend that loads an FMI 2 binary); ``binaries/x86_64-linux/<id>.so`` and
-  ``binaries/x86_64-windows/<id>.dll``; built to ``fmus/native/fmi3/<id>.fmu``.
-
-A native FMU has the same variables as its Python FMU: the FMI 2 modelDescription.xml is the
-Python wrapper's own (``CoreSlave.to_xml``: value references, units, ranges, starts,
-structure), the FMI 3 one is derived from it by :func:`cosim.fmu.fmi3.model_description`
-(as for the Python FMUs' FMI 3 builds), and the C header ``<id>_decl.h`` (value references,
-starts, ranges as ``ato_var`` rows, the event-time output) is written from the same
-declarations at build time, so nothing is declared twice. Route data are exported from the
-bundled route files (parsed by :mod:`plants.route`) to ``resources/routes/<name>.grade``.
-
-Every FMU holds ``sources/`` (the model's C file, the front, the generated header, the FMI
-headers and ``buildDescription.xml`` in the FMI 3.0 format that FMI 2.0.4 adopts) so any tool
-can compile it. The Linux binary needs gcc; the Windows one is built when the mingw-w64 cross
-compiler ``x86_64-w64-mingw32-gcc`` is installed.
+The FMU holds ``binaries/linux64/<id>.so`` (gcc), ``binaries/win64/<id>.dll`` when the
+mingw-w64 cross compiler ``x86_64-w64-mingw32-gcc`` is installed, and ``sources/`` (the C
+files, the generated header, the FMI 2 headers and ``buildDescription.xml``) so any tool can
+compile it. Native FMUs are built to ``fmus/native/<id>.fmu`` (``cosim build --native``).
 
 Compiled with ``-std=c99 -ffp-contract=off`` (no fused multiply-add, no fast math), so the C
-model performs the core's IEEE operations in the core's order.
+model performs the core's IEEE operations in the core's order; its only libm call is ``exp``.
 """
 
 from __future__ import annotations
@@ -48,43 +36,9 @@ HERE = Path(__file__).resolve().parent
 NATIVE_DIR = HERE / "native"
 FRONT_DIR = HERE / "front"
 NATIVE_FMU_DIR = FMU_DIR / "native"
-# the flags that decide the floating-point results, also written into buildDescription.xml
-FP_FLAGS = ["-std=c99", "-ffp-contract=off", "-fno-fast-math"]
-CC_FLAGS = [*FP_FLAGS, "-O2", "-Wall", "-Wextra"]
+CC_FLAGS = ["-std=c99", "-O2", "-ffp-contract=off", "-fno-fast-math", "-Wall", "-Wextra"]
 LINUX_CC = "gcc"
 WINDOWS_CC = "x86_64-w64-mingw32-gcc"
-FMI_VERSIONS = (2, 3)
-EVENT_TIME_OUTPUT = "next_event_time"  # the controllers' announced next event (slave.py)
-FMI2_HEADERS = ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h")
-FMI3_HEADERS = ("fmi3Functions.h", "fmi3FunctionTypes.h", "fmi3PlatformTypes.h")
-
-
-@dataclass(frozen=True)
-class Front:
-    """The C front of one FMI version: its source (in cosim/fmu/front/), the FMI headers it
-    and the backend interface need (from fmpy's c-code/), and its binaries folders."""
-
-    fmi_version: int
-    source: str
-    headers: tuple[str, ...]
-    linux: str    # binaries/<linux>/<id>.so
-    windows: str  # binaries/<windows>/<id>.dll
-
-
-FRONTS: dict[int, Front] = {
-    2: Front(2, "fmi2_front.c", FMI2_HEADERS, "linux64", "win64"),
-    # ato_backend.h declares the backend with the FMI 2 function types: FMI 2 headers too
-    3: Front(3, "fmi3_front.c", FMI2_HEADERS + FMI3_HEADERS, "x86_64-linux", "x86_64-windows"),
-}
-
-
-def native_path(identifier: str, fmi_version: int = 2, dest: Path = NATIVE_FMU_DIR) -> Path:
-    """Where the native FMI ``fmi_version`` build of ``identifier`` goes under ``dest``:
-    ``dest/<id>.fmu`` (FMI 2.0) or ``dest/fmi3/<id>.fmu`` (FMI 3.0), as ``fmus/`` and
-    ``fmus/fmi3/`` for the Python FMUs."""
-    if fmi_version not in FRONTS:
-        raise ValueError(f"fmi_version {fmi_version!r}: expected one of {sorted(FRONTS)}")
-    return (dest if fmi_version == 2 else dest / "fmi3") / f"{identifier}.fmu"
 
 
 @dataclass(frozen=True)
@@ -96,17 +50,7 @@ class NativeSpec:
 
     @property
     def path(self) -> Path:
-        """The FMI 2.0 build."""
-        return native_path(self.identifier, 2)
-
-    @property
-    def path_fmi3(self) -> Path:
-        """The FMI 3.0 build."""
-        return native_path(self.identifier, 3)
-
-    def path_for(self, fmi_version: int) -> Path:
-        """The build of FMI version ``fmi_version`` (2 or 3)."""
-        return native_path(self.identifier, fmi_version)
+        return NATIVE_FMU_DIR / f"{self.identifier}.fmu"
 
 
 NATIVE: dict[str, NativeSpec] = {
@@ -130,11 +74,8 @@ def _c_double(value: float) -> str:
 
 
 def decl_header(identifier: str, variables, guid: str) -> str:
-    """``<id>_decl.h``: model identifier, GUID, one ``ATO_VR_<name>`` per variable, the
-    ``ATO_VARS`` table (causality, type, start, range) in value-reference order and
-    ``ATO_EVENT_TIME_VR``, the value reference of the ``next_event_time`` output or -1 (a
-    model without events): the backend's ``event_time_vr``, so the FMI 3 front's Event Mode
-    follows the same declaration as the modelDescription's ``hasEventMode``."""
+    """``<id>_decl.h``: model identifier, GUID, one ``ATO_VR_<name>`` per variable and the
+    ``ATO_VARS`` table (causality, type, start, range) in value-reference order."""
     types = {float: "ATO_REAL", int: "ATO_INTEGER", bool: "ATO_BOOLEAN", str: "ATO_STRING"}
     causality = {"parameter": "ATO_PARAMETER", "input": "ATO_INPUT", "output": "ATO_OUTPUT"}
     lines = [f"/* generated by cosim/fmu/native_build.py from the declarations of {identifier};"
@@ -142,10 +83,7 @@ def decl_header(identifier: str, variables, guid: str) -> str:
              "#include <math.h>", '#include "ato_vars.h"',
              f"#define ATO_MODEL_IDENTIFIER {_c_string(identifier)}",
              f"#define ATO_GUID {_c_string(guid)}",
-             f"#define ATO_N_VARS {len(variables)}"]
-    event_vr = next((vr for vr, v in enumerate(variables)
-                     if v.name == EVENT_TIME_OUTPUT and v.causality == "output"), -1)
-    lines += [f"#define ATO_EVENT_TIME_VR {event_vr}", "enum {"]
+             f"#define ATO_N_VARS {len(variables)}", "enum {"]
     lines += [f"    ATO_VR_{v.name} = {vr}," for vr, v in enumerate(variables)]
     lines += ["};", "static const ato_var ATO_VARS[ATO_N_VARS] = {"]
     for v in variables:
@@ -157,6 +95,12 @@ def decl_header(identifier: str, variables, guid: str) -> str:
             f"{_c_double(v.min if v.min is not None else 0.0)}, "
             f"{_c_double(v.max if v.max is not None else 0.0)}}},")
     lines.append("};")
+    # the backend's event_time_vr (ato_backend.h): the value reference of the next_event_time
+    # output, -1 for a model without events, from the same declaration as the FMI 3
+    # modelDescription's hasEventMode (cosim.fmu.fmi3)
+    event_vr = next((vr for vr, v in enumerate(variables)
+                     if v.name == EVENT_TIME_OUTPUT and v.causality == "output"), -1)
+    lines.append(f"#define ATO_EVENT_TIME_VR {event_vr}")
     return "\n".join(lines) + "\n"
 
 
@@ -182,7 +126,7 @@ def model_description(identifier: str, slave_class, sources: list[str], guid: st
 def build_description(identifier: str, sources: list[str]) -> bytes:
     """``sources/buildDescription.xml`` in the FMI 3.0 schema (``fmiVersion="3.0"``), which
     FMI 2.0.4 adopts for its sources too: the C files, the include directory and the compiler
-    options that decide the floating-point results."""
+    options that decide the floating-point results (:data:`FP_FLAGS`)."""
     root = Element("fmiBuildDescription", {"fmiVersion": "3.0"})
     conf = SubElement(root, "BuildConfiguration", {"modelIdentifier": identifier})
     files = SubElement(conf, "SourceFileSet", {"language": "C99",
@@ -222,33 +166,93 @@ def _compiler(name: str) -> str:
     return found
 
 
-def compile_command(cc: str, src_dir: Path, out: Path, windows: bool) -> list[str]:
-    """The compiler call that builds the FMU's sources in ``src_dir`` (every ``*.c``: one
-    front and the model) into the shared library ``out``."""
+def compile_binary(cc: str, src_dir: Path, out: Path, windows: bool) -> None:
+    """Compile the FMU's sources in ``src_dir`` into the shared library ``out``."""
     sources = sorted(str(p) for p in src_dir.glob("*.c"))
     cmd = [cc, "-shared", *CC_FLAGS, f"-I{src_dir}", "-o", str(out), *sources]
     if windows:
-        return [*cmd, "-static-libgcc"]
-    return [*cmd, "-fPIC", "-fvisibility=hidden", "-lm"]
+        cmd += ["-static-libgcc"]
+    else:
+        cmd += ["-fPIC", "-fvisibility=hidden", "-lm"]
+    done = subprocess.run(cmd, capture_output=True, text=True)
+    if done.returncode != 0:
+        raise RuntimeError(f"{cc} failed on {out.name}:\n{done.stderr.strip()[-3000:]}")
 
 
-def compile_binaries(commands: list[list[str]]) -> None:
-    """Run the compiler calls side by side (one per core at most); the first failure is
-    raised with the compiler's message, naming the library."""
-    pending, running, failures = list(commands), [], []
-    limit = max(1, os.cpu_count() or 1)
-    while pending or running:
-        while pending and len(running) < limit:
-            cmd = pending.pop(0)
-            running.append((cmd, subprocess.Popen(cmd, stdout=subprocess.PIPE,
-                                                  stderr=subprocess.PIPE, text=True)))
-        cmd, proc = running.pop(0)
-        _, err = proc.communicate()
-        if proc.returncode != 0:
-            failures.append(f"{Path(cmd[0]).name} failed on {Path(cmd[cmd.index('-o') + 1]).name}"
-                            f":\n{err.strip()[-3000:]}")
-    if failures:
-        raise RuntimeError("\n".join(failures))
+def build_native(identifier: str, dest: Path = NATIVE_FMU_DIR, windows: bool | None = None
+                 ) -> Path:
+    """Build the native FMU ``identifier`` into ``dest``; ``windows``: also the win64 DLL
+    (default: when mingw-w64 is installed). Raises :class:`CompilerMissing` naming the
+    compiler when it is absent."""
+    import fmpy
+
+    if identifier not in NATIVE:
+        raise ValueError(f"no native model of {identifier!r}; native: {sorted(NATIVE)}")
+    spec = NATIVE[identifier]
+    gcc = _compiler(LINUX_CC)
+    mingw = None
+    if windows or windows is None:
+        try:
+            mingw = _compiler(WINDOWS_CC)
+        except CompilerMissing:
+            if windows:
+                raise
+    slave_class = catalog()[identifier].load()
+    guid = "{" + str(uuid.uuid4()) + "}"
+    headers = Path(fmpy.__file__).parent / "c-code"
+    c_files = ["fmi2_front.c", spec.source]
+    with tempfile.TemporaryDirectory(prefix="atocosim_native_") as tmp:
+        root = Path(tmp) / "fmu"
+        src = root / "sources"
+        src.mkdir(parents=True)
+        shutil.copy2(FRONT_DIR / "fmi2_front.c", src)
+        shutil.copy2(FRONT_DIR / "ato_backend.h", src)
+        shutil.copy2(NATIVE_DIR / spec.source, src)
+        shutil.copy2(NATIVE_DIR / "ato_vars.h", src)
+        for h in ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h"):
+            shutil.copy2(headers / h, src)
+        (src / f"{identifier}_decl.h").write_text(
+            decl_header(identifier, slave_class.variables, guid))
+        (src / "buildDescription.xml").write_bytes(build_description(identifier, c_files))
+        (root / "modelDescription.xml").write_bytes(
+            model_description(identifier, slave_class, c_files, guid))
+        routes = root / "resources" / "routes"
+        routes.mkdir(parents=True)
+        for name, text in route_tables().items():
+            (routes / f"{name}.grade").write_text(text)
+        (root / "binaries" / "linux64").mkdir(parents=True)
+        compile_binary(gcc, src, root / "binaries" / "linux64" / f"{identifier}.so", False)
+        if mingw:
+            (root / "binaries" / "win64").mkdir(parents=True)
+            compile_binary(mingw, src, root / "binaries" / "win64" / f"{identifier}.dll", True)
+        dest.mkdir(parents=True, exist_ok=True)
+        staged = dest / f".{identifier}.fmu.{os.getpid()}.tmp"
+        with zipfile.ZipFile(staged, "w", zipfile.ZIP_DEFLATED) as z:
+            for f in sorted(p for p in root.rglob("*") if p.is_file()):
+                z.write(f, f.relative_to(root).as_posix())
+        final = dest / f"{identifier}.fmu"
+        os.replace(staged, final)
+    return final
+
+
+# -- FMI 3.0: the FMI 2 build's sources behind the FMI 3 front ------------------------------
+
+FMI_VERSIONS = (2, 3)
+EVENT_TIME_OUTPUT = "next_event_time"  # the controllers' announced next event (slave.py)
+FP_FLAGS = [f for f in CC_FLAGS if not f.startswith(("-O", "-W"))]  # decide the results
+FMI2_FRONT = "fmi2_front.c"
+FMI3_FRONT = "fmi3_front.c"
+FMI3_HEADERS = ("fmi3Functions.h", "fmi3FunctionTypes.h", "fmi3PlatformTypes.h")
+FMI3_LINUX, FMI3_WINDOWS = "x86_64-linux", "x86_64-windows"  # binaries/<platform tuple>
+
+
+def native_path(identifier: str, fmi_version: int = 2, dest: Path = NATIVE_FMU_DIR) -> Path:
+    """Where the native FMI ``fmi_version`` build of ``identifier`` goes under ``dest``:
+    ``dest/<id>.fmu`` (FMI 2.0) or ``dest/fmi3/<id>.fmu`` (FMI 3.0), as ``fmus/`` and
+    ``fmus/fmi3/`` hold the Python FMUs' builds."""
+    if fmi_version not in FMI_VERSIONS:
+        raise ValueError(f"fmi_version {fmi_version!r}: expected one of {list(FMI_VERSIONS)}")
+    return (dest if fmi_version == 2 else dest / "fmi3") / f"{identifier}.fmu"
 
 
 def _compilers(windows: bool | None) -> tuple[str, str | None]:
@@ -264,83 +268,76 @@ def _compilers(windows: bool | None) -> tuple[str, str | None]:
         return gcc, None
 
 
-def _stage(root: Path, spec: NativeSpec, front: Front, decl: str, md2: bytes,
-           routes: dict[str, str]) -> Path:
-    """Lay out the FMU tree of ``spec`` behind ``front`` under ``root``; returns sources/."""
+def package_fmi3(fmi2_fmu: Path, out: Path, windows: bool | None = None) -> Path:
+    """Write the native FMI 3.0 FMU ``out`` from the native FMI 2.0 FMU ``fmi2_fmu``.
+
+    Whatever the FMI 2 build holds (every C file, generated header and resource of the model)
+    is kept; the FMI 2 front in ``sources/`` is replaced by ``cosim/fmu/front/fmi3_front.c``
+    (the front of the Python FMUs' FMI 3 builds, here linked with the model, whose backend
+    calls the model directly) plus the FMI 3 headers (the FMI 2 ones stay: the backend
+    interface is declared with them), ``buildDescription.xml`` names it, modelDescription.xml
+    is :func:`cosim.fmu.fmi3.model_description` of the FMI 2 one (same variables and GUID as
+    ``instantiationToken``), and the sources are compiled into
+    ``binaries/x86_64-linux/<id>.so`` and, with ``windows`` (default: when mingw-w64 is
+    installed), ``binaries/x86_64-windows/<id>.dll``."""
+    from xml.etree import ElementTree
+
     import fmpy
 
     from cosim.fmu import fmi3
 
+    gcc, mingw = _compilers(windows)
     headers = Path(fmpy.__file__).parent / "c-code"
-    src = root / "sources"
-    src.mkdir(parents=True)
-    for name in (front.source, "ato_backend.h"):
-        shutil.copy2(FRONT_DIR / name, src)
-    for name in (spec.source, "ato_vars.h"):
-        shutil.copy2(NATIVE_DIR / name, src)
-    for name in front.headers:
-        shutil.copy2(headers / name, src)
-    (src / f"{spec.identifier}_decl.h").write_text(decl)
-    (src / "buildDescription.xml").write_bytes(
-        build_description(spec.identifier, [front.source, spec.source]))
-    md = md2 if front.fmi_version == 2 else fmi3.model_description(md2)[0]
-    (root / "modelDescription.xml").write_bytes(md)
-    folder = root / "resources" / "routes"
-    folder.mkdir(parents=True)
-    for name, text in routes.items():
-        (folder / f"{name}.grade").write_text(text)
-    return src
-
-
-def _zip(root: Path, final: Path) -> None:
-    """Zip the tree ``root`` into ``final`` atomically (staged beside it, then renamed)."""
-    final.parent.mkdir(parents=True, exist_ok=True)
-    staged = final.parent / f".{final.name}.{os.getpid()}.tmp"
-    with zipfile.ZipFile(staged, "w", zipfile.ZIP_DEFLATED) as z:
-        for f in sorted(p for p in root.rglob("*") if p.is_file()):
-            z.write(f, f.relative_to(root).as_posix())
-    os.replace(staged, final)
+    with tempfile.TemporaryDirectory(prefix="atocosim_native3_") as tmp:
+        root = Path(tmp) / "fmu"
+        with zipfile.ZipFile(fmi2_fmu) as z:
+            z.extractall(root)
+        md, _ = fmi3.model_description((root / "modelDescription.xml").read_bytes())
+        (root / "modelDescription.xml").write_bytes(md)
+        identifier = ElementTree.fromstring(md).find("CoSimulation").get("modelIdentifier")
+        shutil.rmtree(root / "binaries")
+        src = root / "sources"
+        (src / FMI2_FRONT).unlink()
+        shutil.copy2(FRONT_DIR / FMI3_FRONT, src)
+        for name in FMI3_HEADERS:
+            shutil.copy2(headers / name, src)
+        described = ElementTree.parse(src / "buildDescription.xml").getroot()
+        for entry in described.iter("SourceFile"):
+            if entry.get("name") == FMI2_FRONT:
+                entry.set("name", FMI3_FRONT)
+        (src / "buildDescription.xml").write_bytes(
+            b'<?xml version="1.0" encoding="UTF-8"?>\n' + tostring(described, encoding="utf-8"))
+        for cc, platform, suffix in ((gcc, FMI3_LINUX, ".so"), (mingw, FMI3_WINDOWS, ".dll")):
+            if cc is not None:
+                (root / "binaries" / platform).mkdir(parents=True)
+                compile_binary(cc, src, root / "binaries" / platform / f"{identifier}{suffix}",
+                               suffix == ".dll")
+        out.parent.mkdir(parents=True, exist_ok=True)
+        staged = out.parent / f".{out.name}.{os.getpid()}.tmp"
+        with zipfile.ZipFile(staged, "w", zipfile.ZIP_DEFLATED) as z:
+            for f in sorted(p for p in root.rglob("*") if p.is_file()):
+                z.write(f, f.relative_to(root).as_posix())
+        os.replace(staged, out)
+    return out
 
 
 def build_natives(identifier: str, fmi_versions: tuple[int, ...] = FMI_VERSIONS,
                   dest: Path = NATIVE_FMU_DIR, windows: bool | None = None) -> list[Path]:
-    """Build the native FMUs of ``identifier``, one per FMI version in ``fmi_versions``, to
-    :func:`native_path` under ``dest``; ``windows``: also the Windows DLLs (default: when
-    mingw-w64 is installed). The builds share one GUID (the FMI 3 ``instantiationToken``) and
-    their compiler calls run side by side. Raises :class:`CompilerMissing` naming the
-    compiler when it is absent."""
+    """Build the native FMUs of ``identifier`` in ``fmi_versions`` to :func:`native_path`
+    under ``dest`` (the paths in the order given): the FMI 2 build (:func:`build_native`; made
+    in a scratch folder when only FMI 3 is asked for) and the FMI 3 build derived from it
+    (:func:`package_fmi3`), so both share one GUID. ``windows``: also the Windows DLLs
+    (default: when mingw-w64 is installed). Raises :class:`CompilerMissing` naming the
+    compiler when it is absent, before anything is written."""
     if identifier not in NATIVE:
         raise ValueError(f"no native model of {identifier!r}; native: {sorted(NATIVE)}")
-    for version in fmi_versions:
-        native_path(identifier, version)  # refuses an unknown version
-    spec = NATIVE[identifier]
-    gcc, mingw = _compilers(windows)
-    slave_class = catalog()[identifier].load()
-    guid = "{" + str(uuid.uuid4()) + "}"
-    decl = decl_header(identifier, slave_class.variables, guid)
-    routes = route_tables()
-    with tempfile.TemporaryDirectory(prefix="atocosim_native_") as tmp:
-        trees, commands = [], []
-        for version in fmi_versions:
-            front = FRONTS[version]
-            root = Path(tmp) / f"fmi{version}"
-            md2 = model_description(identifier, slave_class, [front.source, spec.source], guid)
-            src = _stage(root, spec, front, decl, md2, routes)
-            for cc, folder, suffix in ((gcc, front.linux, ".so"), (mingw, front.windows, ".dll")):
-                if cc is None:
-                    continue
-                (root / "binaries" / folder).mkdir(parents=True)
-                commands.append(compile_command(
-                    cc, src, root / "binaries" / folder / f"{identifier}{suffix}",
-                    suffix == ".dll"))
-            trees.append((root, native_path(identifier, version, dest)))
-        compile_binaries(commands)
-        for root, final in trees:
-            _zip(root, final)
-    return [final for _, final in trees]
-
-
-def build_native(identifier: str, dest: Path = NATIVE_FMU_DIR, windows: bool | None = None,
-                 fmi_version: int = 2) -> Path:
-    """Build the native FMI ``fmi_version`` FMU of ``identifier`` (:func:`build_natives`)."""
-    return build_natives(identifier, (fmi_version,), dest, windows)[0]
+    targets = {version: native_path(identifier, version, dest) for version in fmi_versions}
+    _compilers(windows)
+    with tempfile.TemporaryDirectory(prefix="atocosim_native2_") as scratch:
+        if 2 in targets:
+            fmi2 = build_native(identifier, dest, windows)
+        else:  # only its sources and model description are used: no Windows DLL
+            fmi2 = build_native(identifier, Path(scratch), windows=False)
+        if 3 in targets:
+            package_fmi3(fmi2, targets[3], windows)
+    return [targets[version] for version in fmi_versions]
