@@ -5,7 +5,8 @@ A native FMU has the same variables as its Python FMU: its modelDescription.xml 
 wrapper's own (``CoreSlave.to_xml``: value references, units, ranges, starts, structure), and
 the C header ``<id>_decl.h`` (value references, starts, ranges as ``ato_var`` rows) is written
 from the same declarations at build time, so nothing is declared twice. Route data are exported
-from the bundled route files (parsed by :mod:`plants.route`) to ``resources/routes/<name>.grade``.
+from the bundled route files (parsed by :mod:`plants.route`) to ``resources/routes/<name>.grade``
+and, for the models that read them, ``<name>.<profile>`` (:data:`ROUTE_PROFILES`).
 
 The FMU holds ``binaries/linux64/<id>.so`` (gcc), ``binaries/win64/<id>.dll`` when the
 mingw-w64 cross compiler ``x86_64-w64-mingw32-gcc`` is installed, and ``sources/`` (the C
@@ -13,7 +14,8 @@ files, the generated header, the FMI 2 headers and ``buildDescription.xml``) so 
 compile it. Native FMUs are built to ``fmus/native/<id>.fmu`` (``cosim build --native``).
 
 Compiled with ``-std=c99 -ffp-contract=off`` (no fused multiply-add, no fast math), so the C
-model performs the core's IEEE operations in the core's order; its only libm call is ``exp``.
+model performs the core's IEEE operations in the core's order (libm calls: ``exp``, and
+``pow`` in the freight brake cylinders).
 """
 
 from __future__ import annotations
@@ -43,10 +45,14 @@ WINDOWS_CC = "x86_64-w64-mingw32-gcc"
 
 @dataclass(frozen=True)
 class NativeSpec:
-    """A native model: the C file of its backend (in cosim/fmu/native/)."""
+    """A native model: the C file of its backend (in cosim/fmu/native/), further C files it
+    links (``helpers``, same folder) and the route profiles it reads besides the grade steps
+    (``route_profiles``, keys of :data:`ROUTE_PROFILES`)."""
 
     identifier: str
     source: str
+    helpers: tuple[str, ...] = ()
+    route_profiles: tuple[str, ...] = ()
 
     @property
     def path(self) -> Path:
@@ -55,6 +61,8 @@ class NativeSpec:
 
 NATIVE: dict[str, NativeSpec] = {
     "BrakeDelayTrain": NativeSpec("BrakeDelayTrain", "brake_delay.c"),
+    "FreightTrain": NativeSpec("FreightTrain", "freight.c", ("freight_kernel.c",),
+                               ("speed_limit", "additional")),
 }
 
 
@@ -64,6 +72,11 @@ class CompilerMissing(RuntimeError):
 
 def _c_string(text: str) -> str:
     return '"' + text.replace("\\", "\\\\").replace('"', '\\"') + '"'
+
+
+def c_identifier(name: str) -> str:
+    """A variable name as a C identifier: ``v[12]`` -> ``v_12`` (``[`` -> ``_``, ``]`` dropped)."""
+    return name.replace("[", "_").replace("]", "")
 
 
 def _c_double(value: float) -> str:
@@ -84,7 +97,7 @@ def decl_header(identifier: str, variables, guid: str) -> str:
              f"#define ATO_MODEL_IDENTIFIER {_c_string(identifier)}",
              f"#define ATO_GUID {_c_string(guid)}",
              f"#define ATO_N_VARS {len(variables)}", "enum {"]
-    lines += [f"    ATO_VR_{v.name} = {vr}," for vr, v in enumerate(variables)]
+    lines += [f"    ATO_VR_{c_identifier(v.name)} = {vr}," for vr, v in enumerate(variables)]
     lines += ["};", "static const ato_var ATO_VARS[ATO_N_VARS] = {"]
     for v in variables:
         start = 0.0 if isinstance(v.start, str) else float(v.start)
@@ -156,6 +169,42 @@ def route_tables() -> dict[str, str]:
     return tables
 
 
+def _step_rows(starts, values) -> list[str]:
+    return [f"{'-inf' if math.isinf(s) and s < 0 else repr(float(s))} {float(g)!r}"
+            for s, g in zip(starts.tolist(), values.tolist())]
+
+
+def _speed_limit_table(route) -> tuple[str, list[str]]:
+    limit = route.speed_limit
+    return "speed limit steps: start_m limit_m_per_s", _step_rows(limit.starts, limit.values)
+
+
+def _additional_table(route) -> tuple[str, list[str]]:
+    xs, cum = route.additional._cumulative  # the knots the compiled kernels interpolate on
+    return ("additional resistance (grade + curve + tunnel), cumulative over position: "
+            "position_m integral_N_per_kN_m", _step_rows(xs, cum))
+
+
+ROUTE_PROFILES = {"speed_limit": _speed_limit_table, "additional": _additional_table}
+
+
+def route_profile_tables(kinds: tuple[str, ...]) -> dict[str, str]:
+    """``<name>.<kind>`` text per bundled route and profile kind (:data:`ROUTE_PROFILES`):
+    rows of two floats (repr, which reads back exactly; ``inf`` where a value is infinite)."""
+    route = importlib.import_module("plants.route")
+    tables = {}
+    for toml in sorted(route.ROUTES_DIR.glob("*.toml")):
+        try:
+            loaded = route.load_route(toml.stem)
+        except ValueError:  # a reference-profile TOML beside the routes, not a route
+            continue
+        for kind in kinds:
+            title, rows = ROUTE_PROFILES[kind](loaded)
+            tables[f"{toml.stem}.{kind}"] = f"# {title} of route {toml.stem}\n" + \
+                "\n".join(rows) + "\n"
+    return tables
+
+
 def _compiler(name: str) -> str:
     found = shutil.which(name)
     if found is None:
@@ -200,14 +249,15 @@ def build_native(identifier: str, dest: Path = NATIVE_FMU_DIR, windows: bool | N
     slave_class = catalog()[identifier].load()
     guid = "{" + str(uuid.uuid4()) + "}"
     headers = Path(fmpy.__file__).parent / "c-code"
-    c_files = ["fmi2_front.c", spec.source]
+    c_files = ["fmi2_front.c", spec.source, *spec.helpers]
     with tempfile.TemporaryDirectory(prefix="atocosim_native_") as tmp:
         root = Path(tmp) / "fmu"
         src = root / "sources"
         src.mkdir(parents=True)
         shutil.copy2(FRONT_DIR / "fmi2_front.c", src)
         shutil.copy2(FRONT_DIR / "ato_backend.h", src)
-        shutil.copy2(NATIVE_DIR / spec.source, src)
+        for name in (spec.source, *spec.helpers):
+            shutil.copy2(NATIVE_DIR / name, src)
         shutil.copy2(NATIVE_DIR / "ato_vars.h", src)
         for h in ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h"):
             shutil.copy2(headers / h, src)
@@ -220,6 +270,8 @@ def build_native(identifier: str, dest: Path = NATIVE_FMU_DIR, windows: bool | N
         routes.mkdir(parents=True)
         for name, text in route_tables().items():
             (routes / f"{name}.grade").write_text(text)
+        for name, text in route_profile_tables(spec.route_profiles).items():
+            (routes / name).write_text(text)
         (root / "binaries" / "linux64").mkdir(parents=True)
         compile_binary(gcc, src, root / "binaries" / "linux64" / f"{identifier}.so", False)
         if mingw:
