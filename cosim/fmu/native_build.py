@@ -332,6 +332,7 @@ def package_fmi3(fmi2_fmu: Path, out: Path, windows: bool | None = None) -> Path
     ``instantiationToken``), and the sources are compiled into
     ``binaries/x86_64-linux/<id>.so`` and, with ``windows`` (default: when mingw-w64 is
     installed), ``binaries/x86_64-windows/<id>.dll``."""
+    from concurrent.futures import ThreadPoolExecutor
     from xml.etree import ElementTree
 
     import fmpy
@@ -359,11 +360,15 @@ def package_fmi3(fmi2_fmu: Path, out: Path, windows: bool | None = None) -> Path
                 entry.set("name", FMI3_FRONT)
         (src / "buildDescription.xml").write_bytes(
             b'<?xml version="1.0" encoding="UTF-8"?>\n' + tostring(described, encoding="utf-8"))
+        jobs = []
         for cc, platform, suffix in ((gcc, FMI3_LINUX, ".so"), (mingw, FMI3_WINDOWS, ".dll")):
             if cc is not None:
                 (root / "binaries" / platform).mkdir(parents=True)
-                compile_binary(cc, src, root / "binaries" / platform / f"{identifier}{suffix}",
-                               suffix == ".dll")
+                jobs.append((cc, src, root / "binaries" / platform / f"{identifier}{suffix}",
+                             suffix == ".dll"))
+        with ThreadPoolExecutor(max_workers=len(jobs)) as pool:  # the compilers side by side
+            for done in [pool.submit(compile_binary, *job) for job in jobs]:
+                done.result()
         out.parent.mkdir(parents=True, exist_ok=True)
         staged = out.parent / f".{out.name}.{os.getpid()}.tmp"
         with zipfile.ZipFile(staged, "w", zipfile.ZIP_DEFLATED) as z:
