@@ -4,9 +4,10 @@ loaded (the dynamic loader's own trace says which libraries it loaded), fmpy, li
 2), the compliance suite, fmpy's build from the FMU's sources, and the Windows binaries under
 Wine (slow).
 
-Equality without tolerance throughout: the hosts run the same binary (or, FMI 2 against FMI 3,
-the same model object code behind another front that forwards every value unchanged) with the
-same libm in the same calling sequence, so the IEEE results are the same."""
+Every equality asserted here is exact: the hosts run the same binary (or, FMI 2 against FMI 3,
+the same model sources compiled by the same compiler with the same flags, behind another front
+that forwards every value unchanged) with the same libm in the same calling sequence, so the
+IEEE results are the same."""
 
 from __future__ import annotations
 
