@@ -404,3 +404,25 @@ def test_windows_build_without_mingw_names_it(monkeypatch, tmp_path):
     with pytest.raises(ValueError, match=r"fmi_version 4: expected one of \[2, 3\]"):
         build_natives(IDENTIFIERS[0], (2, 4), dest=tmp_path)
     assert not list(tmp_path.iterdir())  # refused before anything was written
+
+
+def test_fmi3_packaging_refuses_an_fmu_without_our_fmi2_front(tmp_path):
+    """package_fmi3 derives from our native FMI 2 FMUs only, and says which file is missing."""
+    import zipfile
+
+    from cosim.fmu.native_build import package_fmi3
+
+    if shutil.which("gcc") is None:
+        pytest.skip("gcc not installed")
+
+    other = tmp_path / "Other.fmu"
+    with zipfile.ZipFile(other, "w") as z:
+        z.writestr("modelDescription.xml",
+                   '<fmiModelDescription fmiVersion="2.0" modelName="Other" guid="{0}">'
+                   '<CoSimulation modelIdentifier="Other"/><ModelVariables/>'
+                   "</fmiModelDescription>")
+        z.writestr("binaries/linux64/Other.so", b"")
+        z.writestr("sources/model.c", "int x;\n")
+    with pytest.raises(ValueError, match=r"Other.fmu: no sources/fmi2_front.c"):
+        package_fmi3(other, tmp_path / "out.fmu", windows=False)
+    assert not (tmp_path / "out.fmu").exists()

@@ -350,6 +350,9 @@ def package_fmi3(fmi2_fmu: Path, out: Path, windows: bool | None = None) -> Path
         identifier = ElementTree.fromstring(md).find("CoSimulation").get("modelIdentifier")
         shutil.rmtree(root / "binaries")
         src = root / "sources"
+        if not (src / FMI2_FRONT).is_file():
+            raise ValueError(f"{fmi2_fmu}: no sources/{FMI2_FRONT}: not a native FMI 2.0 FMU "
+                             "of this project")
         (src / FMI2_FRONT).unlink()
         shutil.copy2(FRONT_DIR / FMI3_FRONT, src)
         for name in FMI3_HEADERS:
