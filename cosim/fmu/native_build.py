@@ -318,24 +318,27 @@ def compile_binary(cc: str, src_dir: Path, out: Path, windows: bool) -> None:
         raise RuntimeError(f"{cc} failed on {out.name}:\n{done.stderr.strip()[-3000:]}")
 
 
-def native_sources(identifier: str) -> list[Path]:
-    """Every file the native FMU ``identifier`` is made from: its C files, the FMI 2 front,
-    this builder and the Python wrapper's files (declarations, bundled data)."""
+def native_sources(identifier: str, fmi_version: int = 2) -> list[Path]:
+    """Every file the native FMU ``identifier`` is made from: its C files, the FMI 2 front
+    (and for FMI 3.0 the FMI 3 front and the modelDescription derivation), this builder and
+    the Python wrapper's files (declarations, bundled data)."""
     spec = NATIVE[identifier]
+    fmi3 = [FRONT_DIR / "fmi3_front.c", HERE / "fmi3.py"] if fmi_version == 3 else []
     return [NATIVE_DIR / spec.source, NATIVE_DIR / "ato_vars.h",
             *(NATIVE_DIR / name for name in spec.helpers), FRONT_DIR / "fmi2_front.c",
             FRONT_DIR / "ato_backend.h", Path(__file__),
-            *bundled_files(catalog()[identifier].module)]
+            *bundled_files(catalog()[identifier].module), *fmi3]
 
 
-def native_is_stale(identifier: str) -> bool:
-    """True when the native FMU ``identifier`` is missing or older than a file it is made
-    from (:func:`native_sources`)."""
-    path = NATIVE[identifier].path
+def native_is_stale(identifier: str, fmi_version: int = 2) -> bool:
+    """True when the native FMI ``fmi_version`` FMU ``identifier`` is missing or older than a
+    file it is made from (:func:`native_sources`)."""
+    path = native_path(identifier, fmi_version)
     if not path.is_file():
         return True
     built = path.stat().st_mtime
-    return any(f.is_file() and f.stat().st_mtime > built for f in native_sources(identifier))
+    return any(f.is_file() and f.stat().st_mtime > built
+               for f in native_sources(identifier, fmi_version))
 
 
 def build_native(identifier: str, dest: Path = NATIVE_FMU_DIR, windows: bool | None = None
