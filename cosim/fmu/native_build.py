@@ -1,4 +1,5 @@
-"""Native C FMUs (FMI 2.0): the C twin of a core behind the FMI 2 front, no Python needed.
+"""Native C FMUs (FMI 2.0, and FMI 3.0 derived from them): the C twin of a core behind our C
+fronts, no Python needed.
 
 A native FMU has the same variables as its Python FMU: its modelDescription.xml is the Python
 wrapper's own (``CoreSlave.to_xml``: value references, units, ranges, starts, structure), and
@@ -163,11 +164,18 @@ def decl_header(identifier: str, variables, guid: str, options: dict | None = No
             f"{_c_double(v.min if v.min is not None else 0.0)}, "
             f"{_c_double(v.max if v.max is not None else 0.0)}}},")
     lines.append("};")
+    # the backend's event_time_vr (ato_backend.h): the value reference of the next_event_time
+    # output, -1 for a model without events, from the same declaration as the FMI 3
+    # modelDescription's hasEventMode (cosim.fmu.fmi3)
+    event_vr = next((vr for vr, v in enumerate(variables)
+                     if v.name == EVENT_TIME_OUTPUT and v.causality == "output"), -1)
+    lines.append(f"#define ATO_EVENT_TIME_VR {event_vr}")
     return "\n".join(lines) + "\n"
 
 
 def model_description(identifier: str, slave_class, sources: list[str], guid: str) -> bytes:
-    """The Python wrapper's modelDescription with this FMU's identifier, GUID and sources."""
+    """The Python wrapper's modelDescription (FMI 2.0) with this FMU's identifier, GUID and
+    sources, and ``needsExecutionTool="false"``."""
     with tempfile.TemporaryDirectory() as tmp:
         slave = slave_class(instance_name="native_build", resources=tmp)
         root: Element = slave.to_xml()
@@ -176,6 +184,7 @@ def model_description(identifier: str, slave_class, sources: list[str], guid: st
     root.set("generationTool", "ato-cosim native_build (C)")
     cosim = root.find("CoSimulation")
     cosim.set("modelIdentifier", identifier)
+    cosim.set("needsExecutionTool", "false")  # a binary of its own, no Python (pythonfmu: true)
     files = SubElement(cosim, "SourceFiles")
     for name in sources:
         SubElement(files, "File", {"name": name})
@@ -184,13 +193,16 @@ def model_description(identifier: str, slave_class, sources: list[str], guid: st
 
 
 def build_description(identifier: str, sources: list[str]) -> bytes:
-    """``sources/buildDescription.xml`` (FMI 2.0.4 / 3.0 layout)."""
-    root = Element("fmiBuildDescription", {"fmiVersion": "2.0"})
+    """``sources/buildDescription.xml`` in the FMI 3.0 schema (``fmiVersion="3.0"``), which
+    FMI 2.0.4 adopts for its sources too: the C files, the include directory and the compiler
+    options that decide the floating-point results (:data:`FP_FLAGS`)."""
+    root = Element("fmiBuildDescription", {"fmiVersion": "3.0"})
     conf = SubElement(root, "BuildConfiguration", {"modelIdentifier": identifier})
-    files = SubElement(conf, "SourceFileSet", {"language": "C99"})
+    files = SubElement(conf, "SourceFileSet", {"language": "C99",
+                                                "compilerOptions": " ".join(FP_FLAGS)})
     for name in sources:
         SubElement(files, "SourceFile", {"name": name})
-    SubElement(conf, "IncludeDirectory", {"name": "."})
+    SubElement(files, "IncludeDirectory", {"name": "."})
     indent(root)
     return b'<?xml version="1.0" encoding="UTF-8"?>\n' + tostring(root, encoding="utf-8")
 
@@ -499,24 +511,27 @@ def compile_binary(cc: str, src_dir: Path, out: Path, windows: bool) -> None:
         raise RuntimeError(f"{cc} failed on {out.name}:\n{done.stderr.strip()[-3000:]}")
 
 
-def native_sources(identifier: str) -> list[Path]:
-    """Every file the native FMU ``identifier`` is made from: its C files, the FMI 2 front,
-    this builder and the Python wrapper's files (declarations, bundled data)."""
+def native_sources(identifier: str, fmi_version: int = 2) -> list[Path]:
+    """Every file the native FMU ``identifier`` is made from: its C files, the FMI 2 front
+    (and for FMI 3.0 the FMI 3 front and the modelDescription derivation), this builder and
+    the Python wrapper's files (declarations, bundled data)."""
     spec = NATIVE[identifier]
+    fmi3 = [FRONT_DIR / "fmi3_front.c", HERE / "fmi3.py"] if fmi_version == 3 else []
     return [NATIVE_DIR / spec.source, NATIVE_DIR / "ato_vars.h",
             *(NATIVE_DIR / name for name in spec.helpers), FRONT_DIR / "fmi2_front.c",
             FRONT_DIR / "ato_backend.h", Path(__file__),
-            *bundled_files(catalog()[identifier].module)]
+            *bundled_files(catalog()[identifier].module), *fmi3]
 
 
-def native_is_stale(identifier: str) -> bool:
-    """True when the native FMU ``identifier`` is missing or older than a file it is made
-    from (:func:`native_sources`)."""
-    path = NATIVE[identifier].path
+def native_is_stale(identifier: str, fmi_version: int = 2) -> bool:
+    """True when the native FMI ``fmi_version`` FMU ``identifier`` is missing or older than a
+    file it is made from (:func:`native_sources`)."""
+    path = native_path(identifier, fmi_version)
     if not path.is_file():
         return True
     built = path.stat().st_mtime
-    return any(f.is_file() and f.stat().st_mtime > built for f in native_sources(identifier))
+    return any(f.is_file() and f.stat().st_mtime > built
+               for f in native_sources(identifier, fmi_version))
 
 
 def build_native(identifier: str, dest: Path = NATIVE_FMU_DIR, windows: bool | None = None
@@ -599,3 +614,119 @@ def build_native(identifier: str, dest: Path = NATIVE_FMU_DIR, windows: bool | N
         final = dest / f"{identifier}.fmu"
         os.replace(staged, final)
     return final
+
+
+# -- FMI 3.0: the FMI 2 build's sources behind the FMI 3 front ------------------------------
+
+FMI_VERSIONS = (2, 3)
+EVENT_TIME_OUTPUT = "next_event_time"  # the controllers' announced next event (slave.py)
+FP_FLAGS = [f for f in CC_FLAGS if not f.startswith(("-O", "-W"))]  # decide the results
+FMI2_FRONT = "fmi2_front.c"
+FMI3_FRONT = "fmi3_front.c"
+FMI3_HEADERS = ("fmi3Functions.h", "fmi3FunctionTypes.h", "fmi3PlatformTypes.h")
+FMI3_LINUX, FMI3_WINDOWS = "x86_64-linux", "x86_64-windows"  # binaries/<platform tuple>
+
+
+def native_path(identifier: str, fmi_version: int = 2, dest: Path = NATIVE_FMU_DIR) -> Path:
+    """Where the native FMI ``fmi_version`` build of ``identifier`` goes under ``dest``:
+    ``dest/<id>.fmu`` (FMI 2.0) or ``dest/fmi3/<id>.fmu`` (FMI 3.0), as ``fmus/`` and
+    ``fmus/fmi3/`` hold the Python FMUs' builds."""
+    if fmi_version not in FMI_VERSIONS:
+        raise ValueError(f"fmi_version {fmi_version!r}: expected one of {list(FMI_VERSIONS)}")
+    return (dest if fmi_version == 2 else dest / "fmi3") / f"{identifier}.fmu"
+
+
+def _compilers(windows: bool | None) -> tuple[str, str | None]:
+    """gcc, and mingw-w64 when ``windows`` (True: required; None: when installed)."""
+    gcc = _compiler(LINUX_CC)
+    if windows is False:
+        return gcc, None
+    try:
+        return gcc, _compiler(WINDOWS_CC)
+    except CompilerMissing:
+        if windows:
+            raise
+        return gcc, None
+
+
+def package_fmi3(fmi2_fmu: Path, out: Path, windows: bool | None = None) -> Path:
+    """Write the native FMI 3.0 FMU ``out`` from the native FMI 2.0 FMU ``fmi2_fmu``.
+
+    Whatever the FMI 2 build holds (every C file, generated header and resource of the model)
+    is kept; the FMI 2 front in ``sources/`` is replaced by ``cosim/fmu/front/fmi3_front.c``
+    (the front of the Python FMUs' FMI 3 builds, here linked with the model, whose backend
+    calls the model directly) plus the FMI 3 headers (the FMI 2 ones stay: the backend
+    interface is declared with them), ``buildDescription.xml`` names it, modelDescription.xml
+    is :func:`cosim.fmu.fmi3.model_description` of the FMI 2 one (same variables and GUID as
+    ``instantiationToken``), and the sources are compiled into
+    ``binaries/x86_64-linux/<id>.so`` and, with ``windows`` (default: when mingw-w64 is
+    installed), ``binaries/x86_64-windows/<id>.dll``."""
+    from concurrent.futures import ThreadPoolExecutor
+    from xml.etree import ElementTree
+
+    import fmpy
+
+    from cosim.fmu import fmi3
+
+    gcc, mingw = _compilers(windows)
+    headers = Path(fmpy.__file__).parent / "c-code"
+    with tempfile.TemporaryDirectory(prefix="atocosim_native3_") as tmp:
+        root = Path(tmp) / "fmu"
+        with zipfile.ZipFile(fmi2_fmu) as z:
+            z.extractall(root)
+        md, _ = fmi3.model_description((root / "modelDescription.xml").read_bytes())
+        (root / "modelDescription.xml").write_bytes(md)
+        identifier = ElementTree.fromstring(md).find("CoSimulation").get("modelIdentifier")
+        shutil.rmtree(root / "binaries")
+        src = root / "sources"
+        if not (src / FMI2_FRONT).is_file():
+            raise ValueError(f"{fmi2_fmu}: no sources/{FMI2_FRONT}: not a native FMI 2.0 FMU "
+                             "of this project")
+        (src / FMI2_FRONT).unlink()
+        shutil.copy2(FRONT_DIR / FMI3_FRONT, src)
+        for name in FMI3_HEADERS:
+            shutil.copy2(headers / name, src)
+        described = ElementTree.parse(src / "buildDescription.xml").getroot()
+        for entry in described.iter("SourceFile"):
+            if entry.get("name") == FMI2_FRONT:
+                entry.set("name", FMI3_FRONT)
+        (src / "buildDescription.xml").write_bytes(
+            b'<?xml version="1.0" encoding="UTF-8"?>\n' + tostring(described, encoding="utf-8"))
+        jobs = []
+        for cc, platform, suffix in ((gcc, FMI3_LINUX, ".so"), (mingw, FMI3_WINDOWS, ".dll")):
+            if cc is not None:
+                (root / "binaries" / platform).mkdir(parents=True)
+                jobs.append((cc, src, root / "binaries" / platform / f"{identifier}{suffix}",
+                             suffix == ".dll"))
+        with ThreadPoolExecutor(max_workers=len(jobs)) as pool:  # the compilers side by side
+            for done in [pool.submit(compile_binary, *job) for job in jobs]:
+                done.result()
+        out.parent.mkdir(parents=True, exist_ok=True)
+        staged = out.parent / f".{out.name}.{os.getpid()}.tmp"
+        with zipfile.ZipFile(staged, "w", zipfile.ZIP_DEFLATED) as z:
+            for f in sorted(p for p in root.rglob("*") if p.is_file()):
+                z.write(f, f.relative_to(root).as_posix())
+        os.replace(staged, out)
+    return out
+
+
+def build_natives(identifier: str, fmi_versions: tuple[int, ...] = FMI_VERSIONS,
+                  dest: Path = NATIVE_FMU_DIR, windows: bool | None = None) -> list[Path]:
+    """Build the native FMUs of ``identifier`` in ``fmi_versions`` to :func:`native_path`
+    under ``dest`` (the paths in the order given): the FMI 2 build (:func:`build_native`; made
+    in a scratch folder when only FMI 3 is asked for) and the FMI 3 build derived from it
+    (:func:`package_fmi3`), so both share one GUID. ``windows``: also the Windows DLLs
+    (default: when mingw-w64 is installed). Raises :class:`CompilerMissing` naming the
+    compiler when it is absent, before anything is written."""
+    if identifier not in NATIVE:
+        raise ValueError(f"no native model of {identifier!r}; native: {sorted(NATIVE)}")
+    targets = {version: native_path(identifier, version, dest) for version in fmi_versions}
+    _compilers(windows)
+    with tempfile.TemporaryDirectory(prefix="atocosim_native2_") as scratch:
+        if 2 in targets:
+            fmi2 = build_native(identifier, dest, windows)
+        else:  # only its sources and model description are used: no Windows DLL
+            fmi2 = build_native(identifier, Path(scratch), windows=False)
+        if 3 in targets:
+            package_fmi3(fmi2, targets[3], windows)
+    return [targets[version] for version in fmi_versions]

@@ -14,7 +14,8 @@ Format (see ``scenarios/seed000_stop_pid.toml``)::
     [fmus.NAME]
     fmu = "BrakeDelayTrain"   # FMU identifier in fmus/ (built on demand) or a path to a .fmu
     build = "python"          # python | native: which build of a catalog FMU identifier;
-                              # native: the C FMU fmus/native/<Id>.fmu (FMI 2.0, no Python)
+                              # native: the C FMU fmus/native/<Id>.fmu (no Python; FMI 3.0:
+                              # fmus/native/fmi3/<Id>.fmu)
     sample_time = 0.2         # s, optional: periodic events of a sampled FMU (also set as its
                               # `sample_time` parameter if it has one)
     max_step = 0.5            # s, optional: longest communication step for this FMU
@@ -263,20 +264,18 @@ def catalog_path(identifier: str, fmi_version: int = 2) -> Path:
 
 
 def native_path(source: Path, key: str, fmu: str, fmi_version: int) -> Path:
-    """Where the native build of catalog FMU ``fmu`` lives; refused for an FMU without a native
-    model and for FMI 3.0 (native FMUs are FMI 2.0)."""
-    from cosim.fmu.native_build import NATIVE
+    """Where the native build of catalog FMU ``fmu`` in FMI version ``fmi_version`` lives
+    (``fmus/native/<Id>.fmu``, ``fmus/native/fmi3/<Id>.fmu``); refused for an FMU without a
+    native model."""
+    from cosim.fmu import native_build
 
-    if fmi_version != 2:
-        raise ScenarioError(f"{source}: {key} = 'native': native FMUs are FMI 2.0, and "
-                            f"[simulation] fmi_version = {fmi_version}")
     if fmu.endswith(".fmu"):
         raise ScenarioError(f"{source}: {key} = 'native': fmu = {fmu!r} is a file, used as "
                             "given; build selects the build of a catalog identifier")
-    if fmu not in NATIVE:
+    if fmu not in native_build.NATIVE:
         raise ScenarioError(f"{source}: {key} = 'native': {fmu!r} has no native model "
-                            f"(native: {sorted(NATIVE)})")
-    return NATIVE[fmu].path
+                            f"(native: {sorted(native_build.NATIVE)})")
+    return native_build.native_path(fmu, fmi_version)
 
 
 def _resolve_fmu(source: Path, key: str, fmu: Any, fmi_version: int = 2,
