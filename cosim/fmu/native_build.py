@@ -518,7 +518,8 @@ def native_sources(identifier: str, fmi_version: int = 2) -> list[Path]:
     spec = NATIVE[identifier]
     fmi3 = [FRONT_DIR / "fmi3_front.c", HERE / "fmi3.py"] if fmi_version == 3 else []
     return [NATIVE_DIR / spec.source, NATIVE_DIR / "ato_vars.h",
-            *(NATIVE_DIR / name for name in spec.helpers), FRONT_DIR / "fmi2_front.c",
+            *(NATIVE_DIR / name for name in (*spec.helpers, *spec.shared)),
+            FRONT_DIR / "fmi2_front.c",
             FRONT_DIR / "ato_backend.h", Path(__file__),
             *bundled_files(catalog()[identifier].module), *fmi3]
 
