@@ -1,6 +1,6 @@
 """Model-mismatch studies: a sweep whose runs draw seeded random plant parameters.
 
-``cosim sweep seed000_stop_rmpc --set controller.N=5,10 --perturb plant.mass=+-10%
+``cosim sweep stop_rmpc --set controller.N=5,10 --perturb plant.mass=+-10%
 --perturb plant.brake_time_constant=0.3..0.6 --samples 50 --seed 1`` runs every scenario at
 every grid point with the same ``samples`` parameter draws (common random numbers: the
 controllers are compared on the same plants). Only the perturbed parameters change; the
@@ -234,9 +234,11 @@ def plot_perturbed(frame: pd.DataFrame, keys: list[str], path: str | Path) -> No
 
     groups = list(frame.groupby(["scenario", *keys], sort=False))
     labels = []
+    prefix = os.path.commonprefix([str(s) for s in frame["scenario"].unique()])
+    prefix = prefix[: prefix.rfind("_") + 1]  # the scenarios' shared words, not half a word
     for label, _ in groups:
         label = label if isinstance(label, tuple) else (label,)
-        name = str(label[0]).replace("seed000_stop_", "")
+        name = str(label[0])[len(prefix):] or str(label[0])
         labels.append("\n".join([name] + [f"{k.rpartition('.')[2]}={v}"
                                           for k, v in zip(keys, label[1:], strict=True)]))
     fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(max(6.0, 1.1 * len(groups) + 2), 7),

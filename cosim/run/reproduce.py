@@ -3,12 +3,12 @@
 Each paper has an entry ``scenarios/reproduce/<name>.toml`` (the paper's numbers and tolerances
 live there, not in code)::
 
-    title = "Seed 000: ..."
+    title = "Author et al. (year): ..."
     notes = "why our figures differ from the paper's"     # optional, markdown
     table = "table2"               # optional: the table's file name (default "table")
     [[runs]]                       # one table row per run
     name = "RMPC N=5"
-    scenario = "seed000_stop_rmpc"
+    scenario = "stop_rmpc"
     set = { "controller.N" = 5 }   # optional overrides (as --set)
     repeat = 10                    # optional: run it 10 times; numeric metrics are shown as
                                    # "median [min, max]" (e.g. computation times); the first
@@ -42,7 +42,7 @@ live there, not in code)::
                                    # the verdict names the pairs ours orders the other way
     [[sweeps]]                     # optional: a cosim sweep (sweep.csv, sweep.png)
     name = "fig11"
-    scenarios = ["seed000_stop_rmpc", "seed000_stop_rsmpc"]
+    scenarios = ["stop_rmpc", "stop_rsmpc"]
     grid = { "controller.N" = "3..15" }
     [[figures]]                    # drawn from the runs' results.csv
     file = "fig_speed.png"
@@ -54,14 +54,14 @@ live there, not in code)::
     y_scale = 3.6                  # optional factor (m/s -> km/h)
     ylabel = "speed (km/h)"
     runs = ["PID", "MPC"]          # optional, default all
-    [[figures]]                    # graded speed error (seed 001's Fig. 8): the max |error| of
+    [[figures]]                    # graded speed error: the max |error| of
     file = "fig8.png"              # each run per class of the reference speed, with the limit
     kind = "speed_classes"         # |e| <= max(limit_kmh if v <= limit_below_kmh, fraction v)
     ref = "controller.v_ref"       # the reference speed column (classes are of it)
     y = ["plant.v[1]"]             # speeds; error = y - ref; y_scale converts both (3.6: km/h)
     y_scale = 3.6
     classes = [0, 30, 50, 100]     # class edges (km/h): (0, 30], (30, 50], (50, 100]
-    limit_kmh = 2.0                # CTCS-3: 2 km/h at or below 30 km/h, 2 % of the speed above
+    limit_kmh = 2.0                # e.g. 2 km/h at or below 30 km/h, 2 % above
     limit_below_kmh = 30.0
     limit_fraction = 0.02
     paper = "what the paper reports"   # optional, shown under the figure
@@ -180,7 +180,8 @@ def _check_keys(where: str, table: dict[str, Any], allowed: set[str],
 
 
 def load_entry(name: str | Path) -> Entry:
-    """Read and check an entry by name (``seed000``) or path."""
+    """Read and check an entry by name (its file in ``scenarios/reproduce/`` without ``.toml``)
+    or path."""
     path = Path(name)
     if not path.suffix:
         path = REPRODUCE_DIR / f"{name}.toml"
@@ -576,14 +577,14 @@ def figure_series(frame: Any, spec: dict[str, Any], y: str, run: str) -> Any:
 
 
 def speed_class_errors(frame: Any, spec: dict[str, Any]) -> list[dict[str, Any]]:
-    """Graded speed error of one run (a ``speed_classes`` figure, seed 001's Fig. 8).
+    """Graded speed error of one run (a ``speed_classes`` figure).
 
     Per class (lo, hi] of the reference speed (samples with the reference above zero): the
     max |error| over the ``y`` columns, the class's strictest allowance (at its lowest sample
     speed) and whether every sample keeps its own allowance (all in the figure's units)."""
     import numpy as np
 
-    from cosim.run.metrics import ctcs3_allowance_kmh
+    from cosim.run.metrics import graded_allowance
 
     scale = float(spec.get("y_scale", 1.0))
     ys = spec["y"] if isinstance(spec["y"], list) else [spec["y"]]
@@ -600,9 +601,9 @@ def speed_class_errors(frame: Any, spec: dict[str, Any]) -> list[dict[str, Any]]
         row: dict[str, Any] = {"class": f"{lo:g}-{hi:g}", "samples": int(sel.sum()),
                                "max_abs_error": None, "limit": None, "met": None}
         if np.any(sel):
-            allowed = ctcs3_allowance_kmh(ref[sel], float(spec["limit_kmh"]),
-                                          float(spec["limit_below_kmh"]),
-                                          float(spec["limit_fraction"]))
+            allowed = graded_allowance(ref[sel], float(spec["limit_kmh"]),
+                                       float(spec["limit_below_kmh"]),
+                                       float(spec["limit_fraction"]))
             row.update(max_abs_error=float(err[sel].max()), limit=float(allowed.min()),
                        met=bool(np.all(err[sel] <= allowed + 1e-12)))
         rows.append(row)

@@ -1,6 +1,6 @@
 """Parameter sweeps: one scenario (or several) over a grid of overrides, in parallel processes.
 
-``run_sweep("seed000_stop_rsmpc", {"controller.N": range(3, 16)}, "runs/sweep", workers=2)``
+``run_sweep("stop_rsmpc", {"controller.N": range(3, 16)}, "runs/sweep", workers=2)``
 runs every grid point with :func:`cosim.run.master.run_scenario` in a process pool, and writes
 
 * ``sweep.csv``: one row per run (scenario, the grid values, ``status`` ok / failed /
@@ -8,8 +8,8 @@ runs every grid point with :func:`cosim.run.master.run_scenario` in a process po
   point does not stop the others and an interrupted sweep keeps its finished rows; with
   ``resume`` the points already ``ok`` in an existing ``sweep.csv`` are not run again;
 * ``sweep.png``: stop error against the first grid key, one line per scenario, with the
-  +-0.5 m stop window, and the command switches / controller executions (the paper's Fig. 11
-  plus the switch counts).
+  +-0.5 m stop window, and the command switches / controller executions (a stopping study's
+  figure over the horizon, plus the switch counts).
 
 Grid values on the command line (:func:`parse_grid`): ``controller.N=3..15`` (integer range,
 inclusive), ``controller.beta=1,2,4`` (list) or a single value.
@@ -33,7 +33,7 @@ import pandas as pd
 
 from cosim.run import interrupt
 
-STOP_WINDOW_M = 0.5  # seed 000: ATO stop window +-50 cm
+STOP_WINDOW_M = 0.5  # m, the ATO stop window +-50 cm
 
 SUMMARY_COLUMNS = ("stop_error_m", "command_switches", "qp_solves", "qp_infeasible",
                    "qp_solve_time_median_s", "speed_rmse_mps", "max_jerk_mps3", "wall_time_s")
