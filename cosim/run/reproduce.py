@@ -106,10 +106,7 @@ the table, and are rows of ``table.csv`` with ``metric = "<kind>:<metric>"`` /
 from __future__ import annotations
 
 import math
-import multiprocessing
-import os
 import re
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -292,10 +289,12 @@ def summary_value(summary: dict[str, Any], key: str) -> Any:
     return value
 
 
-def _run_one(scenario: str, overrides: dict[str, Any], out_dir: str) -> dict[str, Any]:
+def _run_one(scenario: str, overrides: dict[str, Any], out_dir: str,
+             plot_format: str = "png") -> dict[str, Any]:
     from cosim.run.master import run_scenario
 
-    result = run_scenario(scenario, overrides=overrides, out_dir=out_dir, build=False)
+    result = run_scenario(scenario, overrides=overrides, out_dir=out_dir, build=False,
+                          plot_format=plot_format)
     return result.summary
 
 
@@ -331,30 +330,38 @@ def repeat_spread(summary: dict[str, Any], key: str) -> tuple[float, float, int]
     return float(min(vals)), float(max(vals)), len(vals)
 
 
-def run_entry(entry: Entry, out_dir: Path, workers: int | None = None
+def run_entry(entry: Entry, out_dir: Path, workers: int | None = None,
+              scheduler: str | None = None, plot_format: str = "png"
               ) -> dict[str, dict[str, Any]]:
-    """Run every run of ``entry`` (``workers`` processes; a run with ``repeat = k`` k times,
-    repetitions 2.. under ``runs/<run>/repeat_NN``); returns run name -> summary (medians and
-    ``repeats`` for a repeated run)."""
+    """Run every run of ``entry`` with :func:`cosim.run.runner.run_tasks` (``workers``
+    processes or the Dask ``scheduler``; a run with ``repeat = k`` k times, repetitions 2..
+    under ``runs/<run>/repeat_NN``); returns run name -> summary (medians and ``repeats`` for
+    a repeated run). A failed run raises :class:`ReproduceError` naming it, after the others
+    finished."""
+    from cosim.run import runner
     from cosim.run.master import ensure_built
     from cosim.run.scenario import load_scenario
 
     for run in entry.runs:  # bad overrides fail here, before anything runs; build once
         ensure_built(load_scenario(run["scenario"], run.get("set", {})))
-    jobs = []
+    tasks = []
     for run in entry.runs:
         base = out_dir / "runs" / slug(run["name"])
         for k in range(int(run.get("repeat", 1))):
             out = base if k == 0 else base / f"repeat_{k + 1:02d}"
-            jobs.append(((run["name"], k), run["scenario"], dict(run.get("set", {})), str(out)))
-    workers = max(1, min(workers or os.cpu_count() or 1, len(jobs)))
-    if workers == 1:
-        done = {key: _run_one(sc, ov, out) for key, sc, ov, out in jobs}
-    else:
-        ctx = multiprocessing.get_context("spawn")
-        with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
-            futures = {key: pool.submit(_run_one, sc, ov, out) for key, sc, ov, out in jobs}
-            done = {key: f.result() for key, f in futures.items()}
+            tasks.append(runner.Task((run["name"], k), _run_one,
+                                     (run["scenario"], dict(run.get("set", {})), str(out),
+                                      plot_format)))
+    done: dict[Any, dict[str, Any]] = {}
+    errors: list[tuple[Any, BaseException]] = []
+    runner.run_tasks(tasks, lambda t, summary: done.__setitem__(t.key, summary),
+                     lambda t, err: errors.append((t.key, err)), workers, scheduler,
+                     f"{entry.name} runs", what=f"{entry.name}'s runs")
+    if errors:
+        (name, k), err = errors[0]
+        raise ReproduceError(f"{entry.path}: run {name!r}"
+                             + (f" (repetition {k + 1})" if k else "") + f" failed: {err}"
+                             ) from err
     result = {}
     for run in entry.runs:
         reps = [done[run["name"], k] for k in range(int(run.get("repeat", 1)))]
@@ -668,20 +675,23 @@ def draw_speed_classes(spec: dict[str, Any], run_dirs: dict[str, Path], path: Pa
 
 
 def reproduce(name: str, out_dir: str | Path | None = None, workers: int | None = None,
-              seeds: int | None = None, rounding: bool = True, scheduler: str | None = None
-              ) -> Path:
-    """Run one entry; write table.md/table.csv (``entry.table``), sweeps and figures, and with
-    claims claims.csv/claims.md over ``seeds`` members (default 20; :mod:`cosim.run.ensemble`,
-    ``rounding``: also the perturbed floating-point rerun); return the table's markdown file."""
+              seeds: int | None = None, rounding: bool = True, scheduler: str | None = None,
+              plot_format: str = "png", echo: bool = True) -> Path:
+    """Run one entry; write table.md/table.csv (``entry.table``), sweeps and figures (in
+    ``plot_format``: png at 200 dpi, svg or pdf), and with claims claims.csv/claims.md over
+    ``seeds`` members (default 20; :mod:`cosim.run.ensemble`, ``rounding``: also the perturbed
+    floating-point rerun); every batch of runs goes through :mod:`cosim.run.runner`
+    (``workers``, ``scheduler``). With ``echo`` the tables are printed in 80 columns
+    (:func:`console_text`). Returns the table's markdown file."""
     import pandas as pd
 
-    from cosim.run.ensemble import compact_table, run_claims
+    from cosim.run.ensemble import run_claims
     from cosim.run.sweep import parse_grid, run_sweep
 
     entry = load_entry(name)
     out = Path(out_dir) if out_dir is not None else Path("runs") / "reproduce" / entry.name
     out.mkdir(parents=True, exist_ok=True)
-    summaries = run_entry(entry, out, workers)
+    summaries = run_entry(entry, out, workers, scheduler, plot_format)
     rows = table_rows(entry, summaries)
     derived = derived_rows(entry, summaries)
     ranked = ranking_rows(entry, summaries)
@@ -695,33 +705,71 @@ def reproduce(name: str, out_dir: str | Path | None = None, workers: int | None 
     for sweep in entry.sweeps:
         grid = parse_grid(f"{k}={v}" for k, v in sweep["grid"].items())
         target = out / slug(sweep["name"])
-        frame = run_sweep(sweep["scenarios"], grid, target, workers=workers)
+        frame = run_sweep(sweep["scenarios"], grid, target, workers=workers,
+                          scheduler=scheduler, plot_format=plot_format)
         keep = [c for c in ("scenario", *grid, "stop_error_m", "controller_executions",
                             "command_switches", "qp_infeasible") if c in frame]
         parts += ["", f"### Sweep {sweep['name']}", "", _frame_markdown(frame[keep]), "",
-                  f"![{sweep['name']}]({target.name}/sweep.png)"]
+                  f"![{sweep['name']}]({target.name}/sweep.{plot_format})"]
     run_dirs = {r["name"]: out / "runs" / slug(r["name"]) for r in entry.runs}
     for spec in entry.figures:
+        file = figure_file(spec, plot_format)
         if spec.get("kind") == "speed_classes":
-            table_md = draw_speed_classes(spec, run_dirs, out / spec["file"])
-            parts += ["", f"![{spec.get('title', spec['file'])}]({spec['file']})", "",
-                      table_md]
+            table_md = draw_speed_classes(spec, run_dirs, out / file)
+            parts += ["", f"![{spec.get('title', file)}]({file})", "", table_md]
             continue
-        draw_figure(spec, run_dirs, out / spec["file"])
-        parts += ["", f"![{spec.get('title', spec['file'])}]({spec['file']})"]
+        draw_figure(spec, run_dirs, out / file)
+        parts += ["", f"![{spec.get('title', file)}]({file})"]
+    claim_rows: list[dict[str, Any]] = []
     if entry.claims:
         k = seeds if seeds is not None else min(20, len(entry.ensemble.report_seeds))
         try:
-            claim_rows = run_claims(entry, out, k, workers, rounding, scheduler)
+            claim_rows = run_claims(entry, out, k, workers, rounding, scheduler, plot_format)
         except ValueError as err:
             raise ReproduceError(str(err)) from err
         parts += ["", "### Claims", "", (out / "claims.md").read_text().split("\n", 2)[2]]
-        print(compact_table(claim_rows))
     if entry.notes:
         parts += ["", "### Where we differ from the paper, and why", "", entry.notes.strip()]
     table = out / f"{entry.table}.md"
     table.write_text("\n".join(parts) + "\n")
+    if echo:
+        print(console_text(entry, rows, claim_rows, out), flush=True)
     return table
+
+
+def figure_file(spec: dict[str, Any], plot_format: str = "png") -> str:
+    """The file a ``[[figures]]`` entry is drawn to: its ``file`` in ``plot_format``."""
+    return f"{Path(spec['file']).stem}.{plot_format}"
+
+
+def console_text(entry: Entry, rows: list[dict[str, Any]], claim_rows: list[dict[str, Any]],
+                 out: Path) -> str:
+    """The entry's results for an 80-column terminal: ours per run and metric (columns
+    numbered, their names below), the claims (id, k of K, verdict) and where the full tables
+    are."""
+    import textwrap
+
+    from cosim.run.console import fit_table
+    from cosim.run.ensemble import compact_table
+
+    names = {m["key"]: f"m{i + 1}" for i, m in enumerate(entry.metrics)}
+    by_run: dict[str, dict[str, Any]] = {}
+    for r in rows:
+        by_run.setdefault(r["run"], {"run": r["run"]})[names[r["metric"]]] = r["ours"]
+    lines = textwrap.wrap(entry.title, 80)
+    if by_run:
+        lines += ["", fit_table(list(by_run.values()), ["run", *names.values()],
+                                title="ours (beside the paper's, with verdicts, in "
+                                      f"{entry.table}.md)")]
+        lines += textwrap.wrap("; ".join(f"{names[m['key']]} {m.get('label', m['key'])}"
+                                         for m in entry.metrics), 80)
+    if claim_rows:
+        lines += ["", compact_table(claim_rows)]
+    full = [f"{entry.table}.md", f"{entry.table}.csv"]
+    if claim_rows:
+        full += ["claims.md", "claims.csv"]
+    lines += ["", *textwrap.wrap(f"full tables in {out}/: " + ", ".join(full), 80)]
+    return "\n".join(lines)
 
 
 def _frame_markdown(frame: Any) -> str:
@@ -751,12 +799,13 @@ def claims_summary(out: Path, names: list[str]) -> str:
 
 def reproduce_all(out_dir: str | Path | None = None, workers: int | None = None,
                   seeds: int | None = None, rounding: bool = True,
-                  scheduler: str | None = None) -> Path:
+                  scheduler: str | None = None, plot_format: str = "png") -> Path:
     """Every entry; one ``REPRODUCTION.md`` with the claims held / failed / inconclusive per
     paper and each entry's tables and figures."""
     out = Path(out_dir) if out_dir is not None else Path("runs") / "reproduce"
     out.mkdir(parents=True, exist_ok=True)
-    tables = {name: reproduce(name, out / name, workers, seeds, rounding, scheduler)
+    tables = {name: reproduce(name, out / name, workers, seeds, rounding, scheduler,
+                              plot_format)
               for name in entry_names()}
     parts = ["# Reproduced results", "", "Made by `cosim reproduce all`; each section by "
              "`cosim reproduce NAME` from the entry in `scenarios/reproduce/`.", "",
