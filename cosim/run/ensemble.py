@@ -111,46 +111,80 @@ def member_dir(out: Path, key: tuple[str, str, int, bool]) -> Path:
     return out / "ensemble" / slug(key[0]) / f"{key[1]}_{key[2] + 1:02d}"
 
 
-def draw_ensemble_figure(spec: dict[str, Any], dirs: dict[str, list[Path]], path: Path
-                         ) -> None:
+def draw_ensemble_figure(spec: dict[str, Any], dirs: dict[str, list[Path]], path: Path,
+                         scenarios: dict[str, Any] | None = None) -> None:
+    """:func:`ensemble_figure_of` the members' results.csv, saved to ``path`` (png at 200
+    dpi, svg or pdf by its suffix)."""
+    import matplotlib.pyplot as plt
+    import pandas as pd
+
+    from cosim.run.results import PLOT_DPI
+
+    frames = {name: [pd.read_csv(d / "results.csv") for d in members_]
+              for name, members_ in dirs.items()}
+    fig = ensemble_figure_of(spec, frames, scenarios or {})
+    fig.savefig(path, dpi=PLOT_DPI, format=Path(path).suffix.lstrip(".") or "png",
+                bbox_inches="tight")
+    plt.close(fig)
+
+
+def ensemble_figure_of(spec: dict[str, Any], frames: dict[str, list[Any]],
+                       scenarios: dict[str, Any]) -> Any:
     """An overlay figure over an ensemble: per run the median over the members and a 5-95 %
-    band (members sampled on the first member's x grid; x = "time" or a recorded column)."""
+    band (members sampled on the first member's x grid; x = "time" or a recorded column);
+    held signals as steps, the reference as a dashed continuous curve, labels and units from
+    the declarations (:func:`cosim.run.reproduce.series_style`), the legend outside."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    import pandas as pd
 
-    from cosim.run.reproduce import figure_series
-    from cosim.run.results import PLOT_DPI
+    from cosim.run.reproduce import (
+        axis_text,
+        figure_series,
+        legend_outside,
+        plain_axes,
+        reference_curve,
+        series_style,
+    )
 
     ys = spec["y"] if isinstance(spec["y"], list) else [spec["y"]]
-    scale = float(spec.get("y_scale", 1.0))
-    fig, ax = plt.subplots(figsize=(8, 4.5))
-    for name, members_ in dirs.items():
-        frames = [pd.read_csv(d / "results.csv") for d in members_]
-        x0 = frames[0]["time"] if spec["x"] == "time" else frames[0][spec["x"]]
+    first = scenarios.get(next(iter(frames))) if frames else None
+    ylabel, scale = axis_text(spec, "y", first, ys[0])
+    fig, ax = plt.subplots(figsize=(9, 4.5))
+    for name, members_ in frames.items():
+        x0 = members_[0]["time"] if spec["x"] == "time" else members_[0][spec["x"]]
         for y in ys:
+            plain = "y_reduce" in spec or "y_minus" in spec
+            style = ({"drawstyle": "default", "text": y, "reference": False} if plain
+                     else series_style(scenarios.get(name), y))
             curves = []
-            for frame in frames:
+            for frame in members_:
                 x = frame["time"] if spec["x"] == "time" else frame[spec["x"]]
-                curves.append(np.interp(x0, x, figure_series(frame, spec, y, name) * scale))
+                values = figure_series(frame, spec, y, name)
+                curve = (reference_curve(scenarios.get(name), frame, y) if style["reference"]
+                         else None)
+                values = values if curve is None else curve
+                curves.append(np.interp(x0, x, values * scale))
             stack = np.vstack(curves)
-            label = name if len(ys) == 1 else f"{name}: {y}"
-            line, = ax.plot(x0, np.median(stack, axis=0), linewidth=1.0,
-                            label=f"{label} (median of {len(frames)})")
+            label = name if len(ys) == 1 else f"{name}: {style['text']}"
+            kwargs: dict[str, Any] = {"linewidth": 1.0, "drawstyle": style["drawstyle"]}
+            if style["reference"]:
+                kwargs.update(color="black", linestyle="--", linewidth=0.9)
+            line, = ax.plot(x0, np.median(stack, axis=0),
+                            label=f"{label} (median of {len(members_)})", **kwargs)
             ax.fill_between(x0, np.percentile(stack, 5, axis=0),
                             np.percentile(stack, 95, axis=0), color=line.get_color(),
-                            alpha=0.25, linewidth=0)
-    ax.set_xlabel(spec.get("xlabel", "time (s)" if spec["x"] == "time" else spec["x"]))
-    ax.set_ylabel(spec.get("ylabel", ys[0]))
+                            alpha=0.25, linewidth=0,
+                            step="post" if style["drawstyle"] == "steps-post" else None)
+    ax.set_xlabel(axis_text(spec, "x", first, spec["x"])[0])
+    ax.set_ylabel(ylabel)
     ax.grid(True, alpha=0.3)
-    ax.legend(fontsize=7)
+    plain_axes(ax)
+    legend_outside(ax)
     fig.suptitle(f"{spec.get('title', '')} (median, 5-95 % band over the seeds)")
     fig.tight_layout()
-    fig.savefig(path, dpi=PLOT_DPI, format=Path(path).suffix.lstrip(".") or "png",
-                bbox_inches="tight")
-    plt.close(fig)
+    return fig
 
 
 ROUNDING_ENV = {"ATO_COSIM_NO_KERNELS": "1"}  # the plants' numpy reference path
@@ -259,6 +293,7 @@ def run_claims(entry: Any, out: Path, k: int, workers: int | None = None,
     import pandas as pd
 
     from cosim.run.master import ensure_built
+    from cosim.run.reproduce import run_scenarios
     from cosim.run.scenario import load_scenario
 
     jobs = claim_jobs(entry, k, rounding)
@@ -287,7 +322,8 @@ def run_claims(entry: Any, out: Path, k: int, workers: int | None = None,
         if runs:
             draw_ensemble_figure(spec, {r: [member_dir(out, (r, "disturbance", i, False))
                                             for i in range(n)] for r in runs},
-                                 out / f"{Path(spec['file']).stem}_ensemble.{plot_format}")
+                                 out / f"{Path(spec['file']).stem}_ensemble.{plot_format}",
+                                 run_scenarios(entry))
     pd.DataFrame(rows).to_csv(out / "claims.csv", index=False)
     (out / "claims.md").write_text(f"## Claims of {entry.title}\n\n"
                                    + claims_markdown(rows, k) + "\n")

@@ -533,40 +533,137 @@ def table_markdown(entry: Entry, rows: list[dict[str, Any]]) -> str:
     return "\n".join(lines)
 
 
-def draw_figure(spec: dict[str, Any], run_dirs: dict[str, Path], path: Path) -> None:
-    """One figure from the runs' results.csv (see the module docstring)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
+def draw_figure(spec: dict[str, Any], run_dirs: dict[str, Path], path: Path,
+                scenarios: dict[str, Any] | None = None) -> None:
+    """:func:`figure_of` the runs' results.csv, saved to ``path`` (its suffix: png at 200
+    dpi, svg or pdf)."""
     import matplotlib.pyplot as plt
     import pandas as pd
 
     names = list(spec.get("runs", list(run_dirs)))
-    ys = spec["y"] if isinstance(spec["y"], list) else [spec["y"]]
-    scale = float(spec.get("y_scale", 1.0))
-    panels = spec.get("kind", "overlay") == "panels"
-    fig, axes = plt.subplots(len(names) if panels else 1, 1, squeeze=False, sharex=True,
-                             figsize=(8, 2.6 * len(names) if panels else 4.5))
-    for i, name in enumerate(names):
-        frame = pd.read_csv(run_dirs[name] / "results.csv")
-        ax = axes[i if panels else 0][0]
-        x = frame["time"] if spec["x"] == "time" else frame[spec["x"]]
-        for y in ys:
-            label = y if panels else (name if len(ys) == 1 else f"{name}: {y}")
-            if "y_reduce" in spec:
-                label = f"{spec['y_reduce']} of {label}"
-            ax.plot(x, figure_series(frame, spec, y, name) * scale, label=label, linewidth=1.0)
-        if panels:
-            ax.set_title(name, fontsize=9)
-        ax.set_ylabel(spec.get("ylabel", ys[0]))
-        ax.grid(True, alpha=0.3)
-        ax.legend(fontsize=7)
-    axes[-1][0].set_xlabel(spec.get("xlabel", "time (s)" if spec["x"] == "time" else spec["x"]))
-    fig.suptitle(spec.get("title", ""))
-    fig.tight_layout()
+    frames = {n: pd.read_csv(run_dirs[n] / "results.csv") for n in names}
+    fig = figure_of(spec, frames, scenarios or {})
     fig.savefig(path, dpi=PLOT_DPI, format=Path(path).suffix.lstrip(".") or "png",
                 bbox_inches="tight")
     plt.close(fig)
+
+
+def series_style(scenario: Any, ref: str) -> dict[str, Any]:
+    """How a figure draws the column ``ref`` of a run of ``scenario``: the scenario's
+    reference (``[summary]`` ``reference_speed`` or ``reference_accel``) as a continuous
+    dashed curve, an output of a sampled or self-triggered FMU (held between its events) as
+    steps, anything else (the plant's continuous states) as a line; with the legend text from
+    the declaration (its description)."""
+    from cosim.run.results import _held, variable_info
+
+    if scenario is None:
+        return {"drawstyle": "default", "text": ref, "reference": False}
+    summary = scenario.summary
+    reference = ref in (summary.get("reference_speed"), summary.get("reference_accel"))
+    text = variable_info(scenario, ref)[0]
+    if reference:
+        return {"drawstyle": "default", "text": f"reference: {text}", "reference": True}
+    return {"drawstyle": "steps-post" if _held(scenario, ref) else "default", "text": text,
+            "reference": False}
+
+
+def axis_text(spec: dict[str, Any], axis: str, scenario: Any, column: str
+              ) -> tuple[str, float]:
+    """(label, factor) of an axis: the entry's ``xlabel`` / ``ylabel`` and ``y_scale`` where
+    given, else the declared description of ``column`` in its display unit (km/h for m/s, kN
+    for N, ...) and the factor to that unit; ``time (s)`` for the time."""
+    from cosim.run.results import display_unit, variable_info
+
+    scale = float(spec.get("y_scale", 1.0)) if axis == "y" else 1.0
+    given = spec.get(f"{axis}label")
+    if column == "time":
+        return str(given or "time (s)"), 1.0
+    text, unit = variable_info(scenario, column) if scenario is not None else (column, None)
+    if given:
+        return str(given), scale
+    if scale != 1.0:  # the entry's factor, without its unit's name
+        return f"{text} ({unit or '1'} x {scale:g})", scale
+    factor, shown = display_unit(unit)
+    return (f"{text} ({shown})" if shown and shown != "1" else text), factor
+
+
+def plain_axes(ax: Any) -> None:
+    """Tick labels without offset or scientific notation ("+1.999e1") on linear axes."""
+    for axis in ("x", "y"):
+        scale = ax.get_xscale() if axis == "x" else ax.get_yscale()
+        if scale == "linear":
+            ax.ticklabel_format(axis=axis, useOffset=False, style="plain")
+
+
+def legend_outside(ax: Any) -> Any:
+    """The legend right of the axes, where no curve can be under it."""
+    return ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=7, frameon=False,
+                     borderaxespad=0.0)
+
+
+def figure_of(spec: dict[str, Any], frames: dict[str, Any], scenarios: dict[str, Any]) -> Any:
+    """One ``[[figures]]`` figure (kind ``overlay``: every run on one axes; ``panels``: one
+    axes per run) from the runs' recorded frames; ``scenarios``: run name -> its loaded
+    scenario (the declarations behind labels and drawing styles, :func:`series_style`)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    names = list(frames)
+    ys = spec["y"] if isinstance(spec["y"], list) else [spec["y"]]
+    panels = spec.get("kind", "overlay") == "panels"
+    fig, axes = plt.subplots(len(names) if panels else 1, 1, squeeze=False, sharex=True,
+                             figsize=(9, 2.6 * len(names) if panels else 4.5))
+    for i, name in enumerate(names):
+        frame, scenario = frames[name], scenarios.get(name)
+        ax = axes[i if panels else 0][0]
+        x = frame["time"] if spec["x"] == "time" else frame[spec["x"]]
+        ylabel, scale = axis_text(spec, "y", scenario, ys[0])
+        for y in ys:
+            style = series_style(scenario, y) if "y_reduce" not in spec and \
+                "y_minus" not in spec else {"drawstyle": "default", "text": y,
+                                            "reference": False}
+            text = style["text"]
+            if "y_reduce" in spec:
+                text = f"{spec['y_reduce']} of {text}"
+            label = text if panels else (name if len(ys) == 1 else f"{name}: {text}")
+            kwargs: dict[str, Any] = {"linewidth": 1.0, "drawstyle": style["drawstyle"]}
+            values = figure_series(frame, spec, y, name)
+            if style["reference"]:
+                kwargs.update(color="black", linestyle="--", linewidth=0.9)
+                curve = reference_curve(scenario, frame, y)
+                values = values if curve is None else curve
+            ax.plot(x, values * scale, label=label, **kwargs)
+        if panels:
+            ax.set_title(name, fontsize=9)
+        ax.set_ylabel(ylabel)
+        ax.grid(True, alpha=0.3)
+        plain_axes(ax)
+        legend_outside(ax)
+    first = scenarios.get(names[0]) if names else None
+    axes[-1][0].set_xlabel(axis_text(spec, "x", first, spec["x"])[0])
+    fig.suptitle(spec.get("title", ""))
+    fig.tight_layout()
+    return fig
+
+
+def reference_curve(scenario: Any, frame: Any, y: str) -> Any:
+    """The continuous reference behind a held ``reference_speed`` column: the stopping curve
+    ``v_ref(s) = sqrt(2 a0 (s_stop - s))`` at the recorded positions where ``[summary]``
+    declares ``reference_decel`` and ``stop_point`` (as the speed metrics use it); None
+    otherwise (the recorded column is the curve)."""
+    import numpy as np
+
+    from cosim.fmu.profiles import StoppingCurve
+
+    cfg = getattr(scenario, "summary", {}) or {}
+    position = cfg.get("position")
+    if (y != cfg.get("reference_speed") or "reference_decel" not in cfg
+            or "stop_point" not in cfg or position not in frame):
+        return None
+    curve = StoppingCurve(float(cfg["reference_decel"]), float(cfg["stop_point"]))
+    return np.array([curve.speed(x) for x in frame[position].to_numpy(dtype=float)])
 
 
 def figure_series(frame: Any, spec: dict[str, Any], y: str, run: str) -> Any:
@@ -712,13 +809,14 @@ def reproduce(name: str, out_dir: str | Path | None = None, workers: int | None 
         parts += ["", f"### Sweep {sweep['name']}", "", _frame_markdown(frame[keep]), "",
                   f"![{sweep['name']}]({target.name}/sweep.{plot_format})"]
     run_dirs = {r["name"]: out / "runs" / slug(r["name"]) for r in entry.runs}
+    scenarios = run_scenarios(entry)
     for spec in entry.figures:
         file = figure_file(spec, plot_format)
         if spec.get("kind") == "speed_classes":
             table_md = draw_speed_classes(spec, run_dirs, out / file)
             parts += ["", f"![{spec.get('title', file)}]({file})", "", table_md]
             continue
-        draw_figure(spec, run_dirs, out / file)
+        draw_figure(spec, run_dirs, out / file, scenarios)
         parts += ["", f"![{spec.get('title', file)}]({file})"]
     claim_rows: list[dict[str, Any]] = []
     if entry.claims:
@@ -735,6 +833,13 @@ def reproduce(name: str, out_dir: str | Path | None = None, workers: int | None 
     if echo:
         print(console_text(entry, rows, claim_rows, out), flush=True)
     return table
+
+
+def run_scenarios(entry: Entry) -> dict[str, Any]:
+    """Run name -> its loaded scenario (with the run's ``set``)."""
+    from cosim.run.scenario import load_scenario
+
+    return {r["name"]: load_scenario(r["scenario"], r.get("set", {})) for r in entry.runs}
 
 
 def figure_file(spec: dict[str, Any], plot_format: str = "png") -> str:

@@ -254,7 +254,8 @@ def run_sweep(scenario: str | Sequence[str], grid: dict[str, Sequence[Any]],
             written.to_csv(out / "sweep.csv", index=False)
             if plot and (frame["status"] == "ok").any():
                 plot_sweep(frame[frame["status"] == "ok"], list(grid),
-                           out / f"sweep.{plot_format}")
+                           out / f"sweep.{plot_format}",
+                           key_labels(load_scenario(paths[0], points[0]), list(grid)))
     return frame
 
 
@@ -309,22 +310,36 @@ def _execute(jobs: list[tuple[str, dict[str, Any]]], workers: int | None,
                      label=label, broadcast=blobs, what="the sweep")
 
 
-def plot_sweep(frame: pd.DataFrame, keys: list[str], path: str | Path) -> None:
+def key_labels(scenario: Any, keys: list[str]) -> dict[str, str]:
+    """Axis labels of grid keys: the declared description and unit of each ``FMU.parameter``
+    (the key itself where there is none)."""
+    from cosim.run.results import axis_label, variable_info
+
+    labels = {}
+    for key in keys:
+        text, unit = variable_info(scenario, key)
+        labels[key] = f"{axis_label(text, unit)} [{key}]" if text != key else key
+    return labels
+
+
+def plot_sweep(frame: pd.DataFrame, keys: list[str], path: str | Path,
+               labels: dict[str, str] | None = None) -> None:
     """:func:`draw_sweep` saved to ``path`` (its suffix: png at 200 dpi, svg or pdf)."""
     import matplotlib.pyplot as plt
 
     from cosim.run.results import PLOT_DPI
 
-    fig = draw_sweep(frame, keys)
+    fig = draw_sweep(frame, keys, labels)
     fig.savefig(path, dpi=PLOT_DPI, format=Path(path).suffix.lstrip(".") or "png",
                 bbox_inches="tight")
     plt.close(fig)
 
 
-def draw_sweep(frame: pd.DataFrame, keys: list[str]) -> Any:
-    """Fig.-11-style figure: stop error (cm) and command switches / executions vs the first
-    key; the stop window drawn, the axis zoomed to the data when they lie far inside it;
-    legends right of the axes."""
+def draw_sweep(frame: pd.DataFrame, keys: list[str],
+               labels: dict[str, str] | None = None) -> Any:
+    """Stop error (cm) and command switches / executions vs the first key (its axis label
+    from ``labels``, e.g. :func:`key_labels`); the stop window drawn, the axis zoomed to the
+    data when they lie far inside it; legends right of the axes; no offset notation."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -347,12 +362,14 @@ def draw_sweep(frame: pd.DataFrame, keys: list[str]) -> Any:
                      color=line.get_color(), label=f"{name}: executions")
     fit_band(ax1, 100.0 * frame["stop_error_m"], -100 * STOP_WINDOW_M, 100 * STOP_WINDOW_M)
     ax1.set_ylabel("stop error (cm)")
-    ax1.set_title("Stop error and command switches vs " + x)
+    ax1.set_title("Stop error and command switches vs "
+                  + (labels or {}).get(x, x).partition(" [")[0].partition(" (")[0])
     ax1.grid(True, alpha=0.3)
     ax1.ticklabel_format(useOffset=False, style="plain", axis="y")
     ax1.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
-    ax2.set_xlabel(x)
+    ax2.set_xlabel((labels or {}).get(x, x))
     ax2.set_ylabel("count")
+    ax2.ticklabel_format(useOffset=False, style="plain", axis="both")
     ax2.grid(True, alpha=0.3)
     ax2.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
     ax2.xaxis.set_tick_params(labelbottom=True)
