@@ -41,3 +41,16 @@ def test_worker_options_are_checked(workers, scheduler, says):
         pytest.importorskip("distributed")
     with pytest.raises(ValueError, match=says):
         runner.check_workers(workers, scheduler)
+
+
+def test_one_runner_starts_every_pool_and_cluster():
+    """Sweeps, reproductions, ensembles and --perturb studies go through cosim.run.runner:
+    no other module of cosim/run starts a process pool or a Dask cluster."""
+    from pathlib import Path
+
+    import cosim.run
+
+    starters = ("ProcessPoolExecutor(", "LocalCluster(", "Client(", "multiprocessing.Pool(")
+    found = [f"{p.name}: {s}" for p in sorted(Path(cosim.run.__file__).parent.rglob("*.py"))
+             if p.name != "runner.py" for s in starters if s in p.read_text()]
+    assert found == []

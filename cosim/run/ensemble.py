@@ -210,11 +210,14 @@ def execute(jobs: list[Job], workers: int | None, label: str = "claims",
         print(f"{label}: {task.key} failed: {err}", file=sys.stderr)
         out[task.key] = None
 
+    from cosim.run.sweep import warm_up_for
+
     for rnd in (False, True):
         tasks = [runner.Task(key, _run_member, (sc, ov, dirs.get(key)))
                  for key, sc, ov in jobs if key[3] == rnd]
         runner.run_tasks(tasks, finished, failed, workers, scheduler, label,
                          env=ROUNDING_ENV if rnd else None, progress=progress,
+                         warm_up=warm_up_for([(sc, ov) for _k, sc, ov in jobs]),
                          what="the claims' runs")
     return out
 

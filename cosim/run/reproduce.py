@@ -341,6 +341,7 @@ def run_entry(entry: Entry, out_dir: Path, workers: int | None = None,
     from cosim.run import runner
     from cosim.run.master import ensure_built
     from cosim.run.scenario import load_scenario
+    from cosim.run.sweep import warm_up_for
 
     for run in entry.runs:  # bad overrides fail here, before anything runs; build once
         ensure_built(load_scenario(run["scenario"], run.get("set", {})))
@@ -356,7 +357,8 @@ def run_entry(entry: Entry, out_dir: Path, workers: int | None = None,
     errors: list[tuple[Any, BaseException]] = []
     runner.run_tasks(tasks, lambda t, summary: done.__setitem__(t.key, summary),
                      lambda t, err: errors.append((t.key, err)), workers, scheduler,
-                     f"{entry.name} runs", what=f"{entry.name}'s runs")
+                     f"{entry.name} runs", what=f"{entry.name}'s runs",
+                     warm_up=warm_up_for([(t.args[0], t.args[1]) for t in tasks]))
     if errors:
         (name, k), err = errors[0]
         raise ReproduceError(f"{entry.path}: run {name!r}"

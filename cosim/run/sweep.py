@@ -259,7 +259,7 @@ def run_sweep(scenario: str | Sequence[str], grid: dict[str, Sequence[Any]],
     return frame
 
 
-def _warm_up(jobs: list[tuple[str, dict[str, Any]]]) -> Callable[[], None]:
+def warm_up_for(jobs: list[tuple[str, dict[str, Any]]]) -> Callable[[], None]:
     """Before the pool forks: load every FMU of the sweep once (extracted, its bundled modules
     imported, the instance freed again), so a forked worker starts with nothing left to
     import or extract (a spawned interpreter paid ~1.5 s CPU of imports before its first
@@ -301,7 +301,7 @@ def _execute(jobs: list[tuple[str, dict[str, Any]]], workers: int | None,
         tasks = [runner.Task((path, point), _run_point, (path, point))
                  for path, point in reversed(jobs)]
         runner.run_tasks(tasks, lambda _t, row: finished(row), failed, workers,
-                         label=label, warm_up=_warm_up(jobs), what="the sweep")
+                         label=label, warm_up=warm_up_for(jobs), what="the sweep")
         return
     from cosim.run import dask_sweep
 
@@ -363,7 +363,7 @@ def draw_sweep(frame: pd.DataFrame, keys: list[str],
     fit_band(ax1, 100.0 * frame["stop_error_m"], -100 * STOP_WINDOW_M, 100 * STOP_WINDOW_M)
     ax1.set_ylabel("stop error (cm)")
     ax1.set_title("Stop error and command switches vs "
-                  + (labels or {}).get(x, x).partition(" [")[0].partition(" (")[0])
+                  + (labels or {}).get(x, x).partition(" [")[0])
     ax1.grid(True, alpha=0.3)
     ax1.ticklabel_format(useOffset=False, style="plain", axis="y")
     ax1.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
