@@ -875,7 +875,7 @@ def console_text(entry: Entry, rows: list[dict[str, Any]], claim_rows: list[dict
     full = [f"{entry.table}.md", f"{entry.table}.csv"]
     if claim_rows:
         full += ["claims.md", "claims.csv"]
-    lines += ["", *textwrap.wrap(f"full tables in {out}/: " + ", ".join(full), 80)]
+    lines += ["", f"full tables in {out}/:", "  " + ", ".join(full)]  # a path is never cut
     return "\n".join(lines)
 
 
