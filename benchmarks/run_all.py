@@ -200,14 +200,17 @@ def campaign_speedups(seeds: int) -> dict[str, dict]:
     r = bench_campaign.campaign(seeds)
     what = f"K = {seeds}, {r['runs']} runs"
     common = {"reference": r["1 worker"], "reference_name": f"1 worker (s; {what})",
-              "load_average": [r["load_before"], r["load_after"]], "seeds": seeds}
+              "load_average": [r["load_before"], r["load_after"]], "seeds": seeds,
+              "cpu_s": {label: r[f"{label} cpu"] for label, _, _ in bench_campaign.WAYS}}
     return {"campaign 2 vs 1 workers": {
                 "figure": r["2 workers"], "unit": "s, seed001 claims, --workers 2", **common,
-                "ratio": r["speedup_2_workers"], "ratio_name": "speed-up, 1 worker / 2"},
+                "ratio": r["speedup_2_workers"], "ratio_name": "speed-up, 1 worker / 2",
+                "cpu_ratio": r["1 worker cpu"] / r["2 workers cpu"]},
             "campaign Dask 2 vs 1 worker": {
                 "figure": r["dask 2 workers"], "unit": "s, seed001 claims, local Dask x 2",
                 **common, "ratio": r["speedup_dask"],
-                "ratio_name": "speed-up, 1 worker / Dask x 2"}}
+                "ratio_name": "speed-up, 1 worker / Dask x 2",
+                "cpu_ratio": r["1 worker cpu"] / r["dask 2 workers cpu"]}}
 
 
 def seed003_lmi(quick: bool) -> dict:
@@ -301,7 +304,7 @@ def main() -> None:
                 "updated_utc": stamp, "updated_groups": ", ".join(args.only)}
     args.out.write_text(json.dumps({"meta": meta, "benchmarks": rows}, indent=1,
                                    default=float) + "\n")
-    print(f"wrote {args.out} (load average {meta['load_average'][0]:.1f} on {meta['cpus']} "
+    print(f"wrote {args.out} (load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} "
           "cores: figures scale with it)")
     if args.out == docs_pages.BENCHMARKS_JSON:  # the site's page follows its source
         page = docs_pages.DOCS / "benchmarks.md"

@@ -262,8 +262,8 @@ def run_sweep(scenario: str | Sequence[str], grid: dict[str, Sequence[Any]],
 def warm_up_for(jobs: list[tuple[str, dict[str, Any]]]) -> Callable[[], None]:
     """Before the pool forks: load every FMU of the sweep once (extracted, its bundled modules
     imported, the instance freed again), so a forked worker starts with nothing left to
-    import or extract (a spawned interpreter paid ~1.5 s CPU of imports before its first
-    point)."""
+    import or extract (a spawned interpreter would import and extract again in each
+    worker)."""
 
     def warm() -> None:
         from cosim.run.master import warm_up
