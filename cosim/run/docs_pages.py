@@ -6,7 +6,8 @@ Each page is made from a source in the repository or the runs and is never edite
 - ``docs/benchmarks.md``: from ``benchmarks/results.json`` (written by
   ``benchmarks/run_all.py``);
 - ``docs/papers/NAME.md`` and its figures ``docs/papers/NAME/*``: from ``runs/reproduce/NAME/``
-  (written by ``cosim reproduce NAME``): its ``claims.md`` when present, its table otherwise,
+  (written by ``cosim reproduce NAME``): its table (``table*.md``: paper values, claims, figures,
+  notes) when present, its ``claims.md`` otherwise,
   with every figure the page links copied beside it. A paper whose reproduction has not been
   run on this machine keeps its committed page.
 
@@ -28,11 +29,11 @@ from pathlib import Path
 
 from cosim.fmu.build import ROOT
 from cosim.fmu.reference import REFERENCE_PATH, fmu_reference
+from cosim.run.provenance import INPUTS_FILE
 
 DOCS = ROOT / "docs"
 BENCHMARKS_JSON = ROOT / "benchmarks" / "results.json"
 REPRODUCE_DIR = Path("runs") / "reproduce"
-INPUTS_FILE = "inputs.sha256"
 NOT_REPRODUCED = ("# {name}\n\nNot reproduced here yet: `cosim reproduce {name}` writes "
                   "`runs/reproduce/{name}/`, then `cosim docs` makes this page.\n")
 _INPUTS = re.compile(r"^<!-- inputs ([0-9a-f]{64}) -->$", re.M)
@@ -80,10 +81,12 @@ def benchmarks_page(results: Path = BENCHMARKS_JSON) -> str:
 
 
 def _table_file(run_dir: Path) -> Path | None:
-    if (run_dir / "claims.md").is_file():
-        return run_dir / "claims.md"
+    """The entry's page source in ``run_dir``: its table (paper values, claims, figures and
+    notes; ``table*.md``), else its claims alone."""
     tables = sorted(p for p in run_dir.glob("table*.md"))
-    return tables[0] if tables else None
+    if tables:
+        return tables[0]
+    return run_dir / "claims.md" if (run_dir / "claims.md").is_file() else None
 
 
 def paper_page(name: str, run_dir: Path) -> dict[Path, bytes] | None:
@@ -124,7 +127,7 @@ def stale_papers(reproduce_dir: Path = REPRODUCE_DIR) -> list[str]:
     tree's current inputs, saying what to run."""
     from cosim.run.provenance import entry_digest
 
-    out = []
+    out: list[str] = []
     for name in paper_names():
         current = entry_digest(name)
         run_dir = reproduce_dir / name

@@ -27,6 +27,7 @@ except ModuleNotFoundError:  # Python 3.10
 SCENARIOS = ROOT / "scenarios"
 ENTRIES = SCENARIOS / "reproduce"
 EVALUATION = ("cosim/run", "cosim/papers")
+INPUTS_FILE = "inputs.sha256"  # in a reproduction's folder: the digest of the inputs it ran
 NOT_INPUTS = {"cosim/run/docs_pages.py", "cosim/run/provenance.py"}
 
 

@@ -112,6 +112,7 @@ from pathlib import Path
 from typing import Any
 
 from cosim.run.claims import ClaimsError, Ensemble, check_claims, check_ensemble
+from cosim.run.provenance import INPUTS_FILE, entry_digest
 from cosim.run.results import PLOT_DPI
 from cosim.run.scenario import SCENARIO_DIR
 
@@ -790,6 +791,9 @@ def reproduce(name: str, out_dir: str | Path | None = None, workers: int | None 
     entry = load_entry(name)
     out = Path(out_dir) if out_dir is not None else Path("runs") / "reproduce" / entry.name
     out.mkdir(parents=True, exist_ok=True)
+    inputs = out / INPUTS_FILE
+    inputs.unlink(missing_ok=True)  # a folder being rewritten vouches for no inputs
+    digest = entry_digest(entry.name) if entry.path.parent == REPRODUCE_DIR else None
     summaries = run_entry(entry, out, workers, scheduler, plot_format)
     rows = table_rows(entry, summaries)
     derived = derived_rows(entry, summaries)
@@ -832,6 +836,8 @@ def reproduce(name: str, out_dir: str | Path | None = None, workers: int | None 
         parts += ["", "### Where we differ from the paper, and why", "", entry.notes.strip()]
     table = out / f"{entry.table}.md"
     table.write_text("\n".join(parts) + "\n")
+    if digest is not None:  # the inputs this folder's results come from (cosim.run.provenance)
+        inputs.write_text(digest + "\n")
     if echo:
         print(console_text(entry, rows, claim_rows, out), flush=True)
     return table
