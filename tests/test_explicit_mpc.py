@@ -167,3 +167,44 @@ def test_empc_core_never_leaves_its_regions_over_the_whole_run() -> None:
 
     ctl, _, _ = closed_loop(ExplicitMpc)
     assert ctl.outside == 0 and ctl.qp_infeasible == 0 and ctl.qp_solves == 801
+
+
+def test_explicit_law_equals_its_online_twin_on_closed_loop_states() -> None:
+    """EMPC in closed loop with the plant core over the first 260 s (start, the target change
+    at 200 s): at every visited state the region lookup gives the force the online twin
+    (``evaluation = "online"``: the same mp-QP solved by DAQP) gives, to the tolerance of
+    the random-parameter test, and the twin run in its own closed loop visits the same
+    states."""
+    from cosim.fmu.state import to_ticks
+    from plants.emu import Emu
+    from plants.route import load_route
+
+    profile = load_reference(REF)
+    names = ([f"v[{i}]" for i in (1, 2, 3)] + ["s", "coupler_force[1]", "coupler_force[2]"]
+             + [f"traction_limit[{i}]" for i in (1, 2, 3)]
+             + [f"brake_limit[{i}]" for i in (1, 2, 3)])
+
+    def run(evaluation: str, shadow: bool) -> tuple[list[float], float]:
+        ctl = ExplicitMpc(P, profile, evaluation=evaluation)
+        twin = ExplicitMpc(P, profile, evaluation="online") if shadow else None
+        plant = Emu(TRAIN, load_route("seed004_level"))
+        speeds, worst = [], 0.0
+        for k in range(260):
+            o = plant.outputs()
+            inputs = {n: o[n] for n in names}
+            out, _ = ctl.compute(float(k), inputs)
+            if twin is not None:
+                other, _ = twin.compute(float(k), inputs)
+                worst = max(worst, max(abs(out[f"force[{i}]"] - other[f"force[{i}]"]) / 1e3
+                                       for i in (1, 2, 3)))
+            speeds.append(o["v"])
+            plant.advance(to_ticks(k), to_ticks(1.0), {f"force[{i}]": out[f"force[{i}]"]
+                                                       for i in (1, 2, 3)})
+        assert ctl.outside == 0 and ctl.qp_infeasible == 0
+        return speeds, worst
+
+    explicit, worst = run("explicit", shadow=True)
+    assert worst <= 1e-6  # kN
+    online, _ = run("online", shadow=False)
+    # equal forces to 1e-6 kN on a ~500 t train move the speed by < 1e-8 m/s per second
+    np.testing.assert_allclose(online, explicit, rtol=0, atol=1e-6)
