@@ -31,17 +31,20 @@ def test_every_shipped_scenario_uses_known_keys():
 
 
 def test_the_known_keys_are_those_the_metrics_read():
-    """SUMMARY_KEYS lists exactly the [summary] keys cosim.run.metrics reads (``cfg.get("k")`` /
-    ``cfg["k"]``), so a new metric cannot be rejected as a misspelling, nor a dead key accepted."""
+    """SUMMARY_KEYS lists exactly the [summary] keys cosim.run.metrics and the paper metrics
+    (cosim/papers) read (``cfg.get("k")`` / ``cfg["k"]``), so a new metric cannot be rejected
+    as a misspelling, nor a dead key accepted."""
     import ast
     from pathlib import Path
 
+    from cosim import papers
     from cosim.run import metrics
     from cosim.run.scenario import SUMMARY_KEYS
 
-    tree = ast.parse(Path(metrics.__file__).read_text())
+    sources = [Path(metrics.__file__), *sorted(Path(papers.__file__).parent.glob("*.py"))]
+    nodes = [n for f in sources for n in ast.walk(ast.parse(f.read_text()))]
     read = set()
-    for node in ast.walk(tree):
+    for node in nodes:
         if (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute)
                 and node.func.attr == "get" and getattr(node.func.value, "id", "") == "cfg"
                 and node.args and isinstance(node.args[0], ast.Constant)):

@@ -64,6 +64,7 @@ from typing import Any
 import numpy as np
 
 from cosim.fmu.profiles import StoppingCurve
+from cosim.papers import seed003, seed004
 
 KMH_PER_MPS = 3.6
 STANDSTILL_MPS = 1e-3
@@ -248,6 +249,8 @@ def compute_summary(result: Any) -> dict[str, Any]:
         else:
             out["arrival_time_error_s"] = None  # never came to rest inside the run
     _energy_metrics(out, cfg, frame, arrival_idx)
+    seed003.metrics(out, cfg, frame, arrival_idx)
+    seed004.metrics(out, cfg, frame)
 
     _seed002_metrics(out, cfg, frame, pos, speed, ref)
     out["executions"] = dict(result.executions)

@@ -57,7 +57,8 @@ SUMMARY_KEYS = ("position", "speed", "acceleration", "command", "command_resolut
                 "speed_limit", "power", "coupler_forces", "stop_point", "reference_decel",
                 "planned_arrival_time", "ctcs3", "unit_speeds", "ma_sample_time",
                 "reference_accel", "final_stop_window", "accel_command", "vehicle_speeds",
-                "energy_traction", "energy_regen", "energy_aux", "phase")
+                "energy_traction", "energy_regen", "energy_aux", "phase", "brake_work",
+                "reference_position")
 
 
 # [summary] keys holding a number; a string "instance.parameter" there reads that parameter's
