@@ -206,7 +206,7 @@ TARGETS = {"freight closed loop": ">= 500 x real time", "EMU closed loop": ">= 1
            "freight plant kernel": "", "EMU plant kernel": "", "freight kernel C vs numba": "",
            "master/raw seed000_stop_pid": "ratio <= 1.10", "master/raw seed002_freight_pid": "",
            "master/raw seed001_emu_pid": "", "sweep 2 vs 1 workers": "speed-up >= 1.7",
-           "seed 003 RMPC LMI event": "<= 20 ms median"}
+           "seed 003 LMI MPC event": "<= 20 ms median"}
 
 
 def main() -> None:
@@ -228,7 +228,7 @@ def main() -> None:
         rows[f"master/raw {scenario}"] = master_overhead(scenario, repeat if scenario == FREIGHT
                                                          or scenario == EMU else 5 * repeat)
     rows["sweep 2 vs 1 workers"] = sweep_speedup(5 if repeat > 1 else 1)  # noisy: 5 pairs
-    rows["seed 003 RMPC LMI event"] = seed003_lmi(args.quick)
+    rows["seed 003 LMI MPC event"] = seed003_lmi(args.quick)
     print(f"{'benchmark':<30} {'figure':>10}  {'reference':>10}  {'ratio':>7}  target / units")
     for name, r in rows.items():
         r["target"] = TARGETS[name]
