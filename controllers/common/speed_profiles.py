@@ -48,6 +48,11 @@ step (``v^2`` linear in ``s``). Limits of the paper: ``-1 <= a <= 1`` m/s^2, cru
   a short level route).
   The cruise profile is the member with no coasting, so the optimal one never needs more.
 
+The cruise and optimal searches cost seconds per process; their results (the cruise speed;
+``V_h`` and ``s_c``) are kept on disk by :func:`cosim.fmu.disk_cache.cached_arrays`, keyed by
+the route's profiles, the schedule, the train, the settings and this module's code, and the
+profile is rebuilt from them (the same floats as a fresh search).
+
 :func:`traction_work` is the mechanical traction work of any profile on the nominal model.
 
 Phases (Table 2, used by the energy-per-phase metrics): ``accelerate`` from the start until the
