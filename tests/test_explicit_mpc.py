@@ -120,6 +120,10 @@ def test_regions_built_for_another_design_are_refused(tmp_path) -> None:
         ExplicitMpc(P, load_reference(REF), regions=tmp_path / "none.npz")
     with pytest.raises(ValueError, match="scheduled"):
         ExplicitMpc(dataclasses.replace(P, delta_mode="optimise"), load_reference(REF))
+    with pytest.raises(ValueError, match="dR = 0.5"):
+        ExplicitMpc(dataclasses.replace(P, r_increment=0.5), load_reference(REF))
+    with pytest.raises(ValueError, match="evaluation"):
+        ExplicitMpc(P, load_reference(REF), evaluation="lookup")
 
 
 def test_empc_fmu_through_the_master(built_fmus) -> None:

@@ -140,6 +140,9 @@ class ExplicitMpc(HybridMpc):
         if evaluation not in EVALUATIONS:
             raise ValueError(f"evaluation = {evaluation!r} must be one of {EVALUATIONS}")
         self.evaluation = evaluation
+        if params.r_increment != 0.0:
+            raise ValueError(f"dR = {params.r_increment}: the EMPC's reduced problem has no "
+                             "force-increment term (eq. 11); its regions are built for dR = 0")
         if params.delta_mode != "schedule":
             raise ValueError(f"delta_mode = {params.delta_mode!r}: EMPC needs the scheduled "
                              "mode (its regions are per mode)")
