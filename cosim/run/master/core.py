@@ -400,7 +400,18 @@ def run_scenario(scenario: str | Path | Scenario, overrides: dict[str, Any] | li
 
 def ensure_built(sc: Scenario) -> list[Path]:
     """Build the scenario's catalog FMUs that are missing or older than their sources, in the
-    scenario's FMI version ([simulation] fmi_version)."""
+    scenario's FMI version ([simulation] fmi_version), and its native ones (build =
+    "native")."""
+    native = sorted({c.fmu for c in sc.components.values() if c.build == "native"})
+    built: list[Path] = []
+    if native:
+        from cosim.fmu.native_build import build_native, native_is_stale
+
+        built = [build_native(name) for name in native if native_is_stale(name)]
+    return built + _ensure_python_built(sc)
+
+
+def _ensure_python_built(sc: Scenario) -> list[Path]:
     from cosim.fmu.build import build_stale, catalog
     from cosim.run.scenario import catalog_path
 
