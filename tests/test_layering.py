@@ -5,9 +5,10 @@
     cosim.run  <-  cosim.interop  <-  cosim.cli
 
 ``cosim.fmu`` (bundled into every FMU) imports nothing else of the project; ``cosim.run`` and
-``cosim.interop`` never import plants or controllers; ``cosim.papers`` (paper-specific
-metrics, called by ``cosim.run.metrics``) imports only ``cosim.fmu`` at most (the catalog finds the FMU wrappers by
-file name, not by import). Checked on the import statements of every module (``ast``).
+``cosim.interop`` never import plants or controllers (the catalog finds the FMU wrappers by
+file name, not by import); ``cosim.papers`` (paper-specific metrics, called by
+``cosim.run.metrics``) imports ``cosim.fmu`` at most. Checked on the import statements of
+every module (``ast``).
 """
 
 from __future__ import annotations
