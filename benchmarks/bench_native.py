@@ -21,7 +21,12 @@ FreightTrain (seed 002, HXD1 + 108 C80):
 * closed loop: every shipped seed-002 scenario with the Python plant FMU and with the native
   one (Python controller FMUs in both): whole-run real-time factors and their ratio.
 
-    python benchmarks/bench_native.py [--repeat 3] [--plants freight brake_delay]
+Crh3Train, Emu3, Emu8 (seeds 003, 001, 004), plant only: the Python FMU and the native FMU
+stepped over the same simulated time with a fixed input, in the step and with the parameters
+of the plant's shipped scenarios, through fmpy ``FMU2Slave`` (one setReal/doStep/getReal of
+every output per step); their real-time factors and the ratio, in the same run.
+
+    python benchmarks/bench_native.py [--repeat 3] [--plants freight brake_delay crh3_emu]
 """
 
 from __future__ import annotations
@@ -217,16 +222,78 @@ def bench_freight(repeat: int) -> None:
               f"zero-cost plant: {pw / (pw - pp):4.2f}x)")
 
 
+# plant-only runs of Crh3Train and the Emus: (identifier, scenario giving the parameters,
+# communication step s, simulated time s, inputs held)
+PLANTS = (
+    ("Crh3Train", "seed003_crh3_gpc_eco", 1.0, 600.0, {"force": 3e5}),
+    ("Emu3", "seed001_emu_pid", 0.2, 120.0, {f"force[{i}]": 6e4 for i in (1, 2, 3)}),
+    ("Emu8", "seed001_emu_pid", 0.2, 120.0, {f"force[{i}]": 2e4 for i in range(1, 9)}),
+)
+
+
+def run_plant_fmu(path: Path, params: dict, step: float, stop: float, inputs: dict) -> float:
+    """Wall time (s) of ``stop`` simulated seconds of the plant FMU at ``path``."""
+    md = read_model_description(str(path))
+    unzipdir = extract(str(path))
+    vr = {v.name: v.valueReference for v in md.modelVariables}
+    types = {v.name: v.type for v in md.modelVariables}
+    outs = [v.valueReference for v in md.modelVariables if v.causality == "output"]
+    ins = [vr[n] for n in inputs]
+    values = list(inputs.values())
+    t0 = time.perf_counter()
+    fmu = FMU2Slave(guid=md.guid, unzipDirectory=unzipdir, instanceName="bench",
+                    modelIdentifier=md.coSimulation.modelIdentifier)
+    fmu.instantiate()
+    fmu.setupExperiment(startTime=0.0)
+    fmu.enterInitializationMode()
+    for name, value in params.items():
+        if name not in vr:
+            continue
+        {"String": fmu.setString, "Integer": fmu.setInteger,
+         "Boolean": fmu.setBoolean}.get(types[name], fmu.setReal)([vr[name]], [value])
+    fmu.exitInitializationMode()
+    for k in range(round(stop / step)):
+        fmu.setReal(ins, values)
+        fmu.doStep(k * step, step)
+        fmu.getReal(outs)
+    fmu.terminate()
+    fmu.freeInstance()
+    return time.perf_counter() - t0
+
+
+def plants_only(repeat: int) -> None:
+    """Plant-only real-time factors of Crh3Train, Emu3, Emu8: Python FMU against native."""
+    specs = catalog()
+    build_stale([specs[ident] for ident, *_ in PLANTS])
+    for ident, scenario, step, stop, inputs in PLANTS:
+        native = build_native(ident, windows=False)
+        sc = load_scenario(ROOT / "scenarios" / f"{scenario}.toml")
+        params = dict(sc.components["plant"].parameters)
+        if ident == "Emu8":  # the 8-car train: its own configuration, the line and noise
+            params.pop("configuration", None)
+        medians = {}
+        for label, path in (("Python FMU", specs[ident].path), ("native FMU", native)):
+            run_plant_fmu(path, params, step, stop, inputs)  # warm-up (extraction, imports)
+            medians[label] = statistics.median(
+                run_plant_fmu(path, params, step, stop, inputs) for _ in range(repeat))
+        py, nat = medians["Python FMU"], medians["native FMU"]
+        print(f"  {ident:14s} {stop:5g} s in {step:g}-s steps: real-time factor Python FMU "
+              f"{stop / py:9.0f}, native {stop / nat:9.0f}   native / Python {py / nat:6.1f}x")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeat", type=int, default=3)
-    ap.add_argument("--plants", nargs="+", choices=("freight", "brake_delay"),
-                    default=["freight", "brake_delay"])
+    ap.add_argument("--plants", nargs="+", choices=("freight", "brake_delay", "crh3_emu"),
+                    default=["freight", "brake_delay", "crh3_emu"])
     args = ap.parse_args()
     if "freight" in args.plants:
         bench_freight(args.repeat)
     if "brake_delay" in args.plants:
         bench_brake_delay(args.repeat)
+    if "crh3_emu" in args.plants:
+        print(f"\nplant only, Crh3Train / Emu3 / Emu8 (median of {args.repeat}):")
+        plants_only(args.repeat)
 
 
 def bench_brake_delay(repeat: int) -> None:

@@ -3,12 +3,12 @@
     cosim.fmu  <-  plants  <-  controllers
         ^                         (plants and controllers use cosim's FMU side, never the reverse)
     cosim.run  <-  cosim.interop  <-  cosim.cli
+        ^
+    cosim.papers  (paper metrics; cosim.run consults their registry by module name, importlib)
 
 ``cosim.fmu`` (bundled into every FMU) imports nothing else of the project; ``cosim.run`` and
 ``cosim.interop`` never import plants or controllers (the catalog finds the FMU wrappers by
-file name, not by import); ``cosim.papers`` (paper-specific metrics, called by
-``cosim.run.metrics``) imports ``cosim.fmu`` at most. Checked on the import statements of
-every module (``ast``).
+file name, not by import). Checked on the import statements of every module (``ast``).
 """
 
 from __future__ import annotations
@@ -25,10 +25,10 @@ ALLOWED: dict[str, set[str]] = {
     "cosim.fmu": {"cosim.fmu"},
     "plants": {"cosim.fmu", "plants"},
     "controllers": {"cosim.fmu", "plants", "controllers"},
-    "cosim.papers": {"cosim.fmu", "cosim.papers"},  # paper-specific metrics
-    "cosim.run": {"cosim.fmu", "cosim.papers", "cosim.run"},
+    "cosim.run": {"cosim.fmu", "cosim.run"},
+    "cosim.papers": {"cosim.fmu", "cosim.run", "cosim.papers"},
     "cosim.interop": {"cosim.fmu", "cosim.run", "cosim.interop"},
-    "cosim.cli": {"cosim.fmu", "cosim.run", "cosim.interop", "cosim.cli"},
+    "cosim.cli": {"cosim.fmu", "cosim.run", "cosim.papers", "cosim.interop", "cosim.cli"},
     "cosim": {"cosim"},  # cosim/__init__.py: nothing
 }
 

@@ -46,7 +46,7 @@ from fmpy.fmi2 import FMU2Slave
 from controllers.hybrid.explicit import PARAM_NAMES, ExplicitLaw
 from controllers.hybrid.explicit_mpc import regions_path
 from cosim.fmu.build import catalog
-from cosim.fmu.native_build import build_native
+from cosim.fmu.native_build import build_native, native_path
 from cosim.run.master import run_scenario
 from cosim.run.scenario import ScenarioError, load_scenario
 
@@ -389,11 +389,11 @@ def test_build_option_errors_name_the_key():
         load_scenario("seed000_stop_mpc", ["controller.build=native"])
     with pytest.raises(ScenarioError, match=r"build = 'cpp'.*expected one of"):
         load_scenario("seed000_stop_pid", ["controller.build=cpp"])
-    with pytest.raises(ScenarioError, match="native FMUs are FMI 2.0"):
-        load_scenario("seed000_stop_pid", ["controller.build=native",
-                                           "simulation.fmi_version=3"])
     sc = load_scenario("seed000_stop_pid", ["plant.build=native", "controller.build=native"])
     assert {c.fmu_path.parent.name for c in sc.components.values()} == {"native"}
+    sc = load_scenario("seed000_stop_pid", ["controller.build=native",
+                                            "simulation.fmi_version=3"])
+    assert sc.components["controller"].fmu_path == native_path("StopPid", 3)
 
 
 @pytest.mark.parametrize("ident", [

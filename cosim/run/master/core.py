@@ -403,11 +403,14 @@ def ensure_built(sc: Scenario) -> list[Path]:
     scenario's FMI version ([simulation] fmi_version), and its native ones (build =
     "native")."""
     native = sorted({c.fmu for c in sc.components.values() if c.build == "native"})
+    version = sc.simulation.fmi_version
     built: list[Path] = []
     if native:
-        from cosim.fmu.native_build import build_native, native_is_stale
+        from cosim.fmu.native_build import build_natives, native_is_stale
 
-        built = [build_native(name) for name in native if native_is_stale(name)]
+        for name in native:
+            if native_is_stale(name, version):
+                built += build_natives(name, (version,))
     return built + _ensure_python_built(sc)
 
 
