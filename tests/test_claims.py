@@ -172,3 +172,20 @@ def test_reproduction_summary_counts_verdicts(tmp_path: Path) -> None:
     lines = claims_summary(tmp_path, ["a", "b"]).splitlines()
     assert lines[2] == "| a | 3 | 2 | 1 | 0 | 0 |"
     assert lines[3] == "| b | 0 | - | - | - | - |"
+
+
+def test_ratio_ci_of_repeated_timings() -> None:
+    """The ratio of medians of two independent repetition sets with its bootstrap CI: exact
+    for constant repetitions, proportional to a scale of one side (same resamples), bracketing
+    the point ratio, and without bounds under 3 repetitions."""
+    from cosim.run.claims import ratio_ci
+
+    assert ratio_ci(np.full(5, 2.0), np.full(4, 1.0)) == (2.0, 2.0, 2.0)
+    rng = np.random.default_rng(3)
+    a, b = rng.normal(10.0, 1.0, 10), rng.normal(20.0, 2.0, 10)
+    r, lo, hi = ratio_ci(a, b)
+    assert lo <= r <= hi and lo < hi
+    r3, lo3, hi3 = ratio_ci(3.0 * a, b)
+    assert (r3, lo3, hi3) == pytest.approx((3 * r, 3 * lo, 3 * hi), rel=1e-12)
+    r2, lo2, hi2 = ratio_ci(a[:2], b)
+    assert r2 == pytest.approx(np.median(a[:2]) / np.median(b)) and np.isnan(lo2)

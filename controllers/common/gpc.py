@@ -43,7 +43,8 @@ class GpcParams:
                                   min=0.0)
     na: int = param(1, "1", "order of the output polynomial (increments)", min=1, max=10)
     nb: int = param(1, "1", "order of the input polynomial (increments)", min=1, max=10)
-    b_init: float = param(0.5, "1", "diagonal of B_1 at the start (A_i = 0)", min=0.0)
+    b_init: float = param(0.5, "1", "diagonal of B_1 at the start", min=0.0)
+    a_init: float = param(0.0, "1", "diagonal of A_1 at the start (A_2.. = 0)")
     p0: float = param(100.0, "1", "initial covariance P = p0 I", min=1e-9)
     p_max: float = param(1e4, "1", "largest trace of P (bound under forgetting)", min=1e-9)
     excitation: float = param(1e-9, "1", "no update while ||regressor|| is at most this",
@@ -70,6 +71,7 @@ class Gpc(StatefulCore):
         n, m = self.n, self.m
         self.n_reg = n * params.na + m * params.nb
         theta = np.zeros((n, self.n_reg))
+        theta[:, :n] = params.a_init * np.eye(n)
         theta[:, n * params.na:n * params.na + m] = params.b_init * np.eye(n, m)
         self.theta = theta
         self.P = params.p0 * np.eye(self.n_reg)

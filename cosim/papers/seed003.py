@@ -54,3 +54,23 @@ def _net(run: RunRecord) -> tuple[np.ndarray, tuple[np.ndarray, ...]] | None:
     end = run.arrival_index if run.arrival_index is not None else len(run.frame) - 1
     trac, regen, aux = (values[: end + 1] for values in series)
     return trac - regen + aux, (trac, regen, aux)
+
+
+@metric("energy_brake_work", keys=("energy_traction", "energy_regen", "energy_aux", "phase",
+                                   "brake_work"))
+def energy_brake_work(run: RunRecord) -> dict[str, Any]:
+    """Table 2's braking convention beside eq. 9's: Table 2 counts the braking phase as a
+    positive "consumption" (the energy the brakes take out of the train, fed back and lost),
+    which eq. 9 does not define. With ``brake_work`` (the recorded cumulative int(B v dt), J):
+    ``energy_brake_work_mj``, the brakes' work over the output intervals that start in the
+    brake phase, up to the arrival (MJ), and ``energy_total_paper_mj`` = the eq. 9 energy of
+    the accelerate and run phases plus that (Table 2's total)."""
+    net, work, phase = _net(run), run.series("brake_work"), run.series("phase")
+    if net is None or work is None or phase is None:
+        return {}
+    end = net[0].size - 1
+    brake = phase[:end] == PHASES[2][0]
+    net_steps = np.diff(net[0])
+    brake_work = float(np.sum(np.diff(work[: end + 1])[brake])) / 1e6
+    return {"energy_brake_work_mj": brake_work,
+            "energy_total_paper_mj": float(np.sum(net_steps[~brake])) / 1e6 + brake_work}

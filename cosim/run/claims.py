@@ -191,6 +191,29 @@ def median_ci(values: np.ndarray) -> tuple[float, float, float, str]:
     return med, float(res.confidence_interval.low), float(res.confidence_interval.high), ""
 
 
+def ratio_ci(a: np.ndarray, b: np.ndarray) -> tuple[float, float, float]:
+    """(median(a) / median(b), CI low, CI high) over independent repetitions ``a`` and ``b``
+    (e.g. the timing repeats of two runs): percentile bootstrap resampling each side on its
+    own; NaN bounds with fewer than 3 repetitions on a side or a zero median."""
+    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    if a.size == 0 or b.size == 0 or np.isnan(a).any() or np.isnan(b).any():
+        return math.nan, math.nan, math.nan
+    mb = float(np.median(b))
+    if mb == 0.0:
+        return math.nan, math.nan, math.nan
+    ratio = float(np.median(a)) / mb
+    if a.size < 3 or b.size < 3:
+        return ratio, math.nan, math.nan
+    from scipy.stats import bootstrap
+
+    def stat(x: np.ndarray, y: np.ndarray, axis: int = -1) -> np.ndarray:
+        return np.median(x, axis=axis) / np.median(y, axis=axis)
+
+    res = bootstrap((a, b), stat, confidence_level=CONFIDENCE, method="percentile",
+                    n_resamples=N_RESAMPLES, random_state=np.random.default_rng(BOOTSTRAP_SEED))
+    return ratio, float(res.confidence_interval.low), float(res.confidence_interval.high)
+
+
 def verdict(claim: dict[str, Any], a: np.ndarray, b: np.ndarray | None = None
             ) -> dict[str, Any]:
     """Evaluate one claim on its members: ``a`` (runs[0]) and, for less/greater, ``b``

@@ -111,7 +111,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from cosim.run.claims import ClaimsError, Ensemble, check_claims, check_ensemble
+import numpy as np
+
+from cosim.run.claims import ClaimsError, Ensemble, check_claims, check_ensemble, ratio_ci
 from cosim.run.provenance import INPUTS_FILE, entry_digest
 from cosim.run.results import PLOT_DPI
 from cosim.run.scenario import SCENARIO_DIR
@@ -319,6 +321,18 @@ def _merge_repeats(summaries: list[dict[str, Any]]) -> dict[str, Any]:
     return merged
 
 
+def repeat_values(summary: dict[str, Any], key: str) -> list[float] | None:
+    """A metric's value in every repetition of a repeated run (None if not repeated or not
+    numeric)."""
+    reps = summary.get("repeats")
+    if not reps:
+        return None
+    vals = [summary_value(r, key) for r in reps]
+    if not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in vals):
+        return None
+    return [float(v) for v in vals]
+
+
 def repeat_spread(summary: dict[str, Any], key: str) -> tuple[float, float, int] | None:
     """``(min, max, n)`` of a metric over a repeated run's repetitions (None if not repeated
     or not numeric)."""
@@ -410,6 +424,14 @@ def table_rows(entry: Entry, summaries: dict[str, dict[str, Any]]) -> list[dict[
                 base_ref = refs.get((base_run, metric["key"]), {}).get("value")
                 row["ratio"] = (float(ours) / float(base) if ours is not None and base
                                 else None)
+                # repeated runs: the ratio of medians with its bootstrap CI
+                ours_reps = repeat_values(summaries[run["name"]], metric["key"])
+                base_reps = repeat_values(summaries[base_run], metric["key"])
+                row["ratio_ci_low"] = row["ratio_ci_high"] = None
+                if ours_reps is not None and base_reps is not None:
+                    _, lo, hi = ratio_ci(np.array(ours_reps), np.array(base_reps))
+                    if np.isfinite(lo) and np.isfinite(hi):
+                        row["ratio_ci_low"], row["ratio_ci_high"] = lo, hi
                 row["paper_ratio"] = (float(ref["value"]) / float(base_ref)
                                       if ref.get("value") is not None and base_ref else None)
             within = None
@@ -521,7 +543,10 @@ def table_markdown(entry: Entry, rows: list[dict[str, Any]]) -> str:
                 ours = f"{ours} [{_fmt(r['ours_min'])}, {_fmt(r['ours_max'])}]"
             cells += [ours + mark, paper]
             if "ratio_to" in metric:
-                cells += [_fmt(r["ratio"]), _fmt(r["paper_ratio"])]
+                ratio = _fmt(r["ratio"])
+                if r.get("ratio_ci_low") is not None:
+                    ratio = f"{ratio} ({_fmt(r['ratio_ci_low'])}-{_fmt(r['ratio_ci_high'])})"
+                cells += [ratio, _fmt(r["paper_ratio"])]
         lines.append(_row(cells))
     sources = sorted({f"{r['run']} / {r['metric']}: {r['source']}" for r in rows if r["source"]})
     if sources:
@@ -529,7 +554,8 @@ def table_markdown(entry: Entry, rows: list[dict[str, Any]]) -> str:
     repeated = sorted({r["repeats"] for r in rows if r["repeats"] > 1})
     if repeated:
         lines += ["", "a [b, c]: median [min, max] over the repetitions of a repeated run ("
-                  + ", ".join(f"{n}" for n in repeated) + " runs)."]
+                  + ", ".join(f"{n}" for n in repeated) + " runs); a ratio r (l-h) of two "
+                  "repeated runs: the ratio of their medians with its 95 % bootstrap CI."]
     if any(r["within"] is not None for r in rows):
         lines += ["", "✓ / ✗: inside / outside the paper's band or the tolerance stated in the "
                   "entry."]
