@@ -23,9 +23,10 @@ ALLOWED: dict[str, set[str]] = {
     "cosim.fmu": {"cosim.fmu"},
     "plants": {"cosim.fmu", "plants"},
     "controllers": {"cosim.fmu", "plants", "controllers"},
-    "cosim.run": {"cosim.fmu", "cosim.run"},
-    "cosim.interop": {"cosim.fmu", "cosim.run", "cosim.interop"},
-    "cosim.cli": {"cosim.fmu", "cosim.run", "cosim.interop", "cosim.cli"},
+    "cosim.papers": {"cosim.papers"},  # paper metrics: pure functions of a run's arrays
+    "cosim.run": {"cosim.fmu", "cosim.papers", "cosim.run"},
+    "cosim.interop": {"cosim.fmu", "cosim.papers", "cosim.run", "cosim.interop"},
+    "cosim.cli": {"cosim.fmu", "cosim.papers", "cosim.run", "cosim.interop", "cosim.cli"},
     "cosim": {"cosim"},  # cosim/__init__.py: nothing
 }
 

@@ -32,7 +32,11 @@ Keys of ``[summary]`` (all optional; variable references are ``FMU.variable``):
 * ``unit_speeds`` (list or ``"plant.v[*]"``, m/s, with ``reference_speed``): the per-power-unit
   indices of seed 001 (:func:`unit_indices`): ``unit_mse_kmh2`` (eq. 87), ``unit_iae_kmh_s``
   (eq. 88) and ``unit_ma_mps_per_sample`` (eq. 89) at the sample time ``ma_sample_time``
-  (s, default 1.0; reported as ``ma_sample_time_s``).
+  (s, default 1.0; reported as ``ma_sample_time_s``), and the same in SI units,
+  ``unit_mse_mps2`` and ``unit_iae_m`` (:mod:`cosim.papers.seed001`);
+* ``unit_accelerations`` (list or ``"plant.a[*]"``, m/s^2) with ``comfort_limit`` (m/s^2,
+  default 1): ``unit_max_abs_accel_mps2``, ``comfort_exceeded``, ``comfort_exceedance_s``
+  and ``comfort_limit_mps2`` (:func:`cosim.papers.seed001.comfort`).
 * ``energy_traction``, ``energy_regen``, ``energy_aux`` (recorded cumulative energies in J,
   seed 003 eq. 9: traction / eta_M, regenerated eta_b int(B v dt), auxiliary e0 t): give
   ``energy_traction_mj``, ``energy_regen_mj``, ``energy_aux_mj`` and ``energy_net_mj`` =
@@ -218,8 +222,17 @@ def compute_summary(result: Any) -> dict[str, Any]:
                                                            err_kmh)
     unit_cols = matching_columns(frame, cfg.get("unit_speeds"))
     if unit_cols and ref is not None:
-        out.update(unit_indices(t, frame[unit_cols].to_numpy(dtype=float), ref,
-                                float(cfg.get("ma_sample_time", 1.0))))
+        from cosim.papers import seed001
+
+        unit_v = frame[unit_cols].to_numpy(dtype=float)
+        out.update(unit_indices(t, unit_v, ref, float(cfg.get("ma_sample_time", 1.0))))
+        out.update(seed001.unit_tracking_si(t, unit_v, ref))
+    accel_cols = matching_columns(frame, cfg.get("unit_accelerations"))
+    if accel_cols:
+        from cosim.papers import seed001
+
+        out.update(seed001.comfort(t, frame[accel_cols].to_numpy(dtype=float),
+                                   float(cfg.get("comfort_limit", 1.0))))
     if accel is not None:
         out["max_abs_accel_mps2"] = float(np.max(np.abs(accel)))
         if accel.size > 1:

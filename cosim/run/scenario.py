@@ -57,13 +57,15 @@ SUMMARY_KEYS = ("position", "speed", "acceleration", "command", "command_resolut
                 "speed_limit", "power", "coupler_forces", "stop_point", "reference_decel",
                 "planned_arrival_time", "ctcs3", "unit_speeds", "ma_sample_time",
                 "reference_accel", "final_stop_window", "accel_command", "vehicle_speeds",
-                "energy_traction", "energy_regen", "energy_aux", "phase")
+                "energy_traction", "energy_regen", "energy_aux", "phase",
+                "unit_accelerations", "comfort_limit")
 
 
 # [summary] keys holding a number; a string "instance.parameter" there reads that parameter's
 # value as the scenario sets it (after --set), so the summary never keeps a stale copy
 SUMMARY_PARAMETER_KEYS = ("stop_point", "planned_arrival_time", "final_stop_window",
-                          "ma_sample_time", "command_resolution", "reference_decel")
+                          "ma_sample_time", "command_resolution", "reference_decel",
+                          "comfort_limit")
 
 
 def resolve_parameter_refs(path: Path, summary: dict[str, Any],
