@@ -38,8 +38,8 @@ sys.path[:0] = [str(ROOT), str(ROOT / "benchmarks")]
 from seed001_scaling_sweep import closed_loop  # noqa: E402
 
 from controllers.datadriven.emu_control import EmuGpc, EmuIsmc, EmuIsmpc, EmuMfac  # noqa: E402
+from cosim.papers.seed001 import unit_indices  # noqa: E402
 from cosim.run.claims import parse_seeds  # noqa: E402
-from cosim.run.metrics import unit_indices  # noqa: E402
 from plants.route import load_reference  # noqa: E402
 
 BUDGET = 9  # evaluations per law (each on every calibration seed), the same for every law

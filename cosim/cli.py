@@ -40,19 +40,21 @@ def build(names: Annotated[list[str] | None, typer.Argument(
               "--fmi", help="FMI version to build: 2 (fmus/<id>.fmu), 3 (fmus/fmi3/<id>.fmu, "
               "co-simulation with Event Mode for the controllers) or all. Default all: the "
               "FMI 3 build is derived from the same FMI 2 build (same Python bundle, a C "
-              "front in front of it), so both cost little more than one")] = "all",
+              "front in front of it), so both cost little more than one. With --native: "
+              "fmus/native/<id>.fmu and fmus/native/fmi3/<id>.fmu")] = "all",
           native: Annotated[bool, typer.Option(
-              "--native", help="build the native C FMUs (FMI 2.0, no Python needed) into "
-              "fmus/native/ instead: linux64 with gcc, win64 too when x86_64-w64-mingw32-gcc "
-              "is installed; the named ones or all that have a C model")] = False) -> None:
+              "--native", help="build the native C FMUs (no Python needed) into fmus/native/ "
+              "instead, of the FMI versions --fmi names: Linux with gcc, Windows too when "
+              "x86_64-w64-mingw32-gcc is installed; the named ones or all that have a C "
+              "model")] = False) -> None:
     """Build FMUs into fmus/ (all, or the named ones)."""
     from cosim.fmu.build import build_fmus, resolve
     from cosim.fmu.fmi3 import Fmi3BuildError
 
-    if native:
-        _build_native(names)
-        return
     versions = _fmi_versions(fmi)
+    if native:
+        _build_native(names, versions)
+        return
     try:
         specs = resolve(names)
     except ValueError as err:
@@ -67,16 +69,21 @@ def build(names: Annotated[list[str] | None, typer.Argument(
             out.print(f"built {shown}  ({spec.description})", highlight=False, markup=False)
 
 
-def _build_native(names: list[str] | None) -> None:
-    from cosim.fmu.native_build import NATIVE, CompilerMissing, build_native
+def _build_native(names: list[str] | None, versions: tuple[int, ...]) -> list[Path]:
+    from cosim.fmu.native_build import NATIVE, CompilerMissing, build_natives
 
+    built: list[Path] = []
     for name in names or sorted(NATIVE):
         try:
-            path = build_native(name)
+            paths = build_natives(name, versions)
         except (ValueError, CompilerMissing, RuntimeError) as err:
             _fail(str(err))
-        shown = path.relative_to(Path.cwd()) if path.is_relative_to(Path.cwd()) else path
-        out.print(f"built {shown}  (native C, FMI 2.0)", highlight=False, markup=False)
+        for version, path in zip(versions, paths):
+            shown = path.relative_to(Path.cwd()) if path.is_relative_to(Path.cwd()) else path
+            out.print(f"built {shown}  (native C, FMI {version}.0)", highlight=False,
+                      markup=False)
+        built += paths
+    return built
 
 
 def _built(path: Path) -> str:
@@ -278,6 +285,25 @@ def _progress(label: str, quiet: bool):
         yield reporter
 
 
+def _native_paths(names: list[str] | None, versions: tuple[int, ...]) -> list[Path]:
+    """The native builds of the identifiers ``names`` (None: every native FMU) in
+    ``versions``, built where missing."""
+    from cosim.fmu.native_build import NATIVE, CompilerMissing, build_natives, native_path
+
+    paths: list[Path] = []
+    for name in sorted(NATIVE) if names is None else names:
+        if name not in NATIVE:
+            _fail(f"no native model of {name!r}; native: {sorted(NATIVE)}")
+        missing = tuple(v for v in versions if not native_path(name, v).is_file())
+        if missing:
+            try:
+                build_natives(name, missing)
+            except (CompilerMissing, RuntimeError) as err:
+                _fail(str(err))
+        paths += [native_path(name, v) for v in versions]
+    return paths
+
+
 @app.command()
 def validate(
     fmus: Annotated[list[str] | None, typer.Argument(
@@ -286,6 +312,9 @@ def validate(
     fmi: Annotated[str, typer.Option(
         "--fmi", help="for our FMUs named by identifier: check the FMI 2 build (2), the FMI 3 "
         "build (3) or both (all)")] = "2",
+    native: Annotated[bool, typer.Option(
+        "--native", help="identifiers name the native C FMUs (fmus/native/, built when "
+        "missing) instead of the Python FMUs; default: every native FMU")] = False,
     lenient: Annotated[bool, typer.Option(
         "--lenient", help="for third-party FMUs: only what FMI 2.0.4 / FMI 3.0 requires is "
         "an error; "
@@ -305,7 +334,12 @@ def validate(
     versions = _fmi_versions(fmi)
     specs = catalog()
     paths: list[Path] = []
-    for name in fmus or list(specs):
+    names = fmus or list(specs)
+    if native:  # identifiers name native FMUs; .fmu paths stay paths
+        paths = _native_paths([n for n in fmus if not n.endswith(".fmu")] if fmus else None,
+                              versions)
+        names = [n for n in fmus or [] if n.endswith(".fmu")]
+    for name in names:
         if name.endswith(".fmu"):
             if not Path(name).is_file():
                 _fail(f"{name}: no such file")
@@ -361,6 +395,8 @@ def sweep(
     shared_fmus: Annotated[bool, typer.Option(
         "--shared-fmus", help="with --scheduler: the workers read the FMUs at this machine's "
         "paths (a shared file system) instead of receiving uploaded copies")] = False,
+    plot_format: Annotated[str, typer.Option(
+        "--format", help="figure file format: png (200 dpi), svg or pdf")] = "png",
 ) -> None:
     """Run scenarios over a parameter grid in parallel; write sweep.csv (a row per point as it
     finishes, with status and error) and sweep.png. A failed point does not stop the others
@@ -368,12 +404,15 @@ def sweep(
     --scheduler: the same grid on a Dask cluster. With --perturb: every grid point on the same
     seeded random plants (perturb.csv, perturb_summary.csv, perturb.png)."""
     from cosim.run import interrupt
+    from cosim.run.console import fit_table
     from cosim.run.master import SimulationError
-    from cosim.run.results import check_destination
+    from cosim.run.results import PLOT_FORMATS, check_destination
     from cosim.run.scenario import ScenarioError, find_scenario
     from cosim.run.sweep import parse_grid, run_sweep
 
     try:
+        if plot_format not in PLOT_FORMATS:
+            raise ValueError(f"--format {plot_format}: one of {', '.join(PLOT_FORMATS)}")
         grid = parse_grid(set_)
         stems = [find_scenario(s).stem for s in scenarios]
         target = out_dir or Path("runs") / ("sweep_" + "_".join(stems))
@@ -385,38 +424,30 @@ def sweep(
             raise ValueError("--perturb runs in the local process pool; --scheduler is not "
                              "supported with it")
         if perturb:
-            _perturbed_sweep(scenarios, grid, perturb, samples, seed, target, workers, no_plot)
+            _perturbed_sweep(scenarios, grid, perturb, samples, seed, target, workers, no_plot,
+                             plot_format)
             return
         frame = run_sweep(scenarios, grid, target, workers, plot=not no_plot, resume=resume,
-                          scheduler=scheduler, shared_fmus=shared_fmus)
+                          scheduler=scheduler, shared_fmus=shared_fmus,
+                          plot_format=plot_format)
     except interrupt.Interrupted as err:
         console.print(f"[bold yellow]{escape(str(err))}[/]; the finished rows are in "
                       f"{escape(str(target))}/sweep.csv", highlight=False, soft_wrap=True)
         raise typer.Exit(interrupt.EXIT_INTERRUPTED) from None
     except (ValueError, ScenarioError, SimulationError) as err:
         _fail(str(err))
-    table = Table(title=escape(f"sweep over {', '.join(grid)}"))
     columns = ["scenario", *grid, "status", "stop_error_m", "controller_executions",
                "command_switches", "qp_infeasible"]
     labels = {"stop_error_m": "stop error m", "controller_executions": "executions",
-              "command_switches": "switches", "qp_infeasible": "infeasible"}
-    for col in columns:
-        table.add_column(escape(labels.get(col, col.rpartition(".")[2])),
-                         justify="left" if col in ("scenario", "status") else "right")
-
-    def cell(row, col: str) -> str:
-        value = row[col]
-        if value is None or value != value:  # None or NaN (a failed point)
-            return "-"
-        if isinstance(value, float) and value.is_integer() and col != "stop_error_m":
-            value = int(value)  # a count in a column that also holds empty cells
-        return f"{value:+.3f}" if col == "stop_error_m" else escape(str(value))
-
-    for _, row in frame.iterrows():
-        table.add_row(*[cell(row, c) for c in columns])
-    out.print(table)
-    out.print(f"wrote {target}/sweep.csv" + ("" if no_plot else ", sweep.png"), highlight=False,
-              markup=False)
+              "command_switches": "switches", "qp_infeasible": "infeasible",
+              **{k: k.rpartition(".")[2] for k in grid}}
+    rows = [{c: (None if row[c] is None or row[c] != row[c] else row[c]) for c in columns}
+            for row in frame.to_dict("records")]
+    out.print(fit_table(rows, columns, labels, signed=["stop_error_m"],
+                        title=f"sweep over {', '.join(grid)} (every column: sweep.csv)"),
+              markup=False, highlight=False, soft_wrap=True)
+    out.print(f"wrote {target}/sweep.csv" + ("" if no_plot else f", sweep.{plot_format}"),
+              highlight=False, markup=False)
     failed = frame[frame["status"] != "ok"]
     for _, row in failed.iterrows():
         point = ", ".join(f"{k}={row[k]}" for k in grid)
@@ -428,15 +459,14 @@ def sweep(
 
 def _perturbed_sweep(scenarios: list[str], grid: dict[str, list[Any]], perturb: list[str],
                      samples: int, seed: int, target: Path, workers: int | None,
-                     no_plot: bool) -> None:
+                     no_plot: bool, plot_format: str = "png") -> None:
     """The mismatch study of ``cosim sweep --perturb`` and its table."""
+    from cosim.run.console import fit_table
     from cosim.run.perturb import parse_perturb, run_perturbed
 
     perts = parse_perturb(perturb)
     _, summary = run_perturbed(scenarios, grid, perts, samples, seed, target, workers,
-                               plot=not no_plot)
-    table = Table(title=f"{samples} perturbed plants (seed {seed}): "
-                        + ", ".join(perturb))
+                               plot=not no_plot, plot_format=plot_format)
     columns = [c for c in ["scenario", *grid, "runs", "stop_error_min_m", "stop_error_median_m",
                            "stop_error_max_m", "inside_window", "executions_median",
                            "qp_infeasible_total", "qp_infeasible_max",
@@ -447,17 +477,14 @@ def _perturbed_sweep(scenarios: list[str], grid: dict[str, list[Any]], perturb: 
               "executions_median": "executions", "qp_infeasible_total": "infeasible",
               "qp_infeasible_max": "infeasible max/run",
               "qp_infeasible_after_stop_total": "after stop", "command_min": "u min",
-              "command_max": "u max"}
-    for col in columns:
-        table.add_column(labels.get(col, col.rpartition(".")[2]),
-                         justify="left" if col == "scenario" else "right")
-    for _, row in summary.iterrows():
-        table.add_row(*[f"{row[c]:+.3f}" if c.startswith("stop_error") else
-                        f"{row[c]:g}" if isinstance(row[c], float) else str(row[c])
-                        for c in columns])
-    out.print(table)
+              "command_max": "u max", **{k: k.rpartition(".")[2] for k in grid}}
+    out.print(fit_table(summary.to_dict("records"), columns, labels,
+                        signed=[c for c in columns if c.startswith("stop_error")],
+                        title=f"{samples} perturbed plants (seed {seed}): " + ", ".join(perturb)
+                        + " (every column: perturb_summary.csv)"),
+              markup=False, highlight=False, soft_wrap=True)
     out.print(f"wrote {target}/perturb.csv, perturb_summary.csv"
-              + ("" if no_plot else ", perturb.png"))
+              + ("" if no_plot else f", perturb.{plot_format}"), markup=False, highlight=False)
 
 
 @app.command()
@@ -498,35 +525,44 @@ def reproduce(
         "--no-rounding", help="skip the claims' rerun on the perturbed floating-point "
         "path (then no claim is marked rounding-robust)")] = False,
     scheduler: Annotated[str | None, typer.Option(
-        help="run the claims' ensemble on a Dask cluster: its address, or 'local-dask' for "
-        "a local cluster of --workers processes")] = None,
+        help="run the runs on a Dask cluster: its address, or 'local-dask' for a local "
+        "cluster of --workers processes")] = None,
+    plot_format: Annotated[str, typer.Option(
+        "--format", help="figure file format: png (200 dpi), svg or pdf")] = "png",
 ) -> None:
     """Reproduce a paper's results: run its scenarios, write the table (ours beside the
     paper's), the sweeps and the figures, and test its claims over K seeds (claims.csv,
     claims.md: median [95 % CI], k of K, verdict); 'all' writes one REPRODUCTION.md."""
+    from cosim.run import interrupt, runner
     from cosim.run.master import SimulationError
     from cosim.run.reproduce import ReproduceError, entry_names, reproduce_all
     from cosim.run.reproduce import reproduce as reproduce_entry
-    from cosim.run.results import OutputError, check_destination
+    from cosim.run.results import PLOT_FORMATS, OutputError, check_destination
     from cosim.run.scenario import ScenarioError
 
     try:
+        if plot_format not in PLOT_FORMATS:
+            raise OutputError(f"--format {plot_format}: one of {', '.join(PLOT_FORMATS)}")
+        runner.check_workers(workers, scheduler)
         if out_dir is not None:
             check_destination(out_dir)
         if name == "all":
-            path = reproduce_all(out_dir, workers, seeds, not no_rounding, scheduler)
+            path = reproduce_all(out_dir, workers, seeds, not no_rounding, scheduler,
+                                 plot_format)
         else:
             if name not in entry_names() and not Path(name).is_file():
                 raise ReproduceError(f"no reproduction entry {name!r} "
                                      f"(known: {', '.join(entry_names())}, all)")
             path = reproduce_entry(name, out_dir, workers, seeds, not no_rounding,
-                                    scheduler)
-    except (ReproduceError, ScenarioError, SimulationError, OutputError) as err:
+                                   scheduler, plot_format)
+    except interrupt.Interrupted as err:
+        console.print(f"[bold yellow]{escape(str(err))}[/]", highlight=False, soft_wrap=True)
+        raise typer.Exit(interrupt.EXIT_INTERRUPTED) from None
+    except (ReproduceError, ScenarioError, SimulationError, OutputError, ValueError) as err:
         _fail(str(err))
     except OSError as err:  # a folder that became unwritable during the run
         _fail(f"cannot write {err.filename or out_dir}: {err.strerror or err}")
-    out.print(path.read_text(), markup=False, highlight=False)
-    out.print(f"wrote {path}")
+    out.print(f"wrote {path}", highlight=False, markup=False)
 
 
 def cli_reference() -> str:

@@ -22,13 +22,13 @@ from pathlib import Path
 from typing import Any
 
 from controllers.common.stopping import MEASURED_SPEED_POSITION, u_max_param, u_min_param
-from cosim.fmu.declare import Declared, Var, build, param, sample_time
+from cosim.fmu.declare import Checked, Declared, Var, build, param, sample_time
 from cosim.fmu.profiles import StoppingCurve, ref_decel_param, stop_point_param
 from cosim.fmu.state import StatefulCore
 
 
 @dataclass(frozen=True)
-class StopPidParams:
+class StopPidParams(Checked):
     kp: float = param(60.0, "%.s/m", "proportional gain on v - v_ref")
     ki: float = param(10.0, "%/m", "integral gain")
     kd: float = param(0.0, "%/(m/s2)", "derivative gain")
@@ -46,15 +46,9 @@ class StopPidParams:
                                      "the stop point, or once stopped after the curve ended "
                                      "(not in the paper; false: the plain PID)")
 
-    def check(self) -> None:
-        if not self.sample_time > 0:
-            raise ValueError(f"sample_time = {self.sample_time} must be > 0")
+    def check_relations(self) -> None:
         if not self.u_min < self.u_max:
             raise ValueError(f"u_min = {self.u_min} must be < u_max = {self.u_max}")
-        if not self.ref_decel > 0:
-            raise ValueError(f"ref_decel = {self.ref_decel} must be > 0")
-        if not self.brake_gain > 0:
-            raise ValueError(f"brake_gain = {self.brake_gain} must be > 0")
 
 
 class StopPid(StatefulCore, Declared):

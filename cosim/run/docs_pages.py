@@ -58,6 +58,13 @@ def benchmarks_page(results: Path = BENCHMARKS_JSON) -> str:
     for name, b in data.get("benchmarks", {}).items():
         ref = f"{_fmt(b.get('reference', ''))} ({_fmt(b.get('reference_name', ''))})"
         ratio = f"{_fmt(b.get('ratio', ''))} ({_fmt(b.get('ratio_name', ''))})"
+        if "cpu_ratio" in b:  # the same ratio of CPU seconds (the work, whatever the load)
+            ratio += f"; CPU seconds: {_fmt(b['cpu_ratio'])}"
+        if "measured_utc" in b:  # a row measured apart from the others
+            load = b.get("load_average")
+            load = load[0] if isinstance(load, list) else load
+            ratio += f"; measured {_fmt(b['measured_utc'])} UTC" + (
+                f", load average {_fmt(load)}" if load is not None else "")
         lines.append(f"| {_fmt(name)} | {_fmt(b.get('figure', ''))} | {_fmt(b.get('unit', ''))}"
                      f" | {ref} | {ratio} | {_fmt(b.get('target', '')) or '-'} |")
     return "\n".join(lines) + "\n"

@@ -1,6 +1,6 @@
 """Scenario files (TOML): which FMUs, their parameters, connections, timing and what to record.
 
-Format (see ``scenarios/seed000_stop_pid.toml``)::
+Format (the files in ``scenarios/`` are examples)::
 
     description = "..."
     [simulation]
@@ -13,6 +13,9 @@ Format (see ``scenarios/seed000_stop_pid.toml``)::
                               # or fmus/fmi3/<Id>.fmu (FMI 3.0); .fmu paths are used as given
     [fmus.NAME]
     fmu = "BrakeDelayTrain"   # FMU identifier in fmus/ (built on demand) or a path to a .fmu
+    build = "python"          # python | native: which build of a catalog FMU identifier;
+                              # native: the C FMU fmus/native/<Id>.fmu (no Python; FMI 3.0:
+                              # fmus/native/fmi3/<Id>.fmu)
     sample_time = 0.2         # s, optional: periodic events of a sampled FMU (also set as its
                               # `sample_time` parameter if it has one)
     max_step = 0.5            # s, optional: longest communication step for this FMU
@@ -29,6 +32,7 @@ Every error names the file, the key and what is wrong.
 from __future__ import annotations
 
 import difflib
+import importlib
 import math
 import re
 from dataclasses import dataclass, field
@@ -47,6 +51,8 @@ from cosim.run import fmi_types
 SCENARIO_DIR = ROOT / "scenarios"
 ALGORITHMS = ("event", "fixed", "jacobi")
 FMI_VERSIONS = (2, 3)
+BUILDS = ("python", "native")  # [fmus.NAME] build: the Python FMU or the native C one
+COMPONENT_KEYS = ("fmu", "build", "sample_time", "max_step")  # --set NAME.key=value
 
 
 RECORD_KEYS = ("variables",)
@@ -55,17 +61,14 @@ RECORD_KEYS = ("variables",)
 SUMMARY_KEYS = ("position", "speed", "acceleration", "command", "command_resolution",
                 "reference_speed",
                 "speed_limit", "power", "coupler_forces", "stop_point", "reference_decel",
-                "planned_arrival_time", "ctcs3", "unit_speeds", "ma_sample_time",
-                "reference_accel", "final_stop_window", "accel_command", "vehicle_speeds",
-                "energy_traction", "energy_regen", "energy_aux", "phase",
-                "unit_accelerations", "comfort_limit")
+                "planned_arrival_time", "accel_command", "metrics")
+# and the keys of the paper metrics the scenario names in ``metrics`` (cosim.papers)
 
 
 # [summary] keys holding a number; a string "instance.parameter" there reads that parameter's
 # value as the scenario sets it (after --set), so the summary never keeps a stale copy
 SUMMARY_PARAMETER_KEYS = ("stop_point", "planned_arrival_time", "final_stop_window",
-                          "ma_sample_time", "command_resolution", "reference_decel",
-                          "comfort_limit")
+                          "ma_sample_time", "command_resolution", "reference_decel")
 
 
 def resolve_parameter_refs(path: Path, summary: dict[str, Any],
@@ -96,6 +99,7 @@ class Component:
     name: str
     fmu: str  # identifier or path as written
     fmu_path: Path
+    build: str = "python"  # python | native (BUILDS)
     sample_time: float | None = None
     max_step: float | None = None
     parameters: dict[str, Any] = field(default_factory=dict)
@@ -181,7 +185,7 @@ def apply_overrides(raw: dict[str, Any], overrides: dict[str, Any] | list[str] |
         if head not in fmus:
             raise ScenarioError(f"{source}: --set {key}: no FMU named {head!r} "
                                 f"(scenario has {sorted(fmus)})")
-        if rest in ("sample_time", "max_step", "fmu"):
+        if rest in COMPONENT_KEYS:
             fmus[head][rest] = value
         elif rest.startswith("inputs."):
             fmus[head].setdefault("inputs", {})[rest[7:]] = value
@@ -201,7 +205,7 @@ def override_keys(overrides: dict[str, Any] | list[str] | None) -> dict[str, str
         head, _, rest = key.partition(".")
         if head in ("simulation", "summary"):
             keys[f"[{head}] {rest}"] = text
-        elif rest in ("sample_time", "max_step", "fmu"):
+        elif rest in COMPONENT_KEYS:
             keys[f"[fmus.{head}] {rest}"] = text
         elif rest.startswith("inputs."):
             keys[f"[fmus.{head}.inputs] {rest[7:]}"] = text
@@ -228,6 +232,38 @@ def _split_override(text: str) -> tuple[str, str]:
     if not sep or not key.strip():
         raise ScenarioError(f"--set {text!r}: expected KEY=VALUE, e.g. plant.mass=539000")
     return key.strip(), value.strip()
+
+
+def _paper_metric_keys(source: Path, summary: dict[str, Any]) -> list[str]:
+    """The ``[summary]`` keys the paper metrics named in ``metrics`` read; raise naming the
+    metric for an unknown name, and the metric to add for a key that only an unnamed metric
+    reads."""
+    from cosim.run.metrics import PAPERS
+
+    papers = importlib.import_module(PAPERS)  # the plug-ins above this layer, by name
+
+    names = summary.get("metrics", [])
+    if not isinstance(names, list) or not all(isinstance(n, str) for n in names):
+        raise ScenarioError(f"{source}: [summary] metrics = {names!r}: expected a list of "
+                            "metric names")
+    registry = papers.registry()
+    for name in names:
+        if name not in registry:
+            hint = difflib.get_close_matches(name, list(registry), n=1)
+            raise ScenarioError(f"{source}: [summary] metrics: no metric {name!r}"
+                                + (f" (did you mean {hint[0]!r}?)" if hint else
+                                   f"; registered: {', '.join(sorted(registry))}"))
+    keys = [k for n in names for k in registry[n].keys]
+    for key in summary:
+        if key in registry and key not in SUMMARY_KEYS:
+            raise ScenarioError(f"{source}: [summary] {key}: a paper metric; name it in "
+                                f"[summary] metrics = [{key!r}, ...]")
+    for key, owners in papers.declared_keys().items():
+        if key in summary and key not in keys and key not in SUMMARY_KEYS:
+            raise ScenarioError(f"{source}: [summary] {key}: read by the metric "
+                                f"{' or '.join(repr(o) for o in owners)}, which [summary] "
+                                "metrics does not name")
+    return keys
 
 
 def _refuse_unknown(source: Path, table: str, given: dict[str, Any],
@@ -259,9 +295,30 @@ def catalog_path(identifier: str, fmi_version: int = 2) -> Path:
     return (FMU_DIR / "fmi3" if fmi_version == 3 else FMU_DIR) / f"{identifier}.fmu"
 
 
-def _resolve_fmu(source: Path, key: str, fmu: Any, fmi_version: int = 2) -> Path:
+def native_path(source: Path, key: str, fmu: str, fmi_version: int) -> Path:
+    """Where the native build of catalog FMU ``fmu`` in FMI version ``fmi_version`` lives
+    (``fmus/native/<Id>.fmu``, ``fmus/native/fmi3/<Id>.fmu``); refused for an FMU without a
+    native model."""
+    from cosim.fmu import native_build
+
+    if fmu.endswith(".fmu"):
+        raise ScenarioError(f"{source}: {key} = 'native': fmu = {fmu!r} is a file, used as "
+                            "given; build selects the build of a catalog identifier")
+    if fmu not in native_build.NATIVE:
+        raise ScenarioError(f"{source}: {key} = 'native': {fmu!r} has no native model "
+                            f"(native: {sorted(native_build.NATIVE)})")
+    return native_build.native_path(fmu, fmi_version)
+
+
+def _resolve_fmu(source: Path, key: str, fmu: Any, fmi_version: int = 2,
+                 build: str = "python") -> Path:
     if not isinstance(fmu, str) or not fmu:
         raise ScenarioError(f"{source}: {key} = {fmu!r}: expected an FMU identifier or path")
+    if build not in BUILDS:
+        raise ScenarioError(f"{source}: {key.replace(' fmu', ' build')} = {build!r}: expected "
+                            f"one of {list(BUILDS)}")
+    if build == "native":
+        return native_path(source, key.replace(" fmu", " build"), fmu, fmi_version)
     if fmu.endswith(".fmu"):
         path = Path(fmu)
         if not path.is_absolute():
@@ -357,8 +414,7 @@ def _load_scenario(path: Path, overrides: dict[str, Any] | list[str] | None) -> 
         key = f"[fmus.{name}]"
         if not isinstance(spec, dict):
             raise ScenarioError(f"{path}: {key} must be a table")
-        _refuse_unknown(path, key, spec, ("fmu", "sample_time", "max_step", "parameters",
-                                          "inputs"))
+        _refuse_unknown(path, key, spec, (*COMPONENT_KEYS, "parameters", "inputs"))
         if "fmu" not in spec:
             raise ScenarioError(f"{path}: {key} fmu is required")
         for table in ("parameters", "inputs"):
@@ -367,7 +423,9 @@ def _load_scenario(path: Path, overrides: dict[str, Any] | list[str] | None) -> 
         components[name] = Component(
             name=name,
             fmu=spec["fmu"],
-            fmu_path=_resolve_fmu(path, f"{key} fmu", spec["fmu"], sim.fmi_version),
+            fmu_path=_resolve_fmu(path, f"{key} fmu", spec["fmu"], sim.fmi_version,
+                                  spec.get("build", "python")),
+            build=spec.get("build", "python"),
             sample_time=(_number(path, f"{key} sample_time", spec["sample_time"])
                          if "sample_time" in spec else None),
             max_step=(_number(path, f"{key} max_step", spec["max_step"])
@@ -391,6 +449,8 @@ def _load_scenario(path: Path, overrides: dict[str, Any] | list[str] | None) -> 
         value = raw.get(table, {})
         if not isinstance(value, dict):
             raise ScenarioError(f"{path}: [{table}] must be a table")
+        if table == "summary":
+            known = (*known, *_paper_metric_keys(path, value))
         _refuse_unknown(path, f"[{table}]", value, tuple(known))
     record = raw.get("record", {}).get("variables")
     if record is not None:
