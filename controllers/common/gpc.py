@@ -138,15 +138,24 @@ class Gpc(StatefulCore):
                 G[:, k * m + j] = self._simulate(moves).ravel() - f
         return f, G
 
+    def plan(self, refs: np.ndarray) -> np.ndarray:
+        """The unclipped input ``u(t) = u(t-1) + du(t)``, ``du(t)`` the first move of the
+        minimiser ``dU = (G'G + w I)^-1 G'(R - f)`` (nothing is recorded)."""
+        f, G = self.prediction_matrices()
+        H = G.T @ G + self.p.control_weight * np.eye(G.shape[1])
+        dU = np.linalg.solve(H, G.T @ (np.asarray(refs, float).ravel() - f))
+        return self.u_prev + dU[:self.m]
+
+    def input_gain(self) -> np.ndarray:
+        """``B_1`` (n, m): the model's response of ``dy(t+1)`` to ``du(t)``."""
+        n = self.n * self.p.na
+        return self.theta[:, n:n + self.m]
+
     def control(self, refs: np.ndarray, lo: np.ndarray | None = None,
                 hi: np.ndarray | None = None) -> np.ndarray:
         """Input ``u(t)`` for references ``refs`` (Ny, n) of ``y(t+1..t+Ny)``, clipped to
         ``[lo, hi]`` and remembered as applied."""
-        p = self.p
-        f, G = self.prediction_matrices()
-        H = G.T @ G + p.control_weight * np.eye(G.shape[1])
-        dU = np.linalg.solve(H, G.T @ (np.asarray(refs, float).ravel() - f))
-        u = self.u_prev + dU[:self.m]
+        u = self.plan(refs)
         if lo is not None:
             u = np.maximum(u, lo)
         if hi is not None:

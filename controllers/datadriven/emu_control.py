@@ -54,9 +54,7 @@ from plants.route import load_reference, routes_dir_in
 # 1 s. So the seed-001 laws sample at 1 s, and the FFDL laws work on y in m/s and u in m/s2
 # per mean unit mass, where a free unit has Phi_1 = I, Phi_2 = T I = I: the paper's start
 # Phi(1) = 0.5 I (0.52 I for MFAC) is of the truth's size, as the paper's mu = 1, beta = 0.05,
-# delta = 1 then are in these units. (Before: 0.2 s, ours, with y, u in 9.667 x km/h, m/s2;
-# scenarios/reproduce/seed001.toml keeps rows of it.) GPC keeps its own km/h, m/s2 (its
-# control weight).
+# delta = 1 then are in these units. GPC keeps its own km/h, m/s2 (its control weight).
 PAPER_SAMPLE_TIME = 1.0
 
 

@@ -54,6 +54,10 @@ live there, not in code)::
     y_scale = 3.6                  # optional factor (m/s -> km/h)
     ylabel = "speed (km/h)"
     runs = ["PID", "MPC"]          # optional, default all
+    limit_ref = "controller.v_ref" # optional, for an error (y_minus): the zero-error reference
+    limit_kmh = 2.0                # and the +-allowance of that reference speed drawn, as in
+    limit_below_kmh = 30.0         # speed_classes (y_scale 3.6: km/h)
+    limit_fraction = 0.02
     [[figures]]                    # graded speed error: the max |error| of
     file = "fig8.png"              # each run per class of the reference speed, with the limit
     kind = "speed_classes"         # |e| <= max(limit_kmh if v <= limit_below_kmh, fraction v)
@@ -76,6 +80,8 @@ live there, not in code)::
     rounding_perturb = ["plant.v0"]  # optional: parameters scaled by 1 + 1e-12 on the
                                    # perturbed floating-point rerun (besides the plants'
                                    # numpy reference path, ATO_COSIM_NO_KERNELS=1)
+    rounding_reference_path = true # optional: false keeps the compiled kernels on the rerun
+                                   # (then rounding_perturb alone perturbs it)
     [[claims]]                     # a claim of the paper, tested over the ensemble
     id = "ismpc_mse_below_ismc"    # unique, [a-z0-9_]
     source = "Table 2"
@@ -90,6 +96,12 @@ live there, not in code)::
     range = [-0.5, 0.5]            # inside
     ensemble = "disturbance"       # disturbance (report seeds) | mismatch (perturb samples)
     origin = "paper"               # paper | ours
+    [[variants]]                   # optional: every claim again with some runs replaced (an
+    name = "white"                 # alternative reading, a mechanism removed); claims.md
+    text = "the paper's white noise"  # gets a verdict per claim and variant, variants.csv
+    replace = { "ISMPC" = "ISMPC white", "ISMC" = "ISMC white" }   # [[runs]] names
+    rounding = false               # optional: also the perturbed floating-point rerun
+    seeds = 5                      # optional: the first 5 report seeds (at most --seeds)
 
 The claims are evaluated by :mod:`cosim.run.claims` (statistics and verdicts) over the runs
 of :mod:`cosim.run.ensemble` (members, perturbed floating-point rerun), which write
@@ -113,7 +125,14 @@ from typing import Any
 
 import numpy as np
 
-from cosim.run.claims import ClaimsError, Ensemble, check_claims, check_ensemble, ratio_ci
+from cosim.run.claims import (
+    ClaimsError,
+    Ensemble,
+    check_claims,
+    check_ensemble,
+    check_variants,
+    ratio_ci,
+)
 from cosim.run.provenance import INPUTS_FILE, entry_digest
 from cosim.run.results import PLOT_DPI
 from cosim.run.scenario import SCENARIO_DIR
@@ -127,7 +146,7 @@ REPRODUCE_DIR = SCENARIO_DIR / "reproduce"
 
 # "ensemble" and "claims": the claims schema (docs of the claims framework), read there
 _ENTRY_KEYS = {"title", "notes", "table", "runs", "metrics", "paper", "derived", "rankings",
-               "sweeps", "figures", "ensemble", "claims"}
+               "sweeps", "figures", "ensemble", "claims", "variants"}
 _RANKING_KEYS = {"name", "metric", "runs", "paper"}
 _DERIVED_KEYS = {"name", "kind", "metric", "run", "baseline", "value", "range", "tolerance",
                  "source"}
@@ -137,7 +156,8 @@ _METRIC_KEYS = {"key", "label", "ratio_to"}
 _PAPER_KEYS = {"run", "metric", "value", "range", "tolerance", "source"}
 _SWEEP_KEYS = {"name", "scenarios", "grid"}
 _FIGURE_KEYS = {"file", "title", "kind", "x", "y", "y_scale", "ylabel", "xlabel", "runs",
-                "y_reduce", "y_minus"}
+                "y_reduce", "y_minus", "limit_ref", "limit_kmh", "limit_below_kmh",
+                "limit_fraction"}
 _CLASS_KEYS = {"file", "title", "kind", "y", "y_scale", "ylabel", "runs", "ref", "classes",
                "limit_kmh", "limit_below_kmh", "limit_fraction", "paper"}
 FIGURE_KINDS = ("overlay", "panels", "speed_classes")
@@ -163,6 +183,7 @@ class Entry:
     table: str = "table"
     ensemble: Ensemble = field(default_factory=Ensemble)
     claims: list[dict[str, Any]] = field(default_factory=list)
+    variants: list[dict[str, Any]] = field(default_factory=list)
 
 
 def entry_names() -> list[str]:
@@ -271,11 +292,13 @@ def load_entry(name: str | Path) -> Entry:
     try:
         ensemble = check_ensemble(str(path), data.get("ensemble"))
         claims = check_claims(str(path), data.get("claims", []), names, ensemble)
+        variants = check_variants(str(path), data.get("variants", []), names)
     except ClaimsError as err:
         raise ReproduceError(str(err)) from err
     return Entry(path.stem, path, data["title"], runs, metrics, data.get("paper", []),
                  data.get("derived", []), data.get("sweeps", []), data.get("figures", []),
-                 data.get("notes", ""), data.get("rankings", []), table, ensemble, claims)
+                 data.get("notes", ""), data.get("rankings", []), table, ensemble, claims,
+                 variants)
 
 
 def slug(name: str) -> str:
@@ -664,6 +687,8 @@ def figure_of(spec: dict[str, Any], frames: dict[str, Any], scenarios: dict[str,
                 curve = reference_curve(scenario, frame, y)
                 values = values if curve is None else curve
             ax.plot(x, values * scale, label=label, **kwargs)
+        if "limit_ref" in spec:
+            draw_limits(ax, spec, frame, x, name)
         if panels:
             ax.set_title(name, fontsize=9)
         ax.set_ylabel(ylabel)
@@ -675,6 +700,25 @@ def figure_of(spec: dict[str, Any], frames: dict[str, Any], scenarios: dict[str,
     fig.suptitle(spec.get("title", ""))
     fig.tight_layout()
     return fig
+
+
+def draw_limits(ax: Any, spec: dict[str, Any], frame: Any, x: Any, run: str) -> None:
+    """The zero-error reference and the +- allowance (``limit_kmh`` at or below
+    ``limit_below_kmh``, ``limit_fraction`` of the speed above) of the ``limit_ref`` speed
+    (times ``y_scale``) on an error figure's axes."""
+    from cosim.run.metrics import graded_allowance
+
+    ref_col = spec["limit_ref"]
+    if ref_col not in frame:
+        raise ReproduceError(f"figure {spec['file']}: run {run!r} recorded no {ref_col!r}")
+    ref = frame[ref_col].to_numpy(dtype=float) * float(spec.get("y_scale", 1.0))
+    allowed = graded_allowance(ref, float(spec.get("limit_kmh", 2.0)),
+                               float(spec.get("limit_below_kmh", 30.0)),
+                               float(spec.get("limit_fraction", 0.02))).astype(float)
+    allowed[ref <= 0.0] = float("nan")  # standing: no allowance drawn
+    ax.axhline(0.0, color="black", linewidth=0.6, label="reference (zero error)")
+    ax.plot(x, allowed, color="black", linestyle="--", linewidth=0.8, label="limit")
+    ax.plot(x, -allowed, color="black", linestyle="--", linewidth=0.8)
 
 
 def reference_curve(scenario: Any, frame: Any, y: str) -> Any:
