@@ -27,22 +27,26 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from cosim.fmu.declare import param
+from cosim.fmu.declare import Checked, param
 from cosim.fmu.state import StatefulCore
 
 
 @dataclass(frozen=True)
-class GpcParams:
+class GpcParams(Checked):
     """GPC horizons and weight, ARX orders and RLS settings."""
 
-    Ny: int = param(3, "1", "prediction horizon N_y (samples)", min=1, max=100)
-    Nu: int = param(2, "1", "control horizon N_u (samples)", min=1, max=100)
+    Ny: int = param(3, "1", "prediction horizon N_y (samples)", min=1, max=100,
+                   integer=True)
+    Nu: int = param(2, "1", "control horizon N_u (samples)", min=1, max=100,
+                   integer=True)
     forgetting: float = param(0.9, "1", "forgetting factor of the recursive least squares",
                               min=0.5, max=1.0)
     control_weight: float = param(0.1, "1", "weight w of ||dU||^2 against ||Y - R||^2",
                                   min=0.0)
-    na: int = param(1, "1", "order of the output polynomial (increments)", min=1, max=10)
-    nb: int = param(1, "1", "order of the input polynomial (increments)", min=1, max=10)
+    na: int = param(1, "1", "order of the output polynomial (increments)", min=1, max=10,
+                    integer=True)
+    nb: int = param(1, "1", "order of the input polynomial (increments)", min=1, max=10,
+                    integer=True)
     b_init: float = param(0.5, "1", "diagonal of B_1 at the start", min=0.0)
     a_init: float = param(0.0, "1", "diagonal of A_1 at the start (A_2.. = 0)")
     p0: float = param(100.0, "1", "initial covariance P = p0 I", min=1e-9)
@@ -50,11 +54,9 @@ class GpcParams:
     excitation: float = param(1e-9, "1", "no update while ||regressor|| is at most this",
                               min=0.0)
 
-    def check(self) -> None:
+    def check_relations(self) -> None:
         if self.Nu > self.Ny:
             raise ValueError(f"Nu = {self.Nu} must be <= Ny = {self.Ny}")
-        if not 0 < self.forgetting <= 1:
-            raise ValueError(f"forgetting = {self.forgetting} must be in (0, 1]")
 
 
 class Gpc(StatefulCore):

@@ -43,7 +43,7 @@ from controllers.datadriven.laws import (
     Mfac,
     MfacParams,
 )
-from cosim.fmu.declare import Declared, Var, build, group, param, parameters, sample_time
+from cosim.fmu.declare import Checked, Declared, Var, build, group, param, parameters, sample_time
 from cosim.fmu.state import StatefulCore
 from plants.route import load_reference, routes_dir_in
 
@@ -59,7 +59,7 @@ PAPER_SAMPLE_TIME = 1.0
 
 
 @dataclass(frozen=True)
-class DriveParams:
+class DriveParams(Checked):
     """The interface part shared by the four controllers."""
 
     mass: float = param(479.5e3, "kg", "train mass M (u_i = F_i n / M)", min=1.0)
@@ -86,13 +86,6 @@ class DriveParams:
                                              "sample (a diagnostic)")
     sample_time: float = sample_time(PAPER_SAMPLE_TIME)
 
-    def check(self) -> None:
-        if not (self.mass > 0 and self.sample_time > 0 and self.accel_max >= 0):
-            raise ValueError(f"mass = {self.mass}, sample_time = {self.sample_time} must be "
-                             f"> 0 and accel_max = {self.accel_max} >= 0")
-        if not (self.output_scale > 0 and self.input_scale > 0):
-            raise ValueError(f"output_scale = {self.output_scale}, input_scale = "
-                             f"{self.input_scale} must be > 0")
 
 
 def rescaled(law: Any, gy: float, gu: float) -> Any:
@@ -160,7 +153,7 @@ class DataDrivenEmuControl(StatefulCore, Declared):
         return cls(params, profile, units)
 
     def __init__(self, params: Any, profile, units: int = 3) -> None:
-        params.drive.check()
+        params.check()
         self.p = params
         self.drive = drive = params.drive
         self.n = units
@@ -229,7 +222,7 @@ class DataDrivenEmuControl(StatefulCore, Declared):
 
 
 @dataclass(frozen=True)
-class EmuMfacParams:
+class EmuMfacParams(Checked):
     """Parameters of the FFDL-MFAC FMU: the common interface part and the law's."""
 
     drive: DriveParams = group(FFDL_DRIVE, "")
@@ -244,7 +237,7 @@ class EmuMfac(DataDrivenEmuControl):
 
 
 @dataclass(frozen=True)
-class EmuIsmcParams:
+class EmuIsmcParams(Checked):
     """Parameters of the FFDL-ISMC FMU: the common interface part and the law's."""
 
     drive: DriveParams = group(FFDL_DRIVE, "")
@@ -259,7 +252,7 @@ class EmuIsmc(DataDrivenEmuControl):
 
 
 @dataclass(frozen=True)
-class EmuIsmpcParams:
+class EmuIsmpcParams(Checked):
     """Parameters of the FFDL-ISMPC FMU: the common interface part and the law's."""
 
     drive: DriveParams = group(FFDL_DRIVE, "")
@@ -284,7 +277,7 @@ class EmuIsmpc(DataDrivenEmuControl):
 
 
 @dataclass(frozen=True)
-class EmuGpcParams:
+class EmuGpcParams(Checked):
     """Parameters of the GPC FMU: the common interface part and the law's."""
 
     drive: DriveParams = group(DriveParams(), "")

@@ -90,7 +90,7 @@ from controllers.common.ffdl import FfdlEstimator, FfdlParams, sig, truncated_ga
 from controllers.common.gpc import Gpc, GpcParams
 from controllers.common.qp import DenseQP
 from controllers.datadriven.tuned import TUNED
-from cosim.fmu.declare import group, param
+from cosim.fmu.declare import Checked, group, param
 from cosim.fmu.state import StatefulCore
 
 
@@ -128,7 +128,7 @@ def null_space_share(u: np.ndarray, M: np.ndarray, K: np.ndarray, gain: float) -
 # -- FFDL-MFAC -------------------------------------------------------------------------------
 
 @dataclass(frozen=True)
-class MfacParams:
+class MfacParams(Checked):
     """FFDL-MFAC (paper section 4.1, 3): Phi(1) = 0.52 I, mu = 1, lambda = 0.2, delta = 1,
     rho = 0.85."""
 
@@ -165,7 +165,7 @@ class Mfac(Law):
 # -- integral sliding surface (eqs. 17-24) ---------------------------------------------------
 
 @dataclass(frozen=True)
-class SurfaceParams:
+class SurfaceParams(Checked):
     """Integral sliding surface of eq. 18."""
 
     k1: float = param(0.5, "1", "k1: weight of the error sum E (eq. 18)", min=0.0, max=1.0)
@@ -249,7 +249,7 @@ class SlidingLaw(Law):
 # -- FFDL-ISMC (eqs. 24-27) ------------------------------------------------------------------
 
 @dataclass(frozen=True)
-class IsmcParams:
+class IsmcParams(Checked):
     """FFDL-ISMC (section 4.1, 2): Phi(1) = 0.5 I, mu = 1, lambda = 0.2, beta = 0.05, k1 =
     0.5, k2 = 2, alpha = 0.65."""
 
@@ -279,14 +279,14 @@ class Ismc(SlidingLaw):
 # -- FFDL-ISMPC (eqs. 52-75) -----------------------------------------------------------------
 
 @dataclass(frozen=True)
-class IsmpcParams:
+class IsmpcParams(Checked):
     """FFDL-ISMPC (section 4.1, 1): Phi(1) = 0.5 I, mu = 1, lambda = 0.2, k1 = 0.5, k2 = 2,
     alpha = 0.5, N = 10."""
 
     ffdl: FfdlParams = group(FfdlParams(), "")
     surface: SurfaceParams = group(SurfaceParams(alpha=0.5), "")
     horizon: int = param(10, "1", "N: prediction and control horizon (eq. 57)", min=1,
-                         max=50, name="N")
+                         max=50, integer=True, name="N")
     theta: float = param(TUNED["ISMPC"]["theta"], "1", "theta: weight of ||U||^2 in J_2 "
                          "(eq. 66; not given in the paper: picked by benchmarks/"
                          "seed001_tuning.py, controllers/datadriven/tuned.py; for km/h and "
@@ -294,20 +294,14 @@ class IsmpcParams:
     constraints: str = param("qp", description='the input box in the MPC of eq. 67: "qp", '
                              "the constrained QP (DAQP) when the unconstrained minimiser "
                              'leaves the box; "clip": the unconstrained minimiser (eq. 72) '
-                             "alone, its input clipped to the box like the other laws'")
+                             "alone, its input clipped to the box like the other laws'",
+                             choices=("qp", "clip"))
     error_prediction: str = param("eq78", description='P_hat of eqs. 70-72 (every stage k of '
                                   "the MPC's prediction adds k p_hat(t-1), p_hat(t-1) = "
                                   'dd_hat(t) - dd_hat(t-1)) with the sign of the law theorem 3 '
                                   'proves, "eq78" (Lambda s - Psi P_hat), or as eqs. 72, 73, 75 '
                                   'print it, "eq72" (+ Psi P_hat); "off": P_hat = 0 (a '
-                                  'diagnostic)')
-
-    def check(self) -> None:
-        if self.constraints not in ("qp", "clip"):
-            raise ValueError(f"constraints = {self.constraints!r}: one of ['clip', 'qp']")
-        if self.error_prediction not in P_HAT_SIGN:
-            raise ValueError(f"error_prediction = {self.error_prediction!r}: one of "
-                             f"{sorted(P_HAT_SIGN)}")
+                                  'diagnostic)', choices=("eq78", "eq72", "off"))
 
 
 P_HAT_SIGN = {"eq78": -1.0, "eq72": 1.0, "off": 0.0}
@@ -398,7 +392,7 @@ NO_COVARIANCE_BOUND = 1e300
 
 
 @dataclass(frozen=True)
-class GpcLawParams:
+class GpcLawParams(Checked):
     """GPC baseline (section 4.1, 4): Ny = 3, Nu = 2, forgetting factor 0.9, the paper's
     textbook RLS: no bound on the covariance (``p_max`` = ``NO_COVARIANCE_BOUND``, never
     reached; the shared core's 1e4, ours, is a safeguard the paper does not have, README

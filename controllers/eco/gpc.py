@@ -23,23 +23,23 @@ import numpy as np
 from controllers.common.gpc import Gpc, GpcParams
 from controllers.eco.tracking import EcoTracker, EcoTrackingParams, SpeedProfile
 from controllers.robust.rmpc import load_model_set, models_dir_in
-from cosim.fmu.declare import group, param
+from cosim.fmu.declare import Checked, group, param
 from plants.route import GRAVITY
 
 MODEL_STARTS = ("identified", "cold")
 
 
 @dataclass(frozen=True)
-class GpcStartParams:
+class GpcStartParams(Checked):
     """Where the GPC's on-line model starts."""
 
     model_start: str = param("identified", description='start of the RLS model: '
                              '"identified" (the robust MPC\'s ARX model at departure) or '
-                             '"cold" (A_1 = 0, B_1 = b_init)')
+                             '"cold" (A_1 = 0, B_1 = b_init)', choices=MODEL_STARTS)
 
 
 @dataclass(frozen=True)
-class Crh3GpcParams:
+class Crh3GpcParams(Checked):
     """Interface part and the GPC's parameters (seed 001's Ny = 3, Nu = 2; b_init = T)."""
 
     track: EcoTrackingParams = group(EcoTrackingParams(), "")
@@ -62,8 +62,6 @@ class Crh3Gpc(EcoTracker):
                  data_dir: Path | None = None) -> None:
         super().__init__(params, profile, t0)
         start = params.start.model_start
-        if start not in MODEL_STARTS:
-            raise ValueError(f"model_start = {start!r} must be one of {MODEL_STARTS}")
         gpc = params.gpc
         if start == "identified":
             models = load_model_set("identified",

@@ -34,7 +34,7 @@ import numpy as np
 
 from controllers.hybrid.miqp import HybridMiqp, MiqpResult, parse_blocks
 from controllers.hybrid.model import KN, ChainModel, Limits, PwlResistance
-from cosim.fmu.declare import Declared, Var, build, param, parameters, sample_time
+from cosim.fmu.declare import Checked, Declared, Var, build, param, parameters, sample_time
 from cosim.fmu.diagnostics import SolveTimes
 from cosim.fmu.state import StatefulCore
 from plants.emu import CONFIGURATIONS, EmuParams, emu_config
@@ -45,11 +45,11 @@ POSITION_REFERENCES = ("horizon", "timetable")
 
 
 @dataclass(frozen=True)
-class HybridMpcParams:
+class HybridMpcParams(Checked):
     """Case 1 of the paper by default (Np = Nu = 10, R = 0.5 I3, Q = 10 I6; no eq. 11)."""
 
     horizon: int = param(10, description="prediction = control horizon Np = Nu", min=1, max=40,
-                         name="N")
+                         integer=True, name="N")
     q_speed: float = param(10.0, "1", "Q: weight on each car's speed error (m/s)^-2", min=0.0)
     q_position: float = param(10.0, "1", "Q: weight on each car's position error (m)^-2",
                               min=0.0)
@@ -62,7 +62,8 @@ class HybridMpcParams:
                              "every stage free (GMPC)")
     sample_time: float = sample_time(1.0)
     configuration: str = param("crh3_3car", description="train data of the control model "
-                               f"(one of {sorted(CONFIGURATIONS)})")
+                               f"(one of {sorted(CONFIGURATIONS)})",
+                               choices=tuple(sorted(CONFIGURATIONS)))
     fit_speed_max: float = param(350.0 / 3.6, "m/s", "PWA resistance fitted on [0, this] in "
                                  "three equal segments", min=1.0)
     coupler_force_max: float = param(1.0e6, "N", "coupler force limit (state constraint)",
@@ -73,31 +74,17 @@ class HybridMpcParams:
                                     "reference of stage s is s_ref(t + s Ts) - s (x_d of eq. "
                                     "12 on the timetable: the accumulated position error is "
                                     'corrected); "horizon": the reference distance from now, '
-                                    "int_t^(t+s Ts) v_ref (no memory of past error)")
+                                    "int_t^(t+s Ts) v_ref (no memory of past error)",
+                                    choices=POSITION_REFERENCES)
     delta_mode: str = param("schedule", description='"schedule": delta fixed as in section 3; '
-                            '"optimise": delta a decision of the MIQP')
+                            '"optimise": delta a decision of the MIQP',
+                            choices=DELTA_MODES)
     brake_from: float = param(600.0, "s", "delta = 0 (braking) from this time ...")
     brake_until_speed: float = param(30.0, "m/s", "... until the mean speed has fallen to this",
                                      min=0.0)
 
-    def check(self) -> None:
-        if int(self.horizon) != self.horizon or self.horizon < 1:
-            raise ValueError(f"N = {self.horizon} must be an integer >= 1")
+    def check_relations(self) -> None:
         parse_blocks(self.move_blocks, int(self.horizon))
-        if self.position_reference not in POSITION_REFERENCES:
-            raise ValueError(f"position_reference = {self.position_reference!r} must be one of "
-                             f"{POSITION_REFERENCES}")
-        if self.delta_mode not in DELTA_MODES:
-            raise ValueError(f"delta_mode = {self.delta_mode!r} must be one of {DELTA_MODES}")
-        if self.configuration not in CONFIGURATIONS:
-            raise ValueError(f"configuration = {self.configuration!r} unknown (known: "
-                             f"{sorted(CONFIGURATIONS)})")
-        for name in ("q_speed", "q_position"):
-            if not getattr(self, name) >= 0:
-                raise ValueError(f"{name} = {getattr(self, name)} must be >= 0")
-        for name in ("sample_time", "coupler_force_max"):
-            if not getattr(self, name) > 0:
-                raise ValueError(f"{name} = {getattr(self, name)} must be > 0")
         if not (self.r_force >= 0 and self.r_increment >= 0
                 and self.r_force + self.r_increment > 0):
             raise ValueError(f"R = {self.r_force}, dR = {self.r_increment}: both >= 0 and one "

@@ -43,7 +43,7 @@ from controllers.common.lmi import LMI_SOLVERS, KothareLmi
 from controllers.common.speed_profiles import PHASE_BRAKE, SpeedProfile
 from controllers.eco.tracking import EcoTracker, EcoTrackingParams
 from controllers.robust.multimodel import ArxSet, SwitchingIndex
-from cosim.fmu.declare import Var, group, param
+from cosim.fmu.declare import Checked, Var, group, param
 from cosim.fmu.diagnostics import SolveTimes
 from cosim.fmu.state import StatefulCore
 from plants.route import GRAVITY
@@ -57,7 +57,7 @@ IDENTIFIED_FILE = "crh3_arx.toml"
 
 
 @dataclass(frozen=True)
-class RmpcParams:
+class RmpcParams(Checked):
     """The law's settings; section 4 of the paper: Q = diag(1, 1, 1) (here: speed and position
     error), R = 1."""
 
@@ -69,7 +69,7 @@ class RmpcParams:
                          "invariant ellipsoid (eq. 25), daN/kN", min=1e-6)
     vertices: str = param("neighbours", description='models the polytope of the LMI spans: '
                           '"neighbours" (active model and its neighbours), "all" or "nominal" '
-                          '(the active model)')
+                          '(the active model)', choices=VERTEX_SETS)
     mass_uncertainty: float = param(0.1, "1", "relative train-mass uncertainty the polytope "
                                     "covers: b of every model between b / (1 + this) and "
                                     "b / (1 - this)", min=0.0, max=0.9)
@@ -77,13 +77,15 @@ class RmpcParams:
                                           "the polytope covers: 1 - a of every model scaled "
                                           "by 1 -+ this", min=0.0, max=0.9)
     model_set: str = param("identified", description='ARX set: "identified" (fitted to our '
-                           'CRH3 plant, controllers/robust/data) or "paper" (section 2)')
+                           'CRH3 plant, controllers/robust/data) or "paper" (section 2)',
+                           choices=MODEL_SETS)
     switch_alpha: float = param(1.0, "1", "a: weight of the current mismatch (eq. 27)",
                                 min=1e-9)
     switch_beta: float = param(1.0, "1", "b: weight of the past mismatches (eq. 27)", min=1e-9)
     switch_rho: float = param(0.8, "1", "forgetting factor rho (eq. 27)", min=1e-6,
                               max=0.999999)
-    switch_horizon: int = param(10, "1", "past horizon l (eq. 27, samples)", min=0, max=1000)
+    switch_horizon: int = param(10, "1", "past horizon l (eq. 27, samples)", min=0, max=1000,
+                                integer=True)
     disturbance_gain: float = param(0.3, "1", "filter gain of the disturbance estimate",
                                     min=0.0, max=1.0)
     error_clip_speed: float = param(30.0, "m/s", "speed error fed to the LMI clipped to "
@@ -92,17 +94,8 @@ class RmpcParams:
                                        "to +- this", min=0.0)
     lmi_floor: float = param(1.0, "1", "errors smaller than this (km/h, m) are scaled up to "
                              "it in the LMI problem (conditioning)", min=1e-6)
-    solver: str = param("clarabel", description=f"SDP solver, one of {LMI_SOLVERS}")
-
-    def check(self) -> None:
-        if self.vertices not in VERTEX_SETS:
-            raise ValueError(f"vertices = {self.vertices!r} must be one of {VERTEX_SETS}")
-        if self.model_set not in MODEL_SETS:
-            raise ValueError(f"model_set = {self.model_set!r} must be one of {MODEL_SETS}")
-        if self.solver not in LMI_SOLVERS:
-            raise ValueError(f"solver = {self.solver!r} must be one of {LMI_SOLVERS}")
-        if int(self.switch_horizon) != self.switch_horizon:
-            raise ValueError(f"switch_horizon = {self.switch_horizon} must be an integer")
+    solver: str = param("clarabel", description=f"SDP solver, one of {LMI_SOLVERS}",
+                        choices=LMI_SOLVERS)
 
 
 def models_dir_in(data_dir: Path) -> Path:
@@ -254,7 +247,7 @@ class RobustMpcLaw(StatefulCore):
 
 
 @dataclass(frozen=True)
-class Crh3LmiMpcParams:
+class Crh3LmiMpcParams(Checked):
     """Interface part (:class:`EcoTrackingParams`) and the robust MPC's settings."""
 
     track: EcoTrackingParams = group(EcoTrackingParams(), "")
