@@ -1,6 +1,6 @@
 """Wall time and real-time factor of the freight scenario (prints figures, asserts nothing).
 
-Target (issue 4): the 22.8 min run with plant sub-step 0.01 s, closed loop, under 60 s wall.
+Target: the 22.8 min run with plant sub-step 0.01 s, closed loop, under 60 s wall.
 
 * closed loop, master: ``seed002_freight_pid`` through the event-driven master (FMUs, summary);
 * plant only, core: :class:`plants.freight.FreightTrain` (no FMI) replaying the force demand and

@@ -4,7 +4,7 @@ freight scenario (prints figures, asserts nothing).
 * per event: the controller core's ``compute`` on freight_20km at states along the reference
   (head at the reference speed, 2,000 positions), median over ``--repeat`` passes, microseconds;
 * closed loop: each ``seed002_freight_*`` scenario through the event-driven master (FMUs),
-  22.8 min route at the 0.01 s plant step; target >= 100x real time (issue 16).
+  22.8 min route at the 0.01 s plant step; target >= 100x real time.
 
     python benchmarks/bench_freight_controllers.py [--repeat 3] [--no-scenarios]
 """

@@ -1,4 +1,4 @@
-"""The freight sub-step kernel: numba vs the same kernel in C vs the numpy reference (issue 10).
+"""The freight sub-step kernel: numba vs the same kernel in C vs the numpy reference.
 
 Issue 10 item 1 asks to measure a numba kernel and a C kernel built with gcc on the freight
 plant, choose one and say why. ``cosim/fmu/native/freight_kernel.c`` is

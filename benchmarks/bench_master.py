@@ -1,4 +1,4 @@
-"""The master against the minimal hand-written fmpy loop on the same FMUs (issue 10, item 3).
+"""The master against the minimal hand-written fmpy loop on the same FMUs.
 
 Runs the master (``Master.run``, no summary, no files) and ``raw_loop.raw_fmpy_loop``
 alternately, ``repeat`` times each after one warm-up of both, and reports the medians:

@@ -1,4 +1,4 @@
-"""Sweep speed-up: ``cosim sweep`` with 2 worker processes against 1 (issue 10, item 5).
+"""Sweep speed-up: ``cosim sweep`` with 2 worker processes against 1.
 
 Runs the issue's command end to end (a fresh ``python -m cosim.cli`` each time, so imports and
 worker start-up count) with ``--workers 1`` and ``--workers 2`` alternately, ``repeat`` times,

@@ -1,9 +1,9 @@
 """Lower bound on the speed error of any freight controller at the final braking of seed 002
-(prints figures, asserts nothing; evidence for issue 16).
+(prints figures, asserts nothing).
 
 The onset is the reference's planned air-brake application
 (:meth:`controllers.common.freight_blending.FreightBlending.planned_onsets`; the start of the
-last braking segment for a reference without one). On the first reference (issue 16) the final
+last braking segment for a reference without one). On the first reference the final
 braking stepped from cruise to -0.2 m/s^2; the plant can brake that
 hard only with its air brake, which it applies in pipe-reduction stages (the smallest, 50 kPa,
 already gives about -0.19 m/s^2), which builds up from head to tail over seconds (eq. 9,

@@ -1,4 +1,4 @@
-"""Sweep of the freight preview's train-mean feedback (seed 002, issue 16; prints figures,
+"""Sweep of the freight preview's train-mean feedback (seed 002; prints figures,
 asserts nothing): the whole freight_20km run, preview core on the plant core at 0.01 s.
 
 For each ``mean_weight`` w and ``observer_correction_time`` t_c, and optionally a plant that

@@ -1,4 +1,4 @@
-"""Every benchmark against the reference it is measured against, in the same run (issue 10).
+"""Every benchmark against the reference it is measured against, in the same run.
 
 Prints one row per figure: the figure, the reference measured in this run, their ratio and the
 issue's target, and writes them to ``benchmarks/results.json``. Asserts nothing.

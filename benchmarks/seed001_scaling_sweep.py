@@ -1,4 +1,4 @@
-"""Seed 001: the data scaling of the FFDL laws (issue 15), measured on direct core loops.
+"""Seed 001: the data scaling of the FFDL laws, measured on direct core loops.
 
 Every FFDL law (MFAC, ISMC, ISMPC) works on ``y_i = c_y v_i`` and ``u_i = c_u F_i / m``
 (``output_scale``, ``input_scale`` of the controller FMUs; default km/h and m/s2). The
@@ -13,9 +13,8 @@ The FFDL laws start from the laws' own defaults (the paper's values; ours declar
 and m/s2). With ``--keep-meaning`` ours (Delta, b, theta, the estimator's reset threshold,
 excitation gate and pinv eps) keep their physical meaning under the new scaling, as in the
 FMUs (the core converts them with :func:`controllers.datadriven.emu_control.rescaled`; the
-FMUs' defaults are ``--scale 1,1 --keep-meaning --sample-time 1``; before issue 15's seventh pass
-``--scale 34.8012,9.667 --keep-meaning`` at 0.2 s); without it they keep their
-numbers in the new units. GPC runs its FMU defaults (km/h, m/s2) unless
+FMUs' defaults are ``--scale 1,1 --keep-meaning --sample-time 1``); without it they keep
+their numbers in the new units. GPC runs its FMU defaults (km/h, m/s2) unless
 ``--gpc-too``.
 
     python benchmarks/seed001_scaling_sweep.py --scale 3.6,1 --scale 1,0.4 [--white]
