@@ -27,7 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from cosim.fmu.declare import Declared, Var, build, group, param
+from cosim.fmu.declare import Checked, Declared, Var, build, group, param
 from cosim.fmu.state import StatefulCore, to_seconds, to_ticks
 from plants import dead_time
 from plants.resistance import Davis
@@ -41,14 +41,14 @@ from plants.route import (
 
 
 @dataclass(frozen=True)
-class BrakeDelayParams:
+class BrakeDelayParams(Checked):
     """Parameters in SI (defaults: seed 000 Table 1)."""
 
     mass: float = param(490e3, "kg", "train mass", min=1.0)
     davis: Davis = group(Davis.from_kn_kmh(5.4, 0.0098, 0.00163), "davis_")
     brake_gain: float = param(1.07 / 100.0, "m/s2/%",
                               "c: brake deceleration per % of command (100 % -> 1.07 m/s2)",
-                              min=0.0)
+                              above=0.0)
     brake_time_constant: float = param(0.4, "s", "tau: first-order brake lag", min=1e-6)
     brake_delay: float = param(1.0, "s", "Td: brake dead time", min=0.0)
     max_step: float = param(0.01, "s", "longest internal integration sub-step", min=1e-6)
@@ -60,15 +60,6 @@ class BrakeDelayParams:
     disturbance_interval: float = param(1.0, "s", "a_d is held for this long, then drawn "
                                         "anew", min=1e-3)
     disturbance_seed: int = param(0, description="seed of the disturbance a_d")
-
-    def check(self) -> None:
-        for name in ("mass", "brake_time_constant", "max_step"):
-            if not getattr(self, name) > 0:
-                raise ValueError(f"{name} = {getattr(self, name)} must be > 0")
-        if not self.brake_delay >= 0:
-            raise ValueError(f"brake_delay = {self.brake_delay} must be >= 0")
-        if not self.brake_gain > 0:
-            raise ValueError(f"brake_gain = {self.brake_gain} must be > 0")
 
 
 class BrakeDelayTrain(StatefulCore, Declared):

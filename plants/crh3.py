@@ -53,7 +53,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from cosim.fmu.declare import Declared, Var, build, group, param
+from cosim.fmu.declare import Checked, Declared, Var, build, group, param
 from cosim.fmu.state import StatefulCore, to_seconds, to_ticks
 from plants import dead_time
 from plants.resistance import KMH, Davis
@@ -82,7 +82,7 @@ def _rest(value: float) -> float:
 
 
 @dataclass(frozen=True)
-class Crh3Params:
+class Crh3Params(Checked):
     """Train data in SI (defaults: seed 003 Table 1 and public CRH3 figures)."""
 
     mass: float = param(MASS, "kg", "train mass M (Table 1: 980 t)", min=1.0)
@@ -128,20 +128,6 @@ class Crh3Params:
     def brake_limit(self, v: float) -> float:
         """Largest brake force (N, >= 0) at speed ``v`` (m/s): min(F_b, P_b/v)."""
         return min(self.max_brake_force, self.max_brake_power / max(abs(v), 1e-9))
-
-    def check(self) -> None:
-        for name in ("mass", "traction_time_constant", "brake_time_constant", "max_step",
-                     "motor_efficiency"):
-            if not getattr(self, name) > 0:
-                raise ValueError(f"{name} = {getattr(self, name)} must be > 0")
-        for name in ("rotating_mass_factor", "max_traction_force", "max_traction_power",
-                     "max_brake_force", "max_brake_power", "aux_power", "length",
-                     "regen_efficiency", "max_speed"):
-            if not getattr(self, name) >= 0:
-                raise ValueError(f"{name} = {getattr(self, name)} must be >= 0")
-        if self.motor_efficiency > 1 or self.regen_efficiency > 1:
-            raise ValueError(f"efficiencies ({self.motor_efficiency}, "
-                             f"{self.regen_efficiency}) must be <= 1")
 
 
 class _Lookup:

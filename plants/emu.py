@@ -51,7 +51,7 @@ import numpy as np
 from scipy import special
 from scipy.linalg import expm
 
-from cosim.fmu.declare import Declared, Var, build, param, parameters
+from cosim.fmu.declare import Checked, Declared, Var, build, param, parameters
 from cosim.fmu.state import StatefulCore, to_seconds, to_ticks
 from plants import dead_time, kernels
 from plants.resistance import KMH, Davis
@@ -70,7 +70,7 @@ def _t(values) -> tuple[float, ...]:
 
 
 @dataclass(frozen=True)
-class EmuParams:
+class EmuParams(Checked):
     """Per-unit tuples (front to rear) in SI units."""
 
     masses: tuple[float, ...]  # kg
@@ -82,8 +82,8 @@ class EmuParams:
     max_traction_power: tuple[float, ...]  # W
     max_brake_force: tuple[float, ...]  # N
     max_brake_power: tuple[float, ...]  # W
-    coupler_stiffness: float = param(2.0e7, "N/m", "k", per_configuration=True)
-    coupler_damping: float = param(5.0e6, "N.s/m", "d", per_configuration=True)
+    coupler_stiffness: float = param(2.0e7, "N/m", "k", min=0.0, per_configuration=True)
+    coupler_damping: float = param(5.0e6, "N.s/m", "d", min=0.0, per_configuration=True)
     rotating_mass_factor: float = param(0.0, "1", "gamma: M (1 + gamma) dv/dt", min=0.0)
     # couplers are solved exactly over a sub-step; resistance varies slowly
     max_step: float = param(0.05, "s", "longest internal integration sub-step", min=1e-6)
@@ -106,7 +106,7 @@ class EmuParams:
     def n(self) -> int:
         return len(self.masses)
 
-    def check(self) -> None:
+    def check_relations(self) -> None:
         n = self.n
         if n < 1:
             raise ValueError("masses: need at least one unit")
@@ -118,13 +118,8 @@ class EmuParams:
                 raise ValueError(f"{name} = {getattr(self, name)} must be finite and >= 0")
         if any(not m > 0 for m in self.masses):
             raise ValueError(f"masses = {self.masses} must be > 0")
-        for name in ("coupler_stiffness", "coupler_damping", "rotating_mass_factor",
-                     "disturbance_accel_std", "disturbance_correlation_time"):
-            if not getattr(self, name) >= 0:
-                raise ValueError(f"{name} = {getattr(self, name)} must be >= 0")
-        for name in ("max_step", "standstill_speed", "disturbance_interval"):
-            if not getattr(self, name) > 0:
-                raise ValueError(f"{name} = {getattr(self, name)} must be > 0")
+        if not self.standstill_speed > 0:
+            raise ValueError(f"standstill_speed = {self.standstill_speed} must be > 0")
 
 
 def _crh380a_3unit() -> EmuParams:

@@ -89,7 +89,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.linalg import solveh_banded
 
-from cosim.fmu.declare import Declared, Var, build, param, parameters
+from cosim.fmu.declare import Checked, Declared, Var, build, param, parameters
 from cosim.fmu.state import TICKS_PER_SECOND, StatefulCore, to_seconds, to_ticks
 from plants import dead_time, kernels
 from plants.kernels import shoe_friction as _shoe_friction  # the plain-Python definition
@@ -108,7 +108,7 @@ LOADED_WAGON_RESISTANCE = (0.92, 0.0048, 0.000125)  # N/kN, v in km/h (eq. 4, ru
 
 
 @dataclass(frozen=True)
-class FreightParams:
+class FreightParams(Checked):
     """Parameters in SI (defaults: seed 002 Table 1, HXD1 + 108 loaded C80; see module doc)."""
 
     n_wagons: int = 108
@@ -123,7 +123,7 @@ class FreightParams:
     coupler_stiffness: float = param(1.37e7, "N/m", "draft-gear stiffness per coupling", min=1.0)
     coupler_damping: float = param(1.5e6, "N.s/m", "draft-gear damping per coupling", min=0.0)
     coupler_slack: float = param(0.0, "m", "total free play per coupling (0: none)", min=0.0)
-    max_traction_force: float = param(760e3, "N", "largest tractive effort (760 kN)", min=0.0)
+    max_traction_force: float = param(760e3, "N", "largest tractive effort (760 kN)", above=0.0)
     max_traction_power: float = param(9.6e6, "W", "traction power at the wheel (9600 kW)", min=1.0)
     max_ed_force: float = param(461e3, "N", "largest electric brake force (461 kN)", min=0.0)
     max_ed_power: float = param(9.6e6, "W", "electric brake power (9600 kW)", min=1.0)
@@ -131,7 +131,7 @@ class FreightParams:
         5.0 * KMH, "m/s", "electric brake fades linearly to 0 below this speed", min=0.0)
     traction_model: int = param(
         0, "1", "0: first-order lag with dead time (eq. 15); 1: ramp (eq. 8)",
-                                min=0, max=1)
+                                min=0, max=1, integer=True)
     traction_delay: float = param(
         0.5, "s", "tau of eq. (15): dead time of traction/electric brake", min=0.0)
     traction_time_constant: float = param(
@@ -166,24 +166,7 @@ class FreightParams:
         "(lognormal, mean 1; 0: every vehicle has the printed coefficients)", min=0.0, max=1.0)
     disturbance_seed: int = param(0, description="seed of the vehicles' resistance factors")
 
-    def check(self) -> None:
-        positive = ("loco_mass", "loco_length", "wagon_mass", "wagon_length", "coupler_stiffness",
-                    "max_traction_force", "max_traction_power", "max_ed_power",
-                    "traction_time_constant", "traction_ramp_time", "brake_propagation_speed",
-                    "brake_release_propagation_speed", "brake_fill_time", "brake_fill_exponent",
-                    "brake_release_time", "brake_release_exponent", "max_cylinder_pressure",
-                    "full_service_reduction", "stiction_speed", "max_step")
-        for name in positive:
-            if not getattr(self, name) > 0:
-                raise ValueError(f"{name} = {getattr(self, name)} must be > 0")
-        non_negative = ("coupler_damping", "coupler_slack", "max_ed_force", "ed_fade_speed",
-                        "traction_delay", "brake_apply_delay", "brake_release_delay",
-                        "min_reduction", "loco_braking_ratio", "wagon_braking_ratio",
-                        "loco_rotating_mass_factor", "wagon_rotating_mass_factor",
-                        "resistance_spread")
-        for name in non_negative:
-            if not getattr(self, name) >= 0:
-                raise ValueError(f"{name} = {getattr(self, name)} must be >= 0")
+    def check_relations(self) -> None:
         if self.coupler_slack > 0:
             # engagement is found one sub-step late: the spring then starts with up to
             # |dv| h of penetration; keep k h^2 / m_rel small so no energy is pumped in
@@ -195,8 +178,6 @@ class FreightParams:
                                  " s (contact too stiff for the sub-step)")
         if self.n_wagons < 0:
             raise ValueError(f"n_wagons = {self.n_wagons} must be >= 0")
-        if self.traction_model not in (0, 1):
-            raise ValueError(f"traction_model = {self.traction_model} must be 0 (lag) or 1 (ramp)")
 
     @property
     def n_vehicles(self) -> int:

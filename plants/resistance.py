@@ -4,13 +4,13 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from cosim.fmu.declare import param
+from cosim.fmu.declare import Checked, param
 
 KMH = 1.0 / 3.6  # m/s per km/h
 
 
 @dataclass(frozen=True)
-class Davis:
+class Davis(Checked):
     """Basic running resistance ``F = a + b v + c v^2`` in N with v in m/s."""
 
     a: float = param(unit="N", description="Davis constant term a", min=0.0)

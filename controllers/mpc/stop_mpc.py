@@ -88,7 +88,7 @@ from controllers.common.stopping import (
     u_min_param,
 )
 from controllers.mpc.terminal import robust_invariant_set
-from cosim.fmu.declare import Declared, Var, build, param, sample_time
+from cosim.fmu.declare import Checked, Declared, Var, build, param, sample_time
 from cosim.fmu.diagnostics import SolveTimes
 from cosim.fmu.profiles import StoppingCurve, ref_decel_param, stop_point_param
 from cosim.fmu.state import StatefulCore
@@ -100,13 +100,15 @@ NO_BOUND = 1e30  # "no lower bound" on a terminal row (DAQP's infinity)
 
 
 @dataclass(frozen=True)
-class StopMpcParams:
+class StopMpcParams(Checked):
     """Parameters, SI units (defaults: seed 000 Table 1 plant, tuned weights)."""
 
     horizon: int = param(10, description="prediction (and control) horizon N", min=2, max=60,
-                         name="N")
+                         integer=True, name="N")
     q_speed: float = param(10.0, "s2/m2", "q1: weight on the speed error", min=0.0)
-    q_position: float = param(10.0, "1/m2", "q2: weight on the position error", min=1e-9)
+    q_position: float = param(10.0, "1/m2", "q2: weight on the position error (the stop is a "
+                              "position target: without it the tube feedback does not "
+                              "stabilise)", min=1e-9)
     r_du: float = param(0.01, "1", "R: weight on the command increment (per %^2)", min=1e-12)
     beta: float = param(2.0, "1", "beta >= 1: suboptimality traded for fewer executions "
                         "(eq. 22, 25)", min=1.0)  # RSMPC only
@@ -145,7 +147,7 @@ class StopMpcParams:
     observer_gain: float = param(0.3, "1", "L: share of the speed innovation taken into the "
                                  "resistance estimate per event", min=0.0, max=1.0)
     design_model: str = param("zoh", description='design rows for v and s: "zoh" (exact) or '
-                              '"euler" (the paper\'s eq. 9)')
+                              '"euler" (the paper\'s eq. 9)', choices=DESIGN_MODELS)
     initial_command: float = param(0.0, "%", "command held before the first event", min=0.0,
                                    max=100.0)
     standstill_speed: float = param(0.02, "m/s", "speed below which a train near the stop "
@@ -156,37 +158,11 @@ class StopMpcParams:
                                       "standstill", min=0.0, max=100.0)
     eps: float = 1e-7  # OSQP tolerance
     qp_solver: str = param("daqp", description='QP solver: "daqp" (exact active set, default) '
-                           'or "osqp" (ADMM)')
+                           'or "osqp" (ADMM)', choices=QP_SOLVERS)
 
-    def check(self) -> None:
-        if int(self.horizon) != self.horizon or self.horizon < 2:
-            raise ValueError(f"horizon = {self.horizon} must be an integer >= 2")
-        for name in ("q_speed", "q_position", "davis_uncertainty"):
-            if not getattr(self, name) >= 0:
-                raise ValueError(f"{name} = {getattr(self, name)} must be >= 0")
-        for name in ("r_du", "sample_time", "brake_gain", "ref_decel", "du_max", "mass",
-                     "speed_error_max", "position_error_max"):
-            if not getattr(self, name) > 0:
-                raise ValueError(f"{name} = {getattr(self, name)} must be > 0")
-        if not self.q_position > 0:
-            raise ValueError(f"q_position = {self.q_position} must be > 0 (the stop is a "
-                             f"position target; without it the tube feedback is not stabilising)")
-        if not self.beta >= 1.0:
-            raise ValueError(f"beta = {self.beta} must be >= 1")
+    def check_relations(self) -> None:
         if not self.u_min < self.u_max:
             raise ValueError(f"u_min = {self.u_min} must be < u_max = {self.u_max}")
-        for name in ("mass_uncertainty", "grade_uncertainty"):
-            if not getattr(self, name) >= 0:
-                raise ValueError(f"{name} = {getattr(self, name)} must be >= 0")
-        if not self.mass_uncertainty < 1.0:
-            raise ValueError(f"mass_uncertainty = {self.mass_uncertainty} must be < 1")
-        if not 0.0 <= self.observer_gain <= 1.0:
-            raise ValueError(f"observer_gain = {self.observer_gain} must be in [0, 1]")
-        if self.design_model not in DESIGN_MODELS:
-            raise ValueError(f"design_model = {self.design_model!r} must be one of "
-                             f"{DESIGN_MODELS}")
-        if self.qp_solver not in QP_SOLVERS:
-            raise ValueError(f"qp_solver = {self.qp_solver!r} must be one of {QP_SOLVERS}")
 
 
 def nominal_resistance_range(p: StopMpcParams, route: Route) -> tuple[float, float]:

@@ -26,18 +26,17 @@ and derivative use the nominal ``T`` (the co-simulation master calls the control
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from cosim.fmu.declare import Declared, Var, build, group, param, parameters, sample_time
+from cosim.fmu.declare import Checked, Declared, Var, build, group, param, parameters, sample_time
 from cosim.fmu.state import StatefulCore
 from plants.route import load_reference, routes_dir_in
 
 
 @dataclass(frozen=True)
-class SpeedPidParams:
+class SpeedPidParams(Checked):
     """Gains in acceleration units; limits in m/s^2. Defaults suit a high-speed EMU at T = 0.2 s."""
 
     kp: float = param(0.6, "1/s", "m/s2 of demand per m/s of speed error", min=0.0)
@@ -52,16 +51,10 @@ class SpeedPidParams:
     feedforward: bool = param(True, description="add the reference acceleration to the demand")
     sample_time: float = sample_time(0.2)
 
-    def check(self) -> None:
-        if not self.sample_time > 0:
-            raise ValueError(f"sample_time = {self.sample_time} must be > 0")
+    def check_relations(self) -> None:
         if not self.accel_min < self.accel_max:
             raise ValueError(f"accel_min = {self.accel_min} must be < accel_max = "
                              f"{self.accel_max}")
-        for name in ("kp", "ki", "kd", "derivative_filter", "rate_limit"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value >= 0):
-                raise ValueError(f"{name} = {value} must be finite and >= 0")
 
 
 class SpeedPid(StatefulCore):
@@ -123,7 +116,7 @@ class SpeedPid(StatefulCore):
 
 
 @dataclass(frozen=True)
-class DistributedSpeedPidParams:
+class DistributedSpeedPidParams(Checked):
     """Speed PID for a multi-unit EMU (seeds 001, 004): one PID, force shared by the units."""
 
     pid: SpeedPidParams = group(SpeedPidParams(), "")
@@ -134,14 +127,10 @@ class DistributedSpeedPidParams:
     stop_speed: float = param(0.3, "m/s", "below this speed with a zero reference the holding "
                               "brake is applied", min=0.0)
 
-    def check(self) -> None:
-        self.pid.check()
+    def check_relations(self) -> None:
+        self.pid.check_relations()
         if self.units < 1:
             raise ValueError(f"units = {self.units} must be >= 1")
-        if not self.mass > 0:
-            raise ValueError(f"mass = {self.mass} must be > 0")
-        if not self.hold_accel <= 0:
-            raise ValueError(f"hold_accel = {self.hold_accel} must be <= 0")
 
 
 class DistributedSpeedPid(StatefulCore, Declared):

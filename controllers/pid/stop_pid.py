@@ -32,7 +32,7 @@ from controllers.common.stopping import (
     u_max_param,
     u_min_param,
 )
-from cosim.fmu.declare import Declared, Var, build, param, sample_time
+from cosim.fmu.declare import Checked, Declared, Var, build, param, sample_time
 from cosim.fmu.profiles import StoppingCurve, ref_decel_param, stop_point_param
 from cosim.fmu.state import StatefulCore
 from plants.resistance import Davis
@@ -40,7 +40,7 @@ from plants.route import Route, load_route, routes_dir_in
 
 
 @dataclass(frozen=True)
-class StopPidParams:
+class StopPidParams(Checked):
     kp: float = param(60.0, "%.s/m", "proportional gain on v - v_ref")
     ki: float = param(10.0, "%/m", "integral gain")
     kd: float = param(0.0, "%/(m/s2)", "derivative gain")
@@ -65,15 +65,9 @@ class StopPidParams:
     davis: Davis = davis_group()
     route: str = route_param()
 
-    def check(self) -> None:
-        if not self.sample_time > 0:
-            raise ValueError(f"sample_time = {self.sample_time} must be > 0")
+    def check_relations(self) -> None:
         if not self.u_min < self.u_max:
             raise ValueError(f"u_min = {self.u_min} must be < u_max = {self.u_max}")
-        if not self.ref_decel > 0:
-            raise ValueError(f"ref_decel = {self.ref_decel} must be > 0")
-        if not self.brake_gain > 0:
-            raise ValueError(f"brake_gain = {self.brake_gain} must be > 0")
 
 
 class StopPid(StatefulCore, Declared):

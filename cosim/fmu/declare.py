@@ -22,6 +22,7 @@ Bundled into every FMU: standard library only.
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any, ClassVar
@@ -127,20 +128,68 @@ class _Spec:
     max: float | None
     per_configuration: bool
     name: str | None
+    above: float | None = None
+    below: float | None = None
+    choices: tuple[Any, ...] | None = None
+    integer: bool = False
+
+    @property
+    def declared_min(self) -> float | None:
+        """The bound written to the modelDescription's ``min`` (inclusive there)."""
+        return self.min if self.min is not None else self.above
+
+    @property
+    def declared_max(self) -> float | None:
+        return self.max if self.max is not None else self.below
+
+    def violation(self, value: Any) -> str | None:
+        """Why ``value`` breaks this declaration, or None when it keeps it."""
+        if self.choices is not None:
+            return None if value in self.choices else (
+                f"{value!r}: must be one of {', '.join(repr(c) for c in self.choices)}")
+        if isinstance(value, (tuple, list)):
+            for item in value:
+                why = self.violation(item)
+                if why is not None:
+                    return f"{list(value)}: entry {why}"
+            return None
+        if isinstance(value, (str, bool)):
+            return None
+        if not math.isfinite(value):
+            return f"{value}: must be a finite number"
+        if self.integer and int(value) != value:
+            return f"{value}: must be an integer"
+        if self.min is not None and not value >= self.min:
+            return f"{value}: must be at least {self.min}"
+        if self.above is not None and not value > self.above:
+            return f"{value}: must be greater than {self.above}"
+        if self.max is not None and not value <= self.max:
+            return f"{value}: must be at most {self.max}"
+        if self.below is not None and not value < self.below:
+            return f"{value}: must be less than {self.below}"
+        return None
 
 
 def param(default: Any = dataclasses.MISSING, unit: str = "1", description: str = "", *,
           min: float | None = None, max: float | None = None,
+          above: float | None = None, below: float | None = None,
+          choices: tuple[Any, ...] | None = None, integer: bool = False,
           per_configuration: bool = False, name: str | None = None) -> Any:
     """A dataclass field declared as a parameter, named as the field unless ``name`` gives the
     paper's symbol (e.g. field ``horizon`` is parameter ``N``).
+
+    Its range: ``min`` / ``max`` inclusive, ``above`` / ``below`` exclusive (written to the
+    modelDescription as its min / max), ``choices`` the admitted values of a string or flag,
+    ``integer`` a whole number; :func:`check_declared` enforces them where a core is built,
+    entry by entry for a tuple value.
 
     ``per_configuration``: the value comes from a named configuration (e.g. an EMU's train
     data); the FMU parameter starts at :data:`KEEP` (-1), which keeps it.
     """
     if unit not in UNITS:
         raise ValueError(f"unit {unit!r} is not declared in UNITS")
-    meta = {_SPEC: _Spec(unit, description, min, max, per_configuration, name)}
+    meta = {_SPEC: _Spec(unit, description, min, max, per_configuration, name, above, below,
+                         tuple(choices) if choices is not None else None, integer)}
     return dataclasses.field(default=default, metadata=meta)
 
 
@@ -174,7 +223,7 @@ def parameters(instance: Any, prefix: str = "", exclude: tuple[str, ...] = ()
                            f"{spec.description} (-1: configuration value)"))
         else:
             out.append(Var(name, "parameter", value, spec.unit, spec.description,
-                           spec.min, spec.max))
+                           spec.declared_min, spec.declared_max))
     return tuple(out)
 
 
@@ -199,6 +248,37 @@ def build(base: Any, values: Mapping[str, Any], prefix: str = "") -> Any:
             raise ValueError(f"{name} = {value} must be >= 0 (or -1: configuration value)")
         changes[f.name] = value
     return dataclasses.replace(base, **changes)
+
+
+def check_declared(instance: Any, prefix: str = "") -> None:
+    """Raise ValueError naming the first declared parameter of ``instance`` (groups included)
+    whose value breaks its declared range, choices or integrality (see :func:`param`)."""
+    for f in dataclasses.fields(instance):
+        value = getattr(instance, f.name)
+        if _GROUP in f.metadata:
+            check_declared(value, prefix + f.metadata[_GROUP])
+            continue
+        spec: _Spec | None = f.metadata.get(_SPEC)
+        if spec is None:
+            continue
+        why = spec.violation(value)
+        if why is not None:
+            name = _declared_name(f, prefix)
+            label = name if name == prefix + f.name else f"{name} ({f.name})"
+            raise ValueError(f"{label} = {why}")
+
+
+class Checked:
+    """Mixin of a declared ``*Params`` dataclass: :meth:`check` enforces every declaration
+    (:func:`check_declared`), then :meth:`check_relations`, the conditions between parameters
+    that no single range states (e.g. ``u_min < u_max``)."""
+
+    def check(self) -> None:
+        check_declared(self)
+        self.check_relations()
+
+    def check_relations(self) -> None:
+        """Conditions between parameters; none unless a class states them."""
 
 
 def field_default(cls: type, name: str) -> Any:
