@@ -4,9 +4,10 @@ Every law (optimal preview, sliding mode, fuzzy PID, PID) feeds back the same sp
 ``(1 - w) v_head + w v_mean`` with the train-mean speed observer
 (:class:`controllers.common.freight_blending.FreightTracker`); the weight w is the one free
 parameter tuned, for every law alike: the same grid of BUDGET values, the same calibration
-disturbance seeds (``plant.disturbance_seed``, disjoint from the report seeds of
-``scenarios/reproduce/seed002.toml``, which loading that entry checks), the same criterion
-and the full scenario runs of ``cosim reproduce`` (the FMUs, the plant's compiled kernel).
+disturbance seeds (``plant.disturbance_seed``: the ``calibration_seeds`` of
+``scenarios/reproduce/seed002.toml``, disjoint from its report seeds, which loading the entry
+checks), the same criterion and the full scenario runs of ``cosim reproduce`` (the FMUs, the
+plant's compiled kernel, the entry's row of each law with the entry's disturbance).
 
 Criterion (fixed before any ranking was looked at): the mean over the calibration seeds of
 ``log(RMSE_mean x RMSE_head)``, the train-mean RMSE (the speed of the paper's one-mass design
@@ -70,22 +71,28 @@ def write_picks(picks: dict[str, float], table: dict[str, list[tuple[float, floa
 def main() -> None:
     from cosim.run.ensemble import execute
     from cosim.run.master import ensure_built
+    from cosim.run.reproduce import load_entry
     from cosim.run.scenario import load_scenario
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--seeds", default="101,102",
-                    help="calibration seeds, disjoint from the entry's report seeds")
+    ap.add_argument("--seeds", default=None,
+                    help="calibration seeds (default: the entry's [ensemble] "
+                    "calibration_seeds, disjoint from its report seeds)")
     ap.add_argument("--workers", type=int, default=1)
     ap.add_argument("--dry-run", action="store_true", help="print the picks, write nothing")
     a = ap.parse_args()
-    seeds = [int(s) for s in a.seeds.split(",")]
+    entry = load_entry("seed002")
+    seeds = ([int(s) for s in a.seeds.split(",")] if a.seeds
+             else list(entry.ensemble.calibration_seeds))
+    common = {r["scenario"]: r.get("set", {}) for r in entry.runs if r["name"] in LAWS}
     jobs = []
     for law, scenario in LAWS.items():
         ensure_built(load_scenario(scenario))
         for w in WEIGHTS:
             for seed in seeds:
                 jobs.append(((law, f"w={w:g}", seed, False), scenario,
-                             {"controller.mean_weight": w, SEED_KEY: seed}))
+                             {**common[scenario], "controller.mean_weight": w,
+                              SEED_KEY: seed}))
     print(f"# {len(jobs)} runs, load average "
           f"{' '.join(f'{x:.2f}' for x in os.getloadavg())}", file=sys.stderr)
     out = execute(jobs, a.workers, "seed002 tuning")
