@@ -1,7 +1,7 @@
 """The freight sub-step kernel: numba vs the same kernel in C vs the numpy reference (issue 10).
 
 Issue 10 item 1 asks to measure a numba kernel and a C kernel built with gcc on the freight
-plant, choose one and say why. ``c_kernel/freight_kernel.c`` is
+plant, choose one and say why. ``cosim/fmu/native/freight_kernel.c`` is
 :func:`plants.kernels.freight_steps` line by line in C (same operations in the same order,
 ``-O2 -ffp-contract=off``, no fast-math); it is compiled here into a temporary folder and called
 through ctypes on the arguments the plant passes to the numba kernel in one communication
@@ -26,8 +26,9 @@ in the same order, the same libm ``pow``/``exp``), so speed does not decide. Wha
 * FMU without Python later: here C would win, as the kernel is a self-contained function; but
   the rest of a plant (command histories for the dead times, brake-pipe history, outputs,
   serialisable FMU state, parameter checks) is Python too and would need porting first. The C
-  file is kept, tested equal to the numba kernel (``tests/test_kernels.py``), as the start of
-  such a port.
+  file, tested equal to the numba kernel (``tests/test_kernels.py``), is the kernel of the
+  native FreightTrain FMU (``cosim/fmu/native/freight.c``, ``docs/native_fmus.md``), where
+  that port is done.
 
     python benchmarks/bench_kernels.py [--repeat 2000]
 """
@@ -56,7 +57,7 @@ from plants import kernels  # noqa: E402
 from plants.freight import FreightParams, FreightTrain  # noqa: E402
 from plants.route import load_route  # noqa: E402
 
-C_SOURCE = HERE / "c_kernel" / "freight_kernel.c"
+C_SOURCE = ROOT / "cosim" / "fmu" / "native" / "freight_kernel.c"
 COMM = 0.2  # s, one communication step = 20 sub-steps of 0.01 s
 GCC_FLAGS = ["-O2", "-fPIC", "-shared", "-ffp-contract=off"]
 

@@ -1,7 +1,7 @@
-"""Real-time factors of the native C plant FMU against the Python FMU and the Python core,
-in one run (prints figures, asserts nothing).
+"""Real-time factors of the native C plant FMUs against the Python FMUs, the Python cores and
+the bare C kernel, in one run (prints figures, asserts nothing).
 
-Native plants so far: BrakeDelayTrain (seed 000). For it:
+BrakeDelayTrain (seed 000):
 
 * plant only: the seed-000 plant (scenario parameters of seed000_stop_pid) stepped over 60 s
   in 0.2-s communication steps with a fixed braking command, through the plant core (no FMI),
@@ -9,10 +9,24 @@ Native plants so far: BrakeDelayTrain (seed 000). For it:
 * closed loop: every shipped seed-000 scenario through the event-driven master with the Python
   plant FMU and with the native one (the controllers are the Python FMUs in both).
 
-The bare C kernel (benchmarks/c_kernel) is the freight kernel; the freight
-plant has no native FMU yet, so that comparison is not made here.
+FreightTrain (seed 002, HXD1 + 108 C80):
 
-    python benchmarks/bench_native.py [--repeat 3]
+* plant only: the plant driven by the force demand and brake-pipe reduction the speed PID of
+  seed002_freight_pid commands in its closed loop (recorded once, replayed open loop) over the
+  whole run in 0.2-s steps, every output read after every step, through the core (numba
+  kernel, no FMI), the Python FMU and the native FMU; and the bare C kernel
+  (cosim/fmu/native/freight_kernel.c through ctypes on the arguments of one communication
+  step, as benchmarks/bench_kernels.py calls it): its time per sub-step times the run's
+  sub-steps, the bound no FMU of this kernel can beat;
+* closed loop: every shipped seed-002 scenario with the Python plant FMU and with the native
+  one (Python controller FMUs in both): whole-run real-time factors and their ratio.
+
+Crh3Train, Emu3, Emu8 (seeds 003, 001, 004), plant only: the Python FMU and the native FMU
+stepped over the same simulated time with a fixed input, in the step and with the parameters
+of the plant's shipped scenarios, through fmpy ``FMU2Slave`` (one setReal/doStep/getReal of
+every output per step); their real-time factors and the ratio, in the same run.
+
+    python benchmarks/bench_native.py [--repeat 3] [--plants freight brake_delay crh3_emu]
 """
 
 from __future__ import annotations
@@ -35,6 +49,7 @@ from cosim.fmu.state import to_ticks  # noqa: E402
 from cosim.run.master import run_scenario  # noqa: E402
 from cosim.run.scenario import load_scenario  # noqa: E402
 from plants.brake_delay import BrakeDelayTrain  # noqa: E402
+from plants.freight import FreightTrain  # noqa: E402
 
 STOP, STEP, COMMAND = 60.0, 0.2, 40.0
 
@@ -79,13 +94,212 @@ def run_fmu(path: Path, params: dict) -> float:
     return time.perf_counter() - t0
 
 
+def _clocks() -> tuple[float, float]:
+    return time.perf_counter(), time.process_time()
+
+
+def _since(start: tuple[float, float]) -> tuple[float, float]:
+    """(wall, CPU) seconds since ``start``: CPU time is what the process itself spent, less
+    sensitive than wall time to other processes on a shared machine."""
+    wall, cpu = _clocks()
+    return wall - start[0], cpu - start[1]
+
+
+def _median(fn, repeat: int) -> tuple[float, float]:
+    fn()  # warm-up (extraction, imports, kernel compilation or cache load)
+    runs = [fn() for _ in range(repeat)]
+    return (statistics.median(r[0] for r in runs), statistics.median(r[1] for r in runs))
+
+
+def freight_inputs() -> tuple[float, dict, list[tuple[float, float]]]:
+    """(step, plant parameters, (force demand, pipe reduction) per step) of the closed loop
+    of seed002_freight_pid with the Python FMUs."""
+    sc = load_scenario(ROOT / "scenarios" / "seed002_freight_pid.toml")
+    frame = run_scenario(sc, plot=False).frame
+    demand = frame["controller.force_demand"].to_numpy()
+    reduction = frame["controller.pipe_reduction"].to_numpy()
+    # row k is the instant t_k: the inputs held over [t_k, t_k+1)
+    steps = list(zip(demand[:-1].tolist(), reduction[:-1].tolist()))
+    return sc.simulation.output_interval, dict(sc.components["plant"].parameters), steps
+
+
+def freight_core(step: float, params: dict, inputs: list) -> tuple[float, float]:
+    values = {v.name: v.start for v in FreightTrain.declarations()
+              if v.causality == "parameter"}
+    values.update(params)
+    t0 = _clocks()
+    core = FreightTrain.from_parameters(values, ROOT)
+    for k, (demand, reduction) in enumerate(inputs):
+        core.advance(to_ticks(k * step), to_ticks(step),
+                     {"force_demand": demand, "pipe_reduction": reduction})
+        core.outputs()
+    return _since(t0)
+
+
+def freight_fmu(path: Path, step: float, params: dict, inputs: list) -> tuple[float, float]:
+    md = read_model_description(str(path))
+    unzipdir = extract(str(path))
+    vr = {v.name: v.valueReference for v in md.modelVariables}
+    outs = [v.valueReference for v in md.modelVariables if v.causality == "output"]
+    ins = [vr["force_demand"], vr["pipe_reduction"]]
+    t0 = _clocks()
+    fmu = FMU2Slave(guid=md.guid, unzipDirectory=unzipdir, instanceName="bench",
+                    modelIdentifier=md.coSimulation.modelIdentifier)
+    fmu.instantiate()
+    fmu.setupExperiment(startTime=0.0)
+    fmu.enterInitializationMode()
+    for name, value in params.items():
+        (fmu.setString if isinstance(value, str) else fmu.setReal)([vr[name]], [value])
+    fmu.exitInitializationMode()
+    for k, (demand, reduction) in enumerate(inputs):
+        fmu.setReal(ins, [demand, reduction])
+        fmu.doStep(k * step, step)
+        fmu.getReal(outs)
+    fmu.terminate()
+    fmu.freeInstance()
+    return _since(t0)
+
+
+def bare_kernel_per_substep(repeat: int) -> float:
+    """Seconds per sub-step of the C kernel alone (cruise case of bench_kernels)."""
+    import tempfile
+
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    import bench_kernels
+
+    with tempfile.TemporaryDirectory() as tmp:
+        dll = bench_kernels.build_c(Path(tmp))
+        _, args = bench_kernels.captured_args("cruise")
+        n_sub = args[4].size
+        per_call = bench_kernels._timed(lambda a: bench_kernels.c_call(dll, a),
+                                        lambda: tuple(a.copy() for a in args), 200 * repeat)
+    return per_call / n_sub
+
+
+def bench_freight(repeat: int) -> None:
+    t0 = time.perf_counter()
+    native = build_native("FreightTrain", windows=False)
+    print(f"native build FreightTrain (linux64): {time.perf_counter() - t0:.2f} s")
+    specs = catalog()
+    build_stale([specs["FreightTrain"]])
+    step, params, inputs = freight_inputs()
+    stop = step * len(inputs)
+    n_sub = round(stop / params.get("max_step", 0.01))
+    rows = {
+        "core (Python)": lambda: freight_core(step, params, inputs),
+        "Python FMU": lambda: freight_fmu(specs["FreightTrain"].path, step, params, inputs),
+        "native FMU": lambda: freight_fmu(native, step, params, inputs),
+    }
+    print(f"\nplant only, FreightTrain, {stop:g} s in {step:g}-s steps, inputs of "
+          f"seed002_freight_pid (median of {repeat}):")
+    medians = {name: _median(fn, repeat) for name, fn in rows.items()}
+    kernel = bare_kernel_per_substep(repeat) * n_sub
+    medians["bare C kernel"] = (kernel, kernel)
+    print(f"  {'':14s} {'wall':>8s}   {'CPU':>8s}   real-time factor (wall, CPU)")
+    for name, (wall, cpu) in medians.items():
+        print(f"  {name:14s} {wall:8.3f} s {cpu:8.3f} s   {stop / wall:8.0f} {stop / cpu:8.0f}")
+    for k, what in ((0, "wall"), (1, "CPU")):
+        py, nat, bare = (medians[n][k] for n in ("Python FMU", "native FMU", "bare C kernel"))
+        print(f"  {what}: native / Python FMU speed-up {py / nat:.2f}x; "
+              f"native FMU time / bare C kernel time {nat / bare:.2f}")
+    print("\nclosed loop, event master, Python controller FMUs (plant FMU wall time, whole-run "
+          "real-time factor, and the ratio a plant of zero cost would give):")
+    for sc in sorted(p.stem for p in (ROOT / "scenarios").glob("seed002_*.toml")):
+        stop_time = load_scenario(ROOT / "scenarios" / f"{sc}.toml").simulation.stop_time
+        overrides = {"Python": None, "native": {"plant.fmu": str(native)}}
+        runs: dict[str, list] = {"Python": [], "native": []}
+        for k in range(repeat + 1):  # alternating, the first of each a warm-up
+            for label, over in overrides.items():
+                result = run_scenario(sc, overrides=over, plot=False)
+                if k:
+                    runs[label].append(result)
+        res = {label: (statistics.median(r.fmu_wall_time_s["plant"] for r in rs),
+                       statistics.median(r.wall_time_s for r in rs))
+               for label, rs in runs.items()}
+        (pp, pw), (np_, nw) = res["Python"], res["native"]
+        print(f"  {sc:24s} plant {pp:6.3f} -> {np_:6.3f} s ({pp / np_:4.1f}x)   "
+              f"RTF {stop_time / pw:6.0f} -> {stop_time / nw:6.0f} ({pw / nw:4.2f}x; "
+              f"zero-cost plant: {pw / (pw - pp):4.2f}x)")
+
+
+# plant-only runs of Crh3Train and the Emus: (identifier, scenario giving the parameters,
+# communication step s, simulated time s, inputs held)
+PLANTS = (
+    ("Crh3Train", "seed003_crh3_gpc_eco", 1.0, 600.0, {"force": 3e5}),
+    ("Emu3", "seed001_emu_pid", 0.2, 120.0, {f"force[{i}]": 6e4 for i in (1, 2, 3)}),
+    ("Emu8", "seed001_emu_pid", 0.2, 120.0, {f"force[{i}]": 2e4 for i in range(1, 9)}),
+)
+
+
+def run_plant_fmu(path: Path, params: dict, step: float, stop: float, inputs: dict) -> float:
+    """Wall time (s) of ``stop`` simulated seconds of the plant FMU at ``path``."""
+    md = read_model_description(str(path))
+    unzipdir = extract(str(path))
+    vr = {v.name: v.valueReference for v in md.modelVariables}
+    types = {v.name: v.type for v in md.modelVariables}
+    outs = [v.valueReference for v in md.modelVariables if v.causality == "output"]
+    ins = [vr[n] for n in inputs]
+    values = list(inputs.values())
+    t0 = time.perf_counter()
+    fmu = FMU2Slave(guid=md.guid, unzipDirectory=unzipdir, instanceName="bench",
+                    modelIdentifier=md.coSimulation.modelIdentifier)
+    fmu.instantiate()
+    fmu.setupExperiment(startTime=0.0)
+    fmu.enterInitializationMode()
+    for name, value in params.items():
+        if name not in vr:
+            continue
+        {"String": fmu.setString, "Integer": fmu.setInteger,
+         "Boolean": fmu.setBoolean}.get(types[name], fmu.setReal)([vr[name]], [value])
+    fmu.exitInitializationMode()
+    for k in range(round(stop / step)):
+        fmu.setReal(ins, values)
+        fmu.doStep(k * step, step)
+        fmu.getReal(outs)
+    fmu.terminate()
+    fmu.freeInstance()
+    return time.perf_counter() - t0
+
+
+def plants_only(repeat: int) -> None:
+    """Plant-only real-time factors of Crh3Train, Emu3, Emu8: Python FMU against native."""
+    specs = catalog()
+    build_stale([specs[ident] for ident, *_ in PLANTS])
+    for ident, scenario, step, stop, inputs in PLANTS:
+        native = build_native(ident, windows=False)
+        sc = load_scenario(ROOT / "scenarios" / f"{scenario}.toml")
+        params = dict(sc.components["plant"].parameters)
+        if ident == "Emu8":  # the 8-car train: its own configuration, the line and noise
+            params.pop("configuration", None)
+        medians = {}
+        for label, path in (("Python FMU", specs[ident].path), ("native FMU", native)):
+            run_plant_fmu(path, params, step, stop, inputs)  # warm-up (extraction, imports)
+            medians[label] = statistics.median(
+                run_plant_fmu(path, params, step, stop, inputs) for _ in range(repeat))
+        py, nat = medians["Python FMU"], medians["native FMU"]
+        print(f"  {ident:14s} {stop:5g} s in {step:g}-s steps: real-time factor Python FMU "
+              f"{stop / py:9.0f}, native {stop / nat:9.0f}   native / Python {py / nat:6.1f}x")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--plants", nargs="+", choices=("freight", "brake_delay", "crh3_emu"),
+                    default=["freight", "brake_delay", "crh3_emu"])
     args = ap.parse_args()
+    if "freight" in args.plants:
+        bench_freight(args.repeat)
+    if "brake_delay" in args.plants:
+        bench_brake_delay(args.repeat)
+    if "crh3_emu" in args.plants:
+        print(f"\nplant only, Crh3Train / Emu3 / Emu8 (median of {args.repeat}):")
+        plants_only(args.repeat)
+
+
+def bench_brake_delay(repeat: int) -> None:
     t0 = time.perf_counter()
     native = build_native("BrakeDelayTrain", windows=False)
-    print(f"native build (linux64): {time.perf_counter() - t0:.2f} s")
+    print(f"\nnative build BrakeDelayTrain (linux64): {time.perf_counter() - t0:.2f} s")
     specs = catalog()
     build_stale([specs["BrakeDelayTrain"]])
     params = plant_parameters()
@@ -95,11 +309,11 @@ def main() -> None:
         "native FMU": lambda: run_fmu(native, params),
     }
     print(f"\nplant only, BrakeDelayTrain, {STOP:g} s in {STEP:g}-s steps "
-          f"(median of {args.repeat}):")
+          f"(median of {repeat}):")
     medians = {}
     for name, fn in rows.items():
         fn()  # warm-up (extraction, imports)
-        medians[name] = statistics.median(fn() for _ in range(args.repeat))
+        medians[name] = statistics.median(fn() for _ in range(repeat))
         print(f"  {name:14s} {medians[name] * 1e3:8.2f} ms   real-time factor "
               f"{STOP / medians[name]:10.0f}")
     print(f"  native / Python FMU speed-up: {medians['Python FMU'] / medians['native FMU']:.1f}x")
@@ -108,7 +322,7 @@ def main() -> None:
         res = {}
         for label, over in (("Python", None), ("native", {"plant.fmu": str(native)})):
             run_scenario(sc, overrides=over, plot=False)  # warm-up
-            runs = [run_scenario(sc, overrides=over, plot=False) for _ in range(args.repeat)]
+            runs = [run_scenario(sc, overrides=over, plot=False) for _ in range(repeat)]
             res[label] = (statistics.median(r.fmu_wall_time_s["plant"] for r in runs),
                           statistics.median(r.wall_time_s for r in runs))
         (pp, pw), (np_, nw) = res["Python"], res["native"]

@@ -40,19 +40,21 @@ def build(names: Annotated[list[str] | None, typer.Argument(
               "--fmi", help="FMI version to build: 2 (fmus/<id>.fmu), 3 (fmus/fmi3/<id>.fmu, "
               "co-simulation with Event Mode for the controllers) or all. Default all: the "
               "FMI 3 build is derived from the same FMI 2 build (same Python bundle, a C "
-              "front in front of it), so both cost little more than one")] = "all",
+              "front in front of it), so both cost little more than one. With --native: "
+              "fmus/native/<id>.fmu and fmus/native/fmi3/<id>.fmu")] = "all",
           native: Annotated[bool, typer.Option(
-              "--native", help="build the native C FMUs (FMI 2.0, no Python needed) into "
-              "fmus/native/ instead: linux64 with gcc, win64 too when x86_64-w64-mingw32-gcc "
-              "is installed; the named ones or all that have a C model")] = False) -> None:
+              "--native", help="build the native C FMUs (no Python needed) into fmus/native/ "
+              "instead, of the FMI versions --fmi names: Linux with gcc, Windows too when "
+              "x86_64-w64-mingw32-gcc is installed; the named ones or all that have a C "
+              "model")] = False) -> None:
     """Build FMUs into fmus/ (all, or the named ones)."""
     from cosim.fmu.build import build_fmus, resolve
     from cosim.fmu.fmi3 import Fmi3BuildError
 
-    if native:
-        _build_native(names)
-        return
     versions = _fmi_versions(fmi)
+    if native:
+        _build_native(names, versions)
+        return
     try:
         specs = resolve(names)
     except ValueError as err:
@@ -67,16 +69,21 @@ def build(names: Annotated[list[str] | None, typer.Argument(
             out.print(f"built {shown}  ({spec.description})", highlight=False, markup=False)
 
 
-def _build_native(names: list[str] | None) -> None:
-    from cosim.fmu.native_build import NATIVE, CompilerMissing, build_native
+def _build_native(names: list[str] | None, versions: tuple[int, ...]) -> list[Path]:
+    from cosim.fmu.native_build import NATIVE, CompilerMissing, build_natives
 
+    built: list[Path] = []
     for name in names or sorted(NATIVE):
         try:
-            path = build_native(name)
+            paths = build_natives(name, versions)
         except (ValueError, CompilerMissing, RuntimeError) as err:
             _fail(str(err))
-        shown = path.relative_to(Path.cwd()) if path.is_relative_to(Path.cwd()) else path
-        out.print(f"built {shown}  (native C, FMI 2.0)", highlight=False, markup=False)
+        for version, path in zip(versions, paths):
+            shown = path.relative_to(Path.cwd()) if path.is_relative_to(Path.cwd()) else path
+            out.print(f"built {shown}  (native C, FMI {version}.0)", highlight=False,
+                      markup=False)
+        built += paths
+    return built
 
 
 def _built(path: Path) -> str:
@@ -278,6 +285,25 @@ def _progress(label: str, quiet: bool):
         yield reporter
 
 
+def _native_paths(names: list[str] | None, versions: tuple[int, ...]) -> list[Path]:
+    """The native builds of the identifiers ``names`` (None: every native FMU) in
+    ``versions``, built where missing."""
+    from cosim.fmu.native_build import NATIVE, CompilerMissing, build_natives, native_path
+
+    paths: list[Path] = []
+    for name in sorted(NATIVE) if names is None else names:
+        if name not in NATIVE:
+            _fail(f"no native model of {name!r}; native: {sorted(NATIVE)}")
+        missing = tuple(v for v in versions if not native_path(name, v).is_file())
+        if missing:
+            try:
+                build_natives(name, missing)
+            except (CompilerMissing, RuntimeError) as err:
+                _fail(str(err))
+        paths += [native_path(name, v) for v in versions]
+    return paths
+
+
 @app.command()
 def validate(
     fmus: Annotated[list[str] | None, typer.Argument(
@@ -286,6 +312,9 @@ def validate(
     fmi: Annotated[str, typer.Option(
         "--fmi", help="for our FMUs named by identifier: check the FMI 2 build (2), the FMI 3 "
         "build (3) or both (all)")] = "2",
+    native: Annotated[bool, typer.Option(
+        "--native", help="identifiers name the native C FMUs (fmus/native/, built when "
+        "missing) instead of the Python FMUs; default: every native FMU")] = False,
     lenient: Annotated[bool, typer.Option(
         "--lenient", help="for third-party FMUs: only what FMI 2.0.4 / FMI 3.0 requires is "
         "an error; "
@@ -305,7 +334,12 @@ def validate(
     versions = _fmi_versions(fmi)
     specs = catalog()
     paths: list[Path] = []
-    for name in fmus or list(specs):
+    names = fmus or list(specs)
+    if native:  # identifiers name native FMUs; .fmu paths stay paths
+        paths = _native_paths([n for n in fmus if not n.endswith(".fmu")] if fmus else None,
+                              versions)
+        names = [n for n in fmus or [] if n.endswith(".fmu")]
+    for name in names:
         if name.endswith(".fmu"):
             if not Path(name).is_file():
                 _fail(f"{name}: no such file")

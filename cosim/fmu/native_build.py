@@ -1,10 +1,17 @@
-"""Native C FMUs (FMI 2.0): the C twin of a core behind the FMI 2 front, no Python needed.
+"""Native C FMUs (FMI 2.0, and FMI 3.0 derived from them): the C twin of a core behind our C
+fronts, no Python needed.
 
 A native FMU has the same variables as its Python FMU: its modelDescription.xml is the Python
 wrapper's own (``CoreSlave.to_xml``: value references, units, ranges, starts, structure), and
 the C header ``<id>_decl.h`` (value references, starts, ranges as ``ato_var`` rows) is written
 from the same declarations at build time, so nothing is declared twice. Route data are exported
-from the bundled route files (parsed by :mod:`plants.route`) to ``resources/routes/<name>.grade``.
+from the bundled route files (parsed by :mod:`plants.route`) to ``resources/routes/<name>.grade``
+and, for the models that read them, ``<name>.<profile>`` (:data:`ROUTE_PROFILES`); the
+bundled reference profiles and EMPC region tables (:data:`DATA`) to ``resources/references``
+and ``resources/regions``. A controller is its law's C file linked with ``ato_controller.c``,
+the C twin of the sampled-controller timing of :mod:`cosim.fmu.slave`.
+The Crh3Train and Emu plants read the step profiles of :data:`STEP_PROFILES` from
+``<name>.profiles`` and link the generic plant backend ``ato_plant_backend.c``.
 
 The FMU holds ``binaries/linux64/<id>.so`` (gcc), ``binaries/win64/<id>.dll`` when the
 mingw-w64 cross compiler ``x86_64-w64-mingw32-gcc`` is installed, and ``sources/`` (the C
@@ -12,7 +19,10 @@ files, the generated header, the FMI 2 headers and ``buildDescription.xml``) so 
 compile it. Native FMUs are built to ``fmus/native/<id>.fmu`` (``cosim build --native``).
 
 Compiled with ``-std=c99 -ffp-contract=off`` (no fused multiply-add, no fast math), so the C
-model performs the core's IEEE operations in the core's order; its only libm call is ``exp``.
+model performs the core's IEEE operations in the core's order (libm calls: ``exp``, and
+``pow`` in the freight brake cylinders; ``sqrt``, correctly rounded, in the controllers;
+``log1p`` in numpy's normal draws and ``log2`` in the choice of squarings of the Emu's matrix
+exponential).
 """
 
 from __future__ import annotations
@@ -20,16 +30,20 @@ from __future__ import annotations
 import importlib
 import math
 import os
+import re
 import shutil
+import struct
 import subprocess
 import tempfile
 import uuid
 import zipfile
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from xml.etree.ElementTree import Element, SubElement, indent, tostring
 
-from cosim.fmu.build import FMU_DIR, catalog
+import numpy as np
+
+from cosim.fmu.build import FMU_DIR, bundled_files, catalog
 
 HERE = Path(__file__).resolve().parent
 NATIVE_DIR = HERE / "native"
@@ -42,18 +56,55 @@ WINDOWS_CC = "x86_64-w64-mingw32-gcc"
 
 @dataclass(frozen=True)
 class NativeSpec:
-    """A native model: the C file of its backend (in cosim/fmu/native/)."""
+    """A native model: the C file of its backend (in cosim/fmu/native/), further C files it
+    links and headers it includes (``helpers``, same folder; a controller's law links with
+    ``ato_controller.c``), the route profiles it reads besides the grade steps
+    (``route_profiles``, keys of :data:`ROUTE_PROFILES`) and the other generated resources it
+    reads (``data``, keys of :data:`DATA`: reference profiles, region tables); files it shares
+    with other plant models (``shared``, C and headers, same folder; with ``ato_plant.c`` the
+    route's step profiles ``<name>.profiles`` are exported), for a model with named train data
+    ``configurations``: ``"module:NAME"`` of a mapping configuration name -> factory of a
+    declared dataclass, written to ``<id>_config.h`` (:func:`config_header`), and the headers
+    of :data:`GENERATED` it includes (``generated``)."""
 
     identifier: str
     source: str
+    helpers: tuple[str, ...] = ()
+    route_profiles: tuple[str, ...] = ()
+    data: tuple[str, ...] = ()
+    shared: tuple[str, ...] = ()
+    configurations: str | None = None
+    generated: tuple[str, ...] = ()
 
     @property
     def path(self) -> Path:
         return NATIVE_FMU_DIR / f"{self.identifier}.fmu"
 
 
+CONTROLLER = ("ato_controller.c", "ato_law.h")  # the sampled-controller backend of a law
+PROFILE = ("ato_profile.c", "ato_profile.h")  # reference profiles (resources/references)
+# the generic plant backend (ato_plant_backend.c: FMI 2-shaped functions, variables, FMU
+# state) and the plant helpers (ato_plant.c: route profiles, envelope, resistance)
+PLANT_SHARED = ("ato_plant_backend.h", "ato_plant_backend.c", "ato_plant.h", "ato_plant.c")
+# numpy's default_rng(seed words).standard_normal in C (seeded disturbances)
+NUMPY_RANDOM = ("ato_numpy_random.h", "ato_numpy_random.c")
+
 NATIVE: dict[str, NativeSpec] = {
     "BrakeDelayTrain": NativeSpec("BrakeDelayTrain", "brake_delay.c"),
+    "StopPid": NativeSpec("StopPid", "stop_pid.c", CONTROLLER),
+    "EmuSpeedPid3": NativeSpec("EmuSpeedPid3", "speed_pid.c", (*CONTROLLER, *PROFILE),
+                               data=("references",)),
+    "EmuSpeedPid8": NativeSpec("EmuSpeedPid8", "speed_pid.c", (*CONTROLLER, *PROFILE),
+                               data=("references",)),
+    "Empc3": NativeSpec("Empc3", "explicit_mpc.c", (*CONTROLLER, *PROFILE),
+                        data=("references", "empc_regions")),
+    "FreightTrain": NativeSpec("FreightTrain", "freight.c", ("freight_kernel.c",),
+                               ("speed_limit", "additional")),
+    "Crh3Train": NativeSpec("Crh3Train", "crh3.c", shared=PLANT_SHARED),
+    **{identifier: NativeSpec(identifier, "emu.c", shared=(*PLANT_SHARED, *NUMPY_RANDOM),
+                              configurations="plants.emu:CONFIGURATIONS",
+                              generated=("ato_numpy_normal.h",))
+       for identifier in ("Emu3", "Emu8")},
 }
 
 
@@ -65,6 +116,11 @@ def _c_string(text: str) -> str:
     return '"' + text.replace("\\", "\\\\").replace('"', '\\"') + '"'
 
 
+def c_identifier(name: str) -> str:
+    """A variable name as a C identifier: ``v[12]`` -> ``v_12`` (``[`` -> ``_``, ``]`` dropped)."""
+    return name.replace("[", "_").replace("]", "")
+
+
 def _c_double(value: float) -> str:
     """A double literal that reads back to the same float (hex, exact)."""
     if math.isinf(value):
@@ -72,9 +128,12 @@ def _c_double(value: float) -> str:
     return float(value).hex()
 
 
-def decl_header(identifier: str, variables, guid: str) -> str:
-    """``<id>_decl.h``: model identifier, GUID, one ``ATO_VR_<name>`` per variable and the
-    ``ATO_VARS`` table (causality, type, start, range) in value-reference order."""
+def decl_header(identifier: str, variables, guid: str, options: dict | None = None) -> str:
+    """``<id>_decl.h``: model identifier, GUID, one ``ATO_VR_<name>`` per variable (name as
+    :func:`c_identifier`), the ``ATO_VARS`` table (causality, type, start, range) in
+    value-reference order, ``ATO_OPTION_<key>`` per integer core option (e.g. ``units``), and
+    for indexed names ``x[i]`` per base name ``ATO_N_x`` and ``ATO_VRS_x[]`` (value references
+    in index order)."""
     types = {float: "ATO_REAL", int: "ATO_INTEGER", bool: "ATO_BOOLEAN", str: "ATO_STRING"}
     causality = {"parameter": "ATO_PARAMETER", "input": "ATO_INPUT", "output": "ATO_OUTPUT"}
     lines = [f"/* generated by cosim/fmu/native_build.py from the declarations of {identifier};"
@@ -83,8 +142,19 @@ def decl_header(identifier: str, variables, guid: str) -> str:
              f"#define ATO_MODEL_IDENTIFIER {_c_string(identifier)}",
              f"#define ATO_GUID {_c_string(guid)}",
              f"#define ATO_N_VARS {len(variables)}", "enum {"]
-    lines += [f"    ATO_VR_{v.name} = {vr}," for vr, v in enumerate(variables)]
-    lines += ["};", "static const ato_var ATO_VARS[ATO_N_VARS] = {"]
+    lines += [f"    ATO_VR_{c_identifier(v.name)} = {vr}," for vr, v in enumerate(variables)]
+    lines += ["};"]
+    lines += [f"#define ATO_OPTION_{key} {int(value)}" for key, value in (options or {}).items()]
+    indexed: dict[str, list[int]] = {}
+    for vr, v in enumerate(variables):
+        found = re.fullmatch(r"(\w+)\[(\d+)\]", v.name)
+        if found:
+            indexed.setdefault(found[1], []).append(vr)
+    for base, vrs in indexed.items():  # v[1] ... v[n]: ATO_N_v and ATO_VRS_v[] = {vr...}
+        lines += [f"#define ATO_N_{base} {len(vrs)}",
+                  f"static const int ATO_VRS_{base}[{len(vrs)}] = "
+                  f"{{{', '.join(map(str, vrs))}}};"]
+    lines += ["static const ato_var ATO_VARS[ATO_N_VARS] = {"]
     for v in variables:
         start = 0.0 if isinstance(v.start, str) else float(v.start)
         text = _c_string(v.start) if isinstance(v.start, str) else "0"
@@ -94,11 +164,18 @@ def decl_header(identifier: str, variables, guid: str) -> str:
             f"{_c_double(v.min if v.min is not None else 0.0)}, "
             f"{_c_double(v.max if v.max is not None else 0.0)}}},")
     lines.append("};")
+    # the backend's event_time_vr (ato_backend.h): the value reference of the next_event_time
+    # output, -1 for a model without events, from the same declaration as the FMI 3
+    # modelDescription's hasEventMode (cosim.fmu.fmi3)
+    event_vr = next((vr for vr, v in enumerate(variables)
+                     if v.name == EVENT_TIME_OUTPUT and v.causality == "output"), -1)
+    lines.append(f"#define ATO_EVENT_TIME_VR {event_vr}")
     return "\n".join(lines) + "\n"
 
 
 def model_description(identifier: str, slave_class, sources: list[str], guid: str) -> bytes:
-    """The Python wrapper's modelDescription with this FMU's identifier, GUID and sources."""
+    """The Python wrapper's modelDescription (FMI 2.0) with this FMU's identifier, GUID and
+    sources, and ``needsExecutionTool="false"``."""
     with tempfile.TemporaryDirectory() as tmp:
         slave = slave_class(instance_name="native_build", resources=tmp)
         root: Element = slave.to_xml()
@@ -107,6 +184,7 @@ def model_description(identifier: str, slave_class, sources: list[str], guid: st
     root.set("generationTool", "ato-cosim native_build (C)")
     cosim = root.find("CoSimulation")
     cosim.set("modelIdentifier", identifier)
+    cosim.set("needsExecutionTool", "false")  # a binary of its own, no Python (pythonfmu: true)
     files = SubElement(cosim, "SourceFiles")
     for name in sources:
         SubElement(files, "File", {"name": name})
@@ -115,13 +193,16 @@ def model_description(identifier: str, slave_class, sources: list[str], guid: st
 
 
 def build_description(identifier: str, sources: list[str]) -> bytes:
-    """``sources/buildDescription.xml`` (FMI 2.0.4 / 3.0 layout)."""
-    root = Element("fmiBuildDescription", {"fmiVersion": "2.0"})
+    """``sources/buildDescription.xml`` in the FMI 3.0 schema (``fmiVersion="3.0"``), which
+    FMI 2.0.4 adopts for its sources too: the C files, the include directory and the compiler
+    options that decide the floating-point results (:data:`FP_FLAGS`)."""
+    root = Element("fmiBuildDescription", {"fmiVersion": "3.0"})
     conf = SubElement(root, "BuildConfiguration", {"modelIdentifier": identifier})
-    files = SubElement(conf, "SourceFileSet", {"language": "C99"})
+    files = SubElement(conf, "SourceFileSet", {"language": "C99",
+                                                "compilerOptions": " ".join(FP_FLAGS)})
     for name in sources:
         SubElement(files, "SourceFile", {"name": name})
-    SubElement(conf, "IncludeDirectory", {"name": "."})
+    SubElement(files, "IncludeDirectory", {"name": "."})
     indent(root)
     return b'<?xml version="1.0" encoding="UTF-8"?>\n' + tostring(root, encoding="utf-8")
 
@@ -142,6 +223,269 @@ def route_tables() -> dict[str, str]:
         tables[toml.stem] = f"# grade steps of route {toml.stem}: start_m permille\n" + \
             "\n".join(rows) + "\n"
     return tables
+
+
+def _step_rows(starts, values) -> list[str]:
+    return [f"{'-inf' if math.isinf(s) and s < 0 else repr(float(s))} {float(g)!r}"
+            for s, g in zip(starts.tolist(), values.tolist())]
+
+
+def _speed_limit_table(route) -> tuple[str, list[str]]:
+    limit = route.speed_limit
+    return "speed limit steps: start_m limit_m_per_s", _step_rows(limit.starts, limit.values)
+
+
+def _additional_table(route) -> tuple[str, list[str]]:
+    xs, cum = route.additional._cumulative  # the knots the compiled kernels interpolate on
+    return ("additional resistance (grade + curve + tunnel), cumulative over position: "
+            "position_m integral_N_per_kN_m", _step_rows(xs, cum))
+
+
+ROUTE_PROFILES = {"speed_limit": _speed_limit_table, "additional": _additional_table}
+
+
+def route_profile_tables(kinds: tuple[str, ...]) -> dict[str, str]:
+    """``<name>.<kind>`` text per bundled route and profile kind (:data:`ROUTE_PROFILES`):
+    rows of two floats (repr, which reads back exactly; ``inf`` where a value is infinite)."""
+    route = importlib.import_module("plants.route")
+    tables = {}
+    for toml in sorted(route.ROUTES_DIR.glob("*.toml")):
+        try:
+            loaded = route.load_route(toml.stem)
+        except ValueError:  # a reference-profile TOML beside the routes, not a route
+            continue
+        for kind in kinds:
+            title, rows = ROUTE_PROFILES[kind](loaded)
+            tables[f"{toml.stem}.{kind}"] = f"# {title} of route {toml.stem}\n" + \
+                "\n".join(rows) + "\n"
+    return tables
+
+
+def reference_tables() -> dict[str, str]:
+    """``references/<name>.ref`` per bundled reference profile (:func:`plants.route.
+    load_reference`): the line ``kind distance|time`` then its points ``x v`` (SI, %.17g via
+    repr, which reads back exactly)."""
+    route = importlib.import_module("plants.route")  # by name: layering
+    tables = {}
+    for path in sorted([*route.ROUTES_DIR.glob("*.csv"), *route.ROUTES_DIR.glob("*.toml")]):
+        try:
+            profile = route.load_reference(path.stem)
+        except (ValueError, AttributeError):  # a route, not a reference profile
+            continue
+        rows = [f"{float(x)!r} {float(v)!r}" for x, v in zip(profile.x.tolist(),
+                                                              profile.v.tolist())]
+        tables[f"references/{path.stem}.ref"] = (
+            f"# reference profile {path.stem}: x (m or s) v (m/s)\nkind {profile.kind}\n"
+            + "\n".join(rows) + "\n")
+    return tables
+
+
+def _numbers(key: str, values) -> str:
+    flat = [float(x) for x in np.asarray(values, dtype=float).ravel().tolist()]
+    return f"{key} {len(flat)} " + " ".join(repr(x) for x in flat)
+
+
+def empc_tables() -> dict[str, str]:
+    """``regions/<name>.empc`` per bundled EMPC region file (controllers/hybrid/data/*.npz):
+    its design settings (``meta key value``), the design constants of the online law
+    (mean-speed weights ``c``, PWA ``breakpoints``, ``motored`` cars, per-mode limit ratios)
+    and per mode and segment the parameter box, the regions (E, e, row offsets, first-move
+    F, f, tolerance) and the bounding-box tree :class:`controllers.hybrid.explicit.BoxTree`
+    built from them; one ``key count values...`` line per array (%.17g via repr: exact)."""
+    explicit = importlib.import_module("controllers.hybrid.explicit")  # by name: layering
+    empc = importlib.import_module("controllers.hybrid.explicit_mpc")
+    hybrid = importlib.import_module("controllers.hybrid.hybrid_mpc")
+    emu = importlib.import_module("plants.emu")
+    tables = {}
+    for path in sorted(explicit.DATA_DIR.glob("*.npz")):
+        law = explicit.ExplicitLaw.load(path)
+        meta = law.meta
+        train = emu.emu_config(str(meta["configuration"]))
+        params = replace(hybrid.HybridMpcParams(), fit_speed_max=float(meta["fit_speed_max"]),
+                         sample_time=float(meta["sample_time"]),
+                         configuration=str(meta["configuration"]))
+        model = hybrid.chain_model(train, params)
+        lines = [f"# EMPC region data {path.stem} (from {path.name}; generated)"]
+        lines += [f"meta {key} {value}" for key, value in meta.items()]
+        lines += [_numbers("c", model.c[:model.n]), _numbers("breakpoints",
+                                                             model.res.breakpoints),
+                  _numbers("motored", model.motored),
+                  *(_numbers(f"ratio{m}", empc.ExplicitMpc.limit_ratio(train, m))
+                    for m in explicit.MODES),
+                  _numbers("keys", sorted(law.sets))]
+        for (mode, seg), rs in sorted(law.sets.items()):
+            p = f"m{mode}s{seg}_"
+            tree = rs.tree
+            lines += [_numbers(p + "box", law.boxes[mode, seg]), _numbers(p + "E", rs.E),
+                      _numbers(p + "e", rs.e), _numbers(p + "rows", rs.rows),
+                      _numbers(p + "na", [rs.F.shape[1]]), _numbers(p + "F", rs.F),
+                      _numbers(p + "f", rs.f), _numbers(p + "tol", [rs.tol]),
+                      *(_numbers(p + name, getattr(tree, name))
+                        for name in ("dim", "thr", "left", "right", "start", "stop", "items"))]
+        tables[f"regions/{path.stem}.empc"] = "\n".join(lines) + "\n"
+    return tables
+
+
+# generated resources a native model may ask for (NativeSpec.data)
+DATA = {"references": reference_tables, "empc_regions": empc_tables}
+
+
+# the step profiles of a route a native plant reads (plants.route.Route fields); sums such as
+# Route.additional are formed in C by the same operations as StepProfile.sum
+STEP_PROFILES = ("grade", "curve_resistance", "tunnel_resistance", "speed_limit", "neutral")
+
+
+def _bits(value: float) -> str:
+    """A double as the 16 hex digits of its IEEE bits: read back exactly by any C library."""
+    return f"{struct.unpack('<Q', struct.pack('<d', float(value)))[0]:016x}"
+
+
+def step_profile_tables() -> dict[str, str]:
+    """``<name>.profiles`` text per bundled route: for each of :data:`STEP_PROFILES` a line
+    ``profile <field> <count>`` and ``count`` lines ``<start bits> <value bits>`` (IEEE bits
+    in hex, the decimal value after ``#``), the first start ``-inf``."""
+    route = importlib.import_module("plants.route")
+    tables = {}
+    for toml in sorted(route.ROUTES_DIR.glob("*.toml")):
+        try:
+            loaded = route.load_route(toml.stem)
+        except ValueError:  # a reference-profile TOML beside the routes, not a route
+            continue
+        lines = [f"# step profiles of route {toml.stem}: start_m value (IEEE bits, hex)"]
+        for field in STEP_PROFILES:
+            profile = getattr(loaded, field)
+            lines.append(f"profile {field} {profile.starts.size}")
+            lines += [f"{_bits(a)} {_bits(b)}  # {a!r} {b!r}"
+                      for a, b in zip(profile.starts.tolist(), profile.values.tolist())]
+        tables[toml.stem] = "\n".join(lines) + "\n"
+    return tables
+
+
+def config_header(identifier: str, where: str) -> str:
+    """``<id>_config.h``: the named configurations (``where`` = ``"module:NAME"``, a mapping
+    name -> factory of a dataclass of floats and tuples of floats) as ``ato_config`` rows:
+    per field a pointer to its values (one for a scalar) and their count, in field order."""
+    import dataclasses
+
+    module, name = where.split(":")
+    configurations = getattr(importlib.import_module(module), name)
+    fields: list[str] = []
+    lines = [f"/* generated by cosim/fmu/native_build.py from {where}; do not edit */",
+             "#ifndef ATO_CONFIG_H", "#define ATO_CONFIG_H"]
+    rows = []
+    for k, (cname, factory) in enumerate(configurations.items()):
+        config = factory()
+        fields = [f.name for f in dataclasses.fields(config)]
+        for field in fields:
+            value = getattr(config, field)
+            values = value if isinstance(value, tuple) else (value,)
+            lines.append(f"static const double ATO_CFG_{k}_{field}[] = "
+                         f"{{{', '.join(_c_double(float(x)) for x in values)}}};")
+        rows.append("    {" + _c_string(cname) + ", {"
+                    + ", ".join(f"{{ATO_CFG_{k}_{f}, sizeof ATO_CFG_{k}_{f} / sizeof(double)}}"
+                                for f in fields) + "}},")
+    lines += [f"#define ATO_CFG_{f.upper()} {i}" for i, f in enumerate(fields)]
+    lines += ["typedef struct { const double* values; int n; } ato_config_field;",
+              f"typedef struct {{ const char* name; ato_config_field field[{len(fields)}]; }}"
+              " ato_config;",
+              f"#define ATO_N_CONFIGS {len(rows)}",
+              "static const ato_config ATO_CONFIGS[ATO_N_CONFIGS] = {", *rows, "};", "#endif"]
+    return "\n".join(lines) + "\n"
+
+
+_PCG_MULT = 0x2360ED051FC65DA44385DF649FCCF645  # PCG64's 128-bit LCG multiplier
+_M128 = (1 << 128) - 1
+
+
+def numpy_normal_header() -> str:
+    """``ato_numpy_normal.h``: the ziggurat tables of numpy's ``Generator.standard_normal``
+    (``ATO_ZIG_KI``, ``ATO_ZIG_WI``, ``ATO_ZIG_FI``, 256 strips), measured from the installed
+    numpy by feeding its PCG64 chosen raw outputs (the state is set so that the next outputs
+    are given words): a draw ``idx | sign << 8 | rabs << 9`` returns ``rabs * wi[idx]`` and
+    takes a second word exactly when ``rabs >= ki[idx]``, so ``wi`` (``rabs = 1``) and ``ki``
+    (bisection on ``rabs``) are exact. ``fi[idx]`` enters only the rejection test of the
+    rare slow path (``(fi[idx-1] - fi[idx]) u + fi[idx] < exp(-x^2 / 2)``): it is
+    ``exp(-x_idx^2 / 2)`` of the strip edge ``x_idx = wi[idx] 2^52``, moved into the interval
+    that numpy's accept/reject boundary at ``u = 0`` leaves for it (bisection on ``rabs``), so
+    a decision can differ from numpy's only for a draw inside that interval (a few ulp)."""
+    import numpy as np
+
+    bg = np.random.PCG64(0)
+    gen = np.random.Generator(bg)
+    minv = pow(_PCG_MULT, -1, 1 << 128)
+
+    def draw(first: int, second: int) -> tuple[float, int]:
+        """standard_normal() with the next two raw words given; (value, words taken: 1, 2,
+        or 3 for more)."""
+        s1, s2 = first, second  # new states with high word 0 output their low word
+        if (s2 - s1) % 2 == 0:  # the increment must be odd: high word 1, low word ^ 1
+            s2 = second ^ (1 << 64) ^ 1
+        inc = (s2 - s1 * _PCG_MULT) & _M128
+        bg.state = {"bit_generator": "PCG64", "has_uint32": 0, "uinteger": 0,
+                    "state": {"state": ((s1 - inc) * minv) & _M128, "inc": inc}}
+        x = float(gen.standard_normal())
+        now = bg.state["state"]["state"]
+        return x, 1 if now == s1 else 2 if now == s2 else 3
+
+    def word(idx: int, rabs: int) -> int:
+        return idx | (rabs << 9)
+
+    def first_true(pred, lo: int, hi: int) -> int:
+        """Smallest n in [lo, hi] with pred(n) (pred monotone), hi if none."""
+        while lo < hi:
+            mid = (lo + hi) // 2
+            if pred(mid):
+                hi = mid
+            else:
+                lo = mid + 1
+        return lo
+
+    top = (1 << 52) - 1
+    wi, ki, fi = [], [], []
+    for idx in range(256):
+        x, taken = draw(word(idx, 1), 0)
+        if taken > 2:
+            raise RuntimeError(f"numpy's standard_normal: strip {idx} rejects rabs = 1")
+        wi.append(x)
+        ki.append(first_true(lambda r, idx=idx: draw(word(idx, r), 0)[1] > 1, 0, top + 1))
+    for idx in range(256):
+        if idx == 0:
+            fi.append(1.0)  # f(0): the top of the first strip
+            continue
+        edge = wi[idx] * 2.0 ** 52
+        value = math.exp(-0.5 * edge * edge)
+
+        def e(r: int, idx: int = idx) -> float:
+            x = r * wi[idx]
+            return math.exp(-0.5 * x * x)
+
+        start = max(ki[idx], 1)
+        rejected = first_true(lambda r, idx=idx: draw(word(idx, r), 0)[1] > 2, start,
+                              top + 1)
+        if rejected <= top:
+            value = max(value, e(rejected))  # fi >= exp at the first rejected draw
+        if rejected - 1 >= start:
+            below = e(rejected - 1)  # fi < exp at the last accepted draw
+            if value >= below:
+                value = math.nextafter(below, 0.0)
+        fi.append(value)
+
+    def table(name: str, ctype: str, values, fmt) -> str:
+        rows = [", ".join(fmt(v) for v in values[i:i + 4]) for i in range(0, 256, 4)]
+        return f"static const {ctype} {name}[256] = {{\n    " + ",\n    ".join(rows) + "\n};"
+
+    return "\n".join([
+        f"/* generated by cosim/fmu/native_build.py from numpy {np.__version__}"
+        " (numpy_normal_header); do not edit */",
+        "#include <stdint.h>",
+        table("ATO_ZIG_KI", "uint64_t", ki, lambda v: f"{v}ULL"),
+        table("ATO_ZIG_WI", "double", wi, _c_double),
+        table("ATO_ZIG_FI", "double", fi, _c_double),
+    ]) + "\n"
+
+
+# headers some native models include, generated at build time (NativeSpec.generated)
+GENERATED = {"ato_numpy_normal.h": numpy_normal_header}
 
 
 def _compiler(name: str) -> str:
@@ -167,6 +511,30 @@ def compile_binary(cc: str, src_dir: Path, out: Path, windows: bool) -> None:
         raise RuntimeError(f"{cc} failed on {out.name}:\n{done.stderr.strip()[-3000:]}")
 
 
+def native_sources(identifier: str, fmi_version: int = 2) -> list[Path]:
+    """Every file the native FMU ``identifier`` is made from: its C files, the FMI 2 front
+    (and for FMI 3.0 the FMI 3 front and the modelDescription derivation), this builder and
+    the Python wrapper's files (declarations, bundled data)."""
+    spec = NATIVE[identifier]
+    fmi3 = [FRONT_DIR / "fmi3_front.c", HERE / "fmi3.py"] if fmi_version == 3 else []
+    return [NATIVE_DIR / spec.source, NATIVE_DIR / "ato_vars.h",
+            *(NATIVE_DIR / name for name in (*spec.helpers, *spec.shared)),
+            FRONT_DIR / "fmi2_front.c",
+            FRONT_DIR / "ato_backend.h", Path(__file__),
+            *bundled_files(catalog()[identifier].module), *fmi3]
+
+
+def native_is_stale(identifier: str, fmi_version: int = 2) -> bool:
+    """True when the native FMI ``fmi_version`` FMU ``identifier`` is missing or older than a
+    file it is made from (:func:`native_sources`)."""
+    path = native_path(identifier, fmi_version)
+    if not path.is_file():
+        return True
+    built = path.stat().st_mtime
+    return any(f.is_file() and f.stat().st_mtime > built
+               for f in native_sources(identifier, fmi_version))
+
+
 def build_native(identifier: str, dest: Path = NATIVE_FMU_DIR, windows: bool | None = None
                  ) -> Path:
     """Build the native FMU ``identifier`` into ``dest``; ``windows``: also the win64 DLL
@@ -188,19 +556,35 @@ def build_native(identifier: str, dest: Path = NATIVE_FMU_DIR, windows: bool | N
     slave_class = catalog()[identifier].load()
     guid = "{" + str(uuid.uuid4()) + "}"
     headers = Path(fmpy.__file__).parent / "c-code"
-    c_files = ["fmi2_front.c", spec.source]
+    c_files = ["fmi2_front.c", spec.source,
+               *(f for f in (*spec.helpers, *spec.shared) if f.endswith(".c"))]
     with tempfile.TemporaryDirectory(prefix="atocosim_native_") as tmp:
         root = Path(tmp) / "fmu"
         src = root / "sources"
         src.mkdir(parents=True)
         shutil.copy2(FRONT_DIR / "fmi2_front.c", src)
         shutil.copy2(FRONT_DIR / "ato_backend.h", src)
-        shutil.copy2(NATIVE_DIR / spec.source, src)
+        for name in (spec.source, *spec.helpers):
+            shutil.copy2(NATIVE_DIR / name, src)
         shutil.copy2(NATIVE_DIR / "ato_vars.h", src)
+        for name in spec.shared:
+            shutil.copy2(NATIVE_DIR / name, src)
+        for name in spec.generated:
+            (src / name).write_text(GENERATED[name]())
+        if spec.configurations:
+            (src / f"{identifier}_config.h").write_text(
+                config_header(identifier, spec.configurations))
+        if spec.shared:  # the plant model includes this FMU's headers by one name
+            (src / "ato_model_decl.h").write_text(
+                f'#include "{identifier}_decl.h"\n'
+                + (f'#include "{identifier}_config.h"\n' if spec.configurations else ""))
         for h in ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h"):
             shutil.copy2(headers / h, src)
         (src / f"{identifier}_decl.h").write_text(
-            decl_header(identifier, slave_class.variables, guid))
+            decl_header(identifier, slave_class.variables, guid,
+                        getattr(slave_class, "core_options", None)))
+        (src / "ato_model.h").write_text(  # the model's header for the shared C files
+            f'/* generated by cosim/fmu/native_build.py */\n#include "{identifier}_decl.h"\n')
         (src / "buildDescription.xml").write_bytes(build_description(identifier, c_files))
         (root / "modelDescription.xml").write_bytes(
             model_description(identifier, slave_class, c_files, guid))
@@ -208,6 +592,16 @@ def build_native(identifier: str, dest: Path = NATIVE_FMU_DIR, windows: bool | N
         routes.mkdir(parents=True)
         for name, text in route_tables().items():
             (routes / f"{name}.grade").write_text(text)
+        for name, text in route_profile_tables(spec.route_profiles).items():
+            (routes / name).write_text(text)
+        if "ato_plant.c" in spec.shared:
+            for name, text in step_profile_tables().items():
+                (routes / f"{name}.profiles").write_text(text)
+        for kind in spec.data:
+            for rel, content in DATA[kind]().items():
+                target = root / "resources" / rel
+                target.parent.mkdir(parents=True, exist_ok=True)
+                target.write_text(content)
         (root / "binaries" / "linux64").mkdir(parents=True)
         compile_binary(gcc, src, root / "binaries" / "linux64" / f"{identifier}.so", False)
         if mingw:
@@ -221,3 +615,119 @@ def build_native(identifier: str, dest: Path = NATIVE_FMU_DIR, windows: bool | N
         final = dest / f"{identifier}.fmu"
         os.replace(staged, final)
     return final
+
+
+# -- FMI 3.0: the FMI 2 build's sources behind the FMI 3 front ------------------------------
+
+FMI_VERSIONS = (2, 3)
+EVENT_TIME_OUTPUT = "next_event_time"  # the controllers' announced next event (slave.py)
+FP_FLAGS = [f for f in CC_FLAGS if not f.startswith(("-O", "-W"))]  # decide the results
+FMI2_FRONT = "fmi2_front.c"
+FMI3_FRONT = "fmi3_front.c"
+FMI3_HEADERS = ("fmi3Functions.h", "fmi3FunctionTypes.h", "fmi3PlatformTypes.h")
+FMI3_LINUX, FMI3_WINDOWS = "x86_64-linux", "x86_64-windows"  # binaries/<platform tuple>
+
+
+def native_path(identifier: str, fmi_version: int = 2, dest: Path = NATIVE_FMU_DIR) -> Path:
+    """Where the native FMI ``fmi_version`` build of ``identifier`` goes under ``dest``:
+    ``dest/<id>.fmu`` (FMI 2.0) or ``dest/fmi3/<id>.fmu`` (FMI 3.0), as ``fmus/`` and
+    ``fmus/fmi3/`` hold the Python FMUs' builds."""
+    if fmi_version not in FMI_VERSIONS:
+        raise ValueError(f"fmi_version {fmi_version!r}: expected one of {list(FMI_VERSIONS)}")
+    return (dest if fmi_version == 2 else dest / "fmi3") / f"{identifier}.fmu"
+
+
+def _compilers(windows: bool | None) -> tuple[str, str | None]:
+    """gcc, and mingw-w64 when ``windows`` (True: required; None: when installed)."""
+    gcc = _compiler(LINUX_CC)
+    if windows is False:
+        return gcc, None
+    try:
+        return gcc, _compiler(WINDOWS_CC)
+    except CompilerMissing:
+        if windows:
+            raise
+        return gcc, None
+
+
+def package_fmi3(fmi2_fmu: Path, out: Path, windows: bool | None = None) -> Path:
+    """Write the native FMI 3.0 FMU ``out`` from the native FMI 2.0 FMU ``fmi2_fmu``.
+
+    Whatever the FMI 2 build holds (every C file, generated header and resource of the model)
+    is kept; the FMI 2 front in ``sources/`` is replaced by ``cosim/fmu/front/fmi3_front.c``
+    (the front of the Python FMUs' FMI 3 builds, here linked with the model, whose backend
+    calls the model directly) plus the FMI 3 headers (the FMI 2 ones stay: the backend
+    interface is declared with them), ``buildDescription.xml`` names it, modelDescription.xml
+    is :func:`cosim.fmu.fmi3.model_description` of the FMI 2 one (same variables and GUID as
+    ``instantiationToken``), and the sources are compiled into
+    ``binaries/x86_64-linux/<id>.so`` and, with ``windows`` (default: when mingw-w64 is
+    installed), ``binaries/x86_64-windows/<id>.dll``."""
+    from concurrent.futures import ThreadPoolExecutor
+    from xml.etree import ElementTree
+
+    import fmpy
+
+    from cosim.fmu import fmi3
+
+    gcc, mingw = _compilers(windows)
+    headers = Path(fmpy.__file__).parent / "c-code"
+    with tempfile.TemporaryDirectory(prefix="atocosim_native3_") as tmp:
+        root = Path(tmp) / "fmu"
+        with zipfile.ZipFile(fmi2_fmu) as z:
+            z.extractall(root)
+        md, _ = fmi3.model_description((root / "modelDescription.xml").read_bytes())
+        (root / "modelDescription.xml").write_bytes(md)
+        identifier = ElementTree.fromstring(md).find("CoSimulation").get("modelIdentifier")
+        shutil.rmtree(root / "binaries")
+        src = root / "sources"
+        if not (src / FMI2_FRONT).is_file():
+            raise ValueError(f"{fmi2_fmu}: no sources/{FMI2_FRONT}: not a native FMI 2.0 FMU "
+                             "of this project")
+        (src / FMI2_FRONT).unlink()
+        shutil.copy2(FRONT_DIR / FMI3_FRONT, src)
+        for name in FMI3_HEADERS:
+            shutil.copy2(headers / name, src)
+        described = ElementTree.parse(src / "buildDescription.xml").getroot()
+        for entry in described.iter("SourceFile"):
+            if entry.get("name") == FMI2_FRONT:
+                entry.set("name", FMI3_FRONT)
+        (src / "buildDescription.xml").write_bytes(
+            b'<?xml version="1.0" encoding="UTF-8"?>\n' + tostring(described, encoding="utf-8"))
+        jobs = []
+        for cc, platform, suffix in ((gcc, FMI3_LINUX, ".so"), (mingw, FMI3_WINDOWS, ".dll")):
+            if cc is not None:
+                (root / "binaries" / platform).mkdir(parents=True)
+                jobs.append((cc, src, root / "binaries" / platform / f"{identifier}{suffix}",
+                             suffix == ".dll"))
+        with ThreadPoolExecutor(max_workers=len(jobs)) as pool:  # the compilers side by side
+            for done in [pool.submit(compile_binary, *job) for job in jobs]:
+                done.result()
+        out.parent.mkdir(parents=True, exist_ok=True)
+        staged = out.parent / f".{out.name}.{os.getpid()}.tmp"
+        with zipfile.ZipFile(staged, "w", zipfile.ZIP_DEFLATED) as z:
+            for f in sorted(p for p in root.rglob("*") if p.is_file()):
+                z.write(f, f.relative_to(root).as_posix())
+        os.replace(staged, out)
+    return out
+
+
+def build_natives(identifier: str, fmi_versions: tuple[int, ...] = FMI_VERSIONS,
+                  dest: Path = NATIVE_FMU_DIR, windows: bool | None = None) -> list[Path]:
+    """Build the native FMUs of ``identifier`` in ``fmi_versions`` to :func:`native_path`
+    under ``dest`` (the paths in the order given): the FMI 2 build (:func:`build_native`; made
+    in a scratch folder when only FMI 3 is asked for) and the FMI 3 build derived from it
+    (:func:`package_fmi3`), so both share one GUID. ``windows``: also the Windows DLLs
+    (default: when mingw-w64 is installed). Raises :class:`CompilerMissing` naming the
+    compiler when it is absent, before anything is written."""
+    if identifier not in NATIVE:
+        raise ValueError(f"no native model of {identifier!r}; native: {sorted(NATIVE)}")
+    targets = {version: native_path(identifier, version, dest) for version in fmi_versions}
+    _compilers(windows)
+    with tempfile.TemporaryDirectory(prefix="atocosim_native2_") as scratch:
+        if 2 in targets:
+            fmi2 = build_native(identifier, dest, windows)
+        else:  # only its sources and model description are used: no Windows DLL
+            fmi2 = build_native(identifier, Path(scratch), windows=False)
+        if 3 in targets:
+            package_fmi3(fmi2, targets[3], windows)
+    return [targets[version] for version in fmi_versions]

@@ -13,6 +13,9 @@ Format (see ``scenarios/seed000_stop_pid.toml``)::
                               # or fmus/fmi3/<Id>.fmu (FMI 3.0); .fmu paths are used as given
     [fmus.NAME]
     fmu = "BrakeDelayTrain"   # FMU identifier in fmus/ (built on demand) or a path to a .fmu
+    build = "python"          # python | native: which build of a catalog FMU identifier;
+                              # native: the C FMU fmus/native/<Id>.fmu (no Python; FMI 3.0:
+                              # fmus/native/fmi3/<Id>.fmu)
     sample_time = 0.2         # s, optional: periodic events of a sampled FMU (also set as its
                               # `sample_time` parameter if it has one)
     max_step = 0.5            # s, optional: longest communication step for this FMU
@@ -47,6 +50,8 @@ from cosim.run import fmi_types
 SCENARIO_DIR = ROOT / "scenarios"
 ALGORITHMS = ("event", "fixed", "jacobi")
 FMI_VERSIONS = (2, 3)
+BUILDS = ("python", "native")  # [fmus.NAME] build: the Python FMU or the native C one
+COMPONENT_KEYS = ("fmu", "build", "sample_time", "max_step")  # --set NAME.key=value
 
 
 RECORD_KEYS = ("variables",)
@@ -94,6 +99,7 @@ class Component:
     name: str
     fmu: str  # identifier or path as written
     fmu_path: Path
+    build: str = "python"  # python | native (BUILDS)
     sample_time: float | None = None
     max_step: float | None = None
     parameters: dict[str, Any] = field(default_factory=dict)
@@ -179,7 +185,7 @@ def apply_overrides(raw: dict[str, Any], overrides: dict[str, Any] | list[str] |
         if head not in fmus:
             raise ScenarioError(f"{source}: --set {key}: no FMU named {head!r} "
                                 f"(scenario has {sorted(fmus)})")
-        if rest in ("sample_time", "max_step", "fmu"):
+        if rest in COMPONENT_KEYS:
             fmus[head][rest] = value
         elif rest.startswith("inputs."):
             fmus[head].setdefault("inputs", {})[rest[7:]] = value
@@ -199,7 +205,7 @@ def override_keys(overrides: dict[str, Any] | list[str] | None) -> dict[str, str
         head, _, rest = key.partition(".")
         if head in ("simulation", "summary"):
             keys[f"[{head}] {rest}"] = text
-        elif rest in ("sample_time", "max_step", "fmu"):
+        elif rest in COMPONENT_KEYS:
             keys[f"[fmus.{head}] {rest}"] = text
         elif rest.startswith("inputs."):
             keys[f"[fmus.{head}.inputs] {rest[7:]}"] = text
@@ -257,9 +263,30 @@ def catalog_path(identifier: str, fmi_version: int = 2) -> Path:
     return (FMU_DIR / "fmi3" if fmi_version == 3 else FMU_DIR) / f"{identifier}.fmu"
 
 
-def _resolve_fmu(source: Path, key: str, fmu: Any, fmi_version: int = 2) -> Path:
+def native_path(source: Path, key: str, fmu: str, fmi_version: int) -> Path:
+    """Where the native build of catalog FMU ``fmu`` in FMI version ``fmi_version`` lives
+    (``fmus/native/<Id>.fmu``, ``fmus/native/fmi3/<Id>.fmu``); refused for an FMU without a
+    native model."""
+    from cosim.fmu import native_build
+
+    if fmu.endswith(".fmu"):
+        raise ScenarioError(f"{source}: {key} = 'native': fmu = {fmu!r} is a file, used as "
+                            "given; build selects the build of a catalog identifier")
+    if fmu not in native_build.NATIVE:
+        raise ScenarioError(f"{source}: {key} = 'native': {fmu!r} has no native model "
+                            f"(native: {sorted(native_build.NATIVE)})")
+    return native_build.native_path(fmu, fmi_version)
+
+
+def _resolve_fmu(source: Path, key: str, fmu: Any, fmi_version: int = 2,
+                 build: str = "python") -> Path:
     if not isinstance(fmu, str) or not fmu:
         raise ScenarioError(f"{source}: {key} = {fmu!r}: expected an FMU identifier or path")
+    if build not in BUILDS:
+        raise ScenarioError(f"{source}: {key.replace(' fmu', ' build')} = {build!r}: expected "
+                            f"one of {list(BUILDS)}")
+    if build == "native":
+        return native_path(source, key.replace(" fmu", " build"), fmu, fmi_version)
     if fmu.endswith(".fmu"):
         path = Path(fmu)
         if not path.is_absolute():
@@ -355,8 +382,7 @@ def _load_scenario(path: Path, overrides: dict[str, Any] | list[str] | None) -> 
         key = f"[fmus.{name}]"
         if not isinstance(spec, dict):
             raise ScenarioError(f"{path}: {key} must be a table")
-        _refuse_unknown(path, key, spec, ("fmu", "sample_time", "max_step", "parameters",
-                                          "inputs"))
+        _refuse_unknown(path, key, spec, (*COMPONENT_KEYS, "parameters", "inputs"))
         if "fmu" not in spec:
             raise ScenarioError(f"{path}: {key} fmu is required")
         for table in ("parameters", "inputs"):
@@ -365,7 +391,9 @@ def _load_scenario(path: Path, overrides: dict[str, Any] | list[str] | None) -> 
         components[name] = Component(
             name=name,
             fmu=spec["fmu"],
-            fmu_path=_resolve_fmu(path, f"{key} fmu", spec["fmu"], sim.fmi_version),
+            fmu_path=_resolve_fmu(path, f"{key} fmu", spec["fmu"], sim.fmi_version,
+                                  spec.get("build", "python")),
+            build=spec.get("build", "python"),
             sample_time=(_number(path, f"{key} sample_time", spec["sample_time"])
                          if "sample_time" in spec else None),
             max_step=(_number(path, f"{key} max_step", spec["max_step"])

@@ -4,18 +4,36 @@
  *   fmu3_host UNZIPDIR MODEL_IDENTIFIER TOKEN STEP N_STEPS EVENT_MODE [in:VR=VALUE ...]
  *             [out:VR ...]
  *
- * Loads UNZIPDIR/binaries/x86_64-linux/MODEL_IDENTIFIER.so, instantiates it (eventModeUsed =
+ * Loads UNZIPDIR/binaries/x86_64-linux/MODEL_IDENTIFIER.so (built with mingw-w64 for Windows:
+ * UNZIPDIR\binaries\x86_64-windows\MODEL_IDENTIFIER.dll), instantiates it (eventModeUsed =
  * EVENT_MODE, 0 or 1), sets the constant Float64 inputs, runs N_STEPS fmi3DoStep calls of STEP
  * seconds and prints "t,out1,out2,...,next" after every step (%.17g; next is the nextEventTime
  * of the last fmi3UpdateDiscreteStates, or nan). With Event Mode it enters Event Mode after
  * initialisation and whenever fmi3DoStep says eventHandlingNeeded. Any non-OK status ends the
  * run with exit status 3. Leaves main() normally (the exit handlers run).
  */
-#include <dlfcn.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+
+#ifdef _WIN32
+#include <windows.h>
+#define PLATFORM_BINARY "%s\\binaries\\x86_64-windows\\%s.dll"
+#define RESOURCES "%s\\resources\\"
+typedef HMODULE library;
+static library open_library(const char* path) { return LoadLibraryA(path); }
+static void* symbol(library lib, const char* name) { return (void*)GetProcAddress(lib, name); }
+static const char* load_error(void) { return "LoadLibrary failed"; }
+#else
+#include <dlfcn.h>
+#define PLATFORM_BINARY "%s/binaries/x86_64-linux/%s.so"
+#define RESOURCES "%s/resources/"
+typedef void* library;
+static library open_library(const char* path) { return dlopen(path, RTLD_NOW | RTLD_LOCAL); }
+static void* symbol(library lib, const char* name) { return dlsym(lib, name); }
+static const char* load_error(void) { return dlerror(); }
+#endif
 
 #include "fmi3Functions.h"
 
@@ -28,7 +46,7 @@ static void logger(fmi3InstanceEnvironment env, fmi3Status status, fmi3String ca
 }
 
 #define LOAD(name)                                                                        \
-    name##TYPE* name = (name##TYPE*)dlsym(lib, #name);                                    \
+    name##TYPE* name = (name##TYPE*)symbol(lib, #name);                                   \
     if (!name) { fprintf(stderr, "missing symbol %s\n", #name); return 2; }
 
 #define CHECK(call)                                                                       \
@@ -42,8 +60,8 @@ int main(int argc, char** argv)
         return 1;
     }
     char path[4096], resources[4096];
-    snprintf(path, sizeof path, "%s/binaries/x86_64-linux/%s.so", argv[1], argv[2]);
-    snprintf(resources, sizeof resources, "%s/resources/", argv[1]);
+    snprintf(path, sizeof path, PLATFORM_BINARY, argv[1], argv[2]);
+    snprintf(resources, sizeof resources, RESOURCES, argv[1]);
     double step = atof(argv[4]), next = NAN;
     int n_steps = atoi(argv[5]), event_mode = atoi(argv[6]);
 
@@ -60,9 +78,9 @@ int main(int argc, char** argv)
             out_vr[n_out++] = (fmi3ValueReference)strtoul(argv[i] + 4, NULL, 10);
         }
     }
-    void* lib = dlopen(path, RTLD_NOW | RTLD_LOCAL);
+    library lib = open_library(path);
     if (!lib) {
-        fprintf(stderr, "dlopen failed: %s\n", dlerror());
+        fprintf(stderr, "cannot load %s: %s\n", path, load_error());
         return 2;
     }
     LOAD(fmi3InstantiateCoSimulation) LOAD(fmi3EnterInitializationMode)

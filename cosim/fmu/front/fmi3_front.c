@@ -201,7 +201,9 @@ fmi3Status fmi3SetDebugLogging(fmi3Instance instance, fmi3Boolean loggingOn, siz
 
 /* -- creation and destruction ------------------------------------------------------------------ */
 /* resourcePath (a directory path, FMI 3.0 sec. 2.3.1) as the file URI FMI 2 expects (FMI 2.0.4
- * sec. 2.1.5 fmuResourceLocation): "file://" + the percent-encoded path, no trailing '/'. */
+ * sec. 2.1.5 fmuResourceLocation): "file://" + the percent-encoded path, no trailing '/'. On
+ * Windows a path "C:\dir\resources\" becomes "file:///C:/dir/resources" (RFC 8089: '\' as '/',
+ * the drive letter after a '/', its ':' kept). */
 static char* resource_uri(const char* path)
 {
     static const char hex[] = "0123456789ABCDEF";
@@ -212,10 +214,27 @@ static char* resource_uri(const char* path)
         return NULL;
     memcpy(uri, "file://", 7);
     j = 7;
+#ifdef _WIN32
+    while (n > 1 && (path[n - 1] == '/' || path[n - 1] == '\\'))
+        --n;
+    int drive = n >= 2 && path[1] == ':' &&
+                ((path[0] >= 'A' && path[0] <= 'Z') || (path[0] >= 'a' && path[0] <= 'z'));
+    if (drive)
+        uri[j++] = '/';
+#else
     while (n > 1 && path[n - 1] == '/')
         --n;
+#endif
     for (size_t i = 0; i < n; ++i) {
         unsigned char c = (unsigned char)path[i];
+#ifdef _WIN32
+        if (c == '\\')
+            c = '/';
+        if (drive && i == 1) {
+            uri[j++] = ':';
+            continue;
+        }
+#endif
         if ((c >= 'A' && c <= 'Z') || (c >= 'a' && c <= 'z') || (c >= '0' && c <= '9') ||
             strchr("/-._~", c)) {
             uri[j++] = (char)c;

@@ -11,7 +11,8 @@
  * iterations), so with the same libm exp the results are equal bit for bit.
  *
  * It is an FMI 2-shaped backend (cosim/fmu/front/ato_backend.h): the FMI 2 front
- * (fmi2_front.c) or the FMI 3 front links it statically. Variables come from the generated
+ * (fmi2_front.c) or the FMI 3 front (fmi3_front.c) links it statically; its event_time_vr is
+ * the generated ATO_EVENT_TIME_VR (-1: a plant has no events). Variables come from the generated
  * BrakeDelayTrain_decl.h. The route parameter names a bundled route whose grade steps the
  * build exported to resources/routes/<name>.grade ("start permille" lines, %.17g).
  */
@@ -783,7 +784,7 @@ static fmi2Status bd_deserialize(fmi2Component comp, const fmi2Byte in[], size_t
 }
 
 static const ato_backend BACKEND = {
-    "native C model " ATO_MODEL_IDENTIFIER, -1, 1,
+    "native C model " ATO_MODEL_IDENTIFIER, ATO_EVENT_TIME_VR, 1,
     bd_instantiate, bd_free, bd_set_debug_logging,
     bd_setup, bd_enter_init, bd_exit_init, bd_terminate, bd_reset,
     bd_get_real, bd_get_integer, bd_get_boolean, bd_get_string,

@@ -169,8 +169,10 @@ def format_report(path: str | Path, problems: list[Problem],
     """A readable report: one line per check (ok / FAIL / warn) with the FMI 2.0.4 clause it
     enforces, then the findings (with what they rest on when the standard does not require
     it: ``recommended`` or a project ``convention``)."""
-    if checks is None:
-        checks = FMI3_CHECKS if any(p.check in FMI3_CHECKS for p in problems) else ALL_CHECKS
+    if checks is None:  # an FMU with no finding at all is listed by its fmiVersion
+        fmi3 = (any(p.check in FMI3_CHECKS for p in problems)
+                or Path(path).is_file() and fmi_version(Path(path)) == "3.0")
+        checks = FMI3_CHECKS if fmi3 else ALL_CHECKS
     lines = [f"FMU {path}"]
     by_check: dict[str, list[Problem]] = {}
     for p in problems:

@@ -400,7 +400,21 @@ def run_scenario(scenario: str | Path | Scenario, overrides: dict[str, Any] | li
 
 def ensure_built(sc: Scenario) -> list[Path]:
     """Build the scenario's catalog FMUs that are missing or older than their sources, in the
-    scenario's FMI version ([simulation] fmi_version)."""
+    scenario's FMI version ([simulation] fmi_version), and its native ones (build =
+    "native")."""
+    native = sorted({c.fmu for c in sc.components.values() if c.build == "native"})
+    version = sc.simulation.fmi_version
+    built: list[Path] = []
+    if native:
+        from cosim.fmu.native_build import build_natives, native_is_stale
+
+        for name in native:
+            if native_is_stale(name, version):
+                built += build_natives(name, (version,))
+    return built + _ensure_python_built(sc)
+
+
+def _ensure_python_built(sc: Scenario) -> list[Path]:
     from cosim.fmu.build import build_stale, catalog
     from cosim.run.scenario import catalog_path
 

@@ -1,8 +1,9 @@
-/* The freight sub-step kernel of plants/kernels.py (freight_steps) in C, for the comparison of
- * issue 10 item 1 (benchmarks/bench_kernels.py builds it with gcc and calls it through ctypes).
- * Same equations, same operations in the same order, no fast-math, no FMA contraction
- * (-ffp-contract=off), so its results can be compared with the numba kernel's bit for bit.
- * Not the production path (see bench_kernels.py for the figures and the decision). */
+/* The freight sub-step kernel of plants/kernels.py (freight_steps) in C: the kernel of the
+ * native FreightTrain FMU (freight.c calls it once per communication step, as the Python core
+ * calls the numba kernel) and of the numba-vs-C comparison of benchmarks/bench_kernels.py
+ * (built with gcc, called through ctypes). Same equations, same operations in the same order,
+ * no fast-math, no FMA contraction (-ffp-contract=off), so its results can be compared with
+ * the numba kernel's bit for bit. */
 #include <math.h>
 #include <stdint.h>
 

@@ -1,0 +1,163 @@
+/*
+ * speed_pid.c: online law of EmuSpeedPid3 / EmuSpeedPid8, the C twin of
+ * controllers/pid/speed_pid.py (DistributedSpeedPid over SpeedPid; seeds 001, 004):
+ *
+ *   e = v_ref - v,   a_dem = a_ref + kp e + ki int(e) dt - kd dv_f/dt,   F = M a_dem
+ *
+ * clamped to the summed envelope over M (and [accel_min, accel_max], rate limit), conditional
+ * integration, derivative on the measured speed (first-order filter); F shared over the units
+ * in proportion to the force each can give now; the holding brake at the final stop. The
+ * core's floating-point operations in its order. Units: ATO_OPTION_units of the generated
+ * header; the reference profile: a bundled name (resources/references).
+ */
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "ato_law.h"
+#include "ato_profile.h"
+#include "ato_vars.h"
+#include "ato_model.h"
+
+#define UNITS ATO_OPTION_units
+
+typedef struct {
+    double integral, prev_speed, derivative, demand, error; /* SpeedPid */
+    int has_prev;
+    double forces[UNITS], v_ref, a_ref;
+} pid_state;
+
+struct law_core {
+    double kp, ki, kd, derivative_filter, accel_min, accel_max, rate_limit, sample_time;
+    int feedforward;
+    double mass, hold_accel, stop_speed;
+    ato_profile profile;
+    pid_state st;
+};
+
+static double pymax(double a, double b) { return b > a ? b : a; }
+static double pymin(double a, double b) { return b < a ? b : a; }
+
+law_core* law_make(const ato_values* p, double t0, char* err, size_t n) {
+    (void)t0;
+    const double* v = p->v;
+    law_core c;
+    memset(&c, 0, sizeof c);
+    c.kp = v[ATO_VR_kp];
+    c.ki = v[ATO_VR_ki];
+    c.kd = v[ATO_VR_kd];
+    c.derivative_filter = v[ATO_VR_derivative_filter];
+    c.accel_min = v[ATO_VR_accel_min];
+    c.accel_max = v[ATO_VR_accel_max];
+    c.rate_limit = v[ATO_VR_rate_limit];
+    c.feedforward = v[ATO_VR_feedforward] != 0.0;
+    c.sample_time = v[ATO_VR_sample_time];
+    c.mass = v[ATO_VR_mass];
+    c.hold_accel = v[ATO_VR_hold_accel];
+    c.stop_speed = v[ATO_VR_stop_speed];
+    /* DistributedSpeedPidParams.check_relations (the declared ranges: ato_controller.c) */
+    if (!(c.accel_min < c.accel_max)) {
+        char a[40], b[40];
+        snprintf(err, n, "accel_min = %s must be < accel_max = %s", ato_repr(c.accel_min, a),
+                 ato_repr(c.accel_max, b));
+        return NULL;
+    }
+    if (!ato_profile_load(&c.profile, p->resources, p->s[ATO_VR_reference], err, n))
+        return NULL;
+    law_core* out = malloc(sizeof c);
+    *out = c;
+    return out;
+}
+
+void law_free(law_core* c) {
+    ato_profile_free(&c->profile);
+    free(c);
+}
+size_t law_state_size(const law_core* c) { (void)c; return sizeof(pid_state); }
+void law_get_state(const law_core* c, void* out) { memcpy(out, &c->st, sizeof c->st); }
+void law_set_state(law_core* c, const void* in) { memcpy(&c->st, in, sizeof c->st); }
+
+/* SpeedPid.update with a_res = 0 and the limits a_lo, a_hi */
+static double update(law_core* c, double v, double v_ref, double a_ref, double a_lo,
+                     double a_hi) {
+    pid_state* st = &c->st;
+    double T = c->sample_time;
+    double lo = pymax(c->accel_min, a_lo);
+    double hi = pymin(c->accel_max, a_hi);
+    lo = pymin(lo, hi); /* inconsistent limits: the upper one wins */
+    if (c->rate_limit > 0) {
+        double step = c->rate_limit * T;
+        double lo2 = pymin(pymax(lo, st->demand - step), hi);
+        double hi2 = pymax(pymin(hi, st->demand + step), lo);
+        lo = lo2;
+        hi = hi2;
+    }
+    double error = v_ref - v;
+    if (st->has_prev) {
+        double raw = (v - st->prev_speed) / T;
+        if (c->derivative_filter > 0) {
+            double alpha = T / (c->derivative_filter + T);
+            st->derivative += alpha * (raw - st->derivative);
+        } else {
+            st->derivative = raw;
+        }
+    }
+    st->prev_speed = v;
+    st->has_prev = 1;
+    double integral = st->integral + error * T;
+    double ff = (c->feedforward ? a_ref : 0.0) + 0.0;
+    double unclamped = ff + c->kp * error + c->ki * integral - c->kd * st->derivative;
+    double demand = pymin(pymax(unclamped, lo), hi);
+    int pushing_out = (unclamped > hi && error > 0) || (unclamped < lo && error < 0);
+    if (!pushing_out) st->integral = integral;
+    st->demand = demand;
+    st->error = error;
+    return demand;
+}
+
+void law_outputs(const law_core* c, double* out) {
+    const pid_state* st = &c->st;
+    for (int i = 0; i < UNITS; i++) out[ATO_VR_force_1 + i] = st->forces[i];
+    out[ATO_VR_force_demand] = c->mass * st->demand;
+    out[ATO_VR_accel_demand] = st->demand;
+    out[ATO_VR_v_ref] = st->v_ref;
+    out[ATO_VR_a_ref] = st->a_ref;
+    out[ATO_VR_speed_error] = -st->error;
+}
+
+int law_compute(law_core* c, double t, const ato_values* p, double* out, char* err, size_t n) {
+    (void)err; (void)n;
+    pid_state* st = &c->st;
+    const double* in = p->v;
+    double x = c->profile.distance ? in[ATO_VR_s] : t;
+    double v_ref = st->v_ref = ato_profile_speed(&c->profile, x);
+    double a_ref = st->a_ref = ato_profile_accel(&c->profile, x);
+    double v = in[ATO_VR_v];
+    double trac[UNITS], brake[UNITS], total_trac = 0.0, total_brake = 0.0;
+    for (int i = 0; i < UNITS; i++) {
+        trac[i] = pymax(in[ATO_VR_traction_limit_1 + i], 0.0);
+        brake[i] = pymax(in[ATO_VR_brake_limit_1 + i], 0.0);
+    }
+    for (int i = 0; i < UNITS; i++) total_trac += trac[i];
+    for (int i = 0; i < UNITS; i++) total_brake += brake[i];
+    double demand = update(c, v, v_ref, a_ref, -total_brake / c->mass, total_trac / c->mass);
+    if (v_ref <= 0.0 && a_ref <= 0.0 && v < c->stop_speed) {
+        demand = pymax(c->hold_accel, -total_brake / c->mass); /* hold at the stop */
+        st->demand = demand;
+    }
+    double force = c->mass * demand;
+    const double* share;
+    double total;
+    static const double none[UNITS];
+    if (force >= 0.0) {
+        share = total_trac > 0 ? trac : none;
+        total = total_trac;
+    } else {
+        share = brake;
+        total = total_brake;
+    }
+    for (int i = 0; i < UNITS; i++) st->forces[i] = total > 0 ? force * share[i] / total : 0.0;
+    law_outputs(c, out);
+    return 1;
+}
