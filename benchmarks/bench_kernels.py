@@ -13,19 +13,17 @@ relative difference of x, v, pressures and scalars; same operations, so 0 is exp
 Cases: ``cruise`` (brakes released, one pipe command: the common case of the closed loop) and
 ``brake wave`` (brake-pipe commands still travelling along the train, per-vehicle arrivals).
 
-Decision (issue 10 item 1): numba stays the production path. Measured on identical inputs the
-two run at the same speed (C / numba 0.8-1.1 over repeated runs on the shared 2-core machine,
-within the noise of the load) and give identical results (0 difference: same IEEE operations
-in the same order, the same libm ``pow``/``exp``), so speed does not decide. What does:
+Numba is the Python plant's production path. On identical inputs the two kernels perform the
+same IEEE operations in the same order with the same libm ``pow``/``exp``, so they give
+identical results (tests/test_kernels.py); their speed ratio is what this benchmark measures
+(docs/benchmarks.md). What decides between them:
 
 * build step: numba needs none (compiled on first use, kept in an on-disk cache keyed by the
   kernel's content, so an FMU extracted to a fresh folder loads it); C needs gcc at
   ``cosim build`` and a binary per platform inside every plant FMU;
 * portability: numba ships wheels for Linux, macOS and Windows on x86-64 and arm64 and
   compiles for the host CPU; a C kernel must be built (or cross-built) for each target;
-* FMU without Python later: here C would win, as the kernel is a self-contained function; but
-  the rest of a plant (command histories for the dead times, brake-pipe history, outputs,
-  serialisable FMU state, parameter checks) is Python too and would need porting first. The C
+* FMU without Python: the C kernel is a self-contained function. The C
   file, tested equal to the numba kernel (``tests/test_kernels.py``), is the kernel of the
   native FreightTrain FMU (``cosim/fmu/native/freight.c``, ``docs/native_fmus.md``), where
   that port is done.

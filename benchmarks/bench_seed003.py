@@ -2,12 +2,12 @@
 real-time factor (prints, asserts nothing).
 
 1. Closed loop of the cores (plant :class:`plants.crh3.Crh3Train`, controller
-   :class:`controllers.robust.rmpc.Crh3Rmpc`, eco profile, Clarabel) over ``--seconds`` s:
+   :class:`controllers.robust.rmpc.Crh3LmiMpc`, eco profile, Clarabel) over ``--seconds`` s:
    the LMI problems of every event are recorded (state and vertices).
 2. Replay of those problems (every ``--every``-th) with both solvers on one prebuilt (DPP)
    problem each: wall time per solve (median, p99), failures, and the largest gain difference
    |F_scs - F_clarabel| / |F_clarabel|.
-3. The scenario ``seed003_crh3_rmpc_eco`` through the master: real-time factor and the median
+3. The scenario ``seed003_crh3_lmimpc_eco`` through the master: real-time factor and the median
    LMI time the controller reports.
 
     python benchmarks/bench_seed003.py [--seconds 600] [--every 5] [--no-scenario]
@@ -28,7 +28,7 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 from controllers.common.lmi import KothareLmi  # noqa: E402
-from controllers.robust.rmpc import Crh3Rmpc  # noqa: E402
+from controllers.robust.rmpc import Crh3LmiMpc  # noqa: E402
 from cosim.fmu.state import to_ticks  # noqa: E402
 from plants.crh3 import Crh3Params, Crh3Train  # noqa: E402
 from plants.route import load_route  # noqa: E402
@@ -36,10 +36,10 @@ from plants.route import load_route  # noqa: E402
 MEASURED = ("v", "s", "traction_limit", "brake_limit")
 
 
-def record_problems(seconds: int, profile: str = "eco") -> tuple[Crh3Rmpc, list]:
+def record_problems(seconds: int, profile: str = "eco") -> tuple[Crh3LmiMpc, list]:
     """Run the cores; return the controller and every event's (x, vertices) LMI data."""
-    starts = {v.name: v.start for v in Crh3Rmpc.declarations() if v.causality == "parameter"}
-    ctl = Crh3Rmpc.from_parameters({**starts, "profile": profile}, data_dir=ROOT)
+    starts = {v.name: v.start for v in Crh3LmiMpc.declarations() if v.causality == "parameter"}
+    ctl = Crh3LmiMpc.from_parameters({**starts, "profile": profile}, data_dir=ROOT)
     plant = Crh3Train(Crh3Params(), load_route("seed003_crh3"))
     lmi = ctl.law.lmi
     problems: list = []
@@ -58,7 +58,7 @@ def record_problems(seconds: int, profile: str = "eco") -> tuple[Crh3Rmpc, list]
     return ctl, problems
 
 
-def replay(ctl: Crh3Rmpc, problems: list, every: int) -> dict[str, dict]:
+def replay(ctl: Crh3LmiMpc, problems: list, every: int) -> dict[str, dict]:
     p, law = ctl.p.rmpc, ctl.law
     chosen = problems[::every]
     out: dict[str, dict] = {}
@@ -89,7 +89,7 @@ def replay(ctl: Crh3Rmpc, problems: list, every: int) -> dict[str, dict]:
     return out
 
 
-def scenario(name: str = "seed003_crh3_rmpc_eco") -> dict:
+def scenario(name: str = "seed003_crh3_lmimpc_eco") -> dict:
     from cosim.fmu.build import build_stale
     from cosim.run.master import run_scenario
 
@@ -126,7 +126,7 @@ def main() -> None:
               f"{r['cpu_p99_ms']:.2f} ms; failures {r['failures']}{extra}")
     if not args.no_scenario:
         r = scenario()
-        print(f"scenario seed003_crh3_rmpc_eco: {r['real_time_factor']:.1f} x real time "
+        print(f"scenario seed003_crh3_lmimpc_eco: {r['real_time_factor']:.1f} x real time "
               f"({r['wall_s']:.1f} s wall), LMI median {r['lmi_median_ms']:.2f} ms, LMI total "
               f"{r['lmi_total_s']:.1f} s, speed MSE {r['speed_mse_kmh2']:.4f} (km/h)^2")
     print(f"load average {os.getloadavg()[0]:.1f}")

@@ -23,10 +23,17 @@ than the wall time on a shared machine) and, per communication step, the CPU tim
 plant's doStep, of the controller (its event runs when its outputs are read) and of the FMI
 calls around them in the fmpy loop, and the master's overhead (its CPU time minus plant and
 controller).
+* seed 001's claims campaign at K seeds (main and perturbed floating-point path) with 2
+  workers vs 1 and on a 2-worker local Dask cluster vs 1 worker (``bench_campaign.py``, one
+  run, load averages before and after);
 * seed 003's robust MPC: the LMI problem of an event (median over the closed loop's problems,
   replayed) with Clarabel vs SCS, and the eco scenario's real-time factor (``bench_seed003``).
 
-    python benchmarks/run_all.py [--quick]
+    python benchmarks/run_all.py [--quick] [--only campaign ...] [--campaign-seeds K]
+
+``--only``: measure only the named groups (``closed_loop``, ``kernels``, ``qp``, ``instances``,
+``master``, ``sweep``, ``campaign``, ``seed003``) and keep the other rows of the existing
+``results.json``; each row records when it was measured and the load average then.
 """
 
 from __future__ import annotations
@@ -46,6 +53,7 @@ HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 sys.path[:0] = [str(ROOT), str(HERE), str(ROOT / "tests")]
 
+import bench_campaign  # noqa: E402
 import bench_freight  # noqa: E402
 import bench_instances  # noqa: E402
 import bench_kernels  # noqa: E402
@@ -186,6 +194,25 @@ def sweep_speedup(repeat: int) -> dict:
             "load_average": [r["load_before"], r["load_after"]]}
 
 
+def campaign_speedups(seeds: int) -> dict[str, dict]:
+    """seed 001's claims at K = ``seeds`` (with the rounding rerun): 2 local workers vs 1 and
+    a 2-worker local Dask cluster vs 1 worker, in one run (bench_campaign)."""
+    r = bench_campaign.campaign(seeds)
+    what = f"K = {seeds}, {r['runs']} runs"
+    common = {"reference": r["1 worker"], "reference_name": f"1 worker (s; {what})",
+              "load_average": [r["load_before"], r["load_after"]], "seeds": seeds,
+              "cpu_s": {label: r[f"{label} cpu"] for label, _, _ in bench_campaign.WAYS}}
+    return {"campaign 2 vs 1 workers": {
+                "figure": r["2 workers"], "unit": "s, seed001 claims, --workers 2", **common,
+                "ratio": r["speedup_2_workers"], "ratio_name": "speed-up, 1 worker / 2",
+                "cpu_ratio": r["1 worker cpu"] / r["2 workers cpu"]},
+            "campaign Dask 2 vs 1 worker": {
+                "figure": r["dask 2 workers"], "unit": "s, seed001 claims, local Dask x 2",
+                **common, "ratio": r["speedup_dask"],
+                "ratio_name": "speed-up, 1 worker / Dask x 2",
+                "cpu_ratio": r["1 worker cpu"] / r["dask 2 workers cpu"]}}
+
+
 def seed003_lmi(quick: bool) -> dict:
     ctl, problems = bench_seed003.record_problems(150 if quick else 600)
     r = bench_seed003.replay(ctl, problems, 5)
@@ -201,11 +228,14 @@ def seed003_lmi(quick: bool) -> dict:
             "scenario_lmi_median_ms": sc["lmi_median_ms"]}
 
 
+GROUPS = ("closed_loop", "kernels", "qp", "instances", "master", "sweep", "campaign", "seed003")
 TARGETS = {"freight closed loop": ">= 500 x real time", "EMU closed loop": ">= 1000 x real time",
            "RMPC N=10 QP step": "<= 35 us", "further FMU instance": "<= 10 ms",
            "freight plant kernel": "", "EMU plant kernel": "", "freight kernel C vs numba": "",
            "master/raw seed000_stop_pid": "ratio <= 1.10", "master/raw seed002_freight_pid": "",
            "master/raw seed001_emu_pid": "", "sweep 2 vs 1 workers": "speed-up >= 1.7",
+           "campaign 2 vs 1 workers": "speed-up >= 1.8",
+           "campaign Dask 2 vs 1 worker": "speed-up >= 1.8",
            "seed 003 RMPC LMI event": "<= 20 ms median"}
 
 
@@ -213,24 +243,47 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="one repetition each")
     parser.add_argument("--out", type=Path, default=HERE / "results.json")
+    parser.add_argument("--only", nargs="+", choices=GROUPS, default=list(GROUPS),
+                        help="measure these groups only; keep the other rows of --out")
+    parser.add_argument("--campaign-seeds", type=int, default=20,
+                        help="K of the campaign benchmark (default 20)")
     args = parser.parse_args()
     repeat = 1 if args.quick else 3
     build_stale()
     rows: dict[str, dict] = {}
-    rows["freight closed loop"], freight_result = closed_loop(FREIGHT, repeat)
-    rows["freight plant kernel"] = freight_plant(freight_result, repeat)
-    rows["freight kernel C vs numba"] = freight_kernel_c(2000 if repeat > 1 else 500)
-    rows["EMU closed loop"], emu_result = closed_loop(EMU, repeat)
-    rows["EMU plant kernel"] = emu_plant(emu_result, repeat)
-    rows["RMPC N=10 QP step"] = qp(20 if repeat > 1 else 5)
-    rows["further FMU instance"] = instances()
-    for scenario in bench_master.SCENARIOS:
-        rows[f"master/raw {scenario}"] = master_overhead(scenario, repeat if scenario == FREIGHT
-                                                         or scenario == EMU else 5 * repeat)
-    rows["sweep 2 vs 1 workers"] = sweep_speedup(5 if repeat > 1 else 1)  # noisy: 5 pairs
-    rows["seed 003 RMPC LMI event"] = seed003_lmi(args.quick)
+    if set(args.only) != set(GROUPS) and args.out.is_file():
+        rows = json.loads(args.out.read_text()).get("benchmarks", {})
+    measured: dict[str, dict] = {}
+    only = set(args.only)
+    if "closed_loop" in only or "kernels" in only:
+        measured["freight closed loop"], freight_result = closed_loop(FREIGHT, repeat)
+        measured["EMU closed loop"], emu_result = closed_loop(EMU, repeat)
+    if "kernels" in only:
+        measured["freight plant kernel"] = freight_plant(freight_result, repeat)
+        measured["freight kernel C vs numba"] = freight_kernel_c(2000 if repeat > 1 else 500)
+        measured["EMU plant kernel"] = emu_plant(emu_result, repeat)
+    if "qp" in only:
+        measured["RMPC N=10 QP step"] = qp(20 if repeat > 1 else 5)
+    if "instances" in only:
+        measured["further FMU instance"] = instances()
+    if "master" in only:
+        for scenario in bench_master.SCENARIOS:
+            measured[f"master/raw {scenario}"] = master_overhead(
+                scenario, repeat if scenario == FREIGHT or scenario == EMU else 5 * repeat)
+    if "sweep" in only:
+        measured["sweep 2 vs 1 workers"] = sweep_speedup(5 if repeat > 1 else 1)  # noisy
+    if "campaign" in only:
+        measured.update(campaign_speedups(args.campaign_seeds))
+    if "seed003" in only:
+        measured["seed 003 RMPC LMI event"] = seed003_lmi(args.quick)
+    stamp = time.strftime("%Y-%m-%d %H:%M:%S", time.gmtime())
+    for r in measured.values():
+        r.setdefault("measured_utc", stamp)
+        r.setdefault("load_average", os.getloadavg()[0])
+    rows.update(measured)
+    rows = {name: rows[name] for name in TARGETS if name in rows}  # the table's order
     print(f"{'benchmark':<30} {'figure':>10}  {'reference':>10}  {'ratio':>7}  target / units")
-    for name, r in rows.items():
+    for name, r in measured.items():
         r["target"] = TARGETS[name]
         print(f"{name:<30} {r['figure']:>10.1f}  {r['reference']:>10.1f}  {r['ratio']:>7.2f}  "
               f"{r['target'] or '-'}; {r['unit']}; ref: {r['reference_name']}; "
@@ -245,11 +298,13 @@ def main() -> None:
                   f"{case['c_us_per_substep']:.2f}, numpy {case['numpy_us_per_substep']:.1f} "
                   f"us/sub-step; max rel. diff numba-C {case['max_rel_diff_numba_c']:.1e}")
     meta = {"python": platform.python_version(), "machine": platform.machine(),
-            "cpus": os.cpu_count(), "load_average": os.getloadavg(),
-            "date_utc": time.strftime("%Y-%m-%d %H:%M:%S", time.gmtime())}
+            "cpus": os.cpu_count(), "load_average": os.getloadavg(), "date_utc": stamp}
+    if set(args.only) != set(GROUPS) and args.out.is_file():  # a partial update
+        meta = {**json.loads(args.out.read_text()).get("meta", {}),
+                "updated_utc": stamp, "updated_groups": ", ".join(args.only)}
     args.out.write_text(json.dumps({"meta": meta, "benchmarks": rows}, indent=1,
                                    default=float) + "\n")
-    print(f"wrote {args.out} (load average {meta['load_average'][0]:.1f} on {meta['cpus']} "
+    print(f"wrote {args.out} (load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} "
           "cores: figures scale with it)")
     if args.out == docs_pages.BENCHMARKS_JSON:  # the site's page follows its source
         page = docs_pages.DOCS / "benchmarks.md"

@@ -47,7 +47,7 @@ from controllers.datadriven.emu_control import (  # noqa: E402
 )
 from controllers.datadriven.laws import IsmcParams, IsmpcParams, MfacParams  # noqa: E402
 from cosim.fmu.state import to_ticks  # noqa: E402
-from cosim.run.metrics import unit_indices  # noqa: E402
+from cosim.papers.seed001 import unit_indices  # noqa: E402
 from plants.emu import Emu, emu_config  # noqa: E402
 from plants.route import load_reference, load_route  # noqa: E402
 

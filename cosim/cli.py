@@ -395,6 +395,8 @@ def sweep(
     shared_fmus: Annotated[bool, typer.Option(
         "--shared-fmus", help="with --scheduler: the workers read the FMUs at this machine's "
         "paths (a shared file system) instead of receiving uploaded copies")] = False,
+    plot_format: Annotated[str, typer.Option(
+        "--format", help="figure file format: png (200 dpi), svg or pdf")] = "png",
 ) -> None:
     """Run scenarios over a parameter grid in parallel; write sweep.csv (a row per point as it
     finishes, with status and error) and sweep.png. A failed point does not stop the others
@@ -402,12 +404,15 @@ def sweep(
     --scheduler: the same grid on a Dask cluster. With --perturb: every grid point on the same
     seeded random plants (perturb.csv, perturb_summary.csv, perturb.png)."""
     from cosim.run import interrupt
+    from cosim.run.console import fit_table
     from cosim.run.master import SimulationError
-    from cosim.run.results import check_destination
+    from cosim.run.results import PLOT_FORMATS, check_destination
     from cosim.run.scenario import ScenarioError, find_scenario
     from cosim.run.sweep import parse_grid, run_sweep
 
     try:
+        if plot_format not in PLOT_FORMATS:
+            raise ValueError(f"--format {plot_format}: one of {', '.join(PLOT_FORMATS)}")
         grid = parse_grid(set_)
         stems = [find_scenario(s).stem for s in scenarios]
         target = out_dir or Path("runs") / ("sweep_" + "_".join(stems))
@@ -419,38 +424,30 @@ def sweep(
             raise ValueError("--perturb runs in the local process pool; --scheduler is not "
                              "supported with it")
         if perturb:
-            _perturbed_sweep(scenarios, grid, perturb, samples, seed, target, workers, no_plot)
+            _perturbed_sweep(scenarios, grid, perturb, samples, seed, target, workers, no_plot,
+                             plot_format)
             return
         frame = run_sweep(scenarios, grid, target, workers, plot=not no_plot, resume=resume,
-                          scheduler=scheduler, shared_fmus=shared_fmus)
+                          scheduler=scheduler, shared_fmus=shared_fmus,
+                          plot_format=plot_format)
     except interrupt.Interrupted as err:
         console.print(f"[bold yellow]{escape(str(err))}[/]; the finished rows are in "
                       f"{escape(str(target))}/sweep.csv", highlight=False, soft_wrap=True)
         raise typer.Exit(interrupt.EXIT_INTERRUPTED) from None
     except (ValueError, ScenarioError, SimulationError) as err:
         _fail(str(err))
-    table = Table(title=escape(f"sweep over {', '.join(grid)}"))
     columns = ["scenario", *grid, "status", "stop_error_m", "controller_executions",
                "command_switches", "qp_infeasible"]
     labels = {"stop_error_m": "stop error m", "controller_executions": "executions",
-              "command_switches": "switches", "qp_infeasible": "infeasible"}
-    for col in columns:
-        table.add_column(escape(labels.get(col, col.rpartition(".")[2])),
-                         justify="left" if col in ("scenario", "status") else "right")
-
-    def cell(row, col: str) -> str:
-        value = row[col]
-        if value is None or value != value:  # None or NaN (a failed point)
-            return "-"
-        if isinstance(value, float) and value.is_integer() and col != "stop_error_m":
-            value = int(value)  # a count in a column that also holds empty cells
-        return f"{value:+.3f}" if col == "stop_error_m" else escape(str(value))
-
-    for _, row in frame.iterrows():
-        table.add_row(*[cell(row, c) for c in columns])
-    out.print(table)
-    out.print(f"wrote {target}/sweep.csv" + ("" if no_plot else ", sweep.png"), highlight=False,
-              markup=False)
+              "command_switches": "switches", "qp_infeasible": "infeasible",
+              **{k: k.rpartition(".")[2] for k in grid}}
+    rows = [{c: (None if row[c] is None or row[c] != row[c] else row[c]) for c in columns}
+            for row in frame.to_dict("records")]
+    out.print(fit_table(rows, columns, labels, signed=["stop_error_m"],
+                        title=f"sweep over {', '.join(grid)} (every column: sweep.csv)"),
+              markup=False, highlight=False, soft_wrap=True)
+    out.print(f"wrote {target}/sweep.csv" + ("" if no_plot else f", sweep.{plot_format}"),
+              highlight=False, markup=False)
     failed = frame[frame["status"] != "ok"]
     for _, row in failed.iterrows():
         point = ", ".join(f"{k}={row[k]}" for k in grid)
@@ -462,15 +459,14 @@ def sweep(
 
 def _perturbed_sweep(scenarios: list[str], grid: dict[str, list[Any]], perturb: list[str],
                      samples: int, seed: int, target: Path, workers: int | None,
-                     no_plot: bool) -> None:
+                     no_plot: bool, plot_format: str = "png") -> None:
     """The mismatch study of ``cosim sweep --perturb`` and its table."""
+    from cosim.run.console import fit_table
     from cosim.run.perturb import parse_perturb, run_perturbed
 
     perts = parse_perturb(perturb)
     _, summary = run_perturbed(scenarios, grid, perts, samples, seed, target, workers,
-                               plot=not no_plot)
-    table = Table(title=f"{samples} perturbed plants (seed {seed}): "
-                        + ", ".join(perturb))
+                               plot=not no_plot, plot_format=plot_format)
     columns = [c for c in ["scenario", *grid, "runs", "stop_error_min_m", "stop_error_median_m",
                            "stop_error_max_m", "inside_window", "executions_median",
                            "qp_infeasible_total", "qp_infeasible_max",
@@ -481,17 +477,14 @@ def _perturbed_sweep(scenarios: list[str], grid: dict[str, list[Any]], perturb: 
               "executions_median": "executions", "qp_infeasible_total": "infeasible",
               "qp_infeasible_max": "infeasible max/run",
               "qp_infeasible_after_stop_total": "after stop", "command_min": "u min",
-              "command_max": "u max"}
-    for col in columns:
-        table.add_column(labels.get(col, col.rpartition(".")[2]),
-                         justify="left" if col == "scenario" else "right")
-    for _, row in summary.iterrows():
-        table.add_row(*[f"{row[c]:+.3f}" if c.startswith("stop_error") else
-                        f"{row[c]:g}" if isinstance(row[c], float) else str(row[c])
-                        for c in columns])
-    out.print(table)
+              "command_max": "u max", **{k: k.rpartition(".")[2] for k in grid}}
+    out.print(fit_table(summary.to_dict("records"), columns, labels,
+                        signed=[c for c in columns if c.startswith("stop_error")],
+                        title=f"{samples} perturbed plants (seed {seed}): " + ", ".join(perturb)
+                        + " (every column: perturb_summary.csv)"),
+              markup=False, highlight=False, soft_wrap=True)
     out.print(f"wrote {target}/perturb.csv, perturb_summary.csv"
-              + ("" if no_plot else ", perturb.png"))
+              + ("" if no_plot else f", perturb.{plot_format}"), markup=False, highlight=False)
 
 
 @app.command()
@@ -532,35 +525,44 @@ def reproduce(
         "--no-rounding", help="skip the claims' rerun on the perturbed floating-point "
         "path (then no claim is marked rounding-robust)")] = False,
     scheduler: Annotated[str | None, typer.Option(
-        help="run the claims' ensemble on a Dask cluster: its address, or 'local-dask' for "
-        "a local cluster of --workers processes")] = None,
+        help="run the runs on a Dask cluster: its address, or 'local-dask' for a local "
+        "cluster of --workers processes")] = None,
+    plot_format: Annotated[str, typer.Option(
+        "--format", help="figure file format: png (200 dpi), svg or pdf")] = "png",
 ) -> None:
     """Reproduce a paper's results: run its scenarios, write the table (ours beside the
     paper's), the sweeps and the figures, and test its claims over K seeds (claims.csv,
     claims.md: median [95 % CI], k of K, verdict); 'all' writes one REPRODUCTION.md."""
+    from cosim.run import interrupt, runner
     from cosim.run.master import SimulationError
     from cosim.run.reproduce import ReproduceError, entry_names, reproduce_all
     from cosim.run.reproduce import reproduce as reproduce_entry
-    from cosim.run.results import OutputError, check_destination
+    from cosim.run.results import PLOT_FORMATS, OutputError, check_destination
     from cosim.run.scenario import ScenarioError
 
     try:
+        if plot_format not in PLOT_FORMATS:
+            raise OutputError(f"--format {plot_format}: one of {', '.join(PLOT_FORMATS)}")
+        runner.check_workers(workers, scheduler)
         if out_dir is not None:
             check_destination(out_dir)
         if name == "all":
-            path = reproduce_all(out_dir, workers, seeds, not no_rounding, scheduler)
+            path = reproduce_all(out_dir, workers, seeds, not no_rounding, scheduler,
+                                 plot_format)
         else:
             if name not in entry_names() and not Path(name).is_file():
                 raise ReproduceError(f"no reproduction entry {name!r} "
                                      f"(known: {', '.join(entry_names())}, all)")
             path = reproduce_entry(name, out_dir, workers, seeds, not no_rounding,
-                                    scheduler)
-    except (ReproduceError, ScenarioError, SimulationError, OutputError) as err:
+                                   scheduler, plot_format)
+    except interrupt.Interrupted as err:
+        console.print(f"[bold yellow]{escape(str(err))}[/]", highlight=False, soft_wrap=True)
+        raise typer.Exit(interrupt.EXIT_INTERRUPTED) from None
+    except (ReproduceError, ScenarioError, SimulationError, OutputError, ValueError) as err:
         _fail(str(err))
     except OSError as err:  # a folder that became unwritable during the run
         _fail(f"cannot write {err.filename or out_dir}: {err.strerror or err}")
-    out.print(path.read_text(), markup=False, highlight=False)
-    out.print(f"wrote {path}")
+    out.print(f"wrote {path}", highlight=False, markup=False)
 
 
 def cli_reference() -> str:
@@ -601,7 +603,7 @@ def docs(check: Annotated[bool, typer.Option(
     the FMU reference (docs/fmus.md, from the cores' declarations), the benchmarks
     (docs/benchmarks.md, from benchmarks/results.json) and a page per paper
     (docs/papers/NAME.md, from runs/reproduce/NAME/ where it exists)."""
-    from cosim.run.docs_pages import DOCS, generated_pages, stale, write
+    from cosim.run.docs_pages import DOCS, generated_pages, stale, stale_papers, write
 
     def pages():
         yield DOCS / "cli.md", cli_reference().encode()
@@ -612,10 +614,15 @@ def docs(check: Annotated[bool, typer.Option(
         if old:
             _fail("out of date: " + ", ".join(str(p) for p in old) + ": run `cosim docs`",
                   code=1)
+        papers = stale_papers()
+        if papers:
+            _fail("paper pages not made from this tree:\n  " + "\n  ".join(papers), code=1)
         out.print("generated pages are up to date")
         return
     for path in write(pages()):
         out.print(f"wrote {path}", highlight=False, markup=False)
+    for line in stale_papers():
+        out.print(f"[yellow]stale:[/] {line}", highlight=False)
 
 
 def main() -> None:  # pragma: no cover - console entry point

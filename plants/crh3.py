@@ -32,6 +32,7 @@ Energy (eq. 9), each integral kept separately in joules::
     energy_regen    = eta_b int(max(-F, 0) v dt)
     energy_aux      = e0 (t - t0)
     energy_net      = energy_traction - energy_regen + energy_aux
+    brake_work      = int(max(-F, 0) v dt)          (Table 2's positive braking energy)
 
 The work integrals of resistance (basic + curve + tunnel) and grade are kept too, so the
 mechanical balance ``W_traction = dKE + W_grade + W_resistance + W_brake`` can be checked
@@ -174,6 +175,8 @@ class Crh3Train(StatefulCore, Declared):
         Var.output("energy_regen", "J", "eta_b int(B v dt) since the start (eq. 9)"),
         Var.output("energy_aux", "J", "e0 (t - t0) (eq. 9)"),
         Var.output("energy_net", "J", "energy_traction - energy_regen + energy_aux (eq. 9)"),
+        Var.output("brake_work", "J", "int(B v dt) since the start: the work of the brakes, "
+                   "fed back and lost (the positive braking energy of seed 003's Table 2)"),
     )
 
     @classmethod
@@ -318,7 +321,7 @@ class Crh3Train(StatefulCore, Declared):
         regen = p.regen_efficiency * self.work_brake
         aux = p.aux_power * to_seconds(self.t_ticks - self.t0_ticks)
         return {"energy_traction": trac, "energy_regen": regen, "energy_aux": aux,
-                "energy_net": trac - regen + aux}
+                "energy_net": trac - regen + aux, "brake_work": self.work_brake}
 
     def outputs(self) -> dict[str, float]:
         p = self.p

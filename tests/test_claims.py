@@ -172,3 +172,86 @@ def test_reproduction_summary_counts_verdicts(tmp_path: Path) -> None:
     lines = claims_summary(tmp_path, ["a", "b"]).splitlines()
     assert lines[2] == "| a | 3 | 2 | 1 | 0 | 0 |"
     assert lines[3] == "| b | 0 | - | - | - | - |"
+
+
+def test_ratio_ci_of_repeated_timings() -> None:
+    """The ratio of medians of two independent repetition sets with its bootstrap CI: exact
+    for constant repetitions, proportional to a scale of one side (same resamples), bracketing
+    the point ratio, and without bounds under 3 repetitions."""
+    from cosim.run.claims import ratio_ci
+
+    assert ratio_ci(np.full(5, 2.0), np.full(4, 1.0)) == (2.0, 2.0, 2.0)
+    rng = np.random.default_rng(3)
+    a, b = rng.normal(10.0, 1.0, 10), rng.normal(20.0, 2.0, 10)
+    r, lo, hi = ratio_ci(a, b)
+    assert lo <= r <= hi and lo < hi
+    r3, lo3, hi3 = ratio_ci(3.0 * a, b)
+    assert (r3, lo3, hi3) == pytest.approx((3 * r, 3 * lo, 3 * hi), rel=1e-12)
+    r2, lo2, hi2 = ratio_ci(a[:2], b)
+    assert r2 == pytest.approx(np.median(a[:2]) / np.median(b)) and np.isnan(lo2)
+
+def _variant_entry() -> object:
+    from types import SimpleNamespace
+
+    return SimpleNamespace(
+        claims=[LESS, {**LESS, "id": "c_below_b", "runs": ["C", "B"]}],
+        variants=[{"name": "alt", "replace": {"A": "A2"}, "seeds": 4}],
+        ensemble=check_ensemble("e.toml", {"seed_key": "plant.seed", "report_seeds": "1..6"}),
+        runs=[{"name": n, "scenario": "s"} for n in ("A", "A2", "B", "C")], path="e.toml")
+
+
+def test_variants_replace_runs_in_every_claim_and_get_their_own_verdicts() -> None:
+    from cosim.run.ensemble import claim_jobs, evaluate
+
+    entry = _variant_entry()
+    jobs = {key for key, _sc, _ov in claim_jobs(entry, 6, rounding=False)}
+    # A2 runs on the variant's 4 seeds only; the claim on C vs B is untouched by the variant
+    assert {k for k in jobs if k[0] == "A2"} == {("A2", "disturbance", i, False)
+                                                  for i in range(4)}
+    # A2 below B on every seed, A above B: the variant flips the verdict of a_below_b only
+    summaries = {}
+    for run, value in (("A", 2.0), ("A2", 0.0), ("B", 1.0), ("C", 0.0)):
+        for i in range(6):
+            summaries[(run, "disturbance", i, False)] = {"m": value + 0.01 * i}
+    main = evaluate(entry, summaries, 6, rounding=False)
+    alt = evaluate(entry, summaries, 6, rounding=False, variants=True)
+    assert [(r["id"], r["verdict"]) for r in main] == [("a_below_b", "fails"),
+                                                       ("c_below_b", "holds")]
+    assert [(r["variant"], r["id"], r["verdict"], r["K"]) for r in alt] == [
+        ("alt", "a_below_b", "holds", 4)]
+
+
+@pytest.mark.parametrize("variant,message", [
+    ({"name": "v", "replace": {"A": "Z"}}, "replace: 'Z' is not one of"),
+    ({"name": "main", "replace": {"A": "B"}}, "name = 'main'"),
+    ({"name": "v", "replace": {}}, "replace = \\{\\}"),
+    ({"name": "v", "replace": {"A": "B"}, "seeds": 0}, "seeds = 0"),
+    ({"name": "v", "replace": {"A": "B"}, "colour": 1}, "unknown key"),
+])
+def test_variant_schema_errors_name_file_key_and_value(variant: dict, message: str) -> None:
+    from cosim.run.claims import check_variants
+
+    with pytest.raises(ClaimsError, match=f"e.toml: \\[\\[variants\\]\\].*{message}"):
+        check_variants("e.toml", [variant], ["A", "B"])
+
+
+def test_panels_ensemble_figure_draws_limits(tmp_path: Path) -> None:
+    import pandas as pd
+
+    from cosim.run.ensemble import draw_ensemble_figure
+
+    dirs = []
+    for i in range(3):
+        d = tmp_path / f"m{i}"
+        d.mkdir()
+        t = np.linspace(0.0, 10.0, 11)
+        pd.DataFrame({"time": t, "plant.v[1]": t + i, "plant.v[2]": t - i,
+                      "controller.v_ref": t}).to_csv(d / "results.csv", index=False)
+        dirs.append(d)
+    spec = {"file": "f.png", "kind": "panels", "x": "time", "y": ["plant.v[1]", "plant.v[2]"],
+            "y_minus": "controller.v_ref", "y_scale": 3.6, "limit_ref": "controller.v_ref"}
+    draw_ensemble_figure(spec, {"A": dirs, "B": dirs}, tmp_path / "f_ensemble.png")
+    assert (tmp_path / "f_ensemble.png").stat().st_size > 0
+    spec["limit_ref"] = "controller.missing"
+    with pytest.raises(ReproduceError, match="recorded no 'controller.missing'"):
+        draw_ensemble_figure(spec, {"A": dirs}, tmp_path / "g.png")

@@ -220,10 +220,10 @@ def test_dense_qp_matches_the_clipped_solution_of_a_separable_problem() -> None:
     assert x == pytest.approx(np.clip(-q / h, lo, hi), rel=1e-12, abs=1e-12)  # active set
 
 
-# ISMC's Delta and ISMPC's theta are ours, in this plant's units: their first design (Delta 0.1,
-# the layer's pull beta / Delta = 0.5 per sample; theta 10); the EMU's defaults (1 km/h, 300)
-# are tuned for that plant's units (benchmarks/seed001_tuning.py)
-@pytest.mark.parametrize("law_cls,params", [(Mfac, MfacParams()),
+# ISMC's Delta and ISMPC's theta are ours, set here for this plant's units (Delta 0.1: the
+# layer's pull beta / Delta = 0.5 per sample; theta 10); the EMU's defaults are tuned for the
+# train (controllers/datadriven/tuned.py); MFAC as the paper gives it (delta 1, no sharing)
+@pytest.mark.parametrize("law_cls,params", [(Mfac, MfacParams(delta=1.0, share_gain=0.0)),
                                             (Ismc, IsmcParams(boundary_layer=0.1)),
                                             (Ismpc, IsmpcParams(theta=10.0)),
                                             (GpcLaw, GpcLawParams())])

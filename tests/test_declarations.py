@@ -88,7 +88,7 @@ def _default_params(cls) -> object:
             "DistributedSpeedPid": lambda: DistributedSpeedPidParams(units=units),
             "HybridMpc": HybridMpcParams,
             "MoveBlockingMpc": lambda: HybridMpcParams(move_blocks="3:4:3"),
-            "ExplicitMpc": lambda: HybridMpcParams(move_blocks="3:4:3"),
+            "ExplicitMpc": lambda: core.default_params,
             }[core.__name__]()
 
 

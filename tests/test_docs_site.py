@@ -65,20 +65,21 @@ def test_cli_reference_lists_every_command_and_option() -> None:
                     assert opt in text, (name, opt)
 
 
-def test_paper_page_prefers_claims_and_copies_figures(tmp_path: Path) -> None:
+def test_paper_page_is_the_whole_table_else_the_claims_and_copies_figures(tmp_path: Path
+                                                                           ) -> None:
     run = tmp_path / "seedX"
     (run / "fig").mkdir(parents=True)
-    (run / "table.md").write_text("## T\n\nthe table\n")
+    (run / "claims.md").write_text("## Claims\n\n![a](fig/a.png) [web](https://x.org/y.png)\n")
     (run / "fig" / "a.png").write_bytes(b"PNG")
     page = docs_pages.paper_page("seedX", run)
     assert page is not None
-    assert b"the table" in page[DOCS / "papers" / "seedX.md"]
-    (run / "claims.md").write_text("## Claims\n\n![a](fig/a.png) [web](https://x.org/y.png)\n")
-    page = docs_pages.paper_page("seedX", run)
     text = page[DOCS / "papers" / "seedX.md"].decode()
-    assert "the table" not in text and text.count("# Claims") == 1
+    assert text.count("# Claims") == 1
     assert "![a](seedX/fig/a.png)" in text and "(https://x.org/y.png)" in text
     assert page[DOCS / "papers" / "seedX" / "fig" / "a.png"] == b"PNG"
+    (run / "table.md").write_text("## T\n\nthe table, claims, figures and notes\n")
+    page = docs_pages.paper_page("seedX", run)
+    assert b"the table, claims" in page[DOCS / "papers" / "seedX.md"]
     assert docs_pages.paper_page("seedY", tmp_path / "none") is None
 
 

@@ -106,3 +106,31 @@ def test_scenarios_follow_their_profiles_on_time_and_energy(tmp_path) -> None:
         planned = sp.traction_work(sp.generate(kind, ROUTE), ROUTE) / eta_m / 1e6
         # closed loop: tracking errors of <= 3 km/h and the 0.5 s force lag cost a little
         assert summary["energy_traction_mj"] == pytest.approx(planned, rel=0.03)
+
+
+def test_the_identified_start_is_the_lmi_mpcs_departure_model_in_gpc_units() -> None:
+    """``model_start = "identified"`` starts the RLS model from the lowest-speed ARX model of
+    the robust MPC's set, dv(k) = a dv(k-1) + b' du(k-1) with b' = b 100 (1 + gamma) / (3.6 g)
+    (km/h per daN/kN to m/s per m/s^2): one sample of each model gives the same speed change;
+    "cold" keeps A = 0, B = b_init; another name is refused."""
+    import dataclasses
+
+    from controllers.robust.rmpc import load_model_set
+    from plants.route import GRAVITY
+
+    arx = load_model_set("identified")
+    params = Crh3GpcParams()
+    ctl = Crh3Gpc(params, _controller().profile)
+    a, b = ctl.gpc.theta[0]
+    assert a == arx.a[0]
+    gamma = params.track.rotating_mass_factor
+    du = 0.1  # m/s^2, one input step
+    assert b * du == pytest.approx(arx.b[0] * du * 100.0 * (1.0 + gamma) / GRAVITY / 3.6,
+                                   rel=1e-12)
+    cold = dataclasses.replace(params, start=dataclasses.replace(params.start,
+                                                                   model_start="cold"))
+    assert Crh3Gpc(cold, ctl.profile).gpc.theta.tolist() == [[0.0, params.gpc.b_init]]
+    bad = dataclasses.replace(params, start=dataclasses.replace(params.start,
+                                                                  model_start="warm"))
+    with pytest.raises(ValueError, match="model_start"):
+        Crh3Gpc(bad, ctl.profile)

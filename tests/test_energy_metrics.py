@@ -1,4 +1,4 @@
-"""Seed 003 summary metrics (cosim/run/metrics.py): eq. 9 energies, per Table 2 phase, counted
+"""Seed 003 summary metrics (cosim/papers/seed003.py): eq. 9 energies, per Table 2 phase, counted
 up to the arrival; and the reproduce entry's derived saving rows."""
 
 from __future__ import annotations
@@ -7,7 +7,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from cosim.run.metrics import _arrival_index, _energy_metrics
+from cosim import papers
+from cosim.run.metrics import _arrival_index
 from cosim.run.reproduce import ReproduceError, derived_rows, load_entry
 
 CFG = {"energy_traction": "p.et", "energy_regen": "p.er", "energy_aux": "p.ea",
@@ -27,12 +28,16 @@ def _frame() -> pd.DataFrame:
                          "c.phase": phase})
 
 
+def _energy(frame: pd.DataFrame, cfg: dict, arrival: int | None) -> dict:
+    run = papers.RunRecord(frame=frame, summary=cfg, arrival_index=arrival)
+    return papers.compute(["energy", "energy_phases"], run)
+
+
 def test_energy_per_phase_sums_to_the_total_up_to_the_arrival() -> None:
     frame = _frame()
     arrival = _arrival_index(frame["p.v"].to_numpy())
     assert arrival == 8
-    out: dict = {}
-    _energy_metrics(out, CFG, frame, arrival)
+    out = _energy(frame, CFG, arrival)
     assert out["energy_traction_mj"] == pytest.approx(3 * 4 + 3 * 2)
     assert out["energy_regen_mj"] == pytest.approx(2 * 3)  # braking 6-8 s only
     assert out["energy_aux_mj"] == pytest.approx(8.0)  # standing after 8 s not counted
@@ -48,12 +53,9 @@ def test_still_moving_at_the_end_counts_the_whole_run_and_missing_columns_give_n
     frame = _frame()
     frame["p.v"] = 1.0
     assert _arrival_index(frame["p.v"].to_numpy()) is None
-    out: dict = {}
-    _energy_metrics(out, CFG, frame, None)
+    out = _energy(frame, CFG, None)
     assert out["energy_aux_mj"] == pytest.approx(10.0)
-    none: dict = {}
-    _energy_metrics(none, {"energy_traction": "p.et"}, frame, None)
-    assert none == {}
+    assert _energy(frame, {"energy_traction": "p.et"}, None) == {}
 
 
 def test_derived_saving_rows(tmp_path) -> None:

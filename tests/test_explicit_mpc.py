@@ -120,6 +120,10 @@ def test_regions_built_for_another_design_are_refused(tmp_path) -> None:
         ExplicitMpc(P, load_reference(REF), regions=tmp_path / "none.npz")
     with pytest.raises(ValueError, match="scheduled"):
         ExplicitMpc(dataclasses.replace(P, delta_mode="optimise"), load_reference(REF))
+    with pytest.raises(ValueError, match="dR = 0.5"):
+        ExplicitMpc(dataclasses.replace(P, r_increment=0.5), load_reference(REF))
+    with pytest.raises(ValueError, match="evaluation"):
+        ExplicitMpc(P, load_reference(REF), evaluation="lookup")
 
 
 def test_empc_fmu_through_the_master(built_fmus) -> None:
@@ -138,23 +142,16 @@ def test_empc_fmu_through_the_master(built_fmus) -> None:
 
 
 @pytest.mark.slow
-def test_table3_trends_and_empc_over_the_whole_run(built_fmus) -> None:
-    """Whole 800 s runs (seed 004 Table 3 and 4): Case 2 (3 R) keeps a steady error and uses
-    less energy and smaller coupler forces than Case 1; Case 3 (N = 3) loses tracking; EMPC
-    tracks like GMPC, uses the same energy and never leaves its regions."""
+def test_cases_and_empc_complete_the_whole_run(built_fmus) -> None:
+    """Whole 800 s runs of Cases 1-3 and the EMPC: every MIQP solved, the EMPC never outside
+    its regions. The paper's Table 3 and 4 comparisons are claims of ``cosim reproduce
+    seed004`` (claims.csv), not pinned here."""
     from cosim.run.master import run_scenario
 
     s = {name: run_scenario(f"scenarios/seed004_crh3_{name}.toml", plot=False).summary
          for name in ("gmpc_case1", "gmpc_case2", "gmpc_case3", "empc")}
-    c1, c2, c3, em = s["gmpc_case1"], s["gmpc_case2"], s["gmpc_case3"], s["empc"]
     assert all(x["completed"] and x["qp_infeasible"] == 0 for x in s.values())
-    assert c2["energy_kj"] < c1["energy_kj"]
-    assert c2["max_coupler_force_kn"] < c1["max_coupler_force_kn"]
-    assert c2["speed_rmse_mps"] > 1.5 * c1["speed_rmse_mps"]  # the steady error
-    assert c3["speed_rmse_mps"] > 10 * c1["speed_rmse_mps"]  # tracking lost
-    assert c3["energy_kj"] < c1["energy_kj"]
-    assert em["speed_rmse_mps"] < 2 * c1["speed_rmse_mps"]
-    assert em["energy_kj"] == pytest.approx(c1["energy_kj"], rel=0.01)
+    assert s["empc"]["qp_solves"] == 801
 
 
 @pytest.mark.slow
@@ -167,3 +164,44 @@ def test_empc_core_never_leaves_its_regions_over_the_whole_run() -> None:
 
     ctl, _, _ = closed_loop(ExplicitMpc)
     assert ctl.outside == 0 and ctl.qp_infeasible == 0 and ctl.qp_solves == 801
+
+
+def test_explicit_law_equals_its_online_twin_on_closed_loop_states() -> None:
+    """EMPC in closed loop with the plant core over the first 260 s (start, the target change
+    at 200 s): at every visited state the region lookup gives the force the online twin
+    (``evaluation = "online"``: the same mp-QP solved by DAQP) gives, to the tolerance of
+    the random-parameter test, and the twin run in its own closed loop visits the same
+    states."""
+    from cosim.fmu.state import to_ticks
+    from plants.emu import Emu
+    from plants.route import load_route
+
+    profile = load_reference(REF)
+    names = ([f"v[{i}]" for i in (1, 2, 3)] + ["s", "coupler_force[1]", "coupler_force[2]"]
+             + [f"traction_limit[{i}]" for i in (1, 2, 3)]
+             + [f"brake_limit[{i}]" for i in (1, 2, 3)])
+
+    def run(evaluation: str, shadow: bool) -> tuple[list[float], float]:
+        ctl = ExplicitMpc(P, profile, evaluation=evaluation)
+        twin = ExplicitMpc(P, profile, evaluation="online") if shadow else None
+        plant = Emu(TRAIN, load_route("seed004_level"))
+        speeds, worst = [], 0.0
+        for k in range(260):
+            o = plant.outputs()
+            inputs = {n: o[n] for n in names}
+            out, _ = ctl.compute(float(k), inputs)
+            if twin is not None:
+                other, _ = twin.compute(float(k), inputs)
+                worst = max(worst, max(abs(out[f"force[{i}]"] - other[f"force[{i}]"]) / 1e3
+                                       for i in (1, 2, 3)))
+            speeds.append(o["v"])
+            plant.advance(to_ticks(k), to_ticks(1.0), {f"force[{i}]": out[f"force[{i}]"]
+                                                       for i in (1, 2, 3)})
+        assert ctl.outside == 0 and ctl.qp_infeasible == 0
+        return speeds, worst
+
+    explicit, worst = run("explicit", shadow=True)
+    assert worst <= 1e-6  # kN
+    online, _ = run("online", shadow=False)
+    # equal forces to 1e-6 kN on a ~500 t train move the speed by < 1e-8 m/s per second
+    np.testing.assert_allclose(online, explicit, rtol=0, atol=1e-6)

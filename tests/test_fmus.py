@@ -426,7 +426,7 @@ def _crh3_coasting_on_level_track(path: Path) -> None:
         fmu.close()
 
 
-@_checks("Crh3Gpc", "Crh3Rmpc")
+@_checks("Crh3Gpc", "Crh3LmiMpc")
 def _crh3_tracker_first_event(path: Path) -> None:
     """At rest at the origin at t = 0 both seed 003 trackers start the profile's accelerating
     phase: phase 1, a traction demand within the plant's limit and the comfort limit, force =

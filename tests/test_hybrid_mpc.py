@@ -15,7 +15,7 @@ from controllers.hybrid.hybrid_mpc import (
     MoveBlockingMpc,
     reference_position,
 )
-from controllers.hybrid.miqp import HybridMiqp, parse_blocks, split_blocks
+from controllers.hybrid.miqp import EPS_REG, HybridMiqp, parse_blocks, split_blocks
 from controllers.hybrid.model import Limits
 from cosim.fmu.state import to_ticks
 from plants.emu import Emu, emu_config
@@ -169,6 +169,40 @@ def test_mode_change_inside_a_block_keeps_each_stage_mode() -> None:
         np.testing.assert_allclose(res.u0, direct.u0, atol=U_TOL)
 
 
+def test_increment_weight_is_eq_11_and_never_raises_the_increments() -> None:
+    """Eq. 11: with dR the optimal cost is the tracking, force and force-increment terms
+    recomputed from the plan (u_{-1} the last applied input), the MIQP still equals its
+    enumeration, and a larger dR never gives larger summed squared increments (the penalised
+    term of a weighted optimum is non-increasing in its weight)."""
+    base = _ctl()
+    rng = np.random.default_rng(5)
+    x0 = _state(rng, 40.0)
+    ref = _reference(rng, 40.0, 10)
+    u_prev = np.array([30.0, 0.0, 30.0])
+    delta = [1] * 10
+    increments = []
+    for dr in (0.0, 0.5, 5.0):
+        miqp = HybridMiqp(base.model, 10, [10.0] * 6, 0.5, None, dr)
+        res = miqp.solve(x0, ref, _limits(), delta, u_prev)
+        assert res.feasible
+        u = res.stage_w[:, :3]
+        du = np.diff(np.vstack([u_prev, u]), axis=0)
+        e = res.states[1:] - ref[1:]
+        cost = 10.0 * np.sum(e**2) + 0.5 * np.sum(u**2) + dr * np.sum(du**2)
+        # the MIQP's regularisation adds eps (b^2 - 2 b guess), in [-eps, eps] per binary,
+        # and eps z^2 per product
+        K = miqp.md.K
+        z = res.stage_w[:, 3 + 1 + K:]
+        binaries = EPS_REG * z.shape[0] * (1 + K)
+        assert (cost - binaries - 1e-9 * cost <= res.cost
+                <= cost + binaries + EPS_REG * np.sum(z**2) + 1e-9 * cost)
+        enum = miqp.solve_enumerated(x0, ref, _limits(), delta, u_prev)
+        assert res.cost == pytest.approx(enum.cost, rel=COST_RTOL)
+        increments.append(float(np.sum(du**2)))
+    assert increments[0] >= increments[1] - 1e-6 >= increments[2] - 2e-6
+    assert increments[2] < increments[0]
+
+
 def test_closed_loop_with_the_plant_core_tracks_and_switches_mode() -> None:
     """Plant core + GMPC (N = 10), a shortened profile: up to 30 m/s, brake to 25 m/s."""
     profile = ReferenceProfile("time", np.array([0.0, 60.0, 80.0, 90.0, 130.0]),
@@ -219,6 +253,8 @@ def test_bad_settings_are_rejected() -> None:
         _ctl(configuration="crh3_8car")
     with pytest.raises(ValueError, match="blocks"):
         HybridMiqp(_ctl(horizon=3).model, 3, 1.0, 1.0, blocks=[2, 2])
+    with pytest.raises(ValueError, match="dR = 0.0"):
+        _ctl(r_force=0.0, r_increment=0.0)
 
 
 def test_gmpc_and_mbmpc_fmus_through_the_master(built_fmus) -> None:

@@ -3,6 +3,8 @@
     cosim.fmu  <-  plants  <-  controllers
         ^                         (plants and controllers use cosim's FMU side, never the reverse)
     cosim.run  <-  cosim.interop  <-  cosim.cli
+        ^
+    cosim.papers  (paper metrics; cosim.run consults their registry by module name, importlib)
 
 ``cosim.fmu`` (bundled into every FMU) imports nothing else of the project; ``cosim.run`` and
 ``cosim.interop`` never import plants or controllers (the catalog finds the FMU wrappers by
@@ -24,8 +26,9 @@ ALLOWED: dict[str, set[str]] = {
     "plants": {"cosim.fmu", "plants"},
     "controllers": {"cosim.fmu", "plants", "controllers"},
     "cosim.run": {"cosim.fmu", "cosim.run"},
+    "cosim.papers": {"cosim.fmu", "cosim.run", "cosim.papers"},
     "cosim.interop": {"cosim.fmu", "cosim.run", "cosim.interop"},
-    "cosim.cli": {"cosim.fmu", "cosim.run", "cosim.interop", "cosim.cli"},
+    "cosim.cli": {"cosim.fmu", "cosim.run", "cosim.papers", "cosim.interop", "cosim.cli"},
     "cosim": {"cosim"},  # cosim/__init__.py: nothing
 }
 

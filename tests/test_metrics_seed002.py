@@ -1,4 +1,5 @@
-"""Seed 002 summary metrics: per-mode speed errors, command variation, train-mean errors."""
+"""Seed 002 summary metrics (cosim/papers/seed002.py): per-mode speed errors and train-mean
+errors; the command range and variation of the generic summary."""
 
 from __future__ import annotations
 
@@ -6,7 +7,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from cosim.run.metrics import _seed002_metrics
+from cosim import papers
+from cosim.run.metrics import command_range
 
 
 def test_mode_errors_window_command_variation_and_train_mean() -> None:
@@ -20,8 +22,8 @@ def test_mode_errors_window_command_variation_and_train_mean() -> None:
     })
     cfg = {"reference_accel": "a", "final_stop_window": 50.0, "stop_point": 500.0,
            "accel_command": "u", "vehicle_speeds": "v[*]"}
-    out: dict = {}
-    _seed002_metrics(out, cfg, frame, s, v, ref)
+    run = papers.RunRecord(frame=frame, summary=cfg, position=s, speed=v, reference_speed=ref)
+    out = {**papers.compute(["speed_modes", "train_mean"], run), **command_range(frame["u"])}
     assert out["max_abs_speed_error_traction_kmh"] == pytest.approx(0.2)
     assert out["max_abs_speed_error_cruise_kmh"] == pytest.approx(0.05)
     assert out["max_abs_speed_error_braking_kmh"] == pytest.approx(0.3)  # 470 m left out

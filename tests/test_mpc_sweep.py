@@ -42,10 +42,12 @@ def test_parallel_sweep_matches_single_runs(built_fmus, tmp_path):
 def test_cli_sweep(built_fmus, tmp_path):
     done = subprocess.run([sys.executable, "-m", "cosim.cli", "sweep", "seed000_stop_rsmpc",
                            "--set", "controller.N=4..5", "--workers", "1", "--out",
-                           str(tmp_path), "--no-plot"], capture_output=True, text=True,
+                           str(tmp_path), "--format", "svg"], capture_output=True, text=True,
                           timeout=600)
     assert done.returncode == 0, done.stderr
-    assert "sweep.csv" in done.stdout
+    assert "sweep.csv" in done.stdout and (tmp_path / "sweep.svg").stat().st_size > 0
+    assert max(len(line) for line in done.stdout.splitlines()) <= 80
+    assert "sweep: 2/2 runs" in done.stderr and "ETA" in done.stderr  # progress
     assert len(pd.read_csv(tmp_path / "sweep.csv")) == 2
     bad = subprocess.run([sys.executable, "-m", "cosim.cli", "sweep", "seed000_stop_rsmpc",
                           "--set", "controller.N=9..x"], capture_output=True, text=True,

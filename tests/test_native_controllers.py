@@ -427,6 +427,10 @@ def test_compliance_suite_passes_the_native_controllers(ident, tmp_path):
      "regions = 'seed004_empc_crh3_3car.npz' were built for N = 10.0, this controller has 5.0"),
     ("Empc3", {"configuration": "crh380a_3unit"}, "were built for configuration = crh3_3car, "
      "this controller has 'crh380a_3unit'"),
+    ("Empc3", {"dR": 0.5}, "dR = 0.5: the EMPC's reduced problem has no force-increment term"),
+    ("Empc3", {"R": 0.0}, "R = 0.0, dR = 0.0: both >= 0 and one > 0"),
+    ("Empc3", {"evaluation": "lookup"}, "evaluation = 'lookup' must be one of ('explicit', "
+     "'online')"),
 ])
 def test_bad_parameters_are_refused_by_both(natives, ident, params, message):
     md, unzipdir = natives[ident]

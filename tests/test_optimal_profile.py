@@ -115,3 +115,25 @@ def test_on_the_seed003_route_optimal_needs_less_energy_than_cruise_and_eco() ->
     assert works["optimal"] < works["cruise"] and works["optimal"] < works["eco"]
     opt = sp.generate("optimal", route)
     assert abs(opt.arrival_time - route.scheduled_time_s) <= sp.ProfileSettings().time_tolerance
+
+
+def test_the_profile_searches_are_kept_on_disk_and_give_the_same_profile(
+        tmp_path, monkeypatch) -> None:
+    """The cruise and optimal searches are stored once per (route, schedule, train, settings)
+    and a later process (here: an emptied in-process cache) rebuilds the same profile from the
+    stored switching points; another schedule is another entry."""
+    monkeypatch.setenv("ATO_COSIM_CACHE", str(tmp_path))
+    T = _schedule()
+    sp._CACHE.clear()
+    first = sp.generate("optimal", SHORT, T, settings=SHORT_SETTINGS)
+    stored = sorted(p.name.split("-")[0] for p in (tmp_path / "designs").iterdir())
+    assert stored == ["cruise_profile", "optimal_profile"]
+    sp._CACHE.clear()
+    again = sp.generate("optimal", SHORT, T, settings=SHORT_SETTINGS)
+    assert again is not first
+    for name in ("s", "v", "t", "mode"):
+        np.testing.assert_array_equal(getattr(again, name), getattr(first, name))
+    sp._CACHE.clear()
+    sp.generate("optimal", SHORT, T + 5.0, settings=SHORT_SETTINGS)
+    assert len(list((tmp_path / "designs").iterdir())) == 4
+    sp._CACHE.clear()

@@ -149,6 +149,16 @@ def test_plot_format_and_resolution(rsmpc_run, tmp_path, fmt):
         write_results(rsmpc_run, tmp_path / "x", plot_format="gif")
 
 
+def test_sweep_keys_are_named_by_their_declarations(built_fmus):
+    from cosim.run.results import variable_info
+    from cosim.run.sweep import key_labels
+
+    sc = load_scenario("seed000_stop_rmpc")
+    text, unit = variable_info(sc, "controller.N")
+    assert text != "controller.N"  # the FMU declares a description
+    assert key_labels(sc, ["controller.N"]) == {"controller.N": f"{text} [controller.N]"}
+
+
 @pytest.mark.parametrize("errors_m,zoomed", [([1e-5, 4e-5, 7e-5], True), ([0.1, -0.3, 0.6], False)])
 def test_sweep_axes_fit_the_data(errors_m, zoomed):
     """Stop errors far inside the +-50 cm window: the axis zooms to them (not flat lines on a
@@ -161,9 +171,11 @@ def test_sweep_axes_fit_the_data(errors_m, zoomed):
 
     frame = pd.DataFrame({"scenario": "s", "controller.N": [3, 4, 5], "stop_error_m": errors_m,
                           "command_switches": [10, 9, 8], "controller_executions": [30, 20, 10]})
-    fig = draw_sweep(frame, ["controller.N"])
+    fig = draw_sweep(frame, ["controller.N"], {"controller.N": "prediction horizon [controller.N]"})
     fig.canvas.draw()
     ax1, ax2 = fig.axes[:2]
+    assert ax2.get_xlabel() == "prediction horizon [controller.N]"
+    assert ax1.get_title() == "Stop error and command switches vs prediction horizon"
     lo, hi = ax1.get_ylim()
     cm = [100 * e for e in errors_m]
     assert lo <= min(cm) and max(cm) <= hi
@@ -198,3 +210,102 @@ def test_perturbed_boxes_are_not_collapsed(monkeypatch, tmp_path):
     plot_perturbed(frame, ["controller.N"], tmp_path / "perturb.png")
     lo, hi = drawn[0].axes[0].get_ylim()
     assert lo <= 100 * errors.min() and 100 * errors.max() <= hi and hi - lo < 5.0
+
+
+def _stopping_frame(offset: float = 0.0):
+    """A synthetic stopping run as seed000_stop_rsmpc records it (0.2 s output, the
+    controller's v_ref and brake command held between its events)."""
+    import numpy as np
+    import pandas as pd
+
+    t = np.arange(0.0, 40.0, 0.2)
+    s = 400.0 - 0.25 * (40.0 - t) ** 2 + offset
+    v = 0.5 * (40.0 - t)
+    held = np.floor(t / 2.0) * 2.0  # an event every 2 s
+    return pd.DataFrame({"time": t, "plant.s": s, "plant.v": v + 0.01 * np.sin(t),
+                         "controller.v_ref": 0.5 * (40.0 - held),
+                         "controller.brake_command": 10.0 + held})
+
+
+def test_reproduce_figures_read_as_paper_figures(built_fmus):
+    """A reproduce overlay and a panels figure: axes named from the declarations with units
+    (or the entry's own label), no offset notation, the legend outside the axes with the
+    runs' names and declared descriptions (no raw variable names), the reference a dashed
+    continuous curve, the held command as steps, the measured speed as a line."""
+    import matplotlib.pyplot as plt
+
+    from cosim.run.reproduce import figure_of
+    from cosim.run.results import variable_info
+
+    sc = load_scenario("seed000_stop_rsmpc")
+    frames = {"RSMPC": _stopping_frame(), "RSMPC 2": _stopping_frame(1e4)}
+    scenarios = {name: sc for name in frames}
+    overlay = figure_of({"file": "f.png", "x": "plant.s", "y": ["plant.v", "controller.v_ref"],
+                         "kind": "overlay"}, frames, scenarios)
+    overlay.canvas.draw()
+    renderer = overlay.canvas.get_renderer()
+    ax = overlay.axes[0]
+    described = variable_info(sc, "plant.s")
+    assert ax.get_xlabel() == f"{described[0]} (m)"
+    assert ax.get_ylabel().endswith("(km/h)")  # m/s declared, shown in km/h
+    import numpy as np
+    legend = ax.get_legend()
+    assert not legend.get_window_extent(renderer).overlaps(ax.get_window_extent(renderer))
+    texts = [t.get_text() for t in legend.get_texts()]
+    assert len(texts) == 4 and all(t.startswith(("RSMPC: ", "RSMPC 2: ")) for t in texts)
+    assert not any("plant." in t or "controller." in t for t in texts), texts
+    lines = ax.get_lines()
+    speed = [ln for ln in lines if "reference" not in ln.get_label()]
+    reference = [ln for ln in lines if "reference" in ln.get_label()]
+    assert len(reference) == 2 and all(ln.get_linestyle() == "--" for ln in reference)
+    assert all(ln.get_drawstyle() == "default" for ln in speed + reference)
+    # the held v_ref column replaced by the declared stopping curve at the recorded positions
+    s = frames["RSMPC"]["plant.s"].to_numpy()
+    curve = 3.6 * np.sqrt(2 * 0.5 * np.maximum(sc.summary["stop_point"] - s, 0.0))
+    assert np.allclose(reference[0].get_ydata(), curve)
+    assert np.allclose(speed[0].get_ydata(), 3.6 * frames["RSMPC"]["plant.v"])
+    for axis in (ax.xaxis, ax.yaxis):  # positions near 1e4 m: no "+1e4" offset
+        assert axis.get_major_formatter().get_offset() == ""
+    plt.close(overlay)
+
+    panels = figure_of({"file": "c.png", "x": "time", "y": ["controller.brake_command"],
+                        "kind": "panels", "ylabel": "brake command (%)"}, frames, scenarios)
+    panels.canvas.draw()
+    renderer = panels.canvas.get_renderer()
+    assert len(panels.axes) == 2
+    for ax in panels.axes:
+        assert ax.get_ylabel() == "brake command (%)"
+        assert [ln.get_drawstyle() for ln in ax.get_lines()] == ["steps-post"]
+        box = ax.get_legend().get_window_extent(renderer)
+        assert not any(box.overlaps(other.get_window_extent(renderer))
+                       for other in panels.axes)
+    assert panels.axes[-1].get_xlabel() == "time (s)"
+    plt.close(panels)
+
+
+def test_ensemble_figure_draws_held_bands_as_steps(built_fmus):
+    """The median and 5-95 % band over the members: a held signal's median and band as steps,
+    its label from the declaration, the legend outside."""
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    from cosim.run.ensemble import ensemble_figure_of
+
+    sc = load_scenario("seed000_stop_rsmpc")
+    members = [_stopping_frame() for _ in range(3)]
+    for i, frame in enumerate(members):
+        frame["controller.brake_command"] += i
+    fig = ensemble_figure_of({"file": "e.png", "x": "time", "y": "controller.brake_command"},
+                             {"RSMPC": members}, {"RSMPC": sc})
+    fig.canvas.draw()
+    ax = fig.axes[0]
+    [line] = ax.get_lines()
+    assert line.get_drawstyle() == "steps-post"
+    assert np.allclose(line.get_ydata(), members[1]["controller.brake_command"])
+    band = ax.collections[0].get_paths()[0].vertices
+    assert np.any(np.isclose(np.diff(band[:, 0]), 0.0))  # vertical risers: a stepped band
+    assert ax.get_xlabel() == "time (s)" and "(%)" in ax.get_ylabel()
+    renderer = fig.canvas.get_renderer()
+    assert not ax.get_legend().get_window_extent(renderer).overlaps(
+        ax.get_window_extent(renderer))
+    plt.close(fig)

@@ -302,3 +302,23 @@ def test_entry_set_overrides_every_run_and_sweep_and_a_runs_own_set_wins(
     assert kp30["set"] == {"plant.disturbance_amplitude": 0.02, "controller.kp": 30.0}
     assert entry.sweeps[0]["grid"] == {"plant.disturbance_amplitude": 0.02,
                                        "controller.kp": 50.0, "controller.N": "3..4"}
+
+
+def test_reproduce_prints_80_columns_and_draws_in_the_chosen_format(built_fmus, tmp_path,
+                                                                    capsys) -> None:
+    """The console gets ours per run and metric (columns named below the table), where the
+    full tables are, and the progress of the runs (stderr); figures in --format."""
+    path = tmp_path / "entry.toml"
+    path.write_text(ENTRY)
+    reproduce(str(path), tmp_path / "out", workers=1, plot_format="svg")
+    printed = capsys.readouterr()
+    lines = printed.out.splitlines()
+    assert lines[0] == "Test entry"
+    assert max(len(line) for line in lines if str(tmp_path) not in line) <= 80
+    assert "m1 stop error (m); m2 executions.controller" in printed.out
+    assert f"full tables in {tmp_path / 'out'}/:\n  table.md, table.csv" in printed.out
+    assert "|" not in printed.out  # no raw markdown
+    assert "entry runs: 2/2 runs" in printed.err and "ETA" in printed.err
+    assert (tmp_path / "out" / "speed.svg").stat().st_size > 0
+    assert not (tmp_path / "out" / "speed.png").exists()
+    assert "![speed.svg](speed.svg)" in (tmp_path / "out" / "table.md").read_text()

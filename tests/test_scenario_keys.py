@@ -53,6 +53,70 @@ def test_the_known_keys_are_those_the_metrics_read():
     assert read | plotted == set(SUMMARY_KEYS)
 
 
+def test_each_paper_metric_declares_the_keys_it_reads():
+    """A registered metric reads (``run.series("k")`` / ``run.columns("k")`` /
+    ``run.summary.get("k")`` / ``cfg["k"]`` / ``"k" in cfg``) only the keys its module's
+    metrics declare or generic ones."""
+    import ast
+    import inspect
+
+    from cosim import papers
+    from cosim.run.scenario import SUMMARY_KEYS
+
+    for name, m in papers.registry().items():
+        module = inspect.getmodule(m.function)
+        tree = ast.parse(inspect.getsource(module))
+        def is_summary(node) -> bool:  # run.summary, or a name bound to it (cfg, summary)
+            return ((isinstance(node, ast.Attribute) and node.attr == "summary")
+                    or (isinstance(node, ast.Name) and node.id in ("cfg", "summary")))
+
+        read = set()
+        for node in ast.walk(tree):
+            if (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute)
+                    and node.args and isinstance(node.args[0], ast.Constant)
+                    and isinstance(node.args[0].value, str)
+                    and (node.func.attr in ("series", "columns")
+                         or (node.func.attr == "get" and is_summary(node.func.value)))):
+                read.add(node.args[0].value)
+            if (isinstance(node, ast.Compare) and isinstance(node.left, ast.Constant)
+                    and isinstance(node.left.value, str) and is_summary(node.comparators[0])):
+                read.add(node.left.value)  # "final_stop_window" in cfg
+            if (isinstance(node, ast.Subscript) and is_summary(node.value)
+                    and isinstance(node.slice, ast.Constant)):
+                read.add(node.slice.value)  # cfg["stop_point"]
+        declared = {k for other in papers.registry().values()
+                    if other.module == m.module for k in other.keys}
+        assert read - set(SUMMARY_KEYS) <= declared, name
+
+
+@pytest.mark.parametrize("line,says", [
+    ('metrics = ["ctcs4"]', "[summary] metrics: no metric 'ctcs4' (did you mean 'ctcs3'?)"),
+    ("ctcs3 = true", "[summary] ctcs3: a paper metric; name it in [summary] metrics = "
+                     "['ctcs3', ...]"),
+    ('unit_speeds = "plant.v"', "[summary] unit_speeds: read by the metric 'unit_indices', "
+                                "which [summary] metrics does not name"),
+])
+def test_paper_metrics_are_named_before_their_keys_are_read(tmp_path, line, says):
+    text = (SCENARIO_DIR / "seed000_stop_pid.toml").read_text()
+    path = tmp_path / "metrics.toml"
+    path.write_text(text.replace("[summary]\n", f"[summary]\n{line}\n", 1))
+    with pytest.raises(ScenarioError) as err:
+        load_scenario(path)
+    assert str(err.value) == f"{path}: {says}"
+
+
+def test_the_generic_runner_names_no_paper():
+    """cosim/run holds no paper's name or rule: paper metrics live in cosim/papers."""
+    from pathlib import Path
+
+    import cosim.run
+
+    pattern = re.compile(r"seed ?-?0\d\d|ctcs|seeds 0\d\d", re.IGNORECASE)
+    found = [f"{p}:{i}" for p in sorted(Path(cosim.run.__file__).parent.rglob("*.py"))
+             for i, line in enumerate(p.read_text().splitlines(), 1) if pattern.search(line)]
+    assert found == []
+
+
 @pytest.mark.parametrize("line,says", [
     ("stoptime = 60", "[simulation] stoptime: unknown key (did you mean 'stop_time'?)"),
     ("output_intervall = 1.0", "[simulation] output_intervall: unknown key (did you mean "

@@ -1,11 +1,11 @@
-"""Seed 001's per-unit indices (eqs. 87-89) in cosim/run/metrics.py, on analytic signals."""
+"""Seed 001's per-unit indices (eqs. 87-89) in cosim/papers/seed001.py, on analytic signals."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from cosim.run.metrics import unit_indices
+from cosim.papers.seed001 import unit_indices
 
 
 def test_mse_iae_and_ma_of_known_signals() -> None:

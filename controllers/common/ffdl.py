@@ -56,7 +56,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from cosim.fmu.declare import param
+from cosim.fmu.declare import Checked, param
 from cosim.fmu.state import StatefulCore
 
 KMH_PER_MPS = 3.6
@@ -104,15 +104,17 @@ def sig(x: np.ndarray, alpha: float) -> np.ndarray:
 
 
 @dataclass(frozen=True)
-class FfdlParams:
+class FfdlParams(Checked):
     """Estimator of the FFDL pseudo-Jacobian (eqs. 15, 16) in the scaled units above."""
 
     mu: float = param(1.0, "1", "mu: weight on the change of the Phi estimate (eq. 15)",
                       min=1e-9)
     step: float = param(0.2, "1", "lambda: step size of the Phi estimator (eq. 16; 0: fixed "
                         "Phi)", min=0.0, max=2.0, name="lambda")
-    L_y: int = param(1, "1", "output pseudo-order L_y (eq. 8)", min=1, max=10)
-    L_u: int = param(1, "1", "input pseudo-order L_u (eq. 8)", min=1, max=10)
+    L_y: int = param(1, "1", "output pseudo-order L_y (eq. 8)", min=1, max=10,
+                    integer=True)
+    L_u: int = param(1, "1", "input pseudo-order L_u (eq. 8)", min=1, max=10,
+                    integer=True)
     phi1_init: float = param(0.5, "1", "diagonal of Phi_1(1), the output blocks", min=0.0)
     phi2_init: float = param(0.5, "1", "diagonal of Phi_2(1), the input block "
                              "(units of y per unit of u)", min=1e-6)
@@ -133,14 +135,6 @@ class FfdlParams:
                                     "dd_hat in the innovation of eq. 16 and evaluate eq. 14 "
                                     "with the updated Phi (a diagnostic; false: eqs. 30, 14 "
                                     "as printed)")
-
-    def check(self) -> None:
-        if not (self.mu > 0 and 0 <= self.step <= 2):
-            raise ValueError(f"mu = {self.mu} must be > 0 and lambda = {self.step} in [0, 2]")
-        if self.L_y < 1 or self.L_u < 1:
-            raise ValueError(f"L_y = {self.L_y}, L_u = {self.L_u} must be >= 1")
-        if not self.phi2_init > 0:
-            raise ValueError(f"phi2_init = {self.phi2_init} must be > 0")
 
 
 class FfdlEstimator(StatefulCore):

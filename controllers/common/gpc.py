@@ -27,33 +27,36 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from cosim.fmu.declare import param
+from cosim.fmu.declare import Checked, param
 from cosim.fmu.state import StatefulCore
 
 
 @dataclass(frozen=True)
-class GpcParams:
+class GpcParams(Checked):
     """GPC horizons and weight, ARX orders and RLS settings."""
 
-    Ny: int = param(3, "1", "prediction horizon N_y (samples)", min=1, max=100)
-    Nu: int = param(2, "1", "control horizon N_u (samples)", min=1, max=100)
+    Ny: int = param(3, "1", "prediction horizon N_y (samples)", min=1, max=100,
+                   integer=True)
+    Nu: int = param(2, "1", "control horizon N_u (samples)", min=1, max=100,
+                   integer=True)
     forgetting: float = param(0.9, "1", "forgetting factor of the recursive least squares",
                               min=0.5, max=1.0)
     control_weight: float = param(0.1, "1", "weight w of ||dU||^2 against ||Y - R||^2",
                                   min=0.0)
-    na: int = param(1, "1", "order of the output polynomial (increments)", min=1, max=10)
-    nb: int = param(1, "1", "order of the input polynomial (increments)", min=1, max=10)
-    b_init: float = param(0.5, "1", "diagonal of B_1 at the start (A_i = 0)", min=0.0)
+    na: int = param(1, "1", "order of the output polynomial (increments)", min=1, max=10,
+                    integer=True)
+    nb: int = param(1, "1", "order of the input polynomial (increments)", min=1, max=10,
+                    integer=True)
+    b_init: float = param(0.5, "1", "diagonal of B_1 at the start", min=0.0)
+    a_init: float = param(0.0, "1", "diagonal of A_1 at the start (A_2.. = 0)")
     p0: float = param(100.0, "1", "initial covariance P = p0 I", min=1e-9)
     p_max: float = param(1e4, "1", "largest trace of P (bound under forgetting)", min=1e-9)
     excitation: float = param(1e-9, "1", "no update while ||regressor|| is at most this",
                               min=0.0)
 
-    def check(self) -> None:
+    def check_relations(self) -> None:
         if self.Nu > self.Ny:
             raise ValueError(f"Nu = {self.Nu} must be <= Ny = {self.Ny}")
-        if not 0 < self.forgetting <= 1:
-            raise ValueError(f"forgetting = {self.forgetting} must be in (0, 1]")
 
 
 class Gpc(StatefulCore):
@@ -70,6 +73,7 @@ class Gpc(StatefulCore):
         n, m = self.n, self.m
         self.n_reg = n * params.na + m * params.nb
         theta = np.zeros((n, self.n_reg))
+        theta[:, :n] = params.a_init * np.eye(n)
         theta[:, n * params.na:n * params.na + m] = params.b_init * np.eye(n, m)
         self.theta = theta
         self.P = params.p0 * np.eye(self.n_reg)
@@ -136,15 +140,24 @@ class Gpc(StatefulCore):
                 G[:, k * m + j] = self._simulate(moves).ravel() - f
         return f, G
 
+    def plan(self, refs: np.ndarray) -> np.ndarray:
+        """The unclipped input ``u(t) = u(t-1) + du(t)``, ``du(t)`` the first move of the
+        minimiser ``dU = (G'G + w I)^-1 G'(R - f)`` (nothing is recorded)."""
+        f, G = self.prediction_matrices()
+        H = G.T @ G + self.p.control_weight * np.eye(G.shape[1])
+        dU = np.linalg.solve(H, G.T @ (np.asarray(refs, float).ravel() - f))
+        return self.u_prev + dU[:self.m]
+
+    def input_gain(self) -> np.ndarray:
+        """``B_1`` (n, m): the model's response of ``dy(t+1)`` to ``du(t)``."""
+        n = self.n * self.p.na
+        return self.theta[:, n:n + self.m]
+
     def control(self, refs: np.ndarray, lo: np.ndarray | None = None,
                 hi: np.ndarray | None = None) -> np.ndarray:
         """Input ``u(t)`` for references ``refs`` (Ny, n) of ``y(t+1..t+Ny)``, clipped to
         ``[lo, hi]`` and remembered as applied."""
-        p = self.p
-        f, G = self.prediction_matrices()
-        H = G.T @ G + p.control_weight * np.eye(G.shape[1])
-        dU = np.linalg.solve(H, G.T @ (np.asarray(refs, float).ravel() - f))
-        u = self.u_prev + dU[:self.m]
+        u = self.plan(refs)
         if lo is not None:
             u = np.maximum(u, lo)
         if hi is not None:

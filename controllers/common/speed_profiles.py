@@ -48,6 +48,11 @@ step (``v^2`` linear in ``s``). Limits of the paper: ``-1 <= a <= 1`` m/s^2, cru
   a short level route).
   The cruise profile is the member with no coasting, so the optimal one never needs more.
 
+The cruise and optimal searches cost seconds per process; their results (the cruise speed;
+``V_h`` and ``s_c``) are kept on disk by :func:`cosim.fmu.disk_cache.cached_arrays`, keyed by
+the route's profiles, the schedule, the train, the settings and this module's code, and the
+profile is rebuilt from them (the same floats as a fresh search).
+
 :func:`traction_work` is the mechanical traction work of any profile on the nominal model.
 
 Phases (Table 2, used by the energy-per-phase metrics): ``accelerate`` from the start until the
@@ -60,10 +65,12 @@ import dataclasses
 import functools
 import math
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 import scipy.optimize
 
+from cosim.fmu.disk_cache import cached_arrays, source_digest
 from plants.crh3 import Crh3Params
 from plants.resistance import KMH
 from plants.route import GRAVITY, Route, StepProfile
@@ -73,6 +80,8 @@ TRACTION, CRUISE, COAST, REACCELERATE, HOLD_LIMIT, BRAKE = 1, 2, 3, 4, 5, 6
 # Table 2 phases
 PHASE_ACCELERATE, PHASE_RUN, PHASE_BRAKE = 1, 2, 3
 PROFILE_KINDS = ("conventional", "eco", "cruise", "optimal")
+# code version of the cached optimal-profile search: this module and the train model
+_CODE_VERSION = source_digest(__file__, Path(__file__).resolve().parents[2] / "plants" / "crh3.py")
 
 
 @dataclass(frozen=True)
@@ -362,14 +371,21 @@ def _cruise(train: Crh3Params, route: Route, scheduled: float,
         return _finish("cruise", s, v, mode, speed, scheduled)
 
     lo, hi = settings.min_low_speed, settings.cruise_speed
-    slowest = profile(lo)
-    if slowest.arrival_time < scheduled:
-        raise ValueError(f"route {route.name!r}: cruising at min_low_speed = {lo:.2f} m/s "
-                         f"arrives at {slowest.arrival_time:.1f} s, before scheduled_time = "
-                         f"{scheduled} s")
-    # run time falls by about L / V^2 per m/s: xtol 1e-6 m/s is well inside time_tolerance
-    speed = scipy.optimize.brentq(lambda x: profile(x).arrival_time - scheduled, lo, hi,
-                                  xtol=1e-6)
+
+    def search() -> tuple[np.ndarray]:
+        slowest = profile(lo)
+        if slowest.arrival_time < scheduled:
+            raise ValueError(f"route {route.name!r}: cruising at min_low_speed = {lo:.2f} "
+                             f"m/s arrives at {slowest.arrival_time:.1f} s, before "
+                             f"scheduled_time = {scheduled} s")
+        # run time falls by about L / V^2 per m/s: xtol 1e-6 m/s is well inside
+        # time_tolerance
+        return (np.array([scipy.optimize.brentq(
+            lambda x: profile(x).arrival_time - scheduled, lo, hi, xtol=1e-6)]),)
+
+    (found,) = cached_arrays("cruise_profile", _CODE_VERSION, _profile_key(
+        route, scheduled, train, settings), search)
+    speed = float(found[0])
     best = profile(speed)
     if abs(best.arrival_time - scheduled) > settings.time_tolerance:
         raise ValueError(f"route {route.name!r}: no cruise profile arrives within "
@@ -388,6 +404,8 @@ def _optimal(train: Crh3Params, route: Route, scheduled: float,
         s, v, mode = _run(_Model(train, route, st), length, "conventional", speed, coast_from)
         return _finish("optimal", s, v, mode, speed, scheduled)
 
+    coast_point: dict[float, float] = {}  # V_h -> the s_c for_schedule chose
+
     def for_schedule(speed: float) -> SpeedProfile | None:
         """The coasting point of holding speed ``speed`` that meets the schedule."""
         late = run(speed, 0.0)  # coasts as soon as V_h is reached: the longest run
@@ -398,8 +416,9 @@ def _optimal(train: Crh3Params, route: Route, scheduled: float,
         c = scipy.optimize.brentq(lambda x: run(speed, x).arrival_time - scheduled, 0.0,
                                   length, xtol=0.5 * settings.ds)
         # the run time is a step function of c on the ds grid: take the closer grid point
-        best = min((run(speed, c + d) for d in (-settings.ds, 0.0, settings.ds)),
-                   key=lambda p: abs(p.arrival_time - scheduled))
+        c_best, best = min(((c + d, run(speed, c + d)) for d in (-settings.ds, 0.0, settings.ds)),
+                           key=lambda cp: abs(cp[1].arrival_time - scheduled))
+        coast_point[speed] = c_best
         return best if abs(best.arrival_time - scheduled) <= settings.time_tolerance else None
 
     cruise = _cruise(train, route, scheduled, settings)
@@ -414,12 +433,50 @@ def _optimal(train: Crh3Params, route: Route, scheduled: float,
     if run(top, 0.0).arrival_time < scheduled:
         top = scipy.optimize.brentq(lambda x: run(x, 0.0).arrival_time - scheduled,
                                     cruise.low_speed, top, xtol=1e-4)
-    res = scipy.optimize.minimize_scalar(work, bounds=(cruise.low_speed, top),
-                                         method="bounded", options={"xatol": 1e-3})
-    best = for_schedule(float(res.x))
-    if best is None or net_energy(best, route, train) > net_energy(cruise, route, train):
+    def search() -> tuple[np.ndarray]:
+        """(V_h, s_c) of the optimum; NaN: no coasting pays (the cruise profile)."""
+        res = scipy.optimize.minimize_scalar(work, bounds=(cruise.low_speed, top),
+                                             method="bounded", options={"xatol": 1e-3})
+        best = for_schedule(float(res.x))
+        if best is None or net_energy(best, route, train) > net_energy(cruise, route, train):
+            return (np.array([math.nan, math.nan]),)
+        return (np.array([float(res.x), coast_point[float(res.x)]]),)
+
+    # the search costs seconds per process: its two numbers are kept on disk, keyed by every
+    # input (route, schedule, train, settings) and the code computing them
+    (found,) = cached_arrays("optimal_profile", _CODE_VERSION,
+                             _profile_key(route, scheduled, train, settings), search)
+    if np.isnan(found[0]):
         return dataclasses.replace(cruise, kind="optimal")  # no coasting pays
-    return best
+    return run(float(found[0]), float(found[1]))
+
+
+def _profile_key(route: Route, scheduled: float, train: Crh3Params,
+                 settings: ProfileSettings) -> list[object]:
+    """Cache-key inputs of a profile search: route, schedule, train and settings."""
+    return [*_route_key(route), float(scheduled), *_dataclass_key(train),
+            *_dataclass_key(settings)]
+
+
+def _dataclass_key(obj: object) -> list[object]:
+    """Field names and values of a dataclass (nested ones field by field), as cache-key
+    inputs."""
+    out: list[object] = []
+    for f in dataclasses.fields(obj):  # type: ignore[arg-type]
+        value = getattr(obj, f.name)
+        out += [f.name, *(_dataclass_key(value) if dataclasses.is_dataclass(value)
+                          else [value])]
+    return out
+
+
+def _route_key(route: Route) -> list[object]:
+    """Everything of a route that the profiles depend on, as cache-key inputs."""
+    out: list[object] = [route.name, float(route.length_m),
+                         float(route.scheduled_time_s or 0.0)]
+    for name in ("grade", "curve_resistance", "tunnel_resistance", "speed_limit"):
+        prof: StepProfile = getattr(route, name)
+        out += [name, prof.starts, prof.values]
+    return out
 
 
 def step_forces(profile: SpeedProfile, route: Route, train: Crh3Params | None = None

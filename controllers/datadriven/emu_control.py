@@ -43,7 +43,7 @@ from controllers.datadriven.laws import (
     Mfac,
     MfacParams,
 )
-from cosim.fmu.declare import Declared, Var, build, group, param, parameters, sample_time
+from cosim.fmu.declare import Checked, Declared, Var, build, group, param, parameters, sample_time
 from cosim.fmu.state import StatefulCore
 from plants.route import load_reference, routes_dir_in
 
@@ -54,14 +54,12 @@ from plants.route import load_reference, routes_dir_in
 # 1 s. So the seed-001 laws sample at 1 s, and the FFDL laws work on y in m/s and u in m/s2
 # per mean unit mass, where a free unit has Phi_1 = I, Phi_2 = T I = I: the paper's start
 # Phi(1) = 0.5 I (0.52 I for MFAC) is of the truth's size, as the paper's mu = 1, beta = 0.05,
-# delta = 1 then are in these units. (Before: 0.2 s, ours, with y, u in 9.667 x km/h, m/s2;
-# scenarios/reproduce/seed001.toml keeps rows of it.) GPC keeps its own km/h, m/s2 (its
-# control weight).
+# delta = 1 then are in these units. GPC keeps its own km/h, m/s2 (its control weight).
 PAPER_SAMPLE_TIME = 1.0
 
 
 @dataclass(frozen=True)
-class DriveParams:
+class DriveParams(Checked):
     """The interface part shared by the four controllers."""
 
     mass: float = param(479.5e3, "kg", "train mass M (u_i = F_i n / M)", min=1.0)
@@ -88,13 +86,6 @@ class DriveParams:
                                              "sample (a diagnostic)")
     sample_time: float = sample_time(PAPER_SAMPLE_TIME)
 
-    def check(self) -> None:
-        if not (self.mass > 0 and self.sample_time > 0 and self.accel_max >= 0):
-            raise ValueError(f"mass = {self.mass}, sample_time = {self.sample_time} must be "
-                             f"> 0 and accel_max = {self.accel_max} >= 0")
-        if not (self.output_scale > 0 and self.input_scale > 0):
-            raise ValueError(f"output_scale = {self.output_scale}, input_scale = "
-                             f"{self.input_scale} must be > 0")
 
 
 def rescaled(law: Any, gy: float, gu: float) -> Any:
@@ -162,7 +153,7 @@ class DataDrivenEmuControl(StatefulCore, Declared):
         return cls(params, profile, units)
 
     def __init__(self, params: Any, profile, units: int = 3) -> None:
-        params.drive.check()
+        params.check()
         self.p = params
         self.drive = drive = params.drive
         self.n = units
@@ -231,7 +222,7 @@ class DataDrivenEmuControl(StatefulCore, Declared):
 
 
 @dataclass(frozen=True)
-class EmuMfacParams:
+class EmuMfacParams(Checked):
     """Parameters of the FFDL-MFAC FMU: the common interface part and the law's."""
 
     drive: DriveParams = group(FFDL_DRIVE, "")
@@ -246,7 +237,7 @@ class EmuMfac(DataDrivenEmuControl):
 
 
 @dataclass(frozen=True)
-class EmuIsmcParams:
+class EmuIsmcParams(Checked):
     """Parameters of the FFDL-ISMC FMU: the common interface part and the law's."""
 
     drive: DriveParams = group(FFDL_DRIVE, "")
@@ -261,7 +252,7 @@ class EmuIsmc(DataDrivenEmuControl):
 
 
 @dataclass(frozen=True)
-class EmuIsmpcParams:
+class EmuIsmpcParams(Checked):
     """Parameters of the FFDL-ISMPC FMU: the common interface part and the law's."""
 
     drive: DriveParams = group(FFDL_DRIVE, "")
@@ -286,7 +277,7 @@ class EmuIsmpc(DataDrivenEmuControl):
 
 
 @dataclass(frozen=True)
-class EmuGpcParams:
+class EmuGpcParams(Checked):
     """Parameters of the GPC FMU: the common interface part and the law's."""
 
     drive: DriveParams = group(DriveParams(), "")

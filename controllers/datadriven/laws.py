@@ -40,29 +40,30 @@ theorem 3 (eq. 78, and eq. 83 after it) uses ``Lambda s - Psi P_hat``, which giv
 p_hat(t-1) + p(t) = dd(t) - dd_hat(t-1)``; under assumption 3 both signs keep ``|s(t+1)| <=
 2 gamma``. They differ under model error, which is what ``p_hat`` mostly carries on a data
 model: ``dd_hat`` (eq. 14) holds ``(Phi_2 - Phi_2_hat) du(t-1)``, ``r = (Phi_2 - Phi_2_hat) /
-Phi_2_hat``. The moves of the ``du`` loop alone (``c`` the MPC's first-move gain on ``p_hat``,
-0.82 at N = 10, theta = 10, Phi_2 = 0.72) obey ``z^2 + r (1 + c) z - c r = 0`` with eq. 72's
-sign, stable for ``-1 < r < 1 / (1 + 2c) = 0.38``, and ``z^2 + r (1 - c) z + c r = 0`` with
-eq. 78's, stable for ``-1 < r < 1 / c = 1.2``. With the ``s`` loop (test_datadriven, a fixed
-``Phi_2_hat = Phi_2 / (1 + r)``, theta = 10) eq. 72's sign diverges from ``r = 0.15``, ``P_hat
-= 0`` from 0.3, eq. 78's at 0.7 (converges at 0.5). The paper's start ``Phi_2(1) = 0.5``
-against the train's about 0.72 is ``r = 0.44``: eq. 72's sign made the forces jump between 50
-and 88 kN at start-up. The default is eq. 78's
+Phi_2_hat``. The moves of the ``du`` loop alone (``c`` the MPC's first-move gain on ``p_hat``) obey
+``z^2 + r (1 + c) z - c r = 0`` with eq. 72's sign, stable for ``-1 < r < 1 / (1 + 2c)``, and
+``z^2 + r (1 - c) z + c r = 0`` with eq. 78's, stable for ``-1 < r < 1 / c``: eq. 78's sign
+tolerates the larger model error (tests/test_datadriven.py closes the ``s`` loop with a fixed
+``Phi_2_hat = Phi_2 / (1 + r)`` and checks the order). The paper's start ``Phi_2(1) = 0.5``
+is such a model error for a train whose ``Phi_2`` is larger. The default is eq. 78's
 (``error_prediction = "eq78"``), eq. 72's is ``"eq72"``, ``"off"`` is ``P_hat = 0``.
+ISMC's layer pulls ``s`` back by ``beta / Delta`` per sample and has no ``p_hat`` term.
 
-(The figures above and below are for a 0.2-s sample with y in km/h and u in m/s^2; the
-seed-001 laws sample at 1 s with y in m/s and u in m/s^2, where Phi_2 is about I.)
-First-move gains of the MPC (N = 10, scalar Phi_2 = 0.72): on ``s`` 0.92 / 0.51 / 0.20 at
-``theta`` = 0.05 / 1 / 10, on ``p_hat`` 1.00 / 1.00 / 0.82. ISMC's layer pulls ``s`` back by
-``beta / Delta = 0.5`` per sample and has no ``p_hat`` term.
+Anti-windup (``anti_windup``, ours): the sums ``E``, ``F`` are not advanced at a sample where
+every unit's input saturates in the direction the law asks for (the train cannot act
+on the surface). ISMPC's QP keeps its moves inside the box, so its inputs stop *on* the bound:
+an input within ``BOUND_TOL`` of its bound counts as saturated. Without it the sums wind up
+over every power-limited stretch and the law overshoots after it. Freezing them when only
+some units saturate would leave a steady error (the end units at their power limit while the
+middle unit still has room). MFAC and GPC have no sums: their inputs are incremental on the
+clipped input they remember, so they have nothing to wind up.
 
-Anti-windup: the sums ``E``, ``F`` are not advanced at a sample where every unit's input
-saturates in the direction the law asked for (the train can no longer act on the surface).
-ISMPC's QP keeps its moves inside the box, so its inputs stop *on* the bound: an input within
-``BOUND_TOL`` of its bound counts as saturated (before, ISMPC's sums wound up over every
-power-limited stretch, to ``s = -31 km/h`` at zero error, and it overshot by 4 km/h after).
-Freezing them when only some units saturate left a steady error: the end units sat at their
-power limit while the middle unit still had room, and the integral action stopped.
+Null-space force sharing (``share_gain``, ours; every law has it, :func:`null_space_share`):
+a fraction of the units' departure from their mean input is removed per sample within the
+null space of the law's input gain (``Phi_2`` for the FFDL laws, the RLS model's ``B_1`` for
+GPC), which moves only the force split between the units. On by default for the three FFDL
+laws (one estimator, one inverse), off for GPC (its ``B_1`` is the RLS's, whose weak
+directions need not be the train's).
 
 FFDL-MFAC (Xiong and Hou 2022, the paper's ref. 18), with weight ``delta`` and step ``rho``::
 
@@ -78,10 +79,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from controllers.common.ffdl import FfdlEstimator, FfdlParams, sig
+from controllers.common.ffdl import FfdlEstimator, FfdlParams, sig, truncated_gain
 from controllers.common.gpc import Gpc, GpcParams
 from controllers.common.qp import DenseQP
-from cosim.fmu.declare import group, param
+from controllers.datadriven.tuned import TUNED
+from cosim.fmu.declare import Checked, group, param
 from cosim.fmu.state import StatefulCore
 
 
@@ -106,16 +108,33 @@ class Law(StatefulCore):
         return u
 
 
+def null_space_share(u: np.ndarray, M: np.ndarray, K: np.ndarray, gain: float) -> np.ndarray:
+    """The move removing the fraction ``gain`` of the units' departure from their mean input
+    ``dev = u - mean(u)`` within the null space of the input block ``M`` (``K`` its
+    regularised inverse): ``gain (dev - K M dev)``, to subtract from a law's move. It leaves
+    the modelled outputs alone (``M`` of it is about zero) and moves only the force split
+    between the units, which the couplers absorb (ours; not in the paper)."""
+    dev = u - u.sum() / u.size
+    return gain * (dev - K @ (M @ dev))
+
+
 # -- FFDL-MFAC -------------------------------------------------------------------------------
 
 @dataclass(frozen=True)
-class MfacParams:
+class MfacParams(Checked):
     """FFDL-MFAC (paper section 4.1, 3): Phi(1) = 0.52 I, mu = 1, lambda = 0.2, delta = 1,
     rho = 0.85."""
 
     ffdl: FfdlParams = group(FfdlParams(phi1_init=0.52, phi2_init=0.52), "")
-    delta: float = param(1.0, "1", "delta: weight on the input move", min=0.0)
+    delta: float = param(TUNED["MFAC"]["delta"], "1", "delta: weight on the input move "
+                         "(the paper's 1 is for a scaling it does not give; picked by "
+                         "benchmarks/seed001_tuning.py, controllers/datadriven/tuned.py)",
+                         min=0.0)
     rho: float = param(0.85, "1", "rho: step size of the control law", min=0.0, max=2.0)
+    share_gain: float = param(0.2, "1", "force sharing: fraction of the units' departure "
+                              "from their mean input removed per sample, in the null space "
+                              "of Phi_2 (0: off, the paper's MFAC; not in the paper)",
+                              min=0.0, max=1.0)
 
 
 class Mfac(Law):
@@ -130,13 +149,16 @@ class Mfac(Law):
         target = y_r_next - y - est.free_response()
         du = self.p.rho * np.linalg.solve(self.p.delta * np.eye(self.n) + Phi2.T @ Phi2,
                                           Phi2.T @ target)
+        if self.p.share_gain > 0:
+            gain = est.control_gain()
+            du = du - null_space_share(self.u, gain.M, gain.K, self.p.share_gain)
         return self._apply(np.clip(self.u + du, lo, hi))
 
 
 # -- integral sliding surface (eqs. 17-24) ---------------------------------------------------
 
 @dataclass(frozen=True)
-class SurfaceParams:
+class SurfaceParams(Checked):
     """Integral sliding surface of eq. 18."""
 
     k1: float = param(0.5, "1", "k1: weight of the error sum E (eq. 18)", min=0.0, max=1.0)
@@ -156,6 +178,9 @@ class SurfaceParams:
                                    "mean of the sums E, F (eqs. 19, 20) removed per sample "
                                    "(1: every unit integrates the mean; 0: the paper's "
                                    "per-unit sums)", min=0.0, max=1.0)
+    anti_windup: bool = param(True, description="hold the sums E, F (eqs. 19, 20) at a sample "
+                              "where every unit's input is at the bound the law pushes it "
+                              "to (false: the paper's sums, always advanced)")
 
 
 class SlidingLaw(Law):
@@ -190,8 +215,7 @@ class SlidingLaw(Law):
         Phi2, K = gain.M, gain.K
         du_eq = K @ (s - c.k1 * E - bk2 * F - est.dd_hat + y_r_next - y - est.free_response())
         if c.share_gain > 0:
-            dev = self.u - self.u.sum() / self.n
-            du_eq = du_eq - c.share_gain * (dev - K @ (Phi2 @ dev))
+            du_eq = du_eq - null_space_share(self.u, Phi2, K, c.share_gain)
         self.s = s
         self._gain = gain
         self._next = (E, F)
@@ -204,7 +228,7 @@ class SlidingLaw(Law):
         tol = self.BOUND_TOL
         pushed = (((u_wanted >= hi - tol) & (self.s < 0))
                   | ((u_wanted <= lo + tol) & (self.s > 0)))
-        if not np.all(pushed):
+        if not (self.surface.anti_windup and np.all(pushed)):
             self.E, self.F = self._next
         return self._apply(u)
 
@@ -218,7 +242,7 @@ class SlidingLaw(Law):
 # -- FFDL-ISMC (eqs. 24-27) ------------------------------------------------------------------
 
 @dataclass(frozen=True)
-class IsmcParams:
+class IsmcParams(Checked):
     """FFDL-ISMC (section 4.1, 2): Phi(1) = 0.5 I, mu = 1, lambda = 0.2, beta = 0.05, k1 =
     0.5, k2 = 2, alpha = 0.65."""
 
@@ -226,9 +250,11 @@ class IsmcParams:
     surface: SurfaceParams = group(SurfaceParams(), "")
     beta: float = param(0.05, "1", "beta: switching gain (eq. 25, units of y per "
                   "sample)", min=0.0)
-    boundary_layer: float = param(1.0, "1", "Delta: width of the saturation boundary layer "
-                                  "replacing sgn (eq. 27, km/h; converted to the units of y; "
-                                  "not in the paper: benchmarks/seed001_tuning.py)", min=1e-9)
+    boundary_layer: float = param(TUNED["ISMC"]["boundary_layer"], "1", "Delta: width of "
+                                  "the saturation boundary layer replacing sgn (eq. 27, km/h; "
+                                  "converted to the units of y; not in the paper: picked by "
+                                  "benchmarks/seed001_tuning.py, controllers/datadriven/"
+                                  "tuned.py)", min=1e-9)
 
 
 class Ismc(SlidingLaw):
@@ -246,28 +272,29 @@ class Ismc(SlidingLaw):
 # -- FFDL-ISMPC (eqs. 52-75) -----------------------------------------------------------------
 
 @dataclass(frozen=True)
-class IsmpcParams:
+class IsmpcParams(Checked):
     """FFDL-ISMPC (section 4.1, 1): Phi(1) = 0.5 I, mu = 1, lambda = 0.2, k1 = 0.5, k2 = 2,
     alpha = 0.5, N = 10."""
 
     ffdl: FfdlParams = group(FfdlParams(), "")
     surface: SurfaceParams = group(SurfaceParams(alpha=0.5), "")
     horizon: int = param(10, "1", "N: prediction and control horizon (eq. 57)", min=1,
-                         max=50, name="N")
-    theta: float = param(300.0, "1", "theta: weight of ||U||^2 in J_2 (eq. 66; not given "
-                         "in the paper: benchmarks/seed001_tuning.py; for km/h and m/s2, "
-                         "converted with the scaling)", min=0.0)
+                         max=50, integer=True, name="N")
+    theta: float = param(TUNED["ISMPC"]["theta"], "1", "theta: weight of ||U||^2 in J_2 "
+                         "(eq. 66; not given in the paper: picked by benchmarks/"
+                         "seed001_tuning.py, controllers/datadriven/tuned.py; for km/h and "
+                         "m/s2, converted with the scaling)", min=0.0)
+    constraints: str = param("qp", description='the input box in the MPC of eq. 67: "qp", '
+                             "the constrained QP (DAQP) when the unconstrained minimiser "
+                             'leaves the box; "clip": the unconstrained minimiser (eq. 72) '
+                             "alone, its input clipped to the box like the other laws'",
+                             choices=("qp", "clip"))
     error_prediction: str = param("eq78", description='P_hat of eqs. 70-72 (every stage k of '
                                   "the MPC's prediction adds k p_hat(t-1), p_hat(t-1) = "
                                   'dd_hat(t) - dd_hat(t-1)) with the sign of the law theorem 3 '
                                   'proves, "eq78" (Lambda s - Psi P_hat), or as eqs. 72, 73, 75 '
                                   'print it, "eq72" (+ Psi P_hat); "off": P_hat = 0 (a '
-                                  'diagnostic)')
-
-    def check(self) -> None:
-        if self.error_prediction not in P_HAT_SIGN:
-            raise ValueError(f"error_prediction = {self.error_prediction!r}: one of "
-                             f"{sorted(P_HAT_SIGN)}")
+                                  'diagnostic)', choices=("eq78", "eq72", "off"))
 
 
 P_HAT_SIGN = {"eq78": -1.0, "eq72": 1.0, "off": 0.0}
@@ -320,7 +347,7 @@ class Ismpc(SlidingLaw):
         inv = np.divide(1.0, den, out=np.zeros_like(den), where=den > 1e-12)
         X = -(Q @ (((Q.T @ grad) @ W) * inv) @ gain.Vt)
         cum = np.cumsum(X, axis=0)
-        if (cum >= lo_cum).all() and (cum <= hi_cum).all():
+        if self.p.constraints == "clip" or ((cum >= lo_cum).all() and (cum <= hi_cum).all()):
             x, dual = X.ravel(), self._zero_dual
         else:
             # J = sum_k ||offset_k + Phi_2 z_k||^2 + theta ||D z||^2, lo_cum <= z_k <= hi_cum
@@ -358,14 +385,25 @@ NO_COVARIANCE_BOUND = 1e300
 
 
 @dataclass(frozen=True)
-class GpcLawParams:
+class GpcLawParams(Checked):
     """GPC baseline (section 4.1, 4): Ny = 3, Nu = 2, forgetting factor 0.9, the paper's
     textbook RLS: no bound on the covariance (``p_max`` = ``NO_COVARIANCE_BOUND``, never
     reached; the shared core's 1e4, ours, is a safeguard the paper does not have, README
-    seed 001). The control weight (not in the paper) is 0.03, picked by the protocol of
-    ``benchmarks/seed001_tuning.py`` like ISMC's Delta and ISMPC's theta."""
+    seed 001). The control weight (not in the paper) is picked by the protocol of
+    ``benchmarks/seed001_tuning.py`` (``controllers/datadriven/tuned.py``) like ISMC's Delta,
+    ISMPC's theta and MFAC's delta."""
 
-    gpc: GpcParams = group(GpcParams(p_max=NO_COVARIANCE_BOUND, control_weight=0.03), "")
+    gpc: GpcParams = group(GpcParams(p_max=NO_COVARIANCE_BOUND,
+                                     control_weight=TUNED["GPC"]["control_weight"]), "")
+    share_gain: float = param(0.0, "1", "force sharing: fraction of the units' departure "
+                              "from their mean input removed per sample, in the null space "
+                              "of the RLS model's B_1 (0: off, the paper's GPC; not in the "
+                              "paper; off by default: B_1's weak directions are not the "
+                              "train's, on a plant whose units act independently it breaks "
+                              "the tracking)", min=0.0, max=1.0)
+
+
+SHARE_INVERSE = FfdlParams()  # the regularised inverse of B_1 for GPC's force sharing
 
 
 class GpcLaw(StatefulCore):
@@ -384,7 +422,14 @@ class GpcLaw(StatefulCore):
         self.gpc.observe(y)
         j = np.arange(1, self.p.gpc.Ny + 1)[:, None]
         refs = np.maximum(y_r + j * (y_r_next - y_r), 0.0) * np.ones((1, self.n))
-        self.u = self.gpc.control(refs, lo, hi)
+        u = self.gpc.plan(refs)
+        if self.p.share_gain > 0:
+            # GPC works in km/h and m/s2, the units the FFDL inverse's defaults are set for
+            gain = truncated_gain(self.gpc.input_gain(), SHARE_INVERSE.pinv_regularisation,
+                                  SHARE_INVERSE.pinv_cutoff)
+            u = u - null_space_share(self.u, gain.M, gain.K, self.p.share_gain)
+        self.u = np.clip(u, lo, hi)
+        self.gpc.applied(self.u)
         return self.u
 
     def hold(self, y: np.ndarray, u: np.ndarray) -> None:

@@ -51,7 +51,7 @@ from controllers.common.speed_profiles import (
     SpeedProfile,
     generate,
 )
-from cosim.fmu.declare import Declared, Var, build, param, sample_time
+from cosim.fmu.declare import Checked, Declared, Var, build, param, sample_time
 from cosim.fmu.state import StatefulCore
 from plants.crh3 import Crh3Params
 from plants.resistance import KMH
@@ -59,7 +59,7 @@ from plants.route import load_route, route_parameter, routes_dir_in
 
 
 @dataclass(frozen=True)
-class EcoTrackingParams:
+class EcoTrackingParams(Checked):
     """The interface part shared by the seed-003 controllers."""
 
     mass: float = param(980e3, "kg", "train mass M (Table 1)", min=1.0)
@@ -161,6 +161,7 @@ class EcoTracker(StatefulCore, Declared):
         return cls(params, profile, t0)
 
     def __init__(self, params: Any, profile: SpeedProfile, t0: float = 0.0) -> None:
+        params.check()
         self.p = params
         self.track: EcoTrackingParams = params.track
         self.profile = profile

@@ -11,6 +11,13 @@ regions, where the least-violated leaf region is used).
 
 The region data are built offline for one design (horizon, blocks, Q, R, train) by
 ``scripts/make_empc_regions.py``; the controller refuses data built for another design.
+
+What it is: the explicit solution of a *reduced* MPC (mode and PWA segment held over the
+horizon, the reference linearised, inputs blocked 3:4:3, the coupler-force and speed rows left
+out; :mod:`controllers.hybrid.explicit`), exact for that problem, not the GMPC's MIQP made
+explicit. ``evaluation = "online"`` is its online twin: the same mp-QP solved at the same
+``theta`` by DAQP every event (:func:`controllers.hybrid.explicit.solve_parametric`) instead of
+the region lookup, so the two differ only in how the law is evaluated.
 """
 
 from __future__ import annotations
@@ -23,14 +30,23 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from controllers.hybrid.explicit import DATA_DIR, PARAM_NAMES, ExplicitLaw
+from controllers.hybrid.explicit import (
+    DATA_DIR,
+    PARAM_NAMES,
+    ExplicitLaw,
+    ParametricQp,
+    parametric_qp,
+    solve_parametric,
+)
 from controllers.hybrid.hybrid_mpc import HybridMpc, HybridMpcParams, reference_position
+from controllers.hybrid.miqp import parse_blocks
 from controllers.hybrid.model import KN, ChainModel
 from cosim.fmu.declare import Var, build
 from plants.emu import EmuParams
 from plants.route import ReferenceProfile, load_reference, routes_dir_in
 
 REGIONS_DEFAULT = "seed004_empc_crh3_3car"
+EVALUATIONS = ("explicit", "online")
 
 
 def regions_path(name: str, data_dir: Path | None = None) -> Path:
@@ -44,7 +60,9 @@ def regions_path(name: str, data_dir: Path | None = None) -> Path:
 class ExplicitMpc(HybridMpc):
     """EMPC: the piecewise-affine law of PPOPT's mp-QPs, evaluated by point location."""
 
-    default_params: ClassVar[HybridMpcParams] = replace(HybridMpcParams(), move_blocks="3:4:3")
+    # the reduced problem linearises the reference from now: the "horizon" position reading
+    default_params: ClassVar[HybridMpcParams] = replace(HybridMpcParams(), move_blocks="3:4:3",
+                                                        position_reference="horizon")
     # parameters the region data are built for (another value is refused at construction)
     fixed_by_data: ClassVar[tuple[str, ...]] = (
         "N", "move_blocks", "q_speed", "q_position", "R", "configuration", "sample_time",
@@ -53,7 +71,10 @@ class ExplicitMpc(HybridMpc):
     setup_vars = (*HybridMpc.setup_vars,
                   Var("regions", "parameter", REGIONS_DEFAULT, description="bundled EMPC "
                       "region data (controllers/hybrid/data/NAME.npz) or path of an .npz "
-                      "written by scripts/make_empc_regions.py"))
+                      "written by scripts/make_empc_regions.py"),
+                  Var("evaluation", "parameter", "explicit", description='"explicit": the '
+                      'region lookup of eq. 18; "online": the same reduced mp-QP solved at '
+                      "theta by DAQP every event (the explicit law's online twin)"))
     output_vars = (*HybridMpc.output_vars,
                    Var.output("empc_outside", "1", "events whose parameter lay outside the "
                               "regions (clipped into the box, or nearest region)", start=0),
@@ -110,11 +131,18 @@ class ExplicitMpc(HybridMpc):
         params = build(cls.default_params, values)
         profile = load_reference(values["reference"], routes_dir=routes_dir_in(data_dir))
         path = regions_path(str(values["regions"]), data_dir)
-        return cls(params, profile, units=units, regions=path)
+        return cls(params, profile, units=units, regions=path,
+                   evaluation=str(values.get("evaluation", "explicit")))
 
     def __init__(self, params: HybridMpcParams, profile: ReferenceProfile, units: int = 3,
-                 regions: Path | None = None) -> None:
+                 regions: Path | None = None, evaluation: str = "explicit") -> None:
         super().__init__(params, profile, units=units)
+        if evaluation not in EVALUATIONS:
+            raise ValueError(f"evaluation = {evaluation!r} must be one of {EVALUATIONS}")
+        self.evaluation = evaluation
+        if params.r_increment != 0.0:
+            raise ValueError(f"dR = {params.r_increment}: the EMPC's reduced problem has no "
+                             "force-increment term (eq. 11); its regions are built for dR = 0")
         if params.delta_mode != "schedule":
             raise ValueError(f"delta_mode = {params.delta_mode!r}: EMPC needs the scheduled "
                              "mode (its regions are per mode)")
@@ -133,6 +161,15 @@ class ExplicitMpc(HybridMpc):
                                  f"this controller has {value!r}: regenerate them with "
                                  "scripts/make_empc_regions.py")
         self.ratio = {m: self.limit_ratio(self.train, m) for m in (0, 1)}
+        # the online twin: the mp-QP of every mode and segment, solved at theta per event
+        self.online: dict[tuple[int, int], ParametricQp] = {}
+        if evaluation == "online":
+            q = [params.q_speed] * units + [params.q_position] * units
+            blocks = parse_blocks(params.move_blocks, self.N)
+            self.online = {key: parametric_qp(self.model, self.N, blocks, q, params.r_force,
+                                              key[0], key[1], self.law.boxes[key],
+                                              self.ratio[key[0]])
+                           for key in self.law.sets}
         self.outside = 0
         self.region = -1
 
@@ -167,16 +204,22 @@ class ExplicitMpc(HybridMpc):
         box = self.law.boxes[mode, seg]
         clipped = np.clip(theta, box[:, 0], box[:, 1])
         regions = self.law.sets[mode, seg]
-        i, viol = regions.locate(clipped)
-        self.outside += bool(np.any(clipped != theta) or viol > regions.tol)
         u = np.zeros(n)
-        if i >= 0:
-            active = np.flatnonzero(self.ratio[mode] > 0) if mode == 1 else np.arange(n)
-            u[active] = regions.control(i, clipped)
+        if self.online:  # the online twin: no region, the mp-QP solved at theta
+            i = -1
+            self.outside += bool(np.any(clipped != theta))
+            qp = self.online[mode, seg]
+            u = qp.first_input(solve_parametric(qp, clipped), n)
         else:
-            self.qp_infeasible += 1
-            self.last_failure = (t, "no region in the leaf")
-            u = np.array(self.forces) / KN
+            i, viol = regions.locate(clipped)
+            self.outside += bool(np.any(clipped != theta) or viol > regions.tol)
+            if i >= 0:
+                active = np.flatnonzero(self.ratio[mode] > 0) if mode == 1 else np.arange(n)
+                u[active] = regions.control(i, clipped)
+            else:
+                self.qp_infeasible += 1
+                self.last_failure = (t, "no region in the leaf")
+                u = np.array(self.forces) / KN
         u = np.where(md.motored, np.maximum(u, 0.0), 0.0) if mode == 1 else np.minimum(u, 0.0)
         self.region = i
         self.delta = mode

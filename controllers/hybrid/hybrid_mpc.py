@@ -6,7 +6,9 @@ At every sample (Ts = 1 s) the controller
    the state ``x = [v_1..v_n, x_1..x_n]`` with displacements relative to the head
    (``x_1 = 0``, ``x_j - x_j+1 = (F_j - d (v_j - v_j+1)) / k``);
 2. references every car's speed to ``v_ref(t + s Ts)`` and its displacement to
-   ``s_ref(t + s Ts) - s`` (``s_ref``: the integral of the speed-time target profile);
+   ``s_ref(t + s Ts) - s`` (``s_ref``: the integral of the speed-time target profile; the
+   timetable reading, with memory of the position error) or, with ``position_reference =
+   "horizon"``, to the reference distance from now (no memory);
 3. fixes the mode schedule of section 3 (``delta = 0`` from ``brake_from`` until the measured
    mean speed has fallen to ``brake_until_speed``, 1 otherwise; ``delta_mode = "optimise"``
    leaves delta to the MIQP instead);
@@ -32,7 +34,7 @@ import numpy as np
 
 from controllers.hybrid.miqp import HybridMiqp, MiqpResult, parse_blocks
 from controllers.hybrid.model import KN, ChainModel, Limits, PwlResistance
-from cosim.fmu.declare import Declared, Var, build, param, parameters, sample_time
+from cosim.fmu.declare import Checked, Declared, Var, build, param, parameters, sample_time
 from cosim.fmu.diagnostics import SolveTimes
 from cosim.fmu.state import StatefulCore
 from plants.emu import CONFIGURATIONS, EmuParams, emu_config
@@ -43,56 +45,50 @@ POSITION_REFERENCES = ("horizon", "timetable")
 
 
 @dataclass(frozen=True)
-class HybridMpcParams:
-    """Case 1 of the paper by default (Np = Nu = 10, R = 0.5 I3, Q = 10 I6)."""
+class HybridMpcParams(Checked):
+    """Case 1 of the paper by default (Np = Nu = 10, R = 0.5 I3, Q = 10 I6; no eq. 11)."""
 
     horizon: int = param(10, description="prediction = control horizon Np = Nu", min=1, max=40,
-                         name="N")
+                         integer=True, name="N")
     q_speed: float = param(10.0, "1", "Q: weight on each car's speed error (m/s)^-2", min=0.0)
     q_position: float = param(10.0, "1", "Q: weight on each car's position error (m)^-2",
                               min=0.0)
-    r_force: float = param(0.5, "1", "R: weight on each car's force (kN)^-2", min=1e-9,
-                           name="R")
+    r_force: float = param(0.5, "1", "R: weight on each car's force (kN)^-2 (eq. 10)",
+                           min=0.0, name="R")
+    r_increment: float = param(0.0, "1", "dR: weight on each car's force increment (kN)^-2 "
+                               "(eq. 11; the paper prints no value: 0 leaves eq. 11 out)",
+                               min=0.0, name="dR")
     move_blocks: str = param("", description='input blocks, e.g. "3:4:3" (MB-MPC); empty: '
                              "every stage free (GMPC)")
     sample_time: float = sample_time(1.0)
     configuration: str = param("crh3_3car", description="train data of the control model "
-                               f"(one of {sorted(CONFIGURATIONS)})")
+                               f"(one of {sorted(CONFIGURATIONS)})",
+                               choices=tuple(sorted(CONFIGURATIONS)))
     fit_speed_max: float = param(350.0 / 3.6, "m/s", "PWA resistance fitted on [0, this] in "
                                  "three equal segments", min=1.0)
     coupler_force_max: float = param(1.0e6, "N", "coupler force limit (state constraint)",
                                      min=1.0)
     speed_max: float = param(350.0 / 3.6, "m/s", "speed limit of every car (state "
                              "constraint)", min=0.0)
-    position_reference: str = param("horizon", description='"horizon": the displacement '
-                                    "reference of stage s is the reference distance from now, "
-                                    "int_t^(t+s Ts) v_ref (eq. 9 on the speed-position curve, "
-                                    'no memory of past error); "timetable": s_ref(t + s Ts) - s '
-                                    "(the accumulated position error is corrected)")
+    position_reference: str = param("timetable", description='"timetable": the displacement '
+                                    "reference of stage s is s_ref(t + s Ts) - s (x_d of eq. "
+                                    "12 on the timetable: the accumulated position error is "
+                                    'corrected); "horizon": the reference distance from now, '
+                                    "int_t^(t+s Ts) v_ref (no memory of past error)",
+                                    choices=POSITION_REFERENCES)
     delta_mode: str = param("schedule", description='"schedule": delta fixed as in section 3; '
-                            '"optimise": delta a decision of the MIQP')
+                            '"optimise": delta a decision of the MIQP',
+                            choices=DELTA_MODES)
     brake_from: float = param(600.0, "s", "delta = 0 (braking) from this time ...")
     brake_until_speed: float = param(30.0, "m/s", "... until the mean speed has fallen to this",
                                      min=0.0)
 
-    def check(self) -> None:
-        if int(self.horizon) != self.horizon or self.horizon < 1:
-            raise ValueError(f"N = {self.horizon} must be an integer >= 1")
+    def check_relations(self) -> None:
         parse_blocks(self.move_blocks, int(self.horizon))
-        if self.position_reference not in POSITION_REFERENCES:
-            raise ValueError(f"position_reference = {self.position_reference!r} must be one of "
-                             f"{POSITION_REFERENCES}")
-        if self.delta_mode not in DELTA_MODES:
-            raise ValueError(f"delta_mode = {self.delta_mode!r} must be one of {DELTA_MODES}")
-        if self.configuration not in CONFIGURATIONS:
-            raise ValueError(f"configuration = {self.configuration!r} unknown (known: "
-                             f"{sorted(CONFIGURATIONS)})")
-        for name in ("q_speed", "q_position"):
-            if not getattr(self, name) >= 0:
-                raise ValueError(f"{name} = {getattr(self, name)} must be >= 0")
-        for name in ("r_force", "sample_time", "coupler_force_max"):
-            if not getattr(self, name) > 0:
-                raise ValueError(f"{name} = {getattr(self, name)} must be > 0")
+        if not (self.r_force >= 0 and self.r_increment >= 0
+                and self.r_force + self.r_increment > 0):
+            raise ValueError(f"R = {self.r_force}, dR = {self.r_increment}: both >= 0 and one "
+                             "> 0 (the QP needs a weight on the forces or their increments)")
 
 
 def chain_model(train: EmuParams, p: HybridMpcParams) -> ChainModel:
@@ -185,7 +181,7 @@ class HybridMpc(StatefulCore, Declared):
         self.N = int(params.horizon)
         self.miqp = HybridMiqp(self.model, self.N, [params.q_speed] * units
                                + [params.q_position] * units, params.r_force,
-                               parse_blocks(params.move_blocks, self.N))
+                               parse_blocks(params.move_blocks, self.N), params.r_increment)
         self.forces = [0.0] * units
         self.delta = 1
         self.braking_done = False
@@ -246,7 +242,7 @@ class HybridMpc(StatefulCore, Declared):
                      coupler=self.p.coupler_force_max / KN, speed=self.p.speed_max)
         delta = self.schedule(t, float(self.model.c @ x0))
         ref = self.references(t, float(inputs["s"]))
-        return self.miqp.solve(x0, ref, lim, delta), delta
+        return self.miqp.solve(x0, ref, lim, delta, np.array(self.forces) / KN), delta
 
     def compute(self, t: float, inputs: dict[str, float]) -> tuple[dict[str, float], int]:
         res, delta = self.solve(t, inputs)

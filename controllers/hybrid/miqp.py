@@ -5,10 +5,14 @@ the plain GMPC of eq. 15), then per stage ``s = 0..N-1`` the mode ``delta_s``, t
 binaries ``b_s`` and the products ``z_s`` of :class:`controllers.hybrid.model.ChainModel`.
 Condensed prediction ``X = Phi x0 + Gam V + f`` (stages 1..N) and cost::
 
-    J = sum_{s=1..N} ||x_s - r_s||_Q^2 + sum_{s=0..N-1} ||u_s||_R^2
+    J = sum_{s=1..N} ||x_s - r_s||_Q^2 + sum_{s=0..N-1} ||u_s||_R^2 + ||u_s - u_{s-1}||_dR^2
 
 (``u`` in kN: eq. 10's traction/brake energy weight R; eq. 9's tracking weight Q on all speeds
-and displacements). Rows: the MLD rows of every stage (big-M, mode) and the state rows of
+and displacements; eq. 11's weight dR on the force increments, ``u_{-1}`` the input applied
+last). Eq. 15 writes the same problem in the increments ``dU``; ``U = u_{-1} + T dU`` (``T``
+lower triangular of ones) is an invertible affine map, so both forms have one minimiser and
+the one here, in ``U``, keeps the move blocks and mode bounds as simple bounds.
+Rows: the MLD rows of every stage (big-M, mode) and the state rows of
 stages 1..N (coupler force, speed limit). The matrices are fixed; per event only the bounds
 and the linear term change.
 
@@ -106,7 +110,8 @@ class HybridMiqp:
     """The condensed MIQP of eq. 15 for one model, horizon and blocking; built once."""
 
     def __init__(self, model: ChainModel, horizon: int, q: Sequence[float] | float,
-                 r: Sequence[float] | float, blocks: Sequence[int] | None = None) -> None:
+                 r: Sequence[float] | float, blocks: Sequence[int] | None = None,
+                 dr: Sequence[float] | float = 0.0) -> None:
         md = model
         n, N, nw, K = md.n, int(horizon), md.nw, md.K
         blocks = [1] * N if blocks is None else [int(b) for b in blocks]
@@ -114,6 +119,7 @@ class HybridMiqp:
             raise ValueError(f"blocks {blocks} must be positive and sum to N = {N}")
         self.md, self.N, self.blocks = md, N, blocks
         self._weights = (q, r)
+        self._dr = dr
         self._split: dict[tuple[int, ...], HybridMiqp] = {}
         nb = len(blocks)
         self.nV = nV = n * nb + N * (1 + 2 * K)
@@ -142,9 +148,13 @@ class HybridMiqp:
         H = np.zeros((nV, nV))
         for s in range(1, N + 1):
             H += Gam[s].T @ Q @ Gam[s]
+        dR = np.diag(np.broadcast_to(np.asarray(dr, float), (n,)))
+        self.dR = dR
         for s in range(N):
             Pu = P[s, :n]
             H += Pu.T @ R @ Pu
+            D = Pu - (P[s - 1, :n] if s > 0 else 0.0)  # u_s - u_{s-1} = D V (- u_{-1} at s = 0)
+            H += D.T @ dR @ D
         H = 2.0 * H  # DAQP: 1/2 V'HV + f'V
         self.binary_idx: list[tuple[int, int, int]] = []  # (V index, stage, kind: -1 delta, k)
         for s in range(N):
@@ -297,15 +307,19 @@ class HybridMiqp:
         rhi[row_max <= rhi] = _INF
         return lo, hi, sense, free
 
-    def linear_term(self, x0: np.ndarray, ref: np.ndarray) -> tuple[np.ndarray, float]:
-        """``(f, const)``: linear term and constant of the cost for ``ref`` (N+1, 2n)."""
+    def linear_term(self, x0: np.ndarray, ref: np.ndarray, u_prev: np.ndarray | None = None
+                    ) -> tuple[np.ndarray, float]:
+        """``(f, const)``: linear term and constant of the cost for ``ref`` (N+1, 2n) and the
+        last applied input ``u_prev`` (kN; eq. 11's first increment, zero when None)."""
         e = self.stage_states_free(x0) - ref
         f = np.einsum("svx,sx->v", self._Gq[1:], e[1:])
+        up = np.zeros(self.md.n) if u_prev is None else np.asarray(u_prev, float)
+        f -= 2.0 * self.P[0, :self.md.n].T @ self.dR @ up
         bps = self.md.res.breakpoints
         for i, s, k in self.binary_idx:  # eps (b - b_guess)^2: guess = segment of the reference
             guess = 1.0 if k < 0 else float(self.md.c @ ref[s] >= bps[k])
             f[i] -= 2.0 * EPS_REG * guess
-        const = float(np.einsum("sx,xy,sy->", e[1:], self.Q, e[1:]))
+        const = float(np.einsum("sx,xy,sy->", e[1:], self.Q, e[1:]) + up @ self.dR @ up)
         return f, const
 
     def for_modes(self, delta: Sequence[int | None]) -> HybridMiqp:
@@ -317,18 +331,19 @@ class HybridMiqp:
             return self
         key = tuple(blocks)
         if key not in self._split:
-            self._split[key] = HybridMiqp(self.md, self.N, *self._weights, blocks)
+            self._split[key] = HybridMiqp(self.md, self.N, *self._weights, blocks, self._dr)
         return self._split[key]
 
     def solve(self, x0: np.ndarray, ref: np.ndarray, lim: Limits,
-              delta: Sequence[int | None]) -> MiqpResult:
-        """The MIQP for state ``x0``, references ``ref`` (N+1, 2n), limits, mode schedule;
-        a block that spans a change of the fixed mode is cut there (:meth:`for_modes`)."""
+              delta: Sequence[int | None], u_prev: np.ndarray | None = None) -> MiqpResult:
+        """The MIQP for state ``x0``, references ``ref`` (N+1, 2n), limits, mode schedule and
+        the last applied input ``u_prev`` (kN, for eq. 11); a block that spans a change of the
+        fixed mode is cut there (:meth:`for_modes`)."""
         problem = self.for_modes(delta)
         if problem is not self:
-            return problem.solve(x0, ref, lim, delta)
+            return problem.solve(x0, ref, lim, delta, u_prev)
         t0, c0 = time.perf_counter(), time.thread_time()
-        f, const = self.linear_term(x0, ref)
+        f, const = self.linear_term(x0, ref, u_prev)
         lo, hi, sense, free = self.bounds(x0, lim, delta)
         res = self._solve(f, const, lo, hi, sense, x0, t0, free)
         if not res.feasible and 0 < free <= ENUMERATE_MAX_FREE:
@@ -379,13 +394,14 @@ class HybridMiqp:
                           blocks=tuple(self.blocks))
 
     def solve_enumerated(self, x0: np.ndarray, ref: np.ndarray, lim: Limits,
-                         delta: Sequence[int | None]) -> MiqpResult:
+                         delta: Sequence[int | None], u_prev: np.ndarray | None = None
+                         ) -> MiqpResult:
         """Reference solution: every assignment of the free binaries as a QP (tests, N small)."""
         problem = self.for_modes(delta)
         if problem is not self:
-            return problem.solve_enumerated(x0, ref, lim, delta)
+            return problem.solve_enumerated(x0, ref, lim, delta, u_prev)
         t0 = time.perf_counter()
-        f, const = self.linear_term(x0, ref)
+        f, const = self.linear_term(x0, ref, u_prev)
         lo, hi, sense, free = self.bounds(x0, lim, delta)
         return self._enumerate(f, const, lo, hi, sense, x0, t0, free)
 

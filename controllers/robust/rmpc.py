@@ -1,6 +1,7 @@
-"""Multi-model LMI robust MPC of seed 003 (section 3.2-3.3, eqs. 14-28) for the CRH3.
+"""Multi-model LMI robust MPC ("LMI MPC"; not seed 000's tube RMPC) of seed 003 (section
+3.2-3.3, eqs. 14-28) for the CRH3.
 
-:class:`Crh3Rmpc` is a seed-003 tracker (:class:`controllers.eco.tracking.EcoTracker`: same
+:class:`Crh3LmiMpc` is a seed-003 tracker (:class:`controllers.eco.tracking.EcoTracker`: same
 inputs, outputs and profile parameters as the GPC baseline); its law, per sample (T = 1 s):
 
 1. measures ``y(k)`` = speed (km/h) and updates the switching index of the ARX set with the
@@ -13,9 +14,14 @@ inputs, outputs and profile parameters as the GPC baseline); its law, per sample
    which already carry the position correction), whose model at vertex ``j`` is
    ``x+ = [[a_j, 0], [T/3.6, 1]] x + [b_j; 0] du``;
 4. solves the Kothare LMI problem (eqs. 22-26, :class:`controllers.common.lmi.KothareLmi`)
-   over the vertex set chosen by ``vertices``: ``"neighbours"`` (our reading of the paper's
-   switching: the active model and its two neighbours in speed order span the polytope Omega
-   of eq. 16), ``"all"`` (the six models) or ``"nominal"`` (the active model alone);
+   over the polytope Omega of eq. 16 (:meth:`RobustMpcLaw.polytope`): the four corners of the
+   box ``[a_lo, a_hi] x [b_lo, b_hi]`` that holds the models chosen by ``vertices``
+   (``"neighbours"``, our reading of the paper's switching: the active model and its two
+   neighbours in speed order; ``"all"``: the six; ``"nominal"``: the active model) with their
+   pole ``1 - a`` scaled by ``1 -+ resistance_uncertainty`` and gain ``b`` by ``1 / (1 -+
+   mass_uncertainty)``. The printed models share one ``b``, so without the box the polytope
+   would hold no gain (mass) uncertainty. With ``"nominal"`` and both uncertainties 0 the
+   problem has the active model as its one vertex (the nominal-model LMI controller);
 5. applies ``u = u_ff + F x`` (``F = Y Qv^-1``) clipped to the tracker's input box (envelope
    and comfort bound). An LMI problem the solver does not solve keeps the previous gain
    (counted in ``qp_infeasible``).
@@ -37,7 +43,7 @@ from controllers.common.lmi import LMI_SOLVERS, KothareLmi
 from controllers.common.speed_profiles import PHASE_BRAKE, SpeedProfile
 from controllers.eco.tracking import EcoTracker, EcoTrackingParams
 from controllers.robust.multimodel import ArxSet, SwitchingIndex
-from cosim.fmu.declare import Var, group, param
+from cosim.fmu.declare import Checked, Var, group, param
 from cosim.fmu.diagnostics import SolveTimes
 from cosim.fmu.state import StatefulCore
 from plants.route import GRAVITY
@@ -51,7 +57,7 @@ IDENTIFIED_FILE = "crh3_arx.toml"
 
 
 @dataclass(frozen=True)
-class RmpcParams:
+class RmpcParams(Checked):
     """The law's settings; section 4 of the paper: Q = diag(1, 1, 1) (here: speed and position
     error), R = 1."""
 
@@ -61,16 +67,25 @@ class RmpcParams:
                            min=1e-9, name="R")
     u_max: float = param(3.0, "1", "bound on the LMI input correction |F z| over the "
                          "invariant ellipsoid (eq. 25), daN/kN", min=1e-6)
-    vertices: str = param("neighbours", description='polytope of the LMI: "neighbours" '
-                          '(active model and its neighbours), "all" or "nominal"')
+    vertices: str = param("neighbours", description='models the polytope of the LMI spans: '
+                          '"neighbours" (active model and its neighbours), "all" or "nominal" '
+                          '(the active model)', choices=VERTEX_SETS)
+    mass_uncertainty: float = param(0.1, "1", "relative train-mass uncertainty the polytope "
+                                    "covers: b of every model between b / (1 + this) and "
+                                    "b / (1 - this)", min=0.0, max=0.9)
+    resistance_uncertainty: float = param(0.3, "1", "relative running-resistance uncertainty "
+                                          "the polytope covers: 1 - a of every model scaled "
+                                          "by 1 -+ this", min=0.0, max=0.9)
     model_set: str = param("identified", description='ARX set: "identified" (fitted to our '
-                           'CRH3 plant, controllers/robust/data) or "paper" (section 2)')
+                           'CRH3 plant, controllers/robust/data) or "paper" (section 2)',
+                           choices=MODEL_SETS)
     switch_alpha: float = param(1.0, "1", "a: weight of the current mismatch (eq. 27)",
                                 min=1e-9)
     switch_beta: float = param(1.0, "1", "b: weight of the past mismatches (eq. 27)", min=1e-9)
     switch_rho: float = param(0.8, "1", "forgetting factor rho (eq. 27)", min=1e-6,
                               max=0.999999)
-    switch_horizon: int = param(10, "1", "past horizon l (eq. 27, samples)", min=0, max=1000)
+    switch_horizon: int = param(10, "1", "past horizon l (eq. 27, samples)", min=0, max=1000,
+                                integer=True)
     disturbance_gain: float = param(0.3, "1", "filter gain of the disturbance estimate",
                                     min=0.0, max=1.0)
     error_clip_speed: float = param(30.0, "m/s", "speed error fed to the LMI clipped to "
@@ -79,17 +94,8 @@ class RmpcParams:
                                        "to +- this", min=0.0)
     lmi_floor: float = param(1.0, "1", "errors smaller than this (km/h, m) are scaled up to "
                              "it in the LMI problem (conditioning)", min=1e-6)
-    solver: str = param("clarabel", description=f"SDP solver, one of {LMI_SOLVERS}")
-
-    def check(self) -> None:
-        if self.vertices not in VERTEX_SETS:
-            raise ValueError(f"vertices = {self.vertices!r} must be one of {VERTEX_SETS}")
-        if self.model_set not in MODEL_SETS:
-            raise ValueError(f"model_set = {self.model_set!r} must be one of {MODEL_SETS}")
-        if self.solver not in LMI_SOLVERS:
-            raise ValueError(f"solver = {self.solver!r} must be one of {LMI_SOLVERS}")
-        if int(self.switch_horizon) != self.switch_horizon:
-            raise ValueError(f"switch_horizon = {self.switch_horizon} must be an integer")
+    solver: str = param("clarabel", description=f"SDP solver, one of {LMI_SOLVERS}",
+                        choices=LMI_SOLVERS)
 
 
 def models_dir_in(data_dir: Path) -> Path:
@@ -126,8 +132,7 @@ class RobustMpcLaw(StatefulCore):
         if abs(models.sample_time - self.T) > 1e-9:
             raise ValueError(f"model set sampled at {models.sample_time} s, controller at "
                              f"sample_time = {self.T} s")
-        n_v = {"neighbours": min(3, models.size), "all": models.size, "nominal": 1}
-        self.lmi = KothareLmi(2, 1, n_v[params.vertices],
+        self.lmi = KothareLmi(2, 1, 1 if self.nominal else 4,
                               np.diag([params.q_speed, params.q_position]),
                               np.array([[params.r_input]]), u_max=[params.u_max],
                               solver=params.solver)
@@ -156,9 +161,35 @@ class RobustMpcLaw(StatefulCore):
         lo = min(max(s - 1, 0), max(n - 3, 0))
         return list(range(lo, lo + min(3, n)))
 
-    def vertex(self, i: int) -> tuple[np.ndarray, np.ndarray]:
-        m = self.models
-        return (np.array([[m.a[i], 0.0], [self.T / 3.6, 1.0]]), np.array([[m.b[i]], [0.0]]))
+    @property
+    def nominal(self) -> bool:
+        """The LMI sees one model: the active one, without uncertainty (the nominal-model
+        controller)."""
+        p = self.p
+        return (p.vertices == "nominal" and p.mass_uncertainty == 0.0
+                and p.resistance_uncertainty == 0.0)
+
+    def vertex(self, a: float, b: float) -> tuple[np.ndarray, np.ndarray]:
+        """``(A, B)`` of the regulated state ``[y - y_r, z]`` for the model ``(a, b)``."""
+        return (np.array([[a, 0.0], [self.T / 3.6, 1.0]]), np.array([[b], [0.0]]))
+
+    def polytope(self, s: int) -> list[tuple[np.ndarray, np.ndarray]]:
+        """Vertices of Omega (eq. 16) at active model ``s``: the corners of the box
+        ``[a_lo, a_hi] x [b_lo, b_hi]`` that holds every model of :meth:`vertex_indices` with
+        its pole ``1 - a`` scaled by ``1 -+ resistance_uncertainty`` and its gain ``b`` by
+        ``1 / (1 +- mass_uncertainty)`` (the law scales force by the nominal mass, so a
+        heavier train has a smaller gain). ``A`` and ``B`` are affine in ``(a, b)``: the box's
+        corners span every such model. One vertex for the nominal-model controller."""
+        m, p = self.models, self.p
+        idx = self.vertex_indices(s)
+        if self.nominal:
+            return [self.vertex(m.a[s], m.b[s])]
+        dr, dm = p.resistance_uncertainty, p.mass_uncertainty
+        a_lo = min(1.0 - (1.0 - m.a[j]) * (1.0 + dr) for j in idx)
+        a_hi = max(1.0 - (1.0 - m.a[j]) * (1.0 - dr) for j in idx)
+        b_lo = min(m.b[j] for j in idx) / (1.0 + dm)
+        b_hi = max(m.b[j] for j in idx) / (1.0 - dm)
+        return [self.vertex(a, b) for a in (a_lo, a_hi) for b in (b_lo, b_hi)]
 
     def control(self, y: float, y_ref: float, y_ref_next: float, position_error: float,
                 lo: float, hi: float) -> float:
@@ -183,7 +214,7 @@ class RobustMpcLaw(StatefulCore):
             x_lmi = x
         else:
             x_lmi = x * (p.lmi_floor / size) if size > 0 else np.array([p.lmi_floor, 0.0])
-        sol = self.lmi.solve(x_lmi, [self.vertex(j) for j in self.vertex_indices(i)])
+        sol = self.lmi.solve(x_lmi, self.polytope(i))
         self.lmi_solves += 1
         self.timing.add(sol.solve_time, sol.cpu_time)
         self.last_status = sol.status
@@ -216,17 +247,17 @@ class RobustMpcLaw(StatefulCore):
 
 
 @dataclass(frozen=True)
-class Crh3RmpcParams:
+class Crh3LmiMpcParams(Checked):
     """Interface part (:class:`EcoTrackingParams`) and the robust MPC's settings."""
 
     track: EcoTrackingParams = group(EcoTrackingParams(), "")
     rmpc: RmpcParams = group(RmpcParams(), "")
 
 
-class Crh3Rmpc(EcoTracker):
+class Crh3LmiMpc(EcoTracker):
     """LMI robust MPC tracker of the seed-003 profiles (multi-model, switching)."""
 
-    params_class = Crh3RmpcParams
+    params_class = Crh3LmiMpcParams
     state_fields = (*EcoTracker.tracker_state, "law", "z", "ref_now")
     output_vars = (
         *EcoTracker.output_vars,
@@ -240,12 +271,12 @@ class Crh3Rmpc(EcoTracker):
     )
 
     @classmethod
-    def build_core(cls, params: Crh3RmpcParams, profile: SpeedProfile, t0: float,
-                   data_dir: Path) -> Crh3Rmpc:
+    def build_core(cls, params: Crh3LmiMpcParams, profile: SpeedProfile, t0: float,
+                   data_dir: Path) -> Crh3LmiMpc:
         models = load_model_set(params.rmpc.model_set, models_dir_in(data_dir))
         return cls(params, profile, t0, models)
 
-    def __init__(self, params: Crh3RmpcParams, profile: SpeedProfile, t0: float = 0.0,
+    def __init__(self, params: Crh3LmiMpcParams, profile: SpeedProfile, t0: float = 0.0,
                  models: ArxSet | None = None) -> None:
         super().__init__(params, profile, t0)
         if models is None:

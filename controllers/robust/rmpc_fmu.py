@@ -3,13 +3,14 @@
 
 from __future__ import annotations
 
-from controllers.robust.rmpc import Crh3Rmpc
+from controllers.robust.rmpc import Crh3LmiMpc
 from cosim.fmu.slave import SampledControllerSlave
 
 
-class Crh3RmpcFmu(SampledControllerSlave):
-    """Multi-model LMI robust MPC tracking the conventional / eco profile of a CRH3 (seed 003)."""
+class Crh3LmiMpcFmu(SampledControllerSlave):
+    """Multi-model LMI robust MPC (Kothare; not seed 000's tube RMPC) tracking the seed-003
+    profiles of a CRH3."""
 
-    core_class = Crh3Rmpc
+    core_class = Crh3LmiMpc
     default_experiment_stop_time = 2200.0
     default_experiment_step = 1.0

@@ -270,11 +270,19 @@ def check_declared(instance: Any, prefix: str = "") -> None:
 
 class Checked:
     """Mixin of a declared ``*Params`` dataclass: :meth:`check` enforces every declaration
-    (:func:`check_declared`), then :meth:`check_relations`, the conditions between parameters
-    that no single range states (e.g. ``u_min < u_max``)."""
+    (:func:`check_declared`, groups included), then :meth:`check_relations` of every group and
+    of the class, the conditions between parameters that no single range states (e.g.
+    ``u_min < u_max``)."""
 
     def check(self) -> None:
         check_declared(self)
+        self._relations()
+
+    def _relations(self) -> None:
+        for f in dataclasses.fields(self):
+            value = getattr(self, f.name)
+            if _GROUP in f.metadata and isinstance(value, Checked):
+                value._relations()
         self.check_relations()
 
     def check_relations(self) -> None:

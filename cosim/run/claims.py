@@ -30,7 +30,8 @@ ORIGINS = ("paper", "ours")
 _CLAIM_KEYS = {"id", "source", "text", "paper", "metric", "kind", "runs", "threshold", "range",
                "ensemble", "origin"}
 _ENSEMBLE_KEYS = {"seed_key", "report_seeds", "calibration_seeds", "perturb", "perturb_seed",
-                  "rounding_perturb"}
+                  "rounding_perturb", "rounding_reference_path"}
+_VARIANT_KEYS = {"name", "text", "replace", "rounding", "seeds"}
 ROUNDING_RELATIVE = 1e-12  # relative change of each [ensemble].rounding_perturb parameter
 CONFIDENCE = 0.95
 N_RESAMPLES = 9999
@@ -51,6 +52,7 @@ class Ensemble:
     perturb: list[str] = field(default_factory=list)
     perturb_seed: int = 0
     rounding_perturb: list[str] = field(default_factory=list)
+    rounding_reference_path: bool = True
 
 
 def parse_seeds(where: str, key: str, value: Any) -> list[int]:
@@ -117,6 +119,14 @@ def check_ensemble(where: str, data: dict[str, Any] | None) -> Ensemble:
             raise ClaimsError(f"{where}: [ensemble] rounding_perturb: {key!r} is not "
                               "FMU.PARAMETER")
     ens.rounding_perturb = list(data.get("rounding_perturb", []))
+    ref_path = data.get("rounding_reference_path", True)
+    if not isinstance(ref_path, bool):
+        raise ClaimsError(f"{where}: [ensemble] rounding_reference_path = {ref_path!r}: "
+                          "expected true or false")
+    if not ref_path and not ens.rounding_perturb:
+        raise ClaimsError(f"{where}: [ensemble] rounding_reference_path = false needs "
+                          "rounding_perturb: the rerun would repeat the main path")
+    ens.rounding_reference_path = ref_path
     seed = data.get("perturb_seed", 0)
     if isinstance(seed, bool) or not isinstance(seed, int):
         raise ClaimsError(f"{where}: [ensemble] perturb_seed = {seed!r}: expected an integer")
@@ -173,6 +183,48 @@ def check_claims(where: str, claims: list[dict[str, Any]], run_names: list[str],
     return claims
 
 
+def check_variants(where: str, variants: list[dict[str, Any]], run_names: list[str]
+                   ) -> list[dict[str, Any]]:
+    """The ``[[variants]]`` tables: each names the runs that replace others in every claim
+    (an alternative reading or a mechanism removed), checked against the entry's runs."""
+    names: set[str] = set()
+    for i, var in enumerate(variants):
+        at = f"{where}: [[variants]] #{i + 1}"
+        unknown = sorted(set(var) - _VARIANT_KEYS)
+        if unknown:
+            raise ClaimsError(f"{at}: unknown key(s) {unknown} (allowed: "
+                              f"{sorted(_VARIANT_KEYS)})")
+        missing = [k for k in ("name", "replace") if k not in var]
+        if missing:
+            raise ClaimsError(f"{at}: missing key(s) {missing}")
+        if not isinstance(var["name"], str) or var["name"] in names or var["name"] == "main":
+            raise ClaimsError(f"{at}: name = {var['name']!r}: a new name other than 'main'")
+        names.add(var["name"])
+        rep = var["replace"]
+        if not (isinstance(rep, dict) and rep):
+            raise ClaimsError(f"{at}: replace = {rep!r}: expected a table run -> run")
+        for old, new in rep.items():
+            for run in (old, new):
+                if run not in run_names:
+                    raise ClaimsError(f"{at}: replace: {run!r} is not one of the entry's "
+                                      f"[[runs]]")
+        n = var.get("seeds")
+        if n is not None and (isinstance(n, bool) or not isinstance(n, int) or n < 1):
+            raise ClaimsError(f"{at}: seeds = {n!r}: expected an integer >= 1 (the first "
+                              "report seeds, at most --seeds)")
+        if not isinstance(var.get("rounding", False), bool):
+            raise ClaimsError(f"{at}: rounding = {var['rounding']!r}: expected true or false")
+    return variants
+
+
+def variant_runs(claim: dict[str, Any], variant: dict[str, Any]) -> list[str] | None:
+    """The claim's runs under ``variant`` (None: the variant replaces none of them)."""
+    rep = variant["replace"]
+    if not any(r in rep for r in claim["runs"]):
+        return None
+    return [rep.get(r, r) for r in claim["runs"]]
+
+
 def median_ci(values: np.ndarray) -> tuple[float, float, float, str]:
     """(median, CI low, CI high, note) of ``values`` (see the module doc for the degenerate
     cases; NaN bounds when no CI can be given)."""
@@ -189,6 +241,29 @@ def median_ci(values: np.ndarray) -> tuple[float, float, float, str]:
     res = bootstrap((values,), np.median, confidence_level=CONFIDENCE, method="percentile",
                     n_resamples=N_RESAMPLES, random_state=np.random.default_rng(BOOTSTRAP_SEED))
     return med, float(res.confidence_interval.low), float(res.confidence_interval.high), ""
+
+
+def ratio_ci(a: np.ndarray, b: np.ndarray) -> tuple[float, float, float]:
+    """(median(a) / median(b), CI low, CI high) over independent repetitions ``a`` and ``b``
+    (e.g. the timing repeats of two runs): percentile bootstrap resampling each side on its
+    own; NaN bounds with fewer than 3 repetitions on a side or a zero median."""
+    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    if a.size == 0 or b.size == 0 or np.isnan(a).any() or np.isnan(b).any():
+        return math.nan, math.nan, math.nan
+    mb = float(np.median(b))
+    if mb == 0.0:
+        return math.nan, math.nan, math.nan
+    ratio = float(np.median(a)) / mb
+    if a.size < 3 or b.size < 3:
+        return ratio, math.nan, math.nan
+    from scipy.stats import bootstrap
+
+    def stat(x: np.ndarray, y: np.ndarray, axis: int = -1) -> np.ndarray:
+        return np.median(x, axis=axis) / np.median(y, axis=axis)
+
+    res = bootstrap((a, b), stat, confidence_level=CONFIDENCE, method="percentile",
+                    n_resamples=N_RESAMPLES, random_state=np.random.default_rng(BOOTSTRAP_SEED))
+    return ratio, float(res.confidence_interval.low), float(res.confidence_interval.high)
 
 
 def verdict(claim: dict[str, Any], a: np.ndarray, b: np.ndarray | None = None

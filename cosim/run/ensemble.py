@@ -9,25 +9,29 @@ Members of a claim's ensemble (K = ``--seeds``, the first K report seeds):
   of the same sequence for every K), with report seed i where there is a seed key.
 
 Every member runs twice: on the main path and on a perturbed floating-point path (the plants'
-numpy reference path, ``ATO_COSIM_NO_KERNELS=1`` in the worker, and each
-``[ensemble].rounding_perturb`` parameter scaled by 1 + 1e-12). Workers are spawned processes
-with one BLAS thread each; progress (runs done / total, elapsed, ETA) goes to stderr.
+numpy reference path, ``ATO_COSIM_NO_KERNELS=1`` in the worker, unless
+``[ensemble].rounding_reference_path`` is false, and each ``[ensemble].rounding_perturb``
+parameter scaled by 1 + 1e-12). The runs go through the shared
+runner (:mod:`cosim.run.runner`: ``--workers``, ``--scheduler``, one BLAS thread per worker,
+interrupts, progress on stderr).
 """
 
 from __future__ import annotations
 
 import math
-import multiprocessing
-import os
 import sys
-import time
-from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from cosim.run.claims import ROUNDING_RELATIVE, ours_text, verdict, with_rounding
+from cosim.run.claims import (
+    ROUNDING_RELATIVE,
+    ours_text,
+    variant_runs,
+    verdict,
+    with_rounding,
+)
 
 Job = tuple[tuple[str, str, int, bool], str, dict[str, Any]]  # (run, ensemble, i, rounding)
 
@@ -76,19 +80,35 @@ def _rounding_overrides(entry: Any, run: dict[str, Any], base: dict[str, Any]
     return out
 
 
+def claim_cases(entry: Any, k: int, rounding: bool = True
+                ) -> list[tuple[str, dict[str, Any], list[str], bool, int]]:
+    """(variant, claim, runs, with the rounding rerun, K) of every claim evaluation: the
+    claims as written (variant "main", K = ``k``) and each ``[[variants]]`` replacing some of
+    their runs (K = its ``seeds``, at most ``k``)."""
+    cases = [("main", c, list(c["runs"]), rounding, k) for c in entry.claims]
+    for var in getattr(entry, "variants", []):
+        kv = min(k, var.get("seeds", k))
+        for claim in entry.claims:
+            runs = variant_runs(claim, var)
+            if runs is not None:
+                cases.append((var["name"], claim, runs, rounding and var.get("rounding", False),
+                              kv))
+    return cases
+
+
 def claim_jobs(entry: Any, k: int, rounding: bool = True) -> list[Job]:
-    """Every (run, ensemble, member, path) the claims need, once."""
+    """Every (run, ensemble, member, path) the claims and their variants need, once."""
     runs = {r["name"]: r for r in entry.runs}
     jobs: dict[tuple[str, str, int, bool], Job] = {}
-    cache: dict[str, list[dict[str, Any]]] = {}
-    for claim in entry.claims:
+    cache: dict[tuple[str, int], list[dict[str, Any]]] = {}
+    for _var, claim, names, with_rnd, kc in claim_cases(entry, k, rounding):
         ens = claim.get("ensemble", "disturbance")
-        if ens not in cache:
-            cache[ens] = members(entry, ens, k)
-        for name in claim["runs"]:
+        if (ens, kc) not in cache:
+            cache[ens, kc] = members(entry, ens, kc)
+        for name in names:
             run = runs[name]
-            for i, member in enumerate(cache[ens]):
-                for rnd in (False, True) if rounding else (False,):
+            for i, member in enumerate(cache[ens, kc]):
+                for rnd in (False, True) if with_rnd else (False,):
                     key = (name, ens, i, rnd)
                     overrides = {**member, **run.get("set", {})}
                     if ens == "mismatch":  # the drawn plant wins over the run's nominal
@@ -114,155 +134,125 @@ def member_dir(out: Path, key: tuple[str, str, int, bool]) -> Path:
     return out / "ensemble" / slug(key[0]) / f"{key[1]}_{key[2] + 1:02d}"
 
 
-def draw_ensemble_figure(spec: dict[str, Any], dirs: dict[str, list[Path]], path: Path
-                         ) -> None:
-    """An overlay figure over an ensemble: per run the median over the members and a 5-95 %
-    band (members sampled on the first member's x grid; x = "time" or a recorded column)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
+def draw_ensemble_figure(spec: dict[str, Any], dirs: dict[str, list[Path]], path: Path,
+                         scenarios: dict[str, Any] | None = None) -> None:
+    """:func:`ensemble_figure_of` the members' results.csv, saved to ``path`` (png at 200
+    dpi, svg or pdf by its suffix)."""
     import matplotlib.pyplot as plt
     import pandas as pd
 
-    from cosim.run.reproduce import figure_series
     from cosim.run.results import PLOT_DPI
 
-    ys = spec["y"] if isinstance(spec["y"], list) else [spec["y"]]
-    scale = float(spec.get("y_scale", 1.0))
-    fig, ax = plt.subplots(figsize=(8, 4.5))
-    for name, members_ in dirs.items():
-        frames = [pd.read_csv(d / "results.csv") for d in members_]
-        x0 = frames[0]["time"] if spec["x"] == "time" else frames[0][spec["x"]]
-        for y in ys:
-            curves = []
-            for frame in frames:
-                x = frame["time"] if spec["x"] == "time" else frame[spec["x"]]
-                curves.append(np.interp(x0, x, figure_series(frame, spec, y, name) * scale))
-            stack = np.vstack(curves)
-            label = name if len(ys) == 1 else f"{name}: {y}"
-            line, = ax.plot(x0, np.median(stack, axis=0), linewidth=1.0,
-                            label=f"{label} (median of {len(frames)})")
-            ax.fill_between(x0, np.percentile(stack, 5, axis=0),
-                            np.percentile(stack, 95, axis=0), color=line.get_color(),
-                            alpha=0.25, linewidth=0)
-    ax.set_xlabel(spec.get("xlabel", "time (s)" if spec["x"] == "time" else spec["x"]))
-    ax.set_ylabel(spec.get("ylabel", ys[0]))
-    ax.grid(True, alpha=0.3)
-    ax.legend(fontsize=7)
-    fig.suptitle(f"{spec.get('title', '')} (median, 5-95 % band over the seeds)")
-    fig.tight_layout()
+    frames = {name: [pd.read_csv(d / "results.csv") for d in members_]
+              for name, members_ in dirs.items()}
+    fig = ensemble_figure_of(spec, frames, scenarios or {})
     fig.savefig(path, dpi=PLOT_DPI, format=Path(path).suffix.lstrip(".") or "png",
                 bbox_inches="tight")
     plt.close(fig)
 
 
-def _worker_setup() -> None:
-    from cosim.run.threads import limit_blas_for_process
+def ensemble_figure_of(spec: dict[str, Any], frames: dict[str, list[Any]],
+                       scenarios: dict[str, Any]) -> Any:
+    """An overlay figure over an ensemble: per run the median over the members and a 5-95 %
+    band (members sampled on the first member's x grid; x = "time" or a recorded column);
+    held signals as steps, the reference as a dashed continuous curve, labels and units from
+    the declarations (:func:`cosim.run.reproduce.series_style`), the legend outside."""
+    import matplotlib
 
-    limit_blas_for_process()
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from cosim.run.reproduce import (
+        axis_text,
+        draw_limits,
+        figure_series,
+        legend_outside,
+        plain_axes,
+        reference_curve,
+        series_style,
+    )
+
+    ys = spec["y"] if isinstance(spec["y"], list) else [spec["y"]]
+    first = scenarios.get(next(iter(frames))) if frames else None
+    ylabel, scale = axis_text(spec, "y", first, ys[0])
+    panels = spec.get("kind", "overlay") == "panels"
+    fig, axes = plt.subplots(len(frames) if panels else 1, 1, squeeze=False, sharex=True,
+                             figsize=(9, 2.6 * len(frames) if panels else 4.5))
+    for j, (name, members_) in enumerate(frames.items()):
+        ax = axes[j if panels else 0][0]
+        x0 = members_[0]["time"] if spec["x"] == "time" else members_[0][spec["x"]]
+        for y in ys:
+            plain = "y_reduce" in spec or "y_minus" in spec
+            style = ({"drawstyle": "default", "text": y, "reference": False} if plain
+                     else series_style(scenarios.get(name), y))
+            curves = []
+            for frame in members_:
+                x = frame["time"] if spec["x"] == "time" else frame[spec["x"]]
+                values = figure_series(frame, spec, y, name)
+                curve = (reference_curve(scenarios.get(name), frame, y) if style["reference"]
+                         else None)
+                values = values if curve is None else curve
+                curves.append(np.interp(x0, x, values * scale))
+            stack = np.vstack(curves)
+            label = (style["text"] if panels else name if len(ys) == 1
+                     else f"{name}: {style['text']}")
+            kwargs: dict[str, Any] = {"linewidth": 1.0, "drawstyle": style["drawstyle"]}
+            if style["reference"]:
+                kwargs.update(color="black", linestyle="--", linewidth=0.9)
+            line, = ax.plot(x0, np.median(stack, axis=0),
+                            label=f"{label} (median of {len(members_)})", **kwargs)
+            ax.fill_between(x0, np.percentile(stack, 5, axis=0),
+                            np.percentile(stack, 95, axis=0), color=line.get_color(),
+                            alpha=0.25, linewidth=0,
+                            step="post" if style["drawstyle"] == "steps-post" else None)
+        if "limit_ref" in spec and (panels or j == 0):
+            draw_limits(ax, spec, members_[0], x0, name)
+        if panels:
+            ax.set_title(name, fontsize=9)
+        ax.set_ylabel(ylabel)
+        ax.grid(True, alpha=0.3)
+        plain_axes(ax)
+        legend_outside(ax)
+    axes[-1][0].set_xlabel(axis_text(spec, "x", first, spec["x"])[0])
+    fig.suptitle(f"{spec.get('title', '')} (median, 5-95 % band over the seeds)")
+    fig.tight_layout()
+    return fig
 
 
-class Progress:
-    """``runs done / total, elapsed, ETA`` lines on stderr (one every ~2 s, and the last)."""
-
-    def __init__(self, total: int, label: str) -> None:
-        self.total, self.label, self.done = total, label, 0
-        self.start = self.last = time.monotonic()
-
-    def step(self) -> None:
-        self.done += 1
-        now = time.monotonic()
-        if now - self.last < 2.0 and self.done < self.total:
-            return
-        self.last = now
-        elapsed = now - self.start
-        eta = elapsed / self.done * (self.total - self.done)
-        print(f"{self.label}: {self.done}/{self.total} runs, {elapsed:.0f} s elapsed, "
-              f"ETA {eta:.0f} s", file=sys.stderr, flush=True)
-
-
-def _execute_dask(todo: list[Job], scheduler: str, workers: int | None, label: str,
-                  out: dict[Any, Any], progress: Progress, dirs: dict[Any, str]) -> None:
-    """``todo`` on a Dask cluster (``"local-dask"``: a LocalCluster of ``workers`` processes,
-    one thread each, started here so that it inherits this process's environment)."""
-    import logging
-
-    from distributed import Client, LocalCluster, as_completed
-
-    from cosim.run.dask_sweep import LOCAL, check_available
-
-    check_available()
-    cluster = None
-    if scheduler == LOCAL:
-        cluster = LocalCluster(n_workers=max(1, min(workers or os.cpu_count() or 1,
-                                                    len(todo))),
-                               threads_per_worker=1, processes=True, dashboard_address=None,
-                               silence_logs=logging.ERROR)
-    try:
-        with Client(cluster if cluster is not None else scheduler) as client:
-            client.run(_worker_setup)
-            futures = {client.submit(_run_member, sc, ov, dirs.get(key), pure=False): key
-                       for key, sc, ov in todo}
-            for fut in as_completed(futures):
-                try:
-                    out[futures[fut]] = fut.result()
-                except Exception as err:  # noqa: BLE001 - a failed run: metric missing
-                    print(f"{label}: {futures[fut]} failed: {err}", file=sys.stderr)
-                    out[futures[fut]] = None
-                progress.step()
-    finally:
-        if cluster is not None:
-            cluster.close()
+ROUNDING_ENV = {"ATO_COSIM_NO_KERNELS": "1"}  # the plants' numpy reference path
 
 
 def execute(jobs: list[Job], workers: int | None, label: str = "claims",
-            scheduler: str | None = None, dirs: dict[Any, str] | None = None
+            scheduler: str | None = None, dirs: dict[Any, str] | None = None,
+            reference_path: bool = True
             ) -> dict[tuple[str, str, int, bool], dict[str, Any] | None]:
-    """Run the jobs (main path and rounding path in separate spawned pools or Dask clusters,
-    the latter with ``ATO_COSIM_NO_KERNELS=1``); a failed run gives None (its metrics are
-    missing). ``dirs``: job key -> folder for the run's results (others write none)."""
-    from cosim.run import interrupt
+    """Run the jobs with :func:`cosim.run.runner.run_tasks` (main path, then the rounding
+    path in processes started with ``ATO_COSIM_NO_KERNELS=1`` unless ``reference_path`` is
+    false); a failed run gives None (its metrics are missing). ``dirs``: job key -> folder
+    for the run's results (others write none)."""
+    from cosim.run import runner
 
     dirs = dirs or {}
     out: dict[tuple[str, str, int, bool], dict[str, Any] | None] = {}
-    progress = Progress(len(jobs), label)
+    progress = runner.Progress(len(jobs), label)
+
+    def finished(task: runner.Task, summary: Any) -> None:
+        out[task.key] = summary
+
+    def failed(task: runner.Task, err: BaseException) -> None:
+        print(f"{label}: {task.key} failed: {err}", file=sys.stderr)
+        out[task.key] = None
+
+    from cosim.run.sweep import warm_up_for
+
     for rnd in (False, True):
-        todo = [j for j in jobs if j[0][3] == rnd]
-        if not todo:
-            continue
-        n = max(1, min(workers or os.cpu_count() or 1, len(todo)))
-        old = os.environ.get("ATO_COSIM_NO_KERNELS")
-        if rnd:
-            os.environ["ATO_COSIM_NO_KERNELS"] = "1"  # inherited by the spawned workers
-        try:
-            if scheduler is not None:
-                _execute_dask(todo, scheduler, workers, label, out, progress, dirs)
-                continue
-            ctx = multiprocessing.get_context("spawn")
-            with interrupt.guard(), ProcessPoolExecutor(
-                    max_workers=n, mp_context=ctx, initializer=_worker_setup) as pool:
-                futures = {pool.submit(_run_member, sc, ov, dirs.get(key)): key
-                           for key, sc, ov in todo}
-                pending = set(futures)
-                while pending:
-                    ready, pending = wait(pending, timeout=0.5, return_when=FIRST_COMPLETED)
-                    for fut in ready:
-                        try:
-                            out[futures[fut]] = fut.result()
-                        except Exception as err:  # noqa: BLE001 - a failed run: metric missing
-                            print(f"{label}: {futures[fut]} failed: {err}", file=sys.stderr)
-                            out[futures[fut]] = None
-                        progress.step()
-                    if interrupt.requested():
-                        for fut in pending:
-                            fut.cancel()
-                        interrupt.check_between("the claims' runs")
-        finally:
-            if rnd:
-                if old is None:
-                    os.environ.pop("ATO_COSIM_NO_KERNELS", None)
-                else:
-                    os.environ["ATO_COSIM_NO_KERNELS"] = old
+        tasks = [runner.Task(key, _run_member, (sc, ov, dirs.get(key)))
+                 for key, sc, ov in jobs if key[3] == rnd]
+        runner.run_tasks(tasks, finished, failed, workers, scheduler, label,
+                         env=ROUNDING_ENV if rnd and reference_path else None,
+                         progress=progress,
+                         warm_up=warm_up_for([(sc, ov) for _k, sc, ov in jobs]),
+                         what="the claims' runs")
     return out
 
 
@@ -280,26 +270,59 @@ def _metric(summaries: dict[Any, dict[str, Any] | None], run: str, ens: str, n: 
 
 
 def evaluate(entry: Any, summaries: dict[Any, dict[str, Any] | None], k: int,
-             rounding: bool = True) -> list[dict[str, Any]]:
-    """One row per claim (see :func:`cosim.run.claims.verdict`)."""
+             rounding: bool = True, variants: bool = False) -> list[dict[str, Any]]:
+    """One row per claim (see :func:`cosim.run.claims.verdict`); with ``variants`` one row
+    per claim and ``[[variants]]`` entry that replaces one of its runs instead."""
     rows = []
-    for claim in entry.claims:
+    for var, claim, names, with_rnd, kc in claim_cases(entry, k, rounding):
+        if (var != "main") != variants:
+            continue
         ens = claim.get("ensemble", "disturbance")
-        n = len(members(entry, ens, k))
+        n = len(members(entry, ens, kc))
         results = []
-        for rnd in (False, True) if rounding else (False,):
-            a = _metric(summaries, claim["runs"][0], ens, n, rnd, claim["metric"])
-            b = (_metric(summaries, claim["runs"][1], ens, n, rnd, claim["metric"])
-                 if len(claim["runs"]) > 1 else None)
+        for rnd in (False, True) if with_rnd else (False,):
+            a = _metric(summaries, names[0], ens, n, rnd, claim["metric"])
+            b = (_metric(summaries, names[1], ens, n, rnd, claim["metric"])
+                 if len(names) > 1 else None)
             results.append(verdict(claim, a, b))
-        row = with_rounding(results[0], results[1] if rounding else None)
-        rows.append({"id": claim["id"], "source": claim.get("source", ""),
+        row = with_rounding(results[0], results[1] if with_rnd else None)
+        rows.append({**({"variant": var} if variants else {}),
+                     "id": claim["id"], "source": claim.get("source", ""),
                      "text": claim["text"], "paper": claim.get("paper", ""),
                      "metric": claim["metric"], "kind": claim["kind"],
-                     "runs": " vs ".join(claim["runs"]), "ensemble": ens,
+                     "runs": " vs ".join(names), "ensemble": ens,
                      "origin": claim.get("origin", "paper"),
                      "threshold": claim.get("threshold", claim.get("range")), **row})
     return rows
+
+
+def variants_markdown(entry: Any, rows: list[dict[str, Any]], var_rows: list[dict[str, Any]]
+                      ) -> str:
+    """Each claim's verdict as written and under every variant (a column each; "=": the
+    variant replaces none of the claim's runs), then what each variant replaces."""
+    from cosim.run.reproduce import _row
+
+    names = [v["name"] for v in entry.variants]
+    got = {(r["variant"], r["id"]): r for r in var_rows}
+
+    def cell(r: dict[str, Any] | None) -> str:
+        if r is None:
+            return "="
+        flag = "" if r["rounding_robust"] in (None, True) else " (r)"
+        return f"{r['verdict']}{flag} ({r['k']}/{r['K']})"
+
+    lines = [_row(["claim", "main", *names]), "|" + " --- |" * (2 + len(names))]
+    for r in rows:
+        lines.append(_row([r["id"], cell(r), *(cell(got.get((n, r["id"]))) for n in names)]))
+    lines += ["", "Verdict (k of K on the claimed side) of every claim with the runs of each "
+              "variant in place of those it replaces; (r): rounding-sensitive. Variants:", ""]
+    for v in entry.variants:
+        rep = "; ".join(f"{a} -> {b}" for a, b in v["replace"].items())
+        rnd = "" if v.get("rounding", False) else " (no perturbed floating-point rerun)"
+        if "seeds" in v:
+            rnd += f" (the first {v['seeds']} report seeds at most)"
+        lines.append(f"- **{v['name']}**: {v.get('text', '')}{rnd}. {rep}.")
+    return "\n".join(lines)
 
 
 def claims_markdown(rows: list[dict[str, Any]], k: int) -> str:
@@ -333,11 +356,14 @@ def compact_table(rows: list[dict[str, Any]]) -> str:
 
 
 def run_claims(entry: Any, out: Path, k: int, workers: int | None = None,
-               rounding: bool = True, scheduler: str | None = None) -> list[dict[str, Any]]:
-    """Run and evaluate the entry's claims; write ``claims.csv`` and ``claims.md``."""
+               rounding: bool = True, scheduler: str | None = None,
+               plot_format: str = "png") -> list[dict[str, Any]]:
+    """Run and evaluate the entry's claims; write ``claims.csv``, ``claims.md`` and the
+    ensemble figures (``plot_format``)."""
     import pandas as pd
 
     from cosim.run.master import ensure_built
+    from cosim.run.reproduce import run_scenarios
     from cosim.run.scenario import load_scenario
 
     jobs = claim_jobs(entry, k, rounding)
@@ -348,16 +374,17 @@ def run_claims(entry: Any, out: Path, k: int, workers: int | None = None,
             ensure_built(sc)
             built.add(scenario)
     # the members of overlay figures' runs keep their results (disturbance seeds, main path)
-    banded = {r for f in entry.figures if f.get("kind", "overlay") == "overlay"
+    banded = {r for f in entry.figures if f.get("kind", "overlay") in ("overlay", "panels")
               for r in f.get("runs", [x["name"] for x in entry.runs])}
     dirs = {key: str(member_dir(out, key)) for key, _sc, _ov in jobs
             if key[0] in banded and key[1] == "disturbance" and not key[3]}
-    summaries = execute(jobs, workers, f"{entry.name} claims", scheduler, dirs)
+    summaries = execute(jobs, workers, f"{entry.name} claims", scheduler, dirs,
+                        entry.ensemble.rounding_reference_path)
     rows = evaluate(entry, summaries, k, rounding)
     out.mkdir(parents=True, exist_ok=True)
     n = len(members(entry, "disturbance", k))
     for spec in entry.figures if n > 1 else []:
-        if spec.get("kind", "overlay") != "overlay":
+        if spec.get("kind", "overlay") not in ("overlay", "panels"):
             continue
         runs = [r for r in spec.get("runs", [x["name"] for x in entry.runs])
                 if all((r, "disturbance", i, False) in dirs
@@ -366,8 +393,14 @@ def run_claims(entry: Any, out: Path, k: int, workers: int | None = None,
         if runs:
             draw_ensemble_figure(spec, {r: [member_dir(out, (r, "disturbance", i, False))
                                             for i in range(n)] for r in runs},
-                                 out / (Path(spec["file"]).stem + "_ensemble.png"))
+                                 out / f"{Path(spec['file']).stem}_ensemble.{plot_format}",
+                                 run_scenarios(entry))
     pd.DataFrame(rows).to_csv(out / "claims.csv", index=False)
-    (out / "claims.md").write_text(f"## Claims of {entry.title}\n\n"
-                                   + claims_markdown(rows, k) + "\n")
+    text = f"## Claims of {entry.title}\n\n" + claims_markdown(rows, k) + "\n"
+    if getattr(entry, "variants", []):
+        var_rows = evaluate(entry, summaries, k, rounding, variants=True)
+        pd.DataFrame(var_rows).to_csv(out / "variants.csv", index=False)
+        text += ("\n#### The claims under each variant\n\n"
+                 + variants_markdown(entry, rows, var_rows) + "\n")
+    (out / "claims.md").write_text(text)
     return rows

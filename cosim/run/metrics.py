@@ -15,34 +15,12 @@ Keys of ``[summary]`` (all optional; variable references are ``FMU.variable``):
   recorded ``reference_speed`` (which a self-triggered controller holds between its events);
 * ``planned_arrival_time`` (s): gives ``arrival_time_error_s`` (time the train came to rest
   minus the plan);
-* ``ctcs3`` (bool): the scenario is speed tracking under the CTCS-3 rule (seeds 001, 004):
-  gives ``ctcs3_speed_error_ok``, which means nothing for a stopping or freight scenario;
-* ``reference_accel`` (m/s^2, with ``speed`` and ``reference_speed``): the moving samples are
-  split by the sign of the reference acceleration into traction (> 0), cruise (0) and braking
-  (< 0) and give ``max_abs_speed_error_{traction,cruise,braking}_kmh``; ``final_stop_window``
-  (m, with ``stop_point`` and ``position``) leaves the last metres before the stop point out of
-  these and gives ``max_abs_speed_error_outside_stop_kmh`` and ``speed_rmse_kmh`` over the same
-  samples (seed 002);
 * ``accel_command`` (m/s^2): the controllers' acceleration demand, giving
   ``command_min``, ``command_max`` and ``command_total_variation`` (sum of |changes|, the
   chattering measure);
-* ``vehicle_speeds`` (list or glob, m/s): the train-mean speed (plain mean over the vehicles)
-  against the reference gives ``train_mean_speed_rmse_kmh`` and
-  ``max_abs_train_mean_speed_error_kmh`` (same samples and window as the mode errors);
-* ``unit_speeds`` (list or ``"plant.v[*]"``, m/s, with ``reference_speed``): the per-power-unit
-  indices of seed 001 (:func:`unit_indices`): ``unit_mse_kmh2`` (eq. 87), ``unit_iae_kmh_s``
-  (eq. 88) and ``unit_ma_mps_per_sample`` (eq. 89) at the sample time ``ma_sample_time``
-  (s, default 1.0; reported as ``ma_sample_time_s``).
-* ``energy_traction``, ``energy_regen``, ``energy_aux`` (recorded cumulative energies in J,
-  seed 003 eq. 9: traction / eta_M, regenerated eta_b int(B v dt), auxiliary e0 t): give
-  ``energy_traction_mj``, ``energy_regen_mj``, ``energy_aux_mj`` and ``energy_net_mj`` =
-  traction - regen + aux (MJ), each counted from the first sample up to the arrival (the first
-  sample of the final standstill, as for ``arrival_time_error_s``; the end of the run if the
-  train never came to rest), so that standing at the terminus does not add auxiliary energy;
-* ``phase`` (with the three energies: a recorded phase index, 1 accelerate, 2 run, 3 brake, as
-  the seed-003 controllers publish it from their profile): ``energy_accelerate_mj``,
-  ``energy_run_mj``, ``energy_brake_mj``, the net energy of eq. 9 over the output intervals
-  that start in each phase (Table 2; the same window as ``energy_net_mj``, so they sum to it).
+* ``metrics`` (list of names): the paper metrics registered in :mod:`cosim.papers` that the
+  scenario uses; each reads its own ``[summary]`` keys (valid only where it is named) and adds
+  its entries after the generic ones.
 
 Always present: ``completed`` (False, with ``error``, for the partial results of a failed or
 interrupted run), ``sim_time_s``, ``wall_time_s``, ``real_time_factor``, ``algorithm``,
@@ -58,6 +36,7 @@ them; ``terminated_by``
 
 from __future__ import annotations
 
+import importlib
 import math
 from typing import Any
 
@@ -66,20 +45,16 @@ import numpy as np
 from cosim.fmu.profiles import StoppingCurve
 
 KMH_PER_MPS = 3.6
+PAPERS = "cosim.papers"  # the registry of paper metrics (a layer above this one)
 STANDSTILL_MPS = 1e-3
 
 
-def ctcs3_allowance_kmh(v_ref_kmh: np.ndarray, limit_kmh: float = 2.0,
-                        below_kmh: float = 30.0, fraction: float = 0.02) -> np.ndarray:
-    """CTCS-3 speed-error allowance: ``limit_kmh`` at or below ``below_kmh``, else
-    ``fraction`` of the speed (seed 001, sec. 4.2: 2 km/h, 30 km/h, 2 %)."""
-    v = np.asarray(v_ref_kmh, dtype=float)
-    return np.where(v <= below_kmh, limit_kmh, fraction * v)
-
-
-def ctcs3_speed_error_ok(v_ref_kmh: np.ndarray, error_kmh: np.ndarray) -> bool:
-    """CTCS-3 rule: |error| <= 2 km/h at or below 30 km/h, <= 2 % of the speed above."""
-    return bool(np.all(np.abs(error_kmh) <= ctcs3_allowance_kmh(v_ref_kmh) + 1e-12))
+def graded_allowance(v_ref: np.ndarray, limit: float, below: float,
+                     fraction: float) -> np.ndarray:
+    """A speed-error allowance graded by the reference speed: ``limit`` at or below ``below``,
+    ``fraction`` of the speed above (the speeds and the result in the same unit)."""
+    v = np.asarray(v_ref, dtype=float)
+    return np.where(v <= below, limit, fraction * v)
 
 
 def _series(frame: Any, ref: Any) -> np.ndarray | None:
@@ -105,37 +80,13 @@ def matching_columns(frame: Any, ref: Any) -> list[str]:
     return cols
 
 
-def unit_indices(t: np.ndarray, speeds: np.ndarray, ref: np.ndarray,
-                 ma_sample_time: float) -> dict[str, float]:
-    """Seed 001's indices over the ``n`` power units (``speeds`` (T, n), m/s; ``ref`` (T,)):
-
-    * eq. 87 ``MSE = 1/(nT) sum_i sum_t e_i(t)^2`` over every recorded sample, e in km/h;
-    * eq. 88 ``IAE = 1/n sum_i int |e_i| dt`` (trapezoid), km/h s;
-    * eq. 89 ``MA = max_{t,i} |y_i(t) - y_i(t-1)|``: the largest speed change of a unit over
-      one sample of ``ma_sample_time`` seconds (m/s per sample; speeds interpolated on that
-      grid from the start). With a 1 s sample it equals the largest mean acceleration over
-      1 s in m/s^2, which is what Table 2 lists; it is not ``max_abs_accel_mps2`` (the largest
-      instantaneous train acceleration).
-    """
-    err_kmh = (speeds - ref[:, None]) * KMH_PER_MPS
-    grid = np.arange(t[0], t[-1] + 1e-9, ma_sample_time)
-    sampled = np.column_stack([np.interp(grid, t, speeds[:, i]) for i in range(speeds.shape[1])])
-    ma = float(np.max(np.abs(np.diff(sampled, axis=0)))) if grid.size > 1 else 0.0
-    return {
-        "unit_mse_kmh2": float(np.mean(err_kmh**2)),
-        "unit_iae_kmh_s": float(np.mean(np.trapezoid(np.abs(err_kmh), t, axis=0))),
-        "unit_ma_mps_per_sample": ma,
-        "ma_sample_time_s": float(ma_sample_time),
-    }
-
-
 # event counters an FMU may publish (outputs of the same name), reported per FMU like qp_solves
 CONTROLLER_COUNTERS = ("qp_infeasible_after_stop", "events_moving", "events_standstill")
 
 
 # default switch resolution, relative to the command's full scale (max |u| over the run): a
-# change below a millionth of full scale is rounding or solver noise (DAQP solves exactly; the
-# seed 000 counts are unchanged by it but for 3 of RMPC's 199), not a decision of the controller
+# change below a millionth of full scale is rounding or solver noise (DAQP solves exactly),
+# not a decision of the controller
 COMMAND_RESOLUTION_REL = 1e-6
 
 
@@ -212,14 +163,6 @@ def compute_summary(result: Any) -> dict[str, Any]:
         out["speed_mse_kmh2"] = float(np.mean(err_kmh**2))
         out["iae_kmh_s"] = float(np.trapezoid(np.abs(err * KMH_PER_MPS), t))
         out["max_abs_speed_error_kmh"] = float(np.max(np.abs(err_kmh)))
-    if out.get("max_abs_speed_error_kmh") is not None and cfg.get("ctcs3") is True:
-        out["ctcs3_speed_error_ok"] = ctcs3_speed_error_ok(ref[moving if np.any(moving) else
-                                                               slice(None)] * KMH_PER_MPS,
-                                                           err_kmh)
-    unit_cols = matching_columns(frame, cfg.get("unit_speeds"))
-    if unit_cols and ref is not None:
-        out.update(unit_indices(t, frame[unit_cols].to_numpy(dtype=float), ref,
-                                float(cfg.get("ma_sample_time", 1.0))))
     if accel is not None:
         out["max_abs_accel_mps2"] = float(np.max(np.abs(accel)))
         if accel.size > 1:
@@ -239,7 +182,7 @@ def compute_summary(result: Any) -> dict[str, Any]:
     power = _series(frame, cfg.get("power"))
     if power is not None:
         out["energy_kwh"] = float(np.trapezoid(power, t) / 3.6e6)
-        out["energy_kj"] = out["energy_kwh"] * 3.6e3  # seed 004's unit
+        out["energy_kj"] = out["energy_kwh"] * 3.6e3
     arrival_idx = _arrival_index(speed)
     if speed is not None and "planned_arrival_time" in cfg:
         if arrival_idx is not None:
@@ -247,9 +190,9 @@ def compute_summary(result: Any) -> dict[str, Any]:
             out["arrival_time_error_s"] = float(arrival - float(cfg["planned_arrival_time"]))
         else:
             out["arrival_time_error_s"] = None  # never came to rest inside the run
-    _energy_metrics(out, cfg, frame, arrival_idx)
-
-    _seed002_metrics(out, cfg, frame, pos, speed, ref)
+    out.update(command_range(_series(frame, cfg.get("accel_command"))))
+    out.update(paper_metrics(result.scenario.summary, frame, out, t, pos, speed, ref,
+                             arrival_idx))
     out["executions"] = dict(result.executions)
     out["do_steps"] = dict(result.do_steps)
     out["fmu_wall_time_s"] = {k: round(v, 4) for k, v in result.fmu_wall_time_s.items()}
@@ -262,7 +205,7 @@ def compute_summary(result: Any) -> dict[str, Any]:
                      "qp_cpu_time_median"):
             if name in timing and math.isfinite(timing[name]):
                 out.setdefault(f"{name}_s", {})[fmu] = float(timing[name])
-        for key in CONTROLLER_COUNTERS:  # published by the seed 000 predictive controllers
+        for key in CONTROLLER_COUNTERS:  # published by the event-triggered predictive laws
             if key in outputs:
                 out.setdefault(key, {})[fmu] = int(outputs[key])
     out["warnings"] = warnings(result) + notes
@@ -282,27 +225,28 @@ def _arrival_index(speed: np.ndarray | None) -> int | None:
     return None
 
 
-PHASES = ((1, "accelerate"), (2, "run"), (3, "brake"))
+def command_range(command: np.ndarray | None) -> dict[str, float]:
+    """``command_min``, ``command_max`` and ``command_total_variation`` (sum of |changes|, the
+    chattering measure) of a recorded command (nothing when it is not recorded)."""
+    if command is None:
+        return {}
+    return {"command_min": float(np.min(command)), "command_max": float(np.max(command)),
+            "command_total_variation": float(np.sum(np.abs(np.diff(command))))}
 
 
-def _energy_metrics(out: dict[str, Any], cfg: dict[str, Any], frame: Any,
-                    arrival_idx: int | None) -> None:
-    """Seed 003 energy account (eq. 9) and Table 2's energy per phase, in MJ."""
-    series = (_series(frame, cfg.get("energy_traction")), _series(frame, cfg.get("energy_regen")),
-              _series(frame, cfg.get("energy_aux")))
-    if any(v is None for v in series):
-        return
-    end = arrival_idx if arrival_idx is not None else len(frame) - 1
-    trac, regen, aux = (values[: end + 1] for values in series)
-    net = trac - regen + aux
-    for key, values in (("traction", trac), ("regen", regen), ("aux", aux), ("net", net)):
-        out[f"energy_{key}_mj"] = float(values[-1] - values[0]) / 1e6
-    phase = _series(frame, cfg.get("phase"))
-    if phase is None:
-        return
-    steps = np.diff(net)  # interval i: samples i -> i + 1, in the phase of sample i
-    for index, name in PHASES:
-        out[f"energy_{name}_mj"] = float(np.sum(steps[phase[:end] == index])) / 1e6
+def paper_metrics(cfg: dict[str, Any], frame: Any, generic: dict[str, Any], t: np.ndarray,
+                  pos: np.ndarray | None, speed: np.ndarray | None, ref: np.ndarray | None,
+                  arrival_idx: int | None) -> dict[str, Any]:
+    """The entries of the metrics ``[summary] metrics`` names (:mod:`cosim.papers`)."""
+    names = cfg.get("metrics") or []
+    if not names:
+        return {}
+    papers = importlib.import_module(PAPERS)  # the plug-ins above this layer, by name
+
+    record = papers.RunRecord(frame=frame, summary=cfg, metrics=dict(generic), time=t,
+                              position=pos, speed=speed, reference_speed=ref,
+                              arrival_index=arrival_idx)
+    return papers.compute(list(names), record)
 
 
 def warnings(result: Any) -> list[str]:
@@ -333,38 +277,3 @@ def _flatten_single(out: dict[str, Any], keys: tuple[str, ...]) -> None:
     for key in keys:
         if isinstance(out.get(key), dict) and len(out[key]) == 1:
             out[key] = next(iter(out[key].values()))
-
-
-def _seed002_metrics(out: dict[str, Any], cfg: dict[str, Any], frame: Any,
-                     pos: np.ndarray | None, speed: np.ndarray | None,
-                     ref: np.ndarray | None) -> None:
-    """Per-mode speed errors, command range and variation, train-mean errors (seed 002)."""
-    command = _series(frame, cfg.get("accel_command"))
-    if command is not None:
-        out["command_min"] = float(np.min(command))
-        out["command_max"] = float(np.max(command))
-        out["command_total_variation"] = float(np.sum(np.abs(np.diff(command))))
-    accel = _series(frame, cfg.get("reference_accel"))
-    if speed is None or ref is None:
-        return
-    keep = ref > 0.0
-    if pos is not None and "final_stop_window" in cfg and "stop_point" in cfg:
-        keep &= pos < float(cfg["stop_point"]) - float(cfg["final_stop_window"])
-    err_kmh = (speed - ref) * KMH_PER_MPS
-    if accel is not None and np.any(keep):
-        out["speed_rmse_kmh"] = float(np.sqrt(np.mean(err_kmh[keep] ** 2)))
-    if accel is not None:
-        if "final_stop_window" in cfg:
-            out["max_abs_speed_error_outside_stop_kmh"] = (
-                float(np.max(np.abs(err_kmh[keep]))) if np.any(keep) else None)
-        for mode, sel in (("traction", accel > 0), ("cruise", accel == 0),
-                          ("braking", accel < 0)):
-            part = err_kmh[keep & sel]
-            out[f"max_abs_speed_error_{mode}_kmh"] = (float(np.max(np.abs(part)))
-                                                     if part.size else None)
-    cols = matching_columns(frame, cfg.get("vehicle_speeds"))
-    if cols and np.any(keep):
-        mean = frame[cols].to_numpy(dtype=float).mean(axis=1)
-        e_mean = (mean - ref)[keep] * KMH_PER_MPS
-        out["train_mean_speed_rmse_kmh"] = float(np.sqrt(np.mean(e_mean**2)))
-        out["max_abs_train_mean_speed_error_kmh"] = float(np.max(np.abs(e_mean)))

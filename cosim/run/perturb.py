@@ -1,6 +1,6 @@
 """Model-mismatch studies: a sweep whose runs draw seeded random plant parameters.
 
-``cosim sweep seed000_stop_rmpc --set controller.N=5,10 --perturb plant.mass=+-10%
+``cosim sweep stop_rmpc --set controller.N=5,10 --perturb plant.mass=+-10%
 --perturb plant.brake_time_constant=0.3..0.6 --samples 50 --seed 1`` runs every scenario at
 every grid point with the same ``samples`` parameter draws (common random numbers: the
 controllers are compared on the same plants). Only the perturbed parameters change; the
@@ -20,10 +20,8 @@ infeasible counts) and ``perturb.png`` (box plots of stop error and executions).
 from __future__ import annotations
 
 import math
-import multiprocessing
 import os
 from collections.abc import Iterable, Sequence
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -31,7 +29,8 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from cosim.run.sweep import STOP_WINDOW_M, SUMMARY_COLUMNS, grid_points, worker_setup
+from cosim.run import runner
+from cosim.run.sweep import STOP_WINDOW_M, SUMMARY_COLUMNS, grid_points
 
 COUNTERS = ("qp_infeasible_after_stop", "events_moving", "events_standstill")
 
@@ -151,9 +150,12 @@ def _run_sample(scenario: str, point: dict[str, Any], index: int,
 def run_perturbed(scenario: str | Sequence[str], grid: dict[str, Sequence[Any]],
                   perts: Sequence[Perturbation], samples: int, seed: int,
                   out_dir: str | Path | None = None, workers: int | None = None,
-                  plot: bool = True) -> tuple[pd.DataFrame, pd.DataFrame]:
+                  plot: bool = True, plot_format: str = "png"
+                  ) -> tuple[pd.DataFrame, pd.DataFrame]:
     """Every scenario at every grid point on the same ``samples`` draws, in ``workers``
-    processes. Returns (one row per run, one row per scenario and grid point)."""
+    processes (:func:`cosim.run.runner.run_tasks`). Returns (one row per run, one row per
+    scenario and grid point); with ``out_dir`` writes perturb.csv, perturb_summary.csv and
+    ``perturb.<plot_format>``."""
     from cosim.run.master import ensure_built
     from cosim.run.scenario import ScenarioError, find_scenario, load_scenario
 
@@ -177,15 +179,17 @@ def run_perturbed(scenario: str | Sequence[str], grid: dict[str, Sequence[Any]],
         load_scenario(path, {**points[0], **draws[0]})
     jobs = [(path, point, i, d) for path in paths for point in points
             for i, d in enumerate(draws)]
-    workers = max(1, min(workers or os.cpu_count() or 1, len(jobs)))
-    if workers == 1:
-        rows = [_run_sample(*job) for job in jobs]
-    else:
-        ctx = multiprocessing.get_context("spawn")
-        with ProcessPoolExecutor(max_workers=workers, mp_context=ctx,
-                                 initializer=worker_setup) as pool:
-            rows = [f.result() for f in [pool.submit(_run_sample, *job) for job in jobs]]
-    frame = pd.DataFrame(rows)
+    done: dict[int, dict[str, Any]] = {}
+    errors: list[tuple[int, BaseException]] = []
+    runner.run_tasks([runner.Task(n, _run_sample, job) for n, job in enumerate(jobs)],
+                     lambda task, row: done.__setitem__(task.key, row),
+                     lambda task, err: errors.append((task.key, err)), workers,
+                     label="perturb", what="the mismatch study")
+    if errors:  # every sample is needed for the common-random-number comparison
+        n, err = errors[0]
+        path, point, i, _draw = jobs[n]
+        raise ValueError(f"{path} {point} sample {i}: {type(err).__name__}: {err}") from err
+    frame = pd.DataFrame([done[n] for n in range(len(jobs))])
     table = summarize(frame, list(grid))
     if out_dir is not None:
         out = Path(out_dir)
@@ -193,7 +197,7 @@ def run_perturbed(scenario: str | Sequence[str], grid: dict[str, Sequence[Any]],
         frame.to_csv(out / "perturb.csv", index=False)
         table.to_csv(out / "perturb_summary.csv", index=False)
         if plot:
-            plot_perturbed(frame, list(grid), out / "perturb.png")
+            plot_perturbed(frame, list(grid), out / f"perturb.{plot_format}")
     return frame, table
 
 
@@ -234,9 +238,11 @@ def plot_perturbed(frame: pd.DataFrame, keys: list[str], path: str | Path) -> No
 
     groups = list(frame.groupby(["scenario", *keys], sort=False))
     labels = []
+    prefix = os.path.commonprefix([str(s) for s in frame["scenario"].unique()])
+    prefix = prefix[: prefix.rfind("_") + 1]  # the scenarios' shared words, not half a word
     for label, _ in groups:
         label = label if isinstance(label, tuple) else (label,)
-        name = str(label[0]).replace("seed000_stop_", "")
+        name = str(label[0])[len(prefix):] or str(label[0])
         labels.append("\n".join([name] + [f"{k.rpartition('.')[2]}={v}"
                                           for k, v in zip(keys, label[1:], strict=True)]))
     fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(max(6.0, 1.1 * len(groups) + 2), 7),

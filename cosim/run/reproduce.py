@@ -3,14 +3,14 @@
 Each paper has an entry ``scenarios/reproduce/<name>.toml`` (the paper's numbers and tolerances
 live there, not in code)::
 
-    title = "Seed 000: ..."
+    title = "Author et al. (year): ..."
     notes = "why our figures differ from the paper's"     # optional, markdown
     table = "table2"               # optional: the table's file name (default "table")
     set = { "plant.disturbance_amplitude" = 0.02 }   # optional: overrides of every run and
                                    # sweep (the entry's disturbance); a run's own set wins
     [[runs]]                       # one table row per run
     name = "RMPC N=5"
-    scenario = "seed000_stop_rmpc"
+    scenario = "stop_rmpc"
     set = { "controller.N" = 5 }   # optional overrides (as --set)
     repeat = 10                    # optional: run it 10 times; numeric metrics are shown as
                                    # "median [min, max]" (e.g. computation times); the first
@@ -44,7 +44,7 @@ live there, not in code)::
                                    # the verdict names the pairs ours orders the other way
     [[sweeps]]                     # optional: a cosim sweep (sweep.csv, sweep.png)
     name = "fig11"
-    scenarios = ["seed000_stop_rmpc", "seed000_stop_rsmpc"]
+    scenarios = ["stop_rmpc", "stop_rsmpc"]
     grid = { "controller.N" = "3..15" }
     [[figures]]                    # drawn from the runs' results.csv
     file = "fig_speed.png"
@@ -56,14 +56,18 @@ live there, not in code)::
     y_scale = 3.6                  # optional factor (m/s -> km/h)
     ylabel = "speed (km/h)"
     runs = ["PID", "MPC"]          # optional, default all
-    [[figures]]                    # graded speed error (seed 001's Fig. 8): the max |error| of
+    limit_ref = "controller.v_ref" # optional, for an error (y_minus): the zero-error reference
+    limit_kmh = 2.0                # and the +-allowance of that reference speed drawn, as in
+    limit_below_kmh = 30.0         # speed_classes (y_scale 3.6: km/h)
+    limit_fraction = 0.02
+    [[figures]]                    # graded speed error: the max |error| of
     file = "fig8.png"              # each run per class of the reference speed, with the limit
     kind = "speed_classes"         # |e| <= max(limit_kmh if v <= limit_below_kmh, fraction v)
     ref = "controller.v_ref"       # the reference speed column (classes are of it)
     y = ["plant.v[1]"]             # speeds; error = y - ref; y_scale converts both (3.6: km/h)
     y_scale = 3.6
     classes = [0, 30, 50, 100]     # class edges (km/h): (0, 30], (30, 50], (50, 100]
-    limit_kmh = 2.0                # CTCS-3: 2 km/h at or below 30 km/h, 2 % of the speed above
+    limit_kmh = 2.0                # e.g. 2 km/h at or below 30 km/h, 2 % above
     limit_below_kmh = 30.0
     limit_fraction = 0.02
     paper = "what the paper reports"   # optional, shown under the figure
@@ -78,6 +82,8 @@ live there, not in code)::
     rounding_perturb = ["plant.v0"]  # optional: parameters scaled by 1 + 1e-12 on the
                                    # perturbed floating-point rerun (besides the plants'
                                    # numpy reference path, ATO_COSIM_NO_KERNELS=1)
+    rounding_reference_path = true # optional: false keeps the compiled kernels on the rerun
+                                   # (then rounding_perturb alone perturbs it)
     [[claims]]                     # a claim of the paper, tested over the ensemble
     id = "ismpc_mse_below_ismc"    # unique, [a-z0-9_]
     source = "Table 2"
@@ -92,6 +98,12 @@ live there, not in code)::
     range = [-0.5, 0.5]            # inside
     ensemble = "disturbance"       # disturbance (report seeds) | mismatch (perturb samples)
     origin = "paper"               # paper | ours
+    [[variants]]                   # optional: every claim again with some runs replaced (an
+    name = "white"                 # alternative reading, a mechanism removed); claims.md
+    text = "the paper's white noise"  # gets a verdict per claim and variant, variants.csv
+    replace = { "ISMPC" = "ISMPC white", "ISMC" = "ISMC white" }   # [[runs]] names
+    rounding = false               # optional: also the perturbed floating-point rerun
+    seeds = 5                      # optional: the first 5 report seeds (at most --seeds)
 
 The claims are evaluated by :mod:`cosim.run.claims` (statistics and verdicts) over the runs
 of :mod:`cosim.run.ensemble` (members, perturbed floating-point rerun), which write
@@ -108,15 +120,22 @@ the table, and are rows of ``table.csv`` with ``metric = "<kind>:<metric>"`` /
 from __future__ import annotations
 
 import math
-import multiprocessing
-import os
 import re
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from cosim.run.claims import ClaimsError, Ensemble, check_claims, check_ensemble
+import numpy as np
+
+from cosim.run.claims import (
+    ClaimsError,
+    Ensemble,
+    check_claims,
+    check_ensemble,
+    check_variants,
+    ratio_ci,
+)
+from cosim.run.provenance import INPUTS_FILE, entry_digest
 from cosim.run.results import PLOT_DPI
 from cosim.run.scenario import SCENARIO_DIR
 
@@ -129,7 +148,7 @@ REPRODUCE_DIR = SCENARIO_DIR / "reproduce"
 
 # "ensemble" and "claims": the claims schema (docs of the claims framework), read there
 _ENTRY_KEYS = {"title", "notes", "table", "set", "runs", "metrics", "paper", "derived",
-               "rankings", "sweeps", "figures", "ensemble", "claims"}
+               "rankings", "sweeps", "figures", "ensemble", "claims", "variants"}
 _RANKING_KEYS = {"name", "metric", "runs", "paper"}
 _DERIVED_KEYS = {"name", "kind", "metric", "run", "baseline", "value", "range", "tolerance",
                  "source"}
@@ -139,7 +158,8 @@ _METRIC_KEYS = {"key", "label", "ratio_to"}
 _PAPER_KEYS = {"run", "metric", "value", "range", "tolerance", "source"}
 _SWEEP_KEYS = {"name", "scenarios", "grid"}
 _FIGURE_KEYS = {"file", "title", "kind", "x", "y", "y_scale", "ylabel", "xlabel", "runs",
-                "y_reduce", "y_minus"}
+                "y_reduce", "y_minus", "limit_ref", "limit_kmh", "limit_below_kmh",
+                "limit_fraction"}
 _CLASS_KEYS = {"file", "title", "kind", "y", "y_scale", "ylabel", "runs", "ref", "classes",
                "limit_kmh", "limit_below_kmh", "limit_fraction", "paper"}
 FIGURE_KINDS = ("overlay", "panels", "speed_classes")
@@ -165,6 +185,7 @@ class Entry:
     table: str = "table"
     ensemble: Ensemble = field(default_factory=Ensemble)
     claims: list[dict[str, Any]] = field(default_factory=list)
+    variants: list[dict[str, Any]] = field(default_factory=list)
 
 
 def entry_names() -> list[str]:
@@ -182,7 +203,8 @@ def _check_keys(where: str, table: dict[str, Any], allowed: set[str],
 
 
 def load_entry(name: str | Path) -> Entry:
-    """Read and check an entry by name (``seed000``) or path."""
+    """Read and check an entry by name (its file in ``scenarios/reproduce/`` without ``.toml``)
+    or path."""
     path = Path(name)
     if not path.suffix:
         path = REPRODUCE_DIR / f"{name}.toml"
@@ -278,11 +300,13 @@ def load_entry(name: str | Path) -> Entry:
     try:
         ensemble = check_ensemble(str(path), data.get("ensemble"))
         claims = check_claims(str(path), data.get("claims", []), names, ensemble)
+        variants = check_variants(str(path), data.get("variants", []), names)
     except ClaimsError as err:
         raise ReproduceError(str(err)) from err
     return Entry(path.stem, path, data["title"], runs, metrics, data.get("paper", []),
                  data.get("derived", []), data.get("sweeps", []), data.get("figures", []),
-                 data.get("notes", ""), data.get("rankings", []), table, ensemble, claims)
+                 data.get("notes", ""), data.get("rankings", []), table, ensemble, claims,
+                 variants)
 
 
 def slug(name: str) -> str:
@@ -299,10 +323,12 @@ def summary_value(summary: dict[str, Any], key: str) -> Any:
     return value
 
 
-def _run_one(scenario: str, overrides: dict[str, Any], out_dir: str) -> dict[str, Any]:
+def _run_one(scenario: str, overrides: dict[str, Any], out_dir: str,
+             plot_format: str = "png") -> dict[str, Any]:
     from cosim.run.master import run_scenario
 
-    result = run_scenario(scenario, overrides=overrides, out_dir=out_dir, build=False)
+    result = run_scenario(scenario, overrides=overrides, out_dir=out_dir, build=False,
+                          plot_format=plot_format)
     return result.summary
 
 
@@ -326,6 +352,18 @@ def _merge_repeats(summaries: list[dict[str, Any]]) -> dict[str, Any]:
     return merged
 
 
+def repeat_values(summary: dict[str, Any], key: str) -> list[float] | None:
+    """A metric's value in every repetition of a repeated run (None if not repeated or not
+    numeric)."""
+    reps = summary.get("repeats")
+    if not reps:
+        return None
+    vals = [summary_value(r, key) for r in reps]
+    if not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in vals):
+        return None
+    return [float(v) for v in vals]
+
+
 def repeat_spread(summary: dict[str, Any], key: str) -> tuple[float, float, int] | None:
     """``(min, max, n)`` of a metric over a repeated run's repetitions (None if not repeated
     or not numeric)."""
@@ -338,30 +376,40 @@ def repeat_spread(summary: dict[str, Any], key: str) -> tuple[float, float, int]
     return float(min(vals)), float(max(vals)), len(vals)
 
 
-def run_entry(entry: Entry, out_dir: Path, workers: int | None = None
+def run_entry(entry: Entry, out_dir: Path, workers: int | None = None,
+              scheduler: str | None = None, plot_format: str = "png"
               ) -> dict[str, dict[str, Any]]:
-    """Run every run of ``entry`` (``workers`` processes; a run with ``repeat = k`` k times,
-    repetitions 2.. under ``runs/<run>/repeat_NN``); returns run name -> summary (medians and
-    ``repeats`` for a repeated run)."""
+    """Run every run of ``entry`` with :func:`cosim.run.runner.run_tasks` (``workers``
+    processes or the Dask ``scheduler``; a run with ``repeat = k`` k times, repetitions 2..
+    under ``runs/<run>/repeat_NN``); returns run name -> summary (medians and ``repeats`` for
+    a repeated run). A failed run raises :class:`ReproduceError` naming it, after the others
+    finished."""
+    from cosim.run import runner
     from cosim.run.master import ensure_built
     from cosim.run.scenario import load_scenario
+    from cosim.run.sweep import warm_up_for
 
     for run in entry.runs:  # bad overrides fail here, before anything runs; build once
         ensure_built(load_scenario(run["scenario"], run.get("set", {})))
-    jobs = []
+    tasks = []
     for run in entry.runs:
         base = out_dir / "runs" / slug(run["name"])
         for k in range(int(run.get("repeat", 1))):
             out = base if k == 0 else base / f"repeat_{k + 1:02d}"
-            jobs.append(((run["name"], k), run["scenario"], dict(run.get("set", {})), str(out)))
-    workers = max(1, min(workers or os.cpu_count() or 1, len(jobs)))
-    if workers == 1:
-        done = {key: _run_one(sc, ov, out) for key, sc, ov, out in jobs}
-    else:
-        ctx = multiprocessing.get_context("spawn")
-        with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
-            futures = {key: pool.submit(_run_one, sc, ov, out) for key, sc, ov, out in jobs}
-            done = {key: f.result() for key, f in futures.items()}
+            tasks.append(runner.Task((run["name"], k), _run_one,
+                                     (run["scenario"], dict(run.get("set", {})), str(out),
+                                      plot_format)))
+    done: dict[Any, dict[str, Any]] = {}
+    errors: list[tuple[Any, BaseException]] = []
+    runner.run_tasks(tasks, lambda t, summary: done.__setitem__(t.key, summary),
+                     lambda t, err: errors.append((t.key, err)), workers, scheduler,
+                     f"{entry.name} runs", what=f"{entry.name}'s runs",
+                     warm_up=warm_up_for([(t.args[0], t.args[1]) for t in tasks]))
+    if errors:
+        (name, k), err = errors[0]
+        raise ReproduceError(f"{entry.path}: run {name!r}"
+                             + (f" (repetition {k + 1})" if k else "") + f" failed: {err}"
+                             ) from err
     result = {}
     for run in entry.runs:
         reps = [done[run["name"], k] for k in range(int(run.get("repeat", 1)))]
@@ -407,6 +455,14 @@ def table_rows(entry: Entry, summaries: dict[str, dict[str, Any]]) -> list[dict[
                 base_ref = refs.get((base_run, metric["key"]), {}).get("value")
                 row["ratio"] = (float(ours) / float(base) if ours is not None and base
                                 else None)
+                # repeated runs: the ratio of medians with its bootstrap CI
+                ours_reps = repeat_values(summaries[run["name"]], metric["key"])
+                base_reps = repeat_values(summaries[base_run], metric["key"])
+                row["ratio_ci_low"] = row["ratio_ci_high"] = None
+                if ours_reps is not None and base_reps is not None:
+                    _, lo, hi = ratio_ci(np.array(ours_reps), np.array(base_reps))
+                    if np.isfinite(lo) and np.isfinite(hi):
+                        row["ratio_ci_low"], row["ratio_ci_high"] = lo, hi
                 row["paper_ratio"] = (float(ref["value"]) / float(base_ref)
                                       if ref.get("value") is not None and base_ref else None)
             within = None
@@ -518,7 +574,10 @@ def table_markdown(entry: Entry, rows: list[dict[str, Any]]) -> str:
                 ours = f"{ours} [{_fmt(r['ours_min'])}, {_fmt(r['ours_max'])}]"
             cells += [ours + mark, paper]
             if "ratio_to" in metric:
-                cells += [_fmt(r["ratio"]), _fmt(r["paper_ratio"])]
+                ratio = _fmt(r["ratio"])
+                if r.get("ratio_ci_low") is not None:
+                    ratio = f"{ratio} ({_fmt(r['ratio_ci_low'])}-{_fmt(r['ratio_ci_high'])})"
+                cells += [ratio, _fmt(r["paper_ratio"])]
         lines.append(_row(cells))
     sources = sorted({f"{r['run']} / {r['metric']}: {r['source']}" for r in rows if r["source"]})
     if sources:
@@ -526,47 +585,166 @@ def table_markdown(entry: Entry, rows: list[dict[str, Any]]) -> str:
     repeated = sorted({r["repeats"] for r in rows if r["repeats"] > 1})
     if repeated:
         lines += ["", "a [b, c]: median [min, max] over the repetitions of a repeated run ("
-                  + ", ".join(f"{n}" for n in repeated) + " runs)."]
+                  + ", ".join(f"{n}" for n in repeated) + " runs); a ratio r (l-h) of two "
+                  "repeated runs: the ratio of their medians with its 95 % bootstrap CI."]
     if any(r["within"] is not None for r in rows):
         lines += ["", "✓ / ✗: inside / outside the paper's band or the tolerance stated in the "
                   "entry."]
     return "\n".join(lines)
 
 
-def draw_figure(spec: dict[str, Any], run_dirs: dict[str, Path], path: Path) -> None:
-    """One figure from the runs' results.csv (see the module docstring)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
+def draw_figure(spec: dict[str, Any], run_dirs: dict[str, Path], path: Path,
+                scenarios: dict[str, Any] | None = None) -> None:
+    """:func:`figure_of` the runs' results.csv, saved to ``path`` (its suffix: png at 200
+    dpi, svg or pdf)."""
     import matplotlib.pyplot as plt
     import pandas as pd
 
     names = list(spec.get("runs", list(run_dirs)))
-    ys = spec["y"] if isinstance(spec["y"], list) else [spec["y"]]
-    scale = float(spec.get("y_scale", 1.0))
-    panels = spec.get("kind", "overlay") == "panels"
-    fig, axes = plt.subplots(len(names) if panels else 1, 1, squeeze=False, sharex=True,
-                             figsize=(8, 2.6 * len(names) if panels else 4.5))
-    for i, name in enumerate(names):
-        frame = pd.read_csv(run_dirs[name] / "results.csv")
-        ax = axes[i if panels else 0][0]
-        x = frame["time"] if spec["x"] == "time" else frame[spec["x"]]
-        for y in ys:
-            label = y if panels else (name if len(ys) == 1 else f"{name}: {y}")
-            if "y_reduce" in spec:
-                label = f"{spec['y_reduce']} of {label}"
-            ax.plot(x, figure_series(frame, spec, y, name) * scale, label=label, linewidth=1.0)
-        if panels:
-            ax.set_title(name, fontsize=9)
-        ax.set_ylabel(spec.get("ylabel", ys[0]))
-        ax.grid(True, alpha=0.3)
-        ax.legend(fontsize=7)
-    axes[-1][0].set_xlabel(spec.get("xlabel", "time (s)" if spec["x"] == "time" else spec["x"]))
-    fig.suptitle(spec.get("title", ""))
-    fig.tight_layout()
+    frames = {n: pd.read_csv(run_dirs[n] / "results.csv") for n in names}
+    fig = figure_of(spec, frames, scenarios or {})
     fig.savefig(path, dpi=PLOT_DPI, format=Path(path).suffix.lstrip(".") or "png",
                 bbox_inches="tight")
     plt.close(fig)
+
+
+def series_style(scenario: Any, ref: str) -> dict[str, Any]:
+    """How a figure draws the column ``ref`` of a run of ``scenario``: the scenario's
+    reference (``[summary]`` ``reference_speed`` or ``reference_accel``) as a continuous
+    dashed curve, an output of a sampled or self-triggered FMU (held between its events) as
+    steps, anything else (the plant's continuous states) as a line; with the legend text from
+    the declaration (its description)."""
+    from cosim.run.results import _held, variable_info
+
+    if scenario is None:
+        return {"drawstyle": "default", "text": ref, "reference": False}
+    summary = scenario.summary
+    reference = ref in (summary.get("reference_speed"), summary.get("reference_accel"))
+    text = variable_info(scenario, ref)[0]
+    if reference:
+        return {"drawstyle": "default", "text": f"reference: {text}", "reference": True}
+    return {"drawstyle": "steps-post" if _held(scenario, ref) else "default", "text": text,
+            "reference": False}
+
+
+def axis_text(spec: dict[str, Any], axis: str, scenario: Any, column: str
+              ) -> tuple[str, float]:
+    """(label, factor) of an axis: the entry's ``xlabel`` / ``ylabel`` and ``y_scale`` where
+    given, else the declared description of ``column`` in its display unit (km/h for m/s, kN
+    for N, ...) and the factor to that unit; ``time (s)`` for the time."""
+    from cosim.run.results import display_unit, variable_info
+
+    scale = float(spec.get("y_scale", 1.0)) if axis == "y" else 1.0
+    given = spec.get(f"{axis}label")
+    if column == "time":
+        return str(given or "time (s)"), 1.0
+    text, unit = variable_info(scenario, column) if scenario is not None else (column, None)
+    if given:
+        return str(given), scale
+    if scale != 1.0:  # the entry's factor, without its unit's name
+        return f"{text} ({unit or '1'} x {scale:g})", scale
+    factor, shown = display_unit(unit)
+    return (f"{text} ({shown})" if shown and shown != "1" else text), factor
+
+
+def plain_axes(ax: Any) -> None:
+    """Tick labels without offset or scientific notation ("+1.999e1") on linear axes."""
+    for axis in ("x", "y"):
+        scale = ax.get_xscale() if axis == "x" else ax.get_yscale()
+        if scale == "linear":
+            ax.ticklabel_format(axis=axis, useOffset=False, style="plain")
+
+
+def legend_outside(ax: Any) -> Any:
+    """The legend right of the axes, where no curve can be under it."""
+    return ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=7, frameon=False,
+                     borderaxespad=0.0)
+
+
+def figure_of(spec: dict[str, Any], frames: dict[str, Any], scenarios: dict[str, Any]) -> Any:
+    """One ``[[figures]]`` figure (kind ``overlay``: every run on one axes; ``panels``: one
+    axes per run) from the runs' recorded frames; ``scenarios``: run name -> its loaded
+    scenario (the declarations behind labels and drawing styles, :func:`series_style`)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    names = list(frames)
+    ys = spec["y"] if isinstance(spec["y"], list) else [spec["y"]]
+    panels = spec.get("kind", "overlay") == "panels"
+    fig, axes = plt.subplots(len(names) if panels else 1, 1, squeeze=False, sharex=True,
+                             figsize=(9, 2.6 * len(names) if panels else 4.5))
+    for i, name in enumerate(names):
+        frame, scenario = frames[name], scenarios.get(name)
+        ax = axes[i if panels else 0][0]
+        x = frame["time"] if spec["x"] == "time" else frame[spec["x"]]
+        ylabel, scale = axis_text(spec, "y", scenario, ys[0])
+        for y in ys:
+            style = series_style(scenario, y) if "y_reduce" not in spec and \
+                "y_minus" not in spec else {"drawstyle": "default", "text": y,
+                                            "reference": False}
+            text = style["text"]
+            if "y_reduce" in spec:
+                text = f"{spec['y_reduce']} of {text}"
+            label = text if panels else (name if len(ys) == 1 else f"{name}: {text}")
+            kwargs: dict[str, Any] = {"linewidth": 1.0, "drawstyle": style["drawstyle"]}
+            values = figure_series(frame, spec, y, name)
+            if style["reference"]:
+                kwargs.update(color="black", linestyle="--", linewidth=0.9)
+                curve = reference_curve(scenario, frame, y)
+                values = values if curve is None else curve
+            ax.plot(x, values * scale, label=label, **kwargs)
+        if "limit_ref" in spec:
+            draw_limits(ax, spec, frame, x, name)
+        if panels:
+            ax.set_title(name, fontsize=9)
+        ax.set_ylabel(ylabel)
+        ax.grid(True, alpha=0.3)
+        plain_axes(ax)
+        legend_outside(ax)
+    first = scenarios.get(names[0]) if names else None
+    axes[-1][0].set_xlabel(axis_text(spec, "x", first, spec["x"])[0])
+    fig.suptitle(spec.get("title", ""))
+    fig.tight_layout()
+    return fig
+
+
+def draw_limits(ax: Any, spec: dict[str, Any], frame: Any, x: Any, run: str) -> None:
+    """The zero-error reference and the +- allowance (``limit_kmh`` at or below
+    ``limit_below_kmh``, ``limit_fraction`` of the speed above) of the ``limit_ref`` speed
+    (times ``y_scale``) on an error figure's axes."""
+    from cosim.run.metrics import graded_allowance
+
+    ref_col = spec["limit_ref"]
+    if ref_col not in frame:
+        raise ReproduceError(f"figure {spec['file']}: run {run!r} recorded no {ref_col!r}")
+    ref = frame[ref_col].to_numpy(dtype=float) * float(spec.get("y_scale", 1.0))
+    allowed = graded_allowance(ref, float(spec.get("limit_kmh", 2.0)),
+                               float(spec.get("limit_below_kmh", 30.0)),
+                               float(spec.get("limit_fraction", 0.02))).astype(float)
+    allowed[ref <= 0.0] = float("nan")  # standing: no allowance drawn
+    ax.axhline(0.0, color="black", linewidth=0.6, label="reference (zero error)")
+    ax.plot(x, allowed, color="black", linestyle="--", linewidth=0.8, label="limit")
+    ax.plot(x, -allowed, color="black", linestyle="--", linewidth=0.8)
+
+
+def reference_curve(scenario: Any, frame: Any, y: str) -> Any:
+    """The continuous reference behind a held ``reference_speed`` column: the stopping curve
+    ``v_ref(s) = sqrt(2 a0 (s_stop - s))`` at the recorded positions where ``[summary]``
+    declares ``reference_decel`` and ``stop_point`` (as the speed metrics use it); None
+    otherwise (the recorded column is the curve)."""
+    import numpy as np
+
+    from cosim.fmu.profiles import StoppingCurve
+
+    cfg = getattr(scenario, "summary", {}) or {}
+    position = cfg.get("position")
+    if (y != cfg.get("reference_speed") or "reference_decel" not in cfg
+            or "stop_point" not in cfg or position not in frame):
+        return None
+    curve = StoppingCurve(float(cfg["reference_decel"]), float(cfg["stop_point"]))
+    return np.array([curve.speed(x) for x in frame[position].to_numpy(dtype=float)])
 
 
 def figure_series(frame: Any, spec: dict[str, Any], y: str, run: str) -> Any:
@@ -584,14 +762,14 @@ def figure_series(frame: Any, spec: dict[str, Any], y: str, run: str) -> Any:
 
 
 def speed_class_errors(frame: Any, spec: dict[str, Any]) -> list[dict[str, Any]]:
-    """Graded speed error of one run (a ``speed_classes`` figure, seed 001's Fig. 8).
+    """Graded speed error of one run (a ``speed_classes`` figure).
 
     Per class (lo, hi] of the reference speed (samples with the reference above zero): the
     max |error| over the ``y`` columns, the class's strictest allowance (at its lowest sample
     speed) and whether every sample keeps its own allowance (all in the figure's units)."""
     import numpy as np
 
-    from cosim.run.metrics import ctcs3_allowance_kmh
+    from cosim.run.metrics import graded_allowance
 
     scale = float(spec.get("y_scale", 1.0))
     ys = spec["y"] if isinstance(spec["y"], list) else [spec["y"]]
@@ -608,9 +786,9 @@ def speed_class_errors(frame: Any, spec: dict[str, Any]) -> list[dict[str, Any]]
         row: dict[str, Any] = {"class": f"{lo:g}-{hi:g}", "samples": int(sel.sum()),
                                "max_abs_error": None, "limit": None, "met": None}
         if np.any(sel):
-            allowed = ctcs3_allowance_kmh(ref[sel], float(spec["limit_kmh"]),
-                                          float(spec["limit_below_kmh"]),
-                                          float(spec["limit_fraction"]))
+            allowed = graded_allowance(ref[sel], float(spec["limit_kmh"]),
+                                       float(spec["limit_below_kmh"]),
+                                       float(spec["limit_fraction"]))
             row.update(max_abs_error=float(err[sel].max()), limit=float(allowed.min()),
                        met=bool(np.all(err[sel] <= allowed + 1e-12)))
         rows.append(row)
@@ -675,20 +853,26 @@ def draw_speed_classes(spec: dict[str, Any], run_dirs: dict[str, Path], path: Pa
 
 
 def reproduce(name: str, out_dir: str | Path | None = None, workers: int | None = None,
-              seeds: int | None = None, rounding: bool = True, scheduler: str | None = None
-              ) -> Path:
-    """Run one entry; write table.md/table.csv (``entry.table``), sweeps and figures, and with
-    claims claims.csv/claims.md over ``seeds`` members (default 20; :mod:`cosim.run.ensemble`,
-    ``rounding``: also the perturbed floating-point rerun); return the table's markdown file."""
+              seeds: int | None = None, rounding: bool = True, scheduler: str | None = None,
+              plot_format: str = "png", echo: bool = True) -> Path:
+    """Run one entry; write table.md/table.csv (``entry.table``), sweeps and figures (in
+    ``plot_format``: png at 200 dpi, svg or pdf), and with claims claims.csv/claims.md over
+    ``seeds`` members (default 20; :mod:`cosim.run.ensemble`, ``rounding``: also the perturbed
+    floating-point rerun); every batch of runs goes through :mod:`cosim.run.runner`
+    (``workers``, ``scheduler``). With ``echo`` the tables are printed in 80 columns
+    (:func:`console_text`). Returns the table's markdown file."""
     import pandas as pd
 
-    from cosim.run.ensemble import compact_table, run_claims
+    from cosim.run.ensemble import run_claims
     from cosim.run.sweep import parse_grid, run_sweep
 
     entry = load_entry(name)
     out = Path(out_dir) if out_dir is not None else Path("runs") / "reproduce" / entry.name
     out.mkdir(parents=True, exist_ok=True)
-    summaries = run_entry(entry, out, workers)
+    inputs = out / INPUTS_FILE
+    inputs.unlink(missing_ok=True)  # a folder being rewritten vouches for no inputs
+    digest = entry_digest(entry.name) if entry.path.parent == REPRODUCE_DIR else None
+    summaries = run_entry(entry, out, workers, scheduler, plot_format)
     rows = table_rows(entry, summaries)
     derived = derived_rows(entry, summaries)
     ranked = ranking_rows(entry, summaries)
@@ -702,33 +886,81 @@ def reproduce(name: str, out_dir: str | Path | None = None, workers: int | None 
     for sweep in entry.sweeps:
         grid = parse_grid(f"{k}={v}" for k, v in sweep["grid"].items())
         target = out / slug(sweep["name"])
-        frame = run_sweep(sweep["scenarios"], grid, target, workers=workers)
+        frame = run_sweep(sweep["scenarios"], grid, target, workers=workers,
+                          scheduler=scheduler, plot_format=plot_format)
         keep = [c for c in ("scenario", *grid, "stop_error_m", "controller_executions",
                             "command_switches", "qp_infeasible") if c in frame]
         parts += ["", f"### Sweep {sweep['name']}", "", _frame_markdown(frame[keep]), "",
-                  f"![{sweep['name']}]({target.name}/sweep.png)"]
+                  f"![{sweep['name']}]({target.name}/sweep.{plot_format})"]
     run_dirs = {r["name"]: out / "runs" / slug(r["name"]) for r in entry.runs}
+    scenarios = run_scenarios(entry)
     for spec in entry.figures:
+        file = figure_file(spec, plot_format)
         if spec.get("kind") == "speed_classes":
-            table_md = draw_speed_classes(spec, run_dirs, out / spec["file"])
-            parts += ["", f"![{spec.get('title', spec['file'])}]({spec['file']})", "",
-                      table_md]
+            table_md = draw_speed_classes(spec, run_dirs, out / file)
+            parts += ["", f"![{spec.get('title', file)}]({file})", "", table_md]
             continue
-        draw_figure(spec, run_dirs, out / spec["file"])
-        parts += ["", f"![{spec.get('title', spec['file'])}]({spec['file']})"]
+        draw_figure(spec, run_dirs, out / file, scenarios)
+        parts += ["", f"![{spec.get('title', file)}]({file})"]
+    claim_rows: list[dict[str, Any]] = []
     if entry.claims:
         k = seeds if seeds is not None else min(20, len(entry.ensemble.report_seeds))
         try:
-            claim_rows = run_claims(entry, out, k, workers, rounding, scheduler)
+            claim_rows = run_claims(entry, out, k, workers, rounding, scheduler, plot_format)
         except ValueError as err:
             raise ReproduceError(str(err)) from err
         parts += ["", "### Claims", "", (out / "claims.md").read_text().split("\n", 2)[2]]
-        print(compact_table(claim_rows))
     if entry.notes:
         parts += ["", "### Where we differ from the paper, and why", "", entry.notes.strip()]
     table = out / f"{entry.table}.md"
     table.write_text("\n".join(parts) + "\n")
+    if digest is not None:  # the inputs this folder's results come from (cosim.run.provenance)
+        inputs.write_text(digest + "\n")
+    if echo:
+        print(console_text(entry, rows, claim_rows, out), flush=True)
     return table
+
+
+def run_scenarios(entry: Entry) -> dict[str, Any]:
+    """Run name -> its loaded scenario (with the run's ``set``)."""
+    from cosim.run.scenario import load_scenario
+
+    return {r["name"]: load_scenario(r["scenario"], r.get("set", {})) for r in entry.runs}
+
+
+def figure_file(spec: dict[str, Any], plot_format: str = "png") -> str:
+    """The file a ``[[figures]]`` entry is drawn to: its ``file`` in ``plot_format``."""
+    return f"{Path(spec['file']).stem}.{plot_format}"
+
+
+def console_text(entry: Entry, rows: list[dict[str, Any]], claim_rows: list[dict[str, Any]],
+                 out: Path) -> str:
+    """The entry's results for an 80-column terminal: ours per run and metric (columns
+    numbered, their names below), the claims (id, k of K, verdict) and where the full tables
+    are."""
+    import textwrap
+
+    from cosim.run.console import fit_table
+    from cosim.run.ensemble import compact_table
+
+    names = {m["key"]: f"m{i + 1}" for i, m in enumerate(entry.metrics)}
+    by_run: dict[str, dict[str, Any]] = {}
+    for r in rows:
+        by_run.setdefault(r["run"], {"run": r["run"]})[names[r["metric"]]] = r["ours"]
+    lines = textwrap.wrap(entry.title, 80)
+    if by_run:
+        lines += ["", fit_table(list(by_run.values()), ["run", *names.values()],
+                                title="ours (beside the paper's, with verdicts, in "
+                                      f"{entry.table}.md)")]
+        lines += textwrap.wrap("; ".join(f"{names[m['key']]} {m.get('label', m['key'])}"
+                                         for m in entry.metrics), 80)
+    if claim_rows:
+        lines += ["", compact_table(claim_rows)]
+    full = [f"{entry.table}.md", f"{entry.table}.csv"]
+    if claim_rows:
+        full += ["claims.md", "claims.csv"]
+    lines += ["", f"full tables in {out}/:", "  " + ", ".join(full)]  # a path is never cut
+    return "\n".join(lines)
 
 
 def _frame_markdown(frame: Any) -> str:
@@ -758,12 +990,13 @@ def claims_summary(out: Path, names: list[str]) -> str:
 
 def reproduce_all(out_dir: str | Path | None = None, workers: int | None = None,
                   seeds: int | None = None, rounding: bool = True,
-                  scheduler: str | None = None) -> Path:
+                  scheduler: str | None = None, plot_format: str = "png") -> Path:
     """Every entry; one ``REPRODUCTION.md`` with the claims held / failed / inconclusive per
     paper and each entry's tables and figures."""
     out = Path(out_dir) if out_dir is not None else Path("runs") / "reproduce"
     out.mkdir(parents=True, exist_ok=True)
-    tables = {name: reproduce(name, out / name, workers, seeds, rounding, scheduler)
+    tables = {name: reproduce(name, out / name, workers, seeds, rounding, scheduler,
+                              plot_format)
               for name in entry_names()}
     parts = ["# Reproduced results", "", "Made by `cosim reproduce all`; each section by "
              "`cosim reproduce NAME` from the entry in `scenarios/reproduce/`.", "",

@@ -1,6 +1,6 @@
 """Scenario files (TOML): which FMUs, their parameters, connections, timing and what to record.
 
-Format (see ``scenarios/seed000_stop_pid.toml``)::
+Format (the files in ``scenarios/`` are examples)::
 
     description = "..."
     [simulation]
@@ -32,6 +32,7 @@ Every error names the file, the key and what is wrong.
 from __future__ import annotations
 
 import difflib
+import importlib
 import math
 import re
 from dataclasses import dataclass, field
@@ -60,9 +61,8 @@ RECORD_KEYS = ("variables",)
 SUMMARY_KEYS = ("position", "speed", "acceleration", "command", "command_resolution",
                 "reference_speed",
                 "speed_limit", "power", "coupler_forces", "stop_point", "reference_decel",
-                "planned_arrival_time", "ctcs3", "unit_speeds", "ma_sample_time",
-                "reference_accel", "final_stop_window", "accel_command", "vehicle_speeds",
-                "energy_traction", "energy_regen", "energy_aux", "phase")
+                "planned_arrival_time", "accel_command", "metrics")
+# and the keys of the paper metrics the scenario names in ``metrics`` (cosim.papers)
 
 
 # [summary] keys holding a number; a string "instance.parameter" there reads that parameter's
@@ -232,6 +232,38 @@ def _split_override(text: str) -> tuple[str, str]:
     if not sep or not key.strip():
         raise ScenarioError(f"--set {text!r}: expected KEY=VALUE, e.g. plant.mass=539000")
     return key.strip(), value.strip()
+
+
+def _paper_metric_keys(source: Path, summary: dict[str, Any]) -> list[str]:
+    """The ``[summary]`` keys the paper metrics named in ``metrics`` read; raise naming the
+    metric for an unknown name, and the metric to add for a key that only an unnamed metric
+    reads."""
+    from cosim.run.metrics import PAPERS
+
+    papers = importlib.import_module(PAPERS)  # the plug-ins above this layer, by name
+
+    names = summary.get("metrics", [])
+    if not isinstance(names, list) or not all(isinstance(n, str) for n in names):
+        raise ScenarioError(f"{source}: [summary] metrics = {names!r}: expected a list of "
+                            "metric names")
+    registry = papers.registry()
+    for name in names:
+        if name not in registry:
+            hint = difflib.get_close_matches(name, list(registry), n=1)
+            raise ScenarioError(f"{source}: [summary] metrics: no metric {name!r}"
+                                + (f" (did you mean {hint[0]!r}?)" if hint else
+                                   f"; registered: {', '.join(sorted(registry))}"))
+    keys = [k for n in names for k in registry[n].keys]
+    for key in summary:
+        if key in registry and key not in SUMMARY_KEYS:
+            raise ScenarioError(f"{source}: [summary] {key}: a paper metric; name it in "
+                                f"[summary] metrics = [{key!r}, ...]")
+    for key, owners in papers.declared_keys().items():
+        if key in summary and key not in keys and key not in SUMMARY_KEYS:
+            raise ScenarioError(f"{source}: [summary] {key}: read by the metric "
+                                f"{' or '.join(repr(o) for o in owners)}, which [summary] "
+                                "metrics does not name")
+    return keys
 
 
 def _refuse_unknown(source: Path, table: str, given: dict[str, Any],
@@ -417,6 +449,8 @@ def _load_scenario(path: Path, overrides: dict[str, Any] | list[str] | None) -> 
         value = raw.get(table, {})
         if not isinstance(value, dict):
             raise ScenarioError(f"{path}: [{table}] must be a table")
+        if table == "summary":
+            known = (*known, *_paper_metric_keys(path, value))
         _refuse_unknown(path, f"[{table}]", value, tuple(known))
     record = raw.get("record", {}).get("variables")
     if record is not None:

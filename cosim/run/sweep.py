@@ -1,6 +1,6 @@
 """Parameter sweeps: one scenario (or several) over a grid of overrides, in parallel processes.
 
-``run_sweep("seed000_stop_rsmpc", {"controller.N": range(3, 16)}, "runs/sweep", workers=2)``
+``run_sweep("stop_rsmpc", {"controller.N": range(3, 16)}, "runs/sweep", workers=2)``
 runs every grid point with :func:`cosim.run.master.run_scenario` in a process pool, and writes
 
 * ``sweep.csv``: one row per run (scenario, the grid values, ``status`` ok / failed /
@@ -8,8 +8,8 @@ runs every grid point with :func:`cosim.run.master.run_scenario` in a process po
   point does not stop the others and an interrupted sweep keeps its finished rows; with
   ``resume`` the points already ``ok`` in an existing ``sweep.csv`` are not run again;
 * ``sweep.png``: stop error against the first grid key, one line per scenario, with the
-  +-0.5 m stop window, and the command switches / controller executions (the paper's Fig. 11
-  plus the switch counts).
+  +-0.5 m stop window, and the command switches / controller executions (a stopping study's
+  figure over the horizon, plus the switch counts).
 
 Grid values on the command line (:func:`parse_grid`): ``controller.N=3..15`` (integer range,
 inclusive), ``controller.beta=1,2,4`` (list) or a single value.
@@ -20,20 +20,15 @@ from __future__ import annotations
 import csv
 import functools
 import itertools
-import multiprocessing
-import os
-import signal
-import sys
-from collections.abc import Iterable, Sequence
-from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
 import pandas as pd
 
-from cosim.run import interrupt
+from cosim.run import interrupt, runner
 
-STOP_WINDOW_M = 0.5  # seed 000: ATO stop window +-50 cm
+STOP_WINDOW_M = 0.5  # m, the ATO stop window +-50 cm
 
 SUMMARY_COLUMNS = ("stop_error_m", "command_switches", "qp_solves", "qp_infeasible",
                    "qp_solve_time_median_s", "speed_rmse_mps", "max_jerk_mps3", "wall_time_s")
@@ -192,17 +187,19 @@ class _RowWriter:
 def run_sweep(scenario: str | Sequence[str], grid: dict[str, Sequence[Any]],
               out_dir: str | Path | None = None, workers: int | None = None,
               plot: bool = True, resume: bool = False, scheduler: str | None = None,
-              shared_fmus: bool = False) -> pd.DataFrame:
-    """Run every grid point of every scenario in ``workers`` processes (default: CPU count),
-    or on a Dask cluster (``scheduler``: its address, or ``"local-dask"`` for a
-    ``LocalCluster`` of ``workers`` processes; :mod:`cosim.run.dask_sweep`).
+              shared_fmus: bool = False, plot_format: str = "png") -> pd.DataFrame:
+    """Run every grid point of every scenario with :func:`cosim.run.runner.run_tasks`: in
+    ``workers`` processes (default: CPU count), or on a Dask cluster (``scheduler``: its
+    address, or ``"local-dask"`` for a ``LocalCluster`` of ``workers`` processes;
+    :mod:`cosim.run.dask_sweep`).
 
     FMUs are built (if stale) once, before the pool starts. Returns one row per run, in grid
     order, with ``status`` and ``error``; with ``out_dir`` each row is appended to
     ``sweep.csv`` as it finishes (``resume``: the ``ok`` rows of an existing one are kept and
     not run again), then the file is rewritten in grid order and, with ``plot``, ``sweep.png``
-    drawn. SIGINT/SIGTERM: no new point starts, running ones stop (status ``interrupted``),
-    the finished rows are written and :class:`cosim.run.interrupt.Interrupted` is raised.
+    drawn (``sweep.<plot_format>``: png at 200 dpi, svg or pdf). SIGINT/SIGTERM: no new
+    point starts, running ones stop (status ``interrupted``), the finished rows are written
+    and :class:`cosim.run.interrupt.Interrupted` is raised.
     Each worker runs with one BLAS thread and is reused for many points (the imports and FMU
     extractions happen once per worker). On Dask the FMU files are uploaded to the workers,
     or, with ``shared_fmus``, read by them from the same paths (a shared file system).
@@ -215,16 +212,7 @@ def run_sweep(scenario: str | Sequence[str], grid: dict[str, Sequence[Any]],
         raise ValueError("run_sweep: no scenario given")
     if not grid:
         raise ValueError("run_sweep: empty grid")
-    if workers is not None and workers < 1:
-        raise ValueError(f"--workers {workers}: must be at least 1")
-    if scheduler is not None:
-        from cosim.run import dask_sweep
-
-        dask_sweep.check_available()
-        if workers is not None and scheduler != dask_sweep.LOCAL:
-            raise ValueError(f"--workers {workers} with --scheduler {scheduler}: a cluster's "
-                             "workers are its own (--workers sizes the local pool or "
-                             f"--scheduler {dask_sweep.LOCAL})")
+    runner.check_workers(workers, scheduler)
     points = grid_points(grid)
     paths = [str(find_scenario(s)) for s in scenarios]
     for path in paths:  # fail early on a bad scenario or key, and build what is missing
@@ -253,13 +241,7 @@ def run_sweep(scenario: str | Sequence[str], grid: dict[str, Sequence[Any]],
             writer.add(row)
 
     try:
-        with interrupt.guard():
-            if scheduler is None:
-                _execute(todo, workers, finished)
-            else:
-                from cosim.run import dask_sweep
-
-                dask_sweep.execute(todo, scheduler, workers, finished, shared_fmus)
+        _execute(todo, workers, finished, scheduler, shared_fmus, plot_format)
     finally:
         if writer is not None:
             writer.close()
@@ -271,121 +253,93 @@ def run_sweep(scenario: str | Sequence[str], grid: dict[str, Sequence[Any]],
                 written[col] = pd.to_numeric(written[col]).round().astype("Int64")
             written.to_csv(out / "sweep.csv", index=False)
             if plot and (frame["status"] == "ok").any():
-                plot_sweep(frame[frame["status"] == "ok"], list(grid), out / "sweep.png")
+                plot_sweep(frame[frame["status"] == "ok"], list(grid),
+                           out / f"sweep.{plot_format}",
+                           key_labels(load_scenario(paths[0], points[0]), list(grid)))
     return frame
 
 
-def _pool_context(jobs: list[tuple[str, dict[str, Any]]]) -> Any:
-    """How pool workers start. On Linux they are forked from this process after it imported
-    the master and loaded every FMU of the sweep once (extracted, its bundled modules
-    imported, the instance freed again): a worker then starts with nothing left to import or
-    extract, where a spawned interpreter paid ~1.5 s CPU of imports before its first point
-    (with 2 workers on 2 cores that was a third of the sweep). Elsewhere: spawn."""
-    if sys.platform != "linux" or "fork" not in multiprocessing.get_all_start_methods():
-        return multiprocessing.get_context("spawn")
-    import cosim.run.master  # noqa: F401 - the imports, here, once
-    import cosim.run.metrics  # noqa: F401
-    from cosim.run.master import warm_up
-    from cosim.run.scenario import load_scenario
-    fmus: dict[str, None] = {}
-    for path, point in jobs:
-        try:
-            for comp in load_scenario(path, dict(point)).components.values():
-                fmus.setdefault(str(comp.fmu_path))
-        except (ValueError, OSError):
-            continue  # the point fails in its worker, with this error
-    for fmu in fmus:
-        warm_up(Path(fmu))
-    return multiprocessing.get_context("fork")
+def warm_up_for(jobs: list[tuple[str, dict[str, Any]]]) -> Callable[[], None]:
+    """Before the pool forks: load every FMU of the sweep once (extracted, its bundled modules
+    imported, the instance freed again), so a forked worker starts with nothing left to
+    import or extract (a spawned interpreter would import and extract again in each
+    worker)."""
 
+    def warm() -> None:
+        from cosim.run.master import warm_up
+        from cosim.run.scenario import load_scenario
 
-def _worker_init() -> None:
-    """A pool worker, once: ignore SIGINT/SIGTERM between runs (a Ctrl-C reaches the whole
-    process group; during a run :func:`cosim.run.interrupt.guard` handles them and the run
-    stops: a forked worker starts with the sweep's guard state, which is cleared), then
-    :func:`worker_setup`."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    signal.signal(signal.SIGTERM, signal.SIG_IGN)
-    interrupt.reset()
-    worker_setup()
-
-
-def worker_setup() -> None:
-    """A worker process, once: one BLAS thread for good, and the master's imports done before
-    the first point."""
-    import cosim.run.master  # noqa: F401 - fmpy, numpy, the scenario code
-    import cosim.run.metrics  # noqa: F401
-    from cosim.run.threads import limit_blas_for_process
-
-    limit_blas_for_process()
-
-
-def pool_size(workers: int | None, jobs: int) -> int:
-    """Processes for ``jobs`` points: ``workers`` (default: CPU count), at most one a point."""
-    return max(1, min(workers or os.cpu_count() or 1, jobs))
-
-
-def _execute(jobs: list[tuple[str, dict[str, Any]]], workers: int | None, finished) -> None:
-    """Run ``jobs`` (in a process pool when more than one worker), handing each row to
-    ``finished`` as it arrives; on a signal, stop the running points and raise Interrupted."""
-    if not jobs:
-        return
-    workers = pool_size(workers, len(jobs))
-    if workers == 1:
+        fmus: dict[str, None] = {}
         for path, point in jobs:
-            interrupt.check_between("the sweep")
-            finished(_run_point(path, point))
-        interrupt.check_between("the sweep")
+            try:
+                for comp in load_scenario(path, dict(point)).components.values():
+                    fmus.setdefault(str(comp.fmu_path))
+            except (ValueError, OSError):
+                continue  # the point fails in its worker, with this error
+        for fmu in fmus:
+            warm_up(Path(fmu))
+
+    return warm
+
+
+def _execute(jobs: list[tuple[str, dict[str, Any]]], workers: int | None,
+             finished: Callable[[dict[str, Any]], None], scheduler: str | None = None,
+             shared_fmus: bool = False, plot_format: str = "png") -> None:
+    """Run ``jobs`` (scenario path, grid point) with the shared runner, handing each row to
+    ``finished`` as it arrives; on a signal, the running points stop (status
+    ``interrupted``) and Interrupted is raised. Along a swept horizon or resolution the cost
+    grows, so the last grid points start first and the short ones fill the end (the workers
+    finish together; rows are put back in grid order by the caller)."""
+
+    def failed(task: runner.Task, err: BaseException) -> None:
+        path, point = task.key
+        finished({"scenario": Path(path).stem, **point, "status": "failed",
+                  "error": f"worker process failed: {type(err).__name__}: {err}"})
+
+    label = "sweep"
+    if scheduler is None:
+        tasks = [runner.Task((path, point), _run_point, (path, point))
+                 for path, point in reversed(jobs)]
+        runner.run_tasks(tasks, lambda _t, row: finished(row), failed, workers,
+                         label=label, warm_up=warm_up_for(jobs), what="the sweep")
         return
-    with ProcessPoolExecutor(max_workers=workers, mp_context=_pool_context(jobs),
-                             initializer=_worker_init) as pool:
-        # the last grid points first: along a swept horizon or resolution the cost grows, so
-        # the long runs start first and the short ones fill the end (the workers finish
-        # together; rows are put back in grid order by the caller)
-        job_of = {pool.submit(_run_point, path, point): (path, point)
-                  for path, point in reversed(jobs)}
-        pending = set(job_of)
-        stopping = False
-        while pending:
-            ready, pending = wait(pending, timeout=0.2, return_when=FIRST_COMPLETED)
-            for future in ready:
-                if future.cancelled():
-                    continue
-                try:
-                    finished(future.result())
-                except Exception as err:  # noqa: BLE001 - a crashed worker fails its point only
-                    path, point = job_of[future]
-                    finished({"scenario": Path(path).stem, **point, "status": "failed",
-                              "error": f"worker process failed: {type(err).__name__}: {err}"})
-            if interrupt.requested() and not stopping:
-                stopping = True
-                for future in pending:
-                    future.cancel()
-                for proc in list(getattr(pool, "_processes", {}).values()):
-                    try:  # the running points stop at their next communication point
-                        os.kill(proc.pid, signal.SIGINT)
-                    except OSError:
-                        pass
-                pending = {f for f in pending if not f.cancelled()}
-    interrupt.check_between("the sweep")
+    from cosim.run import dask_sweep
+
+    tasks, blobs = dask_sweep.tasks(jobs, finished, shared_fmus)
+    runner.run_tasks(tasks, lambda _t, row: finished(row), failed, workers, scheduler,
+                     label=label, broadcast=blobs, what="the sweep")
 
 
-def plot_sweep(frame: pd.DataFrame, keys: list[str], path: str | Path) -> None:
+def key_labels(scenario: Any, keys: list[str]) -> dict[str, str]:
+    """Axis labels of grid keys: the declared description and unit of each ``FMU.parameter``
+    (the key itself where there is none)."""
+    from cosim.run.results import axis_label, variable_info
+
+    labels = {}
+    for key in keys:
+        text, unit = variable_info(scenario, key)
+        labels[key] = f"{axis_label(text, unit)} [{key}]" if text != key else key
+    return labels
+
+
+def plot_sweep(frame: pd.DataFrame, keys: list[str], path: str | Path,
+               labels: dict[str, str] | None = None) -> None:
     """:func:`draw_sweep` saved to ``path`` (its suffix: png at 200 dpi, svg or pdf)."""
     import matplotlib.pyplot as plt
 
     from cosim.run.results import PLOT_DPI
 
-    fig = draw_sweep(frame, keys)
+    fig = draw_sweep(frame, keys, labels)
     fig.savefig(path, dpi=PLOT_DPI, format=Path(path).suffix.lstrip(".") or "png",
                 bbox_inches="tight")
     plt.close(fig)
 
 
-def draw_sweep(frame: pd.DataFrame, keys: list[str]) -> Any:
-    """Fig.-11-style figure: stop error (cm) and command switches / executions vs the first
-    key; the stop window drawn, the axis zoomed to the data when they lie far inside it;
-    legends right of the axes."""
+def draw_sweep(frame: pd.DataFrame, keys: list[str],
+               labels: dict[str, str] | None = None) -> Any:
+    """Stop error (cm) and command switches / executions vs the first key (its axis label
+    from ``labels``, e.g. :func:`key_labels`); the stop window drawn, the axis zoomed to the
+    data when they lie far inside it; legends right of the axes; no offset notation."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -408,12 +362,14 @@ def draw_sweep(frame: pd.DataFrame, keys: list[str]) -> Any:
                      color=line.get_color(), label=f"{name}: executions")
     fit_band(ax1, 100.0 * frame["stop_error_m"], -100 * STOP_WINDOW_M, 100 * STOP_WINDOW_M)
     ax1.set_ylabel("stop error (cm)")
-    ax1.set_title("Stop error and command switches vs " + x)
+    ax1.set_title("Stop error and command switches vs "
+                  + (labels or {}).get(x, x).partition(" [")[0])
     ax1.grid(True, alpha=0.3)
     ax1.ticklabel_format(useOffset=False, style="plain", axis="y")
     ax1.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
-    ax2.set_xlabel(x)
+    ax2.set_xlabel((labels or {}).get(x, x))
     ax2.set_ylabel("count")
+    ax2.ticklabel_format(useOffset=False, style="plain", axis="both")
     ax2.grid(True, alpha=0.3)
     ax2.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
     ax2.xaxis.set_tick_params(labelbottom=True)

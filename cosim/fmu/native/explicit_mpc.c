@@ -267,19 +267,43 @@ law_core* law_make(const ato_values* p, double t0, char* err, size_t n) {
             snprintf(err, n, "%s = %s must be >= 0", nonneg[i], ato_repr(v[nonneg_vr[i]], a));
             return fail(c, NULL);
         }
-    const char* pos[] = {"r_force", "sample_time", "coupler_force_max"};
-    const int pos_vr[] = {ATO_VR_R, ATO_VR_sample_time, ATO_VR_coupler_force_max};
-    for (int i = 0; i < 3; i++)
+    const char* pos[] = {"sample_time", "coupler_force_max"};
+    const int pos_vr[] = {ATO_VR_sample_time, ATO_VR_coupler_force_max};
+    for (int i = 0; i < 2; i++)
         if (!(v[pos_vr[i]] > 0)) {
             char a[40];
             snprintf(err, n, "%s = %s must be > 0", pos[i], ato_repr(v[pos_vr[i]], a));
             return fail(c, NULL);
         }
+    double r_force = v[ATO_VR_R], r_increment = v[ATO_VR_dR];
+    if (!(r_force >= 0 && r_increment >= 0 && r_force + r_increment > 0)) {
+        char a[40], b[40];
+        snprintf(err, n, "R = %s, dR = %s: both >= 0 and one > 0 (the QP needs a weight on the "
+                 "forces or their increments)", ato_repr(r_force, a), ato_repr(r_increment, b));
+        return fail(c, NULL);
+    }
     if (!ato_profile_load(&c->profile, p->resources, s[ATO_VR_reference], err, n))
         return fail(c, NULL);
     if (c->profile.distance) {
         snprintf(err, n, "reference: hybrid MPC tracks a speed-time profile, got a "
                  "'distance' one");
+        return fail(c, NULL);
+    }
+    /* ExplicitMpc.__init__, in its order: the evaluation, eq. 11's weight, the mode */
+    const char* evaluation = s[ATO_VR_evaluation];
+    if (strcmp(evaluation, "explicit") != 0 && strcmp(evaluation, "online") != 0) {
+        snprintf(err, n, "evaluation = '%s' must be one of ('explicit', 'online')", evaluation);
+        return fail(c, NULL);
+    }
+    if (strcmp(evaluation, "explicit") != 0) {
+        snprintf(err, n, "evaluation = '%s': the native FMU evaluates the region lookup only; "
+                 "the online twin needs the Python FMU", evaluation);
+        return fail(c, NULL);
+    }
+    if (r_increment != 0.0) {
+        char a[40];
+        snprintf(err, n, "dR = %s: the EMPC's reduced problem has no force-increment term "
+                 "(eq. 11); its regions are built for dR = 0", ato_repr(r_increment, a));
         return fail(c, NULL);
     }
     if (strcmp(dmode, "schedule") != 0) {

@@ -1,0 +1,134 @@
+"""Metrics that belong to one paper, registered by name.
+
+The generic summary (:func:`cosim.run.metrics.compute_summary`) knows no paper. A scenario names
+the paper metrics it wants in ``[summary] metrics = ["ctcs3", "unit_indices"]``; each name is a
+function registered here, in the module of the paper that defines it (``cosim/papers/seed001.py``
+and so on), with the ``[summary]`` keys it reads::
+
+    from cosim.papers import RunRecord, metric
+
+    @metric("unit_indices", keys=("unit_speeds", "ma_sample_time"))
+    def unit_indices(run: RunRecord) -> dict[str, Any]:
+        cols = run.columns("unit_speeds")
+        ...
+        return {"unit_mse_kmh2": ...}
+
+A metric function takes the run's :class:`RunRecord` and returns the entries it adds to
+``summary.json`` (an empty dict when the recording lacks what it needs). Every module of this
+package is imported when the registry is first consulted, so a new module or function needs no
+other registration. A key a metric declares is a valid ``[summary]`` key only in a scenario that
+names the metric.
+"""
+
+from __future__ import annotations
+
+import importlib
+import pkgutil
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class RunRecord:
+    """What a paper metric sees of one run.
+
+    ``frame``: the recorded results (``time`` and ``FMU.variable`` columns); ``summary``: the
+    scenario's ``[summary]`` table (parameter references resolved); ``metrics``: the generic
+    summary computed so far (read it, do not change it); ``time`` (s), ``position`` (m),
+    ``speed`` (m/s) and ``reference_speed`` (m/s, the stopping curve where ``reference_decel``
+    gives one) as the generic summary resolved them, None when not recorded; ``arrival_index``:
+    the first sample of the final standstill (None: still moving at the end)."""
+
+    frame: Any
+    summary: Mapping[str, Any]
+    metrics: Mapping[str, Any] = field(default_factory=dict)
+    time: np.ndarray | None = None
+    position: np.ndarray | None = None
+    speed: np.ndarray | None = None
+    reference_speed: np.ndarray | None = None
+    arrival_index: int | None = None
+
+    def series(self, key: str) -> np.ndarray | None:
+        """The recorded column the ``[summary]`` key ``key`` names (None: key or column
+        absent)."""
+        ref = self.summary.get(key)
+        if isinstance(ref, str) and ref in self.frame.columns and len(self.frame):
+            return self.frame[ref].to_numpy(dtype=float)
+        return None
+
+    def columns(self, key: str) -> list[str]:
+        """The recorded columns the ``[summary]`` key ``key`` names (a name, a
+        ``"plant.v[*]"`` pattern or a list of those)."""
+        from cosim.run.metrics import matching_columns
+
+        return matching_columns(self.frame, self.summary.get(key))
+
+
+MetricFunction = Callable[[RunRecord], dict[str, Any]]
+
+
+@dataclass(frozen=True)
+class Metric:
+    """A registered metric: its name, the ``[summary]`` keys it reads, its function and the
+    module (paper) that defines it."""
+
+    name: str
+    keys: tuple[str, ...]
+    function: MetricFunction
+    module: str
+
+
+_REGISTRY: dict[str, Metric] = {}
+_loaded: list[bool] = []
+
+
+def metric(name: str, keys: tuple[str, ...] = ()) -> Callable[[MetricFunction], MetricFunction]:
+    """Register the decorated function as the metric ``name`` reading the ``[summary]``
+    ``keys``. A name is registered once (a second registration is an error)."""
+
+    def register(function: MetricFunction) -> MetricFunction:
+        known = _REGISTRY.get(name)
+        if known is not None and known.function is not function:
+            raise ValueError(f"metric {name!r} registered twice ({known.module} and "
+                             f"{function.__module__})")
+        _REGISTRY[name] = Metric(name, tuple(keys), function, function.__module__)
+        return function
+
+    return register
+
+
+def registry() -> dict[str, Metric]:
+    """Every registered metric by name (the modules of this package imported once)."""
+    if not _loaded:
+        for info in pkgutil.iter_modules(__path__):
+            importlib.import_module(f"{__name__}.{info.name}")
+        _loaded.append(True)
+    return dict(_REGISTRY)
+
+
+def lookup(name: str) -> Metric:
+    """The metric ``name``; ``KeyError`` naming the registered ones when there is none."""
+    found = registry().get(name)
+    if found is None:
+        raise KeyError(f"no metric {name!r}; registered: {', '.join(sorted(registry()))}")
+    return found
+
+
+def declared_keys() -> dict[str, list[str]]:
+    """``[summary]`` key -> the metrics that read it, over every registered metric."""
+    out: dict[str, list[str]] = {}
+    for m in registry().values():
+        for key in m.keys:
+            out.setdefault(key, []).append(m.name)
+    return out
+
+
+def compute(names: list[str], run: RunRecord) -> dict[str, Any]:
+    """The entries the metrics ``names`` add, in that order."""
+    out: dict[str, Any] = {}
+    for name in names:
+        out.update(lookup(name).function(run))
+    return out

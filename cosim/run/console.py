@@ -1,0 +1,109 @@
+"""Tables for an 80-column terminal (``cosim sweep``, ``cosim reproduce``): the full tables go
+to files (csv, md); the console gets these.
+
+:func:`fit_table` formats every cell (numbers to 4 significant digits, counts as integers,
+``-`` for a missing value), drops the prefix the key column's names share (stated above the
+table), and when the columns do not fit ``width`` splits them into blocks, each repeating the
+key columns, so that nothing is cut.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+WIDTH = 80
+GAP = "  "
+
+
+def cell(value: Any, signed: bool = False) -> str:
+    """A value as a short text: ``-`` for None/NaN, an integer as such, a float to 4
+    significant digits (``signed``: with its sign), anything else as ``str``."""
+    if value is None or (isinstance(value, float) and math.isnan(value)):
+        return "-"
+    if isinstance(value, bool):
+        return "yes" if value else "no"
+    if isinstance(value, float) and value.is_integer() and abs(value) < 1e9 and not signed:
+        return str(int(value))
+    if isinstance(value, (int, float)):
+        return f"{value:+.4g}" if signed else f"{value:.4g}"
+    return str(value)
+
+
+def _is_number(text: str) -> bool:
+    if text == "-":
+        return True
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
+def _shared_prefix(names: Sequence[str]) -> str:
+    """The words (up to an ``_``) every name starts with, when there are several names."""
+    if len(set(names)) < 2:
+        return ""
+    prefix = os.path.commonprefix(list(names))
+    return prefix[: prefix.rfind("_") + 1]
+
+
+def fit_table(rows: Sequence[Mapping[str, Any]], columns: Sequence[str],
+              labels: Mapping[str, str] | None = None, keys: int = 1,
+              signed: Sequence[str] = (), width: int = WIDTH, title: str = "") -> str:
+    """``rows`` as a plain-text table of ``columns`` (headers from ``labels``), the first
+    ``keys`` columns on the left of every block; no line longer than ``width``."""
+    labels = labels or {}
+    text = [[cell(r.get(c), c in signed) for c in columns] for r in rows]
+    lines = [title] if title else []
+    if text and keys:
+        prefix = _shared_prefix([t[0] for t in text])
+        if prefix:
+            for t in text:
+                t[0] = t[0][len(prefix):]
+            lines.append(f"({columns[0]}: {prefix}...)")
+    heads = [labels.get(c, c) for c in columns]
+    widths = [max([len(heads[i]), *(len(t[i]) for t in text)]) for i in range(len(columns))]
+    key_cols = list(range(min(keys, len(columns))))
+    key_width = sum(widths[i] + len(GAP) for i in key_cols)
+    for i in key_cols:  # a key wider than the line: cut it, the full name is in the file
+        limit = max(8, width // 2 - len(GAP))
+        if widths[i] > limit:
+            widths[i] = limit
+            for t in text:
+                t[i] = t[i] if len(t[i]) <= limit else t[i][: limit - 1] + "~"
+    key_width = sum(widths[i] + len(GAP) for i in key_cols)
+    blocks: list[list[int]] = []
+    current: list[int] = []
+    used = key_width
+    for i in range(len(key_cols), len(columns)):
+        w = min(widths[i], width - key_width)
+        widths[i] = w
+        if current and used + w > width:
+            blocks.append(current)
+            current, used = [], key_width
+        current.append(i)
+        used += w + len(GAP)
+    if current or not blocks:
+        blocks.append(current)
+
+    numeric = [all(_is_number(t[i]) for t in text) for i in range(len(columns))]
+
+    def fmt(values: Sequence[str], cols: Sequence[int]) -> str:
+        parts = []
+        for i in cols:
+            value = values[i] if len(values[i]) <= widths[i] else values[i][: widths[i] - 1] + "~"
+            right = numeric[i] and i not in key_cols
+            parts.append(value.rjust(widths[i]) if right else value.ljust(widths[i]))
+        return GAP.join(parts).rstrip()
+
+    for n, block in enumerate(blocks):
+        cols = [*key_cols, *block]
+        if n:
+            lines.append("")
+        lines.append(fmt(heads, cols))
+        lines.append("-" * min(width, len(fmt(heads, cols))))
+        lines += [fmt(t, cols) for t in text]
+    return "\n".join(lines)

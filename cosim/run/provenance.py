@@ -1,0 +1,77 @@
+"""What a reproduction's figures depend on, as one digest (so a generated page knows when it is
+stale).
+
+The inputs of entry ``scenarios/reproduce/NAME.toml`` are: the entry itself; every scenario it
+names (a string value equal to a file stem in ``scenarios/``); the files bundled into every FMU
+those scenarios and the entry name (a string equal to a catalog identifier:
+``cosim.fmu.build.bundled_files`` of its wrapper, i.e. the cores, their data and the FMU layer);
+and the code that runs and evaluates them (``cosim/run/``, ``cosim/papers/``), leaving out the
+pages' own writer. :func:`entry_digest` is a SHA-256 over their relative paths and contents, so
+it is the same on every machine for the same tree.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+from cosim.fmu.build import ROOT, bundled_files, catalog
+
+try:
+    import tomllib
+except ModuleNotFoundError:  # Python 3.10
+    import tomli as tomllib  # type: ignore[no-redef]
+
+SCENARIOS = ROOT / "scenarios"
+ENTRIES = SCENARIOS / "reproduce"
+EVALUATION = ("cosim/run", "cosim/papers")
+INPUTS_FILE = "inputs.sha256"  # in a reproduction's folder: the digest of the inputs it ran
+NOT_INPUTS = {"cosim/run/docs_pages.py", "cosim/run/provenance.py"}
+
+
+def _strings(value: Any) -> Iterator[str]:
+    if isinstance(value, str):
+        yield value
+    elif isinstance(value, dict):
+        for item in value.values():
+            yield from _strings(item)
+    elif isinstance(value, list):
+        for item in value:
+            yield from _strings(item)
+
+
+def entry_inputs(name: str) -> list[Path]:
+    """The files entry ``name``'s results depend on, sorted (see the module docstring)."""
+    entry = ENTRIES / f"{name}.toml"
+    data = tomllib.loads(entry.read_text())
+    known = catalog()
+    files: set[Path] = {entry}
+    fmus: set[str] = set()
+    for text in set(_strings(data)):
+        if "\n" in text or "/" in text or len(text) > 100:  # prose, not a name
+            continue
+        scenario = SCENARIOS / f"{text}.toml"
+        if scenario.is_file():
+            files.add(scenario)
+            fmus.update(s for s in _strings(tomllib.loads(scenario.read_text())) if s in known)
+        if text in known:
+            fmus.add(text)
+    for identifier in sorted(fmus):
+        files.update(bundled_files(known[identifier].module))
+    for folder in EVALUATION:
+        for path in (ROOT / folder).rglob("*.py"):
+            if path.relative_to(ROOT).as_posix() not in NOT_INPUTS:
+                files.add(path)
+    return sorted(files)
+
+
+def entry_digest(name: str) -> str:
+    """SHA-256 over the relative paths and contents of :func:`entry_inputs`."""
+    h = hashlib.sha256()
+    for path in entry_inputs(name):
+        h.update(path.relative_to(ROOT).as_posix().encode() + b"\0")
+        h.update(path.read_bytes())
+        h.update(b"\0")
+    return h.hexdigest()

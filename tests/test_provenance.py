@@ -1,0 +1,64 @@
+"""A paper page knows the inputs it was made from (cosim.run.provenance) and `cosim docs --check`
+names every page whose inputs the tree no longer has."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from cosim.fmu.build import ROOT
+from cosim.run import docs_pages
+from cosim.run.provenance import entry_digest, entry_inputs
+
+
+def _rel(paths: list[Path]) -> set[str]:
+    return {p.relative_to(ROOT).as_posix() for p in paths}
+
+
+def test_inputs_are_the_entry_its_scenarios_their_cores_and_the_evaluation() -> None:
+    files = _rel(entry_inputs("seed000"))
+    assert "scenarios/reproduce/seed000.toml" in files
+    assert "scenarios/seed000_stop_pid.toml" in files
+    assert "controllers/pid/stop_pid.py" in files  # the core behind StopPid
+    assert "plants/brake_delay.py" in files  # the plant behind BrakeDelayTrain
+    assert "cosim/run/claims.py" in files
+    assert "cosim/run/docs_pages.py" not in files  # the page writer is not an input
+    assert not any(f.startswith("scenarios/seed001") for f in files)
+    assert "controllers/datadriven/laws.py" not in files  # another paper's law
+
+
+def test_digest_is_a_function_of_contents(monkeypatch) -> None:
+    first = entry_digest("seed000")
+    assert entry_digest("seed000") == first
+    target = ROOT / "controllers" / "pid" / "stop_pid.py"
+    original = Path.read_bytes
+
+    def edited(self: Path) -> bytes:
+        data = original(self)
+        return data + b"\n# edited\n" if self == target else data
+
+    monkeypatch.setattr(Path, "read_bytes", edited)
+    assert entry_digest("seed000") != first
+    assert entry_digest("seed001") == entry_digest("seed001")
+
+
+def test_stale_papers_names_runs_and_pages_made_from_other_inputs(tmp_path, monkeypatch) -> None:
+    monkeypatch.setattr(docs_pages, "paper_names", lambda: ["seed000"])
+    run = tmp_path / "seed000"
+    run.mkdir()
+    (run / "claims.md").write_text("## claims\n")
+    (run / docs_pages.INPUTS_FILE).write_text(entry_digest("seed000") + "\n")
+    assert docs_pages.stale_papers(tmp_path) == []
+    page = docs_pages.paper_page("seed000", run)[docs_pages.DOCS / "papers" / "seed000.md"]
+    assert f"<!-- inputs {entry_digest('seed000')} -->" in page.decode()
+    (run / docs_pages.INPUTS_FILE).write_text("0" * 64 + "\n")
+    (line,) = docs_pages.stale_papers(tmp_path)
+    assert "other inputs" in line and "cosim reproduce seed000" in line
+    (run / "claims.md").unlink()  # no run here: the committed page's header decides
+    committed = docs_pages.DOCS / "papers" / "seed000.md"
+    text = committed.read_text() if committed.is_file() else docs_pages.NOT_REPRODUCED
+    found = docs_pages._INPUTS.search(text)
+    if found is None:  # the page saying how to make it carries no result: not stale
+        expect_stale = text != docs_pages.NOT_REPRODUCED.format(name="seed000")
+    else:
+        expect_stale = found.group(1) != entry_digest("seed000")
+    assert bool(docs_pages.stale_papers(tmp_path)) == expect_stale
