@@ -1,11 +1,14 @@
 """High-speed train with first-order-lag plus dead-time brakes (seed 000, eqs. 1-7).
 
     da_c/dt = -a_c / tau + (1 / tau) a_t(t - Td),   a_t = -c u       (eqs. 2-4)
-    dv/dt   = a_c - a_r(v, s),   ds/dt = v,   a_r = a_w(v) + a_g(s)   (eqs. 5-7)
+    dv/dt   = a_c - a_r(v, s) - a_d(t),   ds/dt = v,   a_r = a_w(v) + a_g(s)   (eqs. 5-7)
 
 ``u`` is the brake command in percent of full service braking (0..100); ``c`` maps 100 % to the
 maximum brake deceleration (1.07 m/s^2 in Table 1), so a_c <= 0 while braking (the paper's sign
-convention: a = a_c - a_r). ``a_w`` is Davis resistance per unit mass, ``a_g = g i(s)/1000``.
+convention: a = a_c - a_r). ``a_w`` is Davis resistance per unit mass, ``a_g = g i(s)/1000``;
+``a_d`` an unknown bounded resistance disturbance (wind, rail condition; ours, the paper's
+"uncertain disturbance from the external environment"), piecewise constant, seeded
+(:meth:`BrakeDelayTrain.disturbance_at`; zero by default).
 
 Integration: sub-steps no longer than ``max_step`` on a grid anchored at t = 0 and split at
 every instant where the delayed command changes, so the result does not depend on the
@@ -51,12 +54,18 @@ class BrakeDelayParams(Checked):
     max_step: float = param(0.01, "s", "longest internal integration sub-step", min=1e-6)
     grade_scale: float = param(1.0, "1", "factor on the route's grades (model mismatch "
                                "studies)", min=0.0)
+    disturbance_amplitude: float = param(0.0, "m/s2", "bound A of the unknown resistance "
+                                         "disturbance a_d, uniform in [-A, A] (0: none)",
+                                         min=0.0)
+    disturbance_interval: float = param(1.0, "s", "a_d is held for this long, then drawn "
+                                        "anew", min=1e-3)
+    disturbance_seed: int = param(0, description="seed of the disturbance a_d")
 
 
 class BrakeDelayTrain(StatefulCore, Declared):
     """Single-mass train, brake command -> lag + dead time -> deceleration."""
 
-    state_fields = ("t_ticks", "a_c", "v", "s", "history")
+    state_fields = ("t_ticks", "a_c", "v", "s", "history", "a_d")
     params_class = BrakeDelayParams
     setup_vars = (
         *initial_state_parameters(20.0),
@@ -100,6 +109,8 @@ class BrakeDelayTrain(StatefulCore, Declared):
         self.history = dead_time.new_history(initial_command)
         self._delay_ticks = to_ticks(params.brake_delay)
         self._grid_ticks = to_ticks(params.max_step)
+        self.a_d = 0.0  # m/s^2, the disturbance acting over the current communication step
+        self._draw: tuple[int, float] = (-1, 0.0)  # (interval index, its a_d)
 
     # -- physics -------------------------------------------------------------------------------
     def resistance_accel(self, v: float, s: float) -> float:
@@ -109,6 +120,20 @@ class BrakeDelayTrain(StatefulCore, Declared):
     def grade_accel(self, s: float) -> float:
         """g i(s)/1000 (m/s^2), the route's grade times ``grade_scale``."""
         return self.p.grade_scale * self.route.grade_accel(s)
+
+    def disturbance_at(self, t: float) -> float:
+        """a_d (m/s^2, > 0 decelerates) of the interval containing ``t``: uniform in
+        ``[-A, A]``, drawn from ``(disturbance_seed, interval index)`` (a function of the time
+        alone); the plant holds it over each communication step from the step's start."""
+        p = self.p
+        if p.disturbance_amplitude == 0.0:
+            return 0.0
+        k = int(math.floor(t / p.disturbance_interval + 1e-9))
+        if self._draw[0] != k:
+            rng = np.random.default_rng([p.disturbance_seed, k])
+            self._draw = (k, float(rng.uniform(-p.disturbance_amplitude,
+                                               p.disturbance_amplitude)))
+        return self._draw[1]
 
     def _accel(self, a_c: float, v: float, grade_accel: float) -> float:
         a = a_c - self.p.davis.force(max(v, 0.0)) / self.p.mass - grade_accel
@@ -147,7 +172,7 @@ class BrakeDelayTrain(StatefulCore, Declared):
         so the result does not depend on where sub-steps fall."""
         remaining = h
         while remaining > 0.0:
-            g = self.grade_accel(self.s)
+            g = self.grade_accel(self.s) + self.a_d
             boundary = self._next_grade_change()
             dt = remaining
             v1, s1 = self._rk4(a_t, g, dt)
@@ -181,6 +206,7 @@ class BrakeDelayTrain(StatefulCore, Declared):
             raise ValueError(f"doStep at t={to_seconds(t_ticks)} s but plant is at "
                              f"t={to_seconds(self.t_ticks)} s")
         dead_time.record(self.history, t_ticks, float(inputs["brake_command"]))
+        self.a_d = self.disturbance_at(to_seconds(t_ticks))
         now = t_ticks
         for cut in dead_time.substep_ends(t_ticks, h_ticks, [self._grid_ticks], self.history,
                                           self._delay_ticks):
@@ -195,7 +221,7 @@ class BrakeDelayTrain(StatefulCore, Declared):
         return {
             "v": self.v,
             "s": self.s,
-            "a": self._accel(self.a_c, self.v, self.grade_accel(self.s)),
+            "a": self._accel(self.a_c, self.v, self.grade_accel(self.s) + self.a_d),
             "a_c": self.a_c,
             "applied_command": self.delayed_command(t),
             "grade": self.p.grade_scale * self.route.grade.at(self.s),

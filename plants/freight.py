@@ -161,6 +161,10 @@ class FreightParams(Checked):
     stiction_speed: float = param(
         0.01, "m/s", "regularisation of friction forces at standstill", min=1e-6)
     max_step: float = param(0.01, "s", "longest internal integration sub-step", min=1e-6)
+    resistance_spread: float = param(
+        0.0, "1", "standard deviation of the log of each vehicle's basic-resistance factor "
+        "(lognormal, mean 1; 0: every vehicle has the printed coefficients)", min=0.0, max=1.0)
+    disturbance_seed: int = param(0, description="seed of the vehicles' resistance factors")
 
     def check_relations(self) -> None:
         if self.coupler_slack > 0:
@@ -178,6 +182,17 @@ class FreightParams(Checked):
     @property
     def n_vehicles(self) -> int:
         return self.n_wagons + 1
+
+
+def resistance_factors(n: int, spread: float, seed: int) -> np.ndarray:
+    """Each vehicle's factor on its basic-resistance coefficients (eqs. 3-4): lognormal with
+    mean 1 and log standard deviation ``spread`` (bearing, wheel and load state differ from
+    vehicle to vehicle and are not known to a controller), drawn from ``seed``; all ones for
+    ``spread = 0``."""
+    if spread == 0.0:
+        return np.ones(n)
+    z = np.random.default_rng(seed).standard_normal(n)
+    return np.exp(spread * z - 0.5 * spread**2)
 
 
 def friction_coefficient(v: np.ndarray) -> np.ndarray:
@@ -276,6 +291,7 @@ class FreightTrain(StatefulCore, Declared):
         weight = self.mass * GRAVITY  # N
         coeffs = np.tile(np.asarray(p.wagon_resistance, dtype=float), (n, 1))
         coeffs[0] = p.loco_resistance
+        coeffs *= resistance_factors(n, p.resistance_spread, p.disturbance_seed)[:, None]
         # basic resistance in N with v in m/s: N/kN * kN, v_kmh = v / KMH
         self.res_a = coeffs[:, 0] * weight / 1e3
         self.res_b = coeffs[:, 1] * weight / 1e3 / KMH

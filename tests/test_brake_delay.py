@@ -147,3 +147,36 @@ def test_bad_parameters_rejected():
         make(v0=-1.0)
     with pytest.raises(ValueError, match="not found"):
         load_route("no_such_route")
+
+
+def test_disturbance_is_a_seeded_bounded_piecewise_constant_resistance() -> None:
+    """a_d: uniform in [-A, A], constant over each disturbance_interval, a function of the
+    time and the seed only; with the brake released on a level route the speed difference of
+    two runs, without and with it, is the integral of a_d within the bound the Davis force's
+    speed dependence allows."""
+    from dataclasses import replace
+
+    from plants.brake_delay import BrakeDelayParams, BrakeDelayTrain
+    from plants.route import Route
+
+    p = replace(BrakeDelayParams(), disturbance_amplitude=0.02, disturbance_seed=3,
+                disturbance_interval=1.0)
+    plant = BrakeDelayTrain(p, Route.flat(), v0=20.0)
+    values = [plant.disturbance_at(0.2 * k) for k in range(50)]
+    assert all(abs(x) <= 0.02 for x in values)
+    assert len(set(values[0:5])) == 1 and values[5] != values[4]
+    again = BrakeDelayTrain(p, Route.flat(), v0=20.0)
+    assert [again.disturbance_at(0.2 * k) for k in range(49, -1, -1)] == values[::-1]
+    free = BrakeDelayTrain(replace(p, disturbance_amplitude=0.0), Route.flat(), v0=20.0)
+    for k in range(50):
+        for train in (plant, free):
+            train.advance(to_ticks(0.2 * k), to_ticks(0.2), {"brake_command": 0.0})
+    # d(gap)/dt = a_d + (Davis(v_p) - Davis(v_f)) / m with gap = v_f - v_p: the second term
+    # is at most slope |gap| <= slope A t (slope of Davis / m at the top speed, 20 m/s), so
+    # |gap - int a_d| <= slope A t^2 over the t = 10 s
+    gap = free.v - plant.v
+    integral = 0.2 * sum(values)
+    slope = (p.davis.b + 2.0 * p.davis.c * 20.0) / p.mass
+    bound = slope * 0.02 * 10.0**2
+    assert abs(integral) > 3 * bound  # the seed's disturbance is visible against the bound
+    assert abs(gap - integral) <= bound

@@ -251,7 +251,7 @@ def test_bad_parameters_are_rejected() -> None:
 def _closed_loop(t_end: float) -> tuple[FreightTrain, np.ndarray]:
     route = load_route("freight_20km")
     train = FreightTrain(P, route)
-    pid = FreightPid(FreightPidParams(), route.reference, route)
+    pid = FreightPid(FreightPidParams(mean_weight=0.0), route.reference, route)  # head fed back
     T, rows = to_ticks(0.2), []
     t = 0
     while t < to_ticks(t_end):
@@ -444,3 +444,28 @@ def test_braked_train_at_rest_on_a_grade_stays_at_rest_until_released() -> None:
     assert np.all(train.v == 0.0)
     run(train, lambda _: {"pipe_reduction": 0.0}, 760.0, 0.2)
     assert not train.held and train.v[0] > 0.1  # brakes released: downhill it goes
+
+
+def test_resistance_spread_draws_lognormal_factors_per_vehicle() -> None:
+    """The disturbance of the seed 002 entry: each vehicle's basic-resistance coefficients
+    times one lognormal factor (mean 1, log-sd = spread) from the seed; zero spread is the
+    printed coefficients exactly, a seed gives the same factors every time and another seed
+    others; the factors' log has the declared spread."""
+    from dataclasses import replace
+
+    from plants.freight import FreightParams, FreightTrain, resistance_factors
+    from plants.route import load_route
+
+    assert np.array_equal(resistance_factors(109, 0.0, 7), np.ones(109))
+    a, b = resistance_factors(109, 0.2, 7), resistance_factors(109, 0.2, 8)
+    assert np.array_equal(a, resistance_factors(109, 0.2, 7)) and not np.array_equal(a, b)
+    big = np.log(resistance_factors(200_000, 0.2, 1))
+    # sample mean / sd of 2e5 normals: standard errors 0.2 / sqrt(2e5) ~ 4.5e-4, ~3.2e-4
+    assert big.mean() == pytest.approx(-0.5 * 0.2**2, abs=5 * 4.5e-4)
+    assert big.std() == pytest.approx(0.2, abs=5 * 3.2e-4)
+    route = load_route("freight_20km")
+    nominal = FreightTrain(FreightParams(), route)
+    spread = FreightTrain(replace(FreightParams(), resistance_spread=0.2, disturbance_seed=7),
+                          route)
+    np.testing.assert_allclose(spread.res_a, nominal.res_a * a, rtol=1e-15)
+    np.testing.assert_allclose(spread.res_c, nominal.res_c * a, rtol=1e-15)

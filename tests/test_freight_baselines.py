@@ -120,3 +120,92 @@ def test_controller_state_restore_reproduces_the_rest(name: str) -> None:
     second = [step(k) for k in range(30, 80)]
     assert first == second
     assert any(dict(o)["pipe_reduction"] > 0 for o in first)  # the air brake took part
+
+
+def test_smc_boundary_layer_stops_the_chattering_inside_the_layer() -> None:
+    """With sat(sigma / phi) the law on the nominal plant is, inside the layer,
+    sigma(k+1) = (1 - q T - eps T / phi) sigma(k): a geometric decay with that exact ratio,
+    no sign switch (until it reaches rounding level), |sigma| <= phi from the entry on;
+    with sgn (phi = 0) sigma keeps switching sign in the band eps T."""
+    from dataclasses import replace
+
+    base = SlidingModeParams()
+    phi = base.eps / base.q  # the entry's layer width: in the layer eps/phi = q
+    T, a_res = base.sample_time, 0.01
+    ratio = 1.0 - base.q * T - base.eps * T / phi
+    assert 0.0 < ratio < 1.0
+    runs = {}
+    for width in (0.0, phi):
+        smc = FreightSlidingMode(replace(base, boundary_layer=width), _profile(), Route.flat())
+        v, sigmas = 10.0 - 2.0, []
+        for _ in range(400):
+            e = 10.0 - v
+            u = smc.law(e, 0.0, a_res)
+            smc.integral += T * e
+            sigmas.append(smc.sigma)
+            v += T * (u - a_res)
+        runs[width] = np.array(sigmas)
+    inside = runs[phi]
+    entry = int(np.argmax(np.abs(inside) <= phi))
+    assert entry > 0 and np.all(np.abs(inside[entry:]) <= phi)
+    tail = inside[entry:entry + 50]
+    # each step is a few roundings of numbers of order phi: relative 1e-12 absorbs them
+    np.testing.assert_allclose(tail[1:], ratio * tail[:-1], rtol=0, atol=1e-12 * phi)
+    assert np.all(np.sign(tail) == np.sign(tail[0]))  # (later it decays to rounding level)
+    assert np.count_nonzero(np.diff(np.sign(runs[0.0][100:]))) > 100
+
+
+def test_fuzzy_pid_feedforward_is_the_pids_term() -> None:
+    """reference_feedforward adds exactly the freight PID's a_ref(s + v t_p) to the fuzzy
+    PID's demand: same state, same sample, the demands differ by the PID's a_ref output."""
+    from dataclasses import replace
+
+    from controllers.pid.freight_pid import FreightPid, FreightPidParams
+    from plants.route import load_route
+
+    route = load_route("freight_20km")
+    pid = FreightPid(FreightPidParams(), route.reference, route)
+    plain = FreightFuzzyPid(FuzzyPidParams(), route.reference, route)
+    fed = FreightFuzzyPid(replace(FuzzyPidParams(), reference_feedforward=True),
+                          route.reference, route)
+    s = 1000.0  # on the traction ramp: a_ref > 0, the demand inside its bounds
+    v = route.reference.speed(s) + 0.1
+    a_pid = pid.compute(0.0, {"v": v, "s": s})[0]["a_ref"]
+    out_plain = plain.compute(0.0, {"v": v, "s": s})[0]
+    out_fed = fed.compute(0.0, {"v": v, "s": s})[0]
+    assert a_pid != 0.0 and out_fed["a_ref"] == a_pid
+    lo, hi = fed.blending.accel_limits(v)
+    assert lo < out_fed["accel_demand"] < hi
+    assert out_fed["accel_demand"] - out_plain["accel_demand"] == pytest.approx(a_pid,
+                                                                                rel=1e-12)
+
+
+@pytest.mark.parametrize("name", ["preview", "smc", "fpid", "pid"])
+def test_every_law_feeds_back_the_observed_blend(name: str) -> None:
+    """Every freight law carries the train-mean observer and feeds back
+    (1 - w) v_head + w v_mean (the same IEEE operations: exact); its demand then differs
+    from the same law's with w = 0, which feeds back the head speed exactly."""
+    from dataclasses import replace
+
+    from controllers.pid.freight_pid import FreightPid, FreightPidParams
+    from controllers.preview.preview import FreightPreview, PreviewParams
+    from plants.route import load_route
+
+    core_class, params = {"preview": (FreightPreview, PreviewParams()),
+                          "smc": (FreightSlidingMode, SlidingModeParams()),
+                          "fpid": (FreightFuzzyPid, FuzzyPidParams()),
+                          "pid": (FreightPid, FreightPidParams())}[name]
+    route = load_route("freight_20km")
+    w = 0.5
+    blended = core_class(replace(params, mean_weight=w), route.reference, route)
+    head = core_class(replace(params, mean_weight=0.0), route.reference, route)
+    s0, v0 = 5000.0, route.reference.speed(5000.0)
+    diff = 0.0
+    for k in range(20):
+        v, s = v0 + 0.02 * np.sin(k), s0 + v0 * 0.2 * k
+        out = blended.compute(0.2 * k, {"v": v, "s": s})[0]
+        assert blended.v_feedback == (1.0 - w) * v + w * blended.observer.speed
+        ref = head.compute(0.2 * k, {"v": v, "s": s})[0]
+        diff = max(diff, abs(out["accel_demand"] - ref["accel_demand"]))
+    assert diff > 0.0  # the observer changes the demand of every law
+    assert head.v_feedback == v  # w = 0: the head speed, exactly

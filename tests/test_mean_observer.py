@@ -1,4 +1,4 @@
-"""Train-mean speed observer of the freight preview controller (seed 002, issue 16)."""
+"""Train-mean speed observer of the freight speed controllers (seed 002)."""
 
 from __future__ import annotations
 
@@ -22,7 +22,7 @@ def route():
 
 
 def _observer_run(route, params: FreightParams | None = None) -> tuple[np.ndarray, ...]:
-    core = FreightPreview(PreviewParams(), route.reference, route)  # w = 0.7, t_c = 45 s
+    core = FreightPreview(PreviewParams(mean_weight=0.7), route.reference, route)  # t_c = 45 s
     run = closed_loop(core, route, 1400.0, params=params, extra=("v_mean_estimate",))
     moving = run["s"] < 19950.0
     err = KMH * (run["v_mean_estimate"] - run["v_mean"])[moving]
@@ -31,10 +31,10 @@ def _observer_run(route, params: FreightParams | None = None) -> tuple[np.ndarra
 
 def test_observer_tracks_the_plants_mean_speed_on_the_closed_loop(route) -> None:
     """Whole freight_20km run (plant core at 0.01 s, 109 vehicles, stretch modes, the planned
-    air-brake stop) with the default blend (w = 0.7, t_c = 45 s): the observer follows the
-    plant's (m (1 + gamma)-weighted) mean speed within 0.2 km/h, 0.07 rms (measured 0.142 and
-    0.050), while the head differs from the mean by more than 0.3 km/h (the stretch modes and
-    the start's stretch rate, which the observer must not follow)."""
+    air-brake stop) with the blend w = 0.7, t_c = 45 s: the observer follows the plant's
+    (m (1 + gamma)-weighted) mean speed within 0.2 km/h, 0.07 rms, while the head differs
+    from the mean by more than 0.3 km/h (the stretch modes and the start's stretch rate,
+    which the observer must not follow)."""
     err, head, stop = _observer_run(route)
     assert np.abs(err).max() < 0.2
     assert np.sqrt(np.mean(err**2)) < 0.07
@@ -45,8 +45,7 @@ def test_observer_tracks_the_plants_mean_speed_on_the_closed_loop(route) -> None
 def test_observer_does_not_drift_with_a_resistance_error(route) -> None:
     """The plant's wagon resistance 30 % above the observer's nominal one (a bias of about
     5e-3 m/s^2 at cruise): the bias state takes it up, the estimate stays within 0.35 km/h,
-    0.1 rms (measured 0.244 and 0.075; a correction on the speed alone with t_c = 120 s left
-    1.6 km/h rms, t_c times the bias)."""
+    0.1 rms (a correction on the speed alone would leave t_c times the bias)."""
     base = FreightParams()
     plant = replace(base, wagon_resistance=tuple(1.3 * c for c in base.wagon_resistance))
     err, _, _ = _observer_run(route, plant)
@@ -59,7 +58,8 @@ class _Today(FreightPreview):
 
     def compute(self, t: float, inputs: dict[str, float]) -> tuple[dict[str, float], int]:
         self.v_feedback = float(inputs["v"])
-        return FreightTracker.compute(self, t, inputs)
+        FreightTracker._track(self, t, self.v_feedback, float(inputs["s"]))
+        return self.outputs(), 1
 
 
 def test_mean_weight_zero_is_todays_head_feedback_exactly(route) -> None:

@@ -92,6 +92,7 @@ def test_reproduce_writes_ours_beside_the_paper(built_fmus, tmp_path: Path) -> N
      "y_reduce 'max'"),
     ('colour = "red"\n', "unknown key(s) ['colour']"),
     ('table = "../t"\n', "must be a file name"),
+    ('set = 3\n', "set = 3 must be a table of overrides"),
     ('[[rankings]]\nmetric = "nope"\nruns = ["PID"]\n', "metric 'nope' is not in [[metrics]]"),
     ('[[rankings]]\nmetric = "stop_error_m"\nruns = ["PID", "PID"]\n', "must be distinct"),
     ('[[rankings]]\nmetric = "stop_error_m"\nruns = ["PID", "PID kp=30"]\npaper = ["PID"]\n',
@@ -104,7 +105,7 @@ def test_reproduce_writes_ours_beside_the_paper(built_fmus, tmp_path: Path) -> N
 ])
 def test_bad_entries_name_the_file_and_key(tmp_path: Path, patch: str, message: str) -> None:
     path = tmp_path / "bad.toml"
-    top = patch.startswith(("colour", "table"))  # top-level keys go before the first table
+    top = patch.startswith(("colour", "table", "set"))  # top-level keys go before the first table
     path.write_text(patch + "\n" + ENTRY if top else ENTRY + patch)
     with pytest.raises(ReproduceError, match=re.escape(message)) as err:
         load_entry(str(path))
@@ -285,6 +286,22 @@ def test_reproduce_out_that_cannot_be_written_is_a_clear_error(tmp_path: Path,
     assert isinstance(result.exception, SystemExit)
     assert f"cannot write {tmp_path / 'ro' / 'table.md'}: Permission denied" in " ".join(
         result.output.split())
+
+
+def test_entry_set_overrides_every_run_and_sweep_and_a_runs_own_set_wins(
+        tmp_path: Path) -> None:
+    """The entry-level set (the entry's disturbance) reaches every run and every sweep's grid;
+    a key a run sets itself keeps the run's value."""
+    path = tmp_path / "entry.toml"
+    path.write_text('set = { "plant.disturbance_amplitude" = 0.02, "controller.kp" = 50.0 }\n'
+                    + ENTRY + '[[sweeps]]\nname = "n"\nscenarios = ["seed000_stop_rmpc"]\n'
+                    'grid = { "controller.N" = "3..4" }\n')
+    entry = load_entry(str(path))
+    plain, kp30 = entry.runs
+    assert plain["set"] == {"plant.disturbance_amplitude": 0.02, "controller.kp": 50.0}
+    assert kp30["set"] == {"plant.disturbance_amplitude": 0.02, "controller.kp": 30.0}
+    assert entry.sweeps[0]["grid"] == {"plant.disturbance_amplitude": 0.02,
+                                       "controller.kp": 50.0, "controller.N": "3..4"}
 
 
 def test_reproduce_prints_80_columns_and_draws_in_the_chosen_format(built_fmus, tmp_path,

@@ -52,3 +52,22 @@ def test_plain_pid_tuning_is_not_a_knife_edge(kd):
     """Neighbouring derivative gains still stop inside the window."""
     error, v, _ = run(replace(StopPidParams(), **{**PLAIN, "kd": kd}))
     assert abs(error) <= 0.5 and v == 0.0
+
+
+def test_resistance_feedforward_is_the_mpcs_known_resistance():
+    """resistance_feedforward: u_ff = (a0 - a_r(v, s)) / c with a_r the ideal MPC's known
+    resistance (Davis / mass + the route's grade) at the same speed and position: the first
+    command of the two PIDs differs by exactly -a_r / c."""
+    from controllers.mpc.stop_mpc import IdealStopMpc, StopMpcParams
+
+    base = replace(StopPidParams(), **PLAIN)
+    fed = StopPid(replace(base, resistance_feedforward=True))
+    plain = StopPid(base)
+    mpc = IdealStopMpc(StopMpcParams())
+    s = 200.0  # on the 28 permille grade, on the curve: no error, the feedforward alone
+    v = (2.0 * base.ref_decel * (base.stop_point - s)) ** 0.5
+    u_fed = fed.compute(0.0, {"v": v, "s": s})[0]["brake_command"]
+    u_plain = plain.compute(0.0, {"v": v, "s": s})[0]["brake_command"]
+    a_r = mpc.resistance(v, s)
+    assert a_r > 0.2  # mostly the grade
+    assert u_fed - u_plain == pytest.approx(-a_r / base.brake_gain, rel=1e-12)

@@ -52,6 +52,8 @@ from typing import Any
 
 import numpy as np
 
+from controllers.common.mean_observer import MeanSpeedObserver, fed_back_speed
+from controllers.preview.design import DelayedModel, lag_delay_model
 from cosim.fmu.declare import Declared, Var, build, param
 from cosim.fmu.state import StatefulCore
 from plants.freight import (
@@ -488,6 +490,7 @@ def tracker_outputs(demand_description: str) -> tuple[Var, ...]:
         Var.output("a_ref", "m/s2", "reference acceleration (with preview)"),
         Var.output("speed_error", "m/s", "v - v_ref"),
         Var.output("air_brake_estimate", "Pa", "modelled mean cylinder pressure"),
+        Var.output("v_mean_estimate", "m/s", "observed train-mean (centre-of-mass) speed"),
     )
 
 
@@ -497,10 +500,14 @@ class FreightTracker(StatefulCore, Declared):
     included), the shared blending turning ``M (1 + gamma) a_dem`` into the plant commands.
 
     Every controller measures the locomotive (head) speed and position and tracks the
-    reference at the head position; ``params_class`` needs ``blending`` and ``sample_time``.
+    reference at the head position; ``params_class`` needs ``blending``, ``sample_time``,
+    ``mean_weight`` and ``observer_correction_time``. Every family feeds back the same speed,
+    :attr:`v_feedback` = ``(1 - w) v_head + w v_c``, ``v_c`` of the train-mean speed observer
+    (:class:`controllers.common.mean_observer.MeanSpeedObserver`) on :meth:`design_model`.
     """
 
-    state_fields = ("blending", "v_ref", "a_ref", "demand", "speed_error")
+    state_fields = ("blending", "v_ref", "a_ref", "demand", "speed_error", "observer",
+                    "v_feedback")
     setup_vars = (route_parameter("freight_20km", "its reference profile is tracked"),)
     input_vars = (
         Var.input("v", "m/s", "measured head speed"),
@@ -516,6 +523,8 @@ class FreightTracker(StatefulCore, Declared):
 
     def __init__(self, params: Any, profile: ReferenceProfile, route: Route) -> None:
         params.check()
+        if not 0.0 <= params.mean_weight <= 1.0:
+            raise ValueError(f"mean_weight = {params.mean_weight} must be in [0, 1]")
         self.p = params
         self.profile = profile
         self.route = route
@@ -525,10 +534,20 @@ class FreightTracker(StatefulCore, Declared):
         self.a_ref = 0.0
         self.demand = 0.0  # m/s^2
         self.speed_error = 0.0  # m/s, v - v_ref
+        self.observer = MeanSpeedObserver(self.design_model(), self.blending, self.sample_time,
+                                          params.observer_correction_time)
+        self.v_feedback = 0.0  # m/s, the fed-back speed (1 - w) v_head + w v_mean
 
     @property
     def sample_time(self) -> float:
         return float(self.p.sample_time)
+
+    def design_model(self) -> DelayedModel:
+        """Eq. (15)/(18) on the sample time with the nominal train's traction dead time and
+        lag (the observer's model; the preview has its own design parameters)."""
+        train = self.p.blending.train
+        return lag_delay_model(self.sample_time, train.traction_delay,
+                               train.traction_time_constant)
 
     #: a family that counts the air brake as a disturbance sets its locomotive's part of
     #: the demand (m/s^2) here in :meth:`accel_demand`; the blending then passes it on as it
@@ -541,7 +560,17 @@ class FreightTracker(StatefulCore, Declared):
         raise NotImplementedError
 
     def compute(self, t: float, inputs: dict[str, float]) -> tuple[dict[str, float], int]:
+        """Observer update, the family's demand on the fed-back speed, blending; then the
+        sample's locomotive force and modelled air brake go to the observer."""
         v, s = float(inputs["v"]), float(inputs["s"])
+        self.v_feedback = fed_back_speed(v, self.observer.update(v, s), self.p.mean_weight)
+        before = self.blending.model.pressure.copy()
+        self._track(t, v, s)
+        self.observer.record(self.blending.force, 0.5 * (before + self.blending.model.pressure),
+                             s)
+        return self.outputs(), 1
+
+    def _track(self, t: float, v: float, s: float) -> None:
         speed = max(v, 0.0)
         self.v_ref = self.profile.speed(s)
         self.speed_error = v - self.v_ref
@@ -552,14 +581,14 @@ class FreightTracker(StatefulCore, Declared):
         self.blending.blend(t, self.sample_time, v, s,
                             self.m_eff * (self.demand if loco is None else loco), self.v_ref,
                             self.a_ref, a_res, locomotive=loco is not None)
-        return self.outputs(), 1
 
     def outputs(self) -> dict[str, float]:
         b = self.blending
         return {"force_demand": b.force, "pipe_reduction": b.reduction,
                 "accel_demand": self.demand, "v_ref": self.v_ref, "a_ref": self.a_ref,
                 "speed_error": self.speed_error,
-                "air_brake_estimate": b.pressure_estimate}
+                "air_brake_estimate": b.pressure_estimate,
+                "v_mean_estimate": self.observer.speed}
 
 
 def interp_at(x: float, xp: list[float], fp: list[float]) -> float:

@@ -12,10 +12,14 @@ surfaces are precomputed at initialisation on the node grid (``fuzzy_nodes`` per
 interpolated bilinearly at each event (microseconds instead of an inference)::
 
     Kp = kp + kp_scale dKp(E, EC),   Ki = max(ki + ki_scale dKi(E, EC), 0)
-    u  = a_res + Kp e + Ki int(e) dt          (no reference-acceleration feedforward)
+    u  = a_ff + a_res + Kp e + Ki int(e) dt
 
-The classic fuzzy PID is a feedback controller: the demand needs an error, so it lags the
-reference in traction and braking (paper: 0.6-1.2 km/h).
+``e = v_ref - v_f`` with ``v_f`` the fed-back speed of
+:class:`controllers.common.freight_blending.FreightTracker`. The classic fuzzy PID is a
+feedback controller (``a_ff = 0``, ``reference_feedforward`` false): the demand needs an error,
+so it lags the reference in traction and braking (paper: 0.6-1.2 km/h). With
+``reference_feedforward`` ``a_ff`` is the freight PID's term,
+:func:`controllers.pid.freight_pid.reference_feedforward`.
 """
 
 from __future__ import annotations
@@ -26,6 +30,8 @@ import numpy as np
 import skfuzzy as fuzz
 
 from controllers.common.freight_blending import BlendingParams, FreightTracker, tracker_outputs
+from controllers.common.mean_observer import correction_time_param, mean_weight_param
+from controllers.pid.freight_pid import preview_time_param, reference_feedforward
 from cosim.fmu.declare import group, param, sample_time
 from plants.route import ReferenceProfile, Route
 
@@ -85,6 +91,12 @@ class FuzzyPidParams:
     ec_scale: float = param(0.02, "m/s2", "error rate of one unit of EC", min=1e-9)
     fuzzy_nodes: int = param(13, "1", "nodes per axis of the precomputed rule surface",
                              min=2, max=1001)
+    reference_feedforward: bool = param(False, description="add the freight PID's "
+                                        "reference-acceleration feedforward a_ref(s + v t_p) "
+                                        "(false: the paper's feedback-only fuzzy PID)")
+    preview_time: float = preview_time_param()
+    mean_weight: float = mean_weight_param("FPID")
+    observer_correction_time: float = correction_time_param()
 
     def check(self) -> None:
         self.blending.check()
@@ -132,15 +144,18 @@ class FreightFuzzyPid(FreightTracker):
                      hi: float) -> float:
         p = self.p
         T = p.sample_time
-        self.a_ref = self.profile.accel(s)
-        e = self.v_ref - v
+        if p.reference_feedforward:
+            self.a_ref = a_ff = reference_feedforward(self.profile, v, s, p.preview_time)
+        else:
+            self.a_ref, a_ff = self.profile.accel(s), 0.0
+        e = self.v_ref - self.v_feedback
         ec = 0.0 if self.prev_error is None else (e - self.prev_error) / T
         self.prev_error = e
         E, EC = e / p.e_scale, ec / p.ec_scale
         self.kp_now = max(p.kp + p.kp_scale * self.kp_surface(E, EC), 0.0)
         self.ki_now = max(p.ki + p.ki_scale * self.ki_surface(E, EC), 0.0)
         integral = self.integral + e * T
-        raw = a_res + self.kp_now * e + self.ki_now * integral
+        raw = a_ff + a_res + self.kp_now * e + self.ki_now * integral
         u = min(max(raw, lo), hi)
         if not ((raw > hi and e > 0) or (raw < lo and e < 0)):  # conditional integration
             self.integral = integral

@@ -79,9 +79,16 @@ from controllers.common.design_model import (
     dare,
 )
 from controllers.common.qp import QP_SOLVERS, HorizonQP, QPResult, support_of_sum
-from controllers.common.stopping import MEASURED_SPEED_POSITION, u_max_param, u_min_param
+from controllers.common.stopping import (
+    MEASURED_SPEED_POSITION,
+    davis_group,
+    mass_param,
+    route_param,
+    u_max_param,
+    u_min_param,
+)
 from controllers.mpc.terminal import robust_invariant_set
-from cosim.fmu.declare import Checked, Declared, Var, build, group, param, sample_time
+from cosim.fmu.declare import Checked, Declared, Var, build, param, sample_time
 from cosim.fmu.diagnostics import SolveTimes
 from cosim.fmu.profiles import StoppingCurve, ref_decel_param, stop_point_param
 from cosim.fmu.state import StatefulCore
@@ -121,9 +128,9 @@ class StopMpcParams(Checked):
                                    min=1e-9)
     position_error_max: float = param(20.0, "m", "bound of |s - s_s| in the constraint set X",
                                       min=1e-9)
-    mass: float = param(490e3, "kg", "train mass (resistance model)", min=1.0)
-    davis: Davis = group(Davis.from_kn_kmh(5.4, 0.0098, 0.00163), "davis_")
-    route: str = param("seed000_stop", description="route (grade profile): bundled name or path")
+    mass: float = mass_param()
+    davis: Davis = davis_group()
+    route: str = route_param()
     davis_uncertainty: float = param(0.2, "1", "relative Davis uncertainty in the disturbance "
                                      "bound W", min=0.0)
     nominal_resistance: bool = param(True, description="tube controllers: the nominal model "

@@ -1,7 +1,9 @@
 """Speed-tracking PID for the heavy freight train, traction / ED / air-brake blending (seed 002).
 
-The loop is :class:`controllers.pid.speed_pid.SpeedPid` (acceleration units) on the head speed and
-position, with three feedforwards:
+The loop is :class:`controllers.pid.speed_pid.SpeedPid` (acceleration units) on the fed-back
+speed (the head's, blended with the observed train mean by ``mean_weight``: see
+:class:`controllers.common.freight_blending.FreightTracker`) and the head position, with three
+feedforwards:
 
 * reference acceleration ``a_ref`` taken ``preview_time`` ahead (``s + v t_p``), so that the
   traction dead time and lag (eq. 15: 0.5 s + 1.5 s) do not make the train lag the profile —
@@ -20,9 +22,15 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from controllers.common.freight_blending import BlendingParams, FreightTracker, tracker_outputs
+from controllers.common.mean_observer import correction_time_param, mean_weight_param
 from controllers.pid.speed_pid import SpeedPid, SpeedPidParams
 from cosim.fmu.declare import group, param
 from plants.route import ReferenceProfile, Route
+
+
+def preview_time_param() -> float:
+    """The look-ahead ``t_p`` of the reference-acceleration feedforward (PID, fuzzy PID)."""
+    return param(2.0, "s", "look-ahead of the reference acceleration feedforward", min=0.0)
 
 
 def default_pid() -> SpeedPidParams:
@@ -35,10 +43,11 @@ def default_pid() -> SpeedPidParams:
 class FreightPidParams:
     pid: SpeedPidParams = group(default_pid(), "")
     blending: BlendingParams = group(BlendingParams(), "")
-    preview_time: float = param(2.0, "s", "look-ahead of the reference acceleration "
-                                "feedforward", min=0.0)
+    preview_time: float = preview_time_param()
     resistance_feedforward: bool = param(True, description="add the modelled running "
                                          "resistance to the demand")
+    mean_weight: float = mean_weight_param("PID")
+    observer_correction_time: float = correction_time_param()
 
     def check(self) -> None:
         self.pid.check()
@@ -65,6 +74,13 @@ class FreightPid(FreightTracker):
     def accel_demand(self, t: float, v: float, s: float, a_res: float, lo: float,
                      hi: float) -> float:
         p = self.p
-        self.a_ref = a_ref = self.profile.accel(s + max(v, 0.0) * p.preview_time)
-        return self.pid.update(v, self.v_ref, a_ref,
+        self.a_ref = a_ref = reference_feedforward(self.profile, v, s, p.preview_time)
+        return self.pid.update(self.v_feedback, self.v_ref, a_ref,
                                a_res if p.resistance_feedforward else 0.0, a_lo=lo, a_hi=hi)
+
+
+def reference_feedforward(profile: ReferenceProfile, v: float, s: float,
+                          preview_time: float) -> float:
+    """The reference acceleration ``preview_time`` ahead of the measured head,
+    ``a_ref(s + v t_p)`` (m/s^2): the PID's feedforward, also the fuzzy PID's option."""
+    return profile.accel(s + max(v, 0.0) * preview_time)

@@ -4,6 +4,9 @@ Error ``e = v - v_ref(s)`` (m/s, positive when too fast); brake command (%)::
 
     u = u_ff + kp e + ki int(e) + kd de/dt,   u_ff = a0 / c   (reference deceleration)
 
+or, with ``resistance_feedforward`` (the information the MPCs have), ``u_ff = (a0 - a_r) / c``
+with the known resistance ``a_r`` (Davis force / mass + the route's grade).
+
 clamped to ``[u_min, u_max]``. Anti-windup by conditional integration: the integral is frozen
 while the command is saturated in the direction the error would push it. The derivative acts on
 the error, by backward difference over the sample time. The feedforward stops at the stop point.
@@ -21,10 +24,19 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from controllers.common.stopping import MEASURED_SPEED_POSITION, u_max_param, u_min_param
+from controllers.common.stopping import (
+    MEASURED_SPEED_POSITION,
+    davis_group,
+    mass_param,
+    route_param,
+    u_max_param,
+    u_min_param,
+)
 from cosim.fmu.declare import Checked, Declared, Var, build, param, sample_time
 from cosim.fmu.profiles import StoppingCurve, ref_decel_param, stop_point_param
 from cosim.fmu.state import StatefulCore
+from plants.resistance import Davis
+from plants.route import Route, load_route, routes_dir_in
 
 
 @dataclass(frozen=True)
@@ -45,6 +57,13 @@ class StopPidParams(Checked):
     hold_at_stop_point: bool = param(True, description="full brake (u_max) once at or past "
                                      "the stop point, or once stopped after the curve ended "
                                      "(not in the paper; false: the plain PID)")
+    resistance_feedforward: bool = param(False, description="feed the known resistance "
+                                         "forward as the MPCs do, u_ff = (a0 - a_r(v, s)) / c "
+                                         "with a_r the Davis force / mass + the route's grade "
+                                         "(false: a0 / c, the paper's PID)")
+    mass: float = mass_param()
+    davis: Davis = davis_group()
+    route: str = route_param()
 
     def check_relations(self) -> None:
         if not self.u_min < self.u_max:
@@ -65,11 +84,18 @@ class StopPid(StatefulCore, Declared):
 
     @classmethod
     def from_parameters(cls, values: dict[str, Any], data_dir: Path, t0: float = 0.0) -> StopPid:
-        return cls(build(StopPidParams, values))
+        params = build(StopPidParams, values)
+        route = (load_route(params.route, routes_dir_in(data_dir))
+                 if params.resistance_feedforward else None)
+        return cls(params, route)
 
-    def __init__(self, params: StopPidParams) -> None:
+    def __init__(self, params: StopPidParams, route: Route | None = None) -> None:
+        """``route``: the grades of the resistance feedforward (loaded by name if needed)."""
         params.check()
         self.p = params
+        if params.resistance_feedforward and route is None:
+            route = load_route(params.route)
+        self.route = route
         self.curve = StoppingCurve(params.ref_decel, params.stop_point)
         self.integral = 0.0
         self.prev_error: float | None = None
@@ -80,7 +106,10 @@ class StopPid(StatefulCore, Declared):
         v, s = inputs["v"], inputs["s"]
         v_ref = self.curve.speed(s)
         error = v - v_ref
-        u_ff = p.ref_decel / p.brake_gain if p.feedforward and s < p.stop_point else 0.0
+        u_ff = 0.0
+        if p.feedforward and s < p.stop_point:
+            a_r = self.resistance(v, s) if p.resistance_feedforward else 0.0
+            u_ff = (p.ref_decel - a_r) / p.brake_gain
         if p.hold_at_stop_point and (s >= p.stop_point or (v_ref == 0.0 and v <= 0.0)):
             u_ff = p.u_max  # at or past the stop point: hold the train
         derivative = 0.0 if self.prev_error is None else (error - self.prev_error) / p.sample_time
@@ -94,6 +123,12 @@ class StopPid(StatefulCore, Declared):
             self.integral = integral
         self.command = u
         return {"brake_command": u, "v_ref": v_ref, "speed_error": error}, 1
+
+    def resistance(self, v: float, s: float) -> float:
+        """The known resistance a_r (m/s^2): Davis force / mass + the route's grade, as the
+        MPCs feed forward (:meth:`controllers.mpc.stop_mpc._StopMpcBase.resistance`)."""
+        assert self.route is not None
+        return self.p.davis.force(max(v, 0.0)) / self.p.mass + self.route.grade_accel(s)
 
     def outputs(self) -> dict[str, float]:
         return {"brake_command": self.command, "v_ref": 0.0, "speed_error": 0.0}

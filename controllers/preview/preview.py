@@ -4,7 +4,7 @@ Servo feedback on ``x0 = [e, Delta z]`` plus reference preview over the next ``M
 disturbance preview of the resistance ahead over ``M_d`` samples (gains:
 :mod:`controllers.preview.design`). The controller measures the locomotive (head) speed ``v`` and
 position ``s``; the servo's speed is ``v_f = (1 - w) v + w v_c`` (``mean_weight`` w, our
-addition), ``v_c`` the train-mean speed of :class:`controllers.preview.mean_observer.
+addition), ``v_c`` the train-mean speed of :class:`controllers.common.mean_observer.
 MeanSpeedObserver` (the force balance of the whole train from the locomotive's demand and the
 modelled air brake and resistance, slowly corrected toward ``v``), and the error
 ``e = v_ref(s) - v_f`` at the head position (w = 0: the head speed alone, the paper's one mass).
@@ -37,9 +37,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from controllers.common.freight_blending import BlendingParams, FreightTracker, tracker_outputs
-from controllers.preview.design import lag_delay_model, preview_gains
-from controllers.preview.mean_observer import MeanSpeedObserver
-from cosim.fmu.declare import Var, group, param, sample_time
+from controllers.common.mean_observer import correction_time_param, mean_weight_param
+from controllers.preview.design import DelayedModel, lag_delay_model, preview_gains
+from cosim.fmu.declare import group, param, sample_time
 from plants.route import ReferenceProfile, Route
 
 
@@ -64,13 +64,8 @@ class PreviewParams:
                                     "its planned stop application included) and u the "
                                     "locomotive's part; off: u is the whole train's demand, the "
                                     "blending trims the air brake with it")
-    mean_weight: float = param(0.7, "1", "weight w of the observed train-mean speed in the "
-                               "fed-back speed (1 - w) v_head + w v_mean (0: the head alone)",
-                               min=0.0, max=1.0)
-    observer_correction_time: float = param(45.0, "s", "time constant t_c of the mean-speed "
-                                            "observer's correction toward the head speed "
-                                            "(speed and acceleration bias; > 2 sample times)",
-                                            min=1.0)
+    mean_weight: float = mean_weight_param("Preview")
+    observer_correction_time: float = correction_time_param()
 
     def check(self) -> None:
         self.blending.check()
@@ -86,17 +81,14 @@ class PreviewParams:
 class FreightPreview(FreightTracker):
     """Optimal preview servo (eqs. 33-35) + shared blending."""
 
-    state_fields = (*FreightTracker.state_fields, "z", "z_prev", "u_prev", "d_prev",
-                    "observer", "v_feedback")
+    state_fields = (*FreightTracker.state_fields, "z", "z_prev", "u_prev", "d_prev")
     params_class = PreviewParams
-    output_vars = (*tracker_outputs("preview control input u(k) = u(k-1) + Delta u(k)"),
-                   Var.output("v_mean_estimate", "m/s", "observed train-mean (centre-of-mass) "
-                              "speed"))
+    output_vars = tracker_outputs("preview control input u(k) = u(k-1) + Delta u(k)")
 
     def __init__(self, params: PreviewParams, profile: ReferenceProfile, route: Route) -> None:
         super().__init__(params, profile, route)
         p = params
-        self.model = lag_delay_model(p.sample_time, p.traction_delay, p.traction_time_constant)
+        self.model = self.design_model()
         self.gains = preview_gains(self.model, p.q_e, p.q_dz, p.h, p.preview_steps,
                                    p.disturbance_steps)
         times = profile.times()
@@ -108,25 +100,11 @@ class FreightPreview(FreightTracker):
         self.z_prev: np.ndarray | None = None
         self.u_prev = 0.0  # m/s^2, u(k-1)
         self.d_prev: float | None = None  # m/s^2, d(k-1)
-        self.observer = MeanSpeedObserver(self.model, self.blending, p.sample_time,
-                                          p.observer_correction_time)
-        self.v_feedback = 0.0  # m/s, the fed-back speed (1 - w) v_head + w v_mean
 
-    def compute(self, t: float, inputs: dict[str, float]) -> tuple[dict[str, float], int]:
-        """Observer update, the servo on the fed-back speed (:meth:`accel_demand`), blending;
-        then the sample's locomotive force and modelled air brake go to the observer."""
-        v, s = float(inputs["v"]), float(inputs["s"])
-        v_mean = self.observer.update(v, s)
-        w = self.p.mean_weight
-        self.v_feedback = v if w == 0.0 else (1.0 - w) * v + w * v_mean
-        before = self.blending.model.pressure.copy()
-        out, n = super().compute(t, inputs)
-        self.observer.record(self.blending.force, 0.5 * (before + self.blending.model.pressure),
-                             s)
-        return out, n
-
-    def outputs(self) -> dict[str, float]:
-        return {**super().outputs(), "v_mean_estimate": self.observer.speed}
+    def design_model(self) -> DelayedModel:
+        """Eq. (15)/(18) with the preview's design dead time and lag (the observer's too)."""
+        p = self.p
+        return lag_delay_model(p.sample_time, p.traction_delay, p.traction_time_constant)
 
     def ahead(self, s: float) -> tuple[np.ndarray, np.ndarray]:
         """Reference speeds ``R(k+j)`` and disturbances ``d(k+j)``, ``j = 0..max(M_R, M_d)``,

@@ -2,14 +2,19 @@
 
 Designed on the nominal first-order model ``v(k+1) = v(k) + T (u(k) - a_res)`` (no traction lag:
 the baseline ignores it, which is why it chatters on the real chain). Sliding variable on the
-head speed error ``e = v_ref - v`` with an integral term, ``sigma = e + lambda I``,
+speed error ``e = v_ref - v_f`` (``v_f`` the fed-back speed of
+:class:`controllers.common.freight_blending.FreightTracker`) with an integral term,
+``sigma = e + lambda I``,
 ``I(k+1) = I(k) + T e(k)``, and Gao's discrete exponential reaching law
 ``sigma(k+1) = (1 - q T) sigma(k) - eps T sgn(sigma(k))`` give::
 
     u = a_ref + a_res + lambda e + q sigma + eps sgn(sigma)
 
-``boundary_layer`` > 0 replaces ``sgn`` by ``sat(sigma / phi)`` (less chattering). The demand
-goes to the shared blending.
+``boundary_layer`` phi > 0 replaces ``sgn`` by ``sat(sigma / phi)``: inside the layer the law is
+linear, ``sigma(k+1) = (1 - q T - eps T / phi) sigma(k)``, so on the design model sigma enters
+the layer and decays in it without switching sign when ``(q + eps / phi) T < 1``; with ``sgn``
+it switches sign about every sample, in a band of about ``eps T``. The demand goes to the
+shared blending.
 """
 
 from __future__ import annotations
@@ -18,6 +23,7 @@ import math
 from dataclasses import dataclass
 
 from controllers.common.freight_blending import BlendingParams, FreightTracker, tracker_outputs
+from controllers.common.mean_observer import correction_time_param, mean_weight_param
 from cosim.fmu.declare import group, param, sample_time
 from plants.route import ReferenceProfile, Route
 
@@ -30,7 +36,10 @@ class SlidingModeParams:
                        min=0.0, name="lambda")
     q: float = param(0.3, "1/s", "exponential reaching rate q", min=0.0)
     eps: float = param(0.03, "m/s2", "switching gain eps of the reaching law", min=0.0)
-    boundary_layer: float = param(0.0, "m/s", "phi of sat(sigma / phi) (0: sgn)", min=0.0)
+    boundary_layer: float = param(0.0, "m/s", "phi of sat(sigma / phi) (0: sgn, the paper's)",
+                                  min=0.0)
+    mean_weight: float = mean_weight_param("SMC")
+    observer_correction_time: float = correction_time_param()
 
     def check(self) -> None:
         self.blending.check()
@@ -70,7 +79,7 @@ class FreightSlidingMode(FreightTracker):
     def accel_demand(self, t: float, v: float, s: float, a_res: float, lo: float,
                      hi: float) -> float:
         self.a_ref = self.profile.accel(s)
-        e = self.v_ref - v
+        e = self.v_ref - self.v_feedback
         u = self.law(e, self.a_ref, a_res)
         self.integral += self.sample_time * e
         return min(max(u, lo), hi)

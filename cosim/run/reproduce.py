@@ -6,6 +6,8 @@ live there, not in code)::
     title = "Author et al. (year): ..."
     notes = "why our figures differ from the paper's"     # optional, markdown
     table = "table2"               # optional: the table's file name (default "table")
+    set = { "plant.disturbance_amplitude" = 0.02 }   # optional: overrides of every run and
+                                   # sweep (the entry's disturbance); a run's own set wins
     [[runs]]                       # one table row per run
     name = "RMPC N=5"
     scenario = "stop_rmpc"
@@ -145,8 +147,8 @@ except ModuleNotFoundError:  # Python < 3.11
 REPRODUCE_DIR = SCENARIO_DIR / "reproduce"
 
 # "ensemble" and "claims": the claims schema (docs of the claims framework), read there
-_ENTRY_KEYS = {"title", "notes", "table", "runs", "metrics", "paper", "derived", "rankings",
-               "sweeps", "figures", "ensemble", "claims", "variants"}
+_ENTRY_KEYS = {"title", "notes", "table", "set", "runs", "metrics", "paper", "derived",
+               "rankings", "sweeps", "figures", "ensemble", "claims", "variants"}
 _RANKING_KEYS = {"name", "metric", "runs", "paper"}
 _DERIVED_KEYS = {"name", "kind", "metric", "run", "baseline", "value", "range", "tolerance",
                  "source"}
@@ -217,9 +219,14 @@ def load_entry(name: str | Path) -> Entry:
     if not (isinstance(table, str) and re.fullmatch(r"[A-Za-z0-9_-]+", table)):
         raise ReproduceError(f"{path}: table = {table!r} must be a file name without folder or "
                              "suffix (letters, digits, '_', '-')")
+    common = data.get("set", {})
+    if not isinstance(common, dict):
+        raise ReproduceError(f"{path}: set = {common!r} must be a table of overrides")
     runs = data["runs"]
     for i, run in enumerate(runs):
         _check_keys(f"{path}: [[runs]] #{i + 1}", run, _RUN_KEYS, ("name", "scenario"))
+        if common:
+            run["set"] = {**common, **run.get("set", {})}
         rep = run.get("repeat", 1)
         if isinstance(rep, bool) or not isinstance(rep, int) or rep < 1:
             raise ReproduceError(f"{path}: [[runs]] #{i + 1}: repeat = {rep!r} must be an "
@@ -271,6 +278,7 @@ def load_entry(name: str | Path) -> Entry:
     for i, sweep in enumerate(data.get("sweeps", [])):
         _check_keys(f"{path}: [[sweeps]] #{i + 1}", sweep, _SWEEP_KEYS,
                     ("name", "scenarios", "grid"))
+        sweep["grid"] = {**common, **sweep["grid"]}
     for i, fig in enumerate(data.get("figures", [])):
         where = f"{path}: [[figures]] #{i + 1}"
         if fig.get("kind", "overlay") not in FIGURE_KINDS:

@@ -310,6 +310,12 @@ static int ensure_core(inst* m) {
              r[ATO_VR_brake_delay]);
         return 0;
     }
+    if (r[ATO_VR_disturbance_amplitude] != 0.0) {
+        logm(m, fmi2Error, "logStatusError", "bad parameter: disturbance_amplitude = %.17g: "
+             "the native build has no disturbance (0 only; use the Python FMU)",
+             r[ATO_VR_disturbance_amplitude]);
+        return 0;
+    }
     if (r[ATO_VR_v0] < 0) {
         logm(m, fmi2Error, "logStatusError", "bad parameter: v0 = %.17g must be >= 0",
              r[ATO_VR_v0]);
@@ -582,15 +588,31 @@ static fmi2Status no_vars(inst* m, const char* call, size_t n) {
     logm(m, fmi2Error, "logStatusError", "%s: this FMU has no such variables", call);
     return fmi2Error;
 }
-static fmi2Status bd_get_integer(fmi2Component c, const fmi2ValueReference vr[], size_t n,
-                                 fmi2Integer v[]) {
-    (void)vr; (void)v;
-    return no_vars(c, "fmi2GetInteger", n);
+/* Integer variables (parameters only: disturbance_seed) are kept as doubles in m->r */
+static fmi2Status bd_get_integer(fmi2Component comp, const fmi2ValueReference vr[], size_t n,
+                                 fmi2Integer value[]) {
+    inst* m = comp;
+    for (size_t i = 0; i < n; i++) {
+        if (!check_vr(m, vr[i], ATO_INTEGER, "fmi2GetInteger")) return fmi2Error;
+        value[i] = (fmi2Integer)m->r[vr[i]];
+    }
+    return fmi2OK;
 }
-static fmi2Status bd_set_integer(fmi2Component c, const fmi2ValueReference vr[], size_t n,
-                                 const fmi2Integer v[]) {
-    (void)vr; (void)v;
-    return no_vars(c, "fmi2SetInteger", n);
+static fmi2Status bd_set_integer(fmi2Component comp, const fmi2ValueReference vr[], size_t n,
+                                 const fmi2Integer value[]) {
+    inst* m = comp;
+    for (size_t i = 0; i < n; i++) {
+        if (!check_vr(m, vr[i], ATO_INTEGER, "fmi2SetInteger")) return fmi2Error;
+        if (m->initialized) {
+            logm(m, fmi2Error, "logStatusError",
+                 "fmi2SetInteger: parameter '%s' is fixed after initialisation",
+                 ATO_VARS[vr[i]].name);
+            return fmi2Error;
+        }
+        m->r[vr[i]] = (double)value[i];
+        free_core(m);
+    }
+    return fmi2OK;
 }
 static fmi2Status bd_get_boolean(fmi2Component c, const fmi2ValueReference vr[], size_t n,
                                  fmi2Boolean v[]) {

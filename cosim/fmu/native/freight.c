@@ -247,6 +247,12 @@ static void free_core(inst* m) {
  * value is set (set_number, from the generated ATO_VARS). Messages name the parameter. */
 static int check_parameters(inst* m) {
     const double* r = m->r;
+    if (r[ATO_VR_resistance_spread] != 0.0) {
+        logm(m, fmi2Error, "logStatusError",
+             "bad parameter: resistance_spread = %.17g: the native build has no resistance "
+             "spread (0 only; use the Python FMU)", r[ATO_VR_resistance_spread]);
+        return 0;
+    }
     if (!(r[ATO_VR_max_traction_force] > 0)) {
         logm(m, fmi2Error, "logStatusError",
              "bad parameter: max_traction_force = %.17g: must be greater than 0",

@@ -49,6 +49,11 @@ law_core* law_make(const ato_values* p, double t0, char* err, size_t n) {
     c.sample_time = v[ATO_VR_sample_time];
     c.feedforward = v[ATO_VR_feedforward] != 0.0;
     c.hold_at_stop_point = v[ATO_VR_hold_at_stop_point] != 0.0;
+    if (v[ATO_VR_resistance_feedforward] != 0.0) {
+        snprintf(err, n, "resistance_feedforward = true: the native build has no resistance "
+                 "feedforward (false only; use the Python FMU)");
+        return NULL;
+    }
     /* StopPidParams.check_relations (the declared ranges: ato_controller.c) */
     if (!(c.u_min < c.u_max)) {
         char a[40], b[40];
