@@ -32,7 +32,7 @@ import skfuzzy as fuzz
 from controllers.common.freight_blending import BlendingParams, FreightTracker, tracker_outputs
 from controllers.common.mean_observer import correction_time_param, mean_weight_param
 from controllers.pid.freight_pid import preview_time_param, reference_feedforward
-from cosim.fmu.declare import group, param, sample_time
+from cosim.fmu.declare import Checked, group, param, sample_time
 from plants.route import ReferenceProfile, Route
 
 TERMS = ("NB", "NM", "NS", "ZO", "PS", "PM", "PB")
@@ -80,7 +80,7 @@ def infer(E: float, EC: float, rules: tuple[tuple[str, ...], ...]) -> float:
 
 
 @dataclass(frozen=True)
-class FuzzyPidParams:
+class FuzzyPidParams(Checked):
     blending: BlendingParams = group(BlendingParams(), "")
     sample_time: float = sample_time(0.2)
     kp: float = param(0.3, "1/s", "base proportional gain (m/s2 per m/s)", min=0.0)
@@ -90,20 +90,13 @@ class FuzzyPidParams:
     e_scale: float = param(0.5 / 3.6, "m/s", "speed error of one unit of E", min=1e-9)
     ec_scale: float = param(0.02, "m/s2", "error rate of one unit of EC", min=1e-9)
     fuzzy_nodes: int = param(13, "1", "nodes per axis of the precomputed rule surface",
-                             min=2, max=1001)
+                             min=2, max=1001, integer=True)
     reference_feedforward: bool = param(False, description="add the freight PID's "
                                         "reference-acceleration feedforward a_ref(s + v t_p) "
                                         "(false: the paper's feedback-only fuzzy PID)")
     preview_time: float = preview_time_param()
     mean_weight: float = mean_weight_param("FPID")
     observer_correction_time: float = correction_time_param()
-
-    def check(self) -> None:
-        self.blending.check()
-        if not self.sample_time > 0:
-            raise ValueError(f"sample_time = {self.sample_time} must be > 0")
-        if self.fuzzy_nodes < 2:
-            raise ValueError(f"fuzzy_nodes = {self.fuzzy_nodes} must be >= 2")
 
 
 class RuleSurface:

@@ -24,7 +24,7 @@ from dataclasses import dataclass
 from controllers.common.freight_blending import BlendingParams, FreightTracker, tracker_outputs
 from controllers.common.mean_observer import correction_time_param, mean_weight_param
 from controllers.pid.speed_pid import SpeedPid, SpeedPidParams
-from cosim.fmu.declare import group, param
+from cosim.fmu.declare import Checked, group, param
 from plants.route import ReferenceProfile, Route
 
 
@@ -40,7 +40,7 @@ def default_pid() -> SpeedPidParams:
 
 
 @dataclass(frozen=True)
-class FreightPidParams:
+class FreightPidParams(Checked):
     pid: SpeedPidParams = group(default_pid(), "")
     blending: BlendingParams = group(BlendingParams(), "")
     preview_time: float = preview_time_param()
@@ -48,12 +48,6 @@ class FreightPidParams:
                                          "resistance to the demand")
     mean_weight: float = mean_weight_param("PID")
     observer_correction_time: float = correction_time_param()
-
-    def check(self) -> None:
-        self.pid.check()
-        self.blending.check()
-        if not self.preview_time >= 0:
-            raise ValueError(f"preview_time = {self.preview_time} must be >= 0")
 
 
 class FreightPid(FreightTracker):

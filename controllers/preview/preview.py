@@ -39,12 +39,12 @@ import numpy as np
 from controllers.common.freight_blending import BlendingParams, FreightTracker, tracker_outputs
 from controllers.common.mean_observer import correction_time_param, mean_weight_param
 from controllers.preview.design import DelayedModel, lag_delay_model, preview_gains
-from cosim.fmu.declare import group, param, sample_time
+from cosim.fmu.declare import Checked, group, param, sample_time
 from plants.route import ReferenceProfile, Route
 
 
 @dataclass(frozen=True)
-class PreviewParams:
+class PreviewParams(Checked):
     blending: BlendingParams = group(BlendingParams(), "")
     sample_time: float = sample_time(0.2)
     q_e: float = param(1.0, "1", "weight of the speed error (m/s)^2 in eq. (37)", min=1e-12)
@@ -53,9 +53,9 @@ class PreviewParams:
     h: float = param(1e4, "1", "weight H of the input difference (m/s^2)^2 in eq. (37)",
                      min=1e-12)
     preview_steps: int = param(150, "1", "reference preview M_R (samples)", min=0, max=10000,
-                               name="M_R")
+                               integer=True, name="M_R")
     disturbance_steps: int = param(150, "1", "disturbance preview M_d (samples)", min=0,
-                                   max=10000, name="M_d")
+                                   max=10000, integer=True, name="M_d")
     traction_delay: float = param(0.5, "s", "tau of the design model (eq. 15)", min=0.0)
     traction_time_constant: float = param(1.5, "s", "t_vb of the design model (eq. 15)",
                                           min=1e-6)
@@ -66,16 +66,6 @@ class PreviewParams:
                                     "blending trims the air brake with it")
     mean_weight: float = mean_weight_param("Preview")
     observer_correction_time: float = correction_time_param()
-
-    def check(self) -> None:
-        self.blending.check()
-        if not self.sample_time > 0:
-            raise ValueError(f"sample_time = {self.sample_time} must be > 0")
-        if self.preview_steps < 0 or self.disturbance_steps < 0:
-            raise ValueError(f"M_R = {self.preview_steps} and M_d = {self.disturbance_steps} "
-                             "must be >= 0")
-        if not 0.0 <= self.mean_weight <= 1.0:
-            raise ValueError(f"mean_weight = {self.mean_weight} must be in [0, 1]")
 
 
 class FreightPreview(FreightTracker):

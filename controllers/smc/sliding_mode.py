@@ -24,12 +24,12 @@ from dataclasses import dataclass
 
 from controllers.common.freight_blending import BlendingParams, FreightTracker, tracker_outputs
 from controllers.common.mean_observer import correction_time_param, mean_weight_param
-from cosim.fmu.declare import group, param, sample_time
+from cosim.fmu.declare import Checked, group, param, sample_time
 from plants.route import ReferenceProfile, Route
 
 
 @dataclass(frozen=True)
-class SlidingModeParams:
+class SlidingModeParams(Checked):
     blending: BlendingParams = group(BlendingParams(), "")
     sample_time: float = sample_time(0.2)
     lam: float = param(0.05, "1/s", "lambda: integral weight of the sliding variable",
@@ -41,11 +41,8 @@ class SlidingModeParams:
     mean_weight: float = mean_weight_param("SMC")
     observer_correction_time: float = correction_time_param()
 
-    def check(self) -> None:
-        self.blending.check()
-        if not self.sample_time > 0:
-            raise ValueError(f"sample_time = {self.sample_time} must be > 0")
-        if not 0 <= self.q * self.sample_time < 1:
+    def check_relations(self) -> None:
+        if not self.q * self.sample_time < 1:
             raise ValueError(f"q T = {self.q * self.sample_time} must be in [0, 1)")
 
 
