@@ -302,6 +302,25 @@ def test_entry_set_overrides_every_run_and_sweep_and_a_runs_own_set_wins(
     assert kp30["set"] == {"plant.disturbance_amplitude": 0.02, "controller.kp": 30.0}
     assert entry.sweeps[0]["grid"] == {"plant.disturbance_amplitude": 0.02,
                                        "controller.kp": 50.0, "controller.N": "3..4"}
+    # the sweep's own key stays first: its figure's x axis
+    assert list(entry.sweeps[0]["grid"])[0] == "controller.N"
+
+
+def test_sweep_figure_plots_against_the_first_key_and_makes_no_series_of_held_keys() -> None:
+    import pandas as pd
+
+    from cosim.run.sweep import draw_sweep
+
+    frame = pd.DataFrame({"scenario": ["a"] * 3 + ["b"] * 3, "controller.N": [3, 4, 5] * 2,
+                          "plant.disturbance_amplitude": [0.02] * 6,
+                          "stop_error_m": [0.01, 0.02, 0.03, 0.0, 0.01, 0.02],
+                          "command_switches": [5, 4, 3, 6, 5, 4],
+                          "controller_executions": [10, 9, 8, 7, 6, 5]})
+    fig = draw_sweep(frame, ["controller.N", "plant.disturbance_amplitude"])
+    ax1 = fig.axes[0]
+    assert [ln.get_label() for ln in ax1.get_lines() if not ln.get_label().startswith("_")] == [
+        "a", "b"]
+    assert list(ax1.get_lines()[0].get_xdata()) == [3, 4, 5]
 
 
 def test_reproduce_prints_80_columns_and_draws_in_the_chosen_format(built_fmus, tmp_path,

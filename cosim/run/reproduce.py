@@ -278,7 +278,9 @@ def load_entry(name: str | Path) -> Entry:
     for i, sweep in enumerate(data.get("sweeps", [])):
         _check_keys(f"{path}: [[sweeps]] #{i + 1}", sweep, _SWEEP_KEYS,
                     ("name", "scenarios", "grid"))
-        sweep["grid"] = {**common, **sweep["grid"]}
+        # the sweep's own keys first (the first is its figure's x axis), then the entry's
+        sweep["grid"] = {**sweep["grid"],
+                         **{k: v for k, v in common.items() if k not in sweep["grid"]}}
     for i, fig in enumerate(data.get("figures", [])):
         where = f"{path}: [[figures]] #{i + 1}"
         if fig.get("kind", "overlay") not in FIGURE_KINDS:

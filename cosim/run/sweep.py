@@ -348,7 +348,7 @@ def draw_sweep(frame: pd.DataFrame, keys: list[str],
     from cosim.run.results import fit_band
 
     x = keys[0]
-    others = keys[1:]
+    others = [k for k in keys[1:] if frame[k].nunique(dropna=False) > 1]  # held values: no series
     fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(7.5, 8), sharex=True)
     for label, group in frame.groupby(["scenario", *others], sort=False):
         name = label if isinstance(label, str) else " ".join(
