@@ -8,7 +8,7 @@
  *      tau_b) and clipped to the envelope min(F_t, P_t / v) (none above max_speed) /
  *      min(F_b, P_b / v) at the present speed
  *   energy_traction = int(max(F, 0) v dt) / eta_M, energy_regen = eta_b int(max(-F, 0) v dt),
- *   energy_aux = e0 (t - t0), energy_net = traction - regen + aux
+ *   energy_aux = e0 (t - t0), energy_net = traction - regen + aux, brake_work = int(max(-F, 0) v dt)
  *
  * The same floating-point operations in the same order as the Python core: sub-steps on the
  * absolute integer-nanosecond grid of max_step (ato_substep_ends), the lag solved exactly,
@@ -188,6 +188,7 @@ static void outputs(ato_inst* m, void* core) {
     r[ATO_VR_energy_regen] = regen;
     r[ATO_VR_energy_aux] = aux;
     r[ATO_VR_energy_net] = trac - regen + aux;
+    r[ATO_VR_brake_work] = c->w_brake;
 }
 
 static void destroy(void* core) {
