@@ -369,14 +369,16 @@ def _timing(key: str) -> bool:
 def summaries_outside(python: dict, native: dict, relative: float,
                       position_scale: float) -> list[str]:
     """Summary keys whose values differ by more than ``relative`` of their value (the stop
-    error: of the position scale); clock readings left out, the others must be equal."""
+    error and the distance short, differences of positions: of the position scale); clock
+    readings left out, the others must be equal."""
     outside = []
     for key, value in python.items():
         other = native[key]
         if _timing(key):
             continue
         if isinstance(value, float) and isinstance(other, float):
-            scale = max(abs(value), position_scale if key.startswith("stop_error") else 0.0)
+            positional = key.startswith(("stop_error", "distance_short"))
+            scale = max(abs(value), position_scale if positional else 0.0)
             if not abs(other - value) <= relative * scale:
                 outside.append(key)
         elif other != value:
