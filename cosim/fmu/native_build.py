@@ -106,6 +106,10 @@ NATIVE: dict[str, NativeSpec] = {
            ("FreightPid", "freight_pid.c", ("ato_freight_tracker.h",)),
            ("FreightSmc", "freight_smc.c", ("ato_freight_tracker.h",)),
            ("FreightFpid", "freight_fpid.c", ("ato_freight_tracker.h", "ato_fuzzy_rules.h")))},
+    "FreightPreview": NativeSpec("FreightPreview", "freight_preview.c",
+                                 (*CONTROLLER, *PROFILE, *FREIGHT_TRACKER),
+                                 data=("references", "preview_gains"),
+                                 generated=("ato_freight_tracker.h",)),
     "FreightTrain": NativeSpec("FreightTrain", "freight.c", ("freight_kernel.c",),
                                ("speed_limit", "additional")),
     "Crh3Train": NativeSpec("Crh3Train", "crh3.c", shared=PLANT_SHARED),
@@ -335,7 +339,30 @@ def empc_tables() -> dict[str, str]:
 
 
 # generated resources a native model may ask for (NativeSpec.data)
-DATA = {"references": reference_tables, "empc_regions": empc_tables}
+PREVIEW_DESIGN = ("sample_time", "q_e", "q_dz", "h", "preview_steps", "disturbance_steps",
+                  "traction_delay", "traction_time_constant")
+
+
+def preview_tables() -> dict[str, str]:
+    """``preview/default.gains``: the optimal preview servo's gains (eqs. 33-36,
+    :func:`controllers.preview.design.preview_gains` on the design model of
+    :meth:`controllers.preview.preview.FreightPreview.design_model`) computed by the Python
+    core for the declared defaults of the design parameters: one ``key count values...`` line
+    each for the design settings (checked by the native FMU against its parameters) and
+    ``F0`` (1 + n), ``FR`` (M_R) and ``Fd`` (M_d + 1); %.17g via repr: exact."""
+    preview = importlib.import_module("controllers.preview.preview")  # by name: layering
+    design = importlib.import_module("controllers.preview.design")
+    p = preview.PreviewParams()
+    model = design.lag_delay_model(p.sample_time, p.traction_delay, p.traction_time_constant)
+    g = design.preview_gains(model, p.q_e, p.q_dz, p.h, p.preview_steps, p.disturbance_steps)
+    lines = [f"# optimal preview gains for the default design of {preview.__name__}",
+             *(_numbers(key, [float(getattr(p, key))]) for key in PREVIEW_DESIGN),
+             _numbers("F0", g.F0[0]), _numbers("FR", g.FR), _numbers("Fd", g.Fd)]
+    return {"preview/default.gains": "\n".join(lines) + "\n"}
+
+
+DATA = {"references": reference_tables, "empc_regions": empc_tables,
+        "preview_gains": preview_tables}
 
 
 # the step profiles of a route a native plant reads (plants.route.Route fields); sums such as

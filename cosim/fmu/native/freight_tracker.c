@@ -287,7 +287,8 @@ static double approach_force(const ft_const* c, const ft_state* st, double t, do
 
 /* FreightBlending.blend (locomotive = False) */
 static int blend(const ft_const* c, ft_state* st, double t, double T, double v, double s,
-                 double force, double v_ref, double a_ref, double a_res, char* err, size_t n) {
+                 double force, double v_ref, double a_ref, double a_res, int locomotive,
+                 char* err, size_t n) {
     const ato_profile* prof = &c->profile;
     double speed = ft_max(v, 0.0), trac, ed, onset, onset_stop, planned;
     traction_limits(speed, &trac, &ed);
@@ -349,7 +350,9 @@ static int blend(const ft_const* c, ft_state* st, double t, double T, double v, 
     if (st->final_approach) {
         force = approach_force(c, st, t, v, s);
     } else if (!st->holding && air_applied(st)) {
-        double air = dot(FT_BRAKE_SCALE, st->pressure, FT_N_VEHICLES) * friction_at(speed);
+        double air = locomotive ? 0.0
+                                : dot(FT_BRAKE_SCALE, st->pressure, FT_N_VEHICLES)
+                                      * friction_at(speed);
         force = ft_min(force + air, 0.0);
     }
     st->force = ft_min(ft_max(force, -ed), trac);
@@ -381,6 +384,77 @@ static double observer_update(const ft_const* c, ft_state* st, double v_head) {
     st->z[0] += c->speed_gain * r;
     st->bias += c->bias_gain * r;
     return st->z[0];
+}
+
+/* -- the model for the laws that preview it ---------------------------------------------- */
+
+int ft_air_applied(const ft_state* st) { return air_applied(st); }
+void ft_traction_limits(double v, double* trac, double* ed) { traction_limits(v, trac, ed); }
+double ft_basic_accel(double v) { return basic_accel(v); }
+double ft_additional_accel(const ft_const* c, double s) { return additional_accel(c, s); }
+double ft_resistance_accel(const ft_const* c, double v, double s) {
+    return resistance_accel(c, v, s);
+}
+double ft_friction_at(double v) { return friction_at(v); }
+void ft_onset_ahead(const ft_const* c, double s, double* onset, double* stop) {
+    onset_ahead(c, s, onset, stop);
+}
+double ft_planned_reduction(const ft_const* c, double s, double v, double a_res) {
+    return planned_reduction(c, s, v, a_res);
+}
+
+void ft_air_force_ahead(const ft_state* st, double t, const double* times, const double* speeds,
+                        int m, int has_planned, double planned_t, double planned_r,
+                        double* out) {
+    int nh = st->n_history;
+    double ht[FT_MAX_HISTORY + 1], hr[FT_MAX_HISTORY + 1];
+    memcpy(ht, st->history_t, nh * sizeof(double));
+    memcpy(hr, st->history_r, nh * sizeof(double));
+    if (has_planned && planned_r != hr[nh - 1]) {
+        ht[nh] = planned_t;
+        hr[nh] = planned_r;
+        nh++;
+    }
+    double(*arrivals)[FT_N_VEHICLES] = malloc(2 * (size_t)nh * sizeof *arrivals);
+    double(*overtaken)[FT_N_VEHICLES] = arrivals + nh;
+    if (!arrivals) { /* out of memory: no air brake foreseen */
+        for (int j = 0; j < m; j++) out[j] = 0.0;
+        return;
+    }
+    int seen[FT_N_VEHICLES], seen_min = nh;
+    for (int i = 0; i < FT_N_VEHICLES; i++) {
+        seen[i] = 0;
+        for (int k = 0; k < nh; k++) {
+            int rising = k == 0 || hr[k] >= hr[k - 1];
+            arrivals[k][i] = ht[k] + (rising ? FT_APPLY_DELAY[i] : FT_RELEASE_DELAY[i]);
+            if (arrivals[k][i] <= t) seen[i] = k;
+        }
+        if (seen[i] < seen_min) seen_min = seen[i];
+        overtaken[nh - 1][i] = arrivals[nh - 1][i];
+        for (int k = nh - 2; k >= 0; k--)
+            overtaken[k][i] = ft_min(arrivals[k][i], overtaken[k + 1][i]);
+    }
+    for (int j = 0; j < m; j++) {
+        double sum = 0.0;
+        for (int i = 0; i < FT_N_VEHICLES; i++) {
+            double target = target_pressure(hr[seen[i]]);
+            double pres = st->pressure[i], now = t;
+            for (int k = seen_min + 1; k < nh; k++) {
+                int kk = k + 1 < nh - 1 ? k + 1 : nh - 1;
+                int acts = k > seen[i] && (k == nh - 1 || arrivals[k][i] < overtaken[kk][i]);
+                double arrive = acts ? arrivals[k][i] : INFINITY;
+                if (arrive > now && arrive <= times[j]) {
+                    pres = evolve(pres, target, arrive - now);
+                    now = arrive;
+                }
+                if (arrive <= times[j]) target = target_pressure(hr[k]);
+            }
+            pres = evolve(pres, target, ft_max(times[j] - now, 0.0));
+            sum += pres * FT_BRAKE_SCALE[i];
+        }
+        out[j] = sum * friction_at(speeds[j]);
+    }
+    free(arrivals);
 }
 
 /* -- FreightTracker ------------------------------------------------------------------------ */
@@ -528,8 +602,10 @@ int ft_compute(const ft_const* c, ft_state* st, double t, double v, double s, ft
     double a_res = resistance_accel(c, speed, s);
     accel_limits(st, speed, &lo, &hi);
     st->demand = law(law_data, st, t, v, s, a_res, lo, hi);
-    if (!blend(c, st, t, c->sample_time, v, s, FT_M_EFF * st->demand, st->v_ref, st->a_ref,
-               a_res, err, n))
+    int loco = st->has_locomotive;
+    if (!blend(c, st, t, c->sample_time, v, s,
+               FT_M_EFF * (loco ? st->locomotive_demand : st->demand), st->v_ref, st->a_ref,
+               a_res, loco, err, n))
         return 0;
     /* observer.record */
     double mean[FT_N_VEHICLES];

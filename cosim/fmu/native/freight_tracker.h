@@ -48,6 +48,8 @@ typedef struct {
     double history_t[FT_MAX_HISTORY], history_r[FT_MAX_HISTORY];
     /* FreightTracker */
     double v_ref, a_ref, demand, speed_error, v_feedback;
+    int has_locomotive;        /* the law set locomotive_demand (counts the air brake itself) */
+    double locomotive_demand;  /* m/s^2, the locomotive's part of the demand */
     /* MeanSpeedObserver */
     int started;
     double z[FT_NZ], bias, u, air, s;
@@ -67,6 +69,21 @@ int ft_compute(const ft_const* c, ft_state* st, double t, double v, double s, ft
 void ft_outputs(const ft_state* st, double* out);
 /* ReferenceProfile.accel(s + max(v, 0) t_p) (controllers/pid/freight_pid.py) */
 double ft_reference_feedforward(const ft_const* c, double v, double s, double preview_time);
+
+/* FreightBlending's model, for a law that previews it */
+int ft_air_applied(const ft_state* st);
+void ft_traction_limits(double v, double* trac, double* ed);
+double ft_basic_accel(double v);
+double ft_additional_accel(const ft_const* c, double s);
+double ft_resistance_accel(const ft_const* c, double v, double s);
+double ft_friction_at(double v);
+void ft_onset_ahead(const ft_const* c, double s, double* onset, double* stop);
+double ft_planned_reduction(const ft_const* c, double s, double v, double a_res);
+/* FreightBlending.air_force_ahead: the air-brake force (N) at times[j] (>= t) and speeds[j],
+ * j < m, with the planned command (planned_t, planned_r) when has_planned */
+void ft_air_force_ahead(const ft_state* st, double t, const double* times, const double* speeds,
+                        int m, int has_planned, double planned_t, double planned_r,
+                        double* out);
 
 static inline double ft_max(double a, double b) { return b > a ? b : a; } /* Python max */
 static inline double ft_min(double a, double b) { return b < a ? b : a; } /* Python min */
