@@ -1,4 +1,5 @@
-"""The native C freight controller FMUs (FreightPid, FreightSmc, FreightFpid: a law file over
+"""The native C freight controller FMUs (FreightPid, FreightSmc, FreightFpid, FreightPreview: a
+law file over
 cosim/fmu/native/freight_tracker.c, the shared observer and blending, behind ato_controller.c)
 against their Python cores, and the shipped seed-002 closed loops with the native plant and
 controller against the all-Python loops.
@@ -20,7 +21,11 @@ and numpy's pairwise sum written out), with three kinds of exceptions, each boun
   two calls per cylinder and step;
 
 so one event's outputs differ from the core's at the same state by at most
-EPS = 2 gamma_109 + 2 gamma_5 + 20 u relative to their scale (:data:`EPS`). The state the
+EPS = 2 gamma_109 + 2 gamma_5 + 20 u relative to their scale (:data:`EPS`). The preview servo
+has three more dot products, ``F0 x0 + F_R Delta R + F_d Delta d`` (n <= 151, terms of both
+signs): its increment differs by at most 2 gamma_151 S, S the sum of the terms' magnitudes,
+which the test records from the core's own products at every event (:class:`TermScale`), so
+its EPS is EPS + 2 gamma_151 max S / scale. The state the
 events carry (observer speed and bias, cylinder pressures, the law's integral) holds the
 difference on; counting it as never damped and integrated once more by the law's integral,
 after k events the difference is at most (k + 1)^2 EPS of the output's largest magnitude over
@@ -45,19 +50,19 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from fmi_state_helpers import FmuInstance, rerun_after_restore
+from freight_loop import closed_loop
+from test_native_controllers import _callbacks, _flat, gamma
 
 from cosim.fmu.build import catalog
 from cosim.fmu.native_build import build_native
 from cosim.run.master import run_scenario
 from cosim.run.scenario import load_scenario
-from fmi_state_helpers import FmuInstance, rerun_after_restore
-from freight_loop import closed_loop
-from test_native_controllers import _callbacks, _flat, gamma
 
 ROOT = Path(__file__).resolve().parents[1]
 U = 2.0**-53
 EPS = 2 * gamma(109) + 2 * gamma(5) + 20 * U
-CONTROLLERS = ("FreightPid", "FreightSmc", "FreightFpid")
+CONTROLLERS = ("FreightPid", "FreightSmc", "FreightFpid", "FreightPreview")
 OUTPUTS = ("force_demand", "pipe_reduction", "accel_demand", "v_ref", "a_ref", "speed_error",
            "air_brake_estimate", "v_mean_estimate")
 EXACT = ("pipe_reduction", "v_ref", "a_ref", "speed_error")
@@ -105,10 +110,37 @@ def open_native(path: Path, name: str = "native") -> FmuInstance:
     return FmuInstance(str(path), name, strings={"route": "freight_20km"})
 
 
+class TermScale:
+    """A gain vector whose ``@`` is numpy's own (the same product, so the core's results do
+    not change) and which records sum |F_j y_j|, the scale of its rounding error."""
+
+    def __init__(self, gains: np.ndarray, record: list[float]) -> None:
+        self.gains, self.record = gains, record
+
+    def __getitem__(self, i: int) -> TermScale:
+        return TermScale(self.gains[i], self.record)
+
+    def __matmul__(self, y: np.ndarray) -> float:
+        self.record.append(float(np.abs(self.gains) @ np.abs(y)))
+        return self.gains @ y
+
+
+def record_preview_terms(core) -> list[float]:
+    """Make the preview core record its servo's term magnitudes (three per event)."""
+    from dataclasses import replace
+
+    terms: list[float] = []
+    g = core.gains
+    core.gains = replace(g, F0=TermScale(g.F0, terms), FR=TermScale(g.FR, terms),
+                         Fd=TermScale(g.Fd, terms))
+    return terms
+
+
 def compare_replay(path: Path, ident: str, inputs: list) -> dict[str, float]:
     """A fresh core and the native FMU given the same inputs at every event: the outputs of
     each event within :func:`bound` (the exact ones equal). Returns the coverage."""
     core = core_of(ident)
+    terms = record_preview_terms(core) if ident == "FreightPreview" else []
     fmu = open_native(path)
     rows_core, rows_native = [], []
     for t, v, s in inputs:
@@ -128,7 +160,12 @@ def compare_replay(path: Path, ident: str, inputs: list) -> dict[str, float]:
                                       f"{a[differ[0], j]!r}")
             continue
         scale = float(np.abs(a[:, j]).max())
-        tol = np.array([bound(k) for k in range(len(inputs))]) * scale
+        eps = EPS
+        if terms and name in ("force_demand", "accel_demand"):  # the servo's dot products
+            per_event = np.add.reduceat(np.array(terms), np.arange(0, len(terms), 3))
+            unit = core.m_eff if name == "force_demand" else 1.0  # N per m/s^2
+            eps = EPS + 2 * gamma(151) * float(per_event.max()) * unit / scale
+        tol = np.array([(k + 1) ** 2 * eps for k in range(len(inputs))]) * scale
         over = np.nonzero(np.abs(b[:, j] - a[:, j]) > tol)[0]
         assert over.size == 0, (f"{ident}.{name} beyond the bound first at t = "
                                 f"{inputs[over[0]][0]}: {b[over[0], j]!r} vs {a[over[0], j]!r}")
@@ -184,6 +221,8 @@ def test_native_state_round_trip(natives, ident):
     ("FreightPid", {"route": "routes/freight_20km.toml"}, "route = 'routes/freight_20km.toml':"
      " the native FMU knows the bundled routes"),
     ("FreightPid", {"release_share": 0.9}, "need 0 < release_share (0.9) < ed_share (0.8)"),
+    ("FreightPreview", {"M_R": 100}, "M_R = 100.0: the native FMU carries the preview gains "
+     "of the default design (M_R = 150.0) only"),
 ])
 def test_native_refuses_what_it_cannot_run(natives, ident, params, message):
     """Parameters the native FMU does not carry data for, or that the core refuses, are
@@ -219,7 +258,18 @@ def test_native_refuses_what_it_cannot_run(natives, ident, params, message):
 # -- closed loops of the shipped seed-002 scenarios ---------------------------------------------
 IRREPRODUCIBLE = ("*wall_time*", "*real_time*", "*solve_time*", "*cpu_time*")
 LOOPS = {"FreightPid": "seed002_freight_pid", "FreightSmc": "seed002_freight_smc",
-         "FreightFpid": "seed002_freight_fpid"}
+         "FreightFpid": "seed002_freight_fpid", "FreightPreview": "seed002_freight_preview"}
+
+
+def preview_term_scale(frame) -> float:
+    """Largest sum |F y| of the preview servo's products over the loop's events, relative to
+    its largest demand: the core replayed on the loop's measured speeds and positions."""
+    core = core_of("FreightPreview")
+    terms = record_preview_terms(core)
+    for t, v, s in zip(frame["time"], frame["plant.v"], frame["plant.s"]):
+        core.compute(float(t), {"v": float(v), "s": float(s)})
+    per_event = np.add.reduceat(np.array(terms), np.arange(0, len(terms), 3))
+    return float(per_event.max()) / float(frame["controller.accel_demand"].abs().max())
 
 
 def compare_loops(name: str, stop_time: float | None) -> None:
@@ -231,7 +281,10 @@ def compare_loops(name: str, stop_time: float | None) -> None:
                        plot=False)
     sc = load_scenario(name, base)
     n_events = sc.simulation.stop_time / sc.components["controller"].sample_time
-    rtol = n_events**2 * EPS
+    eps = EPS
+    if sc.components["controller"].fmu == "FreightPreview":  # the servo's dot products
+        eps += 2 * gamma(151) * preview_term_scale(py.frame)
+    rtol = n_events**2 * eps
     assert rtol < 1e-5  # meaningful: far below any figure a summary reports
     for c in py.frame.columns:
         if any(fnmatch.fnmatch(c, p) for p in IRREPRODUCIBLE):
@@ -269,8 +322,9 @@ def test_whole_seed002_loop_with_native_plant_and_controller_equals_python(name)
 
 
 @pytest.mark.parametrize("ident", [
-    "FreightPid",  # the three share the backend and the base: the others in the slow suite
-    *(pytest.param(i, marks=pytest.mark.slow) for i in ("FreightSmc", "FreightFpid"))])
+    "FreightPid",  # the four share the backend and the base: the others in the slow suite
+    *(pytest.param(i, marks=pytest.mark.slow)
+      for i in ("FreightSmc", "FreightFpid", "FreightPreview"))])
 def test_compliance_suite_passes_the_native_freight_controllers(ident, tmp_path):
     """cosim validate (calling sequence, state, reset, wrong-state calls, bad parameters,
     non-finite inputs) finds no error and no warning."""
