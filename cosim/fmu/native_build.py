@@ -738,10 +738,15 @@ def build_native(identifier: str, dest: Path = NATIVE_FMU_DIR, windows: bool | N
                 target.parent.mkdir(parents=True, exist_ok=True)
                 target.write_text(content)
         (root / "binaries" / "linux64").mkdir(parents=True)
-        compile_binary(gcc, src, root / "binaries" / "linux64" / f"{identifier}.so", False)
+        jobs = [(gcc, src, root / "binaries" / "linux64" / f"{identifier}.so", False)]
         if mingw:
             (root / "binaries" / "win64").mkdir(parents=True)
-            compile_binary(mingw, src, root / "binaries" / "win64" / f"{identifier}.dll", True)
+            jobs.append((mingw, src, root / "binaries" / "win64" / f"{identifier}.dll", True))
+        from concurrent.futures import ThreadPoolExecutor
+
+        with ThreadPoolExecutor(max_workers=len(jobs)) as pool:  # the compilers side by side
+            for done in [pool.submit(compile_binary, *job) for job in jobs]:
+                done.result()
         dest.mkdir(parents=True, exist_ok=True)
         staged = dest / f".{identifier}.fmu.{os.getpid()}.tmp"
         with zipfile.ZipFile(staged, "w", zipfile.ZIP_DEFLATED) as z:
