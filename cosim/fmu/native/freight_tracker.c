@@ -33,17 +33,23 @@ static double target_pressure(double r) {
 
 static double xpow(double x, double e) { return e == 1.0 ? x : pow(x, e); } /* numpy: x**1 = x */
 
-/* FreightTrain.evolve_pressure of one cylinder */
+/* FreightTrain.evolve_pressure of one cylinder (only the branch numpy.where keeps is
+ * computed: the same value) */
 static double evolve(double pres, double target, double dt) {
     double pmax = FT_MAX_CYLINDER_PRESSURE;
-    double frac = ft_min(pres / pmax, 1.0);
-    double t_up = FT_FILL_TIME * xpow(frac, 1.0 / FT_FILL_EXPONENT);
-    double up = pmax * xpow(ft_min((t_up + dt) / FT_FILL_TIME, 1.0), FT_FILL_EXPONENT);
-    double t_down = FT_RELEASE_TIME * xpow(1.0 - frac, 1.0 / FT_RELEASE_EXPONENT);
-    double down = pmax * (1.0 - xpow(ft_min((t_down + dt) / FT_RELEASE_TIME, 1.0),
-                                     FT_RELEASE_EXPONENT));
-    if (pres < target) return ft_min(up, target);
-    if (pres > target) return ft_max(down, target);
+    if (pres < target) {
+        double frac = ft_min(pres / pmax, 1.0);
+        double t_up = FT_FILL_TIME * xpow(frac, 1.0 / FT_FILL_EXPONENT);
+        double up = pmax * xpow(ft_min((t_up + dt) / FT_FILL_TIME, 1.0), FT_FILL_EXPONENT);
+        return ft_min(up, target);
+    }
+    if (pres > target) {
+        double frac = ft_min(pres / pmax, 1.0);
+        double t_down = FT_RELEASE_TIME * xpow(1.0 - frac, 1.0 / FT_RELEASE_EXPONENT);
+        double down = pmax * (1.0 - xpow(ft_min((t_down + dt) / FT_RELEASE_TIME, 1.0),
+                                         FT_RELEASE_EXPONENT));
+        return ft_max(down, target);
+    }
     return pres;
 }
 
