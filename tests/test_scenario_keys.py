@@ -201,6 +201,8 @@ def test_summary_reads_a_parameter_by_reference(tmp_path):
     sc = load_scenario("seed000_stop_pid", ["controller.stop_point=450"])
     assert sc.summary["stop_point"] == 450.0
     assert load_scenario("seed000_stop_pid").summary["stop_point"] == 400.0
+    decel = load_scenario("seed000_stop_pid", ["controller.ref_decel=0.6"]).summary
+    assert decel["reference_decel"] == 0.6  # the stopping curve the metrics use, the controller's
     text = (load_scenario("seed000_stop_pid").path.read_text()
             .replace('stop_point = "controller.stop_point"', 'stop_point = "controller.nope"'))
     bad = tmp_path / "bad.toml"
