@@ -118,6 +118,8 @@ def test_run_figure_reads_as_a_paper_figure(rsmpc_run):
     box_legend = legend.get_window_extent(renderer)
     assert not box_legend.overlaps(inset.get_window_extent(renderer))
     assert not box_legend.overlaps(main.get_window_extent(renderer))  # outside the axes
+    assert not inset.get_tightbbox(renderer).overlaps(main.get_window_extent(renderer))
+    assert not inset.get_tightbbox(renderer).overlaps(fig.axes[1].yaxis.get_tightbbox(renderer))
     labels = [t.get_text() for t in legend.get_texts()]
     assert "speed" in labels and "stop point" in labels
     assert not any(name.startswith(("plant.", "controller.")) for name in labels), labels
@@ -126,6 +128,7 @@ def test_run_figure_reads_as_a_paper_figure(rsmpc_run):
     lines = {line.get_label(): line for ax in fig.axes for line in ax.get_lines()}
     assert lines["speed"].get_drawstyle() == "default"
     assert lines["reference (as held by the controller)"].get_drawstyle() == "steps-post"
+    assert lines["reference curve"].get_drawstyle() == "default"  # the continuous v_ref(s)
     assert lines["brake command u"].get_drawstyle() == "steps-post"
     for ax in (main, twin, inset):
         for axis in (ax.xaxis, ax.yaxis):
