@@ -278,8 +278,8 @@ class Crh3LmiMpc(EcoTracker):
         Var.output("qp_solves", "1", "LMI (SDP) problems solved so far", start=0),
         Var.output("qp_infeasible", "1", "events whose LMI problem has no solution (previous "
                    "gain kept)", start=0),
-        Var.output("lmi_fallbacks", "1", "events whose LMI problem the first solver left "
-                   "unsolved and the fallback solver was asked to solve", start=0),
+        Var.output("lmi_fallbacks", "1", "events whose LMI problem the first solver leaves "
+                   "unsolved, handed to the fallback solver", start=0),
     )
 
     @classmethod
