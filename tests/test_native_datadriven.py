@@ -29,7 +29,10 @@ prediction matrices, 6 x 6 solve) stays below 512 roundings, so EPS = 512 u. A v
 differs by at most 2 EPS sum_B |d value / d B| |B| (first order, both sides err): the
 sensitivities are measured on the Python core by finite differences along random unit
 directions of each block (a random direction carries at least about 1 / sqrt(dim) of the
-largest gain, hence the factor sqrt(dim B)), plus 2 EPS of the value itself.
+largest gain, hence the factor sqrt(dim B)), plus 2 EPS of the value itself; and for the
+laws that solve a linear system (MFAC's delta I + Phi_2'Phi_2, GPC's G'G + w I) the forward
+error of a backward-stable solve, 2 EPS cond(A) |x|, on the entries that hold the move (an
+ill-conditioned A, GPC's under a large covariance, is not reached by perturbing the blocks).
 
 Near a threshold the two may take different branches: the truncated inverse keeps the
 singular directions with sigma_j >= cutoff sigma_1, and a sigma_j within the SVDs' error
@@ -169,7 +172,78 @@ def one_sample_bound(core, ident: str, state: dict, t: float, inputs: dict,
             p[k] = block + H * norm * d
             worst = np.maximum(worst, np.abs(run(moved) - base) / H)
         total += math.sqrt(block.size) * worst
-    return 2 * EPS * (total + np.abs(base))
+    bound = 2 * EPS * (total + np.abs(base))
+    move = solve_error(core, ident, state, t, inputs)
+    if move > 0.0:  # the move's entries: u, u_prev, du(t) in du_hist and dH; the forces (m u)
+        marks = input_marks(ident, core.get_state())
+        bound += move * marks
+        bound[:3] += move * core.unit_mass / core.drive.input_scale
+    return bound
+
+
+def solve_error(core, ident: str, state: dict, t: float, inputs: dict) -> float:
+    """2 EPS cond(A) |x|: the forward error of a backward-stable solve A x = b (LAPACK's and
+    the C elimination, EPS of A), which a perturbation of the state blocks need not reach
+    when A is ill-conditioned (GPC's G'G + w I under a large covariance); for MFAC the move
+    rho x of (delta I + Phi_2'Phi_2) x = Phi_2' target, for GPC the first moves of dU. 0 at a
+    holding sample (no solve)."""
+    if ident == "EmuIsmc3":
+        return 0.0
+    core.set_state(state)
+    d, n = core.drive, core.n
+    v = np.array([inputs[f"v[{i}]"] for i in range(1, n + 1)])
+    x = inputs["s"] if core.profile.kind == "distance" else t
+    v_ref, a_ref = core.profile.speed(x), core.profile.accel(x)
+    if v_ref <= 0.0 and a_ref <= 0.0 and float(v.sum()) < d.stop_speed * n:
+        return 0.0
+    c = d.output_scale
+    y, y_r = c * v, c * v_ref
+    y_r_next = c * core.next_reference(x, v, v_ref, a_ref)
+    law = core.law
+    if ident == "EmuGpc3":
+        gpc = law.gpc
+        gpc.observe(y)
+        j = np.arange(1, gpc.p.Ny + 1)[:, None]
+        refs = np.maximum(y_r + j * (y_r_next - y_r), 0.0) * np.ones((1, n))
+        f, G = gpc.prediction_matrices()
+        A = G.T @ G + gpc.p.control_weight * np.eye(G.shape[1])
+        sol = np.linalg.solve(A, G.T @ (refs.ravel() - f))
+        scale = 1.0
+    else:
+        est = law.est
+        est.observe(y)
+        M = est.input_block
+        A = law.p.delta * np.eye(n) + M.T @ M
+        sol = np.linalg.solve(A, M.T @ (y_r_next - y - est.free_response()))
+        scale = law.p.rho
+    return 2 * EPS * float(np.linalg.cond(A)) * scale * float(np.linalg.norm(sol))
+
+
+def input_marks(ident: str, state: dict) -> np.ndarray:
+    """1 at the law state's entries that hold this sample's input move, 0 elsewhere."""
+    marked = copy.deepcopy(state)
+
+    def zero(tree):
+        for key, value in tree.items():
+            if isinstance(value, dict):
+                zero(value)
+            elif isinstance(value, np.ndarray):
+                tree[key] = np.zeros_like(value, dtype=float)
+            elif isinstance(value, list):
+                tree[key] = [0.0] * len(value)
+            else:
+                tree[key] = 0.0
+    zero(marked)
+    law = marked["law"]
+    inner = law["gpc"] if ident == "EmuGpc3" else law["est"]
+    n = law["u"].size
+    law["u"][:] = 1.0
+    inner["u_prev"][:] = 1.0
+    inner["du_hist"][0] = 1.0
+    if ident != "EmuGpc3":
+        k = inner["dy_hist"].size
+        inner["dH_prev"][k:k + n] = 1.0
+    return law_state(ident, marked)
 
 
 def near_cutoff(core, ident: str) -> bool:
