@@ -3,17 +3,21 @@ native C controller FMUs against the same loops with the Python controller FMUs,
 (prints figures, asserts nothing).
 
 Loops: every shipped scenario whose controller has a native build (``StopPid``,
-``EmuSpeedPid3``, ``Empc3``), through the event-driven master, the plant the Python FMU in
-both; seed 000 also with both FMUs native. Each loop runs the first ``--stop-time`` simulated
-seconds (default 300 s, the whole run when shorter), median of ``--repeat`` runs after one
-warm-up run.
+``EmuSpeedPid3``, ``Empc3``, the seed-001 data-driven ``EmuMfac3``, ``EmuIsmc3``,
+``EmuGpc3``), through the event-driven master, the plant the Python FMU in both; where the
+plant has a native build too, also with both FMUs native. Each loop runs the first
+``--stop-time`` simulated seconds (default 300 s, the whole run when shorter), median of
+``--repeat`` runs after one warm-up run; ``--scenarios`` picks loops by a glob of the
+scenario name.
 
     python benchmarks/bench_native_controllers.py [--repeat 3] [--stop-time 300]
+        [--scenarios 'seed001_*']
 """
 
 from __future__ import annotations
 
 import argparse
+import fnmatch
 import statistics
 import sys
 from pathlib import Path
@@ -43,10 +47,13 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--stop-time", type=float, default=300.0)
+    ap.add_argument("--scenarios", default="*", help="glob of the scenario names")
     args = ap.parse_args()
     print("closed loop, event master: controller FMU wall time and whole-run real-time "
           f"factor, Python -> native (median of {args.repeat})")
     for name, natives in loops():
+        if not fnmatch.fnmatch(name, args.scenarios):
+            continue
         stop = min(load_scenario(name).simulation.stop_time, args.stop_time)
         base = [f"simulation.stop_time={stop}"]
         res = {}

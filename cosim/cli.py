@@ -70,14 +70,23 @@ def build(names: Annotated[list[str] | None, typer.Argument(
 
 
 def _build_native(names: list[str] | None, versions: tuple[int, ...]) -> list[Path]:
+    import os
+    from concurrent.futures import ThreadPoolExecutor
+
     from cosim.fmu.native_build import NATIVE, CompilerMissing, build_natives
 
     built: list[Path] = []
-    for name in names or sorted(NATIVE):
-        try:
-            paths = build_natives(name, versions)
-        except (ValueError, CompilerMissing, RuntimeError) as err:
-            _fail(str(err))
+    wanted = names or sorted(NATIVE)
+    # the FMUs side by side, one per core (the compilers are subprocesses); shown in order
+    with ThreadPoolExecutor(max_workers=max(1, min(len(wanted), os.cpu_count() or 1))) as pool:
+        jobs = [pool.submit(build_natives, name, versions) for name in wanted]
+        results = []
+        for job in jobs:
+            try:
+                results.append(job.result())
+            except (ValueError, CompilerMissing, RuntimeError) as err:
+                _fail(str(err))
+    for paths in results:
         for version, path in zip(versions, paths):
             shown = path.relative_to(Path.cwd()) if path.is_relative_to(Path.cwd()) else path
             out.print(f"built {shown}  (native C, FMI {version}.0)", highlight=False,
