@@ -70,14 +70,14 @@ def build(names: Annotated[list[str] | None, typer.Argument(
 
 
 def _build_native(names: list[str] | None, versions: tuple[int, ...]) -> list[Path]:
-    from cosim.fmu.native_build import NATIVE, CompilerMissing, build_natives
+    from cosim.fmu.native_build import NATIVE, CompilerMissing, build_all_natives
 
     built: list[Path] = []
-    for name in names or sorted(NATIVE):
-        try:
-            paths = build_natives(name, versions)
-        except (ValueError, CompilerMissing, RuntimeError) as err:
-            _fail(str(err))
+    try:  # the models side by side, one per core
+        done = build_all_natives(names or sorted(NATIVE), versions)
+    except (ValueError, CompilerMissing, RuntimeError) as err:
+        _fail(str(err))
+    for paths in done.values():
         for version, path in zip(versions, paths):
             shown = path.relative_to(Path.cwd()) if path.is_relative_to(Path.cwd()) else path
             out.print(f"built {shown}  (native C, FMI {version}.0)", highlight=False,
