@@ -18,8 +18,10 @@ FreightTrain (seed 002, HXD1 + 108 C80):
   (cosim/fmu/native/freight_kernel.c through ctypes on the arguments of one communication
   step, as benchmarks/bench_kernels.py calls it): its time per sub-step times the run's
   sub-steps, the bound no FMU of this kernel can beat;
-* closed loop: every shipped seed-002 scenario with the Python plant FMU and with the native
-  one (Python controller FMUs in both): whole-run real-time factors and their ratio.
+* closed loop: every shipped seed-002 scenario with the Python plant and controller FMUs, the
+  native plant and the Python controller, and the native plant and controller (where the
+  controller has a native build), in one run: whole-run real-time factors, their ratios to
+  the all-Python loop, and where the wall time goes (each FMU, the rest: master and fmpy).
 
 Crh3Train, Emu3, Emu8 (seeds 003, 001, 004), plant only: the Python FMU and the native FMU
 stepped over the same simulated time with a fixed input, in the step and with the parameters
@@ -31,7 +33,8 @@ Building: ``python -m cosim.cli build --native --fmi all`` end to end (every nat
 the CPU time of it and its compilers (the time one core would take), in one run
 (:func:`build_all`; the ``native_build`` row of run_all.py).
 
-    python benchmarks/bench_native.py [--repeat 3] [--plants freight brake_delay crh3_emu build]
+    python benchmarks/bench_native.py [--repeat 3]
+        [--plants freight freight_loops brake_delay crh3_emu build]
 """
 
 from __future__ import annotations
@@ -53,7 +56,7 @@ from fmpy import extract, read_model_description  # noqa: E402
 from fmpy.fmi2 import FMU2Slave  # noqa: E402
 
 from cosim.fmu.build import build_stale, catalog  # noqa: E402
-from cosim.fmu.native_build import build_native  # noqa: E402
+from cosim.fmu.native_build import NATIVE, build_native  # noqa: E402
 from cosim.fmu.state import to_ticks  # noqa: E402
 from cosim.run.master import run_scenario  # noqa: E402
 from cosim.run.scenario import load_scenario  # noqa: E402
@@ -211,24 +214,53 @@ def bench_freight(repeat: int) -> None:
         py, nat, bare = (medians[n][k] for n in ("Python FMU", "native FMU", "bare C kernel"))
         print(f"  {what}: native / Python FMU speed-up {py / nat:.2f}x; "
               f"native FMU time / bare C kernel time {nat / bare:.2f}")
-    print("\nclosed loop, event master, Python controller FMUs (plant FMU wall time, whole-run "
-          "real-time factor, and the ratio a plant of zero cost would give):")
-    for sc in sorted(p.stem for p in (ROOT / "scenarios").glob("seed002_*.toml")):
-        stop_time = load_scenario(ROOT / "scenarios" / f"{sc}.toml").simulation.stop_time
-        overrides = {"Python": None, "native": {"plant.fmu": str(native)}}
-        runs: dict[str, list] = {"Python": [], "native": []}
-        for k in range(repeat + 1):  # alternating, the first of each a warm-up
-            for label, over in overrides.items():
-                result = run_scenario(sc, overrides=over, plot=False)
+    print()
+    freight_loops(repeat)
+
+
+#: the freight closed loop's configurations: (label, instances run native)
+FREIGHT_LOOPS = (("Python plant + Python controller", ()),
+                 ("native plant + Python controller", ("plant",)),
+                 ("native plant + native controller", ("plant", "controller")))
+
+
+def freight_loops(repeat: int, scenarios: list[str] | None = None) -> dict:
+    """Every shipped seed-002 closed loop through the event master in the three
+    configurations of :data:`FREIGHT_LOOPS` (the last where the controller has a native
+    build), alternating, the first round a warm-up; median whole-run wall time, the plant's
+    and the controller's FMU wall time and the rest (master and fmpy calls), and the
+    real-time factors' ratios to the all-Python loop. Returns them by scenario."""
+    print("closed loop, event master, seed 002: whole-run real-time factor (wall), the FMUs' "
+          f"wall time and the rest (master + fmpy), median of {repeat}:")
+    out = {}
+    names = scenarios or sorted(p.stem for p in (ROOT / "scenarios").glob("seed002_*.toml"))
+    for sc in names:
+        scenario = load_scenario(ROOT / "scenarios" / f"{sc}.toml")
+        stop_time = scenario.simulation.stop_time
+        configs = [(label, comps) for label, comps in FREIGHT_LOOPS
+                   if all(scenario.components[c].fmu in NATIVE for c in comps)]
+        runs: dict[str, list] = {label: [] for label, _ in configs}
+        for k in range(repeat + 1):  # alternating, the first round a warm-up
+            for label, comps in configs:
+                result = run_scenario(sc, [f"{c}.build=native" for c in comps], plot=False)
                 if k:
                     runs[label].append(result)
-        res = {label: (statistics.median(r.fmu_wall_time_s["plant"] for r in rs),
-                       statistics.median(r.wall_time_s for r in rs))
-               for label, rs in runs.items()}
-        (pp, pw), (np_, nw) = res["Python"], res["native"]
-        print(f"  {sc:24s} plant {pp:6.3f} -> {np_:6.3f} s ({pp / np_:4.1f}x)   "
-              f"RTF {stop_time / pw:6.0f} -> {stop_time / nw:6.0f} ({pw / nw:4.2f}x; "
-              f"zero-cost plant: {pw / (pw - pp):4.2f}x)")
+        rows = {}
+        for label, rs in runs.items():
+            wall = statistics.median(r.wall_time_s for r in rs)
+            plant = statistics.median(r.fmu_wall_time_s["plant"] for r in rs)
+            ctrl = statistics.median(r.fmu_wall_time_s["controller"] for r in rs)
+            rows[label] = {"rtf": stop_time / wall, "wall_s": wall, "plant_s": plant,
+                           "controller_s": ctrl, "rest_s": wall - plant - ctrl}
+        base = rows[FREIGHT_LOOPS[0][0]]["rtf"]
+        print(f"  {sc}:")
+        for label, row in rows.items():
+            row["ratio"] = row["rtf"] / base
+            print(f"    {label:34s} RTF {row['rtf']:6.0f} ({row['ratio']:4.2f}x)   plant "
+                  f"{row['plant_s']:6.3f} s  controller {row['controller_s']:6.3f} s  rest "
+                  f"{row['rest_s']:6.3f} s")
+        out[sc] = rows
+    return out
 
 
 # plant-only runs of Crh3Train and the Emus: (identifier, scenario giving the parameters,
@@ -315,7 +347,8 @@ def build_all() -> dict:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeat", type=int, default=3)
-    ap.add_argument("--plants", nargs="+", choices=("freight", "brake_delay", "crh3_emu", "build"),
+    ap.add_argument("--plants", nargs="+", choices=("freight", "freight_loops", "brake_delay",
+                                                  "crh3_emu", "build"),
                     default=["freight", "brake_delay", "crh3_emu", "build"])
     args = ap.parse_args()
     if "build" in args.plants:
@@ -325,6 +358,8 @@ def main() -> None:
               f"on {r['cpus']} cores)")
     if "freight" in args.plants:
         bench_freight(args.repeat)
+    if "freight_loops" in args.plants:
+        freight_loops(args.repeat)
     if "brake_delay" in args.plants:
         bench_brake_delay(args.repeat)
     if "crh3_emu" in args.plants:

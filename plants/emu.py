@@ -85,6 +85,12 @@ class EmuParams(Checked):
     coupler_stiffness: float = param(2.0e7, "N/m", "k", min=0.0, per_configuration=True)
     coupler_damping: float = param(5.0e6, "N.s/m", "d", min=0.0, per_configuration=True)
     rotating_mass_factor: float = param(0.0, "1", "gamma: M (1 + gamma) dv/dt", min=0.0)
+    # plant mismatch: the configuration's masses and Davis terms scaled (load, running
+    # resistance); the traction and brake envelopes stay the configuration's
+    mass_factor: float = param(1.0, "1", "multiplies every unit's mass (load)", above=0.0)
+    davis_a_factor: float = param(1.0, "1", "multiplies every unit's Davis a", min=0.0)
+    davis_b_factor: float = param(1.0, "1", "multiplies every unit's Davis b", min=0.0)
+    davis_c_factor: float = param(1.0, "1", "multiplies every unit's Davis c", min=0.0)
     # couplers are solved exactly over a sub-step; resistance varies slowly
     max_step: float = param(0.05, "s", "longest internal integration sub-step", min=1e-6)
     standstill_speed: float = 0.01  # m/s, width of the smooth sign of braking / static resistance
@@ -315,13 +321,13 @@ class Emu(StatefulCore, Declared):
         self.route = route
         n = params.n
         self.n = n
-        self.m = np.array(params.masses)
+        self.m = np.array(params.masses) * params.mass_factor
         self.m_eff = self.m * (1.0 + params.rotating_mass_factor)
         self.lengths = np.array(params.lengths)
         self.offsets = np.concatenate(([0.0], np.cumsum(self.lengths)[:-1]))  # front of unit i
-        self.da = np.array(params.davis_a)
-        self.db = np.array(params.davis_b)
-        self.dc = np.array(params.davis_c)
+        self.da = np.array(params.davis_a) * params.davis_a_factor
+        self.db = np.array(params.davis_b) * params.davis_b_factor
+        self.dc = np.array(params.davis_c) * params.davis_c_factor
         self.ft = np.array(params.max_traction_force)
         self.pt = np.array(params.max_traction_power)
         self.fb = np.array(params.max_brake_force)

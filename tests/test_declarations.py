@@ -167,3 +167,39 @@ def test_catalog_read_from_source_equals_the_imported_wrappers() -> None:
     from cosim.fmu.build import _imported_catalog
 
     assert catalog() == _imported_catalog()
+
+
+def _entry_texts() -> dict[str, str]:
+    """What the paper pages publish from each reproduce entry: title, notes, run names,
+    sources of the paper's figures and claims, figure titles, claim texts."""
+    import tomllib
+
+    from cosim.run.reproduce import REPRODUCE_DIR
+
+    texts: dict[str, str] = {}
+    for path in sorted(REPRODUCE_DIR.glob("*.toml")):
+        data = tomllib.loads(path.read_text())
+        texts[f"{path.name}: title"] = data.get("title", "")
+        texts[f"{path.name}: notes"] = data.get("notes", "")
+        for table in ("runs", "paper", "derived", "rankings", "figures", "claims", "metrics"):
+            for i, row in enumerate(data.get(table, [])):
+                for key in ("name", "source", "title", "paper", "label", "text"):
+                    if isinstance(row.get(key), str):
+                        texts[f"{path.name}: [[{table}]] #{i + 1} {key}"] = row[key]
+    return texts
+
+
+def test_entries_scenarios_and_metrics_say_what_is() -> None:
+    """No history in what the paper pages, scenario descriptions and the metric list publish."""
+    from cosim import papers
+    from cosim.run.scenario import SCENARIO_DIR, load_scenario
+
+    texts = _entry_texts()
+    for path in sorted(SCENARIO_DIR.glob("*.toml")):
+        texts[f"{path.name}: description"] = load_scenario(path.stem).description
+    for name, m in papers.registry().items():
+        texts[f"metric {name}"] = m.description
+        texts |= {f"metric {name}: {key}": text for key, (text, _) in m.outputs.items()}
+    assert len(texts) > 100  # the walk found the entries and scenarios
+    bad = {where: text for where, text in texts.items() if HISTORY.search(text or "")}
+    assert not bad, bad

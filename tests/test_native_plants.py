@@ -210,13 +210,18 @@ def set_core_state(core: Emu, state: dict) -> None:
         setattr(core, name, value)
 
 
-@pytest.mark.parametrize("units", [3, 8])
+MISMATCH = {"mass_factor": 1.07, "davis_a_factor": 0.8, "davis_b_factor": 1.25,
+            "davis_c_factor": 0.9}  # a plant-mismatch sample: scaled masses and Davis terms
+
+
+@pytest.mark.parametrize(("units", "mismatch"), [(3, {}), (8, {}), (3, MISMATCH)])
 def test_emu_outputs_and_disturbance_equal_the_core_at_the_same_state(natives, seed001_inputs,
-                                                                        units):
+                                                                        units, mismatch):
     """The core put in the native model's state (from its serialized FMU state) computes the
     native outputs bit for bit: envelopes, neutral sections, route forces, coupler forces,
-    powers, and the accelerations with numpy's seeded disturbance draw of each interval."""
-    params = emu_case(units)
+    powers, and the accelerations with numpy's seeded disturbance draw of each interval, also
+    with the masses and Davis terms scaled."""
+    params = {**emu_case(units), **mismatch}
     native = Native(natives[f"Emu{units}"], params)
     core = core_of(Emu, params, units=units)
     assert core.kernel  # compared with the compiled kernels (numba), as the Python FMU runs

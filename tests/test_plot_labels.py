@@ -118,6 +118,8 @@ def test_run_figure_reads_as_a_paper_figure(rsmpc_run):
     box_legend = legend.get_window_extent(renderer)
     assert not box_legend.overlaps(inset.get_window_extent(renderer))
     assert not box_legend.overlaps(main.get_window_extent(renderer))  # outside the axes
+    assert not inset.get_tightbbox(renderer).overlaps(main.get_window_extent(renderer))
+    assert not inset.get_tightbbox(renderer).overlaps(fig.axes[1].yaxis.get_tightbbox(renderer))
     labels = [t.get_text() for t in legend.get_texts()]
     assert "speed" in labels and "stop point" in labels
     assert not any(name.startswith(("plant.", "controller.")) for name in labels), labels
@@ -126,6 +128,7 @@ def test_run_figure_reads_as_a_paper_figure(rsmpc_run):
     lines = {line.get_label(): line for ax in fig.axes for line in ax.get_lines()}
     assert lines["speed"].get_drawstyle() == "default"
     assert lines["reference (as held by the controller)"].get_drawstyle() == "steps-post"
+    assert lines["reference curve"].get_drawstyle() == "default"  # the continuous v_ref(s)
     assert lines["brake command u"].get_drawstyle() == "steps-post"
     for ax in (main, twin, inset):
         for axis in (ax.xaxis, ax.yaxis):
@@ -308,4 +311,53 @@ def test_ensemble_figure_draws_held_bands_as_steps(built_fmus):
     renderer = fig.canvas.get_renderer()
     assert not ax.get_legend().get_window_extent(renderer).overlaps(
         ax.get_window_extent(renderer))
+    plt.close(fig)
+
+
+def _title_clear_of_axes(fig) -> None:
+    """The figure's suptitle overlaps no axes (with its title and tick labels)."""
+    fig.canvas.draw()
+    renderer = fig.canvas.get_renderer()
+    title = fig._suptitle.get_window_extent(renderer)
+    for ax in fig.axes:
+        assert not title.overlaps(ax.get_tightbbox(renderer)), ax.get_title()
+
+
+def test_tall_panel_figures_keep_the_title_above_the_first_panel():
+    """Ten panels (a tall figure): the suptitle clears the first panel and its title, in the
+    run figure and in the ensemble figure."""
+    import matplotlib.pyplot as plt
+    import numpy as np
+    import pandas as pd
+
+    from cosim.run.ensemble import ensemble_figure_of
+    from cosim.run.reproduce import figure_of
+
+    t = np.arange(0.0, 100.0, 0.2)
+    frames = {f"run {i}": pd.DataFrame({"time": t, "e": np.sin(t)}) for i in range(10)}
+    spec = {"file": "e.png", "x": "time", "y": ["e"], "kind": "panels", "ylabel": "e (km/h)",
+            "title": "Speed error of each controller (Figs. 9-11, upper plots)"}
+    for fig in (figure_of(spec, frames, {}),
+                ensemble_figure_of(spec, {k: [v, v] for k, v in frames.items()}, {})):
+        _title_clear_of_axes(fig)
+        plt.close(fig)
+
+
+def test_sweep_series_are_named_by_their_labels():
+    """A sweep's legend names each scenario's series by the label given (an entry's
+    ``labels``, else the scenario's description), wrapped; the raw name where none is given."""
+    import matplotlib.pyplot as plt
+    import pandas as pd
+
+    from cosim.run.sweep import draw_sweep
+
+    frame = pd.DataFrame({"scenario": ["a_rmpc"] * 2 + ["a_rsmpc"] * 2, "controller.N": [3, 4] * 2,
+                          "stop_error_m": [0.01, 0.02, 0.03, 0.01],
+                          "command_switches": [10, 9, 8, 7], "controller_executions": [3, 2, 5, 4]})
+    long = "robust self-triggered MPC, the command held for M samples between its events"
+    fig = draw_sweep(frame, ["controller.N"], None, {"a_rsmpc": long})
+    texts = [t.get_text() for t in fig.axes[0].get_legend().get_texts()]
+    assert texts[0] == "a_rmpc"
+    assert texts[1].replace("\n", " ") == long and all(
+        len(line) <= 40 for line in texts[1].splitlines())
     plt.close(fig)

@@ -102,6 +102,9 @@ def test_reproduce_writes_ours_beside_the_paper(built_fmus, tmp_path: Path) -> N
     ('[[figures]]\nfile = "c.png"\nkind = "speed_classes"\ny = ["plant.v"]\nref = "r"\n'
      'classes = [0, 50, 30]\nlimit_kmh = 2.0\nlimit_below_kmh = 30.0\nlimit_fraction = 0.02\n',
      "must be increasing edges"),
+    ('[[sweeps]]\nname = "s"\nscenarios = ["seed000_stop_pid"]\n'
+     'grid = { "controller.kp" = "1,2" }\nlabels = { seed000_stop_pidx = "PID" }\n',
+     "labels name scenarios ['seed000_stop_pidx']"),
 ])
 def test_bad_entries_name_the_file_and_key(tmp_path: Path, patch: str, message: str) -> None:
     path = tmp_path / "bad.toml"
@@ -341,3 +344,31 @@ def test_reproduce_prints_80_columns_and_draws_in_the_chosen_format(built_fmus, 
     assert (tmp_path / "out" / "speed.svg").stat().st_size > 0
     assert not (tmp_path / "out" / "speed.png").exists()
     assert "![speed.svg](speed.svg)" in (tmp_path / "out" / "table.md").read_text()
+
+
+def test_wide_paper_tables_are_split_and_keep_each_metric_together() -> None:
+    """Many metrics: several markdown tables of at most TABLE_COLUMNS columns, each led by the
+    run column; a metric's ours / paper columns in one table; no "paper" column where the paper
+    gives no value for any run."""
+    from types import SimpleNamespace
+
+    from cosim.run.reproduce import TABLE_COLUMNS, table_markdown
+
+    metrics = [{"key": f"m{i}", "label": f"metric {i}"} for i in range(11)]
+    runs = [{"name": "A"}, {"name": "B"}]
+    rows = [{"run": r["name"], "metric": m["key"], "ours": float(i), "within": None,
+             "paper": 2.0 if i % 3 == 0 else None, "paper_range": None, "ours_min": None,
+             "source": "", "repeats": 1} for r in runs for i, m in enumerate(metrics)]
+    text = table_markdown(SimpleNamespace(metrics=metrics, runs=runs), rows)
+    headers = [line for line in text.splitlines() if line.startswith("| run |")]
+    assert len(headers) > 1
+    cells = [h.strip("| ").split(" | ") for h in headers]
+    assert all(len(c) <= TABLE_COLUMNS for c in cells)
+    shown = [c for cs in cells for c in cs if c.startswith("metric")]
+    assert shown == [m["label"] for m in metrics]  # each once, in order
+    for cs in cells:  # a paper column right after each metric the paper gives, only there
+        for i, c in enumerate(cs):
+            if c.startswith("metric "):
+                given = int(c.split()[1]) % 3 == 0
+                assert (i + 1 < len(cs) and cs[i + 1] == "paper") == given
+    assert sum(line.startswith("| B |") for line in text.splitlines()) == len(headers)

@@ -90,3 +90,27 @@ def test_wrong_vertex_count_and_solver_are_rejected():
     lmi = KothareLmi(2, 1, 2, np.eye(2), np.eye(1))
     with pytest.raises(ValueError, match="built for 2"):
         lmi.solve(np.zeros(2), VERTICES)
+
+
+def test_an_event_the_first_solver_leaves_unsolved_is_solved_by_the_fallback(monkeypatch):
+    """Clarabel stopping short of its tolerance ("optimal_inaccurate") hands the event to SCS:
+    the solution is marked as the fallback's and satisfies every LMI to SCS's tolerance;
+    without a fallback the event stays unsolved; a fallback equal to the solver is refused."""
+    with pytest.raises(ValueError, match="fallback"):
+        KothareLmi(2, 1, 1, np.eye(2), np.eye(1), fallback="clarabel")
+    x = np.array([2.0, -15.0])
+    alone = KothareLmi(2, 1, len(VERTICES), np.eye(2), np.eye(1), u_max=[2.0])
+    lmi = KothareLmi(2, 1, len(VERTICES), np.eye(2), np.eye(1), u_max=[2.0], fallback="scs")
+    for problem in (alone, lmi):
+        real = problem._solve_with
+
+        def stalls(solver, real=real):
+            return "optimal_inaccurate" if solver == "clarabel" else real(solver)
+
+        monkeypatch.setattr(problem, "_solve_with", stalls)
+    assert not alone.solve(x, VERTICES).ok
+    sol = lmi.solve(x, VERTICES)
+    assert sol.ok and sol.fallback, sol.status
+    tol = 1e-4  # SCS's eps_abs / eps_rel (KothareLmi.solver_options)
+    for M in lmi.vertex_matrices(sol, VERTICES):
+        assert np.linalg.eigvalsh(M).min() >= -10 * tol * np.abs(M).max()

@@ -89,6 +89,33 @@ def test_each_paper_metric_declares_the_keys_it_reads():
         assert read - set(SUMMARY_KEYS) <= declared, name
 
 
+def test_paper_metrics_declare_their_entries_and_the_docs_list_them():
+    """Every registered metric declares what it measures and each summary.json entry it adds
+    (description, unit); the generated list in docs/scenarios.md names each entry with its
+    unit; an entry a metric returns without declaring it is an error naming the metric."""
+    from dataclasses import replace
+
+    from cosim import papers
+
+    text = papers.reference_markdown()
+    for name, m in papers.registry().items():
+        assert m.description and m.outputs, name
+        assert f"**`{name}`**" in text
+        for key, (meaning, unit) in m.outputs.items():
+            assert meaning and unit, (name, key)
+            assert f"| `{key}` | {meaning} | {unit} |" in text
+    known = papers.lookup("distance_short")
+    stub = replace(known, function=lambda run: {"distance_short_m": 1.0, "undeclared_m": 2.0})
+    papers._REGISTRY["distance_short"] = stub
+    try:
+        with pytest.raises(ValueError, match=r"'distance_short'.*\['undeclared_m'\]"):
+            papers.compute(["distance_short"], papers.RunRecord(frame=None, summary={}))
+    finally:
+        papers._REGISTRY["distance_short"] = known
+    with pytest.raises(ValueError, match="output 'x_m'"):
+        papers.metric("bad", description="d", outputs={"x_m": ("x", "")})
+
+
 @pytest.mark.parametrize("line,says", [
     ('metrics = ["ctcs4"]', "[summary] metrics: no metric 'ctcs4' (did you mean 'ctcs3'?)"),
     ("ctcs3 = true", "[summary] ctcs3: a paper metric; name it in [summary] metrics = "
@@ -174,6 +201,8 @@ def test_summary_reads_a_parameter_by_reference(tmp_path):
     sc = load_scenario("seed000_stop_pid", ["controller.stop_point=450"])
     assert sc.summary["stop_point"] == 450.0
     assert load_scenario("seed000_stop_pid").summary["stop_point"] == 400.0
+    decel = load_scenario("seed000_stop_pid", ["controller.ref_decel=0.6"]).summary
+    assert decel["reference_decel"] == 0.6  # the stopping curve the metrics use, the controller's
     text = (load_scenario("seed000_stop_pid").path.read_text()
             .replace('stop_point = "controller.stop_point"', 'stop_point = "controller.nope"'))
     bad = tmp_path / "bad.toml"

@@ -46,8 +46,9 @@ class LmiSolution:
     Qv: np.ndarray
     Y: np.ndarray
     status: str
-    solve_time: float  # wall time of cvxpy's solve call (s)
-    cpu_time: float = 0.0  # CPU time of this process during that call (s; load-independent)
+    solve_time: float  # wall time of cvxpy's solve call(s) (s)
+    cpu_time: float = 0.0  # CPU time of this process during those calls (s; load-independent)
+    fallback: bool = False  # solved by the fallback solver after the first did not solve it
 
     @property
     def ok(self) -> bool:
@@ -69,9 +70,17 @@ class KothareLmi:
 
     def __init__(self, n: int, m: int, n_vertices: int, Q1: np.ndarray, R: np.ndarray,
                  u_max: Sequence[float] | None = None, C: np.ndarray | None = None,
-                 y_max: Sequence[float] | None = None, solver: str = "clarabel") -> None:
+                 y_max: Sequence[float] | None = None, solver: str = "clarabel",
+                 fallback: str | None = None) -> None:
+        """``fallback``: a solver of :data:`LMI_SOLVERS` that re-solves an event ``solver``
+        leaves unsolved (an interior-point method may stop short of its tolerance, status
+        "optimal_inaccurate", on a problem a first-order method solves), ``None``: none."""
         if solver not in LMI_SOLVERS:
             raise ValueError(f"solver = {solver!r} must be one of {LMI_SOLVERS}")
+        if fallback is not None and (fallback not in LMI_SOLVERS or fallback == solver):
+            raise ValueError(f"fallback = {fallback!r} must be None or one of {LMI_SOLVERS} "
+                             f"other than solver = {solver!r}")
+        self.fallback = fallback
         if n_vertices < 1:
             raise ValueError(f"n_vertices = {n_vertices} must be >= 1")
         self.n, self.m, self.L, self.solver = n, m, n_vertices, solver
@@ -111,11 +120,12 @@ class KothareLmi:
         self.Q1, self.R = np.asarray(Q1, float), np.asarray(R, float)
         self.solves = 0
 
-    def solver_options(self) -> dict:
-        """The solver and its tolerances: Clarabel's defaults (gap and feasibility 1e-8); SCS
-        (first order) at 1e-4, its default accuracy (at 1e-6 it does not converge in 20000
-        iterations on these problems; at 1e-4 it takes thousands, ~40x Clarabel's time)."""
-        if self.solver == "clarabel":
+    def solver_options(self, solver: str | None = None) -> dict:
+        """The solver (default: ``solver``) and its tolerances: Clarabel's defaults (gap and
+        feasibility 1e-8); SCS (first order) at 1e-4, its default accuracy (at 1e-6 it does
+        not converge in 20000 iterations on these problems; at 1e-4 it takes thousands, ~40x
+        Clarabel's time)."""
+        if (solver or self.solver) == "clarabel":
             return {"solver": cp.CLARABEL}
         return {"solver": cp.SCS, "eps_abs": 1e-4, "eps_rel": 1e-4, "max_iters": 100000}
 
@@ -123,6 +133,13 @@ class KothareLmi:
     def tolerance(self) -> float:
         """Relative accuracy the solver is asked for (gap / feasibility)."""
         return 1e-8 if self.solver == "clarabel" else 1e-4
+
+    def _solve_with(self, solver: str) -> str:
+        try:
+            self.problem.solve(**self.solver_options(solver))
+            return str(self.problem.status)
+        except cp.error.SolverError as exc:
+            return f"solver error: {exc}"
 
     def solve(self, x: np.ndarray, vertices: Sequence[tuple[np.ndarray, np.ndarray]]
               ) -> LmiSolution:
@@ -134,21 +151,20 @@ class KothareLmi:
             pa.value = np.asarray(A, float).reshape(self.n, self.n)
             pb.value = np.asarray(B, float).reshape(self.n, self.m)
         t0, c0 = time.perf_counter(), time.process_time()
-        try:
-            self.problem.solve(**self.solver_options())
-            status = str(self.problem.status)
-        except cp.error.SolverError as exc:
-            status = f"solver error: {exc}"
+        status = self._solve_with(self.solver)
+        fallback = False
+        if (status not in _SOLVED or self.Qv.value is None) and self.fallback is not None:
+            status, fallback = self._solve_with(self.fallback), True
         dt, cpu = time.perf_counter() - t0, time.process_time() - c0
         self.solves += 1
         if status not in _SOLVED or self.Qv.value is None:
             nan = np.full((self.m, self.n), math.nan)
             return LmiSolution(nan, math.nan, np.full((self.n, self.n), math.nan), nan,
-                               status, dt, cpu)
+                               status, dt, cpu, fallback)
         Qv = np.asarray(self.Qv.value, float)
         Y = np.asarray(self.Y.value, float).reshape(self.m, self.n)
         F = np.linalg.solve(Qv.T, Y.T).T  # Y Qv^-1
-        return LmiSolution(F, float(self.gamma.value), Qv, Y, status, dt, cpu)
+        return LmiSolution(F, float(self.gamma.value), Qv, Y, status, dt, cpu, fallback)
 
     def vertex_matrices(self, sol: LmiSolution,
                         vertices: Sequence[tuple[np.ndarray, np.ndarray]]

@@ -357,12 +357,11 @@ class HybridMiqp:
         if np.any(lo > hi + 1e-9):
             return self._failed("empty constraint set", t0, free)
         hi = np.maximum(hi, lo)
-        # a fresh workspace per solve (0.5 ms): DAQP's branch and bound leaves state behind
-        # that changed a later answer (an "infeasible" for a problem solved afresh, seen at
-        # t = 611 s of the seed 004 run); fresh, the result depends on the data alone, which
-        # the FMU state (save/restore) needs. A failed solve (cycling, or a feasible problem
-        # declared infeasible: 2 of 800 events in Case 2, near-degenerate big-M rows) is
-        # retried with more tolerant pivoting / cycle detection
+        # a fresh workspace per solve: DAQP's branch and bound leaves state behind that can
+        # change a later answer; fresh, the result depends on the data alone, which the FMU
+        # state (save/restore) needs. A failed solve (cycling, or a feasible problem declared
+        # infeasible on near-degenerate big-M rows) is retried with more tolerant pivoting /
+        # cycle detection
         nodes, status = 0, ""
         for attempt, settings in enumerate(_RETRY_SETTINGS):
             solver = self._setup()

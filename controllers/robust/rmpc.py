@@ -23,8 +23,9 @@ inputs, outputs and profile parameters as the GPC baseline); its law, per sample
    would hold no gain (mass) uncertainty. With ``"nominal"`` and both uncertainties 0 the
    problem has the active model as its one vertex (the nominal-model LMI controller);
 5. applies ``u = u_ff + F x`` (``F = Y Qv^-1``) clipped to the tracker's input box (envelope
-   and comfort bound). An LMI problem the solver does not solve keeps the previous gain
-   (counted in ``qp_infeasible``).
+   and comfort bound). An LMI problem the solver (Clarabel) leaves unsolved is re-solved by
+   the fallback solver (SCS, counted in ``lmi_fallbacks``); one neither solves keeps the
+   previous gain (counted in ``qp_infeasible``).
 
 Units of the law: ``y`` km/h, ``u`` daN/kN (per cent of the train's weight, the unit that
 reconciles the paper's a_i and b = 0.318, see :mod:`controllers.robust.multimodel`); the tracker
@@ -96,6 +97,10 @@ class RmpcParams(Checked):
                              "it in the LMI problem (conditioning)", min=1e-6)
     solver: str = param("clarabel", description=f"SDP solver, one of {LMI_SOLVERS}",
                         choices=LMI_SOLVERS)
+    fallback_solver: str = param("scs", description="SDP solver that re-solves an event the "
+                                 "first leaves unsolved (Clarabel may stop short of its "
+                                 'tolerance, "optimal_inaccurate"), "none": no second try',
+                                 choices=("none", *LMI_SOLVERS))
 
 
 def models_dir_in(data_dir: Path) -> Path:
@@ -124,7 +129,7 @@ class RobustMpcLaw(StatefulCore):
 
     state_fields: ClassVar[tuple[str, ...]] = (
         "switch", "xi_hat", "y_prev", "u_prev", "gain", "active", "gamma", "lmi_solves",
-        "lmi_failures", "last_status")
+        "lmi_failures", "lmi_fallbacks", "last_status")
 
     def __init__(self, params: RmpcParams, models: ArxSet, sample_time: float = 1.0) -> None:
         params.check()
@@ -135,7 +140,9 @@ class RobustMpcLaw(StatefulCore):
         self.lmi = KothareLmi(2, 1, 1 if self.nominal else 4,
                               np.diag([params.q_speed, params.q_position]),
                               np.array([[params.r_input]]), u_max=[params.u_max],
-                              solver=params.solver)
+                              solver=params.solver,
+                              fallback=None if params.fallback_solver == "none"
+                              else params.fallback_solver)
         self.switch = SwitchingIndex(models, params.switch_alpha, params.switch_beta,
                                      params.switch_rho, int(params.switch_horizon))
         self.xi_hat = 0.0
@@ -149,6 +156,7 @@ class RobustMpcLaw(StatefulCore):
         # reported once at fmi2Terminate (cosim.fmu.diagnostics)
         self.timing = SolveTimes()
         self.lmi_failures = 0
+        self.lmi_fallbacks = 0
         self.last_status = ""
 
     def vertex_indices(self, s: int) -> list[int]:
@@ -218,6 +226,7 @@ class RobustMpcLaw(StatefulCore):
         self.lmi_solves += 1
         self.timing.add(sol.solve_time, sol.cpu_time)
         self.last_status = sol.status
+        self.lmi_fallbacks += sol.fallback
         if sol.ok:
             self.gain = [float(sol.F[0, 0]), float(sol.F[0, 1])]
             self.gamma = sol.gamma
@@ -236,6 +245,7 @@ class RobustMpcLaw(StatefulCore):
             "active_model": self.active + 1,
             "lmi_gamma": self.gamma,
             "qp_infeasible": self.lmi_failures,
+            "lmi_fallbacks": self.lmi_fallbacks,
             "qp_solves": self.lmi_solves,
             "disturbance_estimate": self.xi_hat,
         }
@@ -268,6 +278,8 @@ class Crh3LmiMpc(EcoTracker):
         Var.output("qp_solves", "1", "LMI (SDP) problems solved so far", start=0),
         Var.output("qp_infeasible", "1", "events whose LMI problem has no solution (previous "
                    "gain kept)", start=0),
+        Var.output("lmi_fallbacks", "1", "events whose LMI problem the first solver leaves "
+                   "unsolved, handed to the fallback solver", start=0),
     )
 
     @classmethod

@@ -91,6 +91,8 @@ PLANT_BACKEND = ("ato_plant_backend.h", "ato_plant_backend.c", "ato_math.h")
 PLANT_SHARED = (*PLANT_BACKEND, "ato_plant.h", "ato_plant.c")
 # numpy's default_rng(seed words).standard_normal in C (seeded disturbances)
 NUMPY_RANDOM = ("ato_numpy_random.h", "ato_numpy_random.c")
+# the freight controllers' shared base: observer, blending, brake-pipe model (freight_tracker.c)
+FREIGHT_TRACKER = ("freight_tracker.c", "freight_tracker.h")
 
 NATIVE: dict[str, NativeSpec] = {
     "BrakeDelayTrain": NativeSpec("BrakeDelayTrain", "brake_delay.c", shared=PLANT_SHARED),
@@ -101,6 +103,16 @@ NATIVE: dict[str, NativeSpec] = {
                                data=("references",)),
     "Empc3": NativeSpec("Empc3", "explicit_mpc.c", (*CONTROLLER, *PROFILE),
                         data=("references", "empc_regions")),
+    **{identifier: NativeSpec(identifier, source, (*CONTROLLER, *PROFILE, *FREIGHT_TRACKER),
+                              data=("references",), generated=generated)
+       for identifier, source, generated in (
+           ("FreightPid", "freight_pid.c", ("ato_freight_tracker.h",)),
+           ("FreightSmc", "freight_smc.c", ("ato_freight_tracker.h",)),
+           ("FreightFpid", "freight_fpid.c", ("ato_freight_tracker.h", "ato_fuzzy_rules.h")))},
+    "FreightPreview": NativeSpec("FreightPreview", "freight_preview.c",
+                                 (*CONTROLLER, *PROFILE, *FREIGHT_TRACKER),
+                                 data=("references", "preview_gains"),
+                                 generated=("ato_freight_tracker.h",)),
     "FreightTrain": NativeSpec("FreightTrain", "freight.c", ("freight_kernel.c",),
                                ("speed_limit", "additional"), shared=PLANT_BACKEND),
     "Crh3Train": NativeSpec("Crh3Train", "crh3.c", shared=PLANT_SHARED),
@@ -330,7 +342,30 @@ def empc_tables() -> dict[str, str]:
 
 
 # generated resources a native model may ask for (NativeSpec.data)
-DATA = {"references": reference_tables, "empc_regions": empc_tables}
+PREVIEW_DESIGN = ("sample_time", "q_e", "q_dz", "h", "preview_steps", "disturbance_steps",
+                  "traction_delay", "traction_time_constant")
+
+
+def preview_tables() -> dict[str, str]:
+    """``preview/default.gains``: the optimal preview servo's gains (eqs. 33-36,
+    :func:`controllers.preview.design.preview_gains` on the design model of
+    :meth:`controllers.preview.preview.FreightPreview.design_model`) computed by the Python
+    core for the declared defaults of the design parameters: one ``key count values...`` line
+    each for the design settings (checked by the native FMU against its parameters) and
+    ``F0`` (1 + n), ``FR`` (M_R) and ``Fd`` (M_d + 1); %.17g via repr: exact."""
+    preview = importlib.import_module("controllers.preview.preview")  # by name: layering
+    design = importlib.import_module("controllers.preview.design")
+    p = preview.PreviewParams()
+    model = design.lag_delay_model(p.sample_time, p.traction_delay, p.traction_time_constant)
+    g = design.preview_gains(model, p.q_e, p.q_dz, p.h, p.preview_steps, p.disturbance_steps)
+    lines = [f"# optimal preview gains for the default design of {preview.__name__}",
+             *(_numbers(key, [float(getattr(p, key))]) for key in PREVIEW_DESIGN),
+             _numbers("F0", g.F0[0]), _numbers("FR", g.FR), _numbers("Fd", g.Fd)]
+    return {"preview/default.gains": "\n".join(lines) + "\n"}
+
+
+DATA = {"references": reference_tables, "empc_regions": empc_tables,
+        "preview_gains": preview_tables}
 
 
 # the step profiles of a route a native plant reads (plants.route.Route fields); sums such as
@@ -487,8 +522,108 @@ def numpy_normal_header() -> str:
     ]) + "\n"
 
 
+def _c_array(name: str, values) -> str:
+    flat = [float(x) for x in np.asarray(values, dtype=float).ravel().tolist()]
+    return (f"static const double {name}[{max(len(flat), 1)}] = {{"
+            + ", ".join(_c_double(x) for x in flat or [0.0]) + "};")
+
+
+def freight_tracker_header() -> str:
+    """``ato_freight_tracker.h``: the data of the freight controllers' shared base
+    (:class:`controllers.common.freight_blending.FreightTracker`) that the Python core derives
+    from the nominal train (``BlendingParams.train``, not an FMU parameter) at construction,
+    computed here by the core itself: the sums ``M (1 + gamma)``, weight, brake scale and the
+    Davis terms (numpy's pairwise sums), each vehicle's brake scale and application / release
+    delays, the brake-pipe and traction data, per bundled route with a reference profile the
+    knots and values of the length-mean additional resistance and the reference's name, and
+    the observer's design model (:meth:`FreightTracker.design_model`) at the declared default
+    sample time (a native FMU refuses another one)."""
+    blending = importlib.import_module("controllers.common.freight_blending")  # layering
+    route_mod = importlib.import_module("plants.route")
+    design = importlib.import_module("controllers.preview.design")
+    kernels = importlib.import_module("plants.kernels")
+    params = blending.BlendingParams()
+    tp = params.train
+    lines = ["/* generated by cosim/fmu/native_build.py from controllers.common.freight_blending"
+             " (the nominal train of BlendingParams); do not edit */",
+             "#ifndef ATO_FREIGHT_TRACKER_H", "#define ATO_FREIGHT_TRACKER_H"]
+    routes = []
+    model = None
+    for toml in sorted(route_mod.ROUTES_DIR.glob("*.toml")):
+        try:
+            route = route_mod.load_route(toml.stem)
+        except ValueError:  # a reference-profile TOML beside the routes
+            continue
+        if route.reference is None or route.reference.kind != "distance":
+            continue
+        b = blending.FreightBlending(params, route.reference, route)
+        model = b.model
+        try:
+            import tomllib
+        except ModuleNotFoundError:  # Python 3.10
+            import tomli as tomllib  # type: ignore[no-redef]
+        reference = Path(str(tomllib.loads(toml.read_text())["reference"])).stem
+        routes.append((toml.stem, b, reference))
+    if model is None:
+        raise RuntimeError("no bundled route with a reference profile")
+    b = routes[0][1]
+    n = model.m_eff.size
+    scalars = {
+        "N_VEHICLES": None, "M_EFF": b.m_eff, "WEIGHT": b.weight, "BRAKE_SCALE_SUM":
+        b.brake_scale, "RES_A": b._res_a, "RES_B": b._res_b, "RES_C": b._res_c,
+        "KMH": kernels.KMH, "MAX_TRACTION_FORCE": tp.max_traction_force,
+        "MAX_TRACTION_POWER": tp.max_traction_power, "MAX_ED_FORCE": tp.max_ed_force,
+        "MAX_ED_POWER": tp.max_ed_power, "ED_FADE_SPEED": tp.ed_fade_speed,
+        "TRACTION_DELAY": tp.traction_delay, "TRACTION_TIME_CONSTANT": tp.traction_time_constant,
+        "MAX_CYLINDER_PRESSURE": tp.max_cylinder_pressure, "FILL_TIME": tp.brake_fill_time,
+        "FILL_EXPONENT": tp.brake_fill_exponent, "RELEASE_TIME": tp.brake_release_time,
+        "RELEASE_EXPONENT": tp.brake_release_exponent,
+        "FULL_SERVICE_REDUCTION": tp.full_service_reduction, "MIN_REDUCTION": tp.min_reduction,
+        "STICTION_SPEED": tp.stiction_speed, "RELEASED_PA": blending.RELEASED_PA}
+    lines.append(f"#define FT_N_VEHICLES {n}")
+    lines += [f"#define FT_{k} {_c_double(float(v))}" for k, v in scalars.items()
+              if v is not None]
+    lines += [_c_array("FT_BRAKE_SCALE", model.brake_scale),
+              _c_array("FT_APPLY_DELAY", model.apply_delay),
+              _c_array("FT_RELEASE_DELAY", model.release_delay)]
+    # the observer's design model at the default sample time of the laws (0.2 s)
+    T = 0.2
+    dm = design.lag_delay_model(T, tp.traction_delay, tp.traction_time_constant)
+    lines += [f"#define FT_DESIGN_SAMPLE_TIME {_c_double(T)}", f"#define FT_NZ {dm.n}",
+              _c_array("FT_A", dm.A), _c_array("FT_B", dm.B[:, 0]), _c_array("FT_E", dm.E[:, 0])]
+    rows = []
+    for k, (name, rb, reference) in enumerate(routes):
+        lines += [_c_array(f"FT_KNOTS_{k}", rb._add_knots),
+                  _c_array(f"FT_VALUES_{k}", rb._add_values)]
+        rows.append(f"    {{{_c_string(name)}, {_c_string(reference)}, "
+                    f"{rb._add_knots.size}, FT_KNOTS_{k}, FT_VALUES_{k}}},")
+    lines += ["typedef struct { const char* route; const char* reference; int n;"
+              " const double* knots; const double* values; } ft_route;",
+              f"#define FT_N_ROUTES {len(rows)}",
+              "static const ft_route FT_ROUTES[FT_N_ROUTES] = {", *rows, "};", "#endif"]
+    return "\n".join(lines) + "\n"
+
+
+def fuzzy_rules_header() -> str:
+    """``ato_fuzzy_rules.h``: the fuzzy PID's rule surfaces (``controllers.fuzzy.fuzzy_pid.
+    RuleSurface`` of ``KP_RULES`` and ``KI_RULES``: the Mamdani inference of scikit-fuzzy on
+    the node grid) tabulated by the core at the declared default ``fuzzy_nodes``, and the grid
+    step (a native FMU refuses another node count)."""
+    fuzzy = importlib.import_module("controllers.fuzzy.fuzzy_pid")  # by name: layering
+    nodes = int(fuzzy.FuzzyPidParams().fuzzy_nodes)
+    kp = fuzzy.RuleSurface(fuzzy.KP_RULES, nodes)
+    ki = fuzzy.RuleSurface(fuzzy.KI_RULES, nodes)
+    return "\n".join([
+        "/* generated by cosim/fmu/native_build.py from controllers.fuzzy.fuzzy_pid; do not"
+        " edit */", "#ifndef ATO_FUZZY_RULES_H", "#define ATO_FUZZY_RULES_H",
+        f"#define FZ_NODES {nodes}", f"#define FZ_STEP {_c_double(float(kp.step))}",
+        _c_array("FZ_KP", kp.table), _c_array("FZ_KI", ki.table), "#endif"]) + "\n"
+
+
 # headers some native models include, generated at build time (NativeSpec.generated)
-GENERATED = {"ato_numpy_normal.h": numpy_normal_header}
+GENERATED = {"ato_numpy_normal.h": numpy_normal_header,
+             "ato_freight_tracker.h": freight_tracker_header,
+             "ato_fuzzy_rules.h": fuzzy_rules_header}
 
 
 def _compiler(name: str) -> str:

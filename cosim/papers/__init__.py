@@ -7,14 +7,18 @@ and so on), with the ``[summary]`` keys it reads::
 
     from cosim.papers import RunRecord, metric
 
-    @metric("unit_indices", keys=("unit_speeds", "ma_sample_time"))
+    @metric("unit_indices", keys=("unit_speeds", "ma_sample_time"),
+            description="Table 2's indices over the power units",
+            outputs={"unit_mse_kmh2": ("speed MSE of the units, eq. 87", "(km/h)^2")})
     def unit_indices(run: RunRecord) -> dict[str, Any]:
         cols = run.columns("unit_speeds")
         ...
         return {"unit_mse_kmh2": ...}
 
 A metric function takes the run's :class:`RunRecord` and returns the entries it adds to
-``summary.json`` (an empty dict when the recording lacks what it needs). Every module of this
+``summary.json`` (an empty dict when the recording lacks what it needs), each one declared in
+``outputs`` with its description and unit (a key it does not declare is an error; the list in
+docs/scenarios.md is generated from these declarations by ``cosim docs``). Every module of this
 package is imported when the registry is first consulted, so a new module or function needs no
 other registration. A key a metric declares is a valid ``[summary]`` key only in a scenario that
 names the metric.
@@ -72,29 +76,43 @@ MetricFunction = Callable[[RunRecord], dict[str, Any]]
 
 @dataclass(frozen=True)
 class Metric:
-    """A registered metric: its name, the ``[summary]`` keys it reads, its function and the
-    module (paper) that defines it."""
+    """A registered metric: its name, the ``[summary]`` keys it reads, its function, the
+    module (paper) that defines it, what it measures and the ``summary.json`` entries it adds
+    (key -> (description, unit))."""
 
     name: str
     keys: tuple[str, ...]
     function: MetricFunction
     module: str
+    description: str
+    outputs: Mapping[str, tuple[str, str]]
 
 
 _REGISTRY: dict[str, Metric] = {}
 _loaded: list[bool] = []
 
 
-def metric(name: str, keys: tuple[str, ...] = ()) -> Callable[[MetricFunction], MetricFunction]:
+def metric(name: str, keys: tuple[str, ...] = (), *, description: str,
+           outputs: Mapping[str, tuple[str, str]]
+           ) -> Callable[[MetricFunction], MetricFunction]:
     """Register the decorated function as the metric ``name`` reading the ``[summary]``
-    ``keys``. A name is registered once (a second registration is an error)."""
+    ``keys``, measuring ``description`` and adding the entries ``outputs`` (key ->
+    (description, unit); unit ``"1"`` for a count or ratio, ``"-"`` for a yes/no). A name is
+    registered once (a second registration is an error)."""
+    if not description or not outputs:
+        raise ValueError(f"metric {name!r}: a description and its outputs are declared")
+    for key, declared in outputs.items():
+        if len(declared) != 2 or not all(declared):
+            raise ValueError(f"metric {name!r}: output {key!r} = {declared!r} must be "
+                             "(description, unit)")
 
     def register(function: MetricFunction) -> MetricFunction:
         known = _REGISTRY.get(name)
         if known is not None and known.function is not function:
             raise ValueError(f"metric {name!r} registered twice ({known.module} and "
                              f"{function.__module__})")
-        _REGISTRY[name] = Metric(name, tuple(keys), function, function.__module__)
+        _REGISTRY[name] = Metric(name, tuple(keys), function, function.__module__,
+                                 description, dict(outputs))
         return function
 
     return register
@@ -127,8 +145,29 @@ def declared_keys() -> dict[str, list[str]]:
 
 
 def compute(names: list[str], run: RunRecord) -> dict[str, Any]:
-    """The entries the metrics ``names`` add, in that order."""
+    """The entries the metrics ``names`` add, in that order; ``ValueError`` for an entry a
+    metric does not declare in its ``outputs``."""
     out: dict[str, Any] = {}
     for name in names:
-        out.update(lookup(name).function(run))
+        found = lookup(name)
+        added = found.function(run)
+        undeclared = sorted(set(added) - set(found.outputs))
+        if undeclared:
+            raise ValueError(f"metric {name!r} ({found.module}) returned {undeclared}, which "
+                             f"its outputs do not declare ({sorted(found.outputs)})")
+        out.update(added)
     return out
+
+
+def reference_markdown() -> str:
+    """The registered metrics as markdown (for docs/scenarios.md, ``cosim docs``): per metric
+    its name, module, the ``[summary]`` keys it reads, what it measures, and a table of the
+    entries it adds with their descriptions and units."""
+    lines: list[str] = []
+    for m in sorted(registry().values(), key=lambda m: (m.module, m.name)):
+        keys = ", ".join(f"`{k}`" for k in m.keys) or "no [summary] key"
+        lines += ["", f"**`{m.name}`** (`{m.module.replace('.', '/')}.py`; reads {keys}): "
+                  f"{m.description}.", "", "| entry | meaning | unit |", "| --- | --- | --- |"]
+        lines += ["| " + " | ".join((f"`{key}`", text.replace("|", "\\|"), unit)) + " |"
+                  for key, (text, unit) in m.outputs.items()]
+    return "\n".join(lines) + "\n"

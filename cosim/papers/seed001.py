@@ -46,7 +46,9 @@ def ctcs3_speed_error_ok(v_ref_kmh: np.ndarray, error_kmh: np.ndarray) -> bool:
     return bool(np.all(np.abs(error_kmh) <= ctcs3_allowance_kmh(v_ref_kmh) + 1e-12))
 
 
-@metric("ctcs3")
+@metric("ctcs3", description="the CTCS-3 speed-error allowance kept while the reference moves",
+        outputs={"ctcs3_speed_error_ok": ("the speed error within the CTCS-3 allowance at "
+                                          "every moving sample", "-")})
 def ctcs3(run: RunRecord) -> dict[str, Any]:
     """``ctcs3_speed_error_ok``: the speed error keeps the CTCS-3 allowance at every recorded
     sample while the reference is moving (speed tracking only: it means nothing for a stopping
@@ -84,7 +86,17 @@ def unit_indices(t: np.ndarray, speeds: np.ndarray, ref: np.ndarray,
     }
 
 
-@metric("unit_indices", keys=("unit_speeds", "ma_sample_time"))
+@metric("unit_indices", keys=("unit_speeds", "ma_sample_time"),
+        description="Table 2's tracking indices over the power units, errors against the "
+                    "reference speed",
+        outputs={"unit_mse_kmh2": ("speed MSE over units and samples, eq. 87", "(km/h)^2"),
+                 "unit_iae_kmh_s": ("integral of the absolute speed error, mean over the "
+                                    "units, eq. 88", "km/h s"),
+                 "unit_ma_mps_per_sample": ("largest speed change of a unit over one sample "
+                                            "of ma_sample_time, eq. 89", "m/s per sample"),
+                 "ma_sample_time_s": ("the sample of eq. 89", "s"),
+                 "unit_mse_mps2": ("eq. 87 in SI units", "(m/s)^2"),
+                 "unit_iae_m": ("eq. 88 in SI units", "m")})
 def unit_indices_metric(run: RunRecord) -> dict[str, Any]:
     """:func:`unit_indices` of the ``unit_speeds`` columns (list or ``"plant.v[*]"``, m/s)
     against the reference speed, at ``ma_sample_time`` (s, default 1.0), and
@@ -120,7 +132,13 @@ def comfort(t: np.ndarray, accels: np.ndarray, limit: float) -> dict[str, float 
             "comfort_limit_mps2": float(limit)}
 
 
-@metric("comfort", keys=("unit_accelerations", "comfort_limit"))
+@metric("comfort", keys=("unit_accelerations", "comfort_limit"),
+        description="the units' accelerations against the comfort limit (default 1 m/s^2)",
+        outputs={"unit_max_abs_accel_mps2": ("largest absolute acceleration of any unit",
+                                             "m/s^2"),
+                 "comfort_exceeded": ("some unit above the limit at some sample", "-"),
+                 "comfort_exceedance_s": ("time with some unit above the limit", "s"),
+                 "comfort_limit_mps2": ("the limit", "m/s^2")})
 def comfort_metric(run: RunRecord) -> dict[str, Any]:
     """:func:`comfort` of the ``unit_accelerations`` columns (list or ``"plant.a[*]"``, m/s2)
     against ``comfort_limit`` (m/s2, default 1)."""

@@ -21,7 +21,18 @@ def _kept(run: RunRecord) -> np.ndarray:
     return keep
 
 
-@metric("speed_modes", keys=("reference_accel", "final_stop_window"))
+@metric("speed_modes", keys=("reference_accel", "final_stop_window"),
+        description="the speed error of the moving samples split by the sign of the reference "
+                    "acceleration, the last final_stop_window m before the stop left out",
+        outputs={"max_abs_speed_error_traction_kmh": ("max absolute speed error, reference "
+                                                      "accelerating", "km/h"),
+                 "max_abs_speed_error_cruise_kmh": ("max absolute speed error, reference "
+                                                    "constant", "km/h"),
+                 "max_abs_speed_error_braking_kmh": ("max absolute speed error, reference "
+                                                     "decelerating", "km/h"),
+                 "max_abs_speed_error_outside_stop_kmh": ("max absolute speed error over "
+                                                          "the kept samples", "km/h"),
+                 "speed_rmse_kmh": ("RMS speed error over the kept samples", "km/h")})
 def speed_modes(run: RunRecord) -> dict[str, Any]:
     """The samples split by the sign of the ``reference_accel`` column (m/s^2) into traction
     (> 0), cruise (0) and braking (< 0): ``max_abs_speed_error_{traction,cruise,braking}_kmh``;
@@ -44,7 +55,12 @@ def speed_modes(run: RunRecord) -> dict[str, Any]:
     return out
 
 
-@metric("train_mean", keys=("vehicle_speeds", "final_stop_window"))
+@metric("train_mean", keys=("vehicle_speeds", "final_stop_window"),
+        description="the train-mean speed (plain mean of the vehicle speeds) against the "
+                    "reference, over the samples speed_modes keeps",
+        outputs={"train_mean_speed_rmse_kmh": ("RMS error of the train-mean speed", "km/h"),
+                 "max_abs_train_mean_speed_error_kmh": ("max absolute error of the train-mean "
+                                                        "speed", "km/h")})
 def train_mean(run: RunRecord) -> dict[str, Any]:
     """The train-mean speed (plain mean of the ``vehicle_speeds`` columns, m/s) against the
     reference: ``train_mean_speed_rmse_kmh`` and ``max_abs_train_mean_speed_error_kmh`` over

@@ -12,7 +12,13 @@ from cosim.papers import RunRecord, metric
 PHASES = ((1, "accelerate"), (2, "run"), (3, "brake"))
 
 
-@metric("energy", keys=("energy_traction", "energy_regen", "energy_aux"))
+@metric("energy", keys=("energy_traction", "energy_regen", "energy_aux"),
+        description="eq. 9's energies from the recorded cumulative ones (J), from the start up "
+                    "to the arrival (the first sample of the final standstill)",
+        outputs={"energy_traction_mj": ("traction energy, int F v dt / eta_M", "MJ"),
+                 "energy_regen_mj": ("regenerated energy, eta_b int B v dt", "MJ"),
+                 "energy_aux_mj": ("auxiliary energy, e0 t", "MJ"),
+                 "energy_net_mj": ("traction - regenerated + auxiliary", "MJ")})
 def energy(run: RunRecord) -> dict[str, Any]:
     """From the recorded cumulative energies (J; eq. 9: traction / eta_M, regenerated
     eta_b int(B v dt), auxiliary e0 t): ``energy_traction_mj``, ``energy_regen_mj``,
@@ -29,7 +35,12 @@ def energy(run: RunRecord) -> dict[str, Any]:
                                 ("net", net[0]))}
 
 
-@metric("energy_phases", keys=("energy_traction", "energy_regen", "energy_aux", "phase"))
+@metric("energy_phases", keys=("energy_traction", "energy_regen", "energy_aux", "phase"),
+        description="eq. 9's net energy over the output intervals starting in each of Table "
+                    "2's phases (1 accelerate, 2 run, 3 brake); they add up to energy_net_mj",
+        outputs={"energy_accelerate_mj": ("net energy, accelerate phase", "MJ"),
+                 "energy_run_mj": ("net energy, run phase", "MJ"),
+                 "energy_brake_mj": ("net energy, brake phase", "MJ")})
 def energy_phases(run: RunRecord) -> dict[str, Any]:
     """With ``phase`` (a recorded phase index, 1 accelerate, 2 run, 3 brake, as the
     controllers publish it from their profile): ``energy_accelerate_mj``, ``energy_run_mj``,
@@ -57,7 +68,13 @@ def _net(run: RunRecord) -> tuple[np.ndarray, tuple[np.ndarray, ...]] | None:
 
 
 @metric("energy_brake_work", keys=("energy_traction", "energy_regen", "energy_aux", "phase",
-                                   "brake_work"))
+                                   "brake_work"),
+        description="Table 2's braking convention: the brakes' work over the brake phase "
+                    "counted as a positive consumption",
+        outputs={"energy_brake_work_mj": ("the brakes' work int B v dt over the brake phase, "
+                                          "up to the arrival", "MJ"),
+                 "energy_total_paper_mj": ("eq. 9's energy of the accelerate and run phases "
+                                           "plus the brake work (Table 2's total)", "MJ")})
 def energy_brake_work(run: RunRecord) -> dict[str, Any]:
     """Table 2's braking convention beside eq. 9's: Table 2 counts the braking phase as a
     positive "consumption" (the energy the brakes take out of the train, fed back and lost),

@@ -11,7 +11,10 @@ from typing import Any
 from cosim.papers import RunRecord, metric
 
 
-@metric("distance_short", keys=("reference_position",))
+@metric("distance_short", keys=("reference_position",),
+        description="how far the train ends behind its timetable position s_ref(t)",
+        outputs={"distance_short_m": ("s_ref - s at the end of the run (> 0: behind the "
+                                      "timetable)", "m")})
 def distance_short(run: RunRecord) -> dict[str, Any]:
     """With ``reference_position`` (the recorded timetable position s_ref(t), the integral of
     the target speed, m) and the run's position: ``distance_short_m`` = s_ref - s at the end

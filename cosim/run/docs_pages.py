@@ -181,6 +181,13 @@ def host_packages() -> str:
     return ", ".join(f"`{name}`" for name in sorted(names))
 
 
+def paper_metrics() -> str:
+    """The paper metrics of ``cosim.papers``'s registry with their declared entries."""
+    from cosim.papers import reference_markdown
+
+    return reference_markdown()
+
+
 def fill_generated(text: str, key: str, content: str) -> str:
     """``text`` with the part between ``<!-- generated: key -->`` and the next
     ``<!-- end generated -->`` replaced by ``content``."""
@@ -198,6 +205,9 @@ def generated_pages(reproduce_dir: Path = REPRODUCE_DIR) -> Iterator[tuple[Path,
         yield DOCS / "benchmarks.md", benchmarks_page().encode()
     other = DOCS / "other_tools.md"
     yield other, fill_generated(other.read_text(), "host-packages", host_packages()).encode()
+    scenarios = DOCS / "scenarios.md"
+    yield scenarios, fill_generated(scenarios.read_text(), "paper-metrics",
+                                    paper_metrics()).encode()
     present = set()
     for name in paper_names():
         page = paper_page(name, reproduce_dir / name)

@@ -177,7 +177,8 @@ def ensemble_figure_of(spec: dict[str, Any], frames: dict[str, list[Any]],
     ylabel, scale = axis_text(spec, "y", first, ys[0])
     panels = spec.get("kind", "overlay") == "panels"
     fig, axes = plt.subplots(len(frames) if panels else 1, 1, squeeze=False, sharex=True,
-                             figsize=(9, 2.6 * len(frames) if panels else 4.5))
+                             figsize=(9, 2.6 * len(frames) if panels else 4.5),
+                             layout="constrained")  # room for the title and outside legends
     for j, (name, members_) in enumerate(frames.items()):
         ax = axes[j if panels else 0][0]
         x0 = members_[0]["time"] if spec["x"] == "time" else members_[0][spec["x"]]
@@ -215,7 +216,6 @@ def ensemble_figure_of(spec: dict[str, Any], frames: dict[str, list[Any]],
         legend_outside(ax)
     axes[-1][0].set_xlabel(axis_text(spec, "x", first, spec["x"])[0])
     fig.suptitle(f"{spec.get('title', '')} (median, 5-95 % band over the seeds)")
-    fig.tight_layout()
     return fig
 
 

@@ -28,8 +28,8 @@ interrupted run), ``sim_time_s``, ``wall_time_s``, ``real_time_factor``, ``algor
 ``qp_infeasible``; ``qp_solve_time_median_s``, ``qp_solve_time_total_s`` and
 ``qp_cpu_time_total_s``, the median and total wall time and the total CPU time of the run's
 solves, which the FMU logs at fmi2Terminate (:mod:`cosim.fmu.diagnostics`; never outputs);
-``qp_infeasible_after_stop``, ``events_moving``, ``events_standstill``) when an FMU publishes
-them; ``terminated_by``
+``qp_infeasible_after_stop``, ``events_moving``, ``events_standstill``, ``lmi_fallbacks``)
+when an FMU publishes them; ``terminated_by``
 (``{instance, time}``) when an FMU ended the run itself (fmi2Discard with fmi2Terminated, FMI
 2.0.4 sec. 4.2.2; ``completed`` stays true).
 """
@@ -81,7 +81,8 @@ def matching_columns(frame: Any, ref: Any) -> list[str]:
 
 
 # event counters an FMU may publish (outputs of the same name), reported per FMU like qp_solves
-CONTROLLER_COUNTERS = ("qp_infeasible_after_stop", "events_moving", "events_standstill")
+CONTROLLER_COUNTERS = ("qp_infeasible_after_stop", "events_moving", "events_standstill",
+                       "lmi_fallbacks")
 
 
 # default switch resolution, relative to the command's full scale (max |u| over the run): a
@@ -205,7 +206,7 @@ def compute_summary(result: Any) -> dict[str, Any]:
                      "qp_cpu_time_median"):
             if name in timing and math.isfinite(timing[name]):
                 out.setdefault(f"{name}_s", {})[fmu] = float(timing[name])
-        for key in CONTROLLER_COUNTERS:  # published by the event-triggered predictive laws
+        for key in CONTROLLER_COUNTERS:  # published by the predictive laws
             if key in outputs:
                 out.setdefault(key, {})[fmu] = int(outputs[key])
     out["warnings"] = warnings(result) + notes

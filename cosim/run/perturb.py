@@ -246,7 +246,7 @@ def plot_perturbed(frame: pd.DataFrame, keys: list[str], path: str | Path) -> No
         labels.append("\n".join([name] + [f"{k.rpartition('.')[2]}={v}"
                                           for k, v in zip(keys, label[1:], strict=True)]))
     fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(max(6.0, 1.1 * len(groups) + 2), 7),
-                                   sharex=True)
+                                   sharex=True, layout="constrained")
     from cosim.run.results import PLOT_DPI, fit_band
 
     errors_cm = [100.0 * g["stop_error_m"].astype(float) for _, g in groups]
@@ -261,6 +261,6 @@ def plot_perturbed(frame: pd.DataFrame, keys: list[str], path: str | Path) -> No
     ax2.set_ylabel("controller executions")
     ax2.set_xticks(range(1, len(groups) + 1), labels, fontsize=8)
     ax2.grid(True, alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(path, dpi=PLOT_DPI, format=Path(path).suffix.lstrip(".") or "png")
+    fig.savefig(path, dpi=PLOT_DPI, format=Path(path).suffix.lstrip(".") or "png",
+                bbox_inches="tight")
     plt.close(fig)

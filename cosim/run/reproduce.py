@@ -46,6 +46,8 @@ live there, not in code)::
     name = "fig11"
     scenarios = ["stop_rmpc", "stop_rsmpc"]
     grid = { "controller.N" = "3..15" }
+    labels = { stop_rmpc = "RMPC" }  # optional: the legend's name of a scenario's series
+                                   # (default: the scenario's description)
     [[figures]]                    # drawn from the runs' results.csv
     file = "fig_speed.png"
     title = "Speed against position"
@@ -156,7 +158,7 @@ DERIVED_KINDS = ("saving_percent",)
 _RUN_KEYS = {"name", "scenario", "set", "repeat"}
 _METRIC_KEYS = {"key", "label", "ratio_to"}
 _PAPER_KEYS = {"run", "metric", "value", "range", "tolerance", "source"}
-_SWEEP_KEYS = {"name", "scenarios", "grid"}
+_SWEEP_KEYS = {"name", "scenarios", "grid", "labels"}
 _FIGURE_KEYS = {"file", "title", "kind", "x", "y", "y_scale", "ylabel", "xlabel", "runs",
                 "y_reduce", "y_minus", "limit_ref", "limit_kmh", "limit_below_kmh",
                 "limit_fraction"}
@@ -278,6 +280,11 @@ def load_entry(name: str | Path) -> Entry:
     for i, sweep in enumerate(data.get("sweeps", [])):
         _check_keys(f"{path}: [[sweeps]] #{i + 1}", sweep, _SWEEP_KEYS,
                     ("name", "scenarios", "grid"))
+        unnamed = sorted(set(sweep.get("labels", {})) - {Path(s).stem for s in sweep["scenarios"]})
+        if unnamed:
+            raise ReproduceError(f"{path}: [[sweeps]] #{i + 1}: labels name scenarios "
+                                 f"{unnamed} that are not in its scenarios "
+                                 f"{sweep['scenarios']!r}")
         # the sweep's own keys first (the first is its figure's x axis), then the entry's
         sweep["grid"] = {**sweep["grid"],
                          **{k: v for k, v in common.items() if k not in sweep["grid"]}}
@@ -552,35 +559,59 @@ def derived_markdown(rows: list[dict[str, Any]]) -> str:
     return "\n".join(lines)
 
 
+TABLE_COLUMNS = 9  # at most this many columns in one markdown table of a paper page
+
+
 def table_markdown(entry: Entry, rows: list[dict[str, Any]]) -> str:
-    """Wide table: a row per run, per metric "ours" and "paper" columns."""
-    header = ["run"]
+    """A row per run; per metric an "ours" column and a "paper" column (left out where the
+    paper gives no value for any run), and with ``ratio_to`` the ratio and the paper's. When
+    the columns exceed :data:`TABLE_COLUMNS` the metrics are split over several tables, each
+    repeating the run column (a metric's columns stay together)."""
+    by = {(r["run"], r["metric"]): r for r in rows}
+    runs = [run["name"] for run in entry.runs]
+    groups: list[list[tuple[str, list[str]]]] = []  # per metric: (header, cells per run)
     for metric in entry.metrics:
         label = metric.get("label", metric["key"])
-        header += [f"{label}", "paper"]
-        if "ratio_to" in metric:
-            header += [f"ratio to {metric['ratio_to']}", "paper"]
-    lines = [_row(header), "|" + " --- |" * len(header)]
-    by = {(r["run"], r["metric"]): r for r in rows}
-    for run in entry.runs:
-        cells = [run["name"]]
-        for metric in entry.metrics:
-            r = by[run["name"], metric["key"]]
+        ours, paper, ratio, paper_ratio = [], [], [], []
+        for name in runs:
+            r = by[name, metric["key"]]
             mark = "" if r["within"] is None else (" ✓" if r["within"] else " ✗")
-            paper = _fmt(r["paper"])
+            given = _fmt(r["paper"])
             if r["paper_range"] is not None:
                 band = f"in [{_fmt(r['paper_range'][0])}, {_fmt(r['paper_range'][1])}]"
-                paper = band if r["paper"] is None else f"{paper} ({band})"
-            ours = _fmt(r["ours"])
+                given = band if r["paper"] is None else f"{given} ({band})"
+            value = _fmt(r["ours"])
             if r["ours_min"] is not None:
-                ours = f"{ours} [{_fmt(r['ours_min'])}, {_fmt(r['ours_max'])}]"
-            cells += [ours + mark, paper]
+                value = f"{value} [{_fmt(r['ours_min'])}, {_fmt(r['ours_max'])}]"
+            ours.append(value + mark)
+            paper.append(given)
             if "ratio_to" in metric:
-                ratio = _fmt(r["ratio"])
+                text = _fmt(r["ratio"])
                 if r.get("ratio_ci_low") is not None:
-                    ratio = f"{ratio} ({_fmt(r['ratio_ci_low'])}-{_fmt(r['ratio_ci_high'])})"
-                cells += [ratio, _fmt(r["paper_ratio"])]
-        lines.append(_row(cells))
+                    text = f"{text} ({_fmt(r['ratio_ci_low'])}-{_fmt(r['ratio_ci_high'])})"
+                ratio.append(text)
+                paper_ratio.append(_fmt(r["paper_ratio"]))
+        columns = [(label, ours)]
+        if any(c != "-" for c in paper):
+            columns.append(("paper", paper))
+        if "ratio_to" in metric:
+            columns.append((f"ratio to {metric['ratio_to']}", ratio))
+            if any(c != "-" for c in paper_ratio):
+                columns.append(("paper", paper_ratio))
+        groups.append(columns)
+    tables: list[list[tuple[str, list[str]]]] = [[]]
+    for columns in groups:
+        if tables[-1] and 1 + len(tables[-1]) + len(columns) > TABLE_COLUMNS:
+            tables.append([])
+        tables[-1] += columns
+    lines: list[str] = []
+    for n, table in enumerate(tables):
+        if n:
+            lines.append("")
+        header = ["run", *(head for head, _ in table)]
+        lines += [_row(header), "|" + " --- |" * len(header)]
+        lines += [_row([name, *(cells[i] for _, cells in table)])
+                  for i, name in enumerate(runs)]
     sources = sorted({f"{r['run']} / {r['metric']}: {r['source']}" for r in rows if r["source"]})
     if sources:
         lines += ["", "Paper figures: " + "; ".join(sources) + "."]
@@ -676,7 +707,8 @@ def figure_of(spec: dict[str, Any], frames: dict[str, Any], scenarios: dict[str,
     ys = spec["y"] if isinstance(spec["y"], list) else [spec["y"]]
     panels = spec.get("kind", "overlay") == "panels"
     fig, axes = plt.subplots(len(names) if panels else 1, 1, squeeze=False, sharex=True,
-                             figsize=(9, 2.6 * len(names) if panels else 4.5))
+                             figsize=(9, 2.6 * len(names) if panels else 4.5),
+                             layout="constrained")  # room for the title and outside legends
     for i, name in enumerate(names):
         frame, scenario = frames[name], scenarios.get(name)
         ax = axes[i if panels else 0][0]
@@ -708,7 +740,6 @@ def figure_of(spec: dict[str, Any], frames: dict[str, Any], scenarios: dict[str,
     first = scenarios.get(names[0]) if names else None
     axes[-1][0].set_xlabel(axis_text(spec, "x", first, spec["x"])[0])
     fig.suptitle(spec.get("title", ""))
-    fig.tight_layout()
     return fig
 
 
@@ -815,7 +846,7 @@ def draw_speed_classes(spec: dict[str, Any], run_dirs: dict[str, Path], path: Pa
                     is not None), None) for k in range(len(classes))]
     pd.DataFrame([{"run": n, **r} for n in names for r in per_run[n]]).to_csv(
         path.with_suffix(".csv"), index=False)
-    fig, ax = plt.subplots(figsize=(10.5, 4.5))
+    fig, ax = plt.subplots(figsize=(10.5, 4.5), layout="constrained")
     x = np.arange(len(classes))
     width = 0.8 / (len(names) + 1)
     for i, n in enumerate(names):
@@ -833,9 +864,8 @@ def draw_speed_classes(spec: dict[str, Any], run_dirs: dict[str, Path], path: Pa
     ax.set_xlabel("reference speed class (km/h)")
     ax.set_ylabel(spec.get("ylabel", "max |speed error|"))
     ax.grid(True, axis="y", alpha=0.3)
-    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0))
+    legend_outside(ax)
     fig.suptitle(spec.get("title", ""))
-    fig.tight_layout()
     fig.savefig(path, dpi=PLOT_DPI, format=Path(path).suffix.lstrip(".") or "png",
                 bbox_inches="tight")
     plt.close(fig)
@@ -889,7 +919,8 @@ def reproduce(name: str, out_dir: str | Path | None = None, workers: int | None 
         grid = parse_grid(f"{k}={v}" for k, v in sweep["grid"].items())
         target = out / slug(sweep["name"])
         frame = run_sweep(sweep["scenarios"], grid, target, workers=workers,
-                          scheduler=scheduler, plot_format=plot_format)
+                          scheduler=scheduler, plot_format=plot_format,
+                          series_labels=sweep.get("labels"))
         keep = [c for c in ("scenario", *grid, "stop_error_m", "controller_executions",
                             "command_switches", "qp_infeasible") if c in frame]
         parts += ["", f"### Sweep {sweep['name']}", "", _frame_markdown(frame[keep]), "",

@@ -199,14 +199,14 @@ def _held(scenario: Any, ref: str) -> bool:
 
 def _stop_inset(ax: Any, pos: np.ndarray, speed_kmh: np.ndarray, stop: float) -> Any:
     """A zoom on the last 20 m before the stop point: speed against the distance to the stop
-    point in metres (plain numbers, no offset), in the upper right corner, where the speed
-    of a train braking to a stop is low; the legend is outside the axes."""
+    point in metres (plain numbers, no offset), right of the axes (and of a twin axis's
+    labels), where it covers no curve; the legend is outside the axes."""
     from matplotlib.ticker import MaxNLocator
 
     near = pos >= stop - 20.0
     if not near.any() or len(pos) < 2:
         return None
-    inset = ax.inset_axes([0.64, 0.50, 0.33, 0.42])
+    inset = ax.inset_axes([1.27, 0.25, 0.28, 0.6])
     inset.set_facecolor("white")
     inset.set_zorder(10)
     inset.plot(pos[near] - stop, speed_kmh[near], color="C0", lw=1.0)
@@ -214,7 +214,7 @@ def _stop_inset(ax: Any, pos: np.ndarray, speed_kmh: np.ndarray, stop: float) ->
     right = max(float(pos[near].max()) - stop, 2.0)
     inset.set_xlim(-20.0, right)
     inset.set_xlabel("to stop point (m)", fontsize=7)
-    inset.set_ylabel("km/h", fontsize=7)
+    inset.set_ylabel("speed (km/h)", fontsize=7)
     inset.set_title("last 20 m", fontsize=7)
     inset.tick_params(labelsize=6)
     inset.ticklabel_format(useOffset=False, style="plain")
@@ -273,6 +273,7 @@ def draw_run(result: Any) -> Any:
     import matplotlib.pyplot as plt
 
     from cosim.run.metrics import matching_columns
+    from cosim.run.reproduce import reference_curve
 
     cfg = result.scenario.summary
     frame = result.frame
@@ -299,6 +300,10 @@ def draw_run(result: Any) -> Any:
                     " (as held by the controller)" if held else ""),
                         color="k" if key == "reference_speed" else "C3",
                         drawstyle="steps-post" if held else "default")
+                curve = (reference_curve(result.scenario, frame, ref)
+                         if key == "reference_speed" and held else None)
+                if curve is not None:  # the stopping curve itself, beside what was held
+                    ax.plot(x, curve * 3.6, color="0.5", lw=0.9, label="reference curve")
         ax.set_xlabel(xlabel)
         ax.set_ylabel("speed (km/h)")
         ax.ticklabel_format(useOffset=False, style="plain")

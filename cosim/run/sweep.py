@@ -187,7 +187,8 @@ class _RowWriter:
 def run_sweep(scenario: str | Sequence[str], grid: dict[str, Sequence[Any]],
               out_dir: str | Path | None = None, workers: int | None = None,
               plot: bool = True, resume: bool = False, scheduler: str | None = None,
-              shared_fmus: bool = False, plot_format: str = "png") -> pd.DataFrame:
+              shared_fmus: bool = False, plot_format: str = "png",
+              series_labels: dict[str, str] | None = None) -> pd.DataFrame:
     """Run every grid point of every scenario with :func:`cosim.run.runner.run_tasks`: in
     ``workers`` processes (default: CPU count), or on a Dask cluster (``scheduler``: its
     address, or ``"local-dask"`` for a ``LocalCluster`` of ``workers`` processes;
@@ -197,9 +198,10 @@ def run_sweep(scenario: str | Sequence[str], grid: dict[str, Sequence[Any]],
     order, with ``status`` and ``error``; with ``out_dir`` each row is appended to
     ``sweep.csv`` as it finishes (``resume``: the ``ok`` rows of an existing one are kept and
     not run again), then the file is rewritten in grid order and, with ``plot``, ``sweep.png``
-    drawn (``sweep.<plot_format>``: png at 200 dpi, svg or pdf). SIGINT/SIGTERM: no new
-    point starts, running ones stop (status ``interrupted``), the finished rows are written
-    and :class:`cosim.run.interrupt.Interrupted` is raised.
+    drawn (``sweep.<plot_format>``: png at 200 dpi, svg or pdf; each scenario's series named
+    by ``series_labels[scenario name]``, else by the scenario's ``description``).
+    SIGINT/SIGTERM: no new point starts, running ones stop (status ``interrupted``), the
+    finished rows are written and :class:`cosim.run.interrupt.Interrupted` is raised.
     Each worker runs with one BLAS thread and is reused for many points (the imports and FMU
     extractions happen once per worker). On Dask the FMU files are uploaded to the workers,
     or, with ``shared_fmus``, read by them from the same paths (a shared file system).
@@ -253,9 +255,11 @@ def run_sweep(scenario: str | Sequence[str], grid: dict[str, Sequence[Any]],
                 written[col] = pd.to_numeric(written[col]).round().astype("Int64")
             written.to_csv(out / "sweep.csv", index=False)
             if plot and (frame["status"] == "ok").any():
+                named = {Path(p).stem: load_scenario(p, points[0]).description for p in paths}
+                named = {k: v for k, v in named.items() if v} | (series_labels or {})
                 plot_sweep(frame[frame["status"] == "ok"], list(grid),
                            out / f"sweep.{plot_format}",
-                           key_labels(load_scenario(paths[0], points[0]), list(grid)))
+                           key_labels(load_scenario(paths[0], points[0]), list(grid)), named)
     return frame
 
 
@@ -323,23 +327,29 @@ def key_labels(scenario: Any, keys: list[str]) -> dict[str, str]:
 
 
 def plot_sweep(frame: pd.DataFrame, keys: list[str], path: str | Path,
-               labels: dict[str, str] | None = None) -> None:
+               labels: dict[str, str] | None = None,
+               series_labels: dict[str, str] | None = None) -> None:
     """:func:`draw_sweep` saved to ``path`` (its suffix: png at 200 dpi, svg or pdf)."""
     import matplotlib.pyplot as plt
 
     from cosim.run.results import PLOT_DPI
 
-    fig = draw_sweep(frame, keys, labels)
+    fig = draw_sweep(frame, keys, labels, series_labels)
     fig.savefig(path, dpi=PLOT_DPI, format=Path(path).suffix.lstrip(".") or "png",
                 bbox_inches="tight")
     plt.close(fig)
 
 
 def draw_sweep(frame: pd.DataFrame, keys: list[str],
-               labels: dict[str, str] | None = None) -> Any:
+               labels: dict[str, str] | None = None,
+               series_labels: dict[str, str] | None = None) -> Any:
     """Stop error (cm) and command switches / executions vs the first key (its axis label
-    from ``labels``, e.g. :func:`key_labels`); the stop window drawn, the axis zoomed to the
-    data when they lie far inside it; legends right of the axes; no offset notation."""
+    from ``labels``, e.g. :func:`key_labels`; each scenario's series named by
+    ``series_labels``, wrapped to 40 characters, else by the scenario's name); the stop
+    window drawn, the axis zoomed to the data when they lie far inside it; legends right of
+    the axes; no offset notation."""
+    import textwrap
+
     import matplotlib
 
     matplotlib.use("Agg")
@@ -349,10 +359,13 @@ def draw_sweep(frame: pd.DataFrame, keys: list[str],
 
     x = keys[0]
     others = [k for k in keys[1:] if frame[k].nunique(dropna=False) > 1]  # held values: no series
-    fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(7.5, 8), sharex=True)
+    fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(7.5, 8), sharex=True, layout="constrained")
     for label, group in frame.groupby(["scenario", *others], sort=False):
-        name = label if isinstance(label, str) else " ".join(
-            [str(label[0])] + [f"{k}={v}" for k, v in zip(others, label[1:], strict=True)])
+        label = label if isinstance(label, tuple) else (label,)
+        scenario = str(label[0])
+        name = " ".join([(series_labels or {}).get(scenario, scenario)]
+                        + [f"{k}={v}" for k, v in zip(others, label[1:], strict=True)])
+        name = "\n".join(textwrap.wrap(name, 40))
         group = group.sort_values(x)
         ax1.plot(group[x], 100.0 * group["stop_error_m"], marker="o", label=name)
         line, = ax2.plot(group[x], group["command_switches"], marker="s",
@@ -373,5 +386,4 @@ def draw_sweep(frame: pd.DataFrame, keys: list[str],
     ax2.grid(True, alpha=0.3)
     ax2.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
     ax2.xaxis.set_tick_params(labelbottom=True)
-    fig.tight_layout()
     return fig

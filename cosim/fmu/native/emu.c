@@ -457,6 +457,10 @@ static void* create(ato_inst* mi) {
     }
     const struct { const char* name; int vr; int positive; } scalars[] = {
         {"rotating_mass_factor", ATO_VR_rotating_mass_factor, 0},
+        {"mass_factor", ATO_VR_mass_factor, 1},
+        {"davis_a_factor", ATO_VR_davis_a_factor, 0},
+        {"davis_b_factor", ATO_VR_davis_b_factor, 0},
+        {"davis_c_factor", ATO_VR_davis_c_factor, 0},
         {"disturbance_accel_std", ATO_VR_disturbance_accel_std, 0},
         {"disturbance_correlation_time", ATO_VR_disturbance_correlation_time, 0},
         {"max_step", ATO_VR_max_step, 1},
@@ -499,8 +503,12 @@ static void* create(ato_inst* mi) {
         memcpy(per_unit[f].dst, field(cfg, per_unit[f].f, &n), N * sizeof(double));
     double offset = 0.0;
     for (int i = 0; i < N; i++) {
-        e->m[i] = masses[i];
-        e->m_eff[i] = masses[i] * (1.0 + gamma_rot);
+        /* plant mismatch: masses and Davis terms scaled (EmuParams.mass_factor, ...) */
+        e->m[i] = masses[i] * r[ATO_VR_mass_factor];
+        e->m_eff[i] = e->m[i] * (1.0 + gamma_rot);
+        e->da[i] *= r[ATO_VR_davis_a_factor];
+        e->db[i] *= r[ATO_VR_davis_b_factor];
+        e->dc[i] *= r[ATO_VR_davis_c_factor];
         e->offsets[i] = offset; /* [0, cumsum(lengths)[:-1]] */
         offset = i == 0 ? e->lengths[0] : offset + e->lengths[i];
         e->motored[i] = e->ft[i] > 0 ? 1.0 : 0.0;

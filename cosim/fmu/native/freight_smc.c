@@ -1,0 +1,93 @@
+/*
+ * freight_smc.c: online law of FreightSmc, the C twin of controllers/smc/sliding_mode.py
+ * (FreightSlidingMode on the fed-back speed of the shared base, freight_tracker.c):
+ *
+ *   e = v_ref - v_f,   sigma = e + lambda I,   I(k+1) = I(k) + T e(k)
+ *   u = a_ref + a_res + lambda e + q sigma + eps sw(sigma)
+ *
+ * sw = sgn, or sat(sigma / phi) with a boundary layer phi > 0; u within the blending's
+ * limits. The core's floating-point operations in its order.
+ */
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "freight_tracker.h"
+#include "ato_model.h"
+
+typedef struct {
+    ft_state base;
+    double integral, sigma;
+} smc_state;
+
+struct law_core {
+    double sample_time, lam, q, eps, boundary_layer;
+    ft_const base;
+    smc_state st;
+};
+
+law_core* law_make(const ato_values* p, double t0, char* err, size_t n) {
+    (void)t0;
+    const double* v = p->v;
+    law_core* c = calloc(1, sizeof *c);
+    if (!c) {
+        snprintf(err, n, "out of memory");
+        return NULL;
+    }
+    c->sample_time = v[ATO_VR_sample_time];
+    c->lam = v[ATO_VR_lambda];
+    c->q = v[ATO_VR_q];
+    c->eps = v[ATO_VR_eps];
+    c->boundary_layer = v[ATO_VR_boundary_layer];
+    if (!(c->q * c->sample_time < 1)) { /* SlidingModeParams.check_relations */
+        char a[40];
+        snprintf(err, n, "q T = %s must be in [0, 1)", ato_repr(c->q * c->sample_time, a));
+        free(c);
+        return NULL;
+    }
+    if (!ft_make(&c->base, p, err, n)) {
+        ft_free(&c->base);
+        free(c);
+        return NULL;
+    }
+    ft_reset(&c->st.base);
+    return c;
+}
+
+void law_free(law_core* c) {
+    ft_free(&c->base);
+    free(c);
+}
+size_t law_state_size(const law_core* c) { (void)c; return sizeof(smc_state); }
+void law_get_state(const law_core* c, void* out) { memcpy(out, &c->st, sizeof c->st); }
+void law_set_state(law_core* c, const void* in) { memcpy(&c->st, in, sizeof c->st); }
+
+static double switching(double sigma, double phi) {
+    if (phi > 0) return ft_max(-1.0, ft_min(1.0, sigma / phi));
+    return sigma != 0 ? copysign(1.0, sigma) : 0.0;
+}
+
+static double accel_demand(void* law, ft_state* b, double t, double v, double s, double a_res,
+                           double lo, double hi) {
+    (void)t; (void)v;
+    law_core* c = law;
+    smc_state* st = &c->st;
+    b->a_ref = ato_profile_accel(&c->base.profile, s);
+    double e = b->v_ref - b->v_feedback;
+    st->sigma = e + c->lam * st->integral;
+    double u = (b->a_ref + a_res + c->lam * e + c->q * st->sigma
+                + c->eps * switching(st->sigma, c->boundary_layer));
+    st->integral += c->sample_time * e;
+    return ft_min(ft_max(u, lo), hi);
+}
+
+void law_outputs(const law_core* c, double* out) { ft_outputs(&c->st.base, out); }
+
+int law_compute(law_core* c, double t, const ato_values* p, double* out, char* err, size_t n) {
+    if (!ft_compute(&c->base, &c->st.base, t, p->v[ATO_VR_v], p->v[ATO_VR_s], accel_demand, c,
+                    err, n))
+        return 0;
+    law_outputs(c, out);
+    return 1;
+}
