@@ -28,14 +28,23 @@ stepped over the same simulated time with a fixed input, in the step and with th
 of the plant's shipped scenarios, through fmpy ``FMU2Slave`` (one setReal/doStep/getReal of
 every output per step); their real-time factors and the ratio, in the same run.
 
+Building: ``python -m cosim.cli build --native --fmi all`` end to end (every native FMU, FMI
+2.0 and 3.0, the Linux and, with mingw-w64 installed, the Windows binaries): its wall time and
+the CPU time of it and its compilers (the time one core would take), in one run
+(:func:`build_all`; the ``native_build`` row of run_all.py).
+
     python benchmarks/bench_native.py [--repeat 3]
-        [--plants freight freight_loops brake_delay crh3_emu]
+        [--plants freight freight_loops brake_delay crh3_emu build]
 """
 
 from __future__ import annotations
 
 import argparse
+import os
+import resource
+import shutil
 import statistics
+import subprocess
 import sys
 import time
 from pathlib import Path
@@ -313,13 +322,40 @@ def plants_only(repeat: int) -> None:
               f"{stop / py:9.0f}, native {stop / nat:9.0f}   native / Python {py / nat:6.1f}x")
 
 
+def build_all() -> dict:
+    """``python -m cosim.cli build --native --fmi all`` in the project folder: wall time (s),
+    CPU time of the command and its compilers (s, user + system), the number of FMUs built,
+    whether the Windows binaries were among them, and the load averages before and after."""
+    from cosim.fmu.native_build import WINDOWS_CC
+
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    load_before = os.getloadavg()[0]
+    t0 = time.perf_counter()
+    done = subprocess.run([sys.executable, "-m", "cosim.cli", "build", "--native", "--fmi", "all"],
+                          cwd=ROOT, capture_output=True, text=True,
+                          env=dict(os.environ, PYTHONPATH=str(ROOT)))
+    wall = time.perf_counter() - t0
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    if done.returncode != 0:
+        raise RuntimeError(f"cosim build --native failed:\n{done.stdout}{done.stderr}")
+    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    return {"wall_s": wall, "cpu_s": cpu, "fmus": done.stdout.count("built "),
+            "windows": shutil.which(WINDOWS_CC) is not None, "cpus": os.cpu_count(),
+            "load_before": load_before, "load_after": os.getloadavg()[0]}
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--plants", nargs="+", choices=("freight", "freight_loops", "brake_delay",
-                                                  "crh3_emu"),
-                    default=["freight", "brake_delay", "crh3_emu"])
+                                                  "crh3_emu", "build"),
+                    default=["freight", "brake_delay", "crh3_emu", "build"])
     args = ap.parse_args()
+    if "build" in args.plants:
+        r = build_all()
+        print(f"cosim build --native --fmi all: {r['fmus']} FMUs in {r['wall_s']:.1f} s wall, "
+              f"{r['cpu_s']:.1f} s CPU (load {r['load_before']:.1f} -> {r['load_after']:.1f} "
+              f"on {r['cpus']} cores)")
     if "freight" in args.plants:
         bench_freight(args.repeat)
     if "freight_loops" in args.plants:

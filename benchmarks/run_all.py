@@ -27,13 +27,15 @@ controller).
   workers vs 1 and on a 2-worker local Dask cluster vs 1 worker (``bench_campaign.py``, one
   run, load averages before and after);
 * seed 003's robust MPC: the LMI problem of an event (median over the closed loop's problems,
-  replayed) with Clarabel vs SCS, and the eco scenario's real-time factor (``bench_seed003``).
+  replayed) with Clarabel vs SCS, and the eco scenario's real-time factor (``bench_seed003``);
+* ``cosim build --native --fmi all`` end to end: its wall time vs its CPU time (the command's
+  and its compilers'; what one core would take), ratio = CPU / wall (``bench_native``).
 
     python benchmarks/run_all.py [--quick] [--only campaign ...] [--campaign-seeds K]
 
 ``--only``: measure only the named groups (``closed_loop``, ``kernels``, ``qp``, ``instances``,
-``master``, ``sweep``, ``campaign``, ``seed003``) and keep the other rows of the existing
-``results.json``; each row records when it was measured and the load average then.
+``master``, ``sweep``, ``campaign``, ``seed003``, ``native_build``) and keep the other rows of
+the existing ``results.json``; each row records when it was measured and the load average then.
 """
 
 from __future__ import annotations
@@ -59,6 +61,7 @@ import bench_instances  # noqa: E402
 import bench_kernels  # noqa: E402
 import bench_master  # noqa: E402
 import bench_mpc  # noqa: E402
+import bench_native  # noqa: E402
 import bench_plants  # noqa: E402
 import bench_seed003  # noqa: E402
 import bench_sweep  # noqa: E402
@@ -228,7 +231,19 @@ def seed003_lmi(quick: bool) -> dict:
             "scenario_lmi_median_ms": sc["lmi_median_ms"]}
 
 
-GROUPS = ("closed_loop", "kernels", "qp", "instances", "master", "sweep", "campaign", "seed003")
+def native_build() -> dict:
+    """``cosim build --native --fmi all`` (bench_native.build_all): wall time against the CPU
+    time of the command and its compilers."""
+    r = bench_native.build_all()
+    return {"figure": r["wall_s"], "unit": f"s wall, {r['fmus']} FMUs (FMI 2.0 and 3.0, "
+            + ("Linux and Windows binaries)" if r["windows"] else "Linux binaries)"),
+            "reference": r["cpu_s"], "reference_name": "CPU time of the build and compilers (s)",
+            "ratio": r["cpu_s"] / r["wall_s"], "ratio_name": "CPU / wall (cores used)",
+            "load_average": [r["load_before"], r["load_after"]]}
+
+
+GROUPS = ("closed_loop", "kernels", "qp", "instances", "master", "sweep", "campaign", "seed003",
+          "native_build")
 TARGETS = {"freight closed loop": ">= 500 x real time", "EMU closed loop": ">= 1000 x real time",
            "RMPC N=10 QP step": "<= 35 us", "further FMU instance": "<= 10 ms",
            "freight plant kernel": "", "EMU plant kernel": "", "freight kernel C vs numba": "",
@@ -236,7 +251,8 @@ TARGETS = {"freight closed loop": ">= 500 x real time", "EMU closed loop": ">= 1
            "master/raw seed001_emu_pid": "", "sweep 2 vs 1 workers": "speed-up >= 1.7",
            "campaign 2 vs 1 workers": "speed-up >= 1.8",
            "campaign Dask 2 vs 1 worker": "speed-up >= 1.8",
-           "seed 003 RMPC LMI event": "<= 20 ms median"}
+           "seed 003 RMPC LMI event": "<= 20 ms median",
+           "native build, all FMUs": "<= 60 s on 2 cores"}
 
 
 def main() -> None:
@@ -276,6 +292,8 @@ def main() -> None:
         measured.update(campaign_speedups(args.campaign_seeds))
     if "seed003" in only:
         measured["seed 003 RMPC LMI event"] = seed003_lmi(args.quick)
+    if "native_build" in only:
+        measured["native build, all FMUs"] = native_build()
     stamp = time.strftime("%Y-%m-%d %H:%M:%S", time.gmtime())
     for r in measured.values():
         r.setdefault("measured_utc", stamp)

@@ -70,23 +70,14 @@ def build(names: Annotated[list[str] | None, typer.Argument(
 
 
 def _build_native(names: list[str] | None, versions: tuple[int, ...]) -> list[Path]:
-    import os
-    from concurrent.futures import ThreadPoolExecutor
-
-    from cosim.fmu.native_build import NATIVE, CompilerMissing, build_natives
+    from cosim.fmu.native_build import NATIVE, CompilerMissing, build_all_natives
 
     built: list[Path] = []
-    wanted = names or sorted(NATIVE)
-    # the FMUs side by side, one per core (the compilers are subprocesses); shown in order
-    with ThreadPoolExecutor(max_workers=max(1, min(len(wanted), os.cpu_count() or 1))) as pool:
-        jobs = [pool.submit(build_natives, name, versions) for name in wanted]
-        results = []
-        for job in jobs:
-            try:
-                results.append(job.result())
-            except (ValueError, CompilerMissing, RuntimeError) as err:
-                _fail(str(err))
-    for paths in results:
+    try:  # the models side by side, one per core
+        done = build_all_natives(names or sorted(NATIVE), versions)
+    except (ValueError, CompilerMissing, RuntimeError) as err:
+        _fail(str(err))
+    for paths in done.values():
         for version, path in zip(versions, paths):
             shown = path.relative_to(Path.cwd()) if path.is_relative_to(Path.cwd()) else path
             out.print(f"built {shown}  (native C, FMI {version}.0)", highlight=False,

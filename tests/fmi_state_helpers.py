@@ -17,6 +17,23 @@ def rerun_after_restore(instances: list, step, k_save: int, k_end: int) -> tuple
     return first, second
 
 
+def assert_replays_from_state(fmu, rest) -> list:
+    """Snapshot ``fmu``'s FMU state (``getFMUstate`` and its serialized bytes), run ``rest()``
+    (the rows of the rest of a run), then restore the state and rerun, and restore from the
+    bytes and rerun: the same rows each time. Frees both states; returns the rows."""
+    state = fmu.getFMUstate()
+    blob = fmu.serializeFMUstate(state)
+    first = rest()
+    fmu.setFMUstate(state)
+    assert rest() == first
+    restored = fmu.deSerializeFMUstate(blob)
+    fmu.setFMUstate(restored)
+    assert rest() == first
+    fmu.freeFMUstate(state)
+    fmu.freeFMUstate(restored)
+    return first
+
+
 class FmuInstance:
     """An initialised fmpy instance of an FMU file with parameters set by type
     (``strings``, ``reals``, ``ints``); ``get``/``set`` read and write Reals by name."""

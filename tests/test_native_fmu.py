@@ -17,14 +17,11 @@ from pathlib import Path
 
 import fmpy
 import pytest
+from fmi_state_helpers import assert_replays_from_state
 from fmpy import extract, read_model_description
 from fmpy.fmi1 import FMICallException
-from fmpy.fmi2 import (
-    FMU2Slave,
-    defaultCallbacks,
-    fmi2CallbackFunctions,
-    fmi2CallbackLoggerTYPE,
-)
+from fmpy.fmi2 import FMU2Slave
+from native_helpers import build_unzipped, initialising, open_native, variable_rows
 
 from cosim.fmu.native_build import CompilerMissing, _compiler, build_native
 from cosim.fmu.state import to_ticks
@@ -36,30 +33,7 @@ OUTPUTS = ("v", "s", "a", "a_c", "applied_command", "grade")
 
 @pytest.fixture(scope="module")
 def native(tmp_path_factory):
-    if shutil.which("gcc") is None:
-        pytest.skip("gcc not installed: native FMUs cannot be built")
-    path = build_native("BrakeDelayTrain", dest=tmp_path_factory.mktemp("native"),
-                        windows=False)
-    md = read_model_description(str(path), validate=True)
-    unzipdir = extract(str(path), unzipdir=str(tmp_path_factory.mktemp("unzip")))
-    return path, md, unzipdir
-
-
-def open_fmu(native, params: dict | None = None):
-    _, md, unzipdir = native
-    vr = {v.name: v.valueReference for v in md.modelVariables}
-    fmu = FMU2Slave(guid=md.guid, unzipDirectory=unzipdir, instanceName="native",
-                    modelIdentifier=md.coSimulation.modelIdentifier)
-    fmu.instantiate()
-    fmu.setupExperiment(startTime=0.0)
-    fmu.enterInitializationMode()
-    for name, value in (params or {}).items():
-        if isinstance(value, str):
-            fmu.setString([vr[name]], [value])
-        else:
-            fmu.setReal([vr[name]], [value])
-    fmu.exitInitializationMode()
-    return fmu, vr
+    return build_unzipped("BrakeDelayTrain", tmp_path_factory)
 
 
 def commands(seed: int, n: int) -> list[tuple[float, float]]:
@@ -88,7 +62,7 @@ def test_native_equals_python_core_bit_for_bit(native, params, seed):
               if v.causality == "parameter"}
     values.update(params)
     core = BrakeDelayTrain.from_parameters(values, ROOT)
-    fmu, vr = open_fmu(native, params)
+    fmu, vr = open_native(native, params)
     out_vrs = [vr[n] for n in OUTPUTS]
     ticks, t = 0, 0.0
     stopped = False
@@ -109,7 +83,7 @@ def test_native_equals_python_core_bit_for_bit(native, params, seed):
 
 
 def test_state_get_set_and_serialize_replay_exactly(native):
-    fmu, vr = open_fmu(native)
+    fmu, vr = open_native(native)
     out_vrs = [vr[n] for n in OUTPUTS]
     steps = commands(7, 60)
     t = 0.0
@@ -117,8 +91,6 @@ def test_state_get_set_and_serialize_replay_exactly(native):
         fmu.setReal([vr["brake_command"]], [u])
         fmu.doStep(t, h)
         t += h
-    state = fmu.getFMUstate()
-    blob = fmu.serializeFMUstate(state)
     t_saved = t
 
     def rest():
@@ -130,34 +102,13 @@ def test_state_get_set_and_serialize_replay_exactly(native):
             rows.append(fmu.getReal(out_vrs))
         return rows
 
-    first = rest()
-    fmu.setFMUstate(state)
-    assert rest() == first
-    restored = fmu.deSerializeFMUstate(blob)
-    fmu.setFMUstate(restored)
-    assert rest() == first
-    fmu.freeFMUstate(state)
-    fmu.freeFMUstate(restored)
+    assert_replays_from_state(fmu, rest)
     fmu.freeInstance()
 
 
 def test_errors_reach_the_log_with_logging_off(native):
-    _, md, unzipdir = native
-    vr = {v.name: v.valueReference for v in md.modelVariables}
     messages: list[str] = []
-
-    def logger(env, instance, status, category, message):
-        messages.append(message.decode())
-
-    callbacks = fmi2CallbackFunctions()
-    callbacks.logger = fmi2CallbackLoggerTYPE(logger)
-    callbacks.allocateMemory = defaultCallbacks.allocateMemory
-    callbacks.freeMemory = defaultCallbacks.freeMemory
-    fmu = FMU2Slave(guid=md.guid, unzipDirectory=unzipdir, instanceName="bad",
-                    modelIdentifier=md.coSimulation.modelIdentifier)
-    fmu.instantiate(loggingOn=False, callbacks=callbacks)
-    fmu.setupExperiment(startTime=0.0)
-    fmu.enterInitializationMode()
+    fmu, vr = initialising(native, messages, "bad")
     with pytest.raises(FMICallException):
         fmu.setReal([vr["mass"]], [-5.0])
     assert any("mass = -5 outside [1, inf]" in m for m in messages), messages
@@ -195,11 +146,7 @@ def test_model_description_is_the_python_fmus(native, built_fmus):
     _, md, _ = native
     py = read_model_description(str(built_fmus["BrakeDelayTrain"].path))
 
-    def rows(m):
-        return [(v.name, v.valueReference, v.causality, v.variability, v.type, v.unit,
-                 v.min, v.max, v.start, v.description) for v in m.modelVariables]
-
-    assert rows(md) == rows(py)
+    assert variable_rows(md) == variable_rows(py)
     assert md.coSimulation.modelIdentifier == "BrakeDelayTrain"
     assert md.coSimulation.canGetAndSetFMUstate and md.coSimulation.canSerializeFMUstate
 
@@ -225,7 +172,7 @@ def test_binary_needs_no_python(native, tmp_path):
          f"out:{vr['a_c']}"], capture_output=True, text=True, env=env, timeout=60)
     assert done.returncode == 0, done.stderr
     rows = [[float(x) for x in line.split(",")] for line in done.stdout.split()]
-    fmu, _ = open_fmu(native)
+    fmu, _ = open_native(native)
     for k, row in enumerate(rows):
         fmu.setReal([vr["brake_command"]], [50.0])
         fmu.doStep(k * 0.2, 0.2)
@@ -268,7 +215,7 @@ def test_windows_binary_under_wine(tmp_path):
     assert done.returncode == 0, done.stderr
     rows = np.array([[float(x) for x in line.split(",")] for line in done.stdout.split()])
     assert rows.shape == (25, 4)
-    fmu, _ = open_fmu((path, md, unzipdir))
+    fmu, _ = open_native((path, md, unzipdir))
     linux = []
     for k in range(25):
         fmu.setReal([vr["brake_command"]], [50.0])

@@ -21,23 +21,17 @@ from __future__ import annotations
 
 import os
 import random
-import shutil
 import subprocess
 import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
-from fmpy import extract, read_model_description
+from fmi_state_helpers import assert_replays_from_state
+from fmpy import read_model_description
 from fmpy.fmi1 import FMICallException
-from fmpy.fmi2 import (
-    FMU2Slave,
-    defaultCallbacks,
-    fmi2CallbackFunctions,
-    fmi2CallbackLoggerTYPE,
-)
+from native_helpers import build_unzipped, initialising, open_native, variable_rows
 
-from cosim.fmu.native_build import build_native
 from cosim.fmu.state import to_ticks
 from plants import kernels
 from plants.freight import FreightTrain
@@ -61,31 +55,7 @@ pytestmark = pytest.mark.skipif(not kernels.KERNELS,
 
 @pytest.fixture(scope="module")
 def native(tmp_path_factory):
-    if shutil.which("gcc") is None:
-        pytest.skip("gcc not installed: native FMUs cannot be built")
-    path = build_native("FreightTrain", dest=tmp_path_factory.mktemp("native"), windows=False)
-    md = read_model_description(str(path), validate=True)
-    unzipdir = extract(str(path), unzipdir=str(tmp_path_factory.mktemp("unzip")))
-    return path, md, unzipdir
-
-
-def open_fmu(native, params: dict | None = None, callbacks=None):
-    _, md, unzipdir = native
-    vr = {v.name: v.valueReference for v in md.modelVariables}
-    fmu = FMU2Slave(guid=md.guid, unzipDirectory=unzipdir, instanceName="native",
-                    modelIdentifier=md.coSimulation.modelIdentifier)
-    fmu.instantiate(callbacks=callbacks, loggingOn=False)
-    fmu.setupExperiment(startTime=0.0)
-    fmu.enterInitializationMode()
-    for name, value in (params or {}).items():
-        if isinstance(value, str):
-            fmu.setString([vr[name]], [value])
-        elif isinstance(value, int):
-            fmu.setInteger([vr[name]], [value])
-        else:
-            fmu.setReal([vr[name]], [value])
-    fmu.exitInitializationMode()
-    return fmu, vr
+    return build_unzipped("FreightTrain", tmp_path_factory)
 
 
 def core_of(params: dict) -> FreightTrain:
@@ -101,7 +71,7 @@ def compare_run(native, params: dict, steps: list[tuple[float, float, float]]) -
     """Step core and FMU with ``(h, force_demand, pipe_reduction)``; every output after every
     step equal (air_brake_force within its bound). Returns the coverage seen."""
     core = core_of(params)
-    fmu, vr = open_fmu(native, params)
+    fmu, vr = open_native(native, params)
     names = [v.name for v in native[1].modelVariables if v.causality == "output"]
     vrs = [vr[n] for n in names]
     bound = air_brake_bound(core.x.size)
@@ -181,7 +151,7 @@ def test_native_equals_python_core_other_parameters(native, params, seed):
 def test_state_get_set_and_serialize_replay_exactly(native):
     """FMU state mid brake wave (commands still travelling along the train): restored from
     the state and from its serialized bytes, the rest of the run repeats bit for bit."""
-    fmu, vr = open_fmu(native, {"v0": 18.0})
+    fmu, vr = open_native(native, {"v0": 18.0})
     outs = [v.valueReference for v in native[1].modelVariables if v.causality == "output"]
     steps = _random_steps(5, 60)
     steps[29] = (0.2, 0.0, 120e3)  # an application that is travelling at the snapshot
@@ -190,8 +160,6 @@ def test_state_get_set_and_serialize_replay_exactly(native):
         fmu.setReal([vr["force_demand"], vr["pipe_reduction"]], [d, r])
         fmu.doStep(t, h)
         t += h
-    state = fmu.getFMUstate()
-    blob = fmu.serializeFMUstate(state)
     t_saved = t
 
     def rest():
@@ -203,14 +171,7 @@ def test_state_get_set_and_serialize_replay_exactly(native):
             rows.append(fmu.getReal(outs))
         return rows
 
-    first = rest()
-    fmu.setFMUstate(state)
-    assert rest() == first
-    restored = fmu.deSerializeFMUstate(blob)
-    fmu.setFMUstate(restored)
-    assert rest() == first
-    fmu.freeFMUstate(state)
-    fmu.freeFMUstate(restored)
+    assert_replays_from_state(fmu, rest)
     fmu.freeInstance()
 
 
@@ -219,11 +180,7 @@ def test_model_description_is_the_python_fmus(native, built_fmus):
     _, md, _ = native
     py = read_model_description(str(built_fmus["FreightTrain"].path))
 
-    def rows(m):
-        return [(v.name, v.valueReference, v.causality, v.variability, v.type, v.unit,
-                 v.min, v.max, v.start, v.description) for v in m.modelVariables]
-
-    assert rows(md) == rows(py)
+    assert variable_rows(md) == variable_rows(py)
     assert md.coSimulation.canGetAndSetFMUstate and md.coSimulation.canSerializeFMUstate
 
 
@@ -248,21 +205,7 @@ def test_sources_and_route_data_inside(native):
 
 def test_errors_reach_the_log_with_logging_off(native):
     messages: list[str] = []
-
-    def logger(env, instance, status, category, message):
-        messages.append(message.decode())
-
-    callbacks = fmi2CallbackFunctions()
-    callbacks.logger = fmi2CallbackLoggerTYPE(logger)
-    callbacks.allocateMemory = defaultCallbacks.allocateMemory
-    callbacks.freeMemory = defaultCallbacks.freeMemory
-    _, md, unzipdir = native
-    vr = {v.name: v.valueReference for v in md.modelVariables}
-    fmu = FMU2Slave(guid=md.guid, unzipDirectory=unzipdir, instanceName="bad",
-                    modelIdentifier=md.coSimulation.modelIdentifier)
-    fmu.instantiate(loggingOn=False, callbacks=callbacks)
-    fmu.setupExperiment(startTime=0.0)
-    fmu.enterInitializationMode()
+    fmu, vr = initialising(native, messages, "bad")
     with pytest.raises(FMICallException):
         fmu.setInteger([vr["traction_model"]], [2])
     assert any("traction_model = 2 outside [0, 1]" in m for m in messages), messages

@@ -406,6 +406,24 @@ def test_windows_build_without_mingw_names_it(monkeypatch, tmp_path):
     assert not list(tmp_path.iterdir())  # refused before anything was written
 
 
+def test_building_several_refuses_before_writing(monkeypatch, tmp_path):
+    """build_all_natives (what ``cosim build --native`` calls) names the missing compiler, the
+    unknown model and the unknown FMI version before any model is built."""
+    import cosim.fmu.native_build as nb
+
+    real = shutil.which
+    monkeypatch.setattr(nb.shutil, "which", lambda name: None if name == nb.LINUX_CC
+                        else real(name))
+    with pytest.raises(nb.CompilerMissing, match=r"'gcc'.*apt-get install gcc"):
+        nb.build_all_natives(IDENTIFIERS, dest=tmp_path)
+    monkeypatch.setattr(nb.shutil, "which", real)
+    with pytest.raises(ValueError, match=r"no native model of 'NoSuchTrain'"):
+        nb.build_all_natives([IDENTIFIERS[0], "NoSuchTrain"], dest=tmp_path)
+    with pytest.raises(ValueError, match=r"fmi_version 4: expected one of \[2, 3\]"):
+        nb.build_all_natives(IDENTIFIERS, (2, 4), dest=tmp_path)
+    assert not list(tmp_path.iterdir())
+
+
 def test_fmi3_packaging_refuses_an_fmu_without_our_fmi2_front(tmp_path):
     """package_fmi3 derives from our native FMI 2 FMUs only, and says which file is missing."""
     import zipfile

@@ -29,16 +29,14 @@ Tolerances, from the numerics (compiled -std=c99 -ffp-contract=off: no fused mul
 from __future__ import annotations
 
 import math
-import shutil
 import struct
 from pathlib import Path
 
 import numpy as np
 import pytest
-from fmpy import extract, read_model_description
-from fmpy.fmi2 import FMU2Slave
+from fmi_state_helpers import assert_replays_from_state
+from native_helpers import build_unzipped, open_native
 
-from cosim.fmu.native_build import build_native
 from cosim.fmu.state import to_seconds, to_ticks
 from plants.crh3 import Crh3Train
 from plants.emu import Emu
@@ -50,35 +48,16 @@ TIMING_KEYS = ("wall_time", "real_time_factor", "fmu_wall", "solve_time", "cpu_t
 
 @pytest.fixture(scope="module")
 def natives(tmp_path_factory):
-    if shutil.which("gcc") is None:
-        pytest.skip("gcc not installed: native FMUs cannot be built")
-    out = {}
-    for ident in ("Crh3Train", "Emu3", "Emu8"):
-        path = build_native(ident, dest=tmp_path_factory.mktemp("native"), windows=False)
-        md = read_model_description(str(path), validate=True)
-        unzipdir = extract(str(path), unzipdir=str(tmp_path_factory.mktemp("unzip")))
-        out[ident] = (path, md, unzipdir)
-    return out
+    return {ident: build_unzipped(ident, tmp_path_factory)
+            for ident in ("Crh3Train", "Emu3", "Emu8")}
 
 
 class Native:
     """One instance of a native FMU through fmpy, parameters set by declared type."""
 
     def __init__(self, native, params: dict) -> None:
-        _, md, unzipdir = native
-        self.md = md
-        self.vr = {v.name: v.valueReference for v in md.modelVariables}
-        types = {v.name: v.type for v in md.modelVariables}
-        self.fmu = FMU2Slave(guid=md.guid, unzipDirectory=unzipdir, instanceName="native",
-                             modelIdentifier=md.coSimulation.modelIdentifier)
-        self.fmu.instantiate()
-        self.fmu.setupExperiment(startTime=0.0)
-        self.fmu.enterInitializationMode()
-        for name, value in params.items():
-            setter = {"String": self.fmu.setString, "Integer": self.fmu.setInteger,
-                      "Boolean": self.fmu.setBoolean}.get(types[name], self.fmu.setReal)
-            setter([self.vr[name]], [value])
-        self.fmu.exitInitializationMode()
+        md = self.md = native[1]
+        self.fmu, self.vr = open_native(native, params)
         self.outputs = [v.name for v in md.modelVariables if v.causality == "output"]
 
     def step(self, t: float, h: float, inputs: dict[str, float]) -> None:
@@ -179,19 +158,15 @@ def test_crh3_stop_and_state_replay(natives):
         t += 0.5
         assert native.read() == core.outputs()
     assert core.held and core.v == 0.0
-    fmu = native.fmu
-    blob = fmu.serializeFMUstate(fmu.getFMUstate())
-    first = []
-    for k in range(10):
-        native.step(t + k, 1.0, {"force": 4e5})
-        first.append(native.read())
-    fmu.setFMUstate(fmu.deSerializeFMUstate(blob))
-    again = []
-    for k in range(10):
-        native.step(t + k, 1.0, {"force": 4e5})
-        again.append(native.read())
-    assert again == first
-    assert first[-1]["v"] > 0.0
+
+    def rest() -> list[dict[str, float]]:
+        rows = []
+        for k in range(10):
+            native.step(t + k, 1.0, {"force": 4e5})
+            rows.append(native.read())
+        return rows
+
+    assert assert_replays_from_state(native.fmu, rest)[-1]["v"] > 0.0
 
 
 # -- Emu3 / Emu8 -----------------------------------------------------------------------------
@@ -320,49 +295,23 @@ def test_emu_state_replay_and_bad_parameters(natives):
     fmu = native.fmu
     for k in range(20):
         native.step(k * 0.2, 0.2, unit_forces([5e4, 5e4, 5e4], 3))
-    blob = fmu.serializeFMUstate(fmu.getFMUstate())
-    runs = []
-    for _ in range(2):
-        fmu.setFMUstate(fmu.deSerializeFMUstate(blob))
-        out = []
+
+    def rest() -> list[dict[str, float]]:
+        rows = []
         for k in range(20, 40):
             native.step(k * 0.2, 0.2, unit_forces([-2e5, -2e5, -2e5], 3))
-            out.append(native.read())
-        runs.append(out)
-    assert runs[0] == runs[1]
+            rows.append(native.read())
+        return rows
+
+    assert_replays_from_state(fmu, rest)
     for bad, word in (({"configuration": "crh3_8car"}, "units"),
                       ({"disturbance_correlation_time": 5.0, "disturbance_accel_std": 0.1},
                        "disturbance_correlation_time"),
                       ({"route": "/tmp/x.toml"}, "route")):
         messages: list[str] = []
         with pytest.raises(FMICallException):
-            _open_logged(natives["Emu3"], bad, messages)
+            open_native(natives["Emu3"], bad, messages, "bad")
         assert any(word in m for m in messages), messages
-
-
-def _open_logged(native, params: dict, messages: list[str]) -> None:
-    from fmpy.fmi2 import defaultCallbacks, fmi2CallbackFunctions, fmi2CallbackLoggerTYPE
-
-    _, md, unzipdir = native
-    vr = {v.name: v.valueReference for v in md.modelVariables}
-    types = {v.name: v.type for v in md.modelVariables}
-
-    def logger(env, name, status, category, message):
-        messages.append(message.decode())
-
-    callbacks = fmi2CallbackFunctions()
-    callbacks.logger = fmi2CallbackLoggerTYPE(logger)
-    callbacks.allocateMemory = defaultCallbacks.allocateMemory
-    callbacks.freeMemory = defaultCallbacks.freeMemory
-    fmu = FMU2Slave(guid=md.guid, unzipDirectory=unzipdir, instanceName="bad",
-                    modelIdentifier=md.coSimulation.modelIdentifier)
-    fmu.instantiate(callbacks=callbacks, loggingOn=False)
-    fmu.setupExperiment(startTime=0.0)
-    fmu.enterInitializationMode()
-    for name, value in params.items():
-        setter = {"String": fmu.setString}.get(types[name], fmu.setReal)
-        setter([vr[name]], [value])
-    fmu.exitInitializationMode()
 
 
 # -- closed loops ------------------------------------------------------------------------------

@@ -10,8 +10,9 @@ and, for the models that read them, ``<name>.<profile>`` (:data:`ROUTE_PROFILES`
 bundled reference profiles and EMPC region tables (:data:`DATA`) to ``resources/references``
 and ``resources/regions``. A controller is its law's C file linked with ``ato_controller.c``,
 the C twin of the sampled-controller timing of :mod:`cosim.fmu.slave`.
-The Crh3Train and Emu plants read the step profiles of :data:`STEP_PROFILES` from
-``<name>.profiles`` and link the generic plant backend ``ato_plant_backend.c``.
+Every plant links the generic plant backend ``ato_plant_backend.c``; BrakeDelayTrain,
+Crh3Train and the Emus read the step profiles of :data:`STEP_PROFILES` from
+``<name>.profiles``.
 
 The FMU holds ``binaries/linux64/<id>.so`` (gcc), ``binaries/win64/<id>.dll`` when the
 mingw-w64 cross compiler ``x86_64-w64-mingw32-gcc`` is installed, and ``sources/`` (the C
@@ -81,11 +82,13 @@ class NativeSpec:
         return NATIVE_FMU_DIR / f"{self.identifier}.fmu"
 
 
-CONTROLLER = ("ato_controller.c", "ato_law.h")  # the sampled-controller backend of a law
+# the sampled-controller backend of a law and what the laws share
+CONTROLLER = ("ato_controller.c", "ato_law.h", "ato_law_common.h", "ato_math.h")
 PROFILE = ("ato_profile.c", "ato_profile.h")  # reference profiles (resources/references)
 # the generic plant backend (ato_plant_backend.c: FMI 2-shaped functions, variables, FMU
 # state) and the plant helpers (ato_plant.c: route profiles, envelope, resistance)
-PLANT_SHARED = ("ato_plant_backend.h", "ato_plant_backend.c", "ato_plant.h", "ato_plant.c")
+PLANT_BACKEND = ("ato_plant_backend.h", "ato_plant_backend.c", "ato_math.h")
+PLANT_SHARED = (*PLANT_BACKEND, "ato_plant.h", "ato_plant.c")
 # numpy's default_rng(seed words).standard_normal in C (seeded disturbances)
 NUMPY_RANDOM = ("ato_numpy_random.h", "ato_numpy_random.c")
 # the freight controllers' shared base: observer, blending, brake-pipe model (freight_tracker.c)
@@ -98,7 +101,7 @@ DATADRIVEN = (*CONTROLLER, *PROFILE, "ato_datadriven.c", "ato_datadriven.h", "at
 FFDL = ("ato_ffdl.c", "ato_ffdl.h")
 
 NATIVE: dict[str, NativeSpec] = {
-    "BrakeDelayTrain": NativeSpec("BrakeDelayTrain", "brake_delay.c"),
+    "BrakeDelayTrain": NativeSpec("BrakeDelayTrain", "brake_delay.c", shared=PLANT_SHARED),
     "StopPid": NativeSpec("StopPid", "stop_pid.c", CONTROLLER),
     "EmuSpeedPid3": NativeSpec("EmuSpeedPid3", "speed_pid.c", (*CONTROLLER, *PROFILE),
                                data=("references",)),
@@ -123,7 +126,7 @@ NATIVE: dict[str, NativeSpec] = {
     "EmuGpc3": NativeSpec("EmuGpc3", "emu_gpc.c", DATADRIVEN, data=("references",),
                           generated=("ato_datadriven_const.h",)),
     "FreightTrain": NativeSpec("FreightTrain", "freight.c", ("freight_kernel.c",),
-                               ("speed_limit", "additional")),
+                               ("speed_limit", "additional"), shared=PLANT_BACKEND),
     "Crh3Train": NativeSpec("Crh3Train", "crh3.c", shared=PLANT_SHARED),
     **{identifier: NativeSpec(identifier, "emu.c", shared=(*PLANT_SHARED, *NUMPY_RANDOM),
                               configurations="plants.emu:CONFIGURATIONS",
@@ -675,6 +678,18 @@ def compile_binary(cc: str, src_dir: Path, out: Path, windows: bool) -> None:
         raise RuntimeError(f"{cc} failed on {out.name}:\n{done.stderr.strip()[-3000:]}")
 
 
+def _compile_side_by_side(jobs: list[tuple[str, Path, Path, bool]]) -> None:
+    """:func:`compile_binary` of each ``(cc, src_dir, out, windows)`` job, the compilers
+    running at the same time (each in its own process); creates the output folders."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    for job in jobs:
+        job[2].parent.mkdir(parents=True, exist_ok=True)
+    with ThreadPoolExecutor(max_workers=max(len(jobs), 1)) as pool:
+        for done in [pool.submit(compile_binary, *job) for job in jobs]:
+            done.result()
+
+
 def native_sources(identifier: str, fmi_version: int = 2) -> list[Path]:
     """Every file the native FMU ``identifier`` is made from: its C files, the FMI 2 front
     (and for FMI 3.0 the FMI 3 front and the modelDescription derivation), this builder and
@@ -766,16 +781,10 @@ def build_native(identifier: str, dest: Path = NATIVE_FMU_DIR, windows: bool | N
                 target = root / "resources" / rel
                 target.parent.mkdir(parents=True, exist_ok=True)
                 target.write_text(content)
-        (root / "binaries" / "linux64").mkdir(parents=True)
-        jobs = [(gcc, src, root / "binaries" / "linux64" / f"{identifier}.so", False)]
-        if mingw:
-            (root / "binaries" / "win64").mkdir(parents=True)
-            jobs.append((mingw, src, root / "binaries" / "win64" / f"{identifier}.dll", True))
-        from concurrent.futures import ThreadPoolExecutor
-
-        with ThreadPoolExecutor(max_workers=len(jobs)) as pool:  # the compilers side by side
-            for done in [pool.submit(compile_binary, *job) for job in jobs]:
-                done.result()
+        _compile_side_by_side(
+            [(cc, src, root / "binaries" / platform / f"{identifier}{suffix}", suffix == ".dll")
+             for cc, platform, suffix in ((gcc, "linux64", ".so"), (mingw, "win64", ".dll"))
+             if cc is not None])
         dest.mkdir(parents=True, exist_ok=True)
         staged = dest / f".{identifier}.fmu.{os.getpid()}.tmp"
         with zipfile.ZipFile(staged, "w", zipfile.ZIP_DEFLATED) as z:
@@ -831,7 +840,6 @@ def package_fmi3(fmi2_fmu: Path, out: Path, windows: bool | None = None) -> Path
     ``instantiationToken``), and the sources are compiled into
     ``binaries/x86_64-linux/<id>.so`` and, with ``windows`` (default: when mingw-w64 is
     installed), ``binaries/x86_64-windows/<id>.dll``."""
-    from concurrent.futures import ThreadPoolExecutor
     from xml.etree import ElementTree
 
     import fmpy
@@ -862,15 +870,10 @@ def package_fmi3(fmi2_fmu: Path, out: Path, windows: bool | None = None) -> Path
                 entry.set("name", FMI3_FRONT)
         (src / "buildDescription.xml").write_bytes(
             b'<?xml version="1.0" encoding="UTF-8"?>\n' + tostring(described, encoding="utf-8"))
-        jobs = []
-        for cc, platform, suffix in ((gcc, FMI3_LINUX, ".so"), (mingw, FMI3_WINDOWS, ".dll")):
-            if cc is not None:
-                (root / "binaries" / platform).mkdir(parents=True)
-                jobs.append((cc, src, root / "binaries" / platform / f"{identifier}{suffix}",
-                             suffix == ".dll"))
-        with ThreadPoolExecutor(max_workers=len(jobs)) as pool:  # the compilers side by side
-            for done in [pool.submit(compile_binary, *job) for job in jobs]:
-                done.result()
+        _compile_side_by_side(
+            [(cc, src, root / "binaries" / platform / f"{identifier}{suffix}", suffix == ".dll")
+             for cc, platform, suffix in ((gcc, FMI3_LINUX, ".so"), (mingw, FMI3_WINDOWS, ".dll"))
+             if cc is not None])
         out.parent.mkdir(parents=True, exist_ok=True)
         staged = out.parent / f".{out.name}.{os.getpid()}.tmp"
         with zipfile.ZipFile(staged, "w", zipfile.ZIP_DEFLATED) as z:
@@ -900,3 +903,25 @@ def build_natives(identifier: str, fmi_versions: tuple[int, ...] = FMI_VERSIONS,
         if 3 in targets:
             package_fmi3(fmi2, targets[3], windows)
     return [targets[version] for version in fmi_versions]
+
+
+def build_all_natives(identifiers: list[str], fmi_versions: tuple[int, ...] = FMI_VERSIONS,
+                      dest: Path = NATIVE_FMU_DIR, windows: bool | None = None,
+                      workers: int | None = None) -> dict[str, list[Path]]:
+    """:func:`build_natives` of each of ``identifiers``, ``workers`` models at a time (default:
+    the machine's CPU count; the compilers are processes, so threads suffice). Returns
+    identifier -> paths in the order given; raises the first model's error (after the builds
+    under way have ended), :class:`CompilerMissing` before anything is written."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    for identifier in identifiers:
+        if identifier not in NATIVE:
+            raise ValueError(f"no native model of {identifier!r}; native: {sorted(NATIVE)}")
+        for version in fmi_versions:
+            native_path(identifier, version, dest)  # a known FMI version
+    _compilers(windows)
+    with ThreadPoolExecutor(max_workers=workers or os.cpu_count() or 1) as pool:
+        futures = {identifier: pool.submit(build_natives, identifier, fmi_versions, dest,
+                                           windows)
+                   for identifier in identifiers}
+        return {identifier: future.result() for identifier, future in futures.items()}

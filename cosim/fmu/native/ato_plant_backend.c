@@ -65,10 +65,10 @@ static int cmp_i64(const void* a, const void* b) {
     return x < y ? -1 : x > y;
 }
 
-size_t ato_substep_ends(int64_t t, int64_t h, const int64_t* grids, int n_grids,
-                        int64_t** out) {
+size_t ato_substep_ends_acting(int64_t t, int64_t h, const int64_t* grids, int n_grids,
+                               const int64_t* acts, size_t n_acts, int64_t** out) {
     int64_t end = t + h;
-    size_t cap = 1;
+    size_t cap = 1 + n_acts;
     for (int g = 0; g < n_grids; g++)
         if (grids[g] > 0) {
             int64_t first = (ato_floordiv(t, grids[g]) + 1) * grids[g];
@@ -81,12 +81,19 @@ size_t ato_substep_ends(int64_t t, int64_t h, const int64_t* grids, int n_grids,
         if (grids[g] > 0)
             for (int64_t k = (ato_floordiv(t, grids[g]) + 1) * grids[g]; k < end; k += grids[g])
                 cuts[n++] = k;
+    for (size_t i = 0; i < n_acts; i++)
+        if (t < acts[i] && acts[i] < end) cuts[n++] = acts[i];
     qsort(cuts, n, sizeof(int64_t), cmp_i64);
     size_t u = 0; /* a set: each cut once */
     for (size_t i = 0; i < n; i++)
         if (u == 0 || cuts[i] != cuts[u - 1]) cuts[u++] = cuts[i];
     *out = cuts;
     return u;
+}
+
+size_t ato_substep_ends(int64_t t, int64_t h, const int64_t* grids, int n_grids,
+                        int64_t** out) {
+    return ato_substep_ends_acting(t, h, grids, n_grids, NULL, 0, out);
 }
 
 static char* dup(const char* s) {

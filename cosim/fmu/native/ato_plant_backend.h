@@ -18,6 +18,7 @@
 #include <stdint.h>
 
 #include "ato_backend.h"
+#include "ato_math.h"
 #include "ato_vars.h"
 
 #define ATO_TICKS_PER_SECOND 1000000000LL
@@ -64,9 +65,6 @@ void ato_log(ato_inst* m, fmi2Status status, const char* fmt, ...);
 int64_t ato_to_ticks(double seconds);
 double ato_to_seconds(int64_t ticks);
 int64_t ato_floordiv(int64_t a, int64_t b);
-/* Python's max(a, b) / min(a, b): the first argument unless the second is larger/smaller */
-static inline double ato_max(double a, double b) { return b > a ? b : a; }
-static inline double ato_min(double a, double b) { return b < a ? b : a; }
 
 void ato_put(ato_buf* b, const void* data, size_t n);
 void ato_take(ato_rd* r, void* out, size_t n);
@@ -76,5 +74,9 @@ void ato_take(ato_rd* r, void* out, size_t n);
  * their number, *cuts malloc'ed */
 size_t ato_substep_ends(int64_t t, int64_t h, const int64_t* grids, int n_grids,
                         int64_t** cuts);
+/* the same with the instants among acts[0 .. n_acts - 1] inside (t, t + h) cut too (where a
+ * delayed command acts: plants.dead_time.substep_ends with a history) */
+size_t ato_substep_ends_acting(int64_t t, int64_t h, const int64_t* grids, int n_grids,
+                               const int64_t* acts, size_t n_acts, int64_t** cuts);
 
 #endif

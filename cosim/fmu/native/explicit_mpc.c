@@ -23,7 +23,7 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "ato_law.h"
+#include "ato_law_common.h"
 #include "ato_profile.h"
 #include "ato_vars.h"
 #include "ato_model.h"
@@ -55,8 +55,6 @@ struct law_core {
     ato_profile profile;
     empc_state st;
 };
-
-static double pymax(double a, double b) { return b > a ? b : a; }
 
 /* -- the generated region file: "key count values..." lines, "meta key value" lines -------- */
 typedef struct { char key[64]; int n; double* x; } array;
@@ -221,7 +219,7 @@ static int parse_blocks(const char* text, int horizon, char* err, size_t n) {
 }
 
 static int isclose(double a, double b) {
-    return a == b || fabs(a - b) <= 1e-9 * pymax(fabs(a), fabs(b));
+    return a == b || fabs(a - b) <= 1e-9 * ato_max(fabs(a), fabs(b));
 }
 
 void law_free(law_core* c) {
@@ -382,9 +380,7 @@ law_core* law_make(const ato_values* p, double t0, char* err, size_t n) {
     return c;
 }
 
-size_t law_state_size(const law_core* c) { (void)c; return sizeof(empc_state); }
-void law_get_state(const law_core* c, void* out) { memcpy(out, &c->st, sizeof c->st); }
-void law_set_state(law_core* c, const void* in) { memcpy(&c->st, in, sizeof c->st); }
+ATO_LAW_PLAIN_STATE(st)
 
 /* -- event ------------------------------------------------------------------------------- */
 static double violation(const region_set* s, int i, const double* theta) {
@@ -483,7 +479,7 @@ int law_compute(law_core* c, double t, const ato_values* p, double* out, char* e
     }
     double theta[NTHETA] = {vm - vd, 1e3 * (v[0] - v[1]), 1e3 * (v[1] - v[2]),
                             in[ATO_VR_coupler_force_1] / KN, in[ATO_VR_coupler_force_2] / KN,
-                            vd, slope, pymax(lim, 0.0)};
+                            vd, slope, ato_max(lim, 0.0)};
     const region_set* rs = &c->sets[mode][seg];
     double clipped[NTHETA];
     int changed = 0;

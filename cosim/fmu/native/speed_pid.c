@@ -12,10 +12,8 @@
  */
 #include <math.h>
 #include <stdio.h>
-#include <stdlib.h>
-#include <string.h>
 
-#include "ato_law.h"
+#include "ato_law_common.h"
 #include "ato_profile.h"
 #include "ato_vars.h"
 #include "ato_model.h"
@@ -29,67 +27,52 @@ typedef struct {
 } pid_state;
 
 struct law_core {
-    double kp, ki, kd, derivative_filter, accel_min, accel_max, rate_limit, sample_time;
-    int feedforward;
+    ato_pid_gains pid;
+    double derivative_filter, accel_min, accel_max, rate_limit;
     double mass, hold_accel, stop_speed;
     ato_profile profile;
     pid_state st;
 };
-
-static double pymax(double a, double b) { return b > a ? b : a; }
-static double pymin(double a, double b) { return b < a ? b : a; }
 
 law_core* law_make(const ato_values* p, double t0, char* err, size_t n) {
     (void)t0;
     const double* v = p->v;
     law_core c;
     memset(&c, 0, sizeof c);
-    c.kp = v[ATO_VR_kp];
-    c.ki = v[ATO_VR_ki];
-    c.kd = v[ATO_VR_kd];
+    c.pid = ATO_PID_GAINS(v);
     c.derivative_filter = v[ATO_VR_derivative_filter];
     c.accel_min = v[ATO_VR_accel_min];
     c.accel_max = v[ATO_VR_accel_max];
     c.rate_limit = v[ATO_VR_rate_limit];
-    c.feedforward = v[ATO_VR_feedforward] != 0.0;
-    c.sample_time = v[ATO_VR_sample_time];
     c.mass = v[ATO_VR_mass];
     c.hold_accel = v[ATO_VR_hold_accel];
     c.stop_speed = v[ATO_VR_stop_speed];
     /* DistributedSpeedPidParams.check_relations (the declared ranges: ato_controller.c) */
-    if (!(c.accel_min < c.accel_max)) {
-        char a[40], b[40];
-        snprintf(err, n, "accel_min = %s must be < accel_max = %s", ato_repr(c.accel_min, a),
-                 ato_repr(c.accel_max, b));
+    if (!ato_check_less("accel_min", c.accel_min, "accel_max", c.accel_max, err, n))
         return NULL;
-    }
     if (!ato_profile_load(&c.profile, p->resources, p->s[ATO_VR_reference], err, n))
         return NULL;
-    law_core* out = malloc(sizeof c);
-    *out = c;
-    return out;
+    return ato_law_on_heap(&c, sizeof c);
 }
 
 void law_free(law_core* c) {
     ato_profile_free(&c->profile);
     free(c);
 }
-size_t law_state_size(const law_core* c) { (void)c; return sizeof(pid_state); }
-void law_get_state(const law_core* c, void* out) { memcpy(out, &c->st, sizeof c->st); }
-void law_set_state(law_core* c, const void* in) { memcpy(&c->st, in, sizeof c->st); }
+ATO_LAW_PLAIN_STATE(st)
 
 /* SpeedPid.update with a_res = 0 and the limits a_lo, a_hi */
 static double update(law_core* c, double v, double v_ref, double a_ref, double a_lo,
                      double a_hi) {
     pid_state* st = &c->st;
-    double T = c->sample_time;
-    double lo = pymax(c->accel_min, a_lo);
-    double hi = pymin(c->accel_max, a_hi);
-    lo = pymin(lo, hi); /* inconsistent limits: the upper one wins */
+    double T = c->pid.sample_time;
+    double lo = ato_max(c->accel_min, a_lo);
+    double hi = ato_min(c->accel_max, a_hi);
+    lo = ato_min(lo, hi); /* inconsistent limits: the upper one wins */
     if (c->rate_limit > 0) {
         double step = c->rate_limit * T;
-        double lo2 = pymin(pymax(lo, st->demand - step), hi);
-        double hi2 = pymax(pymin(hi, st->demand + step), lo);
+        double lo2 = ato_min(ato_max(lo, st->demand - step), hi);
+        double hi2 = ato_max(ato_min(hi, st->demand + step), lo);
         lo = lo2;
         hi = hi2;
     }
@@ -105,12 +88,10 @@ static double update(law_core* c, double v, double v_ref, double a_ref, double a
     }
     st->prev_speed = v;
     st->has_prev = 1;
-    double integral = st->integral + error * T;
-    double ff = (c->feedforward ? a_ref : 0.0) + 0.0;
-    double unclamped = ff + c->kp * error + c->ki * integral - c->kd * st->derivative;
-    double demand = pymin(pymax(unclamped, lo), hi);
-    int pushing_out = (unclamped > hi && error > 0) || (unclamped < lo && error < 0);
-    if (!pushing_out) st->integral = integral;
+    double ff = (c->pid.feedforward ? a_ref : 0.0) + 0.0;
+    /* - kd D added as + (-(kd D)): the same double */
+    double demand = ato_pid_step(&st->integral, &c->pid, ff, -(c->pid.kd * st->derivative),
+                                 error, lo, hi);
     st->demand = demand;
     st->error = error;
     return demand;
@@ -136,14 +117,14 @@ int law_compute(law_core* c, double t, const ato_values* p, double* out, char* e
     double v = in[ATO_VR_v];
     double trac[UNITS], brake[UNITS], total_trac = 0.0, total_brake = 0.0;
     for (int i = 0; i < UNITS; i++) {
-        trac[i] = pymax(in[ATO_VR_traction_limit_1 + i], 0.0);
-        brake[i] = pymax(in[ATO_VR_brake_limit_1 + i], 0.0);
+        trac[i] = ato_max(in[ATO_VR_traction_limit_1 + i], 0.0);
+        brake[i] = ato_max(in[ATO_VR_brake_limit_1 + i], 0.0);
     }
     for (int i = 0; i < UNITS; i++) total_trac += trac[i];
     for (int i = 0; i < UNITS; i++) total_brake += brake[i];
     double demand = update(c, v, v_ref, a_ref, -total_brake / c->mass, total_trac / c->mass);
     if (v_ref <= 0.0 && a_ref <= 0.0 && v < c->stop_speed) {
-        demand = pymax(c->hold_accel, -total_brake / c->mass); /* hold at the stop */
+        demand = ato_max(c->hold_accel, -total_brake / c->mass); /* hold at the stop */
         st->demand = demand;
     }
     double force = c->mass * demand;

@@ -11,10 +11,8 @@
  */
 #include <math.h>
 #include <stdio.h>
-#include <stdlib.h>
-#include <string.h>
 
-#include "ato_law.h"
+#include "ato_law_common.h"
 #include "ato_vars.h"
 #include "ato_model.h"
 
@@ -24,30 +22,23 @@ typedef struct {
 } pid_state;
 
 struct law_core {
-    double kp, ki, kd, ref_decel, stop_point, brake_gain, u_min, u_max, sample_time;
-    int feedforward, hold_at_stop_point;
+    ato_pid_gains pid;
+    double ref_decel, stop_point, brake_gain, u_min, u_max;
+    int hold_at_stop_point;
     pid_state st;
 };
-
-/* Python's max(a, b) / min(a, b): the first argument unless the second is larger/smaller */
-static double pymax(double a, double b) { return b > a ? b : a; }
-static double pymin(double a, double b) { return b < a ? b : a; }
 
 law_core* law_make(const ato_values* p, double t0, char* err, size_t n) {
     (void)t0;
     const double* v = p->v;
     law_core c;
     memset(&c, 0, sizeof c);
-    c.kp = v[ATO_VR_kp];
-    c.ki = v[ATO_VR_ki];
-    c.kd = v[ATO_VR_kd];
+    c.pid = ATO_PID_GAINS(v);
     c.ref_decel = v[ATO_VR_ref_decel];
     c.stop_point = v[ATO_VR_stop_point];
     c.brake_gain = v[ATO_VR_brake_gain];
     c.u_min = v[ATO_VR_u_min];
     c.u_max = v[ATO_VR_u_max];
-    c.sample_time = v[ATO_VR_sample_time];
-    c.feedforward = v[ATO_VR_feedforward] != 0.0;
     c.hold_at_stop_point = v[ATO_VR_hold_at_stop_point] != 0.0;
     if (v[ATO_VR_resistance_feedforward] != 0.0) {
         snprintf(err, n, "resistance_feedforward = true: the native build has no resistance "
@@ -55,39 +46,28 @@ law_core* law_make(const ato_values* p, double t0, char* err, size_t n) {
         return NULL;
     }
     /* StopPidParams.check_relations (the declared ranges: ato_controller.c) */
-    if (!(c.u_min < c.u_max)) {
-        char a[40], b[40];
-        snprintf(err, n, "u_min = %s must be < u_max = %s", ato_repr(c.u_min, a),
-                 ato_repr(c.u_max, b));
-        return NULL;
-    }
-    law_core* out = malloc(sizeof c);
-    *out = c;
-    return out;
+    if (!ato_check_less("u_min", c.u_min, "u_max", c.u_max, err, n)) return NULL;
+    return ato_law_on_heap(&c, sizeof c);
 }
 
 void law_free(law_core* c) { free(c); }
-size_t law_state_size(const law_core* c) { (void)c; return sizeof(pid_state); }
-void law_get_state(const law_core* c, void* out) { memcpy(out, &c->st, sizeof c->st); }
-void law_set_state(law_core* c, const void* in) { memcpy(&c->st, in, sizeof c->st); }
+ATO_LAW_PLAIN_STATE(st)
 
 int law_compute(law_core* c, double t, const ato_values* p, double* out, char* err, size_t n) {
     (void)t; (void)err; (void)n;
     double v = p->v[ATO_VR_v], s = p->v[ATO_VR_s];
-    double v_ref = sqrt(2.0 * c->ref_decel * pymax(c->stop_point - s, 0.0));
+    double v_ref = sqrt(2.0 * c->ref_decel * ato_max(c->stop_point - s, 0.0));
     double error = v - v_ref;
-    double u_ff = c->feedforward && s < c->stop_point ? c->ref_decel / c->brake_gain : 0.0;
+    double u_ff =
+        c->pid.feedforward && s < c->stop_point ? c->ref_decel / c->brake_gain : 0.0;
     if (c->hold_at_stop_point && (s >= c->stop_point || (v_ref == 0.0 && v <= 0.0)))
         u_ff = c->u_max; /* at or past the stop point: hold the train */
-    double derivative = c->st.has_prev ? (error - c->st.prev_error) / c->sample_time : 0.0;
+    double derivative =
+        c->st.has_prev ? (error - c->st.prev_error) / c->pid.sample_time : 0.0;
     c->st.prev_error = error;
     c->st.has_prev = 1;
-    double integral = c->st.integral + error * c->sample_time;
-    double unclamped = u_ff + c->kp * error + c->ki * integral + c->kd * derivative;
-    double u = pymin(pymax(unclamped, c->u_min), c->u_max);
-    int saturated_high = unclamped > c->u_max && error > 0;
-    int saturated_low = unclamped < c->u_min && error < 0;
-    if (!(saturated_high || saturated_low)) c->st.integral = integral;
+    double u = ato_pid_step(&c->st.integral, &c->pid, u_ff, c->pid.kd * derivative, error,
+                            c->u_min, c->u_max);
     c->st.command = u;
     out[ATO_VR_brake_command] = u;
     out[ATO_VR_v_ref] = v_ref;
