@@ -15,6 +15,7 @@
 #include <string.h>
 
 #include "ato_fuzzy_rules.h"
+#include "ato_law_common.h"
 #include "freight_tracker.h"
 #include "ato_model.h"
 
@@ -70,9 +71,7 @@ void law_free(law_core* c) {
     ft_free(&c->base);
     free(c);
 }
-size_t law_state_size(const law_core* c) { (void)c; return sizeof(fpid_state); }
-void law_get_state(const law_core* c, void* out) { memcpy(out, &c->st, sizeof c->st); }
-void law_set_state(law_core* c, const void* in) { memcpy(&c->st, in, sizeof c->st); }
+ATO_LAW_PLAIN_STATE(st)
 
 /* RuleSurface.__call__ */
 static double surface(const double* t, double E, double EC) {

@@ -11,6 +11,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "ato_law_common.h"
 #include "freight_tracker.h"
 #include "ato_model.h"
 
@@ -47,11 +48,8 @@ law_core* law_make(const ato_values* p, double t0, char* err, size_t n) {
     c->sample_time = v[ATO_VR_sample_time];
     c->resistance_feedforward = v[ATO_VR_resistance_feedforward] != 0.0;
     c->preview_time = v[ATO_VR_preview_time];
-    if (!(c->accel_min < c->accel_max)) { /* SpeedPidParams.check_relations */
-        char a[40], b[40];
-        snprintf(err, n, "accel_min = %s must be < accel_max = %s", ato_repr(c->accel_min, a),
-                 ato_repr(c->accel_max, b));
-        free(c);
+    if (!ato_check_less("accel_min", c->accel_min, "accel_max", c->accel_max, err, n)) {
+        free(c); /* SpeedPidParams.check_relations */
         return NULL;
     }
     if (!ft_make(&c->base, p, err, n)) {
@@ -67,9 +65,7 @@ void law_free(law_core* c) {
     ft_free(&c->base);
     free(c);
 }
-size_t law_state_size(const law_core* c) { (void)c; return sizeof(pid_state); }
-void law_get_state(const law_core* c, void* out) { memcpy(out, &c->st, sizeof c->st); }
-void law_set_state(law_core* c, const void* in) { memcpy(&c->st, in, sizeof c->st); }
+ATO_LAW_PLAIN_STATE(st)
 
 /* SpeedPid.update */
 static double update(law_core* c, double v, double v_ref, double a_ref, double a_res,

@@ -17,6 +17,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "ato_law_common.h"
 #include "freight_tracker.h"
 #include "ato_model.h"
 
@@ -187,9 +188,7 @@ fail:
     return NULL;
 }
 
-size_t law_state_size(const law_core* c) { (void)c; return sizeof(preview_state); }
-void law_get_state(const law_core* c, void* out) { memcpy(out, &c->st, sizeof c->st); }
-void law_set_state(law_core* c, const void* in) { memcpy(&c->st, in, sizeof c->st); }
+ATO_LAW_PLAIN_STATE(st)
 
 static double dot(const double* a, const double* b, int n) { /* index order */
     double s = 0.0;

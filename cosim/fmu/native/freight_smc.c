@@ -13,6 +13,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "ato_law_common.h"
 #include "freight_tracker.h"
 #include "ato_model.h"
 
@@ -59,9 +60,7 @@ void law_free(law_core* c) {
     ft_free(&c->base);
     free(c);
 }
-size_t law_state_size(const law_core* c) { (void)c; return sizeof(smc_state); }
-void law_get_state(const law_core* c, void* out) { memcpy(out, &c->st, sizeof c->st); }
-void law_set_state(law_core* c, const void* in) { memcpy(&c->st, in, sizeof c->st); }
+ATO_LAW_PLAIN_STATE(st)
 
 static double switching(double sigma, double phi) {
     if (phi > 0) return ft_max(-1.0, ft_min(1.0, sigma / phi));
