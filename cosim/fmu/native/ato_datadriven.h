@@ -47,4 +47,14 @@ void dd_outputs(const double* st, double* out);
 /* sum of x[0..n-1] as numpy's add.reduce for n < 8: ((0.0 + x0) + x1) + ... */
 double dd_sum(const double* x, int n);
 
+/* law_state_size, law_get_state, law_set_state and law_outputs of a data-driven law whose
+ * whole state is the c->count doubles at c->st (the drive's part first, read by dd_outputs) */
+#define DD_LAW_FLAT_STATE                                                                   \
+    size_t law_state_size(const law_core* c) { return c->count * sizeof(double); }         \
+    void law_get_state(const law_core* c, void* out) {                                      \
+        memcpy(out, c->st, law_state_size(c));                                              \
+    }                                                                                       \
+    void law_set_state(law_core* c, const void* in) { memcpy(c->st, in, law_state_size(c)); } \
+    void law_outputs(const law_core* c, double* out) { dd_outputs(c->st, out); }
+
 #endif

@@ -81,10 +81,7 @@ void law_free(law_core* c) {
     free(c->st);
     free(c);
 }
-size_t law_state_size(const law_core* c) { return c->count * sizeof(double); }
-void law_get_state(const law_core* c, void* out) { memcpy(out, c->st, law_state_size(c)); }
-void law_set_state(law_core* c, const void* in) { memcpy(c->st, in, law_state_size(c)); }
-void law_outputs(const law_core* c, double* out) { dd_outputs(c->st, out); }
+DD_LAW_FLAT_STATE
 
 static void apply(law_core* c, const double* u) {
     ffdl_applied(&c->est, &c->f, u);
