@@ -63,6 +63,7 @@ import pytest
 from fmpy import extract, read_model_description
 from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import FMU2Slave
+from native_helpers import set_by_type
 
 from cosim.fmu.build import catalog
 from cosim.fmu.native_build import build_native
@@ -633,7 +634,6 @@ def test_other_parameters_agree_at_the_first_samples(natives, ident, params):
 ])
 def test_bad_parameters_are_refused(natives, ident, params, message):
     _, md, unzipdir = natives[ident]
-    vr = {v.name: v for v in md.modelVariables}
     logged: list[str] = []
     from fmpy.fmi2 import defaultCallbacks, fmi2CallbackFunctions, fmi2CallbackLoggerTYPE
 
@@ -646,14 +646,7 @@ def test_bad_parameters_are_refused(natives, ident, params, message):
     fmu.instantiate(callbacks=cb)
     fmu.setupExperiment(startTime=0.0)
     fmu.enterInitializationMode()
-    for name, value in params.items():
-        ref = [vr[name].valueReference]
-        if vr[name].type == "Integer":
-            fmu.setInteger(ref, [value])
-        elif vr[name].type == "String":
-            fmu.setString(ref, [value])
-        else:
-            fmu.setReal(ref, [value])
+    set_by_type(fmu, md, params)
     with pytest.raises(FMICallException):
         fmu.exitInitializationMode()
     assert any(message in text for text in logged), logged

@@ -52,6 +52,7 @@ import numpy as np
 import pytest
 from fmi_state_helpers import FmuInstance, rerun_after_restore
 from freight_loop import closed_loop
+from native_helpers import set_by_type
 from test_native_controllers import _callbacks, _flat, gamma
 
 from cosim.fmu.build import catalog
@@ -242,14 +243,7 @@ def test_native_refuses_what_it_cannot_run(natives, ident, params, message):
     fmu.setupExperiment(startTime=0.0)
     fmu.enterInitializationMode()
     fmu.setString([var["route"].valueReference], ["freight_20km"])
-    for name, value in params.items():
-        ref = [var[name].valueReference]
-        if var[name].type == "Integer":
-            fmu.setInteger(ref, [value])
-        elif var[name].type == "String":
-            fmu.setString(ref, [value])
-        else:
-            fmu.setReal(ref, [value])
+    set_by_type(fmu, md, params)
     with pytest.raises(FMICallException):
         fmu.exitInitializationMode()
     assert any(message in text for text in logged), logged
