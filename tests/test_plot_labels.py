@@ -236,6 +236,7 @@ def test_reproduce_figures_read_as_paper_figures(built_fmus):
     runs' names and declared descriptions (no raw variable names), the reference a dashed
     continuous curve, the held command as steps, the measured speed as a line."""
     import matplotlib.pyplot as plt
+    import numpy as np
 
     from cosim.run.reproduce import figure_of
     from cosim.run.results import variable_info
@@ -249,9 +250,10 @@ def test_reproduce_figures_read_as_paper_figures(built_fmus):
     renderer = overlay.canvas.get_renderer()
     ax = overlay.axes[0]
     described = variable_info(sc, "plant.s")
-    assert ax.get_xlabel() == f"{described[0]} (m)"
+    assert ax.get_xlabel() == f"{described[0]} (km)"  # the runs span 10 km: drawn in km
+    assert np.isclose(max(ln.get_xdata().max() for ln in ax.get_lines()),
+                      frames["RSMPC 2"]["plant.s"].max() / 1000.0)
     assert ax.get_ylabel().endswith("(km/h)")  # m/s declared, shown in km/h
-    import numpy as np
     legend = ax.get_legend()
     assert not legend.get_window_extent(renderer).overlaps(ax.get_window_extent(renderer))
     texts = [t.get_text() for t in legend.get_texts()]
@@ -279,11 +281,45 @@ def test_reproduce_figures_read_as_paper_figures(built_fmus):
     for ax in panels.axes:
         assert ax.get_ylabel() == "brake command (%)"
         assert [ln.get_drawstyle() for ln in ax.get_lines()] == ["steps-post"]
-        box = ax.get_legend().get_window_extent(renderer)
-        assert not any(box.overlaps(other.get_window_extent(renderer))
-                       for other in panels.axes)
+        assert ax.get_legend() is None  # one curve: named by the panel's title and y label
     assert panels.axes[-1].get_xlabel() == "time (s)"
     plt.close(panels)
+
+
+def test_per_unit_panels_name_each_unit_and_keep_coinciding_curves_visible(built_fmus):
+    """Seed 001's per-unit figures: every unit's curve labelled by its own declaration (not the
+    train's mean speed, not a raw name), ``y_minus`` said in the label, curves of one panel in
+    distinct line styles (units with equal speed stay visible), the limit band in the legend,
+    a 270 km route drawn in km."""
+    import matplotlib.pyplot as plt
+    import numpy as np
+    import pandas as pd
+
+    from cosim.run.reproduce import figure_of
+    from cosim.run.results import variable_info
+
+    sc = load_scenario("seed001_emu_ismpc")
+    t = np.arange(0.0, 100.0)
+    v = np.full_like(t, 80.0)
+    frame = pd.DataFrame({"time": t, "plant.s": 2700.0 * t, "controller.v_ref": v + 0.1,
+                          **{f"plant.v[{i}]": v for i in (1, 2, 3)}})
+    units = [f"plant.v[{i}]" for i in (1, 2, 3)]
+    texts = [variable_info(sc, u)[0] for u in units]
+    assert len(set(texts)) == 3 and all(f"unit {i}" in x for i, x in zip((1, 2, 3), texts))
+    fig = figure_of({"file": "e.png", "kind": "panels", "x": "plant.s", "y": units,
+                     "y_minus": "controller.v_ref", "y_scale": 3.6, "limit_ref":
+                     "controller.v_ref"}, {"ISMPC": frame}, {"ISMPC": sc})
+    fig.canvas.draw()
+    [ax] = fig.axes
+    ref_text = variable_info(sc, "controller.v_ref")[0]
+    labels = [t.get_text() for t in ax.get_legend().get_texts()]
+    assert labels[:3] == [f"{x} - {ref_text}" for x in texts]
+    assert not any("plant." in x or "controller." in x for x in labels), labels
+    styles = [ln.get_linestyle() for ln in ax.get_lines()[:3]]
+    assert len(set(styles)) == 3
+    assert ax.get_xlabel().endswith("(km)") and np.isclose(ax.get_lines()[0].get_xdata()[-1],
+                                                           2700.0 * 99 / 1000.0)
+    plt.close(fig)
 
 
 def test_ensemble_figure_draws_held_bands_as_steps(built_fmus):

@@ -694,10 +694,49 @@ def legend_outside(ax: Any) -> Any:
                      borderaxespad=0.0)
 
 
+LINESTYLES = ("-", "--", ":", "-.")  # per series of one axes: coinciding curves stay visible
+KM_FROM_M = 10_000.0  # a position axis spanning at least this (m) is drawn in km
+
+
+def x_axis(spec: dict[str, Any], scenario: Any, frames: dict[str, Any]) -> tuple[str, float]:
+    """(label, factor) of a figure's x axis: :func:`axis_text`, with a position declared in m
+    drawn in km where the runs span at least ``KM_FROM_M`` (no 6-digit tick labels)."""
+    from cosim.run.results import variable_info
+
+    label, factor = axis_text(spec, "x", scenario, spec["x"])
+    if spec["x"] == "time" or spec.get("xlabel") or scenario is None:
+        return label, factor
+    text, unit = variable_info(scenario, spec["x"])
+    span = max((float(np.nanmax(np.abs(f[spec["x"]].to_numpy(dtype=float))))
+                for f in frames.values() if spec["x"] in f and len(f)), default=0.0)
+    if unit == "m" and span >= KM_FROM_M:
+        return f"{text} (km)", 1e-3
+    return label, factor
+
+
+def series_label(spec: dict[str, Any], scenario: Any, y: str, style: dict[str, Any]) -> str:
+    """The legend text of one series: its declared description (:func:`series_style`), with
+    ``y_reduce`` ("mean of ...") and ``y_minus`` ("... - <its description>") said."""
+    from cosim.run.results import variable_info
+
+    text = style["text"]
+    if "y_reduce" in spec:
+        text = f"{spec['y_reduce']} of {y}"
+    if "y_minus" in spec:
+        minus = variable_info(scenario, spec["y_minus"])[0] if scenario is not None \
+            else spec["y_minus"]
+        text = f"{text} - {minus}"
+    return text
+
+
 def figure_of(spec: dict[str, Any], frames: dict[str, Any], scenarios: dict[str, Any]) -> Any:
     """One ``[[figures]]`` figure (kind ``overlay``: every run on one axes; ``panels``: one
     axes per run) from the runs' recorded frames; ``scenarios``: run name -> its loaded
-    scenario (the declarations behind labels and drawing styles, :func:`series_style`)."""
+    scenario (the declarations behind labels and drawing styles, :func:`series_style`).
+
+    The series of one axes cycle through ``LINESTYLES``, so curves that coincide (cars with the
+    same force) stay distinguishable; a legend is drawn where an axes has more than one
+    labelled curve (a single-curve panel is named by its title and y label)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -709,22 +748,23 @@ def figure_of(spec: dict[str, Any], frames: dict[str, Any], scenarios: dict[str,
     fig, axes = plt.subplots(len(names) if panels else 1, 1, squeeze=False, sharex=True,
                              figsize=(9, 2.6 * len(names) if panels else 4.5),
                              layout="constrained")  # room for the title and outside legends
+    first = scenarios.get(names[0]) if names else None
+    xlabel, xfactor = x_axis(spec, first, frames)
     for i, name in enumerate(names):
         frame, scenario = frames[name], scenarios.get(name)
         ax = axes[i if panels else 0][0]
-        x = frame["time"] if spec["x"] == "time" else frame[spec["x"]]
+        x = (frame["time"] if spec["x"] == "time" else frame[spec["x"]]) * xfactor
         ylabel, scale = axis_text(spec, "y", scenario, ys[0])
-        for y in ys:
-            style = series_style(scenario, y) if "y_reduce" not in spec and \
-                "y_minus" not in spec else {"drawstyle": "default", "text": y,
-                                            "reference": False}
-            text = style["text"]
-            if "y_reduce" in spec:
-                text = f"{spec['y_reduce']} of {text}"
+        for j, y in enumerate(ys):
+            style = series_style(scenario, y) if "y_reduce" not in spec else \
+                {"drawstyle": "default", "text": y, "reference": False}
+            text = series_label(spec, scenario, y, style)
             label = text if panels else (name if len(ys) == 1 else f"{name}: {text}")
             kwargs: dict[str, Any] = {"linewidth": 1.0, "drawstyle": style["drawstyle"]}
+            if panels or len(ys) > 1:
+                kwargs["linestyle"] = LINESTYLES[j % len(LINESTYLES)]
             values = figure_series(frame, spec, y, name)
-            if style["reference"]:
+            if style["reference"] and "y_minus" not in spec:
                 kwargs.update(color="black", linestyle="--", linewidth=0.9)
                 curve = reference_curve(scenario, frame, y)
                 values = values if curve is None else curve
@@ -736,9 +776,9 @@ def figure_of(spec: dict[str, Any], frames: dict[str, Any], scenarios: dict[str,
         ax.set_ylabel(ylabel)
         ax.grid(True, alpha=0.3)
         plain_axes(ax)
-        legend_outside(ax)
-    first = scenarios.get(names[0]) if names else None
-    axes[-1][0].set_xlabel(axis_text(spec, "x", first, spec["x"])[0])
+        if len(ax.get_legend_handles_labels()[1]) > 1:
+            legend_outside(ax)
+    axes[-1][0].set_xlabel(xlabel)
     fig.suptitle(spec.get("title", ""))
     return fig
 

@@ -159,7 +159,8 @@ def variable_info(scenario: Any, ref: str) -> tuple[str, str | None]:
         comp, var = ref.split(".", 1)
         base = var.split("[", 1)[0]
         md = read_model_description(str(scenario.components[comp].fmu_path), validate=False)
-        found = next(v for v in md.modelVariables if v.name in (var, base))
+        by_name = {v.name: v for v in md.modelVariables}
+        found = by_name.get(var) or by_name[base]  # the element itself, else its vector
         unit = found.unit or (found.declaredType.unit if found.declaredType is not None
                               else None)
         text = found.description or ref

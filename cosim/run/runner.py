@@ -176,7 +176,7 @@ def run_tasks(tasks: Sequence[Task], finished: Callable[[Task, Any], None],
 
     with interrupt.guard():
         if scheduler is not None:
-            _run_dask(tasks, done, lost, scheduler, workers, env, broadcast)
+            _run_dask(tasks, done, lost, scheduler, workers, env, broadcast, warm_up)
         elif pool_size(workers, len(tasks)) == 1 and not env:
             for task in tasks:
                 interrupt.check_between(what)
@@ -246,10 +246,13 @@ def _run_pool(tasks: Sequence[Task], done: Callable[[Task, Any], None],
 
 def _run_dask(tasks: Sequence[Task], done: Callable[[Task, Any], None],
               lost: Callable[[Task, BaseException], None], scheduler: str,
-              workers: int | None, env: dict[str, str] | None, broadcast: Any) -> None:
+              workers: int | None, env: dict[str, str] | None, broadcast: Any,
+              warm_up: Callable[[], None] | None = None) -> None:
     """The tasks on the cluster at ``scheduler`` (or a LocalCluster started here, inheriting
-    ``env``); on a signal the unfinished tasks are cancelled."""
-    from distributed import Client, LocalCluster
+    ``env``, its workers warmed up by ``warm_up`` before the first task, as a forked pool is);
+    results are taken as they complete; on a signal the unfinished tasks are cancelled."""
+    from distributed import Client, LocalCluster, wait
+    from distributed import TimeoutError as DaskTimeout
 
     check_dask()
     cluster = None
@@ -261,6 +264,8 @@ def _run_dask(tasks: Sequence[Task], done: Callable[[Task, Any], None],
         try:
             with Client(cluster if cluster is not None else scheduler) as client:
                 client.run(worker_setup, env)
+                if cluster is not None and warm_up is not None:  # its paths are this machine's
+                    client.run(warm_up)
                 kwargs: dict[str, Any] = {}
                 if broadcast is not None:
                     [kwargs["broadcast"]] = client.scatter([broadcast], broadcast=True)
@@ -268,6 +273,10 @@ def _run_dask(tasks: Sequence[Task], done: Callable[[Task, Any], None],
                            for t in tasks}
                 pending = set(task_of)
                 while pending:
+                    try:
+                        wait(list(pending), timeout=_POLL_S, return_when="FIRST_COMPLETED")
+                    except (DaskTimeout, TimeoutError):
+                        pass
                     ready = {f for f in pending if f.done()}
                     for future in ready:
                         try:
@@ -280,8 +289,6 @@ def _run_dask(tasks: Sequence[Task], done: Callable[[Task, Any], None],
                     if pending and interrupt.requested():
                         client.cancel(list(pending))
                         break
-                    if not ready:
-                        time.sleep(_POLL_S / 2)
         finally:
             if cluster is not None:
                 cluster.close()
