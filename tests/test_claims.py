@@ -255,3 +255,116 @@ def test_panels_ensemble_figure_draws_limits(tmp_path: Path) -> None:
     spec["limit_ref"] = "controller.missing"
     with pytest.raises(ReproduceError, match="recorded no 'controller.missing'"):
         draw_ensemble_figure(spec, {"A": dirs}, tmp_path / "g.png")
+
+
+def _repeat_entry(repeats: int = 4) -> object:
+    from types import SimpleNamespace
+
+    timing = {**LESS, "id": "a_faster_than_b", "metric": "t", "ensemble": "repeat"}
+    return SimpleNamespace(
+        claims=[timing, {**timing, "id": "c_faster_than_b", "runs": ["C", "B"]}, LESS],
+        variants=[],
+        ensemble=check_ensemble("e.toml", {"seed_key": "plant.seed", "report_seeds": "1..3",
+                                           "repeats": repeats}),
+        runs=[{"name": "A", "scenario": "s", "set": {"controller.x": 1}},
+              {"name": "B", "scenario": "s"}, {"name": "C", "scenario": "s"}],
+        path="e.toml")
+
+
+def test_repeat_members_are_the_nominal_run_interleaved_without_rounding() -> None:
+    from cosim.run.ensemble import claim_jobs, members
+
+    entry = _repeat_entry(4)
+    # K of a repeat claim is the entry's repeats, whatever --seeds (here 2 and 3)
+    assert members(entry, "repeat", 2) == members(entry, "repeat", 3) == [{}] * 4
+    jobs = claim_jobs(entry, 2, rounding=True)
+    rep = [(key, ov) for key, _sc, ov in jobs if key[1] == "repeat"]
+    # first, by repeat index then run: A0, B0, C0, A1, ...; never a rounding rerun
+    assert [key for key, _ov in rep] == [(r, "repeat", i, False)
+                                         for i in range(4) for r in ("A", "B", "C")]
+    assert [key for key, _sc, _ov in jobs[:len(rep)]] == [key for key, _ov in rep]
+    # every repeat of a run has the same overrides: the run's own set, no seed
+    assert {r: [ov for key, ov in rep if key[0] == r] for r in "ABC"} == {
+        "A": [{"controller.x": 1}] * 4, "B": [{}] * 4, "C": [{}] * 4}
+    # the disturbance claim keeps its seeds and its rounding rerun
+    dist = {key for key, _sc, _ov in jobs if key[1] == "disturbance"}
+    assert dist == {(r, "disturbance", i, rnd) for r in "AB" for i in range(2)
+                    for rnd in (False, True)}
+
+
+def test_repeat_verdict_over_the_repeats_pairs_by_index() -> None:
+    from cosim.run.ensemble import claims_markdown, evaluate
+
+    entry = _repeat_entry(5)
+    drift = np.arange(5.0)  # a load drift met by both runs of a pair
+    summaries: dict = {}
+    for i in range(5):
+        summaries[("A", "repeat", i, False)] = {"t": 1.0 + drift[i]}
+        summaries[("B", "repeat", i, False)] = {"t": 1.5 + drift[i]}
+        summaries[("C", "repeat", i, False)] = {"t": 2.0 + drift[i]}
+    for r in "AB":
+        for i in range(2):
+            for rnd in (False, True):
+                summaries[(r, "disturbance", i, rnd)] = {"m": 0.0 if r == "A" else 1.0}
+    rows = {r["id"]: r for r in evaluate(entry, summaries, 2, rounding=True)}
+    # the paired differences are exactly -0.5 and +0.5 on every repeat, though the drift
+    # spans the samples of each run
+    a = rows["a_faster_than_b"]
+    assert (a["verdict"], a["k"], a["K"], a["median"]) == ("holds", 5, 5, -0.5)
+    assert a["rounding_robust"] is None and a["rounding_verdict"] is None
+    c = rows["c_faster_than_b"]
+    assert (c["verdict"], c["k"], c["K"]) == ("fails", 0, 5)
+    assert rows["a_below_b"]["K"] == 2 and rows["a_below_b"]["rounding_robust"] is True
+    text = claims_markdown(list(rows.values()), 2)
+    line = next(x for x in text.splitlines() if x.startswith("| a_faster_than_b"))
+    assert line.rstrip(" |").endswith("n/a") and "repeat index" in text
+
+
+@pytest.mark.parametrize("value", [0, -3, 2.5, "10", True])
+def test_bad_repeats_value_names_file_and_key(value: object) -> None:
+    with pytest.raises(ClaimsError, match=f"e.toml: \\[ensemble\\] repeats = {value!r}"):
+        check_ensemble("e.toml", {"repeats": value})
+
+
+def test_repeat_claim_needs_repeats() -> None:
+    with pytest.raises(ClaimsError, match="e.toml: \\[\\[claims\\]\\] 'a_below_b': ensemble "
+                                          "= 'repeat' needs \\[ensemble\\] repeats"):
+        check_claims("e.toml", [{**LESS, "ensemble": "repeat"}], ["A", "B"],
+                     check_ensemble("e.toml", {}))
+
+
+def test_seed004_timing_claims_repeat_ten_times() -> None:
+    from cosim.run.ensemble import claim_cases, members
+
+    entry = load_entry("seed004")
+    timing = [c for c in entry.claims if c["metric"] == "qp_cpu_time_total_s"]
+    assert len(timing) == 3 and all(c["ensemble"] == "repeat" for c in timing)
+    assert len(members(entry, "repeat", 2)) == 10
+    rounding = {c["id"]: rnd for _v, c, _r, rnd, _k in claim_cases(entry, 2)}
+    assert [rounding[c["id"]] for c in timing] == [False] * 3
+
+
+def test_repeat_claim_end_to_end_on_a_fast_entry(tmp_path: Path) -> None:
+    import pandas as pd
+
+    from cosim.run.ensemble import run_claims
+
+    path = tmp_path / "tiny.toml"
+    path.write_text(
+        'title = "t"\n'
+        '[[runs]]\nname = "A"\nscenario = "seed000_stop_pid"\n'
+        '[[runs]]\nname = "B"\nscenario = "seed000_stop_pid_plain"\n'
+        '[ensemble]\nreport_seeds = "1..3"\nrepeats = 3\n'
+        '[[claims]]\nid = "a_faster"\ntext = "t"\nmetric = "wall_time_s"\nkind = "less"\n'
+        'runs = ["A", "B"]\nensemble = "repeat"\n'
+        '[[claims]]\nid = "a_within_bound"\ntext = "t"\nmetric = "wall_time_s"\n'
+        'kind = "below"\nthreshold = 1e9\nruns = ["A"]\n')
+    entry = load_entry(path)
+    rows = {r["id"]: r for r in run_claims(entry, tmp_path / "out", 2, workers=1)}
+    assert rows["a_faster"]["K"] == 3 and rows["a_faster"]["rounding_robust"] is None
+    assert rows["a_faster"]["verdict"] in ("holds", "fails", "inconclusive")
+    # no seed key: the disturbance claim is one run, with its rounding rerun
+    assert rows["a_within_bound"]["K"] == 1 and rows["a_within_bound"]["rounding_robust"]
+    csv = pd.read_csv(tmp_path / "out" / "claims.csv")
+    assert list(csv["K"]) == [3, 1]
+    assert "n/a" in (tmp_path / "out" / "claims.md").read_text()

@@ -13,6 +13,12 @@ Degenerate cases give a stated verdict: a missing or NaN metric on any member ->
 inconclusive ("metric missing"); all samples equal (a deterministic run) -> the CI is that
 value; fewer than 3 distinct members and not all equal -> inconclusive ("K < 3").
 A verdict that differs on the perturbed floating-point rerun -> ``rounding-sensitive``.
+
+Ensemble kinds of a claim: ``disturbance`` (member i: report seed i), ``mismatch`` (member i:
+plant-mismatch sample i), ``repeat`` (member i < ``[ensemble] repeats``: the same nominal
+deterministic run again, for metrics that vary run to run only through measurement, CPU and
+wall times; pair i is repeat index i of A and of B; no perturbed floating-point rerun, whose
+rounding verdict does not apply: ``rounding_robust`` is None).
 """
 
 from __future__ import annotations
@@ -25,12 +31,12 @@ from typing import Any
 import numpy as np
 
 CLAIM_KINDS = ("less", "greater", "below", "above", "inside")
-ENSEMBLES = ("disturbance", "mismatch")
+ENSEMBLES = ("disturbance", "mismatch", "repeat")
 ORIGINS = ("paper", "ours")
 _CLAIM_KEYS = {"id", "source", "text", "paper", "metric", "kind", "runs", "threshold", "range",
                "ensemble", "origin"}
 _ENSEMBLE_KEYS = {"seed_key", "report_seeds", "calibration_seeds", "perturb", "perturb_seed",
-                  "rounding_perturb", "rounding_reference_path"}
+                  "rounding_perturb", "rounding_reference_path", "repeats"}
 _VARIANT_KEYS = {"name", "text", "replace", "rounding", "seeds"}
 ROUNDING_RELATIVE = 1e-12  # relative change of each [ensemble].rounding_perturb parameter
 CONFIDENCE = 0.95
@@ -53,6 +59,7 @@ class Ensemble:
     perturb_seed: int = 0
     rounding_perturb: list[str] = field(default_factory=list)
     rounding_reference_path: bool = True
+    repeats: int | None = None  # members of a "repeat" claim (None: no such claim allowed)
 
 
 def parse_seeds(where: str, key: str, value: Any) -> list[int]:
@@ -131,6 +138,12 @@ def check_ensemble(where: str, data: dict[str, Any] | None) -> Ensemble:
     if isinstance(seed, bool) or not isinstance(seed, int):
         raise ClaimsError(f"{where}: [ensemble] perturb_seed = {seed!r}: expected an integer")
     ens.perturb_seed = seed
+    if "repeats" in data:
+        rep = data["repeats"]
+        if isinstance(rep, bool) or not isinstance(rep, int) or rep < 1:
+            raise ClaimsError(f"{where}: [ensemble] repeats = {rep!r}: expected an integer "
+                              ">= 1 (the repetitions of a 'repeat' claim's nominal run)")
+        ens.repeats = rep
     return ens
 
 
@@ -178,6 +191,9 @@ def check_claims(where: str, claims: list[dict[str, Any]], run_names: list[str],
             raise ClaimsError(f"{at}: ensemble = {ensemble!r} (known: {ENSEMBLES})")
         if ensemble == "mismatch" and not ens.perturb:
             raise ClaimsError(f"{at}: ensemble = 'mismatch' needs [ensemble] perturb")
+        if ensemble == "repeat" and ens.repeats is None:
+            raise ClaimsError(f"{at}: ensemble = 'repeat' needs [ensemble] repeats (the "
+                              "number of repetitions of the nominal run)")
         if claim.get("origin", "paper") not in ORIGINS:
             raise ClaimsError(f"{at}: origin = {claim['origin']!r} (known: {ORIGINS})")
     return claims

@@ -1,19 +1,26 @@
 """Run an entry's claims over their ensembles and write ``claims.csv`` / ``claims.md``.
 
-Members of a claim's ensemble (K = ``--seeds``, the first K report seeds):
+Members of a claim's ensemble (K = ``--seeds``, the first K report seeds, except ``repeat``):
 
 - ``disturbance``: member i sets ``[ensemble].seed_key`` to report seed i; without a seed key
   the plant has no random input and the ensemble is one (deterministic) run.
 - ``mismatch``: member i is plant-mismatch sample i drawn from ``[ensemble].perturb``
   (:func:`cosim.run.perturb.draw_samples`, seeded by ``[ensemble].perturb_seed``; the first K
   of the same sequence for every K), with report seed i where there is a seed key.
+- ``repeat``: member i (i < ``[ensemble].repeats``) is the same nominal deterministic run
+  (no seed, no draw), for metrics that vary run to run only through measurement (CPU and
+  wall times). K is the entry's ``repeats``, independent of ``--seeds``. Pairs are repeat
+  indices (repeat i of A with repeat i of B); the repeat jobs run first, in the order
+  A0, B0, A1, B1, ... over every run of the repeat claims, so a drift of the machine's load
+  meets both runs of a pair.
 
-Every member runs twice: on the main path and on a perturbed floating-point path (the plants'
-numpy reference path, ``ATO_COSIM_NO_KERNELS=1`` in the worker, unless
-``[ensemble].rounding_reference_path`` is false, and each ``[ensemble].rounding_perturb``
-parameter scaled by 1 + 1e-12). The runs go through the shared
-runner (:mod:`cosim.run.runner`: ``--workers``, ``--scheduler``, one BLAS thread per worker,
-interrupts, progress on stderr).
+Every member of a ``disturbance`` or ``mismatch`` claim runs twice: on the main path and on a
+perturbed floating-point path (the plants' numpy reference path, ``ATO_COSIM_NO_KERNELS=1`` in
+the worker, unless ``[ensemble].rounding_reference_path`` is false, and each
+``[ensemble].rounding_perturb`` parameter scaled by 1 + 1e-12); a ``repeat`` claim has no such
+rerun (its rounding-robust column reads "n/a": its metric is a measurement, not a result of
+the floating-point path). The runs go through the shared runner (:mod:`cosim.run.runner`:
+``--workers``, ``--scheduler``, one BLAS thread per worker, interrupts, progress on stderr).
 """
 
 from __future__ import annotations
@@ -41,6 +48,11 @@ def members(entry: Any, ensemble: str, k: int) -> list[dict[str, Any]]:
     ens = entry.ensemble
     if k < 1:
         raise ValueError(f"--seeds {k}: must be at least 1")
+    if ensemble == "repeat":  # the entry's repeats, whatever --seeds
+        if ens.repeats is None:
+            raise ValueError(f"{entry.path}: [ensemble] repeats: not given, needed by a "
+                             "'repeat' claim")
+        return [{} for _ in range(ens.repeats)]
     if k > len(ens.report_seeds):
         raise ValueError(f"--seeds {k}: {entry.path} [ensemble] report_seeds has only "
                          f"{len(ens.report_seeds)} seeds")
@@ -84,20 +96,25 @@ def claim_cases(entry: Any, k: int, rounding: bool = True
                 ) -> list[tuple[str, dict[str, Any], list[str], bool, int]]:
     """(variant, claim, runs, with the rounding rerun, K) of every claim evaluation: the
     claims as written (variant "main", K = ``k``) and each ``[[variants]]`` replacing some of
-    their runs (K = its ``seeds``, at most ``k``)."""
-    cases = [("main", c, list(c["runs"]), rounding, k) for c in entry.claims]
+    their runs (K = its ``seeds``, at most ``k``). A ``repeat`` claim never has the rounding
+    rerun (its K is the entry's repeats, see :func:`members`)."""
+    def rnd(claim: dict[str, Any], wanted: bool) -> bool:
+        return wanted and claim.get("ensemble", "disturbance") != "repeat"
+
+    cases = [("main", c, list(c["runs"]), rnd(c, rounding), k) for c in entry.claims]
     for var in getattr(entry, "variants", []):
         kv = min(k, var.get("seeds", k))
         for claim in entry.claims:
             runs = variant_runs(claim, var)
             if runs is not None:
-                cases.append((var["name"], claim, runs, rounding and var.get("rounding", False),
-                              kv))
+                cases.append((var["name"], claim, runs,
+                              rnd(claim, rounding and var.get("rounding", False)), kv))
     return cases
 
 
 def claim_jobs(entry: Any, k: int, rounding: bool = True) -> list[Job]:
-    """Every (run, ensemble, member, path) the claims and their variants need, once."""
+    """Every (run, ensemble, member, path) the claims and their variants need, once; the
+    ``repeat`` members first, interleaved by repeat index (A0, B0, A1, B1, ...)."""
     runs = {r["name"]: r for r in entry.runs}
     jobs: dict[tuple[str, str, int, bool], Job] = {}
     cache: dict[tuple[str, int], list[dict[str, Any]]] = {}
@@ -116,7 +133,11 @@ def claim_jobs(entry: Any, k: int, rounding: bool = True) -> list[Job]:
                     if rnd:
                         overrides.update(_rounding_overrides(entry, run, overrides))
                     jobs.setdefault(key, (key, run["scenario"], overrides))
-    return list(jobs.values())
+    order = {name: j for j, name in enumerate(dict.fromkeys(key[0] for key in jobs))}
+    repeats = sorted((key for key in jobs if key[1] == "repeat"),
+                     key=lambda key: (key[2], order[key[0]]))
+    return [jobs[key] for key in repeats] + [j for key, j in jobs.items()
+                                             if key[1] != "repeat"]
 
 
 def _run_member(scenario: str, overrides: dict[str, Any], out_dir: str | None = None
@@ -332,7 +353,8 @@ def claims_markdown(rows: list[dict[str, Any]], k: int) -> str:
                    "rounding-robust"]), "|" + " --- |" * 7]
     for r in rows:
         what = {"less": "A - B", "greater": "A - B"}.get(r["kind"], r["metric"])
-        robust = "-" if r["rounding_robust"] is None else "yes" if r["rounding_robust"] else "no"
+        robust = ("n/a" if r["ensemble"] == "repeat" else "-" if r["rounding_robust"] is None
+                  else "yes" if r["rounding_robust"] else "no")
         lines.append(_row([f"{r['id']}: {r['text']} ({r['runs']}; {r['metric']}, "
                            f"{r['ensemble']})", r["source"], r["paper"],
                            f"{what}: {ours_text(r)}", f"{r['k']} of {r['K']}", r["verdict"],
@@ -343,6 +365,10 @@ def claims_markdown(rows: list[dict[str, Any]], k: int) -> str:
               "A - B: the paired difference per member (same seed / mismatch sample); k of K: "
               "members on the claimed side. Verdict from the 95 % bootstrap CI of the median; "
               "rounding-sensitive: the verdict differs on the perturbed floating-point rerun."]
+    if any(r["ensemble"] == "repeat" for r in rows):
+        lines[-1] += (" repeat: the members are repetitions of the same nominal run (K fixed "
+                      "by the entry, not by --seeds), paired by repeat index; no rounding "
+                      "rerun (n/a).")
     return "\n".join(lines)
 
 

@@ -86,6 +86,8 @@ live there, not in code)::
                                    # numpy reference path, ATO_COSIM_NO_KERNELS=1)
     rounding_reference_path = true # optional: false keeps the compiled kernels on the rerun
                                    # (then rounding_perturb alone perturbs it)
+    repeats = 10                   # "repeat" claims: repetitions of the nominal run (K of
+                                   # those claims, whatever --seeds; no rounding rerun)
     [[claims]]                     # a claim of the paper, tested over the ensemble
     id = "ismpc_mse_below_ismc"    # unique, [a-z0-9_]
     source = "Table 2"
@@ -99,6 +101,8 @@ live there, not in code)::
     threshold = 0.2                # below / above
     range = [-0.5, 0.5]            # inside
     ensemble = "disturbance"       # disturbance (report seeds) | mismatch (perturb samples)
+                                   # | repeat (the nominal run [ensemble].repeats times,
+                                   # paired by repeat index: CPU / wall time claims)
     origin = "paper"               # paper | ours
     [[variants]]                   # optional: every claim again with some runs replaced (an
     name = "white"                 # alternative reading, a mechanism removed); claims.md
