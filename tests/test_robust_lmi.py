@@ -108,6 +108,7 @@ def test_an_event_the_first_solver_leaves_unsolved_is_solved_by_the_fallback(mon
             return "optimal_inaccurate" if solver == "clarabel" else real(solver)
 
         monkeypatch.setattr(problem, "_solve_with", stalls)
+        monkeypatch.setattr(problem, "_solve_direct", lambda x, v: ("optimal_inaccurate", None))
     assert not alone.solve(x, VERTICES).ok
     sol = lmi.solve(x, VERTICES)
     assert sol.ok and sol.fallback, sol.status
