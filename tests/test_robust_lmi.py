@@ -108,9 +108,30 @@ def test_an_event_the_first_solver_leaves_unsolved_is_solved_by_the_fallback(mon
             return "optimal_inaccurate" if solver == "clarabel" else real(solver)
 
         monkeypatch.setattr(problem, "_solve_with", stalls)
+        monkeypatch.setattr(problem, "_solve_direct", lambda x, v: ("optimal_inaccurate", None))
     assert not alone.solve(x, VERTICES).ok
     sol = lmi.solve(x, VERTICES)
     assert sol.ok and sol.fallback, sol.status
     tol = 1e-4  # SCS's eps_abs / eps_rel (KothareLmi.solver_options)
     for M in lmi.vertex_matrices(sol, VERTICES):
         assert np.linalg.eigvalsh(M).min() >= -10 * tol * np.abs(M).max()
+
+
+def test_direct_clarabel_path_gives_cvxpys_solution():
+    """Clarabel on the conic data (direct) and through ``problem.solve`` get the same data and
+    settings: F and gamma agree to Clarabel's relative tolerance of their magnitude."""
+    rng = np.random.default_rng(3)
+    for _ in range(3):
+        verts = [(A + 0.005 * rng.standard_normal((2, 2)), B) for A, B in VERTICES]
+        direct = KothareLmi(2, 1, len(verts), np.eye(2), np.eye(1), u_max=[2.0])
+        plain = KothareLmi(2, 1, len(verts), np.eye(2), np.eye(1), u_max=[2.0], direct=False)
+        assert direct.direct and not plain.direct
+        for _ in range(3):
+            x = rng.standard_normal(2) * [5.0, 40.0]
+            a, b = direct.solve(x, verts), plain.solve(x, verts)
+            assert a.status == b.status
+            if not a.ok:
+                continue
+            tol = 10 * direct.tolerance
+            assert abs(a.gamma - b.gamma) <= tol * abs(b.gamma)
+            assert np.max(np.abs(a.F - b.F)) <= tol * max(1.0, np.max(np.abs(b.F)))

@@ -18,20 +18,29 @@ at each event ::
 (Kothare, Balakrishnan and Morari 1996, Automatica 32(10), Theorem 2 and section 3.2). The
 problem is parametrised (cvxpy ``Parameter`` for ``x`` and every vertex ``A_j``, ``B_j``) and
 disciplined-parametrised (DPP), so it is canonicalised once and an event only refills the
-parameters. The paper's disturbance column ``D_j`` of eq. 24 is not used: the seed 003
-controller absorbs the disturbance with integral action instead (``controllers.robust``).
+parameters. With Clarabel, an event goes straight to the solver: the parameter vector times
+cvxpy's reduced parameter-to-data tensor gives the conic data ``(A, b)`` of
+``min q'z  s.t.  A z + s = b, s in K`` (the same data, in the same layout, cvxpy builds), and a
+fixed linear map (from cvxpy's inverse reductions, found once) takes the solver's ``z`` to
+``gamma``, ``Qv`` and ``Y``. The paper's disturbance column ``D_j`` of eq. 24 is not used: the
+seed 003 controller absorbs the disturbance with integral action instead (``controllers.robust``).
 """
 
 from __future__ import annotations
 
 import math
 import time
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-import clarabel  # noqa: F401  (cvxpy's SDP solver used by default: missing = error at import)
+import clarabel  # cvxpy's SDP solver, used by default (missing = error at import)
 import cvxpy as cp
 import numpy as np
+import scipy.sparse as sp
+from cvxpy.lin_ops.lin_op import CONSTANT_ID
+from cvxpy.reductions.solution import Solution
+from cvxpy.reductions.solvers.conic_solvers.clarabel_conif import CLARABEL, dims_to_solver_cones
 
 LMI_SOLVERS = ("clarabel", "scs")
 _SOLVED = (cp.OPTIMAL,)
@@ -46,7 +55,7 @@ class LmiSolution:
     Qv: np.ndarray
     Y: np.ndarray
     status: str
-    solve_time: float  # wall time of cvxpy's solve call(s) (s)
+    solve_time: float  # wall time of the solve: data, solver call(s), solution (s)
     cpu_time: float = 0.0  # CPU time of this process during those calls (s; load-independent)
     fallback: bool = False  # solved by the fallback solver after the first did not solve it
 
@@ -71,10 +80,13 @@ class KothareLmi:
     def __init__(self, n: int, m: int, n_vertices: int, Q1: np.ndarray, R: np.ndarray,
                  u_max: Sequence[float] | None = None, C: np.ndarray | None = None,
                  y_max: Sequence[float] | None = None, solver: str = "clarabel",
-                 fallback: str | None = None) -> None:
+                 fallback: str | None = None, direct: bool = True) -> None:
         """``fallback``: a solver of :data:`LMI_SOLVERS` that re-solves an event ``solver``
         leaves unsolved (an interior-point method may stop short of its tolerance, status
-        "optimal_inaccurate", on a problem a first-order method solves), ``None``: none."""
+        "optimal_inaccurate", on a problem a first-order method solves), ``None``: none.
+        ``direct``: with ``solver = "clarabel"``, call Clarabel on the conic data
+        (:meth:`_solve_direct`) rather than through ``problem.solve``; both pass Clarabel the
+        same data and settings."""
         if solver not in LMI_SOLVERS:
             raise ValueError(f"solver = {solver!r} must be one of {LMI_SOLVERS}")
         if fallback is not None and (fallback not in LMI_SOLVERS or fallback == solver):
@@ -119,6 +131,61 @@ class KothareLmi:
             raise AssertionError("Kothare LMI problem is not DPP")
         self.Q1, self.R = np.asarray(Q1, float), np.asarray(R, float)
         self.solves = 0
+        self._x = np.zeros(n)
+        self.direct = direct and solver == "clarabel"
+        if self.direct:
+            self._build_direct()
+
+    def _build_direct(self) -> None:
+        """The conic data of the problem as an affine map of the parameters, and the linear
+        map from the solver's variable to ``(gamma, Qv, Y)``, from cvxpy's Clarabel chain.
+
+        Data: ``values = T @ [p; 1]`` with ``T`` cvxpy's reduced tensor (``ReducedMat``) and
+        ``p`` the parameters flattened column-major at cvxpy's columns; ``values`` fill the
+        fixed CSC pattern of ``[-A | b]`` (so with ``keep_zeros = False``, as cvxpy does). The
+        objective ``q`` (here ``gamma``'s column) does not depend on the parameters. The
+        solution map is linear (the reductions only copy and symmetrise entries), so it is
+        found by inverting the chain at ``z = 0`` and at each unit vector."""
+        self.x.value = np.zeros(self.n)
+        for pa, pb in zip(self.A, self.B, strict=True):
+            pa.value, pb.value = np.zeros((self.n, self.n)), np.zeros((self.n, self.m))
+        data, chain, inverse = self.problem.get_problem_data(cp.CLARABEL)
+        prog = data[cp.settings.PARAM_PROB]
+        prog.reduced_A.cache(False)
+        self._tensor = prog.reduced_A.reduced_mat.tocsr()
+        indices, indptr, shape = prog.reduced_A.problem_data_index
+        nz = prog.x.size
+        split = int(indptr[nz])
+        self._a_index = (np.asarray(indices[:split]), np.asarray(indptr[:nz + 1]),
+                         (shape[0], nz))
+        self._b_rows, self._split = np.asarray(indices[split:]), split
+        self._n_rows = shape[0]
+        cols = prog.param_id_to_col
+        self._pvec = np.zeros(prog.total_param_size + 1)
+        self._pvec[cols[CONSTANT_ID]] = 1.0
+        self._x_col = cols[self.x.id]
+        self._ab_cols = [(cols[pa.id], cols[pb.id]) for pa, pb in zip(self.A, self.B,
+                                                                       strict=True)]
+        self._q = np.asarray(data[cp.settings.C], float).copy()
+        self._P = sp.triu(sp.csc_array((nz, nz))).tocsc()
+        self._cones = dims_to_solver_cones(data[CLARABEL.DIMS])
+        self._settings = CLARABEL.parse_solver_opts(False, {})
+
+        var_id = inverse[-1][CLARABEL.VAR_ID]
+
+        def recover(z: np.ndarray) -> np.ndarray:
+            sol = Solution(cp.OPTIMAL, 0.0, {var_id: z}, {}, {})
+            for reduction, data in reversed(list(zip(chain.reductions[:-1], inverse[:-1],
+                                                     strict=True))):
+                sol = reduction.invert(sol, data)
+            vals = sol.primal_vars
+            return np.concatenate([np.asarray(vals[v.id], float).ravel(order="F")
+                                   for v in (self.gamma, self.Qv, self.Y)])
+
+        offset = recover(np.zeros(nz))
+        if np.any(offset != 0.0):
+            raise AssertionError("solution map of the Kothare LMI problem is not linear")
+        self._unpack = np.column_stack([recover(np.eye(nz)[i]) for i in range(nz)])
 
     def solver_options(self, solver: str | None = None) -> dict:
         """The solver (default: ``solver``) and its tolerances: Clarabel's defaults (gap and
@@ -141,30 +208,76 @@ class KothareLmi:
         except cp.error.SolverError as exc:
             return f"solver error: {exc}"
 
+    def _solve_direct(self, x: np.ndarray, vertices: Sequence[tuple[np.ndarray, np.ndarray]]
+                      ) -> tuple[str, np.ndarray | None]:
+        """Clarabel on the conic data at ``(x, vertices)``: cvxpy's status (a solver error
+        gives the message of cvxpy's ``SolverError``) and ``[gamma, vec Qv, vec Y]``
+        (column-major) when a solution is present, else ``None``."""
+        n, m, pv = self.n, self.m, self._pvec
+        pv[self._x_col:self._x_col + n] = x
+        for (A, B), (ca, cb) in zip(vertices, self._ab_cols, strict=True):
+            pv[ca:ca + n * n] = np.asarray(A, float).ravel(order="F")
+            pv[cb:cb + n * m] = np.asarray(B, float).ravel(order="F")
+        values = self._tensor @ pv
+        k = self._split
+        A_data = sp.csc_array((-values[:k], self._a_index[0], self._a_index[1]),
+                              shape=self._a_index[2])
+        b = np.zeros(self._n_rows)
+        np.add.at(b, self._b_rows, values[k:])
+        result = clarabel.DefaultSolver(self._P, self._q, A_data, b, self._cones,
+                                        self._settings).solve()
+        status = CLARABEL.STATUS_MAP.get(str(result.status), cp.settings.SOLVER_ERROR)
+        if status in cp.settings.INACCURATE:
+            warnings.warn("Solution may be inaccurate. Try another solver, adjusting the "
+                          "solver settings, or solve with verbose=True for more "
+                          "information.", stacklevel=3)
+        if status in cp.settings.ERROR:
+            return ("solver error: Solver 'CLARABEL' failed. Try another solver, or solve "
+                    "with verbose=True for more information.", None)
+        if status not in cp.settings.SOLUTION_PRESENT:
+            return status, None
+        return status, self._unpack @ np.asarray(result.x, float)
+
+    def _set_parameters(self, vertices: Sequence[tuple[np.ndarray, np.ndarray]]) -> None:
+        self.x.value = self._x
+        for (A, B), pa, pb in zip(vertices, self.A, self.B, strict=True):
+            pa.value = np.asarray(A, float).reshape(self.n, self.n)
+            pb.value = np.asarray(B, float).reshape(self.n, self.m)
+
     def solve(self, x: np.ndarray, vertices: Sequence[tuple[np.ndarray, np.ndarray]]
               ) -> LmiSolution:
         """Solve at state ``x`` for the vertices ``[(A_j, B_j)]`` (exactly ``n_vertices``)."""
         if len(vertices) != self.L:
             raise ValueError(f"{len(vertices)} vertices given, problem built for {self.L}")
-        self.x.value = np.asarray(x, float).reshape(self.n)
-        for (A, B), pa, pb in zip(vertices, self.A, self.B, strict=True):
-            pa.value = np.asarray(A, float).reshape(self.n, self.n)
-            pb.value = np.asarray(B, float).reshape(self.n, self.m)
+        n, m = self.n, self.m
+        self._x = np.asarray(x, float).reshape(n).copy()
         t0, c0 = time.perf_counter(), time.process_time()
-        status = self._solve_with(self.solver)
+        if self.direct:
+            status, z = self._solve_direct(self._x, vertices)
+        else:
+            self._set_parameters(vertices)
+            status = self._solve_with(self.solver)
+            z = None if self.Qv.value is None else np.concatenate(
+                [np.ravel(self.gamma.value), np.ravel(self.Qv.value, order="F"),
+                 np.ravel(self.Y.value, order="F")])
         fallback = False
-        if (status not in _SOLVED or self.Qv.value is None) and self.fallback is not None:
+        if (status not in _SOLVED or z is None) and self.fallback is not None:
+            if self.direct:
+                self._set_parameters(vertices)
             status, fallback = self._solve_with(self.fallback), True
+            z = None if self.Qv.value is None else np.concatenate(
+                [np.ravel(self.gamma.value), np.ravel(self.Qv.value, order="F"),
+                 np.ravel(self.Y.value, order="F")])
         dt, cpu = time.perf_counter() - t0, time.process_time() - c0
         self.solves += 1
-        if status not in _SOLVED or self.Qv.value is None:
-            nan = np.full((self.m, self.n), math.nan)
-            return LmiSolution(nan, math.nan, np.full((self.n, self.n), math.nan), nan,
+        if status not in _SOLVED or z is None:
+            nan = np.full((m, n), math.nan)
+            return LmiSolution(nan, math.nan, np.full((n, n), math.nan), nan,
                                status, dt, cpu, fallback)
-        Qv = np.asarray(self.Qv.value, float)
-        Y = np.asarray(self.Y.value, float).reshape(self.m, self.n)
+        Qv = z[1:1 + n * n].reshape(n, n, order="F")
+        Y = z[1 + n * n:].reshape(m, n, order="F")
         F = np.linalg.solve(Qv.T, Y.T).T  # Y Qv^-1
-        return LmiSolution(F, float(self.gamma.value), Qv, Y, status, dt, cpu, fallback)
+        return LmiSolution(F, float(z[0]), Qv, Y, status, dt, cpu, fallback)
 
     def vertex_matrices(self, sol: LmiSolution,
                         vertices: Sequence[tuple[np.ndarray, np.ndarray]]
@@ -173,7 +286,7 @@ class KothareLmi:
         n, m = self.n, self.m
         Q1h, Rh = _sqrtm_psd(self.Q1), _sqrtm_psd(self.R)
         Qv, Y, g = sol.Qv, sol.Y, sol.gamma
-        x = np.asarray(self.x.value, float).reshape(n, 1)
+        x = self._x.reshape(n, 1)
         out = [np.block([[np.ones((1, 1)), x.T], [x, Qv]])]
         for A, B in vertices:
             AQBY = A @ Qv + B @ Y
