@@ -157,7 +157,9 @@ def test_site_renders_in_chromium(tmp_path: Path) -> None:
 
     def dump(url: str) -> str:
         result = subprocess.run(
-            [browser, "--headless", "--no-sandbox", "--disable-gpu",
+            [browser, "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic",
+             "--no-first-run", "--disable-background-networking", "--disable-component-update",
+             "--disable-sync", f"--user-data-dir={tmp_path / 'profile'}",
              "--allow-file-access-from-files", "--virtual-time-budget=5000", "--dump-dom", url],
             capture_output=True, text=True, timeout=120)
         assert result.returncode == 0, result.stderr[-2000:]
