@@ -126,7 +126,9 @@ def test_bash_block_runs(where: str, language: str, code: str, tmp_path: Path) -
     cosim = bin_dir / "cosim"
     cosim.write_text(f'#!/bin/sh\nexec "{sys.executable}" -m cosim.cli "$@"\n')
     cosim.chmod(0o755)
-    (bin_dir / "python").symlink_to(sys.executable)
+    python = bin_dir / "python"  # a wrapper, not a symlink: a venv's interpreter finds its
+    python.write_text(f'#!/bin/sh\nexec "{sys.executable}" "$@"\n')  # packages by its own path
+    python.chmod(0o755)
     work = tmp_path / "work"
     work.mkdir()
     env = {**os.environ, "PATH": f"{bin_dir}{os.pathsep}{os.environ['PATH']}",

@@ -49,6 +49,7 @@ from cosim.fmu.build import catalog
 from cosim.fmu.native_build import build_native, native_path
 from cosim.run.master import run_scenario
 from cosim.run.scenario import ScenarioError, load_scenario
+from plants.emu import emu_config
 
 CONTROLLERS = ("StopPid", "EmuSpeedPid3", "EmuSpeedPid8", "Empc3")
 UNIT = 2.0**-53
@@ -105,6 +106,7 @@ class Pair:
         self.vars = {v.name: v for v in md.modelVariables}
         self.outputs = [v for v in md.modelVariables if v.causality == "output"]
         self.inputs = [v for v in md.modelVariables if v.causality == "input"]
+        self.v_seen = 0.0  # largest |unit speed| set so far (m/s)
         self.native = FMU2Slave(guid=md.guid, unzipDirectory=unzipdir, instanceName="native",
                                 modelIdentifier=md.coSimulation.modelIdentifier)
         self.native.instantiate()
@@ -129,6 +131,8 @@ class Pair:
 
     def set_inputs(self, values: list[float]) -> None:
         vrs = [v.valueReference for v in self.inputs]
+        self.v_seen = max([self.v_seen] + [
+            abs(x) for v, x in zip(self.inputs, values, strict=True) if v.name.startswith("v[")])
         self.native.setReal(vrs, values)
         self.py.set_real(vrs, values)
 
@@ -187,12 +191,15 @@ CASES = [
 
 def assert_outputs_agree(pair: Pair, ident: str, native: list, py: list, where: str) -> None:
     """Equal, except the EMPC's forces (within :func:`empc_force_bound`) and its speed error
-    (the mean speed's dot product: 2 gamma_3 sum |c_i v_i| <= 2 gamma_3 max v)."""
+    (the mean speed's dot product: 2 gamma_3 sum |c_i v_i| <= 2 gamma_3 max v, the max over
+    every speed set so far: an event computes from the inputs in effect at its own time, which
+    may be an earlier step's)."""
     if ident != "Empc3":
         assert native == py, where
         return
     d_force = empc_force_bound()
-    v_max = max(pair.py.values[v.name] for v in pair.inputs if v.name.startswith("v["))
+    v_max = max([pair.v_seen] + [abs(pair.py.values[v.name]) for v in pair.inputs
+                                 if v.name.startswith("v[")])
     for var, a, b in zip(pair.outputs, native, py):
         if var.name.startswith("force["):
             tol = d_force
@@ -345,17 +352,32 @@ def _compare(name: str, natives: tuple[str, ...], stop_time: float | None) -> No
     mean_force = float(py.frame["controller.force_demand"].abs().mean())
     rtol = n_events * empc_force_bound() / mean_force
     assert rtol < 1e-6  # the bound is meaningful: far below any figure a summary reports
+    # a coupler force k (x_i - x_i+1) + d (v_i - v_i+1) is a difference of two positions of
+    # magnitude s_max: once the forces differ, each run rounds its positions its own way, by up
+    # to u s_max per plant sub-step and position, so two runs' couplers may differ by
+    # 2 k (2 n_sub u s_max) beyond what the force bound explains (plus d times the speeds')
+    plant = sc.components["plant"]
+    train = emu_config(str(plant.parameters["configuration"]))
+    n_sub = sc.simulation.stop_time / float(plant.parameters["max_step"])
+    s_max = float(py.frame["plant.s"].abs().max())
+    v_scale = max(float(py.frame[c].abs().max()) for c in cols if c.startswith("plant.v["))
+    coupler = (train.coupler_stiffness * 4 * n_sub * UNIT * s_max
+               + train.coupler_damping * 2 * rtol * v_scale)
     for c in cols:
         a, b = py.frame[c].to_numpy(), nat.frame[c].to_numpy()
         if c == "controller.delta":
             assert (a == b).all(), f"{name}: the mode schedule differs"
         else:
             scale = float(np.abs(a).max())
-            assert np.allclose(b, a, rtol=rtol, atol=rtol * scale), f"{name}: {c}"
+            atol = rtol * scale + (coupler if c.startswith("plant.coupler_force[") else 0.0)
+            assert np.allclose(b, a, rtol=rtol, atol=atol), f"{name}: {c}"
     for key, value in s_py.items():
         other = s_nat[key]
         if isinstance(value, (int, float)) and not isinstance(value, bool):
-            assert math.isclose(other, value, rel_tol=rtol, abs_tol=rtol), (key, value, other)
+            extra = 0.0 if "coupler" not in key else coupler * (1e-3 if key.endswith("_kn")
+                                                                 else 1.0)
+            assert math.isclose(other, value, rel_tol=rtol, abs_tol=rtol + extra), (
+                key, value, other)
         else:
             assert other == value, key
 
