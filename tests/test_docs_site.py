@@ -1,12 +1,15 @@
 """The documentation site: generated pages current, the site builds with warnings as errors,
-every runnable block of the docs runs, and (slow) the built pages and figures render in a
-headless Chromium.
+every runnable block of the docs runs, and (slow) the built pages render in a headless Chromium
+as a reader sees them.
 
 Convention for code blocks in ``docs/*.md``: a ```` ```bash ```` block is run by
 :func:`test_bash_block_runs` in a fresh temporary folder, with this checkout's ``cosim`` first
-on ``PATH``, and must exit 0 within ``BLOCK_TIMEOUT_S``; ```` ```bash norun ```` marks a block
-shown only (installs, long runs). ```` ```python ```` blocks are executed as scripts the same
-way unless marked ``norun``. Other fences (toml, text, sh, c) are data or other languages.
+on ``PATH``, and must exit 0 within ``BLOCK_TIMEOUT_S``; ```` ```python ```` blocks are executed
+as scripts the same way. An HTML comment ``<!-- norun -->`` on the line right before the fence
+marks a block shown only (installs, long runs): the comment is invisible in the rendered page,
+and the fence's info string stays one word, which is all the site's Markdown (Python-Markdown
+with pymdownx.superfences) recognises; ```` ```bash norun ```` is not a fence there and swallows
+the text after it into a code box. Other fences (toml, text, sh, c) are data or other languages.
 """
 
 from __future__ import annotations
@@ -27,16 +30,36 @@ from cosim.run import docs_pages
 ROOT = Path(__file__).resolve().parent.parent
 DOCS = ROOT / "docs"
 BLOCK_TIMEOUT_S = 600  # a block builds the FMUs it runs: minutes on a loaded 2-core machine
-_FENCE = re.compile(r"^```(bash|python)([^\n]*)\n(.*?)^```\s*$", re.M | re.S)
+NORUN = "<!-- norun -->"  # on the line before a fence: the block is shown, not run
+_FENCE = re.compile(r"^(<!-- norun -->\n)?```(bash|python)[ \t]*\n(.*?)^```[ \t]*$",
+                    re.M | re.S)
+_OPENING = re.compile(r"^[ \t]*```(.*)$", re.M)  # every fence line: opening or closing
 
 
 def _blocks() -> list[tuple[str, str, str]]:
     found = []
     for page in sorted(DOCS.rglob("*.md")):
         for i, m in enumerate(_FENCE.finditer(page.read_text())):
-            if "norun" not in m.group(2).split():
-                found.append((f"{page.relative_to(DOCS)}#{i}", m.group(1), m.group(3)))
+            if not m.group(1):
+                found.append((f"{page.relative_to(DOCS)}#{i}", m.group(2), m.group(3)))
     return found
+
+
+def test_fences_name_one_language() -> None:
+    """Each fence's info string is one word (or none, a closing fence): superfences takes
+    ```` ```bash norun ```` for text, and everything after it up to the next fence lands in a
+    code box, out of the table of contents."""
+    for page in sorted(DOCS.rglob("*.md")):
+        for m in _OPENING.finditer(page.read_text()):
+            assert re.fullmatch(r"[A-Za-z0-9_+-]*[ \t]*", m.group(1)), (page, m.group(0))
+
+
+def test_norun_marks_only_the_block_after_it() -> None:
+    page = f"a\n\n{NORUN}\n```bash\nexit 1\n```\n\n```bash\ntrue\n```\n"
+    found = [(m.group(1), m.group(2), m.group(3)) for m in _FENCE.finditer(page)]
+    assert found == [(NORUN + "\n", "bash", "exit 1\n"), (None, "bash", "true\n")]
+    run = [code for _, _, code in _blocks()]
+    assert run and not any("pip install" in code for code in run)  # installs are shown only
 
 
 def test_generated_pages_are_current() -> None:
