@@ -171,45 +171,123 @@ def _chromium() -> str | None:
                  if p), None)
 
 
-@pytest.mark.slow
-def test_site_renders_in_chromium(tmp_path: Path) -> None:
-    """Each page's main text and every figure it shows load in a headless browser: a probe
-    page loads the site's images and writes their decoded sizes into the DOM Chromium dumps."""
+# Screenshots of every page of the site at 1280 px, kept after the browser tests (CI uploads
+# the folder as an artefact): $ATO_COSIM_SCREENSHOTS, default runs/site-screenshots/.
+SCREENSHOTS = Path(os.environ.get("ATO_COSIM_SCREENSHOTS", ROOT / "runs" / "site-screenshots"))
+WIDTH_PX = 1280  # the reader's window
+MAX_SHOT_PX = 16000  # a full-page screenshot's height is the page's, up to this
+
+# Run in each built page after it loads: what a reader sees, as JSON in a script element that
+# --dump-dom prints (fence marks in the text, h2/h3 headings and whether the page's table of
+# contents links them, images with their decoded size, where the claims tables' verdict
+# columns sit against the window and their scrolling box, the page height).
+_PROBE = """
+window.addEventListener('load', () => setTimeout(() => {
+  const art = document.querySelector('article');
+  const toc = new Set([...document.querySelectorAll('nav.md-nav--secondary a.md-nav__link')]
+    .map(a => decodeURIComponent((a.getAttribute('href') || '').split('#')[1] || '')));
+  const out = {article: !!art, h1: !!(art && art.querySelector('h1')),
+               height: document.documentElement.scrollHeight, width: window.innerWidth};
+  if (art) {
+    const text = art.innerText;
+    out.fences = (text.match(/```/g) || []).length;
+    out.headings = [...art.querySelectorAll('h2, h3')].map(h => (
+      {id: h.id, text: h.textContent.replace('\u00b6', '').trim(), in_toc: toc.has(h.id)}));
+    out.images = [...art.querySelectorAll('img')].map(i => (
+      {src: i.getAttribute('src'), complete: i.complete, w: i.naturalWidth,
+       h: i.naturalHeight}));
+    out.verdict_columns = [...art.querySelectorAll('th')]
+      .filter(th => th.textContent.trim() === 'verdict').map(th => {
+        const r = th.getBoundingClientRect();
+        const box = (th.closest('.md-typeset__scrollwrap') || art).getBoundingClientRect();
+        return {left: r.left, right: r.right, box_left: box.left, box_right: box.right};
+      });
+  }
+  const s = document.createElement('script');
+  s.type = 'application/json'; s.id = 'probe-result'; s.textContent = JSON.stringify(out);
+  document.body.appendChild(s);
+}, 0));
+"""
+_RESULT = re.compile(r'<script type="application/json" id="probe-result">(.*?)</script>', re.S)
+
+
+def _browse(browser: str, profile: Path, url: str, *args: str) -> str:
+    result = subprocess.run(
+        [browser, "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic",
+         "--no-first-run", "--disable-background-networking", "--disable-component-update",
+         "--disable-sync", f"--user-data-dir={profile}", "--allow-file-access-from-files",
+         "--hide-scrollbars", "--virtual-time-budget=5000", *args, url],
+        capture_output=True, text=True, timeout=180)
+    assert result.returncode == 0, result.stderr[-2000:]
+    return result.stdout
+
+
+@pytest.fixture(scope="module")
+def rendered(tmp_path_factory: pytest.TempPathFactory) -> dict[str, dict]:
+    """Every page of the built site opened in headless Chromium at ``WIDTH_PX``: the probe's
+    findings by page (``"papers/seed000/"``), and a full-page screenshot of each in
+    ``SCREENSHOTS`` (``papers__seed000.png``; the home page ``index.png``)."""
+    import json
+
     browser = _chromium()
     if browser is None:
         pytest.skip("no chromium on PATH (Debian: apt-get install chromium)")
-    site = _site(tmp_path)
-
-    def dump(url: str) -> str:
-        result = subprocess.run(
-            [browser, "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic",
-             "--no-first-run", "--disable-background-networking", "--disable-component-update",
-             "--disable-sync", f"--user-data-dir={tmp_path / 'profile'}",
-             "--allow-file-access-from-files", "--virtual-time-budget=5000", "--dump-dom", url],
-            capture_output=True, text=True, timeout=120)
-        assert result.returncode == 0, result.stderr[-2000:]
-        return result.stdout
-
-    pages = sorted(site.rglob("index.html"))
-    images = []
-    for page in pages:
-        if "404" in page.parts:
+    tmp = tmp_path_factory.mktemp("rendered")
+    site = _site(tmp)
+    SCREENSHOTS.mkdir(parents=True, exist_ok=True)
+    for old in SCREENSHOTS.glob("*.png"):
+        old.unlink()
+    found: dict[str, dict] = {}
+    for page in sorted(site.rglob("index.html")):
+        rel = page.parent.relative_to(site).as_posix()
+        if rel.startswith("404"):
             continue
-        dom = dump(page.as_uri())
-        assert "<article" in dom and "<h1" in dom, page
-        srcs = re.findall(r'<img[^>]+src="([^"]+)"', dom)
-        images += [(page.parent / src).resolve() for src in srcs
-                   if not src.startswith(("http", "data:"))]
-    assert any("papers" in str(i) for i in images) or not list((DOCS / "papers").rglob("*.png"))
-    probe = site / "probe.html"
-    probe.write_text(
-        "<html><body><div id=out></div><script>const srcs=" + repr([i.as_uri() for i in images])
-        + ";for(const s of srcs){const im=new Image();im.onload=()=>{"
-        "document.getElementById('out').insertAdjacentHTML('beforeend',"
-        "'<p class=ok>'+im.naturalWidth+'</p>');};"
-        "im.onerror=()=>{document.getElementById('out').insertAdjacentHTML('beforeend',"
-        "'<p class=bad>'+s+'</p>');};im.src=s;}</script></body></html>")
-    dom = dump(probe.as_uri())
-    assert 'class="bad"' not in dom, dom[-2000:]
-    widths = [int(w) for w in re.findall(r'<p class="ok">(\d+)</p>', dom)]
-    assert len(widths) == len(images) and all(w > 100 for w in widths), (widths, len(images))
+        page.write_text(page.read_text().replace("</body>", f"<script>{_PROBE}</script></body>"))
+        dom = _browse(browser, tmp / "profile", page.as_uri(), f"--window-size={WIDTH_PX},900",
+                      "--dump-dom")
+        match = _RESULT.search(dom)
+        assert match, (rel, dom[-2000:])
+        probe = json.loads(match.group(1))
+        name = "index" if rel == "." else rel.replace("/", "__")
+        height = min(max(int(probe["height"]), 900), MAX_SHOT_PX)
+        _browse(browser, tmp / "profile", page.as_uri(), f"--window-size={WIDTH_PX},{height}",
+                f"--screenshot={SCREENSHOTS / name}.png")
+        found["" if rel == "." else rel + "/"] = probe
+    return found
+
+
+@pytest.mark.slow
+def test_every_page_renders_its_text_headings_and_figures(rendered: dict[str, dict]) -> None:
+    """As a reader sees it: the article and its title, no fence marks shown as text (a fence
+    the Markdown did not recognise), every h2/h3 heading linked from the
+    page's table of contents, every image decoded with a non-zero size, a screenshot kept."""
+    assert {"", "getting_started/", "architecture/", "cli/", "papers/"} <= set(rendered)
+    for page, probe in rendered.items():
+        assert probe["article"] and probe["h1"], page
+        assert probe["fences"] == 0, page
+        missing = [h["text"] for h in probe["headings"] if not h["in_toc"]]
+        assert not missing, (page, missing)
+        bad = [i["src"] for i in probe["images"] if not (i["complete"] and i["w"] and i["h"])]
+        assert not bad, (page, bad)
+        name = "index" if not page else page.rstrip("/").replace("/", "__")
+        assert (SCREENSHOTS / f"{name}.png").stat().st_size > 0, page
+    first_run = next(h for h in rendered["getting_started/"]["headings"]
+                     if h["text"] == "A first run")
+    assert first_run["in_toc"]
+    paper_images = [i for p, probe in rendered.items() if p.startswith("papers/")
+                    for i in probe["images"]]
+    assert paper_images or not list((DOCS / "papers").rglob("*.png"))
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(reason="paper pages are regenerated by the next reproduction", strict=False)
+def test_paper_verdict_columns_fit_1280px(rendered: dict[str, dict]) -> None:
+    """Each claims table's verdict column lies inside the window and inside the table's own
+    scrolling box at 1280 px, so a reader sees the verdicts without scrolling sideways."""
+    papers = {p: probe for p, probe in rendered.items()
+              if p.startswith("papers/") and p != "papers/"}
+    columns = [(p, c) for p, probe in papers.items() for c in probe["verdict_columns"]]
+    assert columns, "no claims table with a verdict column on a paper page"
+    hidden = [p for p, c in columns
+              if c["right"] > min(c["box_right"], WIDTH_PX) + 0.5 or c["left"] < c["box_left"]]
+    assert not hidden, hidden
