@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import inspect
 import json
 from contextlib import contextmanager
 from pathlib import Path
@@ -97,7 +98,10 @@ def _built(path: Path) -> str:
 
 @app.command("list")
 def list_() -> None:
-    """List the FMUs this project builds and the shipped scenarios, a line each."""
+    """List the FMUs and the shipped scenarios.
+
+    A line each: the FMUs this project builds (whether their FMI 2 and FMI 3 builds are in
+    fmus/) and the scenarios in scenarios/ with their descriptions."""
     from cosim.fmu.build import catalog
     from cosim.run.scenario import SCENARIO_DIR
 
@@ -194,8 +198,9 @@ def run(
         "--strict", help="exit with status 1 when the run had warnings (e.g. infeasible QPs)")]
         = False,
 ) -> None:
-    """Run a scenario; write results.csv, summary.json and plot.png; print the summary.
+    """Run a scenario and print its summary.
 
+    Writes results.csv, summary.json and plot.png into --out, building the FMUs it needs.
     Ctrl-C (or SIGTERM) stops the run at the next communication point, writes what was
     recorded (summary.json "completed": false) and exits with status 130; a second one exits
     at once."""
@@ -327,8 +332,10 @@ def validate(
         help="seconds one FMU's whole check may take (a backstop for hangs the per-call "
         "watchdog misses)")] = 120.0,
 ) -> None:
-    """FMI 2.0 / FMI 3.0 compliance checks (cosim.interop.compliance, chosen by the FMU's
-    fmiVersion) on FMUs; non-zero exit on an error."""
+    """Check FMUs against FMI 2.0 / FMI 3.0.
+
+    The compliance checks of cosim.interop.compliance, chosen by the FMU's fmiVersion;
+    non-zero exit on an error."""
     from cosim.fmu.build import build_fmu, catalog
 
     versions = _fmi_versions(fmi)
@@ -398,11 +405,13 @@ def sweep(
     plot_format: Annotated[str, typer.Option(
         "--format", help="figure file format: png (200 dpi), svg or pdf")] = "png",
 ) -> None:
-    """Run scenarios over a parameter grid in parallel; write sweep.csv (a row per point as it
-    finishes, with status and error) and sweep.png. A failed point does not stop the others
-    (exit status 1 at the end); Ctrl-C keeps the finished rows (exit status 130). With
-    --scheduler: the same grid on a Dask cluster. With --perturb: every grid point on the same
-    seeded random plants (perturb.csv, perturb_summary.csv, perturb.png)."""
+    """Run scenarios over a parameter grid in parallel.
+
+    Writes sweep.csv (a row per point as it finishes, with status and error) and sweep.png. A
+    failed point does not stop the others (exit status 1 at the end); Ctrl-C keeps the finished
+    rows (exit status 130). With --scheduler: the same grid on a Dask cluster. With --perturb:
+    every grid point on the same seeded random plants (perturb.csv, perturb_summary.csv,
+    perturb.png)."""
     from cosim.run import interrupt
     from cosim.run.console import fit_table
     from cosim.run.master import SimulationError
@@ -494,7 +503,10 @@ def export(
     set_: Annotated[list[str] | None, typer.Option(
         "--set", help="override NAME.key=value (repeatable)")] = None,
 ) -> None:
-    """Export a scenario and its FMUs as an SSP 1.0 package (SystemStructure.ssd + FMUs)."""
+    """Export a scenario and its FMUs as an SSP 1.0 package.
+
+    The package holds SystemStructure.ssd (components, connections, parameter values, units,
+    default experiment) and the FMUs."""
     from cosim.interop.ssp import export_notes, export_ssp
     from cosim.run.results import check_destination
     from cosim.run.scenario import ScenarioError, load_scenario
@@ -530,9 +542,11 @@ def reproduce(
     plot_format: Annotated[str, typer.Option(
         "--format", help="figure file format: png (200 dpi), svg or pdf")] = "png",
 ) -> None:
-    """Reproduce a paper's results: run its scenarios, write the table (ours beside the
-    paper's), the sweeps and the figures, and test its claims over K seeds (claims.csv,
-    claims.md: median [95 % CI], k of K, verdict); 'all' writes one REPRODUCTION.md."""
+    """Reproduce a paper's results and test its claims.
+
+    Runs its scenarios, writes the table (ours beside the paper's), the sweeps and the
+    figures, and tests its claims over K seeds (claims.csv, claims.md: median [95 % CI],
+    k of K, verdict); 'all' writes one REPRODUCTION.md."""
     from cosim.run import interrupt, runner
     from cosim.run.master import SimulationError
     from cosim.run.reproduce import ReproduceError, entry_names, reproduce_all
@@ -599,10 +613,11 @@ def cli_reference() -> str:
 def docs(check: Annotated[bool, typer.Option(
         "--check", help="exit 1 if a generated page is out of date instead of writing it")
         ] = False) -> None:
-    """Write the generated pages of the documentation site: the CLI reference (docs/cli.md),
-    the FMU reference (docs/fmus.md, from the cores' declarations), the benchmarks
-    (docs/benchmarks.md, from benchmarks/results.json) and a page per paper
-    (docs/papers/NAME.md, from runs/reproduce/NAME/ where it exists)."""
+    """Write the documentation site's generated pages.
+
+    The CLI reference (docs/cli.md), the FMU reference (docs/fmus.md, from the cores'
+    declarations), the benchmarks (docs/benchmarks.md, from benchmarks/results.json) and a page
+    per paper (docs/papers/NAME.md, from runs/reproduce/NAME/ where it exists)."""
     from cosim.run.docs_pages import DOCS, generated_pages, stale, stale_papers, write
 
     def pages():
@@ -623,6 +638,17 @@ def docs(check: Annotated[bool, typer.Option(
         out.print(f"wrote {path}", highlight=False, markup=False)
     for line in stale_papers():
         out.print(f"[yellow]stale:[/] {line}", highlight=False)
+
+
+def one_line_paragraphs(text: str) -> str:
+    """``text`` (a docstring) with each paragraph on one line: typer's rich help keeps a
+    docstring's line breaks, which then break sentences in the middle at any terminal width;
+    a one-line paragraph is wrapped by the terminal at its own width."""
+    return "\n\n".join(" ".join(p.split()) for p in inspect.cleandoc(text).split("\n\n"))
+
+
+for _command in app.registered_commands:  # each command's help: a short first sentence
+    _command.help = one_line_paragraphs(_command.help or _command.callback.__doc__ or "")
 
 
 def main() -> None:  # pragma: no cover - console entry point

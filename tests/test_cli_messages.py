@@ -61,3 +61,38 @@ def test_non_tty_run_prints_progress_every_tenth_and_set_takes_effect(built_fmus
 def test_sweep_help_keeps_the_bracketed_extra():
     done = cosim("sweep", "--help")
     assert "ato-cosim[dask]" in done.stdout.replace("\n", " ").replace("│", "").replace(" ", "")
+
+
+def test_command_list_gives_each_command_one_line_at_80_columns():
+    """``cosim --help`` at 80 columns: each command's help is one short sentence, on the
+    command's own line of the panel (no continuation line)."""
+    import os
+
+    import typer
+
+    from cosim.cli import app
+
+    done = subprocess.run([sys.executable, "-m", "cosim.cli", "--help"], capture_output=True,
+                          text=True, timeout=120, env={**os.environ, "COLUMNS": "80"})
+    lines = done.stdout.splitlines()
+    start = next(i for i, line in enumerate(lines) if "Commands" in line)
+    rows = lines[start + 1:next(i for i in range(start + 1, len(lines))
+                                if lines[i].startswith("╰"))]
+    names = list(typer.main.get_command(app).commands)
+    assert [row.split()[1] for row in rows] == names, rows
+    assert all(len(row) <= 80 and row.rstrip(" │").endswith(".") for row in rows), rows
+
+
+def test_command_help_paragraphs_wrap_at_the_terminal_not_mid_sentence():
+    """Every paragraph of every command's help is one line, so the terminal wraps it at its
+    own width (typer's rich help keeps a docstring's line breaks, which split sentences at any
+    width); the first paragraph is one short sentence."""
+    import typer
+
+    from cosim.cli import app, one_line_paragraphs
+
+    assert one_line_paragraphs("A b.\n\n    c\n    d.\n") == "A b.\n\nc d."
+    for name, cmd in typer.main.get_command(app).commands.items():
+        first = cmd.help.split("\n\n")[0]
+        assert "\n" not in cmd.help.replace("\n\n", ""), name
+        assert first.endswith(".") and ". " not in first and len(first) <= 60, name
