@@ -4,19 +4,20 @@
 from cosim import api
 
 scenario = api.load("seed000_stop_pid", {"simulation.stop_time": 45.0})
-run = api.run(scenario)          # builds the FMUs it needs, as `cosim run` does
-run.frame.head()                 # the recorded signals, one column per "instance.variable"
-run.units["plant.v"]             # "m/s": the unit the FMU declares
-run.with_units().head()          # the same table, columns (variable, unit)
-run.summary["stop_error_m"]      # the metrics of summary.json
-fig = run.figure()               # the figure `cosim run` writes as plot.png
-api.compare({"PID": run, "other": api.run("seed000_stop_rmpc")})  # metrics side by side
+run = api.run(scenario)     # builds the FMUs it needs, as `cosim run` does
+run.frame.head()            # the recorded signals, a column per "instance.variable"
+run.units["plant.v"]        # "m/s": the unit the FMU declares
+run.with_units().head()     # the same table, columns (variable, unit)
+run.summary["stop_error_m"] # the metrics of summary.json
+fig = run.figure()          # the figure `cosim run` writes as plot.png
+other = api.run("seed000_stop_rmpc")
+api.compare({"PID": run, "RMPC": other})  # the metrics side by side
 ```
 
-Each function calls what ``cosim run`` calls (:mod:`cosim.run.scenario`,
-:mod:`cosim.run.master`, :mod:`cosim.run.results`), so a run here and the same run from the
+Each function calls what ``cosim run`` calls (``cosim.run.scenario``,
+``cosim.run.master``, ``cosim.run.results``), so a run here and the same run from the
 command line give the same results, summary and figure. Units and descriptions come from the
-FMUs' modelDescriptions (:func:`cosim.run.results.variable_info`), which the FMUs derive from
+FMUs' modelDescriptions (``cosim.run.results.variable_info``), which the FMUs derive from
 their cores' declarations.
 """
 
@@ -51,16 +52,39 @@ def load(scenario: str | Path, overrides: Overrides | None = None) -> Scenario:
 
     ``overrides`` is a mapping of keys to Python values (``{"plant.mass": 539000.0}``) or a
     sequence of ``--set`` texts (``["plant.mass=539000"]``, each value read as a TOML literal).
-    Raises :class:`cosim.run.scenario.ScenarioError` naming the file, the key and, for a bad
+    Raises ``cosim.run.scenario.ScenarioError`` naming the file, the key and, for a bad
     override, the override."""
     return load_scenario(scenario, overrides)
 
 
 def build(scenario: str | Path | Scenario) -> list[Path]:
     """Build the scenario's FMUs that are missing or older than their sources (into
-    ``fmus/``, in the scenario's FMI version); the paths built. :func:`run` does this
+    ``fmus/``, in the scenario's FMI version); the paths built. ``run`` does this
     itself."""
     return ensure_built(scenario if isinstance(scenario, Scenario) else load(scenario))
+
+
+def run(scenario: str | Path | Scenario, overrides: Overrides | None = None, *,
+        algorithm: str | None = None, out_dir: str | Path | None = None, plot: bool = True,
+        plot_format: str = "png", progress: ProgressFn | None = None) -> Run:
+    """Run a scenario (a name, a path, or one from ``load``) as ``cosim run`` does:
+    build the FMUs it needs, co-simulate, compute the summary and, with ``out_dir``, write
+    results.csv, summary.json and (``plot``) the plot there.
+
+    ``overrides`` as in ``load`` (with a name or path only: a loaded scenario has its
+    own); ``algorithm``: ``"event"``, ``"fixed"`` or ``"jacobi"`` in place of the scenario's;
+    ``progress(t, stop_time)`` is called as the run advances. Raises
+    ``cosim.run.scenario.ScenarioError`` for a scenario that cannot run and
+    ``cosim.run.master.SimulationError`` for a failure during the run (after writing
+    the partial results to ``out_dir``)."""
+    if isinstance(scenario, Scenario) and overrides:
+        raise ValueError("overrides go with a scenario name or path; a loaded scenario has "
+                         "its own (api.load(name, overrides))")
+    if plot_format not in PLOT_FORMATS:
+        raise ValueError(f"plot format {plot_format!r}: one of {', '.join(PLOT_FORMATS)}")
+    return Run(run_scenario(scenario, overrides=overrides, algorithm=algorithm,
+                            out_dir=out_dir, progress=progress, plot=plot,
+                            plot_format=plot_format))
 
 
 @dataclass
@@ -82,7 +106,7 @@ class Run:
 
     @property
     def summary(self) -> dict[str, Any]:
-        """The metrics ``cosim run`` writes to summary.json (see :mod:`cosim.run.metrics`)."""
+        """The metrics ``cosim run`` writes to summary.json (see ``cosim.run.metrics``)."""
         return self.result.summary
 
     @property
@@ -111,7 +135,7 @@ class Run:
                 for column, unit in self.variables["unit"].items()}
 
     def with_units(self) -> pd.DataFrame:
-        """:attr:`frame` with two-level columns (variable, unit); ``""`` for no unit."""
+        """``frame`` with two-level columns (variable, unit); ``""`` for no unit."""
         frame = self.result.frame.copy()
         frame.columns = pd.MultiIndex.from_tuples(
             [(column, self.units.get(column) or "") for column in frame.columns],
@@ -129,29 +153,6 @@ class Run:
         """Write results.csv, summary.json and the plot into ``out_dir``, as ``cosim run
         --out`` does; the paths written."""
         return self.result.write(Path(out_dir), plot=plot, plot_format=plot_format)
-
-
-def run(scenario: str | Path | Scenario, overrides: Overrides | None = None, *,
-        algorithm: str | None = None, out_dir: str | Path | None = None, plot: bool = True,
-        plot_format: str = "png", progress: ProgressFn | None = None) -> Run:
-    """Run a scenario (a name, a path, or one from :func:`load`) as ``cosim run`` does:
-    build the FMUs it needs, co-simulate, compute the summary and, with ``out_dir``, write
-    results.csv, summary.json and (``plot``) the plot there.
-
-    ``overrides`` as in :func:`load` (with a name or path only: a loaded scenario has its
-    own); ``algorithm``: ``"event"``, ``"fixed"`` or ``"jacobi"`` in place of the scenario's;
-    ``progress(t, stop_time)`` is called as the run advances. Raises
-    :class:`cosim.run.scenario.ScenarioError` for a scenario that cannot run and
-    :class:`cosim.run.master.SimulationError` for a failure during the run (after writing
-    the partial results to ``out_dir``)."""
-    if isinstance(scenario, Scenario) and overrides:
-        raise ValueError("overrides go with a scenario name or path; a loaded scenario has "
-                         "its own (api.load(name, overrides))")
-    if plot_format not in PLOT_FORMATS:
-        raise ValueError(f"plot format {plot_format!r}: one of {', '.join(PLOT_FORMATS)}")
-    return Run(run_scenario(scenario, overrides=overrides, algorithm=algorithm,
-                            out_dir=out_dir, progress=progress, plot=plot,
-                            plot_format=plot_format))
 
 
 def compare(runs: Mapping[str, Run] | Sequence[Run],
