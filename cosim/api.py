@@ -4,14 +4,14 @@
 from cosim import api
 
 scenario = api.load("seed000_stop_pid", {"simulation.stop_time": 45.0})
-run = api.run(scenario)     # builds the FMUs it needs, as `cosim run` does
-run.frame.head()            # the recorded signals, a column per "instance.variable"
+run = api.run(scenario)     # builds the FMUs it needs, as `cosim run`
+run.frame.head()            # the recorded signals
 run.units["plant.v"]        # "m/s": the unit the FMU declares
-run.with_units().head()     # the same table, columns (variable, unit)
+run.with_units().head()     # columns (variable, unit)
 run.summary["stop_error_m"] # the metrics of summary.json
-fig = run.figure()          # the figure `cosim run` writes as plot.png
+fig = run.figure()          # the figure of `cosim run` (plot.png)
 other = api.run("seed000_stop_rmpc")
-api.compare({"PID": run, "RMPC": other})  # the metrics side by side
+api.compare({"PID": run, "RMPC": other})  # metrics side by side
 ```
 
 Each function calls what ``cosim run`` calls (``cosim.run.scenario``,
