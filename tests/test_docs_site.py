@@ -128,6 +128,7 @@ def test_host_packages_cover_every_fmu_import() -> None:
 def _site(tmp_path: Path) -> Path:
     pytest.importorskip("mkdocs")
     pytest.importorskip("material")
+    pytest.importorskip("mkdocstrings_handlers.python")  # the API page (mkdocs.yml plugins)
     site = tmp_path / "site"
     result = subprocess.run(
         [sys.executable, "-m", "mkdocs", "build", "--strict", "--site-dir", str(site)],
@@ -261,7 +262,10 @@ def test_every_page_renders_its_text_headings_and_figures(rendered: dict[str, di
     """As a reader sees it: the article and its title, no fence marks shown as text (a fence
     the Markdown did not recognise), every h2/h3 heading linked from the
     page's table of contents, every image decoded with a non-zero size, a screenshot kept."""
-    assert {"", "getting_started/", "architecture/", "cli/", "papers/"} <= set(rendered)
+    assert {"", "getting_started/", "architecture/", "cli/", "api/", "python/",
+            "papers/"} <= set(rendered)
+    api_headings = {h["text"].split()[0] for h in rendered["api/"]["headings"] if h["text"]}
+    assert {"load", "run", "Run", "compare"} <= api_headings, api_headings  # from docstrings
     for page, probe in rendered.items():
         assert probe["article"] and probe["h1"], page
         assert probe["fences"] == 0, page
