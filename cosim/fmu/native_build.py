@@ -35,7 +35,6 @@ import re
 import shutil
 import struct
 import subprocess
-import sys
 import tempfile
 import uuid
 import zipfile
@@ -66,10 +65,8 @@ class NativeSpec:
     with other plant models (``shared``, C and headers, same folder; with ``ato_plant.c`` the
     route's step profiles ``<name>.profiles`` are exported), for a model with named train data
     ``configurations``: ``"module:NAME"`` of a mapping configuration name -> factory of a
-    declared dataclass, written to ``<id>_config.h`` (:func:`config_header`), the headers
-    of :data:`GENERATED` it includes (``generated``), and the solvers it links (``solvers``,
-    keys of :data:`SOLVERS`: C sources from their registry source distributions, fetched at
-    build time, never in this repository)."""
+    declared dataclass, written to ``<id>_config.h`` (:func:`config_header`), and the headers
+    of :data:`GENERATED` it includes (``generated``)."""
 
     identifier: str
     source: str
@@ -79,7 +76,6 @@ class NativeSpec:
     shared: tuple[str, ...] = ()
     configurations: str | None = None
     generated: tuple[str, ...] = ()
-    solvers: tuple[str, ...] = ()
 
     @property
     def path(self) -> Path:
@@ -142,82 +138,6 @@ NATIVE: dict[str, NativeSpec] = {
                               generated=("ato_numpy_normal.h",))
        for identifier in ("Emu3", "Emu8")},
 }
-
-
-@dataclass(frozen=True)
-class SolverSource:
-    """A solver compiled into native FMUs from its registry source distribution: the Python
-    package (the version installed, which the Python cores call, so both sides run the same
-    solver release), the folders of its C sources and headers inside the archive, and its
-    licence file (shipped in each FMU as ``documentation/licenses/<package>_<name>``)."""
-
-    package: str
-    sources: str
-    headers: str
-    licence: str
-
-
-# DAQP (dual active-set QP, MIT): its sdist ships the C library it wraps (csrc/)
-SOLVERS = {"daqp": SolverSource("daqp", "csrc/src", "csrc/include", "LICENSE")}
-SDIST_CACHE = Path(os.environ.get("ATO_COSIM_SDIST_CACHE",
-                                  Path.home() / ".cache" / "ato-cosim" / "sdist"))
-
-
-def solver_sdist(name: str) -> Path:
-    """The source distribution of solver ``name`` (:data:`SOLVERS`) at the installed version:
-    from :data:`SDIST_CACHE` (``ATO_COSIM_SDIST_CACHE``), else downloaded there by ``pip
-    download --no-deps --no-binary :all:``."""
-    from importlib.metadata import PackageNotFoundError, version
-
-    solver = SOLVERS[name]
-    try:
-        wanted = version(solver.package)
-    except PackageNotFoundError:
-        raise RuntimeError(f"native FMUs with {name} take its C sources from the source "
-                           f"distribution of the installed version: pip install "
-                           f"{solver.package}") from None
-    stem = f"{solver.package}-{wanted}"
-    for suffix in (".tar.gz", ".zip"):
-        found = SDIST_CACHE / f"{stem}{suffix}"
-        if found.is_file():
-            return found
-    SDIST_CACHE.mkdir(parents=True, exist_ok=True)
-    done = subprocess.run([sys.executable, "-m", "pip", "download", f"{solver.package}=={wanted}",
-                           "--no-deps", "--no-binary", ":all:",
-                           "-d", str(SDIST_CACHE)], capture_output=True, text=True)
-    for suffix in (".tar.gz", ".zip"):
-        found = SDIST_CACHE / f"{stem}{suffix}"
-        if found.is_file():
-            return found
-    raise RuntimeError(f"could not download the source distribution of {solver.package} "
-                       f"{wanted} into {SDIST_CACHE} (put {stem}.tar.gz there):\n"
-                       f"{done.stderr.strip()[-2000:]}")
-
-
-def solver_files(name: str) -> tuple[dict[str, bytes], bytes]:
-    """(C sources and headers by file name, licence text) of solver ``name`` from its source
-    distribution (:func:`solver_sdist`)."""
-    import tarfile
-
-    solver = SOLVERS[name]
-    archive = solver_sdist(name)
-    files: dict[str, bytes] = {}
-    licence = None
-    with tarfile.open(archive) as tar:
-        for member in tar.getmembers():
-            if not member.isfile():
-                continue
-            rel = member.name.split("/", 1)[1] if "/" in member.name else member.name
-            folder, _, base = rel.rpartition("/")
-            if (folder == solver.sources and base.endswith(".c")) or (
-                    folder == solver.headers and base.endswith(".h")):
-                files[base] = tar.extractfile(member).read()
-            elif rel == solver.licence:
-                licence = tar.extractfile(member).read()
-    if not files or licence is None:
-        raise RuntimeError(f"{archive}: no C sources in {solver.sources}/ or no "
-                           f"{solver.licence}")
-    return files, licence
 
 
 class CompilerMissing(RuntimeError):
@@ -820,10 +740,8 @@ def build_native(identifier: str, dest: Path = NATIVE_FMU_DIR, windows: bool | N
     slave_class = catalog()[identifier].load()
     guid = "{" + str(uuid.uuid4()) + "}"
     headers = Path(fmpy.__file__).parent / "c-code"
-    solvers = {name: solver_files(name) for name in spec.solvers}
-    solver_c = sorted(f for files, _ in solvers.values() for f in files if f.endswith(".c"))
     c_files = ["fmi2_front.c", spec.source,
-               *(f for f in (*spec.helpers, *spec.shared) if f.endswith(".c")), *solver_c]
+               *(f for f in (*spec.helpers, *spec.shared) if f.endswith(".c"))]
     with tempfile.TemporaryDirectory(prefix="atocosim_native_") as tmp:
         root = Path(tmp) / "fmu"
         src = root / "sources"
@@ -837,15 +755,6 @@ def build_native(identifier: str, dest: Path = NATIVE_FMU_DIR, windows: bool | N
             shutil.copy2(NATIVE_DIR / name, src)
         for name in spec.generated:
             (src / name).write_text(GENERATED[name]())
-        for name, (files, licence) in solvers.items():
-            for base, content in files.items():
-                if (src / base).exists():
-                    raise RuntimeError(f"{name}'s {base} collides with a file of {identifier}")
-                (src / base).write_bytes(content)
-            licences = root / "documentation" / "licenses"
-            licences.mkdir(parents=True, exist_ok=True)
-            (licences / f"{SOLVERS[name].package}_{Path(SOLVERS[name].licence).name}"
-             ).write_bytes(licence)
         if spec.configurations:
             (src / f"{identifier}_config.h").write_text(
                 config_header(identifier, spec.configurations))
