@@ -42,14 +42,16 @@ static void apply(sliding* c, const double* u) {
     memmove(c->u, u, sizeof(double) * N);
 }
 
-void sliding_hold(sliding* c, const double* y, const double* u) {
-    ffdl_observe(&c->est, &c->f, y, 0);
-    apply(c, u);
-    for (int i = 0; i < N; i++) c->E[i] = c->F[i] = c->s[i] = 0.0;
-}
-
-void sliding_equivalent(sliding* c, const dd_sample* smp, double* du) {
+int sliding_sample(sliding* c, const dd_drive* d, double t, const double* in, dd_sample* smp,
+                   double* du) {
+    dd_sample_inputs(d, t, in, smp);
     const double* y = smp->y;
+    if (smp->holding) {
+        ffdl_observe(&c->est, &c->f, y, 0);
+        apply(c, smp->hold);
+        for (int i = 0; i < N; i++) c->E[i] = c->F[i] = c->s[i] = 0.0;
+        return 0;
+    }
     ffdl_observe(&c->est, &c->f, y, 1);
     double e[N], s[N], *E = c->E_next, *F = c->F_next, M[N * N], fr[N], r[N];
     double bk2 = c->b * c->k2;
@@ -79,6 +81,7 @@ void sliding_equivalent(sliding* c, const dd_sample* smp, double* du) {
         for (int i = 0; i < N; i++) du[i] = du[i] - sh[i];
     }
     memcpy(c->s, s, sizeof s);
+    return 1;
 }
 
 void sliding_finish(sliding* c, const double* want, const dd_sample* smp) {

@@ -38,10 +38,12 @@ void sliding_read(sliding* c, const double* v);
 int sliding_state_count(const sliding* c);
 /* point the estimator and u, E, F, s into the state at `at` and set their initial values */
 void sliding_bind(sliding* c, double* at);
-/* SlidingLaw.hold: the sample's input u imposed, the sums and s zeroed */
-void sliding_hold(sliding* c, const double* y, const double* u);
-/* SlidingLaw.equivalent: observe y(t); s(t) into c->s and du_eq into du */
-void sliding_equivalent(sliding* c, const dd_sample* smp, double* du);
+/* The sample's inputs at t into smp (dd_sample_inputs); at a holding sample SlidingLaw.hold
+ * (the holding input imposed, the sums and s zeroed) and 0; otherwise SlidingLaw.equivalent
+ * (observe y(t); s(t) into c->s, du_eq into du) and 1: the law then ends the sample with
+ * sliding_finish */
+int sliding_sample(sliding* c, const dd_drive* d, double t, const double* in, dd_sample* smp,
+                   double* du);
 /* SlidingLaw._finish: u = clip(want, lo, hi) applied, the sums committed unless held */
 void sliding_finish(sliding* c, const double* want, const dd_sample* smp);
 

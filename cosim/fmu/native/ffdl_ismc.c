@@ -52,13 +52,10 @@ DD_LAW_FLAT_STATE
 int law_compute(law_core* c, double t, const ato_values* p, double* out, char* err, size_t n) {
     (void)err; (void)n;
     dd_sample smp;
-    dd_sample_inputs(&c->drive, t, p->v, &smp);
     sliding* law = &c->law;
-    if (smp.holding) {
-        sliding_hold(law, smp.y, smp.hold);
-    } else {
-        double du[N], sat[N], sw[N], negK[N * N], want[N];
-        sliding_equivalent(law, &smp, du);
+    double du[N];
+    if (sliding_sample(law, &c->drive, t, p->v, &smp, du)) {
+        double sat[N], sw[N], negK[N * N], want[N];
         /* Ismc.step: du_sw = -K beta sat(s / Delta) */
         for (int i = 0; i < N; i++)
             sat[i] = c->beta * ato_npclip(law->s[i] / c->layer, -1.0, 1.0);

@@ -267,13 +267,10 @@ static void mpc_moves(law_core* c, const double* lo_cum, const double* hi_cum, d
 int law_compute(law_core* c, double t, const ato_values* p, double* out, char* err, size_t n) {
     (void)err; (void)n;
     dd_sample smp;
-    dd_sample_inputs(&c->drive, t, p->v, &smp);
     sliding* law = &c->law;
-    if (smp.holding) {
-        sliding_hold(law, smp.y, smp.hold);
-    } else {
-        double du[NU], base[NU], lo_cum[NU], hi_cum[NU], u0[NU], want[NU];
-        sliding_equivalent(law, &smp, du);
+    double du[NU];
+    if (sliding_sample(law, &c->drive, t, p->v, &smp, du)) {
+        double base[NU], lo_cum[NU], hi_cum[NU], u0[NU], want[NU];
         for (int i = 0; i < NU; i++) {
             base[i] = law->u[i] + du[i];
             lo_cum[i] = smp.lo[i] - base[i];
