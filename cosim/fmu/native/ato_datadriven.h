@@ -1,9 +1,10 @@
 /*
  * ato_datadriven.h: the part of the seed-001 data-driven controllers shared by their laws
- * (ffdl_mfac.c, ffdl_ismc.c, ffdl_ismpc.c, emu_gpc.c), the C twin of controllers/datadriven/emu_control.py
- * DataDrivenEmuControl: the inputs' scaling (y_i = c_y v_i, u_i = c_u F_i / m), the input box
- * from the plant's envelope and the comfort limit, the reference y_r(t) and y_r(t+1) at the
- * predicted head position, the holding brake at the final stop, and the outputs.
+ * (ffdl_mfac.c, ffdl_ismc.c, ffdl_ismpc.c, emu_gpc.c), the C twin of
+ * controllers/datadriven/emu_control.py DataDrivenEmuControl: the inputs' scaling (y_i =
+ * c_y v_i, u_i = c_u F_i / m), the input box from the plant's envelope and the comfort limit,
+ * the reference y_r(t) and y_r(t+1) at the predicted head position, the holding brake at the
+ * final stop, and the outputs.
  *
  * A law's state is one array of doubles (law_state_size = its count times 8) beginning with
  * the drive's DD_DRIVE_STATE values: force[1..n], v_ref, a_ref, speed_error, holding (0/1);

@@ -11,11 +11,12 @@
  * (ato_truncated_svd), X = -Q ((Q' G V) / (lambda_tt sv^2 + theta)) V', G the stages' gradient
  * Theta'(Lambda s - Psi P). Otherwise the QP in the cumulated moves z (simple bounds):
  *
- *   min 1/2 z'Hz + q'z,  H = 2 (I_N (x) Phi_2'Phi_2) + 2 theta (D'D (x) I_n),  q = 2 vec(offset Phi_2)
+ *   min 1/2 z'Hz + q'z,  H = 2 (I_N (x) Phi_2'Phi_2) + 2 theta (D'D (x) I_n),
+ *   q = 2 vec(offset Phi_2),  offset_k = s -/+ k p_hat
  *
  * is solved by DAQP (daqp_quadprog, default settings, its active set started from the signs
  * of the previous plan's duals shifted by one stage: controllers/common/qp.py DenseQP), built
- * from the sources of its registry distribution at build time (cosim/fmu/native_build.py).
+ * from the sources of its registry distribution at build time (cosim/fmu/native_solvers.py).
  * theta is rescaled to the units of y and u (x (gy / gu)^2).
  *
  * State: the drive's (ato_datadriven.h), the sliding law's (ato_sliding.h: estimator, u, E, F,
