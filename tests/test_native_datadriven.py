@@ -1,7 +1,8 @@
-"""The native C FMUs of the seed-001 data-driven controllers EmuMfac3, EmuIsmc3 and EmuGpc3
-(cosim/fmu/native/ffdl_mfac.c, ffdl_ismc.c, emu_gpc.c over ato_datadriven.c, ato_ffdl.c,
-ato_linalg.c) against the Python FMUs of their cores (controllers.datadriven.emu_control), on
-the inputs of the shipped seed-001 scenarios.
+"""The native C FMUs of the seed-001 data-driven controllers EmuMfac3, EmuIsmc3, EmuIsmpc3 and
+EmuGpc3 (cosim/fmu/native/ffdl_mfac.c, ffdl_ismc.c, ffdl_ismpc.c, emu_gpc.c over
+ato_datadriven.c, ato_ffdl.c, ato_sliding.c, ato_linalg.c; ISMPC's QP by DAQP compiled from
+its source distribution) against the Python FMUs of their cores
+(controllers.datadriven.emu_control), on the inputs of the shipped seed-001 scenarios.
 
 What is compared, and why so. The cores' scalar operations (scaling, input box, reference,
 holding brake, estimator and RLS updates, sliding surface, sums, clips) are written in C in
@@ -33,6 +34,18 @@ largest gain, hence the factor sqrt(dim B)), plus 2 EPS of the value itself; and
 laws that solve a linear system (MFAC's delta I + Phi_2'Phi_2, GPC's G'G + w I) the forward
 error of a backward-stable solve, 2 EPS cond(A) |x|, on the entries that hold the move (an
 ill-conditioned A, GPC's under a large covariance, is not reached by perturbing the blocks).
+
+ISMPC's MPC solves the same kind of system: its unconstrained minimiser (eq. 72) inverts
+Theta'Theta + theta I on the kept directions (eigenvalues lambda_tt sv^2 + theta), its QP
+factorises H = 2 (I (x) Phi_2'Phi_2) + 2 theta (D'D (x) I) on the active set (DAQP: LDL' of
+the free block, exact up to rounding for a given active set); the move's bound is 2 EPS
+max(cond) |plan|, and the duals kept for the next warm start (the plan's, shifted) err by
+the residual of that solve, 2 EPS (cond(H) + 1) (|H| |z| + |q|). The warm-start duals of the
+state before a sample only choose DAQP's starting active set, not its answer, so they are not
+perturbed. DAQP's tolerances are thresholds like the cutoff: it accepts a bound violated by
+less than its primal_tol (1e-6) as met, so a sample where an inactive bound of the Python
+plan is violated within the solve's error of primal_tol may end on another active set in C,
+and is not compared either.
 
 Near a threshold the two may take different branches: the truncated inverse keeps the
 singular directions with sigma_j >= cutoff sigma_1, and a sigma_j within the SVDs' error
@@ -73,7 +86,9 @@ EPS = 512 * UNIT  # backward error of a sample's blocks (module docstring)
 H = 2.0**-20  # finite-difference step, relative to a block's norm
 DIRECTIONS = 3  # random directions per block
 SCENARIOS = {"EmuMfac3": "seed001_emu_mfac", "EmuIsmc3": "seed001_emu_ismc",
-             "EmuGpc3": "seed001_emu_gpc"}
+             "EmuIsmpc3": "seed001_emu_ismpc", "EmuGpc3": "seed001_emu_gpc"}
+SLIDING = ("EmuIsmc3", "EmuIsmpc3")  # the laws on the integral sliding surface
+DAQP_PRIMAL_TOL = 1e-6  # DAQP's default primal_tol (csrc/include/constants.h), both sides
 INPUTS = ("v[1]", "v[2]", "v[3]", "s", "traction_limit[1]", "traction_limit[2]",
           "traction_limit[3]", "brake_limit[1]", "brake_limit[2]", "brake_limit[3]")
 SHORT_S = 150.0  # s of each scenario in the default suite (start, acceleration, power limit)
@@ -124,8 +139,10 @@ def law_state(ident: str, state: dict) -> np.ndarray:
         parts += [e["phi"], e["y_prev"], e["dy_hist"], e["du_hist"], e["u_prev"], e["dH_prev"],
                   e["dd_hat"], e["dd_hat_prev"], [float(e["resets"]), float(e["started"])],
                   law["u"]]
-        if ident == "EmuIsmc3":
+        if ident in SLIDING:
             parts += [law["E"], law["F"], law["s"]]
+        if ident == "EmuIsmpc3":
+            parts += [law["warm_dual"], [float(law["qp_solves"]), float(law["qp_failures"])]]
     return np.concatenate([np.asarray(p, float).ravel() for p in parts])
 
 
@@ -136,7 +153,7 @@ def blocks(ident: str, state: dict) -> list[tuple[str, ...]]:
                                              "u_prev")] + [("law", "u")]
     out = [("law", "est", k) for k in ("phi", "y_prev", "dy_hist", "du_hist", "u_prev",
                                        "dH_prev", "dd_hat", "dd_hat_prev")] + [("law", "u")]
-    if ident == "EmuIsmc3":
+    if ident in SLIDING:  # not ISMPC's warm_dual (module docstring)
         out += [("law", k) for k in ("E", "F", "s")]
     return out
 
@@ -174,12 +191,73 @@ def one_sample_bound(core, ident: str, state: dict, t: float, inputs: dict,
             worst = np.maximum(worst, np.abs(run(moved) - base) / H)
         total += math.sqrt(block.size) * worst
     bound = 2 * EPS * (total + np.abs(base))
-    move = solve_error(core, ident, state, t, inputs)
+    if ident == "EmuIsmpc3":
+        move, dual = mpc_error(core, state, t, inputs)
+        if dual > 0.0:  # the warm-start duals of the next sample, after the qp counters
+            bound[-2 - dual_size(core):-2] += dual
+    else:
+        move = solve_error(core, ident, state, t, inputs)
     if move > 0.0:  # the move's entries: u, u_prev, du(t) in du_hist and dH; the forces (m u)
         marks = input_marks(ident, core.get_state())
         bound += move * marks
         bound[:3] += move * core.unit_mass / core.drive.input_scale
     return bound
+
+
+def dual_size(core) -> int:
+    return core.law.warm_dual.size
+
+
+def _recording(law) -> list:
+    """The calls of ``law.mpc_moves`` and ``law.qp.solve`` (the probe's instance; its class
+    untouched), each as (name, arguments, result), recorded from now on."""
+    if not hasattr(law, "_calls"):
+        law._calls = []
+        for owner, name in ((law, "mpc_moves"), (law.qp, "solve")):
+            inner = getattr(owner, name)
+
+            def wrapped(*args, _inner=inner, _name=name, **kwargs):
+                result = _inner(*args, **kwargs)
+                law._calls.append((_name, args, result))
+                return result
+            setattr(owner, name, wrapped)
+    law._calls.clear()
+    return law._calls
+
+
+def mpc_error(core, state: dict, t: float, inputs: dict) -> tuple[float, float]:
+    """ISMPC's (move bound, dual bound) of the sample (module docstring): 2 EPS cond |plan|
+    with cond the larger of the unconstrained system's on the kept directions and the QP's
+    cond(H); the duals' 2 EPS (cond(H) + 1) (|H| |z| + |q|) when the QP was solved; inf when
+    an inactive bound of the QP's plan is violated within its error of DAQP's primal_tol (a
+    threshold crossing; compare_samples skips the sample). (0, 0) at a holding sample."""
+    law = core.law
+    calls = _recording(law)
+    core.set_state(state)
+    core.compute(t, inputs)
+    moves = [c for c in calls if c[0] == "mpc_moves"]
+    if not moves:
+        return 0.0, 0.0
+    plan = float(np.linalg.norm(moves[0][2]))
+    gain = law._gain
+    lam = np.outer(law._tt_eig, gain.sv * gain.sv) + law.p.theta
+    cond = float(lam.max() / lam.min()) if lam.size else 1.0
+    solves = [c for c in calls if c[0] == "solve"]
+    if not solves:
+        return 2 * EPS * cond * plan, 0.0
+    (H, q, lo, hi, _), (z, dual, _) = solves[0][1], solves[0][2]
+    cond_h = float(np.linalg.cond(H))
+    cond = max(cond, cond_h)
+    z_norm = float(np.linalg.norm(z))
+    move = 2 * EPS * cond * max(plan, z_norm)
+    hi_eff = np.maximum(hi, lo)
+    violation = np.maximum(lo - z, z - hi_eff)
+    margin = 2 * EPS * cond_h * (z_norm + float(np.abs(np.concatenate([lo, hi_eff])).max()))
+    inactive = dual == 0.0
+    if np.any(inactive & (np.abs(violation - DAQP_PRIMAL_TOL) <= margin)):
+        return math.inf, math.inf
+    residual = float(np.linalg.norm(H, 2)) * z_norm + float(np.linalg.norm(q))
+    return move, 2 * EPS * (cond_h + 1) * residual
 
 
 def solve_error(core, ident: str, state: dict, t: float, inputs: dict) -> float:
@@ -188,7 +266,7 @@ def solve_error(core, ident: str, state: dict, t: float, inputs: dict) -> float:
     when A is ill-conditioned (GPC's G'G + w I under a large covariance); for MFAC the move
     rho x of (delta I + Phi_2'Phi_2) x = Phi_2' target, for GPC the first moves of dU. 0 at a
     holding sample (no solve)."""
-    if ident == "EmuIsmc3":
+    if ident in SLIDING:
         return 0.0
     core.set_state(state)
     d, n = core.drive, core.n
@@ -287,6 +365,9 @@ class Twins:
             elif kind == "Boolean":
                 self.native.setBoolean(vr, [value])
                 self.py.set_boolean(vr, [value])
+            elif kind == "String":
+                self.native.setString(vr, [value])
+                self.py.set_string(vr, [value])
             else:
                 self.native.setReal(vr, [value])
                 self.py.set_real(vr, [value])
@@ -344,6 +425,8 @@ def compare_samples(natives, ident: str, stop_time: float) -> tuple[int, int]:
             before = core.get_state()
             skip = near_cutoff(core, ident)
             bound = None if skip else one_sample_bound(probe, ident, before, t, inputs, rng)
+            if bound is not None and not np.all(np.isfinite(bound)):  # a DAQP threshold
+                skip, bound = True, None
         twins.set_inputs(values[k])
         native, py = twins.outputs()
         twins.step(t, h)
@@ -594,6 +677,9 @@ def test_native_datadriven_state_round_trip(natives, ident):
     ("EmuIsmc3", {"disturbance_estimate": False, "input_scale": 2.0,
                   "reference_at_next_position": False}),
     ("EmuGpc3", {"na": 2, "nb": 2, "Ny": 5, "Nu": 3, "share_gain": 0.3, "p_max": 1e4}),
+    ("EmuIsmpc3", {"constraints": "clip", "error_prediction": "eq72", "N": 4}),
+    ("EmuIsmpc3", {"error_prediction": "off", "N": 25, "theta": 3.0, "output_scale": 3.6,
+                   "input_scale": 2.0}),
 ])
 def test_other_parameters_agree_at_the_first_samples(natives, ident, params):
     """Other orders and options of the same laws: from the same start, on the recorded
@@ -616,6 +702,10 @@ def test_other_parameters_agree_at_the_first_samples(natives, ident, params):
                 continue
             inputs = dict(zip(INPUTS, (float(x) for x in values[k])))
             bound = one_sample_bound(probe, ident, core.get_state(), t, inputs, rng)
+            if not np.all(np.isfinite(bound)):  # a DAQP threshold (module docstring)
+                twins.set_inputs(values[k])
+                twins.step(t, 1.0)
+                continue
         twins.set_inputs(values[k])
         native, py = twins.outputs()
         twins.step(t, 1.0)
@@ -631,6 +721,8 @@ def test_other_parameters_agree_at_the_first_samples(natives, ident, params):
 @pytest.mark.parametrize(("ident", "params", "message"), [
     ("EmuGpc3", {"Nu": 4, "Ny": 3}, "Nu = 4 must be <= Ny = 3"),
     ("EmuMfac3", {"reference": "no_such_profile"}, "no_such_profile"),
+    ("EmuIsmpc3", {"constraints": "box"}, "constraints = 'box': must be one of 'qp', 'clip'"),
+    ("EmuIsmpc3", {"error_prediction": "eq73"}, "must be one of 'eq78', 'eq72', 'off'"),
 ])
 def test_bad_parameters_are_refused(natives, ident, params, message):
     _, md, unzipdir = natives[ident]

@@ -1,9 +1,10 @@
 /*
  * ato_datadriven.h: the part of the seed-001 data-driven controllers shared by their laws
- * (ffdl_mfac.c, ffdl_ismc.c, emu_gpc.c), the C twin of controllers/datadriven/emu_control.py
- * DataDrivenEmuControl: the inputs' scaling (y_i = c_y v_i, u_i = c_u F_i / m), the input box
- * from the plant's envelope and the comfort limit, the reference y_r(t) and y_r(t+1) at the
- * predicted head position, the holding brake at the final stop, and the outputs.
+ * (ffdl_mfac.c, ffdl_ismc.c, ffdl_ismpc.c, emu_gpc.c), the C twin of
+ * controllers/datadriven/emu_control.py DataDrivenEmuControl: the inputs' scaling (y_i =
+ * c_y v_i, u_i = c_u F_i / m), the input box from the plant's envelope and the comfort limit,
+ * the reference y_r(t) and y_r(t+1) at the predicted head position, the holding brake at the
+ * final stop, and the outputs.
  *
  * A law's state is one array of doubles (law_state_size = its count times 8) beginning with
  * the drive's DD_DRIVE_STATE values: force[1..n], v_ref, a_ref, speed_error, holding (0/1);
@@ -47,14 +48,17 @@ void dd_outputs(const double* st, double* out);
 /* sum of x[0..n-1] as numpy's add.reduce for n < 8: ((0.0 + x0) + x1) + ... */
 double dd_sum(const double* x, int n);
 
-/* law_state_size, law_get_state, law_set_state and law_outputs of a data-driven law whose
- * whole state is the c->count doubles at c->st (the drive's part first, read by dd_outputs) */
-#define DD_LAW_FLAT_STATE                                                                   \
+/* law_state_size, law_get_state and law_set_state of a data-driven law whose whole state is
+ * the c->count doubles at c->st (the drive's part first, read by dd_outputs) */
+#define DD_LAW_STATE_IMAGE                                                                  \
     size_t law_state_size(const law_core* c) { return c->count * sizeof(double); }         \
     void law_get_state(const law_core* c, void* out) {                                      \
         memcpy(out, c->st, law_state_size(c));                                              \
     }                                                                                       \
-    void law_set_state(law_core* c, const void* in) { memcpy(c->st, in, law_state_size(c)); } \
+    void law_set_state(law_core* c, const void* in) { memcpy(c->st, in, law_state_size(c)); }
+/* the same and law_outputs, for a law whose outputs are the drive's */
+#define DD_LAW_FLAT_STATE                                                                   \
+    DD_LAW_STATE_IMAGE                                                                      \
     void law_outputs(const law_core* c, double* out) { dd_outputs(c->st, out); }
 
 #endif

@@ -2,7 +2,7 @@
  * ato_ffdl.h: the FFDL pseudo-Jacobian estimator (seed 001 eqs. 8-16), the C twin of
  * controllers/common/ffdl.py FfdlEstimator, with the seed-001 core's rescaling of its
  * thresholds (controllers/datadriven/emu_control.py rescaled), for ffdl_mfac.c and
- * ffdl_ismc.c.
+ * ato_sliding.c (ffdl_ismc.c, ffdl_ismpc.c).
  *
  * Its state is ffdl_state_count() doubles of the law's state array, in the order of
  * FfdlEstimator.state_fields: phi (n x n(L_y + L_u), row-major), y_prev (n), dy_hist (L_y x n,

@@ -72,8 +72,19 @@ int ato_sym_eigen(double* a, int n, double* w, double* v) {
     return sweeps;
 }
 
+double ato_npclip(double x, double lo, double hi) {
+    double a = isnan(x) || isnan(lo) ? x + lo : (lo > x ? lo : x);
+    return isnan(a) || isnan(hi) ? a + hi : (hi < a ? hi : a);
+}
+
 void ato_truncated_gain(const double* m, int n, double eps, double cutoff, double* m_r,
                         double* k, int* kept) {
+    double sv[ATO_LINALG_MAX], vt[ATO_LINALG_MAX * ATO_LINALG_MAX];
+    ato_truncated_svd(m, n, eps, cutoff, m_r, k, sv, vt, kept);
+}
+
+void ato_truncated_svd(const double* m, int n, double eps, double cutoff, double* m_r,
+                       double* k, double* kept_sv, double* vt, int* kept) {
     double a[ATO_LINALG_MAX * ATO_LINALG_MAX], v[ATO_LINALG_MAX * ATO_LINALG_MAX];
     double w[ATO_LINALG_MAX], sv[ATO_LINALG_MAX], col[ATO_LINALG_MAX], mv[ATO_LINALG_MAX];
     for (int i = 0; i < n; i++) /* M'M */
@@ -93,8 +104,9 @@ void ato_truncated_gain(const double* m, int n, double eps, double cutoff, doubl
     *kept = 0;
     for (int j = 0; j < n; j++) {
         if (!(sv[j] >= cutoff * sv[0])) continue;
+        kept_sv[*kept] = sv[j];
+        for (int r = 0; r < n; r++) vt[*kept * n + r] = col[r] = v[r * n + j];
         ++*kept;
-        for (int r = 0; r < n; r++) col[r] = v[r * n + j];
         ato_matvec(m, n, n, col, mv); /* M v_j = sigma_j u_j */
         double lam = w[j] > 0.0 ? w[j] : 0.0;
         double g = 1.0 / (lam + eps);

@@ -37,10 +37,6 @@ struct law_core {
     double *G, *H, *f, *g, *rhs, *sim_dy, *sim_du, *moves, *Px, *Pn;
 };
 
-static double npclip(double x, double lo, double hi) {
-    double a = isnan(x) || isnan(lo) ? x + lo : (lo > x ? lo : x);
-    return isnan(a) || isnan(hi) ? a + hi : (hi < a ? hi : a);
-}
 static double npmax(double a, double b) { return isnan(a) || isnan(b) ? a + b : (b > a ? b : a); }
 
 law_core* law_make(const ato_values* p, double t0, char* err, size_t n) {
@@ -235,7 +231,7 @@ int law_compute(law_core* c, double t, const ato_values* p, double* out, char* e
             ato_null_space_share(c->u, Mr, K, N, c->share, sh);
             for (int i = 0; i < N; i++) u[i] = u[i] - sh[i];
         }
-        for (int i = 0; i < N; i++) c->u[i] = npclip(u[i], smp.lo[i], smp.hi[i]);
+        for (int i = 0; i < N; i++) c->u[i] = ato_npclip(u[i], smp.lo[i], smp.hi[i]);
         applied(c, c->u);
     }
     dd_commit(&smp, c->u, c->st);

@@ -30,11 +30,6 @@ struct law_core {
     double* u;
 };
 
-static double npclip(double x, double lo, double hi) {
-    double a = isnan(x) || isnan(lo) ? x + lo : (lo > x ? lo : x);
-    return isnan(a) || isnan(hi) ? a + hi : (hi < a ? hi : a);
-}
-
 law_core* law_make(const ato_values* p, double t0, char* err, size_t n) {
     (void)t0;
     law_core* c = calloc(1, sizeof *c);
@@ -101,7 +96,7 @@ int law_compute(law_core* c, double t, const ato_values* p, double* out, char* e
             for (int i = 0; i < N; i++) du[i] = du[i] - sh[i];
         }
         double u[N];
-        for (int i = 0; i < N; i++) u[i] = npclip(c->u[i] + du[i], s.lo[i], s.hi[i]);
+        for (int i = 0; i < N; i++) u[i] = ato_npclip(c->u[i] + du[i], s.lo[i], s.hi[i]);
         apply(c, u);
     }
     dd_commit(&s, c->u, c->st);
