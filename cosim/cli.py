@@ -321,11 +321,18 @@ def validate(
         "what it recommends or leaves to the FMU, and our project conventions (units "
         "everywhere, explicit output dependencies, default step size), are warnings")] = False,
     call_timeout: Annotated[float, typer.Option(
-        help="seconds one FMI call may take before it is reported as a hang (with the call "
-        "and its arguments)")] = 5.0,
+        help="CPU seconds one FMI call may use before it is reported as a hang (with the call "
+        "and its arguments); set-up calls (loading, instantiate, exit initialisation) get at "
+        "least --setup-call-timeout. A call that uses no CPU is a hang once the machine, at "
+        "its measured speed, offered it twice its limit: a busy machine only makes the wait "
+        "longer")] = 5.0,
+    setup_call_timeout: Annotated[float, typer.Option(
+        help="CPU seconds a set-up call may use (the FMU's imports, e.g. cvxpy, run there)")]
+        = 60.0,
     timeout: Annotated[float, typer.Option(
-        help="seconds one FMU's whole check may take (a backstop for hangs the per-call "
-        "watchdog misses)")] = 120.0,
+        help="seconds of a free core the dynamic checks of one FMU may take in all (its "
+        "worker restarts included); on a busy machine the wall-clock time allowed grows "
+        "with the measured slowdown")] = 300.0,
 ) -> None:
     """FMI 2.0 / FMI 3.0 compliance checks (cosim.interop.compliance, chosen by the FMU's
     fmiVersion) on FMUs; non-zero exit on an error."""
@@ -358,7 +365,8 @@ def validate(
     failed = False
     for path in paths:
         problems = check_fmu(path, Options(strict=not lenient, timeout=timeout,
-                                           call_timeout=call_timeout))
+                                           call_timeout=call_timeout,
+                                           setup_call_timeout=setup_call_timeout))
         failed |= not passed(problems)
         report[str(path)] = [vars(p) for p in problems]
         if not as_json:

@@ -74,7 +74,8 @@ def test_hanging_call_is_reported_with_its_arguments(results):
     assert len(hangs) == 1 and hangs[0].check == "invalid-step"
     assert hangs[0].message.startswith(
         "hang: fmi2DoStep(currentCommunicationPoint=0.0, communicationStepSize=nan) did not "
-        f"return within {CALL_TIMEOUT:g} s")
+        "return: it used "), hangs[0].message
+    assert f"over its limit of {CALL_TIMEOUT:g} CPU s" in hangs[0].message
     assert hangs[0].severity == WARNING  # a NaN step size is the master's error (4.2.2)
     # the worker restarted: the checks after the hang ran
     assert any(p.check == "bad-parameters" for p in results("Hanger", False))

@@ -20,8 +20,11 @@ checks:
   Python exception, ours go through a shim that returns fmi2Error, see ``cosim/fmu/build.py``).
 
 The dynamic checks run in a worker subprocess (``python -m cosim.interop.compliance.worker``), so an
-FMU that crashes or hangs the host is reported as a problem of the check it was in, and the
-worker is restarted for the remaining checks. ``check_together(paths)`` loads several FMUs in
+FMU that crashes or hangs the host is reported as a problem of the check it was in, naming the
+FMI call, and the worker is restarted for the remaining checks (not after a crash or hang in
+loading or instantiating the FMU, or a second one in the same FMI function: every further check
+would meet it). Hangs are decided on the FMU's own progress, never on a bare wall-clock figure
+(:mod:`cosim.interop.compliance.watchdog`). ``check_together(paths)`` loads several FMUs in
 one process and checks that they do not disturb each other (pythonfmu FMUs share one interpreter).
 
 Exercising the FMU: parameters keep their start values; every Real input follows a
@@ -68,6 +71,7 @@ from cosim.interop.compliance.common import (
 )
 from cosim.interop.compliance.host import _Host
 from cosim.interop.compliance.model_description import check_model_description
+from cosim.interop.compliance.watchdog import SETUP_CALL_ALLOWANCE, Limits
 from cosim.interop.compliance.worker import _run_worker
 
 __all__ = ["ALL_CHECKS", "CLAUSES", "CONVENTION", "DYNAMIC_CHECKS", "ERROR", "FMI3_CHECKS",
@@ -86,8 +90,14 @@ class Options:
     strict: bool = True
     step_tolerance: float = 1e-9  # variable-step results vs fixed-step results (relative)
     n_steps: int = 40  # communication steps per run
-    call_timeout: float = 5.0  # s, per FMI call: a call that does not return is a hang
-    timeout: float = 120.0  # s, per worker process (backstop for a hang the watchdog misses)
+    # CPU s one FMI call may use (set-up calls: at least setup_call_timeout); a call that uses
+    # no CPU hangs once the machine, at its measured speed, offered it twice that
+    # (cosim.interop.compliance.watchdog)
+    call_timeout: float = 5.0
+    setup_call_timeout: float = SETUP_CALL_ALLOWANCE
+    # s of a free core (wall-clock time times the measured share of a core) for all the
+    # dynamic checks of one FMU, worker restarts included
+    timeout: float = 300.0
     # outputs (fnmatch on name, or "description:<pattern>") excluded from the exact
     # reproducibility comparisons (reset, state, instances): wall-clock measurements
     irreproducible: tuple[str, ...] = ("*wall_time*", "*solve_time*", "*cpu_time*",
@@ -97,9 +107,13 @@ class Options:
     dynamic: bool = True
 
 
+def _limits(opts: Options) -> Limits:
+    return Limits(call_cpu=opts.call_timeout, setup_call_cpu=opts.setup_call_timeout,
+                  budget=opts.timeout)
+
+
 def _worker_options(opts: Options) -> dict[str, Any]:
     return {"n_steps": opts.n_steps, "step_tolerance": opts.step_tolerance,
-            "call_timeout": opts.call_timeout,
             "irreproducible": list(opts.irreproducible),
             "step_dependent": list(opts.step_dependent)}
 
@@ -123,7 +137,7 @@ def check_fmu(path: str | Path, options: Options | None = None) -> list[Problem]
         return skipped(DYNAMIC_CHECKS, "the FMU could not be read or is not for "
                        "co-simulation", problems)
     args = {"mode": "single", "paths": [str(path.resolve())], **_worker_options(opts)}
-    return classify(problems + _run_worker(args, DYNAMIC_CHECKS, opts.timeout), opts.strict)
+    return classify(problems + _run_worker(args, DYNAMIC_CHECKS, _limits(opts)), opts.strict)
 
 
 def fmi_version(path: Path) -> str | None:
@@ -152,7 +166,7 @@ def _check_fmi3(path: Path, opts: Options) -> list[Problem]:
         return classify(skipped(FMI3_DYNAMIC_CHECKS, "the FMU cannot be run here (see "
                                 "fmi3-capabilities)", problems), opts.strict)
     args = {"mode": "fmi3", "paths": [str(path.resolve())], **_worker_options(opts)}
-    return classify(problems + _run_worker(args, FMI3_DYNAMIC_CHECKS, opts.timeout),
+    return classify(problems + _run_worker(args, FMI3_DYNAMIC_CHECKS, _limits(opts)),
                     opts.strict)
 
 
@@ -161,7 +175,7 @@ def check_together(paths: list[str | Path], options: Options | None = None) -> l
     opts = options or Options()
     args = {"mode": "together", "paths": [str(Path(p).resolve()) for p in paths],
             **_worker_options(opts)}
-    return classify(_run_worker(args, ("together",), opts.timeout), opts.strict)
+    return classify(_run_worker(args, ("together",), _limits(opts)), opts.strict)
 
 
 def format_report(path: str | Path, problems: list[Problem],

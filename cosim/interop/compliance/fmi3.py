@@ -236,8 +236,9 @@ class _Instance3:
         def log(env: Any, status: int, category: bytes, message: bytes) -> None:
             self.messages.append((status, message.decode(errors="replace")))
 
-        self.fmu = FMU3Slave(guid=host.md.guid, unzipDirectory=host.unzipdir,
-                             modelIdentifier=host.cs.modelIdentifier, instanceName=name)
+        self.fmu = WATCHDOG.call(f"dlopen({host.cs.modelIdentifier})",
+                                 FMU3Slave, guid=host.md.guid, unzipDirectory=host.unzipdir,
+                                 modelIdentifier=host.cs.modelIdentifier, instanceName=name)
         WATCHDOG.call(describe_call("fmi3InstantiateCoSimulation", (), kw),
                       self.fmu.instantiate, loggingOn=False, logMessage=log, **kw)
         self.alive = True
@@ -248,7 +249,7 @@ class _Instance3:
         from cosim.interop.compliance.host import WATCHDOG, describe_call
 
         try:
-            return 0, WATCHDOG.call(describe_call(method, args, kwargs),
+            return 0, WATCHDOG.call(describe_call(method, args, kwargs, "fmi3"),
                                     getattr(self.fmu, method), *args, **kwargs)
         except FMICallException as err:
             return err.status, None
