@@ -333,6 +333,13 @@ def validate(
         help="seconds of a free core the dynamic checks of one FMU may take in all (its "
         "worker restarts included); on a busy machine the wall-clock time allowed grows "
         "with the measured slowdown")] = 300.0,
+    max_extracted_mb: Annotated[float, typer.Option(
+        help="MiB all files of one FMU may expand to; a larger archive is refused before "
+        "extraction")] = 512.0,
+    max_files: Annotated[int, typer.Option(
+        help="files one FMU archive may hold")] = 10_000,
+    max_model_description_mb: Annotated[float, typer.Option(
+        help="MiB modelDescription.xml may have (about 1 MiB per 170,000 variables)")] = 4.0,
 ) -> None:
     """FMI 2.0 / FMI 3.0 compliance checks (cosim.interop.compliance, chosen by the FMU's
     fmiVersion) on FMUs; non-zero exit on an error."""
@@ -360,13 +367,17 @@ def validate(
         else:
             _fail(f"unknown FMU {name!r}; known: {sorted(specs)}")
     from cosim.interop.compliance import Options, check_fmu, format_report, passed
+    from cosim.interop.compliance.archive import MB, ArchiveLimits
 
+    limits = ArchiveLimits(max_extracted=int(max_extracted_mb * MB), max_files=max_files,
+                           max_model_description=int(max_model_description_mb * MB))
     report: dict[str, list[dict]] = {}
     failed = False
     for path in paths:
         problems = check_fmu(path, Options(strict=not lenient, timeout=timeout,
                                            call_timeout=call_timeout,
-                                           setup_call_timeout=setup_call_timeout))
+                                           setup_call_timeout=setup_call_timeout,
+                                           limits=limits))
         failed |= not passed(problems)
         report[str(path)] = [vars(p) for p in problems]
         if not as_json:

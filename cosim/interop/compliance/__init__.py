@@ -43,10 +43,12 @@ Modules: ``common`` (Problem, severities), ``model_description`` (static checks)
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import zipfile
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
+from cosim.interop.compliance.archive import ArchiveLimits, ArchiveRefused, inspect
 from cosim.interop.compliance.common import (
     ALL_CHECKS,
     CLAUSES,
@@ -105,6 +107,8 @@ class Options:
     # outputs excluded only from the variable-step comparison: defined per communication step
     step_dependent: tuple[str, ...] = ("description:*communication step*",)
     dynamic: bool = True
+    # extracted size, file count, modelDescription size (checked before anything is read)
+    limits: ArchiveLimits = field(default_factory=ArchiveLimits)
 
 
 def _limits(opts: Options) -> Limits:
@@ -114,6 +118,7 @@ def _limits(opts: Options) -> Limits:
 
 def _worker_options(opts: Options) -> dict[str, Any]:
     return {"n_steps": opts.n_steps, "step_tolerance": opts.step_tolerance,
+            "limits": asdict(opts.limits),
             "irreproducible": list(opts.irreproducible),
             "step_dependent": list(opts.step_dependent)}
 
@@ -125,7 +130,14 @@ def check_fmu(path: str | Path, options: Options | None = None) -> list[Problem]
     path = Path(path)
     if not path.is_file():
         return [Problem("fmpy-validation", f"{path}: no such file")]
-    if fmi_version(path) == "3.0":
+    try:
+        inspect(path, opts.limits)
+    except ArchiveRefused as err:
+        return skipped(ALL_CHECKS, "the archive was refused",
+                       [Problem("fmpy-validation", f"archive refused before extraction: {err}")])
+    except (zipfile.BadZipFile, OSError):
+        pass  # reported by the static checks (not a readable zip archive)
+    if fmi_version(path, opts.limits.max_model_description) == "3.0":
         return _check_fmi3(path, opts)
     problems = check_model_description(path, strict=opts.strict)
     if not opts.dynamic:
@@ -140,10 +152,12 @@ def check_fmu(path: str | Path, options: Options | None = None) -> list[Problem]
     return classify(problems + _run_worker(args, DYNAMIC_CHECKS, _limits(opts)), opts.strict)
 
 
-def fmi_version(path: Path) -> str | None:
-    """The fmiVersion attribute of an FMU's modelDescription.xml (None if unreadable)."""
+def fmi_version(path: Path, max_bytes: int | None = None) -> str | None:
+    """The fmiVersion attribute of an FMU's modelDescription.xml (None if unreadable or larger
+    than ``max_bytes``, default :class:`ArchiveLimits`' limit)."""
     try:
-        return _read_xml(path).get("fmiVersion")
+        limit = ArchiveLimits().max_model_description if max_bytes is None else max_bytes
+        return _read_xml(path, limit).get("fmiVersion")
     except Exception:
         return None
 

@@ -75,13 +75,16 @@ def _emit(kind: str, payload: Any) -> None:
 
 def _worker(args: dict) -> None:
     """Run dynamic checks, reporting progress on stdout (see ``_run_worker``)."""
-    from fmpy import extract
+    from cosim.interop.compliance.archive import ArchiveLimits, extract
 
     if args.get("board"):
         WATCHDOG.start(args["board"])
     paths = [Path(p) for p in args["paths"]]
-    unzipdirs = [extract(str(p)) for p in paths]
+    limits = ArchiveLimits(**args["limits"]) if "limits" in args else ArchiveLimits()
+    unzipdirs: list[str] = []
     try:
+        for p in paths:
+            unzipdirs.append(extract(p, limits))
         if args["mode"] == "fmi3":
             _fmi3_worker(args, paths[0], unzipdirs[0])
             return
