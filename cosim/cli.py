@@ -365,8 +365,12 @@ def validate(
                     build_fmu(specs[name], fmi_version=version)
                 paths.append(path)
         else:
-            _fail(f"unknown FMU {name!r}; known: {sorted(specs)}")
-    from cosim.interop.compliance import Options, check_fmu, format_report, passed
+            import difflib
+
+            hint = difflib.get_close_matches(name, list(specs), n=1)
+            _fail(f"unknown FMU {name!r}" + (f" (did you mean {hint[0]!r}?)" if hint else
+                                             f"; known: {sorted(specs)}"))
+    from cosim.interop.compliance import Options, check_fmu, classify, format_report, passed
     from cosim.interop.compliance.archive import MB, ArchiveLimits
 
     limits = ArchiveLimits(max_extracted=int(max_extracted_mb * MB), max_files=max_files,
@@ -382,6 +386,11 @@ def validate(
         report[str(path)] = [vars(p) for p in problems]
         if not as_json:
             out.print(format_report(path, problems), highlight=False, soft_wrap=True, markup=False)
+            if not lenient and not passed(problems) and passed(classify(problems, False)):
+                out.print("  hint: every error above is something FMI recommends or leaves to "
+                          "the FMU, or a convention of this project; for a third-party FMU, "
+                          "--lenient checks only what the standard requires (it passes this "
+                          "one)", highlight=False, soft_wrap=True, markup=False)
     if as_json:
         out.print_json(json.dumps(report))
     if failed:

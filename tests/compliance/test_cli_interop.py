@@ -31,6 +31,9 @@ def test_validate_fails_broken_fmu_with_readable_report(broken_fmu):
 def test_validate_unknown_fmu_is_an_error():
     done = cosim("validate", "NoSuchFmu")
     assert done.returncode == 2 and "unknown FMU" in done.stderr
+    typo = cosim("validate", "StopPd")
+    assert typo.returncode == 2
+    assert "unknown FMU 'StopPd' (did you mean 'StopPid'?)" in typo.stderr.replace("\n", " ")
 
 
 def test_export_ssp(tmp_path, built_fmus):
