@@ -326,11 +326,25 @@ def validate(
         "what it recommends or leaves to the FMU, and our project conventions (units "
         "everywhere, explicit output dependencies, default step size), are warnings")] = False,
     call_timeout: Annotated[float, typer.Option(
-        help="seconds one FMI call may take before it is reported as a hang (with the call "
-        "and its arguments)")] = 5.0,
+        help="CPU seconds one FMI call may use before it is reported as a hang (with the call "
+        "and its arguments); set-up calls (loading, instantiate, exit initialisation) get at "
+        "least --setup-call-timeout. A call that uses no CPU is a hang once the machine, at "
+        "its measured speed, offered it twice its limit: a busy machine only makes the wait "
+        "longer")] = 5.0,
+    setup_call_timeout: Annotated[float, typer.Option(
+        help="CPU seconds a set-up call may use (the FMU's imports, e.g. cvxpy, run there)")]
+        = 60.0,
     timeout: Annotated[float, typer.Option(
-        help="seconds one FMU's whole check may take (a backstop for hangs the per-call "
-        "watchdog misses)")] = 120.0,
+        help="seconds of a free core the dynamic checks of one FMU may take in all (its "
+        "worker restarts included); on a busy machine the wall-clock time allowed grows "
+        "with the measured slowdown")] = 300.0,
+    max_extracted_mb: Annotated[float, typer.Option(
+        help="MiB all files of one FMU may expand to; a larger archive is refused before "
+        "extraction")] = 512.0,
+    max_files: Annotated[int, typer.Option(
+        help="files one FMU archive may hold")] = 10_000,
+    max_model_description_mb: Annotated[float, typer.Option(
+        help="MiB modelDescription.xml may have (about 1 MiB per 170,000 variables)")] = 4.0,
 ) -> None:
     """Check FMUs against FMI 2.0 / FMI 3.0.
 
@@ -358,18 +372,32 @@ def validate(
                     build_fmu(specs[name], fmi_version=version)
                 paths.append(path)
         else:
-            _fail(f"unknown FMU {name!r}; known: {sorted(specs)}")
-    from cosim.interop.compliance import Options, check_fmu, format_report, passed
+            import difflib
 
+            hint = difflib.get_close_matches(name, list(specs), n=1)
+            _fail(f"unknown FMU {name!r}" + (f" (did you mean {hint[0]!r}?)" if hint else
+                                             f"; known: {sorted(specs)}"))
+    from cosim.interop.compliance import Options, check_fmu, classify, format_report, passed
+    from cosim.interop.compliance.archive import MB, ArchiveLimits
+
+    limits = ArchiveLimits(max_extracted=int(max_extracted_mb * MB), max_files=max_files,
+                           max_model_description=int(max_model_description_mb * MB))
     report: dict[str, list[dict]] = {}
     failed = False
     for path in paths:
         problems = check_fmu(path, Options(strict=not lenient, timeout=timeout,
-                                           call_timeout=call_timeout))
+                                           call_timeout=call_timeout,
+                                           setup_call_timeout=setup_call_timeout,
+                                           limits=limits))
         failed |= not passed(problems)
         report[str(path)] = [vars(p) for p in problems]
         if not as_json:
             out.print(format_report(path, problems), highlight=False, soft_wrap=True, markup=False)
+            if not lenient and not passed(problems) and passed(classify(problems, False)):
+                out.print("  hint: every error above is something FMI recommends or leaves to "
+                          "the FMU, or a convention of this project; for a third-party FMU, "
+                          "--lenient checks only what the standard requires (it passes this "
+                          "one)", highlight=False, soft_wrap=True, markup=False)
     if as_json:
         out.print_json(json.dumps(report))
     if failed:

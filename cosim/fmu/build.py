@@ -442,7 +442,8 @@ def is_intact(path: Path) -> bool:
 def _builder_files(fmi_version: int) -> list[Path]:
     from cosim.fmu import fmi3
 
-    files = [Path(__file__).resolve(), SHIM_SOURCE]
+    files = [Path(__file__).resolve(), SHIM_SOURCE,
+             SHIM_SOURCE.parent / "front" / "instance_registry.h"]
     return files + fmi3.builder_files() if fmi_version == 3 else files
 
 

@@ -227,5 +227,6 @@ def package(fmi2_fmu: Path, identifier: str, out: Path) -> Path:
 
 def builder_files() -> list[Path]:
     """The files an FMI 3 build depends on besides the FMI 2 build's."""
-    return [Path(__file__).resolve(), *FRONT_SOURCES, FRONT_HEADER]
+    return [Path(__file__).resolve(), *FRONT_SOURCES, FRONT_HEADER,
+            FRONT_DIR / "instance_registry.h"]
 

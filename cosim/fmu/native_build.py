@@ -708,7 +708,7 @@ def native_sources(identifier: str, fmi_version: int = 2) -> list[Path]:
     return [NATIVE_DIR / spec.source, NATIVE_DIR / "ato_vars.h",
             *(NATIVE_DIR / name for name in (*spec.helpers, *spec.shared)),
             FRONT_DIR / "fmi2_front.c",
-            FRONT_DIR / "ato_backend.h", Path(__file__),
+            FRONT_DIR / "ato_backend.h", FRONT_DIR / "instance_registry.h", Path(__file__),
             *bundled_files(catalog()[identifier].module), *fmi3]
 
 
@@ -754,6 +754,7 @@ def build_native(identifier: str, dest: Path = NATIVE_FMU_DIR, windows: bool | N
         src.mkdir(parents=True)
         shutil.copy2(FRONT_DIR / "fmi2_front.c", src)
         shutil.copy2(FRONT_DIR / "ato_backend.h", src)
+        shutil.copy2(FRONT_DIR / "instance_registry.h", src)
         for name in (spec.source, *spec.helpers):
             shutil.copy2(NATIVE_DIR / name, src)
         shutil.copy2(NATIVE_DIR / "ato_vars.h", src)
@@ -882,6 +883,7 @@ def package_fmi3(fmi2_fmu: Path, out: Path, windows: bool | None = None) -> Path
                              "of this project")
         (src / FMI2_FRONT).unlink()
         shutil.copy2(FRONT_DIR / FMI3_FRONT, src)
+        shutil.copy2(FRONT_DIR / "instance_registry.h", src)
         for name in FMI3_HEADERS:
             shutil.copy2(headers / name, src)
         described = ElementTree.parse(src / "buildDescription.xml").getroot()

@@ -44,6 +44,7 @@
 #include <string.h>
 
 #include "fmi2Functions.h"
+#include "front/instance_registry.h"
 
 #ifndef SHIM_LIBPYTHON_SONAME
 #define SHIM_LIBPYTHON_SONAME ""
@@ -309,17 +310,49 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
         free(s);
         return NULL;
     }
+    if (!registry_add(s)) {
+        log_message(functions, instanceName, "out of memory");
+        inner.fmi2FreeInstance(s->inner);
+        free(s);
+        return NULL;
+    }
     return s;
 }
+
+/* what a second fmi2FreeInstance needs for its message (front/instance_registry.h) */
+typedef struct {
+    fmi2CallbackFunctions host;
+    char name[256];
+} FreedMemo;
 
 void fmi2FreeInstance(fmi2Component c)
 {
     Shim* s = (Shim*)c;
+    unsigned char buf[REGISTRY_MEMO] = {0};
+    FreedMemo memo;
+    char text[512];
     if (!s)
         return;
-    if (s->inner)
-        inner.fmi2FreeInstance(s->inner);
-    free(s);
+    if (registry_is_live(s)) { /* pythonfmu aborts on a second delete of its slave */
+        memset(&memo, 0, sizeof memo);
+        memo.host = s->host;
+        snprintf(memo.name, sizeof memo.name, "%s", s->name);
+        memcpy(buf, &memo, sizeof memo);
+        registry_release(s, buf);
+        if (s->inner)
+            inner.fmi2FreeInstance(s->inner);
+        free(s);
+        return;
+    }
+    if (registry_release(s, buf) == -1) {
+        memcpy(&memo, buf, sizeof memo);
+        snprintf(text, sizeof text, "fmi2FreeInstance: instance '%s' was freed already; call "
+                 "refused", memo.name);
+        log_message(&memo.host, memo.name, text);
+    } else {
+        fprintf(stderr, "fmi2FreeInstance: %p is not a live instance of this FMU; call "
+                "refused\n", c);
+    }
 }
 
 /* -- initialisation, termination, reset ---------------------------------------------------- */

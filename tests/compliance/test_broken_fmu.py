@@ -19,8 +19,8 @@ PLANTED = {  # check -> fragment of the expected message (see broken_train.py)
     "two-instances": "differs from a run alone",
     "wrong-state": "fmi2DoStep before initialisation: accepted",
     "non-finite-inputs": "input u = nan: accepted",
-    "invalid-step": "crashed (signal 6)",
-    "bad-parameters": "hang",
+    "invalid-step": "crashed (SIGABRT) in fmi2DoStep(currentCommunicationPoint=",
+    "bad-parameters": "hang: fmi2SetReal(",
 }
 
 

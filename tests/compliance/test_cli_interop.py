@@ -21,7 +21,7 @@ def test_validate_passes_our_fmu(built_fmus):
 
 
 def test_validate_fails_broken_fmu_with_readable_report(broken_fmu):
-    done = cosim("validate", str(broken_fmu), "--json", "--timeout", "8")
+    done = cosim("validate", str(broken_fmu), "--json", "--call-timeout", "1")
     assert done.returncode == 1
     report = json.loads(done.stdout)[str(broken_fmu)]
     assert {"reset", "fmu-state", "wrong-state"} <= {p["check"] for p in report
@@ -31,6 +31,9 @@ def test_validate_fails_broken_fmu_with_readable_report(broken_fmu):
 def test_validate_unknown_fmu_is_an_error():
     done = cosim("validate", "NoSuchFmu")
     assert done.returncode == 2 and "unknown FMU" in done.stderr
+    typo = cosim("validate", "StopPd")
+    assert typo.returncode == 2
+    assert "unknown FMU 'StopPd' (did you mean 'StopPid'?)" in typo.stderr.replace("\n", " ")
 
 
 def test_export_ssp(tmp_path, built_fmus):

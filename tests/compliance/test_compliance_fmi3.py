@@ -25,15 +25,9 @@ IDENTIFIERS = sorted(catalog())
 
 
 @pytest.fixture(scope="session")
-def fmi3_results(built_fmus_fmi3):
-    cache: dict[str, list] = {}
-
-    def results(identifier: str) -> list:
-        if identifier not in cache:
-            cache[identifier] = check_fmu(built_fmus_fmi3[identifier].path_fmi3)
-        return cache[identifier]
-
-    return results
+def fmi3_results(built_fmus_fmi3, checked_once):
+    """identifier -> problems of its FMI 3 build, computed once per FMU and test run."""
+    return lambda identifier: checked_once(built_fmus_fmi3[identifier].path_fmi3)
 
 
 @pytest.mark.parametrize("check", FMI3_CHECKS)
@@ -42,6 +36,8 @@ def test_fmi3_build_passes_check(identifier, check, fmi3_results, built_fmus_fmi
     problems = fmi3_results(identifier)
     errors = [p for p in problems if p.check == check and p.severity == ERROR]
     assert not errors, format_report(built_fmus_fmi3[identifier].path_fmi3, problems)
+    # every finding belongs to a check of the parametrisation (so none goes unseen)
+    assert {p.check for p in problems} <= set(FMI3_CHECKS), problems
 
 
 def test_fmi3_checks_are_chosen_by_fmi_version(built_fmus_fmi3):

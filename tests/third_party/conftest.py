@@ -25,3 +25,13 @@ def c_fmus3(tmp_path_factory) -> dict[str, Path]:
     from third_party_fmus3 import build_all3
 
     return build_all3(tmp_path_factory.mktemp("c_fmus3"))
+
+
+@pytest.fixture(scope="session")
+def hostile_fmus(tmp_path_factory) -> dict[str, Path]:
+    """Name -> path of every hostile C test FMU (third_party_fmus.HOSTILE), built once."""
+    if shutil.which("gcc") is None:
+        pytest.skip("gcc not installed: the C test FMUs cannot be built")
+    from third_party_fmus import build_hostile
+
+    return build_hostile(tmp_path_factory.mktemp("hostile_fmus"))

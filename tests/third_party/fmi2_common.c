@@ -61,6 +61,9 @@ fmi2Component fmi2Instantiate(fmi2String name, fmi2Type type, fmi2String guid,
                               fmi2Boolean visible, fmi2Boolean logging) {
     (void)guid; (void)resources; (void)visible; (void)logging;
     if (type != fmi2CoSimulation) return NULL;
+#ifdef ON_INSTANTIATE
+    ON_INSTANTIATE; /* a hostile test FMU's misbehaviour (hostile.c) */
+#endif
     Inst *m = calloc(1, sizeof(Inst));
     if (!m) return NULL;
     if (cb) m->cb = *cb;

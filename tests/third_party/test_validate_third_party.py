@@ -20,6 +20,7 @@ from cosim.interop.compliance import (
     Options,
     check_fmu,
     classify,
+    passed,
 )
 
 # the C FMUs accept NaN/out-of-range parameters and NaN inputs and a fixed parameter set after
@@ -74,7 +75,8 @@ def test_hanging_call_is_reported_with_its_arguments(results):
     assert len(hangs) == 1 and hangs[0].check == "invalid-step"
     assert hangs[0].message.startswith(
         "hang: fmi2DoStep(currentCommunicationPoint=0.0, communicationStepSize=nan) did not "
-        f"return within {CALL_TIMEOUT:g} s")
+        "return: it used "), hangs[0].message
+    assert f"over its limit of {CALL_TIMEOUT:g} CPU s" in hangs[0].message
     assert hangs[0].severity == WARNING  # a NaN step size is the master's error (4.2.2)
     # the worker restarted: the checks after the hang ran
     assert any(p.check == "bad-parameters" for p in results("Hanger", False))
@@ -91,3 +93,66 @@ def test_cli_lenient_exit_status(c_fmus):
     assert "[FMI 2.0.4 2.1.7" in done.stdout and "PASSED: 0 error(s)" in done.stdout
     done = validate(str(c_fmus["AllTypes"]))
     assert done.returncode == 1 and "FAILED" in done.stdout
+
+
+def test_strict_report_of_a_third_party_fmu_suggests_lenient(c_fmus, results):
+    """AllTypes fails the strict checks only on what the standard leaves to the FMU."""
+    done = subprocess.run([sys.executable, "-m", "cosim.cli", "validate",
+                           str(c_fmus["AllTypes"]), "--call-timeout", str(CALL_TIMEOUT)],
+                          capture_output=True, text=True)
+    assert done.returncode == 1
+    assert ("hint: every error above is something FMI recommends or leaves to the FMU, or a "
+            "convention of this project; for a third-party FMU, --lenient checks only what the "
+            "standard requires (it passes this one)") in done.stdout, done.stdout
+    # a required rule broken: lenient fails it too, so no such hint
+    assert not passed(results("FeedthroughLying", False))
+
+
+def test_refused_event_mode_instantiation_says_what_the_fmu_said(c_fmus3, monkeypatch, tmp_path):
+    """A binary that returns NULL for eventModeUsed = true: the report names the call, its
+    arguments, why an importer may ask for it and the FMU's own message, not fmpy's "Failed to
+    instantiate model"."""
+    from fmpy import extract
+    from fmpy.fmi3 import FMU3Slave
+
+    from cosim.interop.compliance.fmi3 import _Failed3, _Host3
+
+    def refusing(self, visible=False, loggingOn=False, eventModeUsed=False, **kw):
+        kw["logMessage"](None, 3, b"logStatusError", b"Event Mode is not supported")
+        raise Exception("Failed to instantiate model")
+
+    path = c_fmus3["TimeEvents3"]
+    host = _Host3(path, str(extract(str(path), tmp_path / "unzipped")), 8)
+    monkeypatch.setattr(FMU3Slave, "instantiate", refusing)
+    with pytest.raises(_Failed3) as err:
+        host.instance("events", eventModeUsed=True)
+    assert str(err.value) == (
+        "fmi3InstantiateCoSimulation(eventModeUsed=True) returned NULL (its modelDescription "
+        "declares hasEventMode = true, so an importer may ask for Event Mode); FMU says: Event "
+        "Mode is not supported")
+
+
+def test_fmi3_step_without_a_default_stays_near_the_internal_step(c_fmus3, tmp_path):
+    """No DefaultExperiment stepSize, stopTime 1e7 s, fixedInternalStepSize 1e-3 s (as the
+    Reference Roberts): the checks step 100 internal steps (0.1 s), not 1e7 / 100 s (1e8
+    internal steps in one fmi3DoStep, a false hang)."""
+    import re
+    import zipfile
+
+    from fmpy import extract
+
+    from cosim.interop.compliance.fmi3 import _Host3
+
+    src, path = c_fmus3["TimeEvents3"], tmp_path / "LongSpan.fmu"
+    with zipfile.ZipFile(src) as zin, zipfile.ZipFile(path, "w") as zout:
+        for item in zin.infolist():
+            data = zin.read(item)
+            if item.filename == "modelDescription.xml":
+                text = re.sub(r"<DefaultExperiment[^>]*/>",
+                              '<DefaultExperiment startTime="0" stopTime="1e7"/>', data.decode())
+                text = text.replace("<CoSimulation ",
+                                    '<CoSimulation fixedInternalStepSize="1e-3" ')
+                data = text.encode()
+            zout.writestr(item, data)
+    host = _Host3(path, str(extract(str(path), tmp_path / "unzipped")), 40)
+    assert host.h == 100 * 1e-3

@@ -97,6 +97,25 @@ FEEDTHROUGH_LYING = Spec("FeedthroughLying", "feedthrough.c", FEEDTHROUGH.variab
 HANGER = Spec("Hanger", "events.c", EVENTS.variables, dependencies=EVENTS.dependencies,
               defines=("HANG_ON_NAN_STEP",))
 
+# hostile.c: one FMU per misbehaviour (built only by the tests that use them, build_hostile)
+_HOSTILE_VARIABLES = (
+    ("u", "Real", "input", "continuous", 0, "0.5", {"unit": "1"}),
+    ("y", "Real", "output", "continuous", 1, None, {"unit": "1"}),
+)
+HOSTILE = {name: Spec(name, "hostile.c", _HOSTILE_VARIABLES, dependencies={"y": ("u",)},
+                      defines=defines)
+           for name, defines in (
+               ("SpinInInstantiate", ("ON_INSTANTIATE=spin()",)),
+               ("BlockInInstantiate", ("ON_INSTANTIATE=block()",)),
+               ("SpinInDoStep", ("ON_STEP=spin()",)),
+               ("BlockInDoStep", ("ON_STEP=block()",)),
+               ("SegfaultInDoStep", ("ON_STEP=segfault()",)),
+               ("AbortInDoStep", ("ON_STEP=abort()",)),
+               ("ExitInDoStep", ("ON_STEP=exit(3)",)),
+               ("NanOutput", ("NAN_OUTPUT",)),
+               ("SlowFirstStep", ("ON_STEP=slow_once()",)),
+           )}
+
 SPECS = (ALL_TYPES, TERMINATOR, DISCARDER, DISCARDER_FIXED, FEEDTHROUGH, FEEDTHROUGH_UNDECLARED,
          EVENTS, FEEDTHROUGH_LYING, HANGER)
 
@@ -168,6 +187,13 @@ def build(spec: Spec, out_dir: Path, work: Path) -> Path:
         z.writestr("modelDescription.xml", model_description(spec))
         z.write(lib, f"binaries/linux64/{spec.name}.so")
     return path
+
+
+def build_hostile(out_dir: Path, names: tuple[str, ...] | None = None) -> dict[str, Path]:
+    """The hostile test FMUs (:data:`HOSTILE`, all or ``names``) built into ``out_dir``."""
+    work = out_dir / "build"
+    work.mkdir(parents=True, exist_ok=True)
+    return {name: build(HOSTILE[name], out_dir, work) for name in names or HOSTILE}
 
 
 def build_all(out_dir: Path) -> dict[str, Path]:

@@ -16,6 +16,7 @@
 
 #include "fmi2Functions.h"
 #include "ato_backend.h"
+#include "instance_registry.h"
 
 enum mode { INSTANTIATED = 1, INIT = 2, STEP = 4, TERMINATED = 8, ERROR_ = 16 };
 static const char* mode_name(int m) {
@@ -108,15 +109,46 @@ fmi2Component fmi2Instantiate(fmi2String name, fmi2Type type, fmi2String guid,
     f->name = malloc(strlen(name ? name : "?") + 1);
     strcpy(f->name, name ? name : "?");
     f->mode = INSTANTIATED;
+    if (!registry_add(f)) {
+        front_error(cb, name, "fmi2Instantiate: out of memory");
+        be->free_instance(model);
+        free(f->name);
+        free(f);
+        return NULL;
+    }
     return f;
 }
 
+/* what a second fmi2FreeInstance needs for its message (instance_registry.h) */
+typedef struct {
+    fmi2CallbackFunctions cb;
+    char name[256];
+} freed_memo;
+
 void fmi2FreeInstance(fmi2Component c) {
     front* f = c;
+    unsigned char buf[REGISTRY_MEMO] = {0};
+    freed_memo memo;
     if (!f) return;
-    f->be->free_instance(f->model);
-    free(f->name);
-    free(f);
+    if (registry_is_live(f)) {
+        memset(&memo, 0, sizeof memo);
+        memo.cb = f->cb;
+        snprintf(memo.name, sizeof memo.name, "%s", f->name);
+        memcpy(buf, &memo, sizeof memo);
+        registry_release(f, buf);
+        f->be->free_instance(f->model);
+        free(f->name);
+        free(f);
+        return;
+    }
+    if (registry_release(f, buf) == -1) {
+        memcpy(&memo, buf, sizeof memo);
+        front_error(&memo.cb, memo.name, "fmi2FreeInstance: instance '%s' was freed already; "
+                    "call refused", memo.name);
+    } else {
+        fprintf(stderr, "fmi2FreeInstance: %p is not a live instance of this FMU; call "
+                "refused\n", (void*)c);
+    }
 }
 
 fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean on, size_t n,

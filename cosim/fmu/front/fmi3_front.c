@@ -37,6 +37,7 @@
 
 #include "ato_backend.h"
 #include "fmi3Functions.h"
+#include "instance_registry.h"
 
 typedef enum {
     MODE_INSTANTIATED,
@@ -314,6 +315,12 @@ fmi3Instance fmi3InstantiateCoSimulation(
         free(f);
         return NULL;
     }
+    if (!registry_add(f)) {
+        front_log(f, fmi3Error, "logStatusError", "%s: out of memory", f->name);
+        backend->free_instance(f->inner);
+        free(f);
+        return NULL;
+    }
     return f;
 }
 
@@ -347,14 +354,42 @@ fmi3Instance fmi3InstantiateScheduledExecution(
     return NULL;
 }
 
+/* what a second fmi3FreeInstance needs for its message (instance_registry.h) */
+typedef struct {
+    fmi3InstanceEnvironment environment;
+    fmi3LogMessageCallback logMessage;
+    char name[256];
+} FreedMemo;
+
 void fmi3FreeInstance(fmi3Instance instance)
 {
     Front* f = (Front*)instance;
+    unsigned char buf[REGISTRY_MEMO] = {0};
+    FreedMemo memo;
+    char text[512];
     if (!f)
         return;
-    if (f->inner)
-        backend->free_instance(f->inner);
-    free(f);
+    if (registry_is_live(f)) {
+        memset(&memo, 0, sizeof memo);
+        memo.environment = f->environment;
+        memo.logMessage = f->logMessage;
+        snprintf(memo.name, sizeof memo.name, "%s", f->name);
+        memcpy(buf, &memo, sizeof memo);
+        registry_release(f, buf);
+        if (f->inner)
+            backend->free_instance(f->inner);
+        free(f);
+        return;
+    }
+    if (registry_release(f, buf) == -1) {
+        memcpy(&memo, buf, sizeof memo);
+        snprintf(text, sizeof text, "%s: fmi3FreeInstance: the instance was freed already; "
+                 "call refused", memo.name);
+        host_error(memo.environment, memo.logMessage, text);
+    } else {
+        fprintf(stderr, "fmi3FreeInstance: %p is not a live instance of this FMU; call "
+                "refused\n", instance);
+    }
 }
 
 /* -- initialisation, modes, termination, reset --------------------------------------------------- */

@@ -20,8 +20,11 @@ checks:
   Python exception, ours go through a shim that returns fmi2Error, see ``cosim/fmu/build.py``).
 
 The dynamic checks run in a worker subprocess (``python -m cosim.interop.compliance.worker``), so an
-FMU that crashes or hangs the host is reported as a problem of the check it was in, and the
-worker is restarted for the remaining checks. ``check_together(paths)`` loads several FMUs in
+FMU that crashes or hangs the host is reported as a problem of the check it was in, naming the
+FMI call, and the worker is restarted for the remaining checks (not after a crash or hang in
+loading or instantiating the FMU, or a second one in the same FMI function: every further check
+would meet it). Hangs are decided on the FMU's own progress, never on a bare wall-clock figure
+(:mod:`cosim.interop.compliance.watchdog`). ``check_together(paths)`` loads several FMUs in
 one process and checks that they do not disturb each other (pythonfmu FMUs share one interpreter).
 
 Exercising the FMU: parameters keep their start values; every Real input follows a
@@ -40,10 +43,12 @@ Modules: ``common`` (Problem, severities), ``model_description`` (static checks)
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import zipfile
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
+from cosim.interop.compliance.archive import ArchiveLimits, ArchiveRefused, inspect
 from cosim.interop.compliance.common import (
     ALL_CHECKS,
     CLAUSES,
@@ -68,6 +73,7 @@ from cosim.interop.compliance.common import (
 )
 from cosim.interop.compliance.host import _Host
 from cosim.interop.compliance.model_description import check_model_description
+from cosim.interop.compliance.watchdog import SETUP_CALL_ALLOWANCE, Limits
 from cosim.interop.compliance.worker import _run_worker
 
 __all__ = ["ALL_CHECKS", "CLAUSES", "CONVENTION", "DYNAMIC_CHECKS", "ERROR", "FMI3_CHECKS",
@@ -86,8 +92,14 @@ class Options:
     strict: bool = True
     step_tolerance: float = 1e-9  # variable-step results vs fixed-step results (relative)
     n_steps: int = 40  # communication steps per run
-    call_timeout: float = 5.0  # s, per FMI call: a call that does not return is a hang
-    timeout: float = 120.0  # s, per worker process (backstop for a hang the watchdog misses)
+    # CPU s one FMI call may use (set-up calls: at least setup_call_timeout); a call that uses
+    # no CPU hangs once the machine, at its measured speed, offered it twice that
+    # (cosim.interop.compliance.watchdog)
+    call_timeout: float = 5.0
+    setup_call_timeout: float = SETUP_CALL_ALLOWANCE
+    # s of a free core (wall-clock time times the measured share of a core) for all the
+    # dynamic checks of one FMU, worker restarts included
+    timeout: float = 300.0
     # outputs (fnmatch on name, or "description:<pattern>") excluded from the exact
     # reproducibility comparisons (reset, state, instances): wall-clock measurements
     irreproducible: tuple[str, ...] = ("*wall_time*", "*solve_time*", "*cpu_time*",
@@ -95,11 +107,18 @@ class Options:
     # outputs excluded only from the variable-step comparison: defined per communication step
     step_dependent: tuple[str, ...] = ("description:*communication step*",)
     dynamic: bool = True
+    # extracted size, file count, modelDescription size (checked before anything is read)
+    limits: ArchiveLimits = field(default_factory=ArchiveLimits)
+
+
+def _limits(opts: Options) -> Limits:
+    return Limits(call_cpu=opts.call_timeout, setup_call_cpu=opts.setup_call_timeout,
+                  budget=opts.timeout)
 
 
 def _worker_options(opts: Options) -> dict[str, Any]:
     return {"n_steps": opts.n_steps, "step_tolerance": opts.step_tolerance,
-            "call_timeout": opts.call_timeout,
+            "limits": asdict(opts.limits),
             "irreproducible": list(opts.irreproducible),
             "step_dependent": list(opts.step_dependent)}
 
@@ -111,7 +130,14 @@ def check_fmu(path: str | Path, options: Options | None = None) -> list[Problem]
     path = Path(path)
     if not path.is_file():
         return [Problem("fmpy-validation", f"{path}: no such file")]
-    if fmi_version(path) == "3.0":
+    try:
+        inspect(path, opts.limits)
+    except ArchiveRefused as err:
+        return skipped(ALL_CHECKS, "the archive was refused",
+                       [Problem("fmpy-validation", f"archive refused before extraction: {err}")])
+    except (zipfile.BadZipFile, OSError):
+        pass  # reported by the static checks (not a readable zip archive)
+    if fmi_version(path, opts.limits.max_model_description) == "3.0":
         return _check_fmi3(path, opts)
     problems = check_model_description(path, strict=opts.strict)
     if not opts.dynamic:
@@ -123,13 +149,15 @@ def check_fmu(path: str | Path, options: Options | None = None) -> list[Problem]
         return skipped(DYNAMIC_CHECKS, "the FMU could not be read or is not for "
                        "co-simulation", problems)
     args = {"mode": "single", "paths": [str(path.resolve())], **_worker_options(opts)}
-    return classify(problems + _run_worker(args, DYNAMIC_CHECKS, opts.timeout), opts.strict)
+    return classify(problems + _run_worker(args, DYNAMIC_CHECKS, _limits(opts)), opts.strict)
 
 
-def fmi_version(path: Path) -> str | None:
-    """The fmiVersion attribute of an FMU's modelDescription.xml (None if unreadable)."""
+def fmi_version(path: Path, max_bytes: int | None = None) -> str | None:
+    """The fmiVersion attribute of an FMU's modelDescription.xml (None if unreadable or larger
+    than ``max_bytes``, default :class:`ArchiveLimits`' limit)."""
     try:
-        return _read_xml(path).get("fmiVersion")
+        limit = ArchiveLimits().max_model_description if max_bytes is None else max_bytes
+        return _read_xml(path, limit).get("fmiVersion")
     except Exception:
         return None
 
@@ -152,7 +180,7 @@ def _check_fmi3(path: Path, opts: Options) -> list[Problem]:
         return classify(skipped(FMI3_DYNAMIC_CHECKS, "the FMU cannot be run here (see "
                                 "fmi3-capabilities)", problems), opts.strict)
     args = {"mode": "fmi3", "paths": [str(path.resolve())], **_worker_options(opts)}
-    return classify(problems + _run_worker(args, FMI3_DYNAMIC_CHECKS, opts.timeout),
+    return classify(problems + _run_worker(args, FMI3_DYNAMIC_CHECKS, _limits(opts)),
                     opts.strict)
 
 
@@ -161,7 +189,7 @@ def check_together(paths: list[str | Path], options: Options | None = None) -> l
     opts = options or Options()
     args = {"mode": "together", "paths": [str(Path(p).resolve()) for p in paths],
             **_worker_options(opts)}
-    return classify(_run_worker(args, ("together",), opts.timeout), opts.strict)
+    return classify(_run_worker(args, ("together",), _limits(opts)), opts.strict)
 
 
 def format_report(path: str | Path, problems: list[Problem],

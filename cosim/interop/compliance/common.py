@@ -131,8 +131,14 @@ def passed(problems: list[Problem]) -> bool:
     return not any(p.severity == ERROR for p in problems)
 
 
-def _read_xml(path: Path) -> ElementTree.Element:
+def _read_xml(path: Path, max_bytes: int | None = None) -> ElementTree.Element:
+    """The parsed modelDescription.xml (refused over ``max_bytes``; the checks read it after
+    :func:`~cosim.interop.compliance.archive.inspect` bounded it)."""
+    from cosim.interop.compliance.archive import ArchiveRefused
+
     with zipfile.ZipFile(path) as z:
+        if max_bytes is not None and z.getinfo("modelDescription.xml").file_size > max_bytes:
+            raise ArchiveRefused(f"modelDescription.xml is larger than {max_bytes} bytes")
         return ElementTree.fromstring(z.read("modelDescription.xml"))
 
 

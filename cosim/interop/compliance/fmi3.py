@@ -188,6 +188,12 @@ class _Host3:
         step = float(de.stepSize) if de is not None and de.stepSize is not None else None
         if step is None:
             step = (stop - self.start) / 100 if stop else 0.01
+            # no default step: at most 100 of the FMU's own fixed internal steps, so a model
+            # integrating a long span (Reference Roberts: 1e7 s in steps of 1e-3 s) is not
+            # asked for 1e8 internal steps in one fmi3DoStep
+            internal = getattr(self.cs, "fixedInternalStepSize", None)
+            if internal:
+                step = min(step, 100 * float(internal))
         self.h = step
         span = round((stop - self.start) / step) if stop else n_steps
         self.n = max(4, min(n_steps, span))
@@ -215,7 +221,11 @@ class _Host3:
 class _Failed3(Exception):
     """An FMI 3 call of a nominal run that did not return fmi3OK/fmi3Warning."""
 
-    def __init__(self, method: str, status: int, messages: list[tuple[int, str]]) -> None:
+    def __init__(self, method: str, status: int, messages: list[tuple[int, str]],
+                 text: str = "") -> None:
+        if text:
+            super().__init__(text)
+            return
         label = {2: "Discard", 3: "Error", 4: "Fatal"}.get(status, str(status))
         said = " | ".join(m for _, m in messages[-2:]).strip()
         super().__init__(f"fmi3{method[0].upper()}{method[1:]} returned fmi3{label} in a "
@@ -236,10 +246,21 @@ class _Instance3:
         def log(env: Any, status: int, category: bytes, message: bytes) -> None:
             self.messages.append((status, message.decode(errors="replace")))
 
-        self.fmu = FMU3Slave(guid=host.md.guid, unzipDirectory=host.unzipdir,
-                             modelIdentifier=host.cs.modelIdentifier, instanceName=name)
-        WATCHDOG.call(describe_call("fmi3InstantiateCoSimulation", (), kw),
-                      self.fmu.instantiate, loggingOn=False, logMessage=log, **kw)
+        self.fmu = WATCHDOG.call(f"dlopen({host.cs.modelIdentifier})",
+                                 FMU3Slave, guid=host.md.guid, unzipDirectory=host.unzipdir,
+                                 modelIdentifier=host.cs.modelIdentifier, instanceName=name)
+        call = describe_call("fmi3InstantiateCoSimulation", (), kw)
+        try:
+            WATCHDOG.call(call, self.fmu.instantiate, loggingOn=False, logMessage=log, **kw)
+        except Exception as err:
+            if "instantiate" not in str(err):
+                raise
+            said = " | ".join(m for _, m in self.messages[-2:]).strip()
+            why = (" (its modelDescription declares hasEventMode = true, so an importer may "
+                   "ask for Event Mode)" if kw.get("eventModeUsed") else "")
+            raise _Failed3(call, 3, [], f"{call} returned NULL{why}; "
+                           + (f"FMU says: {said}" if said else "the FMU logged nothing")
+                           ) from None
         self.alive = True
 
     def call(self, method: str, *args: Any, **kwargs: Any) -> tuple[int, Any]:
@@ -248,7 +269,7 @@ class _Instance3:
         from cosim.interop.compliance.host import WATCHDOG, describe_call
 
         try:
-            return 0, WATCHDOG.call(describe_call(method, args, kwargs),
+            return 0, WATCHDOG.call(describe_call(method, args, kwargs, "fmi3"),
                                     getattr(self.fmu, method), *args, **kwargs)
         except FMICallException as err:
             return err.status, None

@@ -93,59 +93,41 @@ def _matching(outputs: list, patterns: tuple[str, ...]) -> frozenset[int]:
     return frozenset(found)
 
 
-def describe_call(method: str, args: tuple = (), kwargs: dict | None = None) -> str:
-    """``fmi2DoStep(currentCommunicationPoint=0.0, communicationStepSize=nan)``."""
+def describe_call(method: str, args: tuple = (), kwargs: dict | None = None,
+                  standard: str = "fmi2") -> str:
+    """``fmi2DoStep(currentCommunicationPoint=0.0, communicationStepSize=nan)`` (``standard``
+    "fmi3": the FMI 3 name)."""
     parts = [repr(a) for a in args] + [f"{k}={v!r}" for k, v in (kwargs or {}).items()]
-    name = method if method.startswith("fmi2") else "fmi2" + method[0].upper() + method[1:]
+    name = (method if method.startswith(("fmi2", "fmi3", "dlopen"))
+            else standard + method[0].upper() + method[1:])
     return f"{name}({', '.join(parts)})"
 
 
-# Set-up calls may legitimately take long (fmi2Instantiate imports the FMU's Python runtime and
-# may compile its kernels on a first run; fmi2ExitInitializationMode builds the core: DARE,
-# invariant sets): they get at least this long before they count as a hang.
-SETUP_CALL_ALLOWANCE = 60.0  # s (below the worker backstop, Options.timeout)
-_SETUP_CALLS = ("fmi2Instantiate", "fmi2ExitInitializationMode")
-
-
 class _Watchdog:
-    """Ends the worker when one FMI call has not returned within ``timeout`` s (set-up calls:
-    at least :data:`SETUP_CALL_ALLOWANCE`), after reporting the call and its arguments
-    (``report``); a thread checks every 50 ms. Without :meth:`start` (the FMU run outside the
-    worker) it only keeps the current call."""
+    """Announces each FMI call of the worker on a :class:`~cosim.interop.compliance.watchdog.
+    CallBoard`, where the supervisor decides whether it hangs (:func:`~cosim.interop.
+    compliance.watchdog.supervise`). Without :meth:`start` (the FMU run outside the worker) it
+    only keeps the current call."""
 
     def __init__(self) -> None:
-        self.current: tuple[str, float] | None = None
-        self.timeout: float | None = None
+        self.current: str | None = None
+        self.board = None
 
-    def start(self, timeout: float, report: Any) -> None:
-        import os
-        import threading
-        import time
+    def start(self, board_path: str) -> None:
+        from cosim.interop.compliance.watchdog import CallBoard
 
-        self.timeout = timeout
-
-        def watch() -> None:
-            while True:
-                time.sleep(0.05)
-                current = self.current
-                if current is None:
-                    continue
-                limit = (max(timeout, SETUP_CALL_ALLOWANCE)
-                         if current[0].startswith(_SETUP_CALLS) else timeout)
-                if time.monotonic() - current[1] > limit:
-                    report(current[0], limit)
-                    os._exit(70)
-
-        threading.Thread(target=watch, daemon=True, name="fmi-call-watchdog").start()
+        self.board = CallBoard(board_path)
 
     def call(self, description: str, function: Any, *args: Any, **kwargs: Any) -> Any:
-        import time
-
-        self.current = (description, time.monotonic())
+        self.current = description
+        if self.board is not None:
+            self.board.begin(description)
         try:
             return function(*args, **kwargs)
         finally:
             self.current = None
+            if self.board is not None:
+                self.board.end()
 
 
 WATCHDOG = _Watchdog()
@@ -164,8 +146,9 @@ class _Instance:
         self.messages: list[tuple[int, str]] = []
         self._callbacks = logging_callbacks(lambda status, text:
                                             self.messages.append((status, text)))
-        self.fmu = FMU2Slave(guid=host.md.guid, unzipDirectory=host.unzipdir,
-                             modelIdentifier=host.cs.modelIdentifier, instanceName=name)
+        self.fmu = WATCHDOG.call(f"dlopen({host.cs.modelIdentifier})",
+                                 FMU2Slave, guid=host.md.guid, unzipDirectory=host.unzipdir,
+                                 modelIdentifier=host.cs.modelIdentifier, instanceName=name)
         WATCHDOG.call(describe_call("instantiate", (), {"instanceName": name}),
                       self.fmu.instantiate, callbacks=self._callbacks, loggingOn=True)
         self.alive = True

@@ -7,8 +7,8 @@ from __future__ import annotations
 import json
 import os
 import shutil
-import subprocess
 import sys
+import tempfile
 from dataclasses import asdict
 from pathlib import Path
 from typing import Any
@@ -46,6 +46,14 @@ from cosim.interop.compliance.host import (
 )
 from cosim.interop.compliance.state import _check_fmu_state
 from cosim.interop.compliance.stepping import _check_invalid_step, _check_variable_step
+from cosim.interop.compliance.watchdog import (
+    INSTANTIATE_CALLS,
+    Budget,
+    CallBoard,
+    Limits,
+    call_name,
+    supervise,
+)
 
 _DYNAMIC = {
     "calling-sequence": _check_calling_sequence,
@@ -67,14 +75,16 @@ def _emit(kind: str, payload: Any) -> None:
 
 def _worker(args: dict) -> None:
     """Run dynamic checks, reporting progress on stdout (see ``_run_worker``)."""
-    from fmpy import extract
+    from cosim.interop.compliance.archive import ArchiveLimits, extract
 
-    if args.get("call_timeout"):
-        WATCHDOG.start(args["call_timeout"], lambda call, seconds:
-                       _emit("hang", {"call": call, "seconds": seconds}))
+    if args.get("board"):
+        WATCHDOG.start(args["board"])
     paths = [Path(p) for p in args["paths"]]
-    unzipdirs = [extract(str(p)) for p in paths]
+    limits = ArchiveLimits(**args["limits"]) if "limits" in args else ArchiveLimits()
+    unzipdirs: list[str] = []
     try:
+        for p in paths:
+            unzipdirs.append(extract(p, limits))
         if args["mode"] == "fmi3":
             _fmi3_worker(args, paths[0], unzipdirs[0])
             return
@@ -158,66 +168,74 @@ def _together(hosts: list[_Host]) -> list[Problem]:
     return problems
 
 
-def _run_worker(args: dict, checks: tuple[str, ...], timeout: float) -> list[Problem]:
-    """Run the worker until every check has finished, crashed or hung (then restart it).
-    A call that does not return within ``args["call_timeout"]`` is reported by the worker's
-    watchdog with its arguments; ``timeout`` bounds a whole worker process as a backstop."""
+def _run_worker(args: dict, checks: tuple[str, ...], limits: Limits) -> list[Problem]:
+    """Run the worker until every check has finished, crashed or hung (then restart it for
+    the remaining checks). :func:`~cosim.interop.compliance.watchdog.supervise` decides hangs
+    on the FMU's own progress; ``limits.budget`` bounds all the worker's runs for this FMU. A
+    crash or hang in loading or instantiating the FMU, or a second one in the same FMI
+    function, ends the checks: the remaining ones are reported as skipped."""
     problems: list[Problem] = []
     done: set[str] = set()
-    while True:
-        args = {**args, "skip": sorted(done)}
-        cmd = [sys.executable, "-m", "cosim.interop.compliance.worker", json.dumps(args)]
-        env = dict(os.environ)
-        root = str(Path(__file__).resolve().parents[3])
-        env["PYTHONPATH"] = root + os.pathsep + env.get("PYTHONPATH", "")
-        current: str | None = None
-        hung_call: dict | None = None
+    failed_in: dict[str, str] = {}  # FMI function -> the check that crashed or hung in it
+    budget = Budget(limits.budget)
+    env = dict(os.environ)
+    root = str(Path(__file__).resolve().parents[3])
+    env["PYTHONPATH"] = root + os.pathsep + env.get("PYTHONPATH", "")
+    with tempfile.TemporaryDirectory(prefix="cosim-compliance-") as tmp:
+        board = CallBoard(Path(tmp) / "board", create=True)
         try:
-            proc = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, env=env)
-            out, err, code, hung = proc.stdout, proc.stderr, proc.returncode, False
-        except subprocess.TimeoutExpired as exc:
-            out = exc.stdout.decode() if isinstance(exc.stdout, bytes) else (exc.stdout or "")
-            err, code, hung = "", None, True
-        for line in out.splitlines():
-            if not line.startswith(_MARK):
-                continue
-            kind, payload = json.loads(line[len(_MARK):])
-            if kind == "begin":
-                current = payload
-            elif kind == "end":
-                done.add(payload)
-                current = None
-            elif kind == "problem":
-                problems.append(Problem(**payload))
-            elif kind == "hang":
-                hung_call = payload
-        if current is None and not hung and code == 0:
-            return problems
-        if hung_call is not None:
-            problems.append(Problem(current or "calling-sequence", f"hang: "
-                                    f"{hung_call['call']} did not return within "
-                                    f"{hung_call['seconds']:g} s (the host was killed; "
-                                    "--call-timeout sets the limit)"))
-            if current is None:
-                return problems
-        elif current is None:  # died outside a check (loading): report once and stop
-            tail = err.strip().splitlines()[-1] if err.strip() else f"exit status {code}"
-            problems.append(Problem("calling-sequence", f"the host process failed while "
-                                    f"loading the FMU: {tail}"))
-            return skipped(tuple(c for c in checks if c not in done),
-                           "the FMU could not be loaded", problems)
-        if hung_call is not None:
-            pass
-        elif hung:
-            problems.append(Problem(current, f"hang: no progress for {timeout:.0f} s (the "
-                                             "host was killed)"))
-        else:
-            signal = f"signal {-code}" if code < 0 else f"exit status {code}"
-            problems.append(Problem(current, f"the host process crashed ({signal}) during "
-                                             "this check"))
-        done.add(current)
-        if all(c in done for c in checks):
-            return problems
+            while True:
+                run_args = {**args, "skip": sorted(done), "board": str(board.path)}
+                cmd = [sys.executable, "-m", "cosim.interop.compliance.worker",
+                       json.dumps(run_args)]
+                with tempfile.TemporaryFile("w+") as out, tempfile.TemporaryFile("w+") as err:
+                    outcome = supervise(cmd, env, board, limits, budget, out, err)
+                    out.seek(0)
+                    err.seek(0)
+                    stdout, stderr = out.read(), err.read()
+                current: str | None = None
+                for line in stdout.splitlines():
+                    if not line.startswith(_MARK):
+                        continue
+                    kind, payload = json.loads(line[len(_MARK):])
+                    if kind == "begin":
+                        current = payload
+                    elif kind == "end":
+                        done.add(payload)
+                        current = None
+                    elif kind == "problem":
+                        problems.append(Problem(**payload))
+                if current is None and not outcome.hang and outcome.returncode == 0:
+                    return problems
+                if current is None and not outcome.hang:
+                    # died outside a check (loading): report once and stop
+                    tail = (stderr.strip().splitlines()[-1] if stderr.strip()
+                            else outcome.describe())
+                    problems.append(Problem("calling-sequence", "the host process failed "
+                                            f"while loading the FMU: {tail}"))
+                    return skipped(tuple(c for c in checks if c not in done),
+                                   "the FMU could not be loaded", problems)
+                check = current or next(c for c in checks if c not in done)
+                problems.append(Problem(check, outcome.describe()
+                                        + ("" if outcome.hang else " during this check")))
+                done.add(check)
+                function = call_name(outcome.call)
+                rest = tuple(c for c in checks if c not in done)
+                what = "hangs" if outcome.hang else "crashes"
+                if outcome.hang == "budget":
+                    return skipped(rest, f"the checks of this FMU ran out of their budget "
+                                   f"(--timeout, in {check})", problems)
+                if function and (function.startswith(INSTANTIATE_CALLS)
+                                 or function in failed_in):
+                    where = ", ".join(sorted({failed_in.get(function, check), check}))
+                    return skipped(rest, f"the FMU {what} in {function} (see {where})",
+                                   problems)
+                if function:
+                    failed_in[function] = check
+                if not rest:
+                    return problems
+        finally:
+            board.close()
 
 
 if __name__ == "__main__":

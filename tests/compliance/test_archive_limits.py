@@ -1,0 +1,158 @@
+"""``cosim validate`` bounds an untrusted FMU archive before any work: a zip bomb (1 MB
+expanding to 1 GiB), too many files or a huge modelDescription.xml are refused with their
+sizes and the flag that raises the limit; unsafe entries are refused; a failed extraction
+leaves no folder behind. The archives are written byte by byte here."""
+
+from __future__ import annotations
+
+import struct
+import subprocess
+import sys
+import tempfile
+import zipfile
+import zlib
+from pathlib import Path
+
+import pytest
+
+from cosim.interop.compliance import ALL_CHECKS, ERROR, SKIPPED, Options, check_fmu
+from cosim.interop.compliance.archive import (
+    MB,
+    ArchiveLimits,
+    ArchiveRefused,
+    extract,
+    inspect,
+)
+
+MODEL_DESCRIPTION = (b'<?xml version="1.0" encoding="UTF-8"?>\n<fmiModelDescription '
+                     b'fmiVersion="2.0" modelName="m" guid="{0}"><CoSimulation '
+                     b'modelIdentifier="m"/><ModelVariables/><ModelStructure/>'
+                     b'</fmiModelDescription>\n')
+
+
+def raw_zip(path: Path, entries: list[tuple[str, int, int, bytes, int]]) -> Path:
+    """A zip archive of ``(name, method, crc32, stored bytes, size)`` entries, written field by
+    field (method 0: stored, 8: deflated)."""
+    out, central = bytearray(), bytearray()
+    for name, method, crc, data, size in entries:
+        encoded = name.encode()
+        offset = len(out)
+        out += struct.pack("<IHHHHHIIIHH", 0x04034B50, 20, 0, method, 0, 0x21, crc, len(data),
+                           size, len(encoded), 0) + encoded + data
+        central += struct.pack("<IHHHHHHIIIHHHHHII", 0x02014B50, 20, 20, 0, method, 0, 0x21,
+                               crc, len(data), size, len(encoded), 0, 0, 0, 0, 0,
+                               offset) + encoded
+    end = struct.pack("<IHHHHIIH", 0x06054B50, 0, 0, len(entries), len(entries), len(central),
+                      len(out), 0)
+    path.write_bytes(bytes(out + central + end))
+    return path
+
+
+def stored(name: str, data: bytes) -> tuple[str, int, int, bytes, int]:
+    return name, 0, zlib.crc32(data), data, len(data)
+
+
+def zeros(name: str, size: int, chunk: int = MB) -> tuple[str, int, int, bytes, int]:
+    """``size`` zero bytes deflated: one flushed block per ``chunk`` repeated (a full flush
+    makes each block independent of the data before it), so 1 GiB takes about 1 MB."""
+    c = zlib.compressobj(9, zlib.DEFLATED, -15)
+    block = c.compress(bytes(chunk)) + c.flush(zlib.Z_FULL_FLUSH)
+    crc = 0
+    for _ in range(size // chunk):
+        crc = zlib.crc32(bytes(chunk), crc)
+    return name, 8, crc, block * (size // chunk) + c.flush(zlib.Z_FINISH), size
+
+
+@pytest.fixture
+def no_leftovers(tmp_path, monkeypatch):
+    """Temporary folders of this process and its workers go to a fresh folder; returns a
+    function listing what is left there."""
+    temp = tmp_path / "temp"
+    temp.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(temp))
+    monkeypatch.setenv("TMPDIR", str(temp))
+    return lambda: sorted(p.name for p in temp.iterdir())
+
+
+def refused(problems: list) -> str:
+    """The refusal message; every other check is skipped."""
+    errors = [p for p in problems if p.severity == ERROR]
+    assert len(errors) == 1 and errors[0].check == "fmpy-validation", problems
+    assert {p.check for p in problems if p.severity == SKIPPED} == set(ALL_CHECKS) - {
+        "fmpy-validation"}
+    return errors[0].message
+
+
+def test_zip_bomb_is_refused_with_its_sizes(tmp_path, no_leftovers):
+    bomb = raw_zip(tmp_path / "bomb.fmu", [stored("modelDescription.xml", MODEL_DESCRIPTION),
+                                           zeros("resources/zeros.bin", 1 << 30)])
+    assert bomb.stat().st_size < 2 * MB
+    with zipfile.ZipFile(bomb) as z:  # a well-formed archive: zipfile reads its directory
+        assert sum(e.file_size for e in z.infolist()) > 1 << 30
+    message = refused(check_fmu(bomb))
+    assert message == (f"archive refused before extraction: the archive "
+                       f"({bomb.stat().st_size / MB:.3g} MiB) expands to 1 GiB, more than the "
+                       "limit of 512 MiB (--max-extracted-mb raises it)")
+    assert no_leftovers() == []
+
+
+def test_too_many_files_are_refused(tmp_path):
+    path = raw_zip(tmp_path / "many.fmu", [stored("modelDescription.xml", MODEL_DESCRIPTION)]
+                   + [stored(f"resources/{i}.txt", b"x") for i in range(10)])
+    message = refused(check_fmu(path, Options(limits=ArchiveLimits(max_files=10))))
+    assert message.endswith("11 files in the archive, more than the limit of 10 (--max-files "
+                            "raises it)")
+
+
+def test_huge_model_description_is_refused_unless_the_limit_is_raised(tmp_path):
+    padding = b"<!--" + b" " * (5 * MB) + b"-->"
+    text = MODEL_DESCRIPTION.replace(b"<fmiModelDescription", padding + b"<fmiModelDescription")
+    path = raw_zip(tmp_path / "huge.fmu", [stored("modelDescription.xml", text)])
+    assert refused(check_fmu(path)).endswith("modelDescription.xml is 5 MiB, more than the "
+                                             "limit of 4 MiB (--max-model-description-mb "
+                                             "raises it)")
+    raised = check_fmu(path, Options(limits=ArchiveLimits(max_model_description=8 * MB)))
+    assert not any("archive refused" in p.message for p in raised), raised
+
+
+@pytest.mark.parametrize("name, says", [
+    ("../outside.txt", "unsafe path in the archive: '../outside.txt'"),
+    ("/etc/outside.txt", "unsafe path in the archive: '/etc/outside.txt'"),
+    ("binaries\\win64\\m.dll", "unsafe path in the archive"),
+])
+def test_unsafe_entries_are_refused(tmp_path, name, says):
+    path = raw_zip(tmp_path / "unsafe.fmu", [stored("modelDescription.xml", MODEL_DESCRIPTION),
+                                             stored(name, b"x")])
+    with pytest.raises(ArchiveRefused, match=says.replace("\\", "\\\\").replace(".", r"\.")):
+        inspect(path)
+
+
+def test_symbolic_links_are_refused(tmp_path):
+    path = tmp_path / "link.fmu"
+    with zipfile.ZipFile(path, "w") as z:
+        z.writestr("modelDescription.xml", MODEL_DESCRIPTION)
+        link = zipfile.ZipInfo("resources/passwd")
+        link.external_attr = (0o120777 << 16)  # S_IFLNK
+        z.writestr(link, "/etc/passwd")
+    with pytest.raises(ArchiveRefused, match="symbolic link in the archive: 'resources/passwd'"):
+        inspect(path)
+
+
+def test_failed_extraction_removes_its_folder(tmp_path, no_leftovers):
+    """The second entry's checksum is wrong: zipfile raises after the first was written."""
+    good = stored("modelDescription.xml", MODEL_DESCRIPTION)
+    name, method, crc, data, size = stored("resources/data.bin", b"payload" * 1000)
+    path = raw_zip(tmp_path / "torn.fmu", [good, (name, method, crc ^ 1, data, size)])
+    with pytest.raises(zipfile.BadZipFile):
+        extract(path)
+    assert no_leftovers() == []
+
+
+def test_cli_names_the_flag_that_raises_a_limit(tmp_path):
+    path = raw_zip(tmp_path / "many.fmu", [stored("modelDescription.xml", MODEL_DESCRIPTION),
+                                           stored("resources/a.txt", b"x")])
+    done = subprocess.run([sys.executable, "-m", "cosim.cli", "validate", str(path),
+                           "--max-files", "1"], capture_output=True, text=True)
+    assert done.returncode == 1
+    assert ("archive refused before extraction: 2 files in the archive, more than the limit of "
+            "1 (--max-files raises it)") in done.stdout
