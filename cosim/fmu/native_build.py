@@ -134,7 +134,8 @@ NATIVE: dict[str, NativeSpec] = {
                           generated=("ato_datadriven_const.h",)),
     # seed 000's predictive stopping controllers: one law, DAQP from its sdist; the tube
     # controllers' terminal sets as computed by the core (ato_stop_mpc_sets.h)
-    **{identifier: NativeSpec(identifier, "stop_mpc.c", CONTROLLER, solvers=("daqp",),
+    **{identifier: NativeSpec(identifier, "stop_mpc.c",
+                              (*CONTROLLER, "ato_linalg.c", "ato_linalg.h"), solvers=("daqp",),
                               generated=("ato_stop_mpc_sets.h",),
                               defines=(("ATO_STOP_MPC_KIND", kind),))
        for kind, identifier in enumerate(("StopMpc", "StopRmpc", "StopRsmpc"))},
@@ -780,6 +781,7 @@ def native_sources(identifier: str, fmi_version: int = 2) -> list[Path]:
             *(NATIVE_DIR / name for name in (*spec.helpers, *spec.shared)),
             FRONT_DIR / "fmi2_front.c",
             FRONT_DIR / "ato_backend.h", Path(__file__),
+            *([HERE / "native_solvers.py"] if spec.solvers else []),
             *bundled_files(catalog()[identifier].module), *fmi3]
 
 

@@ -30,6 +30,7 @@
 #include "api.h" /* DAQP */
 #include "utils.h" /* DAQP: daqp_update_ldp */
 #include "ato_law_common.h"
+#include "ato_linalg.h"
 #include "ato_model.h"
 #include "ato_stop_mpc_sets.h"
 #include "ato_vars.h"
@@ -64,29 +65,16 @@ static void matmul(const double* a, const double* b, int n, int k, int m, double
         }
 }
 
-/* x = a^-1 b (n x n, b n x m), partial pivoting; a and b destroyed; 0 when singular */
-static int solve_many(double* a, double* b, int n, int m) {
-    for (int c = 0; c < n; c++) {
-        int p = c;
-        for (int r = c + 1; r < n; r++)
-            if (fabs(a[r * n + c]) > fabs(a[p * n + c])) p = r;
-        if (a[p * n + c] == 0.0) return 0;
-        if (p != c) {
-            for (int j = 0; j < n; j++) { double t = a[c*n+j]; a[c*n+j] = a[p*n+j]; a[p*n+j] = t; }
-            for (int j = 0; j < m; j++) { double t = b[c*m+j]; b[c*m+j] = b[p*m+j]; b[p*m+j] = t; }
-        }
-        for (int r = c + 1; r < n; r++) {
-            double f = a[r * n + c] / a[c * n + c];
-            for (int j = c; j < n; j++) a[r * n + j] -= f * a[c * n + j];
-            for (int j = 0; j < m; j++) b[r * m + j] -= f * b[c * m + j];
-        }
+/* b = a^-1 b for the n x n matrix a (n <= 4) and the n x m matrix b, column by column
+ * (ato_solve: Gaussian elimination with partial pivoting); 0 when a is singular */
+static int solve_many(const double* a, double* b, int n, int m) {
+    double a_copy[16], col[4];
+    for (int j = 0; j < m; j++) {
+        memcpy(a_copy, a, sizeof(double) * n * n);
+        for (int i = 0; i < n; i++) col[i] = b[i * m + j];
+        if (!ato_solve(a_copy, col, n, col)) return 0;
+        for (int i = 0; i < n; i++) b[i * m + j] = col[i];
     }
-    for (int c = n - 1; c >= 0; c--)
-        for (int j = 0; j < m; j++) {
-            double acc = b[c * m + j];
-            for (int l = c + 1; l < n; l++) acc -= a[c * n + l] * b[l * m + j];
-            b[c * m + j] = acc / a[c * n + c];
-        }
     return 1;
 }
 
@@ -465,45 +453,38 @@ static void reference(const law_core* c, double t, int stages, const double* a_r
     }
 }
 
-/* support of the sum of the images of W under R_i^M's matrices in the direction f */
+/* max over W's two vertices w of f' M w */
+static double support_term(const law_core* c, const double* M, const double* f) {
+    double best = -INFINITY;
+    for (int w = 0; w < 2; w++) {
+        double acc = 0.0;
+        for (int r = 0; r < NX; r++) {
+            double mw = 0.0;
+            for (int k = 0; k < NX; k++) mw += M[r * NX + k] * c->w_vert[w * NX + k];
+            acc += f[r] * mw;
+        }
+        best = ato_max(best, acc);
+    }
+    return best;
+}
+
+/* support in the direction f of R_i^M = (+)_j M_j W (StopMpc.reach_mats: A^j, j < i, when
+ * i <= hold; else A_cl^(i - hold) A^j, j < hold, and A_cl^j, j < i - hold) */
 static double support(const law_core* c, int i, int hold, const double* f) {
-    double total = 0.0, Ap[16], Ac[16], head[16], M[16], tmp[16];
+    double total = 0.0, Ap[16], Ac[16], head[16], tmp[16];
     int n_a = i <= hold ? i : hold, n_cl = i <= hold ? 0 : i - hold;
-    /* head = A_cl^(i - hold) (identity when i <= hold) */
     memset(head, 0, sizeof head);
     for (int k = 0; k < NX; k++) head[k * NX + k] = 1.0;
     for (int k = 0; k < n_cl; k++) { matmul(head, c->Acl, NX, NX, NX, tmp); memcpy(head, tmp, sizeof tmp); }
-    memset(Ap, 0, sizeof Ap);
-    for (int k = 0; k < NX; k++) Ap[k * NX + k] = 1.0;
-    for (int j = 0; j < n_a; j++) { /* head A^j */
-        matmul(head, Ap, NX, NX, NX, M);
-        double best = -INFINITY;
-        for (int w = 0; w < 2; w++) {
-            double acc = 0.0;
-            for (int r = 0; r < NX; r++) {
-                double mw = 0.0;
-                for (int k = 0; k < NX; k++) mw += M[r * NX + k] * c->w_vert[w * NX + k];
-                acc += f[r] * mw;
-            }
-            best = ato_max(best, acc);
-        }
-        total += best;
-        matmul(Ap, c->A, NX, NX, NX, tmp); memcpy(Ap, tmp, sizeof tmp);
-    }
+    memcpy(Ap, head, sizeof Ap); /* head A^j */
     memset(Ac, 0, sizeof Ac);
     for (int k = 0; k < NX; k++) Ac[k * NX + k] = 1.0;
+    for (int j = 0; j < n_a; j++) {
+        total += support_term(c, Ap, f);
+        matmul(Ap, c->A, NX, NX, NX, tmp); memcpy(Ap, tmp, sizeof tmp);
+    }
     for (int j = 0; j < n_cl; j++) { /* A_cl^j */
-        double best = -INFINITY;
-        for (int w = 0; w < 2; w++) {
-            double acc = 0.0;
-            for (int r = 0; r < NX; r++) {
-                double mw = 0.0;
-                for (int k = 0; k < NX; k++) mw += Ac[r * NX + k] * c->w_vert[w * NX + k];
-                acc += f[r] * mw;
-            }
-            best = ato_max(best, acc);
-        }
-        total += best;
+        total += support_term(c, Ac, f);
         matmul(Ac, c->Acl, NX, NX, NX, tmp); memcpy(Ac, tmp, sizeof tmp);
     }
     return total;
@@ -568,13 +549,10 @@ static int dare(const double* A, const double* b, const double* Q, double r, dou
     for (int it = 0; it < 200; it++) {
         matmul(G, Hk, NX, NX, NX, W);
         for (int i = 0; i < NX; i++) W[i * NX + i] += 1.0;
-        double Wc[16];
-        memcpy(Wc, W, sizeof W);
         memcpy(X1, Ak, sizeof X1);
-        if (!solve_many(Wc, X1, NX, NX)) return 0; /* X1 = W^-1 A */
-        memcpy(Wc, W, sizeof W);
+        if (!solve_many(W, X1, NX, NX)) return 0; /* X1 = W^-1 A */
         memcpy(X2, G, sizeof X2);
-        if (!solve_many(Wc, X2, NX, NX)) return 0; /* X2 = W^-1 G */
+        if (!solve_many(W, X2, NX, NX)) return 0; /* X2 = W^-1 G */
         double At[16];
         for (int i = 0; i < NX; i++)
             for (int j = 0; j < NX; j++) At[i * NX + j] = Ak[j * NX + i];
