@@ -4,8 +4,8 @@ built from its sdist) against their Python cores (controllers/mpc/stop_mpc.py).
 Sample by sample: the native FMU and the Python FMU get the same FMI calls with the inputs of
 the Python closed loop of each shipped seed 000 scenario (and the reproduction's variants:
 W = whole resistance, disturbance observer), and every output is compared at every sample.
-The counters, holds and announced next event times must be equal; the brake command may differ by what the two builds'
-rounding and DAQP's tolerance allow:
+The counters, holds and announced next event times must be equal; the brake command may
+differ by what the two builds' rounding and DAQP's tolerance allow:
 
 * both builds solve the same QP, with data (Hessian, linear term, bounds) formed by sums of
   at most ``m`` products in different orders, so each data entry differs by at most
