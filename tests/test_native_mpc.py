@@ -53,6 +53,7 @@ PRIMAL_TOL = 1e-6  # DAQP's default primal_tol (HorizonQP keeps it)
 CASES = [
     ("seed000_stop_mpc", []),
     ("seed000_stop_mpc_euler", []),
+    ("seed000_stop_mpc", ["controller.N=7", "controller.q_speed=3.0", "controller.r_du=0.05"]),
     ("seed000_stop_rmpc", []),
     ("seed000_stop_rsmpc", []),
     ("seed000_stop_rmpc", ["controller.N=5"]),
@@ -259,3 +260,31 @@ def test_native_mpc_state_restores_the_same_run(natives, ident):
     fmu.freeFMUstate(saved)
     fmu.terminate()
     fmu.freeInstance()
+
+
+@pytest.mark.parametrize(("ident", "params", "message"), [
+    ("StopRmpc", {"mass_uncertainty": 0.05}, "no terminal set is shipped for this design"),
+    ("StopRsmpc", {"position_error_max": 15.0}, "no terminal set is shipped for this design"),
+    ("StopMpc", {"qp_solver": "osqp"}, "qp_solver = 'osqp': the native build solves with DAQP"),
+    ("StopMpc", {"route": "/tmp/x.toml"}, "the native build reads bundled routes only"),
+])
+def test_native_mpc_refuses_what_it_has_no_data_for(natives, ident, params, message):
+    """A tube design whose terminal set is not shipped, another QP solver, a route path: the
+    initialisation fails with a message naming it (logged with logging off). The ideal MPC
+    has no terminal set: another design of it is built in C and runs."""
+    from fmpy.fmi1 import FMICallException
+    from native_helpers import initialising, set_by_type
+
+    messages: list[str] = []
+    fmu, _ = initialising(natives[ident], messages)
+    set_by_type(fmu, natives[ident][1], params)
+    with pytest.raises(FMICallException):
+        fmu.exitInitializationMode()
+    assert any(message in m for m in messages), messages
+    fmu.freeInstance()
+    other, _ = initialising(natives["StopMpc"], None)
+    set_by_type(other, natives["StopMpc"][1], {"N": 7, "q_speed": 3.0, "mass": 400e3})
+    other.exitInitializationMode()
+    other.doStep(0.0, 0.2)
+    other.terminate()
+    other.freeInstance()
