@@ -475,7 +475,10 @@ static double support(const law_core* c, int i, int hold, const double* f) {
     int n_a = i <= hold ? i : hold, n_cl = i <= hold ? 0 : i - hold;
     memset(head, 0, sizeof head);
     for (int k = 0; k < NX; k++) head[k * NX + k] = 1.0;
-    for (int k = 0; k < n_cl; k++) { matmul(head, c->Acl, NX, NX, NX, tmp); memcpy(head, tmp, sizeof tmp); }
+    for (int k = 0; k < n_cl; k++) {
+        matmul(head, c->Acl, NX, NX, NX, tmp);
+        memcpy(head, tmp, sizeof tmp);
+    }
     memcpy(Ap, head, sizeof Ap); /* head A^j */
     memset(Ac, 0, sizeof Ac);
     for (int k = 0; k < NX; k++) Ac[k * NX + k] = 1.0;
@@ -496,7 +499,12 @@ static horizon_qp* make_qp(law_core* c, int hold) {
         int H = N, *free_stage = malloc(sizeof(int) * N);
         double *scale = malloc(sizeof(double) * H), *lo = malloc(sizeof(double) * H),
                *hi = malloc(sizeof(double) * H);
-        for (int i = 0; i < H; i++) { free_stage[i] = i; scale[i] = 1.0; lo[i] = c->u_min; hi[i] = c->u_max; }
+        for (int i = 0; i < H; i++) {
+            free_stage[i] = i;
+            scale[i] = 1.0;
+            lo[i] = c->u_min;
+            hi[i] = c->u_max;
+        }
         double F[4] = {0.0, 1.0, 0.0, 0.0}, mask[1] = {0.0};
         horizon_qp* q = qp_make(c->A, c->b, c->g, H, free_stage, N, scale, c->Q, c->r_du, c->P,
                                 F, mask, 1, lo, hi, NULL, 0, NULL, NULL, -c->du_max, c->du_max);
@@ -573,7 +581,8 @@ static int dare(const double* A, const double* b, const double* Q, double r, dou
         if (!isfinite(scale)) return 0;
         if (diff <= 1e-16 * scale) {
             for (int i = 0; i < NX; i++) /* symmetric, as the DARE's solution is */
-                for (int j = 0; j < NX; j++) P[i * NX + j] = 0.5 * (Hk[i * NX + j] + Hk[j * NX + i]);
+                for (int j = 0; j < NX; j++)
+                    P[i * NX + j] = 0.5 * (Hk[i * NX + j] + Hk[j * NX + i]);
             return 1;
         }
     }
@@ -712,7 +721,10 @@ law_core* law_make(const ato_values* p, double t0, char* err, size_t n) {
     } else {
         w_lo = c->spread[0]; w_hi = c->spread[1];
     }
-    for (int k = 0; k < NX; k++) { c->w_vert[k] = c->g[k] * w_lo; c->w_vert[NX + k] = c->g[k] * w_hi; }
+    for (int k = 0; k < NX; k++) {
+        c->w_vert[k] = c->g[k] * w_lo;
+        c->w_vert[NX + k] = c->g[k] * w_hi;
+    }
     static const double Frows[16] = {0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0, 0, 1};
     memcpy(c->F, Frows, sizeof Frows);
     c->ref_mask[0] = c->ref_mask[1] = 0.0; c->ref_mask[2] = c->ref_mask[3] = 1.0;
@@ -728,9 +740,13 @@ law_core* law_make(const ato_values* p, double t0, char* err, size_t n) {
         }
         h[0] = h[1] = c->se_max; h[2] = h[3] = c->pe_max; h[4] = h[5] = c->du_max;
         if (c->known) {
-            double a_lo = gmin + davis(c, 0.0) / c->mass, a_hi = gmax + davis(c, c->v_max) / c->mass;
+            double a_lo = gmin + davis(c, 0.0) / c->mass;
+            double a_hi = gmax + davis(c, c->v_max) / c->mass;
             double us_lo = (c->a0 - a_hi) / c->c, us_hi = (c->a0 - a_lo) / c->c;
-            for (int k = 0; k < NX; k++) { Ct[6 * 4 + k] = k == U_PREV; Ct[7 * 4 + k] = -(k == U_PREV); }
+            for (int k = 0; k < NX; k++) {
+                Ct[6 * 4 + k] = k == U_PREV;
+                Ct[7 * 4 + k] = -(k == U_PREV);
+            }
             h[6] = c->u_max - us_hi; h[7] = us_lo - c->u_min;
             nC = 8;
         }
