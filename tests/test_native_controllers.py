@@ -409,8 +409,8 @@ def test_whole_shipped_loop_with_native_controller_equals_python(name, comps):
 
 def test_build_option_errors_name_the_key():
     with pytest.raises(ScenarioError, match=r"--set controller.build=native: build = "
-                       r"'native': 'StopMpc' has no native model"):
-        load_scenario("seed000_stop_mpc", ["controller.build=native"])
+                       r"'native': 'Crh3LmiMpc' has no native model"):
+        load_scenario("seed003_crh3_lmimpc_conventional", ["controller.build=native"])
     with pytest.raises(ScenarioError, match=r"build = 'cpp'.*expected one of"):
         load_scenario("seed000_stop_pid", ["controller.build=cpp"])
     sc = load_scenario("seed000_stop_pid", ["plant.build=native", "controller.build=native"])
