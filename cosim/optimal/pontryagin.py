@@ -58,7 +58,12 @@ from cosim.optimal.model import Section, Train
 
 # controls of the cost-to-go
 POWER, HOLD, COAST, BRAKE, REGEN = 0, 1, 2, 3, 4
-_CONTROLS = np.array([POWER, HOLD, COAST, BRAKE, REGEN])
+# a switch between maximum traction and coasting inside a step: the step's traction at these
+# shares of the maximum (to first order in the step length the same motion and cost as
+# maximum traction over that share of the step, then coasting)
+_SWITCH_SHARES = (0.25, 0.5, 0.75)
+_CONTROLS = np.arange(5 + len(_SWITCH_SHARES))
+_N = _CONTROLS.size
 # regimes of a step of the optimal run
 MAX_TRACTION, CRUISE_TRACTION, COASTING, CRUISE_BRAKE, MAX_BRAKE, MAX_REGEN = 1, 2, 3, 4, 5, 6
 REGIME_NAMES = {MAX_TRACTION: "maximum traction", CRUISE_TRACTION: "cruise (partial traction)",
@@ -129,9 +134,9 @@ class _Dynamics:
         self.rho = train.regen_efficiency
 
     def force(self, v: np.ndarray, g: float) -> np.ndarray:
-        """Force per unit effective mass (m/s2): row ``i`` of ``v`` (first axis of length 5)
-        under control ``_CONTROLS[i]`` (maximum traction, hold, coast, maximum braking,
-        maximum regenerative braking alone)."""
+        """Force per unit effective mass (m/s2): row ``i`` of ``v`` (first axis: the
+        controls) under control ``_CONTROLS[i]`` (maximum traction, hold, coast, maximum
+        braking, maximum regenerative braking alone, then the switching shares)."""
         tr = self.train
         out = np.zeros_like(v)
         r = tr.resistance(v[0])
@@ -142,6 +147,9 @@ class _Dynamics:
         out[3] = np.minimum(np.maximum(-tr.brake_limit(v[3]), r + g - tr.max_decel), 0.0)
         r = tr.resistance(v[4])
         out[4] = np.minimum(np.maximum(-tr.regen_limit(v[4]), r + g - tr.max_decel), 0.0)
+        for i, share in enumerate(_SWITCH_SHARES, start=5):
+            r = tr.resistance(v[i])
+            out[i] = share * np.minimum(tr.traction_limit(v[i]), tr.max_accel + r + g)
         return out
 
     def advance(self, E: np.ndarray, h: float, g: float, cap: float
@@ -231,6 +239,7 @@ class SectionSolver:
         top = float(st.limit.max())
         self.v_nodes = np.unique(np.concatenate((np.linspace(0.0, top, self.grid.speeds),
                                                  st.limit)))
+        self._spacing = top / (self.grid.speeds - 1)
         n = len(st.h)
         # node cap: the lower limit of the two steps at each node
         lim = st.limit
@@ -269,7 +278,7 @@ class SectionSolver:
     def _brake_inverse(self, k: int, e_next: float, cap: float) -> float:
         """E at node k whose maximum-braking step lands on ``e_next`` (at most ``cap``)."""
         def land(e: float) -> float:
-            return float(self._advance(k, np.full(5, e))[0][BRAKE]) - e_next
+            return float(self._advance(k, np.full(_N, e))[0][BRAKE]) - e_next
 
         if land(cap) <= 0.0:
             return cap
@@ -284,7 +293,7 @@ class SectionSolver:
             ok |= np.arange(e.size) == e.size - 1  # the boundary node: on the stop curve
             return (np.zeros((1, e.size)), np.where(ok, cost, _BIG)[None, :],
                     np.where(ok, dt, 0.0)[None, :])
-        e1, cost, dt, _ = self._advance(k, np.broadcast_to(e, (5, e.size)))
+        e1, cost, dt, _ = self._advance(k, np.broadcast_to(e, (_N, e.size)))
         v1 = self._snap(k + 1, np.sqrt(2.0 * e1))
         bad = ~np.isfinite(dt) | (v1 > self.nodes[k + 1][-1])
         return v1, np.where(bad, _BIG, cost), np.where(bad, 0.0, dt)
@@ -302,10 +311,27 @@ class SectionSolver:
         J: list[Callable[[np.ndarray], np.ndarray]] = [lambda v: np.zeros_like(v)] * (n + 1)
         for k in range(n - 1, -1, -1):
             v1, cost, dt = self._moves[k]
+            if k < n - 1:
+                cost = cost.copy()
+                cost[HOLD] = np.where(self._may_hold(k, self.nodes[k], multiplier), cost[HOLD],
+                                      _BIG)
             nxt = J[k + 1](v1) if k < n - 1 else np.zeros_like(v1)
             J[k] = self._interpolant(k, np.minimum((cost + multiplier * dt + nxt).min(axis=0),
                                                    _BIG), multiplier)
         return J
+
+    def _may_hold(self, k: int, v: np.ndarray, multiplier: float) -> np.ndarray:
+        """Where a speed may be held (a singular arc of the maximum principle): at the
+        cruising speeds V (partial traction) and W (partial braking) of ``multiplier``, within
+        the speed grid's spacing, or at the speed limit; anywhere else holding is never
+        optimal (``dp/ds = 0`` needs ``psi(v) = eta_t lambda`` or ``lambda / eta_r``), and
+        allowing it would let the grid's interpolation error pick it."""
+        V, W = hold_speeds(self.train, multiplier)
+        if math.isnan(V):  # no resistance slope: no singular speed, hold anywhere
+            return np.ones(v.shape, dtype=bool)
+        dv = self._spacing
+        cap = float(self.steps.limit[k])
+        return (np.abs(v - V) <= dv) | (np.abs(v - W) <= dv) | (v >= cap - dv)
 
     def _interpolant(self, k: int, values: np.ndarray, multiplier: float
                      ) -> Callable[[np.ndarray], np.ndarray]:
@@ -343,8 +369,10 @@ class SectionSolver:
                                      f"last {h:.1f} m")
                 choice, e1 = BRAKE, np.zeros(1)
             else:
-                e1s, cost, dts, ws = self._advance(k, np.full(5, E[0]))
+                e1s, cost, dts, ws = self._advance(k, np.full(_N, E[0]))
                 v1 = self._snap(k + 1, np.sqrt(2.0 * e1s))
+                cost[HOLD] = cost[HOLD] if self._may_hold(k, np.sqrt(2.0 * E), multiplier)[0] \
+                    else _BIG
                 vals = cost + multiplier * dts + J[k + 1](v1)
                 i = int(np.argmin(vals))
                 if vals[i] >= 0.1 * _BIG:
@@ -412,6 +440,8 @@ def _regime(choice: int, e0: float, e1: float, cap: float, force: float, h: floa
         return MAX_BRAKE
     if choice == REGEN:
         return MAX_REGEN
+    if choice >= 5:  # a switch inside the step: the regime of the larger share
+        return MAX_TRACTION if _SWITCH_SHARES[choice - 5] >= 0.5 else COASTING
     if choice == COAST:
         return COASTING
     if choice == POWER:
