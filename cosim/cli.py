@@ -584,18 +584,13 @@ def optimal(
 ) -> None:
     """Energy-optimal speed profile (Pontryagin regimes) for a line, train and schedule."""
     from cosim.optimal import output
+    from cosim.optimal.lines import load_line
     from cosim.optimal.model import Section, Train
     from cosim.optimal.pontryagin import Grid, SectionSolver
-    from cosim.optimal.ttobench import load_journey, load_track, load_train
-    from plants.route import load_route
+    from cosim.optimal.ttobench import load_journey, load_train
 
     try:
-        if track.endswith(".json"):
-            tr = load_track(track)
-            route, stop_list = tr.route, list(tr.stops)
-        else:
-            route = load_route(track)
-            stop_list = [x for _, x in route.stations] or [0.0, route.length_m]
+        route, stop_list = load_line(track)
         vehicle = Train.from_crh3() if train == "crh3" else load_train(train)
         runs: list[tuple[str, Section, float]] = []
         if journey is not None:
