@@ -34,15 +34,18 @@ holds the limit by partial traction or partial braking (Albrecht et al. 2016, pa
 Solution: the adjoint is the gradient ``p = dJ*/dE`` of the cost-to-go ``J*(s, E)`` (Bellman's
 principle; the Hamilton-Jacobi-Bellman equation is the maximum principle's characteristic
 form). The cost-to-go of the Lagrangian ``J + lambda T`` is computed backwards over position on
-a speed grid with these regimes as the controls (each step integrated by the explicit
-midpoint rule in ``s``, ``sub_steps`` per step, the cost-to-go interpolated linearly in
-``v``); the run is then integrated forwards from rest choosing at each step the regime that
-minimises step cost plus cost-to-go at its exact state, so every switching point (the coasting
-point, the start of power before a climb, the braking point) comes from the adjoint condition
-it stands for. ``lambda`` is the one number the schedule fixes: the running time decreases
-with it, and a 1-D root finder (``scipy.optimize.brentq`` on ``log lambda``) finds the
-``lambda`` whose running time is ``T`` (the energy's sensitivity to the running time is
-``dJ/dT = -lambda``).
+a speed grid with these regimes as the controls (each step integrated by the explicit midpoint
+rule in ``s``, ``sub_steps`` per step, the cost-to-go interpolated linearly in ``E``; holding a
+speed only where a singular arc may be, at ``V``, ``W`` or a limit; traction at a share of the
+maximum over a step standing for a switch inside it); the run is then integrated forwards from
+rest choosing at each step the regime that minimises step cost plus cost-to-go at its exact
+state, so every switching point (the coasting point, the start of power before a climb, the
+braking point) comes from the adjoint condition it stands for. ``lambda`` is the one number the
+schedule fixes: the running time decreases with it, and a 1-D root finder
+(``scipy.optimize.brentq`` on ``log lambda``) finds the ``lambda`` whose running time is ``T``
+(the energy's sensitivity to the running time is ``dJ/dT = -lambda``). On the grid the running
+time is not continuous in ``lambda``: the run returned is on time (never late) but can be
+early, and its energy is then that of its own running time.
 """
 
 from __future__ import annotations
@@ -335,19 +338,11 @@ class SectionSolver:
 
     def _interpolant(self, k: int, values: np.ndarray, multiplier: float
                      ) -> Callable[[np.ndarray], np.ndarray]:
-        # the cost-to-go less lambda x (distance to go / speed), the time cost of running on at
-        # the present speed, is interpolated linearly in E: what remains is close to linear in
-        # kinetic energy (the energy a speed is worth); the time cost itself is convex in E,
-        # and a linear interpolant above it would make every control landing between nodes
-        # look dearer than holding a node's speed
-        nodes = self.nodes[k]
-        e = 0.5 * nodes**2
-        go = multiplier * (self.steps.x[-1] - self.steps.x[k])
-        slow = 1.0  # m/s: below it the time-cost model is not subtracted further
-        base = values - go / np.maximum(nodes, slow)
-        top = nodes[-1]
-        return lambda v: np.where(v <= top, np.interp(0.5 * v * v, e, base)
-                                  + go / np.maximum(v, slow), _BIG)
+        # linear in E: the cost-to-go's energy part is close to linear in kinetic energy (the
+        # energy a speed is worth)
+        e = 0.5 * self.nodes[k] ** 2
+        top = self.nodes[k][-1]
+        return lambda v: np.where(v <= top, np.interp(0.5 * v * v, e, values), _BIG)
 
     def run(self, multiplier: float) -> OptimalRun:
         """The run from rest that follows the cost-to-go of ``multiplier``."""
