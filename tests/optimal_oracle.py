@@ -76,7 +76,6 @@ def solve(section: Section, train: Train, running_time: float, ds: float,
     inv_vbar = cp.Parameter(n, pos=True)
     inv_vbar3 = cp.Parameter(n, pos=True)
     emid = 0.5 * (E[:-1] + E[1:])
-    ebar = 0.5 * cp.multiply(vbar, vbar) if False else None  # noqa: F841 (documented below)
     e_bar = cp.Parameter(n, nonneg=True)
     speed_lin = vbar + cp.multiply(emid - e_bar, inv_vbar)
     resist = (d.a + d.b * speed_lin + 2.0 * d.c * emid) / m
