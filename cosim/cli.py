@@ -607,6 +607,70 @@ def reproduce(
     out.print(f"wrote {path}", highlight=False, markup=False)
 
 
+@app.command()
+def optimal(
+    track: Annotated[str, typer.Argument(
+        help="TTOBench track JSON, route TOML or bundled route name")],
+    out_dir: Annotated[Path, typer.Option("--out", help="folder for the CSV and figure")],
+    train: Annotated[str, typer.Option(
+        help="TTOBench train JSON, or crh3 (seed 003's train)")] = "crh3",
+    time: Annotated[float | None, typer.Option(
+        "--time", help="running time in s (default: the route's schedule)")] = None,
+    journey: Annotated[Path | None, typer.Option(
+        help="TTOBench journey JSON: every section, each in its timing window")] = None,
+    stops: Annotated[str, typer.Option(help="FROM:TO stop indices of a track")] = "0:-1",
+    trade_off: Annotated[int, typer.Option(
+        "--trade-off", help="also the energy/running-time curve at N times")] = 0,
+    ds: Annotated[float, typer.Option(help="position step of the optimiser (m)")] = 50.0,
+    speeds: Annotated[int, typer.Option(help="speed nodes of the optimiser")] = 600,
+) -> None:
+    """Energy-optimal speed profile (Pontryagin regimes) for a line, train and schedule."""
+    from cosim.optimal import output
+    from cosim.optimal.lines import load_line
+    from cosim.optimal.model import Section, Train
+    from cosim.optimal.pontryagin import Grid, SectionSolver
+    from cosim.optimal.ttobench import load_journey, load_train
+
+    try:
+        route, stop_list = load_line(track)
+        vehicle = Train.from_crh3() if train == "crh3" else load_train(train)
+        runs: list[tuple[str, Section, float]] = []
+        if journey is not None:
+            for i, sec in enumerate(load_journey(journey).sections):
+                runs.append((f"section{i}", Section(route, sec.departure.position,
+                                                   sec.arrival.position), sec.running_time()))
+        else:
+            a, b = (int(x) for x in stops.split(":"))
+            T = time if time is not None else route.scheduled_time_s
+            if T is None:
+                raise ValueError("give --time or --journey (the route has no schedule)")
+            runs.append(("run", Section(route, stop_list[a], stop_list[b]), T))
+        grid = Grid(ds=ds, speeds=speeds)
+        table = Table("run", "from (m)", "to (m)", "time (s)", "energy (kWh)", "V (km/h)")
+        for label, section, T in runs:
+            solver = SectionSolver(section, vehicle, grid)
+            best = solver.for_time(T)
+            name = f"{route.name} {label}"
+            output.write_csv(best, vehicle, out_dir / f"{label}.csv", name)
+            output.figure(best, out_dir / f"{label}.png", name)
+            table.add_row(label, f"{section.start:.0f}", f"{section.end:.0f}",
+                          f"{best.running_time:.1f}", f"{best.energy / 3.6e6:.2f}",
+                          f"{best.hold_speed * 3.6:.1f}")
+            if trade_off > 1:
+                import numpy as np
+
+                t0 = solver.fastest().running_time
+                times = np.linspace(t0 * 1.02, max(T, t0 * 1.02) * 1.3, trade_off)
+                runs_t = [solver.for_time(float(t)) for t in times]
+                output.trade_off_csv(np.array([r.running_time for r in runs_t]),
+                                     np.array([r.energy for r in runs_t]),
+                                     out_dir / f"{label}_trade_off.csv")
+    except (ValueError, KeyError, OSError) as err:
+        _fail(str(err))
+    out.print(table)
+    out.print(f"wrote {out_dir}", highlight=False, markup=False)
+
+
 def cli_reference() -> str:
     """``docs/cli.md``: every command's usage, help text and options, read from the click
     command tree typer builds (so the page says what ``--help`` says)."""

@@ -5,6 +5,7 @@
     cosim.run  <-  cosim.interop  <-  cosim.cli
         ^
     cosim.papers  (paper metrics; cosim.run consults their registry by module name, importlib)
+    plants  <-  cosim.optimal  <-  cosim.cli  (offline planning on the plants' physics)
 
 ``cosim.fmu`` (bundled into every FMU) imports nothing else of the project; ``cosim.run`` and
 ``cosim.interop`` never import plants or controllers (the catalog finds the FMU wrappers by
@@ -28,7 +29,9 @@ ALLOWED: dict[str, set[str]] = {
     "cosim.run": {"cosim.fmu", "cosim.run"},
     "cosim.papers": {"cosim.fmu", "cosim.run", "cosim.papers"},
     "cosim.interop": {"cosim.fmu", "cosim.run", "cosim.interop"},
-    "cosim.cli": {"cosim.fmu", "cosim.run", "cosim.papers", "cosim.interop", "cosim.cli"},
+    "cosim.optimal": {"cosim.fmu", "plants", "cosim.optimal"},
+    "cosim.cli": {"cosim.fmu", "cosim.run", "cosim.papers", "cosim.interop", "cosim.optimal",
+                  "cosim.cli"},
     # the Python entry point: a peer of the CLI (it reads the CLI's choice of printed metrics)
     "cosim.api": {"cosim.fmu", "cosim.run", "cosim.cli", "cosim.api"},
     "cosim": {"cosim"},  # cosim/__init__.py: nothing

@@ -1,0 +1,166 @@
+"""The optimum of optimal train control (cosim.optimal.pontryagin) against an independent
+discretised optimum (tests/optimal_oracle.py: a sequential convex program over position and
+kinetic energy, cvxpy + Clarabel), on level, steeply graded and speed-limited lines; the
+regimes where the theory puts them; the schedule kept.
+
+Tolerance: both methods are run on a grid and on the grid halved; the difference of the two
+results of each method estimates the error of its finer result (first-order convergence: the
+error of the finer grid equals the difference; faster convergence makes it smaller), so the two
+finer results may differ by the sum of those differences. Energies are compared at the same
+running time: the theory's own; a run found for a running time a little earlier is charged
+``lambda m_eff dT`` (``dJ/dT = -lambda m_eff``)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from cosim.optimal.model import Section, Train
+from cosim.optimal.pontryagin import (
+    COASTING,
+    CRUISE_BRAKE,
+    Grid,
+    OptimalRun,
+    SectionSolver,
+)
+from plants.resistance import Davis
+from plants.route import Route, StepProfile
+from tests import optimal_oracle
+
+# a 500 t train too weak to hold its cruising speed on +15 permille, fast enough to gain
+# speed coasting down -20 permille; regenerative (60 %) and friction brakes
+WEAK = Train("weak", 500e3, 0.06, Davis(7000.0, 150.0, 10.0), 250e3, 2.0e6, 250e3, 3.0e6,
+             200e3, max_decel=0.8, traction_efficiency=0.9, regen_efficiency=0.6)
+# a suburban train with every limit of a TTOBench train: comfort accelerations too
+EMU = Train("emu", 300e3, 0.08, Davis(5000.0, 100.0, 8.0), 300e3, 4e6, 300e3, 4e6, 300e3,
+            max_accel=1.0, max_decel=0.9, traction_efficiency=0.9, regen_efficiency=0.8)
+
+
+def _line(name: str, length: float, grade: list[list[float]],
+          limits: list[list[float]]) -> Section:
+    route = Route(name, length, StepProfile.from_pairs(grade),
+                  speed_limit=StepProfile.from_pairs(limits))
+    return Section(route, 0.0, length)
+
+
+LEVEL = _line("level", 4000.0, [[0.0, 0.0]], [[0.0, 25.0]])
+STEEP = _line("steep", 9000.0, [[0.0, 0.0], [2500.0, -20.0], [3700.0, 0.0], [5500.0, 15.0],
+                                [6700.0, 0.0]], [[0.0, 40.0]])
+LIMITED = _line("limited", 6000.0, [[0.0, 0.0], [4000.0, 5.0]],
+                [[0.0, 30.0], [2500.0, 15.0], [3500.0, 30.0]])
+GRID = Grid(ds=50.0, speeds=400)
+
+
+def _at(run: OptimalRun, T: float, m_eff: float) -> float:
+    """Energy (J) of ``run`` carried to the running time ``T`` (s) with dJ/dT."""
+    return run.energy - run.multiplier * m_eff * (T - run.running_time)
+
+
+def _compare(section: Section, train: Train, stretch: float) -> dict[str, float]:
+    coarse = SectionSolver(section, train, GRID)
+    T = stretch * coarse.fastest().running_time
+    th_coarse = coarse.for_time(T)
+    th_fine = SectionSolver(section, train, GRID.finer()).for_time(T)
+    T = th_fine.running_time  # the comparison time: the finer theory run's own
+    m = train.effective_mass
+    or_coarse = optimal_oracle.solve(section, train, T, GRID.ds)
+    or_fine = optimal_oracle.solve(section, train, T, GRID.ds / 2.0)
+    return {"T": T, "theory": th_fine.energy, "oracle": or_fine.energy,
+            "theory_error": abs(_at(th_coarse, T, m) - th_fine.energy),
+            "oracle_error": abs(or_coarse.energy - or_fine.energy),
+            "oracle_time": or_fine.running_time}
+
+
+# measured on the speed-limited line: the theory's run 1.0 % above the oracle, the two-grid
+# estimate 0.05 %: the cost-to-go on its speed grid ends the first traction phase early and
+# makes the speed up with a second one; a known defect, kept visible (strict: it must fail)
+_LIMITED_GAP = pytest.mark.xfail(strict=True, reason="cost-to-go grid bias on the "
+                                 "speed-limited line (see the comment above)")
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("section", "train", "stretch"), [
+    (LEVEL, EMU, 1.2), (STEEP, WEAK, 1.25),
+    pytest.param(LIMITED, EMU, 1.15, marks=_LIMITED_GAP)],
+    ids=["level", "steep", "speed-limited"])
+def test_the_theory_optimum_equals_the_convex_oracle_within_the_grid_error(
+        section: Section, train: Train, stretch: float) -> None:
+    c = _compare(section, train, stretch)
+    assert c["oracle_time"] <= c["T"] * (1 + 1e-6)
+    tol = c["theory_error"] + c["oracle_error"]
+    assert abs(c["theory"] - c["oracle"]) <= tol, c
+
+
+@pytest.fixture(scope="module")
+def steep_run() -> OptimalRun:
+    solver = SectionSolver(STEEP, WEAK, GRID)
+    return solver.for_time(1.25 * solver.fastest().running_time)
+
+
+def test_the_descent_is_steep_at_the_cruising_speed(steep_run: OptimalRun) -> None:
+    """The premise of the regime tests: at the theory's cruising speed V coasting speeds the
+    train up on -20 permille (a steep descent), and V is below the line limit."""
+    V = steep_run.hold_speed
+    assert V < 40.0
+    assert WEAK.grade_accel(-20.0) + WEAK.resistance(np.array([V]))[0] < 0.0
+
+
+def _step_before(run: OptimalRun, position: float) -> int:
+    return int(np.searchsorted(run.s, position)) - 1
+
+
+def test_coast_before_the_descent(steep_run: OptimalRun) -> None:
+    """Howlett, Pudney & Vu (2009): a steep descent is entered coasting, below V, the
+    coasting started before it."""
+    r, V = steep_run, steep_run.hold_speed
+    k = _step_before(r, 2500.0)
+    assert r.v[k + 1] < V
+    assert np.all(r.regime[k - 2:k + 1] == COASTING)
+
+
+def test_no_holding_brake_below_the_braking_cruise_speed(steep_run: OptimalRun) -> None:
+    """With regeneration below 100 % the train holds a speed by braking only at W (psi(W) =
+    lambda / eta_r, above V) or at a speed limit: never at V on a descent."""
+    r = steep_run
+    W = r.brake_hold_speed
+    assert W > r.hold_speed
+    held = r.regime == CRUISE_BRAKE
+    at = np.minimum(r.v[:-1], r.v[1:])[held]
+    lim = r.speed_limit[held]
+    dv = 40.0 / (GRID.speeds - 1)
+    assert np.all((at >= W - 2 * dv) | (at >= lim - 2 * dv))
+
+
+# measured: the running time jumps with lambda on the cost-to-go grid, so the on-time run
+# found can be early (1 % at 1.1, 3.4 % at 1.3 of the shortest run): a known defect
+_EARLY = pytest.mark.xfail(strict=True, reason="running time discontinuous in lambda")
+
+
+@pytest.mark.parametrize("stretch", [pytest.param(1.1, marks=_EARLY),
+                                     pytest.param(1.3, marks=_EARLY)])
+def test_the_schedule_is_kept(stretch: float) -> None:
+    solver = SectionSolver(LEVEL, EMU, GRID)
+    T = stretch * solver.fastest().running_time
+    run = solver.for_time(T)
+    assert run.running_time <= T
+    assert run.running_time >= T * (1 - 2e-3)  # the root finder's tolerance on lambda
+
+
+def test_the_run_is_on_time_from_rest_to_rest_within_the_limits() -> None:
+    solver = SectionSolver(LIMITED, EMU, GRID)
+    T = 1.2 * solver.fastest().running_time
+    run = solver.for_time(T)
+    assert run.running_time <= T
+    assert run.v[0] == 0.0 and run.v[-1] == 0.0
+    assert np.all(run.v[1:-1] <= LIMITED.limit_on(run.s[:-2], run.s[1:-1], EMU) + 1e-9)
+    assert np.all(run.v[1:-1] <= LIMITED.limit_on(run.s[1:-1], run.s[2:], EMU) + 1e-9)
+    assert math.isfinite(run.energy)
+
+
+def test_a_longer_schedule_needs_less_energy() -> None:
+    solver = SectionSolver(LEVEL, EMU, GRID)
+    T0 = solver.fastest().running_time
+    energies = [solver.for_time(k * T0).energy for k in (1.1, 1.2, 1.4)]
+    assert energies[0] > energies[1] > energies[2]
