@@ -45,6 +45,7 @@ from xml.etree.ElementTree import Element, SubElement, indent, tostring
 import numpy as np
 
 from cosim.fmu.build import FMU_DIR, bundled_files, catalog
+from cosim.fmu.native_solvers import solver_files
 
 HERE = Path(__file__).resolve().parent
 NATIVE_DIR = HERE / "native"
@@ -66,7 +67,9 @@ class NativeSpec:
     route's step profiles ``<name>.profiles`` are exported), for a model with named train data
     ``configurations``: ``"module:NAME"`` of a mapping configuration name -> factory of a
     declared dataclass, written to ``<id>_config.h`` (:func:`config_header`), and the headers
-    of :data:`GENERATED` it includes (``generated``)."""
+    of :data:`GENERATED` it includes (``generated``), and the numerical solvers it links
+    (``solvers``, keys of :data:`cosim.fmu.native_solvers.SOLVERS`: their C sources come from
+    the registry's source distribution at build time, their licence is shipped in the FMU)."""
 
     identifier: str
     source: str
@@ -76,6 +79,7 @@ class NativeSpec:
     shared: tuple[str, ...] = ()
     configurations: str | None = None
     generated: tuple[str, ...] = ()
+    solvers: tuple[str, ...] = ()
 
     @property
     def path(self) -> Path:
@@ -793,8 +797,10 @@ def build_native(identifier: str, dest: Path = NATIVE_FMU_DIR, windows: bool | N
     slave_class = catalog()[identifier].load()
     guid = "{" + str(uuid.uuid4()) + "}"
     headers = Path(fmpy.__file__).parent / "c-code"
+    solvers = [solver_files(name) for name in spec.solvers]
     c_files = ["fmi2_front.c", spec.source,
-               *(f for f in (*spec.helpers, *spec.shared) if f.endswith(".c"))]
+               *(f for f in (*spec.helpers, *spec.shared) if f.endswith(".c")),
+               *(f.name for solver in solvers for f in solver.sources if f.suffix == ".c")]
     with tempfile.TemporaryDirectory(prefix="atocosim_native_") as tmp:
         root = Path(tmp) / "fmu"
         src = root / "sources"
@@ -817,6 +823,15 @@ def build_native(identifier: str, dest: Path = NATIVE_FMU_DIR, windows: bool | N
                 + (f'#include "{identifier}_config.h"\n' if spec.configurations else ""))
         for h in ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h"):
             shutil.copy2(headers / h, src)
+        for solver in solvers:  # the solver's own files, flat beside ours, and its licence
+            for f in solver.sources:
+                if (src / f.name).exists():
+                    raise RuntimeError(f"{identifier}: {solver.name}'s {f.name} has the name "
+                                       "of a file of the model")
+                shutil.copy2(f, src)
+            licence = root / solver.license_name
+            licence.parent.mkdir(parents=True, exist_ok=True)
+            shutil.copy2(solver.license, licence)
         (src / f"{identifier}_decl.h").write_text(
             decl_header(identifier, slave_class.variables, guid,
                         getattr(slave_class, "core_options", None)))
