@@ -103,6 +103,8 @@ FREIGHT_TRACKER = ("freight_tracker.c", "freight_tracker.h")
 DATADRIVEN = (*CONTROLLER, *PROFILE, "ato_datadriven.c", "ato_datadriven.h", "ato_linalg.c",
               "ato_linalg.h")
 FFDL = ("ato_ffdl.c", "ato_ffdl.h")
+# the seed-004 controllers' shared parameter checks and move blocks
+HYBRID = ("ato_hybrid.c", "ato_hybrid.h")
 
 NATIVE: dict[str, NativeSpec] = {
     "BrakeDelayTrain": NativeSpec("BrakeDelayTrain", "brake_delay.c", shared=PLANT_SHARED),
@@ -111,8 +113,12 @@ NATIVE: dict[str, NativeSpec] = {
                                data=("references",)),
     "EmuSpeedPid8": NativeSpec("EmuSpeedPid8", "speed_pid.c", (*CONTROLLER, *PROFILE),
                                data=("references",)),
-    "Empc3": NativeSpec("Empc3", "explicit_mpc.c", (*CONTROLLER, *PROFILE),
+    "Empc3": NativeSpec("Empc3", "explicit_mpc.c", (*CONTROLLER, *PROFILE, *HYBRID),
                         data=("references", "empc_regions")),
+    **{identifier: NativeSpec(identifier, "hybrid_mpc.c", (*CONTROLLER, *PROFILE, *HYBRID),
+                              data=("references",), generated=("ato_hybrid_model.h",),
+                              solvers=("daqp",))
+       for identifier in ("Gmpc3", "MbMpc3")},
     **{identifier: NativeSpec(identifier, source, (*CONTROLLER, *PROFILE, *FREIGHT_TRACKER),
                               data=("references",), generated=generated)
        for identifier, source, generated in (

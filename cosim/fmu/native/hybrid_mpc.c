@@ -27,7 +27,8 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "api.h"
+#include "api.h"   /* DAQP */
+#include "utils.h" /* DAQP: daqp_update_ldp */
 #include "ato_hybrid.h"
 #include "ato_hybrid_model.h"
 #include "ato_law_common.h"
