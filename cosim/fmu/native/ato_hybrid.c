@@ -59,13 +59,13 @@ int ato_hybrid_check(const ato_values* p, const ato_hybrid_vrs* vr, ato_profile*
     if (!ok) return 0;
     const char* posref = s[vr->position_reference];
     if (strcmp(posref, "horizon") != 0 && strcmp(posref, "timetable") != 0) {
-        snprintf(err, n, "position_reference = '%s' must be one of ('horizon', 'timetable')",
+        snprintf(err, n, "position_reference = '%s': must be one of 'horizon', 'timetable'",
                  posref);
         return 0;
     }
     const char* dmode = s[vr->delta_mode];
     if (strcmp(dmode, "schedule") != 0 && strcmp(dmode, "optimise") != 0) {
-        snprintf(err, n, "delta_mode = '%s' must be one of ('schedule', 'optimise')", dmode);
+        snprintf(err, n, "delta_mode = '%s': must be one of 'schedule', 'optimise'", dmode);
         return 0;
     }
     const char* nonneg[] = {"q_speed", "q_position"};

@@ -610,15 +610,20 @@ law_core* law_make(const ato_values* p, double t0, char* err, size_t n) {
     const char* config = s[ATO_VR_configuration];
     for (int q = 0; q < HY_N_MODELS; q++)
         if (strcmp(HY_MODELS[q].name, config) == 0) c->md = &HY_MODELS[q];
-    if (!c->md) {
+    if (!c->md) { /* the declared choices, then emu_config's number of cars */
         int cars = -1;
-        for (int q = 0; q < HY_N_CONFIGS; q++)
+        char known[256] = "";
+        for (int q = 0; q < HY_N_CONFIGS; q++) {
             if (strcmp(HY_CONFIGS[q].name, config) == 0) cars = HY_CONFIGS[q].cars;
+            size_t len = strlen(known);
+            snprintf(known + len, sizeof known - len, "%s'%s'", q ? ", " : "",
+                     HY_CONFIGS[q].name);
+        }
         if (cars >= 0)
             snprintf(err, n, "configuration = '%s' has %d cars, this controller has %d",
                      config, cars, UNITS);
         else
-            snprintf(err, n, "configuration '%s' unknown", config);
+            snprintf(err, n, "configuration = '%s': must be one of %s", config, known);
         return fail(c);
     }
     const char* fixed[] = {"sample_time", "fit_speed_max"};
