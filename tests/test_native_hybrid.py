@@ -36,18 +36,17 @@ import tempfile
 import daqp
 import numpy as np
 import pytest
-from fmpy import extract, read_model_description
 from fmpy.fmi2 import FMU2Slave
 
 from controllers.hybrid.hybrid_mpc import HybridMpc
 from controllers.hybrid.miqp import _RETRY_SETTINGS
 from controllers.hybrid.model import KN, Limits
 from cosim.fmu.build import catalog
-from cosim.fmu.native_build import build_native
 from cosim.fmu.state import to_ticks
 from cosim.run.scenario import load_scenario
 from plants.emu import Emu, emu_config
 from plants.route import load_route
+from tests.native_helpers import build_unzipped, initialising, set_by_type
 
 IDENTS = ("Gmpc3", "MbMpc3")
 SCENARIO = {"Gmpc3": "seed004_crh3_gmpc", "MbMpc3": "seed004_crh3_mbmpc"}
@@ -61,15 +60,8 @@ def gamma(n: int) -> float:
 
 @pytest.fixture(scope="module")
 def natives(tmp_path_factory):
-    if shutil.which("gcc") is None:
-        pytest.skip("gcc not installed: native FMUs cannot be built")
-    dest = tmp_path_factory.mktemp("native")
-    out = {}
-    for ident in IDENTS:
-        path = build_native(ident, dest=dest, windows=False)
-        md = read_model_description(str(path), validate=True)
-        out[ident] = (path, md, extract(str(path), unzipdir=str(tmp_path_factory.mktemp(ident))))
-    return out
+    """identifier -> (FMU path, model description, unzipped folder), built once."""
+    return {ident: build_unzipped(ident, tmp_path_factory) for ident in IDENTS}
 
 
 def miqp_force_bound(core: HybridMpc, t: float, inputs: dict[str, float]) -> float:
@@ -272,6 +264,19 @@ def test_native_hybrid_mpc_runs_in_fmpy_with_defaults(natives, ident):
     assert np.all(np.isfinite(res["force_demand"]))
 
 
+def _native_refusal(native, params: dict) -> list[str]:
+    """The messages the native FMU logs (logging off) when ``params`` make it refuse
+    fmi2ExitInitializationMode (asserted)."""
+    from fmpy.fmi1 import FMICallException
+
+    logged: list[str] = []
+    fmu, _ = initialising(native, logged)
+    set_by_type(fmu, native[1], params)
+    with pytest.raises(FMICallException):
+        fmu.exitInitializationMode()
+    return logged
+
+
 @pytest.mark.parametrize(("params", "message"), [
     ({"N": 5, "move_blocks": "3:4"}, "move_blocks = '3:4': positive lengths summing to N = 5"),
     ({"R": 0.0}, "R = 0.0, dR = 0.0: both >= 0 and one > 0"),
@@ -282,28 +287,13 @@ def test_native_hybrid_mpc_runs_in_fmpy_with_defaults(natives, ident):
     ({"delta_mode": "free"}, "delta_mode = 'free': must be one of 'schedule', 'optimise'"),
 ])
 def test_bad_parameters_are_refused_by_both(natives, params, message):
-    from tests.test_native_controllers import _callbacks
-
-    _, md, unzipdir = natives["Gmpc3"]
-    logged: list[str] = []
-    fmu = FMU2Slave(guid=md.guid, unzipDirectory=unzipdir, instanceName="native",
-                    modelIdentifier="Gmpc3")
-    fmu.instantiate(callbacks=_callbacks(lambda c, i, s, cat, text: logged.append(
-        text.decode())))
-    fmu.setupExperiment(startTime=0.0)
-    fmu.enterInitializationMode()
-    vr = {v.name: v for v in md.modelVariables}
-    py = catalog()["Gmpc3"].load()(instance_name="python", resources=tempfile.mkdtemp())
-    for name, value in params.items():
-        ref = [vr[name].valueReference]
-        kind = {"Integer": "integer", "String": "string"}.get(vr[name].type, "real")
-        getattr(fmu, f"set{kind.capitalize()}")(ref, [value])
-        getattr(py, f"set_{kind}")(ref, [value])
-    from fmpy.fmi1 import FMICallException
-
-    with pytest.raises(FMICallException):
-        fmu.exitInitializationMode()
+    logged = _native_refusal(natives["Gmpc3"], params)
     assert any(message in text for text in logged), logged
+    py = catalog()["Gmpc3"].load()(instance_name="python", resources=tempfile.mkdtemp())
+    vr = {v.name: v for v in natives["Gmpc3"][1].modelVariables}
+    for name, value in params.items():
+        kind = {"Integer": "integer", "String": "string"}.get(vr[name].type, "real")
+        getattr(py, f"set_{kind}")([vr[name].valueReference], [value])
     py.setup_experiment(0.0)
     py.enter_initialization_mode()
     with pytest.raises(ValueError, match=re.escape(message)):
@@ -313,22 +303,7 @@ def test_bad_parameters_are_refused_by_both(natives, params, message):
 def test_native_refuses_a_control_model_it_was_not_built_for(natives):
     """The zero-order hold and the PWA fit are build-time data: another sample time is
     refused by the native FMU with a message (the Python FMU computes its own)."""
-    from tests.test_native_controllers import _callbacks
-
-    _, md, unzipdir = natives["Gmpc3"]
-    logged: list[str] = []
-    fmu = FMU2Slave(guid=md.guid, unzipDirectory=unzipdir, instanceName="native",
-                    modelIdentifier="Gmpc3")
-    fmu.instantiate(callbacks=_callbacks(lambda c, i, s, cat, text: logged.append(
-        text.decode())))
-    fmu.setupExperiment(startTime=0.0)
-    fmu.enterInitializationMode()
-    vr = {v.name: v.valueReference for v in md.modelVariables}
-    fmu.setReal([vr["sample_time"]], [0.5])
-    from fmpy.fmi1 import FMICallException
-
-    with pytest.raises(FMICallException):
-        fmu.exitInitializationMode()
+    logged = _native_refusal(natives["Gmpc3"], {"sample_time": 0.5})
     assert any("sample_time = 0.5: the native FMU's control model is built for "
                "sample_time = 1.0" in text for text in logged), logged
 
