@@ -7,6 +7,8 @@
    p99, total), branch and bound nodes, for GMPC, MB-MPC and EMPC at N = 10 (blocks 3:4:3 for
    MB-MPC and EMPC) and at N = 3 (MB-MPC 1:2; EMPC unblocked, region data
    ``seed004_empc_crh3_3car_n3``).
+   EMPC's lookup runs compiled (numba) where numba is installed; ``--lookup`` also times the
+   compiled point location against its numpy reference per lookup on random parameters.
 2. Solver comparison on the MIQPs of that run (every ``--every``-th event and the
    ``--hardest`` with the most branch-and-bound nodes): DAQP (as the controller calls it)
    against SCIP through pyscipopt (convex quadratic objective as a constraint on an epigraph
@@ -14,7 +16,7 @@
    location with ``--scip-path`` (e.g. after ``pip install --target /tmp/scipenv
    pyscipopt``); without it the comparison is skipped.
 
-    python benchmarks/bench_hybrid.py [--every 200] [--hardest 5] [--scip-path DIR]
+    python benchmarks/bench_hybrid.py [--every 200] [--hardest 5] [--scip-path DIR] [--lookup]
 """
 
 from __future__ import annotations
@@ -153,13 +155,43 @@ def compare(ctl: HybridMpc, events: list, stats: list, every: int, hardest: int)
           f"ms; largest relative objective difference {max(gaps):.1e}")
 
 
+def lookups(count: int = 2000) -> None:
+    """Median time (us) of one point location, compiled and numpy, per region set of the
+    seed 004 EMPC, on ``count`` random parameters over each set's box."""
+    from controllers.hybrid.explicit import ExplicitLaw
+
+    law = ExplicitLaw.load(regions_path("seed004_empc_crh3_3car"))
+    rng = np.random.default_rng(1)
+    print("EMPC point location, median us per lookup: compiled (numba) / numpy reference")
+    for key, rs in sorted(law.sets.items()):
+        box = law.boxes[key]
+        thetas = box[:, 0] + rng.random((count, box.shape[0])) * (box[:, 1] - box[:, 0])
+        times = {}
+        for label, locate in (("compiled", rs.locate), ("numpy", rs.locate_reference)):
+            if label == "compiled" and not rs.compiled:
+                continue
+            locate(thetas[0])
+            ts = []
+            for theta in thetas:
+                t0 = time.perf_counter()
+                locate(theta)
+                ts.append(time.perf_counter() - t0)
+            times[label] = 1e6 * float(np.median(ts))
+        print(f"  mode {key[0]} segment {key[1]} ({rs.count} regions): "
+              + ", ".join(f"{k} {v:.1f}" for k, v in times.items()))
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--lookup", action="store_true", help="time the EMPC point location only")
     ap.add_argument("--every", type=int, default=200, help="compare every n-th event")
     ap.add_argument("--hardest", type=int, default=5,
                     help="also compare the events with the most nodes")
     ap.add_argument("--scip-path", default="", help="directory holding pyscipopt")
     args = ap.parse_args()
+    if args.lookup:
+        lookups()
+        return
     if args.scip_path:
         sys.path.insert(0, args.scip_path)
     runs = [("GMPC N=10", HybridMpc, {}), ("MB-MPC 3:4:3 N=10", MoveBlockingMpc, {}),

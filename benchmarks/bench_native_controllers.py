@@ -3,12 +3,12 @@ native C controller FMUs against the same loops with the Python controller FMUs,
 (prints figures, asserts nothing).
 
 Loops: every shipped scenario whose controller has a native build (``StopPid``,
-``EmuSpeedPid3``, ``Empc3``, the seed-001 data-driven ``EmuMfac3``, ``EmuIsmc3``,
-``EmuGpc3``), through the event-driven master, the plant the Python FMU in both; where the
-plant has a native build too, also with both FMUs native. Each loop runs the first
-``--stop-time`` simulated seconds (default 300 s, the whole run when shorter), median of
-``--repeat`` runs after one warm-up run; ``--scenarios`` picks loops by a glob of the
-scenario name.
+``EmuSpeedPid3``, ``Empc3``, the seed-004 hybrid MPCs ``Gmpc3`` and ``MbMpc3``, the seed-001
+data-driven ``EmuMfac3``, ``EmuIsmc3``, ``EmuGpc3``), through the event-driven master, the
+plant the Python FMU in both; where the plant has a native build too, also with both FMUs
+native. Each loop runs the first ``--stop-time`` simulated seconds (default 300 s, the whole
+run when shorter), median of ``--repeat`` runs after one warm-up run; ``--scenarios`` picks
+loops by a glob of the scenario name.
 
     python benchmarks/bench_native_controllers.py [--repeat 3] [--stop-time 300]
         [--scenarios 'seed001_*']

@@ -85,6 +85,53 @@ def test_point_location_equals_a_brute_force_scan(key: tuple[int, int]) -> None:
                                        atol=1e-6)
 
 
+UNIT = 2.0**-53
+
+
+@pytest.mark.parametrize("key", KEYS)
+def test_compiled_point_location_equals_the_numpy_reference(key: tuple[int, int]) -> None:
+    """The numba kernel (controllers.hybrid.locate) and the numpy reference return the same
+    region on many random parameters over the box (and outside it, where the least violated
+    region is returned). The kernel sums each row E_r theta in index order, numpy's BLAS in
+    its own: the two violations of a row differ by at most d_r = 2 gamma_9 (sum_j |E_rj
+    theta_j| + |e_r|) (gamma_n = n u / (1 - n u)), so a region may differ only where a test
+    ``violation <= tol`` or a comparison of two violations lies within that of the edge:
+    every differing sample is checked to be such a tie."""
+    from controllers.hybrid.locate import compiled_locator
+
+    if compiled_locator() is None:
+        pytest.skip("numba not installed (or ATO_COSIM_NO_KERNELS set): no compiled lookup")
+    regions = LAW.sets[key]
+    assert regions.compiled
+    gamma9 = 9 * UNIT / (1 - 9 * UNIT)
+    box = LAW.boxes[key]
+    wide = np.column_stack([box[:, 0] - 0.1 * np.ptp(box, axis=1),
+                            box[:, 1] + 0.1 * np.ptp(box, axis=1)])
+    thetas = np.vstack([_samples(box, 4000, seed=90 + 10 * key[0] + key[1]),
+                        _samples(wide, 1000, seed=91 + 10 * key[0] + key[1])])
+    same = 0
+    for theta in thetas:
+        i, v = regions.locate(theta)
+        j, w = regions.locate_reference(theta)
+        if i == j:
+            same += 1
+            a, b = regions.rows[i], regions.rows[i + 1]
+            d = 2 * gamma9 * float(np.max(np.abs(regions.E[a:b]) @ np.abs(theta)
+                                          + np.abs(regions.e[a:b])))
+            assert abs(v - w) <= d, (theta, v, w)
+            continue
+        for k in regions.tree.candidates(theta):  # a tie within rounding decided it
+            a, b = regions.rows[k], regions.rows[k + 1]
+            d = 2 * gamma9 * float(np.max(np.abs(regions.E[a:b]) @ np.abs(theta)
+                                          + np.abs(regions.e[a:b])))
+            r = regions.violation(int(k), theta)
+            if abs(r - regions.tol) <= d or abs(r - w) <= 2 * d:
+                break
+        else:
+            raise AssertionError(f"theta = {theta}: compiled region {i}, reference {j}")
+    assert same >= 0.99 * len(thetas)
+
+
 def test_box_tree_candidates_hold_every_box_containing_the_point() -> None:
     rng = np.random.default_rng(7)
     lo = rng.random((300, 3)) * 10

@@ -41,6 +41,7 @@ from pathlib import Path
 
 import numpy as np
 
+from controllers.hybrid.locate import compiled_locator
 from controllers.hybrid.model import ChainModel
 
 PARAM_NAMES = ("e", "dv12", "dv23", "f12", "f23", "v_ref", "a_ref", "limit")
@@ -247,21 +248,41 @@ class RegionSet:
 
     def __init__(self, E: np.ndarray, e: np.ndarray, rows: np.ndarray, F: np.ndarray,
                  f: np.ndarray, box_lo: np.ndarray, box_hi: np.ndarray, tol: float = 1e-7,
-                 leaf_size: int = 8) -> None:
-        self.E, self.e, self.rows = E, e, np.asarray(rows, np.int64)
+                 leaf_size: int = 8, compiled: bool = True) -> None:
+        self.E = np.ascontiguousarray(E, dtype=float)
+        self.e = np.ascontiguousarray(e, dtype=float)
+        self.rows = np.ascontiguousarray(rows, dtype=np.int64)
         self.F, self.f = F, f
         self.count = F.shape[0]
-        self.tol = tol
+        self.tol = float(tol)
         self.tree = BoxTree(box_lo, box_hi, leaf_size=leaf_size)
+        # the compiled lookup (controllers.hybrid.locate) where numba is installed
+        self._kernel = compiled_locator() if compiled else None
 
     def violation(self, i: int, theta: np.ndarray) -> float:
         a, b = self.rows[i], self.rows[i + 1]
         return float(np.max(self.E[a:b] @ theta - self.e[a:b]))
 
+    @property
+    def compiled(self) -> bool:
+        """Does :meth:`locate` run the compiled kernel (else the numpy reference)?"""
+        return self._kernel is not None
+
     def locate(self, theta: np.ndarray) -> tuple[int, float]:
         """``(region, violation)``: the first leaf candidate holding ``theta`` (violation <=
         tol), else the candidate violated least (theta on a gap between regions, e.g. an
-        omitted tiny region; -1 if the leaf is empty)."""
+        omitted tiny region; -1 if the leaf is empty). Compiled where numba is installed,
+        else :meth:`locate_reference`."""
+        if self._kernel is None:
+            return self.locate_reference(theta)
+        t = self.tree
+        i, v = self._kernel(self.E, self.e, self.rows, t.dim, t.thr, t.left, t.right,
+                            t.start, t.stop, t.items, self.tol,
+                            np.ascontiguousarray(theta, dtype=float))
+        return int(i), float(v)
+
+    def locate_reference(self, theta: np.ndarray) -> tuple[int, float]:
+        """:meth:`locate` in numpy (the reference of the compiled kernel)."""
         best, best_v = -1, math.inf
         for i in self.tree.candidates(theta):
             v = self.violation(int(i), theta)

@@ -23,6 +23,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "ato_hybrid.h"
 #include "ato_law_common.h"
 #include "ato_profile.h"
 #include "ato_vars.h"
@@ -182,42 +183,6 @@ static int load_set(region_set* s, const table* t, int mode, int seg, char* err,
 }
 
 /* -- construction ------------------------------------------------------------------------- */
-/* controllers/hybrid/miqp.py parse_blocks: "3:4:3" (or blank: one stage per block), positive
- * lengths summing to N; 0 after a message */
-static int parse_blocks(const char* text, int horizon, char* err, size_t n) {
-    const char* q = text;
-    while (*q == ' ' || *q == '\t') q++;
-    if (!*q) return 1;
-    long sum = 0;
-    int positive = 1;
-    const char* p = text;
-    for (;;) {
-        char* end;
-        while (*p == ' ' || *p == '\t') p++;
-        long b = strtol(p, &end, 10);
-        if (end == p) {
-            snprintf(err, n, "move_blocks = '%s': expected lengths like '3:4:3'", text);
-            return 0;
-        }
-        p = end;
-        while (*p == ' ' || *p == '\t') p++;
-        positive &= b >= 1;
-        sum += b;
-        if (!*p) break;
-        if (*p != ':' && *p != ',') {
-            snprintf(err, n, "move_blocks = '%s': expected lengths like '3:4:3'", text);
-            return 0;
-        }
-        p++;
-    }
-    if (!positive || sum != horizon) {
-        snprintf(err, n, "move_blocks = '%s': positive lengths summing to N = %d", text,
-                 horizon);
-        return 0;
-    }
-    return 1;
-}
-
 static int isclose(double a, double b) {
     return a == b || fabs(a - b) <= 1e-9 * ato_max(fabs(a), fabs(b));
 }
@@ -244,49 +209,12 @@ law_core* law_make(const ato_values* p, double t0, char* err, size_t n) {
     c->brake_until_speed = v[ATO_VR_brake_until_speed];
     c->sample_time = v[ATO_VR_sample_time];
     c->horizon = (int)v[ATO_VR_N];
-    /* HybridMpcParams.check, in its order */
-    if (!parse_blocks(s[ATO_VR_move_blocks], c->horizon, err, n)) return fail(c, NULL);
+    /* HybridMpcParams.check and the profile, in their order */
+    static const ato_hybrid_vrs vrs = ATO_HYBRID_VRS;
+    if (!ato_hybrid_check(p, &vrs, &c->profile, err, n)) return fail(c, NULL);
     const char* posref = s[ATO_VR_position_reference];
-    if (strcmp(posref, "horizon") != 0 && strcmp(posref, "timetable") != 0) {
-        snprintf(err, n, "position_reference = '%s' must be one of ('horizon', 'timetable')",
-                 posref);
-        return fail(c, NULL);
-    }
     const char* dmode = s[ATO_VR_delta_mode];
-    if (strcmp(dmode, "schedule") != 0 && strcmp(dmode, "optimise") != 0) {
-        snprintf(err, n, "delta_mode = '%s' must be one of ('schedule', 'optimise')", dmode);
-        return fail(c, NULL);
-    }
-    const char* nonneg[] = {"q_speed", "q_position"};
-    const int nonneg_vr[] = {ATO_VR_q_speed, ATO_VR_q_position};
-    for (int i = 0; i < 2; i++)
-        if (!(v[nonneg_vr[i]] >= 0)) {
-            char a[40];
-            snprintf(err, n, "%s = %s must be >= 0", nonneg[i], ato_repr(v[nonneg_vr[i]], a));
-            return fail(c, NULL);
-        }
-    const char* pos[] = {"sample_time", "coupler_force_max"};
-    const int pos_vr[] = {ATO_VR_sample_time, ATO_VR_coupler_force_max};
-    for (int i = 0; i < 2; i++)
-        if (!(v[pos_vr[i]] > 0)) {
-            char a[40];
-            snprintf(err, n, "%s = %s must be > 0", pos[i], ato_repr(v[pos_vr[i]], a));
-            return fail(c, NULL);
-        }
-    double r_force = v[ATO_VR_R], r_increment = v[ATO_VR_dR];
-    if (!(r_force >= 0 && r_increment >= 0 && r_force + r_increment > 0)) {
-        char a[40], b[40];
-        snprintf(err, n, "R = %s, dR = %s: both >= 0 and one > 0 (the QP needs a weight on the "
-                 "forces or their increments)", ato_repr(r_force, a), ato_repr(r_increment, b));
-        return fail(c, NULL);
-    }
-    if (!ato_profile_load(&c->profile, p->resources, s[ATO_VR_reference], err, n))
-        return fail(c, NULL);
-    if (c->profile.distance) {
-        snprintf(err, n, "reference: hybrid MPC tracks a speed-time profile, got a "
-                 "'distance' one");
-        return fail(c, NULL);
-    }
+    double r_increment = v[ATO_VR_dR];
     /* ExplicitMpc.__init__, in its order: the evaluation, eq. 11's weight, the mode */
     const char* evaluation = s[ATO_VR_evaluation];
     if (strcmp(evaluation, "explicit") != 0 && strcmp(evaluation, "online") != 0) {
