@@ -624,7 +624,10 @@ def optimal(
     ds: Annotated[float, typer.Option(help="position step of the optimiser (m)")] = 50.0,
     speeds: Annotated[int, typer.Option(help="speed nodes of the optimiser")] = 600,
 ) -> None:
-    """Energy-optimal speed profile (Pontryagin regimes) for a line, train and schedule."""
+    """Write the energy-optimal speed profile of a run.
+
+    The profile is for a line, train and running time, by the regimes of optimal train control
+    (Pontryagin's maximum principle)."""
     from cosim.optimal import output
     from cosim.optimal.lines import load_line
     from cosim.optimal.model import Section, Train
