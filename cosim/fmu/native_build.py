@@ -19,6 +19,12 @@ mingw-w64 cross compiler ``x86_64-w64-mingw32-gcc`` is installed, and ``sources/
 files, the generated header, the FMI 2 headers and ``buildDescription.xml``) so any tool can
 compile it. Native FMUs are built to ``fmus/native/<id>.fmu`` (``cosim build --native``).
 
+Builds are deterministic and cached: the GUID is derived from the FMU's sources (the same
+sources give the same GUID, a changed file a new one), and the compiled binaries are kept in
+the user cache (``$ATO_COSIM_CACHE`` or ``$XDG_CACHE_HOME/ato-cosim``, folder ``native``;
+``ATO_COSIM_CACHE=off`` disables it) under the SHA-256 of every file in ``sources/`` and the
+compilers' ``--version`` and flags, so a rebuild of unchanged sources links nothing anew.
+
 Compiled with ``-std=c99 -ffp-contract=off`` (no fused multiply-add, no fast math), so the C
 model performs the core's IEEE operations in the core's order (libm calls: ``exp``, and
 ``pow`` in the freight brake cylinders; ``sqrt``, correctly rounded, in the controllers;
@@ -28,6 +34,9 @@ exponential).
 
 from __future__ import annotations
 
+import fcntl
+import functools
+import hashlib
 import importlib
 import math
 import os
@@ -36,6 +45,7 @@ import shutil
 import struct
 import subprocess
 import tempfile
+import threading
 import uuid
 import zipfile
 from dataclasses import dataclass, replace
@@ -45,6 +55,7 @@ from xml.etree.ElementTree import Element, SubElement, indent, tostring
 import numpy as np
 
 from cosim.fmu.build import FMU_DIR, bundled_files, catalog
+from cosim.fmu.disk_cache import cache_root
 from cosim.fmu.native_solvers import solver_files
 
 HERE = Path(__file__).resolve().parent
@@ -227,13 +238,15 @@ def decl_header(identifier: str, variables, guid: str, options: dict | None = No
 
 def model_description(identifier: str, slave_class, sources: list[str], guid: str) -> bytes:
     """The Python wrapper's modelDescription (FMI 2.0) with this FMU's identifier, GUID and
-    sources, and ``needsExecutionTool="false"``."""
+    sources, ``needsExecutionTool="false"`` and no ``generationDateAndTime`` (a build is a
+    function of its sources)."""
     with tempfile.TemporaryDirectory() as tmp:
         slave = slave_class(instance_name="native_build", resources=tmp)
         root: Element = slave.to_xml()
     root.set("modelName", identifier)
     root.set("guid", guid)
     root.set("generationTool", "ato-cosim native_build (C)")
+    root.attrib.pop("generationDateAndTime", None)  # same sources, same file (and GUID)
     cosim = root.find("CoSimulation")
     cosim.set("modelIdentifier", identifier)
     cosim.set("needsExecutionTool", "false")  # a binary of its own, no Python (pythonfmu: true)
@@ -828,6 +841,82 @@ def compile_binary(cc: str, src_dir: Path, out: Path, windows: bool) -> None:
         raise RuntimeError(f"{cc} failed on {out.name}:\n{done.stderr.strip()[-3000:]}")
 
 
+GUID_PLACEHOLDER = "{00000000-0000-4000-8000-000000000000}"  # replaced by the sources' GUID
+
+
+def _tree_digest(root: Path, skip: str = "binaries") -> bytes:
+    """SHA-256 of every file under ``root`` (relative POSIX path and bytes, in sorted order),
+    the folder ``skip`` left out."""
+    h = hashlib.sha256()
+    for f in sorted(p for p in root.rglob("*") if p.is_file()):
+        rel = f.relative_to(root).as_posix()
+        if rel.split("/")[0] == skip:
+            continue
+        data = f.read_bytes()
+        h.update(f"{rel}\0{len(data)}\0".encode())
+        h.update(data)
+    return h.digest()
+
+
+def _stamp_guid(root: Path, files: list[Path]) -> str:
+    """Replace :data:`GUID_PLACEHOLDER` in ``files`` by the GUID derived from the tree's
+    digest (:func:`_tree_digest` with the placeholder in place): a UUID version 4 layout of
+    its first 16 bytes. Returns the GUID."""
+    guid = "{" + str(uuid.UUID(bytes=_tree_digest(root)[:16], version=4)) + "}"
+    for f in files:
+        f.write_bytes(f.read_bytes().replace(GUID_PLACEHOLDER.encode(), guid.encode()))
+    return guid
+
+
+@functools.cache
+def _compiler_identity(cc: str) -> str:
+    """The compiler's path and ``--version`` text (a part of the build cache's key)."""
+    done = subprocess.run([cc, "--version"], capture_output=True, text=True)
+    return f"{cc}\n{done.stdout}"
+
+
+def _compile_cached(root: Path, jobs: list[tuple[str, Path, Path, bool]]) -> None:
+    """:func:`_compile_side_by_side` of ``jobs`` (each output under ``root``), or their
+    outputs from the build cache (``<cache>/native/<key>/``) when the same sources (every file
+    under ``root`` but ``binaries/``) were compiled by the same compilers with the same flags
+    before. A new result is stored in a staged folder renamed into place, so concurrent
+    builds never see a partial entry, and a lock file per key makes a second build of the
+    same sources wait for the first instead of compiling again; an unwritable cache only
+    skips the cache."""
+    base = cache_root()
+    h = hashlib.sha256(_tree_digest(root))
+    for cc, _src, out, windows in jobs:
+        h.update(f"{_compiler_identity(cc)}\0{out.relative_to(root).as_posix()}\0"
+                 f"{windows}\0{' '.join(CC_FLAGS)}\0".encode())
+    outputs = [out.relative_to(root) for _cc, _src, out, _windows in jobs]
+    if base is None:
+        _compile_side_by_side(jobs)
+        return
+    entry = base / "native" / h.hexdigest()
+    try:
+        entry.parent.mkdir(parents=True, exist_ok=True)
+        lock = open(entry.with_suffix(".lock"), "a")  # noqa: SIM115 - held for the build
+    except OSError:  # an unwritable cache: build without it
+        _compile_side_by_side(jobs)
+        return
+    with lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)  # one build of these sources at a time; others wait
+        if all((entry / rel).is_file() for rel in outputs):
+            for rel in outputs:
+                (root / rel).parent.mkdir(parents=True, exist_ok=True)
+                shutil.copyfile(entry / rel, root / rel)
+            return
+        _compile_side_by_side(jobs)
+        staged = entry.with_name(f".{entry.name}.{os.getpid()}.{threading.get_ident()}.tmp")
+        try:
+            for rel in outputs:
+                (staged / rel).parent.mkdir(parents=True, exist_ok=True)
+                shutil.copyfile(root / rel, staged / rel)
+            os.replace(staged, entry)
+        except OSError:  # stored by another build, or the cache is full: keep the build
+            shutil.rmtree(staged, ignore_errors=True)
+
+
 def _compile_side_by_side(jobs: list[tuple[str, Path, Path, bool]]) -> None:
     """:func:`compile_binary` of each ``(cc, src_dir, out, windows)`` job, the compilers
     running at the same time (each in its own process); creates the output folders."""
@@ -884,7 +973,7 @@ def build_native(identifier: str, dest: Path = NATIVE_FMU_DIR, windows: bool | N
             if windows:
                 raise
     slave_class = catalog()[identifier].load()
-    guid = "{" + str(uuid.uuid4()) + "}"
+    guid = GUID_PLACEHOLDER  # the sources' own GUID is stamped in once they are written
     headers = Path(fmpy.__file__).parent / "c-code"
     solvers = [solver_files(name) for name in spec.solvers]
     c_files = ["fmi2_front.c", spec.source,
@@ -945,7 +1034,9 @@ def build_native(identifier: str, dest: Path = NATIVE_FMU_DIR, windows: bool | N
                 target = root / "resources" / rel
                 target.parent.mkdir(parents=True, exist_ok=True)
                 target.write_text(content)
-        _compile_side_by_side(
+        _stamp_guid(root, [src / f"{identifier}_decl.h", root / "modelDescription.xml"])
+        _compile_cached(
+            root,
             [(cc, src, root / "binaries" / platform / f"{identifier}{suffix}", suffix == ".dll")
              for cc, platform, suffix in ((gcc, "linux64", ".so"), (mingw, "win64", ".dll"))
              if cc is not None])
@@ -1035,7 +1126,8 @@ def package_fmi3(fmi2_fmu: Path, out: Path, windows: bool | None = None) -> Path
                 entry.set("name", FMI3_FRONT)
         (src / "buildDescription.xml").write_bytes(
             b'<?xml version="1.0" encoding="UTF-8"?>\n' + tostring(described, encoding="utf-8"))
-        _compile_side_by_side(
+        _compile_cached(
+            root,
             [(cc, src, root / "binaries" / platform / f"{identifier}{suffix}", suffix == ".dll")
              for cc, platform, suffix in ((gcc, FMI3_LINUX, ".so"), (mingw, FMI3_WINDOWS, ".dll"))
              if cc is not None])
