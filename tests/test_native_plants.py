@@ -36,6 +36,7 @@ import numpy as np
 import pytest
 from fmi_state_helpers import assert_replays_from_state
 from native_helpers import build_unzipped, open_native
+from scenario_groups import one_per_fmu_pair
 
 from cosim.fmu.state import to_seconds, to_ticks
 from plants.crh3 import Crh3Train
@@ -400,7 +401,7 @@ def test_emu_closed_loop_summaries_within_the_bound(natives, scenario):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("scenario", SEED003)
+@pytest.mark.parametrize("scenario", one_per_fmu_pair(SEED003))
 def test_crh3_whole_closed_loops_are_the_same(natives, scenario):
     python = scenario_run(scenario)
     native = scenario_run(scenario, plant=natives["Crh3Train"][0])
@@ -409,7 +410,7 @@ def test_crh3_whole_closed_loops_are_the_same(natives, scenario):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("scenario", EMU_LOOPS)
+@pytest.mark.parametrize("scenario", one_per_fmu_pair(EMU_LOOPS))
 def test_emu_whole_closed_loops_within_the_bound(natives, scenario):
     """A whole shipped seed-001 / seed-004 loop with the native Emu3: every summary within
     K (1 + K h) EPS. A loop that amplifies rounding-level differences beyond any such bound

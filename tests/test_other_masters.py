@@ -1,5 +1,6 @@
 """Our FMUs under other masters: libcosim (fixed step) must match our master's Jacobi mode
-to 1e-9 on every shipped scenario; fmpy's simulate_fmu replays a plant from recorded inputs."""
+to 1e-9 on every shipped scenario (whole runs: one per pair of FMUs); fmpy's simulate_fmu
+replays a plant from recorded inputs."""
 
 from __future__ import annotations
 
@@ -7,10 +8,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from scenario_groups import one_per_fmu_pair
 
 from cosim.interop.libcosim import compare_frames, run_libcosim, simulate_single
 from cosim.run.master import run_scenario
-from cosim.run.scenario import load_scenario
+from cosim.run.scenario import SCENARIO_DIR, load_scenario
 
 SCENARIOS = sorted((Path(__file__).resolve().parent.parent / "scenarios").glob("*.toml"))
 SHORT = 40.0  # s of each scenario in the quick test; the full runs are marked slow
@@ -41,9 +43,10 @@ def test_libcosim_matches_jacobi(path, built_fmus):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("path", SCENARIOS, ids=lambda p: p.stem)
-def test_libcosim_matches_jacobi_full_run(path, built_fmus):
-    sc, ours, theirs = _ours_and_libcosim(path, None)
+@pytest.mark.parametrize("name", one_per_fmu_pair())
+def test_libcosim_matches_jacobi_full_run(name, built_fmus):
+    """Whole runs, one scenario per pair of FMUs (:mod:`scenario_groups`)."""
+    sc, ours, theirs = _ours_and_libcosim(SCENARIO_DIR / f"{name}.toml", None)
     _assert_match(sc, ours, theirs)
 
 
