@@ -1,14 +1,15 @@
 """The optimum of cosim.optimal against the convex oracle of tests/optimal_oracle.py on
 TTOBench lines and a steep test line, and against seed 003's optimal profile on its line.
 
-    TTOBENCH_DIR=path/to/ttobench python benchmarks/optimal_vs_oracle.py [--seed003]
+    python benchmarks/optimal_vs_oracle.py [--seed003]
+
+on TTOBench's instances shipped in cosim_data/ttobench (or ``$TTOBENCH_DIR``).
 
 Prints one row per line: running time, theory energy, oracle energy, their difference and the
 tolerance derived from the two grids of each method (tests/test_optimal_control.py)."""
 
 from __future__ import annotations
 
-import os
 import sys
 import time
 from pathlib import Path
@@ -78,16 +79,15 @@ def main() -> None:
           "tolerance | within | time |\n|---|---|---|---|---|---|---|---|---|", flush=True)
     compare("steep test line (-20, +15 permille), 500 t test train", STEEP, WEAK,
             stretch=1.25)
-    d = Path(os.environ.get("TTOBENCH_DIR", ROOT.parent / "shared" / "ttobench"))
-    flirt = tb.load_train(d / "trains" / "CH_Stadler_FLIRT_TPF.json")
-    ref = tb.load_track(d / "tracks" / "00_reference.json")
+    flirt = tb.load_train(tb.instance("trains", "CH_Stadler_FLIRT_TPF"))
+    ref = tb.load_track(tb.instance("tracks", "00_reference"))
     compare("00_reference stop 0-1, FLIRT TPF", ref.section(0, 1), flirt)
-    cn = tb.load_track(d / "tracks" / "CN_Songjiazhuang_Yizhuang.json")
-    subway = tb.load_train(d / "trains" / "CN_Beijing_Subway.json")
+    cn = tb.load_track(tb.instance("tracks", "CN_Songjiazhuang_Yizhuang"))
+    subway = tb.load_train(tb.instance("trains", "CN_Beijing_Subway"))
     compare("CN_Songjiazhuang_Yizhuang stop 0-1, Beijing Subway", cn.section(0, 1), subway)
-    sg = tb.load_track(d / "tracks" / "CH_StGallen_Wil.json")
-    kiss = tb.load_train(d / "trains" / "CH_Stadler_KISS_SBB.json")
-    j = tb.load_journey(d / "journeys" / "CH_StGallen_Wil_Journey_01.json").sections[0]
+    sg = tb.load_track(tb.instance("tracks", "CH_StGallen_Wil"))
+    kiss = tb.load_train(tb.instance("trains", "CH_Stadler_KISS_SBB"))
+    j = tb.load_journey(tb.instance("journeys", "CH_StGallen_Wil_Journey_01")).sections[0]
     compare("CH_StGallen_Wil journey 01 section 0, KISS SBB",
             Section(sg.route, j.departure.position, j.arrival.position), kiss,
             T=j.running_time())

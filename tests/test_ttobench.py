@@ -1,12 +1,11 @@
 """TTOBench JSON (cosim.optimal.ttobench): tracks, trains and journeys written here in the
-format of its READMEs, converted to SI; the real instances where ../shared/ttobench exists;
-``cosim optimal`` on a small line."""
+format of its READMEs, converted to SI; the real instances shipped in cosim_data/ttobench
+(or ``$TTOBENCH_DIR``); ``cosim optimal`` on a small line."""
 
 from __future__ import annotations
 
 import json
 import math
-import os
 from pathlib import Path
 
 import numpy as np
@@ -18,9 +17,6 @@ from cosim.optimal import ttobench as tb
 from cosim.optimal.model import Section
 from cosim.optimal.pontryagin import Grid, SectionSolver
 
-# the lead's copy beside the repository (../shared/ttobench), or TTOBENCH_DIR
-SHARED = Path(os.environ.get("TTOBENCH_DIR",
-                             Path(__file__).resolve().parents[1].parent / "shared" / "ttobench"))
 META = {"id": "x", "library version": "TTOBench v1.5"}
 
 
@@ -153,27 +149,34 @@ def test_cosim_optimal_writes_the_profile_and_figure(tmp_path: Path) -> None:
     assert ref.run_time() <= 140.0 + 1e-6
 
 
-@pytest.mark.skipif(not SHARED.is_dir(), reason=f"no TTOBench copy at {SHARED} (the lead's "
-                    "steering repository carries it under shared/ttobench)")
 def test_every_real_instance_loads() -> None:
-    tracks = sorted((SHARED / "tracks").glob("*.json"))
-    trains = sorted((SHARED / "trains").glob("*.json"))
-    assert tracks and trains
+    tracks = sorted((tb.DATA / "tracks").glob("*.json"))
+    trains = sorted((tb.DATA / "trains").glob("*.json"))
+    journeys = sorted((tb.DATA / "journeys").glob("*.json"))
+    assert len(tracks) >= 3 and len(trains) >= 3 and journeys
+    assert (tb.DATA / "LICENSE").read_text().startswith("BSD 2-Clause License")
     for path in tracks:
         t = tb.load_track(path)
         assert t.route.length_m == t.stops[-1] > 0
     for path in trains:
         tr = tb.load_train(path)
         assert tr.mass > 0 and tr.davis.force(20.0) > 0
-    for path in sorted((SHARED / "journeys").glob("*.json")):
+    for path in journeys:
         j = tb.load_journey(path)
         assert all(s.running_time() > 0 for s in j.sections)
 
 
-@pytest.mark.skipif(not SHARED.is_dir(), reason=f"no TTOBench copy at {SHARED}")
+def test_an_unknown_instance_names_those_there_are() -> None:
+    assert tb.instance("tracks", "00_reference").is_file()
+    with pytest.raises(FileNotFoundError, match="00_reference"):
+        tb.instance("tracks", "no_such_line")
+    with pytest.raises(ValueError, match="kind"):
+        tb.instance("track", "00_reference")
+
+
 def test_the_reference_track_with_a_real_train() -> None:
-    track = tb.load_track(SHARED / "tracks" / "00_reference.json")
-    train = tb.load_train(SHARED / "trains" / "CH_Stadler_FLIRT_TPF.json")
+    track = tb.load_track(tb.instance("tracks", "00_reference"))
+    train = tb.load_train(tb.instance("trains", "CH_Stadler_FLIRT_TPF"))
     solver = SectionSolver(track.section(0, 1), train, Grid(100.0, 300))
     fastest = solver.fastest()
     run = solver.for_time(1.1 * fastest.running_time)

@@ -25,7 +25,9 @@ from __future__ import annotations
 
 import json
 import math
+import os
 from dataclasses import dataclass
+from importlib import resources
 from pathlib import Path
 from typing import Any
 
@@ -34,6 +36,24 @@ import numpy as np
 from cosim.optimal.model import Section, Train
 from plants.resistance import Davis
 from plants.route import Route, StepProfile
+
+#: TTOBench's instances shipped in package ``cosim_data`` (cosim_data/ttobench/README.md:
+#: source commit, BSD-2 licence, citation), or the copy at ``$TTOBENCH_DIR`` (same layout:
+#: tracks/, trains/, journeys/).
+DATA = Path(os.environ.get("TTOBENCH_DIR", str(resources.files("cosim_data") / "ttobench")))
+
+
+def instance(kind: str, name: str) -> Path:
+    """The JSON file of a TTOBench instance: ``kind`` tracks, trains or journeys, ``name``
+    without ``.json`` (e.g. ``instance("tracks", "00_reference")``)."""
+    if kind not in ("tracks", "trains", "journeys"):
+        raise ValueError(f"TTOBench kind {kind!r}: tracks, trains or journeys")
+    path = DATA / kind / f"{name}.json"
+    if not path.is_file():
+        have = sorted(p.stem for p in (DATA / kind).glob("*.json"))
+        raise FileNotFoundError(f"no TTOBench {kind[:-1]} {name!r} in {DATA} (have: {have})")
+    return path
+
 
 _UNITS = {"m": 1.0, "km": 1e3, "kg": 1.0, "t": 1e3, "W": 1.0, "kW": 1e3, "MW": 1e6,
           "N": 1.0, "kN": 1e3, "m/s": 1.0, "km/h": 1.0 / 3.6, "m/s^2": 1.0, "%": 0.01,
