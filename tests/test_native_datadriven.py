@@ -405,10 +405,12 @@ class Twins:
         self.py.do_step(t, h)
 
 
-def compare_samples(natives, ident: str, stop_time: float) -> tuple[int, int]:
-    """Every sample of the shipped scenario up to ``stop_time`` from the same state
-    (module docstring); returns (compared, skipped near the cutoff, the sum over the samples
-    of the largest force bound, N)."""
+def compare_samples(natives, ident: str, stop_time: float, stride: int = 1
+                    ) -> tuple[int, int, float]:
+    """Every ``stride``-th sample of the shipped scenario up to ``stop_time`` from the same
+    state (module docstring; both twins step and synchronise at every sample); returns
+    (compared, skipped near the cutoff, the sum over the compared samples of the largest
+    force bound)."""
     times, values = recorded_inputs(SCENARIOS[ident], stop_time)
     twins = Twins(natives, ident)
     rng = np.random.default_rng(29)
@@ -419,6 +421,11 @@ def compare_samples(natives, ident: str, stop_time: float) -> tuple[int, int]:
         t, h = float(times[k]), float(times[k + 1] - times[k])
         inputs = dict(zip(INPUTS, (float(x) for x in values[k])))
         core = twins.py.core
+        if core is not None and k % stride:  # not compared: both twins step from one state
+            twins.sync_native()
+            twins.set_inputs(values[k])
+            twins.step(t, h)
+            continue
         if core is not None:
             twins.sync_native()
             probe = probe or copy.deepcopy(core)
@@ -463,15 +470,22 @@ def test_native_sample_equals_python_within_rounding(natives, ident):
     assert compared >= 0.9 * SHORT_S, (compared, skipped)
 
 
+WHOLE_RUN_STRIDE = 5  # every 5th sample of a whole run is compared
+
+
 @pytest.mark.slow
 @needs_gcc
 @pytest.mark.parametrize("ident", list(SCENARIOS))
 def test_native_sample_equals_python_over_the_whole_run(natives, ident):
+    """Every WHOLE_RUN_STRIDE-th sample of the whole run (the short test above compares every
+    sample of the first SHORT_S seconds): the one-sample bound's probe steps the law several
+    times per sample and is most of the cost, while the states a whole run visits (the stop,
+    the limits, the adaptive laws' late estimates) are reached with any stride."""
     from cosim.run.scenario import load_scenario
 
     stop = load_scenario(SCENARIOS[ident]).simulation.stop_time
-    compared, skipped, _ = compare_samples(natives, ident, stop)
-    assert compared >= 0.9 * stop, (compared, skipped)
+    compared, skipped, _ = compare_samples(natives, ident, stop, WHOLE_RUN_STRIDE)
+    assert compared >= 0.9 * stop / WHOLE_RUN_STRIDE, (compared, skipped)
 
 
 SHORT_LOOP_S = 30.0  # s of closed loop compared (module docstring of the loop test)
