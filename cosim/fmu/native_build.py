@@ -22,8 +22,9 @@ compile it. Native FMUs are built to ``fmus/native/<id>.fmu`` (``cosim build --n
 Builds are deterministic and cached: the GUID is derived from the FMU's sources (the same
 sources give the same GUID, a changed file a new one), and the compiled binaries are kept in
 the user cache (``$ATO_COSIM_CACHE`` or ``$XDG_CACHE_HOME/ato-cosim``, folder ``native``;
-``ATO_COSIM_CACHE=off`` disables it) under the SHA-256 of every file in ``sources/`` and the
-compilers' ``--version`` and flags, so a rebuild of unchanged sources links nothing anew.
+``ATO_COSIM_CACHE=off`` disables it) under the SHA-256 of every file of the FMU but its
+binaries, the compilers' ``--version`` and the flags, so a rebuild of unchanged sources
+compiles nothing.
 
 Compiled with ``-std=c99 -ffp-contract=off`` (no fused multiply-add, no fast math), so the C
 model performs the core's IEEE operations in the core's order (libm calls: ``exp``, and
@@ -884,14 +885,14 @@ def _compile_cached(root: Path, jobs: list[tuple[str, Path, Path, bool]]) -> Non
     same sources wait for the first instead of compiling again; an unwritable cache only
     skips the cache."""
     base = cache_root()
+    if base is None:
+        _compile_side_by_side(jobs)
+        return
     h = hashlib.sha256(_tree_digest(root))
     for cc, _src, out, windows in jobs:
         h.update(f"{_compiler_identity(cc)}\0{out.relative_to(root).as_posix()}\0"
                  f"{windows}\0{' '.join(CC_FLAGS)}\0".encode())
     outputs = [out.relative_to(root) for _cc, _src, out, _windows in jobs]
-    if base is None:
-        _compile_side_by_side(jobs)
-        return
     entry = base / "native" / h.hexdigest()
     try:
         entry.parent.mkdir(parents=True, exist_ok=True)
