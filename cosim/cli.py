@@ -569,15 +569,19 @@ def reproduce(
         "cluster of --workers processes")] = None,
     plot_format: Annotated[str, typer.Option(
         "--format", help="figure file format: png (200 dpi), svg or pdf")] = "png",
+    redraw: Annotated[bool, typer.Option(
+        "--redraw", help="no simulation: tables, claims and figures again from the "
+        "folder's record (seconds)")] = False,
 ) -> None:
     """Reproduce a paper's results and test its claims.
 
-    Runs its scenarios, writes the table (ours beside the paper's), the sweeps and the
-    figures, and tests its claims over K seeds (claims.csv, claims.md: median [95 % CI],
-    k of K, verdict); 'all' writes one REPRODUCTION.md."""
+    Runs its scenarios, keeps what they produced (record/), writes the table (ours beside the
+    paper's), the sweeps and the figures, and tests its claims over K seeds (claims.csv,
+    claims.md: median [95 % CI], k of K, verdict); 'all' writes one REPRODUCTION.md. With
+    --redraw everything after the simulations is made again from the record."""
     from cosim.run import interrupt, runner
     from cosim.run.master import SimulationError
-    from cosim.run.reproduce import ReproduceError, entry_names, reproduce_all
+    from cosim.run.reproduce import ReproduceError, entry_names, redraw_entry, reproduce_all
     from cosim.run.reproduce import reproduce as reproduce_entry
     from cosim.run.results import PLOT_FORMATS, OutputError, check_destination
     from cosim.run.scenario import ScenarioError
@@ -588,7 +592,12 @@ def reproduce(
         runner.check_workers(workers, scheduler)
         if out_dir is not None:
             check_destination(out_dir)
-        if name == "all":
+        if redraw:
+            names = entry_names() if name == "all" else [name]
+            for each in names:
+                path = redraw_entry(each, out_dir if name != "all" or out_dir is None
+                                    else out_dir / each, plot_format)
+        elif name == "all":
             path = reproduce_all(out_dir, workers, seeds, not no_rounding, scheduler,
                                  plot_format)
         else:

@@ -39,6 +39,8 @@ from cosim.run.claims import (
     verdict,
     with_rounding,
 )
+from cosim.run.record import Job as RecordJob
+from cosim.run.record import Record, series_name
 
 Job = tuple[tuple[str, str, int, bool], str, dict[str, Any]]  # (run, ensemble, i, rounding)
 
@@ -155,17 +157,14 @@ def member_dir(out: Path, key: tuple[str, str, int, bool]) -> Path:
     return out / "ensemble" / slug(key[0]) / f"{key[1]}_{key[2] + 1:02d}"
 
 
-def draw_ensemble_figure(spec: dict[str, Any], dirs: dict[str, list[Path]], path: Path,
+def draw_ensemble_figure(spec: dict[str, Any], frames: dict[str, list[Any]], path: Path,
                          scenarios: dict[str, Any] | None = None) -> None:
-    """:func:`ensemble_figure_of` the members' results.csv, saved to ``path`` (png at 200
-    dpi, svg or pdf by its suffix)."""
+    """:func:`ensemble_figure_of` the members' recorded series (run name -> one frame per
+    member), saved to ``path`` (png at 200 dpi, svg or pdf by its suffix)."""
     import matplotlib.pyplot as plt
-    import pandas as pd
 
     from cosim.run.results import PLOT_DPI
 
-    frames = {name: [pd.read_csv(d / "results.csv") for d in members_]
-              for name, members_ in dirs.items()}
     fig = ensemble_figure_of(spec, frames, scenarios or {})
     fig.savefig(path, dpi=PLOT_DPI, format=Path(path).suffix.lstrip(".") or "png",
                 bbox_inches="tight")
@@ -381,31 +380,64 @@ def compact_table(rows: list[dict[str, Any]]) -> str:
     return "\n".join(lines)
 
 
-def run_claims(entry: Any, out: Path, k: int, workers: int | None = None,
-               rounding: bool = True, scheduler: str | None = None,
-               plot_format: str = "png") -> list[dict[str, Any]]:
-    """Run and evaluate the entry's claims; write ``claims.csv``, ``claims.md`` and the
-    ensemble figures (``plot_format``)."""
-    import pandas as pd
+def member_jobs(entry: Any, k: int, rounding: bool = True) -> list[RecordJob]:
+    """:func:`claim_jobs` as record jobs, with the environment each ran in (the rounding path's
+    :data:`ROUNDING_ENV` unless ``[ensemble].rounding_reference_path`` is false)."""
+    env = ROUNDING_ENV if entry.ensemble.rounding_reference_path else {}
+    return [RecordJob("member", key, scenario, overrides, dict(env) if key[3] else {})
+            for key, scenario, overrides in claim_jobs(entry, k, rounding)]
 
+
+def _banded(entry: Any) -> set[str]:
+    """Runs drawn by an overlay or panels figure: their members keep their series."""
+    return {r for f in entry.figures if f.get("kind", "overlay") in ("overlay", "panels")
+            for r in f.get("runs", [x["name"] for x in entry.runs])}
+
+
+def simulate_claims(entry: Any, out: Path, record: Record, workers: int | None = None,
+                    scheduler: str | None = None) -> None:
+    """Run the claims' members (K and rounding path of ``record``) and add their summaries to
+    ``record``, with the series of the members the ensemble figures draw."""
     from cosim.run.master import ensure_built
-    from cosim.run.reproduce import run_scenarios
+    from cosim.run.reproduce import record_series, run_scenarios
     from cosim.run.scenario import load_scenario
 
-    jobs = claim_jobs(entry, k, rounding)
+    jobs = claim_jobs(entry, record.seeds, record.rounding)
     built: set[str] = set()
     for _key, scenario, overrides in jobs:  # bad overrides fail before anything runs
         sc = load_scenario(scenario, overrides)
         if scenario not in built:
             ensure_built(sc)
             built.add(scenario)
-    # the members of overlay figures' runs keep their results (disturbance seeds, main path)
-    banded = {r for f in entry.figures if f.get("kind", "overlay") in ("overlay", "panels")
-              for r in f.get("runs", [x["name"] for x in entry.runs])}
+    banded = _banded(entry)
     dirs = {key: str(member_dir(out, key)) for key, _sc, _ov in jobs
             if key[0] in banded and key[1] == "disturbance" and not key[3]}
     summaries = execute(jobs, workers, f"{entry.name} claims", scheduler, dirs,
                         entry.ensemble.rounding_reference_path)
+    for job in member_jobs(entry, record.seeds, record.rounding):
+        record.add(job, summaries.get(job.key))
+    scenarios = run_scenarios(entry)
+    specs = [f for f in entry.figures if f.get("kind", "overlay") in ("overlay", "panels")]
+    for key in dirs:
+        if summaries.get(key) is not None:
+            record_series(record, series_name("member", key[0], key[2]),
+                          member_dir(out, key),
+                          [f for f in specs if key[0] in f.get("runs", [key[0]])],
+                          scenarios[key[0]])
+
+
+def write_claims(entry: Any, record: Record, out: Path, plot_format: str = "png"
+                 ) -> list[dict[str, Any]]:
+    """Evaluate the entry's claims on ``record``'s members; write ``claims.csv``,
+    ``claims.md`` (and ``variants.*``) and the ensemble figures (``plot_format``) to ``out``.
+    """
+    import pandas as pd
+
+    from cosim.run.reproduce import run_scenarios
+
+    k, rounding = record.seeds, record.rounding
+    summaries = {job.key: record.results[ident] for ident, job in record.jobs.items()
+                 if job.kind == "member"}
     rows = evaluate(entry, summaries, k, rounding)
     out.mkdir(parents=True, exist_ok=True)
     n = len(members(entry, "disturbance", k))
@@ -413,11 +445,9 @@ def run_claims(entry: Any, out: Path, k: int, workers: int | None = None,
         if spec.get("kind", "overlay") not in ("overlay", "panels"):
             continue
         runs = [r for r in spec.get("runs", [x["name"] for x in entry.runs])
-                if all((r, "disturbance", i, False) in dirs
-                       and summaries.get((r, "disturbance", i, False)) is not None
-                       for i in range(n))]
+                if all(series_name("member", r, i) in record.series for i in range(n))]
         if runs:
-            draw_ensemble_figure(spec, {r: [member_dir(out, (r, "disturbance", i, False))
+            draw_ensemble_figure(spec, {r: [record.series[series_name("member", r, i)]
                                             for i in range(n)] for r in runs},
                                  out / f"{Path(spec['file']).stem}_ensemble.{plot_format}",
                                  run_scenarios(entry))

@@ -1,5 +1,5 @@
 """What a reproduction's figures depend on, as one digest (so a generated page knows when it is
-stale).
+stale), and what its simulations depend on, as another (so a record knows when it is).
 
 The inputs of entry ``scenarios/reproduce/NAME.toml`` are: the entry itself; every scenario it
 names (a string value equal to a file stem in ``scenarios/``); the files bundled into every FMU
@@ -8,6 +8,13 @@ those scenarios and the entry name (a string equal to a catalog identifier:
 and the code that runs and evaluates them (``cosim/run/``, ``cosim/papers/``), leaving out the
 pages' own writer. :func:`entry_digest` is a SHA-256 over their relative paths and contents, so
 it is the same on every machine for the same tree.
+
+The *simulation* inputs (:func:`simulation_digest`) are the same files less the entry and the
+modules that only turn a record into tables, claims, figures and pages (:data:`EVALUATION_ONLY`):
+what fixes a simulation's result given its job (scenario and overrides, which the record keeps
+and :func:`cosim.run.record.check_jobs` compares). A record whose simulation digest is the
+tree's serves the page whatever changed in the entry or the evaluation code: the page is then
+redrawn from it in seconds (``cosim docs``) instead of rerunning the simulations.
 """
 
 from __future__ import annotations
@@ -29,6 +36,9 @@ ENTRIES = SCENARIOS / "reproduce"
 EVALUATION = ("cosim/run", "cosim/papers")
 INPUTS_FILE = "inputs.sha256"  # in a reproduction's folder: the digest of the inputs it ran
 NOT_INPUTS = {"cosim/run/docs_pages.py", "cosim/run/provenance.py"}
+# read a record and the entry only: tables, claims, figures, the page
+EVALUATION_ONLY = {"cosim/run/reproduce.py", "cosim/run/ensemble.py", "cosim/run/claims.py",
+                   "cosim/run/record.py", "cosim/run/console.py"}
 
 
 def _strings(value: Any) -> Iterator[str]:
@@ -67,10 +77,26 @@ def entry_inputs(name: str) -> list[Path]:
     return sorted(files)
 
 
+def simulation_inputs(name: str) -> list[Path]:
+    """:func:`entry_inputs` less the entry itself and :data:`EVALUATION_ONLY`."""
+    entry = ENTRIES / f"{name}.toml"
+    return [p for p in entry_inputs(name)
+            if p != entry and p.relative_to(ROOT).as_posix() not in EVALUATION_ONLY]
+
+
 def entry_digest(name: str) -> str:
     """SHA-256 over the relative paths and contents of :func:`entry_inputs`."""
+    return _digest(entry_inputs(name))
+
+
+def simulation_digest(name: str) -> str:
+    """SHA-256 over the relative paths and contents of :func:`simulation_inputs`."""
+    return _digest(simulation_inputs(name))
+
+
+def _digest(paths: list[Path]) -> str:
     h = hashlib.sha256()
-    for path in entry_inputs(name):
+    for path in paths:
         h.update(path.relative_to(ROOT).as_posix().encode() + b"\0")
         h.update(path.read_bytes())
         h.update(b"\0")

@@ -141,7 +141,8 @@ from cosim.run.claims import (
     check_variants,
     ratio_ci,
 )
-from cosim.run.provenance import INPUTS_FILE, entry_digest
+from cosim.run.provenance import INPUTS_FILE, entry_digest, simulation_digest
+from cosim.run.record import Job, Record, RecordError, check_jobs, load, save, series_name
 from cosim.run.results import PLOT_DPI
 from cosim.run.scenario import SCENARIO_DIR
 
@@ -389,14 +390,26 @@ def repeat_spread(summary: dict[str, Any], key: str) -> tuple[float, float, int]
     return float(min(vals)), float(max(vals)), len(vals)
 
 
+def run_jobs(entry: Entry) -> list[Job]:
+    """The table runs' simulations: one job per run and repetition."""
+    return [Job("run", (run["name"], k), run["scenario"], dict(run.get("set", {})))
+            for run in entry.runs for k in range(int(run.get("repeat", 1)))]
+
+
+def sweep_jobs(entry: Entry) -> list[Job]:
+    """One job per ``[[sweeps]]`` entry (its scenarios and grid)."""
+    return [Job("sweep", (sweep["name"],), list(sweep["scenarios"]), dict(sweep["grid"]))
+            for sweep in entry.sweeps]
+
+
 def run_entry(entry: Entry, out_dir: Path, workers: int | None = None,
-              scheduler: str | None = None, plot_format: str = "png"
-              ) -> dict[str, dict[str, Any]]:
+              scheduler: str | None = None, plot_format: str = "png",
+              record: Record | None = None) -> dict[str, dict[str, Any]]:
     """Run every run of ``entry`` with :func:`cosim.run.runner.run_tasks` (``workers``
     processes or the Dask ``scheduler``; a run with ``repeat = k`` k times, repetitions 2..
     under ``runs/<run>/repeat_NN``); returns run name -> summary (medians and ``repeats`` for
-    a repeated run). A failed run raises :class:`ReproduceError` naming it, after the others
-    finished."""
+    a repeated run), each repetition's summary added to ``record``. A failed run raises
+    :class:`ReproduceError` naming it, after the others finished."""
     from cosim.run import runner
     from cosim.run.master import ensure_built
     from cosim.run.scenario import load_scenario
@@ -404,14 +417,14 @@ def run_entry(entry: Entry, out_dir: Path, workers: int | None = None,
 
     for run in entry.runs:  # bad overrides fail here, before anything runs; build once
         ensure_built(load_scenario(run["scenario"], run.get("set", {})))
+    jobs = run_jobs(entry)
     tasks = []
-    for run in entry.runs:
-        base = out_dir / "runs" / slug(run["name"])
-        for k in range(int(run.get("repeat", 1))):
-            out = base if k == 0 else base / f"repeat_{k + 1:02d}"
-            tasks.append(runner.Task((run["name"], k), _run_one,
-                                     (run["scenario"], dict(run.get("set", {})), str(out),
-                                      plot_format)))
+    for job in jobs:
+        name, k = job.key
+        base = out_dir / "runs" / slug(name)
+        out = base if k == 0 else base / f"repeat_{k + 1:02d}"
+        tasks.append(runner.Task(job.key, _run_one,
+                                 (job.scenario, dict(job.overrides), str(out), plot_format)))
     done: dict[Any, dict[str, Any]] = {}
     errors: list[tuple[Any, BaseException]] = []
     runner.run_tasks(tasks, lambda t, summary: done.__setitem__(t.key, summary),
@@ -423,6 +436,16 @@ def run_entry(entry: Entry, out_dir: Path, workers: int | None = None,
         raise ReproduceError(f"{entry.path}: run {name!r}"
                              + (f" (repetition {k + 1})" if k else "") + f" failed: {err}"
                              ) from err
+    if record is not None:
+        for job in jobs:
+            record.add(job, done[job.key])
+    return merged_summaries(entry, {key: done[key] for key in done})
+
+
+def merged_summaries(entry: Entry, done: dict[Any, dict[str, Any]]
+                     ) -> dict[str, dict[str, Any]]:
+    """Run name -> its summary from (run name, repetition) -> summary: a repeated run's
+    medians with ``repeats`` (:func:`_merge_repeats`)."""
     result = {}
     for run in entry.runs:
         reps = [done[run["name"], k] for k in range(int(run.get("repeat", 1)))]
@@ -630,16 +653,14 @@ def table_markdown(entry: Entry, rows: list[dict[str, Any]]) -> str:
     return "\n".join(lines)
 
 
-def draw_figure(spec: dict[str, Any], run_dirs: dict[str, Path], path: Path,
+def draw_figure(spec: dict[str, Any], frames: dict[str, Any], path: Path,
                 scenarios: dict[str, Any] | None = None) -> None:
-    """:func:`figure_of` the runs' results.csv, saved to ``path`` (its suffix: png at 200
-    dpi, svg or pdf)."""
+    """:func:`figure_of` the runs' recorded series (run name -> frame), saved to ``path`` (its
+    suffix: png at 200 dpi, svg or pdf)."""
     import matplotlib.pyplot as plt
-    import pandas as pd
 
-    names = list(spec.get("runs", list(run_dirs)))
-    frames = {n: pd.read_csv(run_dirs[n] / "results.csv") for n in names}
-    fig = figure_of(spec, frames, scenarios or {})
+    names = list(spec.get("runs", list(frames)))
+    fig = figure_of(spec, {n: frames[n] for n in names}, scenarios or {})
     fig.savefig(path, dpi=PLOT_DPI, format=Path(path).suffix.lstrip(".") or "png",
                 bbox_inches="tight")
     plt.close(fig)
@@ -872,7 +893,7 @@ def speed_class_errors(frame: Any, spec: dict[str, Any]) -> list[dict[str, Any]]
     return rows
 
 
-def draw_speed_classes(spec: dict[str, Any], run_dirs: dict[str, Path], path: Path) -> str:
+def draw_speed_classes(spec: dict[str, Any], frames: dict[str, Any], path: Path) -> str:
     """Grouped bars of :func:`speed_class_errors` per run with each class's limit; writes
     ``<file>.csv`` beside the figure and returns the markdown table."""
     import matplotlib
@@ -882,9 +903,8 @@ def draw_speed_classes(spec: dict[str, Any], run_dirs: dict[str, Path], path: Pa
     import numpy as np
     import pandas as pd
 
-    names = list(spec.get("runs", list(run_dirs)))
-    per_run = {n: speed_class_errors(pd.read_csv(run_dirs[n] / "results.csv"), spec)
-               for n in names}
+    names = list(spec.get("runs", list(frames)))
+    per_run = {n: speed_class_errors(frames[n], spec) for n in names}
     classes = [r["class"] for r in per_run[names[0]]]
     limits = [next((per_run[n][k]["limit"] for n in names if per_run[n][k]["limit"]
                     is not None), None) for k in range(len(classes))]
@@ -928,27 +948,121 @@ def draw_speed_classes(spec: dict[str, Any], run_dirs: dict[str, Path], path: Pa
     return "\n".join(lines)
 
 
-def reproduce(name: str, out_dir: str | Path | None = None, workers: int | None = None,
-              seeds: int | None = None, rounding: bool = True, scheduler: str | None = None,
-              plot_format: str = "png", echo: bool = True) -> Path:
-    """Run one entry; write table.md/table.csv (``entry.table``), sweeps and figures (in
-    ``plot_format``: png at 200 dpi, svg or pdf), and with claims claims.csv/claims.md over
-    ``seeds`` members (default 20; :mod:`cosim.run.ensemble`, ``rounding``: also the perturbed
-    floating-point rerun); every batch of runs goes through :mod:`cosim.run.runner`
-    (``workers``, ``scheduler``). With ``echo`` the tables are printed in 80 columns
-    (:func:`console_text`). Returns the table's markdown file."""
+def figure_columns(spec: dict[str, Any], scenario: Any, columns: list[str]) -> set[str]:
+    """The recorded columns a ``[[figures]]`` entry reads from one run's results (of
+    ``columns``): time, x, the y columns (patterns expanded), ``y_minus``, ``limit_ref``,
+    ``ref`` and the position behind a stopping-curve reference (:func:`reference_curve`)."""
     import pandas as pd
 
-    from cosim.run.ensemble import run_claims
+    from cosim.run.metrics import matching_columns
+
+    empty = pd.DataFrame(columns=columns)
+    ys = spec["y"] if isinstance(spec["y"], list) else [spec["y"]]
+    wanted = {"time", spec.get("x", "time"), spec.get("y_minus"), spec.get("limit_ref"),
+              spec.get("ref"), (getattr(scenario, "summary", {}) or {}).get("position")}
+    for y in ys:
+        wanted.update(matching_columns(empty, y) if "y_reduce" in spec else [y])
+    return {c for c in wanted if c in columns}
+
+
+def record_series(record: Record, name: str, folder: Path, specs: list[dict[str, Any]],
+                  scenario: Any) -> None:
+    """Keep of ``folder/results.csv`` as series ``name``: the columns ``specs`` read and every
+    column of one value per train (no ``[i]`` index: the per-vehicle and per-unit columns,
+    most of a freight train's file, only where a figure reads them)."""
+    import pandas as pd
+
+    path = folder / "results.csv"
+    columns = list(pd.read_csv(path, nrows=0).columns)
+    keep = set().union({c for c in columns if "[" not in c},
+                       *(figure_columns(spec, scenario, columns) for spec in specs))
+    frame = pd.read_csv(path, usecols=[c for c in columns if c in keep],
+                        float_precision="round_trip")
+    record.series[name] = frame
+
+
+def _figure_runs(entry: Entry, kinds: tuple[str, ...]) -> dict[str, list[dict[str, Any]]]:
+    """Run name -> the ``[[figures]]`` of ``kinds`` that draw it."""
+    out: dict[str, list[dict[str, Any]]] = {}
+    for spec in entry.figures:
+        if spec.get("kind", "overlay") in kinds:
+            for run in spec.get("runs", [r["name"] for r in entry.runs]):
+                out.setdefault(run, []).append(spec)
+    return out
+
+
+def simulate(entry: Entry, out: Path, workers: int | None = None, seeds: int | None = None,
+             rounding: bool = True, scheduler: str | None = None, plot_format: str = "png"
+             ) -> Record:
+    """Every simulation ``entry`` needs (its runs, sweeps and claims' members), through
+    :mod:`cosim.run.runner`; the record of their results and of the series the figures draw.
+    """
+    from cosim.run.ensemble import simulate_claims
     from cosim.run.sweep import parse_grid, run_sweep
 
-    entry = load_entry(name)
-    out = Path(out_dir) if out_dir is not None else Path("runs") / "reproduce" / entry.name
+    k = claims_k(entry, seeds)
+    digest = simulation_digest(entry.name) if entry.path.parent == REPRODUCE_DIR else ""
+    record = Record(entry.name, digest, k, rounding)
+    run_entry(entry, out, workers, scheduler, plot_format, record)
+    scenarios = run_scenarios(entry)
+    for name, specs in _figure_runs(entry, FIGURE_KINDS).items():
+        record_series(record, series_name("run", name), out / "runs" / slug(name), specs,
+                      scenarios[name])
+    for job in sweep_jobs(entry):
+        grid = parse_grid(f"{k}={v}" for k, v in job.overrides.items())
+        frame = run_sweep(job.scenario, grid, out / slug(job.key[0]), workers=workers,
+                          scheduler=scheduler, plot=False)
+        record.add(job, {"columns": list(frame.columns),
+                         "rows": [[_plain(v) for v in row] for row in
+                                  frame.astype(object).itertuples(index=False)]})
+    if entry.claims:
+        try:
+            simulate_claims(entry, out, record, workers, scheduler)
+        except ValueError as err:
+            raise ReproduceError(str(err)) from err
+    return record
+
+
+def _plain(value: Any) -> Any:
+    """A JSON value of a frame cell: numpy scalars as Python ones, missing as None."""
+    import pandas as pd
+
+    if value is None or (not isinstance(value, str) and pd.isna(value)):
+        return None
+    return value.item() if isinstance(value, np.generic) else value
+
+
+def claims_k(entry: Entry, seeds: int | None) -> int:
+    """K of the claims' members: ``seeds``, else 20 or all the report seeds if fewer."""
+    return seeds if seeds is not None else min(20, len(entry.ensemble.report_seeds))
+
+
+def wanted_jobs(entry: Entry, k: int, rounding: bool) -> list[Job]:
+    """Every simulation the entry's tables, sweeps and claims at ``k`` members read."""
+    from cosim.run.ensemble import member_jobs
+
+    return run_jobs(entry) + sweep_jobs(entry) + (member_jobs(entry, k, rounding)
+                                                  if entry.claims else [])
+
+
+def evaluate(entry: Entry, record: Record, out: Path, plot_format: str = "png"
+             ) -> tuple[Path, list[dict[str, Any]], list[dict[str, Any]]]:
+    """Tables, sweeps' tables and figures, figures, claims and the page of ``entry`` from
+    ``record`` alone (no simulation; :class:`cosim.run.record.RecordError` if the record
+    lacks a job the entry reads): writes ``table.md`` / ``table.csv`` (``entry.table``),
+    ``claims.*`` and the figures in ``plot_format`` to ``out``; returns the table's file,
+    its rows and the claims' rows."""
+    import pandas as pd
+
+    from cosim.run.ensemble import write_claims
+    from cosim.run.scenario import load_scenario
+    from cosim.run.sweep import key_labels, plot_sweep
+
+    check_jobs(record, wanted_jobs(entry, record.seeds, record.rounding))
     out.mkdir(parents=True, exist_ok=True)
-    inputs = out / INPUTS_FILE
-    inputs.unlink(missing_ok=True)  # a folder being rewritten vouches for no inputs
-    digest = entry_digest(entry.name) if entry.path.parent == REPRODUCE_DIR else None
-    summaries = run_entry(entry, out, workers, scheduler, plot_format)
+    summaries = merged_summaries(entry, {job.key: record.results[ident]
+                                         for ident, job in record.jobs.items()
+                                         if job.kind == "run"})
     rows = table_rows(entry, summaries)
     derived = derived_rows(entry, summaries)
     ranked = ranking_rows(entry, summaries)
@@ -960,39 +1074,85 @@ def reproduce(name: str, out_dir: str | Path | None = None, workers: int | None 
     if ranked:
         parts += ["", ranking_markdown(ranked)]
     for sweep in entry.sweeps:
-        grid = parse_grid(f"{k}={v}" for k, v in sweep["grid"].items())
+        stored = record.result("sweep", sweep["name"])
+        frame = pd.DataFrame(stored["rows"], columns=stored["columns"])
+        keys = list(sweep["grid"])
         target = out / slug(sweep["name"])
-        frame = run_sweep(sweep["scenarios"], grid, target, workers=workers,
-                          scheduler=scheduler, plot_format=plot_format,
-                          series_labels=sweep.get("labels"))
-        keep = [c for c in ("scenario", *grid, "stop_error_m", "controller_executions",
+        target.mkdir(parents=True, exist_ok=True)
+        frame.to_csv(target / "sweep.csv", index=False)
+        ok = frame[frame["status"] == "ok"]
+        if len(ok):
+            first = load_scenario(sweep["scenarios"][0])
+            named = {Path(p).stem: load_scenario(p).description for p in sweep["scenarios"]}
+            named = {n: v for n, v in named.items() if v} | sweep.get("labels", {})
+            plot_sweep(ok, keys, target / f"sweep.{plot_format}", key_labels(first, keys),
+                       named)
+        keep = [c for c in ("scenario", *keys, "stop_error_m", "controller_executions",
                             "command_switches", "qp_infeasible") if c in frame]
         parts += ["", f"### Sweep {sweep['name']}", "", _frame_markdown(frame[keep]), "",
                   f"![{sweep['name']}]({target.name}/sweep.{plot_format})"]
-    run_dirs = {r["name"]: out / "runs" / slug(r["name"]) for r in entry.runs}
     scenarios = run_scenarios(entry)
+    frames = {name: record.frame(series_name("run", name))
+              for name in _figure_runs(entry, FIGURE_KINDS)}
     for spec in entry.figures:
         file = figure_file(spec, plot_format)
         if spec.get("kind") == "speed_classes":
-            table_md = draw_speed_classes(spec, run_dirs, out / file)
+            table_md = draw_speed_classes(spec, frames, out / file)
             parts += ["", f"![{spec.get('title', file)}]({file})", "", table_md]
             continue
-        draw_figure(spec, run_dirs, out / file, scenarios)
+        draw_figure(spec, frames, out / file, scenarios)
         parts += ["", f"![{spec.get('title', file)}]({file})"]
     claim_rows: list[dict[str, Any]] = []
     if entry.claims:
-        k = seeds if seeds is not None else min(20, len(entry.ensemble.report_seeds))
-        try:
-            claim_rows = run_claims(entry, out, k, workers, rounding, scheduler, plot_format)
-        except ValueError as err:
-            raise ReproduceError(str(err)) from err
+        claim_rows = write_claims(entry, record, out, plot_format)
         parts += ["", "### Claims", "", (out / "claims.md").read_text().split("\n", 2)[2]]
     if entry.notes:
         parts += ["", "### Where we differ from the paper, and why", "", entry.notes.strip()]
     table = out / f"{entry.table}.md"
     table.write_text("\n".join(parts) + "\n")
-    if digest is not None:  # the inputs this folder's results come from (cosim.run.provenance)
-        inputs.write_text(digest + "\n")
+    return table, rows, claim_rows
+
+
+def reproduce(name: str, out_dir: str | Path | None = None, workers: int | None = None,
+              seeds: int | None = None, rounding: bool = True, scheduler: str | None = None,
+              plot_format: str = "png", echo: bool = True) -> Path:
+    """Run one entry (:func:`simulate`), keep its record (``record/``,
+    :mod:`cosim.run.record`) and write everything made of it (:func:`evaluate`): the tables,
+    sweeps, figures (in ``plot_format``: png at 200 dpi, svg or pdf) and, with claims,
+    claims.csv/claims.md over ``seeds`` members (default 20; :mod:`cosim.run.ensemble`,
+    ``rounding``: also the perturbed floating-point rerun); every batch of runs goes through
+    :mod:`cosim.run.runner` (``workers``, ``scheduler``). With ``echo`` the tables are printed
+    in 80 columns (:func:`console_text`). Returns the table's markdown file."""
+    entry = load_entry(name)
+    out = Path(out_dir) if out_dir is not None else Path("runs") / "reproduce" / entry.name
+    out.mkdir(parents=True, exist_ok=True)
+    inputs = out / INPUTS_FILE
+    inputs.unlink(missing_ok=True)  # a folder being rewritten vouches for no inputs
+    record = simulate(entry, out, workers, seeds, rounding, scheduler, plot_format)
+    save(record, out)
+    return redraw_entry(entry.name, out, plot_format, echo)
+
+
+def redraw_entry(name: str, out_dir: str | Path | None = None, plot_format: str = "png",
+           echo: bool = True) -> Path:
+    """Tables, figures, claims and page of entry ``name`` from the record in ``out_dir``
+    (default ``runs/reproduce/NAME``) without simulating (:func:`evaluate`); the folder's
+    ``inputs.sha256`` then names the inputs of both (:func:`cosim.run.provenance.
+    entry_digest`) when the record's simulation inputs are the tree's. Returns the table's
+    markdown file."""
+    entry = load_entry(name)
+    out = Path(out_dir) if out_dir is not None else Path("runs") / "reproduce" / entry.name
+    record = load(out)
+    if record.entry != entry.name:
+        raise ReproduceError(f"{out}: the record is of {record.entry!r}, not {entry.name!r}")
+    inputs = out / INPUTS_FILE
+    inputs.unlink(missing_ok=True)
+    try:
+        table, rows, claim_rows = evaluate(entry, record, out, plot_format)
+    except RecordError as err:
+        raise ReproduceError(str(err)) from err
+    if entry.path.parent == REPRODUCE_DIR and record.simulation == simulation_digest(name):
+        inputs.write_text(entry_digest(name) + "\n")
     if echo:
         print(console_text(entry, rows, claim_rows, out), flush=True)
     return table

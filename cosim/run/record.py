@@ -1,0 +1,166 @@
+"""What a reproduction's simulations produced, kept apart from what is made of it.
+
+A :class:`Record` holds, for one entry, every simulation job it ran with that job's complete
+specification (scenario, overrides, environment) and result (the run's ``summary.json``
+content), and the recorded series its figures draw. The tables, claims, figures and page are
+a function of the record and the entry (:mod:`cosim.run.reproduce`), so they are redrawn from
+it in seconds without simulating; :func:`check_jobs` refuses a record that lacks a job the
+entry needs or ran it with another specification.
+
+On disk (``<folder>/record/``, gzip without timestamps so the same record gives the same
+bytes): ``record.json.gz`` (the entry name, the digest of the simulation inputs
+(:func:`cosim.run.provenance.simulation_digest`), K, the rounding flag and the jobs) and one
+``series/<key>.csv.gz`` per recorded series (floats written with 17 significant digits, so
+they read back bit for bit).
+"""
+
+from __future__ import annotations
+
+import gzip
+import hashlib
+import io
+import json
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import pandas as pd
+
+RECORD_DIR = "record"
+_JOBS_FILE = "record.json.gz"
+_SERIES_DIR = "series"
+FORMAT = 1
+
+
+class RecordError(ValueError):
+    """A record that cannot serve an entry (the message says which job or file, and why)."""
+
+
+@dataclass(frozen=True)
+class Job:
+    """One simulation: ``kind`` (``run``: a table run's repetition; ``member``: a claim's
+    ensemble member; ``sweep``: a sweep), its ``key`` (run name and repetition; run, ensemble,
+    member index and rounding path; sweep name), and what fixes its result: the ``scenario``,
+    the ``overrides`` and the environment ``env`` of the process that ran it."""
+
+    kind: str
+    key: tuple[Any, ...]
+    scenario: str | list[str]
+    overrides: dict[str, Any]
+    env: dict[str, str] = field(default_factory=dict)
+
+    def spec(self) -> dict[str, Any]:
+        return {"kind": self.kind, "key": list(self.key), "scenario": self.scenario,
+                "overrides": self.overrides, "env": self.env}
+
+
+@dataclass
+class Record:
+    """The simulations of one entry: ``results`` maps each job's (kind, key) to its summary
+    (a ``sweep``: the list of its rows; a failed member: None); ``series`` maps a series name
+    (:func:`series_name`) to its recorded columns."""
+
+    entry: str
+    simulation: str  # digest of the simulation inputs the jobs ran with
+    seeds: int  # K of the claims' members
+    rounding: bool  # the claims' members ran on the perturbed floating-point path too
+    jobs: dict[tuple[Any, ...], Job] = field(default_factory=dict)
+    results: dict[tuple[Any, ...], Any] = field(default_factory=dict)
+    series: dict[str, pd.DataFrame] = field(default_factory=dict)
+
+    def add(self, job: Job, result: Any) -> None:
+        ident = (job.kind, *job.key)
+        self.jobs[ident] = job
+        self.results[ident] = result
+
+    def result(self, kind: str, *key: Any) -> Any:
+        return self.results[(kind, *key)]
+
+    def frame(self, name: str) -> pd.DataFrame:
+        try:
+            return self.series[name]
+        except KeyError:
+            raise RecordError(f"record of {self.entry}: no recorded series {name!r} (rerun "
+                              f"`cosim reproduce {self.entry}`)") from None
+
+
+def series_name(kind: str, *key: Any) -> str:
+    """The name of a recorded series: ``run/<run>`` or ``member/<run>/<i>``."""
+    return "/".join([kind, *(str(k) for k in key)])
+
+
+def _file_of(name: str) -> str:
+    stem = re.sub(r"[^a-z0-9]+", "_", name.lower()).strip("_")
+    return f"{stem}_{hashlib.sha256(name.encode()).hexdigest()[:8]}.csv.gz"
+
+
+def _gzip(data: bytes) -> bytes:
+    buf = io.BytesIO()
+    with gzip.GzipFile(fileobj=buf, mode="wb", mtime=0, filename="") as f:
+        f.write(data)
+    return buf.getvalue()
+
+
+def save(record: Record, folder: Path) -> Path:
+    """Write ``record`` to ``folder/record/`` (replacing what was there); returns that
+    folder."""
+    import shutil
+
+    target = folder / RECORD_DIR
+    staging = folder / f".{RECORD_DIR}.tmp"
+    shutil.rmtree(staging, ignore_errors=True)
+    (staging / _SERIES_DIR).mkdir(parents=True)
+    files = {}
+    for name, frame in sorted(record.series.items()):
+        files[name] = _file_of(name)
+        text = frame.to_csv(index=False, float_format="%.17g", lineterminator="\n")
+        (staging / _SERIES_DIR / files[name]).write_bytes(_gzip(text.encode()))
+    body = {"format": FORMAT, "entry": record.entry, "simulation": record.simulation,
+            "seeds": record.seeds, "rounding": record.rounding, "series": files,
+            "jobs": [{**job.spec(), "result": record.results[ident]}
+                     for ident, job in record.jobs.items()]}
+    (staging / _JOBS_FILE).write_bytes(_gzip(json.dumps(body, sort_keys=True).encode()))
+    shutil.rmtree(target, ignore_errors=True)
+    staging.replace(target)
+    return target
+
+
+def load(folder: Path) -> Record:
+    """The record in ``folder/record/`` (:class:`RecordError` naming the file if there is
+    none or it cannot be read)."""
+    path = folder / RECORD_DIR / _JOBS_FILE
+    try:
+        body = json.loads(gzip.decompress(path.read_bytes()))
+    except FileNotFoundError:
+        raise RecordError(f"{path}: no record (run `cosim reproduce` first)") from None
+    except (OSError, ValueError) as err:
+        raise RecordError(f"{path}: unreadable record ({err})") from None
+    if body.get("format") != FORMAT:
+        raise RecordError(f"{path}: record format {body.get('format')!r}, this version reads "
+                          f"{FORMAT} (rerun `cosim reproduce {body.get('entry', '')}`)")
+    rec = Record(body["entry"], body["simulation"], int(body["seeds"]), bool(body["rounding"]))
+    for item in body["jobs"]:
+        key = tuple(item["key"])
+        scenario = item["scenario"]
+        rec.add(Job(item["kind"], key, scenario if isinstance(scenario, str) else
+                    list(scenario), item["overrides"], item["env"]), item["result"])
+    for name, file in body["series"].items():
+        rec.series[name] = pd.read_csv(folder / RECORD_DIR / _SERIES_DIR / file,
+                                       float_precision="round_trip")
+    return rec
+
+
+def check_jobs(record: Record, wanted: list[Job]) -> None:
+    """:class:`RecordError` naming the first job of ``wanted`` the record does not have with
+    the same specification."""
+    for job in wanted:
+        have = record.jobs.get((job.kind, *job.key))
+        if have is None:
+            raise RecordError(f"record of {record.entry}: no {job.kind} {list(job.key)} (the "
+                              f"entry asks for more than was simulated; rerun `cosim reproduce "
+                              f"{record.entry}`)")
+        if json.dumps(have.spec(), sort_keys=True) != json.dumps(job.spec(), sort_keys=True):
+            raise RecordError(f"record of {record.entry}: {job.kind} {list(job.key)} ran as "
+                              f"{have.spec()}, the entry now asks for {job.spec()} (rerun "
+                              f"`cosim reproduce {record.entry}`)")
