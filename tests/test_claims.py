@@ -154,14 +154,9 @@ def test_ensemble_figure_draws_median_and_band(tmp_path: Path) -> None:
 
     from cosim.run.ensemble import draw_ensemble_figure
 
-    dirs = []
-    for i in range(4):
-        d = tmp_path / f"m{i}"
-        d.mkdir()
-        t = np.linspace(0.0, 10.0, 11)
-        pd.DataFrame({"time": t, "plant.v": t + i, "controller.v_ref": t}).to_csv(
-            d / "results.csv", index=False)
-        dirs.append(d)
+    t = np.linspace(0.0, 10.0, 11)
+    dirs = [pd.DataFrame({"time": t, "plant.v": t + i, "controller.v_ref": t})
+            for i in range(4)]
     spec = {"file": "f.png", "x": "time", "y": ["plant.v"], "y_minus": "controller.v_ref"}
     draw_ensemble_figure(spec, {"A": dirs}, tmp_path / "f_ensemble.png")
     assert (tmp_path / "f_ensemble.png").stat().st_size > 0
@@ -249,14 +244,9 @@ def test_panels_ensemble_figure_draws_limits(tmp_path: Path) -> None:
 
     from cosim.run.ensemble import draw_ensemble_figure
 
-    dirs = []
-    for i in range(3):
-        d = tmp_path / f"m{i}"
-        d.mkdir()
-        t = np.linspace(0.0, 10.0, 11)
-        pd.DataFrame({"time": t, "plant.v[1]": t + i, "plant.v[2]": t - i,
-                      "controller.v_ref": t}).to_csv(d / "results.csv", index=False)
-        dirs.append(d)
+    t = np.linspace(0.0, 10.0, 11)
+    dirs = [pd.DataFrame({"time": t, "plant.v[1]": t + i, "plant.v[2]": t - i,
+                          "controller.v_ref": t}) for i in range(3)]
     spec = {"file": "f.png", "kind": "panels", "x": "time", "y": ["plant.v[1]", "plant.v[2]"],
             "y_minus": "controller.v_ref", "y_scale": 3.6, "limit_ref": "controller.v_ref"}
     draw_ensemble_figure(spec, {"A": dirs, "B": dirs}, tmp_path / "f_ensemble.png")

@@ -17,6 +17,7 @@ from cosim.run.reproduce import (
     load_entry,
     ranking_markdown,
     ranking_rows,
+    redraw_entry,
     reproduce,
     speed_class_errors,
     summary_value,
@@ -229,11 +230,8 @@ def test_seed001_declares_figures_6_to_10() -> None:
 
 
 def test_speed_classes_figure_writes_table_and_csv(tmp_path: Path) -> None:
-    for name in ("a", "b"):
-        (tmp_path / name).mkdir()
-        _graded_frame().to_csv(tmp_path / name / "results.csv", index=False)
     text = draw_speed_classes({**CLASSES, "paper": "A fails at 30"},
-                              {"A": tmp_path / "a", "B": tmp_path / "b"}, tmp_path / "fig8.png")
+                              {"A": _graded_frame(), "B": _graded_frame()}, tmp_path / "fig8.png")
     assert (tmp_path / "fig8.png").stat().st_size > 10_000
     csv = pd.read_csv(tmp_path / "fig8.csv")
     assert len(csv) == 6 and set(csv.run) == {"A", "B"}
@@ -372,3 +370,63 @@ def test_wide_paper_tables_are_split_and_keep_each_metric_together() -> None:
                 given = int(c.split()[1]) % 3 == 0
                 assert (i + 1 < len(cs) and cs[i + 1] == "paper") == given
     assert sum(line.startswith("| B |") for line in text.splitlines()) == len(headers)
+
+
+CLAIMED = ENTRY + """
+[ensemble]
+seed_key = "plant.disturbance_seed"
+report_seeds = "1..3"
+calibration_seeds = "101..103"
+[[claims]]
+id = "pid_stops_in_window"
+text = "PID stops within 0.5 m"
+metric = "stop_error_m"
+kind = "below"
+runs = ["PID"]
+threshold = 0.5
+"""
+
+
+def test_redraw_makes_the_same_tables_claims_and_figures_from_the_record_alone(
+        built_fmus, tmp_path: Path, monkeypatch) -> None:
+    """Everything after the simulations is a function of the record: redrawn with every
+    simulation entry point disabled it is byte for byte what the run wrote; a changed claim
+    is re-evaluated on the recorded members; a run the record lacks is named."""
+    import cosim.run.ensemble as ensemble
+    import cosim.run.reproduce as rep
+
+    path = tmp_path / "entry.toml"
+    path.write_text(CLAIMED.replace("kind = \"overlay\"", "kind = \"overlay\"\nruns = [\"PID\"]"))
+    out = tmp_path / "out"
+    reproduce(str(path), out, workers=1, seeds=2, echo=False)
+    made = {f: (out / f).read_bytes() for f in ("table.md", "table.csv", "claims.csv",
+                                                "claims.md", "speed.png",
+                                                "speed_ensemble.png")}
+    for f in made:
+        (out / f).unlink()
+
+    def no_simulation(*args, **kwargs):
+        raise AssertionError("simulated while redrawing")
+
+    monkeypatch.setattr(rep, "_run_one", no_simulation)
+    monkeypatch.setattr(ensemble, "_run_member", no_simulation)
+    monkeypatch.setattr(rep, "simulate", no_simulation)
+    redraw_entry(str(path), out, echo=False)
+    assert {f: (out / f).read_bytes() for f in made} == made
+    path.write_text(path.read_text().replace("threshold = 0.5", "threshold = 1e-9"))
+    redraw_entry(str(path), out, echo=False)
+    claim = pd.read_csv(out / "claims.csv").iloc[0]
+    members = [m for m in json.loads(_record_json(out))["jobs"] if m["kind"] == "member"
+               and not m["key"][3]]
+    assert len(members) == 2
+    assert (claim.verdict == "holds") == all(m["result"]["stop_error_m"] < 1e-9
+                                             for m in members)
+    path.write_text(path.read_text() + '[[runs]]\nname = "new"\nscenario = "seed000_stop_pid"\n')
+    with pytest.raises(ReproduceError, match=r"no run \['new', 0\]"):
+        redraw_entry(str(path), out, echo=False)
+
+
+def _record_json(out: Path) -> str:
+    import gzip
+
+    return gzip.decompress((out / "record" / "record.json.gz").read_bytes()).decode()

@@ -17,6 +17,12 @@ evaluation code; the run writes it to ``runs/reproduce/NAME/inputs.sha256``). :f
 lists every page whose inputs have changed since, or that has no run behind it, so
 ``cosim docs --check`` fails on results the tree no longer gives.
 
+The record of the simulations (``record/``, :mod:`cosim.run.record`) is copied beside the page
+(``docs/papers/NAME/record/``). Where only the entry or the evaluation code changed (the
+record's simulation digest is the tree's, :func:`cosim.run.provenance.simulation_digest`),
+``cosim docs`` redraws the page from that record (the local run's, else the committed one) in
+seconds, without simulating (:func:`source_dir`).
+
 The CLI reference (``docs/cli.md``) is made by ``cosim.cli``, which knows the commands.
 """
 
@@ -26,10 +32,12 @@ import json
 import re
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 from cosim.fmu.build import ROOT
 from cosim.fmu.reference import REFERENCE_PATH, fmu_reference
 from cosim.run.provenance import INPUTS_FILE
+from cosim.run.record import RECORD_DIR
 
 DOCS = ROOT / "docs"
 BENCHMARKS_JSON = ROOT / "benchmarks" / "results.json"
@@ -90,13 +98,16 @@ def _table_file(run_dir: Path) -> Path | None:
 
 
 def paper_page(name: str, run_dir: Path) -> dict[Path, bytes] | None:
-    """``docs/papers/NAME.md`` and the figures it links, made from ``run_dir``
-    (``runs/reproduce/NAME``); None when the run folder holds no table."""
+    """``docs/papers/NAME.md``, the figures it links and the run's record, made from
+    ``run_dir`` (``runs/reproduce/NAME``); None when the run folder holds no table."""
     source = _table_file(run_dir)
     if source is None:
         return None
     text = source.read_text()
     files: dict[Path, bytes] = {}
+    for path in sorted((run_dir / RECORD_DIR).rglob("*")):
+        if path.is_file():
+            files[DOCS / "papers" / name / path.relative_to(run_dir)] = path.read_bytes()
 
     def relink(match: re.Match[str]) -> str:
         target = run_dir / match.group(2)
@@ -122,19 +133,73 @@ def run_digest(run_dir: Path) -> str | None:
     return path.read_text().strip() if path.is_file() else None
 
 
+def record_simulation(folder: Path) -> str | None:
+    """The simulation digest of the record in ``folder`` (None if there is none or it cannot
+    be read)."""
+    from cosim.run.record import RecordError, simulation_of
+
+    try:
+        return simulation_of(folder)
+    except RecordError:
+        return None
+
+
+def _page_digest(name: str) -> str | None:
+    page = DOCS / "papers" / f"{name}.md"
+    found = _INPUTS.search(page.read_text()) if page.is_file() else None
+    return found.group(1) if found else None
+
+
+_SCRATCH: list[Any] = []  # the temporary folder pages are redrawn into, kept while the process runs
+
+
+def source_dir(name: str, reproduce_dir: Path = REPRODUCE_DIR) -> Path | None:
+    """The folder paper ``name``'s page is made from, or None to keep the committed page: the
+    local run (``reproduce_dir/NAME``) when its inputs are the tree's; none when the committed
+    page's are; else a folder redrawn (``cosim.run.reproduce.redraw_entry``, no simulation)
+    from a record whose simulation inputs are the tree's, the local run's before the
+    committed one; else the local run if it has a table (:func:`stale_papers` names it)."""
+    import shutil
+    import tempfile
+
+    from cosim.run.provenance import entry_digest, simulation_digest
+    from cosim.run.reproduce import redraw_entry
+
+    run_dir = reproduce_dir / name
+    current = entry_digest(name)
+    if _table_file(run_dir) is not None and run_digest(run_dir) == current:
+        return run_dir
+    if _page_digest(name) == current:
+        return None
+    sim = simulation_digest(name)
+    for folder in (run_dir, DOCS / "papers" / name):
+        if record_simulation(folder) == sim:
+            if not _SCRATCH:
+                _SCRATCH.append(tempfile.TemporaryDirectory(prefix="cosim-docs-"))
+            target = Path(_SCRATCH[0].name) / name
+            shutil.rmtree(target, ignore_errors=True)
+            shutil.copytree(folder / RECORD_DIR, target / RECORD_DIR)
+            redraw_entry(name, target, echo=False)
+            return target
+    return run_dir if _table_file(run_dir) is not None else None
+
+
 def stale_papers(reproduce_dir: Path = REPRODUCE_DIR) -> list[str]:
     """One line per paper whose page (or the run it would be made from) does not come from the
     tree's current inputs, saying what to run."""
-    from cosim.run.provenance import entry_digest
+    from cosim.run.provenance import entry_digest, simulation_digest
 
     out: list[str] = []
     for name in paper_names():
         current = entry_digest(name)
         run_dir = reproduce_dir / name
+        sim = simulation_digest(name)
+        redrawable = any(record_simulation(f) == sim for f in (run_dir, DOCS / "papers" / name))
+        todo = ("run `cosim docs` (the page is redrawn from the record, no simulation)"
+                if redrawable else f"run `cosim reproduce {name}`, then `cosim docs`")
         if _table_file(run_dir) is not None:
             if run_digest(run_dir) != current:
-                out.append(f"{run_dir} was made from other inputs than this tree's: run "
-                           f"`cosim reproduce {name}`, then `cosim docs`")
+                out.append(f"{run_dir} was made from other inputs than this tree's: {todo}")
             continue
         page = DOCS / "papers" / f"{name}.md"
         text = page.read_text() if page.is_file() else NOT_REPRODUCED.format(name=name)
@@ -144,8 +209,8 @@ def stale_papers(reproduce_dir: Path = REPRODUCE_DIR) -> list[str]:
                 out.append(f"{page.relative_to(ROOT)} does not say which inputs made it: run "
                            f"`cosim reproduce {name}`, then `cosim docs`")
         elif found.group(1) != current:
-            out.append(f"{page.relative_to(ROOT)} was made from other inputs than this tree's: run "
-                       f"`cosim reproduce {name}`, then `cosim docs`")
+            out.append(f"{page.relative_to(ROOT)} was made from other inputs than this tree's: "
+                       f"{todo}")
     return out
 
 
@@ -211,7 +276,8 @@ def generated_pages(reproduce_dir: Path = REPRODUCE_DIR) -> Iterator[tuple[Path,
                                     paper_metrics()).encode()
     present = set()
     for name in paper_names():
-        page = paper_page(name, reproduce_dir / name)
+        folder = source_dir(name, reproduce_dir)
+        page = paper_page(name, folder) if folder is not None else None
         if page is not None:
             present.add(name)
             yield from page.items()

@@ -460,3 +460,13 @@ def write_claims(entry: Any, record: Record, out: Path, plot_format: str = "png"
                  + variants_markdown(entry, rows, var_rows) + "\n")
     (out / "claims.md").write_text(text)
     return rows
+
+
+def run_claims(entry: Any, out: Path, k: int, workers: int | None = None,
+               rounding: bool = True, scheduler: str | None = None,
+               plot_format: str = "png") -> list[dict[str, Any]]:
+    """Run and evaluate the entry's claims (:func:`simulate_claims`, then
+    :func:`write_claims` on that record); returns the claims' rows."""
+    record = Record(entry.name, "", k, rounding)
+    simulate_claims(entry, out, record, workers, scheduler)
+    return write_claims(entry, record, out, plot_format)

@@ -85,6 +85,14 @@ class Record:
                               f"`cosim reproduce {self.entry}`)") from None
 
 
+def read_csv(path: Path, **kwargs: Any) -> pd.DataFrame:
+    """``pandas.read_csv`` that reads back every float bit for bit (pandas 3 does by default;
+    earlier versions need the round-trip parser)."""
+    if int(pd.__version__.split(".")[0]) < 3:
+        kwargs["float_precision"] = "round_trip"
+    return pd.read_csv(path, **kwargs)
+
+
 def series_name(kind: str, *key: Any) -> str:
     """The name of a recorded series: ``run/<run>`` or ``member/<run>/<i>``."""
     return "/".join([kind, *(str(k) for k in key)])
@@ -126,16 +134,25 @@ def save(record: Record, folder: Path) -> Path:
     return target
 
 
-def load(folder: Path) -> Record:
-    """The record in ``folder/record/`` (:class:`RecordError` naming the file if there is
-    none or it cannot be read)."""
-    path = folder / RECORD_DIR / _JOBS_FILE
+def _body(path: Path) -> dict[str, Any]:
     try:
-        body = json.loads(gzip.decompress(path.read_bytes()))
+        return json.loads(gzip.decompress(path.read_bytes()))
     except FileNotFoundError:
         raise RecordError(f"{path}: no record (run `cosim reproduce` first)") from None
     except (OSError, ValueError) as err:
         raise RecordError(f"{path}: unreadable record ({err})") from None
+
+
+def simulation_of(folder: Path) -> str:
+    """The simulation digest of the record in ``folder/record/``."""
+    return str(_body(folder / RECORD_DIR / _JOBS_FILE).get("simulation"))
+
+
+def load(folder: Path) -> Record:
+    """The record in ``folder/record/`` (:class:`RecordError` naming the file if there is
+    none or it cannot be read)."""
+    path = folder / RECORD_DIR / _JOBS_FILE
+    body = _body(path)
     if body.get("format") != FORMAT:
         raise RecordError(f"{path}: record format {body.get('format')!r}, this version reads "
                           f"{FORMAT} (rerun `cosim reproduce {body.get('entry', '')}`)")
@@ -146,8 +163,7 @@ def load(folder: Path) -> Record:
         rec.add(Job(item["kind"], key, scenario if isinstance(scenario, str) else
                     list(scenario), item["overrides"], item["env"]), item["result"])
     for name, file in body["series"].items():
-        rec.series[name] = pd.read_csv(folder / RECORD_DIR / _SERIES_DIR / file,
-                                       float_precision="round_trip")
+        rec.series[name] = read_csv(folder / RECORD_DIR / _SERIES_DIR / file)
     return rec
 
 

@@ -142,7 +142,16 @@ from cosim.run.claims import (
     ratio_ci,
 )
 from cosim.run.provenance import INPUTS_FILE, entry_digest, simulation_digest
-from cosim.run.record import Job, Record, RecordError, check_jobs, load, save, series_name
+from cosim.run.record import (
+    Job,
+    Record,
+    RecordError,
+    check_jobs,
+    load,
+    read_csv,
+    save,
+    series_name,
+)
 from cosim.run.results import PLOT_DPI
 from cosim.run.scenario import SCENARIO_DIR
 
@@ -976,8 +985,7 @@ def record_series(record: Record, name: str, folder: Path, specs: list[dict[str,
     columns = list(pd.read_csv(path, nrows=0).columns)
     keep = set().union({c for c in columns if "[" not in c},
                        *(figure_columns(spec, scenario, columns) for spec in specs))
-    frame = pd.read_csv(path, usecols=[c for c in columns if c in keep],
-                        float_precision="round_trip")
+    frame = read_csv(path, usecols=[c for c in columns if c in keep])
     record.series[name] = frame
 
 
@@ -1130,7 +1138,7 @@ def reproduce(name: str, out_dir: str | Path | None = None, workers: int | None 
     inputs.unlink(missing_ok=True)  # a folder being rewritten vouches for no inputs
     record = simulate(entry, out, workers, seeds, rounding, scheduler, plot_format)
     save(record, out)
-    return redraw_entry(entry.name, out, plot_format, echo)
+    return redraw_entry(name, out, plot_format, echo)
 
 
 def redraw_entry(name: str, out_dir: str | Path | None = None, plot_format: str = "png",

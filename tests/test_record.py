@@ -1,0 +1,69 @@
+"""The record of a reproduction's simulations (cosim.run.record): read back bit for bit, the
+same record the same bytes, and a record that cannot serve an entry named as such."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from cosim.run.record import Job, Record, RecordError, check_jobs, load, save, simulation_of
+
+# floats a decimal writer could round: thirds, subnormals, extremes, a NaN
+AWKWARD = [1.0 / 3.0, 2.0 / 3.0 * 1e-310, 1.7976931348623157e308, -0.1 - 0.2, math.nan,
+           np.nextafter(1.0, 2.0)]
+
+
+def _record() -> Record:
+    rec = Record("seedX", "ab" * 32, 2, True)
+    summary = {"stop_error_m": AWKWARD[0], "ok": True, "executions": {"plant": 301},
+               "warnings": ["w"], "missing": math.nan}
+    rec.add(Job("run", ("PID", 0), "s_pid", {"controller.kp": 30.0}), summary)
+    rec.add(Job("member", ("PID", "disturbance", 1, True), "s_pid",
+                {"plant.disturbance_seed": 2}, {"ATO_COSIM_NO_KERNELS": "1"}), None)
+    rec.add(Job("sweep", ("fig11",), ["a", "b"], {"controller.N": "3..5"}),
+            {"columns": ["scenario", "x"], "rows": [["a", 1.5], ["b", None]]})
+    rec.series["run/PID"] = pd.DataFrame({"time": np.linspace(0.0, 1.0, 6),
+                                          "plant.v": AWKWARD})
+    return rec
+
+
+def test_a_record_reads_back_bit_for_bit_and_rewrites_the_same_bytes(tmp_path: Path) -> None:
+    rec = _record()
+    folder = save(rec, tmp_path)
+    back = load(tmp_path)
+    assert (back.entry, back.simulation, back.seeds, back.rounding) == (
+        "seedX", "ab" * 32, 2, True)
+    assert back.jobs == rec.jobs
+    got = back.result("run", "PID", 0)
+    assert got["stop_error_m"] == AWKWARD[0] and math.isnan(got["missing"])
+    assert got["executions"] == {"plant": 301} and got["ok"] is True
+    assert back.result("member", "PID", "disturbance", 1, True) is None
+    frame = back.frame("run/PID")
+    assert frame["plant.v"].to_numpy().tobytes() == np.array(AWKWARD).tobytes()
+    assert simulation_of(tmp_path) == "ab" * 32
+    first = {p.relative_to(folder): p.read_bytes() for p in folder.rglob("*") if p.is_file()}
+    save(back, tmp_path / "again")
+    again = tmp_path / "again" / "record"
+    assert {p.relative_to(again): p.read_bytes() for p in again.rglob("*")
+            if p.is_file()} == first
+
+
+def test_a_record_that_cannot_serve_names_the_job_and_why(tmp_path: Path) -> None:
+    rec = _record()
+    check_jobs(rec, list(rec.jobs.values()))
+    with pytest.raises(RecordError, match=r"no run \['MPC', 0\]"):
+        check_jobs(rec, [Job("run", ("MPC", 0), "s_mpc", {})])
+    with pytest.raises(RecordError, match=r"run \['PID', 0\] ran as .*30\.0.*now asks for.*50"):
+        check_jobs(rec, [Job("run", ("PID", 0), "s_pid", {"controller.kp": 50.0})])
+    with pytest.raises(RecordError, match="no series 'run/MPC'|no recorded series 'run/MPC'"):
+        rec.frame("run/MPC")
+    with pytest.raises(RecordError, match="no record"):
+        load(tmp_path / "nothing")
+    (tmp_path / "record").mkdir()
+    (tmp_path / "record" / "record.json.gz").write_bytes(b"not gzip")
+    with pytest.raises(RecordError, match="unreadable record"):
+        load(tmp_path)
