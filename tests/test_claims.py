@@ -48,29 +48,112 @@ def test_reversed_difference_fails() -> None:
     assert verdict({**LESS, "kind": "greater"}, b + 1.0, b)["verdict"] == "holds"
 
 
-def test_threshold_and_range_kinds() -> None:
+def test_threshold_and_range_kinds_under_each_quantifier() -> None:
     x = 0.1 + 0.01 * NOISE
-    assert verdict({**LESS, "kind": "below", "threshold": 0.2, "runs": ["A"]}, x)["verdict"] \
-        == "holds"
-    assert verdict({**LESS, "kind": "above", "threshold": 0.2, "runs": ["A"]}, x)["verdict"] \
-        == "fails"
+    below = {**LESS, "kind": "below", "threshold": 0.2, "runs": ["A"]}
+    assert verdict(below, x)["verdict"] == "holds"
+    assert verdict({**below, "kind": "above"}, x)["verdict"] == "fails"
     inside = {**LESS, "kind": "inside", "range": [-0.5, 0.5], "runs": ["A"]}
     assert verdict(inside, x)["verdict"] == "holds"
     assert verdict(inside, x + 1.0)["verdict"] == "fails"
-    assert verdict(inside, x + 0.4)["verdict"] == "inconclusive"  # CI straddles 0.5
+    # the median at the edge: some members outside, so "every" fails on them; the median's
+    # sign test decides neither way
+    straddle = 0.5 + 0.01 * NOISE
+    r = verdict(inside, straddle)
+    assert r["quantifier"] == "every" and r["verdict"] == "fails"
+    assert r["worst"] == straddle.max() and r["k"] == int(np.sum(straddle <= 0.5))
+    assert verdict({**inside, "quantifier": "typical"}, straddle)["verdict"] == "inconclusive"
+
+
+def test_a_universal_claim_is_decided_by_its_worst_member() -> None:
+    """"Stops within +-50 cm": 19 of 20 inside and one at 0.70 m fails, though the median and
+    its CI are well inside; 20 of 20 holds, with the share of runs it supports: the one-sided
+    Clopper-Pearson bound, alpha^(1/K) for K of K."""
+    from cosim.run.claims import ALPHA
+
+    inside = {**LESS, "kind": "inside", "range": [-0.5, 0.5], "runs": ["A"]}
+    x = 0.1 + 0.01 * NOISE
+    one_out = x.copy()
+    one_out[7] = 0.70
+    r = verdict(inside, one_out)
+    assert r["verdict"] == "fails" and (r["k"], r["K"]) == (19, 20) and r["worst"] == 0.70
+    assert r["p_value"] is None  # a counterexample is not an inference
+    r = verdict(inside, x)
+    assert r["verdict"] == "holds"
+    assert r["share_low"] == pytest.approx(ALPHA ** (1 / 20), rel=1e-9)
+
+
+def test_a_typical_claim_decides_at_most_alpha_of_null_samples_and_small_k_is_insufficient(
+        ) -> None:
+    """The sign test's decisions, enumerated over every k of K (not sampled): under no
+    difference (each sign a fair coin) the probability of any decision is at most alpha; with
+    K too small to decide whatever the members show, the verdict says which K would."""
+    from scipy.stats import binom
+
+    from cosim.run.claims import ALPHA
+
+    for K in (6, 10, 20, 33):
+        decided = 0.0
+        for k in range(K + 1):
+            x = np.where(np.arange(K) < k, -1.0, 1.0) * (1.0 + np.arange(K))
+            r = verdict(LESS, x, np.zeros(K))
+            assert r["k"] == k and r["verdict"] in ("holds", "fails", "inconclusive")
+            if r["verdict"] != "inconclusive":
+                decided += binom.pmf(k, K, 0.5)
+        assert decided <= ALPHA
+    for K in (1, 3, 5):
+        x = -1.0 - np.arange(K)  # every member on the claimed side
+        r = verdict(LESS, x, np.zeros(K)) if K > 1 else verdict(LESS, x, np.array([0.0]))
+        if K == 1:
+            assert r["verdict"] == "holds" and r["note"] == "one run"  # deterministic
+        else:
+            assert r["verdict"] == "insufficient" and r["note"] == "K >= 6 needed"
+
+
+def test_a_share_claim_is_the_exact_binomial_test() -> None:
+    """At least 80 % of runs: 20 of 20 decide it (0.8^20 < 0.025), 19 of 20 do not
+    (P(X >= 19) = 0.069); 5 members can never decide (0.8^5 > 0.025): 17 would."""
+    share = {**LESS, "kind": "below", "threshold": 0.0, "runs": ["A"],
+             "quantifier": "share", "share": 0.8}
+    x = -1.0 - np.arange(20.0)
+    assert verdict(share, x)["verdict"] == "holds"
+    x[3] = 1.0
+    assert verdict(share, x)["verdict"] == "inconclusive"
+    assert verdict(share, -x)["verdict"] == "fails"  # 1 of 20
+    r = verdict(share, -1.0 - np.arange(5.0))
+    assert r["verdict"] == "insufficient" and r["note"] == "K >= 17 needed"
+
+
+def test_multiplicity_adjustment_is_benjamini_hochberg() -> None:
+    """adjust() against the definition: q_(i) = min_{j >= i} p_(j) m / j over the sorted
+    p-values; a decision is kept where q < alpha; rows without a p-value keep theirs."""
+    from cosim.run.claims import ALPHA, adjust
+
+    ps = [0.001, 0.04, 0.03, 0.2, 0.012]
+    rows = [{"verdict": "holds", "p_value": p} for p in ps] + [
+        {"verdict": "fails", "p_value": None}]
+    out = adjust(rows)
+    order = np.argsort(ps)
+    m = len(ps)
+    q = np.minimum.accumulate((np.array(ps)[order] * m / np.arange(1, m + 1))[::-1])[::-1]
+    want = np.empty(m)
+    want[order] = q
+    assert [r["adjusted_p"] for r in out[:m]] == pytest.approx(list(want), rel=1e-12)
+    assert [r["adjusted"] for r in out] == [
+        "holds" if w < ALPHA else "inconclusive" for w in want] + ["fails"]
 
 
 def test_degenerate_samples_give_a_stated_verdict() -> None:
-    # all equal (a deterministic run): the CI is the value itself
+    # all equal (a deterministic run): the value decides
     med, lo, hi, note = median_ci(np.full(5, 2.0))
     assert (med, lo, hi, note) == (2.0, 2.0, 2.0, "all equal")
     assert verdict(LESS, np.array([1.0]), np.array([2.0]))["verdict"] == "holds"
-    assert verdict(LESS, np.array([2.0]), np.array([2.0]))["verdict"] == "inconclusive"
-    # NaN / missing metric and K < 3
+    assert verdict(LESS, np.array([2.0]), np.array([2.0]))["verdict"] == "fails"
+    # NaN / missing metric and a K too small to decide
     r = verdict(LESS, np.array([1.0, np.nan, 1.0]), np.array([2.0, 2.0, 2.0]))
     assert r["verdict"] == "inconclusive" and r["note"] == "metric missing"
     r = verdict(LESS, np.array([1.0, 1.5]), np.array([2.0, 2.0]))
-    assert r["verdict"] == "inconclusive" and r["note"] == "K < 3"
+    assert r["verdict"] == "insufficient" and r["note"] == "K >= 6 needed"
 
 
 def test_rounding_sensitive_is_never_holds() -> None:
@@ -171,11 +254,14 @@ def test_reproduction_summary_counts_verdicts(tmp_path: Path) -> None:
     from cosim.run.reproduce import claims_summary
 
     (tmp_path / "a").mkdir()
-    pd.DataFrame({"id": ["x", "y", "z"], "verdict": ["holds", "fails", "holds"]}).to_csv(
+    pd.DataFrame({"id": ["x", "y", "z"], "verdict": ["holds", "fails", "holds"],
+                  "adjusted": ["holds", "fails", "inconclusive"]}).to_csv(
         tmp_path / "a" / "claims.csv", index=False)
     lines = claims_summary(tmp_path, ["a", "b"]).splitlines()
-    assert lines[2] == "| a | 3 | 2 | 1 | 0 | 0 |"
-    assert lines[3] == "| b | 0 | - | - | - | - |"
+    assert lines[0] == ("| entry | claims | holds | fails | inconclusive | insufficient | "
+                        "rounding-sensitive |")
+    assert lines[2] == "| a | 3 | 1 | 1 | 1 | 0 | 0 |"  # the adjusted verdicts
+    assert lines[3] == "| b | 0 | - | - | - | - | - |"
 
 
 def test_ratio_ci_of_repeated_timings() -> None:
@@ -361,7 +447,7 @@ def test_repeat_claim_end_to_end_on_a_fast_entry(tmp_path: Path) -> None:
     entry = load_entry(path)
     rows = {r["id"]: r for r in run_claims(entry, tmp_path / "out", 2, workers=1)}
     assert rows["a_faster"]["K"] == 3 and rows["a_faster"]["rounding_robust"] is None
-    assert rows["a_faster"]["verdict"] in ("holds", "fails", "inconclusive")
+    assert rows["a_faster"]["verdict"] == "insufficient"  # 3 repeats cannot decide a median
     # no seed key: the disturbance claim is one run, with its rounding rerun
     assert rows["a_within_bound"]["K"] == 1 and rows["a_within_bound"]["rounding_robust"]
     csv = pd.read_csv(tmp_path / "out" / "claims.csv")

@@ -1,18 +1,39 @@
 """A paper's claims as data, tested over seed ensembles (``[ensemble]`` and ``[[claims]]`` of a
 reproduction entry; schema in the module docstring of :mod:`cosim.run.reproduce`).
 
-Statistics: per metric the median over the ensemble and its 95 % bootstrap CI; per pairwise
-claim the paired difference (same seed / same mismatch sample), its median and 95 % CI and
-"A better on k of K". The bootstrap is :func:`scipy.stats.bootstrap` (percentile method, the
-median being a non-smooth statistic for which BCa's jackknife acceleration is unreliable on
-tied samples; a fixed ``random_state`` so the same runs give the same CI).
+Each claim compares, per member, a tested quantity with its claimed side: ``less`` /
+``greater`` the paired difference A - B (same seed / same mismatch sample) with 0, ``below`` /
+``above`` a metric with ``threshold``, ``inside`` a metric with ``range``. Its
+``quantifier`` says what the paper's sentence asserts about the runs:
 
-Verdicts: ``holds`` (CI strictly on the claimed side of 0 / the threshold / inside the range),
-``fails`` (strictly on the other side / outside the range), ``inconclusive`` otherwise.
-Degenerate cases give a stated verdict: a missing or NaN metric on any member ->
-inconclusive ("metric missing"); all samples equal (a deterministic run) -> the CI is that
-value; fewer than 3 distinct members and not all equal -> inconclusive ("K < 3").
-A verdict that differs on the perturbed floating-point rerun -> ``rounding-sensitive``.
+- ``every`` (universal: "stops within +-50 cm", "in every speed class"): holds only if every
+  member is on the claimed side, fails on the first that is not; the row gives the count
+  and the worst member, and the one-sided Clopper-Pearson lower bound of the share of runs
+  the K members support (``scipy.stats.binomtest``). A counterexample is not a statistical
+  inference, so these claims take no part in the multiplicity adjustment.
+- ``share`` (at least ``share`` = p of the runs): exact one-sided binomial tests of k of K
+  against p (``scipy.stats.binomtest``), each at (1 - ``CONFIDENCE``) / 2.
+- ``typical`` (the usual run: "A tracks better than B"): the sign test on the median
+  (``scipy.stats.quantile_test``, exact and distribution-free), each direction at
+  (1 - ``CONFIDENCE``) / 2, so a decision is the median's exact 95 % CI (order statistics,
+  shown) strictly on one side; ``inside`` holds when both edges' tests decide (an
+  intersection-union test).
+
+The default quantifier is ``every`` for ``below`` / ``above`` / ``inside`` (the papers state
+such bounds as requirements each run meets) and ``typical`` for ``less`` / ``greater``.
+
+Verdicts: ``holds``, ``fails``, ``inconclusive`` (the test decides neither way), or
+``insufficient`` where K members cannot decide at the confidence whatever they show (the
+note says which K would). Degenerate cases: a missing or NaN metric on any member ->
+inconclusive ("metric missing"); all members equal (a deterministic result) -> decided by
+that value. A verdict that differs on the perturbed floating-point rerun ->
+``rounding-sensitive``.
+
+Multiplicity: the claims of one paper are a family; their p-values (two-sided: twice the
+smaller one-sided one) are adjusted by Benjamini-Hochberg (``scipy.stats.
+false_discovery_control``), false discovery rate 1 - ``CONFIDENCE``; the ``adjusted``
+verdict keeps a decision only where the adjusted p-value is below that rate
+(:func:`adjust`).
 
 Ensemble kinds of a claim: ``disturbance`` (member i: report seed i), ``mismatch`` (member i:
 plant-mismatch sample i), ``repeat`` (member i < ``[ensemble] repeats``: the same nominal
@@ -31,12 +52,13 @@ from typing import Any
 import numpy as np
 
 CLAIM_KINDS = ("less", "greater", "below", "above", "inside")
+QUANTIFIERS = ("every", "share", "typical")
 ENSEMBLES = ("disturbance", "mismatch", "repeat")
 ORIGINS = ("paper", "ours")
 _CLAIM_KEYS = {"id", "source", "text", "paper", "metric", "kind", "runs", "threshold", "range",
-               "ensemble", "origin"}
+               "ensemble", "origin", "quantifier", "share"}
 _ENSEMBLE_KEYS = {"seed_key", "report_seeds", "calibration_seeds", "perturb", "perturb_seed",
-                  "rounding_perturb", "rounding_reference_path", "repeats"}
+                  "rounding_perturb", "rounding_reference_path", "repeats", "members"}
 _VARIANT_KEYS = {"name", "text", "replace", "rounding", "seeds"}
 ROUNDING_RELATIVE = 1e-12  # relative change of each [ensemble].rounding_perturb parameter
 CONFIDENCE = 0.95
@@ -60,6 +82,11 @@ class Ensemble:
     rounding_perturb: list[str] = field(default_factory=list)
     rounding_reference_path: bool = True
     repeats: int | None = None  # members of a "repeat" claim (None: no such claim allowed)
+    members: int | None = None  # K a published page needs (None: 20, or every report seed)
+
+    def declared_k(self) -> int:
+        """K the entry's page is published from (``members``, else min(20, report seeds))."""
+        return self.members if self.members is not None else min(20, len(self.report_seeds))
 
 
 def parse_seeds(where: str, key: str, value: Any) -> list[int]:
@@ -144,6 +171,14 @@ def check_ensemble(where: str, data: dict[str, Any] | None) -> Ensemble:
             raise ClaimsError(f"{where}: [ensemble] repeats = {rep!r}: expected an integer "
                               ">= 1 (the repetitions of a 'repeat' claim's nominal run)")
         ens.repeats = rep
+    if "members" in data:
+        k = data["members"]
+        if (isinstance(k, bool) or not isinstance(k, int) or not
+                1 <= k <= len(ens.report_seeds)):
+            raise ClaimsError(f"{where}: [ensemble] members = {k!r}: expected an integer in "
+                              f"[1, {len(ens.report_seeds)}] (K of a published page, at most "
+                              "the report seeds)")
+        ens.members = k
     return ens
 
 
@@ -194,6 +229,16 @@ def check_claims(where: str, claims: list[dict[str, Any]], run_names: list[str],
         if ensemble == "repeat" and ens.repeats is None:
             raise ClaimsError(f"{at}: ensemble = 'repeat' needs [ensemble] repeats (the "
                               "number of repetitions of the nominal run)")
+        quantifier = claim.get("quantifier", default_quantifier(kind))
+        if quantifier not in QUANTIFIERS:
+            raise ClaimsError(f"{at}: quantifier = {quantifier!r} (known: {QUANTIFIERS})")
+        share = claim.get("share")
+        if (quantifier == "share") != (share is not None):
+            raise ClaimsError(f"{at}: share = {share!r}: given with quantifier 'share', and "
+                              "only then")
+        if share is not None and (isinstance(share, bool) or not isinstance(share, (int, float))
+                                  or not 0.0 < share < 1.0):
+            raise ClaimsError(f"{at}: share = {share!r}: a fraction in (0, 1)")
         if claim.get("origin", "paper") not in ORIGINS:
             raise ClaimsError(f"{at}: origin = {claim['origin']!r} (known: {ORIGINS})")
     return claims
@@ -282,42 +327,147 @@ def ratio_ci(a: np.ndarray, b: np.ndarray) -> tuple[float, float, float]:
     return ratio, float(res.confidence_interval.low), float(res.confidence_interval.high)
 
 
+def default_quantifier(kind: str) -> str:
+    """``every`` for a bound on one run's metric, ``typical`` for a comparison of two runs."""
+    return "every" if kind in ("below", "above", "inside") else "typical"
+
+
+ALPHA = 1.0 - CONFIDENCE  # false discovery rate of a paper's claims, and two-sided level
+
+
+def _sign_p(x: np.ndarray, q: float, alternative: str) -> float:
+    """One-sided sign-test p-value of "the median of x is {alternative} than q"."""
+    from scipy.stats import quantile_test
+
+    return float(quantile_test(x, q=q, p=0.5, alternative=alternative).pvalue)
+
+
+def _binom_p(k: int, n: int, p: float, alternative: str) -> float:
+    from scipy.stats import binomtest
+
+    return float(binomtest(k, n, p, alternative=alternative).pvalue)
+
+
+def _median_ci(x: np.ndarray) -> tuple[float, float]:
+    """The exact distribution-free CI of the median (order statistics, the sign test's dual),
+    NaN where K is too small for one."""
+    from scipy.stats import quantile_test
+
+    ci = quantile_test(x, q=float(np.median(x)), p=0.5).confidence_interval(CONFIDENCE)
+    lo, hi = float(ci.low), float(ci.high)
+    return (lo, hi) if math.isfinite(lo) and math.isfinite(hi) else (math.nan, math.nan)
+
+
+def _k_needed(decides: Any) -> int:
+    """The smallest K at which ``decides(K)`` (the best outcome decides) is true."""
+    k = 1
+    while not decides(k) and k < 10_000:
+        k += 1
+    return k
+
+
 def verdict(claim: dict[str, Any], a: np.ndarray, b: np.ndarray | None = None
             ) -> dict[str, Any]:
     """Evaluate one claim on its members: ``a`` (runs[0]) and, for less/greater, ``b``
-    (runs[1]) paired by index. Returns median/CI of the tested quantity, k of K, verdict."""
+    (runs[1]) paired by index. Returns the median and its exact 95 % CI of the tested
+    quantity, k of K on the claimed side, the worst member, the quantifier, the p-value that
+    enters the multiplicity adjustment (None for ``every``) and the verdict (module text)."""
     kind = claim["kind"]
+    quantifier = claim.get("quantifier", default_quantifier(kind))
     a = np.asarray(a, dtype=float)
     if kind in ("less", "greater"):
         assert b is not None
         x = a - np.asarray(b, dtype=float)  # paired difference
-        low_side, high_side = 0.0, 0.0
-        better = x < 0 if kind == "less" else x > 0
+        lo_edge = hi_edge = 0.0
     elif kind in ("below", "above"):
         x = a
-        low_side = high_side = float(claim["threshold"])
-        better = x < low_side if kind == "below" else x > low_side
+        lo_edge = hi_edge = float(claim["threshold"])
     else:
         x = a
-        low_side, high_side = (float(v) for v in claim["range"])
-        better = (x >= low_side) & (x <= high_side)
-    med, lo, hi, note = median_ci(x)
-    out = {"median": med, "ci_low": lo, "ci_high": hi, "k": int(np.sum(better)),
-           "K": int(x.size), "note": note}
+        lo_edge, hi_edge = (float(v) for v in claim["range"])
+    if kind in ("less", "below"):
+        good = x < lo_edge
+    elif kind in ("greater", "above"):
+        good = x > lo_edge
+    else:
+        good = (x >= lo_edge) & (x <= hi_edge)
+    out: dict[str, Any] = {"quantifier": quantifier, "k": int(np.sum(good)), "K": int(x.size),
+                           "median": math.nan, "ci_low": math.nan, "ci_high": math.nan,
+                           "worst": math.nan, "share_low": math.nan, "p_value": None,
+                           "note": ""}
     if kind in ("less", "greater"):
         out.update(a_median=float(np.median(a)) if a.size else math.nan,
                    b_median=float(np.median(b)) if np.size(b) else math.nan)
-    if math.isnan(lo) or math.isnan(hi):
-        out["verdict"] = "inconclusive"
+    if x.size == 0 or np.isnan(x).any():
+        out.update(note="metric missing", verdict="inconclusive")
         return out
-    if kind in ("less", "below"):
-        v = "holds" if hi < low_side else "fails" if lo > low_side else "inconclusive"
-    elif kind in ("greater", "above"):
-        v = "holds" if lo > low_side else "fails" if hi < low_side else "inconclusive"
+    out["median"] = float(np.median(x))
+    out["worst"] = float(_worst(kind, x, lo_edge, hi_edge))
+    if np.all(x == x[0]):  # a deterministic result: its value decides
+        out.update(ci_low=float(x[0]), ci_high=float(x[0]), p_value=0.0,
+                   note="all equal" if x.size > 1 else "one run",
+                   verdict="holds" if good[0] else "fails")
+        if quantifier == "every":
+            out["p_value"] = None
+        return out
+    out["ci_low"], out["ci_high"] = _median_ci(x)
+    n, k = x.size, out["k"]
+    half = ALPHA / 2.0
+    if quantifier == "every":
+        from scipy.stats import binomtest
+
+        out["share_low"] = float(binomtest(k, n, 0.5, alternative="greater")
+                                 .proportion_ci(CONFIDENCE).low)
+        out["verdict"] = "holds" if k == n else "fails"
+        return out
+    if quantifier == "share":
+        p = float(claim["share"])
+        p_hold, p_fail = _binom_p(k, n, p, "greater"), _binom_p(k, n, p, "less")
+        can = (_binom_p(n, n, p, "greater") < half) or (_binom_p(0, n, p, "less") < half)
+        need = _k_needed(lambda m: _binom_p(m, m, p, "greater") < half
+                         and _binom_p(0, m, p, "less") < half)
     else:
-        v = ("holds" if lo >= low_side and hi <= high_side
-             else "fails" if hi < low_side or lo > high_side else "inconclusive")
-    out["verdict"] = v
+        if kind in ("less", "below"):
+            p_hold, p_fail = _sign_p(x, lo_edge, "less"), _sign_p(x, lo_edge, "greater")
+        elif kind in ("greater", "above"):
+            p_hold, p_fail = _sign_p(x, lo_edge, "greater"), _sign_p(x, lo_edge, "less")
+        else:  # inside: both edges (intersection-union); outside: either
+            p_hold = max(_sign_p(x, lo_edge, "greater"), _sign_p(x, hi_edge, "less"))
+            p_fail = min(_sign_p(x, lo_edge, "less"), _sign_p(x, hi_edge, "greater"))
+        can = 0.5 ** n < half
+        need = _k_needed(lambda m: 0.5 ** m < half)
+    out["p_value"] = min(1.0, 2.0 * min(p_hold, p_fail))
+    if not can or n < need:
+        out.update(verdict="insufficient", note=f"K >= {need} needed")
+        return out
+    out["verdict"] = "holds" if p_hold < half else "fails" if p_fail < half else "inconclusive"
+    return out
+
+
+def _worst(kind: str, x: np.ndarray, lo: float, hi: float) -> float:
+    """The member furthest toward (or past) the wrong side of the claim."""
+    if kind in ("less", "below"):
+        return float(np.max(x))
+    if kind in ("greater", "above"):
+        return float(np.min(x))
+    return float(x[np.argmax(np.maximum(lo - x, x - hi))])
+
+
+def adjust(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """The rows of one family with ``adjusted_p`` (Benjamini-Hochberg over the rows' p-values,
+    ``scipy.stats.false_discovery_control``) and ``adjusted`` (the verdict, a decision kept
+    only where the adjusted p-value is below :data:`ALPHA`; rows without a p-value keep
+    theirs)."""
+    from scipy.stats import false_discovery_control
+
+    tested = [i for i, r in enumerate(rows) if r.get("p_value") is not None]
+    adjusted = (false_discovery_control([rows[i]["p_value"] for i in tested], method="bh")
+                if tested else [])
+    out = [dict(r, adjusted_p=None, adjusted=r["verdict"]) for r in rows]
+    for i, q in zip(tested, adjusted, strict=True):
+        out[i]["adjusted_p"] = float(q)
+        if out[i]["verdict"] in ("holds", "fails") and not q < ALPHA:
+            out[i]["adjusted"] = "inconclusive"
     return out
 
 
@@ -336,8 +486,11 @@ def with_rounding(main: dict[str, Any], perturbed: dict[str, Any] | None) -> dic
 
 
 def ours_text(row: dict[str, Any]) -> str:
-    """``median [low, high]`` of the tested quantity (``-`` where unknown)."""
+    """``median [low, high]`` of the tested quantity (``-`` where unknown); for a universal
+    claim the worst member too."""
     def f(v: float) -> str:
         return "-" if v is None or (isinstance(v, float) and math.isnan(v)) else f"{v:.4g}"
     text = f"{f(row['median'])} [{f(row['ci_low'])}, {f(row['ci_high'])}]"
+    if row.get("quantifier") == "every":
+        text += f", worst {f(row.get('worst', math.nan))}"
     return f"{text} ({row['note']})" if row.get("note") else text

@@ -134,14 +134,29 @@ def run_digest(run_dir: Path) -> str | None:
 
 
 def record_simulation(folder: Path) -> str | None:
-    """The simulation digest of the record in ``folder`` (None if there is none or it cannot
-    be read)."""
+    """The simulation digest of the record in ``folder`` (None if there is none, it cannot be
+    read, or it has fewer members than the entry declares for a page:
+    :func:`too_few_members`)."""
     from cosim.run.record import RecordError, simulation_of
 
     try:
-        return simulation_of(folder)
+        digest, k = simulation_of(folder)
     except RecordError:
         return None
+    return None if too_few_members(folder.name, k) else digest
+
+
+def too_few_members(name: str, k: int) -> str | None:
+    """Why a page of entry ``name`` cannot be published from K = ``k`` members (None if it
+    can): fewer than the entry's ``[ensemble]`` declares (``members``, default 20)."""
+    from cosim.run.reproduce import load_entry
+
+    entry = load_entry(name)
+    need = entry.ensemble.declared_k()
+    if entry.claims and k < need:
+        return (f"{name}: made from K = {k} members, the entry declares {need} for a page: "
+                f"run `cosim reproduce {name} --seeds {need}`")
+    return None
 
 
 def _page_digest(name: str) -> str | None:
@@ -167,7 +182,8 @@ def source_dir(name: str, reproduce_dir: Path = REPRODUCE_DIR) -> Path | None:
 
     run_dir = reproduce_dir / name
     current = entry_digest(name)
-    if _table_file(run_dir) is not None and run_digest(run_dir) == current:
+    if (_table_file(run_dir) is not None and run_digest(run_dir) == current
+            and record_simulation(run_dir) is not None):
         return run_dir
     if _page_digest(name) == current:
         return None
@@ -200,6 +216,14 @@ def stale_papers(reproduce_dir: Path = REPRODUCE_DIR) -> list[str]:
         if _table_file(run_dir) is not None:
             if run_digest(run_dir) != current:
                 out.append(f"{run_dir} was made from other inputs than this tree's: {todo}")
+            elif record_simulation(run_dir) is None:
+                from cosim.run.record import RecordError, simulation_of
+
+                try:
+                    why = too_few_members(name, simulation_of(run_dir)[1])
+                except RecordError as err:
+                    why = str(err)
+                out.append(f"{run_dir} cannot be published: {why}")
             continue
         page = DOCS / "papers" / f"{name}.md"
         text = page.read_text() if page.is_file() else NOT_REPRODUCED.format(name=name)

@@ -33,7 +33,9 @@ from typing import Any
 import numpy as np
 
 from cosim.run.claims import (
+    ALPHA,
     ROUNDING_RELATIVE,
+    adjust,
     ours_text,
     variant_runs,
     verdict,
@@ -311,9 +313,9 @@ def evaluate(entry: Any, summaries: dict[Any, dict[str, Any] | None], k: int,
                      "text": claim["text"], "paper": claim.get("paper", ""),
                      "metric": claim["metric"], "kind": claim["kind"],
                      "runs": " vs ".join(names), "ensemble": ens,
-                     "origin": claim.get("origin", "paper"),
+                     "origin": claim.get("origin", "paper"), "share": claim.get("share"),
                      "threshold": claim.get("threshold", claim.get("range")), **row})
-    return rows
+    return adjust(rows)
 
 
 def variants_markdown(entry: Any, rows: list[dict[str, Any]], var_rows: list[dict[str, Any]]
@@ -329,13 +331,16 @@ def variants_markdown(entry: Any, rows: list[dict[str, Any]], var_rows: list[dic
         if r is None:
             return "="
         flag = "" if r["rounding_robust"] in (None, True) else " (r)"
-        return f"{r['verdict']}{flag} ({r['k']}/{r['K']})"
+        return f"{_shown(r)}{flag} ({r['k']}/{r['K']})"
 
     lines = [_row(["claim", "main", *names]), "|" + " --- |" * (2 + len(names))]
     for r in rows:
         lines.append(_row([r["id"], cell(r), *(cell(got.get((n, r["id"]))) for n in names)]))
     lines += ["", "Verdict (k of K on the claimed side) of every claim with the runs of each "
-              "variant in place of those it replaces; (r): rounding-sensitive. Variants:", ""]
+              "variant in place of those it replaces; (r): rounding-sensitive. The cells of "
+              "all variants are one family: their p-values are adjusted together "
+              f"(Benjamini-Hochberg, false discovery rate {ALPHA:g}), and a decision the "
+              "adjustment does not keep reads \"inconclusive (raw: ...)\". Variants:", ""]
     for v in entry.variants:
         rep = "; ".join(f"{a} -> {b}" for a, b in v["replace"].items())
         rnd = "" if v.get("rounding", False) else " (no perturbed floating-point rerun)"
@@ -345,25 +350,53 @@ def variants_markdown(entry: Any, rows: list[dict[str, Any]], var_rows: list[dic
     return "\n".join(lines)
 
 
+VERDICTS = ("holds", "fails", "inconclusive", "insufficient", "rounding-sensitive")
+
+
+def _shown(r: dict[str, Any]) -> str:
+    """The adjusted verdict, with the raw one where the adjustment changed it."""
+    adjusted = r.get("adjusted", r["verdict"])
+    return adjusted if adjusted == r["verdict"] else f"{adjusted} (raw: {r['verdict']})"
+
+
 def claims_markdown(rows: list[dict[str, Any]], k: int) -> str:
+    """The claims table: each claim with its verdict first (adjusted for multiplicity, the raw
+    one where they differ), k of K, ours, the paper's figure and source; then the counts per
+    origin and what the columns mean."""
     from cosim.run.reproduce import _row
 
-    lines = [_row(["claim", "source", "paper", "ours: median [95 % CI]", "k of K", "verdict",
+    lines = [_row(["claim", "verdict", "k of K", "ours: median [95 % CI]", "paper", "source",
                    "rounding-robust"]), "|" + " --- |" * 7]
     for r in rows:
         what = {"less": "A - B", "greater": "A - B"}.get(r["kind"], r["metric"])
         robust = ("n/a" if r["ensemble"] == "repeat" else "-" if r["rounding_robust"] is None
                   else "yes" if r["rounding_robust"] else "no")
-        lines.append(_row([f"{r['id']}: {r['text']} ({r['runs']}; {r['metric']}, "
-                           f"{r['ensemble']})", r["source"], r["paper"],
-                           f"{what}: {ours_text(r)}", f"{r['k']} of {r['K']}", r["verdict"],
-                           robust]))
-    counts = {v: sum(r["verdict"] == v for r in rows)
-              for v in ("holds", "fails", "inconclusive", "rounding-sensitive")}
-    lines += ["", f"--seeds {k}. " + ", ".join(f"{v}: {n}" for v, n in counts.items()) + ". "
-              "A - B: the paired difference per member (same seed / mismatch sample); k of K: "
-              "members on the claimed side. Verdict from the 95 % bootstrap CI of the median; "
-              "rounding-sensitive: the verdict differs on the perturbed floating-point rerun."]
+        quant = r.get("quantifier", "typical")
+        if quant == "share":
+            quant = f"share >= {r.get('share', '')}"
+        lines.append(_row([f"{r['id']}: {r['text']} ({quant}; {r['runs']}; {r['metric']}, "
+                           f"{r['ensemble']}; {r.get('origin', 'paper')})", _shown(r),
+                           f"{r['k']} of {r['K']}", f"{what}: {ours_text(r)}", r["paper"],
+                           r["source"], robust]))
+    origins = dict.fromkeys(r.get("origin", "paper") for r in rows)
+    counts = []
+    for origin in origins:
+        mine = [r for r in rows if r.get("origin", "paper") == origin]
+        counts.append(f"{origin} ({len(mine)}): " + ", ".join(
+            f"{v} {n}" for v in VERDICTS if (n := sum(r.get("adjusted", r["verdict"]) == v
+                                                      for r in mine))))
+    lines += ["", f"--seeds {k}. " + "; ".join(counts) + ".", "",
+              "Quantifiers: *every* holds only if every member is on the claimed side (ours "
+              "gives the worst member); *typical* is the sign test on the median (exact, "
+              "distribution-free; the CI is the median's exact 95 % CI, a decision that CI "
+              "strictly on one side); *share >= p* the exact binomial test of k of K against "
+              "p. A - B: the paired difference per member (same seed / mismatch sample); k of "
+              "K: members on the claimed side. The claims of the paper are one family: the "
+              "p-values of the typical and share claims are adjusted by Benjamini-Hochberg "
+              f"(false discovery rate {ALPHA:g}); a decision the adjustment does not keep "
+              "reads \"inconclusive (raw: ...)\". insufficient: K members cannot decide "
+              "whatever they show (the note says which K would). rounding-sensitive: the "
+              "verdict differs on the perturbed floating-point rerun."]
     if any(r["ensemble"] == "repeat" for r in rows):
         lines[-1] += (" repeat: the members are repetitions of the same nominal run (K fixed "
                       "by the entry, not by --seeds), paired by repeat index; no rounding "
@@ -372,11 +405,12 @@ def claims_markdown(rows: list[dict[str, Any]], k: int) -> str:
 
 
 def compact_table(rows: list[dict[str, Any]]) -> str:
-    """The claims in at most 80 columns (id, k of K, verdict)."""
+    """The claims in at most 80 columns (id, k of K, adjusted verdict)."""
     lines = [f"{'claim':<44} {'k/K':>7}  verdict", "-" * 72]
     for r in rows:
         flag = "" if r["rounding_robust"] in (None, True) else " (r)"
-        lines.append(f"{r['id'][:44]:<44} {r['k']:>3}/{r['K']:<3}  {r['verdict']}{flag}")
+        lines.append(f"{r['id'][:44]:<44} {r['k']:>3}/{r['K']:<3}  "
+                     f"{r.get('adjusted', r['verdict'])}{flag}")
     return "\n".join(lines)
 
 

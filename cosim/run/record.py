@@ -143,9 +143,10 @@ def _body(path: Path) -> dict[str, Any]:
         raise RecordError(f"{path}: unreadable record ({err})") from None
 
 
-def simulation_of(folder: Path) -> str:
-    """The simulation digest of the record in ``folder/record/``."""
-    return str(_body(folder / RECORD_DIR / _JOBS_FILE).get("simulation"))
+def simulation_of(folder: Path) -> tuple[str, int]:
+    """(simulation digest, K of the claims' members) of the record in ``folder/record/``."""
+    body = _body(folder / RECORD_DIR / _JOBS_FILE)
+    return str(body.get("simulation")), int(body.get("seeds", 0))
 
 
 def load(folder: Path) -> Record:

@@ -127,6 +127,7 @@ from __future__ import annotations
 
 import math
 import re
+import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -1136,6 +1137,11 @@ def reproduce(name: str, out_dir: str | Path | None = None, workers: int | None 
     out.mkdir(parents=True, exist_ok=True)
     inputs = out / INPUTS_FILE
     inputs.unlink(missing_ok=True)  # a folder being rewritten vouches for no inputs
+    need = entry.ensemble.declared_k()
+    if entry.claims and seeds is not None and seeds < need:
+        print(f"warning: --seeds {seeds} is below the {need} members {entry.name} declares "
+              f"for a page: claims a small K cannot decide read 'insufficient', and `cosim "
+              f"docs` does not publish this run", file=sys.stderr, flush=True)
     record = simulate(entry, out, workers, seeds, rounding, scheduler, plot_format)
     save(record, out)
     return redraw_entry(name, out, plot_format, echo)
@@ -1217,19 +1223,21 @@ def _frame_markdown(frame: Any) -> str:
 
 
 def claims_summary(out: Path, names: list[str]) -> str:
-    """Claims held / failed / inconclusive / rounding-sensitive per entry, from each entry's
+    """Claims per verdict (after the multiplicity adjustment) per entry, from each entry's
     ``out/<name>/claims.csv`` (an entry without one: no claims)."""
     import pandas as pd
 
-    verdicts = ("holds", "fails", "inconclusive", "rounding-sensitive")
-    lines = [_row(["entry", "claims", *verdicts]), "|" + " --- |" * 6]
+    from cosim.run.ensemble import VERDICTS
+
+    lines = [_row(["entry", "claims", *VERDICTS]), "|" + " --- |" * (2 + len(VERDICTS))]
     for name in names:
         csv = out / name / "claims.csv"
         if not csv.is_file():
-            lines.append(_row([name, "0", "-", "-", "-", "-"]))
+            lines.append(_row([name, "0", *("-" for _ in VERDICTS)]))
             continue
-        got = list(pd.read_csv(csv)["verdict"])
-        lines.append(_row([name, str(len(got)), *(str(got.count(v)) for v in verdicts)]))
+        frame = pd.read_csv(csv)
+        got = list(frame["adjusted" if "adjusted" in frame else "verdict"])
+        lines.append(_row([name, str(len(got)), *(str(got.count(v)) for v in VERDICTS)]))
     return "\n".join(lines)
 
 
