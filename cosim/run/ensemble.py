@@ -461,10 +461,10 @@ def simulate_claims(entry: Any, out: Path, record: Record, workers: int | None =
 
 
 def write_claims(entry: Any, record: Record, out: Path, plot_format: str = "png"
-                 ) -> list[dict[str, Any]]:
+                 ) -> tuple[list[dict[str, Any]], str]:
     """Evaluate the entry's claims on ``record``'s members; write ``claims.csv``,
-    ``claims.md`` (and ``variants.*``) and the ensemble figures (``plot_format``) to ``out``.
-    """
+    ``claims.md`` (and ``variants.*``) and the ensemble figures (``plot_format``) to ``out``;
+    returns the claims' rows and the markdown of claims.md below its title."""
     import pandas as pd
 
     from cosim.run.reproduce import run_scenarios
@@ -486,14 +486,33 @@ def write_claims(entry: Any, record: Record, out: Path, plot_format: str = "png"
                                  out / f"{Path(spec['file']).stem}_ensemble.{plot_format}",
                                  run_scenarios(entry))
     pd.DataFrame(rows).to_csv(out / "claims.csv", index=False)
-    text = f"## Claims of {entry.title}\n\n" + claims_markdown(rows, k) + "\n"
+    text = claims_markdown(rows, k) + "\n"
     if getattr(entry, "variants", []):
         var_rows = evaluate(entry, summaries, k, rounding, variants=True)
         pd.DataFrame(var_rows).to_csv(out / "variants.csv", index=False)
         text += ("\n#### The claims under each variant\n\n"
                  + variants_markdown(entry, rows, var_rows) + "\n")
-    (out / "claims.md").write_text(text)
-    return rows
+    (out / "claims.md").write_text(f"## Claims of {entry.title}\n\n" + text)
+    return rows, text
+
+
+def verdict_summary(rows: list[dict[str, Any]], k: int) -> str:
+    """The verdicts in two sentences for the top of a paper's page: the counts per origin
+    (after the multiplicity adjustment) and the paper's claims that fail here."""
+    counts = []
+    for origin in dict.fromkeys(r.get("origin", "paper") for r in rows):
+        mine = [r for r in rows if r.get("origin", "paper") == origin]
+        got = ", ".join(f"{n} {v}" for v in VERDICTS
+                        if (n := sum(r.get("adjusted", r["verdict"]) == v for r in mine)))
+        counts.append(f"{len(mine)} {'of the paper' if origin == 'paper' else origin}: {got}")
+    text = (f"**Verdicts** over K = {k} seeds (Benjamini-Hochberg adjusted; table below): "
+            + "; ".join(counts) + ".")
+    failed = [r for r in rows if r.get("origin", "paper") == "paper"
+              and r.get("adjusted", r["verdict"]) == "fails"]
+    if failed:
+        text += (" Not reproduced (the paper's claims that fail here): "
+                 + "; ".join(f"{r['text']} (`{r['id']}`)" for r in failed) + ".")
+    return text
 
 
 def run_claims(entry: Any, out: Path, k: int, workers: int | None = None,
@@ -503,4 +522,4 @@ def run_claims(entry: Any, out: Path, k: int, workers: int | None = None,
     :func:`write_claims` on that record); returns the claims' rows."""
     record = Record(entry.name, "", k, rounding)
     simulate_claims(entry, out, record, workers, scheduler)
-    return write_claims(entry, record, out, plot_format)
+    return write_claims(entry, record, out, plot_format)[0]

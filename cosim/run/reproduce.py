@@ -1063,7 +1063,7 @@ def evaluate(entry: Entry, record: Record, out: Path, plot_format: str = "png"
     its rows and the claims' rows."""
     import pandas as pd
 
-    from cosim.run.ensemble import write_claims
+    from cosim.run.ensemble import verdict_summary, write_claims
     from cosim.run.scenario import load_scenario
     from cosim.run.sweep import key_labels, plot_sweep
 
@@ -1112,9 +1112,13 @@ def evaluate(entry: Entry, record: Record, out: Path, plot_format: str = "png"
         draw_figure(spec, frames, out / file, scenarios)
         parts += ["", f"![{spec.get('title', file)}]({file})"]
     claim_rows: list[dict[str, Any]] = []
-    if entry.claims:
-        claim_rows = write_claims(entry, record, out, plot_format)
-        parts += ["", "### Claims", "", (out / "claims.md").read_text().split("\n", 2)[2]]
+    if entry.claims:  # the verdicts lead the page; the single runs follow
+        claim_rows, claims_text = write_claims(entry, record, out, plot_format)
+        head = parts[:4]
+        parts = [*head, verdict_summary(claim_rows, record.seeds), "", "### Claims", "",
+                 claims_text.rstrip("\n"), "", "### Single runs", "",
+                 "Each run once, as its scenario is shipped (the claims above are over the "
+                 "seed ensemble).", "", *parts[4:]]
     if entry.notes:
         parts += ["", "### Where we differ from the paper, and why", "", entry.notes.strip()]
     table = out / f"{entry.table}.md"
