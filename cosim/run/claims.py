@@ -56,7 +56,7 @@ QUANTIFIERS = ("every", "share", "typical")
 ENSEMBLES = ("disturbance", "mismatch", "repeat")
 ORIGINS = ("paper", "ours")
 _CLAIM_KEYS = {"id", "source", "text", "paper", "metric", "kind", "runs", "threshold", "range",
-               "ensemble", "origin", "quantifier", "share"}
+               "ensemble", "origin", "quantifier", "share", "transform"}
 _ENSEMBLE_KEYS = {"seed_key", "report_seeds", "calibration_seeds", "perturb", "perturb_seed",
                   "rounding_perturb", "rounding_reference_path", "repeats", "members"}
 _VARIANT_KEYS = {"name", "text", "replace", "rounding", "seeds"}
@@ -239,6 +239,9 @@ def check_claims(where: str, claims: list[dict[str, Any]], run_names: list[str],
         if share is not None and (isinstance(share, bool) or not isinstance(share, (int, float))
                                   or not 0.0 < share < 1.0):
             raise ClaimsError(f"{at}: share = {share!r}: a fraction in (0, 1)")
+        if claim.get("transform", "abs") != "abs":
+            raise ClaimsError(f"{at}: transform = {claim['transform']!r} (known: 'abs', the "
+                              "metric's absolute value per member)")
         if claim.get("origin", "paper") not in ORIGINS:
             raise ClaimsError(f"{at}: origin = {claim['origin']!r} (known: {ORIGINS})")
     return claims

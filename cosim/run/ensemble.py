@@ -306,6 +306,8 @@ def evaluate(entry: Any, summaries: dict[Any, dict[str, Any] | None], k: int,
             a = _metric(summaries, names[0], ens, n, rnd, claim["metric"])
             b = (_metric(summaries, names[1], ens, n, rnd, claim["metric"])
                  if len(names) > 1 else None)
+            if claim.get("transform") == "abs":  # e.g. the stop error's size, either side
+                a, b = np.abs(a), None if b is None else np.abs(b)
             results.append(verdict(claim, a, b))
         row = with_rounding(results[0], results[1] if with_rnd else None)
         rows.append({**({"variant": var} if variants else {}),

@@ -100,6 +100,10 @@ live there, not in code)::
     runs = ["ISMPC", "ISMC"]
     threshold = 0.2                # below / above
     range = [-0.5, 0.5]            # inside
+    quantifier = "typical"         # every | share | typical (cosim.run.claims; default:
+                                   # every for below/above/inside, typical for less/greater)
+    share = 0.9                    # with quantifier "share": at least this fraction of runs
+    transform = "abs"              # optional: the metric's absolute value per member
     ensemble = "disturbance"       # disturbance (report seeds) | mismatch (perturb samples)
                                    # | repeat (the nominal run [ensemble].repeats times,
                                    # paired by repeat index: CPU / wall time claims)
