@@ -4,6 +4,7 @@ Each paper has an entry ``scenarios/reproduce/<name>.toml`` (the paper's numbers
 live there, not in code)::
 
     title = "Author et al. (year): ..."
+    citation = "Authors: title. Journal vol(no), year."   # optional, shown under the title
     notes = "why our figures differ from the paper's"     # optional, markdown
     table = "table2"               # optional: the table's file name (default "table")
     set = { "plant.disturbance_amplitude" = 0.02 }   # optional: overrides of every run and
@@ -168,7 +169,7 @@ except ModuleNotFoundError:  # Python < 3.11
 REPRODUCE_DIR = SCENARIO_DIR / "reproduce"
 
 # "ensemble" and "claims": the claims schema (docs of the claims framework), read there
-_ENTRY_KEYS = {"title", "notes", "table", "set", "runs", "metrics", "paper", "derived",
+_ENTRY_KEYS = {"title", "citation", "notes", "table", "set", "runs", "metrics", "paper", "derived",
                "rankings", "sweeps", "figures", "ensemble", "claims", "variants"}
 _RANKING_KEYS = {"name", "metric", "runs", "paper"}
 _DERIVED_KEYS = {"name", "kind", "metric", "run", "baseline", "value", "range", "tolerance",
@@ -207,6 +208,7 @@ class Entry:
     ensemble: Ensemble = field(default_factory=Ensemble)
     claims: list[dict[str, Any]] = field(default_factory=list)
     variants: list[dict[str, Any]] = field(default_factory=list)
+    citation: str = ""
 
 
 def entry_names() -> list[str]:
@@ -334,7 +336,7 @@ def load_entry(name: str | Path) -> Entry:
     return Entry(path.stem, path, data["title"], runs, metrics, data.get("paper", []),
                  data.get("derived", []), data.get("sweeps", []), data.get("figures", []),
                  data.get("notes", ""), data.get("rankings", []), table, ensemble, claims,
-                 variants)
+                 variants, str(data.get("citation", "")))
 
 
 def slug(name: str) -> str:
@@ -729,7 +731,7 @@ def plain_axes(ax: Any) -> None:
 
 def legend_outside(ax: Any) -> Any:
     """The legend right of the axes, where no curve can be under it."""
-    return ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=7, frameon=False,
+    return ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=9, frameon=False,
                      borderaxespad=0.0)
 
 
@@ -1080,8 +1082,10 @@ def evaluate(entry: Entry, record: Record, out: Path, plot_format: str = "png"
     derived = derived_rows(entry, summaries)
     ranked = ranking_rows(entry, summaries)
     pd.DataFrame(rows + derived + ranked).to_csv(out / f"{entry.table}.csv", index=False)
-    parts = [f"## {entry.title}", "", f"`cosim reproduce {entry.name}` (entry "
-             f"`scenarios/reproduce/{entry.path.name}`)", "", table_markdown(entry, rows)]
+    source = (f"{entry.citation} " if entry.citation else "") + (
+        f"Reproduced by `cosim reproduce {entry.name}` (entry "
+        f"`scenarios/reproduce/{entry.path.name}`).")
+    parts = [f"## {entry.title}", "", source, "", table_markdown(entry, rows)]
     if derived:
         parts += ["", derived_markdown(derived)]
     if ranked:
