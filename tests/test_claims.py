@@ -423,10 +423,10 @@ def test_seed004_timing_claims_repeat_ten_times() -> None:
 
     entry = load_entry("seed004")
     timing = [c for c in entry.claims if c["metric"] == "qp_cpu_time_total_s"]
-    assert len(timing) == 3 and all(c["ensemble"] == "repeat" for c in timing)
+    assert len(timing) == 4 and all(c["ensemble"] == "repeat" for c in timing)
     assert len(members(entry, "repeat", 2)) == 10
     rounding = {c["id"]: rnd for _v, c, _r, rnd, _k in claim_cases(entry, 2)}
-    assert [rounding[c["id"]] for c in timing] == [False] * 3
+    assert [rounding[c["id"]] for c in timing] == [False] * 4
 
 
 def test_repeat_claim_end_to_end_on_a_fast_entry(tmp_path: Path) -> None:
