@@ -235,7 +235,7 @@ def test_an_entry_claims_get_verdicts_end_to_end(tmp_path: Path) -> None:
 def test_ensemble_figure_draws_median_and_band(tmp_path: Path) -> None:
     import pandas as pd
 
-    from cosim.run.ensemble import draw_ensemble_figure
+    from cosim.run.figures import FigureError, draw_ensemble_figure
 
     t = np.linspace(0.0, 10.0, 11)
     dirs = [pd.DataFrame({"time": t, "plant.v": t + i, "controller.v_ref": t})
@@ -244,7 +244,7 @@ def test_ensemble_figure_draws_median_and_band(tmp_path: Path) -> None:
     draw_ensemble_figure(spec, {"A": dirs}, tmp_path / "f_ensemble.png")
     assert (tmp_path / "f_ensemble.png").stat().st_size > 0
     spec["y"] = ["plant.missing"]
-    with pytest.raises(ReproduceError, match="recorded no 'plant.missing'"):
+    with pytest.raises(FigureError, match="recorded no 'plant.missing'"):
         draw_ensemble_figure(spec, {"A": dirs}, tmp_path / "g.png")
 
 
@@ -328,7 +328,7 @@ def test_variant_schema_errors_name_file_key_and_value(variant: dict, message: s
 def test_panels_ensemble_figure_draws_limits(tmp_path: Path) -> None:
     import pandas as pd
 
-    from cosim.run.ensemble import draw_ensemble_figure
+    from cosim.run.figures import FigureError, draw_ensemble_figure
 
     t = np.linspace(0.0, 10.0, 11)
     dirs = [pd.DataFrame({"time": t, "plant.v[1]": t + i, "plant.v[2]": t - i,
@@ -338,7 +338,7 @@ def test_panels_ensemble_figure_draws_limits(tmp_path: Path) -> None:
     draw_ensemble_figure(spec, {"A": dirs, "B": dirs}, tmp_path / "f_ensemble.png")
     assert (tmp_path / "f_ensemble.png").stat().st_size > 0
     spec["limit_ref"] = "controller.missing"
-    with pytest.raises(ReproduceError, match="recorded no 'controller.missing'"):
+    with pytest.raises(FigureError, match="recorded no 'controller.missing'"):
         draw_ensemble_figure(spec, {"A": dirs}, tmp_path / "g.png")
 
 

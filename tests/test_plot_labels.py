@@ -238,7 +238,7 @@ def test_reproduce_figures_read_as_paper_figures(built_fmus):
     import matplotlib.pyplot as plt
     import numpy as np
 
-    from cosim.run.reproduce import figure_of
+    from cosim.run.figures import figure_of
     from cosim.run.results import variable_info
 
     sc = load_scenario("seed000_stop_rsmpc")
@@ -295,7 +295,7 @@ def test_per_unit_panels_name_each_unit_and_keep_coinciding_curves_visible(built
     import numpy as np
     import pandas as pd
 
-    from cosim.run.reproduce import figure_of
+    from cosim.run.figures import figure_of
     from cosim.run.results import variable_info
 
     sc = load_scenario("seed001_emu_ismpc")
@@ -328,7 +328,7 @@ def test_ensemble_figure_draws_held_bands_as_steps(built_fmus):
     import matplotlib.pyplot as plt
     import numpy as np
 
-    from cosim.run.ensemble import ensemble_figure_of
+    from cosim.run.figures import ensemble_figure_of
 
     sc = load_scenario("seed000_stop_rsmpc")
     members = [_stopping_frame() for _ in range(3)]
@@ -366,8 +366,7 @@ def test_tall_panel_figures_keep_the_title_above_the_first_panel():
     import numpy as np
     import pandas as pd
 
-    from cosim.run.ensemble import ensemble_figure_of
-    from cosim.run.reproduce import figure_of
+    from cosim.run.figures import ensemble_figure_of, figure_of
 
     t = np.arange(0.0, 100.0, 0.2)
     frames = {f"run {i}": pd.DataFrame({"time": t, "e": np.sin(t)}) for i in range(10)}

@@ -241,16 +241,16 @@ def test_speed_classes_figure_writes_table_and_csv(tmp_path: Path) -> None:
 def test_figure_series_mean_of_pattern_minus_reference() -> None:
     """``y_reduce = "mean"`` over ``plant.v[*]`` and ``y_minus``: the train-mean speed error
     of seed 002's figure, exactly the mean of the vehicle columns less the reference."""
-    from cosim.run.reproduce import figure_series
+    from cosim.run.figures import FigureError, figure_series
 
     frame = pd.DataFrame({"time": [0.0, 1.0], "plant.v[1]": [1.0, 4.0], "plant.v[2]": [3.0, 8.0],
                           "plant.v_tail": [100.0, 100.0], "controller.v_ref": [0.5, 5.0]})
     spec = {"file": "f.png", "y_reduce": "mean", "y_minus": "controller.v_ref"}
     assert figure_series(frame, spec, "plant.v[*]", "A").tolist() == [1.5, 1.0]
     assert figure_series(frame, {"file": "f.png"}, "plant.v[2]", "A").tolist() == [3.0, 8.0]
-    with pytest.raises(ReproduceError, match="run 'A' recorded no 'plant.a'"):
+    with pytest.raises(FigureError, match="run 'A' recorded no 'plant.a'"):
         figure_series(frame, {"file": "f.png"}, "plant.a", "A")
-    with pytest.raises(ReproduceError, match="recorded no 'controller.x'"):
+    with pytest.raises(FigureError, match="recorded no 'controller.x'"):
         figure_series(frame, {**spec, "y_minus": "controller.x"}, "plant.v[*]", "A")
 
 

@@ -41,6 +41,7 @@ from cosim.run.claims import (
     verdict,
     with_rounding,
 )
+from cosim.run.figures import draw_ensemble_figure
 from cosim.run.record import Job as RecordJob
 from cosim.run.record import Record, series_name
 
@@ -157,88 +158,6 @@ def member_dir(out: Path, key: tuple[str, str, int, bool]) -> Path:
     from cosim.run.reproduce import slug
 
     return out / "ensemble" / slug(key[0]) / f"{key[1]}_{key[2] + 1:02d}"
-
-
-def draw_ensemble_figure(spec: dict[str, Any], frames: dict[str, list[Any]], path: Path,
-                         scenarios: dict[str, Any] | None = None) -> None:
-    """:func:`ensemble_figure_of` the members' recorded series (run name -> one frame per
-    member), saved to ``path`` (png at 200 dpi, svg or pdf by its suffix)."""
-    import matplotlib.pyplot as plt
-
-    from cosim.run.results import PLOT_DPI
-
-    fig = ensemble_figure_of(spec, frames, scenarios or {})
-    fig.savefig(path, dpi=PLOT_DPI, format=Path(path).suffix.lstrip(".") or "png",
-                bbox_inches="tight")
-    plt.close(fig)
-
-
-def ensemble_figure_of(spec: dict[str, Any], frames: dict[str, list[Any]],
-                       scenarios: dict[str, Any]) -> Any:
-    """An overlay figure over an ensemble: per run the median over the members and a 5-95 %
-    band (members sampled on the first member's x grid; x = "time" or a recorded column);
-    held signals as steps, the reference as a dashed continuous curve, labels and units from
-    the declarations (:func:`cosim.run.reproduce.series_style`), the legend outside."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from cosim.run.reproduce import (
-        axis_text,
-        draw_limits,
-        figure_series,
-        legend_outside,
-        plain_axes,
-        reference_curve,
-        series_style,
-    )
-
-    ys = spec["y"] if isinstance(spec["y"], list) else [spec["y"]]
-    first = scenarios.get(next(iter(frames))) if frames else None
-    ylabel, scale = axis_text(spec, "y", first, ys[0])
-    panels = spec.get("kind", "overlay") == "panels"
-    fig, axes = plt.subplots(len(frames) if panels else 1, 1, squeeze=False, sharex=True,
-                             figsize=(9, 2.6 * len(frames) if panels else 4.5),
-                             layout="constrained")  # room for the title and outside legends
-    for j, (name, members_) in enumerate(frames.items()):
-        ax = axes[j if panels else 0][0]
-        x0 = members_[0]["time"] if spec["x"] == "time" else members_[0][spec["x"]]
-        for y in ys:
-            plain = "y_reduce" in spec or "y_minus" in spec
-            style = ({"drawstyle": "default", "text": y, "reference": False} if plain
-                     else series_style(scenarios.get(name), y))
-            curves = []
-            for frame in members_:
-                x = frame["time"] if spec["x"] == "time" else frame[spec["x"]]
-                values = figure_series(frame, spec, y, name)
-                curve = (reference_curve(scenarios.get(name), frame, y) if style["reference"]
-                         else None)
-                values = values if curve is None else curve
-                curves.append(np.interp(x0, x, values * scale))
-            stack = np.vstack(curves)
-            label = (style["text"] if panels else name if len(ys) == 1
-                     else f"{name}: {style['text']}")
-            kwargs: dict[str, Any] = {"linewidth": 1.0, "drawstyle": style["drawstyle"]}
-            if style["reference"]:
-                kwargs.update(color="black", linestyle="--", linewidth=0.9)
-            line, = ax.plot(x0, np.median(stack, axis=0),
-                            label=f"{label} (median of {len(members_)})", **kwargs)
-            ax.fill_between(x0, np.percentile(stack, 5, axis=0),
-                            np.percentile(stack, 95, axis=0), color=line.get_color(),
-                            alpha=0.25, linewidth=0,
-                            step="post" if style["drawstyle"] == "steps-post" else None)
-        if "limit_ref" in spec and (panels or j == 0):
-            draw_limits(ax, spec, members_[0], x0, name)
-        if panels:
-            ax.set_title(name, fontsize=9)
-        ax.set_ylabel(ylabel)
-        ax.grid(True, alpha=0.3)
-        plain_axes(ax)
-        legend_outside(ax)
-    axes[-1][0].set_xlabel(axis_text(spec, "x", first, spec["x"])[0])
-    fig.suptitle(f"{spec.get('title', '')} (median, 5-95 % band over the seeds)")
-    return fig
 
 
 ROUNDING_ENV = {"ATO_COSIM_NO_KERNELS": "1"}  # the plants' numpy reference path

@@ -38,7 +38,7 @@ INPUTS_FILE = "inputs.sha256"  # in a reproduction's folder: the digest of the i
 NOT_INPUTS = {"cosim/run/docs_pages.py", "cosim/run/provenance.py"}
 # read a record and the entry only: tables, claims, figures, the page
 EVALUATION_ONLY = {"cosim/run/reproduce.py", "cosim/run/ensemble.py", "cosim/run/claims.py",
-                   "cosim/run/record.py", "cosim/run/console.py"}
+                   "cosim/run/record.py", "cosim/run/console.py", "cosim/run/figures.py"}
 
 
 def _strings(value: Any) -> Iterator[str]:
