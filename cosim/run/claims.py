@@ -488,12 +488,27 @@ def with_rounding(main: dict[str, Any], perturbed: dict[str, Any] | None) -> dic
     return out
 
 
+def number(value: float, digits: int = 4) -> str:
+    """``value`` to ``digits`` significant digits, positional between 1e-3 and 1e7 (31130,
+    not 3.113e+04), scientific outside; ``-`` for NaN."""
+    if math.isnan(value):
+        return "-"
+    if value == 0.0 or 1e-3 <= abs(value) < 1e7:
+        return np.format_float_positional(value, precision=digits, unique=False,
+                                          fractional=False, trim="-")
+    return f"{value:.{digits - 1}e}"
+
+
 def ours_text(row: dict[str, Any]) -> str:
     """``median [low, high]`` of the tested quantity (``-`` where unknown); for a universal
     claim the worst member too."""
-    def f(v: float) -> str:
-        return "-" if v is None or (isinstance(v, float) and math.isnan(v)) else f"{v:.4g}"
+    def f(v: float | None) -> str:
+        return "-" if v is None else number(float(v))
     text = f"{f(row['median'])} [{f(row['ci_low'])}, {f(row['ci_high'])}]"
     if row.get("quantifier") == "every":
         text += f", worst {f(row.get('worst', math.nan))}"
+    b = row.get("b_median")
+    if row.get("kind") in ("less", "greater") and b and math.isfinite(b) and not math.isnan(
+            row["median"]):  # the effect's size: "no effect" and "undecided" look apart
+        text += f" ({100.0 * row['median'] / abs(b):+.2g} % of B)"
     return f"{text} ({row['note']})" if row.get("note") else text

@@ -145,6 +145,7 @@ from cosim.run.claims import (
     check_claims,
     check_ensemble,
     check_variants,
+    number,
     ratio_ci,
 )
 from cosim.run.figures import (
@@ -487,7 +488,7 @@ def _fmt(value: Any) -> str:
     if isinstance(value, bool):
         return "yes" if value else "no"
     if isinstance(value, float):
-        return "-" if math.isnan(value) else f"{value:.4g}"
+        return number(value)
     return str(value)
 
 
