@@ -59,6 +59,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -158,6 +159,11 @@ def _toml_value(value: Any) -> str:
     raise TypeError(f"no TOML literal for {value!r}")
 
 
+def _toml_key(key: str) -> str:
+    """A bare key where TOML allows one, else a quoted key."""
+    return key if re.fullmatch(r"[A-Za-z0-9_-]+", key) else json.dumps(key)
+
+
 def toml_text(doc: dict[str, Any], header: str = "") -> str:
     """TOML of ``doc``: plain keys first, then each table (nested dicts as dotted tables);
     read back with ``tomllib`` and compared, so what is written is what is meant."""
@@ -168,7 +174,7 @@ def toml_text(doc: dict[str, Any], header: str = "") -> str:
         if name and (plain or not table):
             lines.extend(["", f"[{name}]"])
         for k, v in plain.items():
-            lines.append(f"{json.dumps(k)} = {_toml_value(v)}")
+            lines.append(f"{_toml_key(k)} = {_toml_value(v)}")
         for k, v in table.items():
             if isinstance(v, dict):
                 emit(v, f"{name}.{k}" if name else k)
