@@ -422,15 +422,14 @@ Runner = Callable[[Path, Path], tuple[Any, dict[str, Any]]]
 def run_section(label: str, section: Section, run: OptimalRun, train: Train, window: Window,
                 out_dir: Path, route_path: Path, runner: Runner, controller_name: str = "pid",
                 title: str = "", journey: JourneySection | None = None) -> Comparison:
-    """Write the reference and scenario of a planned section into ``out_dir``, run it with
+    """Write the reference (``<label>.csv``) and scenario of a planned section into
+    ``out_dir``, run it with
     ``runner`` (``cosim optimal`` passes the project's runner,
     :func:`cosim.run.master.run_scenario`; results in ``out_dir/<label>_<controller>/``) and
     compare it with the plan."""
     ctl = controller(controller_name)
     out_dir = Path(out_dir).resolve()
-    reference = out_dir / f"{label}.csv"
-    if not reference.is_file():
-        write_csv(run, train, reference, title)
+    reference = write_csv(run, train, out_dir / f"{label}.csv", title)
     doc = scenario_document(
         section, run, train, route_path.resolve(), reference, controller_name,
         f"{title or label}: {train.name} following the energy-optimal run, {ctl.description}")
