@@ -632,34 +632,49 @@ def optimal(
         "--trade-off", help="also the energy/running-time curve at N times")] = 0,
     ds: Annotated[float, typer.Option(help="position step of the optimiser (m)")] = 50.0,
     speeds: Annotated[int, typer.Option(help="speed nodes of the optimiser")] = 600,
+    closed_loop: Annotated[str | None, typer.Option(
+        "--closed-loop", help="also run this tracking controller (pid) after each optimal run "
+        "on the CRH3 plant FMU carrying the train, and compare: route.toml, the scenario "
+        "LABEL_CONTROLLER.toml, its results in LABEL_CONTROLLER/ and closed_loop.csv")] = None,
 ) -> None:
     """Write the energy-optimal speed profile of a run.
 
     The profile is for a line, train and running time, by the regimes of optimal train control
-    (Pontryagin's maximum principle)."""
+    (Pontryagin's maximum principle). With --closed-loop a shipped tracking controller follows
+    it in co-simulation: the table gives the planned and closed-loop energy and running time,
+    the arrival against the schedule (+-5 s) and the stop error (+-0.5 m), seed 003's
+    windows."""
+    from cosim.optimal import closed_loop as loop
     from cosim.optimal import output
     from cosim.optimal.lines import load_line
     from cosim.optimal.model import Section, Train
     from cosim.optimal.pontryagin import Grid, SectionSolver
-    from cosim.optimal.ttobench import load_journey, load_train
+    from cosim.optimal.ttobench import JourneySection, load_journey, load_train
+    from cosim.run.master import SimulationError
+    from cosim.run.scenario import ScenarioError
 
+    compared: list[loop.Comparison] = []
     try:
+        if closed_loop is not None:
+            loop.controller(closed_loop)  # an unknown name fails before any planning
         route, stop_list = load_line(track)
         vehicle = Train.from_crh3() if train == "crh3" else load_train(train)
-        runs: list[tuple[str, Section, float]] = []
+        runs: list[tuple[str, Section, float, JourneySection | None]] = []
         if journey is not None:
             for i, sec in enumerate(load_journey(journey).sections):
                 runs.append((f"section{i}", Section(route, sec.departure.position,
-                                                   sec.arrival.position), sec.running_time()))
+                                                   sec.arrival.position), sec.running_time(),
+                             sec))
         else:
             a, b = (int(x) for x in stops.split(":"))
             T = time if time is not None else route.scheduled_time_s
             if T is None:
                 raise ValueError("give --time or --journey (the route has no schedule)")
-            runs.append(("run", Section(route, stop_list[a], stop_list[b]), T))
+            runs.append(("run", Section(route, stop_list[a], stop_list[b]), T, None))
         grid = Grid(ds=ds, speeds=speeds)
+        route_path = loop.write_route(route, out_dir / "route.toml") if closed_loop else None
         table = Table("run", "from (m)", "to (m)", "time (s)", "energy (kWh)", "V (km/h)")
-        for label, section, T in runs:
+        for label, section, T, sec in runs:
             solver = SectionSolver(section, vehicle, grid)
             best = solver.for_time(T)
             name = f"{route.name} {label}"
@@ -677,10 +692,43 @@ def optimal(
                 output.trade_off_csv(np.array([r.running_time for r in runs_t]),
                                      np.array([r.energy for r in runs_t]),
                                      out_dir / f"{label}_trade_off.csv")
-    except (ValueError, KeyError, OSError) as err:
+            if closed_loop is not None and route_path is not None:
+                window = loop.Window(T, journey=None if sec is None else sec.window())
+                compared.append(loop.run_section(label, section, best, vehicle, window,
+                                                 out_dir, route_path, _run_scenario,
+                                                 closed_loop, name, sec))
+    except (ValueError, KeyError, OSError, ScenarioError, SimulationError, RuntimeError) as err:
         _fail(str(err))
     out.print(table)
+    if compared:
+        path = loop.write_table(compared, out_dir / "closed_loop.csv")
+        out.print(_closed_loop_table(compared, closed_loop or ""))
+        out.print(f"wrote {path}", highlight=False, markup=False)
     out.print(f"wrote {out_dir}", highlight=False, markup=False)
+
+
+def _run_scenario(path: Path, where: Path) -> tuple[Any, dict[str, Any]]:
+    """Run a scenario file as ``cosim run PATH --out WHERE`` does: (recorded frame, summary)."""
+    from cosim.run.master import run_scenario
+
+    result = run_scenario(path, out_dir=where)
+    return result.frame, result.summary
+
+
+def _closed_loop_table(compared: list, controller: str) -> Table:
+    """Plan against closed loop, a row per section (energies in kWh)."""
+    table = Table("run", "schedule (s)", "planned (s)", "closed loop (s)", "planned (kWh)",
+                  "closed loop (kWh)", "stop error (m)", "verdict",
+                  title=f"closed loop ({controller}) against the plan")
+    for c in compared:
+        time_cell = "still moving" if c.time is None else (
+            f"{c.time:.1f} ({c.arrival_error:+.1f})")
+        table.add_row(c.label, f"{c.window.schedule:.1f}", f"{c.planned_time:.1f}", time_cell,
+                      f"{c.planned_energy / 3.6e6:.2f}",
+                      f"{c.energy / 3.6e6:.2f} ({100 * (c.energy / c.planned_energy - 1):+.1f} %)",
+                      f"{c.stop_error:+.3f}", escape("; ".join(c.verdict())
+                                                     or "within the windows"))
+    return table
 
 
 def cli_reference() -> str:
