@@ -54,7 +54,7 @@ import numpy as np
 CLAIM_KINDS = ("less", "greater", "below", "above", "inside")
 QUANTIFIERS = ("every", "share", "typical")
 ENSEMBLES = ("disturbance", "mismatch", "repeat")
-ORIGINS = ("paper", "ours")
+ORIGINS = ("paper", "ours", "sanity")  # the paper's statement, ours, a check of the setup
 _CLAIM_KEYS = {"id", "source", "text", "paper", "metric", "kind", "runs", "threshold", "range",
                "ensemble", "origin", "quantifier", "share", "transform"}
 _ENSEMBLE_KEYS = {"seed_key", "report_seeds", "calibration_seeds", "perturb", "perturb_seed",

@@ -108,7 +108,7 @@ live there, not in code)::
     ensemble = "disturbance"       # disturbance (report seeds) | mismatch (perturb samples)
                                    # | repeat (the nominal run [ensemble].repeats times,
                                    # paired by repeat index: CPU / wall time claims)
-    origin = "paper"               # paper | ours
+    origin = "paper"               # paper | ours | sanity (a check of the setup)
     [[variants]]                   # optional: every claim again with some runs replaced (an
     name = "white"                 # alternative reading, a mechanism removed); claims.md
     text = "the paper's white noise"  # gets a verdict per claim and variant, variants.csv
