@@ -430,3 +430,27 @@ def _record_json(out: Path) -> str:
     import gzip
 
     return gzip.decompress((out / "record" / "record.json.gz").read_bytes()).decode()
+
+
+@pytest.mark.parametrize(("patch", "message"), [
+    ('[[statements]]\ntext = "PID stops"\nclaims = ["nope"]\n', "claims: 'nope' is not one"),
+    ('[[statements]]\ntext = "PID stops"\n', "give claims = \\[ids\\] or untestable"),
+    ('[[statements]]\ntext = "PID stops"\nclaims = ["pid_stops_in_window"]\n'
+     'untestable = "x"\n', "one of them"),
+    ('[[statements]]\ntext = "x"\nclaims = []\nsee = 1\n', "unknown key\\(s\\) \\['see'\\]"),
+])
+def test_bad_statements_name_the_file_and_key(tmp_path: Path, patch: str, message: str) -> None:
+    path = tmp_path / "entry.toml"
+    path.write_text(CLAIMED + patch)
+    with pytest.raises(ReproduceError, match=message):
+        load_entry(str(path))
+
+
+def test_every_shipped_statement_names_claims_or_why_not() -> None:
+    """Each paper's statements table: every statement is tested by claims of its entry or
+    says why it is not (load_entry refuses anything else), and every paper has one."""
+    for name in entry_names():
+        entry = load_entry(name)
+        assert entry.statements, name
+        tested = {c for st in entry.statements for c in st.get("claims") or []}
+        assert tested <= {c["id"] for c in entry.claims}

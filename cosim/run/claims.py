@@ -281,6 +281,32 @@ def check_variants(where: str, variants: list[dict[str, Any]], run_names: list[s
     return variants
 
 
+_STATEMENT_KEYS = {"text", "where", "claims", "untestable"}
+
+
+def check_statements(where: str, statements: list[dict[str, Any]],
+                     claim_ids: list[str]) -> list[dict[str, Any]]:
+    """The ``[[statements]]`` tables: each of the paper's assertions (``text``, ``where`` in
+    the paper) with the ``claims`` that test it, or why it is ``untestable``; checked against
+    the entry's claim ids."""
+    for i, st in enumerate(statements):
+        at = f"{where}: [[statements]] #{i + 1}"
+        unknown = sorted(set(st) - _STATEMENT_KEYS)
+        if unknown:
+            raise ClaimsError(f"{at}: unknown key(s) {unknown} (allowed: "
+                              f"{sorted(_STATEMENT_KEYS)})")
+        if not isinstance(st.get("text"), str) or not st["text"].strip():
+            raise ClaimsError(f"{at}: text: the paper's statement is missing")
+        ids, why = st.get("claims"), st.get("untestable")
+        if (ids is None) == (why is None):
+            raise ClaimsError(f"{at} ({st['text'][:40]!r}): give claims = [ids] or "
+                              "untestable = \"why\", one of them")
+        for cid in ids or []:
+            if cid not in claim_ids:
+                raise ClaimsError(f"{at}: claims: {cid!r} is not one of the entry's claim ids")
+    return statements
+
+
 def variant_runs(claim: dict[str, Any], variant: dict[str, Any]) -> list[str] | None:
     """The claim's runs under ``variant`` (None: the variant replaces none of them)."""
     rep = variant["replace"]

@@ -5,6 +5,11 @@ live there, not in code)::
 
     title = "Author et al. (year): ..."
     citation = "Authors: title. Journal vol(no), year."   # optional, shown under the title
+    [[statements]]                 # each assertion of the paper (its results and conclusions)
+    text = "RSMPC switches the command far less often than RMPC"
+    where = "sec. 4, Fig. 11"
+    claims = ["rsmpc_fewer_switches_n10"]   # the claims that test it, or instead:
+    untestable = "why it cannot be tested here"
     notes = "why our figures differ from the paper's"     # optional, markdown
     table = "table2"               # optional: the table's file name (default "table")
     set = { "plant.disturbance_amplitude" = 0.02 }   # optional: overrides of every run and
@@ -144,6 +149,7 @@ from cosim.run.claims import (
     Ensemble,
     check_claims,
     check_ensemble,
+    check_statements,
     check_variants,
     number,
     ratio_ci,
@@ -177,8 +183,9 @@ except ModuleNotFoundError:  # Python < 3.11
 REPRODUCE_DIR = SCENARIO_DIR / "reproduce"
 
 # "ensemble" and "claims": the claims schema (docs of the claims framework), read there
-_ENTRY_KEYS = {"title", "citation", "notes", "table", "set", "runs", "metrics", "paper", "derived",
-               "rankings", "sweeps", "figures", "ensemble", "claims", "variants"}
+_ENTRY_KEYS = {"title", "citation", "statements", "notes", "table", "set", "runs", "metrics",
+               "paper", "derived", "rankings", "sweeps", "figures", "ensemble", "claims",
+               "variants"}
 _RANKING_KEYS = {"name", "metric", "runs", "paper"}
 _DERIVED_KEYS = {"name", "kind", "metric", "run", "baseline", "value", "range", "tolerance",
                  "source"}
@@ -217,6 +224,7 @@ class Entry:
     claims: list[dict[str, Any]] = field(default_factory=list)
     variants: list[dict[str, Any]] = field(default_factory=list)
     citation: str = ""
+    statements: list[dict[str, Any]] = field(default_factory=list)
 
 
 def entry_names() -> list[str]:
@@ -339,12 +347,14 @@ def load_entry(name: str | Path) -> Entry:
         ensemble = check_ensemble(str(path), data.get("ensemble"))
         claims = check_claims(str(path), data.get("claims", []), names, ensemble)
         variants = check_variants(str(path), data.get("variants", []), names)
+        statements = check_statements(str(path), data.get("statements", []),
+                                      [c["id"] for c in claims])
     except ClaimsError as err:
         raise ReproduceError(str(err)) from err
     return Entry(path.stem, path, data["title"], runs, metrics, data.get("paper", []),
                  data.get("derived", []), data.get("sweeps", []), data.get("figures", []),
                  data.get("notes", ""), data.get("rankings", []), table, ensemble, claims,
-                 variants, str(data.get("citation", "")))
+                 variants, str(data.get("citation", "")), statements)
 
 
 def slug(name: str) -> str:
@@ -874,8 +884,11 @@ def evaluate(entry: Entry, record: Record, out: Path, plot_format: str = "png"
     if entry.claims:  # the verdicts lead the page; the single runs follow
         claim_rows, claims_text = write_claims(entry, record, out, plot_format)
         head = parts[:4]
+        stated = (["", "### Every statement of the paper", "",
+                   statements_markdown(entry.statements, claim_rows)]
+                  if entry.statements else [])
         parts = [*head, verdict_summary(claim_rows, record.seeds), "", "### Claims", "",
-                 claims_text.rstrip("\n"), "", "### Single runs", "",
+                 claims_text.rstrip("\n"), *stated, "", "### Single runs", "",
                  "Each run once, as its scenario is shipped (the claims above are over the "
                  "seed ensemble).", "", *parts[4:]]
     if entry.notes:
@@ -883,6 +896,24 @@ def evaluate(entry: Entry, record: Record, out: Path, plot_format: str = "png"
     table = out / f"{entry.table}.md"
     table.write_text("\n".join(parts) + "\n")
     return table, rows, claim_rows
+
+
+def statements_markdown(statements: list[dict[str, Any]], rows: list[dict[str, Any]]) -> str:
+    """Each of the paper's statements with the verdicts (adjusted) of the claims that test it,
+    or why it is not tested."""
+    by_id = {r["id"]: r for r in rows}
+    lines = [_row(["the paper says", "where", "tested by (verdict, k of K)"]),
+             "| --- | --- | --- |"]
+    for st in statements:
+        if st.get("claims") is not None:
+            cell = "; ".join(f"`{c}`: {by_id[c].get('adjusted', by_id[c]['verdict'])} "
+                             f"({by_id[c]['k']}/{by_id[c]['K']})" for c in st["claims"])
+        else:
+            cell = f"not tested: {st['untestable']}"
+        lines.append(_row([st["text"], st.get("where", ""), cell]))
+    n = sum(st.get("claims") is not None for st in statements)
+    lines += ["", f"{n} of {len(statements)} statements tested by a claim."]
+    return "\n".join(lines)
 
 
 def reproduce(name: str, out_dir: str | Path | None = None, workers: int | None = None,
