@@ -125,12 +125,16 @@ The claims are evaluated by :mod:`cosim.run.claims` (statistics and verdicts) ov
 of :mod:`cosim.run.ensemble` (members, perturbed floating-point rerun), which write
 ``claims.csv`` and ``claims.md``; ``table.md`` includes the claims table.
 
-The command runs every run (in parallel processes), writes each run's results under
-``runs/``, then ``table.md`` and ``table.csv`` (or the entry's ``table`` name; ours beside
-the paper's, with the verdict where a tolerance is given; derived figures and rankings follow
-the table, and are rows of ``table.csv`` with ``metric = "<kind>:<metric>"`` /
-``"rank:<metric>"``), the sweeps and the figures. ``all`` runs every entry and writes one
-``REPRODUCTION.md``.
+The command has two halves. :func:`simulate` runs every job the entry needs (the table runs,
+the sweeps, the claims' members; in parallel processes), writes each run's results under
+``runs/`` and returns their :class:`cosim.run.record.Record`, kept in ``record/``.
+:func:`evaluate` makes everything else from that record and the entry alone: ``table.md`` and
+``table.csv`` (or the entry's ``table`` name; the verdicts and the claims table first, then
+ours beside the paper's, with the verdict where a tolerance is given; derived figures and
+rankings follow the table, and are rows of ``table.csv`` with ``metric = "<kind>:<metric>"``
+/ ``"rank:<metric>"``), the statements table, the sweeps' tables and figures and the figures
+(:mod:`cosim.run.figures`). :func:`redraw_entry` (``--redraw``) is the second half alone.
+``all`` runs every entry and writes one ``REPRODUCTION.md``.
 """
 
 from __future__ import annotations
