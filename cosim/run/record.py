@@ -10,8 +10,10 @@ entry needs or ran it with another specification.
 On disk (``<folder>/record/``, gzip without timestamps so the same record gives the same
 bytes): ``record.json.gz`` (the entry name, the digest of the simulation inputs
 (:func:`cosim.run.provenance.simulation_digest`), K, the rounding flag and the jobs) and one
-``series/<key>.csv.gz`` per recorded series (floats written with 17 significant digits, so
-they read back bit for bit).
+``series/<key>.csv.gz`` per recorded series, written with :data:`SERIES_DIGITS` significant
+digits (a figure's resolution, a fifth of the bytes of full precision; the record is what
+every drawing reads, so a run's first figures and any redraw are the same). The summaries,
+which every number in the tables and claims comes from, are kept exactly.
 """
 
 from __future__ import annotations
@@ -31,6 +33,7 @@ RECORD_DIR = "record"
 _JOBS_FILE = "record.json.gz"
 _SERIES_DIR = "series"
 FORMAT = 1
+SERIES_DIGITS = 7
 
 
 class RecordError(ValueError):
@@ -122,7 +125,8 @@ def save(record: Record, folder: Path) -> Path:
     files = {}
     for name, frame in sorted(record.series.items()):
         files[name] = _file_of(name)
-        text = frame.to_csv(index=False, float_format="%.17g", lineterminator="\n")
+        text = frame.to_csv(index=False, float_format=f"%.{SERIES_DIGITS}g",
+                            lineterminator="\n")
         (staging / _SERIES_DIR / files[name]).write_bytes(_gzip(text.encode()))
     body = {"format": FORMAT, "entry": record.entry, "simulation": record.simulation,
             "seeds": record.seeds, "rounding": record.rounding, "series": files,
