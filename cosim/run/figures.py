@@ -72,6 +72,18 @@ def axis_text(spec: dict[str, Any], axis: str, scenario: Any, column: str
     return (f"{text} ({shown})" if shown and shown != "1" else text), factor
 
 
+def zoom(ax: Any, spec: dict[str, Any]) -> None:
+    """The figure's ``xlim`` / ``ylim`` (drawn units) and shaded ``band_x`` [lo, hi, label]."""
+    if "band_x" in spec:
+        lo, hi, *label = spec["band_x"]
+        ax.axvspan(float(lo), float(hi), color="0.85", zorder=0,
+                   label=str(label[0]) if label else None)
+    if "xlim" in spec:
+        ax.set_xlim(*(float(v) for v in spec["xlim"]))
+    if "ylim" in spec:
+        ax.set_ylim(*(float(v) for v in spec["ylim"]))
+
+
 def plain_axes(ax: Any) -> None:
     """Tick labels without offset or scientific notation ("+1.999e1") on linear axes."""
     for axis in ("x", "y"):
@@ -167,6 +179,8 @@ def figure_of(spec: dict[str, Any], frames: dict[str, Any], scenarios: dict[str,
             ax.set_title(name, fontsize=9)
         ax.set_ylabel(ylabel)
         ax.grid(True, alpha=0.3)
+        if panels or i == 0:
+            zoom(ax, spec)
         plain_axes(ax)
         if len(ax.get_legend_handles_labels()[1]) > 1:
             legend_outside(ax)
@@ -342,6 +356,8 @@ def ensemble_figure_of(spec: dict[str, Any], frames: dict[str, list[Any]],
             ax.set_title(name, fontsize=9)
         ax.set_ylabel(ylabel)
         ax.grid(True, alpha=0.3)
+        if panels or j == 0:
+            zoom(ax, spec)
         plain_axes(ax)
         legend_outside(ax)
     axes[-1][0].set_xlabel(axis_text(spec, "x", first, spec["x"])[0])

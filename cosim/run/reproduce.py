@@ -68,6 +68,9 @@ live there, not in code)::
     limit_kmh = 2.0                # and the +-allowance of that reference speed drawn, as in
     limit_below_kmh = 30.0         # speed_classes (y_scale 3.6: km/h)
     limit_fraction = 0.02
+    xlim = [395.0, 401.0]          # optional: the axes' x / y range in the drawn units (a
+    ylim = [0.0, 10.0]             # zoom), and a shaded x band [lo, hi] with its label:
+    band_x = [399.5, 400.5, "stop window +-50 cm"]
     [[figures]]                    # graded speed error: the max |error| of
     file = "fig8.png"              # each run per class of the reference speed, with the limit
     kind = "speed_classes"         # |e| <= max(limit_kmh if v <= limit_below_kmh, fraction v)
@@ -200,7 +203,7 @@ _PAPER_KEYS = {"run", "metric", "value", "range", "tolerance", "source"}
 _SWEEP_KEYS = {"name", "scenarios", "grid", "labels"}
 _FIGURE_KEYS = {"file", "title", "kind", "x", "y", "y_scale", "ylabel", "xlabel", "runs",
                 "y_reduce", "y_minus", "limit_ref", "limit_kmh", "limit_below_kmh",
-                "limit_fraction"}
+                "limit_fraction", "xlim", "ylim", "band_x"}
 _CLASS_KEYS = {"file", "title", "kind", "y", "y_scale", "ylabel", "runs", "ref", "classes",
                "limit_kmh", "limit_below_kmh", "limit_fraction", "paper"}
 FIGURE_KINDS = ("overlay", "panels", "speed_classes")
