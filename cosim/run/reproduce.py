@@ -347,6 +347,17 @@ def load_entry(name: str | Path) -> Entry:
             _check_keys(where, fig, _FIGURE_KEYS, ("file", "x", "y"))
             if fig.get("y_reduce", "mean") != "mean":
                 raise ReproduceError(f"{where}: y_reduce {fig['y_reduce']!r} (known: 'mean')")
+            for key in ("xlim", "ylim", "band_x"):
+                value = fig.get(key)
+                span = value[:2] if isinstance(value, list) else None
+                if value is not None and not (
+                        span is not None and len(span) == 2
+                        and all(isinstance(v, (int, float)) and not isinstance(v, bool)
+                                for v in span) and span[0] < span[1]
+                        and (key == "band_x" and len(value) in (2, 3) or len(value) == 2)):
+                    raise ReproduceError(f"{where}: {key} = {value!r}: expected [low, high]"
+                                         + (" or [low, high, label]" if key == "band_x"
+                                            else "") + " with low < high")
         unknown_runs = sorted(set(fig.get("runs", names)) - set(names))
         if unknown_runs:
             raise ReproduceError(f"{where}: runs {unknown_runs} are not in [[runs]]")
