@@ -7,7 +7,7 @@ live there, not in code)::
     citation = "Authors: title. Journal vol(no), year."   # optional, shown under the title
     [[statements]]                 # each assertion of the paper (its results and conclusions)
     text = "RSMPC switches the command far less often than RMPC"
-    where = "sec. 4, Fig. 11"
+    where = "sec. 4, Fig. 11"      # optional: default, the sources of its claims
     claims = ["rsmpc_fewer_switches_n10"]   # the claims that test it, or instead:
     untestable = "why it cannot be tested here"
     notes = "why our figures differ from the paper's"     # optional, markdown
@@ -920,6 +920,11 @@ def statements_markdown(statements: list[dict[str, Any]], rows: list[dict[str, A
     """Each of the paper's statements with the verdicts (adjusted) of the claims that test it,
     or why it is not tested."""
     by_id = {r["id"]: r for r in rows}
+
+    def where(st: dict[str, Any]) -> str:  # its place in the paper: given, or its claims'
+        return st.get("where") or "; ".join(dict.fromkeys(
+            by_id[c]["source"] for c in st.get("claims") or [] if by_id[c]["source"]))
+
     lines = [_row(["the paper says", "where", "tested by (verdict, k of K)"]),
              "| --- | --- | --- |"]
     for st in statements:
@@ -928,7 +933,7 @@ def statements_markdown(statements: list[dict[str, Any]], rows: list[dict[str, A
                              f"({by_id[c]['k']}/{by_id[c]['K']})" for c in st["claims"])
         else:
             cell = f"not tested: {st['untestable']}"
-        lines.append(_row([st["text"], st.get("where", ""), cell]))
+        lines.append(_row([st["text"], where(st), cell]))
     n = sum(st.get("claims") is not None for st in statements)
     lines += ["", f"{n} of {len(statements)} statements tested by a claim."]
     return "\n".join(lines)
