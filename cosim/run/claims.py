@@ -247,6 +247,12 @@ def check_claims(where: str, claims: list[dict[str, Any]], run_names: list[str],
     return claims
 
 
+def _known_keys(at: str, table: dict[str, Any], allowed: set[str]) -> None:
+    unknown = sorted(set(table) - allowed)
+    if unknown:
+        raise ClaimsError(f"{at}: unknown key(s) {unknown} (allowed: {sorted(allowed)})")
+
+
 def check_variants(where: str, variants: list[dict[str, Any]], run_names: list[str]
                    ) -> list[dict[str, Any]]:
     """The ``[[variants]]`` tables: each names the runs that replace others in every claim
@@ -254,10 +260,7 @@ def check_variants(where: str, variants: list[dict[str, Any]], run_names: list[s
     names: set[str] = set()
     for i, var in enumerate(variants):
         at = f"{where}: [[variants]] #{i + 1}"
-        unknown = sorted(set(var) - _VARIANT_KEYS)
-        if unknown:
-            raise ClaimsError(f"{at}: unknown key(s) {unknown} (allowed: "
-                              f"{sorted(_VARIANT_KEYS)})")
+        _known_keys(at, var, _VARIANT_KEYS)
         missing = [k for k in ("name", "replace") if k not in var]
         if missing:
             raise ClaimsError(f"{at}: missing key(s) {missing}")
@@ -291,10 +294,7 @@ def check_statements(where: str, statements: list[dict[str, Any]],
     the entry's claim ids."""
     for i, st in enumerate(statements):
         at = f"{where}: [[statements]] #{i + 1}"
-        unknown = sorted(set(st) - _STATEMENT_KEYS)
-        if unknown:
-            raise ClaimsError(f"{at}: unknown key(s) {unknown} (allowed: "
-                              f"{sorted(_STATEMENT_KEYS)})")
+        _known_keys(at, st, _STATEMENT_KEYS)
         if not isinstance(st.get("text"), str) or not st["text"].strip():
             raise ClaimsError(f"{at}: text: the paper's statement is missing")
         ids, why = st.get("claims"), st.get("untestable")

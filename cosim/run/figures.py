@@ -72,6 +72,19 @@ def axis_text(spec: dict[str, Any], axis: str, scenario: Any, column: str
     return (f"{text} ({shown})" if shown and shown != "1" else text), factor
 
 
+def finish_axes(ax: Any, spec: dict[str, Any], title: str | None, ylabel: str,
+                first: bool) -> None:
+    """A panel's title (its run), the y label, the grid, the zoom (once per axes: ``first``)
+    and plain tick labels."""
+    if title is not None:
+        ax.set_title(title, fontsize=9)
+    ax.set_ylabel(ylabel)
+    ax.grid(True, alpha=0.3)
+    if first:
+        zoom(ax, spec)
+    plain_axes(ax)
+
+
 def zoom(ax: Any, spec: dict[str, Any]) -> None:
     """The figure's ``xlim`` / ``ylim`` (drawn units) and shaded ``band_x`` [lo, hi, label]."""
     if "band_x" in spec:
@@ -175,13 +188,7 @@ def figure_of(spec: dict[str, Any], frames: dict[str, Any], scenarios: dict[str,
             ax.plot(x, values * scale, label=label, **kwargs)
         if "limit_ref" in spec:
             draw_limits(ax, spec, frame, x, name)
-        if panels:
-            ax.set_title(name, fontsize=9)
-        ax.set_ylabel(ylabel)
-        ax.grid(True, alpha=0.3)
-        if panels or i == 0:
-            zoom(ax, spec)
-        plain_axes(ax)
+        finish_axes(ax, spec, name if panels else None, ylabel, panels or i == 0)
         if len(ax.get_legend_handles_labels()[1]) > 1:
             legend_outside(ax)
     axes[-1][0].set_xlabel(xlabel)
@@ -352,13 +359,7 @@ def ensemble_figure_of(spec: dict[str, Any], frames: dict[str, list[Any]],
                             step="post" if style["drawstyle"] == "steps-post" else None)
         if "limit_ref" in spec and (panels or j == 0):
             draw_limits(ax, spec, members_[0], x0, name)
-        if panels:
-            ax.set_title(name, fontsize=9)
-        ax.set_ylabel(ylabel)
-        ax.grid(True, alpha=0.3)
-        if panels or j == 0:
-            zoom(ax, spec)
-        plain_axes(ax)
+        finish_axes(ax, spec, name if panels else None, ylabel, panels or j == 0)
         legend_outside(ax)
     axes[-1][0].set_xlabel(axis_text(spec, "x", first, spec["x"])[0])
     fig.suptitle(f"{spec.get('title', '')} (median, 5-95 % band over the seeds)")
