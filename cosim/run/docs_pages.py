@@ -165,15 +165,22 @@ def _page_digest(name: str) -> str | None:
     return found.group(1) if found else None
 
 
+def _page_complete(name: str) -> bool:
+    """Whether every local file the committed page of ``name`` links (its figures) is there."""
+    page = DOCS / "papers" / f"{name}.md"
+    return all((page.parent / m.group(2)).is_file() for m in _LINK.finditer(page.read_text()))
+
+
 _SCRATCH: list[Any] = []  # the temporary folder pages are redrawn into, kept while the process runs
 
 
 def source_dir(name: str, reproduce_dir: Path = REPRODUCE_DIR) -> Path | None:
     """The folder paper ``name``'s page is made from, or None to keep the committed page: the
     local run (``reproduce_dir/NAME``) when its inputs are the tree's; none when the committed
-    page's are; else a folder redrawn (``cosim.run.reproduce.redraw_entry``, no simulation)
-    from a record whose simulation inputs are the tree's, the local run's before the
-    committed one; else the local run if it has a table (:func:`stale_papers` names it)."""
+    page's are and every figure it links is there; else a folder redrawn
+    (``cosim.run.reproduce.redraw_entry``, no simulation) from a record whose simulation
+    inputs are the tree's, the local run's before the committed one; else the local run if
+    it has a table (:func:`stale_papers` names it)."""
     import shutil
     import tempfile
 
@@ -185,7 +192,7 @@ def source_dir(name: str, reproduce_dir: Path = REPRODUCE_DIR) -> Path | None:
     if (_table_file(run_dir) is not None and run_digest(run_dir) == current
             and record_simulation(run_dir) is not None):
         return run_dir
-    if _page_digest(name) == current:
+    if _page_digest(name) == current and _page_complete(name):
         return None
     sim = simulation_digest(name)
     for folder in (run_dir, DOCS / "papers" / name):
