@@ -354,7 +354,7 @@ def simulate_claims(entry: Any, out: Path, record: Record, workers: int | None =
     """Run the claims' members (K and rounding path of ``record``) and add their summaries to
     ``record``, with the series of the members the ensemble figures draw."""
     from cosim.run.master import ensure_built
-    from cosim.run.reproduce import record_series, run_scenarios
+    from cosim.run.reproduce import MEMBER_ROWS, record_series, run_scenarios
     from cosim.run.scenario import load_scenario
 
     jobs = claim_jobs(entry, record.seeds, record.rounding)
@@ -378,7 +378,7 @@ def simulate_claims(entry: Any, out: Path, record: Record, workers: int | None =
             record_series(record, series_name("member", key[0], key[2]),
                           member_dir(out, key),
                           [f for f in specs if key[0] in f.get("runs", [key[0]])],
-                          scenarios[key[0]])
+                          scenarios[key[0]], scalars=False, max_rows=MEMBER_ROWS)
 
 
 def write_claims(entry: Any, record: Record, out: Path, plot_format: str = "png"

@@ -235,11 +235,14 @@ def reference_curve(scenario: Any, frame: Any, y: str) -> Any:
 
 def figure_series(frame: Any, spec: dict[str, Any], y: str, run: str) -> Any:
     """The values a figure plots for ``y`` of one run (before ``y_scale``): the column, or with
-    ``y_reduce = "mean"`` the mean of the columns ``y`` names (``"plant.v[*]"``), minus the
-    ``y_minus`` column where given."""
+    ``y_reduce = "mean"`` the mean of the columns ``y`` names (``"plant.v[*]"``; a column of
+    that name is that mean as recorded), minus the ``y_minus`` column where given."""
     from cosim.run.metrics import matching_columns
 
-    cols = matching_columns(frame, y) if "y_reduce" in spec else [y] if y in frame else []
+    if "y_reduce" in spec and y in frame:  # the reduction as recorded (cosim.run.record)
+        cols = [y]
+    else:
+        cols = matching_columns(frame, y) if "y_reduce" in spec else [y] if y in frame else []
     minus = spec.get("y_minus")
     for missing in ([] if cols else [y]) + ([minus] if minus and minus not in frame else []):
         raise FigureError(f"figure {spec['file']}: run {run!r} recorded no {missing!r}")

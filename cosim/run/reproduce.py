@@ -760,18 +760,42 @@ def draw_speed_classes(spec: dict[str, Any], frames: dict[str, Any], path: Path)
     return "\n".join(lines)
 
 
+MEMBER_ROWS = 2000  # rows of a member's series at most: the ensemble bands, evenly thinned
+
+
 def record_series(record: Record, name: str, folder: Path, specs: list[dict[str, Any]],
-                  scenario: Any) -> None:
-    """Keep of ``folder/results.csv`` as series ``name``: the columns ``specs`` read and every
-    column of one value per train (no ``[i]`` index: the per-vehicle and per-unit columns,
-    most of a freight train's file, only where a figure reads them)."""
+                  scenario: Any, scalars: bool = True, max_rows: int | None = None) -> None:
+    """Keep of ``folder/results.csv`` as series ``name`` what ``specs`` draw: the columns they
+    read, a ``y_reduce`` pattern (``plant.v[*]``) as one column of that name holding the
+    reduction (not every vehicle's column), with ``scalars`` every column of one value per
+    train too (no ``[i]`` index), and with ``max_rows`` evenly thinned rows (the last kept)."""
+    import numpy as np
     import pandas as pd
+
+    from cosim.run.metrics import matching_columns
 
     path = folder / "results.csv"
     columns = list(pd.read_csv(path, nrows=0).columns)
-    keep = set().union({c for c in columns if "[" not in c},
-                       *(figure_columns(spec, scenario, columns) for spec in specs))
-    frame = read_csv(path, usecols=[c for c in columns if c in keep])
+    header = pd.DataFrame(columns=columns)
+    keep = {c for c in columns if "[" not in c} if scalars else set()
+    patterns: dict[str, list[str]] = {}
+    for spec in specs:
+        if "y_reduce" in spec:
+            keep |= figure_columns({**spec, "y": []}, scenario, columns)
+            ys = spec["y"] if isinstance(spec["y"], list) else [spec["y"]]
+            for y in ys:
+                patterns[y] = matching_columns(header, y)
+        else:
+            keep |= figure_columns(spec, scenario, columns)
+    wanted = keep.union(*patterns.values())
+    frame = read_csv(path, usecols=[c for c in columns if c in wanted])
+    for pattern, cols in patterns.items():  # the figure's reduction (y_reduce = "mean")
+        frame[pattern] = frame[cols].to_numpy(dtype=float).mean(axis=1)
+    frame = frame[[c for c in frame.columns if c in keep or c in patterns]]
+    if max_rows is not None and len(frame) > max_rows:
+        step = -(-len(frame) // max_rows)
+        rows = np.unique(np.r_[np.arange(0, len(frame), step), len(frame) - 1])
+        frame = frame.iloc[rows].reset_index(drop=True)
     record.series[name] = frame
 
 
