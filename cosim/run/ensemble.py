@@ -354,7 +354,6 @@ def simulate_claims(entry: Any, out: Path, record: Record, workers: int | None =
     """Run the claims' members (K and rounding path of ``record``) and add their summaries to
     ``record``, with the series of the members the ensemble figures draw."""
     from cosim.run.master import ensure_built
-    from cosim.run.reproduce import MEMBER_ROWS, record_series, run_scenarios
     from cosim.run.scenario import load_scenario
 
     jobs = claim_jobs(entry, record.seeds, record.rounding)
@@ -371,10 +370,22 @@ def simulate_claims(entry: Any, out: Path, record: Record, workers: int | None =
                         entry.ensemble.rounding_reference_path)
     for job in member_jobs(entry, record.seeds, record.rounding):
         record.add(job, summaries.get(job.key))
+    record_member_series(entry, out, record)
+
+
+def record_member_series(entry: Any, out: Path, record: Record) -> None:
+    """The series of the members the ensemble figures draw (main path, disturbance, banded
+    runs) from their results.csv under ``out``, added to ``record`` (thinned to
+    :data:`cosim.run.reproduce.MEMBER_ROWS` rows)."""
+    from cosim.run.reproduce import MEMBER_ROWS, record_series, run_scenarios
+
     scenarios = run_scenarios(entry)
+    banded = _banded(entry)
     specs = [f for f in entry.figures if f.get("kind", "overlay") in ("overlay", "panels")]
-    for key in dirs:
-        if summaries.get(key) is not None:
+    for ident, job in record.jobs.items():
+        key = job.key
+        if (job.kind == "member" and key[0] in banded and key[1] == "disturbance"
+                and not key[3] and record.results[ident] is not None):
             record_series(record, series_name("member", key[0], key[2]),
                           member_dir(out, key),
                           [f for f in specs if key[0] in f.get("runs", [key[0]])],

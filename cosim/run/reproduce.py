@@ -799,6 +799,15 @@ def record_series(record: Record, name: str, folder: Path, specs: list[dict[str,
     record.series[name] = frame
 
 
+def record_run_series(entry: Entry, out: Path, record: Record) -> None:
+    """The series of the table runs the figures draw, from their results.csv under ``out``,
+    added to ``record``."""
+    scenarios = run_scenarios(entry)
+    for name, specs in _figure_runs(entry, FIGURE_KINDS).items():
+        record_series(record, series_name("run", name), out / "runs" / slug(name), specs,
+                      scenarios[name])
+
+
 def _figure_runs(entry: Entry, kinds: tuple[str, ...]) -> dict[str, list[dict[str, Any]]]:
     """Run name -> the ``[[figures]]`` of ``kinds`` that draw it."""
     out: dict[str, list[dict[str, Any]]] = {}
@@ -822,10 +831,7 @@ def simulate(entry: Entry, out: Path, workers: int | None = None, seeds: int | N
     digest = simulation_digest(entry.name) if entry.path.parent == REPRODUCE_DIR else ""
     record = Record(entry.name, digest, k, rounding)
     run_entry(entry, out, workers, scheduler, plot_format, record)
-    scenarios = run_scenarios(entry)
-    for name, specs in _figure_runs(entry, FIGURE_KINDS).items():
-        record_series(record, series_name("run", name), out / "runs" / slug(name), specs,
-                      scenarios[name])
+    record_run_series(entry, out, record)
     for job in sweep_jobs(entry):
         grid = parse_grid(f"{k}={v}" for k, v in job.overrides.items())
         frame = run_sweep(job.scenario, grid, out / slug(job.key[0]), workers=workers,
