@@ -572,6 +572,9 @@ def reproduce(
     redraw: Annotated[bool, typer.Option(
         "--redraw", help="no simulation: tables, claims and figures again from the "
         "folder's record (seconds)")] = False,
+    resume: Annotated[bool, typer.Option(
+        "--resume", help="run only the jobs the folder's record lacks (same simulation "
+        "inputs, K and path)")] = False,
 ) -> None:
     """Reproduce a paper's results and test its claims.
 
@@ -605,7 +608,7 @@ def reproduce(
                 raise ReproduceError(f"no reproduction entry {name!r} "
                                      f"(known: {', '.join(entry_names())}, all)")
             path = reproduce_entry(name, out_dir, workers, seeds, not no_rounding,
-                                   scheduler, plot_format)
+                                   scheduler, plot_format, resume=resume)
     except interrupt.Interrupted as err:
         console.print(f"[bold yellow]{escape(str(err))}[/]", highlight=False, soft_wrap=True)
         raise typer.Exit(interrupt.EXIT_INTERRUPTED) from None

@@ -458,3 +458,38 @@ def test_every_shipped_statement_names_claims_or_why_not() -> None:
         assert entry.statements, name
         tested = {c for st in entry.statements for c in st.get("claims") or []}
         assert tested <= {c["id"] for c in entry.claims}
+
+
+def test_resume_runs_only_what_the_record_lacks(built_fmus, tmp_path: Path,
+                                                 monkeypatch) -> None:
+    """--resume takes every job the folder's record holds (same specification) from it: with
+    every simulation entry point disabled the whole entry reproduces byte for byte; a record
+    that lost a member gets that member run again and the same claims."""
+    import gzip
+
+    import cosim.run.ensemble as ensemble
+    import cosim.run.reproduce as rep
+    from cosim.run.record import load, save
+
+    path = tmp_path / "entry.toml"
+    path.write_text(CLAIMED)
+    out = tmp_path / "out"
+    reproduce(str(path), out, workers=1, seeds=2, echo=False)
+    made = {f: (out / f).read_bytes() for f in ("table.md", "claims.csv")}
+    rec = load(out)
+    lost = next(ident for ident, job in rec.jobs.items() if job.kind == "member")
+    del rec.jobs[lost], rec.results[lost]
+    save(rec, out)
+    reproduce(str(path), out, workers=1, seeds=2, echo=False, resume=True)
+    assert {f: (out / f).read_bytes() for f in made} == made
+    assert lost in load(out).jobs
+
+    def no_simulation(*args, **kwargs):
+        raise AssertionError("simulated a job the record holds")
+
+    monkeypatch.setattr(rep, "_run_one", no_simulation)
+    monkeypatch.setattr(ensemble, "_run_member", no_simulation)
+    reproduce(str(path), out, workers=1, seeds=2, echo=False, resume=True)
+    assert {f: (out / f).read_bytes() for f in made} == made
+    body = gzip.decompress((out / "record" / "record.json.gz").read_bytes())
+    assert b'"seeds": 2' in body

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import math
 import sys
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -43,7 +44,9 @@ from cosim.run.claims import (
 )
 from cosim.run.figures import draw_ensemble_figure
 from cosim.run.record import Job as RecordJob
-from cosim.run.record import Record, series_name
+from cosim.run.record import Record, known, save, series_name
+
+CHECKPOINT_EVERY = 20  # members between two saves of the partial record
 
 Job = tuple[tuple[str, str, int, bool], str, dict[str, Any]]  # (run, ensemble, i, rounding)
 
@@ -165,12 +168,13 @@ ROUNDING_ENV = {"ATO_COSIM_NO_KERNELS": "1"}  # the plants' numpy reference path
 
 def execute(jobs: list[Job], workers: int | None, label: str = "claims",
             scheduler: str | None = None, dirs: dict[Any, str] | None = None,
-            reference_path: bool = True
+            reference_path: bool = True,
+            on_result: Callable[[Any, dict[str, Any] | None], None] | None = None
             ) -> dict[tuple[str, str, int, bool], dict[str, Any] | None]:
     """Run the jobs with :func:`cosim.run.runner.run_tasks` (main path, then the rounding
     path in processes started with ``ATO_COSIM_NO_KERNELS=1`` unless ``reference_path`` is
     false); a failed run gives None (its metrics are missing). ``dirs``: job key -> folder
-    for the run's results (others write none)."""
+    for the run's results (others write none); ``on_result(key, summary)`` as each ends."""
     from cosim.run import runner
 
     dirs = dirs or {}
@@ -179,6 +183,8 @@ def execute(jobs: list[Job], workers: int | None, label: str = "claims",
 
     def finished(task: runner.Task, summary: Any) -> None:
         out[task.key] = summary
+        if on_result is not None:
+            on_result(task.key, summary)
 
     def failed(task: runner.Task, err: BaseException) -> None:
         print(f"{label}: {task.key} failed: {err}", file=sys.stderr)
@@ -350,13 +356,16 @@ def _banded(entry: Any) -> set[str]:
 
 
 def simulate_claims(entry: Any, out: Path, record: Record, workers: int | None = None,
-                    scheduler: str | None = None) -> None:
+                    scheduler: str | None = None, previous: Record | None = None) -> None:
     """Run the claims' members (K and rounding path of ``record``) and add their summaries to
-    ``record``, with the series of the members the ensemble figures draw."""
+    ``record``, with the series of the members the ensemble figures draw; a member
+    ``previous`` holds with the same specification is taken from it, not run again."""
     from cosim.run.master import ensure_built
     from cosim.run.scenario import load_scenario
 
-    jobs = claim_jobs(entry, record.seeds, record.rounding)
+    wanted = member_jobs(entry, record.seeds, record.rounding)
+    reuse = {job.key for job in wanted if known(previous, job)}
+    jobs = [j for j in claim_jobs(entry, record.seeds, record.rounding) if j[0] not in reuse]
     built: set[str] = set()
     for _key, scenario, overrides in jobs:  # bad overrides fail before anything runs
         sc = load_scenario(scenario, overrides)
@@ -366,10 +375,25 @@ def simulate_claims(entry: Any, out: Path, record: Record, workers: int | None =
     banded = _banded(entry)
     dirs = {key: str(member_dir(out, key)) for key, _sc, _ov in jobs
             if key[0] in banded and key[1] == "disturbance" and not key[3]}
+    by_key = {job.key: job for job in wanted}
+    for job in wanted:  # the reused members first: a checkpoint keeps them
+        if job.key in reuse:
+            record.add(job, previous.result(job.kind, *job.key))
+    finished = 0
+
+    def checkpoint(key: Any, summary: dict[str, Any] | None) -> None:
+        nonlocal finished
+        if summary is not None:  # a failed member is run again on --resume
+            record.add(by_key[key], summary)
+        finished += 1
+        if finished % CHECKPOINT_EVERY == 0:
+            save(record, out)  # an interrupted run resumes from here (--resume)
+
     summaries = execute(jobs, workers, f"{entry.name} claims", scheduler, dirs,
-                        entry.ensemble.rounding_reference_path)
-    for job in member_jobs(entry, record.seeds, record.rounding):
-        record.add(job, summaries.get(job.key))
+                        entry.ensemble.rounding_reference_path, checkpoint)
+    for job in wanted:
+        record.add(job, previous.result(job.kind, *job.key) if job.key in reuse
+                   else summaries.get(job.key))
     record_member_series(entry, out, record)
 
 

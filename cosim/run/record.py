@@ -172,6 +172,15 @@ def load(folder: Path) -> Record:
     return rec
 
 
+def known(record: Record | None, job: Job) -> bool:
+    """Whether ``record`` holds ``job`` with the same specification (and a result)."""
+    if record is None:
+        return False
+    have = record.jobs.get((job.kind, *job.key))
+    return have is not None and json.dumps(have.spec(), sort_keys=True) == json.dumps(
+        job.spec(), sort_keys=True) and record.results[(job.kind, *job.key)] is not None
+
+
 def check_jobs(record: Record, wanted: list[Job]) -> None:
     """:class:`RecordError` naming the first job of ``wanted`` the record does not have with
     the same specification."""

@@ -174,6 +174,7 @@ from cosim.run.record import (
     Record,
     RecordError,
     check_jobs,
+    known,
     load,
     read_csv,
     save,
@@ -456,11 +457,13 @@ def sweep_jobs(entry: Entry) -> list[Job]:
 
 def run_entry(entry: Entry, out_dir: Path, workers: int | None = None,
               scheduler: str | None = None, plot_format: str = "png",
-              record: Record | None = None) -> dict[str, dict[str, Any]]:
+              record: Record | None = None, previous: Record | None = None
+              ) -> dict[str, dict[str, Any]]:
     """Run every run of ``entry`` with :func:`cosim.run.runner.run_tasks` (``workers``
     processes or the Dask ``scheduler``; a run with ``repeat = k`` k times, repetitions 2..
     under ``runs/<run>/repeat_NN``); returns run name -> summary (medians and ``repeats`` for
-    a repeated run), each repetition's summary added to ``record``. A failed run raises
+    a repeated run), each repetition's summary added to ``record``; a run ``previous`` holds
+    with the same specification is taken from it, not run again. A failed run raises
     :class:`ReproduceError` naming it, after the others finished."""
     from cosim.run import runner
     from cosim.run.master import ensure_built
@@ -471,13 +474,16 @@ def run_entry(entry: Entry, out_dir: Path, workers: int | None = None,
         ensure_built(load_scenario(run["scenario"], run.get("set", {})))
     jobs = run_jobs(entry)
     tasks = []
+    done: dict[Any, dict[str, Any]] = {}
     for job in jobs:
+        if previous is not None and known(previous, job):
+            done[job.key] = previous.result(job.kind, *job.key)
+            continue
         name, k = job.key
         base = out_dir / "runs" / slug(name)
         out = base if k == 0 else base / f"repeat_{k + 1:02d}"
         tasks.append(runner.Task(job.key, _run_one,
                                  (job.scenario, dict(job.overrides), str(out), plot_format)))
-    done: dict[Any, dict[str, Any]] = {}
     errors: list[tuple[Any, BaseException]] = []
     runner.run_tasks(tasks, lambda t, summary: done.__setitem__(t.key, summary),
                      lambda t, err: errors.append((t.key, err)), workers, scheduler,
@@ -819,29 +825,39 @@ def _figure_runs(entry: Entry, kinds: tuple[str, ...]) -> dict[str, list[dict[st
 
 
 def simulate(entry: Entry, out: Path, workers: int | None = None, seeds: int | None = None,
-             rounding: bool = True, scheduler: str | None = None, plot_format: str = "png"
-             ) -> Record:
+             rounding: bool = True, scheduler: str | None = None, plot_format: str = "png",
+             previous: Record | None = None) -> Record:
     """Every simulation ``entry`` needs (its runs, sweeps and claims' members), through
     :mod:`cosim.run.runner`; the record of their results and of the series the figures draw.
-    """
+    A job ``previous`` holds with the same specification is taken from it, not run again,
+    where ``previous`` ran with this tree's simulation inputs, K and rounding path (the run
+    folders under ``out`` then hold its files)."""
     from cosim.run.ensemble import simulate_claims
     from cosim.run.sweep import parse_grid, run_sweep
 
     k = claims_k(entry, seeds)
     digest = simulation_digest(entry.name) if entry.path.parent == REPRODUCE_DIR else ""
     record = Record(entry.name, digest, k, rounding)
-    run_entry(entry, out, workers, scheduler, plot_format, record)
+    if previous is not None and (previous.simulation, previous.seeds, previous.rounding) != (
+            digest, k, rounding):
+        previous = None  # other simulation inputs, K or path: nothing of it is reused
+    run_entry(entry, out, workers, scheduler, plot_format, record, previous)
+    save(record, out)  # a checkpoint: an interrupted run resumes from here (--resume)
     record_run_series(entry, out, record)
     for job in sweep_jobs(entry):
+        if known(previous, job):
+            record.add(job, previous.result(job.kind, *job.key))
+            continue
         grid = parse_grid(f"{k}={v}" for k, v in job.overrides.items())
         frame = run_sweep(job.scenario, grid, out / slug(job.key[0]), workers=workers,
                           scheduler=scheduler, plot=False)
         record.add(job, {"columns": list(frame.columns),
                          "rows": [[_plain(v) for v in row] for row in
                                   frame.astype(object).itertuples(index=False)]})
+        save(record, out)  # a checkpoint
     if entry.claims:
         try:
-            simulate_claims(entry, out, record, workers, scheduler)
+            simulate_claims(entry, out, record, workers, scheduler, previous)
         except ValueError as err:
             raise ReproduceError(str(err)) from err
     return record
@@ -971,14 +987,16 @@ def statements_markdown(statements: list[dict[str, Any]], rows: list[dict[str, A
 
 def reproduce(name: str, out_dir: str | Path | None = None, workers: int | None = None,
               seeds: int | None = None, rounding: bool = True, scheduler: str | None = None,
-              plot_format: str = "png", echo: bool = True) -> Path:
+              plot_format: str = "png", echo: bool = True, resume: bool = False) -> Path:
     """Run one entry (:func:`simulate`), keep its record (``record/``,
     :mod:`cosim.run.record`) and write everything made of it (:func:`evaluate`): the tables,
     sweeps, figures (in ``plot_format``: png at 200 dpi, svg or pdf) and, with claims,
     claims.csv/claims.md over ``seeds`` members (default 20; :mod:`cosim.run.ensemble`,
     ``rounding``: also the perturbed floating-point rerun); every batch of runs goes through
     :mod:`cosim.run.runner` (``workers``, ``scheduler``). With ``echo`` the tables are printed
-    in 80 columns (:func:`console_text`). Returns the table's markdown file."""
+    in 80 columns (:func:`console_text`). With ``resume`` the jobs the folder's record already
+    holds (same specification, simulation inputs, K and path) are not run again. Returns the
+    table's markdown file."""
     entry = load_entry(name)
     out = Path(out_dir) if out_dir is not None else Path("runs") / "reproduce" / entry.name
     out.mkdir(parents=True, exist_ok=True)
@@ -989,7 +1007,13 @@ def reproduce(name: str, out_dir: str | Path | None = None, workers: int | None 
         print(f"warning: --seeds {seeds} is below the {need} members {entry.name} declares "
               f"for a page: claims a small K cannot decide read 'insufficient', and `cosim "
               f"docs` does not publish this run", file=sys.stderr, flush=True)
-    record = simulate(entry, out, workers, seeds, rounding, scheduler, plot_format)
+    previous = None
+    if resume:
+        try:
+            previous = load(out)
+        except RecordError:
+            previous = None  # nothing to resume: everything runs
+    record = simulate(entry, out, workers, seeds, rounding, scheduler, plot_format, previous)
     save(record, out)
     return redraw_entry(name, out, plot_format, echo)
 
