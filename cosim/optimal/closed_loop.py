@@ -22,8 +22,11 @@ Controllers (:data:`CONTROLLERS`): ``pid``, the speed PID of seeds 001 and 004
 (:class:`controllers.pid.speed_pid.DistributedSpeedPid`, FMU ``EmuSpeedPid3``) with its default
 gains, the force of unit 1 driving the single-mass plant (the limits of units 2 and 3 are
 constant inputs 0, so unit 1 takes the whole demand), its mass the train's effective mass and
-its demand bounded by the train's comfort limits. The reference is looked up by the measured
-position; at the end of the reference the PID holds the train with its holding brake.
+its demand bounded by the train's force envelope (largest traction and total brake force per
+unit effective mass; bounded by the comfort limits instead, the PID could not overcome the
+resistance). The closed loop's largest acceleration and deceleration are reported. The
+reference is looked up by the measured position; at the end of the reference the PID holds
+the train with its holding brake.
 
 Train to plant (:func:`plant_parameters`): mass, rotating mass factor, Davis terms, traction
 force and power and top speed carry over as they are; traction efficiency is the plant's
@@ -35,8 +38,7 @@ plant's defaults; ``length`` 0 (a point mass, as the plan). The plant has one br
 and ``P_b = P_r + F_f v_top`` (``v_top`` the train's top speed, or the line's highest limit):
 the smallest ``P_b`` whose envelope covers the train's up to ``v_top`` (``v (min(F_r, P_r / v)
 + F_f)`` grows with ``v``), equal to it at ``v_top`` and at low speed, above it in between;
-exact when the train has only one of the two brakes. The comfort limits of the plan bound the
-controller's demand, so the braking the closed loop asks for is what the plan could use.
+exact when the train has only one of the two brakes.
 
 Energy, in the plan's accounting ``traction / eta_t - eta_r regenerated``: the plant's
 ``energy_traction`` is ``int max(F, 0) v dt / eta_t`` (exact, the plant's own integral); the
