@@ -48,24 +48,26 @@ def test_stale_papers_names_runs_and_pages_made_from_other_inputs(tmp_path, monk
     run.mkdir()
     (run / "claims.md").write_text("## claims\n")
     (run / docs_pages.INPUTS_FILE).write_text(entry_digest("seed000") + "\n")
-    (line,) = docs_pages.stale_papers(tmp_path)  # no record behind it: not publishable
-    assert "cannot be published" in line and "no record" in line
-    save(Record("seed000", simulation_digest("seed000"), 3, True), run)  # too few members
-    (line,) = docs_pages.stale_papers(tmp_path)
-    assert "K = 3 members, the entry declares 20" in line and "--seeds 20" in line
-    save(Record("seed000", simulation_digest("seed000"), 20, True), run)
-    assert docs_pages.stale_papers(tmp_path) == []
-    page = docs_pages.paper_page("seed000", run)[docs_pages.DOCS / "papers" / "seed000.md"]
-    assert f"<!-- inputs {entry_digest('seed000')} -->" in page.decode()
-    (run / docs_pages.INPUTS_FILE).write_text("0" * 64 + "\n")
-    (line,) = docs_pages.stale_papers(tmp_path)
-    # the record's simulation inputs are still the tree's: redrawn, not rerun
-    assert "other inputs" in line and "run `cosim docs`" in line and "no simulation" in line
-    save(Record("seed000", "0" * 64, 20, True), run)  # a record of other simulation inputs
-    (line,) = docs_pages.stale_papers(tmp_path)
-    committed = docs_pages.record_simulation(docs_pages.DOCS / "papers" / "seed000")
-    if committed != simulation_digest("seed000"):
-        assert "run `cosim reproduce seed000`, then `cosim docs`" in line
+    with monkeypatch.context() as m:  # the local run decides where no current page does
+        m.setattr(docs_pages, "_page_digest", lambda name: None)
+        (line,) = docs_pages.stale_papers(tmp_path)  # no record behind it: not publishable
+        assert "cannot be published" in line and "no record" in line
+        save(Record("seed000", simulation_digest("seed000"), 3, True), run)  # too few members
+        (line,) = docs_pages.stale_papers(tmp_path)
+        assert "K = 3 members, the entry declares 20" in line and "--seeds 20" in line
+        save(Record("seed000", simulation_digest("seed000"), 20, True), run)
+        assert docs_pages.stale_papers(tmp_path) == []
+        page = docs_pages.paper_page("seed000", run)[docs_pages.DOCS / "papers" / "seed000.md"]
+        assert f"<!-- inputs {entry_digest('seed000')} -->" in page.decode()
+        (run / docs_pages.INPUTS_FILE).write_text("0" * 64 + "\n")
+        (line,) = docs_pages.stale_papers(tmp_path)
+        # the record's simulation inputs are still the tree's: redrawn, not rerun
+        assert "other inputs" in line and "run `cosim docs`" in line and "no simulation" in line
+        save(Record("seed000", "0" * 64, 20, True), run)  # a record of other simulation inputs
+        (line,) = docs_pages.stale_papers(tmp_path)
+        committed = docs_pages.record_simulation(docs_pages.DOCS / "papers" / "seed000")
+        if committed != simulation_digest("seed000"):
+            assert "run `cosim reproduce seed000`, then `cosim docs`" in line
     (run / "claims.md").unlink()  # no run here: the committed page's header decides
     committed = docs_pages.DOCS / "papers" / "seed000.md"
     text = committed.read_text() if committed.is_file() else docs_pages.NOT_REPRODUCED

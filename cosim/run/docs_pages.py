@@ -220,7 +220,7 @@ def stale_papers(reproduce_dir: Path = REPRODUCE_DIR) -> list[str]:
         redrawable = any(record_simulation(f) == sim for f in (run_dir, DOCS / "papers" / name))
         todo = ("run `cosim docs` (the page is redrawn from the record, no simulation)"
                 if redrawable else f"run `cosim reproduce {name}`, then `cosim docs`")
-        if _table_file(run_dir) is not None:
+        if _table_file(run_dir) is not None and _page_digest(name) != current:
             if run_digest(run_dir) != current:
                 out.append(f"{run_dir} was made from other inputs than this tree's: {todo}")
             elif record_simulation(run_dir) is None:
