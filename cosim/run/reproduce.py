@@ -795,9 +795,10 @@ def record_series(record: Record, name: str, folder: Path, specs: list[dict[str,
             keep |= figure_columns(spec, scenario, columns)
     wanted = keep.union(*patterns.values())
     frame = read_csv(path, usecols=[c for c in columns if c in wanted])
-    for pattern, cols in patterns.items():  # the figure's reduction (y_reduce = "mean")
-        frame[pattern] = frame[cols].to_numpy(dtype=float).mean(axis=1)
-    frame = frame[[c for c in frame.columns if c in keep or c in patterns]]
+    reduced = pd.DataFrame({pattern: frame[cols].to_numpy(dtype=float).mean(axis=1)
+                            for pattern, cols in patterns.items()},  # y_reduce = "mean"
+                           index=frame.index)
+    frame = pd.concat([frame[[c for c in frame.columns if c in keep]], reduced], axis=1)
     if max_rows is not None and len(frame) > max_rows:
         step = -(-len(frame) // max_rows)
         rows = np.unique(np.r_[np.arange(0, len(frame), step), len(frame) - 1])
