@@ -391,9 +391,9 @@ def simulate_claims(entry: Any, out: Path, record: Record, workers: int | None =
 
     summaries = execute(jobs, workers, f"{entry.name} claims", scheduler, dirs,
                         entry.ensemble.rounding_reference_path, checkpoint)
-    for job in wanted:
-        record.add(job, previous.result(job.kind, *job.key) if job.key in reuse
-                   else summaries.get(job.key))
+    for job in wanted:  # a failed member: no result (the others are in from checkpoint)
+        if job.key not in reuse and summaries.get(job.key) is None:
+            record.add(job, None)
     record_member_series(entry, out, record)
 
 

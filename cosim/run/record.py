@@ -130,8 +130,9 @@ def save(record: Record, folder: Path) -> Path:
         (staging / _SERIES_DIR / files[name]).write_bytes(_gzip(text.encode()))
     body = {"format": FORMAT, "entry": record.entry, "simulation": record.simulation,
             "seeds": record.seeds, "rounding": record.rounding, "series": files,
-            "jobs": [{**job.spec(), "result": record.results[ident]}
-                     for ident, job in record.jobs.items()]}
+            "jobs": [{**job.spec(), "result": record.results[ident]}  # in a fixed order,
+                     for ident, job in sorted(record.jobs.items(),  # not the runs' finishing
+                                              key=lambda item: json.dumps(item[0]))]}
     (staging / _JOBS_FILE).write_bytes(_gzip(json.dumps(body, sort_keys=True).encode()))
     shutil.rmtree(target, ignore_errors=True)
     staging.replace(target)
@@ -177,8 +178,13 @@ def known(record: Record | None, job: Job) -> bool:
     if record is None:
         return False
     have = record.jobs.get((job.kind, *job.key))
-    return have is not None and json.dumps(have.spec(), sort_keys=True) == json.dumps(
-        job.spec(), sort_keys=True) and record.results[(job.kind, *job.key)] is not None
+    return (have is not None and _same(have, job)
+            and record.results[(job.kind, *job.key)] is not None)
+
+
+def _same(a: Job, b: Job) -> bool:
+    """Whether two jobs have the same specification (as the record stores it)."""
+    return json.dumps(a.spec(), sort_keys=True) == json.dumps(b.spec(), sort_keys=True)
 
 
 def check_jobs(record: Record, wanted: list[Job]) -> None:
@@ -190,7 +196,7 @@ def check_jobs(record: Record, wanted: list[Job]) -> None:
             raise RecordError(f"record of {record.entry}: no {job.kind} {list(job.key)} (the "
                               f"entry asks for more than was simulated; rerun `cosim reproduce "
                               f"{record.entry}`)")
-        if json.dumps(have.spec(), sort_keys=True) != json.dumps(job.spec(), sort_keys=True):
+        if not _same(have, job):
             raise RecordError(f"record of {record.entry}: {job.kind} {list(job.key)} ran as "
                               f"{have.spec()}, the entry now asks for {job.spec()} (rerun "
                               f"`cosim reproduce {record.entry}`)")
