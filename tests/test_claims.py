@@ -12,6 +12,7 @@ from cosim.run.claims import (
     ClaimsError,
     check_claims,
     check_ensemble,
+    expand_families,
     median_ci,
     parse_seeds,
     verdict,
@@ -191,6 +192,41 @@ def test_seeds_parse_and_must_be_disjoint() -> None:
 def test_claim_schema_errors_name_file_key_and_value(change: dict, message: str) -> None:
     with pytest.raises(ClaimsError, match=f"e.toml: \\[\\[claims\\]\\].*{message}"):
         check_claims("e.toml", [{**LESS, **change}], ["A", "B"], check_ensemble("e.toml", {}))
+
+
+def test_a_claim_family_is_the_cross_product_of_its_placeholders() -> None:
+    family = {"id": "{a}_{m.key}_below_{b.key}", "text": "{a} below {b.run} on {m.key}",
+              "metric": "{m.name}", "kind": "less", "runs": ["{a}", "{b.run}"],
+              "paper": "{m.paper}",
+              "each": {"a": ["x", "y"],
+                       "b": [{"key": "p", "run": "P", "note": "b's"}, {"key": "q", "run": "Q"}],
+                       "m": [{"key": "e", "name": "err", "paper": "{b.key}/{a}"}]}}
+    out = expand_families("e.toml", [LESS, family])
+    assert out[0] is LESS
+    assert [c["id"] for c in out[1:]] == ["x_e_below_p", "x_e_below_q", "y_e_below_p",
+                                          "y_e_below_q"]  # the first placeholder slowest
+    assert out[4] == {"id": "y_e_below_q", "text": "y below Q on e", "metric": "err",
+                      "kind": "less", "runs": ["y", "Q"], "paper": "q/y"}  # nested: "q/y"
+    claims = check_claims("e.toml", [family], ["x", "y", "P", "Q"], check_ensemble("e.toml", {}))
+    assert len(claims) == 4 and all("each" not in c for c in claims)
+
+
+@pytest.mark.parametrize(("each", "message"), [
+    ({"a": []}, "non-empty list"),
+    ({"a": "x"}, "non-empty list"),
+    ({"A-b": ["x"]}, "placeholder name"),
+    ({"a": [{"key": "k"}]}, "AttributeError"),  # {a.name} of a table without "name"
+])
+def test_claim_family_errors_name_the_claim_and_field(each: dict, message: str) -> None:
+    family = {**LESS, "id": "f_{a.name}", "each": each}
+    with pytest.raises(ClaimsError, match=f"e.toml: \\[\\[claims\\]\\] #1.*{message}"):
+        expand_families("e.toml", [family])
+
+
+def test_a_family_expanding_to_a_repeated_id_is_refused() -> None:
+    family = {**LESS, "id": "same", "text": "{a}", "each": {"a": ["x", "y"]}}
+    with pytest.raises(ClaimsError, match="id = 'same' repeats"):
+        check_claims("e.toml", [family], ["A", "B"], check_ensemble("e.toml", {}))
 
 
 def test_entry_with_bad_claim_fails_on_load(tmp_path: Path) -> None:

@@ -461,7 +461,7 @@ def test_every_shipped_statement_names_claims_or_why_not() -> None:
 
 
 def test_resume_runs_only_what_the_record_lacks(built_fmus, tmp_path: Path,
-                                                 monkeypatch) -> None:
+                                                 monkeypatch, capsys) -> None:
     """--resume takes every job the folder's record holds (same specification) from it: with
     every simulation entry point disabled the whole entry reproduces byte for byte; a record
     that lost a member gets that member run again and the same claims."""
@@ -493,3 +493,7 @@ def test_resume_runs_only_what_the_record_lacks(built_fmus, tmp_path: Path,
     assert {f: (out / f).read_bytes() for f in made} == made
     body = gzip.decompress((out / "record" / "record.json.gz").read_bytes())
     assert b'"seeds": 2' in body
+    capsys.readouterr()
+    with pytest.raises(ReproduceError, match="simulated a job"):  # K = 3: nothing reused
+        reproduce(str(path), out, workers=1, seeds=3, echo=False, resume=True)
+    assert "has other K: nothing of it is reused" in capsys.readouterr().err

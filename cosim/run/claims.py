@@ -44,6 +44,7 @@ rounding verdict does not apply: ``rounding_robust`` is None).
 
 from __future__ import annotations
 
+import itertools
 import math
 import re
 from dataclasses import dataclass, field
@@ -56,7 +57,7 @@ QUANTIFIERS = ("every", "share", "typical")
 ENSEMBLES = ("disturbance", "mismatch", "repeat")
 ORIGINS = ("paper", "ours", "sanity")  # the paper's statement, ours, a check of the setup
 _CLAIM_KEYS = {"id", "source", "text", "paper", "metric", "kind", "runs", "threshold", "range",
-               "ensemble", "origin", "quantifier", "share", "transform"}
+               "ensemble", "origin", "quantifier", "share", "transform", "each"}
 _ENSEMBLE_KEYS = {"seed_key", "report_seeds", "calibration_seeds", "perturb", "perturb_seed",
                   "rounding_perturb", "rounding_reference_path", "repeats", "members"}
 _VARIANT_KEYS = {"name", "text", "replace", "rounding", "seeds"}
@@ -182,9 +183,73 @@ def check_ensemble(where: str, data: dict[str, Any] | None) -> Ensemble:
     return ens
 
 
+class _Fields:
+    """A family value that is a table: its fields as attributes (``{rival.run}``)."""
+
+    def __init__(self, fields: dict[str, Any]) -> None:
+        self.__dict__.update(fields)
+
+
+_FAMILY_PASSES = 3  # a family value may itself name placeholders, this deep
+
+
+def _fill(at: str, key: str, value: Any, names: dict[str, Any]) -> Any:
+    """``value`` with the placeholders ``{name}`` / ``{name.field}`` of ``names`` filled."""
+    if isinstance(value, list):
+        return [_fill(at, key, v, names) for v in value]
+    if isinstance(value, dict):
+        return {_fill(at, key, k, names): _fill(at, key, v, names) for k, v in value.items()}
+    if not isinstance(value, str):
+        return value
+    pattern = re.compile(r"\{(" + "|".join(map(re.escape, names)) + r")[.}]")
+    for _ in range(_FAMILY_PASSES):
+        if not pattern.search(value):
+            return value
+        try:
+            value = value.format_map(names)
+        except (KeyError, AttributeError, IndexError, ValueError) as err:
+            raise ClaimsError(f"{at}: {key} = {value!r}: {type(err).__name__} {err} (the "
+                              f"family's placeholders: {sorted(names)})") from None
+    return value
+
+
+def expand_families(where: str, claims: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """The ``[[claims]]`` with each family expanded, in order.
+
+    A claim with ``each`` (a table: placeholder -> list of values) stands for one claim per
+    combination of values (the cross product; the first placeholder varies slowest). Every
+    string of the claim (its id included) is formatted with the combination: ``{name}`` is a
+    string value, ``{name.field}`` a field of a table value; a value may itself name the other
+    placeholders (``paper = "{metric.paper}"`` with ``paper = "{rival.max_paper}"`` in a
+    metric's table)."""
+    out: list[dict[str, Any]] = []
+    for i, claim in enumerate(claims):
+        each = claim.get("each")
+        if each is None:
+            out.append(claim)
+            continue
+        at = f"{where}: [[claims]] #{i + 1} ({claim.get('id')!r})"
+        if not (isinstance(each, dict) and each and all(
+                isinstance(v, list) and v and all(isinstance(x, (str, dict)) for x in v)
+                for v in each.values())):
+            raise ClaimsError(f"{at}: each = {each!r}: expected a table placeholder -> "
+                              "non-empty list of strings or tables")
+        bad = [n for n in each if not re.fullmatch(r"[a-z_][a-z0-9_]*", n)]
+        if bad:
+            raise ClaimsError(f"{at}: each: placeholder name(s) {bad}: expected [a-z_][a-z0-9_]*")
+        body = {k: v for k, v in claim.items() if k != "each"}
+        for combo in itertools.product(*each.values()):
+            names = {n: _Fields(v) if isinstance(v, dict) else v
+                     for n, v in zip(each, combo, strict=True)}
+            out.append({k: _fill(at, k, v, names) for k, v in body.items()})
+    return out
+
+
 def check_claims(where: str, claims: list[dict[str, Any]], run_names: list[str],
                  ens: Ensemble) -> list[dict[str, Any]]:
-    """The ``[[claims]]`` tables, checked against the entry's run names and ensemble."""
+    """The ``[[claims]]`` tables, families expanded (:func:`expand_families`), checked
+    against the entry's run names and ensemble."""
+    claims = expand_families(where, claims)
     ids: set[str] = set()
     for i, claim in enumerate(claims):
         at = f"{where}: [[claims]] #{i + 1}"

@@ -117,6 +117,10 @@ live there, not in code)::
                                    # | repeat (the nominal run [ensemble].repeats times,
                                    # paired by repeat index: CPU / wall time claims)
     origin = "paper"               # paper | ours | sanity (a check of the setup)
+    each.law = [{ key = "rmpc", name = "RMPC" }, { key = "rsmpc", name = "RSMPC" }]
+    each.n = ["3", "10", "15"]     # optional: a claim family, one claim per combination
+                                   # (cross product); "{law.name} N={n}" in any string, the
+                                   # id included (cosim.run.claims.expand_families)
     [[variants]]                   # optional: every claim again with some runs replaced (an
     name = "white"                 # alternative reading, a mechanism removed); claims.md
     text = "the paper's white noise"  # gets a verdict per claim and variant, variants.csv
@@ -841,7 +845,12 @@ def simulate(entry: Entry, out: Path, workers: int | None = None, seeds: int | N
     record = Record(entry.name, digest, k, rounding)
     if previous is not None and (previous.simulation, previous.seeds, previous.rounding) != (
             digest, k, rounding):
-        previous = None  # other simulation inputs, K or path: nothing of it is reused
+        why = [what for what, a, b in (("simulation inputs", previous.simulation, digest),
+                                       ("K", previous.seeds, k),
+                                       ("rounding path", previous.rounding, rounding)) if a != b]
+        print(f"{entry.name}: the record under {out} has other {', '.join(why)}: nothing of it "
+              "is reused", file=sys.stderr, flush=True)
+        previous = None
     run_entry(entry, out, workers, scheduler, plot_format, record, previous)
     save(record, out)  # a checkpoint: an interrupted run resumes from here (--resume)
     record_run_series(entry, out, record)
@@ -1012,8 +1021,9 @@ def reproduce(name: str, out_dir: str | Path | None = None, workers: int | None 
     if resume:
         try:
             previous = load(out)
-        except RecordError:
-            previous = None  # nothing to resume: everything runs
+        except RecordError as err:
+            print(f"{name}: nothing to resume ({err}): everything runs", file=sys.stderr,
+                  flush=True)
     record = simulate(entry, out, workers, seeds, rounding, scheduler, plot_format, previous)
     save(record, out)
     return redraw_entry(name, out, plot_format, echo)
