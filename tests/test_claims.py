@@ -223,6 +223,31 @@ def test_claim_family_errors_name_the_claim_and_field(each: dict, message: str) 
         expand_families("e.toml", [family])
 
 
+def test_a_margin_tells_no_effect_from_undecided() -> None:
+    """With a stated margin, an undecided comparison whose median difference's exact CI lies
+    within +-margin of B's median is "no effect"; a wide CI stays "inconclusive", and a
+    decided one keeps its decision."""
+    b = 100.0 + NOISE
+    centred = NOISE - np.median(NOISE)  # a median difference of 0: the sign test undecided
+    tiny = b + 0.05 * centred  # differences ~0.05: CI well inside +-1 (1 % of ~100)
+    wide = b + 5.0 * centred  # differences ~5: CI beyond +-1
+    claim = {**LESS, "margin": 0.01}
+    small = verdict(claim, tiny, b)
+    assert small["verdict"] == "no effect" and "1%" in small["note"]
+    assert -1.0 < small["ci_low"] and small["ci_high"] < 1.0
+    assert verdict(claim, wide, b)["verdict"] == "inconclusive"
+    assert verdict(claim, b - 3.0, b)["verdict"] == "holds"
+    assert verdict(LESS, tiny, b)["verdict"] == "inconclusive"  # no margin, no equivalence
+
+
+@pytest.mark.parametrize("change", [{"margin": 1.5}, {"margin": 0.1, "kind": "below",
+                                                      "runs": ["A"], "threshold": 1.0},
+                                    {"margin": 0.1, "quantifier": "every"}])
+def test_a_margin_is_a_fraction_on_a_typical_comparison(change: dict) -> None:
+    with pytest.raises(ClaimsError, match="margin = "):
+        check_claims("e.toml", [{**LESS, **change}], ["A", "B"], check_ensemble("e.toml", {}))
+
+
 def test_a_family_expanding_to_a_repeated_id_is_refused() -> None:
     family = {**LESS, "id": "same", "text": "{a}", "each": {"a": ["x", "y"]}}
     with pytest.raises(ClaimsError, match="id = 'same' repeats"):
@@ -298,10 +323,10 @@ def test_reproduction_summary_counts_verdicts(tmp_path: Path) -> None:
                   "adjusted": ["holds", "fails", "inconclusive"]}).to_csv(
         tmp_path / "a" / "claims.csv", index=False)
     lines = claims_summary(tmp_path, ["a", "b"]).splitlines()
-    assert lines[0] == ("| entry | claims | holds | fails | inconclusive | insufficient | "
-                        "rounding-sensitive |")
-    assert lines[2] == "| a | 3 | 1 | 1 | 1 | 0 | 0 |"  # the adjusted verdicts
-    assert lines[3] == "| b | 0 | - | - | - | - | - |"
+    assert lines[0] == ("| entry | claims | holds | fails | inconclusive | no effect | "
+                        "insufficient | rounding-sensitive |")
+    assert lines[2] == "| a | 3 | 1 | 1 | 1 | 0 | 0 | 0 |"  # the adjusted verdicts
+    assert lines[3] == "| b | 0 | - | - | - | - | - | - |"
 
 
 def test_ratio_ci_of_repeated_timings() -> None:

@@ -497,3 +497,20 @@ def test_resume_runs_only_what_the_record_lacks(built_fmus, tmp_path: Path,
     with pytest.raises(ReproduceError, match="simulated a job"):  # K = 3: nothing reused
         reproduce(str(path), out, workers=1, seeds=3, echo=False, resume=True)
     assert "has other K: nothing of it is reused" in capsys.readouterr().err
+
+
+def test_the_table_runs_are_member_one_of_the_disturbance_ensemble() -> None:
+    """A single run of the table takes the first report seed (so it is member 1 of the
+    claims' ensemble, and its seed is named on the page); entries without a random input
+    add nothing."""
+    from cosim.run.ensemble import claim_jobs
+    from cosim.run.reproduce import run_jobs, table_seed
+
+    entry = load_entry("seed000")
+    key = entry.ensemble.seed_key
+    assert table_seed(entry) == {key: entry.ensemble.report_seeds[0]}
+    table = {job.key[0]: job.overrides for job in run_jobs(entry)}
+    first = {j[0][0]: j[2] for j in claim_jobs(entry, 1, rounding=False)
+             if j[0][1] == "disturbance"}
+    assert first and all(table[name] == overrides for name, overrides in first.items())
+    assert table_seed(load_entry("seed004")) == {}  # no random input

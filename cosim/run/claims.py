@@ -22,7 +22,11 @@ Each claim compares, per member, a tested quantity with its claimed side: ``less
 The default quantifier is ``every`` for ``below`` / ``above`` / ``inside`` (the papers state
 such bounds as requirements each run meets) and ``typical`` for ``less`` / ``greater``.
 
-Verdicts: ``holds``, ``fails``, ``inconclusive`` (the test decides neither way), or
+Verdicts: ``holds``, ``fails``, ``inconclusive`` (the test decides neither way), ``no effect``
+(a ``typical`` less / greater claim with a ``margin``: the test decides neither way and the
+exact CI of the median paired difference lies within +-``margin`` x |median of B|, the
+smallest effect the claim calls material, stated with it: an equivalence decision, so "no
+effect" is told apart from "undecided"), or
 ``insufficient`` where K members cannot decide at the confidence whatever they show (the
 note says which K would). Degenerate cases: a missing or NaN metric on any member ->
 inconclusive ("metric missing"); all members equal (a deterministic result) -> decided by
@@ -57,7 +61,8 @@ QUANTIFIERS = ("every", "share", "typical")
 ENSEMBLES = ("disturbance", "mismatch", "repeat")
 ORIGINS = ("paper", "ours", "sanity")  # the paper's statement, ours, a check of the setup
 _CLAIM_KEYS = {"id", "source", "text", "paper", "metric", "kind", "runs", "threshold", "range",
-               "ensemble", "origin", "quantifier", "share", "transform", "each"}
+               "ensemble", "origin", "quantifier", "share", "transform", "each",
+               "margin"}
 _ENSEMBLE_KEYS = {"seed_key", "report_seeds", "calibration_seeds", "perturb", "perturb_seed",
                   "rounding_perturb", "rounding_reference_path", "repeats", "members"}
 _VARIANT_KEYS = {"name", "text", "replace", "rounding", "seeds"}
@@ -307,6 +312,13 @@ def check_claims(where: str, claims: list[dict[str, Any]], run_names: list[str],
         if claim.get("transform", "abs") != "abs":
             raise ClaimsError(f"{at}: transform = {claim['transform']!r} (known: 'abs', the "
                               "metric's absolute value per member)")
+        margin = claim.get("margin")
+        if margin is not None and (
+                kind not in ("less", "greater") or quantifier != "typical"
+                or isinstance(margin, bool) or not isinstance(margin, (int, float))
+                or not 0.0 < margin < 1.0):
+            raise ClaimsError(f"{at}: margin = {margin!r}: a fraction in (0, 1) of B's median, "
+                              "for a typical less / greater claim only")
         if claim.get("origin", "paper") not in ORIGINS:
             raise ClaimsError(f"{at}: origin = {claim['origin']!r} (known: {ORIGINS})")
     return claims
@@ -535,6 +547,12 @@ def verdict(claim: dict[str, Any], a: np.ndarray, b: np.ndarray | None = None
         out.update(verdict="insufficient", note=f"K >= {need} needed")
         return out
     out["verdict"] = "holds" if p_hold < half else "fails" if p_fail < half else "inconclusive"
+    margin = claim.get("margin")
+    if out["verdict"] == "inconclusive" and margin is not None:
+        bound = float(margin) * abs(out["b_median"])
+        if -bound < out["ci_low"] and out["ci_high"] < bound:
+            out.update(verdict="no effect",
+                       note=f"the median difference's CI is within +-{margin:.0%} of B's median")
     return out
 
 

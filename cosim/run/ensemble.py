@@ -277,7 +277,7 @@ def variants_markdown(entry: Any, rows: list[dict[str, Any]], var_rows: list[dic
     return "\n".join(lines)
 
 
-VERDICTS = ("holds", "fails", "inconclusive", "insufficient", "rounding-sensitive")
+VERDICTS = ("holds", "fails", "inconclusive", "no effect", "insufficient", "rounding-sensitive")
 
 
 def _shown(r: dict[str, Any]) -> str:
@@ -321,7 +321,9 @@ def claims_markdown(rows: list[dict[str, Any]], k: int) -> str:
               "K: members on the claimed side. The claims of the paper are one family: the "
               "p-values of the typical and share claims are adjusted by Benjamini-Hochberg "
               f"(false discovery rate {ALPHA:g}); a decision the adjustment does not keep "
-              "reads \"inconclusive (raw: ...)\". insufficient: K members cannot decide "
+              "reads \"inconclusive (raw: ...)\". no effect: undecided, and the median "
+              "difference's CI within the claim's stated margin of B's median (ours says "
+              "which). insufficient: K members cannot decide "
               "whatever they show (the note says which K would). rounding-sensitive: the "
               "verdict differs on the perturbed floating-point rerun."]
     if any(r["ensemble"] == "repeat" for r in rows):

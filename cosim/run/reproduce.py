@@ -447,9 +447,19 @@ def repeat_spread(summary: dict[str, Any], key: str) -> tuple[float, float, int]
     return float(min(vals)), float(max(vals)), len(vals)
 
 
+def table_seed(entry: Entry) -> dict[str, int]:
+    """The random input of the table's single runs: ``[ensemble] seed_key`` at the first
+    report seed (so a single run is member 1 of the claims' ensemble), or nothing where the
+    entry has no random input."""
+    key = entry.ensemble.seed_key
+    return {key: entry.ensemble.report_seeds[0]} if key and entry.ensemble.report_seeds else {}
+
+
 def run_jobs(entry: Entry) -> list[Job]:
-    """The table runs' simulations: one job per run and repetition."""
-    return [Job("run", (run["name"], k), run["scenario"], dict(run.get("set", {})))
+    """The table runs' simulations: one job per run and repetition, at :func:`table_seed`
+    unless the run sets its seed itself."""
+    seed = table_seed(entry)
+    return [Job("run", (run["name"], k), run["scenario"], {**seed, **run.get("set", {})})
             for run in entry.runs for k in range(int(run.get("repeat", 1)))]
 
 
@@ -963,8 +973,10 @@ def evaluate(entry: Entry, record: Record, out: Path, plot_format: str = "png"
                   if entry.statements else [])
         parts = [*head, verdict_summary(claim_rows, record.seeds), "", "### Claims", "",
                  claims_text.rstrip("\n"), *stated, "", "### Single runs", "",
-                 "Each run once, as its scenario is shipped (the claims above are over the "
-                 "seed ensemble).", "", *parts[4:]]
+                 "Each run once, as its scenario is shipped" + "".join(
+                     f", at report seed {v} (`{k}`: member 1 of the claims' disturbance "
+                     "ensemble)" for k, v in table_seed(entry).items())
+                 + " (the claims above are over the seed ensemble).", "", *parts[4:]]
     if entry.notes:
         parts += ["", "### Where we differ from the paper, and why", "", entry.notes.strip()]
     table = out / f"{entry.table}.md"
