@@ -363,6 +363,14 @@ def test_variants_replace_runs_in_every_claim_and_get_their_own_verdicts() -> No
     # A2 runs on the variant's 4 seeds only; the claim on C vs B is untouched by the variant
     assert {k for k in jobs if k[0] == "A2"} == {("A2", "disturbance", i, False)
                                                   for i in range(4)}
+    # a variant gets the perturbed floating-point rerun like the main claims, unless it opts out
+    with_rerun = {key for key, _sc, _ov in claim_jobs(entry, 6, rounding=True)}
+    assert ("A2", "disturbance", 3, True) in with_rerun
+    entry.variants[0]["rounding"] = False
+    without = {key for key, _sc, _ov in claim_jobs(entry, 6, rounding=True)}
+    assert not any(k[0] == "A2" and k[3] for k in without)
+    assert ("A", "disturbance", 5, True) in without
+    del entry.variants[0]["rounding"]
     # A2 below B on every seed, A above B: the variant flips the verdict of a_below_b only
     summaries = {}
     for run, value in (("A", 2.0), ("A2", 0.0), ("B", 1.0), ("C", 0.0)):

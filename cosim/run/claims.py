@@ -356,7 +356,7 @@ def check_variants(where: str, variants: list[dict[str, Any]], run_names: list[s
         if n is not None and (isinstance(n, bool) or not isinstance(n, int) or n < 1):
             raise ClaimsError(f"{at}: seeds = {n!r}: expected an integer >= 1 (the first "
                               "report seeds, at most --seeds)")
-        if not isinstance(var.get("rounding", False), bool):
+        if not isinstance(var.get("rounding", True), bool):
             raise ClaimsError(f"{at}: rounding = {var['rounding']!r}: expected true or false")
     return variants
 

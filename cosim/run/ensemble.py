@@ -116,7 +116,7 @@ def claim_cases(entry: Any, k: int, rounding: bool = True
             runs = variant_runs(claim, var)
             if runs is not None:
                 cases.append((var["name"], claim, runs,
-                              rnd(claim, rounding and var.get("rounding", False)), kv))
+                              rnd(claim, rounding and var.get("rounding", True)), kv))
     return cases
 
 
@@ -270,7 +270,7 @@ def variants_markdown(entry: Any, rows: list[dict[str, Any]], var_rows: list[dic
               "adjustment does not keep reads \"inconclusive (raw: ...)\". Variants:", ""]
     for v in entry.variants:
         rep = "; ".join(f"{a} -> {b}" for a, b in v["replace"].items())
-        rnd = "" if v.get("rounding", False) else " (no perturbed floating-point rerun)"
+        rnd = "" if v.get("rounding", True) else " (no perturbed floating-point rerun)"
         if "seeds" in v:
             rnd += f" (the first {v['seeds']} report seeds at most)"
         lines.append(f"- **{v['name']}**: {v.get('text', '')}{rnd}. {rep}.")

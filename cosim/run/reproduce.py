@@ -125,7 +125,8 @@ live there, not in code)::
     name = "white"                 # alternative reading, a mechanism removed); claims.md
     text = "the paper's white noise"  # gets a verdict per claim and variant, variants.csv
     replace = { "ISMPC" = "ISMPC white", "ISMC" = "ISMC white" }   # [[runs]] names
-    rounding = false               # optional: also the perturbed floating-point rerun
+    rounding = true                # optional (default true): the perturbed floating-point
+                                   # rerun too, as the main claims get it
     seeds = 5                      # optional: the first 5 report seeds (at most --seeds)
 
 The claims are evaluated by :mod:`cosim.run.claims` (statistics and verdicts) over the runs
