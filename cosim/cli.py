@@ -480,8 +480,9 @@ def sweep(
               **{k: k.rpartition(".")[2] for k in grid}}
     rows = [{c: (None if row[c] is None or row[c] != row[c] else row[c]) for c in columns}
             for row in frame.to_dict("records")]
-    out.print(fit_table(rows, columns, labels, signed=["stop_error_m"],
-                        title=f"sweep over {', '.join(grid)} (every column: sweep.csv)"),
+    out.print(fit_table(rows, columns, labels, keys=1 + len(grid), signed=["stop_error_m"],
+                        title=_wrapped(f"sweep over {', '.join(grid)} (every column: "
+                                       "sweep.csv)")),
               markup=False, highlight=False, soft_wrap=True)
     out.print(f"wrote {target}/sweep.csv" + ("" if no_plot else f", sweep.{plot_format}"),
               highlight=False, markup=False)
@@ -492,6 +493,13 @@ def sweep(
                       f"{escape(str(row['error']))}", highlight=False, soft_wrap=True)
     if len(failed):
         raise typer.Exit(1)
+
+
+def _wrapped(text: str, width: int = 80) -> str:
+    """``text`` in lines of at most ``width`` characters, broken between words."""
+    import textwrap
+
+    return "\n".join(textwrap.wrap(text, width, break_on_hyphens=False))
 
 
 def _perturbed_sweep(scenarios: list[str], grid: dict[str, list[Any]], perturb: list[str],
@@ -516,9 +524,11 @@ def _perturbed_sweep(scenarios: list[str], grid: dict[str, list[Any]], perturb: 
               "qp_infeasible_after_stop_total": "after stop", "command_min": "u min",
               "command_max": "u max", **{k: k.rpartition(".")[2] for k in grid}}
     out.print(fit_table(summary.to_dict("records"), columns, labels,
+                        keys=1 + len([k for k in grid if k in summary]),
                         signed=[c for c in columns if c.startswith("stop_error")],
-                        title=f"{samples} perturbed plants (seed {seed}): " + ", ".join(perturb)
-                        + " (every column: perturb_summary.csv)"),
+                        title=_wrapped(f"{samples} perturbed plants (seed {seed}): "
+                                       + ", ".join(perturb)
+                                       + " (every column: perturb_summary.csv)")),
               markup=False, highlight=False, soft_wrap=True)
     out.print(f"wrote {target}/perturb.csv, perturb_summary.csv"
               + ("" if no_plot else f", perturb.{plot_format}"), markup=False, highlight=False)

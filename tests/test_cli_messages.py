@@ -96,3 +96,24 @@ def test_command_help_paragraphs_wrap_at_the_terminal_not_mid_sentence():
         first = cmd.help.split("\n\n")[0]
         assert "\n" not in cmd.help.replace("\n\n", ""), name
         assert first.endswith(".") and ". " not in first and len(first) <= 60, name
+
+
+def test_perturb_table_keeps_the_grid_column_in_every_block_and_one_notation(tmp_path):
+    """``sweep --perturb`` at 80 columns: every block of the summary table repeats the grid
+    value beside the scenario (rows that differ only in it stay apart), and each column has
+    one notation (the masses as integers, the stop errors with the same decimals)."""
+    done = cosim("sweep", "seed000_stop_pid", "--set", "plant.mass=440000,539000",
+                 "--perturb", "plant.brake_time_constant=0.3..0.6", "--samples", "2",
+                 "--workers", "1", "--no-plot", "--out", str(tmp_path / "sweep"))
+    assert done.returncode == 0, done.stderr
+    lines = done.stdout.splitlines()
+    assert max(len(line) for line in lines) <= 80, done.stdout
+    headers = [i for i, line in enumerate(lines) if line.startswith("scenario")]
+    assert len(headers) >= 2, done.stdout  # split into blocks
+    for i in headers:
+        assert lines[i].split()[:2] == ["scenario", "mass"], done.stdout
+        assert [line.split()[1] for line in lines[i + 2:i + 4]] == ["440000", "539000"]
+    assert "e+0" not in done.stdout and "e-0" not in done.stdout, done.stdout
+    errors = [line.split()[3:6] for line in lines[headers[0] + 2:headers[0] + 4]]
+    decimals = {len(x.partition(".")[2]) for row in errors for x in row}
+    assert len(decimals) == 1, errors

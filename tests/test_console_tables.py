@@ -3,7 +3,7 @@ key column, the shared prefix of the names stated once, blocks that repeat the k
 
 from __future__ import annotations
 
-from cosim.run.console import cell, fit_table
+from cosim.run.console import cell, column_cells, fit_table
 from cosim.run.runner import Progress
 
 
@@ -21,7 +21,7 @@ def test_wide_tables_are_split_into_blocks_that_fit():
     headers = [line for line in lines if line.startswith("run ")]
     assert len(headers) >= 2  # split, the key column repeated
     assert sum(line.startswith("beta_long_name") for line in lines) == len(headers)
-    assert "1235" in text and "1.481e+04" in text  # 4 significant digits
+    assert "1235" in text and "14815" in text  # 4 significant digits on the largest
 
 
 def test_cells_and_progress_line():
@@ -31,3 +31,32 @@ def test_cells_and_progress_line():
     assert progress.line().endswith("0/4 runs, 0 s elapsed, ETA ?")
     progress.step()
     assert "1/4 runs" in progress.line() and "ETA" in progress.line()
+
+
+def test_each_column_has_one_notation():
+    """Integers as integers, fixed decimals per column (4 significant digits on its largest
+    value), scientific only for a column fixed-point cannot show; never mixed in a column."""
+    assert column_cells([440000, 539000]) == ["440000", "539000"]
+    assert column_cells([0.1504, -2.945e-05, 0.257, None], signed=True) == \
+        ["+0.1504", "-0.0000", "+0.2570", "-"]
+    assert column_cells([89.03, 100.0, 0]) == ["89.0", "100.0", "0.0"]
+    assert column_cells([2.5e-5, 3e-6]) == ["2.500e-05", "3.000e-06"]
+    assert column_cells([3, 7], signed=True) == ["+3", "+7"]
+    rows = [{"run": "a", "mass": 440000, "err": 0.1504}, {"run": "b", "mass": 539000,
+                                                          "err": -2.945e-05}]
+    text = fit_table(rows, ["run", "mass", "err"], signed=["err"])
+    assert "e+05" not in text and "e-05" not in text
+    assert text.splitlines()[-1].split() == ["b", "539000", "-0.0000"]
+
+
+def test_every_block_repeats_every_key_column():
+    """Rows that differ only in a grid value stay apart in every block."""
+    columns = ["scenario", "N", *(f"metric_{i}" for i in range(12))]
+    rows = [{"scenario": "seed000_stop_rmpc", "N": n, **{c: 0.5 * n for c in columns[2:]}}
+            for n in (5, 10)]
+    lines = fit_table(rows, columns, keys=2, width=80).splitlines()
+    headers = [i for i, line in enumerate(lines) if line.startswith("scenario")]
+    assert len(headers) >= 2
+    for i in headers:
+        assert lines[i].split()[:2] == ["scenario", "N"]
+        assert [line.split()[1] for line in lines[i + 2:i + 4]] == ["5", "10"]

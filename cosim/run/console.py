@@ -1,10 +1,12 @@
 """Tables for an 80-column terminal (``cosim sweep``, ``cosim reproduce``): the full tables go
 to files (csv, md); the console gets these.
 
-:func:`fit_table` formats every cell (numbers to 4 significant digits, counts as integers,
-``-`` for a missing value), drops the prefix the key column's names share (stated above the
-table), and when the columns do not fit ``width`` splits them into blocks, each repeating the
-key columns, so that nothing is cut.
+:func:`fit_table` formats each column in one notation (:func:`column_cells`: integers as
+such, other numbers with the same number of decimals, 4 significant digits on the column's
+largest value, or all in scientific notation where that cannot show them; ``-`` for a missing
+value), drops the prefix the key column's names share (stated above the table), and when the
+columns do not fit ``width`` splits them into blocks, each repeating the key columns, so that
+nothing is cut.
 """
 
 from __future__ import annotations
@@ -32,6 +34,42 @@ def cell(value: Any, signed: bool = False) -> str:
     return str(value)
 
 
+def _numeric(value: Any) -> bool:
+    """A finite int or float (not a bool)."""
+    return (isinstance(value, (int, float)) and not isinstance(value, bool)
+            and math.isfinite(value))
+
+
+def column_cells(values: Sequence[Any], signed: bool = False, digits: int = 4) -> list[str]:
+    """The cells of one column in one notation. Its numbers: integers (every one integral,
+    below 1e9 in magnitude) as integers; otherwise fixed-point with the same decimals for all,
+    ``digits`` significant digits on the largest magnitude, where that lies in [1e-3, 1e6);
+    otherwise all in scientific notation (``digits`` significant digits). ``signed``: numbers
+    with their sign. Anything else as :func:`cell` gives it."""
+    numbers = [float(v) for v in values if _numeric(v)]
+    sign = "+" if signed else ""
+    if not numbers:
+        spec = ""
+    elif all(n.is_integer() and abs(n) < 1e9 for n in numbers):
+        spec = "int"
+    else:
+        largest = max(abs(n) for n in numbers)
+        exponent = math.floor(math.log10(largest)) if largest > 0 else 0
+        if -3 <= exponent < 6:
+            spec = f"{sign}.{max(0, digits - 1 - exponent)}f"
+        else:
+            spec = f"{sign}.{digits - 1}e"
+    cells = []
+    for v in values:
+        if not spec or not _numeric(v):
+            cells.append(cell(v, signed))
+        elif spec == "int":
+            cells.append(f"{int(v):{sign}d}")
+        else:
+            cells.append(f"{float(v):{spec}}")
+    return cells
+
+
 def _is_number(text: str) -> bool:
     if text == "-":
         return True
@@ -53,10 +91,12 @@ def _shared_prefix(names: Sequence[str]) -> str:
 def fit_table(rows: Sequence[Mapping[str, Any]], columns: Sequence[str],
               labels: Mapping[str, str] | None = None, keys: int = 1,
               signed: Sequence[str] = (), width: int = WIDTH, title: str = "") -> str:
-    """``rows`` as a plain-text table of ``columns`` (headers from ``labels``), the first
-    ``keys`` columns on the left of every block; no line longer than ``width``."""
+    """``rows`` as a plain-text table of ``columns`` (headers from ``labels``, each column in
+    one notation: :func:`column_cells`), the first ``keys`` columns on the left of every block;
+    no line longer than ``width``."""
     labels = labels or {}
-    text = [[cell(r.get(c), c in signed) for c in columns] for r in rows]
+    by_column = [column_cells([r.get(c) for r in rows], c in signed) for c in columns]
+    text = [[by_column[i][n] for i in range(len(columns))] for n in range(len(rows))]
     lines = [title] if title else []
     if text and keys:
         prefix = _shared_prefix([t[0] for t in text])
@@ -95,7 +135,7 @@ def fit_table(rows: Sequence[Mapping[str, Any]], columns: Sequence[str],
         parts = []
         for i in cols:
             value = values[i] if len(values[i]) <= widths[i] else values[i][: widths[i] - 1] + "~"
-            right = numeric[i] and i not in key_cols
+            right = numeric[i]
             parts.append(value.rjust(widths[i]) if right else value.ljust(widths[i]))
         return GAP.join(parts).rstrip()
 
