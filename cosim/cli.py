@@ -174,6 +174,7 @@ def print_summary(summary: dict, title: str) -> None:
 
 @app.command()
 def run(
+    ctx: typer.Context,
     scenario: Annotated[str, typer.Argument(help="scenario name in scenarios/ or a path")],
     out_dir: Annotated[Path | None, typer.Option("--out", help="output folder "
                                                  "(default runs/<scenario>)")] = None,
@@ -210,8 +211,9 @@ def run(
     from cosim.run.scenario import ScenarioError, find_scenario
 
     with contextlib.ExitStack() as held, interrupt.guard(restore=False):
-        if not console.is_terminal and not quiet:
-            console.print(f"cosim run {scenario}", highlight=False, markup=False)
+        if not console.is_terminal and not quiet:  # a log says what ran
+            console.print(command_line(ctx), highlight=False,
+                          markup=False, soft_wrap=True)
         try:
             if plot_format not in PLOT_FORMATS:
                 raise OutputError(f"--format {plot_format}: one of {', '.join(PLOT_FORMATS)}")
@@ -245,6 +247,29 @@ def run(
                           soft_wrap=True)
         if strict and result.summary.get("warnings"):
             raise typer.Exit(1)
+
+
+def command_line(ctx: typer.Context) -> str:
+    """The ``cosim`` command line that repeats the command of ``ctx``: its arguments, then
+    every option not at its default (each value of a repeated option), shell-quoted."""
+    import shlex
+
+    parts = ["cosim", ctx.info_name or ""]
+    for param in ctx.command.params:
+        value = ctx.params.get(param.name or "")
+        values = list(value) if isinstance(value, (list, tuple)) else [value]
+        if param.param_type_name == "argument":
+            parts += [str(v) for v in values if v is not None]
+            continue
+        if value is None or value == param.default or value in ([], ()):
+            continue
+        flag = max(param.opts, key=len)  # --quiet, not -q
+        if getattr(param, "is_flag", False):
+            parts.append(flag if value else (param.secondary_opts or [flag])[0])
+        else:
+            for v in values:
+                parts += [flag, str(v)]
+    return shlex.join(parts)
 
 
 class _ProgressReporter:

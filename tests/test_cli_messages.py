@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import re
+import shlex
 import subprocess
 import sys
 
@@ -23,7 +24,9 @@ def test_set_errors_name_the_set_option_and_keep_the_table_name(built_fmus, tmp_
     done = cosim("run", "seed000_stop_pid", "--set", "plant.mas=1", "--out", str(tmp_path))
     assert done.returncode == 2
     message = one_line(done)
-    assert message.startswith("cosim run seed000_stop_pid error: --set plant.mas=1: ")
+    # the command echoed whole (a log shows what ran), then the error
+    echo = f"cosim run seed000_stop_pid --out {shlex.quote(str(tmp_path))} --set plant.mas=1"
+    assert message.startswith(f"{echo} error: --set plant.mas=1: "), message
     assert "did you mean 'mass'?" in message
     assert "[fmus.plant.parameters] mas in " in message  # not eaten as rich markup
 
