@@ -161,15 +161,28 @@ def summary_rows(summary: dict) -> list[tuple[str, str]]:
     return rows
 
 
-def print_summary(summary: dict, title: str) -> None:
-    """The summary as a two-column table at most 80 columns wide (long values wrap)."""
+def print_summary(summary: dict, title: str, notes: dict[str, str] | None = None) -> None:
+    """The summary as a two-column table at most 80 columns wide (long values wrap);
+    ``notes``: text after a metric's value, in parentheses."""
+    notes = notes or {}
     table = Table(title=escape(title), show_header=False, show_edge=False,
                   width=min(80, out.width))
     table.add_column("metric", style="bold", no_wrap=True)
     table.add_column("value", overflow="fold")
     for key, value in summary_rows(summary):
-        table.add_row(key, escape(value))
+        table.add_row(key, escape(value + (f" ({notes[key]})" if key in notes else "")))
     out.print(table)
+
+
+def real_time_notes(summary: dict, stepping: float | None) -> dict[str, str]:
+    """The summary's real-time factor explained: it is the whole run's (loading,
+    initialising and freeing the FMUs included), the progress lines' is the stepping's."""
+    if summary.get("real_time_factor") is None:
+        return {}
+    note = "whole run: loading and initialising the FMUs included"
+    if stepping is not None:
+        note += f"; stepping alone {stepping:.3g}, as the progress lines"
+    return {"real_time_factor": note}
 
 
 @app.command()
@@ -238,7 +251,8 @@ def run(
             except (ScenarioError, SimulationError) as err:
                 on_progress.stop()
                 _fail(str(err))
-        print_summary(result.summary, f"{path.stem} ({result.algorithm})")
+        print_summary(result.summary, f"{path.stem} ({result.algorithm})",
+                      real_time_notes(result.summary, on_progress.stepping_rtf()))
         out.print(f"wrote {target}/results.csv, summary.json"
                   + ("" if no_plot else f", plot.{plot_format}"),
                   highlight=False, markup=False)
@@ -274,7 +288,9 @@ def command_line(ctx: typer.Context) -> str:
 
 class _ProgressReporter:
     """``progress(t, total)`` for the master: a rich bar on a terminal; elsewhere (a pipe, a
-    log) a plain line every ~10 % of the simulated time with the real-time factor."""
+    log) a plain line every ~10 % of the simulated time with the real-time factor of the
+    stepping (simulated over wall-clock time from the first communication point: loading and
+    initialising the FMUs are not in it)."""
 
     def __init__(self, label: str, quiet: bool) -> None:
         import time
@@ -283,7 +299,8 @@ class _ProgressReporter:
 
         self.label, self.quiet, self.tty = label, quiet, console.is_terminal
         self._clock = time.perf_counter
-        self._start: float | None = None  # at the first step: loading the FMUs is not sim time
+        self._first: tuple[float, float] | None = None  # (t, clock) at the first call
+        self._last: tuple[float, float] | None = None
         self._next_tenth = 1
         self.bar = Progress(TextColumn("[bold]{task.description}"), BarColumn(),
                             TextColumn("{task.fields[t]:>8.1f} / {task.total:.1f} s sim"),
@@ -291,17 +308,27 @@ class _ProgressReporter:
                             disable=quiet or not self.tty, transient=True)
         self.task = self.bar.add_task(escape(label), total=1.0, t=0.0)
 
+    def stepping_rtf(self) -> float | None:
+        """Simulated over wall-clock seconds from the first call to the last (None before a
+        second call, or without wall-clock time between them)."""
+        if self._first is None or self._last is None:
+            return None
+        wall = self._last[1] - self._first[1]
+        return (self._last[0] - self._first[0]) / wall if wall > 0 else None
+
     def __call__(self, t: float, total: float) -> None:
+        now = (t, self._clock())
+        if self._first is None:
+            self._first = now
+        self._last = now
         if self.tty:
             self.bar.update(self.task, completed=t, total=total, t=t)
-        elif self._start is None:
-            self._start = self._clock()
         elif not self.quiet and total > 0 and t >= self._next_tenth * total / 10:
             self._next_tenth = int(10 * t / total) + 1
-            wall = self._clock() - self._start
-            rtf = f"{t / wall:.3g}" if wall > 0 else "-"
+            rtf = self.stepping_rtf()
             console.print(f"{self.label}: t = {t:.1f} / {total:.1f} s sim "
-                          f"({100 * t / total:.0f} %), real-time factor {rtf}",
+                          f"({100 * t / total:.0f} %), real-time factor of the stepping "
+                          + ("-" if rtf is None else f"{rtf:.3g}"),
                           highlight=False, markup=False, soft_wrap=True)
 
     def stop(self) -> None:

@@ -120,3 +120,18 @@ def test_perturb_table_keeps_the_grid_column_in_every_block_and_one_notation(tmp
     errors = [line.split()[3:6] for line in lines[headers[0] + 2:headers[0] + 4]]
     decimals = {len(x.partition(".")[2]) for row in errors for x in row}
     assert len(decimals) == 1, errors
+
+
+def test_progress_and_summary_real_time_factors_say_what_they_measure(built_fmus, tmp_path):
+    """The progress lines' real-time factor is the stepping's; the summary's is the whole
+    run's (the FMUs' loading included) and names the stepping's, the last progress line's."""
+    import json
+
+    done = cosim("run", "seed000_stop_pid", "--no-plot", "--out", str(tmp_path))
+    assert done.returncode == 0, done.stderr
+    last = [line for line in done.stderr.splitlines() if "(100 %)" in line][-1]
+    stepping = re.search(r"real-time factor of the stepping (\S+)$", last)[1]
+    text = " ".join(done.stdout.replace("│", " ").split())
+    whole = json.loads((tmp_path / "summary.json").read_text())["real_time_factor"]
+    assert (f"real_time_factor {whole:.6g} (whole run: loading and initialising the FMUs "
+            f"included; stepping alone {stepping}, as the progress lines)") in text, text
