@@ -25,6 +25,14 @@ def _fail(message: str, code: int = 2) -> None:
     raise typer.Exit(code)
 
 
+def _did_you_mean(name: str, known: list[str]) -> str:
+    """`` (did you mean 'X'?)`` for the closest of ``known`` (difflib), else ``""``."""
+    import difflib
+
+    hint = difflib.get_close_matches(name, known, n=1)
+    return f" (did you mean {hint[0]!r}?)" if hint else ""
+
+
 FMI_CHOICES = {"2": (2,), "3": (3,), "all": (2, 3)}
 
 
@@ -350,7 +358,8 @@ def _native_paths(names: list[str] | None, versions: tuple[int, ...]) -> list[Pa
     paths: list[Path] = []
     for name in sorted(NATIVE) if names is None else names:
         if name not in NATIVE:
-            _fail(f"no native model of {name!r}; native: {sorted(NATIVE)}")
+            _fail(f"no native model of {name!r}" + (_did_you_mean(name, sorted(NATIVE))
+                                                     or f"; native: {sorted(NATIVE)}"))
         missing = tuple(v for v in versions if not native_path(name, v).is_file())
         if missing:
             try:
@@ -415,7 +424,10 @@ def validate(
     for name in names:
         if name.endswith(".fmu"):
             if not Path(name).is_file():
-                _fail(f"{name}: no such file")
+                folder = name[:len(name) - len(Path(name).name)]  # as written, "" or ".../"
+                near = sorted(folder + p.name for p in Path(folder or ".").glob("*.fmu"))
+                _fail(f"{name}: no such file" + (_did_you_mean(name, near)  # or an identifier
+                                                 or _did_you_mean(Path(name).stem, list(specs))))
             paths.append(Path(name))
         elif name in specs:
             for version in versions:
@@ -424,11 +436,8 @@ def validate(
                     build_fmu(specs[name], fmi_version=version)
                 paths.append(path)
         else:
-            import difflib
-
-            hint = difflib.get_close_matches(name, list(specs), n=1)
-            _fail(f"unknown FMU {name!r}" + (f" (did you mean {hint[0]!r}?)" if hint else
-                                             f"; known: {sorted(specs)}"))
+            hint = _did_you_mean(name, list(specs))
+            _fail(f"unknown FMU {name!r}" + (hint or f"; known: {sorted(specs)}"))
     from cosim.interop.compliance import Options, check_fmu, classify, format_report, passed
     from cosim.interop.compliance.archive import MB, ArchiveLimits
 
@@ -554,6 +563,34 @@ def _wrapped(text: str, width: int = 80) -> str:
     return "\n".join(textwrap.wrap(text, width, break_on_hyphens=False))
 
 
+def _check_perturbed_keys(scenarios: list[str], keys: list[str]) -> None:
+    """Raise :class:`ScenarioError` for a ``--perturb`` key whose FMU is not in a scenario or
+    whose variable is not in that FMU, with the closest name (difflib); builds the
+    scenarios' missing FMUs to read their variables."""
+    from fmpy import read_model_description
+
+    from cosim.run.master import ensure_built
+    from cosim.run.scenario import ScenarioError, load_scenario
+
+    for scenario in scenarios:
+        sc = load_scenario(scenario)
+        for key in keys:
+            comp_name, _, name = key.partition(".")
+            comp = sc.components.get(comp_name)
+            if comp is None:
+                raise ScenarioError(
+                    f"--perturb {key}: {sc.name} has no FMU named {comp_name!r}"
+                    + (_did_you_mean(comp_name, list(sc.components))
+                       or f"; it has {', '.join(sorted(sc.components))}"))
+            if name in comp.parameters:
+                continue
+            ensure_built(sc)
+            names = [v.name for v in read_model_description(str(comp.fmu_path)).modelVariables]
+            if name not in names:
+                raise ScenarioError(f"--perturb {key}: {comp_name} ({comp.fmu}) has no "
+                                    f"variable {name!r}" + _did_you_mean(name, names))
+
+
 def _perturbed_sweep(scenarios: list[str], grid: dict[str, list[Any]], perturb: list[str],
                      samples: int, seed: int, target: Path, workers: int | None,
                      no_plot: bool, plot_format: str = "png") -> None:
@@ -562,6 +599,7 @@ def _perturbed_sweep(scenarios: list[str], grid: dict[str, list[Any]], perturb: 
     from cosim.run.perturb import parse_perturb, run_perturbed
 
     perts = parse_perturb(perturb)
+    _check_perturbed_keys(scenarios, [p.key for p in perts])
     _, summary = run_perturbed(scenarios, grid, perts, samples, seed, target, workers,
                                plot=not no_plot, plot_format=plot_format)
     columns = [c for c in ["scenario", *grid, "runs", "stop_error_min_m", "stop_error_median_m",

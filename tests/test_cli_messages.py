@@ -8,6 +8,8 @@ import shlex
 import subprocess
 import sys
 
+import pytest
+
 from cosim.run.scenario import SCENARIO_DIR
 
 
@@ -135,3 +137,29 @@ def test_progress_and_summary_real_time_factors_say_what_they_measure(built_fmus
     whole = json.loads((tmp_path / "summary.json").read_text())["real_time_factor"]
     assert (f"real_time_factor {whole:.6g} (whole run: loading and initialising the FMUs "
             f"included; stepping alone {stepping}, as the progress lines)") in text, text
+
+
+@pytest.mark.parametrize("item,message", [
+    ("plant.mas=+-10%", "--perturb plant.mas: plant (BrakeDelayTrain) has no variable 'mas' "
+                        "(did you mean 'mass'?)"),
+    ("plnt.mass=+-10%", "--perturb plnt.mass: seed000_stop_pid has no FMU named 'plnt' "
+                        "(did you mean 'plant'?)"),
+])
+def test_perturb_typos_get_did_you_mean(tmp_path, item, message):
+    done = cosim("sweep", "seed000_stop_pid", "--set", "plant.mass=490000", "--perturb", item,
+                 "--samples", "1", "--workers", "1", "--no-plot", "--out", str(tmp_path / "s"))
+    assert done.returncode == 2
+    assert message in one_line(done), done.stderr
+
+
+def test_validate_typos_get_did_you_mean(tmp_path):
+    (tmp_path / "StopPid.fmu").write_bytes(b"")
+    done = cosim("validate", str(tmp_path / "StopPdi.fmu"))
+    assert done.returncode == 2
+    assert f"no such file (did you mean '{tmp_path / 'StopPid.fmu'}'?)" in one_line(done)
+    (tmp_path / "empty").mkdir()  # no .fmu near: the closest identifier
+    done = cosim("validate", "StopPdi.fmu", cwd=tmp_path / "empty")
+    assert "StopPdi.fmu: no such file (did you mean 'StopPid'?)" in one_line(done)
+    done = cosim("validate", "--native", "StopMcp")
+    assert done.returncode == 2
+    assert "no native model of 'StopMcp' (did you mean 'StopMpc'?)" in one_line(done)
