@@ -454,15 +454,33 @@ def validate(
         report[str(path)] = [vars(p) for p in problems]
         if not as_json:
             out.print(format_report(path, problems), highlight=False, soft_wrap=True, markup=False)
-            if not lenient and not passed(problems) and passed(classify(problems, False)):
-                out.print("  hint: every error above is something FMI recommends or leaves to "
-                          "the FMU, or a convention of this project; for a third-party FMU, "
-                          "--lenient checks only what the standard requires (it passes this "
-                          "one)", highlight=False, soft_wrap=True, markup=False)
+            if not lenient and not passed(problems):
+                hint = _lenient_hint(problems, classify(problems, False))
+                if hint:
+                    out.print(hint, highlight=False, soft_wrap=True, markup=False)
     if as_json:
         out.print_json(json.dumps(report))
     if failed:
         raise typer.Exit(1)
+
+
+def _lenient_hint(strict: list, lenient: list) -> str:
+    """``cosim validate``'s pointer to ``--lenient`` under a strict report whose errors are,
+    all or in part, what FMI recommends or leaves to the FMU or a project convention ("" when
+    none is)."""
+    from cosim.interop.compliance import ERROR
+
+    errors = sum(p.severity == ERROR for p in strict)
+    remain = sum(p.severity == ERROR for p in lenient)
+    if remain == errors:
+        return ""
+    if remain == 0:
+        return ("  hint: every error above is something FMI recommends or leaves to the FMU, "
+                "or a convention of this project; for a third-party FMU, --lenient checks only "
+                "what the standard requires (it passes this one)")
+    return (f"  hint: {errors - remain} of the {errors} errors above are what FMI recommends or "
+            "leaves to the FMU, or conventions of this project; for a third-party FMU, "
+            f"--lenient checks only what the standard requires ({remain} error(s) remain)")
 
 
 @app.command()

@@ -108,6 +108,22 @@ def test_strict_report_of_a_third_party_fmu_suggests_lenient(c_fmus, results):
     assert not passed(results("FeedthroughLying", False))
 
 
+def test_strict_report_with_a_required_rule_broken_counts_what_lenient_keeps(c_fmus, results):
+    """FeedthroughLying breaks a required rule and fails on what the standard leaves to the
+    FMU: the strict report says how many of its errors --lenient would keep."""
+    errors = sum(p.severity == ERROR for p in results("FeedthroughLying", True))
+    remain = sum(p.severity == ERROR for p in results("FeedthroughLying", False))
+    assert 0 < remain < errors
+    done = subprocess.run([sys.executable, "-m", "cosim.cli", "validate",
+                           str(c_fmus["FeedthroughLying"]), "--call-timeout", str(CALL_TIMEOUT)],
+                          capture_output=True, text=True)
+    assert done.returncode == 1
+    assert (f"hint: {errors - remain} of the {errors} errors above are what FMI recommends or "
+            "leaves to the FMU, or conventions of this project; for a third-party FMU, "
+            f"--lenient checks only what the standard requires ({remain} error(s) remain)"
+            ) in done.stdout, done.stdout
+
+
 def test_refused_event_mode_instantiation_says_what_the_fmu_said(c_fmus3, monkeypatch, tmp_path):
     """A binary that returns NULL for eventModeUsed = true: the report names the call, its
     arguments, why an importer may ask for it and the FMU's own message, not fmpy's "Failed to
