@@ -499,7 +499,7 @@ def sweep(
         = False,
     perturb: Annotated[list[str] | None, typer.Option(
         "--perturb", help="model-mismatch study: random plant parameter per run, e.g. "
-        "plant.mass=+-10% or plant.brake_time_constant=0.3..0.6 (repeatable)")] = None,
+        "plant.mass=+-10% or plant.brake_delay=0.8..1.2 (repeatable)")] = None,
     samples: Annotated[int, typer.Option(help="with --perturb: draws per grid point")] = 50,
     seed: Annotated[int, typer.Option(help="with --perturb: random seed of the draws")] = 1,
     scheduler: Annotated[str | None, typer.Option(

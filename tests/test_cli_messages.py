@@ -163,3 +163,20 @@ def test_validate_typos_get_did_you_mean(tmp_path):
     done = cosim("validate", "--native", "StopMcp")
     assert done.returncode == 2
     assert "no native model of 'StopMcp' (did you mean 'StopMpc'?)" in one_line(done)
+
+
+def test_no_help_text_is_cut_at_80_columns():
+    """Every command's ``--help`` at 80 columns shows each word whole (rich cuts a word wider
+    than its column with an ellipsis)."""
+    import os
+
+    import typer
+
+    from cosim.cli import app
+
+    for name in ["", *typer.main.get_command(app).commands]:
+        done = subprocess.run([sys.executable, "-m", "cosim.cli", *name.split(), "--help"],
+                              capture_output=True, text=True, timeout=120,
+                              env={**os.environ, "COLUMNS": "80"})
+        assert done.returncode == 0, done.stderr
+        assert "…" not in done.stdout, (name, done.stdout)
