@@ -180,3 +180,18 @@ def test_no_help_text_is_cut_at_80_columns():
                               env={**os.environ, "COLUMNS": "80"})
         assert done.returncode == 0, done.stderr
         assert "…" not in done.stdout, (name, done.stdout)
+
+
+def test_sweep_table_keeps_the_grid_columns_in_every_block(tmp_path):
+    done = cosim("sweep", "seed000_stop_pid", "seed000_stop_pid_plain",
+                 "--set", "plant.mass=440000,539000", "--set", "controller.ref_decel=0.5,0.55",
+                 "--workers", "1", "--no-plot", "--out", str(tmp_path / "sweep"))
+    assert done.returncode == 0, done.stderr
+    lines = done.stdout.splitlines()
+    assert max(len(line) for line in lines) <= 80, done.stdout
+    headers = [i for i, line in enumerate(lines) if line.startswith("scenario")]
+    assert len(headers) >= 2, done.stdout
+    for i in headers:
+        assert lines[i].split()[:3] == ["scenario", "mass", "ref_decel"], done.stdout
+        assert [line.split()[1:3] for line in lines[i + 2:i + 4]] == [
+            ["440000", "0.50"], ["440000", "0.55"]], done.stdout

@@ -39,7 +39,8 @@ def test_each_column_has_one_notation():
     assert column_cells([440000, 539000]) == ["440000", "539000"]
     assert column_cells([0.1504, -2.945e-05, 0.257, None], signed=True) == \
         ["+0.1504", "-0.0000", "+0.2570", "-"]
-    assert column_cells([89.03, 100.0, 0]) == ["89.0", "100.0", "0.0"]
+    assert column_cells([89.03, 100.0, 0]) == ["89", "100", "0"]
+    assert column_cells([0.5, 0.55]) == ["0.50", "0.55"]  # no zeros every value has
     assert column_cells([2.5e-5, 3e-6]) == ["2.500e-05", "3.000e-06"]
     assert column_cells([3, 7], signed=True) == ["+3", "+7"]
     rows = [{"run": "a", "mass": 440000, "err": 0.1504}, {"run": "b", "mass": 539000,

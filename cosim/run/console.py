@@ -43,7 +43,8 @@ def _numeric(value: Any) -> bool:
 def column_cells(values: Sequence[Any], signed: bool = False, digits: int = 4) -> list[str]:
     """The cells of one column in one notation. Its numbers: integers (every one integral,
     below 1e9 in magnitude) as integers; otherwise fixed-point with the same decimals for all,
-    ``digits`` significant digits on the largest magnitude, where that lies in [1e-3, 1e6);
+    ``digits`` significant digits on the largest magnitude (less the trailing zeros every
+    number has), where that lies in [1e-3, 1e6);
     otherwise all in scientific notation (``digits`` significant digits). ``signed``: numbers
     with their sign. Anything else as :func:`cell` gives it."""
     numbers = [float(v) for v in values if _numeric(v)]
@@ -56,7 +57,10 @@ def column_cells(values: Sequence[Any], signed: bool = False, digits: int = 4) -
         largest = max(abs(n) for n in numbers)
         exponent = math.floor(math.log10(largest)) if largest > 0 else 0
         if -3 <= exponent < 6:
-            spec = f"{sign}.{max(0, digits - 1 - exponent)}f"
+            decimals = max(0, digits - 1 - exponent)
+            while decimals and all(f"{n:.{decimals}f}".endswith("0") for n in numbers):
+                decimals -= 1  # 0.50 / 0.55, not 0.5000 / 0.5500
+            spec = f"{sign}.{decimals}f"
         else:
             spec = f"{sign}.{digits - 1}e"
     cells = []
