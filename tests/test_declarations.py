@@ -167,6 +167,8 @@ def test_catalog_read_from_source_equals_the_imported_wrappers() -> None:
     from cosim.fmu.build import _imported_catalog
 
     assert catalog() == _imported_catalog()
+    cut = {k: v.description for k, v in catalog().items() if not v.description.endswith(".")}
+    assert not cut, f"descriptions cut mid-sentence: {cut}"
 
 
 def _entry_texts() -> dict[str, str]:

@@ -164,12 +164,17 @@ def catalog() -> dict[str, FmuSpec]:
         for node in tree.body:
             if isinstance(node, ast.ClassDef) and node.name.endswith("Fmu"):
                 identifier = node.name[:-3]
-                doc = (ast.get_docstring(node) or identifier).strip().splitlines()[0]
+                doc = summary_line(ast.get_docstring(node) or identifier)
                 if identifier in specs:
                     raise ValueError(f"two FMUs named {identifier}: {specs[identifier].module} "
                                      f"and {mod_name}")
                 specs[identifier] = FmuSpec(identifier, mod_name, node.name, doc)
     return specs
+
+
+def summary_line(doc: str) -> str:
+    """A docstring's first paragraph on one line (an FMU's description in the catalog)."""
+    return " ".join(doc.strip().split("\n\n")[0].split())
 
 
 def _imported_catalog() -> dict[str, FmuSpec]:
@@ -184,7 +189,7 @@ def _imported_catalog() -> dict[str, FmuSpec]:
             if (inspect.isclass(obj) and issubclass(obj, CoreSlave) and obj.__module__ == mod_name
                     and obj.variables):
                 identifier = name[:-3] if name.endswith("Fmu") else name
-                doc = (obj.__doc__ or identifier).strip().splitlines()[0]
+                doc = summary_line(inspect.getdoc(obj) or identifier)
                 specs[identifier] = FmuSpec(identifier, mod_name, name, doc)
     return specs
 
