@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from cosim.reproduce.entry import ReproduceError, Run, entry_names, load_entry
 from cosim.run.claims import (
     ClaimsError,
     check_claims,
@@ -18,7 +19,6 @@ from cosim.run.claims import (
     verdict,
     with_rounding,
 )
-from cosim.run.reproduce import ReproduceError, entry_names, load_entry
 
 LESS = {"id": "a_below_b", "text": "A below B", "metric": "m", "kind": "less",
         "runs": ["A", "B"]}
@@ -243,7 +243,7 @@ def test_shipped_entries_claims_load() -> None:
     for name in entry_names():
         entry = load_entry(name)
         for claim in entry.claims:
-            assert claim["runs"][0] in {r["name"] for r in entry.runs}
+            assert claim["runs"][0] in entry.run_names()
 
 
 CLAIMS_SMOKE_ENTRY = "seed000"  # its runs are a minute of a stopping train: the cheapest
@@ -291,7 +291,7 @@ def test_ensemble_figure_draws_median_and_band(tmp_path: Path) -> None:
 def test_reproduction_summary_counts_verdicts(tmp_path: Path) -> None:
     import pandas as pd
 
-    from cosim.run.reproduce import claims_summary
+    from cosim.reproduce.page import claims_summary
 
     (tmp_path / "a").mkdir()
     pd.DataFrame({"id": ["x", "y", "z"], "verdict": ["holds", "fails", "holds"],
@@ -327,7 +327,7 @@ def _variant_entry() -> object:
         claims=[LESS, {**LESS, "id": "c_below_b", "runs": ["C", "B"]}],
         variants=[{"name": "alt", "replace": {"A": "A2"}, "seeds": 4}],
         ensemble=check_ensemble("e.toml", {"seed_key": "plant.seed", "report_seeds": "1..6"}),
-        runs=[{"name": n, "scenario": "s"} for n in ("A", "A2", "B", "C")], path="e.toml")
+        runs=[Run(name=n, scenario="s") for n in ("A", "A2", "B", "C")], path="e.toml")
 
 
 def test_variants_replace_runs_in_every_claim_and_get_their_own_verdicts() -> None:
@@ -391,8 +391,8 @@ def _repeat_entry(repeats: int = 4) -> object:
         variants=[],
         ensemble=check_ensemble("e.toml", {"seed_key": "plant.seed", "report_seeds": "1..3",
                                            "repeats": repeats}),
-        runs=[{"name": "A", "scenario": "s", "set": {"controller.x": 1}},
-              {"name": "B", "scenario": "s"}, {"name": "C", "scenario": "s"}],
+        runs=[Run(name="A", scenario="s", overrides={"controller.x": 1}),
+              Run(name="B", scenario="s"), Run(name="C", scenario="s")],
         path="e.toml")
 
 

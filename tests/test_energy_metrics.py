@@ -8,8 +8,9 @@ import pandas as pd
 import pytest
 
 from cosim import papers
+from cosim.reproduce.entry import ReproduceError, load_entry
+from cosim.reproduce.tables import derived_rows
 from cosim.run.metrics import _arrival_index
-from cosim.run.reproduce import ReproduceError, derived_rows, load_entry
 
 CFG = {"energy_traction": "p.et", "energy_regen": "p.er", "energy_aux": "p.ea",
        "phase": "c.phase"}
@@ -60,7 +61,7 @@ def test_still_moving_at_the_end_counts_the_whole_run_and_missing_columns_give_n
 
 def test_derived_saving_rows(tmp_path) -> None:
     entry = load_entry("seed003")
-    names = [r["name"] for r in entry.runs]
+    names = entry.run_names()
     summaries = {n: {"energy_net_mj": 100.0, "energy_run_mj": 50.0,
                      "energy_traction_mj": 80.0} for n in names}
     summaries["Eco (GPC)"] = {"energy_net_mj": 82.0, "energy_run_mj": 40.0,

@@ -1,5 +1,5 @@
 """A paper's claims as data, tested over seed ensembles (``[ensemble]`` and ``[[claims]]`` of a
-reproduction entry; schema in the module docstring of :mod:`cosim.run.reproduce`).
+reproduction entry; schema: :mod:`cosim.reproduce.entry`).
 
 Each claim compares, per member, a tested quantity with its claimed side: ``less`` /
 ``greater`` the paired difference A - B (same seed / same mismatch sample) with 0, ``below`` /
@@ -56,11 +56,79 @@ CLAIM_KINDS = ("less", "greater", "below", "above", "inside")
 QUANTIFIERS = ("every", "share", "typical")
 ENSEMBLES = ("disturbance", "mismatch", "repeat")
 ORIGINS = ("paper", "ours", "sanity")  # the paper's statement, ours, a check of the setup
-_CLAIM_KEYS = {"id", "source", "text", "paper", "metric", "kind", "runs", "threshold", "range",
-               "ensemble", "origin", "quantifier", "share", "transform", "each"}
-_ENSEMBLE_KEYS = {"seed_key", "report_seeds", "calibration_seeds", "perturb", "perturb_seed",
-                  "rounding_perturb", "rounding_reference_path", "repeats", "members"}
-_VARIANT_KEYS = {"name", "text", "replace", "rounding", "seeds"}
+REQUIRED = "required"
+# The keys of the claims' tables: key -> (type, default, meaning); the schema page
+# (docs/reproduce_schema.md) is written from them.
+ENSEMBLE_KEYS: dict[str, tuple[str, str, str]] = {
+    "seed_key": ("a string FMU.PARAMETER", "none", "the override key taking a member's seed "
+                 "(none: no random input; a \"disturbance\" claim is then one run)"),
+    "report_seeds": ("\"A..B\", \"A..B, C\" or a list of integers", "\"1..20\"",
+                     "the seeds of the members; ``--seeds K`` takes the first K"),
+    "calibration_seeds": ("as report_seeds", "none", "the seeds used for tuning only; "
+                          "disjoint from report_seeds (checked)"),
+    "perturb": ("a list of strings", "[]", "the plant-mismatch distribution of a "
+                "\"mismatch\" claim, as ``--perturb`` (``plant.mass=+-10%``)"),
+    "perturb_seed": ("an integer", "0", "the seed of the mismatch draws"),
+    "rounding_perturb": ("a list of strings FMU.PARAMETER", "[]", "parameters scaled by "
+                         "1 + 1e-12 on the perturbed floating-point rerun"),
+    "rounding_reference_path": ("true or false", "true", "the rerun also takes the plants' "
+                                "numpy reference path (``ATO_COSIM_NO_KERNELS=1``); false "
+                                "keeps the compiled kernels (rounding_perturb alone "
+                                "perturbs it)"),
+    "repeats": ("an integer >= 1", "none", "the members of a \"repeat\" claim: repetitions of "
+                "the nominal run, whatever ``--seeds`` (no rounding rerun)"),
+    "members": ("an integer in [1, report seeds]", "20, or every report seed if fewer",
+                "K a published page needs"),
+}
+CLAIM_KEYS: dict[str, tuple[str, str, str]] = {
+    "id": ("a string [a-z0-9_]+", REQUIRED, "the claim's id, unique in the entry"),
+    "text": ("a string", REQUIRED, "the claim in words (\"ISMPC has a lower MSE than ISMC\")"),
+    "metric": ("a string", REQUIRED, "the summary key tested ('.' for a nested key; a bool "
+               "counts 1 / 0)"),
+    "kind": ("less | greater | below | above | inside", REQUIRED,
+             "less / greater: runs[0] against runs[1], paired by member; below / above: "
+             "runs[0] against threshold; inside: runs[0] within range"),
+    "runs": ("a list of strings", REQUIRED, "the ``[[runs]]`` names compared: two for less / "
+             "greater, one otherwise"),
+    "threshold": ("a number", "none", "below / above: the bound, in the metric's unit"),
+    "range": ("[low, high]", "none", "inside: the band, in the metric's unit"),
+    "quantifier": ("every | share | typical", "every for below / above / inside, typical for "
+                   "less / greater", "what the claim asserts of the runs "
+                   "(:mod:`cosim.run.claims`)"),
+    "share": ("a number in (0, 1)", "none", "with quantifier share: at least this fraction "
+              "of the runs"),
+    "transform": ("abs", "none", "the metric's absolute value per member"),
+    "ensemble": ("disturbance | mismatch | repeat", "disturbance", "the members: the report "
+                 "seeds, the perturb samples, or the nominal run ``[ensemble] repeats`` times "
+                 "(paired by repeat index: CPU and wall time claims)"),
+    "origin": ("paper | ours | sanity", "paper", "whose claim: the paper's, ours, or a check "
+               "of the setup"),
+    "source": ("a string", "\"\"", "where the paper makes it (\"Table 2\")"),
+    "paper": ("a string", "\"\"", "the paper's value(s), as text"),
+    "each": ("a table placeholder -> list of strings or tables", "none",
+             "a claim family: one claim per combination of values (the cross product); "
+             "``{name}`` / ``{name.field}`` in any string, the id included, is filled "
+             "(:func:`cosim.run.claims.expand_families`)"),
+}
+VARIANT_KEYS: dict[str, tuple[str, str, str]] = {
+    "name": ("a string", REQUIRED, "the variant's name (a column of claims.md), not \"main\""),
+    "replace": ("a table run -> run", REQUIRED, "the ``[[runs]]`` names replaced in every "
+                "claim, and their replacements"),
+    "text": ("a string", "\"\"", "what the variant is (an alternative reading, a mechanism "
+             "removed)"),
+    "rounding": ("true or false", "false", "also the perturbed floating-point rerun"),
+    "seeds": ("an integer >= 1", "--seeds", "the first this many report seeds (at most "
+              "``--seeds``)"),
+}
+STATEMENT_KEYS: dict[str, tuple[str, str, str]] = {
+    "text": ("a string", REQUIRED, "the paper's assertion (a result or a conclusion)"),
+    "where": ("a string", "the sources of its claims", "where the paper makes it"),
+    "claims": ("a list of claim ids", "none", "the claims that test it (this or untestable)"),
+    "untestable": ("a string", "none", "why it cannot be tested here (this or claims)"),
+}
+_CLAIM_KEYS = set(CLAIM_KEYS)
+_ENSEMBLE_KEYS = set(ENSEMBLE_KEYS)
+_VARIANT_KEYS = set(VARIANT_KEYS)
 ROUNDING_RELATIVE = 1e-12  # relative change of each [ensemble].rounding_perturb parameter
 CONFIDENCE = 0.95
 N_RESAMPLES = 9999
@@ -73,7 +141,7 @@ class ClaimsError(ValueError):
 
 @dataclass
 class Ensemble:
-    """How an entry's runs are varied (see :mod:`cosim.run.reproduce`)."""
+    """How an entry's runs are varied (see :mod:`cosim.reproduce.entry`)."""
 
     seed_key: str | None = None
     report_seeds: list[int] = field(default_factory=lambda: list(range(1, 21)))
@@ -349,7 +417,7 @@ def check_variants(where: str, variants: list[dict[str, Any]], run_names: list[s
     return variants
 
 
-_STATEMENT_KEYS = {"text", "where", "claims", "untestable"}
+_STATEMENT_KEYS = set(STATEMENT_KEYS)
 
 
 def check_statements(where: str, statements: list[dict[str, Any]],

@@ -77,22 +77,21 @@ def _draws(entry: Any, k: int) -> list[dict[str, float]]:
     from cosim.run.perturb import draw_samples, nominal_values, parse_perturb
 
     perts = parse_perturb(entry.ensemble.perturb)
-    scenario = next(r["scenario"] for r in entry.runs
-                    if any(c.get("ensemble") == "mismatch" and r["name"] in c["runs"]
+    scenario = next(r.scenario for r in entry.runs
+                    if any(c.get("ensemble") == "mismatch" and r.name in c["runs"]
                            for c in entry.claims))
     nominals = nominal_values(scenario, [p.key for p in perts])
     return draw_samples(perts, nominals, k, entry.ensemble.perturb_seed)
 
 
-def _rounding_overrides(entry: Any, run: dict[str, Any], base: dict[str, Any]
-                        ) -> dict[str, Any]:
+def _rounding_overrides(entry: Any, run: Any, base: dict[str, Any]) -> dict[str, Any]:
     from cosim.run.perturb import nominal_values
 
     out: dict[str, Any] = {}
     for key in entry.ensemble.rounding_perturb:
-        value = base.get(key, run.get("set", {}).get(key))
+        value = base.get(key, run.overrides.get(key))
         if value is None:
-            value = nominal_values(run["scenario"], [key])[key]
+            value = nominal_values(run.scenario, [key])[key]
         if value is None:
             raise ValueError(f"{entry.path}: [ensemble] rounding_perturb {key!r}: no nominal "
                              "value to perturb")
@@ -123,7 +122,7 @@ def claim_cases(entry: Any, k: int, rounding: bool = True
 def claim_jobs(entry: Any, k: int, rounding: bool = True) -> list[Job]:
     """Every (run, ensemble, member, path) the claims and their variants need, once; the
     ``repeat`` members first, interleaved by repeat index (A0, B0, A1, B1, ...)."""
-    runs = {r["name"]: r for r in entry.runs}
+    runs = {r.name: r for r in entry.runs}
     jobs: dict[tuple[str, str, int, bool], Job] = {}
     cache: dict[tuple[str, int], list[dict[str, Any]]] = {}
     for _var, claim, names, with_rnd, kc in claim_cases(entry, k, rounding):
@@ -135,12 +134,12 @@ def claim_jobs(entry: Any, k: int, rounding: bool = True) -> list[Job]:
             for i, member in enumerate(cache[ens, kc]):
                 for rnd in (False, True) if with_rnd else (False,):
                     key = (name, ens, i, rnd)
-                    overrides = {**member, **run.get("set", {})}
+                    overrides = {**member, **run.overrides}
                     if ens == "mismatch":  # the drawn plant wins over the run's nominal
                         overrides.update(member)
                     if rnd:
                         overrides.update(_rounding_overrides(entry, run, overrides))
-                    jobs.setdefault(key, (key, run["scenario"], overrides))
+                    jobs.setdefault(key, (key, run.scenario, overrides))
     order = {name: j for j, name in enumerate(dict.fromkeys(key[0] for key in jobs))}
     repeats = sorted((key for key in jobs if key[1] == "repeat"),
                      key=lambda key: (key[2], order[key[0]]))
@@ -158,7 +157,7 @@ def _run_member(scenario: str, overrides: dict[str, Any], out_dir: str | None = 
 
 def member_dir(out: Path, key: tuple[str, str, int, bool]) -> Path:
     """Where a main-path member writes results.csv (``ensemble/<run>/<ensemble>_<i>``)."""
-    from cosim.run.reproduce import slug
+    from cosim.reproduce.entry import slug
 
     return out / "ensemble" / slug(key[0]) / f"{key[1]}_{key[2] + 1:02d}"
 
@@ -205,7 +204,7 @@ def execute(jobs: list[Job], workers: int | None, label: str = "claims",
 
 def _metric(summaries: dict[Any, dict[str, Any] | None], run: str, ens: str, n: int,
             rnd: bool, metric: str) -> np.ndarray:
-    from cosim.run.reproduce import summary_value
+    from cosim.reproduce.tables import summary_value
 
     vals = []
     for i in range(n):
@@ -249,7 +248,7 @@ def variants_markdown(entry: Any, rows: list[dict[str, Any]], var_rows: list[dic
                       ) -> str:
     """Each claim's verdict as written and under every variant (a column each; "=": the
     variant replaces none of the claim's runs), then what each variant replaces."""
-    from cosim.run.reproduce import _row
+    from cosim.reproduce.tables import md_row
 
     names = [v["name"] for v in entry.variants]
     got = {(r["variant"], r["id"]): r for r in var_rows}
@@ -260,9 +259,9 @@ def variants_markdown(entry: Any, rows: list[dict[str, Any]], var_rows: list[dic
         flag = "" if r["rounding_robust"] in (None, True) else " (r)"
         return f"{_shown(r)}{flag} ({r['k']}/{r['K']})"
 
-    lines = [_row(["claim", "main", *names]), "|" + " --- |" * (2 + len(names))]
+    lines = [md_row(["claim", "main", *names]), "|" + " --- |" * (2 + len(names))]
     for r in rows:
-        lines.append(_row([r["id"], cell(r), *(cell(got.get((n, r["id"]))) for n in names)]))
+        lines.append(md_row([r["id"], cell(r), *(cell(got.get((n, r["id"]))) for n in names)]))
     lines += ["", "Verdict (k of K on the claimed side) of every claim with the runs of each "
               "variant in place of those it replaces; (r): rounding-sensitive. The cells of "
               "all variants are one family: their p-values are adjusted together "
@@ -290,9 +289,9 @@ def claims_markdown(rows: list[dict[str, Any]], k: int) -> str:
     """The claims table: each claim with its verdict first (adjusted for multiplicity, the raw
     one where they differ), k of K, ours, the paper's figure and source; then the counts per
     origin and what the columns mean."""
-    from cosim.run.reproduce import _row
+    from cosim.reproduce.tables import md_row
 
-    lines = [_row(["claim", "verdict", "k of K", "ours: median [95 % CI]", "paper", "source",
+    lines = [md_row(["claim", "verdict", "k of K", "ours: median [95 % CI]", "paper", "source",
                    "rounding-robust"]), "|" + " --- |" * 7]
     for r in rows:
         what = {"less": "A - B", "greater": "A - B"}.get(r["kind"], r["metric"])
@@ -301,7 +300,7 @@ def claims_markdown(rows: list[dict[str, Any]], k: int) -> str:
         quant = r.get("quantifier", "typical")
         if quant == "share":
             quant = f"share >= {r.get('share', '')}"
-        lines.append(_row([f"{r['id']}: {r['text']} ({quant}; {r['runs']}; {r['metric']}, "
+        lines.append(md_row([f"{r['id']}: {r['text']} ({quant}; {r['runs']}; {r['metric']}, "
                            f"{r['ensemble']}; {r.get('origin', 'paper')})", _shown(r),
                            f"{r['k']} of {r['K']}", f"{what}: {ours_text(r)}", r["paper"],
                            r["source"], robust]))
@@ -351,8 +350,7 @@ def member_jobs(entry: Any, k: int, rounding: bool = True) -> list[RecordJob]:
 
 def _banded(entry: Any) -> set[str]:
     """Runs drawn by an overlay or panels figure: their members keep their series."""
-    return {r for f in entry.figures if f.get("kind", "overlay") in ("overlay", "panels")
-            for r in f.get("runs", [x["name"] for x in entry.runs])}
+    return {r for f in entry.figures if f.line_kind() for r in f.runs or entry.run_names()}
 
 
 def simulate_claims(entry: Any, out: Path, record: Record, workers: int | None = None,
@@ -400,19 +398,19 @@ def simulate_claims(entry: Any, out: Path, record: Record, workers: int | None =
 def record_member_series(entry: Any, out: Path, record: Record) -> None:
     """The series of the members the ensemble figures draw (main path, disturbance, banded
     runs) from their results.csv under ``out``, added to ``record`` (thinned to
-    :data:`cosim.run.reproduce.MEMBER_ROWS` rows)."""
-    from cosim.run.reproduce import MEMBER_ROWS, record_series, run_scenarios
+    :data:`cosim.reproduce.run.MEMBER_ROWS` rows)."""
+    from cosim.reproduce.run import MEMBER_ROWS, record_series, run_scenarios
 
     scenarios = run_scenarios(entry)
     banded = _banded(entry)
-    specs = [f for f in entry.figures if f.get("kind", "overlay") in ("overlay", "panels")]
+    lines = [f for f in entry.figures if f.line_kind()]
     for ident, job in record.jobs.items():
         key = job.key
         if (job.kind == "member" and key[0] in banded and key[1] == "disturbance"
                 and not key[3] and record.results[ident] is not None):
             record_series(record, series_name("member", key[0], key[2]),
                           member_dir(out, key),
-                          [f for f in specs if key[0] in f.get("runs", [key[0]])],
+                          [f for f in lines if f.runs is None or key[0] in f.runs],
                           scenarios[key[0]], scalars=False, max_rows=MEMBER_ROWS)
 
 
@@ -423,7 +421,7 @@ def write_claims(entry: Any, record: Record, out: Path, plot_format: str = "png"
     returns the claims' rows and the markdown of claims.md below its title."""
     import pandas as pd
 
-    from cosim.run.reproduce import run_scenarios
+    from cosim.reproduce.run import run_scenarios
 
     k, rounding = record.seeds, record.rounding
     summaries = {job.key: record.results[ident] for ident, job in record.jobs.items()
@@ -431,15 +429,16 @@ def write_claims(entry: Any, record: Record, out: Path, plot_format: str = "png"
     rows = evaluate(entry, summaries, k, rounding)
     out.mkdir(parents=True, exist_ok=True)
     n = len(members(entry, "disturbance", k))
-    for spec in entry.figures if n > 1 else []:
-        if spec.get("kind", "overlay") not in ("overlay", "panels"):
+    for figure in entry.figures if n > 1 else []:
+        if not figure.line_kind():
             continue
-        runs = [r for r in spec.get("runs", [x["name"] for x in entry.runs])
+        runs = [r for r in figure.runs or entry.run_names()
                 if all(series_name("member", r, i) in record.series for i in range(n))]
         if runs:
-            draw_ensemble_figure(spec, {r: [record.series[series_name("member", r, i)]
-                                            for i in range(n)] for r in runs},
-                                 out / f"{Path(spec['file']).stem}_ensemble.{plot_format}",
+            draw_ensemble_figure(figure.spec(),
+                                 {r: [record.series[series_name("member", r, i)]
+                                      for i in range(n)] for r in runs},
+                                 out / f"{Path(figure.file).stem}_ensemble.{plot_format}",
                                  run_scenarios(entry))
     pd.DataFrame(rows).to_csv(out / "claims.csv", index=False)
     text = claims_markdown(rows, k) + "\n"
