@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cosim.reproduce.entry import ReproduceError, Run, entry_names, load_entry
+from cosim.reproduce.entry import ReproduceError, Run, Variant, entry_names, load_entry
 from cosim.run.claims import (
     ClaimsError,
     check_claims,
@@ -288,16 +288,12 @@ def test_ensemble_figure_draws_median_and_band(tmp_path: Path) -> None:
         draw_ensemble_figure(spec, {"A": dirs}, tmp_path / "g.png")
 
 
-def test_reproduction_summary_counts_verdicts(tmp_path: Path) -> None:
-    import pandas as pd
-
+def test_reproduction_summary_counts_verdicts() -> None:
     from cosim.reproduce.page import claims_summary
 
-    (tmp_path / "a").mkdir()
-    pd.DataFrame({"id": ["x", "y", "z"], "verdict": ["holds", "fails", "holds"],
-                  "adjusted": ["holds", "fails", "inconclusive"]}).to_csv(
-        tmp_path / "a" / "claims.csv", index=False)
-    lines = claims_summary(tmp_path, ["a", "b"]).splitlines()
+    rows = [{"id": i, "verdict": v, "adjusted": a} for i, v, a in (
+        ("x", "holds", "holds"), ("y", "fails", "fails"), ("z", "holds", "inconclusive"))]
+    lines = claims_summary({"a": rows, "b": []}).splitlines()
     assert lines[0] == ("| entry | claims | holds | fails | inconclusive | insufficient | "
                         "rounding-sensitive |")
     assert lines[2] == "| a | 3 | 1 | 1 | 1 | 0 | 0 |"  # the adjusted verdicts
@@ -325,7 +321,7 @@ def _variant_entry() -> object:
 
     return SimpleNamespace(
         claims=[LESS, {**LESS, "id": "c_below_b", "runs": ["C", "B"]}],
-        variants=[{"name": "alt", "replace": {"A": "A2"}, "seeds": 4}],
+        variants=[Variant(name="alt", replace={"A": "A2"}, seeds=4)],
         ensemble=check_ensemble("e.toml", {"seed_key": "plant.seed", "report_seeds": "1..6"}),
         runs=[Run(name=n, scenario="s") for n in ("A", "A2", "B", "C")], path="e.toml")
 
@@ -359,9 +355,9 @@ def test_variants_replace_runs_in_every_claim_and_get_their_own_verdicts() -> No
     ({"name": "v", "replace": {"A": "B"}, "colour": 1}, "unknown key"),
 ])
 def test_variant_schema_errors_name_file_key_and_value(variant: dict, message: str) -> None:
-    from cosim.run.claims import check_variants
+    from cosim.reproduce.entry import check_variants
 
-    with pytest.raises(ClaimsError, match=f"e.toml: \\[\\[variants\\]\\].*{message}"):
+    with pytest.raises(ReproduceError, match=f"e.toml: \\[\\[variants\\]\\].*{message}"):
         check_variants("e.toml", [variant], ["A", "B"])
 
 

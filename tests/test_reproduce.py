@@ -450,7 +450,7 @@ def test_every_shipped_statement_names_claims_or_why_not() -> None:
     for name in entry_names():
         entry = load_entry(name)
         assert entry.statements, name
-        tested = {c for st in entry.statements for c in st.get("claims") or []}
+        tested = {c for st in entry.statements for c in st.claims or []}
         assert tested <= {c["id"] for c in entry.claims}
 
 

@@ -2,12 +2,12 @@
 
 An entry is an :class:`Entry` of parts, one dataclass per TOML table
 (:mod:`cosim.reproduce.parts`: :class:`Run`, :class:`Metric`, :class:`PaperValue`,
-:class:`Derived`, :class:`Ranking`, :class:`Sweep`, :class:`Figure`), whose fields are the TOML
-keys (the key is the field's name, or its ``toml`` metadata) and document their meaning
-(``doc`` metadata). :func:`load_entry` checks an entry against them: unknown keys (with the
-nearest known name), missing keys, types, ranges and the names one part gives another; its
-errors name the file, the table and the key with its value. The claims' tables
-(``[ensemble]``, ``[[claims]]``, ``[[variants]]``, ``[[statements]]``) are checked by
+:class:`Derived`, :class:`Ranking`, :class:`Sweep`, :class:`Figure`, :class:`Variant`,
+:class:`Statement`), whose fields are the TOML keys (the key is the field's name, or its
+``toml`` metadata) and document their meaning (``doc`` metadata). :func:`load_entry` checks an
+entry against them: unknown keys (with the nearest known name), missing keys, types, ranges
+and the names one part gives another; its errors name the file, the table and the key with
+its value. The claims' own tables (``[ensemble]``, ``[[claims]]``) are checked by
 :mod:`cosim.run.claims`, whose ``*_KEYS`` tables document their keys. The schema page
 ``docs/reproduce_schema.md`` is written from both (:mod:`cosim.reproduce.schema`).
 """
@@ -30,19 +30,17 @@ from cosim.reproduce.parts import (
     PaperValue,
     Ranking,
     Run,
+    Statement,
     Sweep,
+    Variant,
 )
 from cosim.run.claims import (
     CLAIM_KEYS,
     ENSEMBLE_KEYS,
-    STATEMENT_KEYS,
-    VARIANT_KEYS,
     ClaimsError,
     Ensemble,
     check_claims,
     check_ensemble,
-    check_statements,
-    check_variants,
 )
 from cosim.run.scenario import SCENARIO_DIR
 
@@ -54,8 +52,9 @@ except ModuleNotFoundError:  # Python < 3.11
 REPRODUCE_DIR = SCENARIO_DIR / "reproduce"
 
 __all__ = ["DERIVED_KINDS", "FIGURE_KINDS", "LINE_KINDS", "REPRODUCE_DIR", "Derived", "Entry",
-           "Figure", "Metric", "PaperValue", "Ranking", "ReproduceError", "Run", "Sweep",
-           "entry_names", "load_entry", "slug"]
+           "Figure", "Metric", "PaperValue", "Ranking", "ReproduceError", "Run", "Statement",
+           "Sweep", "Variant", "check_statements", "check_variants", "entry_names",
+           "load_entry", "slug"]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -86,9 +85,8 @@ class Entry:
     claims: list[dict[str, Any]] = doc(
         "the paper's claims, tested over the ensemble (families expanded; "
         ":func:`cosim.run.claims.check_claims`)", default=[])
-    variants: list[dict[str, Any]] = doc("every claim again with some runs replaced",
-                                         default=[])
-    statements: list[dict[str, Any]] = doc(
+    variants: list[Variant] = doc("every claim again with some runs replaced", default=[])
+    statements: list[Statement] = doc(
         "each assertion of the paper with the claims that test it, or why it is untestable",
         default=[])
 
@@ -100,7 +98,7 @@ class Entry:
 PARTS: dict[str, type] = {"runs": Run, "metrics": Metric, "paper": PaperValue,
                           "derived": Derived, "rankings": Ranking, "sweeps": Sweep,
                           "figures": Figure}
-CLAIM_PARTS = ("ensemble", "claims", "variants", "statements")  # checked by cosim.run.claims
+CLAIM_PARTS = ("ensemble", "claims", "variants", "statements")  # read after the parts
 
 
 def entry_names() -> list[str]:
@@ -182,28 +180,71 @@ def load_entry(name: str | Path) -> Entry:
     try:
         ensemble = check_ensemble(str(path), data.get("ensemble"))
         claims = check_claims(str(path), data.get("claims", []), names, ensemble)
-        variants = check_variants(str(path), data.get("variants", []), names)
-        statements = check_statements(str(path), data.get("statements", []),
-                                      [c["id"] for c in claims])
     except ClaimsError as err:
         raise ReproduceError(str(err)) from err
+    variants = check_variants(str(path), data.get("variants", []), names)
+    statements = check_statements(str(path), data.get("statements", []),
+                                  [c["id"] for c in claims])
     return Entry(name=path.stem, path=path, **top, runs=runs, metrics=metrics, paper=paper,
                  derived=derived, rankings=rankings, sweeps=sweeps, figures=figures,
-                 ensemble=ensemble,
-                 claims=claims, variants=variants, statements=statements)
+                 ensemble=ensemble, claims=claims, variants=variants, statements=statements)
 
 
 def _claim_keys(path: Path, data: dict[str, Any]) -> None:
     """The keys of the claims' tables (checked further by :mod:`cosim.run.claims`)."""
     if "ensemble" in data:
         check_keys(f"{path}: [ensemble]", data["ensemble"], list(ENSEMBLE_KEYS))
-    for key, known in (("claims", CLAIM_KEYS), ("variants", VARIANT_KEYS),
-                       ("statements", STATEMENT_KEYS)):
-        tables = data.get(key, [])
-        if not isinstance(tables, list):
-            raise ReproduceError(f"{path}: {key} = {tables!r}: expected [[{key}]] tables")
-        for i, table in enumerate(tables):
-            check_keys(f"{path}: [[{key}]] #{i + 1}", table, list(known))
+    for i, table in enumerate(_tables(str(path), "claims", data.get("claims", []))):
+        check_keys(f"{path}: [[claims]] #{i + 1}", table, list(CLAIM_KEYS))
+
+
+def _tables(where: str, key: str, tables: Any) -> list[dict[str, Any]]:
+    if not (isinstance(tables, list) and all(isinstance(t, dict) for t in tables)):
+        raise ReproduceError(f"{where}: {key} = {tables!r}: expected [[{key}]] tables")
+    return tables
+
+
+def check_variants(where: str, tables: Any, run_names: list[str]) -> list[Variant]:
+    """The ``[[variants]]`` tables of the entry at ``where``: each names the runs that replace
+    others in every claim, checked against the entry's runs."""
+    out: list[Variant] = []
+    for i, data in enumerate(_tables(where, "variants", tables)):
+        at = f"{where}: [[variants]] #{i + 1}"
+        var = build(Variant, at, data)
+        if var.name in {v.name for v in out} or var.name == "main":
+            raise ReproduceError(f"{at}: name = {var.name!r}: a new name other than 'main'")
+        if not var.replace:
+            raise ReproduceError(f"{at}: replace = {var.replace!r}: expected a table run -> run")
+        for run in (r for pair in var.replace.items() for r in pair):
+            if run not in run_names:
+                raise ReproduceError(f"{at}: replace: {run!r} is not one of the entry's "
+                                     f"[[runs]] {run_names}")
+        if var.seeds is not None and var.seeds < 1:
+            raise ReproduceError(f"{at}: seeds = {var.seeds!r}: expected an integer >= 1 (the "
+                                 "first report seeds, at most --seeds)")
+        out.append(var)
+    return out
+
+
+def check_statements(where: str, tables: Any, claim_ids: list[str]) -> list[Statement]:
+    """The ``[[statements]]`` tables of the entry at ``where``: each of the paper's assertions
+    with the claims that test it (checked against the entry's claim ids), or why it is
+    untestable."""
+    out: list[Statement] = []
+    for i, data in enumerate(_tables(where, "statements", tables)):
+        at = f"{where}: [[statements]] #{i + 1}"
+        st = build(Statement, at, data)
+        if not st.text.strip():
+            raise ReproduceError(f"{at}: text: the paper's statement is missing")
+        if (st.claims is None) == (st.untestable is None):
+            raise ReproduceError(f"{at} ({st.text[:40]!r}): give claims = [ids] or "
+                                 "untestable = \"why\", one of them")
+        for cid in st.claims or []:
+            if cid not in claim_ids:
+                raise ReproduceError(f"{at}: claims: {cid!r} is not one of the entry's claim "
+                                     "ids")
+        out.append(st)
+    return out
 
 
 def _check_verdict(where: str, value: float | None, band: list[float] | None,

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import re
 import sys
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -19,6 +20,7 @@ from cosim.reproduce.entry import (
     REPRODUCE_DIR,
     Entry,
     ReproduceError,
+    Statement,
     entry_names,
     load_entry,
 )
@@ -43,13 +45,21 @@ from cosim.run.provenance import INPUTS_FILE, entry_digest, simulation_digest
 from cosim.run.record import Record, RecordError, check_jobs, load, save, series_name
 
 
-def evaluate(entry: Entry, record: Record, out: Path, plot_format: str = "png"
-             ) -> tuple[Path, list[dict[str, Any]], list[dict[str, Any]]]:
+@dataclass(frozen=True)
+class Page:
+    """What :func:`evaluate` made of a record."""
+
+    table: Path  # the page's file (``table.md`` or the entry's ``table`` name)
+    markdown: str  # its content
+    rows: list[dict[str, Any]]  # the table's rows (:func:`cosim.reproduce.tables.table_rows`)
+    claim_rows: list[dict[str, Any]]  # one per claim (:func:`cosim.run.ensemble.evaluate`)
+
+
+def evaluate(entry: Entry, record: Record, out: Path, plot_format: str = "png") -> Page:
     """Tables, sweeps' tables and figures, figures, claims and the page of ``entry`` from
     ``record`` alone (no simulation; :class:`cosim.run.record.RecordError` if the record
     lacks a job the entry reads): writes ``table.md`` / ``table.csv`` (``entry.table``),
-    ``claims.*`` and the figures in ``plot_format`` to ``out``; returns the table's file,
-    its rows and the claims' rows."""
+    ``claims.*`` and the figures in ``plot_format`` to ``out``."""
     import pandas as pd
 
     from cosim.run.ensemble import verdict_summary, write_claims
@@ -92,29 +102,30 @@ def evaluate(entry: Entry, record: Record, out: Path, plot_format: str = "png"
     if entry.notes:
         parts += ["", "### Where we differ from the paper, and why", "", entry.notes.strip()]
     table = out / f"{entry.table}.md"
-    table.write_text("\n".join(parts) + "\n")
-    return table, rows, claim_rows
+    markdown = "\n".join(parts) + "\n"
+    table.write_text(markdown)
+    return Page(table, markdown, rows, claim_rows)
 
 
-def statements_markdown(statements: list[dict[str, Any]], rows: list[dict[str, Any]]) -> str:
+def statements_markdown(statements: list[Statement], rows: list[dict[str, Any]]) -> str:
     """Each of the paper's statements with the verdicts (adjusted) of the claims that test it,
     or why it is not tested."""
     by_id = {r["id"]: r for r in rows}
 
-    def where(st: dict[str, Any]) -> str:  # its place in the paper: given, or its claims'
-        return st.get("where") or "; ".join(dict.fromkeys(
-            by_id[c]["source"] for c in st.get("claims") or [] if by_id[c]["source"]))
+    def where(st: Statement) -> str:  # its place in the paper: given, or its claims'
+        return st.where or "; ".join(dict.fromkeys(
+            by_id[c]["source"] for c in st.claims or [] if by_id[c]["source"]))
 
     lines = [md_row(["the paper says", "where", "tested by (verdict, k of K)"]),
              "| --- | --- | --- |"]
     for st in statements:
-        if st.get("claims") is not None:
+        if st.claims is not None:
             cell = "; ".join(f"`{c}`: {by_id[c].get('adjusted', by_id[c]['verdict'])} "
-                             f"({by_id[c]['k']}/{by_id[c]['K']})" for c in st["claims"])
+                             f"({by_id[c]['k']}/{by_id[c]['K']})" for c in st.claims)
         else:
-            cell = f"not tested: {st['untestable']}"
-        lines.append(md_row([st["text"], where(st), cell]))
-    n = sum(st.get("claims") is not None for st in statements)
+            cell = f"not tested: {st.untestable}"
+        lines.append(md_row([st.text, where(st), cell]))
+    n = sum(st.claims is not None for st in statements)
     lines += ["", f"{n} of {len(statements)} statements tested by a claim."]
     return "\n".join(lines)
 
@@ -122,6 +133,15 @@ def statements_markdown(statements: list[dict[str, Any]], rows: list[dict[str, A
 def reproduce(name: str, out_dir: str | Path | None = None, workers: int | None = None,
               seeds: int | None = None, rounding: bool = True, scheduler: str | None = None,
               plot_format: str = "png", echo: bool = True, resume: bool = False) -> Path:
+    """:func:`reproduce_page`'s file."""
+    return reproduce_page(name, out_dir, workers, seeds, rounding, scheduler, plot_format,
+                          echo, resume).table
+
+
+def reproduce_page(name: str, out_dir: str | Path | None = None, workers: int | None = None,
+                   seeds: int | None = None, rounding: bool = True,
+                   scheduler: str | None = None, plot_format: str = "png", echo: bool = True,
+                   resume: bool = False) -> Page:
     """Run one entry (:func:`simulate`), keep its record (``record/``,
     :mod:`cosim.run.record`) and write everything made of it (:func:`evaluate`): the tables,
     sweeps, figures (in ``plot_format``: png at 200 dpi, svg or pdf) and, with claims,
@@ -129,8 +149,7 @@ def reproduce(name: str, out_dir: str | Path | None = None, workers: int | None 
     ``rounding``: also the perturbed floating-point rerun); every batch of runs goes through
     :mod:`cosim.run.runner` (``workers``, ``scheduler``). With ``echo`` the tables are printed
     in 80 columns (:func:`console_text`). With ``resume`` the jobs the folder's record already
-    holds (same specification, simulation inputs, K and path) are not run again. Returns the
-    table's markdown file."""
+    holds (same specification, simulation inputs, K and path) are not run again."""
     entry = load_entry(name)
     out = Path(out_dir) if out_dir is not None else Path("runs") / "reproduce" / entry.name
     out.mkdir(parents=True, exist_ok=True)
@@ -150,16 +169,22 @@ def reproduce(name: str, out_dir: str | Path | None = None, workers: int | None 
                   flush=True)
     record = simulate(entry, out, workers, seeds, rounding, scheduler, plot_format, previous)
     save(record, out)
-    return redraw_entry(name, out, plot_format, echo)
+    return redraw_page(name, out, plot_format, echo)
 
 
 def redraw_entry(name: str, out_dir: str | Path | None = None, plot_format: str = "png",
-           echo: bool = True) -> Path:
+                 echo: bool = True) -> Path:
+    """:func:`redraw_page`'s file."""
+    return redraw_page(name, out_dir, plot_format, echo).table
+
+
+def redraw_page(name: str, out_dir: str | Path | None = None, plot_format: str = "png",
+                echo: bool = True) -> Page:
     """Tables, figures, claims and page of entry ``name`` from the record in ``out_dir``
     (default ``runs/reproduce/NAME``) without simulating (:func:`evaluate`); the folder's
     ``inputs.sha256`` then names the inputs of both (:func:`cosim.run.provenance.
-    entry_digest`) when the record's simulation inputs are the tree's. Returns the table's
-    markdown file."""
+    entry_digest`) when the record's simulation inputs are the tree's. With ``echo`` the
+    tables are printed in 80 columns (:func:`console_text`)."""
     entry = load_entry(name)
     out = Path(out_dir) if out_dir is not None else Path("runs") / "reproduce" / entry.name
     record = load(out)
@@ -168,14 +193,14 @@ def redraw_entry(name: str, out_dir: str | Path | None = None, plot_format: str 
     inputs = out / INPUTS_FILE
     inputs.unlink(missing_ok=True)
     try:
-        table, rows, claim_rows = evaluate(entry, record, out, plot_format)
+        page = evaluate(entry, record, out, plot_format)
     except RecordError as err:
         raise ReproduceError(str(err)) from err
     if entry.path.parent == REPRODUCE_DIR and record.simulation == simulation_digest(name):
         inputs.write_text(entry_digest(name) + "\n")
     if echo:
-        print(console_text(entry, rows, claim_rows, out), flush=True)
-    return table
+        print(console_text(entry, page.rows, page.claim_rows, out), flush=True)
+    return page
 
 
 def console_text(entry: Entry, rows: list[dict[str, Any]], claim_rows: list[dict[str, Any]],
@@ -208,21 +233,17 @@ def console_text(entry: Entry, rows: list[dict[str, Any]], claim_rows: list[dict
     return "\n".join(lines)
 
 
-def claims_summary(out: Path, names: list[str]) -> str:
+def claims_summary(claims: dict[str, list[dict[str, Any]]]) -> str:
     """Claims per verdict (after the multiplicity adjustment) per entry, from each entry's
-    ``out/<name>/claims.csv`` (an entry without one: no claims)."""
-    import pandas as pd
-
+    claims' rows (an entry without claims: dashes)."""
     from cosim.run.ensemble import VERDICTS
 
     lines = [md_row(["entry", "claims", *VERDICTS]), "|" + " --- |" * (2 + len(VERDICTS))]
-    for name in names:
-        csv = out / name / "claims.csv"
-        if not csv.is_file():
+    for name, rows in claims.items():
+        if not rows:
             lines.append(md_row([name, "0", *("-" for _ in VERDICTS)]))
             continue
-        frame = pd.read_csv(csv)
-        got = list(frame["adjusted" if "adjusted" in frame else "verdict"])
+        got = [r.get("adjusted", r["verdict"]) for r in rows]
         lines.append(md_row([name, str(len(got)), *(str(got.count(v)) for v in VERDICTS)]))
     return "\n".join(lines)
 
@@ -234,16 +255,15 @@ def reproduce_all(out_dir: str | Path | None = None, workers: int | None = None,
     paper and each entry's tables and figures."""
     out = Path(out_dir) if out_dir is not None else Path("runs") / "reproduce"
     out.mkdir(parents=True, exist_ok=True)
-    tables = {name: reproduce(name, out / name, workers, seeds, rounding, scheduler,
-                              plot_format)
-              for name in entry_names()}
+    pages = {name: reproduce_page(name, out / name, workers, seeds, rounding, scheduler,
+                                  plot_format)
+             for name in entry_names()}
     parts = ["# Reproduced results", "", "Made by `cosim reproduce all`; each section by "
              "`cosim reproduce NAME` from the entry in `scenarios/reproduce/`.", "",
-             claims_summary(out, list(tables))]
-    for name, table in tables.items():
-        text = table.read_text()
+             claims_summary({name: page.claim_rows for name, page in pages.items()})]
+    for name, page in pages.items():
         # relative links from out/: prefix the entry folder
-        text = re.sub(r"\]\((?!http)([^)]+)\)", rf"]({name}/\1)", text)
+        text = re.sub(r"\]\((?!http)([^)]+)\)", rf"]({name}/\1)", page.markdown)
         parts += ["", text]
     path = out / "REPRODUCTION.md"
     path.write_text("\n".join(parts) + "\n")

@@ -1,7 +1,8 @@
 """The parts of a reproduction entry, one dataclass per TOML table: ``[[runs]]`` (:class:`Run`),
 ``[[metrics]]`` (:class:`Metric`), ``[[paper]]`` (:class:`PaperValue`), ``[[derived]]``
-(:class:`Derived`), ``[[rankings]]`` (:class:`Ranking`), ``[[sweeps]]`` (:class:`Sweep`) and
-``[[figures]]`` (:class:`Figure`). A field is a TOML key and documents its meaning and unit
+(:class:`Derived`), ``[[rankings]]`` (:class:`Ranking`), ``[[sweeps]]`` (:class:`Sweep`),
+``[[figures]]`` (:class:`Figure`), ``[[variants]]`` (:class:`Variant`) and ``[[statements]]``
+(:class:`Statement`). A field is a TOML key and documents its meaning and unit
 (:func:`cosim.reproduce.fields.doc`); :mod:`cosim.reproduce.entry` reads and checks them."""
 
 from __future__ import annotations
@@ -168,3 +169,32 @@ class Figure:
     def line_kind(self) -> bool:
         """Whether it draws lines over x (``overlay`` or ``panels``)."""
         return self.kind in LINE_KINDS
+
+
+@dataclass(frozen=True, kw_only=True)
+class Variant:
+    """``[[variants]]``: every claim again with some runs replaced (an alternative reading, a
+    mechanism removed): a verdict per claim and variant in ``claims.md``, ``variants.csv``."""
+
+    name: str = doc("the variant's name (a column of ``claims.md``): unique, not \"main\"")
+    replace: dict[str, str] = doc(
+        "``[[runs]]`` name -> the ``[[runs]]`` name replacing it in every claim (not empty)")
+    text: str = doc("what the variant is (an alternative reading, a mechanism removed)",
+                    default="")
+    rounding: bool = doc("also the perturbed floating-point rerun", default=False)
+    seeds: int | None = doc("the first this many report seeds (>= 1, at most ``--seeds``; "
+                            "default: ``--seeds``)", default=None)
+
+
+@dataclass(frozen=True, kw_only=True)
+class Statement:
+    """``[[statements]]``: an assertion of the paper (a result or a conclusion) with the claims
+    that test it, or why it cannot be tested: the page's statements table."""
+
+    text: str = doc("the paper's assertion, in its words")
+    where: str | None = doc("where the paper makes it (default: the sources of its claims)",
+                            default=None)
+    claims: list[str] | None = doc("the ids of the ``[[claims]]`` that test it (this or "
+                                   "``untestable``)", default=None)
+    untestable: str | None = doc("why it cannot be tested here (this or ``claims``)",
+                                 default=None)

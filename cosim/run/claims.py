@@ -110,25 +110,8 @@ CLAIM_KEYS: dict[str, tuple[str, str, str]] = {
              "``{name}`` / ``{name.field}`` in any string, the id included, is filled "
              "(:func:`cosim.run.claims.expand_families`)"),
 }
-VARIANT_KEYS: dict[str, tuple[str, str, str]] = {
-    "name": ("a string", REQUIRED, "the variant's name (a column of claims.md), not \"main\""),
-    "replace": ("a table run -> run", REQUIRED, "the ``[[runs]]`` names replaced in every "
-                "claim, and their replacements"),
-    "text": ("a string", "\"\"", "what the variant is (an alternative reading, a mechanism "
-             "removed)"),
-    "rounding": ("true or false", "false", "also the perturbed floating-point rerun"),
-    "seeds": ("an integer >= 1", "--seeds", "the first this many report seeds (at most "
-              "``--seeds``)"),
-}
-STATEMENT_KEYS: dict[str, tuple[str, str, str]] = {
-    "text": ("a string", REQUIRED, "the paper's assertion (a result or a conclusion)"),
-    "where": ("a string", "the sources of its claims", "where the paper makes it"),
-    "claims": ("a list of claim ids", "none", "the claims that test it (this or untestable)"),
-    "untestable": ("a string", "none", "why it cannot be tested here (this or claims)"),
-}
 _CLAIM_KEYS = set(CLAIM_KEYS)
 _ENSEMBLE_KEYS = set(ENSEMBLE_KEYS)
-_VARIANT_KEYS = set(VARIANT_KEYS)
 ROUNDING_RELATIVE = 1e-12  # relative change of each [ensemble].rounding_perturb parameter
 CONFIDENCE = 0.95
 N_RESAMPLES = 9999
@@ -380,69 +363,10 @@ def check_claims(where: str, claims: list[dict[str, Any]], run_names: list[str],
     return claims
 
 
-def _known_keys(at: str, table: dict[str, Any], allowed: set[str]) -> None:
-    unknown = sorted(set(table) - allowed)
-    if unknown:
-        raise ClaimsError(f"{at}: unknown key(s) {unknown} (allowed: {sorted(allowed)})")
-
-
-def check_variants(where: str, variants: list[dict[str, Any]], run_names: list[str]
-                   ) -> list[dict[str, Any]]:
-    """The ``[[variants]]`` tables: each names the runs that replace others in every claim
-    (an alternative reading or a mechanism removed), checked against the entry's runs."""
-    names: set[str] = set()
-    for i, var in enumerate(variants):
-        at = f"{where}: [[variants]] #{i + 1}"
-        _known_keys(at, var, _VARIANT_KEYS)
-        missing = [k for k in ("name", "replace") if k not in var]
-        if missing:
-            raise ClaimsError(f"{at}: missing key(s) {missing}")
-        if not isinstance(var["name"], str) or var["name"] in names or var["name"] == "main":
-            raise ClaimsError(f"{at}: name = {var['name']!r}: a new name other than 'main'")
-        names.add(var["name"])
-        rep = var["replace"]
-        if not (isinstance(rep, dict) and rep):
-            raise ClaimsError(f"{at}: replace = {rep!r}: expected a table run -> run")
-        for old, new in rep.items():
-            for run in (old, new):
-                if run not in run_names:
-                    raise ClaimsError(f"{at}: replace: {run!r} is not one of the entry's "
-                                      f"[[runs]]")
-        n = var.get("seeds")
-        if n is not None and (isinstance(n, bool) or not isinstance(n, int) or n < 1):
-            raise ClaimsError(f"{at}: seeds = {n!r}: expected an integer >= 1 (the first "
-                              "report seeds, at most --seeds)")
-        if not isinstance(var.get("rounding", False), bool):
-            raise ClaimsError(f"{at}: rounding = {var['rounding']!r}: expected true or false")
-    return variants
-
-
-_STATEMENT_KEYS = set(STATEMENT_KEYS)
-
-
-def check_statements(where: str, statements: list[dict[str, Any]],
-                     claim_ids: list[str]) -> list[dict[str, Any]]:
-    """The ``[[statements]]`` tables: each of the paper's assertions (``text``, ``where`` in
-    the paper) with the ``claims`` that test it, or why it is ``untestable``; checked against
-    the entry's claim ids."""
-    for i, st in enumerate(statements):
-        at = f"{where}: [[statements]] #{i + 1}"
-        _known_keys(at, st, _STATEMENT_KEYS)
-        if not isinstance(st.get("text"), str) or not st["text"].strip():
-            raise ClaimsError(f"{at}: text: the paper's statement is missing")
-        ids, why = st.get("claims"), st.get("untestable")
-        if (ids is None) == (why is None):
-            raise ClaimsError(f"{at} ({st['text'][:40]!r}): give claims = [ids] or "
-                              "untestable = \"why\", one of them")
-        for cid in ids or []:
-            if cid not in claim_ids:
-                raise ClaimsError(f"{at}: claims: {cid!r} is not one of the entry's claim ids")
-    return statements
-
-
-def variant_runs(claim: dict[str, Any], variant: dict[str, Any]) -> list[str] | None:
-    """The claim's runs under ``variant`` (None: the variant replaces none of them)."""
-    rep = variant["replace"]
+def variant_runs(claim: dict[str, Any], variant: Any) -> list[str] | None:
+    """The claim's runs under ``variant`` (a :class:`cosim.reproduce.parts.Variant`; None: it
+    replaces none of them)."""
+    rep = variant.replace
     if not any(r in rep for r in claim["runs"]):
         return None
     return [rep.get(r, r) for r in claim["runs"]]

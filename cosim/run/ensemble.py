@@ -109,13 +109,12 @@ def claim_cases(entry: Any, k: int, rounding: bool = True
         return wanted and claim.get("ensemble", "disturbance") != "repeat"
 
     cases = [("main", c, list(c["runs"]), rnd(c, rounding), k) for c in entry.claims]
-    for var in getattr(entry, "variants", []):
-        kv = min(k, var.get("seeds", k))
+    for var in entry.variants:
+        kv = min(k, var.seeds if var.seeds is not None else k)
         for claim in entry.claims:
             runs = variant_runs(claim, var)
             if runs is not None:
-                cases.append((var["name"], claim, runs,
-                              rnd(claim, rounding and var.get("rounding", False)), kv))
+                cases.append((var.name, claim, runs, rnd(claim, rounding and var.rounding), kv))
     return cases
 
 
@@ -250,7 +249,7 @@ def variants_markdown(entry: Any, rows: list[dict[str, Any]], var_rows: list[dic
     variant replaces none of the claim's runs), then what each variant replaces."""
     from cosim.reproduce.tables import md_row
 
-    names = [v["name"] for v in entry.variants]
+    names = [v.name for v in entry.variants]
     got = {(r["variant"], r["id"]): r for r in var_rows}
 
     def cell(r: dict[str, Any] | None) -> str:
@@ -268,11 +267,11 @@ def variants_markdown(entry: Any, rows: list[dict[str, Any]], var_rows: list[dic
               f"(Benjamini-Hochberg, false discovery rate {ALPHA:g}), and a decision the "
               "adjustment does not keep reads \"inconclusive (raw: ...)\". Variants:", ""]
     for v in entry.variants:
-        rep = "; ".join(f"{a} -> {b}" for a, b in v["replace"].items())
-        rnd = "" if v.get("rounding", False) else " (no perturbed floating-point rerun)"
-        if "seeds" in v:
-            rnd += f" (the first {v['seeds']} report seeds at most)"
-        lines.append(f"- **{v['name']}**: {v.get('text', '')}{rnd}. {rep}.")
+        rep = "; ".join(f"{a} -> {b}" for a, b in v.replace.items())
+        rnd = "" if v.rounding else " (no perturbed floating-point rerun)"
+        if v.seeds is not None:
+            rnd += f" (the first {v.seeds} report seeds at most)"
+        lines.append(f"- **{v.name}**: {v.text}{rnd}. {rep}.")
     return "\n".join(lines)
 
 
@@ -442,7 +441,7 @@ def write_claims(entry: Any, record: Record, out: Path, plot_format: str = "png"
                                  run_scenarios(entry))
     pd.DataFrame(rows).to_csv(out / "claims.csv", index=False)
     text = claims_markdown(rows, k) + "\n"
-    if getattr(entry, "variants", []):
+    if entry.variants:
         var_rows = evaluate(entry, summaries, k, rounding, variants=True)
         pd.DataFrame(var_rows).to_csv(out / "variants.csv", index=False)
         text += ("\n#### The claims under each variant\n\n"
