@@ -66,10 +66,10 @@ def test_derived_saving_rows(tmp_path) -> None:
                      "energy_traction_mj": 80.0} for n in names}
     summaries["Eco (GPC)"] = {"energy_net_mj": 82.0, "energy_run_mj": 40.0,
                               "energy_traction_mj": 70.0}
-    rows = {r["run"]: r for r in derived_rows(entry, summaries)}
+    rows = {r.run: r for r in derived_rows(entry, summaries)}
     text = rows["eco saving, total (paper text)"]
-    assert text["ours"] == pytest.approx(18.0) and text["paper"] == pytest.approx(17.7)
-    assert rows["eco saving, run phase"]["ours"] == pytest.approx(20.0)
+    assert text.ours == pytest.approx(18.0) and text.paper == pytest.approx(17.7)
+    assert rows["eco saving, run phase"].ours == pytest.approx(20.0)
     bad = tmp_path / "bad.toml"
     bad.write_text(entry.path.read_text().replace('kind = "saving_percent"',
                                                   'kind = "ratio"', 1))

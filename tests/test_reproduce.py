@@ -130,14 +130,14 @@ def test_ranking_orders_the_runs_and_names_the_pairs_the_other_way_round(
     summaries = {"PID": {"stop_error_m": 0.3}, "A": {"stop_error_m": 0.1},
                  "B": {"stop_error_m": 0.1}, "PID kp=30": {}}
     main, plain = ranking_rows(entry, summaries)
-    assert main["ours"] == "A < B < PID < PID kp=30"
-    assert main["paper"] == "PID < A < B < PID kp=30"
-    assert main["source"] == "A < PID; B < PID" and main["within"] is False
-    assert main["metric"] == "rank:stop_error_m" and main["label"] == "stop error (m)"
-    assert plain["ours"] == "A < B" and plain["paper"] is None and plain["within"] is None
+    assert main.ours == "A < B < PID < PID kp=30"
+    assert main.paper == "PID < A < B < PID kp=30"
+    assert main.source == "A < PID; B < PID" and main.within is False
+    assert main.metric == "rank:stop_error_m" and main.label == "stop error (m)"
+    assert plain.ours == "A < B" and plain.paper is None and plain.within is None
     summaries["PID"]["stop_error_m"] = 0.05
     (agree, _) = ranking_rows(entry, summaries)
-    assert agree["within"] is True and agree["source"] == ""
+    assert agree.within is True and agree.source == ""
     text = ranking_markdown([agree, plain])
     assert "| stop error (m) | main | PID < A < B < PID kp=30 ✓ |" in text
     assert "| stop error (m) |  | A < B | - | - |" in text
@@ -346,13 +346,14 @@ def test_wide_paper_tables_are_split_and_keep_each_metric_together() -> None:
     run column; a metric's ours / paper columns in one table; no "paper" column where the paper
     gives no value for any run."""
     from cosim.reproduce.entry import Entry, Metric, Run
-    from cosim.reproduce.tables import TABLE_COLUMNS, table_markdown
+    from cosim.reproduce.tables import TABLE_COLUMNS, Cell, table_markdown
 
     metrics = [Metric(key=f"m{i}", label=f"metric {i}") for i in range(11)]
     runs = [Run(name=n, scenario="s") for n in ("A", "B")]
-    rows = [{"run": r.name, "metric": m.key, "ours": float(i), "within": None,
-             "paper": 2.0 if i % 3 == 0 else None, "paper_range": None, "ours_min": None,
-             "source": "", "repeats": 1} for r in runs for i, m in enumerate(metrics)]
+    rows = [Cell(run=r.name, metric=m.key, ours=float(i), ours_min=None, ours_max=None,
+                 repeats=1, paper=2.0 if i % 3 == 0 else None, paper_range=None,
+                 tolerance=None, source="", ratio=None, within=None)
+            for r in runs for i, m in enumerate(metrics)]
     entry = Entry(name="e", path=Path("e.toml"), title="t", runs=runs, metrics=metrics)
     text = table_markdown(entry, rows)
     headers = [line for line in text.splitlines() if line.startswith("| run |")]

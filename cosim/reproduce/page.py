@@ -33,6 +33,7 @@ from cosim.reproduce.run import (
     wanted_jobs,
 )
 from cosim.reproduce.tables import (
+    Cell,
     derived_markdown,
     derived_rows,
     md_row,
@@ -51,7 +52,7 @@ class Page:
 
     table: Path  # the page's file (``table.md`` or the entry's ``table`` name)
     markdown: str  # its content
-    rows: list[dict[str, Any]]  # the table's rows (:func:`cosim.reproduce.tables.table_rows`)
+    rows: list[Cell]  # the table's cells (:func:`cosim.reproduce.tables.table_rows`)
     claim_rows: list[dict[str, Any]]  # one per claim (:func:`cosim.run.ensemble.evaluate`)
 
 
@@ -72,7 +73,8 @@ def evaluate(entry: Entry, record: Record, out: Path, plot_format: str = "png") 
     rows = table_rows(entry, summaries)
     derived = derived_rows(entry, summaries)
     ranked = ranking_rows(entry, summaries)
-    pd.DataFrame(rows + derived + ranked).to_csv(out / f"{entry.table}.csv", index=False)
+    pd.DataFrame([r.csv() for r in [*rows, *derived, *ranked]]).to_csv(
+        out / f"{entry.table}.csv", index=False)
     source = (f"{entry.citation} " if entry.citation else "") + (
         f"Reproduced by `cosim reproduce {entry.name}` (entry "
         f"`scenarios/reproduce/{entry.path.name}`).")
@@ -203,7 +205,7 @@ def redraw_page(name: str, out_dir: str | Path | None = None, plot_format: str =
     return page
 
 
-def console_text(entry: Entry, rows: list[dict[str, Any]], claim_rows: list[dict[str, Any]],
+def console_text(entry: Entry, rows: list[Cell], claim_rows: list[dict[str, Any]],
                  out: Path) -> str:
     """The entry's results for an 80-column terminal: ours per run and metric (columns
     numbered, their names below), the claims (id, k of K, verdict) and where the full tables
@@ -216,7 +218,7 @@ def console_text(entry: Entry, rows: list[dict[str, Any]], claim_rows: list[dict
     names = {m.key: f"m{i + 1}" for i, m in enumerate(entry.metrics)}
     by_run: dict[str, dict[str, Any]] = {}
     for r in rows:
-        by_run.setdefault(r["run"], {"run": r["run"]})[names[r["metric"]]] = r["ours"]
+        by_run.setdefault(r.run, {"run": r.run})[names[r.metric]] = r.ours
     lines = textwrap.wrap(entry.title, 80)
     if by_run:
         lines += ["", fit_table(list(by_run.values()), ["run", *names.values()],
