@@ -113,6 +113,7 @@ def slug(name: str) -> str:
 
 
 def _read(name: str | Path) -> tuple[Path, dict[str, Any]]:
+    """The path of entry ``name`` (a name in ``scenarios/reproduce/`` or a path) and its TOML."""
     path = Path(name)
     if not path.suffix:
         path = REPRODUCE_DIR / f"{name}.toml"
@@ -124,13 +125,14 @@ def _read(name: str | Path) -> tuple[Path, dict[str, Any]]:
         raise ReproduceError(f"{path}: not valid TOML: {err}") from err
 
 
-def _part(cls: type, path: Path, key: str, data: dict[str, Any], i: int, **extra: Any) -> Any:
+def _part(cls: type, path: Path, key: str, data: dict[str, Any], i: int) -> Any:
     """Part ``i`` of ``[[key]]`` built as ``cls`` (keys and types checked)."""
-    return build(cls, f"{path}: [[{key}]] #{i + 1}", data, extra)
+    return build(cls, f"{path}: [[{key}]] #{i + 1}", data)
 
 
 def _cross(where: str, what: str, value: Any, names: list[str], table: str = "[[runs]]"
            ) -> None:
+    """Refuse ``value`` of key ``what`` unless it is one of ``names`` (the names of ``table``)."""
     if value not in names:
         raise ReproduceError(f"{where}: {what} {value!r} is not one of {table} {names}")
 
@@ -144,12 +146,7 @@ def load_entry(name: str | Path) -> Entry:
         raise ReproduceError(f"{path}: table = {top['table']!r} must be a file name without "
                              "folder or suffix (letters, digits, '_', '-')")
     common = top["overrides"]
-    lists = {}
-    for key in PARTS:
-        value = data.get(key, [])
-        if not (isinstance(value, list) and all(isinstance(v, dict) for v in value)):
-            raise ReproduceError(f"{path}: {key} = {value!r}: expected [[{key}]] tables")
-        lists[key] = value
+    lists = {key: _tables(str(path), key, data.get(key, [])) for key in PARTS}
     runs = [_part(Run, path, "runs", r, i) for i, r in enumerate(lists["runs"])]
     runs = [Run(name=r.name, scenario=r.scenario, overrides={**common, **r.overrides},
                 repeat=r.repeat) for r in runs]
@@ -199,6 +196,7 @@ def _claim_keys(path: Path, data: dict[str, Any]) -> None:
 
 
 def _tables(where: str, key: str, tables: Any) -> list[dict[str, Any]]:
+    """The value of ``key`` checked to be a list of tables (``[[key]]``)."""
     if not (isinstance(tables, list) and all(isinstance(t, dict) for t in tables)):
         raise ReproduceError(f"{where}: {key} = {tables!r}: expected [[{key}]] tables")
     return tables
@@ -259,6 +257,7 @@ def _check_verdict(where: str, value: float | None, band: list[float] | None,
 
 
 def _check_paper(ref: PaperValue, where: str, names: list[str], keys: list[str]) -> PaperValue:
+    """A ``[[paper]]`` figure checked: a value or a range, and the run and metric it names."""
     if ref.value is None and ref.band is None:
         raise ReproduceError(f"{where}: needs a value or a range")
     _check_verdict(where, ref.value, ref.band, ref.tolerance)
@@ -269,6 +268,7 @@ def _check_paper(ref: PaperValue, where: str, names: list[str], keys: list[str])
 
 
 def _check_derived(der: Derived, where: str, names: list[str]) -> Derived:
+    """A ``[[derived]]`` figure checked: its kind, the runs it names, the paper's figure."""
     if der.kind not in DERIVED_KINDS:
         raise ReproduceError(f"{where}: kind {der.kind!r} (known: {DERIVED_KINDS})")
     _cross(where, "run", der.run, names)
@@ -278,6 +278,7 @@ def _check_derived(der: Derived, where: str, names: list[str]) -> Derived:
 
 
 def _check_ranking(rank: Ranking, where: str, names: list[str], keys: list[str]) -> Ranking:
+    """A ``[[rankings]]`` checked: its metric, distinct runs, the paper's order of them."""
     if rank.metric not in keys:
         raise ReproduceError(f"{where}: metric {rank.metric!r} is not in [[metrics]] {keys}")
     unknown = sorted(set(rank.runs) - set(names))
@@ -291,6 +292,8 @@ def _check_ranking(rank: Ranking, where: str, names: list[str], keys: list[str])
 
 
 def _check_sweep(sweep: Sweep, where: str, common: dict[str, Any]) -> Sweep:
+    """A ``[[sweeps]]`` checked (labels of its scenarios), with the entry's ``set`` added to its
+    grid."""
     unnamed = sorted(set(sweep.labels) - {Path(s).stem for s in sweep.scenarios})
     if unnamed:
         raise ReproduceError(f"{where}: labels name scenarios {unnamed} that are not in its "
@@ -306,6 +309,7 @@ _CLASS_REQUIRED = ("ref", "classes", "limit_kmh", "limit_below_kmh", "limit_frac
 
 
 def _figure(path: Path, data: dict[str, Any], i: int, names: list[str]) -> Figure:
+    """Figure ``i`` of ``[[figures]]`` built and checked against its kind and the runs ``names``."""
     where = f"{path}: [[figures]] #{i + 1}"
     kind = data.get("kind", "overlay")
     if kind not in FIGURE_KINDS:

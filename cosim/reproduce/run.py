@@ -18,6 +18,7 @@ from cosim.run.record import Job, Record, known, read_csv, save, series_name
 
 def _run_one(scenario: str, overrides: dict[str, Any], out_dir: str,
              plot_format: str = "png") -> dict[str, Any]:
+    """One run of ``scenario`` with ``overrides`` into ``out_dir`` (a task): its summary."""
     from cosim.run.master import run_scenario
 
     result = run_scenario(scenario, overrides=overrides, out_dir=out_dir, build=False,

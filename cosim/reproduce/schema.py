@@ -52,6 +52,7 @@ def _prose(text: str) -> str:
 
 
 def _cell(text: str) -> str:
+    """Docstring text as one markdown table cell (``|`` escaped)."""
     return _prose(text).replace("|", "\\|")
 
 
@@ -63,6 +64,7 @@ def _type(cls: type, key: str, f: dataclasses.Field[object]) -> str:
 
 
 def _default(f: dataclasses.Field[object]) -> str:
+    """A field's default as the page shows it."""
     if required(f):
         return "required"
     value = f.default_factory() if f.default_factory is not dataclasses.MISSING else f.default
@@ -78,6 +80,7 @@ def _default(f: dataclasses.Field[object]) -> str:
 
 
 def _part_table(cls: type) -> list[str]:
+    """The table of the keys of dataclass ``cls``."""
     lines = ["| key | type | default | meaning |", "| --- | --- | --- | --- |"]
     for key, f in keys_of(cls):
         kinds = f.metadata.get("kinds")
@@ -88,6 +91,7 @@ def _part_table(cls: type) -> list[str]:
 
 
 def _keys_table(keys: dict[str, tuple[str, str, str]]) -> list[str]:
+    """The table of the keys of a ``*_KEYS`` table of :mod:`cosim.run.claims`."""
     lines = ["| key | type | default | meaning |", "| --- | --- | --- | --- |"]
     for key, (kind, default, meaning) in keys.items():
         shown = "required" if default == REQUIRED else default
@@ -111,5 +115,6 @@ def schema_markdown() -> str:
 
 
 def _part_section(heading: str, cls: type) -> list[str]:
+    """The section of dataclass ``cls``: its docstring and its keys."""
     text = re.sub(r"^``\[\[\w+\]\]``: ", "", inspect.getdoc(cls) or "")
     return ["", f"## {heading}", "", _prose(text[:1].upper() + text[1:]), "", *_part_table(cls)]

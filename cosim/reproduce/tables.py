@@ -182,6 +182,7 @@ def table_rows(entry: Entry, summaries: dict[str, dict[str, Any]]) -> list[Cell]
 
 def _ratio(summaries: dict[str, dict[str, Any]], refs: dict[tuple[str, str], Any], run: str,
            base_run: str, key: str, ours: Any, value: float | None) -> Ratio:
+    """The ratio of ``run``'s ``key`` to ``base_run``'s, with its CI and the paper's."""
     base = summary_value(summaries[base_run], key)
     base_given = refs.get((base_run, key))
     base_ref = base_given.value if base_given is not None else None
@@ -243,6 +244,7 @@ def ranking_rows(entry: Entry, summaries: dict[str, dict[str, Any]]) -> list[Ran
 
 
 def _mark(within: bool | None) -> str:
+    """The verdict mark after a figure: " ✓", " ✗" or nothing."""
     return "" if within is None else (" ✓" if within else " ✗")
 
 

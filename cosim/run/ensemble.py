@@ -29,7 +29,7 @@ import math
 import sys
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -46,12 +46,15 @@ from cosim.run.figures import draw_ensemble_figure
 from cosim.run.record import Job as RecordJob
 from cosim.run.record import Record, known, save, series_name
 
+if TYPE_CHECKING:
+    from cosim.reproduce.entry import Entry
+
 CHECKPOINT_EVERY = 20  # members between two saves of the partial record
 
 Job = tuple[tuple[str, str, int, bool], str, dict[str, Any]]  # (run, ensemble, i, rounding)
 
 
-def members(entry: Any, ensemble: str, k: int) -> list[dict[str, Any]]:
+def members(entry: Entry, ensemble: str, k: int) -> list[dict[str, Any]]:
     """Overrides of each member (before the run's own ``set``) of one ensemble kind."""
     ens = entry.ensemble
     if k < 1:
@@ -73,7 +76,7 @@ def members(entry: Any, ensemble: str, k: int) -> list[dict[str, Any]]:
             for d, s in zip(_draws(entry, k), seeds, strict=True)]
 
 
-def _draws(entry: Any, k: int) -> list[dict[str, float]]:
+def _draws(entry: Entry, k: int) -> list[dict[str, float]]:
     from cosim.run.perturb import draw_samples, nominal_values, parse_perturb
 
     perts = parse_perturb(entry.ensemble.perturb)
@@ -84,7 +87,7 @@ def _draws(entry: Any, k: int) -> list[dict[str, float]]:
     return draw_samples(perts, nominals, k, entry.ensemble.perturb_seed)
 
 
-def _rounding_overrides(entry: Any, run: Any, base: dict[str, Any]) -> dict[str, Any]:
+def _rounding_overrides(entry: Entry, run: Any, base: dict[str, Any]) -> dict[str, Any]:
     from cosim.run.perturb import nominal_values
 
     out: dict[str, Any] = {}
@@ -99,7 +102,7 @@ def _rounding_overrides(entry: Any, run: Any, base: dict[str, Any]) -> dict[str,
     return out
 
 
-def claim_cases(entry: Any, k: int, rounding: bool = True
+def claim_cases(entry: Entry, k: int, rounding: bool = True
                 ) -> list[tuple[str, dict[str, Any], list[str], bool, int]]:
     """(variant, claim, runs, with the rounding rerun, K) of every claim evaluation: the
     claims as written (variant "main", K = ``k``) and each ``[[variants]]`` replacing some of
@@ -118,7 +121,7 @@ def claim_cases(entry: Any, k: int, rounding: bool = True
     return cases
 
 
-def claim_jobs(entry: Any, k: int, rounding: bool = True) -> list[Job]:
+def claim_jobs(entry: Entry, k: int, rounding: bool = True) -> list[Job]:
     """Every (run, ensemble, member, path) the claims and their variants need, once; the
     ``repeat`` members first, interleaved by repeat index (A0, B0, A1, B1, ...)."""
     runs = {r.name: r for r in entry.runs}
@@ -214,7 +217,7 @@ def _metric(summaries: dict[Any, dict[str, Any] | None], run: str, ens: str, n: 
     return np.array(vals)
 
 
-def evaluate(entry: Any, summaries: dict[Any, dict[str, Any] | None], k: int,
+def evaluate(entry: Entry, summaries: dict[Any, dict[str, Any] | None], k: int,
              rounding: bool = True, variants: bool = False) -> list[dict[str, Any]]:
     """One row per claim (see :func:`cosim.run.claims.verdict`); with ``variants`` one row
     per claim and ``[[variants]]`` entry that replaces one of its runs instead."""
@@ -243,7 +246,7 @@ def evaluate(entry: Any, summaries: dict[Any, dict[str, Any] | None], k: int,
     return adjust(rows)
 
 
-def variants_markdown(entry: Any, rows: list[dict[str, Any]], var_rows: list[dict[str, Any]]
+def variants_markdown(entry: Entry, rows: list[dict[str, Any]], var_rows: list[dict[str, Any]]
                       ) -> str:
     """Each claim's verdict as written and under every variant (a column each; "=": the
     variant replaces none of the claim's runs), then what each variant replaces."""
@@ -339,7 +342,7 @@ def compact_table(rows: list[dict[str, Any]]) -> str:
     return "\n".join(lines)
 
 
-def member_jobs(entry: Any, k: int, rounding: bool = True) -> list[RecordJob]:
+def member_jobs(entry: Entry, k: int, rounding: bool = True) -> list[RecordJob]:
     """:func:`claim_jobs` as record jobs, with the environment each ran in (the rounding path's
     :data:`ROUNDING_ENV` unless ``[ensemble].rounding_reference_path`` is false)."""
     env = ROUNDING_ENV if entry.ensemble.rounding_reference_path else {}
@@ -347,12 +350,12 @@ def member_jobs(entry: Any, k: int, rounding: bool = True) -> list[RecordJob]:
             for key, scenario, overrides in claim_jobs(entry, k, rounding)]
 
 
-def _banded(entry: Any) -> set[str]:
+def _banded(entry: Entry) -> set[str]:
     """Runs drawn by an overlay or panels figure: their members keep their series."""
     return {r for f in entry.figures if f.line_kind() for r in f.runs or entry.run_names()}
 
 
-def simulate_claims(entry: Any, out: Path, record: Record, workers: int | None = None,
+def simulate_claims(entry: Entry, out: Path, record: Record, workers: int | None = None,
                     scheduler: str | None = None, previous: Record | None = None) -> None:
     """Run the claims' members (K and rounding path of ``record``) and add their summaries to
     ``record``, with the series of the members the ensemble figures draw; a member
@@ -394,7 +397,7 @@ def simulate_claims(entry: Any, out: Path, record: Record, workers: int | None =
     record_member_series(entry, out, record)
 
 
-def record_member_series(entry: Any, out: Path, record: Record) -> None:
+def record_member_series(entry: Entry, out: Path, record: Record) -> None:
     """The series of the members the ensemble figures draw (main path, disturbance, banded
     runs) from their results.csv under ``out``, added to ``record`` (thinned to
     :data:`cosim.reproduce.run.MEMBER_ROWS` rows)."""
@@ -413,7 +416,7 @@ def record_member_series(entry: Any, out: Path, record: Record) -> None:
                           scenarios[key[0]], scalars=False, max_rows=MEMBER_ROWS)
 
 
-def write_claims(entry: Any, record: Record, out: Path, plot_format: str = "png"
+def write_claims(entry: Entry, record: Record, out: Path, plot_format: str = "png"
                  ) -> tuple[list[dict[str, Any]], str]:
     """Evaluate the entry's claims on ``record``'s members; write ``claims.csv``,
     ``claims.md`` (and ``variants.*``) and the ensemble figures (``plot_format``) to ``out``;
@@ -469,7 +472,7 @@ def verdict_summary(rows: list[dict[str, Any]], k: int) -> str:
     return text
 
 
-def run_claims(entry: Any, out: Path, k: int, workers: int | None = None,
+def run_claims(entry: Entry, out: Path, k: int, workers: int | None = None,
                rounding: bool = True, scheduler: str | None = None,
                plot_format: str = "png") -> list[dict[str, Any]]:
     """Run and evaluate the entry's claims (:func:`simulate_claims`, then
