@@ -10,15 +10,22 @@ import pytest
 
 from cosim.reproduce.entry import ReproduceError, Run, Variant, entry_names, load_entry
 from cosim.run.claims import (
+    Claim,
     ClaimsError,
     check_claims,
     check_ensemble,
     expand_families,
     median_ci,
     parse_seeds,
-    verdict,
     with_rounding,
 )
+from cosim.run.claims import verdict as claim_verdict
+
+
+def verdict(table: dict, a: np.ndarray, b: np.ndarray | None = None) -> dict:
+    """The verdict of the claim of ``table`` (a ``[[claims]]`` table) on ``a`` and ``b``."""
+    return claim_verdict(Claim.from_table(table), a, b)
+
 
 LESS = {"id": "a_below_b", "text": "A below B", "metric": "m", "kind": "less",
         "runs": ["A", "B"]}
@@ -208,7 +215,9 @@ def test_a_claim_family_is_the_cross_product_of_its_placeholders() -> None:
     assert out[4] == {"id": "y_e_below_q", "text": "y below Q on e", "metric": "err",
                       "kind": "less", "runs": ["y", "Q"], "paper": "q/y"}  # nested: "q/y"
     claims = check_claims("e.toml", [family], ["x", "y", "P", "Q"], check_ensemble("e.toml", {}))
-    assert len(claims) == 4 and all("each" not in c for c in claims)
+    assert [c.id for c in claims] == [c["id"] for c in out[1:]]
+    assert claims[3] == Claim(id="y_e_below_q", text="y below Q on e", metric="err", kind="less",
+                              runs=["y", "Q"], paper="q/y")
 
 
 @pytest.mark.parametrize(("each", "message"), [
@@ -243,7 +252,7 @@ def test_shipped_entries_claims_load() -> None:
     for name in entry_names():
         entry = load_entry(name)
         for claim in entry.claims:
-            assert claim["runs"][0] in entry.run_names()
+            assert claim.runs[0] in entry.run_names()
 
 
 CLAIMS_SMOKE_ENTRY = "seed000"  # its runs are a minute of a stopping train: the cheapest
@@ -262,7 +271,7 @@ def test_an_entry_claims_get_verdicts_end_to_end(tmp_path: Path) -> None:
     name = CLAIMS_SMOKE_ENTRY
     entry = load_entry(name)
     rows = run_claims(entry, tmp_path, 3, workers=2)
-    assert [r["id"] for r in rows] == [c["id"] for c in entry.claims]
+    assert [r["id"] for r in rows] == [c.id for c in entry.claims]
     for r in rows:  # K = 3 decides universal claims on the members, and no median
         main = r["main_verdict"]
         if r["quantifier"] == "every" and r["note"] != "metric missing":
@@ -320,7 +329,8 @@ def _variant_entry() -> object:
     from types import SimpleNamespace
 
     return SimpleNamespace(
-        claims=[LESS, {**LESS, "id": "c_below_b", "runs": ["C", "B"]}],
+        claims=[Claim.from_table(c) for c in (LESS, {**LESS, "id": "c_below_b",
+                                                          "runs": ["C", "B"]})],
         variants=[Variant(name="alt", replace={"A": "A2"}, seeds=4)],
         ensemble=check_ensemble("e.toml", {"seed_key": "plant.seed", "report_seeds": "1..6"}),
         runs=[Run(name=n, scenario="s") for n in ("A", "A2", "B", "C")], path="e.toml")
@@ -383,7 +393,8 @@ def _repeat_entry(repeats: int = 4) -> object:
 
     timing = {**LESS, "id": "a_faster_than_b", "metric": "t", "ensemble": "repeat"}
     return SimpleNamespace(
-        claims=[timing, {**timing, "id": "c_faster_than_b", "runs": ["C", "B"]}, LESS],
+        claims=[Claim.from_table(c) for c in (
+            timing, {**timing, "id": "c_faster_than_b", "runs": ["C", "B"]}, LESS)],
         variants=[],
         ensemble=check_ensemble("e.toml", {"seed_key": "plant.seed", "report_seeds": "1..3",
                                            "repeats": repeats}),
@@ -458,11 +469,11 @@ def test_seed004_timing_claims_repeat_ten_times() -> None:
     from cosim.run.ensemble import claim_cases, members
 
     entry = load_entry("seed004")
-    timing = [c for c in entry.claims if c["metric"] == "qp_cpu_time_total_s"]
-    assert len(timing) == 4 and all(c["ensemble"] == "repeat" for c in timing)
+    timing = [c for c in entry.claims if c.metric == "qp_cpu_time_total_s"]
+    assert len(timing) == 4 and all(c.ensemble == "repeat" for c in timing)
     assert len(members(entry, "repeat", 2)) == 10
-    rounding = {c["id"]: rnd for _v, c, _r, rnd, _k in claim_cases(entry, 2)}
-    assert [rounding[c["id"]] for c in timing] == [False] * 4
+    rounding = {c.id: rnd for _v, c, _r, rnd, _k in claim_cases(entry, 2)}
+    assert [rounding[c.id] for c in timing] == [False] * 4
 
 
 def test_repeat_claim_end_to_end_on_a_fast_entry(tmp_path: Path) -> None:

@@ -452,7 +452,7 @@ def test_every_shipped_statement_names_claims_or_why_not() -> None:
         entry = load_entry(name)
         assert entry.statements, name
         tested = {c for st in entry.statements for c in st.claims or []}
-        assert tested <= {c["id"] for c in entry.claims}
+        assert tested <= {c.id for c in entry.claims}
 
 
 def test_resume_runs_only_what_the_record_lacks(built_fmus, tmp_path: Path,

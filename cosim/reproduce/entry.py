@@ -37,6 +37,7 @@ from cosim.reproduce.parts import (
 from cosim.run.claims import (
     CLAIM_KEYS,
     ENSEMBLE_KEYS,
+    Claim,
     ClaimsError,
     Ensemble,
     check_claims,
@@ -82,7 +83,7 @@ class Entry:
     figures: list[Figure] = doc("figures of the runs' series", default=[])
     ensemble: Ensemble = doc("how a run is varied over seeds for the claims "
                              "(:class:`cosim.run.claims.Ensemble`)", default=Ensemble())
-    claims: list[dict[str, Any]] = doc(
+    claims: list[Claim] = doc(
         "the paper's claims, tested over the ensemble (families expanded; "
         ":func:`cosim.run.claims.check_claims`)", default=[])
     variants: list[Variant] = doc("every claim again with some runs replaced", default=[])
@@ -181,7 +182,7 @@ def load_entry(name: str | Path) -> Entry:
         raise ReproduceError(str(err)) from err
     variants = check_variants(str(path), data.get("variants", []), names)
     statements = check_statements(str(path), data.get("statements", []),
-                                  [c["id"] for c in claims])
+                                  [c.id for c in claims])
     return Entry(name=path.stem, path=path, **top, runs=runs, metrics=metrics, paper=paper,
                  derived=derived, rankings=rankings, sweeps=sweeps, figures=figures,
                  ensemble=ensemble, claims=claims, variants=variants, statements=statements)

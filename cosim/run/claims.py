@@ -296,8 +296,40 @@ def expand_families(where: str, claims: list[dict[str, Any]]) -> list[dict[str, 
     return out
 
 
+@dataclass(frozen=True, kw_only=True)
+class Claim:
+    """A ``[[claims]]`` table, checked, with its defaults filled (its keys:
+    :data:`CLAIM_KEYS`)."""
+
+    id: str
+    text: str
+    metric: str  # the summary key tested
+    kind: str  # one of CLAIM_KINDS
+    runs: list[str]  # two for less / greater, one otherwise
+    threshold: float | None = None  # below / above, in the metric's unit
+    band: list[float] | None = None  # inside: the TOML key "range", [low, high]
+    quantifier: str = "typical"  # one of QUANTIFIERS (the kind's default where not given)
+    share: float | None = None  # quantifier "share": the fraction of the runs
+    transform: str | None = None  # "abs": the metric's absolute value per member
+    ensemble: str = "disturbance"  # one of ENSEMBLES
+    origin: str = "paper"  # one of ORIGINS
+    source: str = ""  # where the paper makes it
+    paper: str = ""  # the paper's value(s), as text
+
+    @classmethod
+    def from_table(cls, table: dict[str, Any]) -> Claim:
+        """The claim of a (checked) ``[[claims]]`` table."""
+        given = {k: v for k, v in table.items() if k not in ("range", "quantifier", "each")}
+        return cls(**given, band=table.get("range"),
+                   quantifier=table.get("quantifier", default_quantifier(table["kind"])))
+
+    def bound(self) -> float | list[float] | None:
+        """The threshold (below / above) or the band (inside) the claim tests against."""
+        return self.threshold if self.threshold is not None else self.band
+
+
 def check_claims(where: str, claims: list[dict[str, Any]], run_names: list[str],
-                 ens: Ensemble) -> list[dict[str, Any]]:
+                 ens: Ensemble) -> list[Claim]:
     """The ``[[claims]]`` tables, families expanded (:func:`expand_families`), checked
     against the entry's run names and ensemble."""
     claims = expand_families(where, claims)
@@ -360,16 +392,16 @@ def check_claims(where: str, claims: list[dict[str, Any]], run_names: list[str],
                               "metric's absolute value per member)")
         if claim.get("origin", "paper") not in ORIGINS:
             raise ClaimsError(f"{at}: origin = {claim['origin']!r} (known: {ORIGINS})")
-    return claims
+    return [Claim.from_table(claim) for claim in claims]
 
 
-def variant_runs(claim: dict[str, Any], variant: Any) -> list[str] | None:
+def variant_runs(claim: Claim, variant: Any) -> list[str] | None:
     """The claim's runs under ``variant`` (a :class:`cosim.reproduce.parts.Variant`; None: it
     replaces none of them)."""
     rep = variant.replace
-    if not any(r in rep for r in claim["runs"]):
+    if not any(r in rep for r in claim.runs):
         return None
-    return [rep.get(r, r) for r in claim["runs"]]
+    return [rep.get(r, r) for r in claim.runs]
 
 
 def median_ci(values: np.ndarray) -> tuple[float, float, float, str]:
@@ -452,14 +484,13 @@ def _k_needed(decides: Any) -> int:
     return k
 
 
-def verdict(claim: dict[str, Any], a: np.ndarray, b: np.ndarray | None = None
-            ) -> dict[str, Any]:
+def verdict(claim: Claim, a: np.ndarray, b: np.ndarray | None = None) -> dict[str, Any]:
     """Evaluate one claim on its members: ``a`` (runs[0]) and, for less/greater, ``b``
     (runs[1]) paired by index. Returns the median and its exact 95 % CI of the tested
     quantity, k of K on the claimed side, the worst member, the quantifier, the p-value that
     enters the multiplicity adjustment (None for ``every``) and the verdict (module text)."""
-    kind = claim["kind"]
-    quantifier = claim.get("quantifier", default_quantifier(kind))
+    kind = claim.kind
+    quantifier = claim.quantifier
     a = np.asarray(a, dtype=float)
     if kind in ("less", "greater"):
         assert b is not None
@@ -467,10 +498,10 @@ def verdict(claim: dict[str, Any], a: np.ndarray, b: np.ndarray | None = None
         lo_edge = hi_edge = 0.0
     elif kind in ("below", "above"):
         x = a
-        lo_edge = hi_edge = float(claim["threshold"])
+        lo_edge = hi_edge = float(claim.threshold)  # type: ignore[arg-type]
     else:
         x = a
-        lo_edge, hi_edge = (float(v) for v in claim["range"])
+        lo_edge, hi_edge = (float(v) for v in claim.band or [])
     if kind in ("less", "below"):
         good = x < lo_edge
     elif kind in ("greater", "above"):
@@ -507,7 +538,7 @@ def verdict(claim: dict[str, Any], a: np.ndarray, b: np.ndarray | None = None
         out["verdict"] = "holds" if k == n else "fails"
         return out
     if quantifier == "share":
-        p = float(claim["share"])
+        p = float(claim.share)  # type: ignore[arg-type]
         p_hold, p_fail = _binom_p(k, n, p, "greater"), _binom_p(k, n, p, "less")
         can = (_binom_p(n, n, p, "greater") < half) or (_binom_p(0, n, p, "less") < half)
         need = _k_needed(lambda m: _binom_p(m, m, p, "greater") < half

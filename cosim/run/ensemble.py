@@ -36,6 +36,7 @@ import numpy as np
 from cosim.run.claims import (
     ALPHA,
     ROUNDING_RELATIVE,
+    Claim,
     adjust,
     ours_text,
     variant_runs,
@@ -81,7 +82,7 @@ def _draws(entry: Entry, k: int) -> list[dict[str, float]]:
 
     perts = parse_perturb(entry.ensemble.perturb)
     scenario = next(r.scenario for r in entry.runs
-                    if any(c.get("ensemble") == "mismatch" and r.name in c["runs"]
+                    if any(c.ensemble == "mismatch" and r.name in c.runs
                            for c in entry.claims))
     nominals = nominal_values(scenario, [p.key for p in perts])
     return draw_samples(perts, nominals, k, entry.ensemble.perturb_seed)
@@ -103,15 +104,15 @@ def _rounding_overrides(entry: Entry, run: Any, base: dict[str, Any]) -> dict[st
 
 
 def claim_cases(entry: Entry, k: int, rounding: bool = True
-                ) -> list[tuple[str, dict[str, Any], list[str], bool, int]]:
+                ) -> list[tuple[str, Claim, list[str], bool, int]]:
     """(variant, claim, runs, with the rounding rerun, K) of every claim evaluation: the
     claims as written (variant "main", K = ``k``) and each ``[[variants]]`` replacing some of
     their runs (K = its ``seeds``, at most ``k``). A ``repeat`` claim never has the rounding
     rerun (its K is the entry's repeats, see :func:`members`)."""
-    def rnd(claim: dict[str, Any], wanted: bool) -> bool:
-        return wanted and claim.get("ensemble", "disturbance") != "repeat"
+    def rnd(claim: Claim, wanted: bool) -> bool:
+        return wanted and claim.ensemble != "repeat"
 
-    cases = [("main", c, list(c["runs"]), rnd(c, rounding), k) for c in entry.claims]
+    cases = [("main", c, list(c.runs), rnd(c, rounding), k) for c in entry.claims]
     for var in entry.variants:
         kv = min(k, var.seeds if var.seeds is not None else k)
         for claim in entry.claims:
@@ -128,7 +129,7 @@ def claim_jobs(entry: Entry, k: int, rounding: bool = True) -> list[Job]:
     jobs: dict[tuple[str, str, int, bool], Job] = {}
     cache: dict[tuple[str, int], list[dict[str, Any]]] = {}
     for _var, claim, names, with_rnd, kc in claim_cases(entry, k, rounding):
-        ens = claim.get("ensemble", "disturbance")
+        ens = claim.ensemble
         if (ens, kc) not in cache:
             cache[ens, kc] = members(entry, ens, kc)
         for name in names:
@@ -225,24 +226,22 @@ def evaluate(entry: Entry, summaries: dict[Any, dict[str, Any] | None], k: int,
     for var, claim, names, with_rnd, kc in claim_cases(entry, k, rounding):
         if (var != "main") != variants:
             continue
-        ens = claim.get("ensemble", "disturbance")
+        ens = claim.ensemble
         n = len(members(entry, ens, kc))
         results = []
         for rnd in (False, True) if with_rnd else (False,):
-            a = _metric(summaries, names[0], ens, n, rnd, claim["metric"])
-            b = (_metric(summaries, names[1], ens, n, rnd, claim["metric"])
+            a = _metric(summaries, names[0], ens, n, rnd, claim.metric)
+            b = (_metric(summaries, names[1], ens, n, rnd, claim.metric)
                  if len(names) > 1 else None)
-            if claim.get("transform") == "abs":  # e.g. the stop error's size, either side
+            if claim.transform == "abs":  # e.g. the stop error's size, either side
                 a, b = np.abs(a), None if b is None else np.abs(b)
             results.append(verdict(claim, a, b))
         row = with_rounding(results[0], results[1] if with_rnd else None)
         rows.append({**({"variant": var} if variants else {}),
-                     "id": claim["id"], "source": claim.get("source", ""),
-                     "text": claim["text"], "paper": claim.get("paper", ""),
-                     "metric": claim["metric"], "kind": claim["kind"],
-                     "runs": " vs ".join(names), "ensemble": ens,
-                     "origin": claim.get("origin", "paper"), "share": claim.get("share"),
-                     "threshold": claim.get("threshold", claim.get("range")), **row})
+                     "id": claim.id, "source": claim.source, "text": claim.text,
+                     "paper": claim.paper, "metric": claim.metric, "kind": claim.kind,
+                     "runs": " vs ".join(names), "ensemble": ens, "origin": claim.origin,
+                     "share": claim.share, "threshold": claim.bound(), **row})
     return adjust(rows)
 
 
