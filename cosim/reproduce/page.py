@@ -171,6 +171,8 @@ def reproduce_page(name: str, out_dir: str | Path | None = None, workers: int | 
                   flush=True)
     record = simulate(entry, out, workers, seeds, rounding, scheduler, plot_format, previous)
     save(record, out)
+    # the page is made from the record as stored (its series at SERIES_DIGITS digits), so
+    # --redraw makes it again byte for byte
     return redraw_page(name, out, plot_format, echo)
 
 
