@@ -27,8 +27,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
+from cosim.reproduce.entry import load_entry  # noqa: E402
 from cosim.run.ensemble import claim_jobs, run_claims  # noqa: E402
-from cosim.run.reproduce import load_entry  # noqa: E402
 
 WAYS = (("1 worker", 1, None), ("2 workers", 2, None), ("dask 2 workers", 2, "local-dask"))
 

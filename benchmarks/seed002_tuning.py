@@ -69,9 +69,9 @@ def write_picks(picks: dict[str, float], table: dict[str, list[tuple[float, floa
 
 
 def main() -> None:
+    from cosim.reproduce.entry import load_entry
     from cosim.run.ensemble import execute
     from cosim.run.master import ensure_built
-    from cosim.run.reproduce import load_entry
     from cosim.run.scenario import load_scenario
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -84,7 +84,7 @@ def main() -> None:
     entry = load_entry("seed002")
     seeds = ([int(s) for s in a.seeds.split(",")] if a.seeds
              else list(entry.ensemble.calibration_seeds))
-    common = {r["scenario"]: r.get("set", {}) for r in entry.runs if r["name"] in LAWS}
+    common = {r.scenario: r.overrides for r in entry.runs if r.name in LAWS}
     jobs = []
     for law, scenario in LAWS.items():
         ensure_built(load_scenario(scenario))

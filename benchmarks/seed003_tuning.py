@@ -28,8 +28,8 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path[:0] = [str(ROOT)]
 
+from cosim.reproduce.entry import load_entry  # noqa: E402
 from cosim.run.perturb import draw_samples, nominal_values, parse_perturb  # noqa: E402
-from cosim.run.reproduce import load_entry  # noqa: E402
 
 BUDGET = 5  # evaluations per tracker (each on every calibration plant), the same for both
 MARK = "# picked by benchmarks/seed003_tuning.py"

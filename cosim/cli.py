@@ -700,10 +700,11 @@ def reproduce(
     paper's), the sweeps and the figures, and tests its claims over K seeds (claims.csv,
     claims.md: median [95 % CI], k of K, verdict); 'all' writes one REPRODUCTION.md. With
     --redraw everything after the simulations is made again from the record."""
+    from cosim.reproduce.entry import ReproduceError, entry_names
+    from cosim.reproduce.page import redraw_entry, reproduce_all
+    from cosim.reproduce.page import reproduce as reproduce_entry
     from cosim.run import interrupt, runner
     from cosim.run.master import SimulationError
-    from cosim.run.reproduce import ReproduceError, entry_names, redraw_entry, reproduce_all
-    from cosim.run.reproduce import reproduce as reproduce_entry
     from cosim.run.results import PLOT_FORMATS, OutputError, check_destination
     from cosim.run.scenario import ScenarioError
 

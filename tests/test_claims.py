@@ -3,22 +3,30 @@ disjoint seeds, rounding-sensitive marking, and (slow) every entry's claims at s
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from cosim.reproduce.entry import ReproduceError, Run, Variant, entry_names, load_entry
 from cosim.run.claims import (
+    Claim,
     ClaimsError,
     check_claims,
     check_ensemble,
     expand_families,
     median_ci,
     parse_seeds,
-    verdict,
     with_rounding,
 )
-from cosim.run.reproduce import ReproduceError, entry_names, load_entry
+from cosim.run.claims import verdict as claim_verdict
+
+
+def verdict(table: dict, a: np.ndarray, b: np.ndarray | None = None) -> dict:
+    """The verdict of the claim of ``table`` (a ``[[claims]]`` table) on ``a`` and ``b``."""
+    return claim_verdict(Claim.from_table(table), a, b)
+
 
 LESS = {"id": "a_below_b", "text": "A below B", "metric": "m", "kind": "less",
         "runs": ["A", "B"]}
@@ -208,7 +216,9 @@ def test_a_claim_family_is_the_cross_product_of_its_placeholders() -> None:
     assert out[4] == {"id": "y_e_below_q", "text": "y below Q on e", "metric": "err",
                       "kind": "less", "runs": ["y", "Q"], "paper": "q/y"}  # nested: "q/y"
     claims = check_claims("e.toml", [family], ["x", "y", "P", "Q"], check_ensemble("e.toml", {}))
-    assert len(claims) == 4 and all("each" not in c for c in claims)
+    assert [c.id for c in claims] == [c["id"] for c in out[1:]]
+    assert claims[3] == Claim(id="y_e_below_q", text="y below Q on e", metric="err", kind="less",
+                              runs=["y", "Q"], paper="q/y")
 
 
 @pytest.mark.parametrize(("each", "message"), [
@@ -221,6 +231,71 @@ def test_claim_family_errors_name_the_claim_and_field(each: dict, message: str) 
     family = {**LESS, "id": "f_{a.name}", "each": each}
     with pytest.raises(ClaimsError, match=f"e.toml: \\[\\[claims\\]\\] #1.*{message}"):
         expand_families("e.toml", [family])
+
+
+def test_a_family_expanding_to_a_repeated_id_is_refused() -> None:
+    family = {**LESS, "id": "same", "text": "{a}", "each": {"a": ["x", "y"]}}
+    with pytest.raises(ClaimsError, match="id = 'same' repeats"):
+        check_claims("e.toml", [family], ["A", "B"], check_ensemble("e.toml", {}))
+
+
+def test_entry_with_bad_claim_fails_on_load(tmp_path: Path) -> None:
+    path = tmp_path / "bad.toml"
+    path.write_text('title = "t"\n[[runs]]\nname = "A"\nscenario = "seed000_stop_pid"\n'
+                    '[[claims]]\nid = "x"\ntext = "t"\nmetric = "m"\nkind = "below"\n'
+                    'runs = ["A"]\nthreshold = "high"\n')
+    with pytest.raises(ReproduceError, match=r"bad.toml: \[\[claims\]\] 'x': threshold = "
+                                             "'high'"):
+        load_entry(path)
+
+
+def test_shipped_entries_claims_load() -> None:
+    for name in entry_names():
+        entry = load_entry(name)
+        for claim in entry.claims:
+            assert claim.runs[0] in entry.run_names()
+
+
+CLAIMS_SMOKE_ENTRY = "seed000"  # its runs are a minute of a stopping train: the cheapest
+
+
+@pytest.mark.slow
+def test_an_entry_claims_get_verdicts_end_to_end(tmp_path: Path) -> None:
+    """The whole claims path (jobs, ensemble, figures, verdicts, files) on the cheapest
+    entry at K = 3. Every entry's claims got their verdicts from the code of this tree in its
+    recorded K = 20 reproduction: the paper pages carry the digest of every file that changes
+    a number, and ``tests/test_docs_site.py::test_generated_pages_are_current`` fails when it
+    differs, so the costlier entries (each 36-117 claim jobs of whole runs at K = 3) need no
+    second, smaller run here."""
+    from cosim.run.ensemble import run_claims
+
+    name = CLAIMS_SMOKE_ENTRY
+    entry = load_entry(name)
+    rows = run_claims(entry, tmp_path, 3, workers=2)
+    assert [r["id"] for r in rows] == [c.id for c in entry.claims]
+    for r in rows:  # K = 3 decides universal claims on the members, and no median
+        main = r["main_verdict"]
+        if r["quantifier"] == "every" and r["note"] != "metric missing":
+            assert main == ("holds" if r["k"] == r["K"] else "fails"), r
+        elif r["note"] not in ("all equal", "one run", "metric missing"):
+            assert main == "insufficient" and r["note"] == "K >= 6 needed", r
+    assert (tmp_path / "claims.csv").is_file() and (tmp_path / "claims.md").is_file()
+
+
+def test_ensemble_figure_draws_median_and_band(tmp_path: Path) -> None:
+    import pandas as pd
+
+    from cosim.run.figures import FigureError, draw_ensemble_figure
+
+    t = np.linspace(0.0, 10.0, 11)
+    dirs = [pd.DataFrame({"time": t, "plant.v": t + i, "controller.v_ref": t})
+            for i in range(4)]
+    spec = {"file": "f.png", "x": "time", "y": ["plant.v"], "y_minus": "controller.v_ref"}
+    draw_ensemble_figure(spec, {"A": dirs}, tmp_path / "f_ensemble.png")
+    assert (tmp_path / "f_ensemble.png").stat().st_size > 0
+    spec["y"] = ["plant.missing"]
+    with pytest.raises(FigureError, match="recorded no 'plant.missing'"):
+        draw_ensemble_figure(spec, {"A": dirs}, tmp_path / "g.png")
 
 
 def test_a_margin_tells_no_effect_from_undecided() -> None:
@@ -248,81 +323,12 @@ def test_a_margin_is_a_fraction_on_a_typical_comparison(change: dict) -> None:
         check_claims("e.toml", [{**LESS, **change}], ["A", "B"], check_ensemble("e.toml", {}))
 
 
-def test_a_family_expanding_to_a_repeated_id_is_refused() -> None:
-    family = {**LESS, "id": "same", "text": "{a}", "each": {"a": ["x", "y"]}}
-    with pytest.raises(ClaimsError, match="id = 'same' repeats"):
-        check_claims("e.toml", [family], ["A", "B"], check_ensemble("e.toml", {}))
+def test_reproduction_summary_counts_verdicts() -> None:
+    from cosim.reproduce.page import claims_summary
 
-
-def test_entry_with_bad_claim_fails_on_load(tmp_path: Path) -> None:
-    path = tmp_path / "bad.toml"
-    path.write_text('title = "t"\n[[runs]]\nname = "A"\nscenario = "seed000_stop_pid"\n'
-                    '[[claims]]\nid = "x"\ntext = "t"\nmetric = "m"\nkind = "below"\n'
-                    'runs = ["A"]\nthreshold = "high"\n')
-    with pytest.raises(ReproduceError, match=r"bad.toml: \[\[claims\]\] 'x': threshold = "
-                                             "'high'"):
-        load_entry(path)
-
-
-def test_shipped_entries_claims_load() -> None:
-    for name in entry_names():
-        entry = load_entry(name)
-        for claim in entry.claims:
-            assert claim["runs"][0] in {r["name"] for r in entry.runs}
-
-
-CLAIMS_SMOKE_ENTRY = "seed000"  # its runs are a minute of a stopping train: the cheapest
-
-
-@pytest.mark.slow
-def test_an_entry_claims_get_verdicts_end_to_end(tmp_path: Path) -> None:
-    """The whole claims path (jobs, ensemble, figures, verdicts, files) on the cheapest
-    entry at K = 3. Every entry's claims got their verdicts from the code of this tree in its
-    recorded K = 20 reproduction: the paper pages carry the digest of every file that changes
-    a number, and ``tests/test_docs_site.py::test_generated_pages_are_current`` fails when it
-    differs, so the costlier entries (each 36-117 claim jobs of whole runs at K = 3) need no
-    second, smaller run here."""
-    from cosim.run.ensemble import run_claims
-
-    name = CLAIMS_SMOKE_ENTRY
-    entry = load_entry(name)
-    rows = run_claims(entry, tmp_path, 3, workers=2)
-    assert [r["id"] for r in rows] == [c["id"] for c in entry.claims]
-    for r in rows:  # K = 3 decides universal claims on the members, and no median
-        main = r["main_verdict"]
-        if r["quantifier"] == "every" and r["note"] != "metric missing":
-            assert main == ("holds" if r["k"] == r["K"] else "fails"), r
-        elif r["note"] not in ("all equal", "one run", "metric missing"):
-            assert main == "insufficient" and r["note"] == "K >= 6 needed", r
-    assert (tmp_path / "claims.csv").is_file() and (tmp_path / "claims.md").is_file()
-
-
-def test_ensemble_figure_draws_median_and_band(tmp_path: Path) -> None:
-    import pandas as pd
-
-    from cosim.run.figures import FigureError, draw_ensemble_figure
-
-    t = np.linspace(0.0, 10.0, 11)
-    dirs = [pd.DataFrame({"time": t, "plant.v": t + i, "controller.v_ref": t})
-            for i in range(4)]
-    spec = {"file": "f.png", "x": "time", "y": ["plant.v"], "y_minus": "controller.v_ref"}
-    draw_ensemble_figure(spec, {"A": dirs}, tmp_path / "f_ensemble.png")
-    assert (tmp_path / "f_ensemble.png").stat().st_size > 0
-    spec["y"] = ["plant.missing"]
-    with pytest.raises(FigureError, match="recorded no 'plant.missing'"):
-        draw_ensemble_figure(spec, {"A": dirs}, tmp_path / "g.png")
-
-
-def test_reproduction_summary_counts_verdicts(tmp_path: Path) -> None:
-    import pandas as pd
-
-    from cosim.run.reproduce import claims_summary
-
-    (tmp_path / "a").mkdir()
-    pd.DataFrame({"id": ["x", "y", "z"], "verdict": ["holds", "fails", "holds"],
-                  "adjusted": ["holds", "fails", "inconclusive"]}).to_csv(
-        tmp_path / "a" / "claims.csv", index=False)
-    lines = claims_summary(tmp_path, ["a", "b"]).splitlines()
+    rows = [{"id": i, "verdict": v, "adjusted": a} for i, v, a in (
+        ("x", "holds", "holds"), ("y", "fails", "fails"), ("z", "holds", "inconclusive"))]
+    lines = claims_summary({"a": rows, "b": []}).splitlines()
     assert lines[0] == ("| entry | claims | holds | fails | inconclusive | no effect | "
                         "insufficient | rounding-sensitive |")
     assert lines[2] == "| a | 3 | 1 | 1 | 1 | 0 | 0 | 0 |"  # the adjusted verdicts
@@ -349,10 +355,11 @@ def _variant_entry() -> object:
     from types import SimpleNamespace
 
     return SimpleNamespace(
-        claims=[LESS, {**LESS, "id": "c_below_b", "runs": ["C", "B"]}],
-        variants=[{"name": "alt", "replace": {"A": "A2"}, "seeds": 4}],
+        claims=[Claim.from_table(c) for c in (LESS, {**LESS, "id": "c_below_b",
+                                                          "runs": ["C", "B"]})],
+        variants=[Variant(name="alt", replace={"A": "A2"}, seeds=4)],
         ensemble=check_ensemble("e.toml", {"seed_key": "plant.seed", "report_seeds": "1..6"}),
-        runs=[{"name": n, "scenario": "s"} for n in ("A", "A2", "B", "C")], path="e.toml")
+        runs=[Run(name=n, scenario="s") for n in ("A", "A2", "B", "C")], path="e.toml")
 
 
 def test_variants_replace_runs_in_every_claim_and_get_their_own_verdicts() -> None:
@@ -366,11 +373,11 @@ def test_variants_replace_runs_in_every_claim_and_get_their_own_verdicts() -> No
     # a variant gets the perturbed floating-point rerun like the main claims, unless it opts out
     with_rerun = {key for key, _sc, _ov in claim_jobs(entry, 6, rounding=True)}
     assert ("A2", "disturbance", 3, True) in with_rerun
-    entry.variants[0]["rounding"] = False
+    entry.variants = [dataclasses.replace(entry.variants[0], rounding=False)]
     without = {key for key, _sc, _ov in claim_jobs(entry, 6, rounding=True)}
     assert not any(k[0] == "A2" and k[3] for k in without)
     assert ("A", "disturbance", 5, True) in without
-    del entry.variants[0]["rounding"]
+    entry = _variant_entry()
     # A2 below B on every seed, A above B: the variant flips the verdict of a_below_b only
     summaries = {}
     for run, value in (("A", 2.0), ("A2", 0.0), ("B", 1.0), ("C", 0.0)):
@@ -392,9 +399,9 @@ def test_variants_replace_runs_in_every_claim_and_get_their_own_verdicts() -> No
     ({"name": "v", "replace": {"A": "B"}, "colour": 1}, "unknown key"),
 ])
 def test_variant_schema_errors_name_file_key_and_value(variant: dict, message: str) -> None:
-    from cosim.run.claims import check_variants
+    from cosim.reproduce.entry import check_variants
 
-    with pytest.raises(ClaimsError, match=f"e.toml: \\[\\[variants\\]\\].*{message}"):
+    with pytest.raises(ReproduceError, match=f"e.toml: \\[\\[variants\\]\\].*{message}"):
         check_variants("e.toml", [variant], ["A", "B"])
 
 
@@ -420,12 +427,13 @@ def _repeat_entry(repeats: int = 4) -> object:
 
     timing = {**LESS, "id": "a_faster_than_b", "metric": "t", "ensemble": "repeat"}
     return SimpleNamespace(
-        claims=[timing, {**timing, "id": "c_faster_than_b", "runs": ["C", "B"]}, LESS],
+        claims=[Claim.from_table(c) for c in (
+            timing, {**timing, "id": "c_faster_than_b", "runs": ["C", "B"]}, LESS)],
         variants=[],
         ensemble=check_ensemble("e.toml", {"seed_key": "plant.seed", "report_seeds": "1..3",
                                            "repeats": repeats}),
-        runs=[{"name": "A", "scenario": "s", "set": {"controller.x": 1}},
-              {"name": "B", "scenario": "s"}, {"name": "C", "scenario": "s"}],
+        runs=[Run(name="A", scenario="s", overrides={"controller.x": 1}),
+              Run(name="B", scenario="s"), Run(name="C", scenario="s")],
         path="e.toml")
 
 
@@ -495,11 +503,11 @@ def test_seed004_timing_claims_repeat_ten_times() -> None:
     from cosim.run.ensemble import claim_cases, members
 
     entry = load_entry("seed004")
-    timing = [c for c in entry.claims if c["metric"] == "qp_cpu_time_total_s"]
-    assert len(timing) == 4 and all(c["ensemble"] == "repeat" for c in timing)
+    timing = [c for c in entry.claims if c.metric == "qp_cpu_time_total_s"]
+    assert len(timing) == 4 and all(c.ensemble == "repeat" for c in timing)
     assert len(members(entry, "repeat", 2)) == 10
-    rounding = {c["id"]: rnd for _v, c, _r, rnd, _k in claim_cases(entry, 2)}
-    assert [rounding[c["id"]] for c in timing] == [False] * 4
+    rounding = {c.id: rnd for _v, c, _r, rnd, _k in claim_cases(entry, 2)}
+    assert [rounding[c.id] for c in timing] == [False] * 4
 
 
 def test_repeat_claim_end_to_end_on_a_fast_entry(tmp_path: Path) -> None:

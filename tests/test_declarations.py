@@ -176,7 +176,7 @@ def _entry_texts() -> dict[str, str]:
     sources of the paper's figures and claims, figure titles, claim texts."""
     import tomllib
 
-    from cosim.run.reproduce import REPRODUCE_DIR
+    from cosim.reproduce.entry import REPRODUCE_DIR
 
     texts: dict[str, str] = {}
     for path in sorted(REPRODUCE_DIR.glob("*.toml")):

@@ -8,8 +8,9 @@ import pandas as pd
 import pytest
 
 from cosim import papers
+from cosim.reproduce.entry import ReproduceError, load_entry
+from cosim.reproduce.tables import derived_rows
 from cosim.run.metrics import _arrival_index
-from cosim.run.reproduce import ReproduceError, derived_rows, load_entry
 
 CFG = {"energy_traction": "p.et", "energy_regen": "p.er", "energy_aux": "p.ea",
        "phase": "c.phase"}
@@ -60,15 +61,15 @@ def test_still_moving_at_the_end_counts_the_whole_run_and_missing_columns_give_n
 
 def test_derived_saving_rows(tmp_path) -> None:
     entry = load_entry("seed003")
-    names = [r["name"] for r in entry.runs]
+    names = entry.run_names()
     summaries = {n: {"energy_net_mj": 100.0, "energy_run_mj": 50.0,
                      "energy_traction_mj": 80.0} for n in names}
     summaries["Eco (GPC)"] = {"energy_net_mj": 82.0, "energy_run_mj": 40.0,
                               "energy_traction_mj": 70.0}
-    rows = {r["run"]: r for r in derived_rows(entry, summaries)}
+    rows = {r.run: r for r in derived_rows(entry, summaries)}
     text = rows["eco saving, total (paper text)"]
-    assert text["ours"] == pytest.approx(18.0) and text["paper"] == pytest.approx(17.7)
-    assert rows["eco saving, run phase"]["ours"] == pytest.approx(20.0)
+    assert text.ours == pytest.approx(18.0) and text.paper == pytest.approx(17.7)
+    assert rows["eco saving, run phase"].ours == pytest.approx(20.0)
     bad = tmp_path / "bad.toml"
     bad.write_text(entry.path.read_text().replace('kind = "saving_percent"',
                                                   'kind = "ratio"', 1))

@@ -84,8 +84,9 @@ def test_a_series_keeps_what_its_figures_draw_reduced_and_thinned(tmp_path: Path
     """A train-mean figure (y_reduce over plant.v[*]) records one column holding the mean, not
     every vehicle's; a member's series is thinned evenly to max_rows with its last row; the
     figure drawn from the record is the figure of the full run at the kept rows."""
+    from cosim.reproduce.entry import Figure
+    from cosim.reproduce.run import record_series
     from cosim.run.figures import figure_series
-    from cosim.run.reproduce import record_series
 
     t = np.arange(10.0)
     full = pd.DataFrame({"time": t, "plant.v[1]": t, "plant.v[2]": 2 * t, "plant.v[3]": 4 * t,
@@ -95,7 +96,8 @@ def test_a_series_keeps_what_its_figures_draw_reduced_and_thinned(tmp_path: Path
     spec = {"file": "f.png", "x": "time", "y": ["plant.v[*]"], "y_reduce": "mean",
             "y_minus": "controller.v_ref"}
     rec = Record("seedX", "0" * 64, 1, False)
-    record_series(rec, "member/A/0", tmp_path / "run", [spec], None, scalars=False,
+    figure = Figure(**spec)
+    record_series(rec, "member/A/0", tmp_path / "run", [figure], None, scalars=False,
                   max_rows=4)
     got = rec.series["member/A/0"]
     assert sorted(got.columns) == ["controller.v_ref", "plant.v[*]", "time"]
@@ -103,5 +105,5 @@ def test_a_series_keeps_what_its_figures_draw_reduced_and_thinned(tmp_path: Path
     rows = got["time"].to_numpy(dtype=int)
     assert figure_series(got, spec, "plant.v[*]", "A").tolist() == pytest.approx(
         figure_series(full, spec, "plant.v[*]", "A")[rows].tolist(), rel=1e-15)
-    record_series(rec, "run/A", tmp_path / "run", [spec], None)  # a table run: scalars too
+    record_series(rec, "run/A", tmp_path / "run", [figure], None)  # a table run: scalars too
     assert "plant.s" in rec.series["run/A"] and len(rec.series["run/A"]) == 10

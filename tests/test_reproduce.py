@@ -9,19 +9,12 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
+from cosim.reproduce.entry import Figure, ReproduceError, entry_names, load_entry
+from cosim.reproduce.figures import draw_speed_classes
+from cosim.reproduce.page import redraw_entry, reproduce
+from cosim.reproduce.tables import ranking_markdown, ranking_rows, summary_value
+from cosim.run.figures import speed_class_errors
 from cosim.run.master import run_scenario
-from cosim.run.reproduce import (
-    ReproduceError,
-    draw_speed_classes,
-    entry_names,
-    load_entry,
-    ranking_markdown,
-    ranking_rows,
-    redraw_entry,
-    reproduce,
-    speed_class_errors,
-    summary_value,
-)
 
 ENTRY = """
 title = "Test entry"
@@ -91,13 +84,14 @@ def test_reproduce_writes_ours_beside_the_paper(built_fmus, tmp_path: Path) -> N
     ('[[figures]]\nfile = "x.png"\nx = "time"\ny = ["plant.v"]\nkind = "pie"\n', "kind 'pie'"),
     ('[[figures]]\nfile = "x.png"\nx = "time"\ny = ["plant.v[*]"]\ny_reduce = "max"\n',
      "y_reduce 'max'"),
-    ('colour = "red"\n', "unknown key(s) ['colour']"),
+    ('colour = "red"\n', "unknown key 'colour' (known: citation, claims,"),
+    ('tilte = "red"\n', "unknown key 'tilte' (did you mean 'title'?)"),
     ('[[figures]]\nfile = "x.png"\nx = "time"\ny = ["plant.v"]\nxlim = [5, 1]\n',
      "xlim = [5, 1]: expected [low, high] with low < high"),
     ('[[figures]]\nfile = "x.png"\nx = "time"\ny = ["plant.v"]\nband_x = [1, 2, "w", 4]\n',
      "band_x = [1, 2, 'w', 4]: expected [low, high] or [low, high, label]"),
     ('table = "../t"\n', "must be a file name"),
-    ('set = 3\n', "set = 3 must be a table of overrides"),
+    ('set = 3\n', "set = 3: expected a table"),
     ('[[rankings]]\nmetric = "nope"\nruns = ["PID"]\n', "metric 'nope' is not in [[metrics]]"),
     ('[[rankings]]\nmetric = "stop_error_m"\nruns = ["PID", "PID"]\n', "must be distinct"),
     ('[[rankings]]\nmetric = "stop_error_m"\nruns = ["PID", "PID kp=30"]\npaper = ["PID"]\n',
@@ -113,7 +107,7 @@ def test_reproduce_writes_ours_beside_the_paper(built_fmus, tmp_path: Path) -> N
 ])
 def test_bad_entries_name_the_file_and_key(tmp_path: Path, patch: str, message: str) -> None:
     path = tmp_path / "bad.toml"
-    top = patch.startswith(("colour", "table", "set"))  # top-level keys go before the first table
+    top = patch.startswith(("colour", "tilte", "table", "set"))  # before the first table
     path.write_text(patch + "\n" + ENTRY if top else ENTRY + patch)
     with pytest.raises(ReproduceError, match=re.escape(message)) as err:
         load_entry(str(path))
@@ -136,14 +130,14 @@ def test_ranking_orders_the_runs_and_names_the_pairs_the_other_way_round(
     summaries = {"PID": {"stop_error_m": 0.3}, "A": {"stop_error_m": 0.1},
                  "B": {"stop_error_m": 0.1}, "PID kp=30": {}}
     main, plain = ranking_rows(entry, summaries)
-    assert main["ours"] == "A < B < PID < PID kp=30"
-    assert main["paper"] == "PID < A < B < PID kp=30"
-    assert main["source"] == "A < PID; B < PID" and main["within"] is False
-    assert main["metric"] == "rank:stop_error_m" and main["label"] == "stop error (m)"
-    assert plain["ours"] == "A < B" and plain["paper"] is None and plain["within"] is None
+    assert main.ours == "A < B < PID < PID kp=30"
+    assert main.paper == "PID < A < B < PID kp=30"
+    assert main.source == "A < PID; B < PID" and main.within is False
+    assert main.metric == "rank:stop_error_m" and main.label == "stop error (m)"
+    assert plain.ours == "A < B" and plain.paper is None and plain.within is None
     summaries["PID"]["stop_error_m"] = 0.05
     (agree, _) = ranking_rows(entry, summaries)
-    assert agree["within"] is True and agree["source"] == ""
+    assert agree.within is True and agree.source == ""
     text = ranking_markdown([agree, plain])
     assert "| stop error (m) | main | PID < A < B < PID kp=30 ✓ |" in text
     assert "| stop error (m) |  | A < B | - | - |" in text
@@ -225,16 +219,15 @@ def test_speed_classes_grade_the_error_against_ctcs3() -> None:
 
 def test_seed001_declares_figures_6_to_10() -> None:
     """Issue 15: Figs. 6-10 of seed 001, Fig. 8 graded by CTCS-3 as data (2 km/h, 30 km/h, 2 %)."""
-    figs = {re.match(r"fig(\d+)_", f["file"]).group(1): f for f in load_entry("seed001").figures}
+    figs = {re.match(r"fig(\d+)_", f.file).group(1): f for f in load_entry("seed001").figures}
     assert sorted(figs, key=int) == ["6", "7", "8", "9", "10"]
     fig8 = figs["8"]
-    assert fig8["kind"] == "speed_classes" and fig8["classes"][:3] == [0, 30, 50]
-    assert (fig8["limit_kmh"], fig8["limit_below_kmh"], fig8["limit_fraction"]) == (2.0, 30.0,
-                                                                                     0.02)
+    assert fig8.kind == "speed_classes" and (fig8.classes or [])[:3] == [0, 30, 50]
+    assert (fig8.limit_kmh, fig8.limit_below_kmh, fig8.limit_fraction) == (2.0, 30.0, 0.02)
 
 
 def test_speed_classes_figure_writes_table_and_csv(tmp_path: Path) -> None:
-    text = draw_speed_classes({**CLASSES, "paper": "A fails at 30"},
+    text = draw_speed_classes(Figure(**CLASSES, paper="A fails at 30"),
                               {"A": _graded_frame(), "B": _graded_frame()}, tmp_path / "fig8.png")
     assert (tmp_path / "fig8.png").stat().st_size > 10_000
     csv = pd.read_csv(tmp_path / "fig8.csv")
@@ -260,8 +253,8 @@ def test_figure_series_mean_of_pattern_minus_reference() -> None:
 
 def test_seed002_plots_the_train_mean_error() -> None:
     """Issue 16: the 0.3 km/h target is judged on the train-mean speed; its error is a figure."""
-    figs = [f for f in load_entry("seed002").figures if f.get("y_reduce") == "mean"]
-    assert [(f["y"], f["y_minus"]) for f in figs] == [(["plant.v[*]"], "controller.v_ref")]
+    figs = [f for f in load_entry("seed002").figures if f.y_reduce == "mean"]
+    assert [(f.y, f.y_minus) for f in figs] == [(["plant.v[*]"], "controller.v_ref")]
 
 
 def test_reproduce_out_that_cannot_be_written_is_a_clear_error(tmp_path: Path,
@@ -271,7 +264,7 @@ def test_reproduce_out_that_cannot_be_written_is_a_clear_error(tmp_path: Path,
     from typer.testing import CliRunner
 
     from cosim import cli
-    from cosim.run import reproduce as reproduce_module
+    from cosim.reproduce import page as reproduce_module
 
     blocker = tmp_path / "a_file"
     blocker.write_text("")
@@ -303,12 +296,12 @@ def test_entry_set_overrides_every_run_and_sweep_and_a_runs_own_set_wins(
                     'grid = { "controller.N" = "3..4" }\n')
     entry = load_entry(str(path))
     plain, kp30 = entry.runs
-    assert plain["set"] == {"plant.disturbance_amplitude": 0.02, "controller.kp": 50.0}
-    assert kp30["set"] == {"plant.disturbance_amplitude": 0.02, "controller.kp": 30.0}
-    assert entry.sweeps[0]["grid"] == {"plant.disturbance_amplitude": 0.02,
+    assert plain.overrides == {"plant.disturbance_amplitude": 0.02, "controller.kp": 50.0}
+    assert kp30.overrides == {"plant.disturbance_amplitude": 0.02, "controller.kp": 30.0}
+    assert entry.sweeps[0].grid == {"plant.disturbance_amplitude": 0.02,
                                        "controller.kp": 50.0, "controller.N": "3..4"}
     # the sweep's own key stays first: its figure's x axis
-    assert list(entry.sweeps[0]["grid"])[0] == "controller.N"
+    assert list(entry.sweeps[0].grid)[0] == "controller.N"
 
 
 def test_sweep_figure_plots_against_the_first_key_and_makes_no_series_of_held_keys() -> None:
@@ -352,22 +345,23 @@ def test_wide_paper_tables_are_split_and_keep_each_metric_together() -> None:
     """Many metrics: several markdown tables of at most TABLE_COLUMNS columns, each led by the
     run column; a metric's ours / paper columns in one table; no "paper" column where the paper
     gives no value for any run."""
-    from types import SimpleNamespace
+    from cosim.reproduce.entry import Entry, Metric, Run
+    from cosim.reproduce.tables import TABLE_COLUMNS, Cell, table_markdown
 
-    from cosim.run.reproduce import TABLE_COLUMNS, table_markdown
-
-    metrics = [{"key": f"m{i}", "label": f"metric {i}"} for i in range(11)]
-    runs = [{"name": "A"}, {"name": "B"}]
-    rows = [{"run": r["name"], "metric": m["key"], "ours": float(i), "within": None,
-             "paper": 2.0 if i % 3 == 0 else None, "paper_range": None, "ours_min": None,
-             "source": "", "repeats": 1} for r in runs for i, m in enumerate(metrics)]
-    text = table_markdown(SimpleNamespace(metrics=metrics, runs=runs), rows)
+    metrics = [Metric(key=f"m{i}", label=f"metric {i}") for i in range(11)]
+    runs = [Run(name=n, scenario="s") for n in ("A", "B")]
+    rows = [Cell(run=r.name, metric=m.key, ours=float(i), ours_min=None, ours_max=None,
+                 repeats=1, paper=2.0 if i % 3 == 0 else None, paper_range=None,
+                 tolerance=None, source="", ratio=None, within=None)
+            for r in runs for i, m in enumerate(metrics)]
+    entry = Entry(name="e", path=Path("e.toml"), title="t", runs=runs, metrics=metrics)
+    text = table_markdown(entry, rows)
     headers = [line for line in text.splitlines() if line.startswith("| run |")]
     assert len(headers) > 1
     cells = [h.strip("| ").split(" | ") for h in headers]
     assert all(len(c) <= TABLE_COLUMNS for c in cells)
     shown = [c for cs in cells for c in cs if c.startswith("metric")]
-    assert shown == [m["label"] for m in metrics]  # each once, in order
+    assert shown == [m.label for m in metrics]  # each once, in order
     for cs in cells:  # a paper column right after each metric the paper gives, only there
         for i, c in enumerate(cs):
             if c.startswith("metric "):
@@ -396,8 +390,9 @@ def test_redraw_makes_the_same_tables_claims_and_figures_from_the_record_alone(
     """Everything after the simulations is a function of the record: redrawn with every
     simulation entry point disabled it is byte for byte what the run wrote; a changed claim
     is re-evaluated on the recorded members; a run the record lacks is named."""
+    import cosim.reproduce.page as page
+    import cosim.reproduce.run as rep
     import cosim.run.ensemble as ensemble
-    import cosim.run.reproduce as rep
 
     path = tmp_path / "entry.toml"
     path.write_text(CLAIMED.replace("kind = \"overlay\"", "kind = \"overlay\"\nruns = [\"PID\"]"))
@@ -414,7 +409,7 @@ def test_redraw_makes_the_same_tables_claims_and_figures_from_the_record_alone(
 
     monkeypatch.setattr(rep, "_run_one", no_simulation)
     monkeypatch.setattr(ensemble, "_run_member", no_simulation)
-    monkeypatch.setattr(rep, "simulate", no_simulation)
+    monkeypatch.setattr(page, "simulate", no_simulation)
     redraw_entry(str(path), out, echo=False)
     assert {f: (out / f).read_bytes() for f in made} == made
     path.write_text(path.read_text().replace("threshold = 0.5", "threshold = 1e-9"))
@@ -441,7 +436,7 @@ def _record_json(out: Path) -> str:
     ('[[statements]]\ntext = "PID stops"\n', "give claims = \\[ids\\] or untestable"),
     ('[[statements]]\ntext = "PID stops"\nclaims = ["pid_stops_in_window"]\n'
      'untestable = "x"\n', "one of them"),
-    ('[[statements]]\ntext = "x"\nclaims = []\nsee = 1\n', "unknown key\\(s\\) \\['see'\\]"),
+    ('[[statements]]\ntext = "x"\nclaims = []\nsee = 1\n', "unknown key 'see' \\(known: "),
 ])
 def test_bad_statements_name_the_file_and_key(tmp_path: Path, patch: str, message: str) -> None:
     path = tmp_path / "entry.toml"
@@ -456,8 +451,8 @@ def test_every_shipped_statement_names_claims_or_why_not() -> None:
     for name in entry_names():
         entry = load_entry(name)
         assert entry.statements, name
-        tested = {c for st in entry.statements for c in st.get("claims") or []}
-        assert tested <= {c["id"] for c in entry.claims}
+        tested = {c for st in entry.statements for c in st.claims or []}
+        assert tested <= {c.id for c in entry.claims}
 
 
 def test_resume_runs_only_what_the_record_lacks(built_fmus, tmp_path: Path,
@@ -467,8 +462,8 @@ def test_resume_runs_only_what_the_record_lacks(built_fmus, tmp_path: Path,
     that lost a member gets that member run again and the same claims."""
     import gzip
 
+    import cosim.reproduce.run as rep
     import cosim.run.ensemble as ensemble
-    import cosim.run.reproduce as rep
     from cosim.run.record import load, save
 
     path = tmp_path / "entry.toml"
@@ -503,8 +498,8 @@ def test_the_table_runs_are_member_one_of_the_disturbance_ensemble() -> None:
     """A single run of the table takes the first report seed (so it is member 1 of the
     claims' ensemble, and its seed is named on the page); entries without a random input
     add nothing."""
+    from cosim.reproduce.run import run_jobs, table_seed
     from cosim.run.ensemble import claim_jobs
-    from cosim.run.reproduce import run_jobs, table_seed
 
     entry = load_entry("seed000")
     key = entry.ensemble.seed_key

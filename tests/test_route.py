@@ -133,11 +133,11 @@ def test_jinan_xuzhou_east_reference_keeps_a_traction_reserve() -> None:
     """The reference needs at most the traction envelope minus 3 sigma of the slowly varying
     disturbance of the seed 001 reproduction (its coloured rows), on every 25 m segment: the
     force m a + resistance + line resistance at the segment's start speed."""
-    from cosim.run.reproduce import load_entry
+    from cosim.reproduce.entry import load_entry
     from plants.emu import emu_config
 
-    sigmas = [r["set"]["plant.disturbance_accel_std"] for r in load_entry("seed001").runs
-              if r.get("set", {}).get("plant.disturbance_correlation_time", 0.0) > 0.0]
+    sigmas = [r.overrides["plant.disturbance_accel_std"] for r in load_entry("seed001").runs
+              if r.overrides.get("plant.disturbance_correlation_time", 0.0) > 0.0]
     reserve = 3.0 * max(sigmas)  # m/s^2: 0.09
     route = load_route("jinan_xuzhou_east")
     ref, p = route.reference, emu_config("crh380a_3unit")

@@ -1,5 +1,5 @@
 """A paper's claims as data, tested over seed ensembles (``[ensemble]`` and ``[[claims]]`` of a
-reproduction entry; schema in the module docstring of :mod:`cosim.run.reproduce`).
+reproduction entry; schema: :mod:`cosim.reproduce.entry`).
 
 Each claim compares, per member, a tested quantity with its claimed side: ``less`` /
 ``greater`` the paired difference A - B (same seed / same mismatch sample) with 0, ``below`` /
@@ -60,12 +60,65 @@ CLAIM_KINDS = ("less", "greater", "below", "above", "inside")
 QUANTIFIERS = ("every", "share", "typical")
 ENSEMBLES = ("disturbance", "mismatch", "repeat")
 ORIGINS = ("paper", "ours", "sanity")  # the paper's statement, ours, a check of the setup
-_CLAIM_KEYS = {"id", "source", "text", "paper", "metric", "kind", "runs", "threshold", "range",
-               "ensemble", "origin", "quantifier", "share", "transform", "each",
-               "margin"}
-_ENSEMBLE_KEYS = {"seed_key", "report_seeds", "calibration_seeds", "perturb", "perturb_seed",
-                  "rounding_perturb", "rounding_reference_path", "repeats", "members"}
-_VARIANT_KEYS = {"name", "text", "replace", "rounding", "seeds"}
+REQUIRED = "required"
+# The keys of the claims' tables: key -> (type, default, meaning); the schema page
+# (docs/reproduce_schema.md) is written from them.
+ENSEMBLE_KEYS: dict[str, tuple[str, str, str]] = {
+    "seed_key": ("a string FMU.PARAMETER", "none", "the override key taking a member's seed "
+                 "(none: no random input; a \"disturbance\" claim is then one run)"),
+    "report_seeds": ("\"A..B\", \"A..B, C\" or a list of integers", "\"1..20\"",
+                     "the seeds of the members; ``--seeds K`` takes the first K"),
+    "calibration_seeds": ("as report_seeds", "none", "the seeds used for tuning only; "
+                          "disjoint from report_seeds (checked)"),
+    "perturb": ("a list of strings", "[]", "the plant-mismatch distribution of a "
+                "\"mismatch\" claim, as ``--perturb`` (``plant.mass=+-10%``)"),
+    "perturb_seed": ("an integer", "0", "the seed of the mismatch draws"),
+    "rounding_perturb": ("a list of strings FMU.PARAMETER", "[]", "parameters scaled by "
+                         "1 + 1e-12 on the perturbed floating-point rerun"),
+    "rounding_reference_path": ("true or false", "true", "the rerun also takes the plants' "
+                                "numpy reference path (``ATO_COSIM_NO_KERNELS=1``); false "
+                                "keeps the compiled kernels (rounding_perturb alone "
+                                "perturbs it)"),
+    "repeats": ("an integer >= 1", "none", "the members of a \"repeat\" claim: repetitions of "
+                "the nominal run, whatever ``--seeds`` (no rounding rerun)"),
+    "members": ("an integer in [1, report seeds]", "20, or every report seed if fewer",
+                "K a published page needs"),
+}
+CLAIM_KEYS: dict[str, tuple[str, str, str]] = {
+    "id": ("a string [a-z0-9_]+", REQUIRED, "the claim's id, unique in the entry"),
+    "text": ("a string", REQUIRED, "the claim in words (\"ISMPC has a lower MSE than ISMC\")"),
+    "metric": ("a string", REQUIRED, "the summary key tested ('.' for a nested key; a bool "
+               "counts 1 / 0)"),
+    "kind": ("less | greater | below | above | inside", REQUIRED,
+             "less / greater: runs[0] against runs[1], paired by member; below / above: "
+             "runs[0] against threshold; inside: runs[0] within range"),
+    "runs": ("a list of strings", REQUIRED, "the ``[[runs]]`` names compared: two for less / "
+             "greater, one otherwise"),
+    "threshold": ("a number", "none", "below / above: the bound, in the metric's unit"),
+    "range": ("[low, high]", "none", "inside: the band, in the metric's unit"),
+    "quantifier": ("every | share | typical", "every for below / above / inside, typical for "
+                   "less / greater", "what the claim asserts of the runs "
+                   "(:mod:`cosim.run.claims`)"),
+    "share": ("a number in (0, 1)", "none", "with quantifier share: at least this fraction "
+              "of the runs"),
+    "transform": ("abs", "none", "the metric's absolute value per member"),
+    "ensemble": ("disturbance | mismatch | repeat", "disturbance", "the members: the report "
+                 "seeds, the perturb samples, or the nominal run ``[ensemble] repeats`` times "
+                 "(paired by repeat index: CPU and wall time claims)"),
+    "origin": ("paper | ours | sanity", "paper", "whose claim: the paper's, ours, or a check "
+               "of the setup"),
+    "source": ("a string", "\"\"", "where the paper makes it (\"Table 2\")"),
+    "paper": ("a string", "\"\"", "the paper's value(s), as text"),
+    "each": ("a table placeholder -> list of strings or tables", "none",
+             "a claim family: one claim per combination of values (the cross product); "
+             "``{name}`` / ``{name.field}`` in any string, the id included, is filled "
+             "(:func:`cosim.run.claims.expand_families`)"),
+    "margin": ("a number in (0, 1)", "none", "typical less / greater: the smallest effect the "
+               "claim calls material, as a fraction of B's median; an undecided claim whose "
+               "median difference's CI lies within it reads \"no effect\""),
+}
+_CLAIM_KEYS = set(CLAIM_KEYS)
+_ENSEMBLE_KEYS = set(ENSEMBLE_KEYS)
 ROUNDING_RELATIVE = 1e-12  # relative change of each [ensemble].rounding_perturb parameter
 CONFIDENCE = 0.95
 N_RESAMPLES = 9999
@@ -78,7 +131,7 @@ class ClaimsError(ValueError):
 
 @dataclass
 class Ensemble:
-    """How an entry's runs are varied (see :mod:`cosim.run.reproduce`)."""
+    """How an entry's runs are varied (see :mod:`cosim.reproduce.entry`)."""
 
     seed_key: str | None = None
     report_seeds: list[int] = field(default_factory=lambda: list(range(1, 21)))
@@ -250,8 +303,41 @@ def expand_families(where: str, claims: list[dict[str, Any]]) -> list[dict[str, 
     return out
 
 
+@dataclass(frozen=True, kw_only=True)
+class Claim:
+    """A ``[[claims]]`` table, checked, with its defaults filled (its keys:
+    :data:`CLAIM_KEYS`)."""
+
+    id: str
+    text: str
+    metric: str  # the summary key tested
+    kind: str  # one of CLAIM_KINDS
+    runs: list[str]  # two for less / greater, one otherwise
+    threshold: float | None = None  # below / above, in the metric's unit
+    band: list[float] | None = None  # inside: the TOML key "range", [low, high]
+    quantifier: str = "typical"  # one of QUANTIFIERS (the kind's default where not given)
+    share: float | None = None  # quantifier "share": the fraction of the runs
+    transform: str | None = None  # "abs": the metric's absolute value per member
+    ensemble: str = "disturbance"  # one of ENSEMBLES
+    origin: str = "paper"  # one of ORIGINS
+    source: str = ""  # where the paper makes it
+    paper: str = ""  # the paper's value(s), as text
+    margin: float | None = None  # typical less / greater: the material effect, of B's median
+
+    @classmethod
+    def from_table(cls, table: dict[str, Any]) -> Claim:
+        """The claim of a (checked) ``[[claims]]`` table."""
+        given = {k: v for k, v in table.items() if k not in ("range", "quantifier", "each")}
+        return cls(**given, band=table.get("range"),
+                   quantifier=table.get("quantifier", default_quantifier(table["kind"])))
+
+    def bound(self) -> float | list[float] | None:
+        """The threshold (below / above) or the band (inside) the claim tests against."""
+        return self.threshold if self.threshold is not None else self.band
+
+
 def check_claims(where: str, claims: list[dict[str, Any]], run_names: list[str],
-                 ens: Ensemble) -> list[dict[str, Any]]:
+                 ens: Ensemble) -> list[Claim]:
     """The ``[[claims]]`` tables, families expanded (:func:`expand_families`), checked
     against the entry's run names and ensemble."""
     claims = expand_families(where, claims)
@@ -321,75 +407,16 @@ def check_claims(where: str, claims: list[dict[str, Any]], run_names: list[str],
                               "for a typical less / greater claim only")
         if claim.get("origin", "paper") not in ORIGINS:
             raise ClaimsError(f"{at}: origin = {claim['origin']!r} (known: {ORIGINS})")
-    return claims
+    return [Claim.from_table(claim) for claim in claims]
 
 
-def _known_keys(at: str, table: dict[str, Any], allowed: set[str]) -> None:
-    unknown = sorted(set(table) - allowed)
-    if unknown:
-        raise ClaimsError(f"{at}: unknown key(s) {unknown} (allowed: {sorted(allowed)})")
-
-
-def check_variants(where: str, variants: list[dict[str, Any]], run_names: list[str]
-                   ) -> list[dict[str, Any]]:
-    """The ``[[variants]]`` tables: each names the runs that replace others in every claim
-    (an alternative reading or a mechanism removed), checked against the entry's runs."""
-    names: set[str] = set()
-    for i, var in enumerate(variants):
-        at = f"{where}: [[variants]] #{i + 1}"
-        _known_keys(at, var, _VARIANT_KEYS)
-        missing = [k for k in ("name", "replace") if k not in var]
-        if missing:
-            raise ClaimsError(f"{at}: missing key(s) {missing}")
-        if not isinstance(var["name"], str) or var["name"] in names or var["name"] == "main":
-            raise ClaimsError(f"{at}: name = {var['name']!r}: a new name other than 'main'")
-        names.add(var["name"])
-        rep = var["replace"]
-        if not (isinstance(rep, dict) and rep):
-            raise ClaimsError(f"{at}: replace = {rep!r}: expected a table run -> run")
-        for old, new in rep.items():
-            for run in (old, new):
-                if run not in run_names:
-                    raise ClaimsError(f"{at}: replace: {run!r} is not one of the entry's "
-                                      f"[[runs]]")
-        n = var.get("seeds")
-        if n is not None and (isinstance(n, bool) or not isinstance(n, int) or n < 1):
-            raise ClaimsError(f"{at}: seeds = {n!r}: expected an integer >= 1 (the first "
-                              "report seeds, at most --seeds)")
-        if not isinstance(var.get("rounding", True), bool):
-            raise ClaimsError(f"{at}: rounding = {var['rounding']!r}: expected true or false")
-    return variants
-
-
-_STATEMENT_KEYS = {"text", "where", "claims", "untestable"}
-
-
-def check_statements(where: str, statements: list[dict[str, Any]],
-                     claim_ids: list[str]) -> list[dict[str, Any]]:
-    """The ``[[statements]]`` tables: each of the paper's assertions (``text``, ``where`` in
-    the paper) with the ``claims`` that test it, or why it is ``untestable``; checked against
-    the entry's claim ids."""
-    for i, st in enumerate(statements):
-        at = f"{where}: [[statements]] #{i + 1}"
-        _known_keys(at, st, _STATEMENT_KEYS)
-        if not isinstance(st.get("text"), str) or not st["text"].strip():
-            raise ClaimsError(f"{at}: text: the paper's statement is missing")
-        ids, why = st.get("claims"), st.get("untestable")
-        if (ids is None) == (why is None):
-            raise ClaimsError(f"{at} ({st['text'][:40]!r}): give claims = [ids] or "
-                              "untestable = \"why\", one of them")
-        for cid in ids or []:
-            if cid not in claim_ids:
-                raise ClaimsError(f"{at}: claims: {cid!r} is not one of the entry's claim ids")
-    return statements
-
-
-def variant_runs(claim: dict[str, Any], variant: dict[str, Any]) -> list[str] | None:
-    """The claim's runs under ``variant`` (None: the variant replaces none of them)."""
-    rep = variant["replace"]
-    if not any(r in rep for r in claim["runs"]):
+def variant_runs(claim: Claim, variant: Any) -> list[str] | None:
+    """The claim's runs under ``variant`` (a :class:`cosim.reproduce.parts.Variant`; None: it
+    replaces none of them)."""
+    rep = variant.replace
+    if not any(r in rep for r in claim.runs):
         return None
-    return [rep.get(r, r) for r in claim["runs"]]
+    return [rep.get(r, r) for r in claim.runs]
 
 
 def median_ci(values: np.ndarray) -> tuple[float, float, float, str]:
@@ -472,14 +499,13 @@ def _k_needed(decides: Any) -> int:
     return k
 
 
-def verdict(claim: dict[str, Any], a: np.ndarray, b: np.ndarray | None = None
-            ) -> dict[str, Any]:
+def verdict(claim: Claim, a: np.ndarray, b: np.ndarray | None = None) -> dict[str, Any]:
     """Evaluate one claim on its members: ``a`` (runs[0]) and, for less/greater, ``b``
     (runs[1]) paired by index. Returns the median and its exact 95 % CI of the tested
     quantity, k of K on the claimed side, the worst member, the quantifier, the p-value that
     enters the multiplicity adjustment (None for ``every``) and the verdict (module text)."""
-    kind = claim["kind"]
-    quantifier = claim.get("quantifier", default_quantifier(kind))
+    kind = claim.kind
+    quantifier = claim.quantifier
     a = np.asarray(a, dtype=float)
     if kind in ("less", "greater"):
         assert b is not None
@@ -487,10 +513,10 @@ def verdict(claim: dict[str, Any], a: np.ndarray, b: np.ndarray | None = None
         lo_edge = hi_edge = 0.0
     elif kind in ("below", "above"):
         x = a
-        lo_edge = hi_edge = float(claim["threshold"])
+        lo_edge = hi_edge = float(claim.threshold)  # type: ignore[arg-type]
     else:
         x = a
-        lo_edge, hi_edge = (float(v) for v in claim["range"])
+        lo_edge, hi_edge = (float(v) for v in claim.band or [])
     if kind in ("less", "below"):
         good = x < lo_edge
     elif kind in ("greater", "above"):
@@ -527,7 +553,7 @@ def verdict(claim: dict[str, Any], a: np.ndarray, b: np.ndarray | None = None
         out["verdict"] = "holds" if k == n else "fails"
         return out
     if quantifier == "share":
-        p = float(claim["share"])
+        p = float(claim.share)  # type: ignore[arg-type]
         p_hold, p_fail = _binom_p(k, n, p, "greater"), _binom_p(k, n, p, "less")
         can = (_binom_p(n, n, p, "greater") < half) or (_binom_p(0, n, p, "less") < half)
         need = _k_needed(lambda m: _binom_p(m, m, p, "greater") < half
@@ -547,12 +573,11 @@ def verdict(claim: dict[str, Any], a: np.ndarray, b: np.ndarray | None = None
         out.update(verdict="insufficient", note=f"K >= {need} needed")
         return out
     out["verdict"] = "holds" if p_hold < half else "fails" if p_fail < half else "inconclusive"
-    margin = claim.get("margin")
-    if out["verdict"] == "inconclusive" and margin is not None:
-        bound = float(margin) * abs(out["b_median"])
+    if out["verdict"] == "inconclusive" and claim.margin is not None:
+        bound = float(claim.margin) * abs(out["b_median"])
         if -bound < out["ci_low"] and out["ci_high"] < bound:
-            out.update(verdict="no effect",
-                       note=f"the median difference's CI is within +-{margin:.0%} of B's median")
+            out.update(verdict="no effect", note=f"the median difference's CI is within "
+                                                 f"+-{claim.margin:.0%} of B's median")
     return out
 
 

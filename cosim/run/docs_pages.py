@@ -3,6 +3,8 @@
 Each page is made from a source in the repository or the runs and is never edited by hand:
 
 - ``docs/fmus.md``: the FMU reference, from the cores' declarations (``cosim.fmu.reference``);
+- ``docs/reproduce_schema.md``: the schema of a reproduction entry, from its dataclasses
+  (``cosim.reproduce.schema``);
 - ``docs/benchmarks.md``: from ``benchmarks/results.json`` (written by
   ``benchmarks/run_all.py``);
 - ``docs/papers/NAME.md`` and its figures ``docs/papers/NAME/*``: from ``runs/reproduce/NAME/``
@@ -149,7 +151,7 @@ def record_simulation(folder: Path) -> str | None:
 def too_few_members(name: str, k: int) -> str | None:
     """Why a page of entry ``name`` cannot be published from K = ``k`` members (None if it
     can): fewer than the entry's ``[ensemble]`` declares (``members``, default 20)."""
-    from cosim.run.reproduce import load_entry
+    from cosim.reproduce.entry import load_entry
 
     entry = load_entry(name)
     need = entry.ensemble.declared_k()
@@ -178,14 +180,14 @@ def source_dir(name: str, reproduce_dir: Path = REPRODUCE_DIR) -> Path | None:
     """The folder paper ``name``'s page is made from, or None to keep the committed page: the
     local run (``reproduce_dir/NAME``) when its inputs are the tree's; none when the committed
     page's are and every figure it links is there; else a folder redrawn
-    (``cosim.run.reproduce.redraw_entry``, no simulation) from a record whose simulation
+    (``cosim.reproduce.page.redraw_entry``, no simulation) from a record whose simulation
     inputs are the tree's, the local run's before the committed one; else the local run if
     it has a table (:func:`stale_papers` names it)."""
     import shutil
     import tempfile
 
+    from cosim.reproduce.page import redraw_entry
     from cosim.run.provenance import entry_digest, simulation_digest
-    from cosim.run.reproduce import redraw_entry
 
     run_dir = reproduce_dir / name
     current = entry_digest(name)
@@ -297,7 +299,10 @@ def fill_generated(text: str, key: str, content: str) -> str:
 
 def generated_pages(reproduce_dir: Path = REPRODUCE_DIR) -> Iterator[tuple[Path, bytes]]:
     """Every generated file whose source is present: (path, content)."""
+    from cosim.reproduce.schema import SCHEMA_PATH, schema_markdown
+
     yield REFERENCE_PATH, fmu_reference().encode()
+    yield SCHEMA_PATH, schema_markdown().encode()
     if BENCHMARKS_JSON.is_file():
         yield DOCS / "benchmarks.md", benchmarks_page().encode()
     other = DOCS / "other_tools.md"

@@ -29,13 +29,14 @@ import math
 import sys
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from cosim.run.claims import (
     ALPHA,
     ROUNDING_RELATIVE,
+    Claim,
     adjust,
     ours_text,
     variant_runs,
@@ -46,12 +47,15 @@ from cosim.run.figures import draw_ensemble_figure
 from cosim.run.record import Job as RecordJob
 from cosim.run.record import Record, known, save, series_name
 
+if TYPE_CHECKING:
+    from cosim.reproduce.entry import Entry
+
 CHECKPOINT_EVERY = 20  # members between two saves of the partial record
 
 Job = tuple[tuple[str, str, int, bool], str, dict[str, Any]]  # (run, ensemble, i, rounding)
 
 
-def members(entry: Any, ensemble: str, k: int) -> list[dict[str, Any]]:
+def members(entry: Entry, ensemble: str, k: int) -> list[dict[str, Any]]:
     """Overrides of each member (before the run's own ``set``) of one ensemble kind."""
     ens = entry.ensemble
     if k < 1:
@@ -73,26 +77,25 @@ def members(entry: Any, ensemble: str, k: int) -> list[dict[str, Any]]:
             for d, s in zip(_draws(entry, k), seeds, strict=True)]
 
 
-def _draws(entry: Any, k: int) -> list[dict[str, float]]:
+def _draws(entry: Entry, k: int) -> list[dict[str, float]]:
     from cosim.run.perturb import draw_samples, nominal_values, parse_perturb
 
     perts = parse_perturb(entry.ensemble.perturb)
-    scenario = next(r["scenario"] for r in entry.runs
-                    if any(c.get("ensemble") == "mismatch" and r["name"] in c["runs"]
+    scenario = next(r.scenario for r in entry.runs
+                    if any(c.ensemble == "mismatch" and r.name in c.runs
                            for c in entry.claims))
     nominals = nominal_values(scenario, [p.key for p in perts])
     return draw_samples(perts, nominals, k, entry.ensemble.perturb_seed)
 
 
-def _rounding_overrides(entry: Any, run: dict[str, Any], base: dict[str, Any]
-                        ) -> dict[str, Any]:
+def _rounding_overrides(entry: Entry, run: Any, base: dict[str, Any]) -> dict[str, Any]:
     from cosim.run.perturb import nominal_values
 
     out: dict[str, Any] = {}
     for key in entry.ensemble.rounding_perturb:
-        value = base.get(key, run.get("set", {}).get(key))
+        value = base.get(key, run.overrides.get(key))
         if value is None:
-            value = nominal_values(run["scenario"], [key])[key]
+            value = nominal_values(run.scenario, [key])[key]
         if value is None:
             raise ValueError(f"{entry.path}: [ensemble] rounding_perturb {key!r}: no nominal "
                              "value to perturb")
@@ -100,34 +103,33 @@ def _rounding_overrides(entry: Any, run: dict[str, Any], base: dict[str, Any]
     return out
 
 
-def claim_cases(entry: Any, k: int, rounding: bool = True
-                ) -> list[tuple[str, dict[str, Any], list[str], bool, int]]:
+def claim_cases(entry: Entry, k: int, rounding: bool = True
+                ) -> list[tuple[str, Claim, list[str], bool, int]]:
     """(variant, claim, runs, with the rounding rerun, K) of every claim evaluation: the
     claims as written (variant "main", K = ``k``) and each ``[[variants]]`` replacing some of
     their runs (K = its ``seeds``, at most ``k``). A ``repeat`` claim never has the rounding
     rerun (its K is the entry's repeats, see :func:`members`)."""
-    def rnd(claim: dict[str, Any], wanted: bool) -> bool:
-        return wanted and claim.get("ensemble", "disturbance") != "repeat"
+    def rnd(claim: Claim, wanted: bool) -> bool:
+        return wanted and claim.ensemble != "repeat"
 
-    cases = [("main", c, list(c["runs"]), rnd(c, rounding), k) for c in entry.claims]
-    for var in getattr(entry, "variants", []):
-        kv = min(k, var.get("seeds", k))
+    cases = [("main", c, list(c.runs), rnd(c, rounding), k) for c in entry.claims]
+    for var in entry.variants:
+        kv = min(k, var.seeds if var.seeds is not None else k)
         for claim in entry.claims:
             runs = variant_runs(claim, var)
             if runs is not None:
-                cases.append((var["name"], claim, runs,
-                              rnd(claim, rounding and var.get("rounding", True)), kv))
+                cases.append((var.name, claim, runs, rnd(claim, rounding and var.rounding), kv))
     return cases
 
 
-def claim_jobs(entry: Any, k: int, rounding: bool = True) -> list[Job]:
+def claim_jobs(entry: Entry, k: int, rounding: bool = True) -> list[Job]:
     """Every (run, ensemble, member, path) the claims and their variants need, once; the
     ``repeat`` members first, interleaved by repeat index (A0, B0, A1, B1, ...)."""
-    runs = {r["name"]: r for r in entry.runs}
+    runs = {r.name: r for r in entry.runs}
     jobs: dict[tuple[str, str, int, bool], Job] = {}
     cache: dict[tuple[str, int], list[dict[str, Any]]] = {}
     for _var, claim, names, with_rnd, kc in claim_cases(entry, k, rounding):
-        ens = claim.get("ensemble", "disturbance")
+        ens = claim.ensemble
         if (ens, kc) not in cache:
             cache[ens, kc] = members(entry, ens, kc)
         for name in names:
@@ -135,12 +137,12 @@ def claim_jobs(entry: Any, k: int, rounding: bool = True) -> list[Job]:
             for i, member in enumerate(cache[ens, kc]):
                 for rnd in (False, True) if with_rnd else (False,):
                     key = (name, ens, i, rnd)
-                    overrides = {**member, **run.get("set", {})}
+                    overrides = {**member, **run.overrides}
                     if ens == "mismatch":  # the drawn plant wins over the run's nominal
                         overrides.update(member)
                     if rnd:
                         overrides.update(_rounding_overrides(entry, run, overrides))
-                    jobs.setdefault(key, (key, run["scenario"], overrides))
+                    jobs.setdefault(key, (key, run.scenario, overrides))
     order = {name: j for j, name in enumerate(dict.fromkeys(key[0] for key in jobs))}
     repeats = sorted((key for key in jobs if key[1] == "repeat"),
                      key=lambda key: (key[2], order[key[0]]))
@@ -158,7 +160,7 @@ def _run_member(scenario: str, overrides: dict[str, Any], out_dir: str | None = 
 
 def member_dir(out: Path, key: tuple[str, str, int, bool]) -> Path:
     """Where a main-path member writes results.csv (``ensemble/<run>/<ensemble>_<i>``)."""
-    from cosim.run.reproduce import slug
+    from cosim.reproduce.entry import slug
 
     return out / "ensemble" / slug(key[0]) / f"{key[1]}_{key[2] + 1:02d}"
 
@@ -205,7 +207,7 @@ def execute(jobs: list[Job], workers: int | None, label: str = "claims",
 
 def _metric(summaries: dict[Any, dict[str, Any] | None], run: str, ens: str, n: int,
             rnd: bool, metric: str) -> np.ndarray:
-    from cosim.run.reproduce import summary_value
+    from cosim.reproduce.tables import summary_value
 
     vals = []
     for i in range(n):
@@ -216,7 +218,7 @@ def _metric(summaries: dict[Any, dict[str, Any] | None], run: str, ens: str, n: 
     return np.array(vals)
 
 
-def evaluate(entry: Any, summaries: dict[Any, dict[str, Any] | None], k: int,
+def evaluate(entry: Entry, summaries: dict[Any, dict[str, Any] | None], k: int,
              rounding: bool = True, variants: bool = False) -> list[dict[str, Any]]:
     """One row per claim (see :func:`cosim.run.claims.verdict`); with ``variants`` one row
     per claim and ``[[variants]]`` entry that replaces one of its runs instead."""
@@ -224,34 +226,32 @@ def evaluate(entry: Any, summaries: dict[Any, dict[str, Any] | None], k: int,
     for var, claim, names, with_rnd, kc in claim_cases(entry, k, rounding):
         if (var != "main") != variants:
             continue
-        ens = claim.get("ensemble", "disturbance")
+        ens = claim.ensemble
         n = len(members(entry, ens, kc))
         results = []
         for rnd in (False, True) if with_rnd else (False,):
-            a = _metric(summaries, names[0], ens, n, rnd, claim["metric"])
-            b = (_metric(summaries, names[1], ens, n, rnd, claim["metric"])
+            a = _metric(summaries, names[0], ens, n, rnd, claim.metric)
+            b = (_metric(summaries, names[1], ens, n, rnd, claim.metric)
                  if len(names) > 1 else None)
-            if claim.get("transform") == "abs":  # e.g. the stop error's size, either side
+            if claim.transform == "abs":  # e.g. the stop error's size, either side
                 a, b = np.abs(a), None if b is None else np.abs(b)
             results.append(verdict(claim, a, b))
         row = with_rounding(results[0], results[1] if with_rnd else None)
         rows.append({**({"variant": var} if variants else {}),
-                     "id": claim["id"], "source": claim.get("source", ""),
-                     "text": claim["text"], "paper": claim.get("paper", ""),
-                     "metric": claim["metric"], "kind": claim["kind"],
-                     "runs": " vs ".join(names), "ensemble": ens,
-                     "origin": claim.get("origin", "paper"), "share": claim.get("share"),
-                     "threshold": claim.get("threshold", claim.get("range")), **row})
+                     "id": claim.id, "source": claim.source, "text": claim.text,
+                     "paper": claim.paper, "metric": claim.metric, "kind": claim.kind,
+                     "runs": " vs ".join(names), "ensemble": ens, "origin": claim.origin,
+                     "share": claim.share, "threshold": claim.bound(), **row})
     return adjust(rows)
 
 
-def variants_markdown(entry: Any, rows: list[dict[str, Any]], var_rows: list[dict[str, Any]]
+def variants_markdown(entry: Entry, rows: list[dict[str, Any]], var_rows: list[dict[str, Any]]
                       ) -> str:
     """Each claim's verdict as written and under every variant (a column each; "=": the
     variant replaces none of the claim's runs), then what each variant replaces."""
-    from cosim.run.reproduce import _row
+    from cosim.reproduce.tables import md_row
 
-    names = [v["name"] for v in entry.variants]
+    names = [v.name for v in entry.variants]
     got = {(r["variant"], r["id"]): r for r in var_rows}
 
     def cell(r: dict[str, Any] | None) -> str:
@@ -260,20 +260,20 @@ def variants_markdown(entry: Any, rows: list[dict[str, Any]], var_rows: list[dic
         flag = "" if r["rounding_robust"] in (None, True) else " (r)"
         return f"{_shown(r)}{flag} ({r['k']}/{r['K']})"
 
-    lines = [_row(["claim", "main", *names]), "|" + " --- |" * (2 + len(names))]
+    lines = [md_row(["claim", "main", *names]), "|" + " --- |" * (2 + len(names))]
     for r in rows:
-        lines.append(_row([r["id"], cell(r), *(cell(got.get((n, r["id"]))) for n in names)]))
+        lines.append(md_row([r["id"], cell(r), *(cell(got.get((n, r["id"]))) for n in names)]))
     lines += ["", "Verdict (k of K on the claimed side) of every claim with the runs of each "
               "variant in place of those it replaces; (r): rounding-sensitive. The cells of "
               "all variants are one family: their p-values are adjusted together "
               f"(Benjamini-Hochberg, false discovery rate {ALPHA:g}), and a decision the "
               "adjustment does not keep reads \"inconclusive (raw: ...)\". Variants:", ""]
     for v in entry.variants:
-        rep = "; ".join(f"{a} -> {b}" for a, b in v["replace"].items())
-        rnd = "" if v.get("rounding", True) else " (no perturbed floating-point rerun)"
-        if "seeds" in v:
-            rnd += f" (the first {v['seeds']} report seeds at most)"
-        lines.append(f"- **{v['name']}**: {v.get('text', '')}{rnd}. {rep}.")
+        rep = "; ".join(f"{a} -> {b}" for a, b in v.replace.items())
+        rnd = "" if v.rounding else " (no perturbed floating-point rerun)"
+        if v.seeds is not None:
+            rnd += f" (the first {v.seeds} report seeds at most)"
+        lines.append(f"- **{v.name}**: {v.text}{rnd}. {rep}.")
     return "\n".join(lines)
 
 
@@ -290,9 +290,9 @@ def claims_markdown(rows: list[dict[str, Any]], k: int) -> str:
     """The claims table: each claim with its verdict first (adjusted for multiplicity, the raw
     one where they differ), k of K, ours, the paper's figure and source; then the counts per
     origin and what the columns mean."""
-    from cosim.run.reproduce import _row
+    from cosim.reproduce.tables import md_row
 
-    lines = [_row(["claim", "verdict", "k of K", "ours: median [95 % CI]", "paper", "source",
+    lines = [md_row(["claim", "verdict", "k of K", "ours: median [95 % CI]", "paper", "source",
                    "rounding-robust"]), "|" + " --- |" * 7]
     for r in rows:
         what = {"less": "A - B", "greater": "A - B"}.get(r["kind"], r["metric"])
@@ -301,7 +301,7 @@ def claims_markdown(rows: list[dict[str, Any]], k: int) -> str:
         quant = r.get("quantifier", "typical")
         if quant == "share":
             quant = f"share >= {r.get('share', '')}"
-        lines.append(_row([f"{r['id']}: {r['text']} ({quant}; {r['runs']}; {r['metric']}, "
+        lines.append(md_row([f"{r['id']}: {r['text']} ({quant}; {r['runs']}; {r['metric']}, "
                            f"{r['ensemble']}; {r.get('origin', 'paper')})", _shown(r),
                            f"{r['k']} of {r['K']}", f"{what}: {ours_text(r)}", r["paper"],
                            r["source"], robust]))
@@ -343,7 +343,7 @@ def compact_table(rows: list[dict[str, Any]]) -> str:
     return "\n".join(lines)
 
 
-def member_jobs(entry: Any, k: int, rounding: bool = True) -> list[RecordJob]:
+def member_jobs(entry: Entry, k: int, rounding: bool = True) -> list[RecordJob]:
     """:func:`claim_jobs` as record jobs, with the environment each ran in (the rounding path's
     :data:`ROUNDING_ENV` unless ``[ensemble].rounding_reference_path`` is false)."""
     env = ROUNDING_ENV if entry.ensemble.rounding_reference_path else {}
@@ -351,13 +351,12 @@ def member_jobs(entry: Any, k: int, rounding: bool = True) -> list[RecordJob]:
             for key, scenario, overrides in claim_jobs(entry, k, rounding)]
 
 
-def _banded(entry: Any) -> set[str]:
+def _banded(entry: Entry) -> set[str]:
     """Runs drawn by an overlay or panels figure: their members keep their series."""
-    return {r for f in entry.figures if f.get("kind", "overlay") in ("overlay", "panels")
-            for r in f.get("runs", [x["name"] for x in entry.runs])}
+    return {r for f in entry.figures if f.line_kind() for r in f.runs or entry.run_names()}
 
 
-def simulate_claims(entry: Any, out: Path, record: Record, workers: int | None = None,
+def simulate_claims(entry: Entry, out: Path, record: Record, workers: int | None = None,
                     scheduler: str | None = None, previous: Record | None = None) -> None:
     """Run the claims' members (K and rounding path of ``record``) and add their summaries to
     ``record``, with the series of the members the ensemble figures draw; a member
@@ -399,33 +398,33 @@ def simulate_claims(entry: Any, out: Path, record: Record, workers: int | None =
     record_member_series(entry, out, record)
 
 
-def record_member_series(entry: Any, out: Path, record: Record) -> None:
+def record_member_series(entry: Entry, out: Path, record: Record) -> None:
     """The series of the members the ensemble figures draw (main path, disturbance, banded
     runs) from their results.csv under ``out``, added to ``record`` (thinned to
-    :data:`cosim.run.reproduce.MEMBER_ROWS` rows)."""
-    from cosim.run.reproduce import MEMBER_ROWS, record_series, run_scenarios
+    :data:`cosim.reproduce.run.MEMBER_ROWS` rows)."""
+    from cosim.reproduce.run import MEMBER_ROWS, record_series, run_scenarios
 
     scenarios = run_scenarios(entry)
     banded = _banded(entry)
-    specs = [f for f in entry.figures if f.get("kind", "overlay") in ("overlay", "panels")]
+    lines = [f for f in entry.figures if f.line_kind()]
     for ident, job in record.jobs.items():
         key = job.key
         if (job.kind == "member" and key[0] in banded and key[1] == "disturbance"
                 and not key[3] and record.results[ident] is not None):
             record_series(record, series_name("member", key[0], key[2]),
                           member_dir(out, key),
-                          [f for f in specs if key[0] in f.get("runs", [key[0]])],
+                          [f for f in lines if f.runs is None or key[0] in f.runs],
                           scenarios[key[0]], scalars=False, max_rows=MEMBER_ROWS)
 
 
-def write_claims(entry: Any, record: Record, out: Path, plot_format: str = "png"
+def write_claims(entry: Entry, record: Record, out: Path, plot_format: str = "png"
                  ) -> tuple[list[dict[str, Any]], str]:
     """Evaluate the entry's claims on ``record``'s members; write ``claims.csv``,
     ``claims.md`` (and ``variants.*``) and the ensemble figures (``plot_format``) to ``out``;
     returns the claims' rows and the markdown of claims.md below its title."""
     import pandas as pd
 
-    from cosim.run.reproduce import run_scenarios
+    from cosim.reproduce.run import run_scenarios
 
     k, rounding = record.seeds, record.rounding
     summaries = {job.key: record.results[ident] for ident, job in record.jobs.items()
@@ -433,19 +432,20 @@ def write_claims(entry: Any, record: Record, out: Path, plot_format: str = "png"
     rows = evaluate(entry, summaries, k, rounding)
     out.mkdir(parents=True, exist_ok=True)
     n = len(members(entry, "disturbance", k))
-    for spec in entry.figures if n > 1 else []:
-        if spec.get("kind", "overlay") not in ("overlay", "panels"):
+    for figure in entry.figures if n > 1 else []:
+        if not figure.line_kind():
             continue
-        runs = [r for r in spec.get("runs", [x["name"] for x in entry.runs])
+        runs = [r for r in figure.runs or entry.run_names()
                 if all(series_name("member", r, i) in record.series for i in range(n))]
         if runs:
-            draw_ensemble_figure(spec, {r: [record.series[series_name("member", r, i)]
-                                            for i in range(n)] for r in runs},
-                                 out / f"{Path(spec['file']).stem}_ensemble.{plot_format}",
+            draw_ensemble_figure(figure.spec(),
+                                 {r: [record.series[series_name("member", r, i)]
+                                      for i in range(n)] for r in runs},
+                                 out / f"{Path(figure.file).stem}_ensemble.{plot_format}",
                                  run_scenarios(entry))
     pd.DataFrame(rows).to_csv(out / "claims.csv", index=False)
     text = claims_markdown(rows, k) + "\n"
-    if getattr(entry, "variants", []):
+    if entry.variants:
         var_rows = evaluate(entry, summaries, k, rounding, variants=True)
         pd.DataFrame(var_rows).to_csv(out / "variants.csv", index=False)
         text += ("\n#### The claims under each variant\n\n"
@@ -473,7 +473,7 @@ def verdict_summary(rows: list[dict[str, Any]], k: int) -> str:
     return text
 
 
-def run_claims(entry: Any, out: Path, k: int, workers: int | None = None,
+def run_claims(entry: Entry, out: Path, k: int, workers: int | None = None,
                rounding: bool = True, scheduler: str | None = None,
                plot_format: str = "png") -> list[dict[str, Any]]:
     """Run and evaluate the entry's claims (:func:`simulate_claims`, then

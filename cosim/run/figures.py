@@ -1,7 +1,7 @@
 """Every figure of a reproduction drawn from recorded series: the runs' overlays and panels,
 the ensembles' medians and bands, and the helpers they share (labels and units from the
 declarations, drawing styles, legends outside the axes). It imports none of the runners; the
-runners and :mod:`cosim.run.reproduce` import it. Figures are matplotlib figures saved at
+runners and :mod:`cosim.reproduce` import it. Figures are matplotlib figures saved at
 :data:`cosim.run.results.PLOT_DPI` (png), or as svg / pdf by the file's suffix.
 """
 

@@ -5,12 +5,13 @@ The inputs of entry ``scenarios/reproduce/NAME.toml`` are: the entry itself; eve
 names (a string value equal to a file stem in ``scenarios/``); the files bundled into every FMU
 those scenarios and the entry name (a string equal to a catalog identifier:
 ``cosim.fmu.build.bundled_files`` of its wrapper, i.e. the cores, their data and the FMU layer);
-and the code that runs and evaluates them (``cosim/run/``, ``cosim/papers/``), leaving out the
-pages' own writer. :func:`entry_digest` is a SHA-256 over their relative paths and contents, so
-it is the same on every machine for the same tree.
+and the code that runs and evaluates them (``cosim/run/``, ``cosim/papers/``,
+``cosim/reproduce/``), leaving out the pages' own writer. :func:`entry_digest` is a SHA-256
+over their relative paths and contents, so it is the same on every machine for the same tree.
 
 The *simulation* inputs (:func:`simulation_digest`) are the same files less the entry and the
-modules that only turn a record into tables, claims, figures and pages (:data:`EVALUATION_ONLY`):
+modules that only turn a record into tables, claims, figures and pages (:data:`EVALUATION_ONLY`,
+every module of :data:`EVALUATION_ONLY_FOLDERS`):
 what fixes a simulation's result given its job (scenario and overrides, which the record keeps
 and :func:`cosim.run.record.check_jobs` compares). A record whose simulation digest is the
 tree's serves the page whatever changed in the entry or the evaluation code: the page is then
@@ -33,12 +34,21 @@ except ModuleNotFoundError:  # Python 3.10
 
 SCENARIOS = ROOT / "scenarios"
 ENTRIES = SCENARIOS / "reproduce"
-EVALUATION = ("cosim/run", "cosim/papers")
+EVALUATION = ("cosim/run", "cosim/papers", "cosim/reproduce")
 INPUTS_FILE = "inputs.sha256"  # in a reproduction's folder: the digest of the inputs it ran
 NOT_INPUTS = {"cosim/run/docs_pages.py", "cosim/run/provenance.py"}
 # read a record and the entry only: tables, claims, figures, the page
 EVALUATION_ONLY = {"cosim/run/reproduce.py", "cosim/run/ensemble.py", "cosim/run/claims.py",
                    "cosim/run/record.py", "cosim/run/console.py", "cosim/run/figures.py"}
+# every module under these folders is evaluation-only: the reproduction (its entries, jobs,
+# tables, figures and page), whose jobs the record keeps and compares
+EVALUATION_ONLY_FOLDERS = ("cosim/reproduce/",)
+
+
+def evaluation_only(relative: str) -> bool:
+    """Whether the file at ``relative`` (a POSIX path from the repository root) only evaluates
+    a record: one of :data:`EVALUATION_ONLY` or under :data:`EVALUATION_ONLY_FOLDERS`."""
+    return relative in EVALUATION_ONLY or relative.startswith(EVALUATION_ONLY_FOLDERS)
 
 
 def _strings(value: Any) -> Iterator[str]:
@@ -78,10 +88,11 @@ def entry_inputs(name: str) -> list[Path]:
 
 
 def simulation_inputs(name: str) -> list[Path]:
-    """:func:`entry_inputs` less the entry itself and :data:`EVALUATION_ONLY`."""
+    """:func:`entry_inputs` less the entry itself and the evaluation-only modules
+    (:func:`evaluation_only`)."""
     entry = ENTRIES / f"{name}.toml"
     return [p for p in entry_inputs(name)
-            if p != entry and p.relative_to(ROOT).as_posix() not in EVALUATION_ONLY]
+            if p != entry and not evaluation_only(p.relative_to(ROOT).as_posix())]
 
 
 def entry_digest(name: str) -> str:

@@ -3,7 +3,7 @@
 A :class:`Record` holds, for one entry, every simulation job it ran with that job's complete
 specification (scenario, overrides, environment) and result (the run's ``summary.json``
 content), and the recorded series its figures draw. The tables, claims, figures and page are
-a function of the record and the entry (:mod:`cosim.run.reproduce`), so they are redrawn from
+a function of the record and the entry (:mod:`cosim.reproduce`), so they are redrawn from
 it in seconds without simulating; :func:`check_jobs` refuses a record that lacks a job the
 entry needs or ran it with another specification.
 

@@ -1,0 +1,14 @@
+"""Paper reproductions as data plus one command: ``cosim reproduce NAME`` / ``cosim reproduce all``.
+
+One module per job:
+
+- :mod:`cosim.reproduce.entry`: an entry ``scenarios/reproduce/NAME.toml`` as typed data and
+  its one loader (:func:`cosim.reproduce.entry.load_entry`), of the parts in
+  :mod:`cosim.reproduce.parts`, whose fields are TOML keys (:mod:`cosim.reproduce.fields`);
+- :mod:`cosim.reproduce.schema`: the schema page ``docs/reproduce_schema.md`` written from them;
+- :mod:`cosim.reproduce.run`: the simulations an entry needs and their record;
+- :mod:`cosim.reproduce.tables`: the tables (ours beside the paper's, derived figures,
+  rankings) and their markdown;
+- :mod:`cosim.reproduce.figures`: the figures and sweeps of the page;
+- :mod:`cosim.reproduce.page`: the page made from a record alone, and the command end to end.
+"""

@@ -1,0 +1,277 @@
+"""What a reproduction makes of its record, and the command.
+
+:func:`evaluate` makes everything after the simulations from the record and the entry alone:
+the page ``table.md`` (the claims' verdicts and table first, then the statements, ours beside
+the paper's, derived figures, rankings, sweeps, figures and notes) with ``table.csv``, and
+``claims.*`` (:mod:`cosim.run.ensemble`). :func:`redraw_entry` (``--redraw``) is that half
+alone, :func:`reproduce` one entry end to end (:func:`cosim.reproduce.run.simulate`, the
+record, :func:`evaluate`) and :func:`reproduce_all` every entry with one ``REPRODUCTION.md``."""
+
+from __future__ import annotations
+
+import re
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from cosim.reproduce.entry import (
+    FIGURE_KINDS,
+    REPRODUCE_DIR,
+    Entry,
+    ReproduceError,
+    Statement,
+    entry_names,
+    load_entry,
+)
+from cosim.reproduce.figures import figure_section, sweep_section
+from cosim.reproduce.run import (
+    figure_runs,
+    merged_summaries,
+    run_scenarios,
+    simulate,
+    table_seed,
+    wanted_jobs,
+)
+from cosim.reproduce.tables import (
+    Cell,
+    derived_markdown,
+    derived_rows,
+    md_row,
+    ranking_markdown,
+    ranking_rows,
+    table_markdown,
+    table_rows,
+)
+from cosim.run.provenance import INPUTS_FILE, entry_digest, simulation_digest
+from cosim.run.record import Record, RecordError, check_jobs, load, save, series_name
+
+
+@dataclass(frozen=True)
+class Page:
+    """What :func:`evaluate` made of a record."""
+
+    table: Path  # the page's file (``table.md`` or the entry's ``table`` name)
+    markdown: str  # its content
+    rows: list[Cell]  # the table's cells (:func:`cosim.reproduce.tables.table_rows`)
+    claim_rows: list[dict[str, Any]]  # one per claim (:func:`cosim.run.ensemble.evaluate`)
+
+
+def evaluate(entry: Entry, record: Record, out: Path, plot_format: str = "png") -> Page:
+    """Tables, sweeps' tables and figures, figures, claims and the page of ``entry`` from
+    ``record`` alone (no simulation; :class:`cosim.run.record.RecordError` if the record
+    lacks a job the entry reads): writes ``table.md`` / ``table.csv`` (``entry.table``),
+    ``claims.*`` and the figures in ``plot_format`` to ``out``."""
+    import pandas as pd
+
+    from cosim.run.ensemble import verdict_summary, write_claims
+
+    check_jobs(record, wanted_jobs(entry, record.seeds, record.rounding))
+    out.mkdir(parents=True, exist_ok=True)
+    summaries = merged_summaries(entry, {job.key: record.results[ident]
+                                         for ident, job in record.jobs.items()
+                                         if job.kind == "run"})
+    rows = table_rows(entry, summaries)
+    derived = derived_rows(entry, summaries)
+    ranked = ranking_rows(entry, summaries)
+    pd.DataFrame([r.csv() for r in [*rows, *derived, *ranked]]).to_csv(
+        out / f"{entry.table}.csv", index=False)
+    source = (f"{entry.citation} " if entry.citation else "") + (
+        f"Reproduced by `cosim reproduce {entry.name}` (entry "
+        f"`scenarios/reproduce/{entry.path.name}`).")
+    parts = [f"## {entry.title}", "", source, "", table_markdown(entry, rows)]
+    if derived:
+        parts += ["", derived_markdown(derived)]
+    if ranked:
+        parts += ["", ranking_markdown(ranked)]
+    for sweep in entry.sweeps:
+        parts += sweep_section(sweep, record.result("sweep", sweep.name), out, plot_format)
+    scenarios = run_scenarios(entry)
+    frames = {name: record.frame(series_name("run", name))
+              for name in figure_runs(entry, FIGURE_KINDS)}
+    for figure in entry.figures:
+        parts += figure_section(figure, frames, out, plot_format, scenarios)
+    claim_rows: list[dict[str, Any]] = []
+    if entry.claims:  # the verdicts lead the page; the single runs follow
+        claim_rows, claims_text = write_claims(entry, record, out, plot_format)
+        head = parts[:4]
+        stated = (["", "### Every statement of the paper", "",
+                   statements_markdown(entry.statements, claim_rows)]
+                  if entry.statements else [])
+        parts = [*head, verdict_summary(claim_rows, record.seeds), "", "### Claims", "",
+                 claims_text.rstrip("\n"), *stated, "", "### Single runs", "",
+                 "Each run once, as its scenario is shipped" + "".join(
+                     f", at report seed {v} (`{k}`: member 1 of the claims' disturbance "
+                     "ensemble)" for k, v in table_seed(entry).items())
+                 + " (the claims above are over the seed ensemble).", "", *parts[4:]]
+    if entry.notes:
+        parts += ["", "### Where we differ from the paper, and why", "", entry.notes.strip()]
+    table = out / f"{entry.table}.md"
+    markdown = "\n".join(parts) + "\n"
+    table.write_text(markdown)
+    return Page(table, markdown, rows, claim_rows)
+
+
+def statements_markdown(statements: list[Statement], rows: list[dict[str, Any]]) -> str:
+    """Each of the paper's statements with the verdicts (adjusted) of the claims that test it,
+    or why it is not tested."""
+    by_id = {r["id"]: r for r in rows}
+
+    def where(st: Statement) -> str:  # its place in the paper: given, or its claims'
+        return st.where or "; ".join(dict.fromkeys(
+            by_id[c]["source"] for c in st.claims or [] if by_id[c]["source"]))
+
+    lines = [md_row(["the paper says", "where", "tested by (verdict, k of K)"]),
+             "| --- | --- | --- |"]
+    for st in statements:
+        if st.claims is not None:
+            cell = "; ".join(f"`{c}`: {by_id[c].get('adjusted', by_id[c]['verdict'])} "
+                             f"({by_id[c]['k']}/{by_id[c]['K']})" for c in st.claims)
+        else:
+            cell = f"not tested: {st.untestable}"
+        lines.append(md_row([st.text, where(st), cell]))
+    n = sum(st.claims is not None for st in statements)
+    lines += ["", f"{n} of {len(statements)} statements tested by a claim."]
+    return "\n".join(lines)
+
+
+def reproduce(name: str, out_dir: str | Path | None = None, workers: int | None = None,
+              seeds: int | None = None, rounding: bool = True, scheduler: str | None = None,
+              plot_format: str = "png", echo: bool = True, resume: bool = False) -> Path:
+    """:func:`reproduce_page`'s file."""
+    return reproduce_page(name, out_dir, workers, seeds, rounding, scheduler, plot_format,
+                          echo, resume).table
+
+
+def reproduce_page(name: str, out_dir: str | Path | None = None, workers: int | None = None,
+                   seeds: int | None = None, rounding: bool = True,
+                   scheduler: str | None = None, plot_format: str = "png", echo: bool = True,
+                   resume: bool = False) -> Page:
+    """Run one entry (:func:`simulate`), keep its record (``record/``,
+    :mod:`cosim.run.record`) and write everything made of it (:func:`evaluate`): the tables,
+    sweeps, figures (in ``plot_format``: png at 200 dpi, svg or pdf) and, with claims,
+    claims.csv/claims.md over ``seeds`` members (default 20; :mod:`cosim.run.ensemble`,
+    ``rounding``: also the perturbed floating-point rerun); every batch of runs goes through
+    :mod:`cosim.run.runner` (``workers``, ``scheduler``). With ``echo`` the tables are printed
+    in 80 columns (:func:`console_text`). With ``resume`` the jobs the folder's record already
+    holds (same specification, simulation inputs, K and path) are not run again."""
+    entry = load_entry(name)
+    out = Path(out_dir) if out_dir is not None else Path("runs") / "reproduce" / entry.name
+    out.mkdir(parents=True, exist_ok=True)
+    inputs = out / INPUTS_FILE
+    inputs.unlink(missing_ok=True)  # a folder being rewritten vouches for no inputs
+    need = entry.ensemble.declared_k()
+    if entry.claims and seeds is not None and seeds < need:
+        print(f"warning: --seeds {seeds} is below the {need} members {entry.name} declares "
+              f"for a page: claims a small K cannot decide read 'insufficient', and `cosim "
+              f"docs` does not publish this run", file=sys.stderr, flush=True)
+    previous = None
+    if resume:
+        try:
+            previous = load(out)
+        except RecordError as err:
+            print(f"{name}: nothing to resume ({err}): everything runs", file=sys.stderr,
+                  flush=True)
+    record = simulate(entry, out, workers, seeds, rounding, scheduler, plot_format, previous)
+    save(record, out)
+    # the page is made from the record as stored (its series at SERIES_DIGITS digits), so
+    # --redraw makes it again byte for byte
+    return redraw_page(name, out, plot_format, echo)
+
+
+def redraw_entry(name: str, out_dir: str | Path | None = None, plot_format: str = "png",
+                 echo: bool = True) -> Path:
+    """:func:`redraw_page`'s file."""
+    return redraw_page(name, out_dir, plot_format, echo).table
+
+
+def redraw_page(name: str, out_dir: str | Path | None = None, plot_format: str = "png",
+                echo: bool = True) -> Page:
+    """Tables, figures, claims and page of entry ``name`` from the record in ``out_dir``
+    (default ``runs/reproduce/NAME``) without simulating (:func:`evaluate`); the folder's
+    ``inputs.sha256`` then names the inputs of both (:func:`cosim.run.provenance.
+    entry_digest`) when the record's simulation inputs are the tree's. With ``echo`` the
+    tables are printed in 80 columns (:func:`console_text`)."""
+    entry = load_entry(name)
+    out = Path(out_dir) if out_dir is not None else Path("runs") / "reproduce" / entry.name
+    record = load(out)
+    if record.entry != entry.name:
+        raise ReproduceError(f"{out}: the record is of {record.entry!r}, not {entry.name!r}")
+    inputs = out / INPUTS_FILE
+    inputs.unlink(missing_ok=True)
+    try:
+        page = evaluate(entry, record, out, plot_format)
+    except RecordError as err:
+        raise ReproduceError(str(err)) from err
+    if entry.path.parent == REPRODUCE_DIR and record.simulation == simulation_digest(name):
+        inputs.write_text(entry_digest(name) + "\n")
+    if echo:
+        print(console_text(entry, page.rows, page.claim_rows, out), flush=True)
+    return page
+
+
+def console_text(entry: Entry, rows: list[Cell], claim_rows: list[dict[str, Any]],
+                 out: Path) -> str:
+    """The entry's results for an 80-column terminal: ours per run and metric (columns
+    numbered, their names below), the claims (id, k of K, verdict) and where the full tables
+    are."""
+    import textwrap
+
+    from cosim.run.console import fit_table
+    from cosim.run.ensemble import compact_table
+
+    names = {m.key: f"m{i + 1}" for i, m in enumerate(entry.metrics)}
+    by_run: dict[str, dict[str, Any]] = {}
+    for r in rows:
+        by_run.setdefault(r.run, {"run": r.run})[names[r.metric]] = r.ours
+    lines = textwrap.wrap(entry.title, 80)
+    if by_run:
+        lines += ["", fit_table(list(by_run.values()), ["run", *names.values()],
+                                title="ours (beside the paper's, with verdicts, in "
+                                      f"{entry.table}.md)")]
+        lines += textwrap.wrap("; ".join(f"{names[m.key]} {m.heading}"
+                                         for m in entry.metrics), 80)
+    if claim_rows:
+        lines += ["", compact_table(claim_rows)]
+    full = [f"{entry.table}.md", f"{entry.table}.csv"]
+    if claim_rows:
+        full += ["claims.md", "claims.csv"]
+    lines += ["", f"full tables in {out}/:", "  " + ", ".join(full)]  # a path is never cut
+    return "\n".join(lines)
+
+
+def claims_summary(claims: dict[str, list[dict[str, Any]]]) -> str:
+    """Claims per verdict (after the multiplicity adjustment) per entry, from each entry's
+    claims' rows (an entry without claims: dashes)."""
+    from cosim.run.ensemble import VERDICTS
+
+    lines = [md_row(["entry", "claims", *VERDICTS]), "|" + " --- |" * (2 + len(VERDICTS))]
+    for name, rows in claims.items():
+        if not rows:
+            lines.append(md_row([name, "0", *("-" for _ in VERDICTS)]))
+            continue
+        got = [r.get("adjusted", r["verdict"]) for r in rows]
+        lines.append(md_row([name, str(len(got)), *(str(got.count(v)) for v in VERDICTS)]))
+    return "\n".join(lines)
+
+
+def reproduce_all(out_dir: str | Path | None = None, workers: int | None = None,
+                  seeds: int | None = None, rounding: bool = True,
+                  scheduler: str | None = None, plot_format: str = "png") -> Path:
+    """Every entry; one ``REPRODUCTION.md`` with the claims held / failed / inconclusive per
+    paper and each entry's tables and figures."""
+    out = Path(out_dir) if out_dir is not None else Path("runs") / "reproduce"
+    out.mkdir(parents=True, exist_ok=True)
+    pages = {name: reproduce_page(name, out / name, workers, seeds, rounding, scheduler,
+                                  plot_format)
+             for name in entry_names()}
+    parts = ["# Reproduced results", "", "Made by `cosim reproduce all`; each section by "
+             "`cosim reproduce NAME` from the entry in `scenarios/reproduce/`.", "",
+             claims_summary({name: page.claim_rows for name, page in pages.items()})]
+    for name, page in pages.items():
+        # relative links from out/: prefix the entry folder
+        text = re.sub(r"\]\((?!http)([^)]+)\)", rf"]({name}/\1)", page.markdown)
+        parts += ["", text]
+    path = out / "REPRODUCTION.md"
+    path.write_text("\n".join(parts) + "\n")
+    return path

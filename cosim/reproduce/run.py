@@ -1,0 +1,256 @@
+"""The simulations of a reproduction entry: its table runs (with repetitions), sweeps and the
+claims' members (:mod:`cosim.run.ensemble`), run through :mod:`cosim.run.runner`, and the
+:class:`cosim.run.record.Record` of their results and of the series the figures draw."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from cosim.reproduce.entry import FIGURE_KINDS, REPRODUCE_DIR, Entry, Figure, ReproduceError, slug
+from cosim.run.figures import figure_columns
+from cosim.run.provenance import simulation_digest
+from cosim.run.record import Job, Record, known, read_csv, save, series_name
+
+
+def _run_one(scenario: str, overrides: dict[str, Any], out_dir: str,
+             plot_format: str = "png") -> dict[str, Any]:
+    """One run of ``scenario`` with ``overrides`` into ``out_dir`` (a task): its summary."""
+    from cosim.run.master import run_scenario
+
+    result = run_scenario(scenario, overrides=overrides, out_dir=out_dir, build=False,
+                          plot_format=plot_format)
+    return result.summary
+
+
+def _merge_repeats(summaries: list[dict[str, Any]]) -> dict[str, Any]:
+    """The first summary, each numeric value replaced by the median over the repetitions;
+    ``repeats`` holds every repetition's summary."""
+    import statistics
+
+    def merge(values: list[Any]) -> Any:
+        first = values[0]
+        if isinstance(first, dict):
+            return {k: merge([v.get(k) if isinstance(v, dict) else None for v in values])
+                    for k in first}
+        nums = [v for v in values if isinstance(v, (int, float)) and not isinstance(v, bool)]
+        if len(nums) == len(values) and not isinstance(first, bool):
+            return statistics.median(nums)
+        return first
+
+    merged = merge(summaries)
+    merged["repeats"] = summaries
+    return merged
+
+
+def table_seed(entry: Entry) -> dict[str, int]:
+    """The random input of the table's single runs: ``[ensemble] seed_key`` at the first
+    report seed (so a single run is member 1 of the claims' ensemble), or nothing where the
+    entry has no random input."""
+    key = entry.ensemble.seed_key
+    return {key: entry.ensemble.report_seeds[0]} if key and entry.ensemble.report_seeds else {}
+
+
+def run_jobs(entry: Entry) -> list[Job]:
+    """The table runs' simulations: one job per run and repetition, at :func:`table_seed`
+    unless the run sets its seed itself."""
+    seed = table_seed(entry)
+    return [Job("run", (run.name, k), run.scenario, {**seed, **run.overrides})
+            for run in entry.runs for k in range(run.repeat)]
+
+
+def sweep_jobs(entry: Entry) -> list[Job]:
+    """One job per ``[[sweeps]]`` entry (its scenarios and grid)."""
+    return [Job("sweep", (sweep.name,), list(sweep.scenarios), dict(sweep.grid))
+            for sweep in entry.sweeps]
+
+
+def run_entry(entry: Entry, out_dir: Path, workers: int | None = None,
+              scheduler: str | None = None, plot_format: str = "png",
+              record: Record | None = None, previous: Record | None = None
+              ) -> dict[str, dict[str, Any]]:
+    """Run every run of ``entry`` with :func:`cosim.run.runner.run_tasks` (``workers``
+    processes or the Dask ``scheduler``; a run with ``repeat = k`` k times, repetitions 2..
+    under ``runs/<run>/repeat_NN``); returns run name -> summary (medians and ``repeats`` for
+    a repeated run), each repetition's summary added to ``record``; a run ``previous`` holds
+    with the same specification is taken from it, not run again. A failed run raises
+    :class:`ReproduceError` naming it, after the others finished."""
+    from cosim.run import runner
+    from cosim.run.master import ensure_built
+    from cosim.run.scenario import load_scenario
+    from cosim.run.sweep import warm_up_for
+
+    for run in entry.runs:  # bad overrides fail here, before anything runs; build once
+        ensure_built(load_scenario(run.scenario, run.overrides))
+    jobs = run_jobs(entry)
+    tasks = []
+    done: dict[Any, dict[str, Any]] = {}
+    for job in jobs:
+        if previous is not None and known(previous, job):
+            done[job.key] = previous.result(job.kind, *job.key)
+            continue
+        name, k = job.key
+        base = out_dir / "runs" / slug(name)
+        out = base if k == 0 else base / f"repeat_{k + 1:02d}"
+        tasks.append(runner.Task(job.key, _run_one,
+                                 (job.scenario, dict(job.overrides), str(out), plot_format)))
+    errors: list[tuple[Any, BaseException]] = []
+    runner.run_tasks(tasks, lambda t, summary: done.__setitem__(t.key, summary),
+                     lambda t, err: errors.append((t.key, err)), workers, scheduler,
+                     f"{entry.name} runs", what=f"{entry.name}'s runs",
+                     warm_up=warm_up_for([(t.args[0], t.args[1]) for t in tasks]))
+    if errors:
+        (name, k), err = errors[0]
+        raise ReproduceError(f"{entry.path}: run {name!r}"
+                             + (f" (repetition {k + 1})" if k else "") + f" failed: {err}"
+                             ) from err
+    if record is not None:
+        for job in jobs:
+            record.add(job, done[job.key])
+    return merged_summaries(entry, {key: done[key] for key in done})
+
+
+def merged_summaries(entry: Entry, done: dict[Any, dict[str, Any]]
+                     ) -> dict[str, dict[str, Any]]:
+    """Run name -> its summary from (run name, repetition) -> summary: a repeated run's
+    medians with ``repeats`` (:func:`_merge_repeats`)."""
+    result = {}
+    for run in entry.runs:
+        reps = [done[run.name, k] for k in range(run.repeat)]
+        result[run.name] = reps[0] if len(reps) == 1 else _merge_repeats(reps)
+    return result
+
+
+MEMBER_ROWS = 2000  # rows of a member's series at most: the ensemble bands, evenly thinned
+
+
+def record_series(record: Record, name: str, folder: Path, figures: list[Figure],
+                  scenario: Any, scalars: bool = True, max_rows: int | None = None) -> None:
+    """Keep of ``folder/results.csv`` as series ``name`` what ``figures`` draw: the columns they
+    read, a ``y_reduce`` pattern (``plant.v[*]``) as one column of that name holding the
+    reduction (not every vehicle's column), with ``scalars`` every column of one value per
+    train too (no ``[i]`` index), and with ``max_rows`` evenly thinned rows (the last kept)."""
+    import numpy as np
+    import pandas as pd
+
+    from cosim.run.metrics import matching_columns
+
+    path = folder / "results.csv"
+    columns = list(pd.read_csv(path, nrows=0).columns)
+    header = pd.DataFrame(columns=columns)
+    keep = {c for c in columns if "[" not in c} if scalars else set()
+    patterns: dict[str, list[str]] = {}
+    for spec in (f.spec() for f in figures):
+        if "y_reduce" in spec:
+            keep |= figure_columns({**spec, "y": []}, scenario, columns)
+            ys = spec["y"] if isinstance(spec["y"], list) else [spec["y"]]
+            for y in ys:
+                patterns[y] = matching_columns(header, y)
+        else:
+            keep |= figure_columns(spec, scenario, columns)
+    wanted = keep.union(*patterns.values())
+    frame = read_csv(path, usecols=[c for c in columns if c in wanted])
+    reduced = pd.DataFrame({pattern: frame[cols].to_numpy(dtype=float).mean(axis=1)
+                            for pattern, cols in patterns.items()},  # y_reduce = "mean"
+                           index=frame.index)
+    frame = pd.concat([frame[[c for c in frame.columns if c in keep]], reduced], axis=1)
+    if max_rows is not None and len(frame) > max_rows:
+        step = -(-len(frame) // max_rows)
+        rows = np.unique(np.r_[np.arange(0, len(frame), step), len(frame) - 1])
+        frame = frame.iloc[rows].reset_index(drop=True)
+    record.series[name] = frame
+
+
+def record_run_series(entry: Entry, out: Path, record: Record) -> None:
+    """The series of the table runs the figures draw, from their results.csv under ``out``,
+    added to ``record``."""
+    scenarios = run_scenarios(entry)
+    for name, figures in figure_runs(entry, FIGURE_KINDS).items():
+        record_series(record, series_name("run", name), out / "runs" / slug(name), figures,
+                      scenarios[name])
+
+
+def figure_runs(entry: Entry, kinds: tuple[str, ...]) -> dict[str, list[Figure]]:
+    """Run name -> the ``[[figures]]`` of ``kinds`` that draw it."""
+    out: dict[str, list[Figure]] = {}
+    for figure in entry.figures:
+        if figure.kind in kinds:
+            for run in figure.runs or entry.run_names():
+                out.setdefault(run, []).append(figure)
+    return out
+
+
+def simulate(entry: Entry, out: Path, workers: int | None = None, seeds: int | None = None,
+             rounding: bool = True, scheduler: str | None = None, plot_format: str = "png",
+             previous: Record | None = None) -> Record:
+    """Every simulation ``entry`` needs (its runs, sweeps and claims' members), through
+    :mod:`cosim.run.runner`; the record of their results and of the series the figures draw.
+    A job ``previous`` holds with the same specification is taken from it, not run again,
+    where ``previous`` ran with this tree's simulation inputs, K and rounding path (the run
+    folders under ``out`` then hold its files)."""
+    from cosim.run.ensemble import simulate_claims
+    from cosim.run.sweep import parse_grid, run_sweep
+
+    k = claims_k(entry, seeds)
+    digest = simulation_digest(entry.name) if entry.path.parent == REPRODUCE_DIR else ""
+    record = Record(entry.name, digest, k, rounding)
+    if previous is not None and (previous.simulation, previous.seeds, previous.rounding) != (
+            digest, k, rounding):
+        why = [what for what, a, b in (("simulation inputs", previous.simulation, digest),
+                                       ("K", previous.seeds, k),
+                                       ("rounding path", previous.rounding, rounding)) if a != b]
+        print(f"{entry.name}: the record under {out} has other {', '.join(why)}: nothing of it "
+              "is reused", file=sys.stderr, flush=True)
+        previous = None
+    run_entry(entry, out, workers, scheduler, plot_format, record, previous)
+    save(record, out)  # a checkpoint: an interrupted run resumes from here (--resume)
+    record_run_series(entry, out, record)
+    for job in sweep_jobs(entry):
+        if known(previous, job):
+            record.add(job, previous.result(job.kind, *job.key))
+            continue
+        grid = parse_grid(f"{k}={v}" for k, v in job.overrides.items())
+        frame = run_sweep(job.scenario, grid, out / slug(job.key[0]), workers=workers,
+                          scheduler=scheduler, plot=False)
+        record.add(job, {"columns": list(frame.columns),
+                         "rows": [[_plain(v) for v in row] for row in
+                                  frame.astype(object).itertuples(index=False)]})
+        save(record, out)  # a checkpoint
+    if entry.claims:
+        try:
+            simulate_claims(entry, out, record, workers, scheduler, previous)
+        except ValueError as err:
+            raise ReproduceError(str(err)) from err
+    return record
+
+
+def _plain(value: Any) -> Any:
+    """A JSON value of a frame cell: numpy scalars as Python ones, missing as None."""
+    import pandas as pd
+
+    if value is None or (not isinstance(value, str) and pd.isna(value)):
+        return None
+    return value.item() if isinstance(value, np.generic) else value
+
+
+def claims_k(entry: Entry, seeds: int | None) -> int:
+    """K of the claims' members: ``seeds``, else 20 or all the report seeds if fewer."""
+    return seeds if seeds is not None else min(20, len(entry.ensemble.report_seeds))
+
+
+def wanted_jobs(entry: Entry, k: int, rounding: bool) -> list[Job]:
+    """Every simulation the entry's tables, sweeps and claims at ``k`` members read."""
+    from cosim.run.ensemble import member_jobs
+
+    return run_jobs(entry) + sweep_jobs(entry) + (member_jobs(entry, k, rounding)
+                                                  if entry.claims else [])
+
+
+def run_scenarios(entry: Entry) -> dict[str, Any]:
+    """Run name -> its loaded scenario (with the run's ``set``)."""
+    from cosim.run.scenario import load_scenario
+
+    return {r.name: load_scenario(r.scenario, r.overrides) for r in entry.runs}
