@@ -182,10 +182,12 @@ def source_dir(name: str, reproduce_dir: Path = REPRODUCE_DIR) -> Path | None:
     page's are and every figure it links is there; else a folder redrawn
     (``cosim.reproduce.page.redraw_entry``, no simulation) from a record whose simulation
     inputs are the tree's, the local run's before the committed one; else the local run if
-    it has a table (:func:`stale_papers` names it)."""
+    it has a table (:func:`stale_papers` names it). A record that lacks a job the entry asks
+    for (an unfinished run) serves no page."""
     import shutil
     import tempfile
 
+    from cosim.reproduce.entry import ReproduceError
     from cosim.reproduce.page import redraw_entry
     from cosim.run.provenance import entry_digest, simulation_digest
 
@@ -204,7 +206,10 @@ def source_dir(name: str, reproduce_dir: Path = REPRODUCE_DIR) -> Path | None:
             target = Path(_SCRATCH[0].name) / name
             shutil.rmtree(target, ignore_errors=True)
             shutil.copytree(folder / RECORD_DIR, target / RECORD_DIR)
-            redraw_entry(name, target, echo=False)
+            try:
+                redraw_entry(name, target, echo=False)
+            except ReproduceError:  # a record that lacks jobs (an unfinished run): the next
+                continue
             return target
     return run_dir if _table_file(run_dir) is not None else None
 
