@@ -509,3 +509,24 @@ def test_the_table_runs_are_member_one_of_the_disturbance_ensemble() -> None:
              if j[0][1] == "disturbance"}
     assert first and all(table[name] == overrides for name, overrides in first.items())
     assert table_seed(load_entry("seed004")) == {}  # no random input
+
+
+def test_single_run_cells_whose_printed_figure_moves_on_the_rerun_are_marked() -> None:
+    """A single-run cell is marked ‡ when the same run on the perturbed floating-point path
+    prints another figure; a change below the printed digits is no mark, and a run without
+    such a rerun has none to give (None)."""
+    from cosim.reproduce.tables import table_markdown, table_rows
+
+    entry = load_entry("seed000")
+    keys = [m.key for m in entry.metrics if "." not in m.key]  # flat summary keys
+    summaries = {run.name: {k: 0.1234 for k in keys} for run in entry.runs}
+    first, second = entry.runs[0].name, entry.runs[1].name
+    perturbed = {first: {k: 0.1236 for k in keys},  # moves the 4th digit: marked
+                 second: {k: 0.123401 for k in keys}}  # below the printed digits
+    rows = table_rows(entry, summaries, perturbed)
+    moves = {(r.run, r.metric): r.rounding_moves for r in rows}
+    assert all(moves[first, k] is True for k in keys)
+    assert all(moves[second, k] is False for k in keys)
+    assert all(moves[r.name, k] is None for r in entry.runs[2:] for k in keys)
+    text = table_markdown(entry, rows)
+    assert "0.1234‡" in text and "‡: the printed figure moves" in text

@@ -57,6 +57,20 @@ class Page:
     claim_rows: list[dict[str, Any]]  # one per claim (:func:`cosim.run.ensemble.evaluate`)
 
 
+def single_run_reruns(entry: Entry, record: Record) -> dict[str, dict[str, Any]]:
+    """Run name -> the summary of the table's single run on the perturbed floating-point
+    path: the rerun of member 1 of the disturbance ensemble, which is the single run
+    (:func:`cosim.reproduce.run.table_seed`), where the record has it."""
+    if not table_seed(entry):
+        return {}
+    out = {}
+    for run in entry.runs:
+        result = record.results.get(("member", run.name, "disturbance", 0, True))
+        if result is not None and run.repeat == 1:
+            out[run.name] = result
+    return out
+
+
 def evaluate(entry: Entry, record: Record, out: Path, plot_format: str = "png") -> Page:
     """Tables, sweeps' tables and figures, figures, claims and the page of ``entry`` from
     ``record`` alone (no simulation; :class:`cosim.run.record.RecordError` if the record
@@ -71,7 +85,7 @@ def evaluate(entry: Entry, record: Record, out: Path, plot_format: str = "png") 
     summaries = merged_summaries(entry, {job.key: record.results[ident]
                                          for ident, job in record.jobs.items()
                                          if job.kind == "run"})
-    rows = table_rows(entry, summaries)
+    rows = table_rows(entry, summaries, single_run_reruns(entry, record))
     derived = derived_rows(entry, summaries)
     ranked = ranking_rows(entry, summaries)
     pd.DataFrame([r.csv() for r in [*rows, *derived, *ranked]]).to_csv(

@@ -92,6 +92,9 @@ class Cell:
     source: str  # where the paper gives it
     ratio: Ratio | None  # with the metric's ratio_to
     within: bool | None  # inside the band and the tolerance (None: nothing to judge)
+    # the printed figure differs on the same run's perturbed floating-point rerun (None: the
+    # record has no such rerun of this run)
+    rounding_moves: bool | None = None
 
     def csv(self) -> dict[str, Any]:
         """The row of ``table.csv``."""
@@ -102,7 +105,7 @@ class Cell:
         if self.ratio is not None:
             row |= {"ratio": self.ratio.value, "ratio_ci_low": self.ratio.ci_low,
                     "ratio_ci_high": self.ratio.ci_high, "paper_ratio": self.ratio.paper}
-        return row | {"within": self.within}
+        return row | {"within": self.within, "rounding_moves": self.rounding_moves}
 
 
 @dataclass(frozen=True)
@@ -154,8 +157,12 @@ def _within(ours: Any, band: list[float] | None, value: float | None,
     return within
 
 
-def table_rows(entry: Entry, summaries: dict[str, dict[str, Any]]) -> list[Cell]:
-    """Long format: one cell per (run, metric) with ours, the paper's and the verdict."""
+def table_rows(entry: Entry, summaries: dict[str, dict[str, Any]],
+               perturbed: dict[str, dict[str, Any]] | None = None) -> list[Cell]:
+    """Long format: one cell per (run, metric) with ours, the paper's and the verdict;
+    ``perturbed`` (run name -> the summary of the same run on the perturbed floating-point
+    path, where there is one) marks the cells whose printed figure it moves."""
+    perturbed = perturbed or {}
     refs = {(r.run, r.metric): r for r in entry.paper}
     rows = []
     for run in entry.runs:
@@ -176,7 +183,11 @@ def table_rows(entry: Entry, summaries: dict[str, dict[str, Any]]) -> list[Cell]
                              repeats=spread[2] if spread else 1, paper=value,
                              paper_range=band, tolerance=tolerance,
                              source=ref.source if ref is not None else "", ratio=ratio,
-                             within=_within(ours, band, value, tolerance)))
+                             within=_within(ours, band, value, tolerance),
+                             rounding_moves=(
+                                 None if run.name not in perturbed or spread else
+                                 fmt(summary_value(perturbed[run.name], metric.key))
+                                 != fmt(ours))))
     return rows
 
 
@@ -295,7 +306,7 @@ def table_markdown(entry: Entry, rows: list[Cell]) -> str:
             value = fmt(r.ours)
             if r.ours_min is not None:
                 value = f"{value} [{fmt(r.ours_min)}, {fmt(r.ours_max)}]"
-            ours.append(value + _mark(r.within))
+            ours.append(value + ("‡" if r.rounding_moves else "") + _mark(r.within))
             paper.append(_given(r.paper, r.paper_range))
             if r.ratio is not None:
                 text = fmt(r.ratio.value)
@@ -332,6 +343,10 @@ def table_markdown(entry: Entry, rows: list[Cell]) -> str:
         lines += ["", "a [b, c]: median [min, max] over the repetitions of a repeated run ("
                   + ", ".join(f"{n}" for n in repeated) + " runs); a ratio r (l-h) of two "
                   "repeated runs: the ratio of their medians with its 95 % bootstrap CI."]
+    if any(r.rounding_moves for r in rows):
+        lines += ["", "‡: the printed figure moves on the same run's perturbed floating-point "
+                  "rerun (its rerun as member 1 of the claims' ensemble): the digits it "
+                  "moves are not a result."]
     if any(r.within is not None for r in rows):
         lines += ["", "✓ / ✗: inside / outside the paper's band or the tolerance stated in the "
                   "entry."]
