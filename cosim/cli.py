@@ -358,8 +358,8 @@ def _native_paths(names: list[str] | None, versions: tuple[int, ...]) -> list[Pa
     paths: list[Path] = []
     for name in sorted(NATIVE) if names is None else names:
         if name not in NATIVE:
-            _fail(f"no native model of {name!r}" + (_did_you_mean(name, sorted(NATIVE))
-                                                     or f"; native: {sorted(NATIVE)}"))
+            _fail(f"no native model of {name!r}; native: {sorted(NATIVE)}"
+                  + _did_you_mean(name, sorted(NATIVE)))
         missing = tuple(v for v in versions if not native_path(name, v).is_file())
         if missing:
             try:
