@@ -162,7 +162,8 @@ def test_validate_typos_get_did_you_mean(tmp_path):
     assert "StopPdi.fmu: no such file (did you mean 'StopPid'?)" in one_line(done)
     done = cosim("validate", "--native", "StopMcp")
     assert done.returncode == 2
-    assert "no native model of 'StopMcp' (did you mean 'StopMpc'?)" in one_line(done)
+    assert "no native model of 'StopMcp'; native: " in one_line(done)
+    assert "(did you mean 'StopMpc'?)" in one_line(done)
 
 
 def test_no_help_text_is_cut_at_80_columns():
