@@ -13,9 +13,9 @@ import pytest
 from cosim.run.scenario import SCENARIO_DIR
 
 
-def cosim(*args: str, cwd=None) -> subprocess.CompletedProcess:
+def cosim(*args: str, cwd=None, env=None) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-m", "cosim.cli", *args], capture_output=True,
-                          text=True, timeout=600, cwd=cwd)
+                          text=True, timeout=600, cwd=cwd, env=env)
 
 
 def one_line(done: subprocess.CompletedProcess) -> str:
@@ -77,8 +77,7 @@ def test_command_list_gives_each_command_one_line_at_80_columns():
 
     from cosim.cli import app
 
-    done = subprocess.run([sys.executable, "-m", "cosim.cli", "--help"], capture_output=True,
-                          text=True, timeout=120, env={**os.environ, "COLUMNS": "80"})
+    done = cosim("--help", env={**os.environ, "COLUMNS": "80"})
     lines = done.stdout.splitlines()
     start = next(i for i, line in enumerate(lines) if "Commands" in line)
     rows = lines[start + 1:next(i for i in range(start + 1, len(lines))
@@ -103,6 +102,16 @@ def test_command_help_paragraphs_wrap_at_the_terminal_not_mid_sentence():
         assert first.endswith(".") and ". " not in first and len(first) <= 60, name
 
 
+def _table_blocks(done: subprocess.CompletedProcess) -> tuple[list[str], list[int]]:
+    """The output's lines (none wider than 80 columns) and the header line of each block of
+    its table (at least two: the table is split)."""
+    lines = done.stdout.splitlines()
+    assert max(len(line) for line in lines) <= 80, done.stdout
+    headers = [i for i, line in enumerate(lines) if line.startswith("scenario")]
+    assert len(headers) >= 2, done.stdout  # split into blocks
+    return lines, headers
+
+
 def test_perturb_table_keeps_the_grid_column_in_every_block_and_one_notation(tmp_path):
     """``sweep --perturb`` at 80 columns: every block of the summary table repeats the grid
     value beside the scenario (rows that differ only in it stay apart), and each column has
@@ -111,10 +120,7 @@ def test_perturb_table_keeps_the_grid_column_in_every_block_and_one_notation(tmp
                  "--perturb", "plant.brake_time_constant=0.3..0.6", "--samples", "2",
                  "--workers", "1", "--no-plot", "--out", str(tmp_path / "sweep"))
     assert done.returncode == 0, done.stderr
-    lines = done.stdout.splitlines()
-    assert max(len(line) for line in lines) <= 80, done.stdout
-    headers = [i for i, line in enumerate(lines) if line.startswith("scenario")]
-    assert len(headers) >= 2, done.stdout  # split into blocks
+    lines, headers = _table_blocks(done)
     for i in headers:
         assert lines[i].split()[:2] == ["scenario", "mass"], done.stdout
         assert [line.split()[1] for line in lines[i + 2:i + 4]] == ["440000", "539000"]
@@ -176,9 +182,7 @@ def test_no_help_text_is_cut_at_80_columns():
     from cosim.cli import app
 
     for name in ["", *typer.main.get_command(app).commands]:
-        done = subprocess.run([sys.executable, "-m", "cosim.cli", *name.split(), "--help"],
-                              capture_output=True, text=True, timeout=120,
-                              env={**os.environ, "COLUMNS": "80"})
+        done = cosim(*name.split(), "--help", env={**os.environ, "COLUMNS": "80"})
         assert done.returncode == 0, done.stderr
         assert "…" not in done.stdout, (name, done.stdout)
 
@@ -188,10 +192,7 @@ def test_sweep_table_keeps_the_grid_columns_in_every_block(tmp_path):
                  "--set", "plant.mass=440000,539000", "--set", "controller.ref_decel=0.5,0.55",
                  "--workers", "1", "--no-plot", "--out", str(tmp_path / "sweep"))
     assert done.returncode == 0, done.stderr
-    lines = done.stdout.splitlines()
-    assert max(len(line) for line in lines) <= 80, done.stdout
-    headers = [i for i, line in enumerate(lines) if line.startswith("scenario")]
-    assert len(headers) >= 2, done.stdout
+    lines, headers = _table_blocks(done)
     for i in headers:
         assert lines[i].split()[:3] == ["scenario", "mass", "ref_decel"], done.stdout
         assert [line.split()[1:3] for line in lines[i + 2:i + 4]] == [
