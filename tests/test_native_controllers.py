@@ -180,6 +180,10 @@ CASES = [
     ("StopPid", {}),
     ("StopPid", {"hold_at_stop_point": False, "kd": 5.0, "kp": 40.0, "u_min": -10.0}),
     ("StopPid", {"feedforward": False, "sample_time": 0.25}),
+    # the known resistance fed forward: Davis / mass + the bundled route's grade
+    ("StopPid", {"resistance_feedforward": True}),
+    ("StopPid", {"resistance_feedforward": True, "route": "jinan_xuzhou_east",
+                 "stop_point": 30000.0, "davis_b": 120.0}),
     ("EmuSpeedPid3", {}),
     ("EmuSpeedPid3", {"kd": 0.2, "derivative_filter": 0.5, "rate_limit": 0.4}),
     ("EmuSpeedPid8", {"reference": "seed004_crh3_reference", "sample_time": 1.0,

@@ -53,6 +53,9 @@ CASES = [
     ({"brake_delay": 0.35, "max_step": 0.03, "v0": 12.0}, 2),
     ({"brake_time_constant": 0.9, "grade_scale": 1.5, "initial_command": 40.0}, 3),
     ({"route": "jinan_xuzhou_east", "v0": 60.0, "s0": 1000.0}, 4),
+    # the unknown resistance a_d: numpy's seeded uniform draws, each held over its interval
+    ({"disturbance_amplitude": 0.02, "disturbance_seed": 7, "disturbance_interval": 0.7}, 5),
+    ({"disturbance_amplitude": 0.3, "disturbance_seed": 12, "v0": 8.0}, 6),
 ]
 
 
@@ -82,8 +85,10 @@ def test_native_equals_python_core_bit_for_bit(native, params, seed):
         assert stopped  # the stopping logic ran
 
 
-def test_state_get_set_and_serialize_replay_exactly(native):
-    fmu, vr = open_native(native)
+@pytest.mark.parametrize("params", [{}, {"disturbance_amplitude": 0.05,
+                                         "disturbance_seed": 3}], ids=["calm", "a_d"])
+def test_state_get_set_and_serialize_replay_exactly(native, params):
+    fmu, vr = open_native(native, params)
     out_vrs = [vr[n] for n in OUTPUTS]
     steps = commands(7, 60)
     t = 0.0

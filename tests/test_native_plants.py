@@ -235,6 +235,63 @@ def test_emu_outputs_and_disturbance_equal_the_core_at_the_same_state(natives, s
             assert native.read() == core.outputs(), t
 
 
+COLOURED = {"disturbance_accel_std": 0.03, "disturbance_correlation_time": 10.0}
+
+
+def coloured_noise_bound(core: Emu, t: float, smooth: bool) -> np.ndarray:
+    """Per unit, how far the native coloured disturbance force (N) may be from the core's at
+    the interval start ``t``: m sigma sqrt(2/K) sum_k (d |omega_k| t + 4 u (|omega_k| t +
+    |phi_k|) + 2 u) + the pairwise sums' 2 gamma_6 K. d = 4 u where omega comes from ndtri
+    (scipy's and the C's each within 2 u of the exact inverse), 0 for the Lorentzian (libm's
+    tan on both sides); 4 u (|omega t| + |phi|): the rounding of each argument on each side;
+    2 u: cos within 1 ulp on each side (numpy's cos need not be libm's)."""
+    from plants.emu import COLOURED_COMPONENTS, _coloured_spectrum
+
+    p = core.p
+    omega, phase = _coloured_spectrum(int(p.disturbance_seed), core.n,
+                                      float(p.disturbance_correlation_time), smooth)
+    d = 4 * U if smooth else 0.0
+    terms = d * np.abs(omega) * t + 4 * U * (np.abs(omega) * t + np.abs(phase)) + 2 * U
+    gamma6 = 6 * U / (1 - 6 * U)
+    unit = math.sqrt(2.0 / COLOURED_COMPONENTS) * (terms.sum(axis=1)
+                                                   + 2 * gamma6 * COLOURED_COMPONENTS)
+    return core.m * p.disturbance_accel_std * unit
+
+
+@pytest.mark.parametrize("smooth", [True, False], ids=["gaussian", "lorentzian"])
+def test_emu_coloured_disturbance_within_the_spectrum_bound(natives, seed001_inputs, smooth):
+    """Seed 001's coloured disturbance (plants.emu.coloured_noise) in the native Emu3: the
+    core put in the native model's state computes every output the native model does, bit
+    for bit, except the accelerations, which carry the disturbance force: those within
+    :func:`coloured_noise_bound` over the unit's effective mass (plus the rounding of the sum
+    it enters); the disturbance is not zero."""
+    params = {**emu_case(3), **COLOURED, "disturbance_smooth": smooth}
+    native = Native(natives["Emu3"], params)
+    core = core_of(Emu, params, units=3)
+    accels = {"a", "a[1]", "a[2]", "a[3]"}
+    t, moved = 0.0, 0.0
+    for k, (_, forces) in enumerate(seed001_inputs):
+        native.step(t, 0.2, unit_forces(forces, 3))
+        t += 0.2
+        if k % 10 != 9:
+            continue
+        set_core_state(core, native.core_state(3))
+        got, want = native.read(), core.outputs()
+        assert {n: v for n, v in got.items() if n not in accels} == {
+            n: v for n, v in want.items() if n not in accels}, t
+        noise = core._noise(core.t_ticks)
+        start = to_seconds(core.t_ticks // core._noise_ticks * core._noise_ticks)
+        a_i = np.array([want[f"a[{i}]"] for i in (1, 2, 3)])
+        tol_i = (coloured_noise_bound(core, start, smooth) / core.m_eff
+                 + 4 * U * (np.abs(a_i) + np.abs(noise) / core.m_eff))
+        for i in (1, 2, 3):
+            assert abs(got[f"a[{i}]"] - want[f"a[{i}]"]) <= tol_i[i - 1], (t, i)
+        tol = float(core.m_eff @ tol_i) / float(np.sum(core.m_eff)) + 8 * U * np.max(np.abs(a_i))
+        assert abs(got["a"] - want["a"]) <= tol, t
+        moved = max(moved, float(np.max(np.abs(noise))))
+    assert moved > 0.0
+
+
 def step_bound(core: Emu, eps: float, h: float, u: dict[str, float]) -> np.ndarray:
     """EPS (|phi| |X| + |gamma| |f|) of one sub-step of h from the core's state, with |f|
     bounded by |u| + |route force| + Davis resistance + |disturbance| per unit."""
@@ -287,7 +344,7 @@ def test_emu_dynamics_within_the_expm_bound(natives, seed001_inputs, units):
 
 def test_emu_state_replay_and_bad_parameters(natives):
     """A serialized state replays bit for bit (the disturbance is a function of seed and
-    time); a configuration of another unit count, a coloured disturbance and a route file
+    time); a configuration of another unit count, a negative correlation time and a route file
     path are refused at initialisation with a message naming the parameter."""
     from fmpy.fmi1 import FMICallException
 
@@ -306,7 +363,7 @@ def test_emu_state_replay_and_bad_parameters(natives):
 
     assert_replays_from_state(fmu, rest)
     for bad, word in (({"configuration": "crh3_8car"}, "units"),
-                      ({"disturbance_correlation_time": 5.0, "disturbance_accel_std": 0.1},
+                      ({"disturbance_correlation_time": -5.0, "disturbance_accel_std": 0.1},
                        "disturbance_correlation_time"),
                       ({"route": "/tmp/x.toml"}, "route")):
         messages: list[str] = []

@@ -110,6 +110,7 @@ PLANT_BACKEND = ("ato_plant_backend.h", "ato_plant_backend.c", "ato_math.h")
 PLANT_SHARED = (*PLANT_BACKEND, "ato_plant.h", "ato_plant.c")
 # numpy's default_rng(seed words).standard_normal in C (seeded disturbances)
 NUMPY_RANDOM = ("ato_numpy_random.h", "ato_numpy_random.c")
+GRADE = ("ato_grade.c", "ato_grade.h")  # a controller's bundled route grades
 # the freight controllers' shared base: observer, blending, brake-pipe model (freight_tracker.c)
 FREIGHT_TRACKER = ("freight_tracker.c", "freight_tracker.h")
 # the seed-001 data-driven controllers: their drive part (scaling, input box, reference,
@@ -124,8 +125,10 @@ SLIDING = (*FFDL, "ato_sliding.c", "ato_sliding.h")
 HYBRID = ("ato_hybrid.c", "ato_hybrid.h")
 
 NATIVE: dict[str, NativeSpec] = {
-    "BrakeDelayTrain": NativeSpec("BrakeDelayTrain", "brake_delay.c", shared=PLANT_SHARED),
-    "StopPid": NativeSpec("StopPid", "stop_pid.c", CONTROLLER),
+    "BrakeDelayTrain": NativeSpec("BrakeDelayTrain", "brake_delay.c",
+                                  shared=(*PLANT_SHARED, *NUMPY_RANDOM),
+                                  generated=("ato_numpy_normal.h",)),
+    "StopPid": NativeSpec("StopPid", "stop_pid.c", (*CONTROLLER, *GRADE)),
     "EmuSpeedPid3": NativeSpec("EmuSpeedPid3", "speed_pid.c", (*CONTROLLER, *PROFILE),
                                data=("references",)),
     "EmuSpeedPid8": NativeSpec("EmuSpeedPid8", "speed_pid.c", (*CONTROLLER, *PROFILE),
@@ -158,12 +161,15 @@ NATIVE: dict[str, NativeSpec] = {
     # seed 000's predictive stopping controllers: one law, DAQP from its sdist; the tube
     # controllers' terminal sets as computed by the core (ato_stop_mpc_sets.h)
     **{identifier: NativeSpec(identifier, "stop_mpc.c",
-                              (*CONTROLLER, "ato_linalg.c", "ato_linalg.h"), solvers=("daqp",),
+                              (*CONTROLLER, *GRADE, "ato_linalg.c", "ato_linalg.h"),
+                              solvers=("daqp",),
                               generated=("ato_stop_mpc_sets.h",),
                               defines=(("ATO_STOP_MPC_KIND", kind),))
        for kind, identifier in enumerate(("StopMpc", "StopRmpc", "StopRsmpc"))},
     "FreightTrain": NativeSpec("FreightTrain", "freight.c", ("freight_kernel.c",),
-                               ("speed_limit", "additional"), shared=PLANT_BACKEND),
+                               ("speed_limit", "additional"),
+                               shared=(*PLANT_BACKEND, *NUMPY_RANDOM),
+                               generated=("ato_numpy_normal.h",)),
     "Crh3Train": NativeSpec("Crh3Train", "crh3.c", shared=PLANT_SHARED),
     **{identifier: NativeSpec(identifier, "emu.c", shared=(*PLANT_SHARED, *NUMPY_RANDOM),
                               configurations="plants.emu:CONFIGURATIONS",

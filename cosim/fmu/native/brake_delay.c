@@ -3,7 +3,12 @@
  * (seed 000, eqs. 1-7): first-order brake lag plus exact dead time, single-mass train.
  *
  *   da_c/dt = -a_c / tau + (1 / tau) a_t(t - Td),   a_t = -c u
- *   dv/dt   = a_c - a_r(v, s),   ds/dt = v,   a_r = (a + (b + c v) v) / m + g_scale g i(s) / 1000
+ *   dv/dt   = a_c - a_r(v, s) - a_d(t),   ds/dt = v,
+ *   a_r = (a + (b + c v) v) / m + g_scale g i(s) / 1000
+ *
+ * a_d, the unknown resistance, is held over each communication step from its start: uniform in
+ * [-A, A], numpy's default_rng([disturbance_seed, k]).uniform(-A, A) of the interval k holding
+ * the step's start (ato_numpy_random.c), as BrakeDelayTrain.disturbance_at.
  *
  * The same floating-point operations in the same order as the Python core (sub-steps on the
  * absolute integer-nanosecond grid of max_step, split where the delayed command changes; exact
@@ -18,8 +23,9 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "ato_plant.h"
 #include "ato_model_decl.h"
+#include "ato_numpy_random.h"
+#include "ato_plant.h"
 
 #define BEFORE_START (-(1LL << 62))
 
@@ -28,6 +34,8 @@ typedef struct { int64_t tick; double value; } cmd;
 typedef struct {
     /* parameters, fixed while the core lives */
     double mass, da, db, dc, gain, tau, grade_scale;
+    double amplitude, interval; /* the disturbance a_d: bound (m/s2), holding time (s) */
+    uint64_t seed;
     int64_t delay_ticks, grid_ticks;
     ato_route route;
     /* state (BrakeDelayTrain.state_fields) */
@@ -35,6 +43,9 @@ typedef struct {
     double a_c, v, s;
     int n_hist, cap_hist;
     cmd* hist;
+    double a_d;               /* the disturbance over the current communication step (m/s2) */
+    int64_t draw_index;       /* the interval whose a_d draw_value is (-1: none yet) */
+    double draw_value;
 } bd;
 
 /* -- route -------------------------------------------------------------------------------- */
@@ -45,6 +56,21 @@ static double grade_accel(const bd* c, double s) {
 static double next_grade_change(const bd* c) {
     int i = ato_profile_index(&c->route.grade, c->s) + 1; /* bisect_right(starts, s) */
     return i < c->route.grade.n ? c->route.grade.starts[i] : INFINITY;
+}
+
+/* a_d of the interval holding t (s): BrakeDelayTrain.disturbance_at */
+static double disturbance_at(bd* c, double t) {
+    if (c->amplitude == 0.0) return 0.0;
+    int64_t k = (int64_t)floor(t / c->interval + 1e-9);
+    if (c->draw_index != k) {
+        uint64_t ints[2] = {c->seed, (uint64_t)k};
+        ato_pcg64 g;
+        ato_pcg64_seed(&g, ints, 2);
+        /* Generator.uniform(low, high): low + (high - low) * next_double */
+        c->draw_value = -c->amplitude + (c->amplitude - -c->amplitude) * ato_pcg64_double(&g);
+        c->draw_index = k;
+    }
+    return c->draw_value;
 }
 
 /* -- dead time ---------------------------------------------------------------------------- */
@@ -102,7 +128,7 @@ static void rk4(const bd* c, double a_t, double g, double h, double* v_out, doub
 static void substep(bd* c, double h, double a_t) {
     double remaining = h;
     while (remaining > 0.0) {
-        double g = grade_accel(c, c->s);
+        double g = grade_accel(c, c->s) + c->a_d;
         double boundary = next_grade_change(c);
         double dt = remaining, v1, s1, unused;
         rk4(c, a_t, g, dt, &v1, &s1);
@@ -142,6 +168,7 @@ static int step(ato_inst* m, void* core, int64_t t, int64_t h) {
         return 0;
     }
     record(c, t, m->r[ATO_VR_brake_command]);
+    c->a_d = disturbance_at(c, ato_to_seconds(t));
     int64_t* acts = malloc((size_t)c->n_hist * sizeof(int64_t)); /* a delayed command acts */
     for (int i = 0; i < c->n_hist; i++) acts[i] = c->hist[i].tick + c->delay_ticks;
     int64_t* cuts;
@@ -182,9 +209,19 @@ static void* create(ato_inst* m) {
         ATO_ERROR(m, "bad parameter: brake_delay = %.17g must be >= 0", r[ATO_VR_brake_delay]);
         return NULL;
     }
-    if (r[ATO_VR_disturbance_amplitude] != 0.0) {
-        ATO_ERROR(m, "bad parameter: disturbance_amplitude = %.17g: the native build has no "
-                  "disturbance (0 only; use the Python FMU)", r[ATO_VR_disturbance_amplitude]);
+    if (!(r[ATO_VR_disturbance_amplitude] >= 0)) {
+        ATO_ERROR(m, "bad parameter: disturbance_amplitude = %.17g must be >= 0",
+                  r[ATO_VR_disturbance_amplitude]);
+        return NULL;
+    }
+    if (!(r[ATO_VR_disturbance_interval] > 0)) {
+        ATO_ERROR(m, "bad parameter: disturbance_interval = %.17g must be > 0",
+                  r[ATO_VR_disturbance_interval]);
+        return NULL;
+    }
+    if (r[ATO_VR_disturbance_seed] < 0) {
+        ATO_ERROR(m, "bad parameter: disturbance_seed = %.17g must be >= 0 (numpy "
+                  "SeedSequence)", r[ATO_VR_disturbance_seed]);
         return NULL;
     }
     if (r[ATO_VR_v0] < 0) {
@@ -203,6 +240,10 @@ static void* create(ato_inst* m) {
     c->gain = r[ATO_VR_brake_gain];
     c->tau = r[ATO_VR_brake_time_constant];
     c->grade_scale = r[ATO_VR_grade_scale];
+    c->amplitude = r[ATO_VR_disturbance_amplitude];
+    c->interval = r[ATO_VR_disturbance_interval];
+    c->seed = (uint64_t)r[ATO_VR_disturbance_seed];
+    c->draw_index = -1;
     c->delay_ticks = ato_to_ticks(r[ATO_VR_brake_delay]);
     c->grid_ticks = ato_to_ticks(r[ATO_VR_max_step]);
     c->t_ticks = m->start_ticks;
@@ -222,7 +263,7 @@ static void outputs(ato_inst* m, void* core) {
     double* r = m->r;
     r[ATO_VR_v] = c->v;
     r[ATO_VR_s] = c->s;
-    r[ATO_VR_a] = accel(c, c->a_c, c->v, grade_accel(c, c->s));
+    r[ATO_VR_a] = accel(c, c->a_c, c->v, grade_accel(c, c->s) + c->a_d);
     r[ATO_VR_a_c] = c->a_c;
     r[ATO_VR_applied_command] = delayed(c, c->t_ticks);
     r[ATO_VR_grade] = c->grade_scale * grade_at(c, c->s);
@@ -234,6 +275,7 @@ static void save(const void* core, ato_buf* b) {
     ato_put(b, &c->a_c, sizeof c->a_c);
     ato_put(b, &c->v, sizeof c->v);
     ato_put(b, &c->s, sizeof c->s);
+    ato_put(b, &c->a_d, sizeof c->a_d);
     int32_t nh = c->n_hist;
     ato_put(b, &nh, sizeof nh);
     ato_put(b, c->hist, (size_t)nh * sizeof(cmd));
@@ -246,6 +288,7 @@ static int load(void* core, ato_rd* r) {
     ato_take(r, &c->a_c, sizeof c->a_c);
     ato_take(r, &c->v, sizeof c->v);
     ato_take(r, &c->s, sizeof c->s);
+    ato_take(r, &c->a_d, sizeof c->a_d);
     ato_take(r, &nh, sizeof nh);
     if (!r->ok || nh < 1 || (size_t)nh * sizeof(cmd) > r->n - r->at) return 0;
     c->cap_hist = nh;
@@ -256,6 +299,6 @@ static int load(void* core, ato_rd* r) {
 }
 
 const ato_model ATO_MODEL = {
-    ATO_MODEL_IDENTIFIER, ATO_GUID, "ATO-" ATO_MODEL_IDENTIFIER "-state-1", ATO_N_VARS,
+    ATO_MODEL_IDENTIFIER, ATO_GUID, "ATO-" ATO_MODEL_IDENTIFIER "-state-2", ATO_N_VARS,
     ATO_VARS, create, destroy, step, outputs, save, load,
 };

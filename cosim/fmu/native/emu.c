@@ -21,8 +21,15 @@
  *
  * The configuration parameter selects the train data generated from plants.emu
  * CONFIGURATIONS (<id>_config.h); coupler_stiffness / coupler_damping = -1 keep the
- * configuration's value. A coloured disturbance (disturbance_correlation_time > 0) needs the
- * Python FMU (its spectrum is drawn through numpy's vectorised cos and pairwise sums).
+ * configuration's value.
+ *
+ * A coloured disturbance (disturbance_correlation_time tau > 0; plants.emu.coloured_noise):
+ * w_i = m_i sigma sqrt(2/K) sum_k cos(omega_ik t + phi_ik) at the interval's start t, K = 64
+ * components drawn once from numpy's default_rng([seed, 0xC010]): omega = tan(pi/2 u) / tau
+ * (Lorentzian) or, smooth, |ndtri(1/2 + u/2)| / tau (Gaussian), phi = 2 pi u'; the sum in
+ * numpy's pairwise order. ndtri is scipy's inverse normal CDF; here Halley's iteration on
+ * libm's erfc from Abramowitz-Stegun 26.2.23, so omega agrees with the core's to a few ulp,
+ * not bit for bit (tests/test_native_plants.py states and checks the bound).
  */
 #include <math.h>
 #include <stdlib.h>
@@ -37,6 +44,8 @@
 #define NB (3 * N)     /* the block matrix of the propagator */
 #define N_PROPS 8      /* propagators kept (sub-step lengths) */
 #define KEEP (-1.0)    /* cosim.fmu.declare.KEEP */
+#define COLOURED 64    /* plants.emu.COLOURED_COMPONENTS */
+#define PI 3.141592653589793 /* np.pi */
 
 typedef struct {
     int64_t h_ticks; /* 0: unused */
@@ -58,6 +67,8 @@ typedef struct {
     int next_prop;
     int64_t noise_index; /* the interval whose draws are in noise_cache; -1: none */
     double noise_cache[N];
+    int coloured;                      /* tau > 0: the spectrum below, not white draws */
+    double omega[N][COLOURED], phase[N][COLOURED];
     /* state (Emu.state_fields) */
     int64_t t;
     double x[N], v[N];
@@ -240,12 +251,56 @@ static int holds(const emu* e, const double* u) {
     return fabs(pos - rf) <= neg + dsum;
 }
 
+/* scipy.special.ndtri(p) for p in [1/2, 1): x >= 0 with Phi(x) = p, i.e. erfc(x / sqrt 2) / 2
+ * = q = 1 - p (exact for p >= 1/2); Abramowitz-Stegun 26.2.23 (|error| < 4.5e-4), then
+ * Halley's iteration on f(x) = erfc(x / sqrt 2) / 2 - q (f' = -phi, f'' = x phi) */
+static double ndtri_upper(double p) {
+    double q = 1.0 - p;
+    if (q >= 0.5) return 0.0;
+    if (q <= 0.0) return INFINITY; /* ndtri(1) */
+    double t = sqrt(-2.0 * log(q));
+    double x = t - (2.515517 + (0.802853 + 0.010328 * t) * t) /
+                       (1.0 + (1.432788 + (0.189269 + 0.001308 * t) * t) * t);
+    for (int i = 0; i < 8; i++) {
+        double phi = exp(-0.5 * x * x) / sqrt(2.0 * PI);
+        double d = (0.5 * erfc(x / sqrt(2.0)) - q) / phi;
+        double step = d / (1.0 - 0.5 * x * d);
+        x += step;
+        if (fabs(step) <= 1e-17 * x) break;
+    }
+    return x;
+}
+
+/* the spectrum of the coloured disturbance (plants.emu._coloured_spectrum) */
+static void coloured_spectrum(emu* e, double tau, int smooth) {
+    uint64_t ints[2] = {(uint64_t)e->seed, 0xC010};
+    ato_pcg64 g;
+    ato_pcg64_seed(&g, ints, 2);
+    for (int i = 0; i < N; i++)
+        for (int k = 0; k < COLOURED; k++) {
+            double u = ato_pcg64_double(&g);
+            e->omega[i][k] = smooth ? fabs(ndtri_upper(0.5 + 0.5 * u)) / tau
+                                    : tan(0.5 * PI * u) / tau;
+        }
+    for (int i = 0; i < N; i++)
+        for (int k = 0; k < COLOURED; k++) e->phase[i][k] = ato_pcg64_double(&g) * 2.0 * PI;
+}
+
 /* the disturbance force (N) of the interval holding tick (Emu._noise) */
 static const double* noise_at(emu* e, int64_t tick) {
     static const double zeros[N] = {0};
     if (e->sigma == 0.0) return zeros;
     int64_t index = ato_floordiv(tick, e->noise_ticks);
-    if (index != e->noise_index) {
+    if (index != e->noise_index && e->coloured) { /* coloured_noise at the interval's start */
+        double t = ato_to_seconds(index * e->noise_ticks), terms[COLOURED];
+        for (int i = 0; i < N; i++) {
+            for (int k = 0; k < COLOURED; k++)
+                terms[k] = cos(e->omega[i][k] * t + e->phase[i][k]);
+            double unit = sqrt(2.0 / COLOURED) * np_sum(terms, COLOURED);
+            e->noise_cache[i] = e->m[i] * e->sigma * unit;
+        }
+        e->noise_index = index;
+    } else if (index != e->noise_index) {
         uint64_t ints[2] = {(uint64_t)e->seed, (uint64_t)index};
         ato_pcg64 g;
         ato_pcg64_seed(&g, ints, 2);
@@ -473,12 +528,6 @@ static void* create(ato_inst* mi) {
             return NULL;
         }
     }
-    if (r[ATO_VR_disturbance_correlation_time] > 0 && r[ATO_VR_disturbance_accel_std] != 0) {
-        ATO_ERROR(mi, "bad parameter: disturbance_correlation_time = %.17g: the native FMU "
-                  "draws white noise only; a coloured disturbance needs the Python FMU",
-                  r[ATO_VR_disturbance_correlation_time]);
-        return NULL;
-    }
     if (r[ATO_VR_disturbance_seed] < 0) {
         ATO_ERROR(mi, "bad parameter: disturbance_seed = %.17g must be >= 0 (numpy "
                   "SeedSequence)", r[ATO_VR_disturbance_seed]);
@@ -524,6 +573,10 @@ static void* create(ato_inst* mi) {
     e->grid = ato_to_ticks(r[ATO_VR_max_step]);
     e->noise_ticks = ato_to_ticks(r[ATO_VR_disturbance_interval]);
     e->noise_index = -1;
+    e->coloured = r[ATO_VR_disturbance_correlation_time] > 0 && e->sigma != 0.0;
+    if (e->coloured)
+        coloured_spectrum(e, r[ATO_VR_disturbance_correlation_time],
+                          r[ATO_VR_disturbance_smooth] != 0.0);
     /* A = [[0, I], [-k M^-1 L, -d M^-1 L]], B = [[0], [M^-1]] (L: the chain's Laplacian) */
     double lap[N][N];
     memset(lap, 0, sizeof lap);

@@ -28,6 +28,7 @@
 
 #include "ato_plant_backend.h"
 #include "ato_model_decl.h"
+#include "ato_numpy_random.h"
 
 #define BEFORE_START (-(1LL << 62))
 #define GRAVITY 9.81
@@ -197,10 +198,9 @@ static void destroy(void* core) {
  * value is set (set_number, from the generated ATO_VARS). Messages name the parameter. */
 static int check_parameters(ato_inst* m) {
     const double* r = m->r;
-    if (r[ATO_VR_resistance_spread] != 0.0) {
-        ATO_ERROR(m, "bad parameter: resistance_spread = %.17g: the native build has no "
-                  "resistance spread (0 only; use the Python FMU)",
-                  r[ATO_VR_resistance_spread]);
+    if (r[ATO_VR_disturbance_seed] < 0) {
+        ATO_ERROR(m, "bad parameter: disturbance_seed = %.17g must be >= 0 (numpy "
+                  "SeedSequence)", r[ATO_VR_disturbance_seed]);
         return 0;
     }
     if (!(r[ATO_VR_max_traction_force] > 0)) {
@@ -255,6 +255,12 @@ static void* create(ato_inst* m) {
     c->work = calloc((size_t)N_WORK * n, sizeof(double));
     c->hint_f = calloc(n, sizeof(int64_t));
     c->hint_r = calloc(n, sizeof(int64_t));
+    /* plants.freight.resistance_factors: exp(spread z - spread^2 / 2), z the vehicles' draws
+     * of np.random.default_rng(disturbance_seed).standard_normal(n); ones for spread = 0 */
+    double spread = r[ATO_VR_resistance_spread];
+    ato_pcg64 rng;
+    uint64_t seed = (uint64_t)r[ATO_VR_disturbance_seed];
+    if (spread != 0.0) ato_pcg64_seed(&rng, &seed, 1);
     double fill_front = 0.0; /* -cumsum(length[:-1]), sequential as np.cumsum */
     for (int i = 0; i < n; i++) {
         int loco = i == 0;
@@ -265,6 +271,12 @@ static void* create(ato_inst* m) {
         double ra = loco ? r[ATO_VR_loco_resistance_a] : r[ATO_VR_wagon_resistance_a];
         double rb = loco ? r[ATO_VR_loco_resistance_b] : r[ATO_VR_wagon_resistance_b];
         double rc = loco ? r[ATO_VR_loco_resistance_c] : r[ATO_VR_wagon_resistance_c];
+        if (spread != 0.0) { /* coeffs *= factors[:, None] */
+            double factor = exp(spread * ato_standard_normal(&rng) - 0.5 * (spread * spread));
+            ra *= factor;
+            rb *= factor;
+            rc *= factor;
+        }
         double theta = loco ? r[ATO_VR_loco_braking_ratio] : r[ATO_VR_wagon_braking_ratio];
         double weight = mass * GRAVITY;
         c->length[i] = length;

@@ -29,6 +29,7 @@
 
 #include "api.h" /* DAQP */
 #include "utils.h" /* DAQP: daqp_update_ldp */
+#include "ato_grade.h"
 #include "ato_law_common.h"
 #include "ato_linalg.h"
 #include "ato_model.h"
@@ -341,8 +342,6 @@ static void qp_solve(horizon_qp* q, const double* x0, const double* ref, const d
 
 /* ---- the law ------------------------------------------------------------------------------ */
 
-typedef struct { int n; double* starts; double* values; } grade_steps;
-
 struct law_core {
     /* parameters */
     int N, l, max_hold, known, observer;
@@ -353,7 +352,7 @@ struct law_core {
     double F[16], ref_mask[4], x_lo[4], x_hi[4];
     int nt;
     const double *Ft, *ht;
-    grade_steps grade;
+    ato_grade grade;
     horizon_qp** qps; /* [0]: fallback, [1..max_hold] */
     int Hmax, ncon_total;
     int* warm_off; /* per hold 0..max_hold: offset of its warm dual in the state */
@@ -370,58 +369,11 @@ enum { ST_COMMAND, ST_LAST_T, ST_HAS_LAST, ST_ANCHOR_T, ST_ANCHOR_S, ST_HOLD, ST
        ST_INFEASIBLE, ST_STANDSTILL, ST_LAST_VREF, ST_INF_AFTER, ST_EV_MOVING, ST_EV_STAND,
        ST_D_HAT, ST_HAS_OBS, ST_OBS_X, ST_PLAN_LEN = ST_OBS_X + 4, ST_SCALARS };
 
-static int load_grade(const char* resources, const char* route, grade_steps* out, char* err,
-                      size_t n) {
-    if (strpbrk(route, "/\\") || strstr(route, ".toml")) {
-        snprintf(err, n, "route = '%s': the native build reads bundled routes only (a file "
-                 "path needs the Python FMU)", route);
-        return 0;
-    }
-    size_t len = strlen(resources) + strlen(route) + 32;
-    char* path = malloc(len);
-    snprintf(path, len, "%s/routes/%s.grade", resources, route);
-    FILE* f = fopen(path, "r");
-    free(path);
-    if (!f) {
-        snprintf(err, n, "route = '%s': no bundled route of that name", route);
-        return 0;
-    }
-    char line[256];
-    int cap = 16;
-    out->n = 0;
-    out->starts = malloc(sizeof(double) * cap);
-    out->values = malloc(sizeof(double) * cap);
-    while (fgets(line, sizeof line, f)) {
-        if (line[0] == '#') continue;
-        double a, v;
-        if (sscanf(line, "%lf %lf", &a, &v) != 2) continue;
-        if (out->n == cap) {
-            cap *= 2;
-            out->starts = realloc(out->starts, sizeof(double) * cap);
-            out->values = realloc(out->values, sizeof(double) * cap);
-        }
-        out->starts[out->n] = a;
-        out->values[out->n++] = v;
-    }
-    fclose(f);
-    return out->n > 0;
-}
-
-/* grade.at(s): values[bisect_right(starts, s) - 1] */
-static double grade_at(const grade_steps* gs, double s) {
-    int lo = 0, hi = gs->n;
-    while (lo < hi) {
-        int mid = (lo + hi) / 2;
-        if (s < gs->starts[mid]) hi = mid; else lo = mid + 1;
-    }
-    return gs->values[lo - 1 < 0 ? 0 : lo - 1];
-}
-
 static double davis(const law_core* c, double v) { return c->da + (c->db + c->dc * v) * v; }
 
 /* known resistance a_r (m/s^2): Davis + grade + the observer's estimate */
 static double resistance(const law_core* c, double v, double s) {
-    return davis(c, ato_max(v, 0.0)) / c->mass + GRAVITY * grade_at(&c->grade, s) / 1000.0 +
+    return davis(c, ato_max(v, 0.0)) / c->mass + ato_grade_accel(&c->grade, s) +
            c->st[ST_D_HAT];
 }
 
@@ -645,7 +597,7 @@ law_core* law_make(const ato_values* p, double t0, char* err, size_t n) {
                  "%s s", ato_repr(v[ATO_VR_brake_delay], a), ato_repr(c->T, b));
         goto fail;
     }
-    if (!load_grade(p->resources, p->s[ATO_VR_route], &c->grade, err, n)) goto fail;
+    if (!ato_grade_load(p->resources, p->s[ATO_VR_route], &c->grade, err, n)) goto fail;
     /* design model (controllers.common.design_model.brake_delay_model) */
     double tau = v[ATO_VR_brake_time_constant];
     double blk[25] = {0}, phi[25];
@@ -812,7 +764,7 @@ void law_free(law_core* c) {
     if (!c) return;
     if (c->qps)
         for (int h = 0; h <= c->max_hold; h++) qp_free(c->qps[h]);
-    free(c->qps); free(c->warm_off); free(c->grade.starts); free(c->grade.values);
+    free(c->qps); free(c->warm_off); ato_grade_free(&c->grade);
     free(c->ref); free(c->e); free(c->d); free(c->qv); free(c->xs); free(c->st);
     free(c);
 }

@@ -4,6 +4,9 @@
  *
  *   e = v - v_ref,   u = u_ff + kp e + ki int(e) + kd de/dt,   u_ff = a0 / c before s_stop
  *
+ * or, with resistance_feedforward, u_ff = (a0 - a_r(v, s)) / c, a_r = the Davis force / mass
+ * + the bundled route's grade (resources/routes/<route>.grade, ato_grade.c), as the MPCs.
+ *
  * clamped to [u_min, u_max], conditional-integration anti-windup, backward-difference
  * derivative over the sample time, full brake u_max at or past the stop point with
  * hold_at_stop_point. The core's floating-point operations in its order (sqrt is correctly
@@ -12,6 +15,7 @@
 #include <math.h>
 #include <stdio.h>
 
+#include "ato_grade.h"
 #include "ato_law_common.h"
 #include "ato_vars.h"
 #include "ato_model.h"
@@ -24,7 +28,9 @@ typedef struct {
 struct law_core {
     ato_pid_gains pid;
     double ref_decel, stop_point, brake_gain, u_min, u_max;
-    int hold_at_stop_point;
+    int hold_at_stop_point, resistance_feedforward;
+    double mass, da, db, dc; /* the known resistance of the feedforward */
+    ato_grade grade;
     pid_state st;
 };
 
@@ -40,17 +46,29 @@ law_core* law_make(const ato_values* p, double t0, char* err, size_t n) {
     c.u_min = v[ATO_VR_u_min];
     c.u_max = v[ATO_VR_u_max];
     c.hold_at_stop_point = v[ATO_VR_hold_at_stop_point] != 0.0;
-    if (v[ATO_VR_resistance_feedforward] != 0.0) {
-        snprintf(err, n, "resistance_feedforward = true: the native build has no resistance "
-                 "feedforward (false only; use the Python FMU)");
-        return NULL;
-    }
+    c.resistance_feedforward = v[ATO_VR_resistance_feedforward] != 0.0;
+    c.mass = v[ATO_VR_mass];
+    c.da = v[ATO_VR_davis_a];
+    c.db = v[ATO_VR_davis_b];
+    c.dc = v[ATO_VR_davis_c];
     /* StopPidParams.check_relations (the declared ranges: ato_controller.c) */
     if (!ato_check_less("u_min", c.u_min, "u_max", c.u_max, err, n)) return NULL;
+    if (c.resistance_feedforward &&
+        !ato_grade_load(p->resources, p->s[ATO_VR_route], &c.grade, err, n))
+        return NULL;
     return ato_law_on_heap(&c, sizeof c);
 }
 
-void law_free(law_core* c) { free(c); }
+void law_free(law_core* c) {
+    if (c->resistance_feedforward) ato_grade_free(&c->grade);
+    free(c);
+}
+
+/* StopPid.resistance: Davis force / mass + the route's grade (m/s2) */
+static double resistance(const law_core* c, double v, double s) {
+    v = ato_max(v, 0.0);
+    return (c->da + (c->db + c->dc * v) * v) / c->mass + ato_grade_accel(&c->grade, s);
+}
 ATO_LAW_PLAIN_STATE(st)
 
 int law_compute(law_core* c, double t, const ato_values* p, double* out, char* err, size_t n) {
@@ -58,8 +76,11 @@ int law_compute(law_core* c, double t, const ato_values* p, double* out, char* e
     double v = p->v[ATO_VR_v], s = p->v[ATO_VR_s];
     double v_ref = sqrt(2.0 * c->ref_decel * ato_max(c->stop_point - s, 0.0));
     double error = v - v_ref;
-    double u_ff =
-        c->pid.feedforward && s < c->stop_point ? c->ref_decel / c->brake_gain : 0.0;
+    double u_ff = 0.0;
+    if (c->pid.feedforward && s < c->stop_point) {
+        double a_r = c->resistance_feedforward ? resistance(c, v, s) : 0.0;
+        u_ff = (c->ref_decel - a_r) / c->brake_gain;
+    }
     if (c->hold_at_stop_point && (s >= c->stop_point || (v_ref == 0.0 && v <= 0.0)))
         u_ff = c->u_max; /* at or past the stop point: hold the train */
     double derivative =
