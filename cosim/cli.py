@@ -692,7 +692,10 @@ def reproduce(
         "folder's record (seconds)")] = False,
     resume: Annotated[bool, typer.Option(
         "--resume", help="run only the jobs the folder's record lacks (same simulation "
-        "inputs, K and path)")] = False,
+        "inputs, K, path and build)")] = False,
+    build: Annotated[str | None, typer.Option(
+        "--build", help="native: the native C builds of the FMUs that have one (the others "
+        "Python); python: every FMU's Python build (default: the entry's build)")] = None,
 ) -> None:
     """Reproduce a paper's results and test its claims.
 
@@ -703,6 +706,7 @@ def reproduce(
     from cosim.reproduce.entry import ReproduceError, entry_names
     from cosim.reproduce.page import redraw_entry, reproduce_all
     from cosim.reproduce.page import reproduce as reproduce_entry
+    from cosim.reproduce.run import BUILDS
     from cosim.run import interrupt, runner
     from cosim.run.master import SimulationError
     from cosim.run.results import PLOT_FORMATS, OutputError, check_destination
@@ -711,6 +715,8 @@ def reproduce(
     try:
         if plot_format not in PLOT_FORMATS:
             raise OutputError(f"--format {plot_format}: one of {', '.join(PLOT_FORMATS)}")
+        if build is not None and build not in BUILDS:
+            raise ReproduceError(f"--build {build}: one of {', '.join(BUILDS)}")
         runner.check_workers(workers, scheduler)
         if out_dir is not None:
             check_destination(out_dir)
@@ -721,13 +727,13 @@ def reproduce(
                                     else out_dir / each, plot_format)
         elif name == "all":
             path = reproduce_all(out_dir, workers, seeds, not no_rounding, scheduler,
-                                 plot_format)
+                                 plot_format, build, resume)
         else:
             if name not in entry_names() and not Path(name).is_file():
                 raise ReproduceError(f"no reproduction entry {name!r} "
                                      f"(known: {', '.join(entry_names())}, all)")
             path = reproduce_entry(name, out_dir, workers, seeds, not no_rounding,
-                                   scheduler, plot_format, resume=resume)
+                                   scheduler, plot_format, resume=resume, build=build)
     except interrupt.Interrupted as err:
         console.print(f"[bold yellow]{escape(str(err))}[/]", highlight=False, soft_wrap=True)
         raise typer.Exit(interrupt.EXIT_INTERRUPTED) from None

@@ -27,6 +27,16 @@ def test_inputs_are_the_entry_its_scenarios_their_cores_and_the_evaluation() -> 
     assert "controllers/datadriven/laws.py" not in files  # another paper's law
 
 
+def test_the_native_build_adds_the_c_models_it_runs() -> None:
+    python = _rel(entry_inputs("seed000"))
+    native = _rel(entry_inputs("seed000", "native"))
+    assert not any(f.endswith(".c") for f in python)  # a Python record: no C is its input
+    assert {"cosim/fmu/native/brake_delay.c", "cosim/fmu/native/stop_mpc.c",
+            "cosim/fmu/native_build.py"} <= set(native)
+    assert set(python) < set(native)
+    assert simulation_digest("seed000", "native") != simulation_digest("seed000")
+
+
 def test_digest_is_a_function_of_contents(monkeypatch) -> None:
     first = entry_digest("seed000")
     assert entry_digest("seed000") == first

@@ -16,6 +16,7 @@ from cosim.run.record import (
     Job,
     Record,
     RecordError,
+    build_of,
     check_jobs,
     load,
     save,
@@ -56,6 +57,7 @@ def test_a_record_reads_back_and_rewrites_the_same_bytes(tmp_path: Path) -> None
     want = np.array([float(f"{v:.{SERIES_DIGITS}g}") for v in AWKWARD])
     assert frame["plant.v"].to_numpy().tobytes() == want.tobytes()
     assert simulation_of(tmp_path) == ("ab" * 32, 2)
+    assert back.build == "python" and build_of(tmp_path) == "python"
     first = {p.relative_to(folder): p.read_bytes() for p in folder.rglob("*") if p.is_file()}
     save(back, tmp_path / "again")
     again = tmp_path / "again" / "record"

@@ -84,13 +84,14 @@ def test_reproduce_writes_ours_beside_the_paper(built_fmus, tmp_path: Path) -> N
     ('[[figures]]\nfile = "x.png"\nx = "time"\ny = ["plant.v"]\nkind = "pie"\n', "kind 'pie'"),
     ('[[figures]]\nfile = "x.png"\nx = "time"\ny = ["plant.v[*]"]\ny_reduce = "max"\n',
      "y_reduce 'max'"),
-    ('colour = "red"\n', "unknown key 'colour' (known: citation, claims,"),
+    ('colour = "red"\n', "unknown key 'colour' (known: build, citation, claims,"),
     ('tilte = "red"\n', "unknown key 'tilte' (did you mean 'title'?)"),
     ('[[figures]]\nfile = "x.png"\nx = "time"\ny = ["plant.v"]\nxlim = [5, 1]\n',
      "xlim = [5, 1]: expected [low, high] with low < high"),
     ('[[figures]]\nfile = "x.png"\nx = "time"\ny = ["plant.v"]\nband_x = [1, 2, "w", 4]\n',
      "band_x = [1, 2, 'w', 4]: expected [low, high] or [low, high, label]"),
     ('table = "../t"\n', "must be a file name"),
+    ('build = "fast"\n', 'build = \'fast\' must be "native" or "python"'),
     ('set = 3\n', "set = 3: expected a table"),
     ('[[rankings]]\nmetric = "nope"\nruns = ["PID"]\n', "metric 'nope' is not in [[metrics]]"),
     ('[[rankings]]\nmetric = "stop_error_m"\nruns = ["PID", "PID"]\n', "must be distinct"),
@@ -107,7 +108,7 @@ def test_reproduce_writes_ours_beside_the_paper(built_fmus, tmp_path: Path) -> N
 ])
 def test_bad_entries_name_the_file_and_key(tmp_path: Path, patch: str, message: str) -> None:
     path = tmp_path / "bad.toml"
-    top = patch.startswith(("colour", "tilte", "table", "set"))  # before the first table
+    top = patch.startswith(("colour", "tilte", "table", "set", "build"))  # before any table
     path.write_text(patch + "\n" + ENTRY if top else ENTRY + patch)
     with pytest.raises(ReproduceError, match=re.escape(message)) as err:
         load_entry(str(path))
@@ -530,3 +531,58 @@ def test_single_run_cells_whose_printed_figure_moves_on_the_rerun_are_marked() -
     assert all(moves[r.name, k] is None for r in entry.runs[2:] for k in keys)
     text = table_markdown(entry, rows)
     assert "0.1234‡" in text and "‡: the printed figure moves" in text
+
+
+def test_the_native_build_runs_each_fmu_that_has_a_native_model() -> None:
+    """--build native: NAME.build = "native" for the FMUs with a native model, never over a
+    build the run sets itself; the Python FMUs of the others; a clear error otherwise."""
+    from cosim.reproduce.run import build_overrides, run_jobs, sweep_jobs
+
+    assert build_overrides("seed000_stop_rsmpc", {}, "native") == {
+        "plant.build": "native", "controller.build": "native"}
+    assert build_overrides("seed000_stop_rsmpc", {}, "python") == {}
+    assert build_overrides("seed000_stop_rsmpc", {"controller.build": "python"},
+                           "native") == {"plant.build": "native"}
+    # seed 003's controllers have no native model: the plant alone
+    assert build_overrides("seed003_crh3_gpc_eco", {}, "native") == {"plant.build": "native"}
+    with pytest.raises(ReproduceError, match="--build fast: one of native, python"):
+        build_overrides("seed000_stop_rsmpc", {}, "fast")
+    entry = load_entry("seed000")
+    native = {j.key: j.overrides for j in run_jobs(entry, "native")}
+    python = {j.key: j.overrides for j in run_jobs(entry, "python")}
+    for key, over in native.items():  # the same job with the builds added
+        assert {k: v for k, v in over.items() if not k.endswith(".build")} == python[key]
+        assert over["plant.build"] == "native"
+    [sweep] = sweep_jobs(entry, "native")
+    assert list(sweep.overrides)[0] == "controller.N"  # the figure's axis stays first
+    assert sweep.overrides["plant.build"] == "native"
+
+
+def test_a_native_rounding_rerun_needs_a_perturbed_parameter(tmp_path: Path) -> None:
+    """A native FMU has no numpy reference path: without [ensemble] rounding_perturb its
+    rounding rerun would repeat the main run, so it is refused, naming the key."""
+    from cosim.run.ensemble import claim_jobs
+
+    from dataclasses import replace
+
+    shipped = load_entry("seed002")
+    entry = replace(shipped, ensemble=replace(shipped.ensemble, rounding_perturb=[]))
+    with pytest.raises(ReproduceError, match=r"\[ensemble\] rounding_perturb: empty"):
+        claim_jobs(entry, 2, rounding=True, build="native")
+    assert claim_jobs(entry, 2, rounding=False, build="native")  # no rerun: nothing to refuse
+    jobs = claim_jobs(load_entry("seed000"), 2, rounding=True, build="native")
+    reruns = [ov for key, _sc, ov in jobs if key[3]]
+    assert reruns and all(ov["plant.build"] == "native" and "plant.v0" in ov for ov in reruns)
+
+
+@pytest.mark.slow
+def test_a_native_campaign_gives_the_python_campaigns_verdicts(tmp_path: Path) -> None:
+    """Seed 002's claims at K = 2 on the native builds (plant and every controller in C) and
+    on the Python builds: the same verdicts and members on the claimed side."""
+    from cosim.run.ensemble import run_claims
+
+    entry = load_entry("seed002")
+    rows = {build: run_claims(entry, tmp_path / build, 2, workers=2, rounding=False,
+                              build=build) for build in ("native", "python")}
+    assert [(r["id"], r["verdict"], r["k"]) for r in rows["native"]] == [
+        (r["id"], r["verdict"], r["k"]) for r in rows["python"]]

@@ -71,6 +71,10 @@ class Entry:
                      "section)", default="")
     table: str = doc("the table's file name without suffix (letters, digits, '_', '-')",
                      default="table")
+    build: str = doc("the FMU builds its simulations run unless `cosim reproduce --build` says "
+                     "otherwise: \"native\" (each FMU's native C build where it has one, the "
+                     "others Python) or \"python\" (every FMU's Python build); a reason for "
+                     "\"python\" belongs in a comment", default="native")
     overrides: dict[str, Any] = doc(
         "overrides of every run and sweep (e.g. the entry's disturbance); a run's own ``set`` "
         "wins", toml="set", default={})
@@ -146,6 +150,9 @@ def load_entry(name: str | Path) -> Entry:
     if not re.fullmatch(r"[A-Za-z0-9_-]+", top["table"]):
         raise ReproduceError(f"{path}: table = {top['table']!r} must be a file name without "
                              "folder or suffix (letters, digits, '_', '-')")
+    if top["build"] not in ("native", "python"):
+        raise ReproduceError(f"{path}: build = {top['build']!r} must be \"native\" or "
+                             "\"python\"")
     common = top["overrides"]
     lists = {key: _tables(str(path), key, data.get(key, [])) for key in PARTS}
     runs = [_part(Run, path, "runs", r, i) for i, r in enumerate(lists["runs"])]

@@ -71,6 +71,23 @@ def single_run_reruns(entry: Entry, record: Record) -> dict[str, dict[str, Any]]
     return out
 
 
+def builds_sentence(entry: Entry, record: Record) -> str:
+    """Which builds of the FMUs the record's table runs ran (``NAME.build`` of their jobs):
+    "FMUs: native C builds of ...; Python builds of ..."."""
+    scenarios = run_scenarios(entry)
+    native: set[str] = set()
+    python: set[str] = set()
+    for job in record.jobs.values():
+        if job.kind != "run":
+            continue
+        for comp in scenarios[job.key[0]].components.values():
+            built = job.overrides.get(f"{comp.name}.build", comp.build)
+            (native if built == "native" else python).add(Path(comp.fmu).stem)
+    parts = [f"{what} builds of {', '.join(sorted(names))}"
+             for what, names in (("native C", native), ("Python", python)) if names]
+    return f"FMUs: {'; '.join(parts)} (`--build {record.build}`)." if parts else ""
+
+
 def evaluate(entry: Entry, record: Record, out: Path, plot_format: str = "png") -> Page:
     """Tables, sweeps' tables and figures, figures, claims and the page of ``entry`` from
     ``record`` alone (no simulation; :class:`cosim.run.record.RecordError` if the record
@@ -80,7 +97,7 @@ def evaluate(entry: Entry, record: Record, out: Path, plot_format: str = "png") 
 
     from cosim.run.ensemble import verdict_summary, write_claims
 
-    check_jobs(record, wanted_jobs(entry, record.seeds, record.rounding))
+    check_jobs(record, wanted_jobs(entry, record.seeds, record.rounding, record.build))
     out.mkdir(parents=True, exist_ok=True)
     summaries = merged_summaries(entry, {job.key: record.results[ident]
                                          for ident, job in record.jobs.items()
@@ -92,7 +109,7 @@ def evaluate(entry: Entry, record: Record, out: Path, plot_format: str = "png") 
         out / f"{entry.table}.csv", index=False)
     source = (f"{entry.citation} " if entry.citation else "") + (
         f"Reproduced by `cosim reproduce {entry.name}` (entry "
-        f"`scenarios/reproduce/{entry.path.name}`).")
+        f"`scenarios/reproduce/{entry.path.name}`). {builds_sentence(entry, record)}")
     parts = [f"## {entry.title}", "", source, "", table_markdown(entry, rows)]
     if derived:
         parts += ["", derived_markdown(derived)]
@@ -151,16 +168,17 @@ def statements_markdown(statements: list[Statement], rows: list[dict[str, Any]])
 
 def reproduce(name: str, out_dir: str | Path | None = None, workers: int | None = None,
               seeds: int | None = None, rounding: bool = True, scheduler: str | None = None,
-              plot_format: str = "png", echo: bool = True, resume: bool = False) -> Path:
+              plot_format: str = "png", echo: bool = True, resume: bool = False,
+              build: str | None = None) -> Path:
     """:func:`reproduce_page`'s file."""
     return reproduce_page(name, out_dir, workers, seeds, rounding, scheduler, plot_format,
-                          echo, resume).table
+                          echo, resume, build).table
 
 
 def reproduce_page(name: str, out_dir: str | Path | None = None, workers: int | None = None,
                    seeds: int | None = None, rounding: bool = True,
                    scheduler: str | None = None, plot_format: str = "png", echo: bool = True,
-                   resume: bool = False) -> Page:
+                   resume: bool = False, build: str | None = None) -> Page:
     """Run one entry (:func:`simulate`), keep its record (``record/``,
     :mod:`cosim.run.record`) and write everything made of it (:func:`evaluate`): the tables,
     sweeps, figures (in ``plot_format``: png at 200 dpi, svg or pdf) and, with claims,
@@ -168,7 +186,10 @@ def reproduce_page(name: str, out_dir: str | Path | None = None, workers: int | 
     ``rounding``: also the perturbed floating-point rerun); every batch of runs goes through
     :mod:`cosim.run.runner` (``workers``, ``scheduler``). With ``echo`` the tables are printed
     in 80 columns (:func:`console_text`). With ``resume`` the jobs the folder's record already
-    holds (same specification, simulation inputs, K and path) are not run again."""
+    holds (same specification, simulation inputs, K, path and build) are not run again.
+    ``build``: "native" runs the catalog FMUs' native C builds where they exist
+    (:func:`cosim.reproduce.run.build_overrides`), "python" every FMU's Python build, None the
+    entry's ``build``."""
     entry = load_entry(name)
     out = Path(out_dir) if out_dir is not None else Path("runs") / "reproduce" / entry.name
     out.mkdir(parents=True, exist_ok=True)
@@ -186,7 +207,8 @@ def reproduce_page(name: str, out_dir: str | Path | None = None, workers: int | 
         except RecordError as err:
             print(f"{name}: nothing to resume ({err}): everything runs", file=sys.stderr,
                   flush=True)
-    record = simulate(entry, out, workers, seeds, rounding, scheduler, plot_format, previous)
+    record = simulate(entry, out, workers, seeds, rounding, scheduler, plot_format, previous,
+                      build)
     save(record, out)
     # the page is made from the record as stored (its series at SERIES_DIGITS digits), so
     # --redraw makes it again byte for byte
@@ -217,8 +239,9 @@ def redraw_page(name: str, out_dir: str | Path | None = None, plot_format: str =
         page = evaluate(entry, record, out, plot_format)
     except RecordError as err:
         raise ReproduceError(str(err)) from err
-    if entry.path.parent == REPRODUCE_DIR and record.simulation == simulation_digest(name):
-        inputs.write_text(entry_digest(name) + "\n")
+    if (entry.path.parent == REPRODUCE_DIR
+            and record.simulation == simulation_digest(name, record.build)):
+        inputs.write_text(entry_digest(name, record.build) + "\n")
     if echo:
         print(console_text(entry, page.rows, page.claim_rows, out), flush=True)
     return page
@@ -271,13 +294,14 @@ def claims_summary(claims: dict[str, list[dict[str, Any]]]) -> str:
 
 def reproduce_all(out_dir: str | Path | None = None, workers: int | None = None,
                   seeds: int | None = None, rounding: bool = True,
-                  scheduler: str | None = None, plot_format: str = "png") -> Path:
+                  scheduler: str | None = None, plot_format: str = "png",
+                  build: str | None = None, resume: bool = False) -> Path:
     """Every entry; one ``REPRODUCTION.md`` with the claims held / failed / inconclusive per
     paper and each entry's tables and figures."""
     out = Path(out_dir) if out_dir is not None else Path("runs") / "reproduce"
     out.mkdir(parents=True, exist_ok=True)
     pages = {name: reproduce_page(name, out / name, workers, seeds, rounding, scheduler,
-                                  plot_format)
+                                  plot_format, resume=resume, build=build)
              for name in entry_names()}
     parts = ["# Reproduced results", "", "Made by `cosim reproduce all`; each section by "
              "`cosim reproduce NAME` from the entry in `scenarios/reproduce/`.", "",

@@ -4,6 +4,7 @@ claims' members (:mod:`cosim.run.ensemble`), run through :mod:`cosim.run.runner`
 
 from __future__ import annotations
 
+import functools
 import sys
 from pathlib import Path
 from typing import Any
@@ -54,38 +55,88 @@ def table_seed(entry: Entry) -> dict[str, int]:
     return {key: entry.ensemble.report_seeds[0]} if key and entry.ensemble.report_seeds else {}
 
 
-def run_jobs(entry: Entry) -> list[Job]:
+BUILDS = ("native", "python")  # --build: the catalog FMUs' native C builds where they exist
+
+
+@functools.lru_cache(maxsize=256)
+def _native_components(scenario: str, fmus: tuple[tuple[str, str], ...]) -> tuple[str, ...]:
+    from cosim.fmu.native_build import NATIVE
+    from cosim.run.scenario import load_scenario
+
+    sc = load_scenario(scenario, dict(fmus))
+    return tuple(c.name for c in sc.components.values() if c.fmu in NATIVE)
+
+
+def build_overrides(scenario: str, overrides: dict[str, Any], build: str) -> dict[str, str]:
+    """The overrides that run ``scenario`` (with ``overrides``) on ``build``: with "native",
+    ``NAME.build = "native"`` for every FMU whose catalog identifier has a native C model
+    (:data:`cosim.fmu.native_build.NATIVE`; the others stay Python) and whose build
+    ``overrides`` do not set; with "python" none."""
+    if build not in BUILDS:
+        raise ReproduceError(f"--build {build}: one of {', '.join(BUILDS)}")
+    if build == "python":
+        return {}
+    fmus = tuple(sorted((k, v) for k, v in overrides.items()
+                        if k.endswith((".fmu", ".build"))))
+    return {f"{name}.build": "native" for name in _native_components(scenario, fmus)
+            if f"{name}.build" not in overrides}
+
+
+def check_rounding_path(entry: Entry, builds: dict[str, dict[str, str]]) -> None:
+    """Refuse a rounding rerun that would repeat the main run: a native C FMU has no numpy
+    reference path, so where a run has one, ``[ensemble] rounding_perturb`` must name a
+    parameter to perturb (``builds``: run name -> :func:`build_overrides`)."""
+    native = sorted(name for name, over in builds.items() if over)
+    if native and not entry.ensemble.rounding_perturb:
+        raise ReproduceError(
+            f"{entry.path}: [ensemble] rounding_perturb: empty, but runs {native[:3]} use "
+            "native C builds, which have no numpy reference path: name a parameter to "
+            "perturb by 1e-12 (or run with --build python, or --no-rounding)")
+
+
+def run_jobs(entry: Entry, build: str = "python") -> list[Job]:
     """The table runs' simulations: one job per run and repetition, at :func:`table_seed`
-    unless the run sets its seed itself."""
+    unless the run sets its seed itself, on ``build`` (:func:`build_overrides`)."""
     seed = table_seed(entry)
-    return [Job("run", (run.name, k), run.scenario, {**seed, **run.overrides})
+    return [Job("run", (run.name, k), run.scenario,
+                {**build_overrides(run.scenario, run.overrides, build), **seed,
+                 **run.overrides})
             for run in entry.runs for k in range(run.repeat)]
 
 
-def sweep_jobs(entry: Entry) -> list[Job]:
-    """One job per ``[[sweeps]]`` entry (its scenarios and grid)."""
-    return [Job("sweep", (sweep.name,), list(sweep.scenarios), dict(sweep.grid))
-            for sweep in entry.sweeps]
+def sweep_jobs(entry: Entry, build: str = "python") -> list[Job]:
+    """One job per ``[[sweeps]]`` entry (its scenarios and grid; on ``build``, each
+    :func:`build_overrides` key as a one-value axis after the sweep's own)."""
+    jobs = []
+    for sweep in entry.sweeps:
+        grid = dict(sweep.grid)
+        for scenario in sweep.scenarios:
+            for key, value in build_overrides(scenario, grid, build).items():
+                grid.setdefault(key, value)
+        jobs.append(Job("sweep", (sweep.name,), list(sweep.scenarios), grid))
+    return jobs
 
 
 def run_entry(entry: Entry, out_dir: Path, workers: int | None = None,
               scheduler: str | None = None, plot_format: str = "png",
-              record: Record | None = None, previous: Record | None = None
-              ) -> dict[str, dict[str, Any]]:
-    """Run every run of ``entry`` with :func:`cosim.run.runner.run_tasks` (``workers``
-    processes or the Dask ``scheduler``; a run with ``repeat = k`` k times, repetitions 2..
-    under ``runs/<run>/repeat_NN``); returns run name -> summary (medians and ``repeats`` for
-    a repeated run), each repetition's summary added to ``record``; a run ``previous`` holds
-    with the same specification is taken from it, not run again. A failed run raises
+              record: Record | None = None, previous: Record | None = None,
+              build: str = "python") -> dict[str, dict[str, Any]]:
+    """Run every run of ``entry`` on ``build`` with :func:`cosim.run.runner.run_tasks`
+    (``workers`` processes or the Dask ``scheduler``; a run with ``repeat = k`` k times,
+    repetitions 2.. under ``runs/<run>/repeat_NN``); returns run name -> summary (medians and
+    ``repeats`` for a repeated run), each repetition's summary added to ``record``; a run
+    ``previous`` holds with the same specification is taken from it, not run again. A failed
+    run raises
     :class:`ReproduceError` naming it, after the others finished."""
     from cosim.run import runner
     from cosim.run.master import ensure_built
     from cosim.run.scenario import load_scenario
     from cosim.run.sweep import warm_up_for
 
-    for run in entry.runs:  # bad overrides fail here, before anything runs; build once
-        ensure_built(load_scenario(run.scenario, run.overrides))
-    jobs = run_jobs(entry)
+    jobs = run_jobs(entry, build)
+    for job in jobs:  # bad overrides fail here, before anything runs; build once
+        if job.key[1] == 0:
+            ensure_built(load_scenario(job.scenario, job.overrides))
     tasks = []
     done: dict[Any, dict[str, Any]] = {}
     for job in jobs:
@@ -185,30 +236,34 @@ def figure_runs(entry: Entry, kinds: tuple[str, ...]) -> dict[str, list[Figure]]
 
 def simulate(entry: Entry, out: Path, workers: int | None = None, seeds: int | None = None,
              rounding: bool = True, scheduler: str | None = None, plot_format: str = "png",
-             previous: Record | None = None) -> Record:
+             previous: Record | None = None, build: str | None = None) -> Record:
     """Every simulation ``entry`` needs (its runs, sweeps and claims' members), through
     :mod:`cosim.run.runner`; the record of their results and of the series the figures draw.
     A job ``previous`` holds with the same specification is taken from it, not run again,
-    where ``previous`` ran with this tree's simulation inputs, K and rounding path (the run
-    folders under ``out`` then hold its files)."""
+    where ``previous`` ran with this tree's simulation inputs, K, rounding path and ``build``
+    (the catalog FMUs' native C builds where they exist, or every FMU's Python build; None:
+    the entry's ``build``; the run folders under ``out`` then hold its files)."""
     from cosim.run.ensemble import simulate_claims
     from cosim.run.sweep import parse_grid, run_sweep
 
     k = claims_k(entry, seeds)
-    digest = simulation_digest(entry.name) if entry.path.parent == REPRODUCE_DIR else ""
-    record = Record(entry.name, digest, k, rounding)
-    if previous is not None and (previous.simulation, previous.seeds, previous.rounding) != (
-            digest, k, rounding):
-        why = [what for what, a, b in (("simulation inputs", previous.simulation, digest),
-                                       ("K", previous.seeds, k),
-                                       ("rounding path", previous.rounding, rounding)) if a != b]
+    build = build or entry.build
+    digest = (simulation_digest(entry.name, build) if entry.path.parent == REPRODUCE_DIR
+              else "")
+    record = Record(entry.name, digest, k, rounding, build)
+    ours = (digest, k, rounding, build)
+    if previous is not None and (previous.simulation, previous.seeds, previous.rounding,
+                                 previous.build) != ours:
+        theirs = (previous.simulation, previous.seeds, previous.rounding, previous.build)
+        why = [what for what, a, b in zip(("simulation inputs", "K", "rounding path",
+                                           "build"), theirs, ours, strict=True) if a != b]
         print(f"{entry.name}: the record under {out} has other {', '.join(why)}: nothing of it "
               "is reused", file=sys.stderr, flush=True)
         previous = None
-    run_entry(entry, out, workers, scheduler, plot_format, record, previous)
+    run_entry(entry, out, workers, scheduler, plot_format, record, previous, build)
     save(record, out)  # a checkpoint: an interrupted run resumes from here (--resume)
     record_run_series(entry, out, record)
-    for job in sweep_jobs(entry):
+    for job in sweep_jobs(entry, build):
         if known(previous, job):
             record.add(job, previous.result(job.kind, *job.key))
             continue
@@ -241,12 +296,13 @@ def claims_k(entry: Entry, seeds: int | None) -> int:
     return seeds if seeds is not None else min(20, len(entry.ensemble.report_seeds))
 
 
-def wanted_jobs(entry: Entry, k: int, rounding: bool) -> list[Job]:
-    """Every simulation the entry's tables, sweeps and claims at ``k`` members read."""
+def wanted_jobs(entry: Entry, k: int, rounding: bool, build: str = "python") -> list[Job]:
+    """Every simulation the entry's tables, sweeps and claims at ``k`` members read, on
+    ``build``."""
     from cosim.run.ensemble import member_jobs
 
-    return run_jobs(entry) + sweep_jobs(entry) + (member_jobs(entry, k, rounding)
-                                                  if entry.claims else [])
+    return run_jobs(entry, build) + sweep_jobs(entry, build) + (
+        member_jobs(entry, k, rounding, build) if entry.claims else [])
 
 
 def run_scenarios(entry: Entry) -> dict[str, Any]:

@@ -190,17 +190,18 @@ def source_dir(name: str, reproduce_dir: Path = REPRODUCE_DIR) -> Path | None:
     from cosim.reproduce.entry import ReproduceError
     from cosim.reproduce.page import redraw_entry
     from cosim.run.provenance import entry_digest, simulation_digest
+    from cosim.run.record import build_of
 
     run_dir = reproduce_dir / name
-    current = entry_digest(name)
-    if (_table_file(run_dir) is not None and run_digest(run_dir) == current
+    page_dir = DOCS / "papers" / name
+    if (_table_file(run_dir) is not None
+            and run_digest(run_dir) == entry_digest(name, build_of(run_dir))
             and record_simulation(run_dir) is not None):
         return run_dir
-    if _page_digest(name) == current and _page_complete(name):
+    if _page_digest(name) == entry_digest(name, build_of(page_dir)) and _page_complete(name):
         return None
-    sim = simulation_digest(name)
-    for folder in (run_dir, DOCS / "papers" / name):
-        if record_simulation(folder) == sim:
+    for folder in (run_dir, page_dir):
+        if record_simulation(folder) == simulation_digest(name, build_of(folder)):
             if not _SCRATCH:
                 _SCRATCH.append(tempfile.TemporaryDirectory(prefix="cosim-docs-"))
             target = Path(_SCRATCH[0].name) / name
@@ -218,16 +219,18 @@ def stale_papers(reproduce_dir: Path = REPRODUCE_DIR) -> list[str]:
     """One line per paper whose page (or the run it would be made from) does not come from the
     tree's current inputs, saying what to run."""
     from cosim.run.provenance import entry_digest, simulation_digest
+    from cosim.run.record import build_of
 
     out: list[str] = []
     for name in paper_names():
-        current = entry_digest(name)
         run_dir = reproduce_dir / name
-        sim = simulation_digest(name)
-        redrawable = any(record_simulation(f) == sim for f in (run_dir, DOCS / "papers" / name))
+        current = entry_digest(name, build_of(run_dir))
+        published = entry_digest(name, build_of(DOCS / "papers" / name))
+        redrawable = any(record_simulation(f) == simulation_digest(name, build_of(f))
+                         for f in (run_dir, DOCS / "papers" / name))
         todo = ("run `cosim docs` (the page is redrawn from the record, no simulation)"
                 if redrawable else f"run `cosim reproduce {name}`, then `cosim docs`")
-        if _table_file(run_dir) is not None and _page_digest(name) != current:
+        if _table_file(run_dir) is not None and _page_digest(name) != published:
             if run_digest(run_dir) != current:
                 out.append(f"{run_dir} was made from other inputs than this tree's: {todo}")
             elif record_simulation(run_dir) is None:
@@ -246,7 +249,7 @@ def stale_papers(reproduce_dir: Path = REPRODUCE_DIR) -> list[str]:
             if text != NOT_REPRODUCED.format(name=name):  # results without their inputs
                 out.append(f"{page.relative_to(ROOT)} does not say which inputs made it: run "
                            f"`cosim reproduce {name}`, then `cosim docs`")
-        elif found.group(1) != current:
+        elif found.group(1) != published:
             out.append(f"{page.relative_to(ROOT)} was made from other inputs than this tree's: "
                        f"{todo}")
     return out

@@ -122,10 +122,18 @@ def claim_cases(entry: Entry, k: int, rounding: bool = True
     return cases
 
 
-def claim_jobs(entry: Entry, k: int, rounding: bool = True) -> list[Job]:
-    """Every (run, ensemble, member, path) the claims and their variants need, once; the
+def claim_jobs(entry: Entry, k: int, rounding: bool = True, build: str = "python"
+               ) -> list[Job]:
+    """Every (run, ensemble, member, path) the claims and their variants need, once, with the
+    ``build`` of the catalog FMUs (:func:`cosim.reproduce.run.build_overrides`); the
     ``repeat`` members first, interleaved by repeat index (A0, B0, A1, B1, ...)."""
+    from cosim.reproduce.run import build_overrides, check_rounding_path
+
     runs = {r.name: r for r in entry.runs}
+    builds = {name: build_overrides(run.scenario, run.overrides, build)
+              for name, run in runs.items()}
+    if rounding:
+        check_rounding_path(entry, builds)
     jobs: dict[tuple[str, str, int, bool], Job] = {}
     cache: dict[tuple[str, int], list[dict[str, Any]]] = {}
     for _var, claim, names, with_rnd, kc in claim_cases(entry, k, rounding):
@@ -137,7 +145,7 @@ def claim_jobs(entry: Entry, k: int, rounding: bool = True) -> list[Job]:
             for i, member in enumerate(cache[ens, kc]):
                 for rnd in (False, True) if with_rnd else (False,):
                     key = (name, ens, i, rnd)
-                    overrides = {**member, **run.overrides}
+                    overrides = {**builds[name], **member, **run.overrides}
                     if ens == "mismatch":  # the drawn plant wins over the run's nominal
                         overrides.update(member)
                     if rnd:
@@ -343,12 +351,13 @@ def compact_table(rows: list[dict[str, Any]]) -> str:
     return "\n".join(lines)
 
 
-def member_jobs(entry: Entry, k: int, rounding: bool = True) -> list[RecordJob]:
+def member_jobs(entry: Entry, k: int, rounding: bool = True, build: str = "python"
+                ) -> list[RecordJob]:
     """:func:`claim_jobs` as record jobs, with the environment each ran in (the rounding path's
     :data:`ROUNDING_ENV` unless ``[ensemble].rounding_reference_path`` is false)."""
     env = ROUNDING_ENV if entry.ensemble.rounding_reference_path else {}
     return [RecordJob("member", key, scenario, overrides, dict(env) if key[3] else {})
-            for key, scenario, overrides in claim_jobs(entry, k, rounding)]
+            for key, scenario, overrides in claim_jobs(entry, k, rounding, build)]
 
 
 def _banded(entry: Entry) -> set[str]:
@@ -364,9 +373,10 @@ def simulate_claims(entry: Entry, out: Path, record: Record, workers: int | None
     from cosim.run.master import ensure_built
     from cosim.run.scenario import load_scenario
 
-    wanted = member_jobs(entry, record.seeds, record.rounding)
+    wanted = member_jobs(entry, record.seeds, record.rounding, record.build)
     reuse = {job.key for job in wanted if known(previous, job)}
-    jobs = [j for j in claim_jobs(entry, record.seeds, record.rounding) if j[0] not in reuse]
+    jobs = [j for j in claim_jobs(entry, record.seeds, record.rounding, record.build)
+            if j[0] not in reuse]
     built: set[str] = set()
     for _key, scenario, overrides in jobs:  # bad overrides fail before anything runs
         sc = load_scenario(scenario, overrides)
@@ -475,9 +485,9 @@ def verdict_summary(rows: list[dict[str, Any]], k: int) -> str:
 
 def run_claims(entry: Entry, out: Path, k: int, workers: int | None = None,
                rounding: bool = True, scheduler: str | None = None,
-               plot_format: str = "png") -> list[dict[str, Any]]:
+               plot_format: str = "png", build: str = "python") -> list[dict[str, Any]]:
     """Run and evaluate the entry's claims (:func:`simulate_claims`, then
     :func:`write_claims` on that record); returns the claims' rows."""
-    record = Record(entry.name, "", k, rounding)
+    record = Record(entry.name, "", k, rounding, build)
     simulate_claims(entry, out, record, workers, scheduler)
     return write_claims(entry, record, out, plot_format)[0]

@@ -4,7 +4,10 @@ stale), and what its simulations depend on, as another (so a record knows when i
 The inputs of entry ``scenarios/reproduce/NAME.toml`` are: the entry itself; every scenario it
 names (a string value equal to a file stem in ``scenarios/``); the files bundled into every FMU
 those scenarios and the entry name (a string equal to a catalog identifier:
-``cosim.fmu.build.bundled_files`` of its wrapper, i.e. the cores, their data and the FMU layer);
+``cosim.fmu.build.bundled_files`` of its wrapper, i.e. the cores, their data and the FMU layer)
+and, on the native build (``cosim reproduce --build native``), for one with a native model
+every file that model is made from (``cosim.fmu.native_build.native_sources``: its C, the C
+fronts and the builder);
 and the code that runs and evaluates them (``cosim/run/``, ``cosim/papers/``,
 ``cosim/reproduce/``), leaving out the pages' own writer. :func:`entry_digest` is a SHA-256
 over their relative paths and contents, so it is the same on every machine for the same tree.
@@ -62,8 +65,9 @@ def _strings(value: Any) -> Iterator[str]:
             yield from _strings(item)
 
 
-def entry_inputs(name: str) -> list[Path]:
-    """The files entry ``name``'s results depend on, sorted (see the module docstring)."""
+def entry_inputs(name: str, build: str = "python") -> list[Path]:
+    """The files entry ``name``'s results on ``build`` (``cosim reproduce --build``) depend on,
+    sorted (see the module docstring)."""
     entry = ENTRIES / f"{name}.toml"
     data = tomllib.loads(entry.read_text())
     known = catalog()
@@ -78,8 +82,12 @@ def entry_inputs(name: str) -> list[Path]:
             fmus.update(s for s in _strings(tomllib.loads(scenario.read_text())) if s in known)
         if text in known:
             fmus.add(text)
+    from cosim.fmu.native_build import NATIVE, native_sources
+
     for identifier in sorted(fmus):
         files.update(bundled_files(known[identifier].module))
+        if build == "native" and identifier in NATIVE:  # its C model, FMI 3 front included
+            files.update(native_sources(identifier, 3))
     for folder in EVALUATION:
         for path in (ROOT / folder).rglob("*.py"):
             if path.relative_to(ROOT).as_posix() not in NOT_INPUTS:
@@ -87,22 +95,22 @@ def entry_inputs(name: str) -> list[Path]:
     return sorted(files)
 
 
-def simulation_inputs(name: str) -> list[Path]:
+def simulation_inputs(name: str, build: str = "python") -> list[Path]:
     """:func:`entry_inputs` less the entry itself and the evaluation-only modules
     (:func:`evaluation_only`)."""
     entry = ENTRIES / f"{name}.toml"
-    return [p for p in entry_inputs(name)
+    return [p for p in entry_inputs(name, build)
             if p != entry and not evaluation_only(p.relative_to(ROOT).as_posix())]
 
 
-def entry_digest(name: str) -> str:
+def entry_digest(name: str, build: str = "python") -> str:
     """SHA-256 over the relative paths and contents of :func:`entry_inputs`."""
-    return _digest(entry_inputs(name))
+    return _digest(entry_inputs(name, build))
 
 
-def simulation_digest(name: str) -> str:
+def simulation_digest(name: str, build: str = "python") -> str:
     """SHA-256 over the relative paths and contents of :func:`simulation_inputs`."""
-    return _digest(simulation_inputs(name))
+    return _digest(simulation_inputs(name, build))
 
 
 def _digest(paths: list[Path]) -> str:

@@ -9,7 +9,8 @@ entry needs or ran it with another specification.
 
 On disk (``<folder>/record/``, gzip without timestamps so the same record gives the same
 bytes): ``record.json.gz`` (the entry name, the digest of the simulation inputs
-(:func:`cosim.run.provenance.simulation_digest`), K, the rounding flag and the jobs) and one
+(:func:`cosim.run.provenance.simulation_digest`), K, the rounding flag, the build and the
+jobs) and one
 ``series/<key>.csv.gz`` per recorded series, written with :data:`SERIES_DIGITS` significant
 digits (a figure's resolution, a fifth of the bytes of full precision; the record is what
 every drawing reads, so a run's first figures and any redraw are the same). The summaries,
@@ -68,6 +69,7 @@ class Record:
     simulation: str  # digest of the simulation inputs the jobs ran with
     seeds: int  # K of the claims' members
     rounding: bool  # the claims' members ran on the perturbed floating-point path too
+    build: str = "python"  # which builds of the catalog FMUs ran (cosim.reproduce.run.BUILDS)
     jobs: dict[tuple[Any, ...], Job] = field(default_factory=dict)
     results: dict[tuple[Any, ...], Any] = field(default_factory=dict)
     series: dict[str, pd.DataFrame] = field(default_factory=dict)
@@ -129,7 +131,8 @@ def save(record: Record, folder: Path) -> Path:
                             lineterminator="\n")
         (staging / _SERIES_DIR / files[name]).write_bytes(_gzip(text.encode()))
     body = {"format": FORMAT, "entry": record.entry, "simulation": record.simulation,
-            "seeds": record.seeds, "rounding": record.rounding, "series": files,
+            "seeds": record.seeds, "rounding": record.rounding, "build": record.build,
+            "series": files,
             "jobs": [{**job.spec(), "result": record.results[ident]}  # in a fixed order,
                      for ident, job in sorted(record.jobs.items(),  # not the runs' finishing
                                               key=lambda item: json.dumps(item[0]))]}
@@ -154,6 +157,15 @@ def simulation_of(folder: Path) -> tuple[str, int]:
     return str(body.get("simulation")), int(body.get("seeds", 0))
 
 
+def build_of(folder: Path) -> str:
+    """The build (``cosim reproduce --build``) of the record in ``folder/record/``; "python"
+    where there is no record."""
+    try:
+        return str(_body(folder / RECORD_DIR / _JOBS_FILE).get("build", "python"))
+    except RecordError:
+        return "python"
+
+
 def load(folder: Path) -> Record:
     """The record in ``folder/record/`` (:class:`RecordError` naming the file if there is
     none or it cannot be read)."""
@@ -162,7 +174,8 @@ def load(folder: Path) -> Record:
     if body.get("format") != FORMAT:
         raise RecordError(f"{path}: record format {body.get('format')!r}, this version reads "
                           f"{FORMAT} (rerun `cosim reproduce {body.get('entry', '')}`)")
-    rec = Record(body["entry"], body["simulation"], int(body["seeds"]), bool(body["rounding"]))
+    rec = Record(body["entry"], body["simulation"], int(body["seeds"]), bool(body["rounding"]),
+                 str(body.get("build", "python")))
     for item in body["jobs"]:
         key = tuple(item["key"])
         scenario = item["scenario"]
