@@ -41,13 +41,8 @@ def repeat_values(summary: dict[str, Any], key: str) -> list[float] | None:
 def repeat_spread(summary: dict[str, Any], key: str) -> tuple[float, float, int] | None:
     """``(min, max, n)`` of a metric over a repeated run's repetitions (None if not repeated
     or not numeric)."""
-    reps = summary.get("repeats")
-    if not reps:
-        return None
-    vals = [summary_value(r, key) for r in reps]
-    if not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in vals):
-        return None
-    return float(min(vals)), float(max(vals)), len(vals)
+    vals = repeat_values(summary, key)
+    return None if vals is None else (min(vals), max(vals), len(vals))
 
 
 def md_row(cells: list[str]) -> str:
