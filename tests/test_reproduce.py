@@ -561,9 +561,9 @@ def test_the_native_build_runs_each_fmu_that_has_a_native_model() -> None:
 def test_a_native_rounding_rerun_needs_a_perturbed_parameter(tmp_path: Path) -> None:
     """A native FMU has no numpy reference path: without [ensemble] rounding_perturb its
     rounding rerun would repeat the main run, so it is refused, naming the key."""
-    from cosim.run.ensemble import claim_jobs
-
     from dataclasses import replace
+
+    from cosim.run.ensemble import claim_jobs
 
     shipped = load_entry("seed002")
     entry = replace(shipped, ensemble=replace(shipped.ensemble, rounding_perturb=[]))
