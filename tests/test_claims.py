@@ -169,12 +169,19 @@ def test_rounding_sensitive_is_never_holds() -> None:
     b = 5.0 + NOISE
     main = verdict(LESS, b - 1.0, b)
     fake_perturbed = verdict(LESS, b + 1.0, b)  # a perturbed path that flips the order
-    out = with_rounding(main, fake_perturbed)
+    out = with_rounding(main, [fake_perturbed])
     assert main["verdict"] == "holds"
     assert out["verdict"] == "rounding-sensitive" and out["rounding_robust"] is False
     assert out["main_verdict"] == "holds" and out["rounding_verdict"] == "fails"
-    same = with_rounding(main, verdict(LESS, b - 1.0 + 1e-12, b))
+    agree = verdict(LESS, b - 1.0 + 1e-12, b)
+    same = with_rounding(main, [agree])
     assert same["verdict"] == "holds" and same["rounding_robust"] is True
+    # two independent paths: one agreeing by chance does not hide the other's flip
+    both = with_rounding(main, [agree, fake_perturbed])
+    assert both["verdict"] == "rounding-sensitive" and both["rounding_robust"] is False
+    assert both["rounding_verdict"] == "holds / fails"
+    assert with_rounding(main, [agree, agree])["verdict"] == "holds"
+    assert with_rounding(main, None)["rounding_robust"] is None
 
 
 def test_seeds_parse_and_must_be_disjoint() -> None:
@@ -534,3 +541,30 @@ def test_repeat_claim_end_to_end_on_a_fast_entry(tmp_path: Path) -> None:
     csv = pd.read_csv(tmp_path / "out" / "claims.csv")
     assert list(csv["K"]) == [3, 1]
     assert "n/a" in (tmp_path / "out" / "claims.md").read_text()
+
+
+def test_a_second_rounding_path_perturbs_other_parameters_without_the_reference_path() -> None:
+    """``rounding_perturb_second``: every perturbed member runs on a second path (2) with
+    only its own parameters scaled by 1 + 1e-12 and no numpy reference path; it may not
+    share a parameter with the first path."""
+    from cosim.run.claims import ROUNDING_RELATIVE
+    from cosim.run.ensemble import ROUNDING_ENV, claim_jobs, member_jobs
+
+    entry = _variant_entry()
+    entry.ensemble = check_ensemble("e.toml", {
+        "seed_key": "plant.seed", "report_seeds": "1..6", "rounding_perturb": ["plant.m"],
+        "rounding_perturb_second": ["controller.k"]})
+    entry.variants = []
+    entry.runs = [dataclasses.replace(r, overrides={"plant.m": 2.0, "controller.k": 3.0})
+                  for r in entry.runs]
+    jobs = {key: ov for key, _sc, ov in claim_jobs(entry, 2, rounding=True)}
+    assert {key[3] for key in jobs} == {0, 1, 2}
+    first, second = jobs["A", "disturbance", 1, 1], jobs["A", "disturbance", 1, 2]
+    assert first["plant.m"] == 2.0 * (1 + ROUNDING_RELATIVE) and first["controller.k"] == 3.0
+    assert second["controller.k"] == 3.0 * (1 + ROUNDING_RELATIVE) and second["plant.m"] == 2.0
+    env = {job.key: job.env for job in member_jobs(entry, 2)}
+    assert env["A", "disturbance", 1, 1] == ROUNDING_ENV
+    assert env["A", "disturbance", 1, 2] == {} == env["A", "disturbance", 1, 0]
+    with pytest.raises(ClaimsError, match="rounding_perturb_second shares"):
+        check_ensemble("e.toml", {"rounding_perturb": ["plant.m"],
+                                  "rounding_perturb_second": ["plant.m"]})

@@ -33,7 +33,7 @@ def _record() -> Record:
     summary = {"stop_error_m": AWKWARD[0], "ok": True, "executions": {"plant": 301},
                "warnings": ["w"], "missing": math.nan}
     rec.add(Job("run", ("PID", 0), "s_pid", {"controller.kp": 30.0}), summary)
-    rec.add(Job("member", ("PID", "disturbance", 1, True), "s_pid",
+    rec.add(Job("member", ("PID", "disturbance", 1, 1), "s_pid",
                 {"plant.disturbance_seed": 2}, {"ATO_COSIM_NO_KERNELS": "1"}), None)
     rec.add(Job("sweep", ("fig11",), ["a", "b"], {"controller.N": "3..5"}),
             {"columns": ["scenario", "x"], "rows": [["a", 1.5], ["b", None]]})
@@ -52,7 +52,7 @@ def test_a_record_reads_back_and_rewrites_the_same_bytes(tmp_path: Path) -> None
     got = back.result("run", "PID", 0)
     assert got["stop_error_m"] == AWKWARD[0] and math.isnan(got["missing"])
     assert got["executions"] == {"plant": 301} and got["ok"] is True
-    assert back.result("member", "PID", "disturbance", 1, True) is None
+    assert back.result("member", "PID", "disturbance", 1, 1) is None
     frame = back.frame("run/PID")
     want = np.array([float(f"{v:.{SERIES_DIGITS}g}") for v in AWKWARD])
     assert frame["plant.v"].to_numpy().tobytes() == want.tobytes()
@@ -109,3 +109,22 @@ def test_a_series_keeps_what_its_figures_draw_reduced_and_thinned(tmp_path: Path
         figure_series(full, spec, "plant.v[*]", "A")[rows].tolist(), rel=1e-15)
     record_series(rec, "run/A", tmp_path / "run", [figure], None)  # a table run: scalars too
     assert "plant.s" in rec.series["run/A"] and len(rec.series["run/A"]) == 10
+
+
+def test_a_record_of_one_rerun_flag_reads_as_paths(tmp_path: Path) -> None:
+    """A record written when a member's key ended in a rerun flag (false / true) reads as
+    path 0 / 1, so its jobs serve the same jobs of the path numbering."""
+    import gzip
+    import json
+
+    rec = _record()
+    save(rec, tmp_path)
+    path = tmp_path / "record" / "record.json.gz"
+    body = json.loads(gzip.decompress(path.read_bytes()))
+    for item in body["jobs"]:
+        if item["kind"] == "member":
+            item["key"][3] = True
+    path.write_bytes(gzip.compress(json.dumps(body).encode()))
+    back = load(tmp_path)
+    [key] = [k for k in back.jobs if k[0] == "member"]
+    assert key == ("member", "PID", "disturbance", 1, 1) and type(key[4]) is int

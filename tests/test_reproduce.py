@@ -522,8 +522,9 @@ def test_single_run_cells_whose_printed_figure_moves_on_the_rerun_are_marked() -
     keys = [m.key for m in entry.metrics if "." not in m.key]  # flat summary keys
     summaries = {run.name: {k: 0.1234 for k in keys} for run in entry.runs}
     first, second = entry.runs[0].name, entry.runs[1].name
-    perturbed = {first: {k: 0.1236 for k in keys},  # moves the 4th digit: marked
-                 second: {k: 0.123401 for k in keys}}  # below the printed digits
+    perturbed = {first: [{k: 0.1234 for k in keys},  # one path moves the 4th digit: marked
+                         {k: 0.1236 for k in keys}],
+                 second: [{k: 0.123401 for k in keys}]}  # below the printed digits
     rows = table_rows(entry, summaries, perturbed)
     moves = {(r.run, r.metric): r.rounding_moves for r in rows}
     assert all(moves[first, k] is True for k in keys)

@@ -57,17 +57,18 @@ class Page:
     claim_rows: list[dict[str, Any]]  # one per claim (:func:`cosim.run.ensemble.evaluate`)
 
 
-def single_run_reruns(entry: Entry, record: Record) -> dict[str, dict[str, Any]]:
-    """Run name -> the summary of the table's single run on the perturbed floating-point
-    path: the rerun of member 1 of the disturbance ensemble, which is the single run
-    (:func:`cosim.reproduce.run.table_seed`), where the record has it."""
+def single_run_reruns(entry: Entry, record: Record) -> dict[str, list[dict[str, Any]]]:
+    """Run name -> the summaries of the table's single run on the perturbed floating-point
+    paths: the reruns of member 1 of the disturbance ensemble, which is the single run
+    (:func:`cosim.reproduce.run.table_seed`), where the record has them."""
     if not table_seed(entry):
         return {}
     out = {}
     for run in entry.runs:
-        result = record.results.get(("member", run.name, "disturbance", 0, True))
-        if result is not None and run.repeat == 1:
-            out[run.name] = result
+        results = [record.results.get(("member", run.name, "disturbance", 0, path))
+                   for path in entry.ensemble.rounding_paths()]
+        if run.repeat == 1 and all(r is not None for r in results):
+            out[run.name] = results
     return out
 
 

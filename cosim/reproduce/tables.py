@@ -153,10 +153,10 @@ def _within(ours: Any, band: list[float] | None, value: float | None,
 
 
 def table_rows(entry: Entry, summaries: dict[str, dict[str, Any]],
-               perturbed: dict[str, dict[str, Any]] | None = None) -> list[Cell]:
+               perturbed: dict[str, list[dict[str, Any]]] | None = None) -> list[Cell]:
     """Long format: one cell per (run, metric) with ours, the paper's and the verdict;
-    ``perturbed`` (run name -> the summary of the same run on the perturbed floating-point
-    path, where there is one) marks the cells whose printed figure it moves."""
+    ``perturbed`` (run name -> the summaries of the same run on the perturbed floating-point
+    paths, where it has them) marks the cells whose printed figure one of them moves."""
     perturbed = perturbed or {}
     refs = {(r.run, r.metric): r for r in entry.paper}
     rows = []
@@ -181,8 +181,8 @@ def table_rows(entry: Entry, summaries: dict[str, dict[str, Any]],
                              within=_within(ours, band, value, tolerance),
                              rounding_moves=(
                                  None if run.name not in perturbed or spread else
-                                 fmt(summary_value(perturbed[run.name], metric.key))
-                                 != fmt(ours))))
+                                 any(fmt(summary_value(s, metric.key)) != fmt(ours)
+                                     for s in perturbed[run.name]))))
     return rows
 
 
@@ -339,8 +339,8 @@ def table_markdown(entry: Entry, rows: list[Cell]) -> str:
                   + ", ".join(f"{n}" for n in repeated) + " runs); a ratio r (l-h) of two "
                   "repeated runs: the ratio of their medians with its 95 % bootstrap CI."]
     if any(r.rounding_moves for r in rows):
-        lines += ["", "‡: the printed figure moves on the same run's perturbed floating-point "
-                  "rerun (its rerun as member 1 of the claims' ensemble): the digits it "
+        lines += ["", "‡: the printed figure moves on a perturbed floating-point rerun of the "
+                  "same run (its reruns as member 1 of the claims' ensemble): the digits it "
                   "moves are not a result."]
     if any(r.within is not None for r in rows):
         lines += ["", "✓ / ✗: inside / outside the paper's band or the tolerance stated in the "

@@ -75,6 +75,10 @@ ENSEMBLE_KEYS: dict[str, tuple[str, str, str]] = {
     "perturb_seed": ("an integer", "0", "the seed of the mismatch draws"),
     "rounding_perturb": ("a list of strings FMU.PARAMETER", "[]", "parameters scaled by "
                          "1 + 1e-12 on the perturbed floating-point rerun"),
+    "rounding_perturb_second": ("a list of strings FMU.PARAMETER", "[]", "parameters scaled "
+                                "by 1 + 1e-12 on a second perturbed rerun, independent of the "
+                                "first (other parameters; never the numpy reference path); "
+                                "none: one rerun"),
     "rounding_reference_path": ("true or false", "true", "the rerun also takes the plants' "
                                 "numpy reference path (``ATO_COSIM_NO_KERNELS=1``); false "
                                 "keeps the compiled kernels (rounding_perturb alone "
@@ -139,7 +143,18 @@ class Ensemble:
     perturb: list[str] = field(default_factory=list)
     perturb_seed: int = 0
     rounding_perturb: list[str] = field(default_factory=list)
+    rounding_perturb_second: list[str] = field(default_factory=list)
     rounding_reference_path: bool = True
+
+    def rounding_paths(self) -> tuple[int, ...]:
+        """The perturbed floating-point paths of a member: 1 (``rounding_perturb``, with the
+        numpy reference path unless ``rounding_reference_path`` is false) and, where
+        ``rounding_perturb_second`` names parameters, 2."""
+        return (1, 2) if self.rounding_perturb_second else (1,)
+
+    def rounding_keys(self, path: int) -> list[str]:
+        """The parameters scaled by 1 + 1e-12 on perturbed path ``path``."""
+        return self.rounding_perturb if path == 1 else self.rounding_perturb_second
     repeats: int | None = None  # members of a "repeat" claim (None: no such claim allowed)
     members: int | None = None  # K a published page needs (None: 20, or every report seed)
 
@@ -197,7 +212,7 @@ def check_ensemble(where: str, data: dict[str, Any] | None) -> Ensemble:
     if both:
         raise ClaimsError(f"{where}: [ensemble]: calibration_seeds and report_seeds share "
                           f"{both}: tuning seeds must be disjoint from report seeds")
-    for key in ("perturb", "rounding_perturb"):
+    for key in ("perturb", "rounding_perturb", "rounding_perturb_second"):
         value = data.get(key, [])
         if not (isinstance(value, list) and all(isinstance(v, str) for v in value)):
             raise ClaimsError(f"{where}: [ensemble] {key} = {value!r}: expected a list of "
@@ -207,11 +222,17 @@ def check_ensemble(where: str, data: dict[str, Any] | None) -> Ensemble:
     except ValueError as err:
         raise ClaimsError(f"{where}: [ensemble] perturb: {err}") from err
     ens.perturb = list(data.get("perturb", []))
-    for key in data.get("rounding_perturb", []):
-        if "." not in key:
-            raise ClaimsError(f"{where}: [ensemble] rounding_perturb: {key!r} is not "
-                              "FMU.PARAMETER")
+    for name in ("rounding_perturb", "rounding_perturb_second"):
+        for key in data.get(name, []):
+            if "." not in key:
+                raise ClaimsError(f"{where}: [ensemble] {name}: {key!r} is not "
+                                  "FMU.PARAMETER")
     ens.rounding_perturb = list(data.get("rounding_perturb", []))
+    ens.rounding_perturb_second = list(data.get("rounding_perturb_second", []))
+    shared = sorted(set(ens.rounding_perturb) & set(ens.rounding_perturb_second))
+    if shared:
+        raise ClaimsError(f"{where}: [ensemble] rounding_perturb_second shares {shared} with "
+                          "rounding_perturb: the second path must perturb other parameters")
     ref_path = data.get("rounding_reference_path", True)
     if not isinstance(ref_path, bool):
         raise ClaimsError(f"{where}: [ensemble] rounding_reference_path = {ref_path!r}: "
@@ -608,15 +629,18 @@ def adjust(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
     return out
 
 
-def with_rounding(main: dict[str, Any], perturbed: dict[str, Any] | None) -> dict[str, Any]:
-    """``main`` with ``rounding_verdict``, ``rounding_robust`` and the final ``verdict``
-    (``rounding-sensitive`` when the perturbed floating-point path's verdict differs)."""
+def with_rounding(main: dict[str, Any], perturbed: list[dict[str, Any]] | None
+                  ) -> dict[str, Any]:
+    """``main`` with ``rounding_verdict`` (each perturbed floating-point path's verdict, in
+    path order, joined by " / "), ``rounding_robust`` and the final ``verdict``
+    (``rounding-sensitive`` when any perturbed path's verdict differs)."""
     out = dict(main, main_verdict=main["verdict"])
-    if perturbed is None:
+    if not perturbed:
         out.update(rounding_verdict=None, rounding_robust=None)
         return out
-    same = perturbed["verdict"] == main["verdict"]
-    out.update(rounding_verdict=perturbed["verdict"], rounding_robust=same)
+    same = all(p["verdict"] == main["verdict"] for p in perturbed)
+    out.update(rounding_verdict=" / ".join(p["verdict"] for p in perturbed),
+               rounding_robust=same)
     if not same:
         out["verdict"] = "rounding-sensitive"
     return out

@@ -14,12 +14,14 @@ Members of a claim's ensemble (K = ``--seeds``, the first K report seeds, except
   A0, B0, A1, B1, ... over every run of the repeat claims, so a drift of the machine's load
   meets both runs of a pair.
 
-Every member of a ``disturbance`` or ``mismatch`` claim runs twice: on the main path and on a
-perturbed floating-point path (the plants' numpy reference path, ``ATO_COSIM_NO_KERNELS=1`` in
-the worker, unless ``[ensemble].rounding_reference_path`` is false, and each
-``[ensemble].rounding_perturb`` parameter scaled by 1 + 1e-12); a ``repeat`` claim has no such
-rerun (its rounding-robust column reads "n/a": its metric is a measurement, not a result of
-the floating-point path). The runs go through the shared runner (:mod:`cosim.run.runner`:
+Every member of a ``disturbance`` or ``mismatch`` claim runs on the main path (path 0) and on
+each perturbed floating-point path: path 1, the plants' numpy reference path
+(``ATO_COSIM_NO_KERNELS=1`` in the worker, unless ``[ensemble].rounding_reference_path`` is
+false) with each ``[ensemble].rounding_perturb`` parameter scaled by 1 + 1e-12, and, where
+``[ensemble].rounding_perturb_second`` names other parameters, path 2 with those scaled
+(:meth:`cosim.run.claims.Ensemble.rounding_paths`); a ``repeat`` claim has no such rerun (its
+rounding-robust column reads "n/a": its metric is a measurement, not a result of the
+floating-point path). The runs go through the shared runner (:mod:`cosim.run.runner`:
 ``--workers``, ``--scheduler``, one BLAS thread per worker, interrupts, progress on stderr).
 """
 
@@ -52,7 +54,7 @@ if TYPE_CHECKING:
 
 CHECKPOINT_EVERY = 20  # members between two saves of the partial record
 
-Job = tuple[tuple[str, str, int, bool], str, dict[str, Any]]  # (run, ensemble, i, rounding)
+Job = tuple[tuple[str, str, int, int], str, dict[str, Any]]  # (run, ensemble, i, path)
 
 
 def members(entry: Entry, ensemble: str, k: int) -> list[dict[str, Any]]:
@@ -88,17 +90,20 @@ def _draws(entry: Entry, k: int) -> list[dict[str, float]]:
     return draw_samples(perts, nominals, k, entry.ensemble.perturb_seed)
 
 
-def _rounding_overrides(entry: Entry, run: Any, base: dict[str, Any]) -> dict[str, Any]:
+def _rounding_overrides(entry: Entry, run: Any, base: dict[str, Any], path: int
+                        ) -> dict[str, Any]:
+    """Perturbed path ``path``'s parameters (``base``'s value, else the run's, else the
+    declared one) scaled by 1 + :data:`ROUNDING_RELATIVE`."""
     from cosim.run.perturb import nominal_values
 
     out: dict[str, Any] = {}
-    for key in entry.ensemble.rounding_perturb:
+    for key in entry.ensemble.rounding_keys(path):
         value = base.get(key, run.overrides.get(key))
         if value is None:
             value = nominal_values(run.scenario, [key])[key]
         if value is None:
-            raise ValueError(f"{entry.path}: [ensemble] rounding_perturb {key!r}: no nominal "
-                             "value to perturb")
+            raise ValueError(f"{entry.path}: [ensemble] rounding perturbation {key!r}: no "
+                             "nominal value to perturb")
         out[key] = float(value) * (1.0 + ROUNDING_RELATIVE)
     return out
 
@@ -124,12 +129,14 @@ def claim_cases(entry: Entry, k: int, rounding: bool = True
 
 def claim_jobs(entry: Entry, k: int, rounding: bool = True, build: str = "python"
                ) -> list[Job]:
-    """Every (run, ensemble, member, path) the claims and their variants need, once, with the
+    """Every (run, ensemble, member, floating-point path) the claims and their variants need,
+    once, with the
     ``build`` of the catalog FMUs (:func:`cosim.reproduce.run.build_overrides`); the
     ``repeat`` members first, interleaved by repeat index (A0, B0, A1, B1, ...)."""
     from cosim.reproduce.run import build_overrides, check_rounding_path
 
     runs = {r.name: r for r in entry.runs}
+    paths = entry.ensemble.rounding_paths()
     builds = {name: build_overrides(run.scenario, run.overrides, build)
               for name, run in runs.items()}
     if rounding:
@@ -143,13 +150,13 @@ def claim_jobs(entry: Entry, k: int, rounding: bool = True, build: str = "python
         for name in names:
             run = runs[name]
             for i, member in enumerate(cache[ens, kc]):
-                for rnd in (False, True) if with_rnd else (False,):
-                    key = (name, ens, i, rnd)
+                for path in (0, *paths) if with_rnd else (0,):
+                    key = (name, ens, i, path)
                     overrides = {**builds[name], **member, **run.overrides}
                     if ens == "mismatch":  # the drawn plant wins over the run's nominal
                         overrides.update(member)
-                    if rnd:
-                        overrides.update(_rounding_overrides(entry, run, overrides))
+                    if path:
+                        overrides.update(_rounding_overrides(entry, run, overrides, path))
                     jobs.setdefault(key, (key, run.scenario, overrides))
     order = {name: j for j, name in enumerate(dict.fromkeys(key[0] for key in jobs))}
     repeats = sorted((key for key in jobs if key[1] == "repeat"),
@@ -166,7 +173,7 @@ def _run_member(scenario: str, overrides: dict[str, Any], out_dir: str | None = 
                         plot=False).summary
 
 
-def member_dir(out: Path, key: tuple[str, str, int, bool]) -> Path:
+def member_dir(out: Path, key: tuple[str, str, int, int]) -> Path:
     """Where a main-path member writes results.csv (``ensemble/<run>/<ensemble>_<i>``)."""
     from cosim.reproduce.entry import slug
 
@@ -180,15 +187,16 @@ def execute(jobs: list[Job], workers: int | None, label: str = "claims",
             scheduler: str | None = None, dirs: dict[Any, str] | None = None,
             reference_path: bool = True,
             on_result: Callable[[Any, dict[str, Any] | None], None] | None = None
-            ) -> dict[tuple[str, str, int, bool], dict[str, Any] | None]:
-    """Run the jobs with :func:`cosim.run.runner.run_tasks` (main path, then the rounding
-    path in processes started with ``ATO_COSIM_NO_KERNELS=1`` unless ``reference_path`` is
-    false); a failed run gives None (its metrics are missing). ``dirs``: job key -> folder
-    for the run's results (others write none); ``on_result(key, summary)`` as each ends."""
+            ) -> dict[tuple[str, str, int, int], dict[str, Any] | None]:
+    """Run the jobs with :func:`cosim.run.runner.run_tasks` (main path, then each perturbed
+    path: path 1 in processes started with ``ATO_COSIM_NO_KERNELS=1`` unless
+    ``reference_path`` is false); a failed run gives None (its metrics are missing).
+    ``dirs``: job key -> folder for the run's results (others write none);
+    ``on_result(key, summary)`` as each ends."""
     from cosim.run import runner
 
     dirs = dirs or {}
-    out: dict[tuple[str, str, int, bool], dict[str, Any] | None] = {}
+    out: dict[tuple[str, str, int, int], dict[str, Any] | None] = {}
     progress = runner.Progress(len(jobs), label)
 
     def finished(task: runner.Task, summary: Any) -> None:
@@ -202,11 +210,11 @@ def execute(jobs: list[Job], workers: int | None, label: str = "claims",
 
     from cosim.run.sweep import warm_up_for
 
-    for rnd in (False, True):
+    for path in sorted({key[3] for key, _sc, _ov in jobs}):
         tasks = [runner.Task(key, _run_member, (sc, ov, dirs.get(key)))
-                 for key, sc, ov in jobs if key[3] == rnd]
+                 for key, sc, ov in jobs if key[3] == path]
         runner.run_tasks(tasks, finished, failed, workers, scheduler, label,
-                         env=ROUNDING_ENV if rnd and reference_path else None,
+                         env=ROUNDING_ENV if path == 1 and reference_path else None,
                          progress=progress,
                          warm_up=warm_up_for([(sc, ov) for _k, sc, ov in jobs]),
                          what="the claims' runs")
@@ -214,12 +222,12 @@ def execute(jobs: list[Job], workers: int | None, label: str = "claims",
 
 
 def _metric(summaries: dict[Any, dict[str, Any] | None], run: str, ens: str, n: int,
-            rnd: bool, metric: str) -> np.ndarray:
+            path: int, metric: str) -> np.ndarray:
     from cosim.reproduce.tables import summary_value
 
     vals = []
     for i in range(n):
-        s = summaries.get((run, ens, i, rnd))
+        s = summaries.get((run, ens, i, path))
         v = None if s is None else summary_value(s, metric)
         ok = isinstance(v, (int, float))  # a bool (a rule met) counts as 1 / 0
         vals.append(float(v) if ok else math.nan)
@@ -237,14 +245,14 @@ def evaluate(entry: Entry, summaries: dict[Any, dict[str, Any] | None], k: int,
         ens = claim.ensemble
         n = len(members(entry, ens, kc))
         results = []
-        for rnd in (False, True) if with_rnd else (False,):
-            a = _metric(summaries, names[0], ens, n, rnd, claim.metric)
-            b = (_metric(summaries, names[1], ens, n, rnd, claim.metric)
+        for path in (0, *entry.ensemble.rounding_paths()) if with_rnd else (0,):
+            a = _metric(summaries, names[0], ens, n, path, claim.metric)
+            b = (_metric(summaries, names[1], ens, n, path, claim.metric)
                  if len(names) > 1 else None)
             if claim.transform == "abs":  # e.g. the stop error's size, either side
                 a, b = np.abs(a), None if b is None else np.abs(b)
             results.append(verdict(claim, a, b))
-        row = with_rounding(results[0], results[1] if with_rnd else None)
+        row = with_rounding(results[0], results[1:])
         rows.append({**({"variant": var} if variants else {}),
                      "id": claim.id, "source": claim.source, "text": claim.text,
                      "paper": claim.paper, "metric": claim.metric, "kind": claim.kind,
@@ -294,10 +302,24 @@ def _shown(r: dict[str, Any]) -> str:
     return adjusted if adjusted == r["verdict"] else f"{adjusted} (raw: {r['verdict']})"
 
 
-def claims_markdown(rows: list[dict[str, Any]], k: int) -> str:
+def rounding_text(entry: Entry) -> str:
+    """The perturbed floating-point paths of ``entry``'s members, in words."""
+    ens = entry.ensemble
+    first = [f"`{key}` x (1 + 1e-12)" for key in ens.rounding_perturb]
+    if ens.rounding_reference_path:
+        first.append("the Python plants' numpy reference path")
+    paths = [" and ".join(first)]
+    if ens.rounding_perturb_second:
+        paths.append(" and ".join(f"`{key}` x (1 + 1e-12)" for key in
+                                  ens.rounding_perturb_second))
+    return "; ".join(f"path {i}: {text}" for i, text in enumerate(paths, 1))
+
+
+def claims_markdown(rows: list[dict[str, Any]], k: int, rounding: str = "") -> str:
     """The claims table: each claim with its verdict first (adjusted for multiplicity, the raw
     one where they differ), k of K, ours, the paper's figure and source; then the counts per
-    origin and what the columns mean."""
+    origin and what the columns mean (``rounding``: the perturbed paths in words,
+    :func:`rounding_text`)."""
     from cosim.reproduce.tables import md_row
 
     lines = [md_row(["claim", "verdict", "k of K", "ours: median [95 % CI]", "paper", "source",
@@ -333,7 +355,8 @@ def claims_markdown(rows: list[dict[str, Any]], k: int) -> str:
               "difference's CI within the claim's stated margin of B's median (ours says "
               "which). insufficient: K members cannot decide "
               "whatever they show (the note says which K would). rounding-sensitive: the "
-              "verdict differs on the perturbed floating-point rerun."]
+              "verdict differs on a perturbed floating-point rerun"
+              + (f" ({rounding})" if rounding else "") + "."]
     if any(r["ensemble"] == "repeat" for r in rows):
         lines[-1] += (" repeat: the members are repetitions of the same nominal run (K fixed "
                       "by the entry, not by --seeds), paired by repeat index; no rounding "
@@ -353,10 +376,10 @@ def compact_table(rows: list[dict[str, Any]]) -> str:
 
 def member_jobs(entry: Entry, k: int, rounding: bool = True, build: str = "python"
                 ) -> list[RecordJob]:
-    """:func:`claim_jobs` as record jobs, with the environment each ran in (the rounding path's
-    :data:`ROUNDING_ENV` unless ``[ensemble].rounding_reference_path`` is false)."""
+    """:func:`claim_jobs` as record jobs, with the environment each ran in (perturbed path
+    1's :data:`ROUNDING_ENV` unless ``[ensemble].rounding_reference_path`` is false)."""
     env = ROUNDING_ENV if entry.ensemble.rounding_reference_path else {}
-    return [RecordJob("member", key, scenario, overrides, dict(env) if key[3] else {})
+    return [RecordJob("member", key, scenario, overrides, dict(env) if key[3] == 1 else {})
             for key, scenario, overrides in claim_jobs(entry, k, rounding, build)]
 
 
@@ -454,7 +477,7 @@ def write_claims(entry: Entry, record: Record, out: Path, plot_format: str = "pn
                                  out / f"{Path(figure.file).stem}_ensemble.{plot_format}",
                                  run_scenarios(entry))
     pd.DataFrame(rows).to_csv(out / "claims.csv", index=False)
-    text = claims_markdown(rows, k) + "\n"
+    text = claims_markdown(rows, k, rounding_text(entry) if rounding else "") + "\n"
     if entry.variants:
         var_rows = evaluate(entry, summaries, k, rounding, variants=True)
         pd.DataFrame(var_rows).to_csv(out / "variants.csv", index=False)

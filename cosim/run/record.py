@@ -45,7 +45,8 @@ class RecordError(ValueError):
 class Job:
     """One simulation: ``kind`` (``run``: a table run's repetition; ``member``: a claim's
     ensemble member; ``sweep``: a sweep), its ``key`` (run name and repetition; run, ensemble,
-    member index and rounding path; sweep name), and what fixes its result: the ``scenario``,
+    member index and floating-point path, 0 the main one; sweep name), and what fixes its
+    result: the ``scenario``,
     the ``overrides`` and the environment ``env`` of the process that ran it."""
 
     kind: str
@@ -178,6 +179,8 @@ def load(folder: Path) -> Record:
                  str(body.get("build", "python")))
     for item in body["jobs"]:
         key = tuple(item["key"])
+        if item["kind"] == "member" and isinstance(key[3], bool):  # a record of one rerun:
+            key = (*key[:3], int(key[3]))  # its flag is path 0 (main) or 1 (the rerun)
         scenario = item["scenario"]
         rec.add(Job(item["kind"], key, scenario if isinstance(scenario, str) else
                     list(scenario), item["overrides"], item["env"]), item["result"])
