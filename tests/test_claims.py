@@ -568,3 +568,24 @@ def test_a_second_rounding_path_perturbs_other_parameters_without_the_reference_
     with pytest.raises(ClaimsError, match="rounding_perturb_second shares"):
         check_ensemble("e.toml", {"rounding_perturb": ["plant.m"],
                                   "rounding_perturb_second": ["plant.m"]})
+
+
+def test_a_timing_run_records_its_machine_and_load_and_the_page_states_them() -> None:
+    """Each run's summary carries ``host`` (CPU, cores, the 1-minute load average before
+    and after); the repeat claims' note gives the machine and the load's range."""
+    from cosim.run.ensemble import claims_markdown, host_text, with_host
+
+    summary = with_host({"qp_cpu_time_total_s": 1.0}, 0.5)
+    host = summary["host"]
+    assert summary["qp_cpu_time_total_s"] == 1.0 and host["load_before"] == 0.5
+    assert host["cores"] >= 1 and host["cpu"] and host["load_after"] >= 0.0
+    runs = [{"host": {"cpu": "X", "cores": 2, "load_before": 0.5, "load_after": 3.25}},
+            {"host": {"cpu": "X", "cores": 2, "load_before": 1.0, "load_after": 2.0}}, None]
+    text = host_text(runs)
+    assert text == "measured on X, 2 cores, 1-minute load average 0.5-3.2 over the repeats"
+    assert host_text([{"qp": 1.0}, None]) == ""
+    row = {"id": "t", "text": "t", "paper": "", "source": "", "metric": "m", "kind": "less",
+           "runs": "A vs B", "ensemble": "repeat", "origin": "ours", "k": 10, "K": 10,
+           "verdict": "holds", "rounding_robust": None, "median": -1.0, "ci_low": -2.0,
+           "ci_high": -0.5, "quantifier": "typical"}
+    assert text in claims_markdown([row], 20, host=text)

@@ -72,6 +72,11 @@ def single_run_reruns(entry: Entry, record: Record) -> dict[str, list[dict[str, 
     return out
 
 
+def entry_run(entry: Entry, name: str) -> Any:
+    """The ``[[runs]]`` entry named ``name``."""
+    return next(r for r in entry.runs if r.name == name)
+
+
 def builds_sentence(entry: Entry, record: Record) -> str:
     """Which builds of the FMUs the record's table runs ran (``NAME.build`` of their jobs):
     "FMUs: native C builds of ...; Python builds of ..."."""
@@ -96,7 +101,7 @@ def evaluate(entry: Entry, record: Record, out: Path, plot_format: str = "png") 
     ``claims.*`` and the figures in ``plot_format`` to ``out``."""
     import pandas as pd
 
-    from cosim.run.ensemble import verdict_summary, write_claims
+    from cosim.run.ensemble import host_text, verdict_summary, write_claims
 
     check_jobs(record, wanted_jobs(entry, record.seeds, record.rounding, record.build))
     out.mkdir(parents=True, exist_ok=True)
@@ -111,7 +116,10 @@ def evaluate(entry: Entry, record: Record, out: Path, plot_format: str = "png") 
     source = (f"{entry.citation} " if entry.citation else "") + (
         f"Reproduced by `cosim reproduce {entry.name}` (entry "
         f"`scenarios/reproduce/{entry.path.name}`). {builds_sentence(entry, record)}")
-    parts = [f"## {entry.title}", "", source, "", table_markdown(entry, rows)]
+    repeated = host_text([record.results[ident] for ident, job in record.jobs.items()
+                          if job.kind == "run" and entry_run(entry, job.key[0]).repeat > 1])
+    parts = [f"## {entry.title}", "", source, "", table_markdown(entry, rows)
+             + (f"\n\nRepeated runs {repeated}." if repeated else "")]
     if derived:
         parts += ["", derived_markdown(derived)]
     if ranked:

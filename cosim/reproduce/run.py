@@ -20,11 +20,13 @@ from cosim.run.record import Job, Record, known, read_csv, save, series_name
 def _run_one(scenario: str, overrides: dict[str, Any], out_dir: str,
              plot_format: str = "png") -> dict[str, Any]:
     """One run of ``scenario`` with ``overrides`` into ``out_dir`` (a task): its summary."""
+    from cosim.run.ensemble import host_load, with_host
     from cosim.run.master import run_scenario
 
+    before = host_load()
     result = run_scenario(scenario, overrides=overrides, out_dir=out_dir, build=False,
                           plot_format=plot_format)
-    return result.summary
+    return with_host(result.summary, before)
 
 
 def _merge_repeats(summaries: list[dict[str, Any]]) -> dict[str, Any]:

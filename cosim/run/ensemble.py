@@ -169,8 +169,58 @@ def _run_member(scenario: str, overrides: dict[str, Any], out_dir: str | None = 
                 ) -> dict[str, Any]:
     from cosim.run.master import run_scenario
 
-    return run_scenario(scenario, overrides=overrides, out_dir=out_dir, build=False,
-                        plot=False).summary
+    before = host_load()
+    summary = run_scenario(scenario, overrides=overrides, out_dir=out_dir, build=False,
+                           plot=False).summary
+    return with_host(summary, before)
+
+
+def host_load() -> float:
+    """The machine's 1-minute load average now (NaN where the system has none)."""
+    import os
+
+    try:
+        return os.getloadavg()[0]
+    except OSError:
+        return math.nan
+
+
+def cpu_model() -> str:
+    """The processor's name (``/proc/cpuinfo``'s model name on Linux, else the platform's)."""
+    import platform
+
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine()
+
+
+def with_host(summary: dict[str, Any], load_before: float) -> dict[str, Any]:
+    """``summary`` with ``host``: where and under what load the run was measured (the CPU,
+    its core count, the 1-minute load average before and after the run), which a timing
+    claim's page states."""
+    import os
+
+    return {**summary, "host": {"cpu": cpu_model(), "cores": os.cpu_count() or 0,
+                                "load_before": load_before, "load_after": host_load()}}
+
+
+def host_text(summaries: list[dict[str, Any] | None]) -> str:
+    """The machine and the range of its 1-minute load average over ``summaries`` (those
+    with a ``host``), in words; "" where none has one."""
+    hosts = [s["host"] for s in summaries if s and isinstance(s.get("host"), dict)]
+    if not hosts:
+        return ""
+    loads = [h[k] for h in hosts for k in ("load_before", "load_after")
+             if isinstance(h.get(k), (int, float)) and not math.isnan(h[k])]
+    machines = sorted({f"{h.get('cpu', '?')}, {h.get('cores', '?')} cores" for h in hosts})
+    text = "measured on " + "; ".join(machines)
+    if loads:
+        text += f", 1-minute load average {min(loads):.1f}-{max(loads):.1f} over the repeats"
+    return text
 
 
 def member_dir(out: Path, key: tuple[str, str, int, int]) -> Path:
@@ -315,11 +365,13 @@ def rounding_text(entry: Entry) -> str:
     return "; ".join(f"path {i}: {text}" for i, text in enumerate(paths, 1))
 
 
-def claims_markdown(rows: list[dict[str, Any]], k: int, rounding: str = "") -> str:
+def claims_markdown(rows: list[dict[str, Any]], k: int, rounding: str = "",
+                    host: str = "") -> str:
     """The claims table: each claim with its verdict first (adjusted for multiplicity, the raw
     one where they differ), k of K, ours, the paper's figure and source; then the counts per
     origin and what the columns mean (``rounding``: the perturbed paths in words,
-    :func:`rounding_text`)."""
+    :func:`rounding_text`; ``host``: where the repeat claims were measured,
+    :func:`host_text`)."""
     from cosim.reproduce.tables import md_row
 
     lines = [md_row(["claim", "verdict", "k of K", "ours: median [95 % CI]", "paper", "source",
@@ -360,7 +412,7 @@ def claims_markdown(rows: list[dict[str, Any]], k: int, rounding: str = "") -> s
     if any(r["ensemble"] == "repeat" for r in rows):
         lines[-1] += (" repeat: the members are repetitions of the same nominal run (K fixed "
                       "by the entry, not by --seeds), paired by repeat index; no rounding "
-                      "rerun (n/a).")
+                      "rerun (n/a)" + (f"; {host}" if host else "") + ".")
     return "\n".join(lines)
 
 
@@ -477,7 +529,9 @@ def write_claims(entry: Entry, record: Record, out: Path, plot_format: str = "pn
                                  out / f"{Path(figure.file).stem}_ensemble.{plot_format}",
                                  run_scenarios(entry))
     pd.DataFrame(rows).to_csv(out / "claims.csv", index=False)
-    text = claims_markdown(rows, k, rounding_text(entry) if rounding else "") + "\n"
+    host = host_text([record.results[ident] for ident, job in record.jobs.items()
+                      if job.kind == "member" and job.key[1] == "repeat"])
+    text = claims_markdown(rows, k, rounding_text(entry) if rounding else "", host) + "\n"
     if entry.variants:
         var_rows = evaluate(entry, summaries, k, rounding, variants=True)
         pd.DataFrame(var_rows).to_csv(out / "variants.csv", index=False)
