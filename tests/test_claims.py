@@ -524,7 +524,7 @@ def test_repeat_claim_end_to_end_on_a_fast_entry(tmp_path: Path) -> None:
 
     path = tmp_path / "tiny.toml"
     path.write_text(
-        'title = "t"\n'
+        'title = "t"\nbuild = "python"\n'
         '[[runs]]\nname = "A"\nscenario = "seed000_stop_pid"\n'
         '[[runs]]\nname = "B"\nscenario = "seed000_stop_pid_plain"\n'
         '[ensemble]\nreport_seeds = "1..3"\nrepeats = 3\n'

@@ -19,6 +19,7 @@ from cosim.run.master import run_scenario
 ENTRY = """
 title = "Test entry"
 notes = "why we differ"
+build = "python"  # the runner's mechanics on the Python FMUs (the native campaign: below)
 [[runs]]
 name = "PID"
 scenario = "seed000_stop_pid"
@@ -108,8 +109,12 @@ def test_reproduce_writes_ours_beside_the_paper(built_fmus, tmp_path: Path) -> N
 ])
 def test_bad_entries_name_the_file_and_key(tmp_path: Path, patch: str, message: str) -> None:
     path = tmp_path / "bad.toml"
-    top = patch.startswith(("colour", "tilte", "table", "set", "build"))  # before any table
-    path.write_text(patch + "\n" + ENTRY if top else ENTRY + patch)
+    top = patch.startswith(("colour", "tilte", "table", "set"))  # before the first table
+    if patch.startswith("build"):  # in place of the entry's own
+        text = re.sub(r"^build = .*$", patch.strip(), ENTRY, flags=re.M)
+    else:
+        text = patch + "\n" + ENTRY if top else ENTRY + patch
+    path.write_text(text)
     with pytest.raises(ReproduceError, match=re.escape(message)) as err:
         load_entry(str(path))
     assert str(path) in str(err.value)
@@ -572,8 +577,9 @@ def test_a_native_rounding_rerun_needs_a_perturbed_parameter(tmp_path: Path) -> 
         claim_jobs(entry, 2, rounding=True, build="native")
     assert claim_jobs(entry, 2, rounding=False, build="native")  # no rerun: nothing to refuse
     jobs = claim_jobs(load_entry("seed000"), 2, rounding=True, build="native")
-    reruns = [ov for key, _sc, ov in jobs if key[3]]
-    assert reruns and all(ov["plant.build"] == "native" and "plant.v0" in ov for ov in reruns)
+    for path, key in ((1, "plant.v0"), (2, "plant.mass")):  # each path its own parameter
+        reruns = [ov for k, _sc, ov in jobs if k[3] == path]
+        assert reruns and all(ov["plant.build"] == "native" and key in ov for ov in reruns)
 
 
 @pytest.mark.slow
