@@ -8,7 +8,7 @@ from pathlib import Path
 from cosim.fmu.build import ROOT
 from cosim.run import docs_pages
 from cosim.run.provenance import entry_digest, entry_inputs, simulation_digest
-from cosim.run.record import Record, save
+from cosim.run.record import Record, build_of, save
 
 
 def _rel(paths: list[Path]) -> set[str]:
@@ -75,8 +75,9 @@ def test_stale_papers_names_runs_and_pages_made_from_other_inputs(tmp_path, monk
         assert "other inputs" in line and "run `cosim docs`" in line and "no simulation" in line
         save(Record("seed000", "0" * 64, 20, True), run)  # a record of other simulation inputs
         (line,) = docs_pages.stale_papers(tmp_path)
-        committed = docs_pages.record_simulation(docs_pages.DOCS / "papers" / "seed000")
-        if committed != simulation_digest("seed000"):
+        folder = docs_pages.DOCS / "papers" / "seed000"
+        committed = docs_pages.record_simulation(folder)
+        if committed != simulation_digest("seed000", build_of(folder)):
             assert "run `cosim reproduce seed000`, then `cosim docs`" in line
     (run / "claims.md").unlink()  # no run here: the committed page's header decides
     committed = docs_pages.DOCS / "papers" / "seed000.md"
@@ -85,5 +86,6 @@ def test_stale_papers_names_runs_and_pages_made_from_other_inputs(tmp_path, monk
     if found is None:  # the page saying how to make it carries no result: not stale
         expect_stale = text != docs_pages.NOT_REPRODUCED.format(name="seed000")
     else:
-        expect_stale = found.group(1) != entry_digest("seed000")
+        expect_stale = found.group(1) != entry_digest(
+            "seed000", build_of(docs_pages.DOCS / "papers" / "seed000"))
     assert bool(docs_pages.stale_papers(tmp_path)) == expect_stale

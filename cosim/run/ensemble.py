@@ -352,11 +352,12 @@ def _shown(r: dict[str, Any]) -> str:
     return adjusted if adjusted == r["verdict"] else f"{adjusted} (raw: {r['verdict']})"
 
 
-def rounding_text(entry: Entry) -> str:
-    """The perturbed floating-point paths of ``entry``'s members, in words."""
+def rounding_text(entry: Entry, build: str = "python") -> str:
+    """The perturbed floating-point paths of ``entry``'s members on ``build``, in words (the
+    numpy reference path only on the Python build: every plant has a native model)."""
     ens = entry.ensemble
     first = [f"`{key}` x (1 + 1e-12)" for key in ens.rounding_perturb]
-    if ens.rounding_reference_path:
+    if ens.rounding_reference_path and build == "python":
         first.append("the Python plants' numpy reference path")
     paths = [" and ".join(first)]
     if ens.rounding_perturb_second:
@@ -531,7 +532,8 @@ def write_claims(entry: Entry, record: Record, out: Path, plot_format: str = "pn
     pd.DataFrame(rows).to_csv(out / "claims.csv", index=False)
     host = host_text([record.results[ident] for ident, job in record.jobs.items()
                       if job.kind == "member" and job.key[1] == "repeat"])
-    text = claims_markdown(rows, k, rounding_text(entry) if rounding else "", host) + "\n"
+    text = claims_markdown(rows, k, rounding_text(entry, record.build) if rounding else "",
+                           host) + "\n"
     if entry.variants:
         var_rows = evaluate(entry, summaries, k, rounding, variants=True)
         pd.DataFrame(var_rows).to_csv(out / "variants.csv", index=False)
