@@ -29,7 +29,8 @@ from cosim.run import docs_pages
 
 ROOT = Path(__file__).resolve().parent.parent
 DOCS = ROOT / "docs"
-BLOCK_TIMEOUT_S = 600  # a block builds the FMUs it runs: minutes on a loaded 2-core machine
+BLOCK_TIMEOUT_S = 1800  # a guard against a hang, not a speed check: the longest block builds and
+# validates every native FMU, about 150 s of CPU on 2 cores unloaded (12x margin for a busy machine)
 NORUN = "<!-- norun -->"  # on the line before a fence: the block is shown, not run
 _FENCE = re.compile(r"^(<!-- norun -->\n)?```(bash|python)[ \t]*\n(.*?)^```[ \t]*$",
                     re.M | re.S)
