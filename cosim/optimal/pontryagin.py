@@ -44,8 +44,10 @@ braking point) comes from the adjoint condition it stands for. ``lambda`` is the
 schedule fixes: the running time decreases with it, and a 1-D root finder
 (``scipy.optimize.brentq`` on ``log lambda``) finds the ``lambda`` whose running time is ``T``
 (the energy's sensitivity to the running time is ``dJ/dT = -lambda``). On the grid the running
-time is not continuous in ``lambda``: the run returned is on time (never late) but can be
-early, and its energy is then that of its own running time.
+time is not continuous in ``lambda`` (the run of the root is on time but can be early) and a
+switching point is known to within a step: :mod:`cosim.optimal.switching` takes this run's
+sequence of regimes and finds its switching points exactly, the run on time
+(:meth:`SectionSolver.for_time`).
 """
 
 from __future__ import annotations
@@ -84,10 +86,13 @@ class Grid:
     ds: float = 50.0
     speeds: int = 600
     sub_steps: int = 2
+    step: float = 2.0  # m, the integration step of the exact switching points (grown in
+    # proportion on sections beyond 20 km)
 
     def finer(self) -> Grid:
-        """Half the position step and speed spacing (the second grid of an error estimate)."""
-        return Grid(self.ds / 2.0, 2 * self.speeds - 1, self.sub_steps)
+        """Half the position step, speed spacing and integration step (the second grid of an
+        error estimate)."""
+        return Grid(self.ds / 2.0, 2 * self.speeds - 1, self.sub_steps, self.step / 2.0)
 
 
 @dataclass(frozen=True)
@@ -401,10 +406,22 @@ class SectionSolver:
         vmax = float(self.v_nodes[-1])
         return max(1e3 * (self.train.psi(vmax) + vmax * 10.0), 1.0)
 
-    def for_time(self, running_time: float, rtol: float = 1e-4) -> OptimalRun:
+    def for_time(self, running_time: float, rtol: float = 1e-4, exact: bool = True
+                 ) -> OptimalRun:
         """The optimal run whose running time is ``running_time`` (s): ``lambda`` by Brent's
-        method on ``log lambda`` (the running time decreases with ``lambda``); the run returned
-        is the one of the bracket end that is on time (not late)."""
+        method on ``log lambda`` (the running time decreases with ``lambda``), the run of the
+        bracket end that is on time (not late); with ``exact`` its switching points then
+        found exactly and the run on time (:func:`cosim.optimal.switching.refine`)."""
+        run = self._for_time(running_time, rtol)
+        if not exact:
+            return run
+        from cosim.optimal.switching import refine  # it builds on this module
+
+        # the integration step grows with sections beyond 20 km (10000 steps at most)
+        step = self.grid.step * max(1.0, self.section.length / 20000.0)
+        return refine(self.section, self.train, run, running_time, step, self.grid.ds)
+
+    def _for_time(self, running_time: float, rtol: float) -> OptimalRun:
         hi = math.log(self._lam_hi())
         fastest = self.run(math.exp(hi))
         if fastest.running_time > running_time:
