@@ -19,14 +19,86 @@ efficiency, less the regenerated share of the regenerative braking work).
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, replace
 
+import numba
 import numpy as np
 
 from plants.crh3 import Crh3Params
 from plants.resistance import Davis
 from plants.route import GRAVITY, Route, StepProfile
+
+# controls of the force laws (:func:`control_force`)
+POWER, HOLD, COAST, BRAKE, REGEN = 0, 1, 2, 3, 4
+
+
+# The laws of the model, once: per unit effective mass (m/s2) at speed ``v`` (m/s) for the
+# train's vector ``p`` (:attr:`Train.vector`: m_eff, Davis a, b, c, F_t, P_t, F_r, P_r, F_f,
+# v_top, a_max, d_max). Compiled (numba) for the switching points' integration; the train's
+# numpy methods apply them element by element.
+@numba.njit(cache=True)
+def resistance_at(v: float, p: np.ndarray) -> float:
+    """Davis resistance ``(a + b v + c v^2) / m_eff``."""
+    return (p[1] + (p[2] + p[3] * v) * v) / p[0]
+
+
+@numba.njit(cache=True)
+def traction_at(v: float, p: np.ndarray) -> float:
+    """Largest traction ``min(F_t, P_t / v) / m_eff``, none from the top speed on."""
+    return min(p[4], p[5] / max(v, 1e-9)) / p[0] if v < p[9] else 0.0
+
+
+@numba.njit(cache=True)
+def regen_at(v: float, p: np.ndarray) -> float:
+    """Largest regenerative brake force ``min(F_r, P_r / v) / m_eff``."""
+    return min(p[6], p[7] / max(v, 1e-9)) / p[0]
+
+
+@numba.njit(cache=True)
+def brake_at(v: float, p: np.ndarray) -> float:
+    """Largest brake force, regenerative and friction: ``regen_at + F_f / m_eff``."""
+    return regen_at(v, p) + p[8] / p[0]
+
+
+@numba.njit(cache=True)
+def control_force(control: int, v: float, g: float, p: np.ndarray) -> float:
+    """The force of a control of the maximum principle at ``v`` on additional resistance ``g``
+    (m/s2): maximum traction (within the comfort acceleration), holding the speed (partial
+    traction or braking within the envelopes), coasting, maximum braking and maximum
+    regenerative braking alone (both within the comfort deceleration, never a traction)."""
+    r = resistance_at(v, p)
+    if control == POWER:
+        return min(traction_at(v, p), p[10] + r + g)
+    if control == HOLD:
+        return min(max(r + g, -brake_at(v, p)), traction_at(v, p))
+    if control == COAST:
+        return 0.0
+    if control == BRAKE:
+        return min(max(-brake_at(v, p), r + g - p[11]), 0.0)
+    return min(max(-regen_at(v, p), r + g - p[11]), 0.0)
+
+
+@numba.njit(cache=True)
+def _law_each(law: int, v: np.ndarray, p: np.ndarray) -> np.ndarray:
+    out = np.empty(v.size)
+    for i in range(v.size):
+        if law == 0:
+            out[i] = resistance_at(v[i], p)
+        elif law == 1:
+            out[i] = traction_at(v[i], p)
+        elif law == 2:
+            out[i] = regen_at(v[i], p)
+        else:
+            out[i] = brake_at(v[i], p)
+    return out
+
+
+def _law(law: int, v: np.ndarray | float, p: np.ndarray) -> np.ndarray:
+    a = np.asarray(v, dtype=float)
+    out = _law_each(law, np.ascontiguousarray(a.ravel()), p).reshape(a.shape)
+    return out[()] if out.ndim == 0 else out  # a scalar for a scalar, as numpy gives
 
 
 @dataclass(frozen=True)
@@ -83,31 +155,39 @@ class Train:
     def with_limits(self, **changes: float) -> Train:
         return replace(self, **changes)
 
-    # -- per unit effective mass (m/s2), vectorised over v ---------------------------------
-    def resistance(self, v: np.ndarray) -> np.ndarray:
-        """Davis resistance per unit effective mass (m/s2)."""
+    @functools.cached_property
+    def vector(self) -> np.ndarray:
+        """The train as the compiled laws take it: m_eff, Davis a, b, c, F_t, P_t, F_r, P_r,
+        F_f, top speed, a_max, d_max (SI)."""
         d = self.davis
-        return (d.a + (d.b + d.c * v) * v) / self.effective_mass
+        return np.array([self.effective_mass, d.a, d.b, d.c, self.max_traction_force,
+                         self.max_traction_power, self.max_regen_force, self.max_regen_power,
+                         self.max_friction_force, self.max_speed, self.max_accel,
+                         self.max_decel], dtype=float)
+
+    # -- per unit effective mass (m/s2), element by element over v -------------------------
+    def resistance(self, v: np.ndarray) -> np.ndarray:
+        """Davis resistance per unit effective mass (m/s2) (:func:`resistance_at`)."""
+        return _law(0, v, self.vector)
 
     def resistance_slope(self, v: np.ndarray | float) -> np.ndarray | float:
         """d/dv of :meth:`resistance` (1/s)."""
         return (self.davis.b + 2.0 * self.davis.c * v) / self.effective_mass
 
     def traction_limit(self, v: np.ndarray) -> np.ndarray:
-        """Largest traction force per unit effective mass (m/s2): min(F_t, P_t / v)."""
-        m = self.effective_mass
-        lim = np.minimum(self.max_traction_force, self.max_traction_power
-                         / np.maximum(v, 1e-9)) / m
-        return np.where(v < self.max_speed, lim, 0.0)
+        """Largest traction force per unit effective mass (m/s2): min(F_t, P_t / v)
+        (:func:`traction_at`)."""
+        return _law(1, v, self.vector)
 
     def regen_limit(self, v: np.ndarray) -> np.ndarray:
-        """Largest regenerative brake force per unit effective mass (m/s2)."""
-        return np.minimum(self.max_regen_force, self.max_regen_power
-                          / np.maximum(v, 1e-9)) / self.effective_mass
+        """Largest regenerative brake force per unit effective mass (m/s2)
+        (:func:`regen_at`)."""
+        return _law(2, v, self.vector)
 
     def brake_limit(self, v: np.ndarray) -> np.ndarray:
-        """Largest brake force (regenerative + friction) per unit effective mass (m/s2)."""
-        return self.regen_limit(v) + self.max_friction_force / self.effective_mass
+        """Largest brake force (regenerative + friction) per unit effective mass (m/s2)
+        (:func:`brake_at`)."""
+        return _law(3, v, self.vector)
 
     def grade_accel(self, w_nkn: np.ndarray | float) -> np.ndarray | float:
         """Force of an additional specific resistance ``w`` (N/kN) per unit effective mass."""

@@ -56,17 +56,27 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 import scipy.optimize
 
-from cosim.optimal.model import Section, Train
+from cosim.optimal.model import (
+    BRAKE,
+    COAST,
+    HOLD,
+    POWER,
+    REGEN,
+    Section,
+    Train,
+    control_force,
+)
 
-# controls of the cost-to-go
-POWER, HOLD, COAST, BRAKE, REGEN = 0, 1, 2, 3, 4
+# controls of the cost-to-go: those of cosim.optimal.model.control_force
 # a switch between maximum traction and coasting inside a step: the step's traction at these
 # shares of the maximum (to first order in the step length the same motion and cost as
 # maximum traction over that share of the step, then coasting)
 _SWITCH_SHARES = (0.25, 0.5, 0.75)
+_SHARES = np.array(_SWITCH_SHARES)
 _CONTROLS = np.arange(5 + len(_SWITCH_SHARES))
 _N = _CONTROLS.size
 # regimes of a step of the optimal run
@@ -134,6 +144,17 @@ class _Steps:
         self.cap = 0.5 * self.limit**2  # E cap of each step
 
 
+@numba.njit(cache=True)
+def _control_forces(v: np.ndarray, g: float, p: np.ndarray, shares: np.ndarray) -> np.ndarray:
+    out = np.empty_like(v)
+    for i in range(v.shape[0]):
+        control = i if i < 5 else POWER
+        share = 1.0 if i < 5 else shares[i - 5]
+        for j in range(v.shape[1]):
+            out[i, j] = share * control_force(control, v[i, j], g, p)
+    return out
+
+
 class _Dynamics:
     def __init__(self, train: Train, sub_steps: int) -> None:
         self.train = train
@@ -144,21 +165,11 @@ class _Dynamics:
     def force(self, v: np.ndarray, g: float) -> np.ndarray:
         """Force per unit effective mass (m/s2): row ``i`` of ``v`` (first axis: the
         controls) under control ``_CONTROLS[i]`` (maximum traction, hold, coast, maximum
-        braking, maximum regenerative braking alone, then the switching shares)."""
-        tr = self.train
-        out = np.zeros_like(v)
-        r = tr.resistance(v[0])
-        out[0] = np.minimum(tr.traction_limit(v[0]), tr.max_accel + r + g)
-        r = tr.resistance(v[1])
-        out[1] = np.clip(r + g, -tr.brake_limit(v[1]), tr.traction_limit(v[1]))
-        r = tr.resistance(v[3])
-        out[3] = np.minimum(np.maximum(-tr.brake_limit(v[3]), r + g - tr.max_decel), 0.0)
-        r = tr.resistance(v[4])
-        out[4] = np.minimum(np.maximum(-tr.regen_limit(v[4]), r + g - tr.max_decel), 0.0)
-        for i, share in enumerate(_SWITCH_SHARES, start=5):
-            r = tr.resistance(v[i])
-            out[i] = share * np.minimum(tr.traction_limit(v[i]), tr.max_accel + r + g)
-        return out
+        braking, maximum regenerative braking alone, then the switching shares), by
+        :func:`cosim.optimal.model.control_force`."""
+        a = np.asarray(v, dtype=float)
+        rows = np.ascontiguousarray(a.reshape(a.shape[0], -1))
+        return _control_forces(rows, float(g), self.train.vector, _SHARES).reshape(a.shape)
 
     def advance(self, E: np.ndarray, h: float, g: float, cap: float
                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:

@@ -5,29 +5,38 @@ The cost-to-go on its grid decides *which* regimes the optimal run passes throug
 order; where it switches between them it can only say to within a step, and the running time
 of its run jumps with the multiplier (so the run it finds for a schedule is early). Here the
 run is a sequence of phases ``[b_i, b_{i+1})`` of position, each in one control of the maximum
-principle -- maximum traction, holding the speed it enters with (partial traction or partial
-braking, the singular arcs), coasting, maximum regenerative braking, maximum braking -- and
-the switching points ``b`` are the unknowns of
+principle (:func:`cosim.optimal.model.control_force`): maximum traction (held at a speed limit
+by the bound below), holding the speed it enters with (partial traction or partial braking,
+the singular arcs), or coasting. Braking at the maximum follows *braking curves*: onto the
+stop and onto every lower speed limit the run brakes for, maximum regenerative braking and,
+over the last ``l_j`` metres before the target, maximum braking (regenerative and friction),
+found backwards from the target by the integration's own rule; a phase that meets a curve
+follows it. A lower limit the run only coasts onto is a constraint instead (its speed at the
+limit's start at most the limit), so the program stays smooth where the run reaches a limit
+exactly. The speed limits themselves and the stop are kept by the *feasibility boundary* (the
+highest kinetic energy from which every lower limit ahead and the stop can still be kept at
+maximum braking), which the run follows where it would pass it. The unknowns ``z = (b, l)``
+solve
 
-    minimise J(b)   subject to   T(b) <= T,   b_1 <= b_2 <= ... ,
+    minimise J(z)   subject to   T(z) <= T,   b_1 <= b_2 <= ...,   E(limit start) <= E_limit,
 
-``J`` the energy of the model (:mod:`cosim.optimal.model`) and ``T`` the running time, each
+``J`` the energy of the model (:mod:`cosim.optimal.model`) and ``T`` the running time, both
 integrated by the explicit midpoint rule in position on a grid of at most ``step`` metres with
-every switching point, grade change and speed-limit change as a node (so ``J`` and ``T`` are
-continuous and piecewise smooth in ``b``). The speed limits and the stop are kept by the
-*feasibility boundary*: the highest kinetic energy from which the stop and every lower limit
-ahead can still be kept, found backwards by the same midpoint rule under maximum braking
-(capped by the limits); a phase that would pass it follows it (maximum braking onto the stop or
-a lower limit, or holding the limit), so the braking points are not unknowns. Solved by SLSQP
-(``scipy.optimize.minimize``) with central-difference gradients of the compiled integration.
+every switching point, grade change and speed-limit change as a node, and a step that meets
+the bound split where it meets it (so ``J`` and ``T`` are continuous and piecewise smooth in
+``z``, and the integration second order). Solved by SLSQP (``scipy.optimize.minimize``) with
+central-difference gradients of the compiled integration (numba), from the cost-to-go's run,
+the unknowns scaled by its position step; SLSQP is run again, with the phases it shrank to
+nothing removed, until the energy stops falling, and one unknown is then moved by Brent's
+method so that the run is exactly on time.
 
-At a solution the program's first-order (KKT) conditions hold: ``dJ/db_i = -mu dT/db_i`` at
-every switching point not at a bound, ``mu`` the multiplier of the schedule, which is the
-maximum principle's ``lambda m_eff = -dJ/dT`` (the switching conditions of Howlett & Pudney
-1995 and Khmelnitsky 2000 are these stationarity conditions for the switching points of a
-fixed sequence). A phase the cost-to-go's run lacks can therefore not appear; a holding phase
-of zero length is put between every maximum-traction phase and the coasting after it, so a
-cruise the grid missed can grow.
+At a solution the program's first-order (KKT) conditions hold: ``dJ/dz_i = -mu dT/dz_i`` at
+every unknown not at a bound, ``mu`` the multiplier of the schedule, which is the maximum
+principle's ``lambda m_eff = -dJ/dT`` (the switching conditions of Howlett & Pudney 1995 and
+Khmelnitsky 2000 are these stationarity conditions for the switching points of a fixed
+sequence). A phase the cost-to-go's run lacks can therefore not appear; a holding phase of zero
+length is put between every maximum-traction phase and the coasting after it, so a cruise the
+grid missed can grow.
 """
 
 from __future__ import annotations
@@ -39,19 +48,25 @@ import numba
 import numpy as np
 import scipy.optimize
 
-from cosim.optimal.model import Section, Train
-from cosim.optimal.pontryagin import (
+from cosim.optimal.model import (
     BRAKE,
     COAST,
+    HOLD,
+    POWER,
+    REGEN,
+    Section,
+    Train,
+    control_force,
+    regen_at,
+    resistance_at,
+)
+from cosim.optimal.pontryagin import (
     COASTING,
     CRUISE_BRAKE,
     CRUISE_TRACTION,
-    HOLD,
     MAX_BRAKE,
     MAX_REGEN,
     MAX_TRACTION,
-    POWER,
-    REGEN,
     OptimalRun,
     hold_speeds,
 )
@@ -63,33 +78,6 @@ _REGIME_OF_MODE = {POWER: MAX_TRACTION, COAST: COASTING, REGEN: MAX_REGEN, BRAKE
 # m/s): a run that would stop short creeps on, slowly and late, so time and energy stay
 # continuous in the switching points; no solution comes near it
 _E_FLOOR = 0.5 * 0.05**2
-
-
-@numba.njit(cache=True)
-def _force(mode: int, v: float, g: float, p: np.ndarray) -> float:
-    """Force per unit effective mass (m/s2) of ``mode`` at ``v`` on additional resistance
-    ``g`` (m/s2); ``p`` the train (:func:`_train_vector`). The same envelopes as
-    :class:`cosim.optimal.pontryagin._Dynamics`."""
-    m, a, b, c, ft, pt, fr, pr, ff, vmax, amax, dmax = (p[0], p[1], p[2], p[3], p[4], p[5],
-                                                        p[6], p[7], p[8], p[9], p[10], p[11])
-    r = (a + (b + c * v) * v) / m
-    vv = max(v, 1e-9)
-    trac = min(ft, pt / vv) / m if v < vmax else 0.0
-    regen = min(fr, pr / vv) / m
-    if mode == 0:  # POWER
-        return min(trac, amax + r + g)
-    if mode == 1:  # HOLD
-        return min(max(r + g, -(regen + ff / m)), trac)
-    if mode == 2:  # COAST
-        return 0.0
-    if mode == 3:  # BRAKE
-        return min(max(-(regen + ff / m), r + g - dmax), 0.0)
-    return min(max(-regen, r + g - dmax), 0.0)  # REGEN
-
-
-@numba.njit(cache=True)
-def _resistance(v: float, p: np.ndarray) -> float:
-    return (p[1] + (p[2] + p[3] * v) * v) / p[0]
 
 
 @numba.njit(cache=True)
@@ -112,10 +100,10 @@ def _boundary(x: np.ndarray, g: np.ndarray, cap: np.ndarray, p: np.ndarray,
             continue
         h = x[k + 1] - x[k]
         v1 = math.sqrt(2.0 * e1)
-        d1 = _force(mode[k], v1, g[k], p) - _resistance(v1, p) - g[k]
+        d1 = control_force(mode[k], v1, g[k], p) - resistance_at(v1, p) - g[k]
         em = max(e1 - 0.5 * h * d1, 0.0)
         vm = math.sqrt(2.0 * em)
-        dm = _force(mode[k], vm, g[k], p) - _resistance(vm, p) - g[k]
+        dm = control_force(mode[k], vm, g[k], p) - resistance_at(vm, p) - g[k]
         ek = max(e1 - h * dm, 0.0)
         e[k] = min(ek, c) if to_cap or target[k] or ek < c else math.inf
     return e
@@ -127,10 +115,10 @@ def _works(e0: float, e1: float, h: float, g: float, p: np.ndarray, vm: float
     """A piece of length ``h`` from ``e0`` to ``e1`` at constant acceleration, resisted at
     speed ``vm``: (mean force per unit mass, traction, regenerative and braking work per unit
     mass, time)."""
-    f = (e1 - e0) / h + _resistance(vm, p) + g
+    f = (e1 - e0) / h + resistance_at(vm, p) + g
     if f > 0.0:
         return f, f * h, 0.0, 0.0, 2.0 * h / (math.sqrt(2.0 * e0) + math.sqrt(2.0 * e1))
-    regen = min(-f, min(p[6], p[7] / max(vm, 1e-9)) / p[0])
+    regen = min(-f, regen_at(vm, p))
     return f, 0.0, regen * h, -f * h, 2.0 * h / (math.sqrt(2.0 * e0) + math.sqrt(2.0 * e1))
 
 
@@ -159,10 +147,11 @@ def _integrate(x: np.ndarray, g: np.ndarray, cap: np.ndarray, mode: np.ndarray,
         e0 = E[k]
         v0 = math.sqrt(2.0 * e0)
         gk = g[k]
-        f0 = _force(mode[k], v0, gk, p)
-        em = min(max(e0 + 0.5 * h * (f0 - _resistance(v0, p) - gk), 0.0), cap[k])
+        f0 = control_force(mode[k], v0, gk, p)
+        em = min(max(e0 + 0.5 * h * (f0 - resistance_at(v0, p) - gk), 0.0), cap[k])
         vm = math.sqrt(2.0 * em)
-        e1 = max(e0 + h * (_force(mode[k], vm, gk, p) - _resistance(vm, p) - gk), _E_FLOOR)
+        e1 = max(e0 + h * (control_force(mode[k], vm, gk, p) - resistance_at(vm, p) - gk),
+                 _E_FLOOR)
         free[k + 1] = e1
         b0, b1 = bound[k], bound[k + 1]
         theta = 1.0
@@ -191,14 +180,6 @@ def _integrate(x: np.ndarray, g: np.ndarray, cap: np.ndarray, mode: np.ndarray,
         held[k] = 1.0 - theta
         E[k + 1] = e1
     return E, free, force, dt, held, wt, wr, wb
-
-
-def _train_vector(train: Train) -> np.ndarray:
-    d = train.davis
-    return np.array([train.effective_mass, d.a, d.b, d.c, train.max_traction_force,
-                     train.max_traction_power, train.max_regen_force, train.max_regen_power,
-                     train.max_friction_force, train.max_speed, train.max_accel,
-                     train.max_decel], dtype=float)
 
 
 def phases_of(run: OptimalRun, targets: np.ndarray
@@ -279,7 +260,7 @@ class SwitchingProblem:
         self.section, self.train = section, train
         self.modes = np.asarray(modes, dtype=np.int64)
         self.step = step
-        self.p = _train_vector(train)
+        self.p = train.vector
         x = section.grid(step)
         self.base = x
         self.base_g = np.asarray(train.grade_accel(section.w_on(x[:-1], x[1:])), dtype=float)
