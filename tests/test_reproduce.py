@@ -443,12 +443,36 @@ def _record_json(out: Path) -> str:
     ('[[statements]]\ntext = "PID stops"\nclaims = ["pid_stops_in_window"]\n'
      'untestable = "x"\n', "one of them"),
     ('[[statements]]\ntext = "x"\nclaims = []\nsee = 1\n', "unknown key 'see' \\(known: "),
+    ('[[statements]]\ntext = "PID stops"\nuntestable = "no metric"\nheadline = true\n',
+     "headline = true needs claims"),
 ])
 def test_bad_statements_name_the_file_and_key(tmp_path: Path, patch: str, message: str) -> None:
     path = tmp_path / "entry.toml"
     path.write_text(CLAIMED + patch)
     with pytest.raises(ReproduceError, match=message):
         load_entry(str(path))
+
+
+def test_the_headline_reads_reproduced_only_when_every_claim_holds() -> None:
+    """The page's headline line: a statement is reproduced when all its claims hold (adjusted
+    verdicts), not reproduced when one fails, undecided otherwise; it names the claims that
+    decide it; statements not marked as headline stay out of it."""
+    from cosim.reproduce.page import headline_markdown
+    from cosim.reproduce.parts import Statement
+
+    def row(cid: str, verdict: str, adjusted: str, k: int) -> dict[str, object]:
+        return {"id": cid, "verdict": verdict, "adjusted": adjusted, "k": k, "K": 20}
+
+    rows = [row("a", "holds", "holds", 20), row("b", "holds", "inconclusive", 14),
+            row("c", "fails", "fails", 0)]
+    cases = [(["a"], "**reproduced** (`a` holds 20/20)"),
+             (["a", "b"], "**undecided** (`b` inconclusive 14/20)"),
+             (["a", "b", "c"], "**not reproduced** (`b` inconclusive 14/20; `c` fails 0/20)")]
+    for claims, expected in cases:
+        text = headline_markdown([Statement(text="S", claims=claims, headline=True),
+                                  Statement(text="T", claims=["c"])], rows)
+        assert text == f"**Headline** (the results the paper is about): S: {expected}."
+    assert headline_markdown([Statement(text="T", claims=["c"])], rows) == ""
 
 
 def test_every_shipped_statement_names_claims_or_why_not() -> None:
@@ -459,6 +483,7 @@ def test_every_shipped_statement_names_claims_or_why_not() -> None:
         assert entry.statements, name
         tested = {c for st in entry.statements for c in st.claims or []}
         assert tested <= {c.id for c in entry.claims}
+        assert any(st.headline for st in entry.statements), f"{name}: no headline statement"
 
 
 def test_resume_runs_only_what_the_record_lacks(built_fmus, tmp_path: Path,

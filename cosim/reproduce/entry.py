@@ -249,6 +249,9 @@ def check_statements(where: str, tables: Any, claim_ids: list[str]) -> list[Stat
             if cid not in claim_ids:
                 raise ReproduceError(f"{at}: claims: {cid!r} is not one of the entry's claim "
                                      "ids")
+        if st.headline and st.claims is None:
+            raise ReproduceError(f"{at} ({st.text[:40]!r}): headline = true needs claims that "
+                                 "test it")
         out.append(st)
     return out
 

@@ -138,7 +138,9 @@ def evaluate(entry: Entry, record: Record, out: Path, plot_format: str = "png") 
         stated = (["", "### Every statement of the paper", "",
                    statements_markdown(entry.statements, claim_rows)]
                   if entry.statements else [])
-        parts = [*head, verdict_summary(claim_rows, record.seeds), "", "### Claims", "",
+        lead = headline_markdown(entry.statements, claim_rows)
+        parts = [*head, verdict_summary(claim_rows, record.seeds), "",
+                 *([lead, ""] if lead else []), "### Claims", "",
                  claims_text.rstrip("\n"), *stated, "", "### Single runs", "",
                  "Each run once, as its scenario is shipped" + "".join(
                      f", at report seed {v} (`{k}`: member 1 of the claims' disturbance "
@@ -150,6 +152,35 @@ def evaluate(entry: Entry, record: Record, out: Path, plot_format: str = "png") 
     markdown = "\n".join(parts) + "\n"
     table.write_text(markdown)
     return Page(table, markdown, rows, claim_rows)
+
+
+def statement_reading(st: Statement, by_id: dict[str, dict[str, Any]]) -> str:
+    """Whether a statement is reproduced, from the adjusted verdicts of its claims:
+    "reproduced" when every claim holds, "not reproduced" when one fails, "undecided"
+    otherwise (inconclusive, insufficient, rounding-sensitive or no effect)."""
+    verdicts = [by_id[c].get("adjusted", by_id[c]["verdict"]) for c in st.claims or []]
+    if verdicts and all(v == "holds" for v in verdicts):
+        return "reproduced"
+    return "not reproduced" if "fails" in verdicts else "undecided"
+
+
+def headline_markdown(statements: list[Statement], rows: list[dict[str, Any]]) -> str:
+    """One line for the top of the page: each headline statement (``headline = true``) and
+    whether it is reproduced, with the claims that decide it (those that do not hold, or all
+    of them when every one holds)."""
+    by_id = {r["id"]: r for r in rows}
+    items = []
+    for st in statements:
+        if not st.headline:
+            continue
+        reading = statement_reading(st, by_id)
+        shown = [c for c in st.claims or []
+                 if by_id[c].get("adjusted", by_id[c]["verdict"]) != "holds"] or st.claims or []
+        why = "; ".join(f"`{c}` {by_id[c].get('adjusted', by_id[c]['verdict'])} "
+                        f"{by_id[c]['k']}/{by_id[c]['K']}" for c in shown)
+        items.append(f"{st.text}: **{reading}** ({why})")
+    return ("**Headline** (the results the paper is about): " + ". ".join(items) + "."
+            if items else "")
 
 
 def statements_markdown(statements: list[Statement], rows: list[dict[str, Any]]) -> str:

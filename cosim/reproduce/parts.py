@@ -199,3 +199,6 @@ class Statement:
                                    "``untestable``)", default=None)
     untestable: str | None = doc("why it cannot be tested here (this or ``claims``)",
                                  default=None)
+    headline: bool = doc("the result the paper is about (its title's method against its "
+                         "rivals or its requirement): the page leads with whether it is "
+                         "reproduced; needs ``claims``", default=False)
