@@ -41,6 +41,7 @@ grid missed can grow.
 
 from __future__ import annotations
 
+import copy
 import math
 from dataclasses import dataclass
 
@@ -233,12 +234,12 @@ def phases_of(run: OptimalRun, targets: np.ndarray
 @dataclass(frozen=True)
 class Switching:
     """The phases of an optimal run: their controls, switching points (m from the section
-    start), the lengths (m) of maximum braking onto each braking target and the multiplier."""
+    start) and the lengths (m) of maximum braking onto each braking target; whether the run is
+    on time and keeps its coasted limits (``converged``), and SLSQP's message."""
 
     modes: np.ndarray
     points: np.ndarray
     brake_lengths: np.ndarray
-    multiplier: float  # mu / m_eff: lambda of the maximum principle (J/kg/s)
     converged: bool
     message: str
 
@@ -258,7 +259,6 @@ class SwitchingProblem:
     def __init__(self, section: Section, train: Train, modes: np.ndarray,
                  step: float = 2.0, brakes: np.ndarray | None = None) -> None:
         self.section, self.train = section, train
-        self.modes = np.asarray(modes, dtype=np.int64)
         self.step = step
         self.p = train.vector
         x = section.grid(step)
@@ -271,15 +271,24 @@ class SwitchingProblem:
         self.base_bound = _boundary(x, self.base_g, self.base_cap, self.p,
                                     np.full(x.size - 1, BRAKE, dtype=np.int64), no_target, True)
         self.length = section.length
-        drops = x[1:-1][self.base_cap[1:] < self.base_cap[:-1]]
-        self.drops = drops
-        brakes = np.ones(drops.size, dtype=bool) if brakes is None else np.asarray(brakes,
-                                                                                   dtype=bool)
-        self.targets = np.r_[drops[brakes], self.length]
-        self.coasted = drops[~brakes]  # reached at or below their limit
-        self.coasted_cap = self.base_cap[np.searchsorted(x, self.coasted)]
+        self.drops = x[1:-1][self.base_cap[1:] < self.base_cap[:-1]]  # lower limits' starts
         self.regen = train.max_regen_force > 0 and train.max_regen_power > 0
+        self._phases(modes, brakes)
+
+    def _phases(self, modes: np.ndarray, brakes: np.ndarray | None) -> None:
+        self.modes = np.asarray(modes, dtype=np.int64)
         self.n_points = self.modes.size - 1
+        brakes = (np.ones(self.drops.size, dtype=bool) if brakes is None
+                  else np.asarray(brakes, dtype=bool))
+        self.targets = np.r_[self.drops[brakes], self.length]
+        self.coasted = self.drops[~brakes]  # reached at or below their limit
+        self.coasted_cap = self.base_cap[np.searchsorted(self.base, self.coasted)]
+
+    def with_phases(self, modes: np.ndarray, brakes: np.ndarray | None) -> SwitchingProblem:
+        """The same section, train and grid with other phases and braking targets."""
+        other = copy.copy(self)
+        other._phases(modes, brakes)
+        return other
 
     def split(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Switching points and braking lengths of the unknowns ``z`` (m)."""
@@ -397,8 +406,8 @@ class SwitchingProblem:
         z0 = self.unknowns(points, brake_lengths)
         n = z0.size
         if n == 0:
-            return Switching(self.modes, points, brake_lengths, math.nan,
-                             self.feasible(z0, running_time), "nothing to choose")
+            return Switching(self.modes, points, brake_lengths, self.feasible(z0, running_time),
+                             "nothing to choose")
         L = self.length
         cache: dict[bytes, tuple[float, float, np.ndarray, np.ndarray, np.ndarray,
                                  np.ndarray]] = {}
@@ -435,8 +444,8 @@ class SwitchingProblem:
         pts, lengths = self.split(np.clip(z0 + scale * res.x, 0.0, L))
         z = self.on_time(self.unknowns(np.maximum.accumulate(pts), lengths), running_time)
         pts, lengths = self.split(z)
-        return Switching(self.modes, pts, lengths, self.multiplier(z),
-                         self.feasible(z, running_time), str(res.message))
+        return Switching(self.modes, pts, lengths, self.feasible(z, running_time),
+                         str(res.message))
 
     def on_time(self, z: np.ndarray, running_time: float) -> np.ndarray:
         """``z`` with the one unknown the running time is most sensitive to moved so that the
@@ -557,9 +566,9 @@ def refine(section: Section, train: Train, run: OptimalRun, running_time: float,
     cost-to-go's run, integrated on the same grid, is returned instead when no on-time run
     improves on it (it is then early, as it was)."""
     modes = phases_of(run, np.zeros(0))[0]
-    drops = SwitchingProblem(section, train, modes, step).drops
-    braked = phases_of(run, drops)[3]
-    problem = SwitchingProblem(section, train, modes, step, braked)
+    problem = SwitchingProblem(section, train, modes, step)
+    braked = phases_of(run, problem.drops)[3]
+    problem = problem.with_phases(modes, braked)
     _, points, lengths, _ = phases_of(run, problem.targets)
     start = problem.run(points, lengths, run.multiplier)
     best: tuple[float, SwitchingProblem, Switching] | None = None
@@ -571,11 +580,12 @@ def refine(section: Section, train: Train, run: OptimalRun, running_time: float,
         best = (energy, problem, sol)
         modes, points = _simplify(sol.modes, sol.points, problem.length)
         lengths = sol.brake_lengths
-        problem = SwitchingProblem(section, train, modes, step, braked)
+        problem = problem.with_phases(modes, braked)
     if best is None:
         return start
     _, problem, sol = best
-    lam = sol.multiplier if math.isfinite(sol.multiplier) else run.multiplier
+    lam = problem.multiplier(problem.unknowns(sol.points, sol.brake_lengths))
+    lam = lam if math.isfinite(lam) else run.multiplier
     refined = problem.run(sol.points, sol.brake_lengths, lam)
     if refined.energy <= start.energy or start.running_time > running_time:
         return refined

@@ -158,7 +158,9 @@ def statement_reading(st: Statement, by_id: dict[str, dict[str, Any]]) -> str:
     """Whether a statement is reproduced, from the adjusted verdicts of its claims:
     "reproduced" when every claim holds, "not reproduced" when one fails, "undecided"
     otherwise (inconclusive, insufficient, rounding-sensitive or no effect)."""
-    verdicts = [by_id[c].get("adjusted", by_id[c]["verdict"]) for c in st.claims or []]
+    from cosim.run.ensemble import final_verdict
+
+    verdicts = [final_verdict(by_id[c]) for c in st.claims or []]
     if verdicts and all(v == "holds" for v in verdicts):
         return "reproduced"
     return "not reproduced" if "fails" in verdicts else "undecided"
@@ -168,6 +170,8 @@ def headline_markdown(statements: list[Statement], rows: list[dict[str, Any]]) -
     """One line for the top of the page: each headline statement (``headline = true``) and
     whether it is reproduced, with the claims that decide it (those that do not hold, or all
     of them when every one holds)."""
+    from cosim.run.ensemble import final_verdict
+
     by_id = {r["id"]: r for r in rows}
     items = []
     for st in statements:
@@ -175,8 +179,8 @@ def headline_markdown(statements: list[Statement], rows: list[dict[str, Any]]) -
             continue
         reading = statement_reading(st, by_id)
         shown = [c for c in st.claims or []
-                 if by_id[c].get("adjusted", by_id[c]["verdict"]) != "holds"] or st.claims or []
-        why = "; ".join(f"`{c}` {by_id[c].get('adjusted', by_id[c]['verdict'])} "
+                 if final_verdict(by_id[c]) != "holds"] or st.claims or []
+        why = "; ".join(f"`{c}` {final_verdict(by_id[c])} "
                         f"{by_id[c]['k']}/{by_id[c]['K']}" for c in shown)
         items.append(f"{st.text}: **{reading}** ({why})")
     return ("**Headline** (the results the paper is about): " + ". ".join(items) + "."
@@ -186,6 +190,8 @@ def headline_markdown(statements: list[Statement], rows: list[dict[str, Any]]) -
 def statements_markdown(statements: list[Statement], rows: list[dict[str, Any]]) -> str:
     """Each of the paper's statements with the verdicts (adjusted) of the claims that test it,
     or why it is not tested."""
+    from cosim.run.ensemble import final_verdict
+
     by_id = {r["id"]: r for r in rows}
 
     def where(st: Statement) -> str:  # its place in the paper: given, or its claims'
@@ -196,7 +202,7 @@ def statements_markdown(statements: list[Statement], rows: list[dict[str, Any]])
              "| --- | --- | --- |"]
     for st in statements:
         if st.claims is not None:
-            cell = "; ".join(f"`{c}`: {by_id[c].get('adjusted', by_id[c]['verdict'])} "
+            cell = "; ".join(f"`{c}`: {final_verdict(by_id[c])} "
                              f"({by_id[c]['k']}/{by_id[c]['K']})" for c in st.claims)
         else:
             cell = f"not tested: {st.untestable}"
@@ -320,14 +326,14 @@ def console_text(entry: Entry, rows: list[Cell], claim_rows: list[dict[str, Any]
 def claims_summary(claims: dict[str, list[dict[str, Any]]]) -> str:
     """Claims per verdict (after the multiplicity adjustment) per entry, from each entry's
     claims' rows (an entry without claims: dashes)."""
-    from cosim.run.ensemble import VERDICTS
+    from cosim.run.ensemble import VERDICTS, final_verdict
 
     lines = [md_row(["entry", "claims", *VERDICTS]), "|" + " --- |" * (2 + len(VERDICTS))]
     for name, rows in claims.items():
         if not rows:
             lines.append(md_row([name, "0", *("-" for _ in VERDICTS)]))
             continue
-        got = [r.get("adjusted", r["verdict"]) for r in rows]
+        got = [final_verdict(r) for r in rows]
         lines.append(md_row([name, str(len(got)), *(str(got.count(v)) for v in VERDICTS)]))
     return "\n".join(lines)
 

@@ -346,9 +346,14 @@ def variants_markdown(entry: Entry, rows: list[dict[str, Any]], var_rows: list[d
 VERDICTS = ("holds", "fails", "inconclusive", "no effect", "insufficient", "rounding-sensitive")
 
 
+def final_verdict(r: dict[str, Any]) -> str:
+    """A claim row's verdict as read: adjusted for multiplicity where it was, else raw."""
+    return r.get("adjusted", r["verdict"])
+
+
 def _shown(r: dict[str, Any]) -> str:
     """The adjusted verdict, with the raw one where the adjustment changed it."""
-    adjusted = r.get("adjusted", r["verdict"])
+    adjusted = final_verdict(r)
     return adjusted if adjusted == r["verdict"] else f"{adjusted} (raw: {r['verdict']})"
 
 
@@ -393,7 +398,7 @@ def claims_markdown(rows: list[dict[str, Any]], k: int, rounding: str = "",
     for origin in origins:
         mine = [r for r in rows if r.get("origin", "paper") == origin]
         counts.append(f"{origin} ({len(mine)}): " + ", ".join(
-            f"{v} {n}" for v in VERDICTS if (n := sum(r.get("adjusted", r["verdict"]) == v
+            f"{v} {n}" for v in VERDICTS if (n := sum(final_verdict(r) == v
                                                       for r in mine))))
     lines += ["", f"--seeds {k}. " + "; ".join(counts) + ".", "",
               "Quantifiers: *every* holds only if every member is on the claimed side (ours "
@@ -423,7 +428,7 @@ def compact_table(rows: list[dict[str, Any]]) -> str:
     for r in rows:
         flag = "" if r["rounding_robust"] in (None, True) else " (r)"
         lines.append(f"{r['id'][:44]:<44} {r['k']:>3}/{r['K']:<3}  "
-                     f"{r.get('adjusted', r['verdict'])}{flag}")
+                     f"{final_verdict(r)}{flag}")
     return "\n".join(lines)
 
 
@@ -550,12 +555,12 @@ def verdict_summary(rows: list[dict[str, Any]], k: int) -> str:
     for origin in dict.fromkeys(r.get("origin", "paper") for r in rows):
         mine = [r for r in rows if r.get("origin", "paper") == origin]
         got = ", ".join(f"{n} {v}" for v in VERDICTS
-                        if (n := sum(r.get("adjusted", r["verdict"]) == v for r in mine)))
+                        if (n := sum(final_verdict(r) == v for r in mine)))
         counts.append(f"{len(mine)} {'of the paper' if origin == 'paper' else origin}: {got}")
     text = (f"**Verdicts** over K = {k} seeds (Benjamini-Hochberg adjusted; table below): "
             + "; ".join(counts) + ".")
     failed = [r for r in rows if r.get("origin", "paper") == "paper"
-              and r.get("adjusted", r["verdict"]) == "fails"]
+              and final_verdict(r) == "fails"]
     if failed:
         text += (" Not reproduced (the paper's claims that fail here): "
                  + "; ".join(f"{r['text']} (`{r['id']}`)" for r in failed) + ".")
