@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import fmpy
 import numpy as np
 import pytest
 
@@ -112,7 +113,6 @@ def _variant(tmp_path, old: str, new: str):
     ("mass = 490000.0", "mas = 490000.0", "no variable 'mas'.*did you mean 'mass'"),
     ("mass = 490000.0", 'mass = "heavy"', "mass is Real, got 'heavy'"),
     ('"controller.s" = "plant.s"', '"controller.s" = "plant.v"', "unit mismatch"),
-    ('"controller.s" = "plant.s"\n', "", "input controller.s is not connected"),
     ("output_interval = 0.2", "output_interval = -0.2", "output_interval = -0.2: must be pos"),
     ("base_step = 0.2", "base_step = 0", "base_step = 0.0: must be positive"),
     ('"plant.brake_command" = "controller.brake_command"',
@@ -126,6 +126,28 @@ def test_scenario_errors_name_file_key_and_problem(tmp_path, built_fmus, old, ne
     with pytest.raises(ScenarioError, match=message) as info:
         run_scenario(path, build=False)
     assert str(path) in str(info.value)
+
+
+def test_an_unconnected_input_keeps_its_start_value_unless_the_scenario_says_error(
+        tmp_path, built_fmus, caplog):
+    """Without "controller.s" = "plant.s" the controller reads its declared start value of s
+    (one log line names it); with [simulation] unconnected_inputs = "error" the run is
+    refused, naming the file and the key."""
+    path = _variant(tmp_path, '"controller.s" = "plant.s"\n', "")
+    with pytest.raises(ScenarioError, match=r"input controller.s is not connected \(\[simulati"
+                                            r"on\] unconnected_inputs = \"error\"\)") as info:
+        run_scenario(path, build=False, overrides=["simulation.unconnected_inputs=error"])
+    assert str(path) in str(info.value)
+    with pytest.raises(ScenarioError, match=r"unconnected_inputs = 'strict': expected one of"):
+        load_scenario(path, ["simulation.unconnected_inputs=strict"])
+    with caplog.at_level("WARNING", logger="cosim.run.master.core"):
+        r = run_scenario(path, build=False, overrides=["simulation.stop_time=1.0"])
+    kept = [rec.getMessage() for rec in caplog.records if "keep their start" in rec.getMessage()]
+    start = next(v.start for v in fmpy.read_model_description(
+        str(r.scenario.components["controller"].fmu_path)).modelVariables if v.name == "s")
+    assert kept == [f"{path}: inputs neither connected nor set keep their start values: "
+                    f"controller.s = {start}"]
+    assert r.completed
 
 
 def test_bad_override_is_reported(built_fmus):

@@ -11,6 +11,10 @@ Format (the files in ``scenarios/`` are examples)::
     base_step = 0.2           # s, communication step of the fixed-step algorithms
     fmi_version = 2           # 2 | 3: catalog FMU names resolve to fmus/<Id>.fmu (FMI 2.0)
                               # or fmus/fmi3/<Id>.fmu (FMI 3.0); .fmu paths are used as given
+    unconnected_inputs = "start"  # start | error: an input neither connected nor given in
+                              # [fmus.NAME.inputs] keeps its declared start value (listed
+                              # once in the log), or is an error; one without a start value
+                              # is always an error
     [fmus.NAME]
     fmu = "BrakeDelayTrain"   # FMU identifier in fmus/ (built on demand) or a path to a .fmu
     build = "python"          # python | native: which build of a catalog FMU identifier;
@@ -51,6 +55,7 @@ from cosim.run import fmi_types
 SCENARIO_DIR = ROOT / "scenarios"
 ALGORITHMS = ("event", "fixed", "jacobi")
 FMI_VERSIONS = (2, 3)
+UNCONNECTED_INPUTS = ("start", "error")  # [simulation] unconnected_inputs
 BUILDS = ("python", "native")  # [fmus.NAME] build: the Python FMU or the native C one
 COMPONENT_KEYS = ("fmu", "build", "sample_time", "max_step")  # --set NAME.key=value
 
@@ -125,6 +130,8 @@ class Simulation:
     algorithm: str = "event"
     base_step: float | None = None
     fmi_version: int = 2  # which builds of catalog FMUs the scenario runs
+    # an input neither connected nor set: keeps its start value ("start") or is refused
+    unconnected_inputs: str = "start"
 
 
 @dataclass
@@ -380,7 +387,8 @@ def _load_scenario(path: Path, overrides: dict[str, Any] | list[str] | None) -> 
     if isinstance(sim_raw, dict):  # an unknown key first: `stoptime` is a misspelt stop_time
         _refuse_unknown(path, "[simulation]", sim_raw, ("stop_time", "start_time",
                                                         "output_interval", "algorithm",
-                                                        "base_step", "fmi_version"))
+                                                        "base_step", "fmi_version",
+                                                        "unconnected_inputs"))
     if not isinstance(sim_raw, dict) or "stop_time" not in sim_raw:
         raise ScenarioError(f"{path}: [simulation] stop_time is required")
     algorithm = sim_raw.get("algorithm", "event")
@@ -391,8 +399,13 @@ def _load_scenario(path: Path, overrides: dict[str, Any] | list[str] | None) -> 
     if fmi_version not in FMI_VERSIONS or isinstance(fmi_version, bool):
         raise ScenarioError(f"{path}: [simulation] fmi_version = {fmi_version!r}: expected one "
                             f"of {list(FMI_VERSIONS)} (which builds of catalog FMUs to run)")
+    unconnected = sim_raw.get("unconnected_inputs", "start")
+    if unconnected not in UNCONNECTED_INPUTS:
+        raise ScenarioError(f"{path}: [simulation] unconnected_inputs = {unconnected!r}: "
+                            f"expected one of {list(UNCONNECTED_INPUTS)}")
     sim = Simulation(
         fmi_version=int(fmi_version),
+        unconnected_inputs=unconnected,
         stop_time=_number(path, "[simulation] stop_time", sim_raw["stop_time"]),
         start_time=_number(path, "[simulation] start_time", sim_raw.get("start_time", 0.0),
                            positive=False),
@@ -531,14 +544,16 @@ def check_against_fmus(scenario: Scenario, descriptions: dict[str, Any],
             raise ScenarioError(f"{src}: {key}: input is both connected and given a constant "
                                 f"in [fmus.{c.dst}.inputs]")
         connected[(c.dst, c.dst_var)] = c
-    for name, vars_ in variables.items():
-        for v in vars_.values():
-            if v.causality == "input" and (name, v.name) not in connected \
-                    and v.name not in scenario.components[name].inputs:
-                raise ScenarioError(
-                    f"{src}: input {name}.{v.name} is not connected: add "
-                    f"\"{name}.{v.name}\" = \"FMU.output\" to [connections] or a constant in "
-                    f"[fmus.{name}.inputs]")
+    strict = scenario.simulation.unconnected_inputs == "error"
+    for name, v in unconnected_inputs(scenario, descriptions):
+        if strict or v.start is None:
+            why = ("[simulation] unconnected_inputs = \"error\"" if v.start is not None
+                   else "it declares no start value")
+            raise ScenarioError(
+                f"{src}: input {name}.{v.name} is not connected ({why}): add "
+                f"\"{name}.{v.name}\" = \"FMU.output\" to [connections] or a constant in "
+                f"[fmus.{name}.inputs]")
+
     def check_ref(ref: str, key: str) -> None:
         comp, var = ref.split(".", 1)
         if "*" in var:  # a glob must match at least one variable
@@ -554,6 +569,17 @@ def check_against_fmus(scenario: Scenario, descriptions: dict[str, Any],
         for ref in value if isinstance(value, list) else [value]:
             if isinstance(ref, str) and "." in ref and ref.split(".", 1)[0] in variables:
                 check_ref(ref, f"[summary] {key}")
+
+
+def unconnected_inputs(scenario: Scenario, descriptions: dict[str, Any]
+                       ) -> list[tuple[str, Any]]:
+    """(component, fmpy variable) of every input neither connected nor given a value in
+    [fmus.NAME.inputs]: it keeps its declared start value (FMI 3.0 sec. 2.4.7.5: an input not
+    set uses its start value; FMI 2.0.4 sec. 2.2.7 likewise)."""
+    connected = {(c.dst, c.dst_var) for c in scenario.connections}
+    return [(name, v) for name, md in descriptions.items() for v in md.modelVariables
+            if v.causality == "input" and (name, v.name) not in connected
+            and v.name not in scenario.components[name].inputs]
 
 
 def check_timing(scenario: Scenario, descriptions: dict[str, Any], algorithm: str) -> None:

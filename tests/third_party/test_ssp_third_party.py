@@ -42,7 +42,7 @@ def test_no_connections_writes_no_empty_element(c_fmus, tmp_path):
 
 
 @pytest.mark.parametrize("fmus, connections, message", [
-    ({"e": ("Events", {})}, {}, "input e.u is not connected"),
+    ({"e": ("Events", {})}, {}, r"input e.u is not connected \(\[simulation\] unconnected"),
     ({"f": ("Feedthrough", {})}, {"f.u": "f.y"}, "algebraic loop"),
     ({"a": ("AllTypes", {"mode": "fastest"})}, {}, "'fastest' is not one of its items"),
 ])
@@ -50,7 +50,8 @@ def test_export_checks_the_scenario_like_run(c_fmus, tmp_path, fmus, connections
     path = write_scenario(tmp_path, {n: (c_fmus[f], {}, i) for n, (f, i) in fmus.items()},
                           connections)
     with pytest.raises(ScenarioError, match=message):
-        export_ssp(path, tmp_path / "bad.ssp", build=False)
+        export_ssp(path, tmp_path / "bad.ssp", ["simulation.unconnected_inputs=error"],
+                   build=False)
     assert not (tmp_path / "bad.ssp").exists()
 
 

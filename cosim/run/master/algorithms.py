@@ -35,7 +35,8 @@ class EventDriven(Algorithm):
     output points, each FMU's max step and the stop time. Plants step at every point; a
     scheduled (sampled or self-triggered) FMU steps only to its own events. An FMU that
     cannot handle variable communication step sizes steps on its own fixed grid of
-    ``max_step`` (else ``base_step``, else ``output_interval``). An FMU that returns early
+    ``max_step`` (else its DefaultExperiment ``stepSize``, else ``base_step``, else
+    ``output_interval``). An FMU that returns early
     (FMI 3) steps first and ends the point where it returned: the others step only to there.
     """
 
@@ -57,7 +58,7 @@ class EventDriven(Algorithm):
                     "the event algorithm cannot step it to them; run it with algorithm = "
                     '"fixed" (or --algorithm fixed)')
             if u.sample_ticks is None:
-                u.sample_ticks = u.max_step_ticks or m.base_step_ticks
+                u.sample_ticks = u.max_step_ticks or u.default_step_ticks or m.base_step_ticks
             step = u.sample_ticks
             if u.max_step_ticks and u.max_step_ticks < step:
                 raise SimulationError(

@@ -10,6 +10,7 @@ either FMI version, side by side.
 
 from __future__ import annotations
 
+import logging
 import re
 import time
 from collections.abc import Callable
@@ -34,11 +35,13 @@ from cosim.run.scenario import (
     check_against_fmus,
     check_timing,
     load_scenario,
+    unconnected_inputs,
 )
 from cosim.run.threads import one_blas_thread
 
 ProgressFn = Callable[[float, float], None]
 WARNING_COUNTER = "qp_infeasible"  # an FMU output counting events that needed a fallback
+LOG = logging.getLogger(__name__)
 
 
 @dataclass
@@ -104,6 +107,10 @@ class Master:
             check_timing(sc, views, self.algorithm_name)
         except ScenarioError as err:
             raise blame_override(err, sc.path, sc.overrides) from None
+        kept = unconnected_inputs(sc, views)
+        if kept:
+            LOG.warning("%s: inputs neither connected nor set keep their start values: %s",
+                        sc.path, ", ".join(f"{name}.{v.name} = {v.start}" for name, v in kept))
         by_name: dict[str, Unit] = {}
         for comp in sc.components.values():
             md = descriptions[comp.name]

@@ -61,6 +61,11 @@ class Unit(ABC):
         self.deps = output_dependencies(md)  # absent dependencies attribute: all inputs
         self.feedthrough = any(self.deps.values())
         self.variable_step = bool(md.coSimulation.canHandleVariableCommunicationStepSize)
+        experiment = md.defaultExperiment
+        step = getattr(experiment, "stepSize", None) if experiment is not None else None
+        # the FMU's own communication step (DefaultExperiment stepSize), ticks; None: not given
+        self.default_step_ticks: int | None = (to_ticks(float(step)) if step is not None
+                                               and float(step) > 0 else None)
         self.time_ticks = 0
         self.do_steps = 0
         self.wall_time = 0.0
