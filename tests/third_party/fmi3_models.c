@@ -1,7 +1,9 @@
 /* Small FMI 3.0 co-simulation FMUs for the tests (one model per MODEL_* define):
    TimeEvents (announces nextEventTime, or returns early), Feedthrough (y_T = u_T for every
    type, an array), Terminator (terminateSimulation at stop_at), Countdown (a countdown input
-   clock whose interval doubles at every tick). */
+   clock whose interval doubles at every tick), Clocked (a periodic input clock "tick" whose
+   interval and shift the FMU gives on request, its interval multiplied by growth at every
+   tick). TimeEvents compares times within its parameter tolerance (0: exactly). */
 #include <stdlib.h>
 #include <string.h>
 #include <math.h>
@@ -12,7 +14,8 @@
                  Boolean String Binary Enumeration: u_T has vr 2i+1, y_T vr 2i+2 */
 
 typedef struct {
-    fmi3Float64 time, period, u, q, next, stop_at, interval, first;
+    fmi3Float64 time, period, u, q, next, stop_at, interval, first, tol, last_event, shift,
+        growth;
     fmi3Int32 n;
     fmi3Boolean announce, eventMode, earlyReturn, tick, pending;
     double num[NT]; /* numeric and Boolean feedthrough values (as double, exact up to 2^53) */
@@ -33,6 +36,9 @@ fmi3Instance fmi3InstantiateCoSimulation(fmi3String name, fmi3String token, fmi3
     (void)upd;
     M *m = calloc(1, sizeof(M));
     m->period = 0.1; m->announce = fmi3True; m->stop_at = 0.75; m->first = 0.1;
+    m->tol = EPS; m->interval = 0.3; m->shift = 0.1; m->growth = 1.0;
+    for (int k = 0; k < NT; k++) /* the Feedthrough's declared start values */
+        m->num[k] = k < 2 ? 1.5 : k == 10 ? 0.0 : 1.0;
     m->eventMode = eventModeUsed; m->earlyReturn = earlyReturnAllowed;
     m->str = strdup("in"); m->log = log; m->env = env;
     return m;
@@ -45,14 +51,18 @@ fmi3Status fmi3EnterInitializationMode(fmi3Instance i, fmi3Boolean td, fmi3Float
     fmi3Float64 start, fmi3Boolean sd, fmi3Float64 stop) {
     M *m = i; (void)td; (void)tol; (void)sd; (void)stop; m->time = start; return fmi3OK; }
 fmi3Status fmi3ExitInitializationMode(fmi3Instance i) {
-    M *m = i; m->next = m->time + m->period; m->interval = m->first; m->pending = fmi3True;
+    M *m = i; m->next = m->time + m->period; m->pending = fmi3True;
+#if !defined(MODEL_CLOCKED)
+    m->interval = m->first;
+#endif
     return fmi3OK; }
 fmi3Status fmi3EnterEventMode(fmi3Instance i) { (void)i; return fmi3OK; }
 fmi3Status fmi3EnterStepMode(fmi3Instance i) { (void)i; return fmi3OK; }
 fmi3Status fmi3Terminate(fmi3Instance i) { say(i, "terminated"); return fmi3OK; }
 fmi3Status fmi3Reset(fmi3Instance i) { (void)i; return fmi3OK; }
 
-static inline void time_event(M *m) { m->n++; m->q = m->u; m->next += m->period; }
+static inline void time_event(M *m) {
+    m->n++; m->q = m->u; m->last_event = m->time; m->next += m->period; }
 
 fmi3Status fmi3UpdateDiscreteStates(fmi3Instance i, fmi3Boolean *need, fmi3Boolean *term,
     fmi3Boolean *nom, fmi3Boolean *vals, fmi3Boolean *defined, fmi3Float64 *next) {
@@ -60,8 +70,11 @@ fmi3Status fmi3UpdateDiscreteStates(fmi3Instance i, fmi3Boolean *need, fmi3Boole
     *need = fmi3False; *term = fmi3False; *nom = fmi3False; *vals = fmi3False;
     *defined = fmi3False; *next = 0.0;
 #if defined(MODEL_TIMEEVENTS)
-    if (m->time >= m->next - EPS) time_event(m);
+    if (m->time >= m->next - m->tol) time_event(m);
     *defined = m->announce; *next = m->next;
+#elif defined(MODEL_CLOCKED)
+    if (m->tick) { m->n++; m->q = m->time; m->tick = fmi3False;
+                   if (m->growth != 1.0) { m->interval *= m->growth; m->pending = fmi3True; } }
 #elif defined(MODEL_COUNTDOWN)
     if (m->tick) { m->n++; m->q = m->u; m->interval *= 2; m->pending = fmi3True;
                    m->tick = fmi3False; }
@@ -76,14 +89,14 @@ fmi3Status fmi3DoStep(fmi3Instance i, fmi3Float64 t, fmi3Float64 h, fmi3Boolean 
     *event = fmi3False; *term = fmi3False; *early = fmi3False; *last = end;
 #if defined(MODEL_TIMEEVENTS)
     if (m->eventMode) {
-        if (end > m->next + EPS) {  /* passes over the event */
+        if (end > m->next + m->tol) {  /* passes over the event */
             if (!m->earlyReturn) { say(m, "doStep passes over an event"); return fmi3Error; }
             *early = fmi3True; *event = fmi3True; *last = m->next; m->time = m->next;
             return fmi3OK;
         }
-        if (fabs(end - m->next) <= EPS && !m->announce) *event = fmi3True;
+        if (fabs(end - m->next) <= m->tol && !m->announce) *event = fmi3True;
     } else {
-        while (m->next <= end + EPS) time_event(m);
+        while (m->next <= end + m->tol) time_event(m);
     }
 #elif defined(MODEL_TERMINATOR)
     if (end >= m->stop_at - EPS) { *term = fmi3True; *last = end; }
@@ -119,6 +132,11 @@ static double *slot(M *m, fmi3ValueReference vr) {
     case 5: return &m->stop_at;
     case 6: return &m->time;
     case 7: return &m->first;
+    case 8: return &m->tol;
+    case 9: return &m->last_event;
+    case 11: return &m->interval;
+    case 12: return &m->shift;
+    case 13: return &m->growth;
     }
 #endif
     return NULL;
@@ -235,4 +253,9 @@ fmi3Status fmi3GetIntervalDecimal(fmi3Instance i, const fmi3ValueReference vr[],
         q[j] = m->pending ? fmi3IntervalChanged : fmi3IntervalUnchanged;
     }
     m->pending = fmi3False;
+    return fmi3OK; }
+fmi3Status fmi3GetShiftDecimal(fmi3Instance i, const fmi3ValueReference vr[], size_t n,
+                               fmi3Float64 shifts[]) {
+    M *m = i;
+    for (size_t j = 0; j < n; j++) { if (vr[j] != 10) return fmi3Error; shifts[j] = m->shift; }
     return fmi3OK; }

@@ -20,7 +20,6 @@ int fmi3GetNumberOfContinuousStates(void) { return 3; }
 int fmi3GetNumberOfEventIndicators(void) { return 3; }
 int fmi3GetNumberOfVariableDependencies(void) { return 3; }
 int fmi3GetOutputDerivatives(void) { return 3; }
-int fmi3GetShiftDecimal(void) { return 3; }
 int fmi3GetShiftFraction(void) { return 3; }
 int fmi3GetVariableDependencies(void) { return 3; }
 int fmi3InstantiateModelExchange(void) { return 3; }

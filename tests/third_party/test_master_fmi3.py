@@ -7,6 +7,8 @@ one scenario."""
 from __future__ import annotations
 
 import math
+import zipfile
+from fractions import Fraction
 
 import numpy as np
 import pytest
@@ -133,3 +135,99 @@ def test_fmi2_and_fmi3_in_one_scenario(c_fmus, c_fmus3, tmp_path):
     r = run_scenario(sc, build=False)
     np.testing.assert_array_equal(r.frame["f3.y_Float64"], r.frame["f2.z"])
     assert not math.isnan(r.frame["f2.z"].iloc[-1])
+
+
+def _last_tick(times: np.ndarray, ticks: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(ticks up to each time, time of the last of them or 0) for recorded ``times``."""
+    n = (times[:, None] >= ticks[None, :] - 1e-12).sum(axis=1)
+    return n, np.array([ticks[k - 1] if k else 0.0 for k in n])
+
+
+def test_event_times_that_are_not_whole_nanoseconds_are_reached_exactly(c_fmus3, tmp_path):
+    """period 1/3 s, compared exactly by the FMU (tolerance 0): it announces 1/3, 2/3, 1, 4/3
+    ... as doubles (its own sums of period); it must be stepped to each exactly, else the event
+    never fires. t_event is the FMU's own time at its last event."""
+    third = 1 / 3
+    sc = write_scenario(tmp_path, {"ev": (c_fmus3["Thirds3"], {"period": third}, {"u": 0.0})},
+                        stop=2.0)
+    r = run_scenario(sc, build=False)
+    events, t = [], 0.0
+    for _ in range(6):
+        t += third  # the FMU's own event times
+        events.append(t)
+    n, last = _last_tick(r.frame["time"].to_numpy(), np.array(events))
+    np.testing.assert_array_equal(r.frame["ev.n"].to_numpy(), n)
+    np.testing.assert_array_equal(r.frame["ev.t_event"].to_numpy(), last)
+
+
+def _clock_run(c_fmus3, tmp_path, kind: str, parameters: dict) -> tuple:
+    sc = write_scenario(tmp_path, {"c": (c_fmus3[f"Clocked{kind.title()}3"], parameters, {})},
+                        stop=2.0)
+    r = run_scenario(sc, build=False)
+    return r.frame["time"].to_numpy(), r.frame["c.n"].to_numpy(), r.frame["c.q"].to_numpy()
+
+
+# the FMU's parameters interval and shift are what it answers fmi3GetIntervalDecimal /
+# fmi3GetShiftDecimal; a constant clock's come from its modelDescription (0.3 s, 0.1 s)
+@pytest.mark.parametrize("kind, parameters", [
+    ("constant", {"interval": 0.7, "shift": 0.5}),  # ignored: the modelDescription's hold
+    ("fixed", {"interval": 0.3, "shift": 0.1}),
+])
+def test_periodic_clocks_tick_at_shift_plus_multiples_of_the_interval(c_fmus3, tmp_path, kind,
+                                                                      parameters):
+    """Ticks at 0.1 + 0.3 k s (0.1, 0.4, 0.7, ...), each to the double of shift + k interval
+    (exact rational, rounded once); q is the FMU's own time at its last tick."""
+    times, n_ticks, q = _clock_run(c_fmus3, tmp_path, kind, parameters)
+    ticks = np.array([float(Fraction(0.1) + k * Fraction(0.3)) for k in range(7)])
+    assert ticks[:3].tolist() == pytest.approx([0.1, 0.4, 0.7], abs=1e-15)
+    n, last = _last_tick(times, ticks)
+    np.testing.assert_array_equal(n_ticks, n)
+    np.testing.assert_array_equal(q, last)
+
+
+def test_a_tunable_clock_ticks_at_the_intervals_the_fmu_retunes_to(c_fmus3, tmp_path):
+    """interval 0.1 s, shift 0.1 s, doubled by the FMU at every tick (fmi3IntervalChanged in
+    Event Mode): ticks at 0.1, 0.1 + 0.2, + 0.4, + 0.8 = 0.1, 0.3, 0.7, 1.5 s."""
+    times, n_ticks, q = _clock_run(c_fmus3, tmp_path, "tunable",
+                                   {"interval": 0.1, "shift": 0.1, "growth": 2.0})
+    ticks, t = [0.1], Fraction(0.1)
+    for k in range(1, 4):
+        t += Fraction(0.1) * 2**k
+        ticks.append(float(t))
+    n, last = _last_tick(times, np.array(ticks))
+    np.testing.assert_array_equal(n_ticks, n)
+    np.testing.assert_array_equal(q, last)
+
+
+def test_a_clock_attribute_that_is_not_valid_names_the_variable(c_fmus3, tmp_path):
+    from cosim.run.master.fmi3 import clock_attributes
+
+    path = tmp_path / "bad.fmu"
+    with zipfile.ZipFile(c_fmus3["ClockedConstant3"]) as src, zipfile.ZipFile(path, "w") as out:
+        for item in src.namelist():
+            data = src.read(item)
+            if item == "modelDescription.xml":
+                data = data.replace(b'intervalDecimal="0.3"', b'intervalDecimal="-0.3"')
+            out.writestr(item, data)
+    with pytest.raises(SimulationError, match=r"bad.fmu: modelDescription.xml: Clock 'tick' "
+                                              r"intervalDecimal = '-0.3': must be > 0"):
+        clock_attributes(path)
+    assert clock_attributes(c_fmus3["ClockedConstant3"])[10].interval == Fraction(0.3)
+
+
+def test_unset_inputs_keep_their_start_values(c_fmus3, tmp_path, caplog):
+    """Only u_Float64 given: every other input of the Feedthrough keeps its declared start
+    value (y_T = u_T), and one log line lists them."""
+    sc = write_scenario(tmp_path, {"ft": (c_fmus3["Feedthrough3"], {}, {"u_Float64": 0.25})},
+                        record=["ft.y_Float64", "ft.y_Float32", "ft.y_Int64", "ft.y_Boolean",
+                                "ft.ya[*]"], stop=0.5)
+    with caplog.at_level("WARNING", logger="cosim.run.master.core"):
+        r = run_scenario(sc, build=False)
+    last = r.frame.iloc[-1]
+    assert (last["ft.y_Float64"], last["ft.y_Float32"], last["ft.y_Int64"],
+            last["ft.y_Boolean"]) == (0.25, 1.5, 1.0, 0.0)
+    assert list(last[["ft.ya[1]", "ft.ya[2]", "ft.ya[3]"]]) == [0.0, 0.0, 0.0]
+    lines = [rec.getMessage() for rec in caplog.records if "keep their start" in rec.getMessage()]
+    assert len(lines) == 1
+    assert "ft.u_Float32 = 1.5, ft.u_Int8 = 1" in lines[0] and "ft.ua[3] = 0" in lines[0]
+    assert "u_Float64" not in lines[0]

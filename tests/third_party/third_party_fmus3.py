@@ -71,7 +71,34 @@ COUNTDOWN3 = Spec3("Countdown3", "COUNTDOWN", (
     ("n", "Int32", "output", "discrete", 3, None, {}),
 ), dependencies={"q": (), "n": ()}, event_mode=True, stop_time=2.0)
 
-SPECS3 = (FEEDTHROUGH3, TIME_EVENTS3, TERMINATOR3, COUNTDOWN3)
+# TimeEvents comparing times exactly (tolerance 0), its period 1/3 s: events at doubles that
+# are not whole nanoseconds; t_event is the FMU's own time at its last event
+THIRDS3 = Spec3("Thirds3", "TIMEEVENTS", (
+    *TIME_EVENTS3.variables,
+    ("tolerance", "Float64", "parameter", "fixed", 8, "0.0", {"unit": "s"}),
+    ("t_event", "Float64", "output", "discrete", 9, None, {"unit": "s"}),
+), dependencies={"q": (), "n": (), "t_event": ()}, event_mode=True, stop_time=2.0)
+
+
+def clocked(name: str, variability: str, **attributes: str) -> Spec3:
+    """The Clocked model with its input clock "tick" of ``variability`` (modelDescription
+    ``attributes`` such as intervalDecimal); q is the FMU's time at its last tick."""
+    return Spec3(name, "CLOCKED", (
+        ("interval", "Float64", "parameter", "fixed", 11, "0.3", {"unit": "s"}),
+        ("shift", "Float64", "parameter", "fixed", 12, "0.1", {"unit": "s"}),
+        ("growth", "Float64", "parameter", "fixed", 13, "1.0", {}),
+        ("tick", "Clock", "input", "discrete", 10, None,
+         {"intervalVariability": variability, **attributes}),
+        ("q", "Float64", "output", "discrete", 2, None, {"unit": "s"}),
+        ("n", "Int32", "output", "discrete", 3, None, {}),
+    ), dependencies={"q": (), "n": ()}, event_mode=True, stop_time=2.0)
+
+
+CLOCKED3 = {kind: clocked(f"Clocked{kind.title()}3", kind, **attributes) for kind, attributes in (
+    ("constant", {"intervalDecimal": "0.3", "shiftDecimal": "0.1"}),
+    ("fixed", {}), ("tunable", {}))}
+
+SPECS3 = (FEEDTHROUGH3, TIME_EVENTS3, TERMINATOR3, COUNTDOWN3, THIRDS3, *CLOCKED3.values())
 
 
 def model_description(spec: Spec3) -> bytes:
@@ -106,7 +133,7 @@ def model_description(spec: Spec3) -> bytes:
         if "unit" in extra:
             attrib["unit"] = extra["unit"]
         if kind == "Clock":
-            attrib["intervalVariability"] = extra["intervalVariability"]
+            attrib.update({k: v for k, v in extra.items() if k != "unit"})
         if kind == "Enumeration":
             attrib["declaredType"] = "Mode"
         if causality == "output":

@@ -11,13 +11,25 @@
   event at the time reached; early return (``earlyReturnAllowed``) ends the communication
   point at ``lastSuccessfulTime``; ``terminateSimulation`` ends the run
   (:class:`FmuTerminated`).
-* Input clocks (sec. 2.2.9, 5.2.2): a periodic clock (``constant``: ``intervalDecimal`` and
-  ``shiftDecimal`` of the modelDescription; ``fixed``/``tunable``: fmi3GetIntervalDecimal
-  after initialisation) ticks at start + shift + k interval; a ``countdown`` clock's interval
-  is read with fmi3GetIntervalDecimal in every Event Mode and, when the FMU says
-  ``fmi3IntervalChanged``, it ticks once that long after. A tick is an event where the master
-  activates the clock (fmi3SetClock) before fmi3UpdateDiscreteStates. Output clocks are the
-  FMU's business (their ticks come as ``eventHandlingNeeded``).
+* Event times: the master's schedule is in integer nanoseconds, the FMU's own times are
+  doubles. An announced ``nextEventTime``, a clock tick or a ``lastSuccessfulTime`` that is
+  not a whole nanosecond (1/3 s) is kept as the FMU's double: its communication point is the
+  nearest nanosecond (the next one when that is not later than now), and the FMU is stepped
+  exactly to its double (``currentCommunicationPoint + communicationStepSize`` equal to it)
+  and from it.
+* Input clocks (sec. 2.2.9, 5.2.2), attributes read from modelDescription.xml
+  (:func:`clock_attributes`; fmpy does not fill them): a periodic clock ticks at start + shift
+  + k interval, with interval and shift from the modelDescription (``constant``:
+  ``intervalDecimal`` / ``shiftDecimal``, or ``intervalCounter`` / ``shiftCounter`` over
+  ``resolution``) or asked of the FMU in Initialization Mode (``fixed``, ``tunable``:
+  fmi3GetIntervalDecimal / fmi3GetShiftDecimal, the Fraction variants when
+  ``supportsFraction``); a ``tunable`` clock's interval is asked again in every Event Mode
+  and, when the FMU says ``fmi3IntervalChanged``, it ticks next that long after its last
+  tick; a ``countdown`` clock's interval is asked in every Event Mode and, when changed, it
+  ticks once that long after. Times are exact fractions until rounded to the FMU's double. A
+  tick is an event where the master activates the clock (fmi3SetClock) before
+  fmi3UpdateDiscreteStates. ``changing`` and ``triggered`` input clocks are refused. Output
+  clocks are the FMU's business (their ticks come as ``eventHandlingNeeded``).
 """
 
 from __future__ import annotations
@@ -25,13 +37,17 @@ from __future__ import annotations
 import copy
 import ctypes
 import math
+import zipfile
 from collections.abc import Callable
+from dataclasses import dataclass
+from fractions import Fraction
 from pathlib import Path
 from time import perf_counter
 from typing import Any
+from xml.etree import ElementTree
 
 from fmpy.fmi1 import FMICallException
-from fmpy.fmi3 import FMU3Slave, fmi3IntervalChanged
+from fmpy.fmi3 import FMU3Slave, fmi3IntervalChanged, fmi3IntervalNotYetKnown
 
 from cosim.fmu.state import to_seconds, to_ticks
 from cosim.run.fmi_types import enumeration_items
@@ -49,6 +65,83 @@ C_NUMBER_TYPES = {"Float64": ctypes.c_double, "Float32": ctypes.c_float,
 ARRAY = "Array"  # the family of array elements (read and written through their array)
 MAX_EVENT_ITERATIONS = 1000  # fmi3UpdateDiscreteStates calls at one event before giving up
 _WARNING, _DISCARD = 1, 2
+# FMI 3.0 sec. 2.4.7.4 and fmi3Variable.xsd (Clock); "calculated" was dropped before 3.0
+INTERVAL_VARIABILITIES = ("constant", "fixed", "tunable", "changing", "countdown", "triggered")
+PERIODIC = ("constant", "fixed", "tunable")
+ASKED = ("fixed", "tunable")  # interval and shift asked of the FMU
+
+
+@dataclass(frozen=True)
+class ClockAttributes:
+    """A Clock variable's attributes (FMI 3.0 sec. 2.4.7.4): interval and shift in s, exact
+    (None: not declared)."""
+
+    name: str
+    value_reference: int
+    causality: str
+    interval_variability: str
+    interval: Fraction | None
+    shift: Fraction | None
+    supports_fraction: bool
+
+
+def clock_attributes(path: Path) -> dict[int, ClockAttributes]:
+    """The Clock variables of the FMU at ``path`` by value reference, from its
+    modelDescription.xml; a value that is not valid is a :class:`SimulationError` naming the
+    file, the variable and the attribute."""
+    with zipfile.ZipFile(path) as archive:
+        root = ElementTree.fromstring(archive.read("modelDescription.xml"))
+    clocks = [_clock(path, element.attrib)
+              for element in root.iterfind("ModelVariables/Clock")]
+    return {c.value_reference: c for c in clocks}
+
+
+def _clock(path: Path, a: dict[str, str]) -> ClockAttributes:
+    """One Clock element's attributes ``a``, checked."""
+    name = a.get("name", "?")
+
+    def bad(key: str, why: str) -> SimulationError:
+        return SimulationError(f"{path}: modelDescription.xml: Clock {name!r} {key} = "
+                               f"{a.get(key)!r}: {why}")
+
+    def number(key: str, kind: type, minimum: float, strict: bool) -> Any:
+        if key not in a:
+            return None
+        try:
+            value = kind(a[key])
+        except ValueError:
+            raise bad(key, f"not a valid {kind.__name__}") from None
+        if not (value > minimum if strict else value >= minimum) or \
+                not math.isfinite(value):
+            raise bad(key, f"must be {'>' if strict else '>='} {minimum}")
+        return value
+
+    kind = a.get("intervalVariability")
+    if kind not in INTERVAL_VARIABILITIES:
+        raise bad("intervalVariability", f"expected one of {list(INTERVAL_VARIABILITIES)}")
+    interval_decimal = number("intervalDecimal", float, 0.0, True)
+    shift_decimal = number("shiftDecimal", float, 0.0, False)
+    interval_counter = number("intervalCounter", int, 0, True)
+    shift_counter = number("shiftCounter", int, 0, False)
+    resolution = number("resolution", int, 0, True)
+    if (interval_counter is not None or shift_counter is not None) and resolution is None:
+        raise bad("resolution", "intervalCounter / shiftCounter need a resolution")
+    interval = (Fraction(interval_counter, resolution) if interval_counter is not None
+                else Fraction(interval_decimal) if interval_decimal is not None else None)
+    shift = (Fraction(shift_counter, resolution) if shift_counter is not None
+             else Fraction(shift_decimal) if shift_decimal is not None else None)
+    if kind == "constant" and interval is None:
+        raise bad("intervalDecimal", "a constant clock declares its interval "
+                                     "(intervalDecimal, or intervalCounter and resolution)")
+    fraction = a.get("supportsFraction", "false")
+    if fraction not in ("true", "false"):
+        raise bad("supportsFraction", "expected true or false")
+    try:
+        vr = int(a["valueReference"])
+    except (KeyError, ValueError):
+        raise bad("valueReference", "not an unsigned integer") from None
+    return ClockAttributes(name, vr, a.get("causality", "local"), kind, interval, shift,
+                           fraction == "true")
 
 
 def family_of(kind: str) -> str:
@@ -74,13 +167,14 @@ def scenario_view(md: Any) -> Any:
     """``md`` as the scenario checks see it: array elements as variables, no clocks."""
     view = copy.copy(md)
     variables = []
-    for v, name, index, _ in elements(md):
+    for v, name, index, size in elements(md):
         if index is None:
             variables.append(v)
         else:
             element = copy.copy(v)
             element.name = name
-            element.start = None
+            starts = str(v.start).split() if v.start is not None else []
+            element.start = starts[index] if len(starts) == size else None
             variables.append(element)
     view.modelVariables = variables
     return view
@@ -102,14 +196,17 @@ class Fmi3Unit(Unit):
                                             modelIdentifier=cs.modelIdentifier,
                                             instanceName=name), self)
         self.can_event_mode = bool(cs.hasEventMode)
-        self.input_clocks = [v for v in md.modelVariables
-                             if v.type == "Clock" and v.causality == "input"]
+        self.input_clocks = [c for c in (clock_attributes(path).values()
+                                         if any(v.type == "Clock" for v in md.modelVariables)
+                                         else ()) if c.causality == "input"]
         self.event_mode = False
         self._in_event = False
         self._needs_event = False
         self._announced: int | None = None
+        self._exact: dict[int, float] = {}  # ticks -> the FMU's own time there (s), not whole ns
         self._clock_next: dict[int, int | None] = {}
-        self._clock_period: dict[int, tuple[int, int, int]] = {}  # vr -> (origin, period, k)
+        # periodic clock vr -> (origin s, interval s, index of its next tick k)
+        self._clock_period: dict[int, tuple[Fraction, Fraction, int]] = {}
         self._expand_dependencies()
         slave = self.slave
         self._getters: dict[str, Callable[[list[int]], list[Any]]] = {
@@ -157,7 +254,7 @@ class Fmi3Unit(Unit):
     def instantiate(self, event_mode: bool = False) -> None:
         self.event_mode = event_mode and self.can_event_mode
         if self.input_clocks and not self.event_mode:
-            names = ", ".join(v.name for v in self.input_clocks)
+            names = ", ".join(c.name for c in self.input_clocks)
             why = ("the FMU has no Event Mode (hasEventMode is false)" if not self.can_event_mode
                    else "this algorithm does not handle events")
             raise SimulationError(f"{self.name}: input clocks ({names}) tick only in Event Mode "
@@ -176,26 +273,44 @@ class Fmi3Unit(Unit):
         self.slave.enterInitializationMode(startTime=start, stopTime=stop)
 
     def exit_initialization(self) -> None:
+        periods = self._periods() if self.event_mode else {}
         self.slave.exitInitializationMode()
         if self.event_mode:  # FMI 3.0 sec. 4.2.1: now in Event Mode
             self._in_event = True
             for clock in self.input_clocks:
-                self._clock_next[clock.valueReference] = None
-                kind = clock.intervalVariability
-                if kind in ("constant", "fixed", "tunable"):
-                    period = (clock.intervalDecimal if kind == "constant"
-                              else self._intervals([clock.valueReference])[0][0])
-                    shift = to_ticks(clock.shiftDecimal or 0.0)
-                    if period is None or not period > 0:
-                        raise SimulationError(f"{self.name}: periodic clock {clock.name} has "
-                                              f"interval {period!r} s (must be positive)")
-                    origin = self._start_ticks + shift
-                    self._clock_period[clock.valueReference] = (origin, to_ticks(period), 0)
-                    self._clock_next[clock.valueReference] = origin
-                elif kind != "countdown":
-                    raise SimulationError(f"{self.name}: input clock {clock.name} has "
-                                          f"intervalVariability {kind!r}: the master ticks "
-                                          "periodic and countdown clocks only")
+                vr = clock.value_reference
+                self._clock_next[vr] = None
+                if vr in periods:
+                    origin = Fraction(to_seconds(self._start_ticks)) + periods[vr][1]
+                    self._clock_period[vr] = (origin, periods[vr][0], 0)
+                    self._clock_next[vr] = self._schedule(float(origin), self._start_ticks - 1)
+
+    def _periods(self) -> dict[int, tuple[Fraction, Fraction]]:
+        """(interval, shift) in s of every periodic input clock, in Initialization Mode: from
+        the modelDescription (constant) or asked of the FMU (fixed, tunable); a
+        clock the master cannot tick is a :class:`SimulationError`."""
+        out = {}
+        for clock in self.input_clocks:
+            kind = clock.interval_variability
+            if kind == "constant":
+                out[clock.value_reference] = (clock.interval, clock.shift or Fraction(0))
+            elif kind in ASKED:
+                (interval, qualifier), = self._intervals([clock])
+                if qualifier == fmi3IntervalNotYetKnown:
+                    raise SimulationError(f"{self.name}: {kind} clock {clock.name}: "
+                                          "fmi3GetInterval says fmi3IntervalNotYetKnown at the "
+                                          "end of Initialization Mode")
+                out[clock.value_reference] = (interval, self._shift(clock))
+            elif kind != "countdown":
+                raise SimulationError(f"{self.name}: input clock {clock.name} has "
+                                      f"intervalVariability {kind!r}: the master ticks "
+                                      "periodic (constant, fixed, tunable) and "
+                                      "countdown clocks only")
+            if kind in PERIODIC and not out[clock.value_reference][0] > 0:
+                raise SimulationError(f"{self.name}: periodic clock {clock.name} has interval "
+                                      f"{float(out[clock.value_reference][0])!r} s (must be "
+                                      "positive)")
+        return out
 
     def terminate(self) -> None:
         self.slave.terminate()
@@ -252,8 +367,32 @@ class Fmi3Unit(Unit):
             getattr(self.slave, f"set{family}")([vr], whole)
 
     # -- stepping ----------------------------------------------------------------------------
+    def _seconds(self, ticks: int) -> float:
+        """The FMU's own time (s) at the communication point ``ticks``."""
+        return self._exact.get(ticks, to_seconds(ticks))
+
+    def _schedule(self, seconds: float, after: int) -> int:
+        """The communication point (ticks, later than ``after``) of an event the FMU has at
+        ``seconds``; a time that is not a whole nanosecond is kept as the FMU's time there."""
+        ticks = max(to_ticks(seconds), after + 1)
+        if seconds != to_seconds(ticks):
+            self._exact[ticks] = min(seconds, self._exact.get(ticks, math.inf))
+        return ticks
+
     def _do_step(self, t: int, h: int) -> int:
-        status = self._c_do_step(to_seconds(t), to_seconds(h))
+        if self._exact and (t in self._exact or t + h in self._exact):
+            start, end = self._seconds(t), self._seconds(t + h)
+            size = end - start
+            for _ in range(4):  # the FMU computes start + size: make it end exactly
+                reached_s = start + size
+                if reached_s == end:
+                    break
+                size = math.nextafter(size, math.inf if reached_s < end else -math.inf)
+            for old in [k for k in self._exact if k < t]:
+                del self._exact[old]
+        else:
+            start, size = to_seconds(t), to_seconds(h)
+        status = self._c_do_step(start, size)
         self.do_steps += 1
         event, terminate, early, last = (f.value for f in self._flags)
         if status > _DISCARD:
@@ -268,8 +407,8 @@ class Fmi3Unit(Unit):
                                   f"{self.name}] a smaller max_step, or a smaller base_step; "
                                   f"FMU says: {self.last_messages()}")
         self.returned_early = bool(early) and self.event_mode
-        reached = to_ticks(last) if self.returned_early else t + h
-        if self.returned_early and not t < reached <= t + h:
+        reached = self._schedule(last, t) if self.returned_early else t + h
+        if self.returned_early and not (start < last and reached <= t + h):
             raise SimulationError(f"{self.name}: doStep at t={to_seconds(t)} s returned early "
                                   f"at lastSuccessfulTime = {last!r} s, outside "
                                   f"({to_seconds(t)}, {to_seconds(t + h)}] s")
@@ -311,6 +450,7 @@ class Fmi3Unit(Unit):
             self._in_event = True
 
     def complete_event(self, ticks: int) -> None:
+        now = self._seconds(ticks)
         ticking = [vr for vr, nxt in self._clock_next.items() if nxt == ticks]
         if ticking:
             self.slave.setClock(ticking, [True] * len(ticking))
@@ -327,34 +467,71 @@ class Fmi3Unit(Unit):
                                   "does not converge)")
         self._announced = None
         if defined:
-            announced = to_ticks(nxt) if math.isfinite(nxt) else None
-            if announced is None or announced <= ticks:
+            if not (math.isfinite(nxt) and nxt > now):
                 raise SimulationError(f"{self.name}: nextEventTime = {nxt!r} s is not after the "
-                                      f"current time {to_seconds(ticks)!r} s (an FMU announcing "
+                                      f"current time {now!r} s (an FMU announcing "
                                       "its next event must give a later time)")
-            self._announced = announced
+            self._announced = self._schedule(nxt, ticks)
         for vr in ticking:
             self._clock_next[vr] = None
             if vr in self._clock_period:
                 origin, period, k = self._clock_period[vr]
                 self._clock_period[vr] = (origin, period, k + 1)
-                self._clock_next[vr] = origin + (k + 1) * period
-        countdown = [c.valueReference for c in self.input_clocks
-                     if c.intervalVariability == "countdown"]
-        if countdown:
-            for vr, (interval, qualifier) in zip(countdown, self._intervals(countdown)):
-                if qualifier == fmi3IntervalChanged:
-                    if not interval > 0:
-                        raise SimulationError(f"{self.name}: countdown clock (value reference "
-                                              f"{vr}) interval {interval!r} s at t = "
-                                              f"{to_seconds(ticks):g} s (must be positive)")
-                    self._clock_next[vr] = ticks + to_ticks(interval)
+                self._clock_next[vr] = self._schedule(float(origin + (k + 1) * period), ticks)
+        asked = [c for c in self.input_clocks
+                 if c.interval_variability in ("countdown", "tunable")]
+        for clock, (interval, qualifier) in zip(asked, self._intervals(asked) if asked else ()):
+            if qualifier != fmi3IntervalChanged:
+                continue
+            vr = clock.value_reference
+            if not interval > 0:
+                raise SimulationError(f"{self.name}: {clock.interval_variability} clock "
+                                      f"{clock.name} interval {float(interval)!r} s at t = "
+                                      f"{now!r} s (must be positive)")
+            if clock.interval_variability == "countdown":
+                self._clock_next[vr] = self._schedule(float(Fraction(now) + interval), ticks)
+            else:  # tunable: the next tick is the new interval after the last one
+                origin, period, k = self._clock_period[vr]
+                if k:
+                    origin, k = origin + (k - 1) * period, 1
+                self._clock_period[vr] = (origin, interval, k)
+                self._clock_next[vr] = self._schedule(float(origin + k * interval), ticks)
         self.slave.enterStepMode()
         self._in_event = self._needs_event = False
 
-    def _intervals(self, vrs: list[int]) -> list[tuple[float, int]]:
-        """fmi3GetIntervalDecimal of ``vrs``: (interval s, qualifier) each."""
-        n = len(vrs)
-        intervals, qualifiers = (ctypes.c_double * n)(), (ctypes.c_int * n)()
-        self.slave.getIntervalDecimal((ctypes.c_uint * n)(*vrs), intervals, qualifiers)
-        return list(zip(intervals, qualifiers))
+    def _intervals(self, clocks: list[ClockAttributes]) -> list[tuple[Fraction, int]]:
+        """fmi3GetIntervalDecimal of ``clocks`` (fmi3GetIntervalFraction of those that
+        supportsFraction): (interval s, qualifier) each."""
+        return [self._interval(c) for c in clocks]
+
+    def _interval(self, clock: ClockAttributes) -> tuple[Fraction, int]:
+        vr, qualifier = (ctypes.c_uint * 1)(clock.value_reference), (ctypes.c_int * 1)()
+        if clock.supports_fraction:
+            counter, resolution = (ctypes.c_uint64 * 1)(), (ctypes.c_uint64 * 1)()
+            self.slave.getIntervalFraction(vr, counter, resolution, qualifier)
+            if not resolution[0]:
+                raise SimulationError(f"{self.name}: clock {clock.name}: "
+                                      "fmi3GetIntervalFraction gave resolution 0")
+            return Fraction(counter[0], resolution[0]), qualifier[0]
+        interval = (ctypes.c_double * 1)()
+        self.slave.getIntervalDecimal(vr, interval, qualifier)
+        if not math.isfinite(interval[0]):
+            return Fraction(0), qualifier[0]
+        return Fraction(interval[0]), qualifier[0]
+
+    def _shift(self, clock: ClockAttributes) -> Fraction:
+        """fmi3GetShiftDecimal (fmi3GetShiftFraction when it supportsFraction) of ``clock``."""
+        vr = (ctypes.c_uint * 1)(clock.value_reference)
+        if clock.supports_fraction:
+            counter, resolution = (ctypes.c_uint64 * 1)(), (ctypes.c_uint64 * 1)()
+            self.slave.getShiftFraction(vr, counter, resolution)
+            if not resolution[0]:
+                raise SimulationError(f"{self.name}: clock {clock.name}: "
+                                      "fmi3GetShiftFraction gave resolution 0")
+            return Fraction(counter[0], resolution[0])
+        shift = (ctypes.c_double * 1)()
+        self.slave.getShiftDecimal(vr, shift)
+        if not (math.isfinite(shift[0]) and shift[0] >= 0):
+            raise SimulationError(f"{self.name}: clock {clock.name}: fmi3GetShiftDecimal gave "
+                                  f"{shift[0]!r} s (must be >= 0)")
+        return Fraction(shift[0])
