@@ -238,6 +238,42 @@ def test_event_master_steps_a_fixed_step_fmu_on_its_own_grid(c_fmus, tmp_path, m
     np.testing.assert_allclose(r.frame["fixed.x"], r.frame["time"], rtol=0, atol=1e-12)
 
 
+def test_event_master_steps_a_fixed_step_fmu_at_its_default_experiment_step(c_fmus, tmp_path,
+                                                                           monkeypatch):
+    """canHandleVariableCommunicationStepSize = false and DefaultExperiment stepSize = 0.05 s:
+    the event algorithm steps it by 0.05 s (not the 0.125 s base step and output interval),
+    20 steps over 1 s; x = integral of u = 1 is the FMU's own time (its last step's end) at
+    every output point."""
+    from cosim.run import master as master_mod
+
+    steps: list[tuple[int, int]] = []
+    real = master_mod.Fmi2Unit._do_step
+
+    def do_step(self, t, h):
+        steps.append((t, h))
+        return real(self, t, h)
+
+    monkeypatch.setattr(master_mod.Fmi2Unit, "_do_step", do_step)
+    sc = write_scenario(tmp_path, {"fixed": (c_fmus["DiscarderFixedStep"], {"max_step": 0.05},
+                                             {"u": 1.0})})
+    r = run_scenario(sc, build=False)
+    assert steps == [(k * 50_000_000, 50_000_000) for k in range(20)]
+    own_time = np.floor(r.frame["time"].to_numpy() / 0.05 + 1e-9) * 0.05
+    np.testing.assert_allclose(r.frame["fixed.x"], own_time, rtol=0, atol=1e-12)
+
+
+def test_unset_input_of_a_third_party_fmu_keeps_its_start_value(c_fmus, tmp_path, caplog):
+    """The Feedthrough's u (start 0.0) neither connected nor set: y = k u and z = integral of
+    u stay 0, and the log says once that u keeps its start value."""
+    sc = write_scenario(tmp_path, {"f": (c_fmus["Feedthrough"], {"k": 2.0}, {})},
+                        record=["f.y", "f.z"])
+    with caplog.at_level("WARNING", logger="cosim.run.master.core"):
+        r = run_scenario(sc, build=False)
+    assert (r.frame["f.y"] == 0.0).all() and (r.frame["f.z"] == 0.0).all()
+    assert [rec.getMessage() for rec in caplog.records] == [
+        f"{sc}: inputs neither connected nor set keep their start values: f.u = 0.0"]
+
+
 def test_fixed_step_fmu_on_a_grid_that_misses_the_stop_time_asks_for_a_max_step(c_fmus,
                                                                                tmp_path):
     sc = write_scenario(tmp_path, {"fixed": (c_fmus["DiscarderFixed"], {}, {"u": 1.0})},

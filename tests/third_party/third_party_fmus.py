@@ -70,6 +70,9 @@ DISCARDER = Spec("Discarder", "discarder.c", (
 # the same binary, but declaring it cannot handle variable communication step sizes
 DISCARDER_FIXED = Spec("DiscarderFixed", "discarder.c", DISCARDER.variables,
                        dependencies={"x": ()}, variable_step=False)
+# ... and declaring its own step (DefaultExperiment stepSize) shorter than the output interval
+DISCARDER_FIXED_STEP = Spec("DiscarderFixedStep", "discarder.c", DISCARDER.variables,
+                            dependencies={"x": ()}, variable_step=False, step=0.05)
 
 # y = k u depends on u; z = integral of u does not (both declared)
 FEEDTHROUGH = Spec("Feedthrough", "feedthrough.c", (
@@ -116,8 +119,8 @@ HOSTILE = {name: Spec(name, "hostile.c", _HOSTILE_VARIABLES, dependencies={"y": 
                ("SlowFirstStep", ("ON_STEP=slow_once()",)),
            )}
 
-SPECS = (ALL_TYPES, TERMINATOR, DISCARDER, DISCARDER_FIXED, FEEDTHROUGH, FEEDTHROUGH_UNDECLARED,
-         EVENTS, FEEDTHROUGH_LYING, HANGER)
+SPECS = (ALL_TYPES, TERMINATOR, DISCARDER, DISCARDER_FIXED, DISCARDER_FIXED_STEP, FEEDTHROUGH,
+         FEEDTHROUGH_UNDECLARED, EVENTS, FEEDTHROUGH_LYING, HANGER)
 
 
 def model_description(spec: Spec) -> bytes:
