@@ -15,7 +15,7 @@
 
 typedef struct {
     fmi3Float64 time, period, u, q, next, stop_at, interval, first, tol, last_event, shift,
-        growth;
+        growth, interval_counter, shift_counter, resolution; /* the last three: Fraction */
     fmi3Int32 n;
     fmi3Boolean announce, eventMode, earlyReturn, tick, pending;
     double num[NT]; /* numeric and Boolean feedthrough values (as double, exact up to 2^53) */
@@ -37,6 +37,7 @@ fmi3Instance fmi3InstantiateCoSimulation(fmi3String name, fmi3String token, fmi3
     M *m = calloc(1, sizeof(M));
     m->period = 0.1; m->announce = fmi3True; m->stop_at = 0.75; m->first = 0.1;
     m->tol = EPS; m->interval = 0.3; m->shift = 0.1; m->growth = 1.0;
+    m->interval_counter = 3; m->shift_counter = 1; m->resolution = 10;
     for (int k = 0; k < NT; k++) /* the Feedthrough's declared start values */
         m->num[k] = k < 2 ? 1.5 : k == 10 ? 0.0 : 1.0;
     m->eventMode = eventModeUsed; m->earlyReturn = earlyReturnAllowed;
@@ -137,6 +138,9 @@ static double *slot(M *m, fmi3ValueReference vr) {
     case 11: return &m->interval;
     case 12: return &m->shift;
     case 13: return &m->growth;
+    case 14: return &m->interval_counter;
+    case 15: return &m->shift_counter;
+    case 16: return &m->resolution;
     }
 #endif
     return NULL;
@@ -253,6 +257,27 @@ fmi3Status fmi3GetIntervalDecimal(fmi3Instance i, const fmi3ValueReference vr[],
         q[j] = m->pending ? fmi3IntervalChanged : fmi3IntervalUnchanged;
     }
     m->pending = fmi3False;
+    return fmi3OK; }
+fmi3Status fmi3GetIntervalFraction(fmi3Instance i, const fmi3ValueReference vr[], size_t n,
+                                   fmi3UInt64 counters[], fmi3UInt64 resolutions[],
+                                   fmi3IntervalQualifier q[]) {
+    M *m = i;
+    for (size_t j = 0; j < n; j++) {
+        if (vr[j] != 10) return fmi3Error;
+        counters[j] = (fmi3UInt64)m->interval_counter;
+        resolutions[j] = (fmi3UInt64)m->resolution;
+        q[j] = m->pending ? fmi3IntervalChanged : fmi3IntervalUnchanged;
+    }
+    m->pending = fmi3False;
+    return fmi3OK; }
+fmi3Status fmi3GetShiftFraction(fmi3Instance i, const fmi3ValueReference vr[], size_t n,
+                                fmi3UInt64 counters[], fmi3UInt64 resolutions[]) {
+    M *m = i;
+    for (size_t j = 0; j < n; j++) {
+        if (vr[j] != 10) return fmi3Error;
+        counters[j] = (fmi3UInt64)m->shift_counter;
+        resolutions[j] = (fmi3UInt64)m->resolution;
+    }
     return fmi3OK; }
 fmi3Status fmi3GetShiftDecimal(fmi3Instance i, const fmi3ValueReference vr[], size_t n,
                                fmi3Float64 shifts[]) {

@@ -14,13 +14,11 @@ int fmi3GetContinuousStates(void) { return 3; }
 int fmi3GetDirectionalDerivative(void) { return 3; }
 int fmi3GetEventIndicators(void) { return 3; }
 int fmi3GetFMUState(void) { return 3; }
-int fmi3GetIntervalFraction(void) { return 3; }
 int fmi3GetNominalsOfContinuousStates(void) { return 3; }
 int fmi3GetNumberOfContinuousStates(void) { return 3; }
 int fmi3GetNumberOfEventIndicators(void) { return 3; }
 int fmi3GetNumberOfVariableDependencies(void) { return 3; }
 int fmi3GetOutputDerivatives(void) { return 3; }
-int fmi3GetShiftFraction(void) { return 3; }
 int fmi3GetVariableDependencies(void) { return 3; }
 int fmi3InstantiateModelExchange(void) { return 3; }
 int fmi3InstantiateScheduledExecution(void) { return 3; }

@@ -185,6 +185,19 @@ def test_periodic_clocks_tick_at_shift_plus_multiples_of_the_interval(c_fmus3, t
     np.testing.assert_array_equal(q, last)
 
 
+def test_a_clock_that_supports_fraction_ticks_at_its_exact_fractions(c_fmus3, tmp_path):
+    """A fixed clock with supportsFraction: interval 2/6 s and shift 1/6 s asked with
+    fmi3GetIntervalFraction / fmi3GetShiftFraction (its decimal answers, 0.7 and 0.5 s, are
+    not asked): ticks at 1/6 + k/3 s, each the double nearest the exact fraction."""
+    times, n_ticks, q = _clock_run(c_fmus3, tmp_path, "fraction", {
+        "interval": 0.7, "shift": 0.5, "interval_counter": 2, "shift_counter": 1,
+        "resolution": 6})
+    ticks = np.array([float(Fraction(1, 6) + Fraction(k, 3)) for k in range(6)])
+    n, last = _last_tick(times, ticks)
+    np.testing.assert_array_equal(n_ticks, n)
+    np.testing.assert_array_equal(q, last)
+
+
 def test_a_tunable_clock_ticks_at_the_intervals_the_fmu_retunes_to(c_fmus3, tmp_path):
     """interval 0.1 s, shift 0.1 s, doubled by the FMU at every tick (fmi3IntervalChanged in
     Event Mode): ticks at 0.1, 0.1 + 0.2, + 0.4, + 0.8 = 0.1, 0.3, 0.7, 1.5 s."""

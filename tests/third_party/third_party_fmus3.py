@@ -82,8 +82,13 @@ THIRDS3 = Spec3("Thirds3", "TIMEEVENTS", (
 
 def clocked(name: str, variability: str, **attributes: str) -> Spec3:
     """The Clocked model with its input clock "tick" of ``variability`` (modelDescription
-    ``attributes`` such as intervalDecimal); q is the FMU's time at its last tick."""
+    ``attributes`` such as intervalDecimal); q is the FMU's time at its last tick. Its interval
+    and shift are the parameters interval and shift (fmi3GetIntervalDecimal, ...Shift...), or
+    interval_counter and shift_counter over resolution (the Fraction functions)."""
     return Spec3(name, "CLOCKED", (
+        ("interval_counter", "UInt64", "parameter", "fixed", 14, "3", {}),
+        ("shift_counter", "UInt64", "parameter", "fixed", 15, "1", {}),
+        ("resolution", "UInt64", "parameter", "fixed", 16, "10", {}),
         ("interval", "Float64", "parameter", "fixed", 11, "0.3", {"unit": "s"}),
         ("shift", "Float64", "parameter", "fixed", 12, "0.1", {"unit": "s"}),
         ("growth", "Float64", "parameter", "fixed", 13, "1.0", {}),
@@ -97,6 +102,7 @@ def clocked(name: str, variability: str, **attributes: str) -> Spec3:
 CLOCKED3 = {kind: clocked(f"Clocked{kind.title()}3", kind, **attributes) for kind, attributes in (
     ("constant", {"intervalDecimal": "0.3", "shiftDecimal": "0.1"}),
     ("fixed", {}), ("tunable", {}))}
+CLOCKED3["fraction"] = clocked("ClockedFraction3", "fixed", supportsFraction="true")
 
 SPECS3 = (FEEDTHROUGH3, TIME_EVENTS3, TERMINATOR3, COUNTDOWN3, THIRDS3, *CLOCKED3.values())
 
