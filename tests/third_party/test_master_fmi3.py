@@ -143,13 +143,16 @@ def _last_tick(times: np.ndarray, ticks: np.ndarray) -> tuple[np.ndarray, np.nda
     return n, np.array([ticks[k - 1] if k else 0.0 for k in n])
 
 
-def test_event_times_that_are_not_whole_nanoseconds_are_reached_exactly(c_fmus3, tmp_path):
+@pytest.mark.parametrize("announce", [True, False])
+def test_event_times_that_are_not_whole_nanoseconds_are_reached_exactly(c_fmus3, tmp_path,
+                                                                        announce):
     """period 1/3 s, compared exactly by the FMU (tolerance 0): it announces 1/3, 2/3, 1, 4/3
-    ... as doubles (its own sums of period); it must be stepped to each exactly, else the event
-    never fires. t_event is the FMU's own time at its last event."""
+    ... as doubles (its own sums of period), or returns early there (lastSuccessfulTime); it
+    must be stepped to each exactly, else the event never fires, and on from there. t_event is
+    the FMU's own time at its last event."""
     third = 1 / 3
-    sc = write_scenario(tmp_path, {"ev": (c_fmus3["Thirds3"], {"period": third}, {"u": 0.0})},
-                        stop=2.0)
+    sc = write_scenario(tmp_path, {"ev": (c_fmus3["Thirds3"], {
+        "period": third, "announce": announce, "tolerance": 0.0}, {"u": 0.0})}, stop=2.0)
     r = run_scenario(sc, build=False)
     events, t = [], 0.0
     for _ in range(6):

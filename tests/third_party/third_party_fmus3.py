@@ -3,7 +3,8 @@ third-party tool would ship them: gcc against fmpy's FMI 3 headers, zipped with 
 modelDescription.xml (binaries/x86_64-linux, FMI 3.0 sec. 2.5.1.1).
 
 Variables are ``(name, type, causality, variability, value reference, start, extra)``;
-``extra`` may hold ``dimension`` (array size), ``unit``, ``intervalVariability``."""
+``extra`` may hold ``dimension`` (array size), ``unit``, and a Clock's attributes
+(``intervalVariability``, ``intervalDecimal``, ``shiftDecimal``, ``supportsFraction`` ...)."""
 
 from __future__ import annotations
 
@@ -71,11 +72,11 @@ COUNTDOWN3 = Spec3("Countdown3", "COUNTDOWN", (
     ("n", "Int32", "output", "discrete", 3, None, {}),
 ), dependencies={"q": (), "n": ()}, event_mode=True, stop_time=2.0)
 
-# TimeEvents comparing times exactly (tolerance 0), its period 1/3 s: events at doubles that
-# are not whole nanoseconds; t_event is the FMU's own time at its last event
+# TimeEvents with its time tolerance and t_event, the FMU's own time at its last event (with
+# tolerance 0 and period 1/3 s: events at doubles that are not whole nanoseconds)
 THIRDS3 = Spec3("Thirds3", "TIMEEVENTS", (
     *TIME_EVENTS3.variables,
-    ("tolerance", "Float64", "parameter", "fixed", 8, "0.0", {"unit": "s"}),
+    ("tolerance", "Float64", "parameter", "fixed", 8, "1e-09", {"unit": "s"}),
     ("t_event", "Float64", "output", "discrete", 9, None, {"unit": "s"}),
 ), dependencies={"q": (), "n": (), "t_event": ()}, event_mode=True, stop_time=2.0)
 
