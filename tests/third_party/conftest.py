@@ -35,3 +35,20 @@ def hostile_fmus(tmp_path_factory) -> dict[str, Path]:
     from third_party_fmus import build_hostile
 
     return build_hostile(tmp_path_factory.mktemp("hostile_fmus"))
+
+
+@pytest.fixture(scope="session")
+def reference_clocks(tmp_path_factory) -> Path:
+    """The Modelica Reference FMU Clocks (FMI 3.0 Scheduled Execution), built with gcc from
+    the Reference-FMUs sources (github.com/modelica/Reference-FMUs, a checkout or its git
+    directory) named by the environment variable REFERENCE_FMUS_SOURCE."""
+    import os
+
+    source = os.environ.get("REFERENCE_FMUS_SOURCE")
+    if not source or not Path(source).is_dir():
+        pytest.skip("REFERENCE_FMUS_SOURCE does not name the Reference-FMUs sources")
+    if shutil.which("gcc") is None:
+        pytest.skip("gcc not installed: the Reference FMUs cannot be built")
+    from third_party_fmus3 import build_reference
+
+    return build_reference("Clocks", Path(source), tmp_path_factory.mktemp("reference"))

@@ -34,6 +34,7 @@ class Spec3:
     event_mode: bool = False
     stop_time: float = 1.0
     step: float = 0.125
+    scheduled: bool = False  # a Scheduled Execution FMU (fmi3_scheduled.c), not co-simulation
 
 
 def _start(kind: str) -> str:
@@ -105,7 +106,34 @@ CLOCKED3 = {kind: clocked(f"Clocked{kind.title()}3", kind, **attributes) for kin
     ("fixed", {}), ("tunable", {}))}
 CLOCKED3["fraction"] = clocked("ClockedFraction3", "fixed", supportsFraction="true")
 
-SPECS3 = (FEEDTHROUGH3, TIME_EVENTS3, TERMINATOR3, COUNTDOWN3, THIRDS3, *CLOCKED3.values())
+# the Scheduled Execution FMU of fmi3_scheduled.c: partitions fast, slow, alarm, kick
+TASKS3 = Spec3("Tasks3", "TASKS", (
+    ("slow_interval", "Float64", "parameter", "fixed", 10, "0.25", {"unit": "s"}),
+    ("slow_shift", "Float64", "parameter", "fixed", 11, "0.0", {"unit": "s"}),
+    ("alarm_after", "Int32", "parameter", "fixed", 12, "5", {}),
+    ("alarm_delay", "Float64", "parameter", "fixed", 13, "0.05", {"unit": "s"}),
+    ("fast", "Clock", "input", "discrete", 1, None,
+     {"intervalVariability": "constant", "intervalDecimal": "0.1", "priority": "1"}),
+    ("slow", "Clock", "input", "discrete", 2, None,
+     {"intervalVariability": "fixed", "priority": "0"}),
+    ("alarm", "Clock", "input", "discrete", 3, None,
+     {"intervalVariability": "countdown", "priority": "2"}),
+    ("kick", "Clock", "input", "discrete", 4, None,
+     {"intervalVariability": "triggered", "priority": "3"}),
+    ("done", "Clock", "output", "discrete", 5, None, {"intervalVariability": "triggered"}),
+    ("u", "Float64", "input", "discrete", 20, "0.0", {}),
+    ("n_fast", "Int32", "output", "discrete", 21, None, {}),
+    ("n_slow", "Int32", "output", "discrete", 22, None, {}),
+    ("n_alarm", "Int32", "output", "discrete", 23, None, {}),
+    ("n_kick", "Int32", "output", "discrete", 24, None, {}),
+    ("y", "Float64", "output", "discrete", 25, None, {}),
+    ("t_alarm", "Float64", "output", "discrete", 26, None, {"unit": "s"}),
+    ("t_kick", "Float64", "output", "discrete", 27, None, {"unit": "s"}),
+), dependencies={"done": (), "n_fast": (), "n_slow": (), "n_alarm": (), "n_kick": (),
+                 "y": ("u",), "t_alarm": (), "t_kick": ()}, scheduled=True)
+
+SPECS3 = (FEEDTHROUGH3, TIME_EVENTS3, TERMINATOR3, COUNTDOWN3, THIRDS3, *CLOCKED3.values(),
+          TASKS3)
 
 
 def model_description(spec: Spec3) -> bytes:
@@ -113,10 +141,13 @@ def model_description(spec: Spec3) -> bytes:
         "fmiVersion": "3.0", "modelName": spec.name,
         "instantiationToken": "{" + hashlib.md5(spec.name.encode()).hexdigest() + "}",
         "generationTool": "tests/third_party (C)", "variableNamingConvention": "structured"})
-    SubElement(root, "CoSimulation", {
-        "modelIdentifier": spec.name, "canHandleVariableCommunicationStepSize": "true",
-        "hasEventMode": "true" if spec.event_mode else "false",
-        "mightReturnEarlyFromDoStep": "true" if spec.event_mode else "false"})
+    if spec.scheduled:
+        SubElement(root, "ScheduledExecution", {"modelIdentifier": spec.name})
+    else:
+        SubElement(root, "CoSimulation", {
+            "modelIdentifier": spec.name, "canHandleVariableCommunicationStepSize": "true",
+            "hasEventMode": "true" if spec.event_mode else "false",
+            "mightReturnEarlyFromDoStep": "true" if spec.event_mode else "false"})
     units = sorted({v[6]["unit"] for v in spec.variables if "unit" in v[6]})
     if units:
         defs = SubElement(root, "UnitDefinitions")
@@ -143,7 +174,7 @@ def model_description(spec: Spec3) -> bytes:
             attrib.update({k: v for k, v in extra.items() if k != "unit"})
         if kind == "Enumeration":
             attrib["declaredType"] = "Mode"
-        if causality == "output":
+        if causality == "output" and kind != "Clock":
             attrib["initial"] = "calculated"
         elif causality == "parameter":
             attrib["initial"] = "exact"
@@ -161,8 +192,8 @@ def model_description(spec: Spec3) -> bytes:
             if name in spec.dependencies:
                 attrib["dependencies"] = " ".join(str(vrs[d]) for d in spec.dependencies[name])
             SubElement(ms, "Output", attrib)
-    for name, _kind, causality, *_ in spec.variables:
-        if causality == "output":
+    for name, kind, causality, *_ in spec.variables:
+        if causality == "output" and kind != "Clock":
             SubElement(ms, "InitialUnknown", {"valueReference": str(vrs[name])})
     indent(root)
     return b'<?xml version="1.0" encoding="UTF-8"?>\n' + tostring(root, encoding="utf-8")
@@ -171,14 +202,41 @@ def model_description(spec: Spec3) -> bytes:
 def build(spec: Spec3, out_dir: Path, work: Path) -> Path:
     headers = Path(fmpy.__file__).parent / "c-code"
     lib = work / f"{spec.name}.so"
+    model = "fmi3_scheduled.c" if spec.scheduled else "fmi3_models.c"
     subprocess.run(["gcc", "-std=c99", "-D_DEFAULT_SOURCE", "-Wall", "-Wextra", "-Werror",
                     "-shared", "-fPIC", "-O1", f"-I{headers}", f"-DMODEL_{spec.model}",
-                    "-o", str(lib), str(HERE / "fmi3_models.c"), str(HERE / "fmi3_stubs.c"), "-lm"],
+                    *(["-DSCHEDULED_EXECUTION"] if spec.scheduled else []), "-o", str(lib),
+                    str(HERE / model), str(HERE / "fmi3_stubs.c"), "-lm"],
                    check=True, capture_output=True, text=True)
     path = out_dir / f"{spec.name}.fmu"
     with zipfile.ZipFile(path, "w") as z:
         z.writestr("modelDescription.xml", model_description(spec))
         z.write(lib, f"binaries/x86_64-linux/{spec.name}.so")
+    return path
+
+
+def build_reference(model: str, source: Path, out_dir: Path) -> Path:
+    """The Modelica Reference FMU ``model`` (FMI 3.0) built from the Reference-FMUs sources
+    at ``source`` (a checkout or its git directory) as its CMakeLists.txt builds it:
+    ``model/model.c``, ``src/fmi3Functions.c`` and ``src/cosimulation.c`` with FMI_VERSION=3
+    and DISABLE_PREFIX, ``model/FMI3.xml`` as modelDescription.xml."""
+    work = out_dir / f"reference-{model}"
+    if (source / "HEAD").is_file():  # a git directory: its newest tree
+        work.mkdir(parents=True, exist_ok=True)
+        archive = subprocess.run(["git", f"--git-dir={source}", "archive", "HEAD", "include",
+                                  "src", model], check=True, capture_output=True).stdout
+        subprocess.run(["tar", "x", "-C", str(work)], input=archive, check=True)
+        source = work
+    lib = out_dir / f"{model}.so"
+    subprocess.run(["gcc", "-shared", "-fPIC", "-O2", "-DFMI_VERSION=3", "-DDISABLE_PREFIX",
+                    f"-I{source / 'include'}", f"-I{source / model}", "-o", str(lib),
+                    str(source / model / "model.c"), str(source / "src" / "fmi3Functions.c"),
+                    str(source / "src" / "cosimulation.c"), "-lm"],
+                   check=True, capture_output=True, text=True)
+    path = out_dir / f"{model}.fmu"
+    with zipfile.ZipFile(path, "w") as z:
+        z.write(source / model / "FMI3.xml", "modelDescription.xml")
+        z.write(lib, f"binaries/x86_64-linux/{model}.so")
     return path
 
 

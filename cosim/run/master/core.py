@@ -14,7 +14,7 @@ import logging
 import re
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -102,12 +102,19 @@ class Master:
             descriptions[comp.name] = read_fmu(sc, comp.name, comp.fmu_path)
             extracted[comp.fmu_path] = extract_once(comp.fmu_path)
         views = {name: unit_class(md).scenario_view(md) for name, md in descriptions.items()}
+        clocks = {name: {v.name for v in md.modelVariables if v.type == "Clock"}
+                  for name, md in descriptions.items()}
+        clock_connections = [c for c in sc.connections
+                             if c.src_var in clocks.get(c.src, ()) or
+                             c.dst_var in clocks.get(c.dst, ())]
+        values = replace(sc, connections=[c for c in sc.connections
+                                          if c not in clock_connections])
         try:
-            check_against_fmus(sc, views)
-            check_timing(sc, views, self.algorithm_name)
+            check_against_fmus(values, views)
+            check_timing(values, views, self.algorithm_name)
         except ScenarioError as err:
             raise blame_override(err, sc.path, sc.overrides) from None
-        kept = unconnected_inputs(sc, views)
+        kept = unconnected_inputs(values, views)
         if kept:
             LOG.warning("%s: inputs neither connected nor set keep their start values: %s",
                         sc.path, ", ".join(f"{name}.{v.name} = {v.start}" for name, v in kept))
@@ -123,11 +130,62 @@ class Master:
             self.units.append(unit)
         self.by_name = by_name
         command = sc.summary.get("command")
-        for c in sc.connections:
+        self.clock_links = self._clock_links(clock_connections)
+        for c in values.connections:
             self.links.append(Link(c, by_name[c.src], by_name[c.dst], c.src_var, c.dst_var,
                                    history=[] if command == f"{c.src}.{c.src_var}" else None))
         self.link_order = self._value_flow_order()
         self.eventful: list[Unit] = []  # FMUs whose events the algorithm handles (initialize)
+
+    def _clock_links(self, connections: list[Connection]
+                     ) -> dict[Unit, dict[int, list[tuple[Unit, int]]]]:
+        """Source unit -> its output clock (value reference) -> the (unit, input clock) it
+        triggers, from the scenario's clock ``connections``: an output clock of a Scheduled
+        Execution FMU to a ``triggered`` input clock of one (FMI 3.0 sec. 5.2.2)."""
+        from cosim.run.master.scheduled import Fmi3ScheduledUnit
+
+        out: dict[Unit, dict[int, list[tuple[Unit, int]]]] = {}
+        for c in connections:
+            key = f"{self.scenario.path}: [connections] \"{c.dst}.{c.dst_var}\" = " \
+                  f"\"{c.src}.{c.src_var}\""
+            src, dst = self.by_name[c.src], self.by_name[c.dst]
+            for unit, var, causality in ((src, c.src_var, "output"), (dst, c.dst_var, "input")):
+                if not isinstance(unit, Fmi3ScheduledUnit):
+                    raise ScenarioError(f"{key}: {unit.name}.{var}: clocks are wired between "
+                                        "Scheduled Execution FMUs only (a Clock connects to a "
+                                        "Clock)")
+                clock = unit.clock_names.get(var)
+                if clock is None or clock.causality != causality:
+                    raise ScenarioError(f"{key}: {unit.name}.{var} is not an {causality} Clock "
+                                        "(a Clock connects to a Clock)")
+            target = dst.clock_names[c.dst_var]
+            if target.interval_variability != "triggered":
+                raise ScenarioError(f"{key}: {c.dst}.{c.dst_var} has intervalVariability "
+                                    f"{target.interval_variability!r}: only a triggered input "
+                                    "clock ticks when another clock does")
+            out.setdefault(src, {}).setdefault(src.clock_names[c.src_var].value_reference,
+                                               []).append((dst, target.value_reference))
+        return out
+
+    def _deliver(self, unit: Unit, ticks: int, pending: list[Unit],
+                 open_events: set[Unit]) -> None:
+        """Trigger the input clocks wired to the output clocks ``unit`` ticked at ``ticks``: a
+        triggered FMU not yet handled at this point is handled before its outputs are read,
+        one already handled is activated again now (its outputs flow from the next point)."""
+        wired = self.clock_links.get(unit)
+        if not wired:
+            return
+        for vr in unit.take_ticks():  # type: ignore[attr-defined]
+            for dst, clock in wired.get(vr, ()):
+                dst.trigger(clock)  # type: ignore[attr-defined]
+                if dst in open_events:
+                    continue
+                if dst not in pending:
+                    pending.append(dst)
+                    open_events.add(dst)
+                else:
+                    dst.complete_event(ticks)
+                    self._deliver(dst, ticks, pending, open_events)
 
     def _value_flow_order(self) -> list[Link]:
         """Connections in value-flow order by the per-variable dependency graph
@@ -187,7 +245,7 @@ class Master:
         if stages is None:
             stages = self._plans[key] = exchange.plan(
                 [link for link in self.link_order if link.dst in due])
-        pending = [u for u in self.eventful if u.event_pending(ticks)] if self.eventful else ()
+        pending = [u for u in self.eventful if u.event_pending(ticks)] if self.eventful else []
         if not pending:
             for st in stages:
                 st.run()
@@ -200,10 +258,13 @@ class Master:
                 if batch.unit in open_events:
                     open_events.discard(batch.unit)
                     batch.unit.complete_event(ticks)
+                    self._deliver(batch.unit, ticks, pending, open_events)
             st.run()
-        for unit in pending:
+        for unit in pending:  # a unit triggered here is appended: handled in this loop too
             if unit in open_events:
+                open_events.discard(unit)
                 unit.complete_event(ticks)
+                self._deliver(unit, ticks, pending, open_events)
 
     def output_point(self, ticks: int) -> bool:
         """Is ``ticks`` an output point (or the stop time)?"""

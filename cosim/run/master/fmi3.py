@@ -83,6 +83,9 @@ class ClockAttributes:
     interval: Fraction | None
     shift: Fraction | None
     supports_fraction: bool
+    # Scheduled Execution: the priority of the clock's model partition (lower value = higher
+    # priority, FMI 3.0 sec. 2.4.7.4); None: not declared
+    priority: int | None = None
 
 
 def clock_attributes(path: Path) -> dict[int, ClockAttributes]:
@@ -141,7 +144,7 @@ def _clock(path: Path, a: dict[str, str]) -> ClockAttributes:
     except (KeyError, ValueError):
         raise bad("valueReference", "not an unsigned integer") from None
     return ClockAttributes(name, vr, a.get("causality", "local"), kind, interval, shift,
-                           fraction == "true")
+                           fraction == "true", number("priority", int, 0, False))
 
 
 def family_of(kind: str) -> str:
@@ -184,6 +187,8 @@ class Fmi3Unit(Unit):
     """An FMI 3.0 co-simulation FMU instance."""
 
     fmi_version = "3.0"
+    # input clocks without a schedule of their own that the master ticks
+    UNSCHEDULED_CLOCKS: tuple[str, ...] = ("countdown",)
     C_TYPES = C_NUMBER_TYPES
     C_PREFIX = "fmi3"
     C_COUNTS = True
@@ -191,11 +196,8 @@ class Fmi3Unit(Unit):
     def __init__(self, name: str, path: Path, unzipdir: str, md: Any) -> None:
         self._arrays: dict[int, tuple[int, str, int, int]] = {}  # element id -> array info
         super().__init__(name, path, unzipdir, md)
-        cs = md.coSimulation
-        self.slave = CheckedSlave(FMU3Slave(guid=md.guid, unzipDirectory=unzipdir,
-                                            modelIdentifier=cs.modelIdentifier,
-                                            instanceName=name), self)
-        self.can_event_mode = bool(cs.hasEventMode)
+        self.slave = CheckedSlave(self._open(md, unzipdir), self)
+        self.can_event_mode = self._has_event_mode(md)
         self.input_clocks = [c for c in (clock_attributes(path).values()
                                          if any(v.type == "Clock" for v in md.modelVariables)
                                          else ()) if c.causality == "input"]
@@ -219,6 +221,16 @@ class Fmi3Unit(Unit):
         self._setters[ARRAY] = self._write_elements
 
     scenario_view = staticmethod(scenario_view)
+
+    def _open(self, md: Any, unzipdir: str) -> Any:
+        """The fmpy object of this instance's interface (not instantiated)."""
+        return FMU3Slave(guid=md.guid, unzipDirectory=unzipdir,
+                         modelIdentifier=md.coSimulation.modelIdentifier,
+                         instanceName=self.name)
+
+    @staticmethod
+    def _has_event_mode(md: Any) -> bool:
+        return bool(md.coSimulation.hasEventMode)
 
     def variables(self, md: Any) -> dict[str, Variable]:
         out: dict[str, Variable] = {}
@@ -301,11 +313,11 @@ class Fmi3Unit(Unit):
                                           "fmi3GetInterval says fmi3IntervalNotYetKnown at the "
                                           "end of Initialization Mode")
                 out[clock.value_reference] = (interval, self._shift(clock))
-            elif kind != "countdown":
+            elif kind not in self.UNSCHEDULED_CLOCKS:
                 raise SimulationError(f"{self.name}: input clock {clock.name} has "
                                       f"intervalVariability {kind!r}: the master ticks "
                                       "periodic (constant, fixed, tunable) and "
-                                      "countdown clocks only")
+                                      f"{' and '.join(self.UNSCHEDULED_CLOCKS)} clocks only")
             if kind in PERIODIC and not out[clock.value_reference][0] > 0:
                 raise SimulationError(f"{self.name}: periodic clock {clock.name} has interval "
                                       f"{float(out[clock.value_reference][0])!r} s (must be "
@@ -472,23 +484,42 @@ class Fmi3Unit(Unit):
                                       f"current time {now!r} s (an FMU announcing "
                                       "its next event must give a later time)")
             self._announced = self._schedule(nxt, ticks)
+        self._advance(ticking, ticks)
+        self._ask_intervals(now, ticks)
+        self.slave.enterStepMode()
+        self._in_event = self._needs_event = False
+
+    def _advance(self, ticking: list[int], ticks: int) -> None:
+        """Each clock of ``ticking`` ticked at ``ticks``: a periodic one ticks next one interval
+        on, another when the FMU gives its interval."""
         for vr in ticking:
             self._clock_next[vr] = None
             if vr in self._clock_period:
                 origin, period, k = self._clock_period[vr]
                 self._clock_period[vr] = (origin, period, k + 1)
                 self._clock_next[vr] = self._schedule(float(origin + (k + 1) * period), ticks)
+
+    def _ask_intervals(self, now: float, ticks: int, zero_allowed: bool = False) -> list[int]:
+        """Ask the countdown and tunable input clocks' intervals (fmi3GetIntervalDecimal) at
+        the event at ``ticks`` (the FMU's time ``now``, s); a changed one schedules the clock's
+        next tick. ``zero_allowed`` (Scheduled Execution): a countdown interval 0 means a tick
+        now; those clocks are returned (else an interval must be positive)."""
         asked = [c for c in self.input_clocks
                  if c.interval_variability in ("countdown", "tunable")]
+        now_ticking = []
         for clock, (interval, qualifier) in zip(asked, self._intervals(asked) if asked else ()):
             if qualifier != fmi3IntervalChanged:
                 continue
             vr = clock.value_reference
+            countdown = clock.interval_variability == "countdown"
+            if countdown and zero_allowed and interval == 0:
+                now_ticking.append(vr)
+                continue
             if not interval > 0:
                 raise SimulationError(f"{self.name}: {clock.interval_variability} clock "
                                       f"{clock.name} interval {float(interval)!r} s at t = "
                                       f"{now!r} s (must be positive)")
-            if clock.interval_variability == "countdown":
+            if countdown:
                 self._clock_next[vr] = self._schedule(float(Fraction(now) + interval), ticks)
             else:  # tunable: the next tick is the new interval after the last one
                 origin, period, k = self._clock_period[vr]
@@ -496,8 +527,7 @@ class Fmi3Unit(Unit):
                     origin, k = origin + (k - 1) * period, 1
                 self._clock_period[vr] = (origin, interval, k)
                 self._clock_next[vr] = self._schedule(float(origin + k * interval), ticks)
-        self.slave.enterStepMode()
-        self._in_event = self._needs_event = False
+        return now_ticking
 
     def _intervals(self, clocks: list[ClockAttributes]) -> list[tuple[Fraction, int]]:
         """fmi3GetIntervalDecimal of ``clocks`` (fmi3GetIntervalFraction of those that

@@ -35,6 +35,10 @@ def _remove_extractions() -> None:
 def unit_class(md: Any) -> type[Unit]:
     """The unit class of the FMI version ``md`` declares."""
     if str(md.fmiVersion).startswith("3"):
+        if md.coSimulation is None:
+            from cosim.run.master.scheduled import Fmi3ScheduledUnit
+
+            return Fmi3ScheduledUnit
         from cosim.run.master.fmi3 import Fmi3Unit
 
         return Fmi3Unit
@@ -66,8 +70,9 @@ def binary_dirs(md: Any) -> tuple[str, list[str]]:
 
 def read_fmu(sc: Scenario, instance: str, path: Path) -> Any:
     """The modelDescription of the FMU of ``instance``, after checking the file is an FMU with a
-    co-simulation binary for this platform: otherwise a :class:`ScenarioError` naming the
-    scenario file, the instance and the path (instead of BadZipFile / KeyError later)."""
+    co-simulation (or FMI 3 Scheduled Execution) binary for this platform: otherwise a
+    :class:`ScenarioError` naming the scenario file, the instance and the path (instead of
+    BadZipFile / KeyError later)."""
     where = f"{sc.path}: [fmus.{instance}] fmu = {str(path)!r}"
     try:
         with zipfile.ZipFile(path) as archive:
@@ -81,20 +86,14 @@ def read_fmu(sc: Scenario, instance: str, path: Path) -> Any:
     except Exception as err:  # noqa: BLE001 - fmpy raises many kinds on a bad XML
         raise ScenarioError(f"{where}: modelDescription.xml is not valid: {err}") from None
     version = str(md.fmiVersion)
-    if md.coSimulation is None:
-        kinds = [k for k, part in (("model exchange", md.modelExchange),
-                                   ("scheduled execution",
-                                    getattr(md, "scheduledExecution", None))) if part]
-        if "scheduled execution" in kinds:
-            raise ScenarioError(
-                f"{where}: an FMI {version} Scheduled Execution FMU ("
-                f"{' and '.join(kinds)}, no co-simulation): the master runs co-simulation "
-                "FMUs only; Scheduled Execution is not supported")
-        raise ScenarioError(f"{where}: not a co-simulation FMU "
-                            f"({' and '.join(kinds) or 'no interface'} only)")
+    scheduled = getattr(md, "scheduledExecution", None)
+    if md.coSimulation is None and not (scheduled and version.startswith("3")):
+        raise ScenarioError(f"{where}: not a co-simulation FMU ("
+                            f"{'model exchange' if md.modelExchange else 'no interface'} "
+                            "only; the master runs co-simulation and Scheduled Execution FMUs)")
     if not (version.startswith("2") or version.startswith("3")):
         raise ScenarioError(f"{where}: FMI {version}: the master runs FMI 2.0 and 3.0 FMUs")
-    ident = md.coSimulation.modelIdentifier
+    ident = (md.coSimulation or scheduled).modelIdentifier
     ext = {"linux": ".so", "darwin": ".dylib", "win": ".dll"}
     from fmpy import platform
 

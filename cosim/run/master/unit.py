@@ -60,7 +60,10 @@ class Unit(ABC):
         self.vars: dict[str, Variable] = self.variables(md)
         self.deps = output_dependencies(md)  # absent dependencies attribute: all inputs
         self.feedthrough = any(self.deps.values())
-        self.variable_step = bool(md.coSimulation.canHandleVariableCommunicationStepSize)
+        # a Scheduled Execution FMU (no co-simulation interface) takes any time between
+        # activations
+        self.variable_step = (md.coSimulation is None
+                              or bool(md.coSimulation.canHandleVariableCommunicationStepSize))
         experiment = md.defaultExperiment
         step = getattr(experiment, "stepSize", None) if experiment is not None else None
         # the FMU's own communication step (DefaultExperiment stepSize), ticks; None: not given
