@@ -222,11 +222,14 @@ class Fmi3Unit(Unit):
 
     scenario_view = staticmethod(scenario_view)
 
+    FMPY_CLASS: type = FMU3Slave  # fmpy's class of this interface
+    INTERFACE = "coSimulation"  # the modelDescription's interface element (fmpy's attribute)
+
     def _open(self, md: Any, unzipdir: str) -> Any:
         """The fmpy object of this instance's interface (not instantiated)."""
-        return FMU3Slave(guid=md.guid, unzipDirectory=unzipdir,
-                         modelIdentifier=md.coSimulation.modelIdentifier,
-                         instanceName=self.name)
+        return self.FMPY_CLASS(guid=md.guid, unzipDirectory=unzipdir,
+                               modelIdentifier=getattr(md, self.INTERFACE).modelIdentifier,
+                               instanceName=self.name)
 
     @staticmethod
     def _has_event_mode(md: Any) -> bool:

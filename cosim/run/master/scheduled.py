@@ -47,6 +47,8 @@ class Fmi3ScheduledUnit(Fmi3Unit):
     """An FMI 3.0 Scheduled Execution FMU instance."""
 
     UNSCHEDULED_CLOCKS = ("countdown", "triggered")
+    FMPY_CLASS = FMU3ScheduledExecution
+    INTERFACE = "scheduledExecution"
 
     def __init__(self, name: str, path: Any, unzipdir: str, md: Any) -> None:
         super().__init__(name, path, unzipdir, md)
@@ -69,11 +71,6 @@ class Fmi3ScheduledUnit(Fmi3Unit):
         self._updated = False  # the FMU called the clock-update callback
         self.ticked: list[int] = []  # output clocks that ticked at the last activations
         self.activations: list[tuple[str, float]] = []  # (input clock, activation time s)
-
-    def _open(self, md: Any, unzipdir: str) -> Any:
-        return FMU3ScheduledExecution(guid=md.guid, unzipDirectory=unzipdir,
-                                      modelIdentifier=md.scheduledExecution.modelIdentifier,
-                                      instanceName=self.name)
 
     @staticmethod
     def _has_event_mode(md: Any) -> bool:
