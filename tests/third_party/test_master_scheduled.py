@@ -9,6 +9,7 @@ from __future__ import annotations
 import math
 import subprocess
 import sys
+import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -100,6 +101,28 @@ def test_clock_connections_are_checked(c_fmus3, c_fmus, tmp_path):
     sc = write_scenario(tmp_path, {"a": (fmu, {}, {}), "b": (fmu, {}, {})},
                         connections={"b.kick": "a.fast"})
     with pytest.raises(ScenarioError, match=r"a.fast is not an output Clock"):
+        run(sc)
+    sc = write_scenario(tmp_path, {"a": (fmu, {}, {}), "cd": (c_fmus3["Countdown3"], {}, {})},
+                        connections={"a.kick": "cd.tick"})
+    with pytest.raises(ScenarioError, match=r"cd.tick: clocks are wired between Scheduled "
+                                            r"Execution FMUs only"):
+        run(sc)
+
+
+def test_an_input_clock_without_priority_is_refused(c_fmus3, tmp_path):
+    """FMI 3.0 sec. 2.4.7.4: an input clock of a Scheduled Execution FMU declares a priority;
+    Tasks3 with the alarm clock's removed."""
+    fmu = tmp_path / "NoPriority.fmu"
+    with zipfile.ZipFile(c_fmus3["Tasks3"]) as source, zipfile.ZipFile(fmu, "w") as out:
+        for item in source.infolist():
+            data = source.read(item)
+            if item.filename == "modelDescription.xml":
+                assert b'priority="2"' in data
+                data = data.replace(b'priority="2"', b"")
+            out.writestr(item, data)
+    sc = write_scenario(tmp_path, {"t": (fmu, {}, {})})
+    with pytest.raises(SimulationError, match=r"NoPriority.fmu: modelDescription.xml: input "
+                                              r"Clock 'alarm' has no priority"):
         run(sc)
 
 
