@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import contextlib
 import fcntl
+import functools
 import json
 import math
 import os
@@ -35,7 +36,9 @@ INSET_LEFT_PER_LINE = 0.04  # axes widths further right per further line of the 
 MEASURED = {"color": "C0", "ls": "-", "lw": 2.0, "zorder": 2}
 REFERENCE = {"color": "k", "ls": "-", "lw": 0.8, "zorder": 3}
 REFERENCE_CURVE = {"color": "0.5", "ls": "-", "lw": 0.8, "zorder": 3}
-FILES = ("results.csv", "summary.json", *(f"plot.{fmt}" for fmt in PLOT_FORMATS))
+UNITS_FILE = "results.units.json"  # beside results.csv: column -> declared unit (or null)
+FILES = ("results.csv", UNITS_FILE, "summary.json", *(f"plot.{fmt}" for fmt in PLOT_FORMATS))
+TIME_INFO = ("simulation time", "s")  # (description, unit) of the column ``time``
 
 
 class OutputError(ValueError):
@@ -117,7 +120,8 @@ def _json_safe(obj: Any) -> Any:
 
 def write_results(result: Any, out_dir: Path, plot: bool = True,
                   force: bool = False, plot_format: str = "png") -> list[Path]:
-    """Write results.csv, summary.json and (unless ``plot`` is False) the plot
+    """Write results.csv, its units (``results.units.json``: column -> the unit its FMU
+    declares, null where none), summary.json and (unless ``plot`` is False) the plot
     (``plot.<plot_format>``: png, svg or pdf) into ``out_dir``
     (into ``<out_dir>.partial`` for a partial result when ``out_dir`` holds a complete run and
     ``force`` is False). Returns the paths written."""
@@ -130,12 +134,15 @@ def write_results(result: Any, out_dir: Path, plot: bool = True,
     tmp = Path(tempfile.mkdtemp(prefix=".writing-", dir=out_dir))
     try:
         result.frame.to_csv(tmp / "results.csv", index=False)  # repr: round-trip exact
+        units = column_units(getattr(result, "scenario", None), result.frame.columns)
+        (tmp / UNITS_FILE).write_text(json.dumps(units, indent=2, ensure_ascii=False) + "\n",
+                                      encoding="utf-8")
         (tmp / "summary.json").write_text(json.dumps(_json_safe(result.summary), indent=2)
                                           + "\n")
         if plot:
             plot_run(result, tmp / f"plot.{plot_format}")
         written = []
-        for name in FILES:  # three renames: the window between them is microseconds
+        for name in FILES:  # a few renames: the window between them is microseconds
             if (tmp / name).exists():
                 os.replace(tmp / name, out_dir / name)
                 written.append(out_dir / name)
@@ -170,16 +177,24 @@ def display_unit(unit: str | None) -> tuple[float, str | None]:
     return _UNIT_DISPLAY.get(unit, (1.0, unit))
 
 
+@functools.lru_cache(maxsize=64)
+def _model_variables(path: str, mtime_ns: int) -> dict[str, Any]:
+    """Name -> fmpy ModelVariable of the FMU at ``path`` (as of ``mtime_ns``: a rebuilt FMU
+    is read again)."""
+    from fmpy import read_model_description
+
+    md = read_model_description(path, validate=False)
+    return {v.name: v for v in md.modelVariables}
+
+
 def variable_info(scenario: Any, ref: str) -> tuple[str, str | None]:
     """(description, declared unit) of ``"instance.variable"`` from its FMU's
     modelDescription; the name itself and None where it has none."""
     try:
-        from fmpy import read_model_description
-
         comp, var = ref.split(".", 1)
         base = var.split("[", 1)[0]
-        md = read_model_description(str(scenario.components[comp].fmu_path), validate=False)
-        by_name = {v.name: v for v in md.modelVariables}
+        path = Path(scenario.components[comp].fmu_path)
+        by_name = _model_variables(str(path), path.stat().st_mtime_ns)
         found = by_name.get(var) or by_name[base]  # the element itself, else its vector
         unit = found.unit or (found.declaredType.unit if found.declaredType is not None
                               else None)
@@ -189,6 +204,19 @@ def variable_info(scenario: Any, ref: str) -> tuple[str, str | None]:
         return text, unit
     except Exception:  # noqa: BLE001 - a plot label must never fail a run
         return ref, None
+
+
+def column_info(scenario: Any, columns: Any) -> dict[str, tuple[str, str | None]]:
+    """Per column of a run's table: (description, declared unit), :data:`TIME_INFO` for
+    ``time``, :func:`variable_info` for the others."""
+    return {str(c): TIME_INFO if c == "time" else variable_info(scenario, str(c))
+            for c in columns}
+
+
+def column_units(scenario: Any, columns: Any) -> dict[str, str | None]:
+    """Per column of a run's table: the unit its FMU declares (None where none), as
+    ``results.units.json`` holds them."""
+    return {column: unit for column, (_, unit) in column_info(scenario, columns).items()}
 
 
 def variable_unit(scenario: Any, ref: str) -> str | None:
