@@ -9,6 +9,8 @@ run.frame.head()            # the recorded signals
 run.units["plant.v"]        # "m/s": the unit the FMU declares
 run.with_units().head()     # columns (variable, unit)
 run.summary["stop_error_m"] # the metrics of summary.json
+run.save("out")             # results.csv, results.units.json, summary.json, plot.png
+api.read_results("out")     # results.csv again, its units in .attrs["units"]
 fig = run.figure()          # the figure of `cosim run` (plot.png)
 other = api.run("seed000_stop_rmpc")
 api.compare({"PID": run, "RMPC": other})  # metrics side by side
@@ -32,10 +34,10 @@ from typing import Any
 import pandas as pd
 
 from cosim.run.master import ProgressFn, RunResult, ensure_built, run_scenario
-from cosim.run.results import PLOT_FORMATS, draw_run, variable_info
+from cosim.run.results import PLOT_FORMATS, UNITS_FILE, column_info, draw_run
 from cosim.run.scenario import SCENARIO_DIR, Scenario, load_scenario
 
-__all__ = ["Run", "build", "compare", "load", "run", "scenarios"]
+__all__ = ["Run", "build", "compare", "load", "read_results", "run", "scenarios"]
 
 Overrides = Mapping[str, Any] | Sequence[str]
 
@@ -122,10 +124,7 @@ class Run:
     def variables(self) -> pd.DataFrame:
         """Per recorded column: its description and declared unit (None where the FMU
         declares none), read from the FMUs' modelDescriptions."""
-        rows = {"time": ("simulation time", "s")}
-        for column in self.result.frame.columns:
-            if column != "time":
-                rows[column] = variable_info(self.scenario, column)
+        rows = column_info(self.scenario, self.result.frame.columns)
         return pd.DataFrame.from_dict(rows, orient="index", columns=["description", "unit"])
 
     @property
@@ -150,9 +149,25 @@ class Run:
 
     def save(self, out_dir: str | Path, plot: bool = True, plot_format: str = "png"
              ) -> list[Path]:
-        """Write results.csv, summary.json and the plot into ``out_dir``, as ``cosim run
-        --out`` does; the paths written."""
+        """Write results.csv, its units (results.units.json), summary.json and the plot into
+        ``out_dir``, as ``cosim run --out`` does; the paths written. ``read_results(out_dir)``
+        reads the table back with its units."""
         return self.result.write(Path(out_dir), plot=plot, plot_format=plot_format)
+
+
+def read_results(folder: str | Path) -> pd.DataFrame:
+    """The ``results.csv`` of a run folder (``cosim run --out``, ``Run.save``) as a
+    DataFrame, every float bit for bit, with its units (column -> declared unit, None where
+    none) in ``frame.attrs["units"]`` from ``results.units.json`` when the folder has one
+    (``{}`` otherwise)."""
+    import json
+
+    folder = Path(folder)
+    frame = pd.read_csv(folder / "results.csv")
+    sidecar = folder / UNITS_FILE
+    frame.attrs["units"] = (json.loads(sidecar.read_text(encoding="utf-8"))
+                            if sidecar.exists() else {})
+    return frame
 
 
 def compare(runs: Mapping[str, Run] | Sequence[Run],

@@ -83,7 +83,7 @@ class BrakeDelayTrain(StatefulCore, Declared):
         Var.output("a", "m/s2", "acceleration dv/dt"),
         Var.output("a_c", "m/s2", "acceleration produced by the brakes (<= 0)"),
         Var.output("applied_command", "%", "command acting now: u(t - Td)"),
-        Var.output("grade", "1", "grade at the train position (permille, uphill > 0)"),
+        Var.output("grade", "‰", "grade at the train position (uphill > 0)"),
     )
 
     @classmethod

@@ -168,7 +168,7 @@ class Crh3Train(StatefulCore, Declared):
         Var.output("traction_limit", "N", "largest traction force at the present speed"),
         Var.output("brake_limit", "N", "largest brake force at the present speed (>= 0)"),
         Var.output("speed_limit", "m/s", "line speed limit at the train position"),
-        Var.output("grade", "1", "grade at the train position (permille, uphill > 0)"),
+        Var.output("grade", "‰", "grade at the train position (uphill > 0)"),
         Var.output("power", "W", "electrical power of eq. 9: traction / eta_M - eta_b "
                    "braking + e0"),
         Var.output("energy_traction", "J", "int(F v dt) / eta_M since the start (eq. 9)"),

@@ -264,7 +264,7 @@ class Emu(StatefulCore, Declared):
         Var.output("total_traction_limit", "N", "sum of the traction limits"),
         Var.output("total_brake_limit", "N", "sum of the brake limits"),
         Var.output("speed_limit", "m/s", "speed limit at the head"),
-        Var.output("grade", "1", "grade at the head (permille, uphill > 0)"),
+        Var.output("grade", "‰", "grade at the head (uphill > 0)"),
         Var.output("neutral", "1", "1 while the first unit is in a neutral section"),
     )
 

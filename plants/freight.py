@@ -250,7 +250,7 @@ class FreightTrain(StatefulCore, Declared):
         Var.output("buff_force_peak", "N",
                    "largest buff force (> 0) over the last communication step"),
         Var.output("air_brake_force", "N", "total air-brake force"),
-        Var.output("grade", "1", "grade at the head (permille, uphill > 0)"),
+        Var.output("grade", "‰", "grade at the head (uphill > 0)"),
         Var.output("speed_limit", "m/s", "line speed limit at the head"),
         Var.output("brake_pipe_reduction", "Pa", "brake-pipe reduction commanded"),
     )

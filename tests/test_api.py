@@ -106,9 +106,27 @@ def test_figure_is_the_run_figure_and_save_writes_the_run_files(short_run: api.R
     finally:
         plt.close(fig)
     written = short_run.save(tmp_path / "out")
-    assert sorted(p.name for p in written) == ["plot.png", "results.csv", "summary.json"]
+    assert sorted(p.name for p in written) == ["plot.png", "results.csv", "results.units.json",
+                                               "summary.json"]
     pd.testing.assert_frame_equal(pd.read_csv(tmp_path / "out" / "results.csv"),
                                   short_run.frame, check_exact=True)
+
+
+def test_results_units_json_holds_each_columns_declared_unit(short_run: api.Run,
+                                                              tmp_path: Path) -> None:
+    """The sidecar beside results.csv: one entry per column, in the table's order, each the
+    unit the FMU declares (as ``Run.units``); ``read_results`` gives the table bit for bit
+    with those units in ``attrs``, and ``{}`` for a folder without the sidecar."""
+    short_run.save(tmp_path, plot=False)
+    units = json.loads((tmp_path / "results.units.json").read_text(encoding="utf-8"))
+    assert list(units) == list(short_run.frame.columns)
+    assert units == short_run.units
+    assert units["time"] == "s" and units["plant.v"] == "m/s"
+    back = api.read_results(tmp_path)
+    pd.testing.assert_frame_equal(back, short_run.frame, check_exact=True)
+    assert back.attrs["units"] == units
+    (tmp_path / "results.units.json").unlink()
+    assert api.read_results(tmp_path).attrs["units"] == {}
 
 
 def test_a_plant_run_in_code_equals_fmpy_running_its_fmu(tmp_path: Path) -> None:

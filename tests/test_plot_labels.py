@@ -11,9 +11,32 @@ from cosim.run.scenario import load_scenario
 
 
 @pytest.mark.parametrize("error,text", [(0.149, "+14.9 cm"), (-0.004, "-0.4 cm"),
-                                        (3.4, "+3.40 m"), (-340.2, "-340.20 m")])
+                                        (3.4, "+3.40 m"), (-340.2, "-340.20 m"),
+                                        (-0.000185, "-0.018 cm"), (0.0005, "+0.050 cm"),
+                                        (0.0, "0.0 cm"), (-0.0, "0.0 cm"),
+                                        (-1e-12, "0.000000 cm")])
 def test_stop_error_in_cm_under_a_metre_else_in_m(error, text):
     assert format_stop_error(error) == text
+
+
+@pytest.mark.parametrize("error", [s * 10.0 ** k * m for s in (1, -1) for k in range(-8, 0)
+                                   for m in (1.0, 1.85, 4.99, 9.5)])
+def test_stop_error_text_is_never_negative_zero_and_keeps_two_digits(error):
+    """Below 1 m: the number read back is within half its last digit of the error in cm,
+    written to 1 mm from 1 mm up and with two significant digits below (down to the finest
+    decimal written), and signed only when it is not zero."""
+    from cosim.run.results import MAX_CM_DECIMALS
+
+    text = format_stop_error(error)
+    number = text.removesuffix(" cm")
+    decimals = len(number.split(".")[1])
+    assert abs(float(number) - 100.0 * error) <= 0.5 * 10.0 ** -decimals * (1 + 1e-9)
+    if float(number) == 0.0:
+        assert number[0] not in "+-"
+    if abs(100.0 * error) >= 0.1:
+        assert decimals == 1
+    elif abs(100.0 * error) >= 10.0 ** (1 - MAX_CM_DECIMALS):
+        assert len(number.lstrip("+-").replace(".", "").lstrip("0")) >= 2, text
 
 
 @pytest.mark.parametrize("scenario,command,shown", [
@@ -111,19 +134,20 @@ def test_run_figure_reads_as_a_paper_figure(rsmpc_run):
     fig = draw_run(rsmpc_run)
     fig.canvas.draw()
     renderer = fig.canvas.get_renderer()
-    main = fig.axes[0]
-    legend = main.get_legend()
-    assert legend is not None
+    main, error, twin = fig.axes
+    legend = error.get_legend()  # under the lowest panel of the tracking plot
+    assert legend is not None and main.get_legend() is None
     inset = next(c for ax in fig.axes for c in ax.child_axes if c.get_title() == "last 20 m")
     box_legend = legend.get_window_extent(renderer)
     assert not box_legend.overlaps(inset.get_window_extent(renderer))
-    assert not box_legend.overlaps(main.get_window_extent(renderer))  # outside the axes
+    for ax in (main, error):  # outside the axes, below the x label
+        assert not box_legend.overlaps(ax.get_window_extent(renderer))
+    assert box_legend.y1 <= error.xaxis.get_tightbbox(renderer).y0
     assert not inset.get_tightbbox(renderer).overlaps(main.get_window_extent(renderer))
-    assert not inset.get_tightbbox(renderer).overlaps(fig.axes[1].yaxis.get_tightbbox(renderer))
+    assert not inset.get_tightbbox(renderer).overlaps(twin.yaxis.get_tightbbox(renderer))
     labels = [t.get_text() for t in legend.get_texts()]
     assert "speed" in labels and "stop point" in labels
     assert not any(name.startswith(("plant.", "controller.")) for name in labels), labels
-    twin = fig.axes[1]
     assert twin.get_ylabel() == "brake command u (%)"
     lines = {line.get_label(): line for ax in fig.axes for line in ax.get_lines()}
     assert lines["speed"].get_drawstyle() == "default"
@@ -133,6 +157,80 @@ def test_run_figure_reads_as_a_paper_figure(rsmpc_run):
     for ax in (main, twin, inset):
         for axis in (ax.xaxis, ax.yaxis):
             assert axis.get_major_formatter().get_offset() == "", (ax, axis)
+    plt.close(fig)
+
+
+def test_run_figure_draws_measured_solid_references_continuous_and_the_error(rsmpc_run):
+    """Two panels sharing the position axis (tracking, error) and the command's twin axis;
+    the measured speed solid and wider than the references, which are solid, black (as
+    held) and grey (the curve), drawn over it; the error panel is reference curve minus
+    measured speed in km/h; every axis labelled with its unit."""
+    import matplotlib.colors as mcolors
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    from cosim.run.reproduce import reference_curve
+    from cosim.run.results import draw_run
+
+    fig = draw_run(rsmpc_run)
+    main, error, twin = fig.axes
+    assert error.get_shared_x_axes().joined(main, error)
+    lines = {line.get_label(): line for line in main.get_lines()}
+    speed = lines["speed"]
+    held, curve = lines["reference (as held by the controller)"], lines["reference curve"]
+    for line in (speed, held, curve):
+        assert line.get_linestyle() == "-"
+    assert speed.get_linewidth() > max(held.get_linewidth(), curve.get_linewidth())
+    assert min(held.get_zorder(), curve.get_zorder()) > speed.get_zorder()
+    assert mcolors.to_hex(held.get_color()) == "#000000"
+    r, g, b = mcolors.to_rgb(curve.get_color())
+    assert r == g == b  # grey
+    [drawn] = [ln for ln in error.get_lines() if ln.get_label() == "reference − speed"]
+    frame, cfg = rsmpc_run.frame, rsmpc_run.scenario.summary
+    expected = 3.6 * (reference_curve(rsmpc_run.scenario, frame, cfg["reference_speed"])
+                      - frame[cfg["speed"]].to_numpy())
+    assert np.allclose(drawn.get_ydata(), expected)
+    assert drawn.get_linestyle() == "-"
+    assert main.get_xlabel() == "" and error.get_xlabel() == "position (m)"
+    for ax in (main, error, twin):
+        assert ax.get_ylabel().endswith(")") and "(" in ax.get_ylabel()
+    plt.close(fig)
+
+
+def test_long_command_label_stays_clear_of_the_title():
+    """A command with a long description (seed 002's locomotive force demand): its axis label
+    is wrapped to the axes' height, so no title, label or inset box overlaps another."""
+    import matplotlib.pyplot as plt
+    import numpy as np
+    import pandas as pd
+
+    from cosim.run.results import draw_run
+
+    command = "controller.locomotive force demand (> 0 traction, < 0 electric brake) (kN)"
+    s = np.linspace(0.0, 20000.0, 400)
+    v = np.sqrt(np.maximum(20000.0 - s, 0.0)) / 10.0
+    frame = pd.DataFrame({"time": np.arange(400.0), "plant.s": s, "plant.v": v,
+                          "controller.v_ref": v + 0.1, command: np.sin(s / 1e3)})
+    cfg = {"position": "plant.s", "speed": "plant.v", "reference_speed": "controller.v_ref",
+           "command": command, "stop_point": 20000.0}
+    fig = draw_run(_stub(cfg, frame, {"stop_error_m": 0.433, "command_switches": 6818}))
+    fig.canvas.draw()
+    renderer = fig.canvas.get_renderer()
+    main, error, twin = fig.axes
+    assert main.get_title() == "stub  stop error +43.3 cm  switches 6818"
+    inset = main.child_axes[0]
+    boxes = {"title": main.title.get_window_extent(renderer),
+             "twin label": twin.yaxis.label.get_window_extent(renderer),
+             "speed label": main.yaxis.label.get_window_extent(renderer),
+             "error label": error.yaxis.label.get_window_extent(renderer),
+             "inset": inset.get_tightbbox(renderer)}
+    for i, (a, box_a) in enumerate(boxes.items()):
+        for b, box_b in list(boxes.items())[i + 1:]:
+            assert not box_a.overlaps(box_b), (a, b)
+    assert twin.get_ylabel().count("\n") >= 1
+    for ax, label in ((twin, "twin label"), (error, "error label")):
+        box, axes_box = boxes[label], ax.get_window_extent(renderer)
+        assert axes_box.y0 <= box.y0 and box.y1 <= axes_box.y1  # within its panel's height
     plt.close(fig)
 
 

@@ -3,6 +3,7 @@ text), and a folder being written by one run is refused to a second run at the s
 
 from __future__ import annotations
 
+import json
 from types import SimpleNamespace
 
 import numpy as np
@@ -20,6 +21,9 @@ def test_results_csv_round_trips_every_float(tmp_path):
     write_results(result, tmp_path, plot=False)
     back = pd.read_csv(tmp_path / "results.csv")
     assert back["plant.v"].to_numpy().tobytes() == values.tobytes()
+    # no scenario, so no declarations: time in s, the other column without a unit
+    assert json.loads((tmp_path / "results.units.json").read_text()) == {"time": "s",
+                                                                          "plant.v": None}
     assert back["time"].to_numpy().tobytes() == frame["time"].to_numpy().tobytes()
 
 

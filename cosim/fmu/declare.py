@@ -27,10 +27,13 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
-# FMI unit name -> (SI base-unit exponents, factor). Every unit a declaration may use is here.
+# FMI unit name -> (SI base-unit exponents, factor): a value v in the unit is v * factor in
+# the SI base units (so 12 permille = 0.012). Every unit a declaration may use is here; names
+# follow the Modelica unit syntax ("." multiplies, a trailing integer is the exponent).
 UNITS: dict[str, tuple[dict[str, int], float]] = {
     "1": ({}, 1.0),
     "%": ({}, 0.01),
+    "‰": ({}, 0.001),  # permille: a railway grade (m of rise per km)
     "s": ({"s": 1}, 1.0),
     "m": ({"m": 1}, 1.0),
     "kg": ({"kg": 1}, 1.0),

@@ -31,7 +31,8 @@
  * Instances are wrapped: the shim passes pythonfmu its own callback structure (pythonfmu keeps
  * a pointer to it) whose logger maps the status and calls the host's logger with the host's
  * componentEnvironment. pythonfmu 0.7 always passes the complete message as the format string
- * without arguments, so the logger forwards it unchanged.
+ * without arguments, '%' not escaped, so the logger forwards it with every '%' doubled: a host
+ * that formats the message (FMI 2.0.4 sec. 2.1.5) prints it unchanged.
  *
  * Compile-time settings (cosim/fmu/build.py): SHIM_LIBPYTHON_SONAME, SHIM_LIBPYTHON_PATH (strings,
  * may be empty).
@@ -97,6 +98,19 @@ static fmi2Status mapped(fmi2Status status)
     return status == fmi2Fatal ? fmi2Error : status;
 }
 
+/* ``message`` as a printf format without arguments ('%' doubled, cut to ``size``): the FMI 2
+ * logger's message is a format (FMI 2.0.4 sec. 2.1.5), a host formats it with vsnprintf */
+static void as_format(const char* message, char* out, size_t size)
+{
+    size_t j = 0;
+    for (size_t i = 0; message[i] && j + 2 < size; ++i) {
+        if (message[i] == '%')
+            out[j++] = '%';
+        out[j++] = message[i];
+    }
+    out[j] = '\0';
+}
+
 static void shim_logger(fmi2ComponentEnvironment env, fmi2String instanceName,
                         fmi2Status status, fmi2String category, fmi2String message, ...)
 {
@@ -108,30 +122,27 @@ static void shim_logger(fmi2ComponentEnvironment env, fmi2String instanceName,
         return; /* pythonfmu runs with logging on (see 5.); ok messages only when asked */
     if (status == fmi2Fatal && message && strncmp(message, prefix, sizeof prefix - 1) == 0) {
         /* pythonfmu's wording for any Python exception; the call was rejected, see above */
-        char text[8192];
+        char text[8192], format[16400];
         snprintf(text, sizeof text, "Python exception, call rejected with fmi2Error: %s",
                  message + sizeof prefix - 1);
-        s->host.logger(s->host.componentEnvironment, instanceName, fmi2Error, category, text);
+        as_format(text, format, sizeof format);
+        s->host.logger(s->host.componentEnvironment, instanceName, fmi2Error, category, format);
         return;
     }
+    char format[16400];
+    as_format(message ? message : "", format, sizeof format);
     s->host.logger(s->host.componentEnvironment, instanceName, mapped(status), category,
-                   message);
+                   format);
 }
 
-/* a message of the shim itself, passed as a format without arguments like pythonfmu does */
+/* a message of the shim itself, passed as a format without arguments like pythonfmu's */
 static void log_message(const fmi2CallbackFunctions* f, fmi2String instanceName,
                         const char* message)
 {
     char text[16400];
-    size_t j = 0;
     if (!f || !f->logger)
         return;
-    for (size_t i = 0; message[i] && j + 2 < sizeof text; ++i) {
-        if (message[i] == '%')
-            text[j++] = '%';
-        text[j++] = message[i];
-    }
-    text[j] = '\0';
+    as_format(message, text, sizeof text);
     f->logger(f->componentEnvironment, instanceName ? instanceName : "", fmi2Error,
               "logStatusError", text);
 }

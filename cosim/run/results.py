@@ -10,11 +10,13 @@ from __future__ import annotations
 
 import contextlib
 import fcntl
+import functools
 import json
 import math
 import os
 import shutil
 import tempfile
+import textwrap
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -23,7 +25,20 @@ import numpy as np
 
 PLOT_FORMATS = ("png", "svg", "pdf")
 PLOT_DPI = 200  # raster figures (png) at print resolution
-FILES = ("results.csv", "summary.json", *(f"plot.{fmt}" for fmt in PLOT_FORMATS))
+MAX_CM_DECIMALS = 6  # a stop error is written to 0.01 um at finest
+LABEL_WIDTH = 40  # characters per line of an axis label
+LEGEND_DROP = 0.5  # in, from an axes' bottom edge to the top of the legend under it
+INSET_LEFT = 1.27  # axes widths, the stop inset's left edge (clear of a one-line twin label)
+INSET_LEFT_PER_LINE = 0.04  # axes widths further right per further line of the twin's label
+# Line styles of the run figure: what was measured solid and wide, what it tracks thinner, in
+# black (as the controller holds it) and grey (the continuous curve it samples).
+# Drawn over the measured curve, a thin reference stays visible where the two coincide.
+MEASURED = {"color": "C0", "ls": "-", "lw": 2.0, "zorder": 2}
+REFERENCE = {"color": "k", "ls": "-", "lw": 0.8, "zorder": 3}
+REFERENCE_CURVE = {"color": "0.5", "ls": "-", "lw": 0.8, "zorder": 3}
+UNITS_FILE = "results.units.json"  # beside results.csv: column -> declared unit (or null)
+FILES = ("results.csv", UNITS_FILE, "summary.json", *(f"plot.{fmt}" for fmt in PLOT_FORMATS))
+TIME_INFO = ("simulation time", "s")  # (description, unit) of the column ``time``
 
 
 class OutputError(ValueError):
@@ -105,7 +120,8 @@ def _json_safe(obj: Any) -> Any:
 
 def write_results(result: Any, out_dir: Path, plot: bool = True,
                   force: bool = False, plot_format: str = "png") -> list[Path]:
-    """Write results.csv, summary.json and (unless ``plot`` is False) the plot
+    """Write results.csv, its units (``results.units.json``: column -> the unit its FMU
+    declares, null where none), summary.json and (unless ``plot`` is False) the plot
     (``plot.<plot_format>``: png, svg or pdf) into ``out_dir``
     (into ``<out_dir>.partial`` for a partial result when ``out_dir`` holds a complete run and
     ``force`` is False). Returns the paths written."""
@@ -118,12 +134,15 @@ def write_results(result: Any, out_dir: Path, plot: bool = True,
     tmp = Path(tempfile.mkdtemp(prefix=".writing-", dir=out_dir))
     try:
         result.frame.to_csv(tmp / "results.csv", index=False)  # repr: round-trip exact
+        units = column_units(getattr(result, "scenario", None), result.frame.columns)
+        (tmp / UNITS_FILE).write_text(json.dumps(units, indent=2, ensure_ascii=False) + "\n",
+                                      encoding="utf-8")
         (tmp / "summary.json").write_text(json.dumps(_json_safe(result.summary), indent=2)
                                           + "\n")
         if plot:
             plot_run(result, tmp / f"plot.{plot_format}")
         written = []
-        for name in FILES:  # three renames: the window between them is microseconds
+        for name in FILES:  # a few renames: the window between them is microseconds
             if (tmp / name).exists():
                 os.replace(tmp / name, out_dir / name)
                 written.append(out_dir / name)
@@ -135,8 +154,16 @@ def write_results(result: Any, out_dir: Path, plot: bool = True,
 
 
 def format_stop_error(error_m: float) -> str:
-    """A stop error in cm under 1 m, otherwise in m."""
-    return f"{error_m * 100:+.1f} cm" if abs(error_m) < 1.0 else f"{error_m:+.2f} m"
+    """A stop error in m from 1 m up (two decimals), in cm below: one decimal from 0.1 cm
+    up, two significant digits below that (so a sub-millimetre error is not shown as 0.0);
+    an error that rounds to zero is written unsigned (never ``-0.0``)."""
+    if abs(error_m) >= 1.0:
+        return f"{error_m:+.2f} m"
+    cm = error_m * 100.0
+    decimals = 1 if abs(cm) >= 0.1 or cm == 0.0 else min(1 - math.floor(math.log10(abs(cm))),
+                                                       MAX_CM_DECIMALS)
+    text = f"{cm:+.{decimals}f}"
+    return f"{text.lstrip('+-')} cm" if float(text) == 0.0 else f"{text} cm"
 
 
 _UNIT_DISPLAY = {"N": (1e-3, "kN"), "m/s2": (1.0, "m/s²"), "%": (1.0, "%"),
@@ -150,16 +177,24 @@ def display_unit(unit: str | None) -> tuple[float, str | None]:
     return _UNIT_DISPLAY.get(unit, (1.0, unit))
 
 
+@functools.lru_cache(maxsize=64)
+def _model_variables(path: str, mtime_ns: int) -> dict[str, Any]:
+    """Name -> fmpy ModelVariable of the FMU at ``path`` (as of ``mtime_ns``: a rebuilt FMU
+    is read again)."""
+    from fmpy import read_model_description
+
+    md = read_model_description(path, validate=False)
+    return {v.name: v for v in md.modelVariables}
+
+
 def variable_info(scenario: Any, ref: str) -> tuple[str, str | None]:
     """(description, declared unit) of ``"instance.variable"`` from its FMU's
     modelDescription; the name itself and None where it has none."""
     try:
-        from fmpy import read_model_description
-
         comp, var = ref.split(".", 1)
         base = var.split("[", 1)[0]
-        md = read_model_description(str(scenario.components[comp].fmu_path), validate=False)
-        by_name = {v.name: v for v in md.modelVariables}
+        path = Path(scenario.components[comp].fmu_path)
+        by_name = _model_variables(str(path), path.stat().st_mtime_ns)
         found = by_name.get(var) or by_name[base]  # the element itself, else its vector
         unit = found.unit or (found.declaredType.unit if found.declaredType is not None
                               else None)
@@ -169,6 +204,19 @@ def variable_info(scenario: Any, ref: str) -> tuple[str, str | None]:
         return text, unit
     except Exception:  # noqa: BLE001 - a plot label must never fail a run
         return ref, None
+
+
+def column_info(scenario: Any, columns: Any) -> dict[str, tuple[str, str | None]]:
+    """Per column of a run's table: (description, declared unit), :data:`TIME_INFO` for
+    ``time``, :func:`variable_info` for the others."""
+    return {str(c): TIME_INFO if c == "time" else variable_info(scenario, str(c))
+            for c in columns}
+
+
+def column_units(scenario: Any, columns: Any) -> dict[str, str | None]:
+    """Per column of a run's table: the unit its FMU declares (None where none), as
+    ``results.units.json`` holds them."""
+    return {column: unit for column, (_, unit) in column_info(scenario, columns).items()}
 
 
 def variable_unit(scenario: Any, ref: str) -> str | None:
@@ -198,19 +246,21 @@ def _held(scenario: Any, ref: str) -> bool:
         return False
 
 
-def _stop_inset(ax: Any, pos: np.ndarray, speed_kmh: np.ndarray, stop: float) -> Any:
+def _stop_inset(ax: Any, pos: np.ndarray, speed_kmh: np.ndarray, stop: float,
+                label_lines: int = 1) -> Any:
     """A zoom on the last 20 m before the stop point: speed against the distance to the stop
     point in metres (plain numbers, no offset), right of the axes (and of a twin axis's
-    labels), where it covers no curve; the legend is outside the axes."""
+    labels, ``label_lines`` lines of them), where it covers no curve; the legend is outside the
+    axes."""
     from matplotlib.ticker import MaxNLocator
 
     near = pos >= stop - 20.0
     if not near.any() or len(pos) < 2:
         return None
-    inset = ax.inset_axes([1.27, 0.25, 0.28, 0.6])
+    inset = ax.inset_axes([INSET_LEFT + INSET_LEFT_PER_LINE * (label_lines - 1), 0.25, 0.28, 0.6])
     inset.set_facecolor("white")
     inset.set_zorder(10)
-    inset.plot(pos[near] - stop, speed_kmh[near], color="C0", lw=1.0)
+    inset.plot(pos[near] - stop, speed_kmh[near], color=MEASURED["color"], lw=1.0)
     inset.axvline(0.0, color="C3", lw=0.8, ls="-.")
     right = max(float(pos[near].max()) - stop, 2.0)
     inset.set_xlim(-20.0, right)
@@ -248,9 +298,14 @@ def fit_band(ax: Any, values: Any, lo: float, hi: float, zoom: float = 0.2) -> b
 
 
 def legend_below(ax: Any, handles: list[Any], labels: list[str]) -> Any:
-    """The legend under the axes (outside them: no curve, inset or twin axis can cover it)."""
-    return ax.legend(handles, labels, loc="upper center", bbox_to_anchor=(0.5, -0.14),
-                     ncol=min(len(labels), 4), fontsize=8, frameon=False)
+    """The legend under the axes, ``LEGEND_DROP`` below their bottom edge (clear of the tick
+    labels and the x label; outside the axes: no curve, inset or twin axis can cover it)."""
+    from matplotlib.transforms import ScaledTranslation
+
+    below = ax.transAxes + ScaledTranslation(0.0, -LEGEND_DROP, ax.figure.dpi_scale_trans)
+    return ax.legend(handles, labels, loc="upper center", bbox_to_anchor=(0.5, 0.0),
+                     bbox_transform=below, ncol=min(len(labels), 4), fontsize=8,
+                     frameon=False)
 
 
 def plot_run(result: Any, path: Path) -> None:
@@ -263,70 +318,111 @@ def plot_run(result: Any, path: Path) -> None:
     plt.close(fig)
 
 
+def wrapped_label(text: str) -> str:
+    """An axis label broken into lines of at most ``LABEL_WIDTH`` characters, so a long
+    declared description stays within its axes' height (clear of the title)."""
+    return textwrap.fill(text, LABEL_WIDTH, break_long_words=False)
+
+
+def _draw_tracking(result: Any, ax: Any, error_ax: Any | None) -> None:
+    """Speed vs position on ``ax``: the measured speed solid and wide, the reference as its
+    continuous curve over it (black, thinner; steps where the controller holds it, with the
+    curve it samples in grey), the speed limit dotted, the stop point, the command on a twin
+    axis and the last 20 m in an inset; ``reference - measured`` on ``error_ax`` below (shared
+    x), and the legend under the lowest of the two."""
+    from cosim.run.reproduce import reference_curve
+
+    cfg, frame = result.scenario.summary, result.frame
+    pos, speed = cfg["position"], cfg["speed"]
+    x = frame[pos].to_numpy(dtype=float)
+    xlabel = "position (m)"
+    if np.nanmax(np.abs(x)) > 5000:
+        x, xlabel = x / 1e3, "position (km)"
+    v_kmh = frame[speed].to_numpy(dtype=float) * 3.6
+    ax.plot(x, v_kmh, label="speed", **MEASURED)
+    reference = None
+    ref = cfg.get("reference_speed")
+    if ref in frame.columns:
+        held = _held(result.scenario, ref)
+        reference = frame[ref].to_numpy(dtype=float) * 3.6
+        ax.plot(x, reference, label="reference" + (" (as held by the controller)" if held
+                                                   else ""),
+                drawstyle="steps-post" if held else "default", **REFERENCE)
+        curve = reference_curve(result.scenario, frame, ref) if held else None
+        if curve is not None:  # the stopping curve itself, beside what was held
+            reference = curve * 3.6
+            ax.plot(x, reference, label="reference curve", **REFERENCE_CURVE)
+    limit = cfg.get("speed_limit")
+    if limit in frame.columns:
+        ax.plot(x, frame[limit] * 3.6, ":", color="C3", lw=1.0, label="speed limit",
+                drawstyle="steps-post" if _held(result.scenario, limit) else "default")
+    ax.set_ylabel("speed (km/h)")
+    ax.ticklabel_format(useOffset=False, style="plain")
+    stop = None
+    if "stop_point" in cfg:
+        stop = float(cfg["stop_point"]) / (1e3 if xlabel.endswith("(km)") else 1.0)
+        ax.axvline(stop, color="C3", lw=0.8, ls="-.", label="stop point")
+    handles, labels = ax.get_legend_handles_labels()
+    top = ax
+    command = cfg.get("command")
+    if command in frame.columns:
+        top = ax.twinx()
+        text, unit = variable_info(result.scenario, command)
+        top.plot(x, frame[command] * display_unit(unit)[0], color="C2", lw=1.0, label=text,
+                 drawstyle="steps-post" if _held(result.scenario, command) else "default")
+        top.set_ylabel(wrapped_label(axis_label(text, unit)))
+        top.ticklabel_format(useOffset=False, style="plain")
+        more, more_labels = top.get_legend_handles_labels()
+        handles, labels = handles + more, labels + more_labels
+    ax.set_zorder(top.get_zorder() + 1)  # the speed curves above the command's
+    ax.patch.set_visible(False)
+    if stop is not None:  # on the topmost axes, opaque
+        _stop_inset(ax, frame[pos].to_numpy(), v_kmh, float(cfg["stop_point"]),
+                    top.get_ylabel().count("\n") + 1 if top is not ax else 1)
+    lowest = ax
+    if error_ax is not None and reference is not None:
+        error_ax.plot(x, reference - v_kmh, label="reference − speed", **MEASURED)
+        error_ax.axhline(0.0, color="0.3", lw=0.6)
+        if stop is not None:
+            error_ax.axvline(stop, color="C3", lw=0.8, ls="-.")
+        error_ax.set_ylabel("reference − speed\n(km/h)")
+        error_ax.ticklabel_format(useOffset=False, style="plain")
+        error_ax.grid(True, alpha=0.3)
+        ax.tick_params(labelbottom=False)
+        lowest = error_ax
+    lowest.set_xlabel(xlabel)
+    legend_below(lowest, handles, labels)
+
+
 def draw_run(result: Any) -> Any:
-    """The run's figure: speed (and reference) vs position with the command on a second axis,
-    as the papers' figures; coupler forces below when the scenario names them; otherwise
-    outputs vs time. Curves and axes are labelled with the declared descriptions and units;
-    outputs of sampled or self-triggered FMUs (held between events) are drawn as steps."""
+    """The run's figure: speed and reference vs position with the command on a second axis
+    and the tracking error (reference minus speed) in a panel under it, as the papers'
+    figures; coupler forces below when the scenario names them; otherwise outputs vs time.
+    Curves and axes are labelled with the declared descriptions and units; outputs of sampled
+    or self-triggered FMUs (held between events) are drawn as steps."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     from cosim.run.metrics import matching_columns
-    from cosim.run.reproduce import reference_curve
 
     cfg = result.scenario.summary
     frame = result.frame
     couplers = matching_columns(frame, cfg.get("coupler_forces"))
-    rows = 2 if couplers else 1
-    fig, axes = plt.subplots(rows, 1, figsize=(9, 5.0 * rows), squeeze=False)
-    ax = axes[0][0]
     pos, speed = cfg.get("position"), cfg.get("speed")
+    tracking = not frame.empty and pos in frame.columns and speed in frame.columns
+    error = tracking and cfg.get("reference_speed") in frame.columns
+    groups = [5.5 if error else 4.0] + ([3.5] if couplers else [])
+    fig = plt.figure(figsize=(9, sum(groups) + 1.0 * len(groups)), layout="constrained")
+    grid = fig.add_gridspec(len(groups), 1, height_ratios=groups)
+    top = grid[0].subgridspec(2, 1, height_ratios=[3.0, 1.2]) if error else grid
+    ax = fig.add_subplot(top[0])
     if frame.empty:
         ax.text(0.5, 0.5, "nothing recorded", ha="center", va="center",
                 transform=ax.transAxes)
-    elif pos in frame.columns and speed in frame.columns:
-        x = frame[pos].to_numpy()
-        xlabel = "position (m)"
-        if np.nanmax(np.abs(x)) > 5000:
-            x, xlabel = x / 1e3, "position (km)"
-        ax.plot(x, frame[speed] * 3.6, label="speed", color="C0")
-        for key, style, label in (("reference_speed", "--", "reference"),
-                                  ("speed_limit", ":", "speed limit")):
-            ref = cfg.get(key)
-            if ref in frame.columns:
-                held = _held(result.scenario, ref)
-                ax.plot(x, frame[ref] * 3.6, style, label=label + (
-                    " (as held by the controller)" if held else ""),
-                        color="k" if key == "reference_speed" else "C3",
-                        drawstyle="steps-post" if held else "default")
-                curve = (reference_curve(result.scenario, frame, ref)
-                         if key == "reference_speed" and held else None)
-                if curve is not None:  # the stopping curve itself, beside what was held
-                    ax.plot(x, curve * 3.6, color="0.5", lw=0.9, label="reference curve")
-        ax.set_xlabel(xlabel)
-        ax.set_ylabel("speed (km/h)")
-        ax.ticklabel_format(useOffset=False, style="plain")
-        if "stop_point" in cfg:
-            stop = float(cfg["stop_point"]) / (1e3 if xlabel.endswith("(km)") else 1.0)
-            ax.axvline(stop, color="C3", lw=0.8, ls="-.", label="stop point")
-        handles, labels = ax.get_legend_handles_labels()
-        command = cfg.get("command")
-        if command in frame.columns:
-            ax2 = ax.twinx()
-            text, unit = variable_info(result.scenario, command)
-            scale = display_unit(unit)[0]
-            ax2.plot(x, frame[command] * scale, color="C2", lw=1.0, label=text,
-                     drawstyle="steps-post" if _held(result.scenario, command) else "default")
-            ax2.set_ylabel(axis_label(text, unit))
-            ax2.ticklabel_format(useOffset=False, style="plain")
-            more, more_labels = ax2.get_legend_handles_labels()
-            handles, labels = handles + more, labels + more_labels
-        if "stop_point" in cfg:  # on the topmost axes, opaque
-            _stop_inset(ax.figure.axes[-1], frame[pos].to_numpy(),
-                        frame[speed].to_numpy() * 3.6, float(cfg["stop_point"]))
-        legend_below(ax, handles, labels)
+    elif tracking:
+        _draw_tracking(result, ax, fig.add_subplot(top[1], sharex=ax) if error else None)
     else:
         t = frame["time"]
         units = set()
@@ -348,12 +444,13 @@ def draw_run(result: Any) -> Any:
     if summary.get("command_switches") is not None:
         title += f"  switches {summary['command_switches']}"
     if not summary.get("completed", True):
-        error = str(summary.get("error") or "failed")
-        title += f"\nincomplete ({error if error.startswith('interrupted') else 'failed'})"
+        error_text = str(summary.get("error") or "failed")
+        title += ("\nincomplete ("
+                  f"{error_text if error_text.startswith('interrupted') else 'failed'})")
     ax.set_title(title)
     ax.grid(True, alpha=0.3)
     if couplers:
-        axc = axes[1][0]
+        axc = fig.add_subplot(grid[-1])
         t = frame["time"].to_numpy()
         forces = frame[couplers].to_numpy() / 1e3
         if len(couplers) <= 3:
@@ -370,5 +467,4 @@ def draw_run(result: Any) -> Any:
         axc.grid(True, alpha=0.3)
         axc.ticklabel_format(useOffset=False, style="plain")
         legend_below(axc, *axc.get_legend_handles_labels())
-    fig.tight_layout()
     return fig

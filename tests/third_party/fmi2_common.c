@@ -32,14 +32,13 @@ static void model_defaults(Inst *m);
 static void model_outputs(Inst *m);
 static fmi2Status model_step(Inst *m, fmi2Real t, fmi2Real h);
 
-static void logf_(Inst *m, fmi2Status status, const char *fmt, ...) {
-    char text[512];
-    va_list ap;
-    va_start(ap, fmt);
-    vsnprintf(text, sizeof text, fmt, ap);
-    va_end(ap);
-    if (m->cb.logger) m->cb.logger(m->cb.componentEnvironment, m->name, status, "log", text);
-}
+/* a message as most FMUs log one: the printf format and its arguments handed to the host's
+ * logger, which formats them (FMI 2.0.4 sec. 2.1.5) */
+#define logf_(m, status, ...) do { \
+    if (((Inst *)(m))->cb.logger) \
+        ((Inst *)(m))->cb.logger(((Inst *)(m))->cb.componentEnvironment, ((Inst *)(m))->name, \
+                                 status, "log", __VA_ARGS__); \
+} while (0)
 
 static int in_mode(Inst *m, const char *call, int allowed_mask) {
     if (allowed_mask & (1 << m->mode)) return 1;

@@ -1,9 +1,10 @@
 /* Small FMI 3.0 co-simulation FMUs for the tests (one model per MODEL_* define):
    TimeEvents (announces nextEventTime, or returns early), Feedthrough (y_T = u_T for every
-   type, an array), Terminator (terminateSimulation at stop_at), Countdown (a countdown input
-   clock whose interval doubles at every tick), Clocked (a periodic input clock "tick" whose
-   interval and shift the FMU gives on request, its interval multiplied by growth at every
-   tick). TimeEvents compares times within its parameter tolerance (0: exactly). */
+   type, 64-bit integers exactly, an array), Terminator (terminateSimulation at stop_at),
+   Countdown (a countdown input clock whose interval doubles at every tick), Clocked (a
+   periodic input clock "tick" whose interval and shift the FMU gives on request, its interval
+   multiplied by growth at every tick). TimeEvents compares times within its parameter
+   tolerance (0: exactly). */
 #include <stdlib.h>
 #include <string.h>
 #include <math.h>
@@ -19,6 +20,7 @@ typedef struct {
     fmi3Int32 n;
     fmi3Boolean announce, eventMode, earlyReturn, tick, pending;
     double num[NT]; /* numeric and Boolean feedthrough values (as double, exact up to 2^53) */
+    fmi3Int64 i64; fmi3UInt64 u64; /* the Int64 and UInt64 feedthrough values, exact */
     char *str;
     fmi3Byte bin[64]; size_t binSize;
     fmi3Float64 arr[3];
@@ -149,7 +151,10 @@ static double *slot(M *m, fmi3ValueReference vr) {
 static int is(const char *a, const char *b) { return strcmp(a, b) == 0; }
 
 static int get_num(M *m, fmi3ValueReference vr, void *out, size_t size, const char *type) {
-#if !defined(MODEL_FEEDTHROUGH)
+#if defined(MODEL_FEEDTHROUGH)
+    if ((vr == 17 || vr == 18) && is(type, "Int64")) { *(fmi3Int64 *)out = m->i64; return 1; }
+    if ((vr == 19 || vr == 20) && is(type, "UInt64")) { *(fmi3UInt64 *)out = m->u64; return 1; }
+#else
     if (vr == 3 && is(type, "Int32")) { *(fmi3Int32 *)out = m->n; return 1; }
     if (vr == 4 && is(type, "Boolean")) { *(fmi3Boolean *)out = m->announce; return 1; }
 #endif
@@ -176,7 +181,10 @@ static int get_num(M *m, fmi3ValueReference vr, void *out, size_t size, const ch
 }
 
 static int set_num(M *m, fmi3ValueReference vr, const void *in, const char *type) {
-#if !defined(MODEL_FEEDTHROUGH)
+#if defined(MODEL_FEEDTHROUGH)
+    if (vr == 17 && is(type, "Int64")) m->i64 = *(const fmi3Int64 *)in;
+    if (vr == 19 && is(type, "UInt64")) m->u64 = *(const fmi3UInt64 *)in;
+#else
     if (vr == 4 && is(type, "Boolean")) { m->announce = *(const fmi3Boolean *)in; return 1; }
 #endif
     double *s = slot(m, vr);

@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import contextlib
 import ctypes
+import itertools
+import weakref
 from collections.abc import Callable
 from pathlib import Path
 from time import perf_counter
@@ -17,6 +20,7 @@ from fmpy.fmi2 import (
     fmi2CallbackFunctions,
     fmi2CallbackLoggerTYPE,
     free,
+    printLogMessage,
 )
 
 from cosim.fmu.state import to_seconds, to_ticks
@@ -54,17 +58,45 @@ class CheckedSlave:
         return call
 
 
+# The FMI 2 logger is variadic (a printf format and its arguments, FMI 2.0.4 sec. 2.1.5),
+# which ctypes cannot receive: fmpy's native proxy (fmpy.logging.addLoggerProxy) formats the
+# message with vsnprintf and calls the one Python logger it holds (a process-wide pointer).
+# That logger is this module's dispatcher, for every FMU; it finds the FMU's listener by the
+# componentEnvironment its callbacks carry (a number, :data:`_LISTENERS`), and hands a
+# message of an FMU instantiated by another host in this process (fmpy's own callbacks) to
+# fmpy's printLogMessage, as fmpy would.
+_LISTENERS: dict[int, Callable[[int, str], None]] = {}
+_KEYS = itertools.count(1)
+
+
+def _dispatch(env: int | None, instance: bytes, status: int, category: bytes,
+              message: bytes) -> None:
+    listener = _LISTENERS.get(env or 0)
+    if listener is None:
+        printLogMessage(env, instance, status, category, message)
+    else:
+        listener(int(status), message.decode("utf-8", "replace") if message else "")
+
+
+_DISPATCH = fmi2CallbackLoggerTYPE(_dispatch)
+
+
 def logging_callbacks(on_message: Callable[[int, str], None]) -> fmi2CallbackFunctions:
-    """fmpy FMI 2 callbacks that hand every log message (status, text) to ``on_message``.
-    The caller must keep the returned object referenced while the FMU instance lives."""
-
-    def logger(env, instance, status, category, message) -> None:
-        on_message(int(status), message.decode("utf-8", "replace") if message else "")
-
+    """fmpy FMI 2 callbacks that hand every log message (status, text formatted with its
+    printf arguments) to ``on_message``. The caller must keep the returned object referenced
+    while the FMU instance lives; ``on_message`` is dropped with it."""
+    key = next(_KEYS)
+    _LISTENERS[key] = on_message
     callbacks = fmi2CallbackFunctions()
-    callbacks.logger = fmi2CallbackLoggerTYPE(logger)
+    callbacks.logger = _DISPATCH
     callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
     callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
+    callbacks.componentEnvironment = key
+    with contextlib.suppress(Exception):  # no proxy for this platform: messages unformatted
+        from fmpy.logging import addLoggerProxy
+
+        addLoggerProxy(ctypes.byref(callbacks))  # the proxy's logger is _DISPATCH again
+    weakref.finalize(callbacks, _LISTENERS.pop, key, None)
     return callbacks
 
 

@@ -19,6 +19,16 @@ from cosim.run.master.unit import Unit
 
 # families recorded as Python objects in list columns (not numbers)
 LIST_FAMILIES = ("String", "Binary")
+# 64-bit integer types, recorded in integer arrays of their own: float64 holds integers
+# exactly only up to 2**53 (FMI 3 Enumerations are read as Int64)
+EXACT_TYPES = {"Int64": np.int64, "UInt64": np.uint64}
+
+
+def exact_dtype(var: Any) -> Any:
+    """The integer dtype that records ``var`` exactly (a 64-bit integer by its type, or by its
+    function family: an FMI 3 Enumeration is got as Int64); None for a variable that float64
+    (or a list column) records exactly."""
+    return EXACT_TYPES.get(var.type) or EXACT_TYPES.get(var.family)
 
 
 
@@ -42,10 +52,12 @@ class Observer:
 
 class Recorder(Observer):
     """Records named variables at output points (numbers: Real, Integer, Boolean, Enumeration
-    values; String variables in lists): one FMI call per FMU and function family per output
-    point, Reals read by the FMU straight into the row of a preallocated array (columns in
-    read order, put in the declared order by :meth:`frame`). An FMU announcing its next event
-    (``next_event_time``) has it read in the same call (:attr:`next_event`)."""
+    values; String and Binary variables in lists): one FMI call per FMU and function family
+    per output point, Reals read by the FMU straight into the row of a preallocated array
+    (columns in read order, put in the declared order by :meth:`frame`); 64-bit integers
+    (:func:`exact_dtype`) into an integer array per group, so that every value is kept
+    exactly. An FMU announcing its next event (``next_event_time``) has it read in the same
+    call (:attr:`next_event`)."""
 
     def __init__(self, refs: list[tuple[Unit, str]], n_points: int) -> None:
         self.refs = refs
@@ -53,17 +65,26 @@ class Recorder(Observer):
         self.rows = 0
         self.strings = {col + 1: (unit, name, []) for col, (unit, name) in enumerate(refs)
                         if unit.vars[name].family in LIST_FAMILIES}
-        groups: dict[tuple[str, str], tuple[Unit, str, list[int], list[int]]] = {}
+        groups: dict[tuple[str, str, Any], tuple[Unit, str, list[int], list[int], Any]] = {}
         for col, (unit, name) in enumerate(refs):
             var = unit.vars[name]
-            family = var.family
-            group = groups.setdefault((unit.name, family), (unit, family, [], []))
+            dtype = exact_dtype(var)
+            group = groups.setdefault((unit.name, var.family, dtype),
+                                      (unit, var.family, [], [], dtype))
             group[2].append(var.vr)
             group[3].append(col + 1)
-        # storage: time, then each numeric group's values (+ its next_event_time) in read order
+        # storage: time, then each float group's values (+ its next_event_time) in read order;
+        # each integer group in an array of its own (its offset: its index in _exact)
         self._groups: list[tuple[Unit, str, list[int], list[int], bool, int]] = []
+        self._exact: list[np.ndarray] = []
+        self._exact_columns: list[tuple[int, list[int]]] = []  # (array index, columns)
         width = 1
-        for unit, family, vrs, cols in groups.values():
+        for unit, family, vrs, cols, dtype in groups.values():
+            if dtype is not None:
+                self._groups.append((unit, family, vrs, cols, False, len(self._exact)))
+                self._exact_columns.append((len(self._exact), cols))
+                self._exact.append(np.zeros((n_points, len(vrs)), dtype=dtype))
+                continue
             extra = (unit.has_next_event_output and unit.C_TYPES.get(family) is ctypes.c_double
                      and unit.vars["next_event_time"].family == family)
             if extra:
@@ -72,10 +93,11 @@ class Recorder(Observer):
             if family not in LIST_FAMILIES:
                 width += len(vrs)
         self._width = width
-        self.check_fits(n_points, width)
+        self.check_fits(n_points, width + sum(a.shape[1] for a in self._exact))
         self._store = np.full((n_points, width), np.nan)
-        self._positions = [p for g in self._groups if g[1] not in LIST_FAMILIES
-                           for p in range(g[5], g[5] + len(g[3]))]
+        self._floats = [g for g, (_, _, dtype) in zip(self._groups, groups)
+                        if g[1] not in LIST_FAMILIES and dtype is None]
+        self._positions = [p for g in self._floats for p in range(g[5], g[5] + len(g[3]))]
         self._reads: list[tuple[Batch, Any, int, Any]] | None = None
         self.next_event: dict[Unit, float] = {}  # read at the last sampled point
 
@@ -99,19 +121,28 @@ class Recorder(Observer):
     def bind(self) -> None:
         """Allocate the FMI calls (after the FMUs are instantiated)."""
         self._reads = []
-        for unit, family, vrs, cols, extra, offset in self._groups:
+        floats = {id(g) for g in self._floats}
+        for group in self._groups:
+            unit, family, vrs, cols, extra, offset = group
             batch = unit.batch(family, vrs, False)
-            target = ([self.strings[c][2] for c in cols] if family in LIST_FAMILIES
-                      else offset if batch.fast and unit.C_TYPES.get(family) is ctypes.c_double
-                      else slice(offset, offset + len(vrs)))
+            if family in LIST_FAMILIES:
+                target: Any = [self.strings[c][2] for c in cols]
+            elif id(group) not in floats:
+                target = self._exact[offset]  # an integer group: its own array
+            elif batch.fast and unit.C_TYPES.get(family) is ctypes.c_double:
+                target = offset
+            else:
+                target = slice(offset, offset + len(vrs))
             self._reads.append((batch, target, offset + len(vrs) - 1 if extra else -1, unit))
 
     @property
     def data(self) -> np.ndarray:
         """The recorded rows, columns as :attr:`columns` (with time first)."""
         out = np.full((len(self._store), len(self.columns) + 1), np.nan)
-        out[:, [0, *[c for g in self._groups if g[1] not in LIST_FAMILIES for c in g[3]]]] = \
+        out[:, [0, *[c for g in self._floats for c in g[3]]]] = \
             self._store[:, [0, *self._positions]]
+        for index, cols in self._exact_columns:  # as floats here; exact in :meth:`frame`
+            out[:, cols] = self._exact[index]
         return out
 
     def sample(self, ticks: int) -> None:
@@ -120,6 +151,8 @@ class Recorder(Observer):
             self.bind()
         if self.rows == len(self._store):
             self._store = np.vstack([self._store, np.full_like(self._store, np.nan)])
+            self._exact[:] = [np.vstack([a, np.zeros_like(a)]) for a in self._exact]
+            self.bind()  # the integer groups' targets are the new arrays
         row = self._store[self.rows]
         row[0] = to_seconds(ticks)
         address = row.ctypes.data
@@ -131,6 +164,8 @@ class Recorder(Observer):
                 batch.get()
                 if target.__class__ is list:
                     self._pending.append((target, batch.values()))
+                elif target.__class__ is np.ndarray:
+                    target[self.rows] = batch.values()  # C integers or Python ints: exact
                 else:
                     row[target] = batch.buf
             if extra >= 0:
@@ -153,6 +188,11 @@ class Recorder(Observer):
         import pandas as pd
 
         frame = pd.DataFrame(self.data[: self.rows], columns=["time", *self.columns])
-        for col, (_, _, values) in self.strings.items():
+        for index, cols in self._exact_columns:  # every committed row read every value
+            for j, col in enumerate(cols):
+                frame[frame.columns[col]] = self._exact[index][: self.rows, j]
+        for col, (unit, name, values) in self.strings.items():
+            if unit.vars[name].family == "Binary":  # as scenarios take them: hexadecimal
+                values = [bytes(v).hex() for v in values]
             frame[frame.columns[col]] = pd.Series(values[: self.rows], dtype=object)
         return frame
