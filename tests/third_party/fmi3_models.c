@@ -42,6 +42,7 @@ fmi3Instance fmi3InstantiateCoSimulation(fmi3String name, fmi3String token, fmi3
     m->interval_counter = 3; m->shift_counter = 1; m->resolution = 10;
     for (int k = 0; k < NT; k++) /* the Feedthrough's declared start values */
         m->num[k] = k < 2 ? 1.5 : k == 10 ? 0.0 : 1.0;
+    m->i64 = 1; m->u64 = 1; /* the exact Int64 and UInt64 start values */
     m->eventMode = eventModeUsed; m->earlyReturn = earlyReturnAllowed;
     m->str = strdup("in"); m->log = log; m->env = env;
     return m;
