@@ -48,10 +48,11 @@ step (``v^2`` linear in ``s``). Limits of the paper: ``-1 <= a <= 1`` m/s^2, cru
   a short level route).
   The cruise profile is the member with no coasting, so the optimal one never needs more.
 
-The cruise and optimal searches cost seconds per process; their results (the cruise speed;
-``V_h`` and ``s_c``) are kept on disk by :func:`cosim.fmu.disk_cache.cached_arrays`, keyed by
-the route's profiles, the schedule, the train, the settings and this module's code, and the
-profile is rebuilt from them (the same floats as a fresh search).
+The eco, cruise and optimal searches cost seconds per process; their results (``V_low``; the
+cruise speed; ``V_h`` and ``s_c``) are kept on disk by
+:func:`cosim.fmu.disk_cache.cached_arrays`, keyed by the route's profiles, the schedule, the
+train, the settings and this module's code, and the profile is rebuilt from them (the same
+floats as a fresh search).
 
 :func:`traction_work` is the mechanical traction work of any profile on the nominal model.
 
@@ -337,27 +338,45 @@ def _generate(kind: str, route: Route, scheduled: float, train: Crh3Params,
         return _cruise(train, route, scheduled, settings)
     if kind == "optimal":
         return _optimal(train, route, scheduled, settings)
-    lo, hi = settings.min_low_speed, v_act  # time(lo) >= time(hi)
-    best: SpeedProfile | None = None
-    for _ in range(60):
-        mid = 0.5 * (lo + hi)
-        prof = _finish("eco", *_run(model, length, "eco", mid), mid, scheduled)
-        if best is None or (abs(prof.arrival_time - scheduled)
-                            < abs(best.arrival_time - scheduled)):
-            best = prof
-        if abs(prof.arrival_time - scheduled) <= settings.time_tolerance:
-            return prof
-        if prof.arrival_time > scheduled:
-            lo = mid
-        else:
-            hi = mid
-        if hi - lo < 1e-6:
-            break
-    if best is None or abs(best.arrival_time - scheduled) > settings.time_tolerance:
-        raise ValueError(f"route {route.name!r}: no eco profile arrives within "
-                         f"{settings.time_tolerance} s of scheduled_time = {scheduled} s "
-                         f"(closest {best.arrival_time if best else float('nan'):.1f} s)")
-    return best
+    return _eco(model, route, scheduled, train, settings)
+
+
+def _eco(model: _Model, route: Route, scheduled: float, train: Crh3Params,
+         settings: ProfileSettings) -> SpeedProfile:
+    """The eco profile whose ``V_low``, found by bisection, meets the schedule."""
+    length = float(route.length_m)
+
+    def profile(low: float) -> SpeedProfile:
+        return _finish("eco", *_run(model, length, "eco", low), low, scheduled)
+
+    def search() -> tuple[np.ndarray]:
+        lo, hi = settings.min_low_speed, settings.cruise_speed  # time(lo) >= time(hi)
+        best: SpeedProfile | None = None
+        for _ in range(60):
+            mid = 0.5 * (lo + hi)
+            prof = profile(mid)
+            if best is None or (abs(prof.arrival_time - scheduled)
+                                < abs(best.arrival_time - scheduled)):
+                best = prof
+            if abs(prof.arrival_time - scheduled) <= settings.time_tolerance:
+                break
+            if prof.arrival_time > scheduled:
+                lo = mid
+            else:
+                hi = mid
+            if hi - lo < 1e-6:
+                break
+        if best is None or abs(best.arrival_time - scheduled) > settings.time_tolerance:
+            raise ValueError(f"route {route.name!r}: no eco profile arrives within "
+                             f"{settings.time_tolerance} s of scheduled_time = {scheduled} s "
+                             f"(closest {best.arrival_time if best else float('nan'):.1f} s)")
+        return (np.array([best.low_speed]),)
+
+    # the bisection runs up to 60 passes over the line: its V_low is kept on disk, keyed by
+    # every input and the code computing it
+    (found,) = cached_arrays("eco_profile", _CODE_VERSION,
+                             _profile_key(route, scheduled, train, settings), search)
+    return profile(float(found[0]))
 
 
 def _cruise(train: Crh3Params, route: Route, scheduled: float,
