@@ -119,7 +119,7 @@ def test_on_the_seed003_route_optimal_needs_less_energy_than_cruise_and_eco() ->
 
 def test_the_profile_searches_are_kept_on_disk_and_give_the_same_profile(
         tmp_path, monkeypatch) -> None:
-    """The cruise and optimal searches are stored once per (route, schedule, train, settings)
+    """The cruise and fixed-family searches are stored once per (route, schedule, train, settings)
     and a later process (here: an emptied in-process cache) rebuilds the same profile from the
     stored switching points; another schedule is another entry."""
     monkeypatch.setenv("ATO_COSIM_CACHE", str(tmp_path))
@@ -127,7 +127,7 @@ def test_the_profile_searches_are_kept_on_disk_and_give_the_same_profile(
     sp._CACHE.clear()
     first = sp.generate("fixed_family", SHORT, T, settings=SHORT_SETTINGS)
     stored = sorted(p.name.split("-")[0] for p in (tmp_path / "designs").iterdir())
-    assert stored == ["cruise_profile", "optimal_profile"]
+    assert stored == ["cruise_profile", "fixed_family_profile"]
     sp._CACHE.clear()
     again = sp.generate("fixed_family", SHORT, T, settings=SHORT_SETTINGS)
     assert again is not first
