@@ -65,7 +65,8 @@ floats as a fresh search).
 :func:`traction_work` is the mechanical traction work of any profile on the nominal model.
 
 Phases (Table 2, used by the energy-per-phase metrics): ``accelerate`` from the start until the
-profile first reaches ``V_act``; ``brake`` from the start of the final braking; ``run`` between.
+profile first reaches ``V_act`` (the optimum: until its first step that is not maximum
+traction); ``brake`` from the start of the final braking; ``run`` between.
 """
 
 from __future__ import annotations
