@@ -56,7 +56,7 @@ def seed003() -> None:
     from plants.route import load_route
 
     route = load_route("seed003_crh3")
-    opt = sp.generate("optimal", route)
+    opt = sp.generate("fixed_family", route)
     T = opt.arrival_time
     e_sp = sp.net_energy(opt, route)
     section = Section(route, 0.0, route.length_m)

@@ -764,6 +764,14 @@ def optimal(
         "--closed-loop", help="also run this tracking controller (pid) after each optimal run "
         "on the CRH3 plant FMU carrying the train, and compare: route.toml, the scenario "
         "LABEL_CONTROLLER.toml, its results in LABEL_CONTROLLER/ and closed_loop.csv")] = None,
+    traction_share: Annotated[float, typer.Option(
+        "--traction-share", help="share of the traction envelope planned with (crh3 only; "
+        "seed 003's trackers plan with 0.9)")] = 1.0,
+    max_accel: Annotated[float | None, typer.Option(
+        "--max-accel", help="comfort limit on dv/dt (m/s2; default none)")] = None,
+    max_decel: Annotated[float | None, typer.Option(
+        "--max-decel", help="limit on -dv/dt (m/s2; default none, the train's own brake), "
+        "e.g. a service braking rate")] = None,
 ) -> None:
     """Write the energy-optimal speed profile of a run.
 
@@ -786,7 +794,14 @@ def optimal(
         if closed_loop is not None:
             loop.controller(closed_loop)  # an unknown name fails before any planning
         route, stop_list = load_line(track)
-        vehicle = Train.from_crh3() if train == "crh3" else load_train(train)
+        if traction_share != 1.0 and train != "crh3":
+            raise ValueError(f"--traction-share {traction_share} applies to --train crh3 only")
+        vehicle = (Train.from_crh3(traction_share=traction_share) if train == "crh3"
+                   else load_train(train))
+        limits = {k: v for k, v in (("max_accel", max_accel), ("max_decel", max_decel))
+                  if v is not None}
+        if limits:
+            vehicle = vehicle.with_limits(**limits)
         runs: list[tuple[str, Section, float, JourneySection | None]] = []
         if journey is not None:
             for i, sec in enumerate(load_journey(journey).sections):
@@ -802,11 +817,19 @@ def optimal(
         grid = Grid(ds=ds, speeds=speeds)
         route_path = loop.write_route(route, out_dir / "route.toml") if closed_loop else None
         table = Table("run", "from (m)", "to (m)", "time (s)", "energy (kWh)", "V (km/h)")
+        options = " ".join([f"--train {train}"] + [
+            f"--{flag} {value:g}" for flag, value in (
+                ("traction-share", traction_share), ("max-accel", max_accel),
+                ("max-decel", max_decel), ("ds", ds)) if value is not None]
+            + [f"--speeds {speeds}"])
         for label, section, T, sec in runs:
             solver = SectionSolver(section, vehicle, grid)
             best = solver.for_time(T)
             name = f"{route.name} {label}"
-            output.write_csv(best, vehicle, out_dir / f"{label}.csv", name)
+            where = (f"--journey {journey} (section {label})" if sec is not None
+                     else f"--stops {stops} --time {T:.17g}")
+            output.write_csv(best, vehicle, out_dir / f"{label}.csv", name,
+                             command=f"cosim optimal {track} {where} {options}")
             output.figure(best, out_dir / f"{label}.png", name)
             table.add_row(label, f"{section.start:.0f}", f"{section.end:.0f}",
                           f"{best.running_time:.1f}", f"{best.energy / 3.6e6:.2f}",

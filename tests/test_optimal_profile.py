@@ -1,4 +1,4 @@
-"""The energy-optimal profile (controllers/common/speed_profiles.py, kind "optimal"): maximum
+"""The fixed-family profile (controllers/common/speed_profiles.py, kind "fixed_family"): maximum
 traction, speed holding, coasting, braking, switching points found for the schedule; against
 a brute-force dynamic programme on a speed-distance grid of a short route."""
 
@@ -27,7 +27,7 @@ def _schedule() -> float:
 
 def test_optimal_is_traction_hold_coast_brake_on_time_and_beats_the_cruise() -> None:
     T = _schedule()
-    opt = sp.generate("optimal", SHORT, T, settings=SHORT_SETTINGS)
+    opt = sp.generate("fixed_family", SHORT, T, settings=SHORT_SETTINGS)
     cruise = sp.generate("cruise", SHORT, T, settings=SHORT_SETTINGS)
     assert abs(opt.arrival_time - T) <= SHORT_SETTINGS.time_tolerance
     modes = opt.mode[:-1]
@@ -99,7 +99,7 @@ def test_optimal_matches_a_dynamic_programme_on_a_short_route() -> None:
         w_dp, t_dp = _dp_work(SHORT, st_dp, lam, 0.4)
         lo, hi = (lam, hi) if t_dp > T else (lo, lam)
     assert abs(t_dp - T) < 1.0
-    opt = sp.generate("optimal", SHORT, t_dp, settings=SHORT_SETTINGS)
+    opt = sp.generate("fixed_family", SHORT, t_dp, settings=SHORT_SETTINGS)
     w_opt = sp.net_energy(opt, SHORT)
     assert w_opt <= 1.01 * w_dp
     assert w_opt >= 0.97 * w_dp  # and the DP, a superset of strategies, is not far below
@@ -111,29 +111,29 @@ def test_optimal_matches_a_dynamic_programme_on_a_short_route() -> None:
 def test_on_the_seed003_route_optimal_needs_less_energy_than_cruise_and_eco() -> None:
     route = load_route("seed003_crh3")
     works = {k: sp.net_energy(sp.generate(k, route), route)
-             for k in ("optimal", "cruise", "eco")}
-    assert works["optimal"] < works["cruise"] and works["optimal"] < works["eco"]
-    opt = sp.generate("optimal", route)
+             for k in ("fixed_family", "cruise", "eco")}
+    assert works["fixed_family"] < works["cruise"] and works["fixed_family"] < works["eco"]
+    opt = sp.generate("fixed_family", route)
     assert abs(opt.arrival_time - route.scheduled_time_s) <= sp.ProfileSettings().time_tolerance
 
 
 def test_the_profile_searches_are_kept_on_disk_and_give_the_same_profile(
         tmp_path, monkeypatch) -> None:
-    """The cruise and optimal searches are stored once per (route, schedule, train, settings)
+    """The cruise and fixed-family searches are stored once per (route, schedule, train, settings)
     and a later process (here: an emptied in-process cache) rebuilds the same profile from the
     stored switching points; another schedule is another entry."""
     monkeypatch.setenv("ATO_COSIM_CACHE", str(tmp_path))
     T = _schedule()
     sp._CACHE.clear()
-    first = sp.generate("optimal", SHORT, T, settings=SHORT_SETTINGS)
+    first = sp.generate("fixed_family", SHORT, T, settings=SHORT_SETTINGS)
     stored = sorted(p.name.split("-")[0] for p in (tmp_path / "designs").iterdir())
-    assert stored == ["cruise_profile", "optimal_profile"]
+    assert stored == ["cruise_profile", "fixed_family_profile"]
     sp._CACHE.clear()
-    again = sp.generate("optimal", SHORT, T, settings=SHORT_SETTINGS)
+    again = sp.generate("fixed_family", SHORT, T, settings=SHORT_SETTINGS)
     assert again is not first
     for name in ("s", "v", "t", "mode"):
         np.testing.assert_array_equal(getattr(again, name), getattr(first, name))
     sp._CACHE.clear()
-    sp.generate("optimal", SHORT, T + 5.0, settings=SHORT_SETTINGS)
+    sp.generate("fixed_family", SHORT, T + 5.0, settings=SHORT_SETTINGS)
     assert len(list((tmp_path / "designs").iterdir())) == 4
     sp._CACHE.clear()

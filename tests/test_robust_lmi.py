@@ -135,3 +135,43 @@ def test_direct_clarabel_path_gives_cvxpys_solution():
             tol = 10 * direct.tolerance
             assert abs(a.gamma - b.gamma) <= tol * abs(b.gamma)
             assert np.max(np.abs(a.F - b.F)) <= tol * max(1.0, np.max(np.abs(b.F)))
+
+
+def test_status_names_are_cvxpys():
+    """The direct path names a solved event as cvxpy does without importing it."""
+    import cvxpy as cp
+    from cvxpy.reductions.solvers.conic_solvers.clarabel_conif import CLARABEL
+
+    from controllers.common.lmi import CLARABEL_SOLVED, OPTIMAL
+
+    assert OPTIMAL == cp.OPTIMAL
+    assert CLARABEL.STATUS_MAP[CLARABEL_SOLVED] == cp.OPTIMAL
+
+
+_FRESH_PROCESS = """
+import sys
+import numpy as np
+from controllers.common.lmi import KothareLmi
+A = [(np.array([[0.9, 0.0], [0.25, 1.0]]), np.array([[b], [0.0]])) for b in (0.4, 0.6)]
+lmi = KothareLmi(2, 1, 2, np.eye(2), np.eye(1), u_max=[2.0])
+sol = lmi.solve(np.array([1.0, -3.0]), A)
+print(sol.status, "cvxpy" in sys.modules, *(float(f).hex() for f in sol.F.ravel()))
+"""
+
+
+def test_cached_direct_data_solves_without_cvxpy_and_gives_the_same_gain(tmp_path):
+    """A process that finds the direct path's data on disk solves without importing cvxpy,
+    and gets the gain of the process that built the data, bit for bit."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    env = {**os.environ, "ATO_COSIM_CACHE": str(tmp_path),
+           "PYTHONPATH": str(Path(__file__).resolve().parents[1])}
+    runs = [subprocess.run([sys.executable, "-c", _FRESH_PROCESS], env=env, check=True,
+                           capture_output=True, text=True).stdout.split() for _ in range(2)]
+    (status0, imported0, *gain0), (status1, imported1, *gain1) = runs
+    assert status0 == status1 == "optimal"
+    assert imported0 == "True" and imported1 == "False"
+    assert gain0 == gain1

@@ -151,3 +151,19 @@ def test_errors_name_the_problem() -> None:
         sp.generate("conventional", ROUTE,
                     settings=dataclasses.replace(sp.ProfileSettings(), accel_max=1.5))
     assert math.isfinite(sp.generate("conventional", Route.flat(1e4)).arrival_time)
+
+
+def test_the_eco_search_is_kept_on_disk_and_gives_the_same_profile(tmp_path,
+                                                                   monkeypatch) -> None:
+    """The eco bisection's V_low is stored once per (route, schedule, train, settings); a later
+    process (here: an emptied in-process cache) rebuilds the same profile from it."""
+    monkeypatch.setenv("ATO_COSIM_CACHE", str(tmp_path))
+    sp._CACHE.clear()
+    first = sp.generate("eco", ROUTE)
+    assert len(list((tmp_path / "designs").glob("eco_profile-*"))) == 1
+    sp._CACHE.clear()
+    again = sp.generate("eco", ROUTE)
+    assert again is not first and again.low_speed == first.low_speed
+    for name in ("s", "v", "t", "mode"):
+        np.testing.assert_array_equal(getattr(again, name), getattr(first, name))
+    sp._CACHE.clear()

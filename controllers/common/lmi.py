@@ -22,28 +22,64 @@ parameters. With Clarabel, an event goes straight to the solver: the parameter v
 cvxpy's reduced parameter-to-data tensor gives the conic data ``(A, b)`` of
 ``min q'z  s.t.  A z + s = b, s in K`` (the same data, in the same layout, cvxpy builds), and a
 fixed linear map (from cvxpy's inverse reductions, found once) takes the solver's ``z`` to
-``gamma``, ``Qv`` and ``Y``. The paper's disturbance column ``D_j`` of eq. 24 is not used: the
-seed 003 controller absorbs the disturbance with integral action instead (``controllers.robust``).
+``gamma``, ``Qv`` and ``Y``. That data and map are kept on disk
+(:func:`cosim.fmu.disk_cache.cached_arrays`, keyed by the problem's sizes and weights, this
+module's code and the cvxpy and Clarabel versions), so a process that finds them there calls
+Clarabel without importing cvxpy; cvxpy is imported when the problem itself is needed: the
+path through ``problem.solve``, the fallback solver, a status other than solved, or data not
+yet on disk. The paper's disturbance column ``D_j`` of eq. 24 is not used: the seed 003
+controller absorbs the disturbance with integral action instead (``controllers.robust``).
 """
 
 from __future__ import annotations
 
+import functools
 import math
 import time
 import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
+from importlib import metadata
+from typing import Any
 
 import clarabel  # cvxpy's SDP solver, used by default (missing = error at import)
-import cvxpy as cp
 import numpy as np
 import scipy.sparse as sp
-from cvxpy.lin_ops.lin_op import CONSTANT_ID
-from cvxpy.reductions.solution import Solution
-from cvxpy.reductions.solvers.conic_solvers.clarabel_conif import CLARABEL, dims_to_solver_cones
+
+from cosim.fmu.disk_cache import cached_arrays, source_digest
 
 LMI_SOLVERS = ("clarabel", "scs")
-_SOLVED = (cp.OPTIMAL,)
+OPTIMAL = "optimal"  # cvxpy's status of a solved problem (cvxpy.OPTIMAL)
+CLARABEL_SOLVED = "Solved"  # Clarabel's status that cvxpy maps to OPTIMAL
+_SOLVED = (OPTIMAL,)
+
+
+# version of the cached direct data: this module and the cvxpy and Clarabel releases (read at
+# import: an FMU's extracted copy of this file may be gone by the time a problem is built)
+_CODE_VERSION = ",".join([source_digest(__file__), *(f"{name}={metadata.version(name)}"
+                                                     for name in ("cvxpy", "clarabel"))])
+
+
+def _clarabel_cones(zero: int, nonneg: int, soc: Sequence[int], psd: Sequence[int]) -> list:
+    """Clarabel's cones for cone dimensions in the order of cvxpy's Clarabel interface (zero,
+    nonnegative, second-order, PSD triangle)."""
+    return ([clarabel.ZeroConeT(zero)] if zero else []) + (
+        [clarabel.NonnegativeConeT(nonneg)] if nonneg else []) + [
+        clarabel.SecondOrderConeT(int(d)) for d in soc] + [
+        clarabel.PSDTriangleConeT(int(d)) for d in psd]
+
+
+@dataclass(frozen=True)
+class _CvxProblem:
+    """The cvxpy problem of eqs. 23-26 and its parameters and variables."""
+
+    problem: Any  # cvxpy.Problem
+    x: Any  # Parameter (n,)
+    A: list  # Parameters (n, n), one per vertex
+    B: list  # Parameters (n, m)
+    gamma: Any  # Variable
+    Qv: Any  # Variable (n, n), symmetric
+    Y: Any  # Variable (m, n)
 
 
 @dataclass(frozen=True)
@@ -96,49 +132,89 @@ class KothareLmi:
         if n_vertices < 1:
             raise ValueError(f"n_vertices = {n_vertices} must be >= 1")
         self.n, self.m, self.L, self.solver = n, m, n_vertices, solver
-        Q1h, Rh = _sqrtm_psd(np.asarray(Q1, float)), _sqrtm_psd(np.asarray(R, float))
-        self.x = cp.Parameter(n, name="x")
-        self.A = [cp.Parameter((n, n), name=f"A{j}") for j in range(n_vertices)]
-        self.B = [cp.Parameter((n, m), name=f"B{j}") for j in range(n_vertices)]
-        self.gamma = cp.Variable(name="gamma")
-        self.Qv = cp.Variable((n, n), symmetric=True, name="Qv")
-        self.Y = cp.Variable((m, n), name="Y")
-        Qv, Y, g = self.Qv, self.Y, self.gamma
-        xc = cp.reshape(self.x, (n, 1), order="F")
+        self.Q1, self.R = np.asarray(Q1, float), np.asarray(R, float)
+        self.u_max = None if u_max is None else np.asarray(u_max, float).reshape(m)
+        self.C = None if C is None else np.atleast_2d(np.asarray(C, float))
+        self.y_max = None if self.C is None or y_max is None else np.asarray(
+            y_max, float).reshape(self.C.shape[0])
+        self.solves = 0
+        self._x = np.zeros(n)
+        self.direct = direct and solver == "clarabel"
+        if self.direct:
+            self._load_direct()
+
+    @functools.cached_property
+    def _cvx(self) -> _CvxProblem:
+        """The problem in cvxpy, parametrised in ``x`` and the vertices (DPP), built on first
+        use."""
+        import cvxpy as cp
+
+        n, m = self.n, self.m
+        Q1h, Rh = _sqrtm_psd(self.Q1), _sqrtm_psd(self.R)
+        x = cp.Parameter(n, name="x")
+        As = [cp.Parameter((n, n), name=f"A{j}") for j in range(self.L)]
+        Bs = [cp.Parameter((n, m), name=f"B{j}") for j in range(self.L)]
+        g = cp.Variable(name="gamma")
+        Qv = cp.Variable((n, n), symmetric=True, name="Qv")
+        Y = cp.Variable((m, n), name="Y")
+        xc = cp.reshape(x, (n, 1), order="F")
         cons = [cp.bmat([[np.ones((1, 1)), xc.T], [xc, Qv]]) >> 0]              # eq. 23
         Zn, Zm, In, Im = np.zeros((n, n)), np.zeros((n, m)), np.eye(n), np.eye(m)
-        for A, B in zip(self.A, self.B, strict=True):
+        for A, B in zip(As, Bs, strict=True):
             AQBY = A @ Qv + B @ Y
             M = cp.bmat([[Qv, AQBY.T, Qv @ Q1h, Y.T @ Rh],
                          [AQBY, Qv, Zn, Zm],
                          [Q1h @ Qv, Zn, g * In, Zm],
                          [Rh @ Y, Zm.T, Zm.T, g * Im]])
             cons.append(0.5 * (M + M.T) >> 0)                                   # eq. 24
-        self.u_max = None if u_max is None else np.asarray(u_max, float).reshape(m)
         if self.u_max is not None:
             X = cp.Variable((m, m), symmetric=True, name="X")
             cons += [cp.bmat([[X, Y], [Y.T, Qv]]) >> 0,                         # eq. 25
                      cp.diag(X) <= self.u_max ** 2]
-        self.C = None if C is None else np.atleast_2d(np.asarray(C, float))
-        if self.C is not None and y_max is not None:
-            ymax = np.asarray(y_max, float).reshape(self.C.shape[0])
-            for A, B in zip(self.A, self.B, strict=True):
+        if self.C is not None and self.y_max is not None:
+            for A, B in zip(As, Bs, strict=True):
                 CA = self.C @ (A @ Qv + B @ Y)
-                M = cp.bmat([[Qv, CA.T], [CA, np.diag(ymax ** 2)]])
+                M = cp.bmat([[Qv, CA.T], [CA, np.diag(self.y_max ** 2)]])
                 cons.append(0.5 * (M + M.T) >> 0)                               # eq. 26
-        self.problem = cp.Problem(cp.Minimize(g), cons)
-        if not self.problem.is_dpp():
+        problem = cp.Problem(cp.Minimize(g), cons)
+        if not problem.is_dpp():
             raise AssertionError("Kothare LMI problem is not DPP")
-        self.Q1, self.R = np.asarray(Q1, float), np.asarray(R, float)
-        self.solves = 0
-        self._x = np.zeros(n)
-        self.direct = direct and solver == "clarabel"
-        if self.direct:
-            self._build_direct()
+        return _CvxProblem(problem, x, As, Bs, g, Qv, Y)
 
-    def _build_direct(self) -> None:
+    @property
+    def problem(self) -> Any:
+        """The cvxpy problem (``cvxpy.Problem``; imports cvxpy)."""
+        return self._cvx.problem
+
+    def _load_direct(self) -> None:
+        """The direct path's data (:meth:`_build_direct`), from the disk cache when there."""
+        none = "none"
+        key = [self.n, self.m, self.L, self.Q1, self.R,
+               none if self.u_max is None else self.u_max,
+               none if self.C is None else self.C, none if self.y_max is None else self.y_max]
+        (sizes, t_data, t_indices, t_indptr, a_indices, a_indptr, b_rows, ab_cols, q, soc,
+         psd, unpack) = cached_arrays("kothare_lmi_direct", _CODE_VERSION, key,
+                                      self._build_direct)
+        (n_rows, nz, split, t_rows, t_cols, const_col, x_col, zero, nonneg) = (
+            int(v) for v in sizes)
+        self._tensor = sp.csr_array((t_data, t_indices, t_indptr), shape=(t_rows, t_cols))
+        self._a_index = (a_indices, a_indptr, (n_rows, nz))
+        self._b_rows, self._split, self._n_rows = b_rows, split, n_rows
+        self._pvec = np.zeros(t_cols)
+        self._pvec[const_col] = 1.0
+        self._x_col = x_col
+        self._ab_cols = [(int(a), int(b)) for a, b in ab_cols]
+        self._q = q
+        self._P = sp.csc_array((nz, nz))
+        self._cones = _clarabel_cones(zero, nonneg, soc, psd)
+        self._settings = clarabel.DefaultSettings()
+        self._settings.verbose = False
+        self._unpack = unpack
+
+    def _build_direct(self) -> tuple[np.ndarray, ...]:
         """The conic data of the problem as an affine map of the parameters, and the linear
-        map from the solver's variable to ``(gamma, Qv, Y)``, from cvxpy's Clarabel chain.
+        map from the solver's variable to ``(gamma, Qv, Y)``, from cvxpy's Clarabel chain, as
+        the arrays :meth:`_load_direct` reads.
 
         Data: ``values = T @ [p; 1]`` with ``T`` cvxpy's reduced tensor (``ReducedMat``) and
         ``p`` the parameters flattened column-major at cvxpy's columns; ``values`` fill the
@@ -146,31 +222,26 @@ class KothareLmi:
         objective ``q`` (here ``gamma``'s column) does not depend on the parameters. The
         solution map is linear (the reductions only copy and symmetrise entries), so it is
         found by inverting the chain at ``z = 0`` and at each unit vector."""
-        self.x.value = np.zeros(self.n)
-        for pa, pb in zip(self.A, self.B, strict=True):
+        import cvxpy as cp
+        from cvxpy.lin_ops.lin_op import CONSTANT_ID
+        from cvxpy.reductions.solution import Solution
+        from cvxpy.reductions.solvers.conic_solvers.clarabel_conif import CLARABEL
+
+        cvx = self._cvx
+        cvx.x.value = np.zeros(self.n)
+        for pa, pb in zip(cvx.A, cvx.B, strict=True):
             pa.value, pb.value = np.zeros((self.n, self.n)), np.zeros((self.n, self.m))
-        data, chain, inverse = self.problem.get_problem_data(cp.CLARABEL)
+        data, chain, inverse = cvx.problem.get_problem_data(cp.CLARABEL)
         prog = data[cp.settings.PARAM_PROB]
         prog.reduced_A.cache(False)
-        self._tensor = prog.reduced_A.reduced_mat.tocsr()
+        tensor = sp.csr_array(prog.reduced_A.reduced_mat)
         indices, indptr, shape = prog.reduced_A.problem_data_index
         nz = prog.x.size
         split = int(indptr[nz])
-        self._a_index = (np.asarray(indices[:split]), np.asarray(indptr[:nz + 1]),
-                         (shape[0], nz))
-        self._b_rows, self._split = np.asarray(indices[split:]), split
-        self._n_rows = shape[0]
         cols = prog.param_id_to_col
-        self._pvec = np.zeros(prog.total_param_size + 1)
-        self._pvec[cols[CONSTANT_ID]] = 1.0
-        self._x_col = cols[self.x.id]
-        self._ab_cols = [(cols[pa.id], cols[pb.id]) for pa, pb in zip(self.A, self.B,
-                                                                       strict=True)]
-        self._q = np.asarray(data[cp.settings.C], float).copy()
-        self._P = sp.triu(sp.csc_array((nz, nz))).tocsc()
-        self._cones = dims_to_solver_cones(data[CLARABEL.DIMS])
-        self._settings = CLARABEL.parse_solver_opts(False, {})
-
+        dims = data[CLARABEL.DIMS]
+        if dims.exp or len(dims.p3d) or len(getattr(dims, "pnd", ())):
+            raise AssertionError("Kothare LMI problem has cones beyond zero, nonneg, SOC, PSD")
         var_id = inverse[-1][CLARABEL.VAR_ID]
 
         def recover(z: np.ndarray) -> np.ndarray:
@@ -180,12 +251,23 @@ class KothareLmi:
                 sol = reduction.invert(sol, data)
             vals = sol.primal_vars
             return np.concatenate([np.asarray(vals[v.id], float).ravel(order="F")
-                                   for v in (self.gamma, self.Qv, self.Y)])
+                                   for v in (cvx.gamma, cvx.Qv, cvx.Y)])
 
         offset = recover(np.zeros(nz))
         if np.any(offset != 0.0):
             raise AssertionError("solution map of the Kothare LMI problem is not linear")
-        self._unpack = np.column_stack([recover(np.eye(nz)[i]) for i in range(nz)])
+        unpack = np.column_stack([recover(np.eye(nz)[i]) for i in range(nz)])
+        if tensor.shape[1] != prog.total_param_size + 1:
+            raise AssertionError("parameter tensor of the Kothare LMI problem: unexpected width")
+        sizes = np.array([shape[0], nz, split, tensor.shape[0], tensor.shape[1],
+                          cols[CONSTANT_ID], cols[cvx.x.id], dims.zero, dims.nonneg])
+        ab_cols = np.array([(cols[pa.id], cols[pb.id]) for pa, pb in zip(cvx.A, cvx.B,
+                                                                         strict=True)])
+        return (sizes, tensor.data, tensor.indices, tensor.indptr,
+                np.asarray(indices[:split]), np.asarray(indptr[:nz + 1]),
+                np.asarray(indices[split:]), ab_cols,
+                np.asarray(data[cp.settings.C], float).copy(),
+                np.array(dims.soc, dtype=np.int64), np.array(dims.psd, dtype=np.int64), unpack)
 
     def solver_options(self, solver: str | None = None) -> dict:
         """The solver (default: ``solver``) and its tolerances: Clarabel's defaults (gap and
@@ -193,8 +275,8 @@ class KothareLmi:
         not converge in 20000 iterations on these problems; at 1e-4 it takes thousands, ~40x
         Clarabel's time)."""
         if (solver or self.solver) == "clarabel":
-            return {"solver": cp.CLARABEL}
-        return {"solver": cp.SCS, "eps_abs": 1e-4, "eps_rel": 1e-4, "max_iters": 100000}
+            return {"solver": "CLARABEL"}
+        return {"solver": "SCS", "eps_abs": 1e-4, "eps_rel": 1e-4, "max_iters": 100000}
 
     @property
     def tolerance(self) -> float:
@@ -202,10 +284,12 @@ class KothareLmi:
         return 1e-8 if self.solver == "clarabel" else 1e-4
 
     def _solve_with(self, solver: str) -> str:
+        from cvxpy.error import SolverError
+
         try:
             self.problem.solve(**self.solver_options(solver))
             return str(self.problem.status)
-        except cp.error.SolverError as exc:
+        except SolverError as exc:
             return f"solver error: {exc}"
 
     def _solve_direct(self, x: np.ndarray, vertices: Sequence[tuple[np.ndarray, np.ndarray]]
@@ -226,6 +310,11 @@ class KothareLmi:
         np.add.at(b, self._b_rows, values[k:])
         result = clarabel.DefaultSolver(self._P, self._q, A_data, b, self._cones,
                                         self._settings).solve()
+        if str(result.status) == CLARABEL_SOLVED:
+            return OPTIMAL, self._unpack @ np.asarray(result.x, float)
+        import cvxpy as cp
+        from cvxpy.reductions.solvers.conic_solvers.clarabel_conif import CLARABEL
+
         status = CLARABEL.STATUS_MAP.get(str(result.status), cp.settings.SOLVER_ERROR)
         if status in cp.settings.INACCURATE:
             warnings.warn("Solution may be inaccurate. Try another solver, adjusting the "
@@ -239,10 +328,19 @@ class KothareLmi:
         return status, self._unpack @ np.asarray(result.x, float)
 
     def _set_parameters(self, vertices: Sequence[tuple[np.ndarray, np.ndarray]]) -> None:
-        self.x.value = self._x
-        for (A, B), pa, pb in zip(vertices, self.A, self.B, strict=True):
+        cvx = self._cvx
+        cvx.x.value = self._x
+        for (A, B), pa, pb in zip(vertices, cvx.A, cvx.B, strict=True):
             pa.value = np.asarray(A, float).reshape(self.n, self.n)
             pb.value = np.asarray(B, float).reshape(self.n, self.m)
+
+    def _cvx_solution(self) -> np.ndarray | None:
+        """``[gamma, vec Qv, vec Y]`` (column-major) of the cvxpy problem's last solve."""
+        cvx = self._cvx
+        if cvx.Qv.value is None:
+            return None
+        return np.concatenate([np.ravel(cvx.gamma.value), np.ravel(cvx.Qv.value, order="F"),
+                               np.ravel(cvx.Y.value, order="F")])
 
     def solve(self, x: np.ndarray, vertices: Sequence[tuple[np.ndarray, np.ndarray]]
               ) -> LmiSolution:
@@ -257,17 +355,13 @@ class KothareLmi:
         else:
             self._set_parameters(vertices)
             status = self._solve_with(self.solver)
-            z = None if self.Qv.value is None else np.concatenate(
-                [np.ravel(self.gamma.value), np.ravel(self.Qv.value, order="F"),
-                 np.ravel(self.Y.value, order="F")])
+            z = self._cvx_solution()
         fallback = False
         if (status not in _SOLVED or z is None) and self.fallback is not None:
             if self.direct:
                 self._set_parameters(vertices)
             status, fallback = self._solve_with(self.fallback), True
-            z = None if self.Qv.value is None else np.concatenate(
-                [np.ravel(self.gamma.value), np.ravel(self.Qv.value, order="F"),
-                 np.ravel(self.Y.value, order="F")])
+            z = self._cvx_solution()
         dt, cpu = time.perf_counter() - t0, time.process_time() - c0
         self.solves += 1
         if status not in _SOLVED or z is None:

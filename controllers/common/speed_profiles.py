@@ -31,8 +31,9 @@ step (``v^2`` linear in ``s``). Limits of the paper: ``-1 <= a <= 1`` m/s^2, cru
   compares a strategy with the conventional one at equal arrival time; ``low_speed`` holds
   ``V_c``. If ``T_s <= T_conv`` it is the conventional profile.
 
-* **Optimal** (ours, beyond the paper): the energy-optimal control sequence of optimal train
-  control (Pontryagin's maximum principle; Howlett, Pudney and Albrecht): maximum traction
+* **Fixed family** (``fixed_family``; ours, beyond the paper): the best member of a fixed
+  family of control sequences of optimal train control (Howlett, Pudney and Albrecht): maximum
+  traction
   (the planning envelope, ``traction_share``, at most ``accel_max``) up to a holding speed
   ``V_h``; speed holding (full traction where a grade pulls the speed below ``V_h``; on a
   down grade the train is held at ``V_h`` by braking); coasting from a point ``s_c`` (held at
@@ -44,19 +45,28 @@ step (``v^2`` linear in ``s``). Limits of the paper: ``-1 <= a <= 1`` m/s^2, cru
   traction / eta_M minus the regenerated eta_b x braking work; the auxiliary energy is fixed
   by the schedule), with ``scipy.optimize.minimize_scalar``. On level track this family
   contains the optimum; on grades the exact optimum may add short power/coast phases around
-  steep sections, which this family lacks (a test compares it with a dynamic programme on
-  a short level route).
-  The cruise profile is the member with no coasting, so the optimal one never needs more.
+  steep sections, and holding by braking is not a regime of the optimum when regeneration is
+  below 100 %, so on grades it is not the optimum (a test compares it with a dynamic
+  programme on a short level route). The cruise profile is the member with no coasting, so
+  the fixed-family one never needs more.
 
-The cruise and optimal searches cost seconds per process; their results (the cruise speed;
-``V_h`` and ``s_c``) are kept on disk by :func:`cosim.fmu.disk_cache.cached_arrays`, keyed by
-the route's profiles, the schedule, the train, the settings and this module's code, and the
-profile is rebuilt from them (the same floats as a fresh search).
+* **Optimum** (:func:`read_optimum`): the true energy optimum (all regimes of the maximum
+  principle, exact switching points) computed offline by ``cosim optimal``
+  (:mod:`cosim.optimal`, which no FMU core imports) and read from its CSV: position, speed and
+  time of its nodes (constant acceleration between nodes, the nodes' own times) and the
+  regime of each step (:data:`OPTIMUM_REGIMES`).
+
+The eco, cruise and fixed-family searches cost seconds per process; their results (``V_low``; the
+cruise speed; ``V_h`` and ``s_c``) are kept on disk by
+:func:`cosim.fmu.disk_cache.cached_arrays`, keyed by the route's profiles, the schedule, the
+train, the settings and this module's code, and the profile is rebuilt from them (the same
+floats as a fresh search).
 
 :func:`traction_work` is the mechanical traction work of any profile on the nominal model.
 
 Phases (Table 2, used by the energy-per-phase metrics): ``accelerate`` from the start until the
-profile first reaches ``V_act``; ``brake`` from the start of the final braking; ``run`` between.
+profile first reaches ``V_act`` (the optimum: until its first step that is not maximum
+traction); ``brake`` from the start of the final braking; ``run`` between.
 """
 
 from __future__ import annotations
@@ -79,8 +89,13 @@ from plants.route import GRAVITY, Route, StepProfile
 TRACTION, CRUISE, COAST, REACCELERATE, HOLD_LIMIT, BRAKE = 1, 2, 3, 4, 5, 6
 # Table 2 phases
 PHASE_ACCELERATE, PHASE_RUN, PHASE_BRAKE = 1, 2, 3
-PROFILE_KINDS = ("conventional", "eco", "cruise", "optimal")
-# code version of the cached optimal-profile search: this module and the train model
+PROFILE_KINDS = ("conventional", "eco", "cruise", "fixed_family")  # generated here
+# regimes of the optimum's CSV (``cosim optimal``'s ``regime`` column) as profile modes
+OPTIMUM_REGIMES = {"maximum traction": TRACTION, "cruise (partial traction)": CRUISE,
+                   "coasting": COAST, "cruise (partial braking)": HOLD_LIMIT,
+                   "maximum braking": BRAKE, "maximum regenerative braking": BRAKE}
+OPTIMUM_COLUMNS = ("position_m", "speed_mps", "time_s")  # its first three columns (SI)
+# code version of the cached profile searches: this module and the train model
 _CODE_VERSION = source_digest(__file__, Path(__file__).resolve().parents[2] / "plants" / "crh3.py")
 
 
@@ -234,7 +249,7 @@ class _Model:
 def _run(model: _Model, length: float, kind: str, low: float,
          coast_from: float = math.inf) -> tuple[np.ndarray, ...]:
     """One forward pass: (s, v, mode) on the grid; ``low`` = V_low (eco); from ``coast_from``
-    (m) on, a cruising train coasts to the braking curve (optimal)."""
+    (m) on, a cruising train coasts to the braking curve (fixed family)."""
     st = model.settings
     n = max(int(math.ceil(length / st.ds)), 1)
     s = np.linspace(0.0, length, n + 1)
@@ -296,7 +311,7 @@ def _finish(kind: str, s: np.ndarray, v: np.ndarray, mode: np.ndarray, low: floa
 def generate(kind: str, route: Route, scheduled_time: float | None = None,
              train: Crh3Params | None = None,
              settings: ProfileSettings | None = None) -> SpeedProfile:
-    """The ``kind`` ("conventional" | "eco" | "cruise") profile from the route's first station
+    """The ``kind`` (:data:`PROFILE_KINDS`) profile from the route's first station
     (or 0) to its end (``length_m``, the stop point) within ``scheduled_time`` (s; default the
     route's ``scheduled_time_s``)."""
     if kind not in PROFILE_KINDS:
@@ -308,7 +323,7 @@ def generate(kind: str, route: Route, scheduled_time: float | None = None,
         scheduled_time = route.scheduled_time_s
     if kind == "eco" and scheduled_time is None:
         raise ValueError(f"route {route.name!r} has no scheduled_time_s: give scheduled_time")
-    if kind in ("cruise", "optimal") and scheduled_time is None:
+    if kind in ("cruise", "fixed_family") and scheduled_time is None:
         raise ValueError(f"route {route.name!r} has no scheduled_time_s: give scheduled_time")
     key = (kind, id(route), float(scheduled_time or 0.0), train, settings)
     hit = _CACHE.get(key)
@@ -335,29 +350,47 @@ def _generate(kind: str, route: Route, scheduled: float, train: Crh3Params,
             kind, s, v, mode, v_act, scheduled)
     if kind == "cruise":
         return _cruise(train, route, scheduled, settings)
-    if kind == "optimal":
-        return _optimal(train, route, scheduled, settings)
-    lo, hi = settings.min_low_speed, v_act  # time(lo) >= time(hi)
-    best: SpeedProfile | None = None
-    for _ in range(60):
-        mid = 0.5 * (lo + hi)
-        prof = _finish("eco", *_run(model, length, "eco", mid), mid, scheduled)
-        if best is None or (abs(prof.arrival_time - scheduled)
-                            < abs(best.arrival_time - scheduled)):
-            best = prof
-        if abs(prof.arrival_time - scheduled) <= settings.time_tolerance:
-            return prof
-        if prof.arrival_time > scheduled:
-            lo = mid
-        else:
-            hi = mid
-        if hi - lo < 1e-6:
-            break
-    if best is None or abs(best.arrival_time - scheduled) > settings.time_tolerance:
-        raise ValueError(f"route {route.name!r}: no eco profile arrives within "
-                         f"{settings.time_tolerance} s of scheduled_time = {scheduled} s "
-                         f"(closest {best.arrival_time if best else float('nan'):.1f} s)")
-    return best
+    if kind == "fixed_family":
+        return _fixed_family(train, route, scheduled, settings)
+    return _eco(model, route, scheduled, train, settings)
+
+
+def _eco(model: _Model, route: Route, scheduled: float, train: Crh3Params,
+         settings: ProfileSettings) -> SpeedProfile:
+    """The eco profile whose ``V_low``, found by bisection, meets the schedule."""
+    length = float(route.length_m)
+
+    def profile(low: float) -> SpeedProfile:
+        return _finish("eco", *_run(model, length, "eco", low), low, scheduled)
+
+    def search() -> tuple[np.ndarray]:
+        lo, hi = settings.min_low_speed, settings.cruise_speed  # time(lo) >= time(hi)
+        best: SpeedProfile | None = None
+        for _ in range(60):
+            mid = 0.5 * (lo + hi)
+            prof = profile(mid)
+            if best is None or (abs(prof.arrival_time - scheduled)
+                                < abs(best.arrival_time - scheduled)):
+                best = prof
+            if abs(prof.arrival_time - scheduled) <= settings.time_tolerance:
+                break
+            if prof.arrival_time > scheduled:
+                lo = mid
+            else:
+                hi = mid
+            if hi - lo < 1e-6:
+                break
+        if best is None or abs(best.arrival_time - scheduled) > settings.time_tolerance:
+            raise ValueError(f"route {route.name!r}: no eco profile arrives within "
+                             f"{settings.time_tolerance} s of scheduled_time = {scheduled} s "
+                             f"(closest {best.arrival_time if best else float('nan'):.1f} s)")
+        return (np.array([best.low_speed]),)
+
+    # the bisection runs up to 60 passes over the line: its V_low is kept on disk, keyed by
+    # every input and the code computing it
+    (found,) = cached_arrays("eco_profile", _CODE_VERSION,
+                             _profile_key(route, scheduled, train, settings), search)
+    return profile(float(found[0]))
 
 
 def _cruise(train: Crh3Params, route: Route, scheduled: float,
@@ -394,7 +427,7 @@ def _cruise(train: Crh3Params, route: Route, scheduled: float,
     return best
 
 
-def _optimal(train: Crh3Params, route: Route, scheduled: float,
+def _fixed_family(train: Crh3Params, route: Route, scheduled: float,
              settings: ProfileSettings) -> SpeedProfile:
     """Hold ``V_h``, coast from ``s_c``, brake: both found for the schedule (module text)."""
     length = float(route.length_m)
@@ -402,7 +435,7 @@ def _optimal(train: Crh3Params, route: Route, scheduled: float,
     def run(speed: float, coast_from: float) -> SpeedProfile:
         st = dataclasses.replace(settings, cruise_speed=speed)
         s, v, mode = _run(_Model(train, route, st), length, "conventional", speed, coast_from)
-        return _finish("optimal", s, v, mode, speed, scheduled)
+        return _finish("fixed_family", s, v, mode, speed, scheduled)
 
     coast_point: dict[float, float] = {}  # V_h -> the s_c for_schedule chose
 
@@ -444,11 +477,47 @@ def _optimal(train: Crh3Params, route: Route, scheduled: float,
 
     # the search costs seconds per process: its two numbers are kept on disk, keyed by every
     # input (route, schedule, train, settings) and the code computing them
-    (found,) = cached_arrays("optimal_profile", _CODE_VERSION,
+    (found,) = cached_arrays("fixed_family_profile", _CODE_VERSION,
                              _profile_key(route, scheduled, train, settings), search)
     if np.isnan(found[0]):
-        return dataclasses.replace(cruise, kind="optimal")  # no coasting pays
+        return dataclasses.replace(cruise, kind="fixed_family")  # no coasting pays
     return run(float(found[0]), float(found[1]))
+
+
+def read_optimum(path: str | Path, route: Route, scheduled_time: float | None = None,
+                 settings: ProfileSettings | None = None) -> SpeedProfile:
+    """The optimum written by ``cosim optimal`` (a CSV whose first columns are
+    :data:`OPTIMUM_COLUMNS` and whose last is ``regime``) as the profile ``"pmp"``; it must run
+    from 0 to the route's end (``length_m``) and arrive within ``time_tolerance`` of
+    ``scheduled_time`` (s; default the route's ``scheduled_time_s``)."""
+    import csv
+
+    settings = settings or ProfileSettings()
+    if scheduled_time is None or scheduled_time <= 0:
+        scheduled_time = route.scheduled_time_s
+    try:
+        with open(path, newline="") as f:
+            rows = [r for r in csv.reader(line for line in f if not line.startswith("#")) if r]
+    except OSError as exc:
+        raise ValueError(f"optimum {str(path)!r}: {exc}") from exc
+    header = tuple(rows[0]) if rows else ()
+    if header[:3] != OPTIMUM_COLUMNS or header[-1] != "regime" or len(rows) < 3:
+        raise ValueError(f"{path}: an optimum has the columns {OPTIMUM_COLUMNS} ... regime "
+                         f"and at least two nodes; got {header}")
+    try:
+        s, v, t = (np.array([float(r[i]) for r in rows[1:]]) for i in range(3))
+        mode = np.array([OPTIMUM_REGIMES[r[-1]] for r in rows[1:]], dtype=np.int64)
+    except (ValueError, KeyError, IndexError) as exc:
+        raise ValueError(f"{path}: bad optimum row: {exc}") from exc
+    mode[-1] = BRAKE
+    length = float(route.length_m)
+    if abs(s[0]) > 1e-3 or abs(s[-1] - length) > 1e-3 or np.any(np.diff(s) <= 0.0):
+        raise ValueError(f"{path}: the optimum runs from {s[0]} m to {s[-1]} m; route "
+                         f"{route.name!r} runs from 0 to length_m = {length} m (increasing)")
+    if scheduled_time is None or abs(t[-1] - scheduled_time) > settings.time_tolerance:
+        raise ValueError(f"{path}: the optimum arrives at {t[-1]} s, not within "
+                         f"{settings.time_tolerance} s of scheduled_time = {scheduled_time} s")
+    return SpeedProfile("pmp", s, v, t, mode, float(np.max(v)), float(scheduled_time))
 
 
 def _profile_key(route: Route, scheduled: float, train: Crh3Params,

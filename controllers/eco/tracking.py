@@ -10,7 +10,9 @@ other is one line of a scenario (the FMU name). Interface (units SI):
   acceleration now, ``s_ref`` (m) the profile's position now (time-indexed part),
   ``speed_error`` = v - v_ref (m/s), ``phase`` (1 accelerate, 2 run, 3 brake: Table 2's
   phases of the profile, for the energy-per-phase metrics);
-* **parameters** ``profile`` ("conventional" | "eco"), ``route`` (bundled name or TOML path),
+* **parameters** ``profile`` (:data:`TRACKER_PROFILES`), ``optimum`` (the optimum's CSV for
+  ``profile = "pmp"``: a bundled name in ``controllers/eco/data`` or a path), ``route``
+  (bundled name or TOML path),
   ``scheduled_time`` (s, -1: the route's ``scheduled_time_s``), the train data the profile is
   planned with and ``u`` is scaled by (``mass``, ``rotating_mass_factor``), the limits
   (``accel_min``/``accel_max`` -1/1 m/s^2, ``cruise_speed`` V_act 330 km/h, ``limit_speed``
@@ -50,6 +52,7 @@ from controllers.common.speed_profiles import (
     ProfileSettings,
     SpeedProfile,
     generate,
+    read_optimum,
 )
 from cosim.fmu.declare import Checked, Declared, Var, build, param, sample_time
 from cosim.fmu.state import StatefulCore
@@ -100,12 +103,26 @@ class EcoTrackingParams(Checked):
         return self.mass * (1.0 + self.rotating_mass_factor)
 
 
+PMP = "pmp"  # the profile read from an optimum of the maximum principle (cosim optimal)
+TRACKER_PROFILES = (*PROFILE_KINDS, PMP)
+
+
+def optimum_dir_in(data_dir: Path) -> Path:
+    """The bundled optimum folder under an FMU's data folder (or the project tree)."""
+    return Path(data_dir) / "controllers" / "eco" / "data"
+
+
 PROFILE_VARS: tuple[Var, ...] = (
     Var("profile", "parameter", "conventional", description="target profile: "
         "'conventional' (accelerate, cruise at V_act, brake), 'eco' (accelerate, coast, "
         "re-accelerate, ..., brake), 'cruise' (accelerate, cruise at the constant speed "
-        "that meets the schedule, brake) or 'optimal' (maximum traction, speed holding, "
-        "coasting, braking; energy-optimal for the schedule)"),
+        "that meets the schedule, brake), 'fixed_family' (maximum traction, speed holding "
+        "(by braking downhill), coasting, service braking: the best of that family for the "
+        "schedule) or 'pmp' (the energy optimum of the maximum principle, read from the "
+        "file 'optimum')"),
+    Var("optimum", "parameter", "seed003_crh3_optimum_service_brake", description="the "
+        "optimum that profile 'pmp' follows: a CSV written by cosim optimal, by bundled name "
+        "(controllers/eco/data/<name>.csv) or path"),
     route_parameter("seed003_crh3", "the profile's line"),
     Var("scheduled_time", "parameter", -1.0, "s", "scheduled running time the eco, "
         "cruise and optimal profiles use up (-1: the route's scheduled_time_s)"),
@@ -144,13 +161,20 @@ class EcoTracker(StatefulCore, Declared):
                         t0: float = 0.0) -> EcoTracker:
         params = build(cls.params_class(), values)
         kind = values["profile"]
-        if kind not in PROFILE_KINDS:
-            raise ValueError(f"profile = {kind!r} must be one of {PROFILE_KINDS}")
+        if kind not in TRACKER_PROFILES:
+            raise ValueError(f"profile = {kind!r} must be one of {TRACKER_PROFILES}")
         route = load_route(values["route"], routes_dir_in(data_dir))
         track: EcoTrackingParams = params.track
         scheduled = float(values["scheduled_time"])
-        profile = generate(kind, route, scheduled if scheduled > 0 else None, track.train(),
-                           track.settings())
+        if kind == PMP:
+            name = str(values["optimum"])
+            path = Path(name) if Path(name).suffix else (optimum_dir_in(data_dir)
+                                                         / f"{name}.csv")
+            profile = read_optimum(path, route, scheduled if scheduled > 0 else None,
+                                   track.settings())
+        else:
+            profile = generate(kind, route, scheduled if scheduled > 0 else None,
+                               track.train(), track.settings())
         return cls.build_core(params, profile, t0, data_dir)
 
     @classmethod

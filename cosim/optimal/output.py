@@ -12,19 +12,24 @@ import numpy as np
 from cosim.optimal.model import Train
 from cosim.optimal.pontryagin import REGIME_NAMES, OptimalRun
 
+COMMAND_PREFIX = "# command: "  # header line naming the command that wrote the file
 COLUMNS = ("position_m", "speed_mps", "time_s", "speed_limit_mps", "grade_permil",
            "force_N", "regime")
 
 
-def write_csv(run: OptimalRun, train: Train, path: str | Path, title: str = "") -> Path:
+def write_csv(run: OptimalRun, train: Train, path: str | Path, title: str = "",
+              command: str = "") -> Path:
     """One row per grid node; the step quantities (limit, grade, force, regime) of the step
-    that starts at the node (the last node: the step that ends there)."""
+    that starts at the node (the last node: the step that ends there). ``command``: the
+    command that regenerates the file, written as a header line (``# command: ...``)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     n = run.s.size
     step = np.minimum(np.arange(n), n - 2)
     with open(path, "w", newline="") as f:
         f.write(f"# energy-optimal run{': ' + title if title else ''}; train {train.name}\n")
+        if command:
+            f.write(f"{COMMAND_PREFIX}{command}\n")
         f.write(f"# running time {run.running_time:.3f} s; energy (traction / eta_t - eta_r "
                 f"regenerated) {run.energy:.6e} J; traction work {run.traction_work:.6e} J; "
                 f"regenerative braking work {run.regen_work:.6e} J\n")

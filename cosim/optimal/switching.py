@@ -79,6 +79,9 @@ _REGIME_OF_MODE = {POWER: MAX_TRACTION, COAST: COASTING, REGEN: MAX_REGEN, BRAKE
 # m/s): a run that would stop short creeps on, slowly and late, so time and energy stay
 # continuous in the switching points; no solution comes near it
 _E_FLOOR = 0.5 * 0.05**2
+# SLSQP's ftol on the scaled energy: the accuracy the switching points are found to (the
+# energy to about this share, the points, where the energy is stationary, to its square root)
+SLSQP_FTOL = 1e-12
 
 
 @numba.njit(cache=True)
@@ -440,7 +443,7 @@ class SwitchingProblem:
         res = scipy.optimize.minimize(lambda y: (at(y)[0] - J0) / sJ, np.zeros(n),
                                       jac=lambda y: at(y)[3] * scale / sJ, method="SLSQP",
                                       bounds=list(zip(lo, hi)), constraints=cons,
-                                      options={"maxiter": max_iter, "ftol": 1e-12})
+                                      options={"maxiter": max_iter, "ftol": SLSQP_FTOL})
         pts, lengths = self.split(np.clip(z0 + scale * res.x, 0.0, L))
         z = self.on_time(self.unknowns(np.maximum.accumulate(pts), lengths), running_time)
         pts, lengths = self.split(z)
