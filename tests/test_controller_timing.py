@@ -86,6 +86,19 @@ def test_events_inside_a_long_step_run_with_the_inputs_held(stop_pid):
     short.free()
 
 
+def test_a_step_shorter_than_the_sample_that_passes_over_an_event_says_so(stop_pid):
+    """A 0.12 s step from t = 0.1 s passes over the 0.2 s controller's event at t = 0.2 s: the
+    warning names that event and does not call the step longer than the sample."""
+    pid = Instance(stop_pid)
+    pid.set(v=20.0, s=0.0)
+    pid.fmu.doStep(currentCommunicationPoint=0.0, communicationStepSize=0.1)
+    pid.fmu.doStep(currentCommunicationPoint=0.1, communicationStepSize=0.12)
+    held = [m for m in pid.messages if "executed with the inputs held" in m]
+    assert len(held) == 1 and "passes over this controller's event at t=0.2 s" in held[0]
+    assert "longer than" not in held[0]
+    pid.free()
+
+
 def test_step_must_continue_from_own_time(stop_pid):
     pid = Instance(stop_pid)
     pid.set(v=20.0, s=0.0)

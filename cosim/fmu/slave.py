@@ -692,8 +692,9 @@ class SampledControllerSlave(CoreSlave):
             if not self._held_inputs_logged:
                 self._held_inputs_logged = True
                 self.log(f"{self.instance_name}: doStep from t={current_time} s to "
-                         f"t={to_seconds(end)} s is longer than this controller's sample "
-                         f"({self.values['sample_time']} s): its events inside a step are "
+                         f"t={to_seconds(end)} s passes over this controller's event at "
+                         f"t={to_seconds(following)} s (sample_time "
+                         f"{self.values['sample_time']} s): its events inside a step are "
                          "executed with the inputs held at the step's start (said once; "
                          "strict_steps = true refuses such steps)", Fmi2Status.warning)
             self.now_ticks = following

@@ -561,10 +561,11 @@ static fmi2Status c_do_step(fmi2Component comp, fmi2Real t, fmi2Real h, fmi2Bool
         if (following >= end) break;
         if (!m->held_logged) {
             m->held_logged = 1;
-            logm(m, fmi2Warning, "%s: doStep from t=%s s to t=%s s is longer than this "
-                 "controller's sample (%s s): its events inside a step are executed with the "
-                 "inputs held at the step's start (said once; strict_steps = true refuses "
-                 "such steps)", m->name, fmt(t).s, fmt(to_seconds(end)).s,
+            logm(m, fmi2Warning, "%s: doStep from t=%s s to t=%s s passes over this "
+                 "controller's event at t=%s s (sample_time %s s): its events inside a step "
+                 "are executed with the inputs held at the step's start (said once; "
+                 "strict_steps = true refuses such steps)", m->name, fmt(t).s,
+                 fmt(to_seconds(end)).s, fmt(to_seconds(following)).s,
                  fmt(m->v[ATO_VR_sample_time]).s);
         }
         m->now = following;
