@@ -103,14 +103,16 @@ class NativeSpec:
 
 # the sampled-controller backend of a law and what the laws share
 CONTROLLER = ("ato_controller.c", "ato_law.h", "ato_law_common.h", "ato_math.h")
-PROFILE = ("ato_profile.c", "ato_profile.h")  # reference profiles (resources/references)
+BUNDLED = ("ato_bundled.c", "ato_bundled.h")  # bundled data files opened by name
+# reference profiles (resources/references)
+PROFILE = ("ato_profile.c", "ato_profile.h", *BUNDLED)
 # the generic plant backend (ato_plant_backend.c: FMI 2-shaped functions, variables, FMU
 # state) and the plant helpers (ato_plant.c: route profiles, envelope, resistance)
 PLANT_BACKEND = ("ato_plant_backend.h", "ato_plant_backend.c", "ato_math.h")
-PLANT_SHARED = (*PLANT_BACKEND, "ato_plant.h", "ato_plant.c")
+PLANT_SHARED = (*PLANT_BACKEND, "ato_plant.h", "ato_plant.c", *BUNDLED)
 # numpy's default_rng(seed words).standard_normal in C (seeded disturbances)
 NUMPY_RANDOM = ("ato_numpy_random.h", "ato_numpy_random.c")
-GRADE = ("ato_grade.c", "ato_grade.h")  # a controller's bundled route grades
+GRADE = ("ato_grade.c", "ato_grade.h", *BUNDLED)  # a controller's bundled route grades
 # the freight controllers' shared base: observer, blending, brake-pipe model (freight_tracker.c)
 FREIGHT_TRACKER = ("freight_tracker.c", "freight_tracker.h")
 # the seed-001 data-driven controllers: their drive part (scaling, input box, reference,
@@ -168,7 +170,7 @@ NATIVE: dict[str, NativeSpec] = {
        for kind, identifier in enumerate(("StopMpc", "StopRmpc", "StopRsmpc"))},
     "FreightTrain": NativeSpec("FreightTrain", "freight.c", ("freight_kernel.c",),
                                ("speed_limit", "additional"),
-                               shared=(*PLANT_BACKEND, *NUMPY_RANDOM),
+                               shared=(*PLANT_BACKEND, *NUMPY_RANDOM, *BUNDLED),
                                generated=("ato_numpy_normal.h",)),
     "Crh3Train": NativeSpec("Crh3Train", "crh3.c", shared=PLANT_SHARED),
     **{identifier: NativeSpec(identifier, "emu.c", shared=(*PLANT_SHARED, *NUMPY_RANDOM),
@@ -983,9 +985,10 @@ def build_native(identifier: str, dest: Path = NATIVE_FMU_DIR, windows: bool | N
     guid = GUID_PLACEHOLDER  # the sources' own GUID is stamped in once they are written
     headers = Path(fmpy.__file__).parent / "c-code"
     solvers = [solver_files(name) for name in spec.solvers]
-    c_files = ["fmi2_front.c", spec.source,
-               *(f for f in (*spec.helpers, *spec.shared) if f.endswith(".c")),
-               *(f.name for solver in solvers for f in solver.sources if f.suffix == ".c")]
+    c_files = list(dict.fromkeys([  # a file two shared groups name is compiled once
+        "fmi2_front.c", spec.source,
+        *(f for f in (*spec.helpers, *spec.shared) if f.endswith(".c")),
+        *(f.name for solver in solvers for f in solver.sources if f.suffix == ".c")]))
     with tempfile.TemporaryDirectory(prefix="atocosim_native_") as tmp:
         root = Path(tmp) / "fmu"
         src = root / "sources"

@@ -1,26 +1,16 @@
 /* ato_grade.c: the bundled route grades a controller reads (ato_grade.h) */
 #include "ato_grade.h"
 
+#include "ato_bundled.h"
+
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
 int ato_grade_load(const char* resources, const char* route, ato_grade* out, char* err,
                    size_t n) {
-    if (strpbrk(route, "/\\") || strstr(route, ".toml")) {
-        snprintf(err, n, "route = '%s': the native build reads bundled routes only (a file "
-                 "path needs the Python FMU)", route);
-        return 0;
-    }
-    size_t len = strlen(resources) + strlen(route) + 32;
-    char* path = malloc(len);
-    snprintf(path, len, "%s/routes/%s.grade", resources, route);
-    FILE* f = fopen(path, "r");
-    free(path);
-    if (!f) {
-        snprintf(err, n, "route = '%s': no bundled route of that name", route);
-        return 0;
-    }
+    FILE* f = ato_open_bundled(resources, "routes", route, "grade", "route", err, n);
+    if (!f) return 0;
     char line[256];
     int cap = 16;
     out->n = 0;

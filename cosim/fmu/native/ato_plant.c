@@ -6,6 +6,8 @@
 
 #include "ato_plant.h"
 
+#include "ato_bundled.h"
+
 static double from_bits(const char* hex, char** end) {
     unsigned long long bits = strtoull(hex, end, 16);
     double d;
@@ -30,20 +32,11 @@ void ato_route_free(ato_route* r) {
 
 int ato_route_load(ato_inst* m, const char* route, ato_route* out) {
     memset(out, 0, sizeof *out);
-    for (const char* p = route; *p; p++)
-        if (*p == '/' || *p == '\\' || *p == '.') {
-            ATO_ERROR(m, "bad parameter: route = '%s': the native FMU reads bundled routes "
-                      "only (resources/routes/*.profiles); a route file path needs the Python "
-                      "FMU", route);
-            return 0;
-        }
-    size_t n = strlen(m->resources) + strlen(route) + 32;
-    char* path = malloc(n);
-    snprintf(path, n, "%s/routes/%s.profiles", m->resources, route);
-    FILE* f = fopen(path, "r");
+    char err[512];
+    FILE* f = ato_open_bundled(m->resources, "routes", route, "profiles", "route", err,
+                               sizeof err);
     if (!f) {
-        ATO_ERROR(m, "bad parameter: route '%s' not found (%s)", route, path);
-        free(path);
+        ATO_ERROR(m, "bad parameter: %s", err);
         return 0;
     }
     struct { const char* name; ato_profile* p; } fields[] = {
@@ -80,12 +73,11 @@ int ato_route_load(ato_inst* m, const char* route, ato_route* out) {
     }
     fclose(f);
     if (!ok || filled != (int)(sizeof fields / sizeof fields[0])) {
-        ATO_ERROR(m, "%s: not a complete route profile file", path);
-        free(path);
+        ATO_ERROR(m, "bad parameter: route = '%s': its bundled file is not a complete route "
+                  "profile file", route);
         ato_route_free(out);
         return 0;
     }
-    free(path);
     return 1;
 }
 

@@ -6,6 +6,8 @@
 
 #include "ato_profile.h"
 
+#include "ato_bundled.h"
+
 static int bisect_right(const double* xs, int n, double s) {
     int lo = 0, hi = n;
     while (lo < hi) {
@@ -64,22 +66,9 @@ void ato_profile_free(ato_profile* p) {
 int ato_profile_load(ato_profile* p, const char* resources, const char* name, char* err,
                      size_t n_err) {
     memset(p, 0, sizeof *p);
-    for (const char* c = name; *c; c++)
-        if (*c == '/' || *c == '\\' || *c == '.') {
-            snprintf(err, n_err, "reference = '%s': the native FMU reads bundled reference "
-                     "profiles only (resources/references/*.ref); a file path needs the "
-                     "Python FMU", name);
-            return 0;
-        }
-    size_t len = strlen(resources) + strlen(name) + 32;
-    char* path = malloc(len);
-    snprintf(path, len, "%s/references/%s.ref", resources, name);
-    FILE* f = fopen(path, "r");
-    if (!f) {
-        snprintf(err, n_err, "reference profile '%s' not found (%s)", name, path);
-        free(path);
-        return 0;
-    }
+    FILE* f = ato_open_bundled(resources, "references", name, "ref", "reference", err,
+                               n_err);
+    if (!f) return 0;
     int cap = 64, k = 0, kind = -1;
     p->x = malloc(cap * sizeof(double));
     p->v = malloc(cap * sizeof(double));
@@ -103,12 +92,11 @@ int ato_profile_load(ato_profile* p, const char* resources, const char* name, ch
     }
     fclose(f);
     if (kind < 0 || k < 2) {
-        snprintf(err, n_err, "%s: no kind line or fewer than two points", path);
-        free(path);
+        snprintf(err, n_err, "reference = '%s': its bundled file has no kind line or fewer "
+                 "than two points", name);
         ato_profile_free(p);
         return 0;
     }
-    free(path);
     p->distance = kind;
     p->n = k;
     p->f = malloc(k * sizeof(double));

@@ -26,6 +26,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "ato_bundled.h"
 #include "ato_plant_backend.h"
 #include "ato_model_decl.h"
 #include "ato_numpy_random.h"
@@ -96,13 +97,10 @@ static void free_steps(steps* s) {
 
 /* resources/routes/<route>.<kind>: "a b" lines, '#' comments */
 static int read_table(ato_inst* m, const char* route, const char* kind, steps* out) {
-    size_t n = strlen(m->resources) + strlen(route) + strlen(kind) + 32;
-    char* path = malloc(n);
-    snprintf(path, n, "%s/routes/%s.%s", m->resources, route, kind);
-    FILE* f = fopen(path, "r");
+    char err[512];
+    FILE* f = ato_open_bundled(m->resources, "routes", route, kind, "route", err, sizeof err);
     if (!f) {
-        ATO_ERROR(m, "bad parameter: route '%s' not found (%s)", route, path);
-        free(path);
+        ATO_ERROR(m, "bad parameter: %s", err);
         return 0;
     }
     int cap = 0, k = 0;
@@ -121,22 +119,14 @@ static int read_table(ato_inst* m, const char* route, const char* kind, steps* o
     fclose(f);
     out->n = k;
     if (k == 0) {
-        ATO_ERROR(m, "%s: no rows", path);
-        free(path);
+        ATO_ERROR(m, "bad parameter: route = '%s': its bundled %s table has no rows", route,
+                  kind);
         return 0;
     }
-    free(path);
     return 1;
 }
 
 static int load_route(ato_inst* m, train* c, const char* route) {
-    for (const char* p = route; *p; p++)
-        if (*p == '/' || *p == '\\' || *p == '.') {
-            ATO_ERROR(m, "bad parameter: route = '%s': the native FMU reads bundled routes "
-                      "only (resources/routes/); a route file path needs the Python FMU",
-                      route);
-            return 0;
-        }
     if (!read_table(m, route, "grade", &c->grade) ||
         !read_table(m, route, "speed_limit", &c->limit) ||
         !read_table(m, route, "additional", &c->additional))
