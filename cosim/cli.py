@@ -515,6 +515,9 @@ def sweep(
         "paths (a shared file system) instead of receiving uploaded copies")] = False,
     plot_format: Annotated[str, typer.Option(
         "--format", help="figure file format: png (200 dpi), svg or pdf")] = "png",
+    time_limit: Annotated[float | None, typer.Option(
+        "--time-limit", min=0.001, help="seconds of wall-clock time a point may "
+        "run before it is stopped and marked failed (local workers)")] = None,
 ) -> None:
     """Run scenarios over a parameter grid in parallel.
 
@@ -549,7 +552,7 @@ def sweep(
             return
         frame = run_sweep(scenarios, grid, target, workers, plot=not no_plot, resume=resume,
                           scheduler=scheduler, shared_fmus=shared_fmus,
-                          plot_format=plot_format)
+                          plot_format=plot_format, time_limit=time_limit)
     except interrupt.Interrupted as err:
         console.print(f"[bold yellow]{escape(str(err))}[/]; the finished rows are in "
                       f"{escape(str(target))}/sweep.csv", highlight=False, soft_wrap=True)

@@ -16,6 +16,7 @@ return value or the exception it raised. The child
 
 from __future__ import annotations
 
+import atexit
 import contextlib
 import ctypes
 import multiprocessing
@@ -102,41 +103,88 @@ def die_with_parent(parent: int) -> None:
 
 
 def _child_main(conn: Connection, crumb: Any, labels: Any, parent: int,
-                function: Callable[..., Any], args: tuple[Any, ...]) -> None:
+                setup: Callable[[], None] | None, first: Any) -> None:
+    """A child's life: ``setup()``, then the job ``first`` (if any) and each job
+    ``(function, args, kwargs)`` received run and its outcome sent back, until None (or the
+    parent's end)."""
     global _crumb, _labels
     die_with_parent(parent)
     os.setpgrp()  # the terminal's Ctrl-C reaches the parent, which passes it on
     interrupt.reset()
     _crumb, _labels = crumb, labels
-    _names.clear()
-    with interrupt.guard(restore=False):
+    if setup is not None:
+        setup()
+    while True:
         try:
-            outcome: tuple[str, Any] = ("ok", function(*args))
-        except BaseException as err:  # noqa: BLE001 - handed to the parent, raised there
-            outcome = ("raised", err)
-        conn.send(outcome)
+            job, first = first or conn.recv(), None
+        except (EOFError, OSError):
+            break
+        if job is None:
+            break
+        function, args, kwargs = job
+        _names.clear()
+        # SIGINT/SIGTERM set a flag, checked between FMU calls; the handlers stay between
+        # jobs, so a late signal is no traceback (the flag is cleared at the next job)
+        with interrupt.guard(restore=False):
+            try:
+                outcome: tuple[str, Any] = ("ok", function(*args, **kwargs))
+            except BaseException as err:  # noqa: BLE001 - handed to the parent, raised there
+                outcome = ("raised", err)
+        try:
+            conn.send(outcome)
+        except Exception as err:  # noqa: BLE001 - e.g. a result that does not pickle
+            conn.send(("raised", RuntimeError(f"{type(err).__name__}: {err}")))
     conn.close()
 
 
 class Child:
-    """``function(*args)`` in a child process (see the module doc)."""
+    """A child process (see the module doc) that runs jobs given with :meth:`submit`, one at
+    a time; ``setup()`` runs in it first, then ``first`` (a job as :meth:`submit` takes it:
+    ``(function, args, kwargs)``, handed over by the fork: its arguments need not pickle).
+    Forked on Linux, spawned elsewhere (then it inherits this process's environment, and
+    jobs and results are pickled)."""
 
-    def __init__(self, function: Callable[..., Any], args: tuple[Any, ...] = ()) -> None:
-        ctx = multiprocessing.get_context("fork" if FORK else "spawn")
+    def __init__(self, setup: Callable[[], None] | None = None, spawn: bool = False,
+                 first: tuple[Callable[..., Any], tuple[Any, ...], dict[str, Any]] | None
+                 = None) -> None:
+        ctx = multiprocessing.get_context("fork" if FORK and not spawn else "spawn")
         self.crumb = ctx.RawArray(ctypes.c_double, 3)
         self.crumb[1] = _IDLE
         self.labels = ctx.RawArray(ctypes.c_char, _LABEL_BYTES)
-        self.conn, child_conn = ctx.Pipe(duplex=False)
-        self.process = ctx.Process(target=_child_main, daemon=True,
-                                   args=(child_conn, self.crumb, self.labels,
-                                         os.getpid(), function, args))
+        self.conn, child_conn = ctx.Pipe()
+        self.process = ctx.Process(target=_child_main,
+                                   args=(child_conn, self.crumb, self.labels, os.getpid(),
+                                         setup, first))
         self.process.start()
         _live[self.pid] = self
         interrupt.on_exit(kill_all)
         child_conn.close()
         self.started = time.monotonic()
         self.outcome: tuple[str, Any] | None = None
+        self.busy = first is not None
         self.stuck_since: float | None = None  # when the last interrupt was passed on
+
+    def submit(self, function: Callable[..., Any], args: tuple[Any, ...] = (),
+               kwargs: dict[str, Any] | None = None) -> Child:
+        """Run ``function(*args, **kwargs)`` in the child."""
+        self.outcome, self.busy, self.stuck_since = None, True, None
+        self.started = time.monotonic()
+        self.crumb[1] = _IDLE
+        try:
+            self.conn.send((function, args, kwargs or {}))
+        except BaseException:
+            self.kill()
+            raise
+        return self
+
+    def close(self) -> None:
+        """Let the child end (killed when it does not within seconds)."""
+        with contextlib.suppress(OSError):
+            self.conn.send(None)
+        self.process.join(10.0)
+        if self.process.is_alive():
+            self.kill()
+        _live.pop(self.pid, None)
 
     @property
     def pid(self) -> int:
@@ -146,16 +194,19 @@ class Child:
         return [self.conn, self.process.sentinel]
 
     def poll(self) -> bool:
-        """Has the child ended (with or without a result)? Takes its result when there."""
+        """Has the job ended, with a result or with the child? Takes the result when
+        there."""
         if self.outcome is None and self.conn.poll():
             try:
                 self.outcome = self.conn.recv()
             except (EOFError, OSError):
                 pass
         if self.outcome is not None:
-            self.process.join(5.0)
-        elif self.process.is_alive():
+            self.busy = False
+            return True
+        if self.process.is_alive():
             return False
+        self.process.join()
         _live.pop(self.pid, None)
         return True
 
@@ -166,6 +217,7 @@ class Child:
             self.process.join()
             raise ChildFailed(self.crash_message())
         kind, value = self.outcome
+        self.outcome = None
         if kind == "raised":
             raise value
         return value
@@ -210,12 +262,17 @@ class Child:
 
 
 def kill_all() -> None:
-    """SIGKILL every running child of this process (a second signal)."""
+    """SIGKILL every running child of this process (a second signal, or this process's
+    exit: none is left waiting for work)."""
     for pid in list(_live):
         with contextlib.suppress(OSError):
             os.kill(pid, signal.SIGKILL)
 
 
+atexit.register(kill_all)  # before multiprocessing's own exit handler, which joins them
+
+
+_POLL_S = 0.1  # s between looks at the children
 STOP_GRACE_S = 3.0  # s an FMU call may take to return once an interrupt was passed on
 
 
@@ -242,7 +299,7 @@ def wait(children: list[Child], timeout: float) -> None:
         time.sleep(timeout)
 
 
-def supervise(child: Child, poll_s: float = 0.1) -> Any:
+def supervise(child: Child, poll_s: float = _POLL_S) -> Any:
     """Wait for ``child``'s result, passing a signal received here
     (:mod:`cosim.run.interrupt`) to it once; an FMU call that does not return within
     :data:`STOP_GRACE_S` of that ends the child (:class:`cosim.run.interrupt.Interrupted`
@@ -286,7 +343,7 @@ def start_run(path: str, progress: Any = None, **options: Any) -> Child:
     started in a child process, showing its progress with ``progress`` (see
     :func:`_run_scenario`; forked, the child writes to the same terminal; a spawned child
     shows none); :func:`finish_run` waits for it."""
-    return Child(_run_scenario, (str(path), options, progress if FORK else None))
+    return Child(first=(_run_scenario, (str(path), options, progress if FORK else None), {}))
 
 
 def finish_run(child: Child, out_dir: Path, force: bool = False) -> RunOutcome:
@@ -306,6 +363,8 @@ def finish_run(child: Child, out_dir: Path, force: bool = False) -> RunOutcome:
             raise
         where = record_crash(out_dir, str(err), force)
         raise interrupt.Interrupted(f"{err} ({where} says so)") from None
+    finally:
+        child.close()
 
 
 def record_crash(out_dir: Path, message: str, force: bool = False) -> Path:

@@ -26,7 +26,7 @@ from typing import Any
 
 import pandas as pd
 
-from cosim.run import interrupt, runner
+from cosim.run import interrupt, isolation, runner
 
 STOP_WINDOW_M = 0.5  # m, the ATO stop window +-50 cm
 
@@ -188,7 +188,8 @@ def run_sweep(scenario: str | Sequence[str], grid: dict[str, Sequence[Any]],
               out_dir: str | Path | None = None, workers: int | None = None,
               plot: bool = True, resume: bool = False, scheduler: str | None = None,
               shared_fmus: bool = False, plot_format: str = "png",
-              series_labels: dict[str, str] | None = None) -> pd.DataFrame:
+              series_labels: dict[str, str] | None = None,
+              time_limit: float | None = None) -> pd.DataFrame:
     """Run every grid point of every scenario with :func:`cosim.run.runner.run_tasks`: in
     ``workers`` processes (default: CPU count), or on a Dask cluster (``scheduler``: its
     address, or ``"local-dask"`` for a ``LocalCluster`` of ``workers`` processes;
@@ -205,6 +206,8 @@ def run_sweep(scenario: str | Sequence[str], grid: dict[str, Sequence[Any]],
     Each worker runs with one BLAS thread and is reused for many points (the imports and FMU
     extractions happen once per worker). On Dask the FMU files are uploaded to the workers,
     or, with ``shared_fmus``, read by them from the same paths (a shared file system).
+    ``time_limit`` (s, wall clock, local workers): a point running longer is stopped and
+    failed; a point whose worker crashes fails naming the signal and the FMU call.
     """
     from cosim.run.master import ensure_built
     from cosim.run.scenario import find_scenario, load_scenario
@@ -243,7 +246,7 @@ def run_sweep(scenario: str | Sequence[str], grid: dict[str, Sequence[Any]],
             writer.add(row)
 
     try:
-        _execute(todo, workers, finished, scheduler, shared_fmus, plot_format)
+        _execute(todo, workers, finished, scheduler, shared_fmus, plot_format, time_limit)
     finally:
         if writer is not None:
             writer.close()
@@ -288,7 +291,8 @@ def warm_up_for(jobs: list[tuple[str, dict[str, Any]]]) -> Callable[[], None]:
 
 def _execute(jobs: list[tuple[str, dict[str, Any]]], workers: int | None,
              finished: Callable[[dict[str, Any]], None], scheduler: str | None = None,
-             shared_fmus: bool = False, plot_format: str = "png") -> None:
+             shared_fmus: bool = False, plot_format: str = "png",
+             time_limit: float | None = None) -> None:
     """Run ``jobs`` (scenario path, grid point) with the shared runner, handing each row to
     ``finished`` as it arrives; on a signal, the running points stop (status
     ``interrupted``) and Interrupted is raised. Along a swept horizon or resolution the cost
@@ -297,15 +301,18 @@ def _execute(jobs: list[tuple[str, dict[str, Any]]], workers: int | None,
 
     def failed(task: runner.Task, err: BaseException) -> None:
         path, point = task.key
+        known = isinstance(err, (isolation.ChildFailed, runner.TimeLimitExceeded))
         finished({"scenario": Path(path).stem, **point, "status": "failed",
-                  "error": f"worker process failed: {type(err).__name__}: {err}"})
+                  "error": str(err) if known else
+                  f"worker process failed: {type(err).__name__}: {err}"})
 
     label = "sweep"
     if scheduler is None:
         tasks = [runner.Task((path, point), _run_point, (path, point))
                  for path, point in reversed(jobs)]
         runner.run_tasks(tasks, lambda _t, row: finished(row), failed, workers,
-                         label=label, warm_up=warm_up_for(jobs), what="the sweep")
+                         label=label, warm_up=warm_up_for(jobs), what="the sweep",
+                         time_limit=time_limit)
         return
     from cosim.run import dask_sweep
 

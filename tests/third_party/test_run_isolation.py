@@ -138,3 +138,56 @@ def test_no_child_outlives_a_killed_parent(hostile_fmus, tmp_path):
     proc.kill()
     proc.communicate(timeout=BOUND_S)
     assert until(lambda: gone(child.pid), "the child of a killed parent ended")
+
+
+def test_a_sweep_point_whose_worker_crashes_names_the_signal_and_the_fmu(hostile_fmus,
+                                                                          tmp_path):
+    from cosim.run.sweep import run_sweep
+
+    paths = [str(scenario(tmp_path, hostile_fmus[name]))
+             for name in ("SegfaultInDoStep", "SlowFirstStep")]
+    frame = run_sweep(paths, {"simulation.stop_time": [1.0, 0.5]}, tmp_path / "sweep",
+                      workers=2, plot=False)
+    rows = {(r["scenario"], r["simulation.stop_time"]): r for r in frame.to_dict("records")}
+    for u in (1.0, 0.5):
+        crashed = rows[("SegfaultInDoStep", u)]
+        assert crashed["status"] == "failed"
+        assert crashed["error"] == "FMU h crashed with SIGSEGV in fmi2DoStep at t = 0 s"
+        assert rows[("SlowFirstStep", u)]["status"] == "ok", rows
+
+
+def test_a_sweep_point_over_its_time_limit_is_stopped(hostile_fmus, tmp_path):
+    from cosim.run.sweep import run_sweep
+
+    path = str(scenario(tmp_path, hostile_fmus["BlockInDoStep"]))
+    frame = run_sweep(path, {"simulation.stop_time": [1.0]}, tmp_path / "sweep", workers=1,
+                      plot=False,
+                      time_limit=0.5)
+    [row] = frame.to_dict("records")
+    assert row["status"] == "failed"
+    assert row["error"] == ("stopped after its time limit of 0.5 s: FMU h in fmi2DoStep at "
+                            "t = 0 s")
+
+
+def test_no_sweep_worker_outlives_a_killed_sweep(hostile_fmus, tmp_path):
+    proc = cosim("sweep", str(scenario(tmp_path, hostile_fmus["BlockInDoStep"])), "--set",
+                 "simulation.stop_time=1,2", "--workers", "2", "--out", str(tmp_path / "sweep"),
+                 "--no-plot")
+
+    def both() -> list[psutil.Process]:
+        found = [c for c in psutil.Process(proc.pid).children()
+                 if any(m.path.endswith("BlockInDoStep.so") for m in _maps(c))]
+        return found if len(found) == 2 else []
+
+    workers = until(both, "two sweep workers in the FMU")
+    proc.kill()
+    proc.communicate(timeout=BOUND_S)
+    for worker in workers:  # type: ignore[union-attr]
+        assert until(lambda w=worker: gone(w.pid), f"worker {worker.pid} ended")
+
+
+def _maps(process: psutil.Process) -> list:
+    try:
+        return process.memory_maps()
+    except psutil.Error:
+        return []
