@@ -4,9 +4,12 @@
 runs every grid point with :func:`cosim.run.master.run_scenario` in a process pool, and writes
 
 * ``sweep.csv``: one row per run (scenario, the grid values, ``status`` ok / failed /
-  interrupted, ``error``, the summary figures), appended as each run finishes, so a failed
-  point does not stop the others and an interrupted sweep keeps its finished rows; with
-  ``resume`` the points already ``ok`` in an existing ``sweep.csv`` are not run again;
+  interrupted, ``error``, the summary figures, and last ``inputs_digest``: a digest of the
+  scenario file's content and the point's values), appended as each run finishes, so a
+  failed point does not stop the others and an interrupted sweep keeps its finished rows;
+  with ``resume`` the points already ``ok`` in an existing ``sweep.csv`` are not run again
+  when their digest is today's (an edited scenario, or a row torn by a full disk, which
+  lacks its last field, is run again);
 * ``sweep.png``: stop error against the first grid key, one line per scenario, with the
   +-0.5 m stop window, and the command switches / controller executions (a stopping study's
   figure over the horizon, plus the switch counts).
@@ -138,14 +141,27 @@ def _text(value: Any) -> str:
     return str(value)
 
 
+DIGEST = "inputs_digest"
+
+
+def inputs_digest(scenario: str, point: dict[str, Any]) -> str:
+    """What a sweep row depends on, as 16 hex digits (SHA-256): the scenario file's bytes
+    and the point's values as text."""
+    import hashlib
+
+    text = "\0".join(_key(scenario, point)).encode()
+    return hashlib.sha256(Path(scenario).read_bytes() + b"\0" + text).hexdigest()[:16]
+
+
 def _done_rows(csv_path: Path, keys: list[str]) -> list[dict[str, Any]]:
-    """The ``ok`` rows of an earlier ``sweep.csv`` (for ``resume``)."""
+    """The ``ok`` rows of an earlier ``sweep.csv`` (for ``resume``), with their
+    digest."""
     if not csv_path.is_file():
         return []
-    earlier = pd.read_csv(csv_path, keep_default_na=False)
+    earlier = pd.read_csv(csv_path, keep_default_na=False, dtype={DIGEST: str})
     if "status" not in earlier.columns or not set(keys) <= set(earlier.columns):
         raise ValueError(f"{csv_path}: not a sweep over {', '.join(keys)}; cannot resume it")
-    text_columns = {"scenario", "status", "error"}
+    text_columns = {"scenario", "status", "error", DIGEST}
     return [{k: v if k in text_columns else _cell(v) for k, v in row.items()}
             for row in earlier.to_dict("records") if row["status"] == "ok"]
 
@@ -171,7 +187,8 @@ class _RowWriter:
     def __init__(self, path: Path, columns: list[str], rows: list[dict[str, Any]]) -> None:
         self.path, self.columns = path, columns
         self.file = path.open("w", newline="")
-        self.writer = csv.DictWriter(self.file, fieldnames=columns, extrasaction="ignore")
+        self.writer = csv.DictWriter(self.file, fieldnames=columns, extrasaction="ignore",
+                                     lineterminator="\n")
         self.writer.writeheader()
         for row in rows:
             self.add(row)
@@ -228,12 +245,14 @@ def run_sweep(scenario: str | Sequence[str], grid: dict[str, Sequence[Any]],
     order = {_key(path, point): i for i, (path, point) in enumerate(jobs)}
     out = Path(out_dir) if out_dir is not None else None
     done: list[dict[str, Any]] = []
-    if out is not None and resume:
+    digests = {_key(path, point): inputs_digest(path, point) for path, point in jobs}
+    if out is not None and resume:  # rows of these inputs only, whole (the digest is last)
         done = [r for r in _done_rows(out / "sweep.csv", list(grid))
-                if _key(r["scenario"], {k: r[k] for k in grid}) in order]
+                if r.get(DIGEST) == digests.get(_key(r["scenario"], {k: r[k] for k in grid}))]
     skip = {_key(r["scenario"], {k: r[k] for k in grid}) for r in done}
     todo = [(path, point) for path, point in jobs if _key(path, point) not in skip]
-    columns = ["scenario", *grid, "status", "error", *SUMMARY_COLUMNS, "controller_executions"]
+    columns = ["scenario", *grid, "status", "error", *SUMMARY_COLUMNS, "controller_executions",
+               DIGEST]
     writer = None
     if out is not None:
         out.mkdir(parents=True, exist_ok=True)
@@ -241,6 +260,7 @@ def run_sweep(scenario: str | Sequence[str], grid: dict[str, Sequence[Any]],
     rows = list(done)
 
     def finished(row: dict[str, Any]) -> None:
+        row = {**row, DIGEST: digests.get(_key(row["scenario"], {k: row[k] for k in grid}))}
         rows.append(row)
         if writer is not None:
             writer.add(row)
