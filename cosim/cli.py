@@ -5,7 +5,6 @@ from __future__ import annotations
 import contextlib
 import inspect
 import json
-from contextlib import contextmanager
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -219,14 +218,19 @@ def run(
     strict: Annotated[bool, typer.Option(
         "--strict", help="exit with status 1 when the run had warnings (e.g. infeasible QPs)")]
         = False,
+    in_process: Annotated[bool, typer.Option(
+        "--in-process", help="run the FMUs in this process (no child process: an FMU that "
+        "crashes ends the command without a report)")] = False,
 ) -> None:
     """Run a scenario and print its summary.
 
     Writes results.csv, summary.json and plot.png into --out, building the FMUs it needs.
-    Ctrl-C (or SIGTERM) stops the run at the next communication point, writes what was
-    recorded (summary.json "completed": false) and exits with status 130; a second one exits
-    at once."""
-    from cosim.run import interrupt
+    The FMUs run in a child process: an FMU that crashes is reported (its name, the signal,
+    the FMI call and the time) with summary.json "completed": false. Ctrl-C (or SIGTERM)
+    stops the run at the next communication point, writes what was recorded and exits with
+    status 130 (an FMU call that does not return is ended after a few seconds); a second
+    one exits at once."""
+    from cosim.run import interrupt, isolation
     from cosim.run.master import SimulationError, run_scenario
     from cosim.run.results import PLOT_FORMATS, OutputError, check_destination, locked_destination
     from cosim.run.scenario import ScenarioError, find_scenario
@@ -244,23 +248,30 @@ def run(
             held.enter_context(locked_destination(target))
         except (ScenarioError, OutputError) as err:
             _fail(str(err))
-        with _progress(path.stem, quiet) as on_progress:
-            try:
-                overrides = [*(set_ or []),
-                             *([f"simulation.fmi_version={fmi}"] if fmi is not None else [])]
-                result = run_scenario(path, overrides=overrides, algorithm=algorithm,
-                                      out_dir=target, progress=on_progress, plot=not no_plot,
-                                      force=force, plot_format=plot_format)
-            except interrupt.Interrupted as err:
-                on_progress.stop()
-                console.print(f"[bold yellow]{escape(str(err))}[/]", highlight=False,
-                              soft_wrap=True)
-                raise typer.Exit(interrupt.EXIT_INTERRUPTED) from None
-            except (ScenarioError, SimulationError) as err:
-                on_progress.stop()
-                _fail(str(err))
+        overrides = [*(set_ or []),
+                     *([f"simulation.fmi_version={fmi}"] if fmi is not None else [])]
+        options = {"overrides": overrides, "algorithm": algorithm, "out_dir": target,
+                   "plot": not no_plot, "force": force, "plot_format": plot_format}
+        reporter = _ProgressReporter(path.stem, quiet)
+        try:
+            if in_process:
+                with reporter.bar:
+                    result = run_scenario(path, progress=reporter, **options)
+                stepping = reporter.stepping_rtf()
+            else:  # the child shows the progress and says what it saw
+                result = isolation.finish_run(isolation.start_run(str(path), reporter,
+                                                                  **options), target, force)
+                stepping = result.stepping_rtf
+        except interrupt.Interrupted as err:
+            reporter.stop()
+            console.print(f"[bold yellow]{escape(str(err))}[/]", highlight=False,
+                          soft_wrap=True)
+            raise typer.Exit(interrupt.EXIT_INTERRUPTED) from None
+        except (ScenarioError, SimulationError) as err:
+            reporter.stop()
+            _fail(str(err))
         print_summary(result.summary, f"{path.stem} ({result.algorithm})",
-                      real_time_notes(result.summary, on_progress.stepping_rtf()))
+                      real_time_notes(result.summary, stepping))
         out.print(f"wrote {target}/results.csv, summary.json"
                   + ("" if no_plot else f", plot.{plot_format}"),
                   highlight=False, markup=False)
@@ -341,13 +352,6 @@ class _ProgressReporter:
 
     def stop(self) -> None:
         self.bar.stop()
-
-
-@contextmanager
-def _progress(label: str, quiet: bool):
-    reporter = _ProgressReporter(label, quiet)
-    with reporter.bar:
-        yield reporter
 
 
 def _native_paths(names: list[str] | None, versions: tuple[int, ...]) -> list[Path]:
@@ -511,6 +515,9 @@ def sweep(
         "paths (a shared file system) instead of receiving uploaded copies")] = False,
     plot_format: Annotated[str, typer.Option(
         "--format", help="figure file format: png (200 dpi), svg or pdf")] = "png",
+    time_limit: Annotated[float | None, typer.Option(
+        "--time-limit", min=0.001, help="seconds of wall-clock time a point may "
+        "run before it is stopped and marked failed (local workers)")] = None,
 ) -> None:
     """Run scenarios over a parameter grid in parallel.
 
@@ -545,7 +552,7 @@ def sweep(
             return
         frame = run_sweep(scenarios, grid, target, workers, plot=not no_plot, resume=resume,
                           scheduler=scheduler, shared_fmus=shared_fmus,
-                          plot_format=plot_format)
+                          plot_format=plot_format, time_limit=time_limit)
     except interrupt.Interrupted as err:
         console.print(f"[bold yellow]{escape(str(err))}[/]; the finished rows are in "
                       f"{escape(str(target))}/sweep.csv", highlight=False, soft_wrap=True)

@@ -103,3 +103,48 @@ def test_a_bad_grid_value_is_refused_before_any_point_runs(built_fmus, tmp_path)
     assert "--set controller.N=abc: controller.N is Integer, got 'abc'" in " ".join(
         result.output.split())
     assert not (tmp_path / "sweep.csv").exists()
+
+
+def test_resume_reruns_a_torn_row(built_fmus, tmp_path):
+    """A row cut short (a full disk) lacks its last field, the inputs' digest: not kept."""
+    from cosim.run.sweep import run_sweep
+
+    out = tmp_path / "out"
+    first = run_sweep("seed000_stop_pid", {"plant.mass": [490000]}, out, workers=1,
+                      plot=False)
+    text = (out / "sweep.csv").read_text()
+    assert "\r" not in text
+    header, row = text.splitlines()
+    (out / "sweep.csv").write_text(f"{header}\n{row[:row.index('.') + 3]}\n")  # mid-number
+    again = run_sweep("seed000_stop_pid", {"plant.mass": [490000]}, out, workers=1,
+                      plot=False, resume=True)
+    assert again["status"].tolist() == ["ok"]
+    assert again["stop_error_m"][0] == first["stop_error_m"][0]
+    assert again["wall_time_s"][0] != first["wall_time_s"][0]  # run again: its own timing
+
+
+def test_the_digest_follows_the_scenario_content_and_the_point(tmp_path):
+    from cosim.run.sweep import inputs_digest
+
+    path = tmp_path / "s.toml"
+    path.write_text("[simulation]\nstop_time = 1.0\n")
+    first = inputs_digest(str(path), {"controller.N": 3})
+    assert inputs_digest(str(path), {"controller.N": 4}) != first
+    path.write_text("[simulation]\nstop_time = 2.0\n")  # edited: ref_decel 0.5 -> 0.4 alike
+    assert inputs_digest(str(path), {"controller.N": 3}) != first
+
+
+def test_resume_reruns_a_row_of_other_inputs(built_fmus, tmp_path):
+    """A row whose digest is not today's (the scenario was edited since) is run again."""
+    from cosim.run.sweep import run_sweep
+
+    out = tmp_path / "out"
+    first = run_sweep("seed000_stop_pid", {"plant.mass": [490000]}, out, workers=1,
+                      plot=False)
+    rows = pd.read_csv(out / "sweep.csv", keep_default_na=False, dtype=str)
+    rows.loc[0, "stop_error_m"], rows.loc[0, "inputs_digest"] = "9.99", "0" * 16
+    rows.to_csv(out / "sweep.csv", index=False)
+    again = run_sweep("seed000_stop_pid", {"plant.mass": [490000]}, out, workers=1,
+                      plot=False, resume=True)
+    assert again["stop_error_m"][0] == first["stop_error_m"][0]
+    assert again["inputs_digest"][0] == first["inputs_digest"][0]

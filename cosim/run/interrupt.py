@@ -4,7 +4,8 @@ A SIGINT (Ctrl-C) or SIGTERM raised as ``KeyboardInterrupt`` lands inside whatev
 runs at that moment, usually an FMU's ``do_step`` behind the C API, where it becomes an opaque
 "doStep failed" or a traceback. While :func:`guard` is active the signals only set a flag; the
 master checks it between FMU calls (:func:`check`) and stops with :class:`Interrupted`, so the
-partial results are written. A second signal exits at once with status 130.
+partial results are written. A second signal exits at once with status 130, after ending the
+processes registered with :func:`on_exit` (a run's or a sweep's children).
 """
 
 from __future__ import annotations
@@ -12,12 +13,13 @@ from __future__ import annotations
 import os
 import signal
 import threading
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 
 EXIT_INTERRUPTED = 130
 _SIGNALS = (signal.SIGINT, signal.SIGTERM)
 _requested: list[str] = []  # names of the signals received while guarded
+_at_exit: list[Callable[[], None]] = []  # what a second signal does before exiting
 
 
 class Interrupted(Exception):  # noqa: N818 - the user's word for it
@@ -25,7 +27,12 @@ class Interrupted(Exception):  # noqa: N818 - the user's word for it
 
 
 def _handler(signum: int, _frame: object) -> None:
-    if _requested:  # second signal: leave now, without cleaning up
+    if _requested:  # second signal: leave now, ending the children first
+        for end in list(_at_exit):
+            try:
+                end()
+            except Exception:  # noqa: BLE001, S110 - leaving regardless
+                pass
         os.write(2, b"interrupted again: exiting at once\n")
         os._exit(EXIT_INTERRUPTED)
     _requested.append(signal.Signals(signum).name)
@@ -58,9 +65,16 @@ _active: list[bool] = []
 
 
 def reset() -> None:
-    """Forget any guard and signal (a process forked from a guarded one)."""
+    """Forget any guard, signal and exit hook (a process forked from a guarded one)."""
     _active.clear()
     _requested.clear()
+    _at_exit.clear()
+
+
+def on_exit(end: Callable[[], None]) -> None:
+    """Call ``end`` (e.g. kill the child processes) before a second signal exits."""
+    if end not in _at_exit:
+        _at_exit.append(end)
 
 
 def requested() -> str | None:

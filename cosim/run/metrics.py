@@ -270,6 +270,23 @@ def warnings(result: Any) -> list[str]:
         solved = f", {solves} QPs solved" if solves else ""
         found.append(f"{fmu}: infeasible QP at {count} events{first}{solved}; the fallback law "
                      "was applied (the constraints could not be met)")
+    return found + non_finite(frame)
+
+
+def non_finite(frame: Any) -> list[str]:
+    """A warning per recorded real variable that was NaN or infinite: its first time and
+    value (results.csv holds NaN as an empty cell)."""
+    found = []
+    for column in frame.columns[1:]:
+        if frame[column].dtype.kind != "f":
+            continue
+        values = frame[column].to_numpy()
+        bad = np.nonzero(~np.isfinite(values))[0]
+        if bad.size:
+            first = bad[0]
+            found.append(f"{column} is {values[first]} from t = "
+                         f"{float(frame['time'].iloc[first]):g} s on ({bad.size} of "
+                         f"{len(values)} recorded points are NaN or infinite)")
     return found
 
 

@@ -4,35 +4,37 @@ claims' ensembles, ``--perturb`` studies).
 :func:`run_tasks` runs :class:`Task` s (a module-level function and its arguments) and hands
 each result to a callback as it arrives:
 
-* ``workers`` processes of a local pool (default: the CPU count; one worker without an
-  environment change runs in this process), each with one BLAS thread for good
-  (:func:`worker_setup`) and reused for many tasks; on Linux they are forked after
+* ``workers`` child processes (default: the CPU count; :class:`cosim.run.isolation.Child`:
+  in a process group of their own, dying with this process), each with one BLAS thread for
+  good (:func:`worker_setup`) and reused for many tasks; on Linux they are forked after
   ``warm_up`` ran here (the imports and FMU extractions done once), or spawned when the tasks
-  need an environment of their own (``env``, e.g. the plants' reference path);
+  need an environment of their own (``env``, e.g. the plants' reference path); a worker that
+  crashes, or passes a task's ``time_limit``, fails that task (naming the signal and the FMU
+  call) and is replaced;
 * or a Dask distributed cluster (``scheduler``: its address, or ``"local-dask"`` for a
   ``LocalCluster`` of ``workers`` processes with one thread each); ``broadcast`` data are sent
   to the cluster once and passed to every task as the keyword ``broadcast``;
 * SIGINT/SIGTERM (:mod:`cosim.run.interrupt`): no new task starts, running local tasks are
-  signalled (a run stops at its next communication point), what finished is handed on, then
-  :class:`cosim.run.interrupt.Interrupted` is raised;
+  signalled once (a run stops at its next communication point; a worker whose FMU call does
+  not return is ended), what finished is handed on, then
+  :class:`cosim.run.interrupt.Interrupted` is raised; a second signal ends the workers and
+  this process at once;
 * progress on stderr: runs done / total, elapsed, ETA (one line every ~2 s, and the last).
 """
 
 from __future__ import annotations
 
+import functools
 import logging
-import multiprocessing
 import os
-import signal
 import sys
 import time
 from collections.abc import Callable, Hashable, Iterator, Sequence
-from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Any
 
-from cosim.run import interrupt
+from cosim.run import interrupt, isolation
 
 LOCAL_DASK = "local-dask"
 DASK_EXTRA = "dask"
@@ -125,17 +127,6 @@ def worker_setup(env: dict[str, str] | None = None) -> None:
     limit_blas_for_process()
 
 
-def _pool_worker_init(env: dict[str, str] | None) -> None:
-    """A local pool worker, once: ignore SIGINT/SIGTERM between runs (a Ctrl-C reaches the
-    whole process group; during a run :func:`cosim.run.interrupt.guard` handles them and the
-    run stops; a forked worker starts with the parent's guard state, which is cleared), then
-    :func:`worker_setup`."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    signal.signal(signal.SIGTERM, signal.SIG_IGN)
-    interrupt.reset()
-    worker_setup(env)
-
-
 @contextmanager
 def _environment(env: dict[str, str] | None) -> Iterator[None]:
     """``env`` set in this process for the duration (inherited by processes started in it)."""
@@ -156,10 +147,12 @@ def run_tasks(tasks: Sequence[Task], finished: Callable[[Task, Any], None],
               scheduler: str | None = None, label: str = "runs",
               env: dict[str, str] | None = None, warm_up: Callable[[], None] | None = None,
               broadcast: Any = None, quiet: bool = False, what: str = "the runs",
-              progress: Progress | None = None) -> None:
+              progress: Progress | None = None, time_limit: float | None = None) -> None:
     """Run ``tasks``; ``finished(task, result)`` or ``failed(task, error)`` as each ends
-    (a task's exception, or its lost worker, fails that task only). Local tasks start in the
-    given order; a signal stops them (see the module doc) and raises ``Interrupted`` ("<what>
+    (a task's exception, its worker's crash (:class:`cosim.run.isolation.ChildFailed`, naming
+    the signal and the FMU call) or its ``time_limit`` (s, wall clock, local workers;
+    :class:`TimeLimitExceeded`) fails that task only). Local tasks start in the given order; a
+    signal stops them (see the module doc) and raises ``Interrupted`` ("<what>
     interrupted"). ``progress``: a :class:`Progress` shared by several calls (default: one
     over these tasks, labelled ``label``)."""
     if not tasks:
@@ -177,71 +170,86 @@ def run_tasks(tasks: Sequence[Task], finished: Callable[[Task, Any], None],
     with interrupt.guard():
         if scheduler is not None:
             _run_dask(tasks, done, lost, scheduler, workers, env, broadcast, warm_up)
-        elif pool_size(workers, len(tasks)) == 1 and not env:
-            for task in tasks:
-                interrupt.check_between(what)
-                _call(task, broadcast, done, lost)
         else:
-            _run_pool(tasks, done, lost, pool_size(workers, len(tasks)), env, warm_up,
-                      broadcast)
+            _run_local(tasks, done, lost, pool_size(workers, len(tasks)), env, warm_up,
+                       broadcast, time_limit)
         interrupt.check_between(what)
 
 
-def _call(task: Task, broadcast: Any, done: Callable[[Task, Any], None],
-          lost: Callable[[Task, BaseException], None]) -> None:
-    kwargs = {} if broadcast is None else {"broadcast": broadcast}
-    try:
-        result = task.function(*task.args, **kwargs)
-    except interrupt.Interrupted:
-        raise
-    except Exception as err:  # noqa: BLE001 - a failing run fails its task only
-        lost(task, err)
-        return
-    done(task, result)
+class TimeLimitExceeded(Exception):  # noqa: N818 - the user's words
+    """A task ran longer than its time limit and was stopped; the message says where."""
 
 
-def _run_pool(tasks: Sequence[Task], done: Callable[[Task, Any], None],
-              lost: Callable[[Task, BaseException], None], workers: int,
-              env: dict[str, str] | None, warm_up: Callable[[], None] | None,
-              broadcast: Any) -> None:
-    """A local process pool: forked after ``warm_up`` on Linux, spawned (inheriting ``env``)
-    where an environment is given or fork is not available."""
-    fork = (not env and sys.platform == "linux"
-            and "fork" in multiprocessing.get_all_start_methods())
-    if fork and warm_up is not None:
+def _run_local(tasks: Sequence[Task], done: Callable[[Task, Any], None],
+               lost: Callable[[Task, BaseException], None], workers: int,
+               env: dict[str, str] | None, warm_up: Callable[[], None] | None,
+               broadcast: Any, time_limit: float | None) -> None:
+    """``workers`` child processes (:class:`cosim.run.isolation.Child`), each reused for
+    many tasks: forked after ``warm_up`` on Linux, spawned (inheriting ``env``) where an
+    environment is given or fork is not available. A child that crashes or passes
+    ``time_limit`` fails its task and is replaced; on a signal no new task starts, the
+    running ones are passed the signal once (an FMU call that does not return ends its
+    child, :func:`cosim.run.isolation.hung`)."""
+    spawn = bool(env) or not isolation.FORK
+    if not spawn and warm_up is not None:
         import cosim.run.master  # noqa: F401 - the imports, here, once
         import cosim.run.metrics  # noqa: F401
 
         warm_up()
-    ctx = multiprocessing.get_context("fork" if fork else "spawn")
     kwargs = {} if broadcast is None else {"broadcast": broadcast}
-    with _environment(env), ProcessPoolExecutor(max_workers=workers, mp_context=ctx,
-                                                initializer=_pool_worker_init,
-                                                initargs=(env,)) as pool:
-        task_of = {pool.submit(t.function, *t.args, **kwargs): t for t in tasks}
-        pending = set(task_of)
-        stopping = False
-        while pending:
-            ready, pending = wait(pending, timeout=_POLL_S, return_when=FIRST_COMPLETED)
-            for future in ready:
-                if future.cancelled():
-                    continue
-                try:
-                    result = future.result()
-                except Exception as err:  # noqa: BLE001 - a crashed worker fails its task
-                    lost(task_of[future], err)
-                else:
-                    done(task_of[future], result)
-            if interrupt.requested() and not stopping:
-                stopping = True
-                for future in pending:
-                    future.cancel()
-                for proc in list(getattr(pool, "_processes", {}).values()):
-                    try:  # the running tasks stop at their next communication point
-                        os.kill(proc.pid, signal.SIGINT)
-                    except OSError:
-                        pass
-                pending = {f for f in pending if not f.cancelled()}
+    queue = list(tasks)
+    idle: list[isolation.Child] = []
+    running: dict[isolation.Child, Task] = {}
+    with _environment(env):
+        try:
+            while queue or running:
+                name = interrupt.requested()
+                while queue and name is None and len(running) < workers:
+                    child = idle.pop() if idle else isolation.Child(
+                        functools.partial(worker_setup, env), spawn=spawn)
+                    task = queue.pop(0)
+                    running[child.submit(task.function, task.args, kwargs)] = task
+                isolation.wait(list(running), _POLL_S)
+                name = interrupt.requested()
+                for child, task in list(running.items()):
+                    stopped = None if child.poll() else _stopped(child, name, time_limit)
+                    if stopped is not None:
+                        child.kill()
+                    elif child.busy and child.process.is_alive():
+                        continue
+                    del running[child]
+                    try:
+                        if stopped is not None:
+                            raise stopped
+                        result = child.result()
+                    except Exception as err:  # noqa: BLE001 - it fails its task only
+                        lost(task, err)
+                    else:
+                        done(task, result)
+                    if child.process.is_alive():
+                        idle.append(child)
+                if interrupt.requested() is not None:
+                    queue.clear()
+        finally:
+            for child in idle:
+                child.close()
+            for child in running:
+                child.kill()
+
+
+def _stopped(child: isolation.Child, signal_name: str | None,
+             time_limit: float | None) -> BaseException | None:
+    """Why ``child``'s task is to be stopped now (its time limit, or an FMU call that did
+    not return after a signal), else None; a signal is passed on to it once."""
+    if signal_name is not None and child.stuck_since is None:
+        child.interrupt(signal_name)
+    where = child.in_call()
+    if time_limit is not None and time.monotonic() - child.started > time_limit:
+        return TimeLimitExceeded(f"stopped after its time limit of {time_limit:g} s"
+                                 + ("" if where is None else
+                                    ": " + where.replace("|", " in ", 1)))
+    stuck = isolation.hung(child)
+    return None if stuck is None else isolation.ChildFailed(f"{stuck} after {signal_name}")
 
 
 def _run_dask(tasks: Sequence[Task], done: Callable[[Task, Any], None],

@@ -4,9 +4,12 @@
 runs every grid point with :func:`cosim.run.master.run_scenario` in a process pool, and writes
 
 * ``sweep.csv``: one row per run (scenario, the grid values, ``status`` ok / failed /
-  interrupted, ``error``, the summary figures), appended as each run finishes, so a failed
-  point does not stop the others and an interrupted sweep keeps its finished rows; with
-  ``resume`` the points already ``ok`` in an existing ``sweep.csv`` are not run again;
+  interrupted, ``error``, the summary figures, and last ``inputs_digest``: a digest of the
+  scenario file's content and the point's values), appended as each run finishes, so a
+  failed point does not stop the others and an interrupted sweep keeps its finished rows;
+  with ``resume`` the points already ``ok`` in an existing ``sweep.csv`` are not run again
+  when their digest is today's (an edited scenario, or a row torn by a full disk, which
+  lacks its last field, is run again);
 * ``sweep.png``: stop error against the first grid key, one line per scenario, with the
   +-0.5 m stop window, and the command switches / controller executions (a stopping study's
   figure over the horizon, plus the switch counts).
@@ -26,7 +29,7 @@ from typing import Any
 
 import pandas as pd
 
-from cosim.run import interrupt, runner
+from cosim.run import interrupt, isolation, runner
 
 STOP_WINDOW_M = 0.5  # m, the ATO stop window +-50 cm
 
@@ -138,14 +141,27 @@ def _text(value: Any) -> str:
     return str(value)
 
 
+DIGEST = "inputs_digest"
+
+
+def inputs_digest(scenario: str, point: dict[str, Any]) -> str:
+    """What a sweep row depends on, as 16 hex digits (SHA-256): the scenario file's bytes
+    and the point's values as text."""
+    import hashlib
+
+    text = "\0".join(_key(scenario, point)).encode()
+    return hashlib.sha256(Path(scenario).read_bytes() + b"\0" + text).hexdigest()[:16]
+
+
 def _done_rows(csv_path: Path, keys: list[str]) -> list[dict[str, Any]]:
-    """The ``ok`` rows of an earlier ``sweep.csv`` (for ``resume``)."""
+    """The ``ok`` rows of an earlier ``sweep.csv`` (for ``resume``), with their
+    digest."""
     if not csv_path.is_file():
         return []
-    earlier = pd.read_csv(csv_path, keep_default_na=False)
+    earlier = pd.read_csv(csv_path, keep_default_na=False, dtype={DIGEST: str})
     if "status" not in earlier.columns or not set(keys) <= set(earlier.columns):
         raise ValueError(f"{csv_path}: not a sweep over {', '.join(keys)}; cannot resume it")
-    text_columns = {"scenario", "status", "error"}
+    text_columns = {"scenario", "status", "error", DIGEST}
     return [{k: v if k in text_columns else _cell(v) for k, v in row.items()}
             for row in earlier.to_dict("records") if row["status"] == "ok"]
 
@@ -171,7 +187,8 @@ class _RowWriter:
     def __init__(self, path: Path, columns: list[str], rows: list[dict[str, Any]]) -> None:
         self.path, self.columns = path, columns
         self.file = path.open("w", newline="")
-        self.writer = csv.DictWriter(self.file, fieldnames=columns, extrasaction="ignore")
+        self.writer = csv.DictWriter(self.file, fieldnames=columns, extrasaction="ignore",
+                                     lineterminator="\n")
         self.writer.writeheader()
         for row in rows:
             self.add(row)
@@ -188,7 +205,8 @@ def run_sweep(scenario: str | Sequence[str], grid: dict[str, Sequence[Any]],
               out_dir: str | Path | None = None, workers: int | None = None,
               plot: bool = True, resume: bool = False, scheduler: str | None = None,
               shared_fmus: bool = False, plot_format: str = "png",
-              series_labels: dict[str, str] | None = None) -> pd.DataFrame:
+              series_labels: dict[str, str] | None = None,
+              time_limit: float | None = None) -> pd.DataFrame:
     """Run every grid point of every scenario with :func:`cosim.run.runner.run_tasks`: in
     ``workers`` processes (default: CPU count), or on a Dask cluster (``scheduler``: its
     address, or ``"local-dask"`` for a ``LocalCluster`` of ``workers`` processes;
@@ -205,6 +223,8 @@ def run_sweep(scenario: str | Sequence[str], grid: dict[str, Sequence[Any]],
     Each worker runs with one BLAS thread and is reused for many points (the imports and FMU
     extractions happen once per worker). On Dask the FMU files are uploaded to the workers,
     or, with ``shared_fmus``, read by them from the same paths (a shared file system).
+    ``time_limit`` (s, wall clock, local workers): a point running longer is stopped and
+    failed; a point whose worker crashes fails naming the signal and the FMU call.
     """
     from cosim.run.master import ensure_built
     from cosim.run.scenario import find_scenario, load_scenario
@@ -225,12 +245,14 @@ def run_sweep(scenario: str | Sequence[str], grid: dict[str, Sequence[Any]],
     order = {_key(path, point): i for i, (path, point) in enumerate(jobs)}
     out = Path(out_dir) if out_dir is not None else None
     done: list[dict[str, Any]] = []
-    if out is not None and resume:
+    digests = {_key(path, point): inputs_digest(path, point) for path, point in jobs}
+    if out is not None and resume:  # rows of these inputs only, whole (the digest is last)
         done = [r for r in _done_rows(out / "sweep.csv", list(grid))
-                if _key(r["scenario"], {k: r[k] for k in grid}) in order]
+                if r.get(DIGEST) == digests.get(_key(r["scenario"], {k: r[k] for k in grid}))]
     skip = {_key(r["scenario"], {k: r[k] for k in grid}) for r in done}
     todo = [(path, point) for path, point in jobs if _key(path, point) not in skip]
-    columns = ["scenario", *grid, "status", "error", *SUMMARY_COLUMNS, "controller_executions"]
+    columns = ["scenario", *grid, "status", "error", *SUMMARY_COLUMNS, "controller_executions",
+               DIGEST]
     writer = None
     if out is not None:
         out.mkdir(parents=True, exist_ok=True)
@@ -238,12 +260,13 @@ def run_sweep(scenario: str | Sequence[str], grid: dict[str, Sequence[Any]],
     rows = list(done)
 
     def finished(row: dict[str, Any]) -> None:
+        row = {**row, DIGEST: digests.get(_key(row["scenario"], {k: row[k] for k in grid}))}
         rows.append(row)
         if writer is not None:
             writer.add(row)
 
     try:
-        _execute(todo, workers, finished, scheduler, shared_fmus, plot_format)
+        _execute(todo, workers, finished, scheduler, shared_fmus, plot_format, time_limit)
     finally:
         if writer is not None:
             writer.close()
@@ -288,7 +311,8 @@ def warm_up_for(jobs: list[tuple[str, dict[str, Any]]]) -> Callable[[], None]:
 
 def _execute(jobs: list[tuple[str, dict[str, Any]]], workers: int | None,
              finished: Callable[[dict[str, Any]], None], scheduler: str | None = None,
-             shared_fmus: bool = False, plot_format: str = "png") -> None:
+             shared_fmus: bool = False, plot_format: str = "png",
+             time_limit: float | None = None) -> None:
     """Run ``jobs`` (scenario path, grid point) with the shared runner, handing each row to
     ``finished`` as it arrives; on a signal, the running points stop (status
     ``interrupted``) and Interrupted is raised. Along a swept horizon or resolution the cost
@@ -297,15 +321,18 @@ def _execute(jobs: list[tuple[str, dict[str, Any]]], workers: int | None,
 
     def failed(task: runner.Task, err: BaseException) -> None:
         path, point = task.key
+        known = isinstance(err, (isolation.ChildFailed, runner.TimeLimitExceeded))
         finished({"scenario": Path(path).stem, **point, "status": "failed",
-                  "error": f"worker process failed: {type(err).__name__}: {err}"})
+                  "error": str(err) if known else
+                  f"worker process failed: {type(err).__name__}: {err}"})
 
     label = "sweep"
     if scheduler is None:
         tasks = [runner.Task((path, point), _run_point, (path, point))
                  for path, point in reversed(jobs)]
         runner.run_tasks(tasks, lambda _t, row: finished(row), failed, workers,
-                         label=label, warm_up=warm_up_for(jobs), what="the sweep")
+                         label=label, warm_up=warm_up_for(jobs), what="the sweep",
+                         time_limit=time_limit)
         return
     from cosim.run import dask_sweep
 

@@ -20,7 +20,7 @@ from typing import Any
 
 from cosim.fmu import diagnostics as fmu_diagnostics
 from cosim.fmu.state import to_seconds, to_ticks
-from cosim.run import exchange, interrupt
+from cosim.run import exchange, interrupt, isolation
 from cosim.run.dependencies import order_connections
 from cosim.run.master.algorithms import ALGORITHM_CLASSES
 from cosim.run.master.errors import FmuCallError, FmuTerminated, SimulationError
@@ -129,6 +129,7 @@ class Master:
             by_name[comp.name] = unit
             self.units.append(unit)
         self.by_name = by_name
+        isolation.watch(self.units)  # in a run's child process: where a crash happened
         command = sc.summary.get("command")
         self.clock_links = self._clock_links(clock_connections)
         for c in values.connections:
