@@ -486,6 +486,11 @@ def test_every_shipped_statement_names_claims_or_why_not() -> None:
         assert any(st.headline for st in entry.statements), f"{name}: no headline statement"
 
 
+def _no_simulation(*args, **kwargs):
+    """A simulation entry point that fails: module-level, so a worker process can run it."""
+    raise AssertionError("simulated a job the record holds")
+
+
 def test_resume_runs_only_what_the_record_lacks(built_fmus, tmp_path: Path,
                                                  monkeypatch, capsys) -> None:
     """--resume takes every job the folder's record holds (same specification) from it: with
@@ -510,11 +515,8 @@ def test_resume_runs_only_what_the_record_lacks(built_fmus, tmp_path: Path,
     assert {f: (out / f).read_bytes() for f in made} == made
     assert lost in load(out).jobs
 
-    def no_simulation(*args, **kwargs):
-        raise AssertionError("simulated a job the record holds")
-
-    monkeypatch.setattr(rep, "_run_one", no_simulation)
-    monkeypatch.setattr(ensemble, "_run_member", no_simulation)
+    monkeypatch.setattr(rep, "_run_one", _no_simulation)
+    monkeypatch.setattr(ensemble, "_run_member", _no_simulation)
     reproduce(str(path), out, workers=1, seeds=2, echo=False, resume=True)
     assert {f: (out / f).read_bytes() for f in made} == made
     body = gzip.decompress((out / "record" / "record.json.gz").read_bytes())
