@@ -552,3 +552,28 @@ def test_paper_figures_from_their_records_read_as_published(built_fmus, entry_na
     assert fig.bbox.contains(*box.min) and fig.bbox.contains(*box.max)
     assert box.height > 20  # readable entries, not a shrunk legend
     plt.close(fig)
+
+
+def test_ensemble_figure_draws_the_reference_the_members_recorded(built_fmus):
+    """The members' median and band of the measured speed in its colour, solid; the reference
+    (the [summary]'s reference_speed) as its median in solid black where the members recorded
+    it, left out where they did not (a record made before the figure named it)."""
+    import matplotlib.pyplot as plt
+    from matplotlib.colors import to_rgba
+
+    from cosim.run.figures import ensemble_figure_of
+
+    sc = load_scenario("seed003_crh3_lmimpc_eco")
+    spec = {"file": "e.png", "x": "time", "y": ["plant.v", "controller.v_ref"]}
+    members = [_tracking_frame(0.1 * i) for i in range(3)]
+    fig = ensemble_figure_of(spec, {"Eco": members}, {"Eco": sc})
+    speed, reference = fig.axes[0].get_lines()
+    assert speed.get_linestyle() == "-" and to_rgba(speed.get_color()) != (0.0, 0.0, 0.0, 1.0)
+    assert reference.get_linestyle() == "-"
+    assert to_rgba(reference.get_color()) == (0.0, 0.0, 0.0, 1.0)
+    plt.close(fig)
+    fig = ensemble_figure_of(spec, {"Eco": [m.drop(columns="controller.v_ref")
+                                            for m in members]}, {"Eco": sc})
+    [speed] = fig.axes[0].get_lines()
+    assert speed.get_label().startswith("Eco: ")
+    plt.close(fig)

@@ -445,7 +445,8 @@ def draw_ensemble_figure(spec: dict[str, Any], frames: dict[str, list[Any]], pat
 def ensemble_figure_of(spec: dict[str, Any], frames: dict[str, list[Any]],
                        scenarios: dict[str, Any]) -> Any:
     """An overlay figure over an ensemble: per run the median over the members and a 5-95 %
-    band (members sampled on the first member's x grid; x = "time" or a recorded column);
+    band (members sampled on the first member's x grid; x = "time" or a recorded column;
+    a reference column the members did not record and no declared curve gives is left out);
     held signals as steps, the measured medians solid in their colours, the reference as its
     continuous curve (solid, black, :data:`REFERENCE_STYLE`), labels and units from
     the declarations (:func:`series_style`), the legend outside."""
@@ -472,11 +473,14 @@ def ensemble_figure_of(spec: dict[str, Any], frames: dict[str, list[Any]],
             curves = []
             for frame in members_:
                 x = frame["time"] if spec["x"] == "time" else frame[spec["x"]]
-                values = figure_series(frame, spec, y, name)
                 curve = (reference_curve(scenarios.get(name), frame, y) if style["reference"]
                          else None)
-                values = values if curve is None else curve
+                if curve is None and style["reference"] and y not in frame:
+                    break  # a reference the members did not record: left out
+                values = figure_series(frame, spec, y, name) if curve is None else curve
                 curves.append(np.interp(x0, x, values * scale))
+            if len(curves) < len(members_):
+                continue
             stack = np.vstack(curves)
             label = (style["text"] if panels else name if len(ys) == 1
                      else f"{name}: {style['text']}")
