@@ -261,7 +261,7 @@ def test_reproduce_figures_read_as_paper_figures(built_fmus):
     assert not legend.get_window_extent(renderer).overlaps(ax.get_window_extent(renderer))
     assert overlay.bbox.contains(*legend.get_window_extent(renderer).min)
     assert overlay.bbox.contains(*legend.get_window_extent(renderer).max)
-    texts = [t.get_text() for t in legend.get_texts()]
+    texts = [t.get_text().replace("\n", " ") for t in legend.get_texts()]  # wrapped
     ref_text = variable_info(sc, "controller.v_ref")[0]
     assert texts == ["RSMPC", "RSMPC 2", f"reference: {ref_text}"]
     lines = ax.get_lines()
@@ -511,7 +511,7 @@ def test_paper_figures_from_their_records_read_as_published(built_fmus, entry_na
     """The shipped figures drawn from the shipped records: at most MAX_PANELS axes, the runs
     the paper compares overlaid (seed 003's figs. 1-3 on one tracking axes), every measured
     curve solid, a reference drawn in each tracking axes (solid, black), every axis label
-    with a unit in parentheses, the legend inside the figure."""
+    with a unit in parentheses, the legend inside the figure, its lines wrapped."""
     import re
     from pathlib import Path
 
@@ -520,7 +520,7 @@ def test_paper_figures_from_their_records_read_as_published(built_fmus, entry_na
 
     from cosim.reproduce.entry import load_entry
     from cosim.reproduce.run import run_scenarios
-    from cosim.run.figures import MAX_PANELS, figure_of, measured_line
+    from cosim.run.figures import LEGEND_WIDTH, MAX_PANELS, figure_of, measured_line
     from cosim.run.record import load, series_name
 
     entry = load_entry(entry_name)
@@ -551,6 +551,8 @@ def test_paper_figures_from_their_records_read_as_published(built_fmus, entry_na
     box = legends[0].get_window_extent(renderer)
     assert fig.bbox.contains(*box.min) and fig.bbox.contains(*box.max)
     assert box.height > 20  # readable entries, not a shrunk legend
+    assert all(len(line) <= LEGEND_WIDTH for text in legends[0].get_texts()
+               for line in text.get_text().splitlines())  # long descriptions wrap
     plt.close(fig)
 
 

@@ -114,10 +114,18 @@ def legend_outside(ax: Any, handles: list[Any] | None = None,
                    labels: list[str] | None = None) -> Any:
     """The legend right of the axes, where no curve can be under it (inside the figure: the
     constrained layout makes room for it); of ``handles`` and ``labels`` where given, in that
-    order, else of every labelled artist of the axes."""
-    given = (handles, labels) if handles is not None and labels is not None else ()
-    return ax.legend(*given, loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=9,
-                     frameon=False, borderaxespad=0.0)
+    order, else of every labelled artist of the axes; each label wrapped at
+    ``LEGEND_WIDTH`` characters."""
+    import textwrap
+
+    if handles is None or labels is None:
+        handles, labels = ax.get_legend_handles_labels()
+    wrapped = [textwrap.fill(text, LEGEND_WIDTH) for text in labels]
+    return ax.legend(handles, wrapped, loc="upper left", bbox_to_anchor=(1.01, 1.0),
+                     fontsize=9, frameon=False, borderaxespad=0.0)
+
+
+LEGEND_WIDTH = 36  # characters of a legend line: a long declared description wraps
 
 
 MARKERS = ("o", "s", "^", "D", "v", "P", "X", "*")  # per measured series of one axes
