@@ -159,3 +159,22 @@ def test_the_schema_page_documents_every_key() -> None:
         for key in keys:
             assert re.search(rf"^\| `{re.escape(key)}` \| .+ \| .{{6,}} \|$", section,
                              re.M), (heading, key)
+
+
+def test_shipped_line_figures_fit_a_page() -> None:
+    """Every shipped line figure draws at most MAX_PANELS axes (error panels counted), names
+    its references and error among the recorded series it reads, and labels a y axis it names
+    itself with a unit in parentheses."""
+    from cosim.run.figures import MAX_PANELS, panel_count
+
+    for name in entry_names():
+        entry = load_entry(name)
+        for figure in entry.figures:
+            if not figure.line_kind():
+                continue
+            runs = figure.runs or [r.name for r in entry.runs]
+            assert panel_count(figure.spec(), len(runs)) <= MAX_PANELS, (name, figure.file)
+            ys = figure.y if isinstance(figure.y, list) else [figure.y]
+            assert set(figure.reference or []) <= set(ys), (name, figure.file)
+            if figure.ylabel is not None:
+                assert re.search(r"\(\S+\)$", figure.ylabel), (name, figure.file)
