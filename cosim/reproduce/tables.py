@@ -47,8 +47,10 @@ def repeat_spread(summary: dict[str, Any], key: str) -> tuple[float, float, int]
 
 
 def md_row(cells: list[str]) -> str:
-    """A markdown table row; a ``|`` inside a cell (``max |e|``) is escaped."""
-    return "| " + " | ".join(str(c).replace("|", "\\|") for c in cells) + " |"
+    """A markdown table row of one line: a ``|`` inside a cell (``max |e|``) is escaped and a
+    line break (a multi-line TOML string) becomes a space, so the row keeps its cells."""
+    return "| " + " | ".join(" ".join(str(c).replace("|", "\\|").splitlines())
+                             for c in cells) + " |"
 
 
 def fmt(value: Any, decimals: int | None = None) -> str:
@@ -95,10 +97,11 @@ class Cell:
     source: str  # where the paper gives it
     ratio: Ratio | None  # with the metric's ratio_to
     within: bool | None  # inside the band and the tolerance (None: nothing to judge)
-    decimals: int  # the metric's column's fixed notation (:func:`column_decimals`)
     # the printed figure differs on the same run's perturbed floating-point rerun (None: the
     # record has no such rerun of this run)
     rounding_moves: bool | None = None
+    # the decimals of the metric's column (:func:`column_decimals`; None: the value's own)
+    decimals: int | None = None
 
     def csv(self) -> dict[str, Any]:
         """The row of ``table.csv``."""
