@@ -61,8 +61,7 @@ def test_a_paper_page_reads_citation_verdicts_figures_runs_notes(name: str) -> N
     doi = f"https://doi.org/{entry.doi}" if entry.doi else "DOI not given in the paper."
     assert doi in opening
     if entry.claims:
-        verdicts = text[text.index("### Verdicts"):text.index("### ", text.index(
-            "### Verdicts") + 4)]
+        verdicts = re.search(r"^### Verdicts$(.*?)^### ", text, re.M | re.S).group(1)
         assert "**Headline**" in verdicts or not any(s.headline for s in entry.statements)
         assert "#### The paper's statements" in verdicts or not entry.statements
 
