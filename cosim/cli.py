@@ -105,10 +105,11 @@ def _built(path: Path) -> str:
 
 @app.command("list")
 def list_() -> None:
-    """List the FMUs and the shipped scenarios.
+    """List the FMUs, the shipped scenarios and the papers.
 
     A line each: the FMUs this project builds (whether their FMI 2 and FMI 3 builds are in
-    fmus/) and the scenarios in scenarios/ with their descriptions."""
+    fmus/), the scenarios in scenarios/ with their descriptions, and the papers reproduced
+    (scenarios/reproduce/) with the alias `cosim reproduce` also takes."""
     from cosim.fmu.build import catalog
     from cosim.run.scenario import SCENARIO_DIR
 
@@ -135,6 +136,22 @@ def list_() -> None:
             desc = f"[red]invalid TOML: {escape(str(err))}[/]"
         table.add_row(escape(path.stem), desc)
     out.print(table)
+    table = Table(title="Papers (cosim reproduce NAME or ALIAS)", show_edge=False)
+    table.add_column("name")
+    table.add_column("alias")
+    table.add_column("paper")
+    for name, alias, title in paper_names():
+        table.add_row(escape(name), escape(alias), escape(title))
+    out.print(table)
+
+
+def paper_names() -> list[tuple[str, str, str]]:
+    """Each shipped reproduction entry's (file stem, alias, title): the papers a reader
+    names to `cosim reproduce`."""
+    from cosim.reproduce.entry import entry_aliases, entry_names, load_entry
+
+    aliases = {stem: alias for alias, stem in entry_aliases().items()}
+    return [(name, aliases.get(name, ""), load_entry(name).title) for name in entry_names()]
 
 
 SUMMARY_KEYS = ("stop_error_m", "final_speed_mps", "command_switches", "speed_rmse_mps",
@@ -678,7 +695,8 @@ def export(
 @app.command()
 def reproduce(
     name: Annotated[str, typer.Argument(
-        help="entry in scenarios/reproduce/ (seed000, ...) or 'all'")],
+        help="a paper: its entry in scenarios/reproduce/ (seed000, ...), its alias "
+        "(liu2022, ...; `cosim list`) or 'all'")],
     out_dir: Annotated[Path | None, typer.Option("--out", help="output folder "
                                                  "(default runs/reproduce/<name>)")] = None,
     workers: Annotated[int | None, typer.Option(
@@ -710,7 +728,7 @@ def reproduce(
     paper's), the sweeps and the figures, and tests its claims over K seeds (claims.csv,
     claims.md: median [95 % CI], k of K, verdict); 'all' writes one REPRODUCTION.md. With
     --redraw everything after the simulations is made again from the record."""
-    from cosim.reproduce.entry import ReproduceError, entry_names
+    from cosim.reproduce.entry import ReproduceError, entry_names, resolve_name
     from cosim.reproduce.page import redraw_entry, reproduce_all
     from cosim.reproduce.page import reproduce as reproduce_entry
     from cosim.reproduce.run import BUILDS
@@ -728,7 +746,8 @@ def reproduce(
         if out_dir is not None:
             check_destination(out_dir)
         if redraw:
-            names = entry_names() if name == "all" else [name]
+            names = entry_names() if name == "all" else [
+                name if Path(name).is_file() else resolve_name(name)]
             for each in names:
                 path = redraw_entry(each, out_dir if name != "all" or out_dir is None
                                     else out_dir / each, plot_format)
@@ -736,9 +755,8 @@ def reproduce(
             path = reproduce_all(out_dir, workers, seeds, not no_rounding, scheduler,
                                  plot_format, build, resume)
         else:
-            if name not in entry_names() and not Path(name).is_file():
-                raise ReproduceError(f"no reproduction entry {name!r} "
-                                     f"(known: {', '.join(entry_names())}, all)")
+            if not Path(name).is_file():
+                name = resolve_name(name)
             path = reproduce_entry(name, out_dir, workers, seeds, not no_rounding,
                                    scheduler, plot_format, resume=resume, build=build)
     except interrupt.Interrupted as err:

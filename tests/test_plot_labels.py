@@ -330,11 +330,14 @@ def _stopping_frame(offset: float = 0.0):
 
 def test_reproduce_figures_read_as_paper_figures(built_fmus):
     """A reproduce overlay and a panels figure: axes named from the declarations with units
-    (or the entry's own label), no offset notation, the legend outside the axes with the
-    runs' names and declared descriptions (no raw variable names), the reference a dashed
-    continuous curve, the held command as steps, the measured speed as a line."""
+    (or the entry's own label), no offset notation, the legend outside the axes and inside the
+    figure with the runs' names and the reference's declared description (no raw variable
+    names), each run's measured speed solid in its own colour and marker, the reference
+    ([summary] reference_speed) once in the legend, its continuous curve solid, black and
+    thinner, the held command as steps."""
     import matplotlib.pyplot as plt
     import numpy as np
+    from matplotlib.colors import to_rgba
 
     from cosim.run.figures import figure_of
     from cosim.run.results import variable_info
@@ -354,13 +357,20 @@ def test_reproduce_figures_read_as_paper_figures(built_fmus):
     assert ax.get_ylabel().endswith("(km/h)")  # m/s declared, shown in km/h
     legend = ax.get_legend()
     assert not legend.get_window_extent(renderer).overlaps(ax.get_window_extent(renderer))
-    texts = [t.get_text() for t in legend.get_texts()]
-    assert len(texts) == 4 and all(t.startswith(("RSMPC: ", "RSMPC 2: ")) for t in texts)
-    assert not any("plant." in t or "controller." in t for t in texts), texts
+    assert overlay.bbox.contains(*legend.get_window_extent(renderer).min)
+    assert overlay.bbox.contains(*legend.get_window_extent(renderer).max)
+    texts = [t.get_text().replace("\n", " ") for t in legend.get_texts()]  # wrapped
+    ref_text = variable_info(sc, "controller.v_ref")[0]
+    assert texts == ["RSMPC", "RSMPC 2", f"reference: {ref_text}"]
     lines = ax.get_lines()
     speed = [ln for ln in lines if "reference" not in ln.get_label()]
     reference = [ln for ln in lines if "reference" in ln.get_label()]
-    assert len(reference) == 2 and all(ln.get_linestyle() == "--" for ln in reference)
+    assert len(speed) == 2 and len(reference) == 2
+    assert all(ln.get_linestyle() == "-" for ln in speed + reference)
+    assert all(to_rgba(ln.get_color()) == (0.0, 0.0, 0.0, 1.0) for ln in reference)
+    assert len({to_rgba(ln.get_color()) for ln in speed}) == 2
+    assert len({ln.get_marker() for ln in speed}) == 2
+    assert max(ln.get_linewidth() for ln in reference) < min(ln.get_linewidth() for ln in speed)
     assert all(ln.get_drawstyle() == "default" for ln in speed + reference)
     # the held v_ref column replaced by the declared stopping curve at the recorded positions
     s = frames["RSMPC"]["plant.s"].to_numpy()
@@ -386,9 +396,9 @@ def test_reproduce_figures_read_as_paper_figures(built_fmus):
 
 def test_per_unit_panels_name_each_unit_and_keep_coinciding_curves_visible(built_fmus):
     """Seed 001's per-unit figures: every unit's curve labelled by its own declaration (not the
-    train's mean speed, not a raw name), ``y_minus`` said in the label, curves of one panel in
-    distinct line styles (units with equal speed stay visible), the limit band in the legend,
-    a 270 km route drawn in km."""
+    train's mean speed, not a raw name), ``y_minus`` said in the label, curves of one panel
+    solid in distinct colours and markers (units with equal speed stay visible), the limit
+    band in the legend, a 270 km route drawn in km."""
     import matplotlib.pyplot as plt
     import numpy as np
     import pandas as pd
@@ -413,8 +423,10 @@ def test_per_unit_panels_name_each_unit_and_keep_coinciding_curves_visible(built
     labels = [t.get_text() for t in ax.get_legend().get_texts()]
     assert labels[:3] == [f"{x} - {ref_text}" for x in texts]
     assert not any("plant." in x or "controller." in x for x in labels), labels
-    styles = [ln.get_linestyle() for ln in ax.get_lines()[:3]]
-    assert len(set(styles)) == 3
+    units_drawn = ax.get_lines()[:3]
+    assert {ln.get_linestyle() for ln in units_drawn} == {"-"}  # measured: solid
+    assert len({ln.get_color() for ln in units_drawn}) == 3
+    assert len({ln.get_marker() for ln in units_drawn}) == 3
     assert ax.get_xlabel().endswith("(km)") and np.isclose(ax.get_lines()[0].get_xdata()[-1],
                                                            2700.0 * 99 / 1000.0)
     plt.close(fig)
@@ -458,8 +470,8 @@ def _title_clear_of_axes(fig) -> None:
 
 
 def test_tall_panel_figures_keep_the_title_above_the_first_panel():
-    """Ten panels (a tall figure): the suptitle clears the first panel and its title, in the
-    run figure and in the ensemble figure."""
+    """Ten panels (a tall ensemble figure) and the most a run figure draws: the suptitle clears
+    the first panel and its title."""
     import matplotlib.pyplot as plt
     import numpy as np
     import pandas as pd
@@ -467,10 +479,13 @@ def test_tall_panel_figures_keep_the_title_above_the_first_panel():
     from cosim.run.figures import ensemble_figure_of, figure_of
 
     t = np.arange(0.0, 100.0, 0.2)
+    from cosim.run.figures import MAX_PANELS
+
     frames = {f"run {i}": pd.DataFrame({"time": t, "e": np.sin(t)}) for i in range(10)}
     spec = {"file": "e.png", "x": "time", "y": ["e"], "kind": "panels", "ylabel": "e (km/h)",
             "title": "Speed error of each controller (Figs. 9-11, upper plots)"}
-    for fig in (figure_of(spec, frames, {}),
+    most = dict(list(frames.items())[:MAX_PANELS])
+    for fig in (figure_of(spec, most, {}),
                 ensemble_figure_of(spec, {k: [v, v] for k, v in frames.items()}, {})):
         _title_clear_of_axes(fig)
         plt.close(fig)
@@ -493,4 +508,172 @@ def test_sweep_series_are_named_by_their_labels():
     assert texts[0] == "a_rmpc"
     assert texts[1].replace("\n", " ") == long and all(
         len(line) <= 40 for line in texts[1].splitlines())
+    plt.close(fig)
+
+
+def _tracking_frame(offset: float = 0.0):
+    """A synthetic tracking run as seed 003 records it: speed, profile speed and acceleration
+    and the controller's speed error v - v_ref (m/s)."""
+    import numpy as np
+    import pandas as pd
+
+    t = np.arange(0.0, 200.0, 1.0)
+    v_ref = 80.0 * (1.0 - np.exp(-t / 50.0))
+    v = v_ref + 0.2 * np.sin(t / 7.0) + offset
+    return pd.DataFrame({"time": t, "plant.s": np.cumsum(v), "plant.v": v,
+                         "controller.v_ref": v_ref, "controller.speed_error": v - v_ref,
+                         "plant.a": np.gradient(v, t), "controller.a_ref": np.gradient(v_ref, t)})
+
+
+def test_error_panel_under_each_tracking_axes(built_fmus):
+    """``error``: a panel under each tracking axes with the recorded error column, drawn with
+    the tracking axes' factor (km/h) in each run's colour, labelled by its declaration in that
+    unit, the zero error solid black; an overlay is two axes, panels two per run; more than
+    MAX_PANELS axes is an error naming the figure and the count."""
+    import matplotlib.pyplot as plt
+    import numpy as np
+    from matplotlib.colors import to_rgba
+
+    from cosim.run.figures import MAX_PANELS, FigureError, figure_of, panel_count
+
+    sc = load_scenario("seed003_crh3_lmimpc_eco")
+    frames = {"GPC": _tracking_frame(), "LMI MPC": _tracking_frame(0.1)}
+    scenarios = {name: sc for name in frames}
+    spec = {"file": "f.png", "x": "time", "y": ["plant.v", "controller.v_ref"], "y_scale": 3.6,
+            "ylabel": "speed (km/h)", "error": "controller.speed_error", "kind": "overlay"}
+    fig = figure_of(spec, frames, scenarios)
+    track, err = fig.axes
+    assert track.get_ylabel() == "speed (km/h)" and err.get_ylabel() == "v - v_ref (km/h)"
+    assert err.get_xlabel() == "time (s)" and track.get_xlabel() == ""
+    drawn = [ln for ln in err.get_lines() if len(ln.get_xdata()) > 2]  # not the zero line
+    assert len(drawn) == 2
+    for line, name in zip(drawn, frames, strict=True):
+        assert np.allclose(line.get_ydata(), 3.6 * frames[name]["controller.speed_error"])
+        assert line.get_linestyle() == "-"
+    colours = {name: ln.get_color() for ln in track.get_lines()
+               for name in frames if ln.get_label() == name}
+    assert [ln.get_color() for ln in drawn] == [colours[n] for n in frames]
+    zero = [ln for ln in err.get_lines() if ln not in drawn]
+    assert [to_rgba(ln.get_color()) for ln in zero] == [(0.0, 0.0, 0.0, 1.0)]
+    assert err.get_position().height < track.get_position().height
+    plt.close(fig)
+
+    panels = figure_of({**spec, "kind": "panels"}, frames, scenarios)
+    assert len(panels.axes) == panel_count({**spec, "kind": "panels"}, 2) == 4
+    assert [ax.get_ylabel() for ax in panels.axes] == ["speed (km/h)", "v - v_ref (km/h)"] * 2
+    plt.close(panels)
+    three = {f"run {i}": _tracking_frame() for i in range(3)}
+    assert panel_count({**spec, "kind": "panels"}, 3) == 6 > MAX_PANELS
+    with pytest.raises(FigureError, match=r"figure f\.png: 6 panels \(3 runs"):
+        figure_of({**spec, "kind": "panels"}, three, {n: sc for n in three})
+
+
+def test_a_figures_reference_key_marks_a_series_the_summary_does_not(built_fmus):
+    """Seed 003's scenarios declare no ``reference_accel``: ``controller.a_ref`` is a measured
+    curve unless the figure's ``reference`` names it; then it is the reference (solid, black,
+    named "reference: <its description>"). A reference not among y is an error naming the key
+    and value."""
+    import matplotlib.pyplot as plt
+    from matplotlib.colors import to_rgba
+
+    from cosim.run.figures import FigureError, figure_of
+    from cosim.run.results import variable_info
+
+    sc = load_scenario("seed003_crh3_lmimpc_eco")
+    assert "reference_accel" not in sc.summary
+    frames = {"Eco": _tracking_frame()}
+    spec = {"file": "a.png", "x": "time", "y": ["plant.a", "controller.a_ref"]}
+    black = (0.0, 0.0, 0.0, 1.0)
+    plain = figure_of(spec, frames, {"Eco": sc})
+    assert not any(to_rgba(ln.get_color()) == black for ln in plain.axes[0].get_lines())
+    plt.close(plain)
+    marked = figure_of({**spec, "reference": ["controller.a_ref"]}, frames, {"Eco": sc})
+    ax = marked.axes[0]
+    by_label = {ln.get_label(): ln for ln in ax.get_lines()}
+    ref = by_label[f"reference: {variable_info(sc, 'controller.a_ref')[0]}"]
+    assert to_rgba(ref.get_color()) == black and ref.get_linestyle() == "-"
+    assert by_label["Eco"].get_linestyle() == "-" and to_rgba(by_label["Eco"].get_color()) != black
+    assert ax.get_ylabel().endswith("(m/s²)")
+    plt.close(marked)
+    with pytest.raises(FigureError, match=r"figure a\.png: reference = \['plant\.v'\] not among"):
+        figure_of({**spec, "reference": ["plant.v"]}, frames, {"Eco": sc})
+
+
+PAPER_FIGURES = [("seed000", "speed_position.png"), ("seed000", "stop_window.png"),
+                 ("seed001", "fig6_unit_speed_tracking.png"),
+                 ("seed003", "fig1_2_speed_distance.png"), ("seed003", "fig3_acceleration.png")]
+
+
+@pytest.mark.parametrize("entry_name,file", PAPER_FIGURES)
+def test_paper_figures_from_their_records_read_as_published(built_fmus, entry_name, file):
+    """The shipped figures drawn from the shipped records: at most MAX_PANELS axes, the runs
+    the paper compares overlaid (seed 003's figs. 1-3 on one tracking axes), every measured
+    curve solid, a reference drawn in each tracking axes (solid, black), every axis label
+    with a unit in parentheses, the legend inside the figure, its lines wrapped."""
+    import re
+    from pathlib import Path
+
+    import matplotlib.pyplot as plt
+    from matplotlib.colors import to_rgba
+
+    from cosim.reproduce.entry import load_entry
+    from cosim.reproduce.run import run_scenarios
+    from cosim.run.figures import LEGEND_WIDTH, MAX_PANELS, figure_of, measured_line
+    from cosim.run.record import load, series_name
+
+    entry = load_entry(entry_name)
+    figure = next(f for f in entry.figures if f.file == file)
+    record = load(Path(__file__).parents[1] / "docs" / "papers" / entry_name)
+    runs = figure.runs or [r.name for r in entry.runs]
+    frames = {n: record.frame(series_name("run", n)) for n in runs}
+    fig = figure_of(figure.spec(), frames, run_scenarios(entry))
+    fig.canvas.draw()
+    renderer = fig.canvas.get_renderer()
+    tracking = fig.axes[::2] if figure.error else fig.axes
+    assert len(fig.axes) <= MAX_PANELS
+    if entry_name == "seed003":
+        assert len(tracking) == 1 and len([ln for ln in tracking[0].get_lines()
+                                           if measured_line(ln)]) == len(runs)
+    for ax in tracking:
+        measured = [ln for ln in ax.get_lines() if measured_line(ln)]
+        references = [ln for ln in ax.get_lines() if not measured_line(ln)]
+        assert measured and all(ln.get_linestyle() == "-" for ln in measured)
+        assert references and all(ln.get_linestyle() == "-" and to_rgba(ln.get_color())
+                                  == (0.0, 0.0, 0.0, 1.0) for ln in references)
+    unit = re.compile(r"\(\S+\)$")
+    for ax in fig.axes:
+        assert unit.search(ax.get_ylabel()), ax.get_ylabel()
+    assert unit.search(fig.axes[-1].get_xlabel()), fig.axes[-1].get_xlabel()
+    legends = [ax.get_legend() for ax in fig.axes if ax.get_legend() is not None]
+    assert len(legends) == 1
+    box = legends[0].get_window_extent(renderer)
+    assert fig.bbox.contains(*box.min) and fig.bbox.contains(*box.max)
+    assert box.height > 20  # readable entries, not a shrunk legend
+    assert all(len(line) <= LEGEND_WIDTH for text in legends[0].get_texts()
+               for line in text.get_text().splitlines())  # long descriptions wrap
+    plt.close(fig)
+
+
+def test_ensemble_figure_draws_the_reference_the_members_recorded(built_fmus):
+    """The members' median and band of the measured speed in its colour, solid; the reference
+    (the [summary]'s reference_speed) as its median in solid black where the members recorded
+    it, left out where they did not (a record made before the figure named it)."""
+    import matplotlib.pyplot as plt
+    from matplotlib.colors import to_rgba
+
+    from cosim.run.figures import ensemble_figure_of
+
+    sc = load_scenario("seed003_crh3_lmimpc_eco")
+    spec = {"file": "e.png", "x": "time", "y": ["plant.v", "controller.v_ref"]}
+    members = [_tracking_frame(0.1 * i) for i in range(3)]
+    fig = ensemble_figure_of(spec, {"Eco": members}, {"Eco": sc})
+    speed, reference = fig.axes[0].get_lines()
+    assert speed.get_linestyle() == "-" and to_rgba(speed.get_color()) != (0.0, 0.0, 0.0, 1.0)
+    assert reference.get_linestyle() == "-"
+    assert to_rgba(reference.get_color()) == (0.0, 0.0, 0.0, 1.0)
+    plt.close(fig)
+    fig = ensemble_figure_of(spec, {"Eco": [m.drop(columns="controller.v_ref")
+                                            for m in members]}, {"Eco": sc})
+    [speed] = fig.axes[0].get_lines()
+    assert speed.get_label().startswith("Eco: ")
     plt.close(fig)

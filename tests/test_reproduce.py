@@ -85,7 +85,7 @@ def test_reproduce_writes_ours_beside_the_paper(built_fmus, tmp_path: Path) -> N
     ('[[figures]]\nfile = "x.png"\nx = "time"\ny = ["plant.v"]\nkind = "pie"\n', "kind 'pie'"),
     ('[[figures]]\nfile = "x.png"\nx = "time"\ny = ["plant.v[*]"]\ny_reduce = "max"\n',
      "y_reduce 'max'"),
-    ('colour = "red"\n', "unknown key 'colour' (known: build, citation, claims,"),
+    ('colour = "red"\n', "unknown key 'colour' (known: alias, build, citation, claims,"),
     ('tilte = "red"\n', "unknown key 'tilte' (did you mean 'title'?)"),
     ('[[figures]]\nfile = "x.png"\nx = "time"\ny = ["plant.v"]\nxlim = [5, 1]\n',
      "xlim = [5, 1]: expected [low, high] with low < high"),
@@ -238,7 +238,7 @@ def test_speed_classes_figure_writes_table_and_csv(tmp_path: Path) -> None:
     assert (tmp_path / "fig8.png").stat().st_size > 10_000
     csv = pd.read_csv(tmp_path / "fig8.csv")
     assert len(csv) == 6 and set(csv.run) == {"A", "B"}
-    assert "| 30-50 | 0.601 | 0.7 ✗ | 0.7 ✗ |" in text and "Paper: A fails at 30" in text
+    assert "| 30-50 | 0.601 | 0.700 ✗ | 0.700 ✗ |" in text and "Paper: A fails at 30" in text
 
 
 def test_figure_series_mean_of_pattern_minus_reference() -> None:
@@ -562,8 +562,46 @@ def test_single_run_cells_whose_printed_figure_moves_on_the_rerun_are_marked() -
     assert all(moves[first, k] is True for k in keys)
     assert all(moves[second, k] is False for k in keys)
     assert all(moves[r.name, k] is None for r in entry.runs[2:] for k in keys)
-    text = table_markdown(entry, rows)
-    assert "0.1234‡" in text and "‡: the printed figure moves" in text
+    text = table_markdown(entry, rows)  # 0.1234 printed 0.123, the rerun's 0.1236 0.124
+    assert "0.123‡" in text and "‡: the printed figure moves" in text
+
+
+def test_fixed_notation_keeps_three_digits_of_the_smallest_magnitude() -> None:
+    """One fixed notation per set of numbers: whole numbers without decimals, else enough
+    decimals for three significant digits of the smallest non-zero magnitude."""
+    from cosim.run.claims import MAX_DECIMALS, decimals_for, fixed
+
+    assert decimals_for([31130.0, 2.0, 0.0]) == 0
+    assert decimals_for([1.518e-4, 0.004643]) == 6  # 0.000152: 3 digits
+    assert decimals_for([16.13, 107.0]) == 1
+    assert decimals_for([0.5, None, "x", True, float("nan")]) == 3
+    assert decimals_for([1e-30]) == MAX_DECIMALS
+    assert [fixed(v, 6) for v in (1.518e-4, 0.004643)] == ["0.000152", "0.004643"]
+    assert fixed(31130.0, 0) == "31130" and fixed(-1e-9, 3) == "0.000"
+    assert fixed(float("nan"), 2) == "-"
+
+
+def test_single_run_columns_have_one_fixed_notation_each() -> None:
+    """Each metric's column of the single-run table prints every value with the same
+    decimals, never in scientific notation, whatever the magnitudes of the runs."""
+    from cosim.reproduce.tables import table_markdown, table_rows
+
+    entry = load_entry("seed000")
+    keys = [m.key for m in entry.metrics if "." not in m.key]
+    magnitudes = [3.113e4, 1.518e-4, 2.0, 0.5, 12.25]
+    summaries = {run.name: {k: magnitudes[i % len(magnitudes)] * (1 + i) for k in keys}
+                 for i, run in enumerate(entry.runs)}
+    text = table_markdown(entry, table_rows(entry, summaries))
+    lines = [line for line in text.splitlines() if line.startswith("| ")]
+    header = [c.strip() for c in lines[0].strip("|").split("|")]
+    body = [[c.strip() for c in line.strip("|").split("|")] for line in lines[1:]]
+    assert "e+" not in text and "e-" not in text
+    for key in keys:
+        label = next(m.heading for m in entry.metrics if m.key == key)
+        column = [re.match(r"-?\d+(\.\d+)?", row[header.index(label)]) for row in body
+                  if row[0] in summaries]
+        places = {len(m.group(1) or ".") - 1 for m in column}
+        assert places == {6}, (key, column)  # 0.000152: 3 digits of the smallest
 
 
 def test_the_native_build_runs_each_fmu_that_has_a_native_model() -> None:

@@ -159,3 +159,64 @@ def test_the_schema_page_documents_every_key() -> None:
         for key in keys:
             assert re.search(rf"^\| `{re.escape(key)}` \| .+ \| .{{6,}} \|$", section,
                              re.M), (heading, key)
+
+
+def test_shipped_line_figures_fit_a_page() -> None:
+    """Every shipped line figure draws at most MAX_PANELS axes (error panels counted), names
+    its references and error among the recorded series it reads, and labels a y axis it names
+    itself with a unit in parentheses."""
+    from cosim.run.figures import MAX_PANELS, panel_count
+
+    for name in entry_names():
+        entry = load_entry(name)
+        for figure in entry.figures:
+            if not figure.line_kind():
+                continue
+            runs = figure.runs or [r.name for r in entry.runs]
+            assert panel_count(figure.spec(), len(runs)) <= MAX_PANELS, (name, figure.file)
+            ys = figure.y if isinstance(figure.y, list) else [figure.y]
+            assert set(figure.reference or []) <= set(ys), (name, figure.file)
+            if figure.ylabel is not None:
+                assert re.search(r"\(\S+\)$", figure.ylabel), (name, figure.file)
+
+
+def test_an_alias_names_the_same_entry_and_an_unknown_name_gets_the_nearest() -> None:
+    """Every shipped entry has a reader's title (author-year, topic) and a distinct alias;
+    the alias loads the same entry as the file's stem; a near miss is offered."""
+    from cosim.reproduce.entry import entry_aliases, resolve_name
+
+    aliases = entry_aliases()
+    assert sorted(aliases.values()) == entry_names()  # one alias each, none shared
+    for alias, stem in aliases.items():
+        assert resolve_name(alias) == resolve_name(stem) == stem
+        assert load_entry(alias) == load_entry(stem)
+        assert not load_entry(stem).title.startswith("Seed")
+    with pytest.raises(ReproduceError, match=r"no reproduction entry 'liu2021' \(did you mean "
+                                             r"'liu2022'\?\)"):
+        load_entry("liu2021")
+    with pytest.raises(ReproduceError, match="known: seed000.*liu2022"):
+        load_entry("nothing-like-it")
+
+
+def test_a_bad_alias_names_the_file_and_value(tmp_path: Path) -> None:
+    with pytest.raises(ReproduceError, match=r"seed999.toml: alias = 'Liu 2022' must be "
+                                             "lower-case"):
+        _load(tmp_path, 'alias = "Liu 2022"\n' + ENTRY)
+
+
+def test_cosim_reproduce_takes_the_alias_and_suggests_for_a_typo(monkeypatch) -> None:
+    """`cosim reproduce liu2022` and `cosim reproduce seed000` run the same entry; a typo is a
+    one-line error with the nearest name."""
+    from typer.testing import CliRunner
+
+    import cosim.reproduce.page as page
+    from cosim.cli import app
+
+    ran: list[str] = []
+    monkeypatch.setattr(page, "reproduce", lambda name, *a, **k: ran.append(name) or name)
+    runner = CliRunner()
+    for name in ("liu2022", "seed000"):
+        assert runner.invoke(app, ["reproduce", name]).exit_code == 0
+    assert ran == ["seed000", "seed000"]
+    done = runner.invoke(app, ["reproduce", "li2023"])
+    assert done.exit_code == 2 and "did you mean 'li2024'" in " ".join(done.output.split())

@@ -17,6 +17,13 @@ starting at t+h (one step later than our event/fixed masters; our master's ``jac
 reproduces this exactly). Values are recorded with a last-value observer after each step; the
 first row is t = h (libcosim initialises inside its first ``step``).
 
+libcosim ignores FMI 2.0 Enumeration variables (it logs "FMI 2.0 Enumeration variable type not
+supported, variable with name ... will be ignored") and aborts its process on an SSP
+``ssc:Enumeration`` connector ("Don't know how to handle Enumeration type!"); an Integer connector
+or parameter in their place finds no variable. So a scenario or SSP that sets or connects an
+Enumeration is refused before libcosim starts (:func:`enumerations_used`,
+:func:`ssp_enumerations`), naming each such variable.
+
 ``simulate_single`` runs one FMU under ``fmpy.simulate_fmu`` with inputs recorded from one of
 our runs (sample-and-hold, as the master delivered them).
 """
@@ -47,6 +54,51 @@ def _lc():
     from libcosimpy import CosimEnums, CosimExecution, CosimObserver, CosimSlave
 
     return CosimExecution, CosimSlave, CosimObserver, CosimEnums
+
+
+ENUMERATION_REASON = ("libcosim ignores FMI 2.0 Enumeration variables (and aborts on an SSP "
+                      "Enumeration connector), so it cannot set, connect or record them")
+
+
+def enumerations_used(sc: Scenario, descriptions: dict[str, Any]) -> list[str]:
+    """``component.variable`` of every FMI 2.0 Enumeration variable the scenario sets
+    (parameter, ``sample_time`` or constant input) or connects; ``descriptions``: component ->
+    its fmpy model description."""
+    used = []
+    for comp in sc.components.values():
+        named = set(comp.parameters) | set(comp.inputs)
+        named |= {c.src_var for c in sc.connections if c.src == comp.name}
+        named |= {c.dst_var for c in sc.connections if c.dst == comp.name}
+        used += [f"{comp.name}.{v.name}" for v in descriptions[comp.name].modelVariables
+                 if v.type == "Enumeration" and v.name in named]
+    return sorted(used)
+
+
+def ssp_enumerations(ssp_path: str | Path) -> list[str]:
+    """``component.connector`` of every Enumeration connector or parameter value in the SSP's
+    ``SystemStructure.ssd``."""
+    import zipfile
+    from xml.etree.ElementTree import fromstring
+
+    with zipfile.ZipFile(ssp_path) as z:
+        root = fromstring(z.read("SystemStructure.ssd"))
+    found = []
+    for comp in root.iter():
+        if not comp.tag.endswith("}Component"):
+            continue
+        for node in comp.iter():
+            if node.tag.endswith(("}Connector", "}Parameter")) and any(
+                    child.tag.endswith("}Enumeration") for child in node):
+                found.append(f"{comp.get('name')}.{node.get('name')}")
+    return sorted(set(found))
+
+
+def _refuse_enumerations(where: str, names: list[str]) -> None:
+    if names:
+        raise LibcosimError(f"{where}: {', '.join(names)} "
+                            f"{'is an Enumeration' if len(names) == 1 else 'are Enumerations'}; "
+                            f"{ENUMERATION_REASON}: run it with `cosim run` (our master), or "
+                            f"leave these variables out")
 
 
 def _last_error() -> str:
@@ -214,8 +266,10 @@ def run_libcosim(scenario: str | Path | Scenario, overrides: dict[str, Any] | No
 
     sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario, overrides)
     # what cosim run refuses (names, types, ranges) is refused here too, naming the key
-    check_against_fmus(sc, {c.name: read_model_description(str(c.fmu_path))
-                            for c in sc.components.values()})
+    descriptions = {c.name: read_model_description(str(c.fmu_path))
+                    for c in sc.components.values()}
+    check_against_fmus(sc, descriptions)
+    _refuse_enumerations(str(sc.path), enumerations_used(sc, descriptions))
     return _isolated("_run_libcosim", sc, step, record)
 
 
@@ -248,7 +302,9 @@ def _run_libcosim(sc: Scenario, step: float | None, record: list[str] | None) ->
 def run_ssp(ssp_path: str | Path, record: list[str], stop_time: float,
             step: float) -> pd.DataFrame:
     """Run an SSP (e.g. from ``cosim export --ssp``) with libcosim's fixed-step master, in a
-    child process as :func:`run_libcosim`."""
+    child process as :func:`run_libcosim`; an SSP with an Enumeration connector or parameter
+    is refused before libcosim starts (:data:`ENUMERATION_REASON`)."""
+    _refuse_enumerations(str(ssp_path), ssp_enumerations(ssp_path))
     return _isolated("_run_ssp", str(ssp_path), list(record), float(stop_time), float(step))
 
 

@@ -239,8 +239,20 @@ def export_ssp(scenario: str | Path | Scenario, out: str | Path,
 
 def export_notes(sc: Scenario) -> list[str]:
     """What an SSP 1.0 importer will not honour in the exported scenario: each component's
-    ``max_step``, written as an ``org.ato-cosim.timing`` annotation that libcosim ignores."""
-    return [f"[fmus.{c.name}] max_step = {c.max_step:g} s is kept as an SSP annotation "
-            f"({ANNOTATION_TYPE}); SSP 1.0 has no such field and libcosim ignores it: run the "
-            f"SSP with a base step of at most {c.max_step:g} s"
-            for c in sc.components.values() if c.max_step is not None]
+    ``max_step``, written as an ``org.ato-cosim.timing`` annotation that libcosim ignores; and
+    the Enumeration variables the scenario sets or connects, which libcosim cannot run
+    (:data:`cosim.interop.libcosim.ENUMERATION_REASON`)."""
+    from fmpy import read_model_description
+
+    from cosim.interop.libcosim import ENUMERATION_REASON, enumerations_used
+
+    notes = [f"[fmus.{c.name}] max_step = {c.max_step:g} s is kept as an SSP annotation "
+             f"({ANNOTATION_TYPE}); SSP 1.0 has no such field and libcosim ignores it: run the "
+             f"SSP with a base step of at most {c.max_step:g} s"
+             for c in sc.components.values() if c.max_step is not None]
+    enumerations = enumerations_used(sc, {c.name: read_model_description(str(c.fmu_path))
+                                          for c in sc.components.values()})
+    if enumerations:
+        notes.append(f"{', '.join(enumerations)}: written as SSP 1.0 Enumerations (other SSP "
+                     f"importers read them), but {ENUMERATION_REASON}")
+    return notes

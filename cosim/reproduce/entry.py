@@ -54,8 +54,8 @@ REPRODUCE_DIR = SCENARIO_DIR / "reproduce"
 
 __all__ = ["DERIVED_KINDS", "FIGURE_KINDS", "LINE_KINDS", "REPRODUCE_DIR", "Derived", "Entry",
            "Figure", "Metric", "PaperValue", "Ranking", "ReproduceError", "Run", "Statement",
-           "Sweep", "Variant", "check_statements", "check_variants", "entry_names",
-           "load_entry", "slug"]
+           "Sweep", "Variant", "check_statements", "check_variants", "entry_aliases",
+           "entry_names", "load_entry", "resolve_name", "slug"]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -64,9 +64,17 @@ class Entry:
 
     name: str = doc("the entry's name: its file's stem", toml=False)
     path: Path = doc("the entry's file", toml=False)
-    title: str = doc("\"Author et al. (year): ...\", the page's title")
-    citation: str = doc("\"Authors: title. Journal vol(no), year.\", shown under the title",
-                        default="")
+    title: str = doc("the paper's name for a reader: \"Author et al. year, topic\" (the page's "
+                     "title, the site's navigation, `cosim list` and `cosim reproduce`)")
+    alias: str = doc("a short name `cosim reproduce` takes beside the file's stem: the first "
+                     "author's surname and the year, e.g. `liu2022` (lower-case letters, digits "
+                     "and '-')", default="")
+    citation: str = doc("\"Authors. Title. Venue, year, vol(no): pages.\" as the paper gives it, "
+                        "shown under the title", default="")
+    doi: str = doc("the paper's DOI (e.g. `10.16383/j.aas.c200039`); empty: the page says the "
+                   "paper gives none", default="")
+    summary: str = doc("what the paper claims, in one paragraph of prose without our results "
+                       "(the page's first paragraph)", default="")
     notes: str = doc("why our figures differ from the paper's (markdown, the page's last "
                      "section)", default="")
     table: str = doc("the table's file name without suffix (letters, digits, '_', '-')",
@@ -111,6 +119,37 @@ def entry_names() -> list[str]:
     return sorted(p.stem for p in REPRODUCE_DIR.glob("*.toml"))
 
 
+def entry_aliases() -> dict[str, str]:
+    """Each shipped entry's ``alias`` -> its file's stem (entries without one left out)."""
+    out: dict[str, str] = {}
+    for name in entry_names():
+        path = REPRODUCE_DIR / f"{name}.toml"
+        try:
+            alias = tomllib.loads(path.read_text()).get("alias", "")
+        except tomllib.TOMLDecodeError as err:
+            raise ReproduceError(f"{path}: not valid TOML: {err}") from err
+        if alias:
+            out[alias] = name
+    return out
+
+
+def resolve_name(name: str) -> str:
+    """The file stem of the shipped entry called ``name`` (its stem or its ``alias``);
+    :class:`ReproduceError` with the nearest known name otherwise."""
+    import difflib
+
+    names = entry_names()
+    if name in names:
+        return name
+    aliases = entry_aliases()
+    if name in aliases:
+        return aliases[name]
+    known = [*names, *aliases]
+    near = difflib.get_close_matches(name, known, n=1)
+    hint = f" (did you mean {near[0]!r}?)" if near else ""
+    raise ReproduceError(f"no reproduction entry {name!r}{hint}; known: {', '.join(known)}")
+
+
 def slug(name: str) -> str:
     """A run's or sweep's name as a folder name (lower case, runs of other characters as
     ``_``)."""
@@ -121,7 +160,7 @@ def _read(name: str | Path) -> tuple[Path, dict[str, Any]]:
     """The path of entry ``name`` (a name in ``scenarios/reproduce/`` or a path) and its TOML."""
     path = Path(name)
     if not path.suffix:
-        path = REPRODUCE_DIR / f"{name}.toml"
+        path = REPRODUCE_DIR / f"{resolve_name(str(name))}.toml"
     if not path.is_file():
         raise ReproduceError(f"no reproduction entry {str(name)!r} (known: {entry_names()})")
     try:
@@ -150,6 +189,9 @@ def load_entry(name: str | Path) -> Entry:
     if not re.fullmatch(r"[A-Za-z0-9_-]+", top["table"]):
         raise ReproduceError(f"{path}: table = {top['table']!r} must be a file name without "
                              "folder or suffix (letters, digits, '_', '-')")
+    if top["alias"] and not re.fullmatch(r"[a-z0-9-]+", top["alias"]):
+        raise ReproduceError(f"{path}: alias = {top['alias']!r} must be lower-case letters, "
+                             "digits and '-'")
     if top["build"] not in ("native", "python"):
         raise ReproduceError(f"{path}: build = {top['build']!r} must be \"native\" or "
                              "\"python\"")

@@ -51,7 +51,7 @@ def sweep_section(sweep: Sweep, stored: dict[str, Any], out: Path, plot_format: 
         named = {n: v for n, v in named.items() if v} | sweep.labels
         plot_sweep(ok, keys, target / f"sweep.{plot_format}", key_labels(first, keys), named)
     keep = [c for c in ("scenario", *keys, *SWEEP_COLUMNS) if c in frame]
-    return ["", f"### Sweep {sweep.name}", "", frame_markdown(frame[keep]), "",
+    return ["", f"#### Sweep {sweep.name}", "", frame_markdown(frame[keep]), "",
             f"![{sweep.name}]({target.name}/sweep.{plot_format})"]
 
 

@@ -1,8 +1,10 @@
 """What a reproduction makes of its record, and the command.
 
 :func:`evaluate` makes everything after the simulations from the record and the entry alone:
-the page ``table.md`` (the claims' verdicts and table first, then the statements, ours beside
-the paper's, derived figures, rankings, sweeps, figures and notes) with ``table.csv``, and
+the page ``table.md`` (the citation and what the paper claims; the verdicts: the headline, the
+paper's statements, the claims grouped by origin; the paper's figures and sweeps redrawn; the
+single runs, ours beside the paper's, derived figures and rankings; the notes) with
+``table.csv``, and
 ``claims.*`` (:mod:`cosim.run.ensemble`). :func:`redraw_entry` (``--redraw``) is that half
 alone, :func:`reproduce` one entry end to end (:func:`cosim.reproduce.run.simulate`, the
 record, :func:`evaluate`) and :func:`reproduce_all` every entry with one ``REPRODUCTION.md``."""
@@ -113,45 +115,61 @@ def evaluate(entry: Entry, record: Record, out: Path, plot_format: str = "png") 
     ranked = ranking_rows(entry, summaries)
     pd.DataFrame([r.csv() for r in [*rows, *derived, *ranked]]).to_csv(
         out / f"{entry.table}.csv", index=False)
-    source = (f"{entry.citation} " if entry.citation else "") + (
-        f"Reproduced by `cosim reproduce {entry.name}` (entry "
-        f"`scenarios/reproduce/{entry.path.name}`). {builds_sentence(entry, record)}")
     repeated = host_text([record.results[ident] for ident, job in record.jobs.items()
                           if job.kind == "run" and entry_run(entry, job.key[0]).repeat > 1])
-    parts = [f"## {entry.title}", "", source, "", table_markdown(entry, rows)
-             + (f"\n\nRepeated runs {repeated}." if repeated else "")]
+    singles = [table_markdown(entry, rows) + (f"\n\nRepeated runs {repeated}." if repeated
+                                              else "")]
     if derived:
-        parts += ["", derived_markdown(derived)]
+        singles += ["", derived_markdown(derived)]
     if ranked:
-        parts += ["", ranking_markdown(ranked)]
-    for sweep in entry.sweeps:
-        parts += sweep_section(sweep, record.result("sweep", sweep.name), out, plot_format)
+        singles += ["", ranking_markdown(ranked)]
+    drawn: list[str] = []
     scenarios = run_scenarios(entry)
     frames = {name: record.frame(series_name("run", name))
               for name in figure_runs(entry, FIGURE_KINDS)}
     for figure in entry.figures:
-        parts += figure_section(figure, frames, out, plot_format, scenarios)
+        drawn += figure_section(figure, frames, out, plot_format, scenarios)
+    for sweep in entry.sweeps:
+        drawn += sweep_section(sweep, record.result("sweep", sweep.name), out, plot_format)
+    verdicts: list[str] = []
     claim_rows: list[dict[str, Any]] = []
-    if entry.claims:  # the verdicts lead the page; the single runs follow
+    if entry.claims:  # the verdicts lead the page; the figures and single runs follow
         claim_rows, claims_text = write_claims(entry, record, out, plot_format)
-        head = parts[:4]
-        stated = (["", "### Every statement of the paper", "",
-                   statements_markdown(entry.statements, claim_rows)]
-                  if entry.statements else [])
         lead = headline_markdown(entry.statements, claim_rows)
-        parts = [*head, verdict_summary(claim_rows, record.seeds), "",
-                 *([lead, ""] if lead else []), "### Claims", "",
-                 claims_text.rstrip("\n"), *stated, "", "### Single runs", "",
-                 "Each run once, as its scenario is shipped" + "".join(
-                     f", at report seed {v} (`{k}`: member 1 of the claims' disturbance "
-                     "ensemble)" for k, v in table_seed(entry).items())
-                 + " (the claims above are over the seed ensemble).", "", *parts[4:]]
+        stated = (["#### The paper's statements", "",
+                   statements_markdown(entry.statements, claim_rows), ""]
+                  if entry.statements else [])
+        verdicts = ["### Verdicts", "", verdict_summary(claim_rows, record.seeds), "",
+                    *([lead, ""] if lead else []), *stated,
+                    "#### Claims: the paper's, then ours, then the sanity checks", "",
+                    claims_text.rstrip("\n"), ""]
+        singles[:0] = ["Each run once, as its scenario is shipped" + "".join(
+            f", at report seed {v} (`{k}`: member 1 of the claims' disturbance ensemble)"
+            for k, v in table_seed(entry).items())
+            + " (the claims above are over the seed ensemble).", ""]
+    alias = f" (or `cosim reproduce {entry.alias}`)" if entry.alias else ""
+    source = (f"Reproduced by `cosim reproduce {entry.name}`{alias} from the entry "
+              f"`scenarios/reproduce/{entry.path.name}`. {builds_sentence(entry, record)}")
+    parts = [f"## {entry.title}", "", *citation_lines(entry), source.rstrip(), "", *verdicts,
+             *(["### The paper's figures, redrawn", *drawn, ""] if drawn else []),
+             "### Single runs", "", *singles]
     if entry.notes:
         parts += ["", "### Where we differ from the paper, and why", "", entry.notes.strip()]
     table = out / f"{entry.table}.md"
     markdown = "\n".join(parts) + "\n"
     table.write_text(markdown)
     return Page(table, markdown, rows, claim_rows)
+
+
+def citation_lines(entry: Entry) -> list[str]:
+    """The page's opening paragraphs: the citation with its DOI (or that the paper gives
+    none), then what the paper claims (``summary``, as one paragraph)."""
+    doi = (f"DOI [{entry.doi}](https://doi.org/{entry.doi})." if entry.doi
+           else "DOI not given in the paper.")
+    lines = [f"{entry.citation} {doi}" if entry.citation else doi, ""]
+    if entry.summary:
+        lines += [" ".join(entry.summary.split()), ""]
+    return lines
 
 
 def statement_reading(st: Statement, by_id: dict[str, dict[str, Any]]) -> str:
@@ -286,8 +304,8 @@ def redraw_page(name: str, out_dir: str | Path | None = None, plot_format: str =
     except RecordError as err:
         raise ReproduceError(str(err)) from err
     if (entry.path.parent == REPRODUCE_DIR
-            and record.simulation == simulation_digest(name, record.build)):
-        inputs.write_text(entry_digest(name, record.build) + "\n")
+            and record.simulation == simulation_digest(entry.name, record.build)):
+        inputs.write_text(entry_digest(entry.name, record.build) + "\n")
     if echo:
         print(console_text(entry, page.rows, page.claim_rows, out), flush=True)
     return page

@@ -129,6 +129,14 @@ class Figure:
     xlabel: str | None = doc("the x axis label (default: from the declarations)", default=None,
                              kinds=LINE_KINDS)
     runs: list[str] | None = doc("the ``[[runs]]`` drawn (default: all)", default=None)
+    reference: list[str] | None = doc(
+        "the y columns that are references (drawn as their continuous curve, solid black; "
+        "the others are measured, solid in colour), beside those the runs' scenarios declare "
+        "in ``[summary]`` (``reference_speed``, ``reference_accel``)", default=None,
+        kinds=LINE_KINDS)
+    error: str | None = doc(
+        "a recorded error column (e.g. ``controller.speed_error``) drawn, times ``y_scale``, "
+        "in a panel under each tracking axes", default=None, kinds=LINE_KINDS)
     y_reduce: str | None = doc("``mean``: the mean of the columns y matches", default=None,
                                kinds=LINE_KINDS)
     y_minus: str | None = doc("a column: y - this column is drawn (an error)", default=None,

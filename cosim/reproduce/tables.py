@@ -7,13 +7,14 @@ where the entry gives a band or a tolerance (:func:`table_rows`), the derived fi
 from __future__ import annotations
 
 import math
+import numbers
 from dataclasses import dataclass, fields
 from typing import Any
 
 import numpy as np
 
 from cosim.reproduce.entry import Entry
-from cosim.run.claims import number, ratio_ci
+from cosim.run.claims import decimals_for, fixed, ratio_ci
 
 
 def summary_value(summary: dict[str, Any], key: str) -> Any:
@@ -46,19 +47,28 @@ def repeat_spread(summary: dict[str, Any], key: str) -> tuple[float, float, int]
 
 
 def md_row(cells: list[str]) -> str:
-    """A markdown table row; a ``|`` inside a cell (``max |e|``) is escaped."""
-    return "| " + " | ".join(str(c).replace("|", "\\|") for c in cells) + " |"
+    """A markdown table row of one line: a ``|`` inside a cell (``max |e|``) is escaped and a
+    line break (a multi-line TOML string) becomes a space, so the row keeps its cells."""
+    return "| " + " | ".join(" ".join(str(c).replace("|", "\\|").splitlines())
+                             for c in cells) + " |"
 
 
-def fmt(value: Any) -> str:
-    """A value in a markdown cell: "-" for none, yes / no, a float to 4 significant digits."""
+def fmt(value: Any, decimals: int | None = None) -> str:
+    """A value in a markdown cell: "-" for none, yes / no, a number in fixed notation with
+    ``decimals`` decimals (its column's, :func:`cosim.run.claims.decimals_for`; None: its
+    own), a text as it is."""
     if value is None:
         return "-"
     if isinstance(value, bool):
         return "yes" if value else "no"
-    if isinstance(value, float):
-        return number(value)
+    if isinstance(value, numbers.Real):
+        return fixed(float(value), decimals_for([value]) if decimals is None else decimals)
     return str(value)
+
+
+def given(value: float | None) -> str:
+    """A figure of the paper as the entry gives it: positional, its digits (0.9249, 324)."""
+    return "-" if value is None else np.format_float_positional(value, trim="-")
 
 
 @dataclass(frozen=True)
@@ -90,6 +100,8 @@ class Cell:
     # the printed figure differs on the same run's perturbed floating-point rerun (None: the
     # record has no such rerun of this run)
     rounding_moves: bool | None = None
+    # the decimals of the metric's column (:func:`column_decimals`; None: the value's own)
+    decimals: int | None = None
 
     def csv(self) -> dict[str, Any]:
         """The row of ``table.csv``."""
@@ -160,9 +172,11 @@ def table_rows(entry: Entry, summaries: dict[str, dict[str, Any]],
     perturbed = perturbed or {}
     refs = {(r.run, r.metric): r for r in entry.paper}
     rows = []
+    decimals = {m.key: column_decimals(entry, summaries, m.key) for m in entry.metrics}
     for run in entry.runs:
         for metric in entry.metrics:
             ours = summary_value(summaries[run.name], metric.key)
+            places = decimals[metric.key]
             ref = refs.get((run.name, metric.key))
             value = ref.value if ref is not None else None
             band = ref.band if ref is not None else None
@@ -178,12 +192,22 @@ def table_rows(entry: Entry, summaries: dict[str, dict[str, Any]],
                              repeats=spread[2] if spread else 1, paper=value,
                              paper_range=band, tolerance=tolerance,
                              source=ref.source if ref is not None else "", ratio=ratio,
-                             within=_within(ours, band, value, tolerance),
+                             within=_within(ours, band, value, tolerance), decimals=places,
                              rounding_moves=(
                                  None if run.name not in perturbed or spread else
-                                 any(fmt(summary_value(s, metric.key)) != fmt(ours)
-                                     for s in perturbed[run.name]))))
+                                 any(fmt(summary_value(s, metric.key), places)
+                                     != fmt(ours, places) for s in perturbed[run.name]))))
     return rows
+
+
+def column_decimals(entry: Entry, summaries: dict[str, dict[str, Any]], key: str) -> int:
+    """The fixed notation of metric ``key``'s column (:func:`cosim.run.claims.decimals_for`
+    of every run's value and repetitions)."""
+    values: list[Any] = []
+    for run in entry.runs:
+        values.append(summary_value(summaries[run.name], key))
+        values += repeat_values(summaries[run.name], key) or []
+    return decimals_for(values)
 
 
 def _ratio(summaries: dict[str, dict[str, Any]], refs: dict[tuple[str, str], Any], run: str,
@@ -256,11 +280,11 @@ def _mark(within: bool | None) -> str:
 
 def _given(paper: float | None, band: list[float] | None) -> str:
     """The paper's figure: its value, its band, or both."""
-    given = fmt(paper)
+    shown = given(paper)
     if band is not None:
-        text = f"in [{fmt(band[0])}, {fmt(band[1])}]"
-        given = text if paper is None else f"{given} ({text})"
-    return given
+        text = f"in [{given(band[0])}, {given(band[1])}]"
+        shown = text if paper is None else f"{shown} ({text})"
+    return shown
 
 
 def ranking_markdown(rows: list[RankingRow]) -> str:
@@ -276,8 +300,9 @@ def ranking_markdown(rows: list[RankingRow]) -> str:
 def derived_markdown(rows: list[DerivedRow]) -> str:
     """The derived figures below the table: ours beside the paper's."""
     lines = ["| derived figure | of | ours | paper | source |", "| --- | --- | --- | --- | --- |"]
+    places = decimals_for(r.ours for r in rows)
     for r in rows:
-        lines.append(md_row([f"{r.run} ({r.metric})", r.of, fmt(r.ours) + _mark(r.within),
+        lines.append(md_row([f"{r.run} ({r.metric})", r.of, fmt(r.ours, places) + _mark(r.within),
                              _given(r.paper, r.paper_range), r.source]))
     return "\n".join(lines)
 
@@ -296,19 +321,23 @@ def table_markdown(entry: Entry, rows: list[Cell]) -> str:
     for metric in entry.metrics:
         label = metric.heading
         ours, paper, ratio, paper_ratio = [], [], [], []
-        for name in runs:
-            r = by[name, metric.key]
-            value = fmt(r.ours)
+        cells = [by[name, metric.key] for name in runs]
+        ratios = [r.ratio for r in cells if r.ratio is not None]
+        places = decimals_for(v for q in ratios for v in (q.value, q.ci_low, q.ci_high))
+        paper_places = decimals_for(q.paper for q in ratios)
+        for r in cells:
+            value = fmt(r.ours, r.decimals)
             if r.ours_min is not None:
-                value = f"{value} [{fmt(r.ours_min)}, {fmt(r.ours_max)}]"
+                value = f"{value} [{fmt(r.ours_min, r.decimals)}, {fmt(r.ours_max, r.decimals)}]"
             ours.append(value + ("‡" if r.rounding_moves else "") + _mark(r.within))
             paper.append(_given(r.paper, r.paper_range))
             if r.ratio is not None:
-                text = fmt(r.ratio.value)
+                text = fmt(r.ratio.value, places)
                 if r.ratio.ci_low is not None:
-                    text = f"{text} ({fmt(r.ratio.ci_low)}-{fmt(r.ratio.ci_high)})"
+                    text = (f"{text} ({fmt(r.ratio.ci_low, places)}-"
+                            f"{fmt(r.ratio.ci_high, places)})")
                 ratio.append(text)
-                paper_ratio.append(fmt(r.ratio.paper))
+                paper_ratio.append(fmt(r.ratio.paper, paper_places))
         columns = [(label, ours)]
         if any(c != "-" for c in paper):
             columns.append(("paper", paper))
@@ -351,7 +380,8 @@ def table_markdown(entry: Entry, rows: list[Cell]) -> str:
 def frame_markdown(frame: Any) -> str:
     """A data frame as a markdown table."""
     cols = list(frame.columns)
+    places = {c: decimals_for(frame[c]) for c in cols}
     lines = [md_row(cols), "|" + " --- |" * len(cols)]
     for _, row in frame.iterrows():
-        lines.append(md_row([fmt(row[c]) for c in cols]))
+        lines.append(md_row([fmt(row[c], places[c]) for c in cols]))
     return "\n".join(lines)

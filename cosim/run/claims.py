@@ -50,7 +50,9 @@ from __future__ import annotations
 
 import itertools
 import math
+import numbers
 import re
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -646,27 +648,59 @@ def with_rounding(main: dict[str, Any], perturbed: list[dict[str, Any]] | None
     return out
 
 
-def number(value: float, digits: int = 4) -> str:
-    """``value`` to ``digits`` significant digits, positional between 1e-3 and 1e7 (31130,
-    not 3.113e+04), scientific outside; ``-`` for NaN."""
+SIGNIFICANT = 3  # significant digits a fixed notation gives the smallest non-zero magnitude
+MAX_DECIMALS = 9  # the most decimals a fixed notation shows (below: zero)
+
+
+def _finite(values: Iterable[Any]) -> list[float]:
+    """The finite numbers (not booleans) among ``values``."""
+    return [float(v) for v in values if isinstance(v, numbers.Real) and not isinstance(v, bool)
+            and math.isfinite(v)]
+
+
+def decimals_for(values: Iterable[Any], significant: int = SIGNIFICANT) -> int:
+    """The decimals of one fixed notation for ``values`` (a table's column, or one claim's
+    median, CI and worst member): none when every finite value is a whole number, else enough
+    for ``significant`` digits of the smallest non-zero magnitude, at most
+    :data:`MAX_DECIMALS`. Non-numbers are left out."""
+    finite = _finite(values)
+    nonzero = [abs(v) for v in finite if v != 0.0]
+    if not nonzero or all(v.is_integer() for v in finite):
+        return 0
+    return min(MAX_DECIMALS, max(0, significant - 1 - math.floor(math.log10(min(nonzero)))))
+
+
+def fixed(value: float, decimals: int) -> str:
+    """``value`` in fixed notation with ``decimals`` decimals (31130, 0.000152; never
+    3.113e+04): ``-`` for NaN, a zero without its sign."""
     if math.isnan(value):
         return "-"
-    if value == 0.0 or 1e-3 <= abs(value) < 1e7:
-        return np.format_float_positional(value, precision=digits, unique=False,
-                                          fractional=False, trim="-")
-    return f"{value:.{digits - 1}e}"
+    if math.isinf(value):
+        return "inf" if value > 0 else "-inf"
+    text = f"{value:.{decimals}f}"
+    return text.lstrip("-") if float(text) == 0.0 else text
+
+
+def number(value: float) -> str:
+    """One number alone in fixed notation (:func:`fixed` at :func:`decimals_for` of it)."""
+    return fixed(value, decimals_for([value]))
 
 
 def ours_text(row: dict[str, Any]) -> str:
-    """``median [low, high]`` of the tested quantity (``-`` where unknown); for a universal
-    claim the worst member too."""
+    """``median [low, high]`` of the tested quantity in one fixed notation (:func:`fixed`;
+    ``-`` where unknown); for a universal claim the worst member too."""
+    worst = row.get("worst", math.nan) if row.get("quantifier") == "every" else None
+    shown = [row["median"], row["ci_low"], row["ci_high"], worst]
+    decimals = decimals_for(shown)
+
     def f(v: float | None) -> str:
-        return "-" if v is None else number(float(v))
+        return "-" if v is None else fixed(float(v), decimals)
     text = f"{f(row['median'])} [{f(row['ci_low'])}, {f(row['ci_high'])}]"
-    if row.get("quantifier") == "every":
-        text += f", worst {f(row.get('worst', math.nan))}"
+    if worst is not None:
+        text += f", worst {f(worst)}"
     b = row.get("b_median")
     if row.get("kind") in ("less", "greater") and b and math.isfinite(b) and not math.isnan(
             row["median"]):  # the effect's size: "no effect" and "undecided" look apart
-        text += f" ({100.0 * row['median'] / abs(b):+.2g} % of B)"
+        share = 100.0 * row["median"] / abs(b)
+        text += f" ({'+' if share > 0 else ''}{fixed(share, decimals_for([share], 2))} % of B)"
     return f"{text} ({row['note']})" if row.get("note") else text

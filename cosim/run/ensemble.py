@@ -37,6 +37,7 @@ import numpy as np
 
 from cosim.run.claims import (
     ALPHA,
+    ORIGINS,
     ROUNDING_RELATIVE,
     Claim,
     adjust,
@@ -313,8 +314,9 @@ def evaluate(entry: Entry, summaries: dict[Any, dict[str, Any] | None], k: int,
 
 def variants_markdown(entry: Entry, rows: list[dict[str, Any]], var_rows: list[dict[str, Any]]
                       ) -> str:
-    """Each claim's verdict as written and under every variant (a column each; "=": the
-    variant replaces none of the claim's runs), then what each variant replaces."""
+    """Each claim's verdict as written and under every variant (a column each, the claims in
+    the order of :func:`by_origin`; "=": the variant replaces none of the claim's runs), then
+    what each variant replaces."""
     from cosim.reproduce.tables import md_row
 
     names = [v.name for v in entry.variants]
@@ -327,7 +329,7 @@ def variants_markdown(entry: Entry, rows: list[dict[str, Any]], var_rows: list[d
         return f"{_shown(r)}{flag} ({r['k']}/{r['K']})"
 
     lines = [md_row(["claim", "main", *names]), "|" + " --- |" * (2 + len(names))]
-    for r in rows:
+    for r in by_origin(rows):
         lines.append(md_row([r["id"], cell(r), *(cell(got.get((n, r["id"]))) for n in names)]))
     lines += ["", "Verdict (k of K on the claimed side) of every claim with the runs of each "
               "variant in place of those it replaces; (r): rounding-sensitive. The cells of "
@@ -371,19 +373,32 @@ def rounding_text(entry: Entry, build: str = "python") -> str:
     return "; ".join(f"path {i}: {text}" for i, text in enumerate(paths, 1))
 
 
+CLAIMS_HEADER = ("claim", "verdict", "k of K", "ours: median [95 % CI]", "paper", "source",
+                 "rounding-robust")
+
+
+def by_origin(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """The claims' rows grouped by origin (the paper's, ours, the sanity checks: the order of
+    :data:`cosim.run.claims.ORIGINS`), each group in the entry's order."""
+    return sorted(rows, key=lambda r: ORIGINS.index(r.get("origin", "paper")))
+
+
 def claims_markdown(rows: list[dict[str, Any]], k: int, rounding: str = "",
-                    host: str = "") -> str:
-    """The claims table: each claim with its verdict first (adjusted for multiplicity, the raw
-    one where they differ), k of K, ours, the paper's figure and source; then the counts per
-    origin and what the columns mean (``rounding``: the perturbed paths in words,
-    :func:`rounding_text`; ``host``: where the repeat claims were measured,
-    :func:`host_text`)."""
+                    host: str = "", headings: dict[str, str] | None = None) -> str:
+    """The claims table: each claim (the paper's first, then ours, then the sanity checks:
+    :func:`by_origin`) with its verdict first (adjusted for multiplicity, the raw one where
+    they differ), k of K, ours (after the metric's heading with its unit where ``headings``,
+    metric key -> the entry's ``[[metrics]]`` heading, has it), the paper's figure and
+    source; then the counts per origin and what the columns mean (``rounding``: the
+    perturbed paths in words, :func:`rounding_text`; ``host``: where the repeat claims were
+    measured, :func:`host_text`)."""
     from cosim.reproduce.tables import md_row
 
-    lines = [md_row(["claim", "verdict", "k of K", "ours: median [95 % CI]", "paper", "source",
-                   "rounding-robust"]), "|" + " --- |" * 7]
-    for r in rows:
-        what = {"less": "A - B", "greater": "A - B"}.get(r["kind"], r["metric"])
+    headings = headings or {}
+    lines = [md_row(list(CLAIMS_HEADER)), "|" + " --- |" * len(CLAIMS_HEADER)]
+    for r in by_origin(rows):
+        heading = headings.get(r["metric"], r["metric"])
+        what = f"A - B, {heading}" if r["kind"] in ("less", "greater") else heading
         robust = ("n/a" if r["ensemble"] == "repeat" else "-" if r["rounding_robust"] is None
                   else "yes" if r["rounding_robust"] else "no")
         quant = r.get("quantifier", "typical")
@@ -538,7 +553,7 @@ def write_claims(entry: Entry, record: Record, out: Path, plot_format: str = "pn
     host = host_text([record.results[ident] for ident, job in record.jobs.items()
                       if job.kind == "member" and job.key[1] == "repeat"])
     text = claims_markdown(rows, k, rounding_text(entry, record.build) if rounding else "",
-                           host) + "\n"
+                           host, {m.key: m.heading for m in entry.metrics}) + "\n"
     if entry.variants:
         var_rows = evaluate(entry, summaries, k, rounding, variants=True)
         pd.DataFrame(var_rows).to_csv(out / "variants.csv", index=False)

@@ -1,7 +1,8 @@
 """Every figure of a reproduction drawn from recorded series: the runs' overlays and panels,
 the ensembles' medians and bands, and the helpers they share (labels and units from the
-declarations, drawing styles, legends outside the axes). It imports none of the runners; the
-runners and :mod:`cosim.reproduce` import it. Figures are matplotlib figures saved at
+declarations, the roles and drawing styles of measured and reference curves, legends
+right of the axes). It imports none of the runners; the runners and :mod:`cosim.reproduce`
+import it. Figures are matplotlib figures saved at
 :data:`cosim.run.results.PLOT_DPI` (png), or as svg / pdf by the file's suffix.
 """
 
@@ -33,18 +34,22 @@ def draw_figure(spec: dict[str, Any], frames: dict[str, Any], path: Path,
     plt.close(fig)
 
 
-def series_style(scenario: Any, ref: str) -> dict[str, Any]:
-    """How a figure draws the column ``ref`` of a run of ``scenario``: the scenario's
-    reference (``[summary]`` ``reference_speed`` or ``reference_accel``) as a continuous
-    dashed curve, an output of a sampled or self-triggered FMU (held between its events) as
-    steps, anything else (the plant's continuous states) as a line; with the legend text from
-    the declaration (its description)."""
+def series_style(scenario: Any, ref: str, references: list[str] | tuple[str, ...] = ()
+                 ) -> dict[str, Any]:
+    """How a figure draws the column ``ref`` of a run of ``scenario``: a reference (one of the
+    figure's ``references``, or the scenario's ``[summary]`` ``reference_speed`` or
+    ``reference_accel``) as its continuous curve (:data:`REFERENCE_STYLE`), an output of a
+    sampled or self-triggered FMU (held between its events) as steps, anything else (the
+    plant's continuous states) as a line; with the legend text from the declaration (its
+    description)."""
     from cosim.run.results import _held, variable_info
 
     if scenario is None:
-        return {"drawstyle": "default", "text": ref, "reference": False}
+        return {"drawstyle": "default", "text": f"reference: {ref}" if ref in references
+                else ref, "reference": ref in references}
     summary = scenario.summary
-    reference = ref in (summary.get("reference_speed"), summary.get("reference_accel"))
+    reference = ref in (*references, summary.get("reference_speed"),
+                        summary.get("reference_accel"))
     text = variable_info(scenario, ref)[0]
     if reference:
         return {"drawstyle": "default", "text": f"reference: {text}", "reference": True}
@@ -105,13 +110,32 @@ def plain_axes(ax: Any) -> None:
             ax.ticklabel_format(axis=axis, useOffset=False, style="plain")
 
 
-def legend_outside(ax: Any) -> Any:
-    """The legend right of the axes, where no curve can be under it."""
-    return ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=9, frameon=False,
-                     borderaxespad=0.0)
+def legend_outside(ax: Any, handles: list[Any] | None = None,
+                   labels: list[str] | None = None) -> Any:
+    """The legend right of the axes, where no curve can be under it (inside the figure: the
+    constrained layout makes room for it); of ``handles`` and ``labels`` where given, in that
+    order, else of every labelled artist of the axes; each label wrapped at
+    ``LEGEND_WIDTH`` characters."""
+    import textwrap
+
+    if handles is None or labels is None:
+        handles, labels = ax.get_legend_handles_labels()
+    wrapped = [textwrap.fill(text, LEGEND_WIDTH) for text in labels]
+    return ax.legend(handles, wrapped, loc="upper left", bbox_to_anchor=(1.01, 1.0),
+                     fontsize=9, frameon=False, borderaxespad=0.0)
 
 
-LINESTYLES = ("-", "--", ":", "-.")  # per series of one axes: coinciding curves stay visible
+LEGEND_WIDTH = 36  # characters of a legend line: a long declared description wraps
+
+
+MARKERS = ("o", "s", "^", "D", "v", "P", "X", "*")  # per measured series of one axes
+MEASURED_WIDTH = 1.4  # measured curves: solid, coloured, a marker every MARKER_EVERY
+REFERENCE_WIDTH = 0.8  # reference curves: solid, black, thinner, drawn above the measured
+REFERENCE_COLOUR = "black"
+MARKER_EVERY = 0.12  # the markers' spacing along a curve, a fraction of the axes' diagonal
+MAX_PANELS = 5  # axes of one figure (error panels included): a printed page's height
+PANEL_HEIGHT = 2.2  # inches of a tracking or panels axes
+ERROR_HEIGHT = 1.3  # inches of an error panel
 KM_FROM_M = 10_000.0  # a position axis spanning at least this (m) is drawn in km
 
 
@@ -146,14 +170,73 @@ def series_label(spec: dict[str, Any], scenario: Any, y: str, style: dict[str, A
     return text
 
 
+def measured_style(k: int) -> dict[str, Any]:
+    """How the ``k``-th measured series of one axes is drawn: solid, in the ``k``-th colour of
+    the colour cycle, with the ``k``-th marker every ``MARKER_EVERY`` of the axes' diagonal
+    (staggered, so curves that coincide, such as cars with the same force, stay visible and
+    tell apart in grey print)."""
+    return {"color": f"C{k % 10}", "linestyle": "-", "linewidth": MEASURED_WIDTH,
+            "marker": MARKERS[k % len(MARKERS)], "markersize": 4.0,
+            "markevery": ((k * MARKER_EVERY / 7.0) % MARKER_EVERY, MARKER_EVERY), "zorder": 2}
+
+
+REFERENCE_STYLE: dict[str, Any] = {"color": REFERENCE_COLOUR, "linestyle": "-",
+                                   "linewidth": REFERENCE_WIDTH, "zorder": 3}
+
+
+def measured_line(artist: Any) -> bool:
+    """Whether a legend's ``artist`` is a measured curve (drawn with markers,
+    :func:`measured_style`); the legend lists those first."""
+    return getattr(artist, "get_marker", lambda: None)() not in (None, "None", "")
+
+
+def first_scenario(names: list[str], scenarios: dict[str, Any]) -> Any:
+    """The scenario of the first run of ``names`` (None without runs or declarations)."""
+    return scenarios.get(names[0]) if names else None
+
+
+def panel_count(spec: dict[str, Any], runs: int) -> int:
+    """The axes a line figure draws for ``runs`` runs: one (``overlay``) or one per run
+    (``panels``), each with an error panel under it where ``error`` is given."""
+    per_run = 2 if spec.get("error") else 1
+    return per_run * (runs if spec.get("kind", "overlay") == "panels" else 1)
+
+
+def error_label(spec: dict[str, Any], scenario: Any, ylabel: str) -> str:
+    """The error panel's y label: the ``error`` column's declared description in the unit of
+    the tracking axes' label ``ylabel`` (the error is drawn with the same factor)."""
+    from cosim.run.results import variable_info
+
+    text = variable_info(scenario, spec["error"])[0] if scenario is not None else spec["error"]
+    unit = ylabel.rsplit("(", 1)[1].rstrip(")") if ylabel.endswith(")") and "(" in ylabel \
+        else None
+    return f"{text} ({unit})" if unit else text
+
+
+def legend_once(label: str, seen: set[str], role: str | None = None) -> str:
+    """``label`` the first time a figure's legend would show its ``role`` (default: the label
+    itself), else hidden (``_``-prefixed): one legend entry for the references (and limits)
+    of several runs."""
+    key = label if role is None else role
+    if key in seen:
+        return f"_{label}"
+    seen.add(key)
+    return label
+
+
 def figure_of(spec: dict[str, Any], frames: dict[str, Any], scenarios: dict[str, Any]) -> Any:
     """One ``[[figures]]`` figure (kind ``overlay``: every run on one axes; ``panels``: one
-    axes per run) from the runs' recorded frames; ``scenarios``: run name -> its loaded
-    scenario (the declarations behind labels and drawing styles, :func:`series_style`).
+    axes per run), with an error panel (the ``error`` column, zero drawn as its reference)
+    under each tracking axes where ``error`` is given, from the runs' recorded frames;
+    ``scenarios``: run name -> its loaded scenario (the declarations behind labels, roles and
+    drawing styles, :func:`series_style`).
 
-    The series of one axes cycle through ``LINESTYLES``, so curves that coincide (cars with the
-    same force) stay distinguishable; a legend is drawn where an axes has more than one
-    labelled curve (a single-curve panel is named by its title and y label)."""
+    A series is a reference where its scenario's ``[summary]`` declares it so
+    (``reference_speed`` / ``reference_accel``): drawn as its continuous curve, solid, black
+    and thinner, above the measured ones; every other series is measured: solid, in its own
+    colour and marker (:func:`measured_style`; the runs of an overlay, or the series of a
+    panel, each their own). At most ``MAX_PANELS`` axes (:func:`panel_count`). The legend sits
+    right of the first axes, inside the figure."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -162,44 +245,92 @@ def figure_of(spec: dict[str, Any], frames: dict[str, Any], scenarios: dict[str,
     names = list(frames)
     ys = spec["y"] if isinstance(spec["y"], list) else [spec["y"]]
     panels = spec.get("kind", "overlay") == "panels"
-    fig, axes = plt.subplots(len(names) if panels else 1, 1, squeeze=False, sharex=True,
-                             figsize=(9, 2.6 * len(names) if panels else 4.5),
-                             layout="constrained")  # room for the title and outside legends
-    first = scenarios.get(names[0]) if names else None
-    xlabel, xfactor = x_axis(spec, first, frames)
+    error = spec.get("error")
+    references = list(spec.get("reference", []))
+    if unknown := [r for r in references if r not in ys]:
+        raise FigureError(f"figure {spec['file']}: reference = {unknown!r} not among its y "
+                          f"{ys!r}")
+    count = panel_count(spec, len(names))
+    measured = max(1, len([y for y in ys if y not in references and (
+        "y_reduce" in spec or not series_style(first_scenario(names, scenarios), y,
+                                               references)["reference"])]))
+    if count > MAX_PANELS:
+        raise FigureError(
+            f"figure {spec['file']}: {count} panels ({len(names)} runs, kind "
+            f"{spec.get('kind', 'overlay')!r}{', each with an error panel' if error else ''}); "
+            f"at most {MAX_PANELS} fit a page: name fewer runs, or draw kind = \"overlay\"")
+    heights = [PANEL_HEIGHT, ERROR_HEIGHT] * (count // 2) if error else [PANEL_HEIGHT] * count
+    fig, axes = plt.subplots(count, 1, squeeze=False, sharex=True,
+                             figsize=(9, sum(heights) + 0.8), height_ratios=heights,
+                             layout="constrained")  # room for the title and the legend
+    per_run = 2 if error else 1
+    xlabel, xfactor = x_axis(spec, first_scenario(names, scenarios), frames)
+    seen: set[str] = set()
     for i, name in enumerate(names):
         frame, scenario = frames[name], scenarios.get(name)
-        ax = axes[i if panels else 0][0]
+        row = i * per_run if panels else 0
+        ax = axes[row][0]
         x = (frame["time"] if spec["x"] == "time" else frame[spec["x"]]) * xfactor
         ylabel, scale = axis_text(spec, "y", scenario, ys[0])
-        for j, y in enumerate(ys):
-            style = series_style(scenario, y) if "y_reduce" not in spec else \
+        k = 0 if panels else i * measured  # the measured series' style index
+        run_style: dict[str, Any] | None = None
+        for y in ys:
+            style = series_style(scenario, y, references) if "y_reduce" not in spec else \
                 {"drawstyle": "default", "text": y, "reference": False}
             text = series_label(spec, scenario, y, style)
-            label = text if panels else (name if len(ys) == 1 else f"{name}: {text}")
-            kwargs: dict[str, Any] = {"linewidth": 1.0, "drawstyle": style["drawstyle"]}
-            if panels or len(ys) > 1:
-                kwargs["linestyle"] = LINESTYLES[j % len(LINESTYLES)]
             values = figure_series(frame, spec, y, name)
             if style["reference"] and "y_minus" not in spec:
-                kwargs.update(color="black", linestyle="--", linewidth=0.9)
                 curve = reference_curve(scenario, frame, y)
                 values = values if curve is None else curve
-            ax.plot(x, values * scale, label=label, **kwargs)
+                ax.plot(x, values * scale, label=legend_once(text, seen, "reference"),
+                        **REFERENCE_STYLE)
+                continue
+            label = text if panels else (name if measured == 1 else f"{name}: {text}")
+            kwargs = measured_style(k)
+            k += 1
+            run_style = run_style or kwargs
+            ax.plot(x, values * scale, label=label,
+                    drawstyle=style["drawstyle"], **kwargs)
         if "limit_ref" in spec:
-            draw_limits(ax, spec, frame, x, name)
+            draw_limits(ax, spec, frame, x, name, seen)
         finish_axes(ax, spec, name if panels else None, ylabel, panels or i == 0)
-        if len(ax.get_legend_handles_labels()[1]) > 1:
-            legend_outside(ax)
+        if error:
+            draw_error(axes[row + 1][0], spec, frame, x, name, scenario, ylabel, scale,
+                       run_style or measured_style(k), i == 0 or panels)
+    labelled = [ax for ax in fig.axes if len(ax.get_legend_handles_labels()[1]) > 1]
+    if labelled:  # one legend: the runs' (or series') styles are the same in every axes
+        handles, labels = labelled[0].get_legend_handles_labels()
+        order = sorted(range(len(labels)), key=lambda n: not measured_line(handles[n]))
+        legend_outside(labelled[0], [handles[n] for n in order], [labels[n] for n in order])
     axes[-1][0].set_xlabel(xlabel)
     fig.suptitle(spec.get("title", ""))
     return fig
 
 
-def draw_limits(ax: Any, spec: dict[str, Any], frame: Any, x: Any, run: str) -> None:
-    """The zero-error reference and the +- allowance (``limit_kmh`` at or below
-    ``limit_below_kmh``, ``limit_fraction`` of the speed above) of the ``limit_ref`` speed
-    (times ``y_scale``) on an error figure's axes."""
+def draw_error(ax: Any, spec: dict[str, Any], frame: Any, x: Any, run: str, scenario: Any,
+               ylabel: str, scale: float, style: dict[str, Any], first: bool) -> None:
+    """The error panel of one run: its recorded ``error`` column times ``scale`` (the tracking
+    axes' factor) solid in the run's colour (without markers), and the zero error (its
+    reference) in black."""
+    column = spec["error"]
+    if column not in frame:
+        raise FigureError(f"figure {spec['file']}: run {run!r} recorded no {column!r} "
+                          f"(key error)")
+    ax.plot(x, frame[column].to_numpy(dtype=float) * scale,
+            **{**style, "marker": None, "linewidth": 1.0})  # spikes would crowd the markers
+    if first:
+        ax.axhline(0.0, **REFERENCE_STYLE)
+        ax.set_ylabel(error_label(spec, scenario, ylabel))
+        ax.grid(True, alpha=0.3)
+        plain_axes(ax)
+
+
+def draw_limits(ax: Any, spec: dict[str, Any], frame: Any, x: Any, run: str,
+                seen: set[str] | None = None) -> None:
+    """The zero-error reference (solid black) and the +- allowance (dashed black:
+    ``limit_kmh`` at or below ``limit_below_kmh``, ``limit_fraction`` of the speed above) of
+    the ``limit_ref`` speed (times ``y_scale``) on an error figure's axes; each named once in
+    the legend of a figure whose labels ``seen`` collects."""
     from cosim.run.metrics import graded_allowance
 
     ref_col = spec["limit_ref"]
@@ -210,8 +341,10 @@ def draw_limits(ax: Any, spec: dict[str, Any], frame: Any, x: Any, run: str) -> 
                                float(spec.get("limit_below_kmh", 30.0)),
                                float(spec.get("limit_fraction", 0.02))).astype(float)
     allowed[ref <= 0.0] = float("nan")  # standing: no allowance drawn
-    ax.axhline(0.0, color="black", linewidth=0.6, label="reference (zero error)")
-    ax.plot(x, allowed, color="black", linestyle="--", linewidth=0.8, label="limit")
+    seen = set() if seen is None else seen
+    ax.axhline(0.0, **REFERENCE_STYLE, label=legend_once("reference (zero error)", seen))
+    ax.plot(x, allowed, color="black", linestyle="--", linewidth=0.8,
+            label=legend_once("limit", seen))
     ax.plot(x, -allowed, color="black", linestyle="--", linewidth=0.8)
 
 
@@ -287,7 +420,8 @@ def speed_class_errors(frame: Any, spec: dict[str, Any]) -> list[dict[str, Any]]
 def figure_columns(spec: dict[str, Any], scenario: Any, columns: list[str]) -> set[str]:
     """The recorded columns a ``[[figures]]`` entry reads from one run's results (of
     ``columns``): time, x, the y columns (patterns expanded), ``y_minus``, ``limit_ref``,
-    ``ref`` and the position behind a stopping-curve reference (:func:`reference_curve`)."""
+    ``ref``, ``error`` and the position behind a stopping-curve reference
+    (:func:`reference_curve`)."""
     import pandas as pd
 
     from cosim.run.metrics import matching_columns
@@ -295,7 +429,8 @@ def figure_columns(spec: dict[str, Any], scenario: Any, columns: list[str]) -> s
     empty = pd.DataFrame(columns=columns)
     ys = spec["y"] if isinstance(spec["y"], list) else [spec["y"]]
     wanted = {"time", spec.get("x", "time"), spec.get("y_minus"), spec.get("limit_ref"),
-              spec.get("ref"), (getattr(scenario, "summary", {}) or {}).get("position")}
+              spec.get("ref"), spec.get("error"),
+              (getattr(scenario, "summary", {}) or {}).get("position")}
     for y in ys:
         wanted.update(matching_columns(empty, y) if "y_reduce" in spec else [y])
     return {c for c in wanted if c in columns}
@@ -318,8 +453,10 @@ def draw_ensemble_figure(spec: dict[str, Any], frames: dict[str, list[Any]], pat
 def ensemble_figure_of(spec: dict[str, Any], frames: dict[str, list[Any]],
                        scenarios: dict[str, Any]) -> Any:
     """An overlay figure over an ensemble: per run the median over the members and a 5-95 %
-    band (members sampled on the first member's x grid; x = "time" or a recorded column);
-    held signals as steps, the reference as a dashed continuous curve, labels and units from
+    band (members sampled on the first member's x grid; x = "time" or a recorded column;
+    a reference column the members did not record and no declared curve gives is left out);
+    held signals as steps, the measured medians solid in their colours, the reference as its
+    continuous curve (solid, black, :data:`REFERENCE_STYLE`), labels and units from
     the declarations (:func:`series_style`), the legend outside."""
     import matplotlib
 
@@ -336,24 +473,29 @@ def ensemble_figure_of(spec: dict[str, Any], frames: dict[str, list[Any]],
     for j, (name, members_) in enumerate(frames.items()):
         ax = axes[j if panels else 0][0]
         x0 = members_[0]["time"] if spec["x"] == "time" else members_[0][spec["x"]]
+        k = 0 if panels else j * len(ys)  # the measured series' style index
         for y in ys:
             plain = "y_reduce" in spec or "y_minus" in spec
             style = ({"drawstyle": "default", "text": y, "reference": False} if plain
-                     else series_style(scenarios.get(name), y))
+                     else series_style(scenarios.get(name), y, spec.get("reference", ())))
             curves = []
             for frame in members_:
                 x = frame["time"] if spec["x"] == "time" else frame[spec["x"]]
-                values = figure_series(frame, spec, y, name)
                 curve = (reference_curve(scenarios.get(name), frame, y) if style["reference"]
                          else None)
-                values = values if curve is None else curve
+                if curve is None and style["reference"] and y not in frame:
+                    break  # a reference the members did not record: left out
+                values = figure_series(frame, spec, y, name) if curve is None else curve
                 curves.append(np.interp(x0, x, values * scale))
+            if len(curves) < len(members_):
+                continue
             stack = np.vstack(curves)
             label = (style["text"] if panels else name if len(ys) == 1
                      else f"{name}: {style['text']}")
-            kwargs: dict[str, Any] = {"linewidth": 1.0, "drawstyle": style["drawstyle"]}
-            if style["reference"]:
-                kwargs.update(color="black", linestyle="--", linewidth=0.9)
+            kwargs: dict[str, Any] = {"drawstyle": style["drawstyle"]}
+            kwargs.update(REFERENCE_STYLE if style["reference"] else
+                          {**measured_style(k), "marker": None})
+            k += 0 if style["reference"] else 1
             line, = ax.plot(x0, np.median(stack, axis=0),
                             label=f"{label} (median of {len(members_)})", **kwargs)
             ax.fill_between(x0, np.percentile(stack, 5, axis=0),

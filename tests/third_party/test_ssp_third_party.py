@@ -63,21 +63,57 @@ def test_an_fmi3_component_is_refused_not_exported_without_connectors(c_fmus3, t
     assert not out.exists()
 
 
-def test_libcosim_refusing_an_enumeration_is_an_error_not_an_abort(c_fmus, tmp_path):
-    """libcosim cannot handle Enumeration connectors and aborts its process on them ("Don't
-    know how to handle Enumeration type!"); run_ssp runs it in a child process, so this is a
-    LibcosimError carrying that report and the calling process goes on."""
-    from cosim.interop.libcosim import LibcosimError, run_ssp
-
+def _enumeration_pair(c_fmus, tmp_path):
     f = c_fmus["AllTypes"]
     inputs = {"mode": "fast", "u": 1.0, "ui": 2, "ub": True, "us": "z"}
-    path = write_scenario(tmp_path, {"A": (f, {}, inputs),
+    return write_scenario(tmp_path, {"A": (f, {}, inputs),
                                      "B": (f, {}, {k: v for k, v in inputs.items()
                                                    if k != "mode"})},
                           {"B.mode": "A.next_mode"})
-    out = export_ssp(path, tmp_path / "enum.ssp", build=False)
-    with pytest.raises(LibcosimError, match="Enumeration"):
+
+
+def test_libcosim_itself_cannot_run_an_enumeration_connector(c_fmus, tmp_path):
+    """The reason the refusals below give, observed: libcosim aborts its process on an SSP
+    Enumeration connector ("Don't know how to handle Enumeration type!"). The child process
+    (``_isolated``) turns the abort into a LibcosimError. If a libcosim release runs it, this
+    fails and the refusals should go."""
+    from cosim.interop.libcosim import LibcosimError, _isolated
+
+    out = export_ssp(_enumeration_pair(c_fmus, tmp_path), tmp_path / "enum.ssp", build=False)
+    with pytest.raises(LibcosimError, match="(?s)ended its process.*Enumeration"):
+        _isolated("_run_ssp", str(out), ["B.mode"], 1.0, 0.1)
+
+
+def test_an_ssp_with_enumerations_is_refused_before_libcosim_starts(c_fmus, tmp_path):
+    from cosim.interop.libcosim import ENUMERATION_REASON, LibcosimError, run_ssp
+
+    out = export_ssp(_enumeration_pair(c_fmus, tmp_path), tmp_path / "enum.ssp", build=False)
+    with pytest.raises(LibcosimError) as err:
         run_ssp(out, ["B.mode"], 1.0, 0.1)
+    message = str(err.value)
+    assert "ended its process" not in message and ENUMERATION_REASON in message
+    # every Enumeration connector of both components, each named
+    for name in ("A.mode", "A.next_mode", "B.mode", "B.next_mode"):
+        assert name in message
+
+
+def test_a_scenario_with_enumerations_is_refused_by_run_libcosim(c_fmus, tmp_path):
+    from cosim.interop.libcosim import ENUMERATION_REASON, LibcosimError, run_libcosim
+
+    with pytest.raises(LibcosimError) as err:
+        run_libcosim(_enumeration_pair(c_fmus, tmp_path), record=["B.y"])
+    message = str(err.value)
+    # set (A.mode) and connected (A.next_mode -> B.mode); B.next_mode is neither
+    assert "A.mode, A.next_mode, B.mode are Enumerations" in message
+    assert ENUMERATION_REASON in message and "B.next_mode" not in message
+
+
+def test_the_export_notes_name_the_enumerations_libcosim_cannot_run(c_fmus, tmp_path):
+    from cosim.interop.ssp import export_notes
+    from cosim.run.scenario import load_scenario
+
+    notes = export_notes(load_scenario(_enumeration_pair(c_fmus, tmp_path)))
+    assert len(notes) == 1 and notes[0].startswith("A.mode, A.next_mode, B.mode: written as")
 
 
 def test_a_max_step_is_kept_as_an_annotation_and_named_in_the_notes(c_fmus, tmp_path):
@@ -96,4 +132,5 @@ def test_a_max_step_is_kept_as_an_annotation_and_named_in_the_notes(c_fmus, tmp_
     xml = zipfile.ZipFile(out).read("SystemStructure.ssd").decode()
     assert f'type="{ANNOTATION_TYPE}"' in xml and 'maxStep="0.05"' in xml
     notes = export_notes(sc)
-    assert len(notes) == 1 and "[fmus.A] max_step = 0.05 s" in notes[0]
+    assert "[fmus.A] max_step = 0.05 s" in notes[0]
+    assert len(notes) == 2 and notes[1].startswith("A.mode: written as")  # set, Enumeration
