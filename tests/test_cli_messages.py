@@ -36,9 +36,15 @@ def test_set_errors_name_the_set_option_and_keep_the_table_name(built_fmus, tmp_
 def test_unconnected_input_hint_keeps_its_table_names(built_fmus, tmp_path):
     text = (SCENARIO_DIR / "seed000_stop_pid.toml").read_text()
     text = re.sub(r'^"controller\.v" = "plant\.v"\n', "", text, flags=re.M)
-    path = tmp_path / "unconnected.toml"
+    path = tmp_path / "unconnected.toml"  # kept at its start value, said in the log
     path.write_text(text)
     done = cosim("run", str(path), "--out", str(tmp_path / "out"))
+    assert done.returncode == 0, done.stderr
+    assert "keep their start values: controller.v" in done.stderr, done.stderr
+    strict = tmp_path / "strict.toml"  # refused, naming where to connect or set it
+    strict.write_text(text.replace("[simulation]\n",
+                                   '[simulation]\nunconnected_inputs = "error"\n', 1))
+    done = cosim("run", str(strict), "--out", str(tmp_path / "strict"))
     assert done.returncode == 2
     message = one_line(done)
     assert "to [connections] or a constant in [fmus.controller.inputs]" in message, message
