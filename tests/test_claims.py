@@ -267,7 +267,7 @@ CLAIMS_SMOKE_ENTRY = "seed000"  # its runs are a minute of a stopping train: the
 
 
 @pytest.mark.slow
-def test_an_entry_claims_get_verdicts_end_to_end(tmp_path: Path) -> None:
+def test_an_entry_claims_get_verdicts_end_to_end(built_fmus, tmp_path: Path) -> None:
     """The whole claims path (jobs, ensemble, figures, verdicts, files) on the cheapest
     entry at K = 3. Every entry's claims got their verdicts from the code of this tree in its
     recorded K = 20 reproduction: the paper pages carry the digest of every file that changes
