@@ -96,8 +96,10 @@ def test_scenarios_follow_their_profiles_on_time_and_energy(tmp_path) -> None:
     from cosim.run.master import run_scenario
 
     eta_m = Crh3Params().motor_efficiency  # the scenarios keep the default
-    for kind in sp.PROFILE_KINDS:
-        run_scenario(f"seed003_crh3_gpc_{kind}", out_dir=tmp_path / kind)
+    for kind in sp.PROFILE_KINDS:  # the fixed family: the optimal rows' scenario, overridden
+        stem = "optimal" if kind == "fixed_family" else kind
+        run_scenario(f"seed003_crh3_gpc_{stem}", out_dir=tmp_path / kind,
+                     overrides={"controller.profile": kind} if stem != kind else None)
         summary = json.loads((tmp_path / kind / "summary.json").read_text())
         assert abs(summary["arrival_time_error_s"]) <= 5.0
         assert abs(summary["stop_error_m"]) <= 0.5
