@@ -169,9 +169,10 @@ def checks_for(path: str | Path) -> tuple[str, ...]:
 
 def _check_fmi3(path: Path, opts: Options) -> list[Problem]:
     """The FMI 3.0 checks (:mod:`cosim.interop.compliance.fmi3`)."""
+    from cosim.interop.compliance.clocks import clock_checks
     from cosim.interop.compliance.fmi3 import static_checks
 
-    problems = static_checks(path)
+    problems = static_checks(path) + clock_checks(path)
     if not opts.dynamic:
         return classify(problems, opts.strict)
     runnable = not any(p.check == "fmi3-capabilities" and p.severity != NOTE

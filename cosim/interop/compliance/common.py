@@ -54,9 +54,12 @@ CLAUSES: dict[str, tuple[str, str]] = {
 }
 
 FMI3_STATIC_CHECKS = ("fmi3-validation", "fmi3-variables", "fmi3-model-structure",
-                      "fmi3-capabilities")
-FMI3_DYNAMIC_CHECKS = ("fmi3-calling-sequence", "fmi3-event-mode", "fmi3-early-return",
-                       "fmi3-fmu-state", "fmi3-wrong-state")
+                      "fmi3-capabilities", "fmi3-clocks")
+# the dynamic checks of the co-simulation interface (not applicable to an FMU without one)
+FMI3_CS_CHECKS = ("fmi3-calling-sequence", "fmi3-event-mode", "fmi3-early-return",
+                  "fmi3-fmu-state", "fmi3-wrong-state")
+FMI3_DYNAMIC_CHECKS = (*FMI3_CS_CHECKS, "fmi3-clock-calls", "fmi3-scheduled-execution",
+                       "fmi3-scheduled-wrong-state")
 FMI3_CHECKS = FMI3_STATIC_CHECKS + FMI3_DYNAMIC_CHECKS
 
 # check -> (FMI 3.0 clause, requirement of its findings unless a finding says otherwise)
@@ -78,6 +81,15 @@ FMI3_CLAUSES: dict[str, tuple[str, str]] = {
                        REQUIRED),
     "fmi3-wrong-state": ("4.2 (calls outside the state machine are the importer's error; an "
                          "FMU should detect them)", RECOMMENDED),
+    "fmi3-clocks": ("2.2.8 (Clocks), 2.4.4 (ClockType attributes), 2.4.7.4 (clocks, previous), "
+                    "2.4.8 (ClockedState)", REQUIRED),
+    "fmi3-clock-calls": ("2.2.8.2 (Clock Types: fmi3GetInterval/GetShift in Initialization "
+                         "Mode, fmi3SetClock and fmi3GetClock in Event Mode)", REQUIRED),
+    "fmi3-scheduled-execution": ("5.2 (Scheduled Execution: fmi3ActivateModelPartition at "
+                                 "the Clocks' ticks, Clock Update Mode)", REQUIRED),
+    "fmi3-scheduled-wrong-state": ("5.2.1, 2.2.8.4 (calls outside the Scheduled Execution "
+                                   "state machine are the importer's error; an FMU should "
+                                   "detect them)", RECOMMENDED),
 }
 
 CLAUSES.update(FMI3_CLAUSES)

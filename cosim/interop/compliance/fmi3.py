@@ -26,6 +26,7 @@ from __future__ import annotations
 import math
 import platform
 import zipfile
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -71,7 +72,8 @@ def static_checks(path: Path) -> list[Problem]:
         messages = validate_fmu(str(path))
         root = _read_xml(path)
     except Exception as err:
-        return skipped(FMI3_STATIC_CHECKS, "the archive could not be read",
+        return skipped(tuple(c for c in FMI3_STATIC_CHECKS if c != "fmi3-clocks"),
+                       "the archive could not be read",
                        [Problem("fmi3-validation", f"cannot be validated: {err}")])
     problems += [Problem("fmi3-validation", str(m).strip()) for m in messages]
     variables = root.find("ModelVariables")
@@ -149,15 +151,19 @@ def static_checks(path: Path) -> list[Problem]:
         if var.get("causality") == "output" and vr not in listed:
             problems.append(Problem("fmi3-model-structure", f"output {var.get('name')} is not "
                                     "listed in ModelStructure as Output"))
-    cs = root.find("CoSimulation")
-    if cs is None:
-        problems.append(Problem("fmi3-capabilities", "not a co-simulation FMU (no CoSimulation "
-                                "element): these checks are for co-simulation",
+    # the interface the dynamic checks load: co-simulation, else Scheduled Execution
+    interface = root.find("CoSimulation")
+    if interface is None:
+        interface = root.find("ScheduledExecution")
+    if interface is None:
+        problems.append(Problem("fmi3-capabilities", "neither a co-simulation nor a Scheduled "
+                                "Execution FMU (no CoSimulation or ScheduledExecution "
+                                "element): these checks are for those interfaces",
                                 requirement=CONVENTION))
-    elif not _binary_ok(path, cs.get("modelIdentifier")):
+    elif not _binary_ok(path, interface.get("modelIdentifier")):
         problems.append(Problem("fmi3-capabilities", f"no binary for this platform "
-                                f"(binaries/{_PLATFORM}/{cs.get('modelIdentifier')}.*): the "
-                                "dynamic checks cannot run here", WARNING))
+                                f"(binaries/{_PLATFORM}/{interface.get('modelIdentifier')}.*): "
+                                "the dynamic checks cannot run here", WARNING))
     return problems
 
 
@@ -173,7 +179,9 @@ class _Host3:
 
         self.path, self.unzipdir = path, unzipdir
         self.md = read_model_description(str(path), validate=False)
-        self.cs = self.md.coSimulation
+        self.cs = self.md.coSimulation  # None: no co-simulation interface
+        self.se = self.md.scheduledExecution  # None: no Scheduled Execution interface
+        self.model_identifier = (self.cs or self.se).modelIdentifier
         variables = self.md.modelVariables
         self.inputs = [v for v in variables if v.causality == "input" and v.type == "Float64"
                        and not v.dimensions]
@@ -197,7 +205,7 @@ class _Host3:
         self.h = step
         span = round((stop - self.start) / step) if stop else n_steps
         self.n = max(4, min(n_steps, span))
-        self.has_event_mode = bool(self.cs.hasEventMode)
+        self.has_event_mode = bool(self.cs and self.cs.hasEventMode)
         self.might_return_early = bool(getattr(self.cs, "mightReturnEarlyFromDoStep", False))
 
     def instance(self, name: str, **kw: Any) -> _Instance3:
@@ -233,11 +241,11 @@ class _Failed3(Exception):
 
 
 class _Instance3:
-    """One FMI 3 instance; ``call`` returns (status, result), logs are kept."""
+    """One FMI 3 co-simulation instance; ``call`` returns (status, result), logs are kept."""
+
+    INSTANTIATE = "fmi3InstantiateCoSimulation"
 
     def __init__(self, host: _Host3, name: str, **kw: Any) -> None:
-        from fmpy.fmi3 import FMU3Slave
-
         from cosim.interop.compliance.host import WATCHDOG, describe_call
 
         self.host = host
@@ -246,12 +254,13 @@ class _Instance3:
         def log(env: Any, status: int, category: bytes, message: bytes) -> None:
             self.messages.append((status, message.decode(errors="replace")))
 
-        self.fmu = WATCHDOG.call(f"dlopen({host.cs.modelIdentifier})",
-                                 FMU3Slave, guid=host.md.guid, unzipDirectory=host.unzipdir,
-                                 modelIdentifier=host.cs.modelIdentifier, instanceName=name)
-        call = describe_call("fmi3InstantiateCoSimulation", (), kw)
+        self.fmu = WATCHDOG.call(f"dlopen({host.model_identifier})",
+                                 self._fmpy_class(), guid=host.md.guid,
+                                 unzipDirectory=host.unzipdir,
+                                 modelIdentifier=host.model_identifier, instanceName=name)
+        call = describe_call(self.INSTANTIATE, (), kw)
         try:
-            WATCHDOG.call(call, self.fmu.instantiate, loggingOn=False, logMessage=log, **kw)
+            WATCHDOG.call(call, self._instantiate, log, **kw)
         except Exception as err:
             if "instantiate" not in str(err):
                 raise
@@ -262,6 +271,15 @@ class _Instance3:
                            + (f"FMU says: {said}" if said else "the FMU logged nothing")
                            ) from None
         self.alive = True
+
+    @staticmethod
+    def _fmpy_class() -> type:
+        from fmpy.fmi3 import FMU3Slave
+
+        return FMU3Slave
+
+    def _instantiate(self, log: Callable[..., None], **kw: Any) -> None:
+        self.fmu.instantiate(loggingOn=False, logMessage=log, **kw)
 
     def call(self, method: str, *args: Any, **kwargs: Any) -> tuple[int, Any]:
         from fmpy.fmi1 import FMICallException

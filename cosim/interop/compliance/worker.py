@@ -24,6 +24,7 @@ from cosim.interop.compliance.calling_sequence import (
 from cosim.interop.compliance.common import (
     _MARK,
     DYNAMIC_CHECKS,
+    FMI3_CS_CHECKS,
     FMI3_DYNAMIC_CHECKS,
     NOTE,
     Problem,
@@ -126,16 +127,21 @@ def _worker(args: dict) -> None:
 
 def _fmi3_worker(args: dict, path: Path, unzipdir: str) -> None:
     """The FMI 3.0 dynamic checks (:mod:`cosim.interop.compliance.fmi3`), same protocol."""
+    from cosim.interop.compliance.clocks import DYNAMIC as CLOCKS
     from cosim.interop.compliance.fmi3 import DYNAMIC, _Failed3, _Host3
 
     host = _Host3(path, unzipdir, args["n_steps"], tuple(args["irreproducible"]))
+    checks = {**DYNAMIC, **CLOCKS}
     ctx: dict[str, Any] = {}
     for name in FMI3_DYNAMIC_CHECKS:
         if name in args["skip"]:
             continue
         _emit("begin", name)
         try:
-            problems = DYNAMIC[name](host, ctx)
+            if host.cs is None and name in FMI3_CS_CHECKS:
+                problems = [Problem(name, "not applicable: no CoSimulation interface", NOTE)]
+            else:
+                problems = checks[name](host, ctx)
         except _Failed3 as err:
             problems = [Problem(name, str(err))]
         except Exception as err:  # a bug in the FMU surfacing as a host exception
