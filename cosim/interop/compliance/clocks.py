@@ -363,7 +363,8 @@ def _clocks(host: _Host3, check: str) -> dict[int, ClockAttributes] | list[Probl
     try:
         return clock_attributes(host.path)
     except SimulationError as err:
-        return [Problem(check, f"not run: the Clocks cannot be read: {err} (see {STATIC})")]
+        return [Problem(check, f"not run: the Clocks cannot be read: {err} (see {STATIC})",
+                        SKIPPED)]
 
 
 def _clocked_reads(host: _Host3) -> dict[int | None, list[Any]]:
