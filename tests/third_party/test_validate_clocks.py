@@ -245,3 +245,45 @@ def test_clocked_cosimulation_fmus_pass_with_their_ticks(c_fmus3, name, ticks):
     assert passed(problems), format_report(c_fmus3[name], problems)
     summary = note(problems, "fmi3-clock-calls")
     assert activated(summary, "tick") == pytest.approx(ticks, abs=1e-12)
+
+
+def replant(src: Path, dest: Path, old: str, new: str) -> Path:
+    """A copy of the FMU ``src`` whose modelDescription.xml has ``old`` replaced by ``new``."""
+    with zipfile.ZipFile(src) as zin, zipfile.ZipFile(dest, "w") as zout:
+        for item in zin.infolist():
+            data = zin.read(item)
+            if item.filename == "modelDescription.xml":
+                text = data.decode()
+                assert text.count(old) == 1, old
+                data = text.replace(old, new).encode()
+            zout.writestr(item, data)
+    return dest
+
+
+def test_a_partition_the_binary_refuses_fails_the_scheduled_run(c_fmus3, tmp_path):
+    """Tasks3 with a fifth triggered input clock in its modelDescription that its binary does
+    not know: the activation returns fmi3Error, a finding citing sec. 5.2."""
+    path = replant(c_fmus3["Tasks3"], tmp_path / "Tasks3.fmu", "  </ModelVariables>",
+                   '    <Clock name="ghost" valueReference="9" causality="input" '
+                   'intervalVariability="triggered" priority="4"/>\n  </ModelVariables>')
+    problems = check_fmu(path, Options(strict=False))
+    (error,) = [p for p in problems if p.check == "fmi3-scheduled-execution"
+                and p.severity == ERROR]
+    assert "fmi3ActivateModelPartition(ghost, 0.0) returned fmi3Error" in error.message
+    assert "FMI 3.0 sec. 5.2," in error.message
+
+
+def test_a_broken_clock_reference_is_cited_and_stops_the_dynamic_checks(reference_clocks,
+                                                                        tmp_path):
+    """fmpy cannot load a modelDescription whose clocks attribute names no variable: the
+    static finding cites sec. 2.4.7.4, the loading failure is an FMI 3 calling-sequence
+    finding and the other dynamic checks are skipped."""
+    path = replant(reference_clocks, tmp_path / "Clocks.fmu", 'priority="2" clocks="1001"',
+                   'priority="2" clocks="1009"')
+    problems = check_fmu(path, Options(strict=False))
+    clocks = [p.message for p in problems if p.check == "fmi3-clocks"]
+    assert any("lists '1009', which is no variable (FMI 3.0 sec. 2.4.7.4" in m for m in clocks)
+    assert any(p.check == "fmi3-calling-sequence" and "while loading" in p.message
+               for p in problems)
+    assert {p.check for p in problems if p.severity == SKIPPED} >= {
+        "fmi3-scheduled-execution", "fmi3-clock-calls"}

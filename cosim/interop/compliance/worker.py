@@ -217,7 +217,8 @@ def _run_worker(args: dict, checks: tuple[str, ...], limits: Limits) -> list[Pro
                     # died outside a check (loading): report once and stop
                     tail = (stderr.strip().splitlines()[-1] if stderr.strip()
                             else outcome.describe())
-                    problems.append(Problem("calling-sequence", "the host process failed "
+                    # reported under the first check (the calling sequence of its standard)
+                    problems.append(Problem(checks[0], "the host process failed "
                                             f"while loading the FMU: {tail}"))
                     return skipped(tuple(c for c in checks if c not in done),
                                    "the FMU could not be loaded", problems)
