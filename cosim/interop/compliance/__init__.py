@@ -38,7 +38,8 @@ in a note. The package imports no plant or controller, so it works for any FMU.
 
 Modules: ``common`` (Problem, severities), ``model_description`` (static checks),
 ``host`` (loading and running an FMU), ``calling_sequence``, ``state``, ``stepping``,
-``errors`` (the dynamic check families), ``worker`` (the subprocess and its supervisor).
+``errors`` (the dynamic check families), ``fmi3`` (the FMI 3.0 checks), ``clocks`` (FMI 3.0
+Clocks and Scheduled Execution), ``worker`` (the subprocess and its supervisor).
 """
 
 from __future__ import annotations

@@ -585,7 +585,9 @@ def _check_clock_calls(host: _Host3, ctx: dict) -> list[Problem]:
                    f"fmi3SetClock({', '.join(by_vr[vr].name for vr in vrs)}) in Event Mode",
                    TYPES)
         result = inst.event_mode(run.problems)
-        for c in countdowns:
+        # countdown Clocks: in every Event Mode; changing ones: when they ticked
+        for c in countdowns + [by_vr[vr] for vr in due
+                               if by_vr[vr].interval_variability == "changing"]:
             interval, _ = _interval(run, c, f"Event Mode at {float(now)!r} s", TYPES)
             if interval is not None:
                 following[c.value_reference] = now + interval

@@ -6,7 +6,9 @@ Static (read from the file): fmpy's FMI 3.0 schema and rule validation; variable
 (causality/variability/initial combinations, start values where required, inside min/max,
 units declared, exactly one independent variable); model structure (every output listed
 as ``ModelStructure/Output``, dependencies naming variables that exist); capabilities (a
-``CoSimulation`` element, a binary for this platform).
+``CoSimulation`` or ``ScheduledExecution`` element, a binary for this platform). The checks of
+Clocks and Scheduled Execution are in :mod:`cosim.interop.compliance.clocks`; the co-simulation
+checks below note themselves not applicable to an FMU without a ``CoSimulation`` element.
 
 Dynamic (the FMU is loaded and run in the compliance worker subprocess, see
 :mod:`cosim.interop.compliance.worker`): the calling sequence without Event Mode
