@@ -581,6 +581,27 @@ def test_fixed_notation_keeps_three_digits_of_the_smallest_magnitude() -> None:
     assert fixed(float("nan"), 2) == "-"
 
 
+def test_fixed_notation_at_and_just_below_powers_of_ten() -> None:
+    """At an exact power of ten, just below it (printed as that power) and at values rounding
+    up to it, :func:`number` prints exactly three significant digits: the exponent comes from
+    the printed digits, not from log10's last bit."""
+    import math
+
+    from cosim.run.claims import decimals_for, number
+
+    def significant(text: str) -> int:
+        return len(text.replace("-", "").replace(".", "").lstrip("0"))
+
+    for k in range(-6, 0):  # 1e-6 needs 8 decimals: within MAX_DECIMALS
+        power = float(f"1e{k}")
+        for value in (power, math.nextafter(power, 0.0), power * 0.9996, power * 0.9994,
+                      -power):
+            assert significant(number(value)) == 3, (value, number(value))
+    assert decimals_for([0.001]) == 5 and number(0.001) == "0.00100"
+    assert number(math.nextafter(0.001, 0.0)) == "0.00100"
+    assert number(9.996e-4) == "0.00100" and number(9.994e-4) == "0.000999"
+
+
 def test_single_run_columns_have_one_fixed_notation_each() -> None:
     """Each metric's column of the single-run table prints every value with the same
     decimals, never in scientific notation, whatever the magnitudes of the runs."""
