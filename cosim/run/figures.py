@@ -130,8 +130,9 @@ LEGEND_WIDTH = 36  # characters of a legend line: a long declared description wr
 
 MARKERS = ("o", "s", "^", "D", "v", "P", "X", "*")  # per measured series of one axes
 MEASURED_WIDTH = 1.4  # measured curves: solid, coloured, a marker every MARKER_EVERY
-REFERENCE_WIDTH = 0.8  # reference curves: solid, black, thinner, drawn above the measured
-REFERENCE_COLOUR = "black"
+REFERENCE_WIDTH = 1.0  # reference curves: solid, mid grey, thinner, drawn beneath the measured
+REFERENCE_COLOUR = "0.5"  # mid grey (matplotlib's grey level)
+REFERENCE_ZORDER = 1.8  # above the grid (1.5) and bands (0), beneath measured curves (2)
 MARKER_EVERY = 0.12  # the markers' spacing along a curve, a fraction of the axes' diagonal
 MAX_PANELS = 5  # axes of one figure (error panels included): a printed page's height
 PANEL_HEIGHT = 2.2  # inches of a tracking or panels axes
@@ -181,7 +182,7 @@ def measured_style(k: int) -> dict[str, Any]:
 
 
 REFERENCE_STYLE: dict[str, Any] = {"color": REFERENCE_COLOUR, "linestyle": "-",
-                                   "linewidth": REFERENCE_WIDTH, "zorder": 3}
+                                   "linewidth": REFERENCE_WIDTH, "zorder": REFERENCE_ZORDER}
 
 
 def measured_line(artist: Any) -> bool:
@@ -232,8 +233,9 @@ def figure_of(spec: dict[str, Any], frames: dict[str, Any], scenarios: dict[str,
     drawing styles, :func:`series_style`).
 
     A series is a reference where its scenario's ``[summary]`` declares it so
-    (``reference_speed`` / ``reference_accel``): drawn as its continuous curve, solid, black
-    and thinner, above the measured ones; every other series is measured: solid, in its own
+    (``reference_speed`` / ``reference_accel``): drawn as its continuous curve, solid, mid
+    grey and thinner, beneath the measured ones (:data:`REFERENCE_STYLE`: where tracking is
+    tight the measured curve stays visible); every other series is measured: solid, in its own
     colour and marker (:func:`measured_style`; the runs of an overlay, or the series of a
     panel, each their own). At most ``MAX_PANELS`` axes (:func:`panel_count`). The legend sits
     right of the first axes, inside the figure."""
@@ -311,7 +313,7 @@ def draw_error(ax: Any, spec: dict[str, Any], frame: Any, x: Any, run: str, scen
                ylabel: str, scale: float, style: dict[str, Any], first: bool) -> None:
     """The error panel of one run: its recorded ``error`` column times ``scale`` (the tracking
     axes' factor) solid in the run's colour (without markers), and the zero error (its
-    reference) in black."""
+    reference) as a reference (:data:`REFERENCE_STYLE`)."""
     column = spec["error"]
     if column not in frame:
         raise FigureError(f"figure {spec['file']}: run {run!r} recorded no {column!r} "
@@ -327,7 +329,7 @@ def draw_error(ax: Any, spec: dict[str, Any], frame: Any, x: Any, run: str, scen
 
 def draw_limits(ax: Any, spec: dict[str, Any], frame: Any, x: Any, run: str,
                 seen: set[str] | None = None) -> None:
-    """The zero-error reference (solid black) and the +- allowance (dashed black:
+    """The zero-error reference (:data:`REFERENCE_STYLE`) and the +- allowance (dashed black:
     ``limit_kmh`` at or below ``limit_below_kmh``, ``limit_fraction`` of the speed above) of
     the ``limit_ref`` speed (times ``y_scale``) on an error figure's axes; each named once in
     the legend of a figure whose labels ``seen`` collects."""
@@ -456,7 +458,7 @@ def ensemble_figure_of(spec: dict[str, Any], frames: dict[str, list[Any]],
     band (members sampled on the first member's x grid; x = "time" or a recorded column;
     a reference column the members did not record and no declared curve gives is left out);
     held signals as steps, the measured medians solid in their colours, the reference as its
-    continuous curve (solid, black, :data:`REFERENCE_STYLE`), labels and units from
+    continuous curve (solid, mid grey, beneath: :data:`REFERENCE_STYLE`), labels and units from
     the declarations (:func:`series_style`), the legend outside."""
     import matplotlib
 
