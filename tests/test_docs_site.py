@@ -93,14 +93,18 @@ def test_paper_page_is_the_whole_table_else_the_claims_and_copies_figures(tmp_pa
                                                                            ) -> None:
     run = tmp_path / "seedX"
     (run / "fig").mkdir(parents=True)
-    (run / "claims.md").write_text("## Claims\n\n![a](fig/a.png) [web](https://x.org/y.png)\n")
+    (run / "claims.md").write_text("## Claims\n\n![a](fig/a.png) [web](https://x.org/y.png)"
+                                   "\n\n[SVG](fig/a.svg)\n")
     (run / "fig" / "a.png").write_bytes(b"PNG")
+    (run / "fig" / "a.svg").write_bytes(b"<svg/>")
     page = docs_pages.paper_page("seedX", run)
     assert page is not None
     text = page[DOCS / "papers" / "seedX.md"].decode()
     assert text.count("# Claims") == 1
     assert "![a](seedX/fig/a.png)" in text and "(https://x.org/y.png)" in text
+    assert "[SVG](seedX/fig/a.svg)" in text  # the vector figure linked and copied beside
     assert page[DOCS / "papers" / "seedX" / "fig" / "a.png"] == b"PNG"
+    assert page[DOCS / "papers" / "seedX" / "fig" / "a.svg"] == b"<svg/>"
     (run / "table.md").write_text("## T\n\nthe table, claims, figures and notes\n")
     page = docs_pages.paper_page("seedX", run)
     assert b"the table, claims" in page[DOCS / "papers" / "seedX.md"]

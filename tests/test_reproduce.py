@@ -5,12 +5,13 @@ from __future__ import annotations
 import json
 import re
 from pathlib import Path
+from typing import Any
 
 import pandas as pd
 import pytest
 
 from cosim.reproduce.entry import Figure, ReproduceError, entry_names, load_entry
-from cosim.reproduce.figures import draw_speed_classes
+from cosim.reproduce.figures import draw_speed_classes, figure_section
 from cosim.reproduce.page import redraw_entry, reproduce
 from cosim.reproduce.tables import ranking_markdown, ranking_rows, summary_value
 from cosim.run.figures import speed_class_errors
@@ -233,12 +234,43 @@ def test_seed001_declares_figures_6_to_10() -> None:
 
 
 def test_speed_classes_figure_writes_table_and_csv(tmp_path: Path) -> None:
-    text = draw_speed_classes(Figure(**CLASSES, paper="A fails at 30"),
-                              {"A": _graded_frame(), "B": _graded_frame()}, tmp_path / "fig8.png")
+    text, written = draw_speed_classes(Figure(**CLASSES, paper="A fails at 30"),
+                                       {"A": _graded_frame(), "B": _graded_frame()},
+                                       tmp_path / "fig8.png")
+    assert written == [tmp_path / "fig8.png", tmp_path / "fig8.svg"]
     assert (tmp_path / "fig8.png").stat().st_size > 10_000
     csv = pd.read_csv(tmp_path / "fig8.csv")
     assert len(csv) == 6 and set(csv.run) == {"A", "B"}
     assert "| 30-50 | 0.601 | 0.700 ✗ | 0.700 ✗ |" in text and "Paper: A fails at 30" in text
+
+
+@pytest.mark.parametrize("spec", [CLASSES, {"file": "track.png", "x": "time",
+                                             "y": ["v1", "v_ref"], "reference": ["v_ref"]}],
+                         ids=["speed_classes", "overlay"])
+def test_page_figure_is_png_and_the_same_svg_on_every_draw(tmp_path: Path,
+                                                          spec: dict[str, Any]) -> None:
+    """A page figure is drawn as png (the image) with its svg beside it, linked under the image
+    as "SVG"; two draws write byte-identical files (no date, the svg's ids fixed), so a
+    redrawn page stays current."""
+    import numpy as np
+
+    frame = _graded_frame().assign(time=lambda f: 0.1 * np.arange(len(f)))
+    pages = {}
+    for draw in ("one", "two"):
+        out = tmp_path / draw
+        out.mkdir()
+        lines = figure_section(Figure(**spec), {"A": frame, "B": frame * 1.01}, out, "png", {})
+        pages[draw] = "\n".join(lines)
+        [image] = re.findall(r"!\[[^\]]*\]\(([^)]+)\)", pages[draw])
+        [svg] = re.findall(r"(?<!!)\[SVG\]\(([^)]+)\)", pages[draw])
+        assert (image, svg) == (spec["file"], spec["file"].replace(".png", ".svg"))
+        assert (out / image).read_bytes().startswith(b"\x89PNG")
+        assert b"<svg" in (out / svg).read_bytes() and b"<dc:date>" not in (out / svg).read_bytes()
+    assert pages["one"] == pages["two"]
+    one = sorted(p.relative_to(tmp_path / "one") for p in (tmp_path / "one").rglob("*"))
+    assert one == sorted(p.relative_to(tmp_path / "two") for p in (tmp_path / "two").rglob("*"))
+    for rel in one:
+        assert (tmp_path / "one" / rel).read_bytes() == (tmp_path / "two" / rel).read_bytes(), rel
 
 
 def test_figure_series_mean_of_pattern_minus_reference() -> None:

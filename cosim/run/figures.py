@@ -3,7 +3,8 @@ the ensembles' medians and bands, and the helpers they share (labels and units f
 declarations, the roles and drawing styles of measured and reference curves, legends
 right of the axes). It imports none of the runners; the runners and :mod:`cosim.reproduce`
 import it. Figures are matplotlib figures saved at
-:data:`cosim.run.results.PLOT_DPI` (png), or as svg / pdf by the file's suffix.
+:data:`cosim.run.results.PLOT_DPI` (png), or as svg / pdf by the file's suffix
+(:func:`save_figure`: the same bytes on every draw).
 """
 
 from __future__ import annotations
@@ -21,17 +22,37 @@ class FigureError(ValueError):
     the run and the column)."""
 
 
-def draw_figure(spec: dict[str, Any], frames: dict[str, Any], path: Path,
-                scenarios: dict[str, Any] | None = None) -> None:
-    """:func:`figure_of` the runs' recorded series (run name -> frame), saved to ``path`` (its
-    suffix: png at 200 dpi, svg or pdf)."""
+SVG_HASHSALT = "ato-cosim"  # matplotlib's svg.hashsalt: the svg's element ids, fixed
+UNDATED: dict[str, dict[str, Any]] = {"svg": {"Date": None}, "pdf": {"CreationDate": None}}
+
+
+def save_figure(fig: Any, path: Path, vector: bool = False) -> list[Path]:
+    """Save ``fig`` to ``path`` by its suffix (png at :data:`PLOT_DPI`, svg or pdf) and, with
+    ``vector``, an svg beside a png (the same stem), then close it; the paths written. The
+    bytes are the same on every draw of the same figure: the svg's element ids hashed from
+    :data:`SVG_HASHSALT`, no date in the svg's or pdf's metadata (:data:`UNDATED`)."""
+    import matplotlib
     import matplotlib.pyplot as plt
 
+    path = Path(path)
+    paths = [path, *([path.with_suffix(".svg")] if vector and path.suffix == ".png" else [])]
+    with matplotlib.rc_context({"svg.hashsalt": SVG_HASHSALT}):
+        for target in paths:
+            kind = target.suffix.lstrip(".") or "png"
+            fig.savefig(target, dpi=PLOT_DPI, format=kind, bbox_inches="tight",
+                        metadata=UNDATED.get(kind))
+    plt.close(fig)
+    return paths
+
+
+def draw_figure(spec: dict[str, Any], frames: dict[str, Any], path: Path,
+                scenarios: dict[str, Any] | None = None, vector: bool = False) -> list[Path]:
+    """:func:`figure_of` the runs' recorded series (run name -> frame), saved to ``path`` (its
+    suffix: png at 200 dpi, svg or pdf) and, with ``vector``, as svg beside a png
+    (:func:`save_figure`); the paths written."""
     names = list(spec.get("runs", list(frames)))
     fig = figure_of(spec, {n: frames[n] for n in names}, scenarios or {})
-    fig.savefig(path, dpi=PLOT_DPI, format=Path(path).suffix.lstrip(".") or "png",
-                bbox_inches="tight")
-    plt.close(fig)
+    return save_figure(fig, path, vector)
 
 
 def series_style(scenario: Any, ref: str, references: list[str] | tuple[str, ...] = ()
@@ -441,15 +462,8 @@ def figure_columns(spec: dict[str, Any], scenario: Any, columns: list[str]) -> s
 def draw_ensemble_figure(spec: dict[str, Any], frames: dict[str, list[Any]], path: Path,
                          scenarios: dict[str, Any] | None = None) -> None:
     """:func:`ensemble_figure_of` the members' recorded series (run name -> one frame per
-    member), saved to ``path`` (png at 200 dpi, svg or pdf by its suffix)."""
-    import matplotlib.pyplot as plt
-
-    from cosim.run.results import PLOT_DPI
-
-    fig = ensemble_figure_of(spec, frames, scenarios or {})
-    fig.savefig(path, dpi=PLOT_DPI, format=Path(path).suffix.lstrip(".") or "png",
-                bbox_inches="tight")
-    plt.close(fig)
+    member), saved to ``path`` (png at 200 dpi, svg or pdf by its suffix: :func:`save_figure`)."""
+    save_figure(ensemble_figure_of(spec, frames, scenarios or {}), path)
 
 
 def ensemble_figure_of(spec: dict[str, Any], frames: dict[str, list[Any]],
