@@ -3,7 +3,9 @@ key column, the shared prefix of the names stated once, blocks that repeat the k
 
 from __future__ import annotations
 
-from cosim.run.console import cell, column_cells, fit_table
+import math
+
+from cosim.run.console import cell, column_cells, decimal_exponent, fit_table
 from cosim.run.runner import Progress
 
 
@@ -48,6 +50,29 @@ def test_each_column_has_one_notation():
     text = fit_table(rows, ["run", "mass", "err"], signed=["err"])
     assert "e+05" not in text and "e-05" not in text
     assert text.splitlines()[-1].split() == ["b", "539000", "-0.0000"]
+
+
+def test_decimal_exponent_is_the_printed_one_at_and_below_powers_of_ten():
+    """The exponent is the one Python prints: exact at every power of ten (no log10 rounding),
+    the next power's for a value that rounds up to it, its own just below that."""
+    for k in range(-12, 13):
+        power = float(f"1e{k}")
+        assert decimal_exponent(power, 3) == k
+        assert decimal_exponent(math.nextafter(power, 0.0), 3) == k  # prints 1.00e{k}
+        assert decimal_exponent(-power, 4) == k
+    assert decimal_exponent(9.996e-4, 3) == -3  # 1.00e-03
+    assert decimal_exponent(9.994e-4, 3) == -4  # 9.99e-04
+    assert decimal_exponent(9.9996e-4, 4) == -3 and decimal_exponent(9.9994e-4, 4) == -4
+
+
+def test_column_notation_at_the_edges_of_fixed_point():
+    """A column whose largest value prints as 1.000e-03 is fixed-point (it lies in the fixed
+    range as printed), one that prints 9.999e-04 or 1.000e+06 is scientific."""
+    assert column_cells([0.001]) == ["0.001"]
+    assert column_cells([math.nextafter(0.001, 0.0)]) == ["0.001"]
+    assert column_cells([9.9996e-4]) == ["0.001"]
+    assert column_cells([9.999e-4]) == ["9.999e-04"]
+    assert column_cells([999999.9]) == ["1.000e+06"]
 
 
 def test_every_block_repeats_every_key_column():

@@ -67,6 +67,25 @@ def test_a_paper_page_reads_citation_verdicts_figures_runs_notes(name: str) -> N
 
 
 @pytest.mark.parametrize("name", _pages())
+def test_each_svg_link_is_a_file_beside_the_page_and_each_svg_is_linked(name: str) -> None:
+    """Every "SVG" link (under a figure: its vector drawing) names a file beside the page, and
+    every svg beside the page (its record aside) is linked, right under its png where it has
+    one."""
+    text = (PAPERS / f"{name}.md").read_text()
+    linked = re.findall(r"(?<!!)\[SVG\]\(([^)\s]+)\)", text)
+    for target in linked:
+        assert (PAPERS / target).is_file(), target
+    beside = {p.relative_to(PAPERS).as_posix() for p in (PAPERS / name).rglob("*.svg")
+              if "record" not in p.relative_to(PAPERS / name).parts}
+    assert beside <= set(linked), sorted(beside - set(linked))
+    for target in linked:
+        png = target.removesuffix(".svg") + ".png"
+        if (PAPERS / png).is_file():
+            assert re.search(rf"!\[[^\]]*\]\({re.escape(png)}\)\s*\n\s*\n?"
+                             rf"\[SVG\]\({re.escape(target)}\)", text), target
+
+
+@pytest.mark.parametrize("name", _pages())
 def test_every_table_row_has_its_headers_cells(name: str) -> None:
     """In the source and as the site's Markdown renders it (which pads a short row with an
     empty cell), every row of every table has as many cells as its header."""

@@ -93,18 +93,49 @@ def test_paper_page_is_the_whole_table_else_the_claims_and_copies_figures(tmp_pa
                                                                            ) -> None:
     run = tmp_path / "seedX"
     (run / "fig").mkdir(parents=True)
-    (run / "claims.md").write_text("## Claims\n\n![a](fig/a.png) [web](https://x.org/y.png)\n")
+    (run / "claims.md").write_text("## Claims\n\n![a](fig/a.png) [web](https://x.org/y.png)"
+                                   "\n\n[SVG](fig/a.svg)\n")
     (run / "fig" / "a.png").write_bytes(b"PNG")
+    (run / "fig" / "a.svg").write_bytes(b"<svg/>")
     page = docs_pages.paper_page("seedX", run)
     assert page is not None
     text = page[DOCS / "papers" / "seedX.md"].decode()
     assert text.count("# Claims") == 1
     assert "![a](seedX/fig/a.png)" in text and "(https://x.org/y.png)" in text
+    assert "[SVG](seedX/fig/a.svg)" in text  # the vector figure linked and copied beside
     assert page[DOCS / "papers" / "seedX" / "fig" / "a.png"] == b"PNG"
+    assert page[DOCS / "papers" / "seedX" / "fig" / "a.svg"] == b"<svg/>"
     (run / "table.md").write_text("## T\n\nthe table, claims, figures and notes\n")
     page = docs_pages.paper_page("seedX", run)
     assert b"the table, claims" in page[DOCS / "papers" / "seedX.md"]
     assert docs_pages.paper_page("seedY", tmp_path / "none") is None
+
+
+def test_only_the_claims_table_is_marked_for_the_stylesheet() -> None:
+    """A paper page's claims table, and no other table, renders inside the ``claims-table``
+    div (md_in_html, as mkdocs.yml enables it) that the site's stylesheet fits to the page
+    width; the text after it stays outside."""
+    import markdown
+
+    from cosim.reproduce.tables import md_row
+    from cosim.run.ensemble import CLAIMS_HEADER
+
+    claims = [md_row(list(CLAIMS_HEADER)), "|" + " --- |" * len(CLAIMS_HEADER),
+              md_row(["a_b: A stops first", "holds", "20 of 20", "0.1 [0, 0.2]", "-", "sec. 4",
+                      "yes"])]
+    text = "\n".join(["# P", "", "| x | y |", "| --- | --- |", "| 1 | 2 |", "", *claims, "",
+                      "after", ""])
+    html = markdown.markdown(docs_pages.mark_claims_tables(text),
+                             extensions=["tables", "md_in_html"])
+    assert html.count("<table>") == 2
+    div = re.search(rf'<div class="{docs_pages.CLAIMS_CLASS}">(.*?)</div>', html, re.S)
+    assert div and "<th>verdict</th>" in div.group(1) and "<td>a_b: A stops first</td>" \
+        in div.group(1)
+    assert "<td>1</td>" not in div.group(1) and "after" not in div.group(1)
+    assert "<p>after</p>" in html
+    config = (ROOT / "mkdocs.yml").read_text()
+    assert "- md_in_html" in config and "- stylesheets/extra.css" in config
+    assert f".{docs_pages.CLAIMS_CLASS} " in (DOCS / "stylesheets" / "extra.css").read_text()
 
 
 def test_fill_generated_replaces_only_its_block() -> None:
@@ -181,8 +212,8 @@ MAX_SHOT_PX = 16000  # a full-page screenshot's height is the page's, up to this
 
 # Run in each built page after it loads: what a reader sees, as JSON in a script element that
 # --dump-dom prints (fence marks in the text, h2/h3 headings and whether the page's table of
-# contents links them, images with their decoded size, where the claims tables' verdict
-# columns sit against the window and their scrolling box, the page height).
+# contents links them, images with their decoded size, where the claims tables' verdict and
+# last columns sit against the window and their scrolling box, the page height).
 _PROBE = """
 window.addEventListener('load', () => setTimeout(() => {
   const art = document.querySelector('article');
@@ -198,11 +229,14 @@ window.addEventListener('load', () => setTimeout(() => {
     out.images = [...art.querySelectorAll('img')].map(i => (
       {src: i.getAttribute('src'), complete: i.complete, w: i.naturalWidth,
        h: i.naturalHeight}));
-    out.verdict_columns = [...art.querySelectorAll('th')]
-      .filter(th => th.textContent.trim() === 'verdict').map(th => {
-        const r = th.getBoundingClientRect();
+    out.claims_columns = [...art.querySelectorAll('th')]
+      .filter(th => th.textContent.trim() === 'verdict').flatMap(th => {
         const box = (th.closest('.md-typeset__scrollwrap') || art).getBoundingClientRect();
-        return {left: r.left, right: r.right, box_left: box.left, box_right: box.right};
+        return [th, th.parentElement.lastElementChild].map(c => {
+          const r = c.getBoundingClientRect();
+          return {name: c.textContent.trim(), left: r.left, right: r.right,
+                  box_left: box.left, box_right: box.right};
+        });
       });
   }
   const s = document.createElement('script');
@@ -285,13 +319,17 @@ def test_every_page_renders_its_text_headings_and_figures(rendered: dict[str, di
 
 
 @pytest.mark.slow
-def test_paper_verdict_columns_fit_1280px(rendered: dict[str, dict]) -> None:
-    """Each claims table's verdict column lies inside the window and inside the table's own
-    scrolling box at 1280 px, so a reader sees the verdicts without scrolling sideways."""
+def test_paper_claims_tables_fit_1280px(rendered: dict[str, dict]) -> None:
+    """Each claims table's verdict column and its last column (rounding-robust) lie inside the
+    window and inside the table's own scrolling box at 1280 px, so a reader sees the whole
+    table without scrolling sideways."""
+    from cosim.run.ensemble import CLAIMS_HEADER
+
     papers = {p: probe for p, probe in rendered.items()
               if p.startswith("papers/") and p != "papers/"}
-    columns = [(p, c) for p, probe in papers.items() for c in probe["verdict_columns"]]
+    columns = [(p, c) for p, probe in papers.items() for c in probe["claims_columns"]]
     assert columns, "no claims table with a verdict column on a paper page"
-    hidden = [p for p, c in columns
+    assert {c["name"] for _, c in columns} == {"verdict", CLAIMS_HEADER[-1]}
+    hidden = [(p, c["name"]) for p, c in columns
               if c["right"] > min(c["box_right"], WIDTH_PX) + 0.5 or c["left"] < c["box_left"]]
     assert not hidden, hidden

@@ -313,6 +313,16 @@ def test_perturbed_boxes_are_not_collapsed(monkeypatch, tmp_path):
     assert lo <= 100 * errors.min() and 100 * errors.max() <= hi and hi - lo < 5.0
 
 
+def _beneath_in_grey(line, measured) -> bool:
+    """Whether ``line`` is drawn as a reference: solid, mid grey (equal channels, neither
+    black nor white), beneath every ``measured`` curve."""
+    from matplotlib.colors import to_rgba
+
+    r, g, b, _ = to_rgba(line.get_color())
+    return (line.get_linestyle() == "-" and r == g == b and 0.25 <= r <= 0.75
+            and all(line.get_zorder() < m.get_zorder() for m in measured))
+
+
 def _stopping_frame(offset: float = 0.0):
     """A synthetic stopping run as seed000_stop_rsmpc records it (0.2 s output, the
     controller's v_ref and brake command held between its events)."""
@@ -333,8 +343,8 @@ def test_reproduce_figures_read_as_paper_figures(built_fmus):
     (or the entry's own label), no offset notation, the legend outside the axes and inside the
     figure with the runs' names and the reference's declared description (no raw variable
     names), each run's measured speed solid in its own colour and marker, the reference
-    ([summary] reference_speed) once in the legend, its continuous curve solid, black and
-    thinner, the held command as steps."""
+    ([summary] reference_speed) once in the legend, its continuous curve solid, mid grey,
+    thinner and beneath the measured curves, the held command as steps."""
     import matplotlib.pyplot as plt
     import numpy as np
     from matplotlib.colors import to_rgba
@@ -367,7 +377,7 @@ def test_reproduce_figures_read_as_paper_figures(built_fmus):
     reference = [ln for ln in lines if "reference" in ln.get_label()]
     assert len(speed) == 2 and len(reference) == 2
     assert all(ln.get_linestyle() == "-" for ln in speed + reference)
-    assert all(to_rgba(ln.get_color()) == (0.0, 0.0, 0.0, 1.0) for ln in reference)
+    assert all(_beneath_in_grey(ln, speed) for ln in reference)
     assert len({to_rgba(ln.get_color()) for ln in speed}) == 2
     assert len({ln.get_marker() for ln in speed}) == 2
     assert max(ln.get_linewidth() for ln in reference) < min(ln.get_linewidth() for ln in speed)
@@ -528,11 +538,11 @@ def _tracking_frame(offset: float = 0.0):
 def test_error_panel_under_each_tracking_axes(built_fmus):
     """``error``: a panel under each tracking axes with the recorded error column, drawn with
     the tracking axes' factor (km/h) in each run's colour, labelled by its declaration in that
-    unit, the zero error solid black; an overlay is two axes, panels two per run; more than
-    MAX_PANELS axes is an error naming the figure and the count."""
+    unit, the zero error drawn as a reference (solid mid grey, beneath); an overlay is two
+    axes, panels two per run; more than MAX_PANELS axes is an error naming the figure
+    and the count."""
     import matplotlib.pyplot as plt
     import numpy as np
-    from matplotlib.colors import to_rgba
 
     from cosim.run.figures import MAX_PANELS, FigureError, figure_of, panel_count
 
@@ -553,8 +563,8 @@ def test_error_panel_under_each_tracking_axes(built_fmus):
     colours = {name: ln.get_color() for ln in track.get_lines()
                for name in frames if ln.get_label() == name}
     assert [ln.get_color() for ln in drawn] == [colours[n] for n in frames]
-    zero = [ln for ln in err.get_lines() if ln not in drawn]
-    assert [to_rgba(ln.get_color()) for ln in zero] == [(0.0, 0.0, 0.0, 1.0)]
+    [zero] = [ln for ln in err.get_lines() if ln not in drawn]
+    assert _beneath_in_grey(zero, drawn)
     assert err.get_position().height < track.get_position().height
     plt.close(fig)
 
@@ -570,9 +580,9 @@ def test_error_panel_under_each_tracking_axes(built_fmus):
 
 def test_a_figures_reference_key_marks_a_series_the_summary_does_not(built_fmus):
     """Seed 003's scenarios declare no ``reference_accel``: ``controller.a_ref`` is a measured
-    curve unless the figure's ``reference`` names it; then it is the reference (solid, black,
-    named "reference: <its description>"). A reference not among y is an error naming the key
-    and value."""
+    curve unless the figure's ``reference`` names it; then it is the reference (solid, mid
+    grey, beneath the measured curve, named "reference: <its description>"). A reference not
+    among y is an error naming the key and value."""
     import matplotlib.pyplot as plt
     from matplotlib.colors import to_rgba
 
@@ -583,16 +593,18 @@ def test_a_figures_reference_key_marks_a_series_the_summary_does_not(built_fmus)
     assert "reference_accel" not in sc.summary
     frames = {"Eco": _tracking_frame()}
     spec = {"file": "a.png", "x": "time", "y": ["plant.a", "controller.a_ref"]}
-    black = (0.0, 0.0, 0.0, 1.0)
     plain = figure_of(spec, frames, {"Eco": sc})
-    assert not any(to_rgba(ln.get_color()) == black for ln in plain.axes[0].get_lines())
+    lines = plain.axes[0].get_lines()
+    assert not any(_beneath_in_grey(ln, lines) for ln in lines)
+    assert len({to_rgba(ln.get_color()) for ln in lines}) == 2  # two measured colours
     plt.close(plain)
     marked = figure_of({**spec, "reference": ["controller.a_ref"]}, frames, {"Eco": sc})
     ax = marked.axes[0]
     by_label = {ln.get_label(): ln for ln in ax.get_lines()}
     ref = by_label[f"reference: {variable_info(sc, 'controller.a_ref')[0]}"]
-    assert to_rgba(ref.get_color()) == black and ref.get_linestyle() == "-"
-    assert by_label["Eco"].get_linestyle() == "-" and to_rgba(by_label["Eco"].get_color()) != black
+    assert _beneath_in_grey(ref, [by_label["Eco"]])
+    assert by_label["Eco"].get_linestyle() == "-" and by_label["Eco"].get_marker() != "None"
+    assert not _beneath_in_grey(by_label["Eco"], [])
     assert ax.get_ylabel().endswith("(m/s²)")
     plt.close(marked)
     with pytest.raises(FigureError, match=r"figure a\.png: reference = \['plant\.v'\] not among"):
@@ -608,13 +620,13 @@ PAPER_FIGURES = [("seed000", "speed_position.png"), ("seed000", "stop_window.png
 def test_paper_figures_from_their_records_read_as_published(built_fmus, entry_name, file):
     """The shipped figures drawn from the shipped records: at most MAX_PANELS axes, the runs
     the paper compares overlaid (seed 003's figs. 1-3 on one tracking axes), every measured
-    curve solid, a reference drawn in each tracking axes (solid, black), every axis label
+    curve solid, a reference drawn in each tracking axes (solid, mid grey, beneath the measured
+    curves), every axis label
     with a unit in parentheses, the legend inside the figure, its lines wrapped."""
     import re
     from pathlib import Path
 
     import matplotlib.pyplot as plt
-    from matplotlib.colors import to_rgba
 
     from cosim.reproduce.entry import load_entry
     from cosim.reproduce.run import run_scenarios
@@ -638,8 +650,7 @@ def test_paper_figures_from_their_records_read_as_published(built_fmus, entry_na
         measured = [ln for ln in ax.get_lines() if measured_line(ln)]
         references = [ln for ln in ax.get_lines() if not measured_line(ln)]
         assert measured and all(ln.get_linestyle() == "-" for ln in measured)
-        assert references and all(ln.get_linestyle() == "-" and to_rgba(ln.get_color())
-                                  == (0.0, 0.0, 0.0, 1.0) for ln in references)
+        assert references and all(_beneath_in_grey(ln, measured) for ln in references)
     unit = re.compile(r"\(\S+\)$")
     for ax in fig.axes:
         assert unit.search(ax.get_ylabel()), ax.get_ylabel()
@@ -656,10 +667,10 @@ def test_paper_figures_from_their_records_read_as_published(built_fmus, entry_na
 
 def test_ensemble_figure_draws_the_reference_the_members_recorded(built_fmus):
     """The members' median and band of the measured speed in its colour, solid; the reference
-    (the [summary]'s reference_speed) as its median in solid black where the members recorded
+    (the [summary]'s reference_speed) as its median, solid mid grey beneath the measured one,
+    where the members recorded
     it, left out where they did not (a record made before the figure named it)."""
     import matplotlib.pyplot as plt
-    from matplotlib.colors import to_rgba
 
     from cosim.run.figures import ensemble_figure_of
 
@@ -668,9 +679,8 @@ def test_ensemble_figure_draws_the_reference_the_members_recorded(built_fmus):
     members = [_tracking_frame(0.1 * i) for i in range(3)]
     fig = ensemble_figure_of(spec, {"Eco": members}, {"Eco": sc})
     speed, reference = fig.axes[0].get_lines()
-    assert speed.get_linestyle() == "-" and to_rgba(speed.get_color()) != (0.0, 0.0, 0.0, 1.0)
-    assert reference.get_linestyle() == "-"
-    assert to_rgba(reference.get_color()) == (0.0, 0.0, 0.0, 1.0)
+    assert speed.get_linestyle() == "-" and not _beneath_in_grey(speed, [])
+    assert _beneath_in_grey(reference, [speed])
     plt.close(fig)
     fig = ensemble_figure_of(spec, {"Eco": [m.drop(columns="controller.v_ref")
                                             for m in members]}, {"Eco": sc})

@@ -5,12 +5,13 @@ from __future__ import annotations
 import json
 import re
 from pathlib import Path
+from typing import Any
 
 import pandas as pd
 import pytest
 
 from cosim.reproduce.entry import Figure, ReproduceError, entry_names, load_entry
-from cosim.reproduce.figures import draw_speed_classes
+from cosim.reproduce.figures import draw_speed_classes, figure_section
 from cosim.reproduce.page import redraw_entry, reproduce
 from cosim.reproduce.tables import ranking_markdown, ranking_rows, summary_value
 from cosim.run.figures import speed_class_errors
@@ -233,12 +234,43 @@ def test_seed001_declares_figures_6_to_10() -> None:
 
 
 def test_speed_classes_figure_writes_table_and_csv(tmp_path: Path) -> None:
-    text = draw_speed_classes(Figure(**CLASSES, paper="A fails at 30"),
-                              {"A": _graded_frame(), "B": _graded_frame()}, tmp_path / "fig8.png")
+    text, written = draw_speed_classes(Figure(**CLASSES, paper="A fails at 30"),
+                                       {"A": _graded_frame(), "B": _graded_frame()},
+                                       tmp_path / "fig8.png")
+    assert written == [tmp_path / "fig8.png", tmp_path / "fig8.svg"]
     assert (tmp_path / "fig8.png").stat().st_size > 10_000
     csv = pd.read_csv(tmp_path / "fig8.csv")
     assert len(csv) == 6 and set(csv.run) == {"A", "B"}
     assert "| 30-50 | 0.601 | 0.700 ✗ | 0.700 ✗ |" in text and "Paper: A fails at 30" in text
+
+
+@pytest.mark.parametrize("spec", [CLASSES, {"file": "track.png", "x": "time",
+                                             "y": ["v1", "v_ref"], "reference": ["v_ref"]}],
+                         ids=["speed_classes", "overlay"])
+def test_page_figure_is_png_and_the_same_svg_on_every_draw(tmp_path: Path,
+                                                          spec: dict[str, Any]) -> None:
+    """A page figure is drawn as png (the image) with its svg beside it, linked under the image
+    as "SVG"; two draws write byte-identical files (no date, the svg's ids fixed), so a
+    redrawn page stays current."""
+    import numpy as np
+
+    frame = _graded_frame().assign(time=lambda f: 0.1 * np.arange(len(f)))
+    pages = {}
+    for draw in ("one", "two"):
+        out = tmp_path / draw
+        out.mkdir()
+        lines = figure_section(Figure(**spec), {"A": frame, "B": frame * 1.01}, out, "png", {})
+        pages[draw] = "\n".join(lines)
+        [image] = re.findall(r"!\[[^\]]*\]\(([^)]+)\)", pages[draw])
+        [svg] = re.findall(r"(?<!!)\[SVG\]\(([^)]+)\)", pages[draw])
+        assert (image, svg) == (spec["file"], spec["file"].replace(".png", ".svg"))
+        assert (out / image).read_bytes().startswith(b"\x89PNG")
+        assert b"<svg" in (out / svg).read_bytes() and b"<dc:date>" not in (out / svg).read_bytes()
+    assert pages["one"] == pages["two"]
+    one = sorted(p.relative_to(tmp_path / "one") for p in (tmp_path / "one").rglob("*"))
+    assert one == sorted(p.relative_to(tmp_path / "two") for p in (tmp_path / "two").rglob("*"))
+    for rel in one:
+        assert (tmp_path / "one" / rel).read_bytes() == (tmp_path / "two" / rel).read_bytes(), rel
 
 
 def test_figure_series_mean_of_pattern_minus_reference() -> None:
@@ -579,6 +611,27 @@ def test_fixed_notation_keeps_three_digits_of_the_smallest_magnitude() -> None:
     assert [fixed(v, 6) for v in (1.518e-4, 0.004643)] == ["0.000152", "0.004643"]
     assert fixed(31130.0, 0) == "31130" and fixed(-1e-9, 3) == "0.000"
     assert fixed(float("nan"), 2) == "-"
+
+
+def test_fixed_notation_at_and_just_below_powers_of_ten() -> None:
+    """At an exact power of ten, just below it (printed as that power) and at values rounding
+    up to it, :func:`number` prints exactly three significant digits: the exponent comes from
+    the printed digits, not from log10's last bit."""
+    import math
+
+    from cosim.run.claims import decimals_for, number
+
+    def significant(text: str) -> int:
+        return len(text.replace("-", "").replace(".", "").lstrip("0"))
+
+    for k in range(-6, 0):  # 1e-6 needs 8 decimals: within MAX_DECIMALS
+        power = float(f"1e{k}")
+        for value in (power, math.nextafter(power, 0.0), power * 0.9996, power * 0.9994,
+                      -power):
+            assert significant(number(value)) == 3, (value, number(value))
+    assert decimals_for([0.001]) == 5 and number(0.001) == "0.00100"
+    assert number(math.nextafter(0.001, 0.0)) == "0.00100"
+    assert number(9.996e-4) == "0.00100" and number(9.994e-4) == "0.000999"
 
 
 def test_single_run_columns_have_one_fixed_notation_each() -> None:

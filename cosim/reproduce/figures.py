@@ -1,7 +1,9 @@
 """The figures and sweeps of a reproduction entry's page: each ``[[figures]]`` drawn from the
 recorded series (lines by :mod:`cosim.run.figures`; the graded speed-error bars of
 ``kind = "speed_classes"`` with their table here), each ``[[sweeps]]``' table and figure, and
-the page's markdown of both."""
+the page's markdown of both. A figure drawn as png (shown on the page) is also written as svg
+beside it (:func:`cosim.run.figures.save_figure`), linked under the figure for a reader who
+wants the vector figure (:func:`figure_lines`)."""
 
 from __future__ import annotations
 
@@ -10,21 +12,29 @@ from typing import Any
 
 from cosim.reproduce.entry import Figure, Sweep, slug
 from cosim.reproduce.tables import fmt, frame_markdown, md_row
-from cosim.run.figures import draw_figure, legend_outside, speed_class_errors
-from cosim.run.results import PLOT_DPI
+from cosim.run.figures import draw_figure, legend_outside, save_figure, speed_class_errors
 
 
 def figure_section(figure: Figure, frames: dict[str, Any], out: Path, plot_format: str,
                    scenarios: dict[str, Any]) -> list[str]:
-    """Draw ``figure`` from the runs' series ``frames`` into ``out`` (``plot_format``); the
-    page's lines of it (the image, and the table of a speed-classes figure)."""
+    """Draw ``figure`` from the runs' series ``frames`` into ``out`` (``plot_format``; a png
+    with its svg beside it); the page's lines of it (:func:`figure_lines`, and the table of a
+    speed-classes figure)."""
     file = figure_file(figure, plot_format)
     title = figure.title if figure.title is not None else file
     if figure.kind == "speed_classes":
-        table_md = draw_speed_classes(figure, frames, out / file)
-        return ["", f"![{title}]({file})", "", table_md]
-    draw_figure(figure.spec(), frames, out / file, scenarios)
-    return ["", f"![{title}]({file})"]
+        table_md, written = draw_speed_classes(figure, frames, out / file)
+        return [*figure_lines(title, written, out), "", table_md]
+    written = draw_figure(figure.spec(), frames, out / file, scenarios, vector=True)
+    return figure_lines(title, written, out)
+
+
+def figure_lines(title: str, written: list[Path], out: Path) -> list[str]:
+    """The page's lines of one figure drawn to ``written`` (paths under ``out``): the first
+    shown as the image, each further one (its svg) linked under it by its format's name."""
+    shown, *others = (p.relative_to(out).as_posix() for p in written)
+    links = " ".join(f"[{Path(p).suffix.lstrip('.').upper()}]({p})" for p in others)
+    return ["", f"![{title}]({shown})", *(["", links] if links else [])]
 
 
 SWEEP_COLUMNS = ("stop_error_m", "controller_executions", "command_switches", "qp_infeasible")
@@ -37,7 +47,7 @@ def sweep_section(sweep: Sweep, stored: dict[str, Any], out: Path, plot_format: 
     import pandas as pd
 
     from cosim.run.scenario import load_scenario
-    from cosim.run.sweep import key_labels, plot_sweep
+    from cosim.run.sweep import draw_sweep, key_labels
 
     frame = pd.DataFrame(stored["rows"], columns=stored["columns"])
     keys = list(sweep.grid)
@@ -45,19 +55,23 @@ def sweep_section(sweep: Sweep, stored: dict[str, Any], out: Path, plot_format: 
     target.mkdir(parents=True, exist_ok=True)
     frame.to_csv(target / "sweep.csv", index=False)
     ok = frame[frame["status"] == "ok"]
+    written = [target / f"sweep.{plot_format}"]
     if len(ok):
         first = load_scenario(sweep.scenarios[0])
         named = {Path(p).stem: load_scenario(p).description for p in sweep.scenarios}
         named = {n: v for n, v in named.items() if v} | sweep.labels
-        plot_sweep(ok, keys, target / f"sweep.{plot_format}", key_labels(first, keys), named)
+        written = save_figure(draw_sweep(ok, keys, key_labels(first, keys), named),
+                              written[0], vector=True)
     keep = [c for c in ("scenario", *keys, *SWEEP_COLUMNS) if c in frame]
-    return ["", f"#### Sweep {sweep.name}", "", frame_markdown(frame[keep]), "",
-            f"![{sweep.name}]({target.name}/sweep.{plot_format})"]
+    return ["", f"#### Sweep {sweep.name}", "", frame_markdown(frame[keep]),
+            *figure_lines(sweep.name, written, out)]
 
 
-def draw_speed_classes(figure: Figure, frames: dict[str, Any], path: Path) -> str:
+def draw_speed_classes(figure: Figure, frames: dict[str, Any], path: Path
+                       ) -> tuple[str, list[Path]]:
     """Grouped bars of :func:`cosim.run.figures.speed_class_errors` per run with each class's
-    limit; writes ``<file>.csv`` beside the figure and returns the markdown table."""
+    limit, drawn to ``path`` (and an svg beside a png); writes ``<file>.csv`` beside the
+    figure; returns the markdown table and the figure's paths."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -93,9 +107,7 @@ def draw_speed_classes(figure: Figure, frames: dict[str, Any], path: Path) -> st
     ax.grid(True, axis="y", alpha=0.3)
     legend_outside(ax)
     fig.suptitle(figure.title or "")
-    fig.savefig(path, dpi=PLOT_DPI, format=Path(path).suffix.lstrip(".") or "png",
-                bbox_inches="tight")
-    plt.close(fig)
+    written = save_figure(fig, path, vector=True)
     lines = [md_row(["class", "limit", *names]), "|" + " --- |" * (len(names) + 2)]
     for k, cls in enumerate(classes):
         cells = []
@@ -108,7 +120,7 @@ def draw_speed_classes(figure: Figure, frames: dict[str, Any], path: Path) -> st
               "sample within its own allowance); limit: the class's strictest allowance."]
     if figure.paper:
         lines += ["", f"Paper: {figure.paper}"]
-    return "\n".join(lines)
+    return "\n".join(lines), written
 
 
 def figure_file(figure: Figure, plot_format: str = "png") -> str:

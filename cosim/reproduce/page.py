@@ -245,7 +245,8 @@ def reproduce_page(name: str, out_dir: str | Path | None = None, workers: int | 
                    resume: bool = False, build: str | None = None) -> Page:
     """Run one entry (:func:`simulate`), keep its record (``record/``,
     :mod:`cosim.run.record`) and write everything made of it (:func:`evaluate`): the tables,
-    sweeps, figures (in ``plot_format``: png at 200 dpi, svg or pdf) and, with claims,
+    sweeps, figures (in ``plot_format``: png at 200 dpi with its svg beside it, svg or pdf;
+    the ensembles' figures without the svg) and, with claims,
     claims.csv/claims.md over ``seeds`` members (default 20; :mod:`cosim.run.ensemble`,
     ``rounding``: also the perturbed floating-point rerun); every batch of runs goes through
     :mod:`cosim.run.runner` (``workers``, ``scheduler``). With ``echo`` the tables are printed

@@ -58,6 +58,8 @@ from typing import Any
 
 import numpy as np
 
+from cosim.run.console import decimal_exponent
+
 CLAIM_KINDS = ("less", "greater", "below", "above", "inside")
 QUANTIFIERS = ("every", "share", "typical")
 ENSEMBLES = ("disturbance", "mismatch", "repeat")
@@ -667,7 +669,8 @@ def decimals_for(values: Iterable[Any], significant: int = SIGNIFICANT) -> int:
     nonzero = [abs(v) for v in finite if v != 0.0]
     if not nonzero or all(v.is_integer() for v in finite):
         return 0
-    return min(MAX_DECIMALS, max(0, significant - 1 - math.floor(math.log10(min(nonzero)))))
+    return min(MAX_DECIMALS,
+               max(0, significant - 1 - decimal_exponent(min(nonzero), significant)))
 
 
 def fixed(value: float, decimals: int) -> str:

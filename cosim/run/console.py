@@ -34,6 +34,15 @@ def cell(value: Any, signed: bool = False) -> str:
     return str(value)
 
 
+def decimal_exponent(value: float, significant: int) -> int:
+    """The power of ten of ``value``'s leading digit as Python prints it to ``significant``
+    (>= 1) significant digits (``f"{value:.{significant - 1}e}"``): 0.001 -> -3 exactly,
+    whatever the platform's log10; a value that rounds up to the next power takes that power's
+    (9.996e-4 at 3 digits prints 1.00e-03: -3), consistent with the digits shown. ``value``
+    finite and non-zero."""
+    return int(f"{value:.{significant - 1}e}".split("e")[1])
+
+
 def _numeric(value: Any) -> bool:
     """A finite int or float (not a bool)."""
     return (isinstance(value, (int, float)) and not isinstance(value, bool)
@@ -55,7 +64,7 @@ def column_cells(values: Sequence[Any], signed: bool = False, digits: int = 4) -
         spec = "int"
     else:
         largest = max(abs(n) for n in numbers)
-        exponent = math.floor(math.log10(largest)) if largest > 0 else 0
+        exponent = decimal_exponent(largest, digits) if largest > 0 else 0
         if -3 <= exponent < 6:
             decimals = max(0, digits - 1 - exponent)
             while decimals and all(f"{n:.{decimals}f}".endswith("0") for n in numbers):

@@ -3,7 +3,8 @@ the ensembles' medians and bands, and the helpers they share (labels and units f
 declarations, the roles and drawing styles of measured and reference curves, legends
 right of the axes). It imports none of the runners; the runners and :mod:`cosim.reproduce`
 import it. Figures are matplotlib figures saved at
-:data:`cosim.run.results.PLOT_DPI` (png), or as svg / pdf by the file's suffix.
+:data:`cosim.run.results.PLOT_DPI` (png), or as svg / pdf by the file's suffix
+(:func:`save_figure`: the same bytes on every draw).
 """
 
 from __future__ import annotations
@@ -21,17 +22,37 @@ class FigureError(ValueError):
     the run and the column)."""
 
 
-def draw_figure(spec: dict[str, Any], frames: dict[str, Any], path: Path,
-                scenarios: dict[str, Any] | None = None) -> None:
-    """:func:`figure_of` the runs' recorded series (run name -> frame), saved to ``path`` (its
-    suffix: png at 200 dpi, svg or pdf)."""
+SVG_HASHSALT = "ato-cosim"  # matplotlib's svg.hashsalt: the svg's element ids, fixed
+UNDATED: dict[str, dict[str, Any]] = {"svg": {"Date": None}, "pdf": {"CreationDate": None}}
+
+
+def save_figure(fig: Any, path: Path, vector: bool = False) -> list[Path]:
+    """Save ``fig`` to ``path`` by its suffix (png at :data:`PLOT_DPI`, svg or pdf) and, with
+    ``vector``, an svg beside a png (the same stem), then close it; the paths written. The
+    bytes are the same on every draw of the same figure: the svg's element ids hashed from
+    :data:`SVG_HASHSALT`, no date in the svg's or pdf's metadata (:data:`UNDATED`)."""
+    import matplotlib
     import matplotlib.pyplot as plt
 
+    path = Path(path)
+    paths = [path, *([path.with_suffix(".svg")] if vector and path.suffix == ".png" else [])]
+    with matplotlib.rc_context({"svg.hashsalt": SVG_HASHSALT}):
+        for target in paths:
+            kind = target.suffix.lstrip(".") or "png"
+            fig.savefig(target, dpi=PLOT_DPI, format=kind, bbox_inches="tight",
+                        metadata=UNDATED.get(kind))
+    plt.close(fig)
+    return paths
+
+
+def draw_figure(spec: dict[str, Any], frames: dict[str, Any], path: Path,
+                scenarios: dict[str, Any] | None = None, vector: bool = False) -> list[Path]:
+    """:func:`figure_of` the runs' recorded series (run name -> frame), saved to ``path`` (its
+    suffix: png at 200 dpi, svg or pdf) and, with ``vector``, as svg beside a png
+    (:func:`save_figure`); the paths written."""
     names = list(spec.get("runs", list(frames)))
     fig = figure_of(spec, {n: frames[n] for n in names}, scenarios or {})
-    fig.savefig(path, dpi=PLOT_DPI, format=Path(path).suffix.lstrip(".") or "png",
-                bbox_inches="tight")
-    plt.close(fig)
+    return save_figure(fig, path, vector)
 
 
 def series_style(scenario: Any, ref: str, references: list[str] | tuple[str, ...] = ()
@@ -130,8 +151,9 @@ LEGEND_WIDTH = 36  # characters of a legend line: a long declared description wr
 
 MARKERS = ("o", "s", "^", "D", "v", "P", "X", "*")  # per measured series of one axes
 MEASURED_WIDTH = 1.4  # measured curves: solid, coloured, a marker every MARKER_EVERY
-REFERENCE_WIDTH = 0.8  # reference curves: solid, black, thinner, drawn above the measured
-REFERENCE_COLOUR = "black"
+REFERENCE_WIDTH = 1.0  # reference curves: solid, mid grey, thinner, drawn beneath the measured
+REFERENCE_COLOUR = "0.5"  # mid grey (matplotlib's grey level)
+REFERENCE_ZORDER = 1.8  # above the grid (1.5) and bands (0), beneath measured curves (2)
 MARKER_EVERY = 0.12  # the markers' spacing along a curve, a fraction of the axes' diagonal
 MAX_PANELS = 5  # axes of one figure (error panels included): a printed page's height
 PANEL_HEIGHT = 2.2  # inches of a tracking or panels axes
@@ -181,7 +203,7 @@ def measured_style(k: int) -> dict[str, Any]:
 
 
 REFERENCE_STYLE: dict[str, Any] = {"color": REFERENCE_COLOUR, "linestyle": "-",
-                                   "linewidth": REFERENCE_WIDTH, "zorder": 3}
+                                   "linewidth": REFERENCE_WIDTH, "zorder": REFERENCE_ZORDER}
 
 
 def measured_line(artist: Any) -> bool:
@@ -232,8 +254,9 @@ def figure_of(spec: dict[str, Any], frames: dict[str, Any], scenarios: dict[str,
     drawing styles, :func:`series_style`).
 
     A series is a reference where its scenario's ``[summary]`` declares it so
-    (``reference_speed`` / ``reference_accel``): drawn as its continuous curve, solid, black
-    and thinner, above the measured ones; every other series is measured: solid, in its own
+    (``reference_speed`` / ``reference_accel``): drawn as its continuous curve, solid, mid
+    grey and thinner, beneath the measured ones (:data:`REFERENCE_STYLE`: where tracking is
+    tight the measured curve stays visible); every other series is measured: solid, in its own
     colour and marker (:func:`measured_style`; the runs of an overlay, or the series of a
     panel, each their own). At most ``MAX_PANELS`` axes (:func:`panel_count`). The legend sits
     right of the first axes, inside the figure."""
@@ -311,7 +334,7 @@ def draw_error(ax: Any, spec: dict[str, Any], frame: Any, x: Any, run: str, scen
                ylabel: str, scale: float, style: dict[str, Any], first: bool) -> None:
     """The error panel of one run: its recorded ``error`` column times ``scale`` (the tracking
     axes' factor) solid in the run's colour (without markers), and the zero error (its
-    reference) in black."""
+    reference) as a reference (:data:`REFERENCE_STYLE`)."""
     column = spec["error"]
     if column not in frame:
         raise FigureError(f"figure {spec['file']}: run {run!r} recorded no {column!r} "
@@ -327,7 +350,7 @@ def draw_error(ax: Any, spec: dict[str, Any], frame: Any, x: Any, run: str, scen
 
 def draw_limits(ax: Any, spec: dict[str, Any], frame: Any, x: Any, run: str,
                 seen: set[str] | None = None) -> None:
-    """The zero-error reference (solid black) and the +- allowance (dashed black:
+    """The zero-error reference (:data:`REFERENCE_STYLE`) and the +- allowance (dashed black:
     ``limit_kmh`` at or below ``limit_below_kmh``, ``limit_fraction`` of the speed above) of
     the ``limit_ref`` speed (times ``y_scale``) on an error figure's axes; each named once in
     the legend of a figure whose labels ``seen`` collects."""
@@ -439,15 +462,8 @@ def figure_columns(spec: dict[str, Any], scenario: Any, columns: list[str]) -> s
 def draw_ensemble_figure(spec: dict[str, Any], frames: dict[str, list[Any]], path: Path,
                          scenarios: dict[str, Any] | None = None) -> None:
     """:func:`ensemble_figure_of` the members' recorded series (run name -> one frame per
-    member), saved to ``path`` (png at 200 dpi, svg or pdf by its suffix)."""
-    import matplotlib.pyplot as plt
-
-    from cosim.run.results import PLOT_DPI
-
-    fig = ensemble_figure_of(spec, frames, scenarios or {})
-    fig.savefig(path, dpi=PLOT_DPI, format=Path(path).suffix.lstrip(".") or "png",
-                bbox_inches="tight")
-    plt.close(fig)
+    member), saved to ``path`` (png at 200 dpi, svg or pdf by its suffix: :func:`save_figure`)."""
+    save_figure(ensemble_figure_of(spec, frames, scenarios or {}), path)
 
 
 def ensemble_figure_of(spec: dict[str, Any], frames: dict[str, list[Any]],
@@ -456,7 +472,7 @@ def ensemble_figure_of(spec: dict[str, Any], frames: dict[str, list[Any]],
     band (members sampled on the first member's x grid; x = "time" or a recorded column;
     a reference column the members did not record and no declared curve gives is left out);
     held signals as steps, the measured medians solid in their colours, the reference as its
-    continuous curve (solid, black, :data:`REFERENCE_STYLE`), labels and units from
+    continuous curve (solid, mid grey, beneath: :data:`REFERENCE_STYLE`), labels and units from
     the declarations (:func:`series_style`), the legend outside."""
     import matplotlib
 
