@@ -15,6 +15,8 @@ issue's target, and writes them to ``benchmarks/results.json``. Asserts nothing.
   ratio = C / numba;
 * the master's loop vs the minimal fmpy loop on seed000_stop_pid, the freight and the EMU
   scenario (``bench_master.py``, alternating pairs; CPU-time and whole-run ratios beside);
+* ``cosim run`` in its child process vs the same run in-process on seed000_stop_pid and the
+  freight scenario (``bench_isolation.py``, alternating pairs; CPU counts the child's);
 * ``cosim sweep seed000_stop_rmpc seed000_stop_rsmpc --set controller.N=3..15`` with 2 workers
   vs 1 (``bench_sweep.py``, end to end, load averages before and after).
 
@@ -34,8 +36,9 @@ controller).
     python benchmarks/run_all.py [--quick] [--only campaign ...] [--campaign-seeds K]
 
 ``--only``: measure only the named groups (``closed_loop``, ``kernels``, ``qp``, ``instances``,
-``master``, ``sweep``, ``campaign``, ``seed003``, ``native_build``) and keep the other rows of
-the existing ``results.json``; each row records when it was measured and the load average then.
+``master``, ``isolation``, ``sweep``, ``campaign``, ``seed003``, ``native_build``) and keep the
+other rows of the existing ``results.json``; each row records when it was measured and the load
+average then.
 """
 
 from __future__ import annotations
@@ -58,6 +61,7 @@ sys.path[:0] = [str(ROOT), str(HERE), str(ROOT / "tests")]
 import bench_campaign  # noqa: E402
 import bench_freight  # noqa: E402
 import bench_instances  # noqa: E402
+import bench_isolation  # noqa: E402
 import bench_kernels  # noqa: E402
 import bench_master  # noqa: E402
 import bench_mpc  # noqa: E402
@@ -197,6 +201,16 @@ def sweep_speedup(repeat: int) -> dict:
             "load_average": [r["load_before"], r["load_after"]]}
 
 
+def isolation_overhead(scenario: str, repeat: int) -> dict:
+    """``cosim run``'s child process against the same run in-process (bench_isolation)."""
+    r = bench_isolation.isolated_vs_in_process(scenario, repeat)
+    return {"figure": r["isolated_s"], "unit": "s, run in a child process (no plot)",
+            "reference": r["in_process_s"], "reference_name": "the same run in-process (s)",
+            "ratio": r["ratio"], "ratio_name": "isolated / in-process, wall (median of pairs)",
+            "cpu_ratio": r["cpu_ratio"], "extra_ms": r["extra_ms"],
+            "load_average": r["load_average"]}
+
+
 def campaign_speedups(seeds: int) -> dict[str, dict]:
     """seed 001's claims at K = ``seeds`` (with the rounding rerun): 2 local workers vs 1 and
     a 2-worker local Dask cluster vs 1 worker, in one run (bench_campaign)."""
@@ -242,13 +256,15 @@ def native_build() -> dict:
             "load_average": [r["load_before"], r["load_after"]]}
 
 
-GROUPS = ("closed_loop", "kernels", "qp", "instances", "master", "sweep", "campaign", "seed003",
-          "native_build")
+GROUPS = ("closed_loop", "kernels", "qp", "instances", "master", "isolation", "sweep", "campaign",
+          "seed003", "native_build")
 TARGETS = {"freight closed loop": ">= 500 x real time", "EMU closed loop": ">= 1000 x real time",
            "RMPC N=10 QP step": "<= 35 us", "further FMU instance": "<= 10 ms",
            "freight plant kernel": "", "EMU plant kernel": "", "freight kernel C vs numba": "",
            "master/raw seed000_stop_pid": "ratio <= 1.10", "master/raw seed002_freight_pid": "",
-           "master/raw seed001_emu_pid": "", "sweep 2 vs 1 workers": "speed-up >= 1.7",
+           "master/raw seed001_emu_pid": "",
+           **{f"isolated/in-process {name}": "" for name in bench_isolation.SCENARIOS},
+           "sweep 2 vs 1 workers": "speed-up >= 1.7",
            "campaign 2 vs 1 workers": "speed-up >= 1.8",
            "campaign Dask 2 vs 1 worker": "speed-up >= 1.8",
            "seed 003 RMPC LMI event": "<= 20 ms median",
@@ -286,6 +302,10 @@ def main() -> None:
         for scenario in bench_master.SCENARIOS:
             measured[f"master/raw {scenario}"] = master_overhead(
                 scenario, repeat if scenario == FREIGHT or scenario == EMU else 5 * repeat)
+    if "isolation" in only:
+        for scenario in bench_isolation.SCENARIOS:
+            measured[f"isolated/in-process {scenario}"] = isolation_overhead(scenario,
+                                                                             5 * repeat)
     if "sweep" in only:
         measured["sweep 2 vs 1 workers"] = sweep_speedup(5 if repeat > 1 else 1)  # noisy
     if "campaign" in only:
