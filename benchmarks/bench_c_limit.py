@@ -147,20 +147,24 @@ def master_vs_c(scenario: str, repeat: int = 3) -> dict:
             "load_average": os.getloadavg()[0]}
 
 
+def summary_line(scenario: str, r: dict) -> str:
+    """One line of :func:`master_vs_c`'s figures."""
+    return (f"{scenario}: master loop {r['master_loop_s']:.3f} s ({r['master_loop_cpu_s']:.3f} "
+            f"s CPU), C loop {r['c_loop_s']:.3f} s ({r['c_loop_cpu_s']:.3f} s CPU); C / master "
+            f"{r['c_over_master']:.3f} wall, {r['c_over_master_cpu']:.3f} CPU (target >= "
+            f"{TARGET:g}); final position {r['master_final_position']:.17g} (master), "
+            f"{r['c_final_position']:.17g} (C): same {r['same_final_position']}; load "
+            f"{r['load_average']:.1f}")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("scenarios", nargs="*", default=list(SCENARIOS.values()))
-    parser.add_argument("--repeat", type=int, default=3)
+    parser.add_argument("scenarios", nargs="*", default=list(SCENARIOS.values()),
+                        help="scenarios whose FMUs all have native builds")
+    parser.add_argument("--repeat", type=int, default=3, help="alternating pairs")
     args = parser.parse_args()
     for scenario in args.scenarios:
-        r = master_vs_c(scenario, args.repeat)
-        print(f"{scenario}: master loop {r['master_loop_s']:.3f} s ({r['master_loop_cpu_s']:.3f}"
-              f" s CPU), C loop {r['c_loop_s']:.3f} s ({r['c_loop_cpu_s']:.3f} s CPU); C / "
-              f"master {r['c_over_master']:.3f} wall, {r['c_over_master_cpu']:.3f} CPU (target "
-              f">= {TARGET:g}); final position {r['master_final_position']:.17g} (master), "
-              f"{r['c_final_position']:.17g} (C): same {r['same_final_position']}; load "
-              f"{r['load_average']:.1f}", flush=True)
-
+        print(summary_line(scenario, master_vs_c(scenario, args.repeat)), flush=True)
 
 if __name__ == "__main__":
     main()
