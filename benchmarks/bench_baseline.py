@@ -12,10 +12,11 @@ Reports per entry and tree the wall time and the CPU time of the CLI and its des
 (``RUSAGE_CHILDREN``: user + system of every finished child process, pool workers included),
 medians over the repetitions, the ratio baseline / this tree (target: this tree takes at most a
 fifth of the baseline's time), and whether the verdicts are the same: ``claims.csv``'s
-``verdict`` and ``k`` of ``K`` of every claim id, compared between the trees (the differences
-listed). Both trees get the same options (``--no-rounding`` on both when given, and only if
-both CLIs have it). The user's design cache (``$ATO_COSIM_CACHE``) is shared by the trees as in
-any campaign. Asserts nothing; ``benchmarks/run_all.py --only baseline`` records the figures.
+``verdict`` and ``k`` of ``K`` of every claim id both trees have, compared (the differences
+listed, and the claims of one tree only). Both trees get the same options (``--no-rounding``
+on both when given, and only if both CLIs have it). The user's design cache
+(``$ATO_COSIM_CACHE``) is shared by the trees as in any campaign. Asserts nothing;
+``benchmarks/run_all.py --only baseline`` records the figures.
 
     python benchmarks/bench_baseline.py [--baseline COMMIT] [--entries seed000 seed004]
         [--seeds K] [--repeat R] [--workers N] [--no-rounding]
@@ -132,9 +133,9 @@ def verdicts(out: Path) -> dict[str, tuple[str, str]]:
 
 def verdict_differences(this: dict[str, tuple[str, str]], base: dict[str, tuple[str, str]]
                         ) -> list[dict[str, object]]:
-    """The claims whose verdict or k of K differ between the trees (or exist on one only)."""
-    return [{"id": claim, THIS: this.get(claim), BASE: base.get(claim)}
-            for claim in sorted(this.keys() | base.keys()) if this.get(claim) != base.get(claim)]
+    """The claims of both trees whose verdict or k of K differ between them."""
+    return [{"id": claim, THIS: this[claim], BASE: base[claim]}
+            for claim in sorted(this.keys() & base.keys()) if this[claim] != base[claim]]
 
 
 def compare(entries: list[str], commit: str = BASELINE, seeds: int = SEEDS, repeat: int = 1,
@@ -170,8 +171,11 @@ def compare(entries: list[str], commit: str = BASELINE, seeds: int = SEEDS, repe
             diffs = verdict_differences(claims[THIS], claims[BASE])
             results[entry] = {
                 "wall_s": wall, "cpu_s": cpu, "ratio_wall": wall[BASE] / wall[THIS],
-                "ratio_cpu": cpu[BASE] / cpu[THIS], "claims": len(claims[THIS]),
+                "ratio_cpu": cpu[BASE] / cpu[THIS],
+                "claims": len(claims[THIS].keys() & claims[BASE].keys()),
                 "same_verdicts": not diffs, "verdict_differences": diffs,
+                "only_this": sorted(claims[THIS].keys() - claims[BASE].keys()),
+                "only_baseline": sorted(claims[BASE].keys() - claims[THIS].keys()),
                 "load_average": [load_before, os.getloadavg()[0]], "seeds": seeds,
                 "repeat": repeat, "baseline": commit, "rounding": rounding}
     return results
@@ -196,9 +200,13 @@ def main() -> None:
               f"{r['cpu_s'][BASE]:.1f} s CPU; {args.baseline} / this: wall "
               f"{r['ratio_wall']:.2f}x, CPU {r['ratio_cpu']:.2f}x (target >= {TARGET:g}x); "
               f"load {r['load_average'][0]:.1f} -> {r['load_average'][1]:.1f}")
-        print(f"  {r['claims']} claims, same verdicts and k of K: {r['same_verdicts']}")
+        print(f"  {r['claims']} claims on both trees, same verdicts and k of K: "
+              f"{r['same_verdicts']}")
         for d in r["verdict_differences"]:
             print(f"  {d['id']}: this {d[THIS]}, {args.baseline} {d[BASE]}")
+        for side, label in (("only_this", "this tree"), ("only_baseline", args.baseline)):
+            if r[side]:
+                print(f"  claims of {label} only: {', '.join(r[side])}")
 
 
 if __name__ == "__main__":

@@ -264,14 +264,19 @@ def baseline_campaigns(commit: str, seeds: int, quick: bool) -> dict[str, dict]:
                                      1 if quick else 2)
     for entry, r in results.items():
         this, base = bench_baseline.THIS, bench_baseline.BASE
+        n = len(r["verdict_differences"])
+        same = "the same" if r["same_verdicts"] else f"differ in {n} claim{'s' * (n > 1)}"
         rows[baseline_row_name(entry, seeds, commit)] = {
             "figure": r["wall_s"][this], "unit": f"s wall, this tree, cosim reproduce {entry} "
-            f"--seeds {seeds}", "reference": r["wall_s"][base],
+            f"--seeds {seeds}; verdicts and k of K {same} (the {r['claims']} claims of both "
+            "trees)",
+            "reference": r["wall_s"][base],
             "reference_name": f"{commit} checked out beside it (s wall)",
             "ratio": r["ratio_wall"], "ratio_name": f"{commit} / this tree, wall",
             "cpu_s": r["cpu_s"], "cpu_ratio": r["ratio_cpu"], "claims": r["claims"],
             "same_verdicts": r["same_verdicts"],
-            "verdict_differences": r["verdict_differences"], "repeat": r["repeat"],
+            "verdict_differences": r["verdict_differences"], "only_this": r["only_this"],
+            "only_baseline": r["only_baseline"], "repeat": r["repeat"],
             "load_average": r["load_average"]}
     return rows
 
@@ -280,7 +285,9 @@ def c_limit(label: str, repeat: int) -> dict:
     """The master vs the bare C loop on the native FMUs of ``label``'s scenario
     (bench_c_limit, alternating pairs)."""
     r = bench_c_limit.master_vs_c(bench_c_limit.SCENARIOS[label], repeat)
-    return {"figure": r["master_loop_s"], "unit": "s, master loop on the native FMUs",
+    same = "the same as" if r["same_final_position"] else "NOT the same as"
+    return {"figure": r["master_loop_s"],
+            "unit": f"s, master loop, native FMUs; final position {same} the C loop's",
             "reference": r["c_loop_s"], "reference_name": "bare C loop, same FMUs (s)",
             "ratio": r["c_over_master"],
             "ratio_name": "C loop wall / master wall (share of the C loop's speed)",
@@ -312,7 +319,7 @@ TARGETS = {"freight closed loop": ">= 500 x real time", "EMU closed loop": ">= 1
            **{baseline_row_name(e, bench_baseline.SEEDS, bench_baseline.BASELINE):
               baseline_target(bench_baseline.BASELINE)
               for e in bench_baseline.ENTRIES},
-           **{f"{label} native: master vs bare C loop":
+           **{f"{label} master vs bare C loop":
               f">= {bench_c_limit.TARGET:g} of the C loop's speed"
               for label in bench_c_limit.SCENARIOS}}
 
@@ -365,7 +372,7 @@ def main() -> None:
         measured.update(baseline_campaigns(args.baseline, args.baseline_seeds, args.quick))
     if "c_limit" in only:
         for label in bench_c_limit.SCENARIOS:
-            measured[f"{label} native: master vs bare C loop"] = c_limit(label, repeat)
+            measured[f"{label} master vs bare C loop"] = c_limit(label, repeat)
     stamp = time.strftime("%Y-%m-%d %H:%M:%S", time.gmtime())
     for r in measured.values():
         r.setdefault("measured_utc", stamp)
@@ -387,7 +394,9 @@ def main() -> None:
                   f"{split}")
         if "same_verdicts" in r:
             print(f"{'':<30} CPU ratio {r['cpu_ratio']:.2f}; same verdicts and k of K: "
-                  f"{r['same_verdicts']} ({r['claims']} claims)")
+                  f"{r['same_verdicts']} ({r['claims']} claims on both trees; "
+                  f"{len(r['only_this'])} on this tree only, {len(r['only_baseline'])} on the "
+                  "baseline only)")
             for d in r["verdict_differences"]:
                 print(f"{'':<30} {d['id']}: this tree {d[bench_baseline.THIS]}, baseline "
                       f"{d[bench_baseline.BASE]}")
