@@ -104,7 +104,15 @@ def plan_text(sc: Scenario, unzipped: dict[str, str]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def prepare_c_loop(sc: Scenario, folder: Path) -> tuple[Path, str]:
+    """The C loop compiled into ``folder``, and its plan for ``sc``'s FMUs (extracted there)."""
+    unzipped = {name: extract(str(comp.fmu_path), unzipdir=str(folder / name))
+                for name, comp in sc.components.items()}
+    return compile_c_loop(folder), plan_text(sc, unzipped)
+
+
 def c_run(exe: Path, plan: str) -> dict[str, float]:
+    """Run the C loop on ``plan``: {final, loop_wall_s, loop_cpu_s}."""
     done = subprocess.run([str(exe)], input=plan, capture_output=True, text=True)
     if done.returncode != 0:
         raise RuntimeError(f"{exe} failed:\n{done.stderr[-3000:]}")
@@ -112,6 +120,8 @@ def c_run(exe: Path, plan: str) -> dict[str, float]:
 
 
 def master_run(sc: Scenario) -> dict[str, float]:
+    """Run ``sc`` through the master: {final (the summary's position), loop_wall_s,
+    loop_cpu_s}."""
     master = Master(sc)
     result = master.run()
     comp, var = sc.summary["position"].split(".", 1)
@@ -124,10 +134,7 @@ def master_vs_c(scenario: str, repeat: int = 3) -> dict:
     CPU seconds of the master and the C loop, their ratios, the final positions."""
     sc = native_scenario(scenario)
     with tempfile.TemporaryDirectory() as tmp:
-        exe = compile_c_loop(Path(tmp))
-        unzipped = {name: extract(str(comp.fmu_path), unzipdir=str(Path(tmp) / name))
-                    for name, comp in sc.components.items()}
-        plan = plan_text(sc, unzipped)
+        exe, plan = prepare_c_loop(sc, Path(tmp))
         master_run(sc)
         c_run(exe, plan)
         pairs = [(master_run(sc), c_run(exe, plan)) for _ in range(repeat)]
