@@ -16,12 +16,43 @@ import shutil
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 ROOT = Path(__file__).resolve().parent.parent
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-from cosim.run.scenario import load_scenario  # noqa: E402
+from cosim.run.scenario import Component, Scenario, load_scenario  # noqa: E402
+
+CASTS = {"Real": float, "Integer": int, "Boolean": bool, "String": str}  # FMI type -> Python
+
+
+def start_values(comp: Component, variables: dict[str, Any]) -> list[tuple[Any, Any]]:
+    """(model variable, value) of what ``comp`` starts with: its parameters (and its
+    ``sample_time`` where the FMU has that parameter) and its inputs' start values, each cast
+    to its variable's FMI type (``variables``: name -> fmpy ScalarVariable)."""
+    params = dict(comp.parameters)
+    if comp.sample_time is not None and "sample_time" in variables:
+        params.setdefault("sample_time", comp.sample_time)
+    return [(variables[key], CASTS[variables[key].type](value))
+            for key, value in {**params, **comp.inputs}.items()]
+
+
+def connection_groups(sc: Scenario, variables: dict[str, dict[str, Any]],
+                      feedthrough: dict[str, bool]) -> list[tuple[str, list[int], str, list[int]]]:
+    """The connections as (source, its value references, destination, theirs), one group per
+    source and destination, in the order a step passes them on: the inputs of FMUs with direct
+    feedthrough (``feedthrough``: controllers) first, from their sources (plants, whose outputs
+    do not depend on their inputs), then the plants' inputs (``variables``: component -> name
+    -> fmpy ScalarVariable)."""
+    groups = []
+    for name in sorted(variables, key=lambda n: not feedthrough[n]):
+        links = [c for c in sc.connections if c.dst == name]
+        for src in dict.fromkeys(c.src for c in links):
+            mine = [c for c in links if c.src == src]
+            groups.append((src, [variables[src][c.src_var].valueReference for c in mine],
+                           name, [variables[name][c.dst_var].valueReference for c in mine]))
+    return groups
 
 
 def raw_fmpy_loop(scenario: str, split: bool = False) -> dict:
@@ -48,28 +79,16 @@ def raw_fmpy_loop(scenario: str, split: bool = False) -> dict:
             fmu.instantiate()
             fmu.setupExperiment(startTime=sc.simulation.start_time)
             fmu.enterInitializationMode()
-            params = dict(comp.parameters)
-            if comp.sample_time is not None and "sample_time" in units[name]["vars"]:
-                params.setdefault("sample_time", comp.sample_time)
-            for key, value in {**params, **comp.inputs}.items():
-                var = units[name]["vars"][key]
+            for var, value in start_values(comp, units[name]["vars"]):
                 setter = {"Real": fmu.setReal, "Integer": fmu.setInteger,
                           "Boolean": fmu.setBoolean, "String": fmu.setString}[var.type]
-                cast = {"Real": float, "Integer": int, "Boolean": bool, "String": str}[var.type]
-                setter([var.valueReference], [cast(value)])
+                setter([var.valueReference], [value])
             fmu.exitInitializationMode()
-        # inputs of FMUs with direct feedthrough (controllers) first, from their sources
-        # (plants, whose outputs do not depend on inputs); then the plants' inputs
-        plan, plan_names = [], []
-        for name in sorted(units, key=lambda n: not units[n]["feedthrough"]):
-            links = [c for c in sc.connections if c.dst == name]
-            for src in dict.fromkeys(c.src for c in links):
-                mine = [c for c in links if c.src == src]
-                plan_names.append((src, name))
-                plan.append((units[src]["fmu"],
-                             [units[src]["vars"][c.src_var].valueReference for c in mine],
-                             units[name]["fmu"],
-                             [units[name]["vars"][c.dst_var].valueReference for c in mine]))
+        groups = connection_groups(sc, {n: u["vars"] for n, u in units.items()},
+                                   {n: u["feedthrough"] for n, u in units.items()})
+        plan = [(units[src]["fmu"], s_refs, units[dst]["fmu"], d_refs)
+                for src, s_refs, dst, d_refs in groups]
+        plan_names = [(src, dst) for src, _, dst, _ in groups]
         records = {}
         for ref in sc.record or []:
             comp, var = ref.split(".", 1)

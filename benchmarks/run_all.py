@@ -31,14 +31,21 @@ controller).
 * seed 003's robust MPC: the LMI problem of an event (median over the closed loop's problems,
   replayed) with Clarabel vs SCS, and the eco scenario's real-time factor (``bench_seed003``);
 * ``cosim build --native --fmi all`` end to end: its wall time vs its CPU time (the command's
-  and its compilers'; what one core would take), ratio = CPU / wall (``bench_native``).
+  and its compilers'; what one core would take), ratio = CPU / wall (``bench_native``);
+* ``cosim reproduce seed000`` and ``seed004 --seeds 5`` on this tree vs on 8a1e303 checked out
+  beside it, alternating (``bench_baseline.py``): wall and CPU seconds, ratio = 8a1e303 /
+  this tree, and whether every claim's verdict and k of K are the same;
+* the EMU and freight closed loops on their native FMUs through the master vs the bare C loop
+  on the same FMUs (``bench_c_limit.py``, alternating): ratio = C loop wall / master loop wall
+  (the share of the C loop's speed the master reaches), the final positions compared.
 
     python benchmarks/run_all.py [--quick] [--only campaign ...] [--campaign-seeds K]
+        [--baseline COMMIT] [--baseline-seeds K]
 
 ``--only``: measure only the named groups (``closed_loop``, ``kernels``, ``qp``, ``instances``,
-``master``, ``isolation``, ``sweep``, ``campaign``, ``seed003``, ``native_build``) and keep the
-other rows of the existing ``results.json``; each row records when it was measured and the load
-average then.
+``master``, ``isolation``, ``sweep``, ``campaign``, ``seed003``, ``native_build``,
+``baseline``, ``c_limit``) and keep the other rows of the existing ``results.json``; each row
+records when it was measured and the load average then.
 """
 
 from __future__ import annotations
@@ -58,6 +65,8 @@ HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 sys.path[:0] = [str(ROOT), str(HERE), str(ROOT / "tests")]
 
+import bench_baseline  # noqa: E402
+import bench_c_limit  # noqa: E402
 import bench_campaign  # noqa: E402
 import bench_freight  # noqa: E402
 import bench_instances  # noqa: E402
@@ -256,8 +265,61 @@ def native_build() -> dict:
             "load_average": [r["load_before"], r["load_after"]]}
 
 
+def baseline_row_name(entry: str, seeds: int, commit: str) -> str:
+    return f"campaign {entry} K={seeds} vs {commit}"
+
+
+def baseline_campaigns(commit: str, seeds: int, quick: bool) -> dict[str, dict]:
+    """``cosim reproduce ENTRY --seeds K`` on this tree vs ``commit`` checked out beside it,
+    alternating (bench_baseline; one pair per entry with ``quick``, else two)."""
+    rows = {}
+    results = bench_baseline.compare(list(bench_baseline.ENTRIES), commit, seeds,
+                                     1 if quick else 2)
+    for entry, r in results.items():
+        this, base = bench_baseline.THIS, bench_baseline.BASE
+        n = len(r["verdict_differences"])
+        same = "the same" if r["same_verdicts"] else f"differ in {n} claim{'s' * (n > 1)}"
+        rows[baseline_row_name(entry, seeds, commit)] = {
+            "figure": r["wall_s"][this], "unit": f"s wall, this tree, cosim reproduce {entry} "
+            f"--seeds {seeds}; verdicts and k of K {same} (the {r['claims']} claims of both "
+            "trees)",
+            "reference": r["wall_s"][base],
+            "reference_name": f"{commit} checked out beside it (s wall)",
+            "ratio": r["ratio_wall"], "ratio_name": f"{commit} / this tree, wall",
+            "cpu_s": r["cpu_s"], "cpu_ratio": r["ratio_cpu"], "claims": r["claims"],
+            "same_verdicts": r["same_verdicts"],
+            "verdict_differences": r["verdict_differences"], "only_this": r["only_this"],
+            "only_baseline": r["only_baseline"], "repeat": r["repeat"],
+            "load_average": r["load_average"]}
+    return rows
+
+
+def c_limit(label: str, repeat: int) -> dict:
+    """The master vs the bare C loop on the native FMUs of ``label``'s scenario
+    (bench_c_limit, alternating pairs)."""
+    r = bench_c_limit.master_vs_c(bench_c_limit.SCENARIOS[label], repeat)
+    same = "the same as" if r["same_final_position"] else "NOT the same as"
+    return {"figure": r["master_loop_s"],
+            "unit": f"s, master loop, native FMUs; final position {same} the C loop's",
+            "reference": r["c_loop_s"], "reference_name": "bare C loop, same FMUs (s)",
+            "ratio": r["c_over_master"],
+            "ratio_name": "C loop wall / master wall (share of the C loop's speed)",
+            "cpu_ratio": r["c_over_master_cpu"],
+            "master_over_c": r["master_loop_s"] / r["c_loop_s"],
+            "master_over_c_cpu": r["master_loop_cpu_s"] / r["c_loop_cpu_s"],
+            "same_final_position": r["same_final_position"],
+            "final_position_m": {"master": r["master_final_position"],
+                                 "c_loop": r["c_final_position"]},
+            "load_average": r["load_average"]}
+
+
 GROUPS = ("closed_loop", "kernels", "qp", "instances", "master", "isolation", "sweep", "campaign",
-          "seed003", "native_build")
+          "seed003", "native_build", "baseline", "c_limit")
+
+
+def baseline_target(commit: str) -> str:
+    return f"<= {1 / bench_baseline.TARGET:g} of {commit}'s time"
+
 TARGETS = {"freight closed loop": ">= 500 x real time", "EMU closed loop": ">= 1000 x real time",
            "RMPC N=10 QP step": "<= 35 us", "further FMU instance": "<= 10 ms",
            "freight plant kernel": "", "EMU plant kernel": "", "freight kernel C vs numba": "",
@@ -268,7 +330,13 @@ TARGETS = {"freight closed loop": ">= 500 x real time", "EMU closed loop": ">= 1
            "campaign 2 vs 1 workers": "speed-up >= 1.8",
            "campaign Dask 2 vs 1 worker": "speed-up >= 1.8",
            "seed 003 RMPC LMI event": "<= 20 ms median",
-           "native build, all FMUs": "<= 60 s on 2 cores"}
+           "native build, all FMUs": "<= 60 s on 2 cores",
+           **{baseline_row_name(e, bench_baseline.SEEDS, bench_baseline.BASELINE):
+              baseline_target(bench_baseline.BASELINE)
+              for e in bench_baseline.ENTRIES},
+           **{f"{label} master vs bare C loop":
+              f">= {bench_c_limit.TARGET:g} of the C loop's speed"
+              for label in bench_c_limit.SCENARIOS}}
 
 
 def main() -> None:
@@ -279,6 +347,11 @@ def main() -> None:
                         help="measure these groups only; keep the other rows of --out")
     parser.add_argument("--campaign-seeds", type=int, default=20,
                         help="K of the campaign benchmark (default 20)")
+    parser.add_argument("--baseline", default=bench_baseline.BASELINE,
+                        help=f"the commit of the baseline group (default "
+                        f"{bench_baseline.BASELINE})")
+    parser.add_argument("--baseline-seeds", type=int, default=bench_baseline.SEEDS,
+                        help=f"K of the baseline group (default {bench_baseline.SEEDS})")
     args = parser.parse_args()
     repeat = 1 if args.quick else 3
     build_stale()
@@ -314,15 +387,22 @@ def main() -> None:
         measured["seed 003 RMPC LMI event"] = seed003_lmi(args.quick)
     if "native_build" in only:
         measured["native build, all FMUs"] = native_build()
+    if "baseline" in only:
+        measured.update(baseline_campaigns(args.baseline, args.baseline_seeds, args.quick))
+    if "c_limit" in only:
+        for label in bench_c_limit.SCENARIOS:
+            measured[f"{label} master vs bare C loop"] = c_limit(label, repeat)
     stamp = time.strftime("%Y-%m-%d %H:%M:%S", time.gmtime())
     for r in measured.values():
         r.setdefault("measured_utc", stamp)
         r.setdefault("load_average", os.getloadavg()[0])
     rows.update(measured)
-    rows = {name: rows[name] for name in TARGETS if name in rows}  # the table's order
+    targets = {**TARGETS, **{name: baseline_target(args.baseline) for name in measured
+                             if name not in TARGETS}}  # a baseline row of another commit or K
+    rows = {name: rows[name] for name in targets if name in rows}  # the table's order
     print(f"{'benchmark':<30} {'figure':>10}  {'reference':>10}  {'ratio':>7}  target / units")
     for name, r in measured.items():
-        r["target"] = TARGETS[name]
+        r["target"] = targets[name]
         print(f"{name:<30} {r['figure']:>10.1f}  {r['reference']:>10.1f}  {r['ratio']:>7.2f}  "
               f"{r['target'] or '-'}; {r['unit']}; ref: {r['reference_name']}; "
               f"ratio: {r['ratio_name']}")
@@ -331,6 +411,19 @@ def main() -> None:
             print(f"{'':<30} CPU: {r['cpu_real_time_factor']:.0f} x real time (master), "
                   f"{r['raw_loop_cpu_real_time_factor']:.0f} x (fmpy loop); per step (us): "
                   f"{split}")
+        if "same_verdicts" in r:
+            print(f"{'':<30} CPU ratio {r['cpu_ratio']:.2f}; same verdicts and k of K: "
+                  f"{r['same_verdicts']} ({r['claims']} claims on both trees; "
+                  f"{len(r['only_this'])} on this tree only, {len(r['only_baseline'])} on the "
+                  "baseline only)")
+            for d in r["verdict_differences"]:
+                print(f"{'':<30} {d['id']}: this tree {d[bench_baseline.THIS]}, baseline "
+                      f"{d[bench_baseline.BASE]}")
+        if "same_final_position" in r:
+            print(f"{'':<30} CPU ratio {r['cpu_ratio']:.2f}; final position "
+                  f"{r['final_position_m']['master']:.17g} m (master), "
+                  f"{r['final_position_m']['c_loop']:.17g} m (C): same "
+                  f"{r['same_final_position']}")
         for case in r.get("cases", ()):
             print(f"{'':<30} {case['case']}: numba {case['numba_us_per_substep']:.2f}, C "
                   f"{case['c_us_per_substep']:.2f}, numpy {case['numpy_us_per_substep']:.1f} "
