@@ -93,7 +93,7 @@ def test_scenarios_follow_their_profiles_on_time_and_energy(tmp_path) -> None:
     limits), phases sum to the total, and the traction energy the plant drew is the planned
     profile's nominal traction work (sp.traction_work) / eta_M: the energy comes from the
     profile, so any ranking of profiles is the ranking of their planned work."""
-    from cosim.run.master import run_scenario
+    from cosim.run.simulate import run_scenario
 
     eta_m = Crh3Params().motor_efficiency  # the scenarios keep the default
     for kind in sp.PROFILE_KINDS:  # the fixed family: the optimal rows' scenario, overridden

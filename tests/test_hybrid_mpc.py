@@ -259,7 +259,7 @@ def test_bad_settings_are_rejected() -> None:
 
 def test_gmpc_and_mbmpc_fmus_through_the_master(built_fmus) -> None:
     """Gmpc3 / MbMpc3 + Emu3 (seed 004 scenarios, first 120 s): tracking, trailer idle."""
-    from cosim.run.master import run_scenario
+    from cosim.run.simulate import run_scenario
 
     for name in ("seed004_crh3_gmpc", "seed004_crh3_mbmpc"):
         result = run_scenario(f"scenarios/{name}.toml",

@@ -41,7 +41,7 @@ EVALUATION = ("cosim/run", "cosim/papers", "cosim/reproduce")
 INPUTS_FILE = "inputs.sha256"  # in a reproduction's folder: the digest of the inputs it ran
 NOT_INPUTS = {"cosim/run/docs_pages.py", "cosim/run/provenance.py"}
 # read a record and the entry only: tables, claims, figures, the page
-EVALUATION_ONLY = {"cosim/run/reproduce.py", "cosim/run/ensemble.py", "cosim/run/claims.py",
+EVALUATION_ONLY = {"cosim/run/ensemble.py", "cosim/run/claims.py",
                    "cosim/run/record.py", "cosim/run/console.py", "cosim/run/figures.py"}
 # every module under these folders is evaluation-only: the reproduction (its entries, jobs,
 # tables, figures and page), whose jobs the record keeps and compares
