@@ -28,6 +28,7 @@ from pathlib import Path
 from typing import Any
 
 from cosim.run import runner
+from cosim.run.scenario import ScenarioError, load_scenario
 
 LOCAL = runner.LOCAL_DASK
 check_available = runner.check_dask
@@ -72,8 +73,6 @@ def tasks(jobs: list[tuple[str, dict[str, Any]]], finished: Callable[[dict[str, 
     scenario loaded and
     overridden here (a bad value fails its row through ``finished``), and the FMU files to
     send to the cluster once (None with ``shared_fmus``)."""
-    from cosim.run.scenario import ScenarioError, load_scenario
-
     out: list[runner.Task] = []
     for path, point in jobs:
         try:

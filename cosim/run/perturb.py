@@ -22,7 +22,11 @@ from typing import Any
 import pandas as pd
 
 from cosim.run import runner
+from cosim.run.figures import PLOT_DPI
 from cosim.run.perturbation import Perturbation, draw_samples, nominal_values
+from cosim.run.results import fit_band
+from cosim.run.scenario import ScenarioError, find_scenario, load_scenario
+from cosim.run.simulate import ensure_built, run_scenario
 from cosim.run.sweep import STOP_WINDOW_M, SUMMARY_COLUMNS, grid_points
 
 COUNTERS = ("qp_infeasible_after_stop", "events_moving", "events_standstill")
@@ -31,8 +35,6 @@ COUNTERS = ("qp_infeasible_after_stop", "events_moving", "events_standstill")
 def _run_sample(scenario: str, point: dict[str, Any], index: int,
                 draw: dict[str, float]) -> dict[str, Any]:
     """One perturbed run in a worker: the drawn values, summary figures and command range."""
-    from cosim.run.simulate import run_scenario
-
     result = run_scenario(scenario, overrides={**point, **draw}, build=False, plot=False)
     summary = result.summary
     row: dict[str, Any] = {"scenario": Path(str(scenario)).stem, **point, "sample": index,
@@ -59,9 +61,6 @@ def run_perturbed(scenario: str | Sequence[str], grid: dict[str, Sequence[Any]],
     processes (:func:`cosim.run.runner.run_tasks`). Returns (one row per run, one row per
     scenario and grid point); with ``out_dir`` writes perturb.csv, perturb_summary.csv and
     ``perturb.<plot_format>``."""
-    from cosim.run.scenario import ScenarioError, find_scenario, load_scenario
-    from cosim.run.simulate import ensure_built
-
     scenarios = [scenario] if isinstance(scenario, (str, Path)) else list(scenario)
     if not scenarios or not perts:
         raise ValueError("run_perturbed: no scenario or no perturbation given")
@@ -150,9 +149,6 @@ def plot_perturbed(frame: pd.DataFrame, keys: list[str], path: str | Path) -> No
                                           for k, v in zip(keys, label[1:], strict=True)]))
     fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(max(6.0, 1.1 * len(groups) + 2), 7),
                                    sharex=True, layout="constrained")
-    from cosim.run.figures import PLOT_DPI
-    from cosim.run.results import fit_band
-
     errors_cm = [100.0 * g["stop_error_m"].astype(float) for _, g in groups]
     ax1.boxplot(errors_cm, showfliers=True)
     # the window drawn; the axis on the boxes when they lie far inside it

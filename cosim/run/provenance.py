@@ -29,6 +29,7 @@ from pathlib import Path
 from typing import Any
 
 from cosim.fmu.build import ROOT, bundled_files, catalog
+from cosim.fmu.native_build import NATIVE, native_sources
 
 try:
     import tomllib
@@ -82,8 +83,6 @@ def entry_inputs(name: str, build: str = "python") -> list[Path]:
             fmus.update(s for s in _strings(tomllib.loads(scenario.read_text())) if s in known)
         if text in known:
             fmus.add(text)
-    from cosim.fmu.native_build import NATIVE, native_sources
-
     for identifier in sorted(fmus):
         files.update(bundled_files(known[identifier].module))
         if build == "native" and identifier in NATIVE:  # its C model, FMI 3 front included

@@ -24,6 +24,7 @@ import numpy as np
 
 from cosim.run.columns import axis_label, column_units, display_unit, is_held, variable_info
 from cosim.run.figures import PLOT_DPI, reference_curve
+from cosim.run.metrics import matching_columns
 
 PLOT_FORMATS = ("png", "svg", "pdf")
 MAX_CM_DECIMALS = 6  # a stop error is written to 0.01 um at finest
@@ -322,8 +323,6 @@ def draw_run(result: Any) -> Any:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-
-    from cosim.run.metrics import matching_columns
 
     cfg = result.scenario.summary
     frame = result.frame

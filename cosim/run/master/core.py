@@ -26,6 +26,7 @@ from cosim.run.master.algorithms import ALGORITHM_CLASSES
 from cosim.run.master.errors import FmuCallError, FmuTerminated, SimulationError
 from cosim.run.master.loading import extract_once, read_fmu, unit_class
 from cosim.run.master.observers import LIST_FAMILIES, Recorder
+from cosim.run.master.scheduled import Fmi3ScheduledUnit
 from cosim.run.master.unit import Unit
 from cosim.run.scenario import (
     Connection,
@@ -142,8 +143,6 @@ class Master:
         """Source unit -> its output clock (value reference) -> the (unit, input clock) it
         triggers, from the scenario's clock ``connections``: an output clock of a Scheduled
         Execution FMU to a ``triggered`` input clock of one (FMI 3.0 sec. 5.2.2)."""
-        from cosim.run.master.scheduled import Fmi3ScheduledUnit
-
         out: dict[Unit, dict[int, list[tuple[Unit, int]]]] = {}
         for c in connections:
             key = f"{self.scenario.path}: [connections] \"{c.dst}.{c.dst_var}\" = " \
