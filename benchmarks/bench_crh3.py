@@ -22,7 +22,7 @@ sys.path.insert(0, str(ROOT))
 from controllers.common import speed_profiles as sp  # noqa: E402
 from controllers.eco.gpc import Crh3Gpc, Crh3GpcParams  # noqa: E402
 from cosim.fmu.state import to_ticks  # noqa: E402
-from cosim.run.master import run_scenario  # noqa: E402
+from cosim.run.simulate import run_scenario  # noqa: E402
 from plants.crh3 import Crh3Params, Crh3Train  # noqa: E402
 from plants.route import load_route  # noqa: E402
 

@@ -82,8 +82,8 @@ def event_table(seconds: float) -> None:
 
 
 def scenario_table() -> None:
-    from cosim.run.master import ensure_built, run_scenario
     from cosim.run.scenario import load_scenario
+    from cosim.run.simulate import ensure_built, run_scenario
 
     print("\nWhole seed-001 scenarios through the event-driven master (FMUs)")
     print(f"{'controller':<8} {'sim s':>6} {'wall s':>8} {'x real time':>12} {'CPU s':>7} "

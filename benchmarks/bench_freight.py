@@ -28,7 +28,7 @@ sys.path.insert(0, str(ROOT))
 from controllers.pid.freight_pid import FreightPid, FreightPidParams  # noqa: E402
 from cosim.fmu.build import resolve  # noqa: E402
 from cosim.fmu.state import to_ticks  # noqa: E402
-from cosim.run.master import run_scenario  # noqa: E402
+from cosim.run.simulate import run_scenario  # noqa: E402
 from plants.freight import FreightParams, FreightTrain  # noqa: E402
 from plants.route import load_route  # noqa: E402
 

@@ -27,7 +27,7 @@ from controllers.fuzzy.fuzzy_pid import FreightFuzzyPid, FuzzyPidParams  # noqa:
 from controllers.pid.freight_pid import FreightPid, FreightPidParams  # noqa: E402
 from controllers.preview.preview import FreightPreview, PreviewParams  # noqa: E402
 from controllers.smc.sliding_mode import FreightSlidingMode, SlidingModeParams  # noqa: E402
-from cosim.run.master import run_scenario  # noqa: E402
+from cosim.run.simulate import run_scenario  # noqa: E402
 from plants.route import load_route  # noqa: E402
 
 CONTROLLERS = {

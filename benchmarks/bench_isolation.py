@@ -1,10 +1,10 @@
 """What running the FMUs in a child process costs: ``cosim run``'s isolated path against the
 same run in the calling process (``--in-process``).
 
-Both sides call :func:`cosim.run.master.run_scenario` with the same options (no plot, results
+Both sides call :func:`cosim.run.simulate.run_scenario` with the same options (no plot, results
 written to a temporary folder). The isolated side starts it in a forked child
-(:func:`cosim.run.isolation.start_run`: process start, the breadcrumb around every FMU call,
-the pipe back) and waits for it (:func:`cosim.run.isolation.finish_run`). Pairs alternate
+(:func:`cosim.run.simulate.start_run`: process start, the breadcrumb around every FMU call,
+the pipe back) and waits for it (:func:`cosim.run.simulate.finish_run`). Pairs alternate
 after one warm-up of each, so a change of machine load hits both sides alike; the ratio is the
 median over pairs of isolated / in-process wall time. The CPU times count the child's
 (``RUSAGE_CHILDREN``) on the isolated side.
@@ -27,9 +27,9 @@ HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 sys.path[:0] = [str(ROOT)]
 
-from cosim.run import isolation  # noqa: E402
-from cosim.run.master import run_scenario  # noqa: E402
+from cosim.run import simulate  # noqa: E402
 from cosim.run.scenario import find_scenario  # noqa: E402
+from cosim.run.simulate import run_scenario  # noqa: E402
 
 SCENARIOS = ("seed000_stop_pid", "seed002_freight_pid")
 
@@ -47,7 +47,7 @@ def one_run(scenario: str, isolated: bool) -> tuple[float, float]:
         options = {"out_dir": Path(tmp), "plot": False, "force": True}
         cpu0, t0 = _cpu(), time.perf_counter()
         if isolated:
-            isolation.finish_run(isolation.start_run(str(path), **options), Path(tmp), True)
+            simulate.finish_run(simulate.start_run(str(path), **options), Path(tmp), True)
         else:
             run_scenario(path, **options)
         return time.perf_counter() - t0, _cpu() - cpu0

@@ -114,8 +114,8 @@ def qp_step(N: int = 10, repeat: int = 20) -> dict[str, float]:
 
 
 def scenario_table(repeat: int) -> None:
-    from cosim.run.master import ensure_built, run_scenario
     from cosim.run.scenario import load_scenario
+    from cosim.run.simulate import ensure_built, run_scenario
 
     print("\nWhole scenario through the event-driven master (60 s simulated, N = 10)")
     print(f"{'controller':<8} {'wall s (median)':>16} {'executions':>11} {'stop err m':>11}")

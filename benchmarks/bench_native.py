@@ -58,8 +58,8 @@ from fmpy.fmi2 import FMU2Slave  # noqa: E402
 from cosim.fmu.build import build_stale, catalog  # noqa: E402
 from cosim.fmu.native_build import NATIVE, build_native  # noqa: E402
 from cosim.fmu.state import to_ticks  # noqa: E402
-from cosim.run.master import run_scenario  # noqa: E402
 from cosim.run.scenario import load_scenario  # noqa: E402
+from cosim.run.simulate import run_scenario  # noqa: E402
 from plants.brake_delay import BrakeDelayTrain  # noqa: E402
 from plants.freight import FreightTrain  # noqa: E402
 

@@ -26,8 +26,8 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 from cosim.fmu.native_build import NATIVE  # noqa: E402
-from cosim.run.master import run_scenario  # noqa: E402
 from cosim.run.scenario import SCENARIO_DIR, load_scenario  # noqa: E402
+from cosim.run.simulate import run_scenario  # noqa: E402
 
 
 def loops() -> list[tuple[str, tuple[str, ...]]]:

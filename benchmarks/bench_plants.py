@@ -28,8 +28,8 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 from cosim.fmu.state import to_ticks  # noqa: E402
-from cosim.run.master import run_scenario  # noqa: E402
 from cosim.run.scenario import load_scenario  # noqa: E402
+from cosim.run.simulate import run_scenario  # noqa: E402
 from plants.emu import Emu, emu_config  # noqa: E402
 from plants.route import load_route  # noqa: E402
 

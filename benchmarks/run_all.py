@@ -82,7 +82,7 @@ from raw_loop import raw_fmpy_loop  # noqa: E402
 
 from cosim.fmu.build import build_stale  # noqa: E402
 from cosim.run import docs_pages  # noqa: E402
-from cosim.run.master import run_scenario  # noqa: E402
+from cosim.run.simulate import run_scenario  # noqa: E402
 
 FREIGHT, EMU = "seed002_freight_pid", "seed001_emu_pid"
 

@@ -15,8 +15,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from cosim.run.master import run_scenario  # noqa: E402
 from cosim.run.scenario import SCENARIO_DIR  # noqa: E402
+from cosim.run.simulate import run_scenario  # noqa: E402
 
 COLUMNS = [("stop_error_m", "stop err m", "{:+.3f}"), ("max_abs_speed_error_kmh", "max|e| km/h",
            "{:.3f}"), ("speed_mse_kmh2", "MSE km2/h2", "{:.4f}"), ("ctcs3_speed_error_ok",

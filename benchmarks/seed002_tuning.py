@@ -71,8 +71,8 @@ def write_picks(picks: dict[str, float], table: dict[str, list[tuple[float, floa
 def main() -> None:
     from cosim.reproduce.entry import load_entry
     from cosim.run.ensemble import execute
-    from cosim.run.master import ensure_built
     from cosim.run.scenario import load_scenario
+    from cosim.run.simulate import ensure_built
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", default=None,

@@ -29,7 +29,7 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path[:0] = [str(ROOT)]
 
 from cosim.reproduce.entry import load_entry  # noqa: E402
-from cosim.run.perturb import draw_samples, nominal_values, parse_perturb  # noqa: E402
+from cosim.run.perturbation import draw_samples, nominal_values, parse_perturb  # noqa: E402
 
 BUDGET = 5  # evaluations per tracker (each on every calibration plant), the same for both
 MARK = "# picked by benchmarks/seed003_tuning.py"
@@ -55,7 +55,7 @@ def calibration_plants(n: int) -> list[dict[str, float]]:
 
 
 def evaluate(scenario: str, key: str, value: float, plant: dict[str, float]) -> float:
-    from cosim.run.master import run_scenario
+    from cosim.run.simulate import run_scenario
 
     summary = run_scenario(scenario, overrides={**plant, f"controller.{key}": value},
                            plot=False).summary

@@ -19,7 +19,7 @@ api.compare({"PID": run, "RMPC": other})  # metrics side by side
 Each function calls what ``cosim run`` calls (``cosim.run.scenario``,
 ``cosim.run.master``, ``cosim.run.results``), so a run here and the same run from the
 command line give the same results, summary and figure. Units and descriptions come from the
-FMUs' modelDescriptions (``cosim.run.results.variable_info``), which the FMUs derive from
+FMUs' modelDescriptions (``cosim.run.columns.variable_info``), which the FMUs derive from
 their cores' declarations.
 """
 
@@ -33,9 +33,11 @@ from typing import Any
 
 import pandas as pd
 
-from cosim.run.master import ProgressFn, RunResult, ensure_built, run_scenario
-from cosim.run.results import PLOT_FORMATS, UNITS_FILE, column_info, draw_run
+from cosim.run.columns import column_info
+from cosim.run.master import ProgressFn, RunResult
+from cosim.run.results import PLOT_FORMATS, UNITS_FILE, draw_run, write_results
 from cosim.run.scenario import SCENARIO_DIR, Scenario, load_scenario
+from cosim.run.simulate import ensure_built, run_scenario
 
 __all__ = ["Run", "build", "compare", "load", "read_results", "run", "scenarios"]
 
@@ -152,7 +154,7 @@ class Run:
         """Write results.csv, its units (results.units.json), summary.json and the plot into
         ``out_dir``, as ``cosim run --out`` does; the paths written. ``read_results(out_dir)``
         reads the table back with its units."""
-        return self.result.write(Path(out_dir), plot=plot, plot_format=plot_format)
+        return write_results(self.result, Path(out_dir), plot=plot, plot_format=plot_format)
 
 
 def read_results(folder: str | Path) -> pd.DataFrame:

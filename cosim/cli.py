@@ -247,10 +247,11 @@ def run(
     stops the run at the next communication point, writes what was recorded and exits with
     status 130 (an FMU call that does not return is ended after a few seconds); a second
     one exits at once."""
-    from cosim.run import interrupt, isolation
-    from cosim.run.master import SimulationError, run_scenario
+    from cosim.run import interrupt, simulate
+    from cosim.run.master import SimulationError
     from cosim.run.results import PLOT_FORMATS, OutputError, check_destination, locked_destination
     from cosim.run.scenario import ScenarioError, find_scenario
+    from cosim.run.simulate import run_scenario
 
     with contextlib.ExitStack() as held, interrupt.guard(restore=False):
         if not console.is_terminal and not quiet:  # a log says what ran
@@ -276,7 +277,7 @@ def run(
                     result = run_scenario(path, progress=reporter, **options)
                 stepping = reporter.stepping_rtf()
             else:  # the child shows the progress and says what it saw
-                result = isolation.finish_run(isolation.start_run(str(path), reporter,
+                result = simulate.finish_run(simulate.start_run(str(path), reporter,
                                                                   **options), target, force)
                 stepping = result.stepping_rtf
         except interrupt.Interrupted as err:
@@ -611,8 +612,8 @@ def _check_perturbed_keys(scenarios: list[str], keys: list[str]) -> None:
     scenarios' missing FMUs to read their variables."""
     from fmpy import read_model_description
 
-    from cosim.run.master import ensure_built
     from cosim.run.scenario import ScenarioError, load_scenario
+    from cosim.run.simulate import ensure_built
 
     for scenario in scenarios:
         sc = load_scenario(scenario)
@@ -638,7 +639,8 @@ def _perturbed_sweep(scenarios: list[str], grid: dict[str, list[Any]], perturb: 
                      no_plot: bool, plot_format: str = "png") -> None:
     """The mismatch study of ``cosim sweep --perturb`` and its table."""
     from cosim.run.console import fit_table
-    from cosim.run.perturb import parse_perturb, run_perturbed
+    from cosim.run.perturb import run_perturbed
+    from cosim.run.perturbation import parse_perturb
 
     perts = parse_perturb(perturb)
     _check_perturbed_keys(scenarios, [p.key for p in perts])
@@ -728,10 +730,10 @@ def reproduce(
     paper's), the sweeps and the figures, and tests its claims over K seeds (claims.csv,
     claims.md: median [95 % CI], k of K, verdict); 'all' writes one REPRODUCTION.md. With
     --redraw everything after the simulations is made again from the record."""
+    from cosim.reproduce.builds import BUILDS
     from cosim.reproduce.entry import ReproduceError, entry_names, resolve_name
     from cosim.reproduce.page import redraw_entry, reproduce_all
     from cosim.reproduce.page import reproduce as reproduce_entry
-    from cosim.reproduce.run import BUILDS
     from cosim.run import interrupt, runner
     from cosim.run.master import SimulationError
     from cosim.run.results import PLOT_FORMATS, OutputError, check_destination
@@ -885,7 +887,7 @@ def optimal(
 
 def _run_scenario(path: Path, where: Path) -> tuple[Any, dict[str, Any]]:
     """Run a scenario file as ``cosim run PATH --out WHERE`` does: (recorded frame, summary)."""
-    from cosim.run.master import run_scenario
+    from cosim.run.simulate import run_scenario
 
     result = run_scenario(path, out_dir=where)
     return result.frame, result.summary

@@ -9,8 +9,8 @@ from pathlib import Path
 import pytest
 
 from cosim.interop.compliance import ALL_CHECKS, SKIPPED, check_fmu, format_report
-from cosim.run.master import run_scenario
 from cosim.run.scenario import SCENARIO_DIR, ScenarioError
+from cosim.run.simulate import run_scenario
 
 
 def corrupt(tmp: Path) -> Path:

@@ -77,7 +77,7 @@ def test_summary_prefers_the_values_passed_on_over_the_recording():
 def test_run_counts_the_values_the_plant_received(built_fmus):
     """seed 000 PID: the summary's count is that of the command values the plant was given
     (recorded here at every event: output interval = sample time), at the resolution asked."""
-    from cosim.run.master import run_scenario
+    from cosim.run.simulate import run_scenario
 
     r = run_scenario("seed000_stop_pid", ["summary.command_resolution=0.5"], build=False,
                      plot=False)

@@ -11,8 +11,9 @@ from fmpy import extract, read_model_description
 from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import FMU2Slave
 
-from cosim.run.master import logging_callbacks, run_scenario
+from cosim.run.master import logging_callbacks
 from cosim.run.scenario import ScenarioError
+from cosim.run.simulate import run_scenario
 
 T = 0.2  # StopPid's sample time in the test
 

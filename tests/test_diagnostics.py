@@ -79,7 +79,7 @@ def test_solve_times_reach_the_host_through_the_log_only(built_fmus):
 
 def test_summary_reads_the_logged_figures(built_fmus):
     """seed 000 RSMPC through the master: the summary's solve times are the logged ones."""
-    from cosim.run.master import run_scenario
+    from cosim.run.simulate import run_scenario
 
     r = run_scenario("seed000_stop_rsmpc", ["simulation.stop_time=10"], build=False,
                      plot=False)

@@ -10,7 +10,7 @@ import pytest
 
 from controllers.common import speed_profiles as sp
 from controllers.eco.gpc import Crh3Gpc, Crh3GpcParams
-from cosim.fmu.state import to_ticks
+from cosim.fmu.closed_loop import closed_loop
 from plants.crh3 import Crh3Params, Crh3Train
 from plants.route import load_route
 
@@ -28,15 +28,12 @@ def _closed_loop(kind: str, t_end: float | None = None) -> tuple[np.ndarray, Crh
     ctl = _controller(kind)
     plant = Crh3Train(Crh3Params(), ROUTE)
     t_end = ctl.profile.arrival_time + 30.0 if t_end is None else t_end
-    rows = []
-    for k in range(int(t_end)):
-        o = plant.outputs()
-        out, hold = ctl.compute(float(k), {n: o[n] for n in ("v", "s", "traction_limit",
-                                                             "brake_limit")})
-        assert hold == 1
-        rows.append((k, o["v"], o["s"], out["v_ref"], out["accel_demand"], out["phase"]))
-        plant.advance(to_ticks(k), to_ticks(1.0), {"force": out["force"]})
-    return np.array(rows), ctl
+    loop = closed_loop(plant, ctl, float(int(t_end)), 1.0,
+                       inputs=("v", "s", "traction_limit", "brake_limit"), commands=("force",))
+    assert loop.event[:-1].all()  # periodic: an event every second
+    rows = np.column_stack([loop.time, loop.plant["v"], loop.plant["s"], loop.controller["v_ref"],
+                            loop.controller["accel_demand"], loop.controller["phase"]])
+    return rows[:-1], ctl
 
 
 def test_input_box_is_the_envelope_and_the_comfort_limit() -> None:
@@ -93,7 +90,7 @@ def test_scenarios_follow_their_profiles_on_time_and_energy(tmp_path) -> None:
     limits), phases sum to the total, and the traction energy the plant drew is the planned
     profile's nominal traction work (sp.traction_work) / eta_M: the energy comes from the
     profile, so any ranking of profiles is the ranking of their planned work."""
-    from cosim.run.master import run_scenario
+    from cosim.run.simulate import run_scenario
 
     eta_m = Crh3Params().motor_efficiency  # the scenarios keep the default
     for kind in sp.PROFILE_KINDS:  # the fixed family: the optimal rows' scenario, overridden

@@ -252,7 +252,7 @@ def test_bad_parameters_are_rejected(name: str, value) -> None:
 
 def test_emu_fmus_close_the_loop_through_the_master(built_fmus) -> None:
     """Emu3 + EmuSpeedPid3 FMUs (seed 004 scenario, first 260 s): CTCS-3 tracking."""
-    from cosim.run.master import run_scenario
+    from cosim.run.simulate import run_scenario
 
     result = run_scenario("scenarios/seed004_crh3_pid.toml",
                           overrides={"simulation.stop_time": 260.0}, plot=False)

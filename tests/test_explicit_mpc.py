@@ -176,7 +176,7 @@ def test_regions_built_for_another_design_are_refused(tmp_path) -> None:
 def test_empc_fmu_through_the_master(built_fmus) -> None:
     """Empc3 + Emu3 (seed004_crh3_empc, first 120 s): tracks, trailer idle while pulling,
     every parameter inside the regions."""
-    from cosim.run.master import run_scenario
+    from cosim.run.simulate import run_scenario
 
     result = run_scenario("scenarios/seed004_crh3_empc.toml",
                           overrides={"simulation.stop_time": 120.0}, plot=False)
@@ -193,7 +193,7 @@ def test_cases_and_empc_complete_the_whole_run(built_fmus) -> None:
     """Whole 800 s runs of Cases 1-3 and the EMPC: every MIQP solved, the EMPC never outside
     its regions. The paper's Table 3 and 4 comparisons are claims of ``cosim reproduce
     seed004`` (claims.csv), not pinned here."""
-    from cosim.run.master import run_scenario
+    from cosim.run.simulate import run_scenario
 
     s = {name: run_scenario(f"scenarios/seed004_crh3_{name}.toml", plot=False).summary
          for name in ("gmpc_case1", "gmpc_case2", "gmpc_case3", "empc")}

@@ -17,8 +17,8 @@ import fnmatch
 import pytest
 from scenario_groups import one_per_fmu_pair
 
-from cosim.run.master import run_scenario
 from cosim.run.scenario import SCENARIO_DIR, load_scenario
+from cosim.run.simulate import run_scenario
 
 SHORT_S = 30.0
 # recorded columns that measure wall-clock time: irreproducible between any two runs

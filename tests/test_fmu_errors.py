@@ -6,8 +6,9 @@ from __future__ import annotations
 import pytest
 from fmpy import read_model_description
 
-from cosim.run.master import FmuCallError, Master, run_scenario
+from cosim.run.master import FmuCallError, Master
 from cosim.run.scenario import ScenarioError, load_scenario
+from cosim.run.simulate import run_scenario
 
 
 def test_integer_parameters_declare_their_range(built_fmus):

@@ -10,6 +10,7 @@ from scipy.integrate import solve_ivp
 
 from controllers.common.freight_blending import BlendingParams
 from controllers.pid.freight_pid import FreightPid, FreightPidParams
+from cosim.fmu.closed_loop import closed_loop
 from cosim.fmu.state import to_ticks
 from plants.freight import FreightParams, FreightTrain
 from plants.route import GRAVITY, KMH, Route, load_route
@@ -252,15 +253,10 @@ def _closed_loop(t_end: float) -> tuple[FreightTrain, np.ndarray]:
     route = load_route("freight_20km")
     train = FreightTrain(P, route)
     pid = FreightPid(FreightPidParams(mean_weight=0.0), route.reference, route)  # head fed back
-    T, rows = to_ticks(0.2), []
-    t = 0
-    while t < to_ticks(t_end):
-        out = train.outputs()
-        cmd, _ = pid.compute(t / 1e9, {"v": out["v"], "s": out["s"]})
-        rows.append((out["s"], out["v"], cmd["v_ref"], cmd["pipe_reduction"]))
-        train.advance(t, T, cmd)
-        t += T
-    return train, np.array(rows)
+    loop = closed_loop(train, pid, t_end, 0.2, inputs=("v", "s"))
+    rows = np.column_stack([loop.plant["s"], loop.plant["v"], loop.controller["v_ref"],
+                            loop.controller["pipe_reduction"]])
+    return train, rows[:-1]  # the points of the events (none at t_end)
 
 
 def test_pid_tracks_the_reference_in_traction() -> None:

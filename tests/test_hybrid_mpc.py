@@ -17,7 +17,7 @@ from controllers.hybrid.hybrid_mpc import (
 )
 from controllers.hybrid.miqp import EPS_REG, HybridMiqp, parse_blocks, split_blocks
 from controllers.hybrid.model import Limits
-from cosim.fmu.state import to_ticks
+from cosim.fmu.closed_loop import closed_loop
 from plants.emu import Emu, emu_config
 from plants.route import ReferenceProfile, load_reference, load_route
 
@@ -211,16 +211,13 @@ def test_closed_loop_with_the_plant_core_tracks_and_switches_mode() -> None:
                                  brake_until_speed=25.0)
     ctl = HybridMpc(params, profile)
     plant = Emu(emu_config("crh3_3car"), load_route("seed004_level"))
-    log = []
-    for k in range(130):
-        o = plant.outputs()
-        names = ([f"v[{i}]" for i in (1, 2, 3)] + ["s", "coupler_force[1]", "coupler_force[2]"]
-                 + [f"traction_limit[{i}]" for i in (1, 2, 3)]
-                 + [f"brake_limit[{i}]" for i in (1, 2, 3)])
-        out, _ = ctl.compute(float(k), {n: o[n] for n in names})
-        log.append((k, o["v"], out["v_ref"], out["delta"], out["force[2]"]))
-        plant.advance(to_ticks(k), to_ticks(1.0), {f"force[{i}]": out[f"force[{i}]"]
-                                                   for i in (1, 2, 3)})
+    names = ([f"v[{i}]" for i in (1, 2, 3)] + ["s", "coupler_force[1]", "coupler_force[2]"]
+             + [f"traction_limit[{i}]" for i in (1, 2, 3)]
+             + [f"brake_limit[{i}]" for i in (1, 2, 3)])
+    loop = closed_loop(plant, ctl, 130.0, 1.0, inputs=names,
+                       commands=[f"force[{i}]" for i in (1, 2, 3)])
+    log = list(zip(range(130), loop.plant["v"][:-1], loop.controller["v_ref"][:-1],
+                   loop.controller["delta"][:-1], loop.controller["force[2]"][:-1], strict=True))
     assert ctl.qp_infeasible == 0
     errors = [abs(v - r) for k, v, r, _, _ in log if 20 <= k]
     assert max(errors) < 1.5  # m/s, at the corners of the profile (no preview of delta)
@@ -259,7 +256,7 @@ def test_bad_settings_are_rejected() -> None:
 
 def test_gmpc_and_mbmpc_fmus_through_the_master(built_fmus) -> None:
     """Gmpc3 / MbMpc3 + Emu3 (seed 004 scenarios, first 120 s): tracking, trailer idle."""
-    from cosim.run.master import run_scenario
+    from cosim.run.simulate import run_scenario
 
     for name in ("seed004_crh3_gmpc", "seed004_crh3_mbmpc"):
         result = run_scenario(f"scenarios/{name}.toml",

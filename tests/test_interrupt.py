@@ -17,7 +17,7 @@ import pandas as pd
 import pytest
 
 from cosim.run import interrupt
-from cosim.run.master import run_scenario
+from cosim.run.simulate import run_scenario
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENARIO = "seed000_stop_pid"

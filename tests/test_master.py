@@ -6,8 +6,8 @@ import fmpy
 import numpy as np
 import pytest
 
-from cosim.run.master import run_scenario
 from cosim.run.scenario import ScenarioError, load_scenario
+from cosim.run.simulate import run_scenario
 
 PID = "seed000_stop_pid"
 
@@ -210,8 +210,9 @@ def test_failure_mid_run_keeps_partial_results(built_fmus, tmp_path, monkeypatch
 def test_a_recording_larger_than_memory_is_refused_before_the_run(built_fmus, monkeypatch):
     """stop_time = 1e9 s at 0.2 s: 5e9 output points would not fit; the run is refused
     before any step, saying how much the recording needs (points x values x 8 bytes)."""
-    from cosim.run.master import SimulationError, run_scenario
+    from cosim.run.master import SimulationError
     from cosim.run.master import observers as master_module
+    from cosim.run.simulate import run_scenario
 
     steps: list[float] = []
     with pytest.raises(SimulationError, match=r"the recording needs \d.* GiB \(5000000002 output "

@@ -11,8 +11,9 @@ import pytest
 
 from cosim.fmu.state import to_ticks
 from cosim.run import master as master_mod
-from cosim.run.master import SimulationError, run_scenario
+from cosim.run.master import SimulationError
 from cosim.run.scenario import load_scenario
+from cosim.run.simulate import run_scenario
 
 PID = "seed000_stop_pid"
 

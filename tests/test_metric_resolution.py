@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import math
 
-from cosim.run.master import run_scenario
+from cosim.run.simulate import run_scenario
 
 SPEED_METRICS = ("speed_rmse_mps", "speed_mse_kmh2", "iae_kmh_s", "max_abs_speed_error_kmh")
 

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from fmi_state_helpers import rerun_after_restore
 
-from cosim.run.master import run_scenario
+from cosim.run.simulate import run_scenario
 
 RSMPC = "seed000_stop_rsmpc"
 

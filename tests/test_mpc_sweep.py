@@ -8,7 +8,7 @@ import sys
 import pandas as pd
 import pytest
 
-from cosim.run.master import run_scenario
+from cosim.run.simulate import run_scenario
 from cosim.run.sweep import grid_points, parse_grid, run_sweep
 
 

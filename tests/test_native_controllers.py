@@ -47,8 +47,8 @@ from controllers.hybrid.explicit import PARAM_NAMES, ExplicitLaw
 from controllers.hybrid.explicit_mpc import regions_path
 from cosim.fmu.build import catalog
 from cosim.fmu.native_build import build_native, native_path
-from cosim.run.master import run_scenario
 from cosim.run.scenario import ScenarioError, load_scenario
+from cosim.run.simulate import run_scenario
 from plants.emu import emu_config
 
 CONTROLLERS = ("StopPid", "EmuSpeedPid3", "EmuSpeedPid8", "Empc3")

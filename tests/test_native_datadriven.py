@@ -115,8 +115,8 @@ def recorded_inputs(scenario: str, stop_time: float) -> tuple[np.ndarray, np.nda
     """(times, inputs (samples, 10)): the controller's inputs at its samples in the shipped
     closed loop (Python controller, native plant: equal to the Python plant bit for bit,
     tests/test_native_plants.py)."""
-    from cosim.run.master import run_scenario
     from cosim.run.scenario import load_scenario
+    from cosim.run.simulate import run_scenario
 
     sc = load_scenario(scenario, [f"simulation.stop_time={stop_time}", "plant.build=native"])
     sc = dataclasses.replace(sc, record=[*(sc.record or []), *(f"plant.{n}" for n in INPUTS)])
@@ -506,7 +506,7 @@ def test_shipped_closed_loop_with_native_controller_over_a_short_horizon(natives
     difference of the native law."""
     import fnmatch
 
-    from cosim.run.master import run_scenario
+    from cosim.run.simulate import run_scenario
 
     _, _, force_bounds = compare_samples(natives, ident, SHORT_LOOP_S)
     base = [f"simulation.stop_time={SHORT_LOOP_S}", "plant.build=native"]

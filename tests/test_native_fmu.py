@@ -244,7 +244,7 @@ def test_closed_loops_with_the_native_plant_are_the_same(native, scenario):
     """Every shipped seed-000 scenario with the native plant in place of the Python FMU: the
     recorded series and the summary are equal (the plant is equal bit for bit, so the loop
     is); only the wall-clock figures differ."""
-    from cosim.run.master import run_scenario
+    from cosim.run.simulate import run_scenario
 
     python = run_scenario(scenario, plot=False)
     c = run_scenario(scenario, overrides={"plant.fmu": str(native[0])}, plot=False)

@@ -100,7 +100,7 @@ def compare_run(native, params: dict, steps: list[tuple[float, float, float]]) -
 @pytest.fixture(scope="module")
 def seed002_loop():
     """The closed loop of seed002_freight_pid with the Python FMUs."""
-    from cosim.run.master import run_scenario
+    from cosim.run.simulate import run_scenario
 
     return run_scenario("seed002_freight_pid", plot=False)
 
@@ -293,7 +293,7 @@ def check_same_loop(python, c, n_vehicles: int) -> None:
 
 def test_closed_loop_with_the_native_plant_is_the_same(native, seed002_loop):
     """seed002_freight_pid with the native plant (``--set plant.fmu=<path>``)."""
-    from cosim.run.master import run_scenario
+    from cosim.run.simulate import run_scenario
 
     c = run_scenario("seed002_freight_pid", overrides={"plant.fmu": str(native[0])},
                      plot=False)
@@ -303,7 +303,7 @@ def test_closed_loop_with_the_native_plant_is_the_same(native, seed002_loop):
 @pytest.mark.slow
 @pytest.mark.parametrize("scenario", [s for s in SEED002 if s != "seed002_freight_pid"])
 def test_closed_loops_of_all_seed002_scenarios_are_the_same(native, scenario):
-    from cosim.run.master import run_scenario
+    from cosim.run.simulate import run_scenario
 
     python = run_scenario(scenario, plot=False)
     c = run_scenario(scenario, overrides={"plant.fmu": str(native[0])}, plot=False)

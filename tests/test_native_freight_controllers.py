@@ -57,8 +57,8 @@ from test_native_controllers import _callbacks, _flat, gamma
 
 from cosim.fmu.build import catalog
 from cosim.fmu.native_build import build_native
-from cosim.run.master import run_scenario
 from cosim.run.scenario import load_scenario
+from cosim.run.simulate import run_scenario
 
 ROOT = Path(__file__).resolve().parents[1]
 U = 2.0**-53

@@ -241,8 +241,8 @@ def test_libcosim_runs_the_fmi2_build_in_a_shipped_loop(native, identifier):
     exactly (both deliver every output to the next step unchanged)."""
     from cosim.fmu.build import build_stale, catalog
     from cosim.interop.libcosim import compare_frames, run_libcosim
-    from cosim.run.master import run_scenario
     from cosim.run.scenario import load_scenario
+    from cosim.run.simulate import run_scenario
 
     found = _shipped_scenario(identifier)
     if found is None:
@@ -271,8 +271,8 @@ def test_shipped_loop_with_the_fmi3_build_equals_the_fmi2_build(native, identifi
     Mode for the controllers) the recorded series and the summary equal the FMI 2 run's; only
     the wall-clock figures differ."""
     from cosim.fmu.build import build_stale, catalog
-    from cosim.run.master import run_scenario
     from cosim.run.scenario import load_scenario
+    from cosim.run.simulate import run_scenario
 
     found = _shipped_scenario(identifier)
     if found is None:
@@ -450,8 +450,8 @@ def test_build_key_native_in_fmi3_builds_and_runs_the_native_fmi3_fmu():
     """``[fmus.NAME] build = "native"`` with ``fmi_version = 3`` resolves to
     fmus/native/fmi3/<Id>.fmu, builds it when stale, and runs as the FMI 2 native loop does
     (first 5 s of the first shipped scenario of the first native model)."""
-    from cosim.run.master import run_scenario
     from cosim.run.scenario import load_scenario
+    from cosim.run.simulate import run_scenario
 
     if shutil.which("gcc") is None:
         pytest.skip("gcc not installed: native FMUs cannot be built")

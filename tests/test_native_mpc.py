@@ -40,8 +40,8 @@ from cosim.fmu.build import catalog
 from cosim.fmu.declare import build
 from cosim.fmu.native_build import build_all_natives
 from cosim.fmu.state import to_ticks
-from cosim.run.master import run_scenario
 from cosim.run.scenario import load_scenario
+from cosim.run.simulate import run_scenario
 from plants.brake_delay import BrakeDelayParams, BrakeDelayTrain
 from plants.route import load_route
 

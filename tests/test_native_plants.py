@@ -93,7 +93,7 @@ class Native:
 
 
 def scenario_run(name: str, stop: float | None = None, plant: Path | None = None):
-    from cosim.run.master import run_scenario
+    from cosim.run.simulate import run_scenario
 
     over: dict = {}
     if stop is not None:
@@ -412,7 +412,7 @@ def reference_summary(scenario: str) -> dict:
     import subprocess
     import sys
 
-    code = ("import json, sys; from cosim.run.master import run_scenario; "
+    code = ("import json, sys; from cosim.run.simulate import run_scenario; "
             f"r = run_scenario({scenario!r}, plot=False); "
             "print(json.dumps(r.summary, default=str))")
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,

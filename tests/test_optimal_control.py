@@ -20,15 +20,8 @@ import numpy as np
 import pytest
 
 from cosim.optimal.model import Section, Train
-from cosim.optimal.pontryagin import (
-    COASTING,
-    CRUISE_BRAKE,
-    CRUISE_TRACTION,
-    MAX_TRACTION,
-    Grid,
-    OptimalRun,
-    SectionSolver,
-)
+from cosim.optimal.pontryagin import Grid, SectionSolver
+from cosim.optimal.regimes import COASTING, CRUISE_BRAKE, CRUISE_TRACTION, MAX_TRACTION, OptimalRun
 from plants.resistance import Davis
 from plants.route import Route, StepProfile
 from tests import optimal_oracle

@@ -11,8 +11,8 @@ import pytest
 from scenario_groups import one_per_fmu_pair
 
 from cosim.interop.libcosim import compare_frames, run_libcosim, simulate_single
-from cosim.run.master import run_scenario
 from cosim.run.scenario import SCENARIO_DIR, load_scenario
+from cosim.run.simulate import run_scenario
 
 SCENARIOS = sorted((Path(__file__).resolve().parent.parent / "scenarios").glob("*.toml"))
 SHORT = 40.0  # s of each scenario in the quick test; the full runs are marked slow

@@ -11,14 +11,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from cosim.run.perturb import (
-    Perturbation,
-    draw_samples,
-    nominal_values,
-    parse_perturb,
-    run_perturbed,
-    summarize,
-)
+from cosim.run.perturb import run_perturbed, summarize
+from cosim.run.perturbation import Perturbation, draw_samples, nominal_values, parse_perturb
 
 STUDY = ["plant.mass=+-10%", "plant.brake_time_constant=0.3..0.6", "plant.brake_delay=0.8..1.2",
          "plant.davis_a=+-30%", "plant.davis_b=+-30%", "plant.davis_c=+-30%",

@@ -6,7 +6,8 @@ from __future__ import annotations
 
 import pytest
 
-from cosim.run.results import display_unit, format_stop_error, variable_unit
+from cosim.run.columns import display_unit, variable_info, variable_unit
+from cosim.run.results import format_stop_error
 from cosim.run.scenario import load_scenario
 
 
@@ -118,7 +119,7 @@ def test_many_couplers_are_one_envelope(monkeypatch, tmp_path):
 @pytest.fixture(scope="module")
 def rsmpc_run(built_fmus):
     """A whole self-triggered stopping run (seconds)."""
-    from cosim.run.master import run_scenario
+    from cosim.run.simulate import run_scenario
 
     return run_scenario("seed000_stop_rsmpc", build=False)
 
@@ -169,7 +170,7 @@ def test_run_figure_draws_measured_solid_references_continuous_and_the_error(rsm
     import matplotlib.pyplot as plt
     import numpy as np
 
-    from cosim.run.reproduce import reference_curve
+    from cosim.run.figures import reference_curve
     from cosim.run.results import draw_run
 
     fig = draw_run(rsmpc_run)
@@ -236,7 +237,8 @@ def test_long_command_label_stays_clear_of_the_title():
 
 @pytest.mark.parametrize("fmt", ["png", "svg", "pdf"])
 def test_plot_format_and_resolution(rsmpc_run, tmp_path, fmt):
-    from cosim.run.results import PLOT_DPI, write_results
+    from cosim.run.figures import PLOT_DPI
+    from cosim.run.results import write_results
 
     written = write_results(rsmpc_run, tmp_path, plot_format=fmt)
     assert tmp_path / f"plot.{fmt}" in written
@@ -251,7 +253,6 @@ def test_plot_format_and_resolution(rsmpc_run, tmp_path, fmt):
 
 
 def test_sweep_keys_are_named_by_their_declarations(built_fmus):
-    from cosim.run.results import variable_info
     from cosim.run.sweep import key_labels
 
     sc = load_scenario("seed000_stop_rmpc")
@@ -350,8 +351,6 @@ def test_reproduce_figures_read_as_paper_figures(built_fmus):
     from matplotlib.colors import to_rgba
 
     from cosim.run.figures import figure_of
-    from cosim.run.results import variable_info
-
     sc = load_scenario("seed000_stop_rsmpc")
     frames = {"RSMPC": _stopping_frame(), "RSMPC 2": _stopping_frame(1e4)}
     scenarios = {name: sc for name in frames}
@@ -414,8 +413,6 @@ def test_per_unit_panels_name_each_unit_and_keep_coinciding_curves_visible(built
     import pandas as pd
 
     from cosim.run.figures import figure_of
-    from cosim.run.results import variable_info
-
     sc = load_scenario("seed001_emu_ismpc")
     t = np.arange(0.0, 100.0)
     v = np.full_like(t, 80.0)
@@ -587,8 +584,6 @@ def test_a_figures_reference_key_marks_a_series_the_summary_does_not(built_fmus)
     from matplotlib.colors import to_rgba
 
     from cosim.run.figures import FigureError, figure_of
-    from cosim.run.results import variable_info
-
     sc = load_scenario("seed003_crh3_lmimpc_eco")
     assert "reference_accel" not in sc.summary
     frames = {"Eco": _tracking_frame()}
@@ -629,7 +624,7 @@ def test_paper_figures_from_their_records_read_as_published(built_fmus, entry_na
     import matplotlib.pyplot as plt
 
     from cosim.reproduce.entry import load_entry
-    from cosim.reproduce.run import run_scenarios
+    from cosim.reproduce.series import run_scenarios
     from cosim.run.figures import LEGEND_WIDTH, MAX_PANELS, figure_of, measured_line
     from cosim.run.record import load, series_name
 

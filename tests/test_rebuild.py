@@ -7,8 +7,8 @@ import shutil
 from pathlib import Path
 
 from cosim.fmu import build
-from cosim.run.master import run_scenario
 from cosim.run.scenario import SCENARIO_DIR
+from cosim.run.simulate import run_scenario
 
 TWEAK = '''
 

@@ -87,7 +87,7 @@ def test_a_series_keeps_what_its_figures_draw_reduced_and_thinned(tmp_path: Path
     every vehicle's; a member's series is thinned evenly to max_rows with its last row; the
     figure drawn from the record is the figure of the full run at the kept rows."""
     from cosim.reproduce.entry import Figure
-    from cosim.reproduce.run import record_series
+    from cosim.reproduce.series import record_series
     from cosim.run.figures import figure_series
 
     t = np.arange(10.0)

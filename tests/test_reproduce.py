@@ -15,7 +15,7 @@ from cosim.reproduce.figures import draw_speed_classes, figure_section
 from cosim.reproduce.page import redraw_entry, reproduce
 from cosim.reproduce.tables import ranking_markdown, ranking_rows, summary_value
 from cosim.run.figures import speed_class_errors
-from cosim.run.master import run_scenario
+from cosim.run.simulate import run_scenario
 
 ENTRY = """
 title = "Test entry"
@@ -660,7 +660,8 @@ def test_single_run_columns_have_one_fixed_notation_each() -> None:
 def test_the_native_build_runs_each_fmu_that_has_a_native_model() -> None:
     """--build native: NAME.build = "native" for the FMUs with a native model, never over a
     build the run sets itself; the Python FMUs of the others; a clear error otherwise."""
-    from cosim.reproduce.run import build_overrides, run_jobs, sweep_jobs
+    from cosim.reproduce.builds import build_overrides
+    from cosim.reproduce.run import run_jobs, sweep_jobs
 
     assert build_overrides("seed000_stop_rsmpc", {}, "native") == {
         "plant.build": "native", "controller.build": "native"}

@@ -192,7 +192,7 @@ def test_lmi_mpc_scenarios_meet_the_paper_limits(profile, built_fmus) -> None:
     4's Delta T_max, Delta l_max), inside the comfort limit, with every LMI solved (by
     Clarabel or its SCS fallback); the comparison with GPC is a claim of ``cosim reproduce
     seed003``."""
-    from cosim.run.master import run_scenario
+    from cosim.run.simulate import run_scenario
 
     rmpc = run_scenario(f"scenarios/seed003_crh3_lmimpc_{profile}.toml", plot=False).summary
     assert rmpc["completed"]

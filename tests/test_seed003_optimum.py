@@ -16,7 +16,7 @@ from controllers.common import speed_profiles as sp
 from controllers.eco.tracking import optimum_dir_in
 from cosim.cli import app
 from cosim.optimal.output import COMMAND_PREFIX
-from cosim.optimal.pontryagin import REGIME_NAMES
+from cosim.optimal.regimes import REGIME_NAMES
 from cosim.optimal.switching import SLSQP_FTOL
 from plants.route import load_route
 

@@ -10,8 +10,8 @@ from fmpy.ssp.ssd import read_ssd
 
 from cosim.interop.libcosim import compare_frames, run_ssp
 from cosim.interop.ssp import export_ssp
-from cosim.run.master import run_scenario
 from cosim.run.scenario import load_scenario
+from cosim.run.simulate import run_scenario
 
 SCENARIOS = sorted((Path(__file__).resolve().parent.parent / "scenarios").glob("*.toml"))
 SHORT = {"simulation.stop_time": 30.0}

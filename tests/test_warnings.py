@@ -9,7 +9,7 @@ import re
 from typer.testing import CliRunner
 
 from cosim.cli import app
-from cosim.run.master import run_scenario
+from cosim.run.simulate import run_scenario
 
 
 def test_impossible_task_warns_and_strict_fails(built_fmus, tmp_path):

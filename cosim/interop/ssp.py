@@ -189,7 +189,7 @@ def export_ssp(scenario: str | Path | Scenario, out: str | Path,
 
     sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario, overrides)
     if build:
-        from cosim.run.master import ensure_built
+        from cosim.run.simulate import ensure_built
 
         ensure_built(sc)
     descriptions = {}

@@ -15,7 +15,7 @@ For a planned section this module writes
   the section start, and the controller following the reference;
 
 then the scenario is run by the project's runner (``cosim optimal`` passes
-:func:`cosim.run.master.run_scenario`, what ``cosim run`` runs; this package does not import
+:func:`cosim.run.simulate.run_scenario`, what ``cosim run`` runs; this package does not import
 the runner) and the closed loop is compared with the plan (:func:`compare`).
 
 Controllers (:data:`CONTROLLERS`): ``pid``, the speed PID of seeds 001 and 004
@@ -71,7 +71,7 @@ import numpy as np
 
 from cosim.optimal.model import Section, Train
 from cosim.optimal.output import write_csv
-from cosim.optimal.pontryagin import OptimalRun
+from cosim.optimal.regimes import OptimalRun
 from cosim.optimal.ttobench import JourneySection
 from plants.route import Route, StepProfile
 
@@ -427,7 +427,7 @@ def run_section(label: str, section: Section, run: OptimalRun, train: Train, win
     """Write the reference (``<label>.csv``) and scenario of a planned section into
     ``out_dir``, run it with
     ``runner`` (``cosim optimal`` passes the project's runner,
-    :func:`cosim.run.master.run_scenario`; results in ``out_dir/<label>_<controller>/``) and
+    :func:`cosim.run.simulate.run_scenario`; results in ``out_dir/<label>_<controller>/``) and
     compare it with the plan."""
     ctl = controller(controller_name)
     out_dir = Path(out_dir).resolve()

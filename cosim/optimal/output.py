@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from cosim.optimal.model import Train
-from cosim.optimal.pontryagin import REGIME_NAMES, OptimalRun
+from cosim.optimal.regimes import REGIME_NAMES, OptimalRun
 
 COMMAND_PREFIX = "# command: "  # header line naming the command that wrote the file
 COLUMNS = ("position_m", "speed_mps", "time_s", "speed_limit_mps", "grade_permil",

@@ -70,6 +70,17 @@ from cosim.optimal.model import (
     Train,
     control_force,
 )
+from cosim.optimal.regimes import (
+    COASTING,
+    CRUISE_BRAKE,
+    CRUISE_TRACTION,
+    MAX_BRAKE,
+    MAX_REGEN,
+    MAX_TRACTION,
+    OptimalRun,
+    hold_speeds,
+)
+from cosim.optimal.switching import refine
 
 # controls of the cost-to-go: those of cosim.optimal.model.control_force
 # a switch between maximum traction and coasting inside a step: the step's traction at these
@@ -79,11 +90,6 @@ _SWITCH_SHARES = (0.25, 0.5, 0.75)
 _SHARES = np.array(_SWITCH_SHARES)
 _CONTROLS = np.arange(5 + len(_SWITCH_SHARES))
 _N = _CONTROLS.size
-# regimes of a step of the optimal run
-MAX_TRACTION, CRUISE_TRACTION, COASTING, CRUISE_BRAKE, MAX_BRAKE, MAX_REGEN = 1, 2, 3, 4, 5, 6
-REGIME_NAMES = {MAX_TRACTION: "maximum traction", CRUISE_TRACTION: "cruise (partial traction)",
-                COASTING: "coasting", CRUISE_BRAKE: "cruise (partial braking)",
-                MAX_BRAKE: "maximum braking", MAX_REGEN: "maximum regenerative braking"}
 _BIG = 1e30  # cost-to-go of a state from which the stop cannot be reached
 
 
@@ -103,32 +109,6 @@ class Grid:
         """Half the position step, speed spacing and integration step (the second grid of an
         error estimate)."""
         return Grid(self.ds / 2.0, 2 * self.speeds - 1, self.sub_steps, self.step / 2.0)
-
-
-@dataclass(frozen=True)
-class OptimalRun:
-    """The optimal run of a section: nodes ``s`` (m, line positions), speeds ``v`` (m/s) and
-    times ``t`` (s); per step the ``regime`` and the mean ``force`` (N, traction > 0); the energy
-    terms (J) and the multiplier."""
-
-    s: np.ndarray
-    v: np.ndarray
-    t: np.ndarray
-    regime: np.ndarray
-    force: np.ndarray
-    speed_limit: np.ndarray  # m/s on each step
-    grade: np.ndarray  # additional resistance on each step (N/kN, grade + curves)
-    traction_work: float  # J, int F_+ ds
-    regen_work: float  # J, int B_r ds
-    brake_work: float  # J, int (B_r + B_f) ds
-    energy: float  # J, traction_work / eta_t - eta_r regen_work
-    multiplier: float  # lambda (J/kg/s per unit effective mass): -dJ/dT / m_eff
-    hold_speed: float  # V of psi(V) = eta_t lambda (m/s; nan if the resistance has no slope)
-    brake_hold_speed: float  # W of psi(W) = lambda / eta_r (m/s; inf without regeneration)
-
-    @property
-    def running_time(self) -> float:
-        return float(self.t[-1])
 
 
 class _Steps:
@@ -218,24 +198,6 @@ class _Dynamics:
         dt = np.where(v0 > 0, 2.0 * h / np.where(v0 > 0, v0, 1.0), np.inf)
         return ok & (E > 0), trac / self.eta - self.rho * regen, dt, np.stack(
             [trac, regen, brake * h])
-
-
-def hold_speeds(train: Train, multiplier: float) -> tuple[float, float]:
-    """(V, W) of ``psi(V) = eta_t lambda`` and ``psi(W) = lambda / eta_r`` (Albrecht et al.
-    2016, part 1): the optimal cruising speed by traction and by regenerative braking."""
-
-    def solve(target: float) -> float:
-        if train.psi(1e3) <= target:
-            return math.inf
-        if target <= 0:
-            return 0.0
-        return scipy.optimize.brentq(lambda v: train.psi(v) - target, 0.0, 1e3, xtol=1e-10)
-
-    if train.davis.b == 0 and train.davis.c == 0:
-        return math.nan, math.nan
-    v = solve(train.traction_efficiency * multiplier)
-    w = math.inf if train.regen_efficiency <= 0 else solve(multiplier / train.regen_efficiency)
-    return v, w
 
 
 class SectionSolver:
@@ -426,8 +388,6 @@ class SectionSolver:
         run = self._for_time(running_time, rtol)
         if not exact:
             return run
-        from cosim.optimal.switching import refine  # it builds on this module
-
         # the integration step grows with sections beyond 20 km (10000 steps at most)
         step = self.grid.step * max(1.0, self.section.length / 20000.0)
         return refine(self.section, self.train, run, running_time, step, self.grid.ds)

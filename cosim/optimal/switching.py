@@ -61,7 +61,7 @@ from cosim.optimal.model import (
     regen_at,
     resistance_at,
 )
-from cosim.optimal.pontryagin import (
+from cosim.optimal.regimes import (
     COASTING,
     CRUISE_BRAKE,
     CRUISE_TRACTION,

@@ -30,11 +30,11 @@ from cosim.reproduce.figures import figure_section, sweep_section
 from cosim.reproduce.run import (
     figure_runs,
     merged_summaries,
-    run_scenarios,
     simulate,
     table_seed,
     wanted_jobs,
 )
+from cosim.reproduce.series import run_scenarios
 from cosim.reproduce.tables import (
     Cell,
     derived_markdown,
@@ -253,7 +253,7 @@ def reproduce_page(name: str, out_dir: str | Path | None = None, workers: int | 
     in 80 columns (:func:`console_text`). With ``resume`` the jobs the folder's record already
     holds (same specification, simulation inputs, K, path and build) are not run again.
     ``build``: "native" runs the catalog FMUs' native C builds where they exist
-    (:func:`cosim.reproduce.run.build_overrides`), "python" every FMU's Python build, None the
+    (:func:`cosim.reproduce.builds.build_overrides`), "python" every FMU's Python build, None the
     entry's ``build``."""
     entry = load_entry(name)
     out = Path(out_dir) if out_dir is not None else Path("runs") / "reproduce" / entry.name

@@ -4,24 +4,24 @@ claims' members (:mod:`cosim.run.ensemble`), run through :mod:`cosim.run.runner`
 
 from __future__ import annotations
 
-import functools
 import sys
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from cosim.reproduce.builds import build_overrides
 from cosim.reproduce.entry import FIGURE_KINDS, REPRODUCE_DIR, Entry, Figure, ReproduceError, slug
-from cosim.run.figures import figure_columns
+from cosim.reproduce.series import record_series, run_scenarios
 from cosim.run.provenance import simulation_digest
-from cosim.run.record import Job, Record, known, read_csv, save, series_name
+from cosim.run.record import Job, Record, known, save, series_name
 
 
 def _run_one(scenario: str, overrides: dict[str, Any], out_dir: str,
              plot_format: str = "png") -> dict[str, Any]:
     """One run of ``scenario`` with ``overrides`` into ``out_dir`` (a task): its summary."""
     from cosim.run.ensemble import host_load, with_host
-    from cosim.run.master import run_scenario
+    from cosim.run.simulate import run_scenario
 
     before = host_load()
     result = run_scenario(scenario, overrides=overrides, out_dir=out_dir, build=False,
@@ -55,45 +55,6 @@ def table_seed(entry: Entry) -> dict[str, int]:
     entry has no random input."""
     key = entry.ensemble.seed_key
     return {key: entry.ensemble.report_seeds[0]} if key and entry.ensemble.report_seeds else {}
-
-
-BUILDS = ("native", "python")  # --build: the catalog FMUs' native C builds where they exist
-
-
-@functools.lru_cache(maxsize=256)
-def _native_components(scenario: str, fmus: tuple[tuple[str, str], ...]) -> tuple[str, ...]:
-    from cosim.fmu.native_build import NATIVE
-    from cosim.run.scenario import load_scenario
-
-    sc = load_scenario(scenario, dict(fmus))
-    return tuple(c.name for c in sc.components.values() if c.fmu in NATIVE)
-
-
-def build_overrides(scenario: str, overrides: dict[str, Any], build: str) -> dict[str, str]:
-    """The overrides that run ``scenario`` (with ``overrides``) on ``build``: with "native",
-    ``NAME.build = "native"`` for every FMU whose catalog identifier has a native C model
-    (:data:`cosim.fmu.native_build.NATIVE`; the others stay Python) and whose build
-    ``overrides`` do not set; with "python" none."""
-    if build not in BUILDS:
-        raise ReproduceError(f"--build {build}: one of {', '.join(BUILDS)}")
-    if build == "python":
-        return {}
-    fmus = tuple(sorted((k, v) for k, v in overrides.items()
-                        if k.endswith((".fmu", ".build"))))
-    return {f"{name}.build": "native" for name in _native_components(scenario, fmus)
-            if f"{name}.build" not in overrides}
-
-
-def check_rounding_path(entry: Entry, builds: dict[str, dict[str, str]]) -> None:
-    """Refuse a rounding rerun that would repeat the main run: a native C FMU has no numpy
-    reference path, so where a run has one, ``[ensemble] rounding_perturb`` must name a
-    parameter to perturb (``builds``: run name -> :func:`build_overrides`)."""
-    native = sorted(name for name, over in builds.items() if over)
-    if native and not entry.ensemble.rounding_perturb:
-        raise ReproduceError(
-            f"{entry.path}: [ensemble] rounding_perturb: empty, but runs {native[:3]} use "
-            "native C builds, which have no numpy reference path: name a parameter to "
-            "perturb by 1e-12 (or run with --build python, or --no-rounding)")
 
 
 def run_jobs(entry: Entry, build: str = "python") -> list[Job]:
@@ -131,8 +92,8 @@ def run_entry(entry: Entry, out_dir: Path, workers: int | None = None,
     run raises
     :class:`ReproduceError` naming it, after the others finished."""
     from cosim.run import runner
-    from cosim.run.master import ensure_built
     from cosim.run.scenario import load_scenario
+    from cosim.run.simulate import ensure_built
     from cosim.run.sweep import warm_up_for
 
     jobs = run_jobs(entry, build)
@@ -175,46 +136,6 @@ def merged_summaries(entry: Entry, done: dict[Any, dict[str, Any]]
         reps = [done[run.name, k] for k in range(run.repeat)]
         result[run.name] = reps[0] if len(reps) == 1 else _merge_repeats(reps)
     return result
-
-
-MEMBER_ROWS = 2000  # rows of a member's series at most: the ensemble bands, evenly thinned
-
-
-def record_series(record: Record, name: str, folder: Path, figures: list[Figure],
-                  scenario: Any, scalars: bool = True, max_rows: int | None = None) -> None:
-    """Keep of ``folder/results.csv`` as series ``name`` what ``figures`` draw: the columns they
-    read, a ``y_reduce`` pattern (``plant.v[*]``) as one column of that name holding the
-    reduction (not every vehicle's column), with ``scalars`` every column of one value per
-    train too (no ``[i]`` index), and with ``max_rows`` evenly thinned rows (the last kept)."""
-    import numpy as np
-    import pandas as pd
-
-    from cosim.run.metrics import matching_columns
-
-    path = folder / "results.csv"
-    columns = list(pd.read_csv(path, nrows=0).columns)
-    header = pd.DataFrame(columns=columns)
-    keep = {c for c in columns if "[" not in c} if scalars else set()
-    patterns: dict[str, list[str]] = {}
-    for spec in (f.spec() for f in figures):
-        if "y_reduce" in spec:
-            keep |= figure_columns({**spec, "y": []}, scenario, columns)
-            ys = spec["y"] if isinstance(spec["y"], list) else [spec["y"]]
-            for y in ys:
-                patterns[y] = matching_columns(header, y)
-        else:
-            keep |= figure_columns(spec, scenario, columns)
-    wanted = keep.union(*patterns.values())
-    frame = read_csv(path, usecols=[c for c in columns if c in wanted])
-    reduced = pd.DataFrame({pattern: frame[cols].to_numpy(dtype=float).mean(axis=1)
-                            for pattern, cols in patterns.items()},  # y_reduce = "mean"
-                           index=frame.index)
-    frame = pd.concat([frame[[c for c in frame.columns if c in keep]], reduced], axis=1)
-    if max_rows is not None and len(frame) > max_rows:
-        step = -(-len(frame) // max_rows)
-        rows = np.unique(np.r_[np.arange(0, len(frame), step), len(frame) - 1])
-        frame = frame.iloc[rows].reset_index(drop=True)
-    record.series[name] = frame
 
 
 def record_run_series(entry: Entry, out: Path, record: Record) -> None:
@@ -305,10 +226,3 @@ def wanted_jobs(entry: Entry, k: int, rounding: bool, build: str = "python") -> 
 
     return run_jobs(entry, build) + sweep_jobs(entry, build) + (
         member_jobs(entry, k, rounding, build) if entry.claims else [])
-
-
-def run_scenarios(entry: Entry) -> dict[str, Any]:
-    """Run name -> its loaded scenario (with the run's ``set``)."""
-    from cosim.run.scenario import load_scenario
-
-    return {r.name: load_scenario(r.scenario, r.overrides) for r in entry.runs}

@@ -59,6 +59,7 @@ from typing import Any
 import numpy as np
 
 from cosim.run.console import decimal_exponent
+from cosim.run.perturbation import parse_perturb
 
 CLAIM_KINDS = ("less", "greater", "below", "above", "inside")
 QUANTIFIERS = ("every", "share", "typical")
@@ -192,8 +193,6 @@ def parse_seeds(where: str, key: str, value: Any) -> list[int]:
 
 def check_ensemble(where: str, data: dict[str, Any] | None) -> Ensemble:
     """The ``[ensemble]`` table, checked (calibration and report seeds disjoint)."""
-    from cosim.run.perturb import parse_perturb
-
     if data is None:
         return Ensemble()
     unknown = sorted(set(data) - _ENSEMBLE_KEYS)

@@ -28,9 +28,12 @@ from pathlib import Path
 from typing import Any
 
 from cosim.run import runner
+from cosim.run.scenario import ScenarioError, load_scenario
 
 LOCAL = runner.LOCAL_DASK
 check_available = runner.check_dask
+# one grid point of a loaded scenario -> its sweep row (cosim.run.sweep.run_point)
+PointRun = Callable[[Any, dict[str, Any]], dict[str, Any]]
 
 
 def _digest(path: Path) -> str:
@@ -49,28 +52,27 @@ def _local_copy(digest: str, data: bytes) -> Path:
     return target
 
 
-def run_point(scenario: Any, point: dict[str, Any],
+def run_point(point_run: PointRun, scenario: Any, point: dict[str, Any],
               broadcast: dict[str, tuple[str, bytes]] | None = None) -> dict[str, Any]:
-    """A Dask task: one grid point of a loaded scenario; ``broadcast``: client FMU path ->
-    (sha256, file content), or None to use the paths as they are (shared)."""
-    from cosim.run.sweep import _run_point
-
+    """A Dask task: ``point_run`` (:func:`cosim.run.sweep.run_point`) on one grid point of a
+    loaded scenario; ``broadcast``: client FMU path -> (sha256, file content), or None to use
+    the paths as they are (shared)."""
     if broadcast is not None:
         scenario = copy.deepcopy(scenario)
         for comp in scenario.components.values():
             digest, data = broadcast[str(comp.fmu_path)]
             comp.fmu_path = _local_copy(digest, data)
-    return _run_point(scenario, point)
+    return point_run(scenario, point)
 
 
 def tasks(jobs: list[tuple[str, dict[str, Any]]], finished: Callable[[dict[str, Any]], None],
-          shared_fmus: bool = False
+          point_run: PointRun, shared_fmus: bool = False
           ) -> tuple[list[runner.Task], dict[str, tuple[str, bytes]] | None]:
-    """The runner's tasks for ``jobs`` (scenario path, grid point), each scenario loaded and
+    """The runner's tasks for ``jobs`` (scenario path, grid point), each running ``point_run``
+    (:func:`cosim.run.sweep.run_point`, passed in: the sweep imports this module), each
+    scenario loaded and
     overridden here (a bad value fails its row through ``finished``), and the FMU files to
     send to the cluster once (None with ``shared_fmus``)."""
-    from cosim.run.scenario import ScenarioError, load_scenario
-
     out: list[runner.Task] = []
     for path, point in jobs:
         try:
@@ -79,8 +81,8 @@ def tasks(jobs: list[tuple[str, dict[str, Any]]], finished: Callable[[dict[str, 
             finished({"scenario": Path(path).stem, **point, "status": "failed",
                       "error": str(err)})
             continue
-        out.append(runner.Task((path, point), run_point, (loaded, point)))
+        out.append(runner.Task((path, point), run_point, (point_run, loaded, point)))
     if shared_fmus or not out:
         return out, None
-    fmu_paths = sorted({str(c.fmu_path) for t in out for c in t.args[0].components.values()})
+    fmu_paths = sorted({str(c.fmu_path) for t in out for c in t.args[1].components.values()})
     return out, {p: (_digest(Path(p)), Path(p).read_bytes()) for p in fmu_paths}

@@ -5,7 +5,7 @@ Members of a claim's ensemble (K = ``--seeds``, the first K report seeds, except
 - ``disturbance``: member i sets ``[ensemble].seed_key`` to report seed i; without a seed key
   the plant has no random input and the ensemble is one (deterministic) run.
 - ``mismatch``: member i is plant-mismatch sample i drawn from ``[ensemble].perturb``
-  (:func:`cosim.run.perturb.draw_samples`, seeded by ``[ensemble].perturb_seed``; the first K
+  (:func:`cosim.run.perturbation.draw_samples`, seeded by ``[ensemble].perturb_seed``; the first K
   of the same sequence for every K), with report seed i where there is a seed key.
 - ``repeat``: member i (i < ``[ensemble].repeats``) is the same nominal deterministic run
   (no seed, no draw), for metrics that vary run to run only through measurement (CPU and
@@ -81,7 +81,7 @@ def members(entry: Entry, ensemble: str, k: int) -> list[dict[str, Any]]:
 
 
 def _draws(entry: Entry, k: int) -> list[dict[str, float]]:
-    from cosim.run.perturb import draw_samples, nominal_values, parse_perturb
+    from cosim.run.perturbation import draw_samples, nominal_values, parse_perturb
 
     perts = parse_perturb(entry.ensemble.perturb)
     scenario = next(r.scenario for r in entry.runs
@@ -95,7 +95,7 @@ def _rounding_overrides(entry: Entry, run: Any, base: dict[str, Any], path: int
                         ) -> dict[str, Any]:
     """Perturbed path ``path``'s parameters (``base``'s value, else the run's, else the
     declared one) scaled by 1 + :data:`ROUNDING_RELATIVE`."""
-    from cosim.run.perturb import nominal_values
+    from cosim.run.perturbation import nominal_values
 
     out: dict[str, Any] = {}
     for key in entry.ensemble.rounding_keys(path):
@@ -132,9 +132,9 @@ def claim_jobs(entry: Entry, k: int, rounding: bool = True, build: str = "python
                ) -> list[Job]:
     """Every (run, ensemble, member, floating-point path) the claims and their variants need,
     once, with the
-    ``build`` of the catalog FMUs (:func:`cosim.reproduce.run.build_overrides`); the
+    ``build`` of the catalog FMUs (:func:`cosim.reproduce.builds.build_overrides`); the
     ``repeat`` members first, interleaved by repeat index (A0, B0, A1, B1, ...)."""
-    from cosim.reproduce.run import build_overrides, check_rounding_path
+    from cosim.reproduce.builds import build_overrides, check_rounding_path
 
     runs = {r.name: r for r in entry.runs}
     paths = entry.ensemble.rounding_paths()
@@ -168,7 +168,7 @@ def claim_jobs(entry: Entry, k: int, rounding: bool = True, build: str = "python
 
 def _run_member(scenario: str, overrides: dict[str, Any], out_dir: str | None = None
                 ) -> dict[str, Any]:
-    from cosim.run.master import run_scenario
+    from cosim.run.simulate import run_scenario
 
     before = host_load()
     summary = run_scenario(scenario, overrides=overrides, out_dir=out_dir, build=False,
@@ -466,8 +466,8 @@ def simulate_claims(entry: Entry, out: Path, record: Record, workers: int | None
     """Run the claims' members (K and rounding path of ``record``) and add their summaries to
     ``record``, with the series of the members the ensemble figures draw; a member
     ``previous`` holds with the same specification is taken from it, not run again."""
-    from cosim.run.master import ensure_built
     from cosim.run.scenario import load_scenario
+    from cosim.run.simulate import ensure_built
 
     wanted = member_jobs(entry, record.seeds, record.rounding, record.build)
     reuse = {job.key for job in wanted if known(previous, job)}
@@ -507,8 +507,8 @@ def simulate_claims(entry: Entry, out: Path, record: Record, workers: int | None
 def record_member_series(entry: Entry, out: Path, record: Record) -> None:
     """The series of the members the ensemble figures draw (main path, disturbance, banded
     runs) from their results.csv under ``out``, added to ``record`` (thinned to
-    :data:`cosim.reproduce.run.MEMBER_ROWS` rows)."""
-    from cosim.reproduce.run import MEMBER_ROWS, record_series, run_scenarios
+    :data:`cosim.reproduce.series.MEMBER_ROWS` rows)."""
+    from cosim.reproduce.series import MEMBER_ROWS, record_series, run_scenarios
 
     scenarios = run_scenarios(entry)
     banded = _banded(entry)
@@ -530,7 +530,7 @@ def write_claims(entry: Entry, record: Record, out: Path, plot_format: str = "pn
     returns the claims' rows and the markdown of claims.md below its title."""
     import pandas as pd
 
-    from cosim.reproduce.run import run_scenarios
+    from cosim.reproduce.series import run_scenarios
 
     k, rounding = record.seeds, record.rounding
     summaries = {job.key: record.results[ident] for ident, job in record.jobs.items()

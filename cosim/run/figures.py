@@ -3,7 +3,7 @@ the ensembles' medians and bands, and the helpers they share (labels and units f
 declarations, the roles and drawing styles of measured and reference curves, legends
 right of the axes). It imports none of the runners; the runners and :mod:`cosim.reproduce`
 import it. Figures are matplotlib figures saved at
-:data:`cosim.run.results.PLOT_DPI` (png), or as svg / pdf by the file's suffix
+:data:`PLOT_DPI` (png), or as svg / pdf by the file's suffix
 (:func:`save_figure`: the same bytes on every draw).
 """
 
@@ -14,7 +14,9 @@ from typing import Any
 
 import numpy as np
 
-from cosim.run.results import PLOT_DPI
+from cosim.run.columns import display_unit, is_held, variable_info
+
+PLOT_DPI = 200  # raster figures (png) at print resolution
 
 
 class FigureError(ValueError):
@@ -63,8 +65,6 @@ def series_style(scenario: Any, ref: str, references: list[str] | tuple[str, ...
     sampled or self-triggered FMU (held between its events) as steps, anything else (the
     plant's continuous states) as a line; with the legend text from the declaration (its
     description)."""
-    from cosim.run.results import _held, variable_info
-
     if scenario is None:
         return {"drawstyle": "default", "text": f"reference: {ref}" if ref in references
                 else ref, "reference": ref in references}
@@ -74,7 +74,7 @@ def series_style(scenario: Any, ref: str, references: list[str] | tuple[str, ...
     text = variable_info(scenario, ref)[0]
     if reference:
         return {"drawstyle": "default", "text": f"reference: {text}", "reference": True}
-    return {"drawstyle": "steps-post" if _held(scenario, ref) else "default", "text": text,
+    return {"drawstyle": "steps-post" if is_held(scenario, ref) else "default", "text": text,
             "reference": False}
 
 
@@ -83,8 +83,6 @@ def axis_text(spec: dict[str, Any], axis: str, scenario: Any, column: str
     """(label, factor) of an axis: the entry's ``xlabel`` / ``ylabel`` and ``y_scale`` where
     given, else the declared description of ``column`` in its display unit (km/h for m/s, kN
     for N, ...) and the factor to that unit; ``time (s)`` for the time."""
-    from cosim.run.results import display_unit, variable_info
-
     scale = float(spec.get("y_scale", 1.0)) if axis == "y" else 1.0
     given = spec.get(f"{axis}label")
     if column == "time":
@@ -164,8 +162,6 @@ KM_FROM_M = 10_000.0  # a position axis spanning at least this (m) is drawn in k
 def x_axis(spec: dict[str, Any], scenario: Any, frames: dict[str, Any]) -> tuple[str, float]:
     """(label, factor) of a figure's x axis: :func:`axis_text`, with a position declared in m
     drawn in km where the runs span at least ``KM_FROM_M`` (no 6-digit tick labels)."""
-    from cosim.run.results import variable_info
-
     label, factor = axis_text(spec, "x", scenario, spec["x"])
     if spec["x"] == "time" or spec.get("xlabel") or scenario is None:
         return label, factor
@@ -180,8 +176,6 @@ def x_axis(spec: dict[str, Any], scenario: Any, frames: dict[str, Any]) -> tuple
 def series_label(spec: dict[str, Any], scenario: Any, y: str, style: dict[str, Any]) -> str:
     """The legend text of one series: its declared description (:func:`series_style`), with
     ``y_reduce`` ("mean of ...") and ``y_minus`` ("... - <its description>") said."""
-    from cosim.run.results import variable_info
-
     text = style["text"]
     if "y_reduce" in spec:
         text = f"{spec['y_reduce']} of {y}"
@@ -227,8 +221,6 @@ def panel_count(spec: dict[str, Any], runs: int) -> int:
 def error_label(spec: dict[str, Any], scenario: Any, ylabel: str) -> str:
     """The error panel's y label: the ``error`` column's declared description in the unit of
     the tracking axes' label ``ylabel`` (the error is drawn with the same factor)."""
-    from cosim.run.results import variable_info
-
     text = variable_info(scenario, spec["error"])[0] if scenario is not None else spec["error"]
     unit = ylabel.rsplit("(", 1)[1].rstrip(")") if ylabel.endswith(")") and "(" in ylabel \
         else None

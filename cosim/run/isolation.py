@@ -28,7 +28,6 @@ import time
 from collections.abc import Callable
 from multiprocessing.connection import Connection
 from multiprocessing.connection import wait as wait_any
-from pathlib import Path
 from typing import Any
 
 from cosim.run import interrupt
@@ -315,76 +314,3 @@ def supervise(child: Child, poll_s: float = _POLL_S) -> Any:
             raise interrupt.Interrupted(f"{stuck} after {name}: stopped it (SIGKILL); "
                                         "nothing this run recorded could be kept")
     return child.result()
-
-
-class RunOutcome:
-    """What ``cosim run`` prints of a run done in a child: its summary, algorithm, and the
-    real-time factor of the stepping its progress reporter saw (None without one)."""
-
-    def __init__(self, summary: dict[str, Any], algorithm: str,
-                 stepping_rtf: float | None) -> None:
-        self.summary, self.algorithm, self.stepping_rtf = summary, algorithm, stepping_rtf
-
-
-def _run_scenario(path: str, options: dict[str, Any], progress: Any = None) -> RunOutcome:
-    """In the child: :func:`cosim.run.master.run_scenario` writing into ``out_dir``, its
-    progress shown by ``progress`` (``cosim run``'s reporter: ``progress(t, total)``,
-    ``progress.bar`` the display held open meanwhile, ``progress.stepping_rtf()``)."""
-    from cosim.run.master import run_scenario
-
-    with progress.bar if progress is not None else contextlib.nullcontext():
-        result = run_scenario(path, progress=progress, **options)
-    return RunOutcome(result.summary, result.algorithm,
-                      None if progress is None else progress.stepping_rtf())
-
-
-def start_run(path: str, progress: Any = None, **options: Any) -> Child:
-    """:func:`cosim.run.master.run_scenario` (``options``: its keywords, with ``out_dir``)
-    started in a child process, showing its progress with ``progress`` (see
-    :func:`_run_scenario`; forked, the child writes to the same terminal; a spawned child
-    shows none); :func:`finish_run` waits for it."""
-    return Child(first=(_run_scenario, (str(path), options, progress if FORK else None), {}))
-
-
-def finish_run(child: Child, out_dir: Path, force: bool = False) -> RunOutcome:
-    """The outcome of :func:`start_run`'s child; a crash (or a hang stopped) is a
-    :class:`cosim.run.master.SimulationError` (``Interrupted``) saying so, after
-    :func:`record_crash` wrote what is known of it."""
-    from cosim.run.master import SimulationError
-
-    try:
-        return supervise(child)
-    except ChildFailed as err:
-        where = record_crash(out_dir, str(err), force)
-        raise SimulationError(f"{err}; nothing this run recorded could be kept: "
-                              f"{where} says so (\"completed\": false)") from None
-    except interrupt.Interrupted as err:
-        if "SIGKILL" not in str(err):
-            raise
-        where = record_crash(out_dir, str(err), force)
-        raise interrupt.Interrupted(f"{err} ({where} says so)") from None
-    finally:
-        child.close()
-
-
-def record_crash(out_dir: Path, message: str, force: bool = False) -> Path:
-    """A run that ended without results: ``summary.json`` with ``"completed": false`` and
-    ``error`` = ``message``, in ``out_dir``, or in ``<out_dir>.partial`` when ``out_dir``
-    holds a complete earlier run (unless ``force``), as :func:`cosim.run.results.write_results`
-    places partial results; the results and plots of an earlier run in that folder are
-    removed, so none is taken for this run's. Returns the summary's path."""
-    import json
-
-    from cosim.run.results import FILES, _is_complete_run
-
-    out_dir = Path(out_dir)
-    if not force and _is_complete_run(out_dir):
-        out_dir = out_dir.with_name(out_dir.name + ".partial")
-    out_dir.mkdir(parents=True, exist_ok=True)
-    for name in FILES:
-        (out_dir / name).unlink(missing_ok=True)
-    summary = out_dir / "summary.json"
-    tmp = summary.with_name(".summary.json.writing")
-    tmp.write_text(json.dumps({"completed": False, "error": message}, indent=2) + "\n")
-    os.replace(tmp, summary)
-    return summary

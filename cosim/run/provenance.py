@@ -29,6 +29,7 @@ from pathlib import Path
 from typing import Any
 
 from cosim.fmu.build import ROOT, bundled_files, catalog
+from cosim.fmu.native_build import NATIVE, native_sources
 
 try:
     import tomllib
@@ -41,7 +42,7 @@ EVALUATION = ("cosim/run", "cosim/papers", "cosim/reproduce")
 INPUTS_FILE = "inputs.sha256"  # in a reproduction's folder: the digest of the inputs it ran
 NOT_INPUTS = {"cosim/run/docs_pages.py", "cosim/run/provenance.py"}
 # read a record and the entry only: tables, claims, figures, the page
-EVALUATION_ONLY = {"cosim/run/reproduce.py", "cosim/run/ensemble.py", "cosim/run/claims.py",
+EVALUATION_ONLY = {"cosim/run/ensemble.py", "cosim/run/claims.py",
                    "cosim/run/record.py", "cosim/run/console.py", "cosim/run/figures.py"}
 # every module under these folders is evaluation-only: the reproduction (its entries, jobs,
 # tables, figures and page), whose jobs the record keeps and compares
@@ -82,8 +83,6 @@ def entry_inputs(name: str, build: str = "python") -> list[Path]:
             fmus.update(s for s in _strings(tomllib.loads(scenario.read_text())) if s in known)
         if text in known:
             fmus.add(text)
-    from cosim.fmu.native_build import NATIVE, native_sources
-
     for identifier in sorted(fmus):
         files.update(bundled_files(known[identifier].module))
         if build == "native" and identifier in NATIVE:  # its C model, FMI 3 front included

@@ -70,7 +70,7 @@ class Record:
     simulation: str  # digest of the simulation inputs the jobs ran with
     seeds: int  # K of the claims' members
     rounding: bool  # the claims' members ran on the perturbed floating-point path too
-    build: str = "python"  # which builds of the catalog FMUs ran (cosim.reproduce.run.BUILDS)
+    build: str = "python"  # which builds of the catalog FMUs ran (cosim.reproduce.builds.BUILDS)
     jobs: dict[tuple[Any, ...], Job] = field(default_factory=dict)
     results: dict[tuple[Any, ...], Any] = field(default_factory=dict)
     series: dict[str, pd.DataFrame] = field(default_factory=dict)

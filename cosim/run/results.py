@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import contextlib
 import fcntl
-import functools
 import json
 import math
 import os
@@ -23,8 +22,11 @@ from typing import Any
 
 import numpy as np
 
+from cosim.run.columns import axis_label, column_units, display_unit, is_held, variable_info
+from cosim.run.figures import PLOT_DPI, reference_curve
+from cosim.run.metrics import matching_columns
+
 PLOT_FORMATS = ("png", "svg", "pdf")
-PLOT_DPI = 200  # raster figures (png) at print resolution
 MAX_CM_DECIMALS = 6  # a stop error is written to 0.01 um at finest
 LABEL_WIDTH = 40  # characters per line of an axis label
 LEGEND_DROP = 0.5  # in, from an axes' bottom edge to the top of the legend under it
@@ -38,7 +40,6 @@ REFERENCE = {"color": "k", "ls": "-", "lw": 0.8, "zorder": 3}
 REFERENCE_CURVE = {"color": "0.5", "ls": "-", "lw": 0.8, "zorder": 3}
 UNITS_FILE = "results.units.json"  # beside results.csv: column -> declared unit (or null)
 FILES = ("results.csv", UNITS_FILE, "summary.json", *(f"plot.{fmt}" for fmt in PLOT_FORMATS))
-TIME_INFO = ("simulation time", "s")  # (description, unit) of the column ``time``
 
 
 class OutputError(ValueError):
@@ -97,7 +98,7 @@ def locked_destination(path: Path, option: str = "--out") -> Iterator[None]:
             fcntl.flock(handle, fcntl.LOCK_UN)
 
 
-def _is_complete_run(out_dir: Path) -> bool:
+def is_complete_run(out_dir: Path) -> bool:
     try:
         return json.loads((out_dir / "summary.json").read_text()).get("completed") is True
     except (OSError, ValueError, AttributeError):
@@ -128,7 +129,7 @@ def write_results(result: Any, out_dir: Path, plot: bool = True,
     out_dir = Path(out_dir)
     if plot_format not in PLOT_FORMATS:
         raise ValueError(f"plot format {plot_format!r}: one of {', '.join(PLOT_FORMATS)}")
-    if not result.summary.get("completed", True) and not force and _is_complete_run(out_dir):
+    if not result.summary.get("completed", True) and not force and is_complete_run(out_dir):
         out_dir = out_dir.with_name(out_dir.name + ".partial")
     out_dir.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=".writing-", dir=out_dir))
@@ -164,86 +165,6 @@ def format_stop_error(error_m: float) -> str:
                                                        MAX_CM_DECIMALS)
     text = f"{cm:+.{decimals}f}"
     return f"{text.lstrip('+-')} cm" if float(text) == 0.0 else f"{text} cm"
-
-
-_UNIT_DISPLAY = {"N": (1e-3, "kN"), "m/s2": (1.0, "m/s²"), "%": (1.0, "%"),
-                 "Pa": (1e-3, "kPa"), "W": (1e-3, "kW"), "m/s": (3.6, "km/h")}
-
-
-def display_unit(unit: str | None) -> tuple[float, str | None]:
-    """(scale, label) to plot a quantity declared in ``unit``: kN for N, m/s² for m/s2, ..."""
-    if unit is None:
-        return 1.0, None
-    return _UNIT_DISPLAY.get(unit, (1.0, unit))
-
-
-@functools.lru_cache(maxsize=64)
-def _model_variables(path: str, mtime_ns: int) -> dict[str, Any]:
-    """Name -> fmpy ModelVariable of the FMU at ``path`` (as of ``mtime_ns``: a rebuilt FMU
-    is read again)."""
-    from fmpy import read_model_description
-
-    md = read_model_description(path, validate=False)
-    return {v.name: v for v in md.modelVariables}
-
-
-def variable_info(scenario: Any, ref: str) -> tuple[str, str | None]:
-    """(description, declared unit) of ``"instance.variable"`` from its FMU's
-    modelDescription; the name itself and None where it has none."""
-    try:
-        comp, var = ref.split(".", 1)
-        base = var.split("[", 1)[0]
-        path = Path(scenario.components[comp].fmu_path)
-        by_name = _model_variables(str(path), path.stat().st_mtime_ns)
-        found = by_name.get(var) or by_name[base]  # the element itself, else its vector
-        unit = found.unit or (found.declaredType.unit if found.declaredType is not None
-                              else None)
-        text = found.description or ref
-        if found.name != var:  # one element of a vector variable: name it
-            text += f" {var[len(base):]}"
-        return text, unit
-    except Exception:  # noqa: BLE001 - a plot label must never fail a run
-        return ref, None
-
-
-def column_info(scenario: Any, columns: Any) -> dict[str, tuple[str, str | None]]:
-    """Per column of a run's table: (description, declared unit), :data:`TIME_INFO` for
-    ``time``, :func:`variable_info` for the others."""
-    return {str(c): TIME_INFO if c == "time" else variable_info(scenario, str(c))
-            for c in columns}
-
-
-def column_units(scenario: Any, columns: Any) -> dict[str, str | None]:
-    """Per column of a run's table: the unit its FMU declares (None where none), as
-    ``results.units.json`` holds them."""
-    return {column: unit for column, (_, unit) in column_info(scenario, columns).items()}
-
-
-def variable_unit(scenario: Any, ref: str) -> str | None:
-    """The declared unit of ``"instance.variable"`` from its FMU's modelDescription."""
-    return variable_info(scenario, ref)[1]
-
-
-def axis_label(text: str, unit: str | None) -> str:
-    """``text (unit)`` in the display unit, ``text`` for a dimensionless quantity."""
-    label = display_unit(unit)[1]
-    return f"{text} ({label})" if label and label != "1" else text
-
-
-def _held(scenario: Any, ref: str) -> bool:
-    """True for an output of a sampled or self-triggered FMU (a ``sample_time`` in the
-    scenario, or a ``sample_time`` parameter or ``next_event_time`` output declared): it is
-    held between the FMU's events, so it is drawn as steps."""
-    try:
-        from fmpy import read_model_description
-
-        component = scenario.components[ref.split(".", 1)[0]]
-        if component.sample_time:
-            return True
-        md = read_model_description(str(component.fmu_path), validate=False)
-        return any(v.name in ("sample_time", "next_event_time") for v in md.modelVariables)
-    except Exception:  # noqa: BLE001 - a plot must never fail a run
-        return False
 
 
 def _stop_inset(ax: Any, pos: np.ndarray, speed_kmh: np.ndarray, stop: float,
@@ -330,8 +251,6 @@ def _draw_tracking(result: Any, ax: Any, error_ax: Any | None) -> None:
     curve it samples in grey), the speed limit dotted, the stop point, the command on a twin
     axis and the last 20 m in an inset; ``reference - measured`` on ``error_ax`` below (shared
     x), and the legend under the lowest of the two."""
-    from cosim.run.reproduce import reference_curve
-
     cfg, frame = result.scenario.summary, result.frame
     pos, speed = cfg["position"], cfg["speed"]
     x = frame[pos].to_numpy(dtype=float)
@@ -343,7 +262,7 @@ def _draw_tracking(result: Any, ax: Any, error_ax: Any | None) -> None:
     reference = None
     ref = cfg.get("reference_speed")
     if ref in frame.columns:
-        held = _held(result.scenario, ref)
+        held = is_held(result.scenario, ref)
         reference = frame[ref].to_numpy(dtype=float) * 3.6
         ax.plot(x, reference, label="reference" + (" (as held by the controller)" if held
                                                    else ""),
@@ -355,7 +274,7 @@ def _draw_tracking(result: Any, ax: Any, error_ax: Any | None) -> None:
     limit = cfg.get("speed_limit")
     if limit in frame.columns:
         ax.plot(x, frame[limit] * 3.6, ":", color="C3", lw=1.0, label="speed limit",
-                drawstyle="steps-post" if _held(result.scenario, limit) else "default")
+                drawstyle="steps-post" if is_held(result.scenario, limit) else "default")
     ax.set_ylabel("speed (km/h)")
     ax.ticklabel_format(useOffset=False, style="plain")
     stop = None
@@ -369,7 +288,7 @@ def _draw_tracking(result: Any, ax: Any, error_ax: Any | None) -> None:
         top = ax.twinx()
         text, unit = variable_info(result.scenario, command)
         top.plot(x, frame[command] * display_unit(unit)[0], color="C2", lw=1.0, label=text,
-                 drawstyle="steps-post" if _held(result.scenario, command) else "default")
+                 drawstyle="steps-post" if is_held(result.scenario, command) else "default")
         top.set_ylabel(wrapped_label(axis_label(text, unit)))
         top.ticklabel_format(useOffset=False, style="plain")
         more, more_labels = top.get_legend_handles_labels()
@@ -405,8 +324,6 @@ def draw_run(result: Any) -> Any:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from cosim.run.metrics import matching_columns
-
     cfg = result.scenario.summary
     frame = result.frame
     couplers = matching_columns(frame, cfg.get("coupler_forces"))
@@ -431,7 +348,7 @@ def draw_run(result: Any) -> Any:
             scale = display_unit(unit)[0]
             units.add(display_unit(unit)[1])
             ax.plot(t, frame[col] * scale, label=axis_label(text, unit),
-                    drawstyle="steps-post" if _held(result.scenario, col) else "default")
+                    drawstyle="steps-post" if is_held(result.scenario, col) else "default")
         ax.set_xlabel("time (s)")
         if len(units) == 1 and None not in units:
             ax.set_ylabel(units.pop())

@@ -48,9 +48,11 @@ try:
 except ModuleNotFoundError:  # Python 3.10
     import tomli as tomllib  # type: ignore[no-redef]
 
-from cosim.fmu.build import FMU_DIR, ROOT
+from cosim.fmu import native_build
+from cosim.fmu.build import FMU_DIR, ROOT, catalog
 from cosim.fmu.state import to_ticks
 from cosim.run import fmi_types
+from cosim.run.metrics import PAPERS
 
 SCENARIO_DIR = ROOT / "scenarios"
 ALGORITHMS = ("event", "fixed", "jacobi")
@@ -245,8 +247,6 @@ def _paper_metric_keys(source: Path, summary: dict[str, Any]) -> list[str]:
     """The ``[summary]`` keys the paper metrics named in ``metrics`` read; raise naming the
     metric for an unknown name, and the metric to add for a key that only an unnamed metric
     reads."""
-    from cosim.run.metrics import PAPERS
-
     papers = importlib.import_module(PAPERS)  # the plug-ins above this layer, by name
 
     names = summary.get("metrics", [])
@@ -306,8 +306,6 @@ def native_path(source: Path, key: str, fmu: str, fmi_version: int) -> Path:
     """Where the native build of catalog FMU ``fmu`` in FMI version ``fmi_version`` lives
     (``fmus/native/<Id>.fmu``, ``fmus/native/fmi3/<Id>.fmu``); refused for an FMU without a
     native model."""
-    from cosim.fmu import native_build
-
     if fmu.endswith(".fmu"):
         raise ScenarioError(f"{source}: {key} = 'native': fmu = {fmu!r} is a file, used as "
                             "given; build selects the build of a catalog identifier")
@@ -336,8 +334,6 @@ def _resolve_fmu(source: Path, key: str, fmu: Any, fmi_version: int = 2,
     built = catalog_path(fmu, fmi_version)
     if built.is_file():  # a built catalog FMU: no need to import every wrapper module
         return built
-    from cosim.fmu.build import catalog
-
     known = catalog()
     if fmu not in known:
         hint = difflib.get_close_matches(fmu, list(known), n=1)

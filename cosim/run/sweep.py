@@ -1,7 +1,7 @@
 """Parameter sweeps: one scenario (or several) over a grid of overrides, in parallel processes.
 
 ``run_sweep("stop_rsmpc", {"controller.N": range(3, 16)}, "runs/sweep", workers=2)``
-runs every grid point with :func:`cosim.run.master.run_scenario` in a process pool, and writes
+runs every grid point with :func:`cosim.run.simulate.run_scenario` in a process pool, and writes
 
 * ``sweep.csv``: one row per run (scenario, the grid values, ``status`` ok / failed /
   interrupted, ``error``, the summary figures, and last ``inputs_digest``: a digest of the
@@ -69,12 +69,13 @@ def grid_points(grid: dict[str, Sequence[Any]]) -> list[dict[str, Any]]:
             for values in itertools.product(*(list(grid[k]) for k in keys))]
 
 
-def _run_point(scenario: Any, point: dict[str, Any]) -> dict[str, Any]:
+def run_point(scenario: Any, point: dict[str, Any]) -> dict[str, Any]:
     """One grid point (in a worker): status, error and the summary figures. ``scenario`` is
     a path (loaded here with ``point`` as overrides) or a loaded :class:`Scenario` (already
     overridden). Never raises for a failing run: the row says what went wrong."""
-    from cosim.run.master import SimulationError, run_scenario
+    from cosim.run.master import SimulationError
     from cosim.run.scenario import Scenario, ScenarioError
+    from cosim.run.simulate import run_scenario
 
     loaded = isinstance(scenario, Scenario)
     name = Path(str(scenario.path if loaded else scenario)).stem
@@ -226,8 +227,8 @@ def run_sweep(scenario: str | Sequence[str], grid: dict[str, Sequence[Any]],
     ``time_limit`` (s, wall clock, local workers): a point running longer is stopped and
     failed; a point whose worker crashes fails naming the signal and the FMU call.
     """
-    from cosim.run.master import ensure_built
     from cosim.run.scenario import find_scenario, load_scenario
+    from cosim.run.simulate import ensure_built
 
     scenarios = [scenario] if isinstance(scenario, (str, Path)) else list(scenario)
     if not scenarios:
@@ -328,7 +329,7 @@ def _execute(jobs: list[tuple[str, dict[str, Any]]], workers: int | None,
 
     label = "sweep"
     if scheduler is None:
-        tasks = [runner.Task((path, point), _run_point, (path, point))
+        tasks = [runner.Task((path, point), run_point, (path, point))
                  for path, point in reversed(jobs)]
         runner.run_tasks(tasks, lambda _t, row: finished(row), failed, workers,
                          label=label, warm_up=warm_up_for(jobs), what="the sweep",
@@ -336,7 +337,7 @@ def _execute(jobs: list[tuple[str, dict[str, Any]]], workers: int | None,
         return
     from cosim.run import dask_sweep
 
-    tasks, blobs = dask_sweep.tasks(jobs, finished, shared_fmus)
+    tasks, blobs = dask_sweep.tasks(jobs, finished, run_point, shared_fmus)
     runner.run_tasks(tasks, lambda _t, row: finished(row), failed, workers, scheduler,
                      label=label, broadcast=blobs, what="the sweep")
 
@@ -344,7 +345,7 @@ def _execute(jobs: list[tuple[str, dict[str, Any]]], workers: int | None,
 def key_labels(scenario: Any, keys: list[str]) -> dict[str, str]:
     """Axis labels of grid keys: the declared description and unit of each ``FMU.parameter``
     (the key itself where there is none)."""
-    from cosim.run.results import axis_label, variable_info
+    from cosim.run.columns import axis_label, variable_info
 
     labels = {}
     for key in keys:
@@ -359,7 +360,7 @@ def plot_sweep(frame: pd.DataFrame, keys: list[str], path: str | Path,
     """:func:`draw_sweep` saved to ``path`` (its suffix: png at 200 dpi, svg or pdf)."""
     import matplotlib.pyplot as plt
 
-    from cosim.run.results import PLOT_DPI
+    from cosim.run.figures import PLOT_DPI
 
     fig = draw_sweep(frame, keys, labels, series_labels)
     fig.savefig(path, dpi=PLOT_DPI, format=Path(path).suffix.lstrip(".") or "png",

@@ -15,7 +15,8 @@ import pytest
 from fmpy import simulate_fmu
 from test_master_third_party import H, write_scenario
 
-from cosim.run.master import SimulationError, run_scenario
+from cosim.run.master import SimulationError
+from cosim.run.simulate import run_scenario
 
 VALUES = {"Float64": 0.1, "Float32": 0.25, "Int8": -100, "UInt8": 200, "Int16": -30000,
           "UInt16": 60000, "Int32": -2**31, "UInt32": 2**32 - 1, "Int64": -2**40,

@@ -15,8 +15,9 @@ import pytest
 from fmpy import simulate_fmu
 from third_party_fmus import MODE_ITEMS
 
-from cosim.run.master import SimulationError, run_scenario
+from cosim.run.master import SimulationError
 from cosim.run.scenario import ScenarioError, load_scenario
+from cosim.run.simulate import run_scenario
 
 ALGORITHMS = ("event", "fixed", "jacobi")
 H = 0.125  # binary-exact step: the same times in both masters

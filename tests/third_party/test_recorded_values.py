@@ -11,7 +11,8 @@ import pytest
 from test_master_fmi3 import VALUES
 from test_master_third_party import write_scenario
 
-from cosim.run.master import SimulationError, run_scenario
+from cosim.run.master import SimulationError
+from cosim.run.simulate import run_scenario
 
 BEYOND_FLOAT = 2**53 + 1  # the first integer float64 cannot hold
 INT64_MAX = 2**63 - 1

@@ -195,7 +195,7 @@ def _maps(process: psutil.Process) -> list:
 
 def test_a_nan_output_is_a_warning_naming_the_variable_and_time(hostile_fmus, tmp_path):
     """NanOutput's y is NaN from t = 0.25 s: of the points 0, 0.125, .., 1 s, 7 are NaN."""
-    from cosim.run.master import run_scenario
+    from cosim.run.simulate import run_scenario
 
     result = run_scenario(scenario(tmp_path, hostile_fmus["NanOutput"]), build=False,
                           plot=False)

@@ -7,7 +7,8 @@ The parts, as in libcosim:
 * algorithms (:mod:`.algorithms`: event-driven, fixed step, Jacobi) decide when each FMU
   steps and in which order values flow;
 * observers (:mod:`.observers`) keep what happens at the output points;
-* :mod:`.core` ties them together for a scenario (:func:`run_scenario`).
+* :mod:`.core` ties them together for a scenario (:class:`Master`), returning a result and
+  writing nothing (:func:`cosim.run.simulate.run_scenario` writes it).
 """
 
 from cosim.run.master.algorithms import (
@@ -23,8 +24,6 @@ from cosim.run.master.core import (
     Master,
     ProgressFn,
     RunResult,
-    ensure_built,
-    run_scenario,
 )
 from cosim.run.master.errors import FmuCallError, FmuTerminated, SimulationError
 from cosim.run.master.fmi2 import CheckedSlave, Fmi2Unit, logging_callbacks
@@ -38,6 +37,6 @@ __all__ = [
     "ALGORITHM_CLASSES", "MAX_HALVINGS", "WARNING_COUNTER", "_EXTRACTED", "Algorithm",
     "CheckedSlave", "EventDriven", "FixedStep", "Fmi2Unit", "FmuCallError", "FmuTerminated",
     "FmuUnit", "Jacobi", "Link", "Master", "Observer", "ProgressFn", "Recorder", "RunResult",
-    "SimulationError", "Unit", "Variable", "ensure_built", "extract_once", "logging_callbacks",
-    "read_fmu", "run_scenario", "unit_class", "warm_up",
+    "SimulationError", "Unit", "Variable", "extract_once", "logging_callbacks",
+    "read_fmu", "unit_class", "warm_up",
 ]

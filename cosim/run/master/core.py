@@ -26,6 +26,7 @@ from cosim.run.master.algorithms import ALGORITHM_CLASSES
 from cosim.run.master.errors import FmuCallError, FmuTerminated, SimulationError
 from cosim.run.master.loading import extract_once, read_fmu, unit_class
 from cosim.run.master.observers import LIST_FAMILIES, Recorder
+from cosim.run.master.scheduled import Fmi3ScheduledUnit
 from cosim.run.master.unit import Unit
 from cosim.run.scenario import (
     Connection,
@@ -34,7 +35,6 @@ from cosim.run.scenario import (
     blame_override,
     check_against_fmus,
     check_timing,
-    load_scenario,
     unconnected_inputs,
 )
 from cosim.run.threads import one_blas_thread
@@ -143,8 +143,6 @@ class Master:
         """Source unit -> its output clock (value reference) -> the (unit, input clock) it
         triggers, from the scenario's clock ``connections``: an output clock of a Scheduled
         Execution FMU to a ``triggered`` input clock of one (FMI 3.0 sec. 5.2.2)."""
-        from cosim.run.master.scheduled import Fmi3ScheduledUnit
-
         out: dict[Unit, dict[int, list[tuple[Unit, int]]]] = {}
         for c in connections:
             key = f"{self.scenario.path}: [connections] \"{c.dst}.{c.dst_var}\" = " \
@@ -416,89 +414,3 @@ class RunResult:
     connection_values: dict[str, list[Any]] = field(default_factory=dict)
     # run-dependent figures an FMU logged at fmi2Terminate (solve times): never outputs
     diagnostics: dict[str, dict[str, float]] = field(default_factory=dict)
-
-    def write(self, out_dir: Path, plot: bool = True, force: bool = False,
-              plot_format: str = "png") -> list[Path]:
-        from cosim.run.results import write_results
-
-        return write_results(self, Path(out_dir), plot=plot, force=force,
-                             plot_format=plot_format)
-
-
-def run_scenario(scenario: str | Path | Scenario, overrides: dict[str, Any] | list[str] | None
-                 = None, algorithm: str | None = None, out_dir: str | Path | None = None,
-                 progress: ProgressFn | None = None, build: bool = True,
-                 plot: bool = True, force: bool = False, plot_format: str = "png"
-                 ) -> RunResult:
-    """Load (and override) a scenario, build missing or stale FMUs, run it, compute the summary
-    and, with ``out_dir``, write results.csv, summary.json and plot.png (see
-    :func:`cosim.run.results.write_results` for ``force``). A failure raises
-    :class:`SimulationError`, SIGINT/SIGTERM :class:`cosim.run.interrupt.Interrupted`, both
-    after writing the partial results."""
-    from cosim.run.metrics import compute_summary
-
-    sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario, overrides)
-    if build:
-        ensure_built(sc)
-    master = Master(sc, algorithm, progress)
-    # SIGINT/SIGTERM only set a flag while the FMUs run (never an exception inside their code);
-    # the master stops at the next communication point and what was recorded is written
-    with interrupt.guard():
-        try:
-            result = master.run()
-        except (SimulationError, interrupt.Interrupted, KeyboardInterrupt) as err:
-            partial = getattr(master, "partial", None)
-            interrupted = isinstance(err, (interrupt.Interrupted, KeyboardInterrupt))
-            if out_dir is None or partial is None or partial.frame.empty and not interrupted:
-                raise  # a failure before anything was recorded (e.g. a rejected parameter)
-            partial.summary = compute_summary(partial)
-            where = partial.write(Path(out_dir), plot=plot, force=force,
-                                  plot_format=plot_format)[0].parent
-            note = (f"; partial results up to t = {partial.sim_time_s:g} s written to {where} "
-                    f"(summary.json has \"completed\": false)")
-            if isinstance(err, interrupt.Interrupted):
-                raise interrupt.Interrupted(f"{err}{note}") from err
-            if isinstance(err, KeyboardInterrupt):
-                raise interrupt.Interrupted(f"{partial.error}{note}") from err
-            raise SimulationError(f"{err}{note}") from err
-        result.summary = compute_summary(result)
-        if out_dir is not None:
-            result.write(Path(out_dir), plot=plot, force=force, plot_format=plot_format)
-    return result
-
-
-def ensure_built(sc: Scenario) -> list[Path]:
-    """Build the scenario's catalog FMUs that are missing or older than their sources, in the
-    scenario's FMI version ([simulation] fmi_version), and its native ones (build =
-    "native")."""
-    native = sorted({c.fmu for c in sc.components.values() if c.build == "native"})
-    version = sc.simulation.fmi_version
-    built: list[Path] = []
-    if native:
-        from cosim.fmu.native_build import build_natives, native_is_stale
-
-        for name in native:
-            if native_is_stale(name, version):
-                built += build_natives(name, (version,))
-    return built + _ensure_python_built(sc)
-
-
-def _ensure_python_built(sc: Scenario) -> list[Path]:
-    from cosim.fmu.build import build_stale, catalog
-    from cosim.run.scenario import catalog_path
-
-    version = sc.simulation.fmi_version
-    specs = catalog()
-    wanted = [specs[c.fmu] for c in sc.components.values()
-              if c.fmu in specs and c.fmu_path == catalog_path(c.fmu, version)]
-    if version == 2:
-        return build_stale(wanted)
-    if not wanted:
-        return []
-    import inspect
-
-    if "fmi_version" not in inspect.signature(build_stale).parameters:
-        raise ScenarioError(f"{sc.path}: [simulation] fmi_version = 3: this installation cannot "
-                            "build FMI 3.0 FMUs (cosim.fmu.build has no FMI 3 builds); give "
-                            "explicit .fmu paths or fmi_version = 2")
-    return build_stale(wanted, fmi_version=version)

@@ -1,0 +1,47 @@
+"""Which builds of the catalog FMUs a reproduction runs on (``cosim reproduce --build``): the
+overrides that select the native C builds, and the refusal of a rounding rerun a native build
+cannot perturb."""
+
+from __future__ import annotations
+
+import functools
+from typing import Any
+
+from cosim.fmu.native_build import NATIVE
+from cosim.reproduce.entry import Entry, ReproduceError
+from cosim.run.scenario import load_scenario
+
+BUILDS = ("native", "python")  # --build: the catalog FMUs' native C builds where they exist
+
+
+@functools.lru_cache(maxsize=256)
+def _native_components(scenario: str, fmus: tuple[tuple[str, str], ...]) -> tuple[str, ...]:
+    sc = load_scenario(scenario, dict(fmus))
+    return tuple(c.name for c in sc.components.values() if c.fmu in NATIVE)
+
+
+def build_overrides(scenario: str, overrides: dict[str, Any], build: str) -> dict[str, str]:
+    """The overrides that run ``scenario`` (with ``overrides``) on ``build``: with "native",
+    ``NAME.build = "native"`` for every FMU whose catalog identifier has a native C model
+    (:data:`cosim.fmu.native_build.NATIVE`; the others stay Python) and whose build
+    ``overrides`` do not set; with "python" none."""
+    if build not in BUILDS:
+        raise ReproduceError(f"--build {build}: one of {', '.join(BUILDS)}")
+    if build == "python":
+        return {}
+    fmus = tuple(sorted((k, v) for k, v in overrides.items()
+                        if k.endswith((".fmu", ".build"))))
+    return {f"{name}.build": "native" for name in _native_components(scenario, fmus)
+            if f"{name}.build" not in overrides}
+
+
+def check_rounding_path(entry: Entry, builds: dict[str, dict[str, str]]) -> None:
+    """Refuse a rounding rerun that would repeat the main run: a native C FMU has no numpy
+    reference path, so where a run has one, ``[ensemble] rounding_perturb`` must name a
+    parameter to perturb (``builds``: run name -> :func:`build_overrides`)."""
+    native = sorted(name for name, over in builds.items() if over)
+    if native and not entry.ensemble.rounding_perturb:
+        raise ReproduceError(
+            f"{entry.path}: [ensemble] rounding_perturb: empty, but runs {native[:3]} use "
+            "native C builds, which have no numpy reference path: name a parameter to "
+            "perturb by 1e-12 (or run with --build python, or --no-rounding)")
