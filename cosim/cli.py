@@ -546,10 +546,11 @@ def sweep(
     from cosim.run import interrupt
     from cosim.run.console import fit_table
     from cosim.run.master import SimulationError
-    from cosim.run.results import PLOT_FORMATS, check_destination
+    from cosim.run.results import PLOT_FORMATS, check_destination, locked_destination
     from cosim.run.scenario import ScenarioError, find_scenario
     from cosim.run.sweep import parse_grid, run_sweep
 
+    held = contextlib.ExitStack()
     try:
         if plot_format not in PLOT_FORMATS:
             raise ValueError(f"--format {plot_format}: one of {', '.join(PLOT_FORMATS)}")
@@ -557,6 +558,7 @@ def sweep(
         stems = [find_scenario(s).stem for s in scenarios]
         target = out_dir or Path("runs") / ("sweep_" + "_".join(stems))
         check_destination(target)
+        held.enter_context(locked_destination(target))
         if shared_fmus and scheduler is None:
             raise ValueError("--shared-fmus is for --scheduler runs (local workers read the "
                              "FMUs where they are)")
@@ -576,6 +578,8 @@ def sweep(
         raise typer.Exit(interrupt.EXIT_INTERRUPTED) from None
     except (ValueError, ScenarioError, SimulationError) as err:
         _fail(str(err))
+    finally:
+        held.close()
     columns = ["scenario", *grid, "status", "stop_error_m", "controller_executions",
                "command_switches", "qp_infeasible"]
     labels = {"stop_error_m": "stop error m", "controller_executions": "executions",
@@ -678,13 +682,14 @@ def export(
     The package holds SystemStructure.ssd (components, connections, parameter values, units,
     default experiment) and the FMUs."""
     from cosim.interop.ssp import export_notes, export_ssp
-    from cosim.run.results import check_destination
+    from cosim.run.results import check_destination, locked_destination
     from cosim.run.scenario import ScenarioError, load_scenario
 
     try:
         check_destination(ssp, "--ssp", is_dir=False)
-        sc = load_scenario(scenario, set_ or None)
-        path = export_ssp(sc, ssp)
+        with locked_destination(ssp, "--ssp", is_dir=False):
+            sc = load_scenario(scenario, set_ or None)
+            path = export_ssp(sc, ssp)
     except (ScenarioError, ValueError, FileNotFoundError) as err:
         _fail(str(err))
     out.print(f"wrote {path}", highlight=False, markup=False)
