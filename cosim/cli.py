@@ -111,7 +111,7 @@ def list_() -> None:
     fmus/), the scenarios in scenarios/ with their descriptions, and the papers reproduced
     (scenarios/reproduce/) with the alias `cosim reproduce` also takes."""
     from cosim.fmu.build import catalog
-    from cosim.run.scenario import SCENARIO_DIR
+    from cosim.run.scenario import SCENARIO_DIR, ScenarioError, read_toml
 
     table = Table(title="FMUs", show_edge=False)
     table.add_column("identifier")
@@ -127,13 +127,9 @@ def list_() -> None:
     table.add_column("description")
     for path in sorted(SCENARIO_DIR.glob("*.toml")):
         try:
-            import tomllib
-        except ModuleNotFoundError:  # Python 3.10
-            import tomli as tomllib  # type: ignore[no-redef]
-        try:
-            desc = tomllib.loads(path.read_text()).get("description", "")
-        except tomllib.TOMLDecodeError as err:
-            desc = f"[red]invalid TOML: {escape(str(err))}[/]"
+            desc = escape(str(read_toml(path).get("description", "")))
+        except ScenarioError as err:
+            desc = f"[red]{escape(str(err))}[/]"
         table.add_row(escape(path.stem), desc)
     out.print(table)
     table = Table(title="Papers (cosim reproduce NAME or ALIAS)", show_edge=False)

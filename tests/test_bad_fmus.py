@@ -36,6 +36,18 @@ def other_platform(tmp: Path, ours: Path) -> Path:
     return path
 
 
+def renamed_library(tmp: Path, ours: Path) -> Path:
+    """Our StopPid with its linux64 library under another name than its modelIdentifier."""
+    path = tmp / "renamed.fmu"
+    with zipfile.ZipFile(ours) as src, zipfile.ZipFile(path, "w") as dst:
+        for item in src.infolist():
+            data = src.read(item)
+            if item.filename == "binaries/linux64/StopPid.so":
+                item.filename = "binaries/linux64/Other.so"
+            dst.writestr(item, data)
+    return path
+
+
 def scenario_with(tmp: Path, fmu: Path) -> Path:
     text = (SCENARIO_DIR / "seed000_stop_pid.toml").read_text()
     text = text.replace('fmu = "StopPid"', f'fmu = "{fmu}"')
@@ -49,6 +61,8 @@ def scenario_with(tmp: Path, fmu: Path) -> Path:
     (lambda tmp, _: without_model_description(tmp), "no modelDescription.xml"),
     (lambda tmp, ours: other_platform(tmp, ours), "no binary for this platform (linux64; "
                                                    "the FMU has win64)"),
+    (lambda tmp, ours: renamed_library(tmp, ours), "binaries/linux64/ has no StopPid.so, the "
+     "library of modelIdentifier 'StopPid' in modelDescription.xml (it holds Other.so"),
 ])
 def test_scenario_naming_a_bad_fmu_is_a_clear_error(built_fmus, tmp_path, make, says):
     fmu = make(tmp_path, built_fmus["StopPid"].path)

@@ -102,6 +102,12 @@ def read_fmu(sc: Scenario, instance: str, path: Path) -> Any:
     if f"binaries/{folder}/{ident}{suffix}" not in names:
         found = sorted({n.split("/")[1] for n in names
                         if n.startswith("binaries/") and n.count("/") >= 2 and n.split("/")[1]})
+        if folder in found:  # the platform's folder, without the library the XML names
+            held = sorted(n.removeprefix(f"binaries/{folder}/") for n in names
+                          if n.startswith(f"binaries/{folder}/") and n.endswith(suffix))
+            raise ScenarioError(f"{where}: binaries/{folder}/ has no {ident}{suffix}, the "
+                                f"library of modelIdentifier {ident!r} in modelDescription.xml "
+                                f"(it holds {', '.join(held) or f'no {suffix} file'})")
         raise ScenarioError(f"{where}: no binary for this platform ({folder}; the FMU has "
                             f"{', '.join(found) or 'no binaries'}): FMI {version} looks for "
                             f"binaries/{folder}/{ident}{suffix}")
