@@ -13,6 +13,8 @@ from rich.console import Console
 from rich.markup import escape
 from rich.table import Table
 
+from cosim.run.archive import LIMIT_SETTINGS, MB, ArchiveLimits
+
 app = typer.Typer(add_completion=False, no_args_is_help=True,
                   help="Train plants and ATO controllers as FMUs: build, run, validate.")
 console = Console(stderr=True)
@@ -417,12 +419,16 @@ def validate(
         "worker restarts included); on a busy machine the wall-clock time allowed grows "
         "with the measured slowdown")] = 300.0,
     max_extracted_mb: Annotated[float, typer.Option(
+        envvar=LIMIT_SETTINGS["max_extracted"][1],
         help="MiB all files of one FMU may expand to; a larger archive is refused before "
-        "extraction")] = 512.0,
+        "extraction")] = ArchiveLimits.max_extracted / MB,
     max_files: Annotated[int, typer.Option(
-        help="files one FMU archive may hold")] = 10_000,
+        envvar=LIMIT_SETTINGS["max_files"][1],
+        help="files one FMU archive may hold")] = ArchiveLimits.max_files,
     max_model_description_mb: Annotated[float, typer.Option(
-        help="MiB modelDescription.xml may have (about 1 MiB per 170,000 variables)")] = 4.0,
+        envvar=LIMIT_SETTINGS["max_model_description"][1],
+        help="MiB modelDescription.xml may have (about 1 MiB per 170,000 variables)")]
+        = ArchiveLimits.max_model_description / MB,
 ) -> None:
     """Check FMUs against FMI 2.0 / FMI 3.0.
 
@@ -456,7 +462,6 @@ def validate(
             hint = _did_you_mean(name, list(specs))
             _fail(f"unknown FMU {name!r}" + (hint or f"; known: {sorted(specs)}"))
     from cosim.interop.compliance import Options, check_fmu, classify, format_report, passed
-    from cosim.interop.compliance.archive import MB, ArchiveLimits
 
     limits = ArchiveLimits(max_extracted=int(max_extracted_mb * MB), max_files=max_files,
                            max_model_description=int(max_model_description_mb * MB))

@@ -122,6 +122,9 @@ def check_point(path: str, point: dict[str, Any]) -> None:
 def _cached_description(path: Path, mtime_ns: int) -> Any:
     from fmpy import read_model_description
 
+    from cosim.run.master.loading import archive_names
+
+    archive_names(str(path), path)  # bounded before the XML is parsed
     return read_model_description(str(path))
 
 
