@@ -14,6 +14,7 @@ from rich.markup import escape
 from rich.table import Table
 
 from cosim.run.archive import LIMIT_SETTINGS, MB, ArchiveLimits
+from cosim.run.grid import MAX_RUNS
 
 app = typer.Typer(add_completion=False, no_args_is_help=True,
                   help="Train plants and ATO controllers as FMUs: build, run, validate.")
@@ -421,13 +422,16 @@ def validate(
     max_extracted_mb: Annotated[float, typer.Option(
         envvar=LIMIT_SETTINGS["max_extracted"][1],
         help="MiB all files of one FMU may expand to; a larger archive is refused before "
-        "extraction")] = ArchiveLimits.max_extracted / MB,
+        f"extraction (environment: {LIMIT_SETTINGS['max_extracted'][1]}, which every command "
+        "that opens an FMU reads)")] = ArchiveLimits.max_extracted / MB,
     max_files: Annotated[int, typer.Option(
         envvar=LIMIT_SETTINGS["max_files"][1],
-        help="files one FMU archive may hold")] = ArchiveLimits.max_files,
+        help="files one FMU archive may hold (environment: "
+        f"{LIMIT_SETTINGS['max_files'][1]})")] = ArchiveLimits.max_files,
     max_model_description_mb: Annotated[float, typer.Option(
         envvar=LIMIT_SETTINGS["max_model_description"][1],
-        help="MiB modelDescription.xml may have (about 1 MiB per 170,000 variables)")]
+        help="MiB modelDescription.xml may have (about 1 MiB per 170,000 variables; "
+        f"environment: {LIMIT_SETTINGS['max_model_description'][1]})")]
         = ArchiveLimits.max_model_description / MB,
 ) -> None:
     """Check FMUs against FMI 2.0 / FMI 3.0.
@@ -536,6 +540,9 @@ def sweep(
     time_limit: Annotated[float | None, typer.Option(
         "--time-limit", min=0.001, help="seconds of wall-clock time a point may "
         "run before it is stopped and marked failed (local workers)")] = None,
+    max_runs: Annotated[int, typer.Option(
+        "--max-runs", min=1, help="runs (grid points x scenarios, x --samples with --perturb) "
+        "the sweep may start; a larger grid is refused before any work")] = MAX_RUNS,
 ) -> None:
     """Run scenarios over a parameter grid in parallel.
 
@@ -568,11 +575,12 @@ def sweep(
                              "supported with it")
         if perturb:
             _perturbed_sweep(scenarios, grid, perturb, samples, seed, target, workers, no_plot,
-                             plot_format)
+                             plot_format, max_runs)
             return
         frame = run_sweep(scenarios, grid, target, workers, plot=not no_plot, resume=resume,
                           scheduler=scheduler, shared_fmus=shared_fmus,
-                          plot_format=plot_format, time_limit=time_limit)
+                          plot_format=plot_format, time_limit=time_limit,
+                          max_runs=max_runs)
     except interrupt.Interrupted as err:
         console.print(f"[bold yellow]{escape(str(err))}[/]; the finished rows are in "
                       f"{escape(str(target))}/sweep.csv", highlight=False, soft_wrap=True)
@@ -640,15 +648,18 @@ def _check_perturbed_keys(scenarios: list[str], keys: list[str]) -> None:
 
 def _perturbed_sweep(scenarios: list[str], grid: dict[str, list[Any]], perturb: list[str],
                      samples: int, seed: int, target: Path, workers: int | None,
-                     no_plot: bool, plot_format: str = "png") -> None:
+                     no_plot: bool, plot_format: str = "png", max_runs: int = MAX_RUNS
+                     ) -> None:
     """The mismatch study of ``cosim sweep --perturb`` and its table."""
     from cosim.run.console import fit_table
+    from cosim.run.grid import check_runs
     from cosim.run.perturb import parse_perturb, run_perturbed
 
     perts = parse_perturb(perturb)
+    check_runs(grid, len(scenarios), max_runs, samples)
     _check_perturbed_keys(scenarios, [p.key for p in perts])
     _, summary = run_perturbed(scenarios, grid, perts, samples, seed, target, workers,
-                               plot=not no_plot, plot_format=plot_format)
+                               plot=not no_plot, plot_format=plot_format, max_runs=max_runs)
     columns = [c for c in ["scenario", *grid, "runs", "stop_error_min_m", "stop_error_median_m",
                            "stop_error_max_m", "inside_window", "executions_median",
                            "qp_infeasible_total", "qp_infeasible_max",

@@ -30,7 +30,8 @@ import numpy as np
 import pandas as pd
 
 from cosim.run import runner
-from cosim.run.sweep import STOP_WINDOW_M, SUMMARY_COLUMNS, grid_points
+from cosim.run.grid import MAX_RUNS, check_runs, grid_points
+from cosim.run.sweep import STOP_WINDOW_M, SUMMARY_COLUMNS
 
 COUNTERS = ("qp_infeasible_after_stop", "events_moving", "events_standstill")
 
@@ -150,18 +151,19 @@ def _run_sample(scenario: str, point: dict[str, Any], index: int,
 def run_perturbed(scenario: str | Sequence[str], grid: dict[str, Sequence[Any]],
                   perts: Sequence[Perturbation], samples: int, seed: int,
                   out_dir: str | Path | None = None, workers: int | None = None,
-                  plot: bool = True, plot_format: str = "png"
+                  plot: bool = True, plot_format: str = "png", max_runs: int = MAX_RUNS
                   ) -> tuple[pd.DataFrame, pd.DataFrame]:
     """Every scenario at every grid point on the same ``samples`` draws, in ``workers``
     processes (:func:`cosim.run.runner.run_tasks`). Returns (one row per run, one row per
     scenario and grid point); with ``out_dir`` writes perturb.csv, perturb_summary.csv and
-    ``perturb.<plot_format>``."""
+    ``perturb.<plot_format>``. More than ``max_runs`` runs are refused before any work."""
     from cosim.run.master import ensure_built
     from cosim.run.scenario import ScenarioError, find_scenario, load_scenario
 
     scenarios = [scenario] if isinstance(scenario, (str, Path)) else list(scenario)
     if not scenarios or not perts:
         raise ValueError("run_perturbed: no scenario or no perturbation given")
+    check_runs(grid, len(scenarios), max_runs, samples)
     points = grid_points(grid) if grid else [{}]
     paths = [str(find_scenario(s)) for s in scenarios]
     draws: list[dict[str, float]] | None = None

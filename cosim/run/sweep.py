@@ -22,51 +22,21 @@ from __future__ import annotations
 
 import csv
 import functools
-import itertools
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
 import pandas as pd
 
 from cosim.run import interrupt, isolation, runner
+from cosim.run.grid import MAX_RUNS, check_runs, grid_points, parse_grid
+
+__all__ = ["MAX_RUNS", "check_runs", "grid_points", "parse_grid", "run_sweep"]
 
 STOP_WINDOW_M = 0.5  # m, the ATO stop window +-50 cm
 
 SUMMARY_COLUMNS = ("stop_error_m", "command_switches", "qp_solves", "qp_infeasible",
                    "qp_solve_time_median_s", "speed_rmse_mps", "max_jerk_mps3", "wall_time_s")
-
-
-def parse_grid(items: Iterable[str]) -> dict[str, list[Any]]:
-    """``["controller.N=3..15", "controller.beta=1,2"]`` -> ``{"controller.N": [3, .., 15], ..}``.
-    """
-    from cosim.run.scenario import parse_value
-
-    grid: dict[str, list[Any]] = {}
-    for item in items:
-        key, sep, text = item.partition("=")
-        if not sep or not key.strip() or not text.strip():
-            raise ValueError(f"--set {item!r}: expected KEY=VALUES, e.g. controller.N=3..15")
-        text = text.strip()
-        if ".." in text:
-            lo, _, hi = text.partition("..")
-            try:
-                first, last = int(lo), int(hi)
-            except ValueError as err:
-                raise ValueError(f"--set {item!r}: a range needs integers, e.g. 3..15") from err
-            if last < first:
-                raise ValueError(f"--set {item!r}: empty range {first}..{last}")
-            grid[key.strip()] = list(range(first, last + 1))
-        else:
-            grid[key.strip()] = [parse_value(v.strip()) for v in text.split(",")]
-    return grid
-
-
-def grid_points(grid: dict[str, Sequence[Any]]) -> list[dict[str, Any]]:
-    """Cartesian product of the grid, in order (first key slowest)."""
-    keys = list(grid)
-    return [dict(zip(keys, values, strict=True))
-            for values in itertools.product(*(list(grid[k]) for k in keys))]
 
 
 def _run_point(scenario: Any, point: dict[str, Any]) -> dict[str, Any]:
@@ -209,7 +179,7 @@ def run_sweep(scenario: str | Sequence[str], grid: dict[str, Sequence[Any]],
               plot: bool = True, resume: bool = False, scheduler: str | None = None,
               shared_fmus: bool = False, plot_format: str = "png",
               series_labels: dict[str, str] | None = None,
-              time_limit: float | None = None) -> pd.DataFrame:
+              time_limit: float | None = None, max_runs: int = MAX_RUNS) -> pd.DataFrame:
     """Run every grid point of every scenario with :func:`cosim.run.runner.run_tasks`: in
     ``workers`` processes (default: CPU count), or on a Dask cluster (``scheduler``: its
     address, or ``"local-dask"`` for a ``LocalCluster`` of ``workers`` processes;
@@ -227,7 +197,8 @@ def run_sweep(scenario: str | Sequence[str], grid: dict[str, Sequence[Any]],
     extractions happen once per worker). On Dask the FMU files are uploaded to the workers,
     or, with ``shared_fmus``, read by them from the same paths (a shared file system).
     ``time_limit`` (s, wall clock, local workers): a point running longer is stopped and
-    failed; a point whose worker crashes fails naming the signal and the FMU call.
+    failed; a point whose worker crashes fails naming the signal and the FMU call. More than
+    ``max_runs`` runs (points times scenarios) are refused before any work (:func:`check_runs`).
     """
     from cosim.run.master import ensure_built
     from cosim.run.scenario import find_scenario, load_scenario
@@ -238,6 +209,7 @@ def run_sweep(scenario: str | Sequence[str], grid: dict[str, Sequence[Any]],
     if not grid:
         raise ValueError("run_sweep: empty grid")
     runner.check_workers(workers, scheduler)
+    check_runs(grid, len(scenarios), max_runs)
     points = grid_points(grid)
     paths = [str(find_scenario(s)) for s in scenarios]
     for path in paths:  # fail early on a bad scenario or key, and build what is missing
