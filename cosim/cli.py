@@ -521,7 +521,8 @@ def sweep(
         min=1, help="parallel processes (default: CPUs)")] = None,
     no_plot: Annotated[bool, typer.Option("--no-plot", help="skip sweep.png")] = False,
     resume: Annotated[bool, typer.Option(
-        "--resume", help="keep the ok rows of an existing sweep.csv and run only the rest")]
+        "--resume", help="keep the ok rows of an existing sweep.csv (perturb.csv with "
+        "--perturb) made from today's inputs and run only the rest")]
         = False,
     perturb: Annotated[list[str] | None, typer.Option(
         "--perturb", help="model-mismatch study: random plant parameter per run, e.g. "
@@ -549,8 +550,8 @@ def sweep(
     Writes sweep.csv (a row per point as it finishes, with status and error) and sweep.png. A
     failed point does not stop the others (exit status 1 at the end); Ctrl-C keeps the finished
     rows (exit status 130). With --scheduler: the same grid on a Dask cluster. With --perturb:
-    every grid point on the same seeded random plants (perturb.csv, perturb_summary.csv,
-    perturb.png)."""
+    every grid point on the same seeded random plants (perturb.csv, a row per run as it
+    finishes, perturb_summary.csv, perturb.png)."""
     from cosim.run import interrupt
     from cosim.run.console import fit_table
     from cosim.run.master import SimulationError
@@ -575,7 +576,7 @@ def sweep(
                              "supported with it")
         if perturb:
             _perturbed_sweep(scenarios, grid, perturb, samples, seed, target, workers, no_plot,
-                             plot_format, max_runs)
+                             plot_format, max_runs, resume)
             return
         frame = run_sweep(scenarios, grid, target, workers, plot=not no_plot, resume=resume,
                           scheduler=scheduler, shared_fmus=shared_fmus,
@@ -583,7 +584,8 @@ def sweep(
                           max_runs=max_runs)
     except interrupt.Interrupted as err:
         console.print(f"[bold yellow]{escape(str(err))}[/]; the finished rows are in "
-                      f"{escape(str(target))}/sweep.csv", highlight=False, soft_wrap=True)
+                      f"{escape(str(target))}/{'perturb' if perturb else 'sweep'}.csv "
+                      "(--resume runs the rest)", highlight=False, soft_wrap=True)
         raise typer.Exit(interrupt.EXIT_INTERRUPTED) from None
     except (ValueError, ScenarioError, SimulationError) as err:
         _fail(str(err))
@@ -648,8 +650,8 @@ def _check_perturbed_keys(scenarios: list[str], keys: list[str]) -> None:
 
 def _perturbed_sweep(scenarios: list[str], grid: dict[str, list[Any]], perturb: list[str],
                      samples: int, seed: int, target: Path, workers: int | None,
-                     no_plot: bool, plot_format: str = "png", max_runs: int = MAX_RUNS
-                     ) -> None:
+                     no_plot: bool, plot_format: str = "png", max_runs: int = MAX_RUNS,
+                     resume: bool = False) -> None:
     """The mismatch study of ``cosim sweep --perturb`` and its table."""
     from cosim.run.console import fit_table
     from cosim.run.grid import check_runs
@@ -659,7 +661,8 @@ def _perturbed_sweep(scenarios: list[str], grid: dict[str, list[Any]], perturb: 
     check_runs(grid, len(scenarios), max_runs, samples)
     _check_perturbed_keys(scenarios, [p.key for p in perts])
     _, summary = run_perturbed(scenarios, grid, perts, samples, seed, target, workers,
-                               plot=not no_plot, plot_format=plot_format, max_runs=max_runs)
+                               plot=not no_plot, plot_format=plot_format, max_runs=max_runs,
+                               resume=resume)
     columns = [c for c in ["scenario", *grid, "runs", "stop_error_min_m", "stop_error_median_m",
                            "stop_error_max_m", "inside_window", "executions_median",
                            "qp_infeasible_total", "qp_infeasible_max",

@@ -126,17 +126,21 @@ def inputs_digest(scenario: str, point: dict[str, Any]) -> str:
     return hashlib.sha256(Path(scenario).read_bytes() + b"\0" + text).hexdigest()[:16]
 
 
-def _done_rows(csv_path: Path, keys: list[str]) -> list[dict[str, Any]]:
-    """The ``ok`` rows of an earlier ``sweep.csv`` (for ``resume``), with their
-    digest."""
+def done_rows(csv_path: Path, keys: list[str], wanted: set[str]) -> list[dict[str, Any]]:
+    """The rows of an earlier ``sweep.csv`` or ``perturb.csv`` (for ``resume``) whose
+    :data:`DIGEST` is in ``wanted`` (today's inputs; a torn row lacks its last field) and
+    whose ``status``, where the file has one, is ``ok``; cells back to what was written."""
     if not csv_path.is_file():
         return []
     earlier = pd.read_csv(csv_path, keep_default_na=False, dtype={DIGEST: str})
-    if "status" not in earlier.columns or not set(keys) <= set(earlier.columns):
+    if not set(keys) <= set(earlier.columns):
         raise ValueError(f"{csv_path}: not a sweep over {', '.join(keys)}; cannot resume it")
+    if DIGEST not in earlier.columns:  # written without the inputs it depends on
+        return []
     text_columns = {"scenario", "status", "error", DIGEST}
     return [{k: v if k in text_columns else _cell(v) for k, v in row.items()}
-            for row in earlier.to_dict("records") if row["status"] == "ok"]
+            for row in earlier.to_dict("records")
+            if row.get("status", "ok") == "ok" and row[DIGEST] in wanted]
 
 
 def _cell(value: Any) -> Any:
@@ -154,7 +158,7 @@ def _cell(value: Any) -> Any:
     return value
 
 
-class _RowWriter:
+class RowWriter:
     """Appends rows to sweep.csv as they arrive (header first), flushed after each row."""
 
     def __init__(self, path: Path, columns: list[str], rows: list[dict[str, Any]]) -> None:
@@ -222,8 +226,7 @@ def run_sweep(scenario: str | Sequence[str], grid: dict[str, Sequence[Any]],
     done: list[dict[str, Any]] = []
     digests = {_key(path, point): inputs_digest(path, point) for path, point in jobs}
     if out is not None and resume:  # rows of these inputs only, whole (the digest is last)
-        done = [r for r in _done_rows(out / "sweep.csv", list(grid))
-                if r.get(DIGEST) == digests.get(_key(r["scenario"], {k: r[k] for k in grid}))]
+        done = done_rows(out / "sweep.csv", list(grid), set(digests.values()))
     skip = {_key(r["scenario"], {k: r[k] for k in grid}) for r in done}
     todo = [(path, point) for path, point in jobs if _key(path, point) not in skip]
     columns = ["scenario", *grid, "status", "error", *SUMMARY_COLUMNS, "controller_executions",
@@ -231,7 +234,7 @@ def run_sweep(scenario: str | Sequence[str], grid: dict[str, Sequence[Any]],
     writer = None
     if out is not None:
         out.mkdir(parents=True, exist_ok=True)
-        writer = _RowWriter(out / "sweep.csv", columns, done)
+        writer = RowWriter(out / "sweep.csv", columns, done)
     rows = list(done)
 
     def finished(row: dict[str, Any]) -> None:
