@@ -291,9 +291,12 @@ def _reproduce_into(entry: Entry, name: str, out: Path, workers: int | None,
 
 def redraw_entry(name: str, out_dir: str | Path | None = None, plot_format: str = "png",
                  echo: bool = True) -> Path:
-    """:func:`redraw_page`'s file, the folder locked meanwhile."""
+    """:func:`redraw_page`'s file, the folder locked meanwhile (a missing folder is not
+    made: :func:`redraw_page` says it holds no record)."""
     out = (Path(out_dir) if out_dir is not None
            else Path("runs") / "reproduce" / load_entry(name).name)
+    if not out.is_dir():
+        return redraw_page(name, out, plot_format, echo).table
     with locked_destination(out):
         return redraw_page(name, out, plot_format, echo).table
 
