@@ -13,6 +13,9 @@ from rich.console import Console
 from rich.markup import escape
 from rich.table import Table
 
+from cosim.run.archive import LIMIT_SETTINGS, MB, ArchiveLimits
+from cosim.run.grid import MAX_RUNS
+
 app = typer.Typer(add_completion=False, no_args_is_help=True,
                   help="Train plants and ATO controllers as FMUs: build, run, validate.")
 console = Console(stderr=True)
@@ -111,7 +114,7 @@ def list_() -> None:
     fmus/), the scenarios in scenarios/ with their descriptions, and the papers reproduced
     (scenarios/reproduce/) with the alias `cosim reproduce` also takes."""
     from cosim.fmu.build import catalog
-    from cosim.run.scenario import SCENARIO_DIR
+    from cosim.run.scenario import SCENARIO_DIR, ScenarioError, read_toml
 
     table = Table(title="FMUs", show_edge=False)
     table.add_column("identifier")
@@ -127,13 +130,9 @@ def list_() -> None:
     table.add_column("description")
     for path in sorted(SCENARIO_DIR.glob("*.toml")):
         try:
-            import tomllib
-        except ModuleNotFoundError:  # Python 3.10
-            import tomli as tomllib  # type: ignore[no-redef]
-        try:
-            desc = tomllib.loads(path.read_text()).get("description", "")
-        except tomllib.TOMLDecodeError as err:
-            desc = f"[red]invalid TOML: {escape(str(err))}[/]"
+            desc = escape(str(read_toml(path).get("description", "")))
+        except ScenarioError as err:
+            desc = f"[red]{escape(str(err))}[/]"
         table.add_row(escape(path.stem), desc)
     out.print(table)
     table = Table(title="Papers (cosim reproduce NAME or ALIAS)", show_edge=False)
@@ -422,12 +421,19 @@ def validate(
         "worker restarts included); on a busy machine the wall-clock time allowed grows "
         "with the measured slowdown")] = 300.0,
     max_extracted_mb: Annotated[float, typer.Option(
+        envvar=LIMIT_SETTINGS["max_extracted"][1],
         help="MiB all files of one FMU may expand to; a larger archive is refused before "
-        "extraction")] = 512.0,
+        f"extraction (environment: {LIMIT_SETTINGS['max_extracted'][1]}, which every command "
+        "that opens an FMU reads)")] = ArchiveLimits.max_extracted / MB,
     max_files: Annotated[int, typer.Option(
-        help="files one FMU archive may hold")] = 10_000,
+        envvar=LIMIT_SETTINGS["max_files"][1],
+        help="files one FMU archive may hold (environment: "
+        f"{LIMIT_SETTINGS['max_files'][1]})")] = ArchiveLimits.max_files,
     max_model_description_mb: Annotated[float, typer.Option(
-        help="MiB modelDescription.xml may have (about 1 MiB per 170,000 variables)")] = 4.0,
+        envvar=LIMIT_SETTINGS["max_model_description"][1],
+        help="MiB modelDescription.xml may have (about 1 MiB per 170,000 variables; "
+        f"environment: {LIMIT_SETTINGS['max_model_description'][1]})")]
+        = ArchiveLimits.max_model_description / MB,
 ) -> None:
     """Check FMUs against FMI 2.0 / FMI 3.0.
 
@@ -461,7 +467,6 @@ def validate(
             hint = _did_you_mean(name, list(specs))
             _fail(f"unknown FMU {name!r}" + (hint or f"; known: {sorted(specs)}"))
     from cosim.interop.compliance import Options, check_fmu, classify, format_report, passed
-    from cosim.interop.compliance.archive import MB, ArchiveLimits
 
     limits = ArchiveLimits(max_extracted=int(max_extracted_mb * MB), max_files=max_files,
                            max_model_description=int(max_model_description_mb * MB))
@@ -517,7 +522,8 @@ def sweep(
         min=1, help="parallel processes (default: CPUs)")] = None,
     no_plot: Annotated[bool, typer.Option("--no-plot", help="skip sweep.png")] = False,
     resume: Annotated[bool, typer.Option(
-        "--resume", help="keep the ok rows of an existing sweep.csv and run only the rest")]
+        "--resume", help="keep the ok rows of an existing sweep.csv (perturb.csv with "
+        "--perturb) made from today's inputs and run only the rest")]
         = False,
     perturb: Annotated[list[str] | None, typer.Option(
         "--perturb", help="model-mismatch study: random plant parameter per run, e.g. "
@@ -536,21 +542,25 @@ def sweep(
     time_limit: Annotated[float | None, typer.Option(
         "--time-limit", min=0.001, help="seconds of wall-clock time a point may "
         "run before it is stopped and marked failed (local workers)")] = None,
+    max_runs: Annotated[int, typer.Option(
+        "--max-runs", min=1, help="runs (grid points x scenarios, x --samples with --perturb) "
+        "the sweep may start; a larger grid is refused before any work")] = MAX_RUNS,
 ) -> None:
     """Run scenarios over a parameter grid in parallel.
 
     Writes sweep.csv (a row per point as it finishes, with status and error) and sweep.png. A
     failed point does not stop the others (exit status 1 at the end); Ctrl-C keeps the finished
     rows (exit status 130). With --scheduler: the same grid on a Dask cluster. With --perturb:
-    every grid point on the same seeded random plants (perturb.csv, perturb_summary.csv,
-    perturb.png)."""
+    every grid point on the same seeded random plants (perturb.csv, a row per run as it
+    finishes, perturb_summary.csv, perturb.png)."""
     from cosim.run import interrupt
     from cosim.run.console import fit_table
     from cosim.run.master import SimulationError
-    from cosim.run.results import PLOT_FORMATS, check_destination
+    from cosim.run.results import PLOT_FORMATS, check_destination, locked_destination
     from cosim.run.scenario import ScenarioError, find_scenario
     from cosim.run.sweep import parse_grid, run_sweep
 
+    held = contextlib.ExitStack()
     try:
         if plot_format not in PLOT_FORMATS:
             raise ValueError(f"--format {plot_format}: one of {', '.join(PLOT_FORMATS)}")
@@ -558,6 +568,7 @@ def sweep(
         stems = [find_scenario(s).stem for s in scenarios]
         target = out_dir or Path("runs") / ("sweep_" + "_".join(stems))
         check_destination(target)
+        held.enter_context(locked_destination(target))
         if shared_fmus and scheduler is None:
             raise ValueError("--shared-fmus is for --scheduler runs (local workers read the "
                              "FMUs where they are)")
@@ -566,17 +577,21 @@ def sweep(
                              "supported with it")
         if perturb:
             _perturbed_sweep(scenarios, grid, perturb, samples, seed, target, workers, no_plot,
-                             plot_format)
+                             plot_format, max_runs, resume)
             return
         frame = run_sweep(scenarios, grid, target, workers, plot=not no_plot, resume=resume,
                           scheduler=scheduler, shared_fmus=shared_fmus,
-                          plot_format=plot_format, time_limit=time_limit)
+                          plot_format=plot_format, time_limit=time_limit,
+                          max_runs=max_runs)
     except interrupt.Interrupted as err:
         console.print(f"[bold yellow]{escape(str(err))}[/]; the finished rows are in "
-                      f"{escape(str(target))}/sweep.csv", highlight=False, soft_wrap=True)
+                      f"{escape(str(target))}/{'perturb' if perturb else 'sweep'}.csv "
+                      "(--resume runs the rest)", highlight=False, soft_wrap=True)
         raise typer.Exit(interrupt.EXIT_INTERRUPTED) from None
     except (ValueError, ScenarioError, SimulationError) as err:
         _fail(str(err))
+    finally:
+        held.close()
     columns = ["scenario", *grid, "status", "stop_error_m", "controller_executions",
                "command_switches", "qp_infeasible"]
     labels = {"stop_error_m": "stop error m", "controller_executions": "executions",
@@ -636,16 +651,20 @@ def _check_perturbed_keys(scenarios: list[str], keys: list[str]) -> None:
 
 def _perturbed_sweep(scenarios: list[str], grid: dict[str, list[Any]], perturb: list[str],
                      samples: int, seed: int, target: Path, workers: int | None,
-                     no_plot: bool, plot_format: str = "png") -> None:
+                     no_plot: bool, plot_format: str = "png", max_runs: int = MAX_RUNS,
+                     resume: bool = False) -> None:
     """The mismatch study of ``cosim sweep --perturb`` and its table."""
     from cosim.run.console import fit_table
+    from cosim.run.grid import check_runs
     from cosim.run.perturb import run_perturbed
     from cosim.run.perturbation import parse_perturb
 
     perts = parse_perturb(perturb)
+    check_runs(grid, len(scenarios), max_runs, samples)
     _check_perturbed_keys(scenarios, [p.key for p in perts])
     _, summary = run_perturbed(scenarios, grid, perts, samples, seed, target, workers,
-                               plot=not no_plot, plot_format=plot_format)
+                               plot=not no_plot, plot_format=plot_format, max_runs=max_runs,
+                               resume=resume)
     columns = [c for c in ["scenario", *grid, "runs", "stop_error_min_m", "stop_error_median_m",
                            "stop_error_max_m", "inside_window", "executions_median",
                            "qp_infeasible_total", "qp_infeasible_max",
@@ -680,13 +699,14 @@ def export(
     The package holds SystemStructure.ssd (components, connections, parameter values, units,
     default experiment) and the FMUs."""
     from cosim.interop.ssp import export_notes, export_ssp
-    from cosim.run.results import check_destination
+    from cosim.run.results import check_destination, locked_destination
     from cosim.run.scenario import ScenarioError, load_scenario
 
     try:
         check_destination(ssp, "--ssp", is_dir=False)
-        sc = load_scenario(scenario, set_ or None)
-        path = export_ssp(sc, ssp)
+        with locked_destination(ssp, "--ssp", is_dir=False):
+            sc = load_scenario(scenario, set_ or None)
+            path = export_ssp(sc, ssp)
     except (ScenarioError, ValueError, FileNotFoundError) as err:
         _fail(str(err))
     out.print(f"wrote {path}", highlight=False, markup=False)

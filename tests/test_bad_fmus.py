@@ -36,6 +36,18 @@ def other_platform(tmp: Path, ours: Path) -> Path:
     return path
 
 
+def renamed_library(tmp: Path, ours: Path) -> Path:
+    """Our StopPid with its linux64 library under another name than its modelIdentifier."""
+    path = tmp / "renamed.fmu"
+    with zipfile.ZipFile(ours) as src, zipfile.ZipFile(path, "w") as dst:
+        for item in src.infolist():
+            data = src.read(item)
+            if item.filename == "binaries/linux64/StopPid.so":
+                item.filename = "binaries/linux64/Other.so"
+            dst.writestr(item, data)
+    return path
+
+
 def scenario_with(tmp: Path, fmu: Path) -> Path:
     text = (SCENARIO_DIR / "seed000_stop_pid.toml").read_text()
     text = text.replace('fmu = "StopPid"', f'fmu = "{fmu}"')
@@ -49,6 +61,8 @@ def scenario_with(tmp: Path, fmu: Path) -> Path:
     (lambda tmp, _: without_model_description(tmp), "no modelDescription.xml"),
     (lambda tmp, ours: other_platform(tmp, ours), "no binary for this platform (linux64; "
                                                    "the FMU has win64)"),
+    (lambda tmp, ours: renamed_library(tmp, ours), "binaries/linux64/ has no StopPid.so, the "
+     "library of modelIdentifier 'StopPid' in modelDescription.xml (it holds Other.so"),
 ])
 def test_scenario_naming_a_bad_fmu_is_a_clear_error(built_fmus, tmp_path, make, says):
     fmu = make(tmp_path, built_fmus["StopPid"].path)
@@ -74,3 +88,47 @@ def test_validate_reports_checks_that_could_not_run_as_skipped(tmp_path, make):
     assert {p.check for p in problems if p.severity == SKIPPED} >= {"units", "reset",
                                                                      "fmu-state"}
     assert "skipped" in report.splitlines()[-1]
+
+
+def with_zeros(tmp: Path, ours: Path, size: int) -> Path:
+    """Our StopPid with ``size`` zero bytes more in resources/ (they deflate to ~1/1000)."""
+    path = tmp / "padded.fmu"
+    with zipfile.ZipFile(ours) as src, zipfile.ZipFile(path, "w", zipfile.ZIP_DEFLATED) as dst:
+        for item in src.infolist():
+            dst.writestr(item, src.read(item))
+        dst.writestr("resources/zeros.bin", bytes(size))
+    return path
+
+
+@pytest.mark.parametrize("variable,value,says", [
+    ("COSIM_MAX_EXTRACTED_MB", "16", "expands to 6[67](\\.\\d)? MiB, more than the limit of 16 MiB "
+     "\\(raise it with COSIM_MAX_EXTRACTED_MB=MIB in the environment"),
+    ("COSIM_MAX_FILES", "3", "files in the archive, more than the limit of 3 \\(raise it with "
+     "COSIM_MAX_FILES=N in the environment"),
+    ("COSIM_MAX_MODEL_DESCRIPTION_MB", "0.001", "modelDescription.xml is .* more than the "
+     "limit of 1.02 KiB \\(raise it with COSIM_MAX_MODEL_DESCRIPTION_MB=MIB"),
+    ("COSIM_MAX_FILES", "many", "environment variable COSIM_MAX_FILES='many': expected a "
+     "positive number"),
+])
+def test_run_bounds_an_fmu_archive_before_extracting_it(built_fmus, tmp_path, monkeypatch,
+                                                         variable, value, says):
+    import re
+    import tempfile
+
+    ours = built_fmus["StopPid"].path
+    fmu = with_zeros(tmp_path, ours, 64 << 20)  # 64 MiB more, about 64 KiB more in the zip
+    assert fmu.stat().st_size < ours.stat().st_size + (1 << 20)
+    scenario = scenario_with(tmp_path, fmu)
+    temp = tmp_path / "temp"
+    temp.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(temp))
+    monkeypatch.setenv(variable, value)
+    with pytest.raises(ScenarioError) as err:
+        run_scenario(scenario, build=False, out_dir=tmp_path / "out")
+    message = str(err.value)
+    # the first FMU of the scenario that breaks the limit is named
+    assert re.match(rf"{re.escape(str(scenario))}: \[fmus\.\w+\] fmu = '[^']+': refused before "
+                    "extraction: ", message), message
+    assert re.search(says, message), message
+    # the refused FMU is not extracted (FMUs before it in the scenario may be)
+    assert not any((folder / "resources" / "zeros.bin").exists() for folder in temp.iterdir())

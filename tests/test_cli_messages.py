@@ -203,3 +203,36 @@ def test_sweep_table_keeps_the_grid_columns_in_every_block(tmp_path):
         assert lines[i].split()[:3] == ["scenario", "mass", "ref_decel"], done.stdout
         assert [line.split()[1:3] for line in lines[i + 2:i + 4]] == [
             ["440000", "0.50"], ["440000", "0.55"]], done.stdout
+
+
+@pytest.mark.parametrize("override,says", [
+    ("simulation.stop_time=1e300", "stop_time = 1e+300: out of range: times are integer "
+                                   "nanoseconds in 64 bits"),
+    ("simulation.stop_time=1e10", "stop_time = 10000000000.0: out of range"),
+    ("simulation.start_time=-1e10", "start_time = -10000000000.0: out of range"),
+    ("simulation.stop_time=-1", "stop_time = -1.0: must be positive"),
+    ("simulation.stop_time=nan", "stop_time = nan: must be finite"),
+    ("simulation.output_interval=1e-12", "output_interval = 1e-12: below the master's 1 ns"),
+    ("controller.sample_time=1e300", "sample_time = 1e+300: out of range"),
+])
+def test_out_of_range_times_name_the_option_key_and_value(override, says):
+    from cosim.run.scenario import ScenarioError, load_scenario
+
+    with pytest.raises(ScenarioError) as err:
+        load_scenario("seed000_stop_pid", [override])
+    assert str(err.value).startswith(f"--set {override}: {says}"), err.value
+    assert "seed000_stop_pid.toml" in str(err.value)  # the file whose key it replaces
+
+
+def test_huge_stop_time_and_latin1_scenario_are_errors_without_traceback(tmp_path):
+    text = (SCENARIO_DIR / "seed000_stop_pid.toml").read_text()
+    huge = tmp_path / "huge.toml"
+    huge.write_text(re.sub(r"^stop_time = .*$", "stop_time = 1e300", text, count=1, flags=re.M))
+    done = cosim("run", str(huge), "--out", str(tmp_path / "a"), "--quiet")
+    assert done.returncode == 2 and "Traceback" not in done.stderr
+    assert f"{huge}: [simulation] stop_time = 1e+300: out of range" in one_line(done)
+    latin = tmp_path / "latin.toml"
+    latin.write_bytes(b'description = "Z\xfcrich"\n' + text.encode())
+    done = cosim("run", str(latin), "--out", str(tmp_path / "b"), "--quiet")
+    assert done.returncode == 2 and "Traceback" not in done.stderr
+    assert f"{latin}: not UTF-8 text: byte 16 is 0xfc" in one_line(done)

@@ -109,3 +109,34 @@ def test_cli_perturb_errors_name_the_item(built_fmus, tmp_path):
                           "--set", "controller.N=5", "--perturb", "plant.mass=10%", "--out",
                           str(tmp_path / "x")], capture_output=True, text=True, timeout=600)
     assert bad.returncode == 2 and "plant.mass=10%" in bad.stderr
+
+
+def test_an_interrupted_study_keeps_its_finished_runs_and_resume_runs_the_rest(built_fmus,
+                                                                             tmp_path,
+                                                                             monkeypatch):
+    from cosim.run import interrupt, sweep
+
+    grid = {"simulation.stop_time": [20.0]}  # short runs
+    perts = parse_perturb(["plant.mass=+-5%"])
+    add = sweep.RowWriter.add
+
+    def add_then_interrupt(self, row):  # a SIGINT (the flag its handler sets) after a row
+        add(self, row)
+        interrupt._requested.append("SIGINT")
+
+    monkeypatch.setattr(sweep.RowWriter, "add", add_then_interrupt)
+    try:
+        with pytest.raises(interrupt.Interrupted, match="the mismatch study interrupted"):
+            run_perturbed("seed000_stop_pid", grid, perts, 4, 1, tmp_path, workers=1,
+                          plot=False)
+    finally:
+        interrupt._requested.clear()
+    monkeypatch.setattr(sweep.RowWriter, "add", add)
+    kept = pd.read_csv(tmp_path / "perturb.csv", dtype={"inputs_digest": str})
+    assert 1 <= len(kept) < 4 and kept["inputs_digest"].str.len().eq(16).all()
+    frame, table = run_perturbed("seed000_stop_pid", grid, perts, 4, 1, tmp_path, workers=1,
+                                 plot=False, resume=True)
+    assert list(frame["sample"]) == [0, 1, 2, 3] and int(table["runs"].iloc[0]) == 4
+    again = pd.read_csv(tmp_path / "perturb.csv", dtype={"inputs_digest": str})
+    for _, row in kept.iterrows():  # kept as they were: not run again (same wall time)
+        assert again[again["sample"] == row["sample"]].iloc[0].equals(row)

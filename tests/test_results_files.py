@@ -34,7 +34,7 @@ def test_a_second_run_into_a_locked_folder_is_refused(tmp_path):
 
     out = tmp_path / "runs" / "a"
     with locked_destination(out):
-        with pytest.raises(OutputError, match=r"--out .*another cosim run is writing into"):
+        with pytest.raises(OutputError, match=r"--out .*another cosim command is writing into"):
             with locked_destination(out):
                 pass
     with locked_destination(out):  # released at the end of the first
@@ -52,5 +52,61 @@ def test_cosim_run_refuses_a_folder_another_run_holds(built_fmus, tmp_path):
                                "--out", str(tmp_path), "--no-plot"],
                               capture_output=True, text=True, timeout=300)
     assert done.returncode == 2, done.stderr
-    assert "another cosim run is writing into this folder" in done.stderr.replace("\n", " ")
+    assert "another cosim command is writing into this folder" in done.stderr.replace("\n", " ")
     assert not (tmp_path / "results.csv").exists()
+
+
+HOLD = ("import sys\nfrom cosim.run.results import locked_destination\n"
+        "with locked_destination(sys.argv[1], is_dir=sys.argv[2] == 'dir'):\n"
+        "    print('held', flush=True)\n    sys.stdin.read()\n")
+
+
+def _holder(destination, is_dir=True):
+    """A second process holding the lock on ``destination`` until its stdin closes."""
+    import subprocess
+    import sys
+
+    proc = subprocess.Popen([sys.executable, "-c", HOLD, str(destination),
+                             "dir" if is_dir else "file"],
+                            stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+    assert proc.stdout.readline() == "held\n"
+    return proc
+
+
+def test_sweep_reproduce_and_export_refuse_a_destination_another_process_holds(tmp_path):
+    import subprocess
+    import sys
+
+    commands = {
+        tmp_path / "sweep": ["sweep", "seed000_stop_pid", "--set", "controller.kp=1,2",
+                             "--out", str(tmp_path / "sweep")],
+        tmp_path / "reproduce": ["reproduce", "seed000", "--out", str(tmp_path / "reproduce")],
+        tmp_path / "a.ssp": ["export", "seed000_stop_pid", "--ssp", str(tmp_path / "a.ssp")],
+    }
+    for destination, args in commands.items():
+        is_dir = destination.suffix != ".ssp"
+        holder = _holder(destination, is_dir)
+        try:
+            done = subprocess.run([sys.executable, "-m", "cosim.cli", *args],
+                                  capture_output=True, text=True, timeout=300)
+        finally:
+            holder.communicate("")
+        message = " ".join(done.stderr.split())
+        assert done.returncode == 2, done.stderr
+        assert f"{destination}: another cosim command is writing into" in message
+        assert f"pid {holder.pid}:" in message
+        assert not (destination / "sweep.csv").exists() and not destination.is_file()
+
+
+def test_a_lock_whose_holder_was_killed_is_taken_over(tmp_path):
+    import os
+
+    from cosim.run.results import LOCK_FILE, locked_destination
+
+    holder = _holder(tmp_path)
+    holder.kill()
+    holder.wait()
+    holder.stdin.close()
+    holder.stdout.close()
+    with locked_destination(tmp_path):
+        assert (tmp_path / LOCK_FILE).read_text().split()[0] == str(os.getpid())

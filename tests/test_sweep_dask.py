@@ -85,13 +85,13 @@ def test_dask_resume_and_interrupt_keep_the_finished_rows(built_fmus, cluster, t
     # a SIGINT (the flag its handler sets) as soon as the first row is written
     from cosim.run import interrupt, sweep
 
-    add = sweep._RowWriter.add
+    add = sweep.RowWriter.add
 
     def add_then_interrupt(self, row):
         add(self, row)
         interrupt._requested.append("SIGINT")
 
-    monkeypatch.setattr(sweep._RowWriter, "add", add_then_interrupt)
+    monkeypatch.setattr(sweep.RowWriter, "add", add_then_interrupt)
     masses = [490000.0 + 1000.0 * k for k in range(12)]
     try:
         with pytest.raises(interrupt.Interrupted, match="the sweep interrupted"):

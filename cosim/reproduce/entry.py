@@ -43,12 +43,7 @@ from cosim.run.claims import (
     check_claims,
     check_ensemble,
 )
-from cosim.run.scenario import SCENARIO_DIR
-
-try:
-    import tomllib
-except ModuleNotFoundError:  # Python < 3.11
-    import tomli as tomllib  # type: ignore[no-redef]
+from cosim.run.scenario import SCENARIO_DIR, read_toml
 
 REPRODUCE_DIR = SCENARIO_DIR / "reproduce"
 
@@ -124,10 +119,7 @@ def entry_aliases() -> dict[str, str]:
     out: dict[str, str] = {}
     for name in entry_names():
         path = REPRODUCE_DIR / f"{name}.toml"
-        try:
-            alias = tomllib.loads(path.read_text()).get("alias", "")
-        except tomllib.TOMLDecodeError as err:
-            raise ReproduceError(f"{path}: not valid TOML: {err}") from err
+        alias = read_toml(path, ReproduceError).get("alias", "")
         if alias:
             out[alias] = name
     return out
@@ -163,10 +155,7 @@ def _read(name: str | Path) -> tuple[Path, dict[str, Any]]:
         path = REPRODUCE_DIR / f"{resolve_name(str(name))}.toml"
     if not path.is_file():
         raise ReproduceError(f"no reproduction entry {str(name)!r} (known: {entry_names()})")
-    try:
-        return path, tomllib.loads(path.read_text())
-    except tomllib.TOMLDecodeError as err:
-        raise ReproduceError(f"{path}: not valid TOML: {err}") from err
+    return path, read_toml(path, ReproduceError)
 
 
 def _part(cls: type, path: Path, key: str, data: dict[str, Any], i: int) -> Any:

@@ -47,6 +47,7 @@ from cosim.reproduce.tables import (
 )
 from cosim.run.provenance import INPUTS_FILE, entry_digest, simulation_digest
 from cosim.run.record import Record, RecordError, check_jobs, load, save, series_name
+from cosim.run.results import locked_destination
 
 
 @dataclass(frozen=True)
@@ -257,7 +258,15 @@ def reproduce_page(name: str, out_dir: str | Path | None = None, workers: int | 
     entry's ``build``."""
     entry = load_entry(name)
     out = Path(out_dir) if out_dir is not None else Path("runs") / "reproduce" / entry.name
-    out.mkdir(parents=True, exist_ok=True)
+    with locked_destination(out):
+        return _reproduce_into(entry, name, out, workers, seeds, rounding, scheduler,
+                               plot_format, echo, resume, build)
+
+
+def _reproduce_into(entry: Entry, name: str, out: Path, workers: int | None,
+                    seeds: int | None, rounding: bool, scheduler: str | None,
+                    plot_format: str, echo: bool, resume: bool, build: str | None) -> Page:
+    """:func:`reproduce_page` into the folder ``out``, which this process holds locked."""
     inputs = out / INPUTS_FILE
     inputs.unlink(missing_ok=True)  # a folder being rewritten vouches for no inputs
     need = entry.ensemble.declared_k()
@@ -282,8 +291,14 @@ def reproduce_page(name: str, out_dir: str | Path | None = None, workers: int | 
 
 def redraw_entry(name: str, out_dir: str | Path | None = None, plot_format: str = "png",
                  echo: bool = True) -> Path:
-    """:func:`redraw_page`'s file."""
-    return redraw_page(name, out_dir, plot_format, echo).table
+    """:func:`redraw_page`'s file, the folder locked meanwhile (a missing folder is not
+    made: :func:`redraw_page` says it holds no record)."""
+    out = (Path(out_dir) if out_dir is not None
+           else Path("runs") / "reproduce" / load_entry(name).name)
+    if not out.is_dir():
+        return redraw_page(name, out, plot_format, echo).table
+    with locked_destination(out):
+        return redraw_page(name, out, plot_format, echo).table
 
 
 def redraw_page(name: str, out_dir: str | Path | None = None, plot_format: str = "png",
@@ -364,17 +379,17 @@ def reproduce_all(out_dir: str | Path | None = None, workers: int | None = None,
     """Every entry; one ``REPRODUCTION.md`` with the claims held / failed / inconclusive per
     paper and each entry's tables and figures."""
     out = Path(out_dir) if out_dir is not None else Path("runs") / "reproduce"
-    out.mkdir(parents=True, exist_ok=True)
-    pages = {name: reproduce_page(name, out / name, workers, seeds, rounding, scheduler,
-                                  plot_format, resume=resume, build=build)
-             for name in entry_names()}
-    parts = ["# Reproduced results", "", "Made by `cosim reproduce all`; each section by "
-             "`cosim reproduce NAME` from the entry in `scenarios/reproduce/`.", "",
-             claims_summary({name: page.claim_rows for name, page in pages.items()})]
-    for name, page in pages.items():
-        # relative links from out/: prefix the entry folder
-        text = re.sub(r"\]\((?!http)([^)]+)\)", rf"]({name}/\1)", page.markdown)
-        parts += ["", text]
-    path = out / "REPRODUCTION.md"
-    path.write_text("\n".join(parts) + "\n")
-    return path
+    with locked_destination(out):
+        pages = {name: reproduce_page(name, out / name, workers, seeds, rounding, scheduler,
+                                      plot_format, resume=resume, build=build)
+                 for name in entry_names()}
+        parts = ["# Reproduced results", "", "Made by `cosim reproduce all`; each section by "
+                 "`cosim reproduce NAME` from the entry in `scenarios/reproduce/`.", "",
+                 claims_summary({name: page.claim_rows for name, page in pages.items()})]
+        for name, page in pages.items():
+            # relative links from out/: prefix the entry folder
+            text = re.sub(r"\]\((?!http)([^)]+)\)", rf"]({name}/\1)", page.markdown)
+            parts += ["", text]
+        path = out / "REPRODUCTION.md"
+        path.write_text("\n".join(parts) + "\n")
+        return path

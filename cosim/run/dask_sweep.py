@@ -2,7 +2,7 @@
 
 The client (this process) loads and overrides each point's scenario, so a bad value fails its
 row exactly as in the local pool, and submits one task per point; a worker runs it with the
-same code as a local pool worker (:func:`cosim.run.sweep._run_point`), so the rows are the same
+same code as a local pool worker (:func:`cosim.run.sweep.run_point`), so the rows are the same
 (timings aside); the cluster, progress and interrupts are :mod:`cosim.run.runner`'s. The FMUs
 travel as files, one of two ways:
 

@@ -23,11 +23,19 @@ import pandas as pd
 
 from cosim.run import runner
 from cosim.run.figures import PLOT_DPI
+from cosim.run.grid import MAX_RUNS, check_runs, grid_points
 from cosim.run.perturbation import Perturbation, draw_samples, nominal_values
 from cosim.run.results import fit_band
 from cosim.run.scenario import ScenarioError, find_scenario, load_scenario
 from cosim.run.simulate import ensure_built, run_scenario
-from cosim.run.sweep import STOP_WINDOW_M, SUMMARY_COLUMNS, grid_points
+from cosim.run.sweep import (
+    DIGEST,
+    STOP_WINDOW_M,
+    SUMMARY_COLUMNS,
+    RowWriter,
+    done_rows,
+    inputs_digest,
+)
 
 COUNTERS = ("qp_infeasible_after_stop", "events_moving", "events_standstill")
 
@@ -55,15 +63,20 @@ def _run_sample(scenario: str, point: dict[str, Any], index: int,
 def run_perturbed(scenario: str | Sequence[str], grid: dict[str, Sequence[Any]],
                   perts: Sequence[Perturbation], samples: int, seed: int,
                   out_dir: str | Path | None = None, workers: int | None = None,
-                  plot: bool = True, plot_format: str = "png"
-                  ) -> tuple[pd.DataFrame, pd.DataFrame]:
+                  plot: bool = True, plot_format: str = "png", max_runs: int = MAX_RUNS,
+                  resume: bool = False) -> tuple[pd.DataFrame, pd.DataFrame]:
     """Every scenario at every grid point on the same ``samples`` draws, in ``workers``
     processes (:func:`cosim.run.runner.run_tasks`). Returns (one row per run, one row per
-    scenario and grid point); with ``out_dir`` writes perturb.csv, perturb_summary.csv and
-    ``perturb.<plot_format>``."""
+    scenario and grid point); with ``out_dir`` writes perturb.csv (each run's row appended as
+    it finishes, last its :data:`~cosim.run.sweep.DIGEST` of the scenario file, point, sample
+    and drawn values, so an interrupted study keeps its finished runs; then rewritten in
+    order), perturb_summary.csv and ``perturb.<plot_format>``. With ``resume`` the runs
+    whose rows an existing perturb.csv holds with today's digest are not run again. More
+    than ``max_runs`` runs are refused before any work."""
     scenarios = [scenario] if isinstance(scenario, (str, Path)) else list(scenario)
     if not scenarios or not perts:
         raise ValueError("run_perturbed: no scenario or no perturbation given")
+    check_runs(grid, len(scenarios), max_runs, samples)
     points = grid_points(grid) if grid else [{}]
     paths = [str(find_scenario(s)) for s in scenarios]
     draws: list[dict[str, float]] | None = None
@@ -81,21 +94,44 @@ def run_perturbed(scenario: str | Sequence[str], grid: dict[str, Sequence[Any]],
         load_scenario(path, {**points[0], **draws[0]})
     jobs = [(path, point, i, d) for path in paths for point in points
             for i, d in enumerate(draws)]
-    done: dict[int, dict[str, Any]] = {}
+    digests = [inputs_digest(path, {**point, "sample": i, **d}) for path, point, i, d in jobs]
+    out = Path(out_dir) if out_dir is not None else None
+    kept = {row[DIGEST]: row for row in (
+        done_rows(out / "perturb.csv", [*grid, "sample"], set(digests))
+        if out is not None and resume else [])}
+    done = {n: kept[digest] for n, digest in enumerate(digests) if digest in kept}
+    columns = ["scenario", *grid, "sample", *(p.key for p in perts), *SUMMARY_COLUMNS,
+               *COUNTERS, "controller_executions", "command_min", "command_max", "completed",
+               DIGEST]
+    writer = None
+    if out is not None:
+        out.mkdir(parents=True, exist_ok=True)
+        writer = RowWriter(out / "perturb.csv", columns, list(done.values()))
+
+    def finished(task: runner.Task, row: dict[str, Any]) -> None:
+        done[task.key] = row = {**row, DIGEST: digests[task.key]}
+        if writer is not None:
+            writer.add(row)
+
     errors: list[tuple[int, BaseException]] = []
-    runner.run_tasks([runner.Task(n, _run_sample, job) for n, job in enumerate(jobs)],
-                     lambda task, row: done.__setitem__(task.key, row),
-                     lambda task, err: errors.append((task.key, err)), workers,
-                     label="perturb", what="the mismatch study")
+    try:
+        runner.run_tasks([runner.Task(n, _run_sample, job) for n, job in enumerate(jobs)
+                          if n not in done], finished,
+                         lambda task, err: errors.append((task.key, err)), workers,
+                         label="perturb", what="the mismatch study")
+    finally:
+        if writer is not None:
+            writer.close()
     if errors:  # every sample is needed for the common-random-number comparison
         n, err = errors[0]
         path, point, i, _draw = jobs[n]
         raise ValueError(f"{path} {point} sample {i}: {type(err).__name__}: {err}") from err
-    frame = pd.DataFrame([done[n] for n in range(len(jobs))])
+    rows = [done[n] for n in range(len(jobs))]
+    frame = pd.DataFrame(rows, columns=[  # the command's range where the scenario names one
+        c for c in columns if not c.startswith("command_") or any(
+            r.get(c) is not None for r in rows)])
     table = summarize(frame, list(grid))
-    if out_dir is not None:
-        out = Path(out_dir)
-        out.mkdir(parents=True, exist_ok=True)
+    if out is not None:
         frame.to_csv(out / "perturb.csv", index=False)
         table.to_csv(out / "perturb_summary.csv", index=False)
         if plot:

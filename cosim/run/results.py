@@ -70,29 +70,63 @@ def check_destination(path: Path, option: str = "--out", is_dir: bool = True) ->
                           f"{err.strerror or err}") from None
 
 
-LOCK_FILE = ".cosim-run.lock"
+LOCK_FILE = ".cosim.lock"  # in an output folder: the pid and command line of its writer
+
+
+def lock_path(path: Path, is_dir: bool = True) -> Path:
+    """The lock file of the output folder ``path`` (``path/.cosim.lock``), or of the output
+    file ``path`` with ``is_dir=False`` (``.<name>.cosim.lock`` beside it)."""
+    path = Path(path)
+    return path / LOCK_FILE if is_dir else path.with_name(f".{path.name}{LOCK_FILE}")
+
+
+def _holder(text: str) -> str:
+    """The lock file's writer as the refusal names it: ``pid N: COMMAND``, and whether that
+    process has ended (its forked workers, which share the lock, still hold it then)."""
+    pid, _, command = text.strip().partition(" ")
+    if not pid.isdigit():
+        return "a process that has not yet written its pid"
+    try:
+        os.kill(int(pid), 0)
+        alive = ""
+    except ProcessLookupError:
+        alive = "; it has ended, its worker processes still hold the lock"
+    except PermissionError:  # another user's live process
+        alive = ""
+    return f"pid {pid}: {command}{alive}"
 
 
 @contextlib.contextmanager
-def locked_destination(path: Path, option: str = "--out") -> Iterator[None]:
-    """Hold an exclusive ``fcntl`` lock on ``path/.cosim-run.lock`` while a run writes into the
-    folder ``path`` (created); a second run into the same folder meanwhile fails at once with
-    :class:`OutputError` instead of one result silently replacing the other. The kernel drops
-    the lock when the process ends, however it ends."""
+def locked_destination(path: Path, option: str = "--out", is_dir: bool = True) -> Iterator[None]:
+    """Hold an exclusive ``fcntl`` lock on :func:`lock_path` while a command writes into the
+    folder ``path`` (created; with ``is_dir=False`` the file ``path``, its folder created), the
+    lock file naming this process (``PID COMMAND LINE``). A second command into the same
+    destination meanwhile fails at once with :class:`OutputError` naming the destination and
+    the holder, instead of one result silently replacing the other. The kernel drops the lock
+    when its holder ends, however it ends: a lock left by a killed command is taken over."""
+    import shlex
+    import sys
+
     path = Path(path)
+    lock = lock_path(path, is_dir)
     try:
-        path.mkdir(parents=True, exist_ok=True)
-        handle = open(path / LOCK_FILE, "a+")  # noqa: SIM115 - held for the with-block
+        lock.parent.mkdir(parents=True, exist_ok=True)
+        handle = open(lock, "a+")  # noqa: SIM115 - held for the with-block
     except OSError as err:
         raise OutputError(f"{option} {path}: cannot write in it: {err.strerror or err}") from None
     with handle:
         try:
             fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
-            raise OutputError(f"{option} {path}: another cosim run is writing into this folder "
-                              f"(it holds {path / LOCK_FILE}); wait for it to end or give "
-                              "another --out") from None
+            handle.seek(0)
+            what = "this folder" if is_dir else "this file"
+            raise OutputError(f"{option} {path}: another cosim command is writing into {what} "
+                              f"({_holder(handle.read())}; it holds {lock}); wait for it to "
+                              f"end or give another {option}") from None
         try:
+            handle.truncate(0)
+            handle.write(f"{os.getpid()} {shlex.join(sys.argv)}\n")
+            handle.flush()
             yield
         finally:
             fcntl.flock(handle, fcntl.LOCK_UN)

@@ -50,7 +50,7 @@ except ModuleNotFoundError:  # Python 3.10
 
 from cosim.fmu import native_build
 from cosim.fmu.build import FMU_DIR, ROOT, catalog
-from cosim.fmu.state import to_ticks
+from cosim.fmu.state import TICKS_PER_SECOND, to_ticks
 from cosim.run import fmi_types
 from cosim.run.metrics import PAPERS
 
@@ -297,6 +297,38 @@ def _number(source: str, key: str, value: Any, positive: bool = True,
     return value
 
 
+MAX_TIME_TICKS = 2**63 - 1  # ns: the master's times are integer nanoseconds in 64-bit integers
+
+
+def _time(source: str, key: str, value: Any, positive: bool = True) -> float:
+    """A time of the scenario (s): a finite number (positive unless ``positive`` is False)
+    whose integer nanoseconds fit in 64 bits, and, when positive, at least the 1 ns tick."""
+    seconds = _number(source, key, value, positive)
+    if abs(seconds) > MAX_TIME_TICKS / TICKS_PER_SECOND:
+        raise ScenarioError(f"{source}: {key} = {seconds}: out of range: times are integer "
+                            f"nanoseconds in 64 bits, at most "
+                            f"{MAX_TIME_TICKS / TICKS_PER_SECOND:.6g} s")
+    if positive and to_ticks(seconds) == 0:
+        raise ScenarioError(f"{source}: {key} = {seconds}: below the master's 1 ns tick")
+    return seconds
+
+
+def read_toml(path: Path, error: type[Exception] = ScenarioError) -> dict[str, Any]:
+    """The TOML file ``path``; ``error`` naming the file when it is not UTF-8 (with the byte
+    offset of the first byte that is not) or not valid TOML."""
+    data = Path(path).read_bytes()
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as err:
+        raise error(f"{path}: not UTF-8 text: byte {err.start} is 0x{data[err.start]:02x} "
+                    "(TOML files are UTF-8: save it as UTF-8, e.g. `iconv -f latin1 -t utf-8`)"
+                    ) from None
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as err:
+        raise error(f"{path}: not valid TOML: {err}") from None
+
+
 def catalog_path(identifier: str, fmi_version: int = 2) -> Path:
     """Where the FMI ``fmi_version`` build of catalog FMU ``identifier`` lives."""
     return (FMU_DIR / "fmi3" if fmi_version == 3 else FMU_DIR) / f"{identifier}.fmu"
@@ -370,11 +402,7 @@ def load_scenario(name_or_path: str | Path,
 
 
 def _load_scenario(path: Path, overrides: dict[str, Any] | list[str] | None) -> Scenario:
-    try:
-        with open(path, "rb") as f:
-            raw = tomllib.load(f)
-    except tomllib.TOMLDecodeError as err:
-        raise ScenarioError(f"{path}: not valid TOML: {err}") from err
+    raw = read_toml(path)
     apply_overrides(raw, overrides, str(path))
     _refuse_unknown(path, "top level", raw, ("description", "simulation", "fmus",
                                               "connections", "record", "summary"))
@@ -402,13 +430,13 @@ def _load_scenario(path: Path, overrides: dict[str, Any] | list[str] | None) -> 
     sim = Simulation(
         fmi_version=int(fmi_version),
         unconnected_inputs=unconnected,
-        stop_time=_number(path, "[simulation] stop_time", sim_raw["stop_time"]),
-        start_time=_number(path, "[simulation] start_time", sim_raw.get("start_time", 0.0),
+        stop_time=_time(path, "[simulation] stop_time", sim_raw["stop_time"]),
+        start_time=_time(path, "[simulation] start_time", sim_raw.get("start_time", 0.0),
                            positive=False),
-        output_interval=_number(path, "[simulation] output_interval",
+        output_interval=_time(path, "[simulation] output_interval",
                                 sim_raw.get("output_interval", 0.1)),
         algorithm=algorithm,
-        base_step=(_number(path, "[simulation] base_step", sim_raw["base_step"])
+        base_step=(_time(path, "[simulation] base_step", sim_raw["base_step"])
                    if "base_step" in sim_raw else None),
     )
     if sim.stop_time <= sim.start_time:
@@ -435,9 +463,9 @@ def _load_scenario(path: Path, overrides: dict[str, Any] | list[str] | None) -> 
             fmu_path=_resolve_fmu(path, f"{key} fmu", spec["fmu"], sim.fmi_version,
                                   spec.get("build", "python")),
             build=spec.get("build", "python"),
-            sample_time=(_number(path, f"{key} sample_time", spec["sample_time"])
+            sample_time=(_time(path, f"{key} sample_time", spec["sample_time"])
                          if "sample_time" in spec else None),
-            max_step=(_number(path, f"{key} max_step", spec["max_step"])
+            max_step=(_time(path, f"{key} max_step", spec["max_step"])
                       if "max_step" in spec else None),
             parameters=dict(spec.get("parameters", {})),
             inputs=dict(spec.get("inputs", {})),

@@ -22,51 +22,21 @@ from __future__ import annotations
 
 import csv
 import functools
-import itertools
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
 import pandas as pd
 
 from cosim.run import interrupt, isolation, runner
+from cosim.run.grid import MAX_RUNS, check_runs, grid_points, parse_grid
+
+__all__ = ["MAX_RUNS", "check_runs", "grid_points", "parse_grid", "run_sweep"]
 
 STOP_WINDOW_M = 0.5  # m, the ATO stop window +-50 cm
 
 SUMMARY_COLUMNS = ("stop_error_m", "command_switches", "qp_solves", "qp_infeasible",
                    "qp_solve_time_median_s", "speed_rmse_mps", "max_jerk_mps3", "wall_time_s")
-
-
-def parse_grid(items: Iterable[str]) -> dict[str, list[Any]]:
-    """``["controller.N=3..15", "controller.beta=1,2"]`` -> ``{"controller.N": [3, .., 15], ..}``.
-    """
-    from cosim.run.scenario import parse_value
-
-    grid: dict[str, list[Any]] = {}
-    for item in items:
-        key, sep, text = item.partition("=")
-        if not sep or not key.strip() or not text.strip():
-            raise ValueError(f"--set {item!r}: expected KEY=VALUES, e.g. controller.N=3..15")
-        text = text.strip()
-        if ".." in text:
-            lo, _, hi = text.partition("..")
-            try:
-                first, last = int(lo), int(hi)
-            except ValueError as err:
-                raise ValueError(f"--set {item!r}: a range needs integers, e.g. 3..15") from err
-            if last < first:
-                raise ValueError(f"--set {item!r}: empty range {first}..{last}")
-            grid[key.strip()] = list(range(first, last + 1))
-        else:
-            grid[key.strip()] = [parse_value(v.strip()) for v in text.split(",")]
-    return grid
-
-
-def grid_points(grid: dict[str, Sequence[Any]]) -> list[dict[str, Any]]:
-    """Cartesian product of the grid, in order (first key slowest)."""
-    keys = list(grid)
-    return [dict(zip(keys, values, strict=True))
-            for values in itertools.product(*(list(grid[k]) for k in keys))]
 
 
 def run_point(scenario: Any, point: dict[str, Any]) -> dict[str, Any]:
@@ -123,6 +93,9 @@ def check_point(path: str, point: dict[str, Any]) -> None:
 def _cached_description(path: Path, mtime_ns: int) -> Any:
     from fmpy import read_model_description
 
+    from cosim.run.master.loading import archive_names
+
+    archive_names(str(path), path)  # bounded before the XML is parsed
     return read_model_description(str(path))
 
 
@@ -154,17 +127,21 @@ def inputs_digest(scenario: str, point: dict[str, Any]) -> str:
     return hashlib.sha256(Path(scenario).read_bytes() + b"\0" + text).hexdigest()[:16]
 
 
-def _done_rows(csv_path: Path, keys: list[str]) -> list[dict[str, Any]]:
-    """The ``ok`` rows of an earlier ``sweep.csv`` (for ``resume``), with their
-    digest."""
+def done_rows(csv_path: Path, keys: list[str], wanted: set[str]) -> list[dict[str, Any]]:
+    """The rows of an earlier ``sweep.csv`` or ``perturb.csv`` (for ``resume``) whose
+    :data:`DIGEST` is in ``wanted`` (today's inputs; a torn row lacks its last field) and
+    whose ``status``, where the file has one, is ``ok``; cells back to what was written."""
     if not csv_path.is_file():
         return []
     earlier = pd.read_csv(csv_path, keep_default_na=False, dtype={DIGEST: str})
-    if "status" not in earlier.columns or not set(keys) <= set(earlier.columns):
+    if not set(keys) <= set(earlier.columns):
         raise ValueError(f"{csv_path}: not a sweep over {', '.join(keys)}; cannot resume it")
+    if DIGEST not in earlier.columns:  # written without the inputs it depends on
+        return []
     text_columns = {"scenario", "status", "error", DIGEST}
     return [{k: v if k in text_columns else _cell(v) for k, v in row.items()}
-            for row in earlier.to_dict("records") if row["status"] == "ok"]
+            for row in earlier.to_dict("records")
+            if row.get("status", "ok") == "ok" and row[DIGEST] in wanted]
 
 
 def _cell(value: Any) -> Any:
@@ -182,7 +159,7 @@ def _cell(value: Any) -> Any:
     return value
 
 
-class _RowWriter:
+class RowWriter:
     """Appends rows to sweep.csv as they arrive (header first), flushed after each row."""
 
     def __init__(self, path: Path, columns: list[str], rows: list[dict[str, Any]]) -> None:
@@ -207,7 +184,7 @@ def run_sweep(scenario: str | Sequence[str], grid: dict[str, Sequence[Any]],
               plot: bool = True, resume: bool = False, scheduler: str | None = None,
               shared_fmus: bool = False, plot_format: str = "png",
               series_labels: dict[str, str] | None = None,
-              time_limit: float | None = None) -> pd.DataFrame:
+              time_limit: float | None = None, max_runs: int = MAX_RUNS) -> pd.DataFrame:
     """Run every grid point of every scenario with :func:`cosim.run.runner.run_tasks`: in
     ``workers`` processes (default: CPU count), or on a Dask cluster (``scheduler``: its
     address, or ``"local-dask"`` for a ``LocalCluster`` of ``workers`` processes;
@@ -225,7 +202,8 @@ def run_sweep(scenario: str | Sequence[str], grid: dict[str, Sequence[Any]],
     extractions happen once per worker). On Dask the FMU files are uploaded to the workers,
     or, with ``shared_fmus``, read by them from the same paths (a shared file system).
     ``time_limit`` (s, wall clock, local workers): a point running longer is stopped and
-    failed; a point whose worker crashes fails naming the signal and the FMU call.
+    failed; a point whose worker crashes fails naming the signal and the FMU call. More than
+    ``max_runs`` runs (points times scenarios) are refused before any work (:func:`check_runs`).
     """
     from cosim.run.scenario import find_scenario, load_scenario
     from cosim.run.simulate import ensure_built
@@ -236,6 +214,7 @@ def run_sweep(scenario: str | Sequence[str], grid: dict[str, Sequence[Any]],
     if not grid:
         raise ValueError("run_sweep: empty grid")
     runner.check_workers(workers, scheduler)
+    check_runs(grid, len(scenarios), max_runs)
     points = grid_points(grid)
     paths = [str(find_scenario(s)) for s in scenarios]
     for path in paths:  # fail early on a bad scenario or key, and build what is missing
@@ -248,8 +227,7 @@ def run_sweep(scenario: str | Sequence[str], grid: dict[str, Sequence[Any]],
     done: list[dict[str, Any]] = []
     digests = {_key(path, point): inputs_digest(path, point) for path, point in jobs}
     if out is not None and resume:  # rows of these inputs only, whole (the digest is last)
-        done = [r for r in _done_rows(out / "sweep.csv", list(grid))
-                if r.get(DIGEST) == digests.get(_key(r["scenario"], {k: r[k] for k in grid}))]
+        done = done_rows(out / "sweep.csv", list(grid), set(digests.values()))
     skip = {_key(r["scenario"], {k: r[k] for k in grid}) for r in done}
     todo = [(path, point) for path, point in jobs if _key(path, point) not in skip]
     columns = ["scenario", *grid, "status", "error", *SUMMARY_COLUMNS, "controller_executions",
@@ -257,7 +235,7 @@ def run_sweep(scenario: str | Sequence[str], grid: dict[str, Sequence[Any]],
     writer = None
     if out is not None:
         out.mkdir(parents=True, exist_ok=True)
-        writer = _RowWriter(out / "sweep.csv", columns, done)
+        writer = RowWriter(out / "sweep.csv", columns, done)
     rows = list(done)
 
     def finished(row: dict[str, Any]) -> None:

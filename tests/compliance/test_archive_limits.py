@@ -16,7 +16,7 @@ from pathlib import Path
 import pytest
 
 from cosim.interop.compliance import ALL_CHECKS, ERROR, SKIPPED, Options, check_fmu
-from cosim.interop.compliance.archive import (
+from cosim.run.archive import (
     MB,
     ArchiveLimits,
     ArchiveRefused,
@@ -92,7 +92,8 @@ def test_zip_bomb_is_refused_with_its_sizes(tmp_path, no_leftovers):
     message = refused(check_fmu(bomb))
     assert message == (f"archive refused before extraction: the archive "
                        f"({bomb.stat().st_size / MB:.3g} MiB) expands to 1 GiB, more than the "
-                       "limit of 512 MiB (--max-extracted-mb raises it)")
+                       "limit of 512 MiB (raise it with COSIM_MAX_EXTRACTED_MB=MIB in the "
+                       "environment, or cosim validate --max-extracted-mb)")
     assert no_leftovers() == []
 
 
@@ -100,8 +101,9 @@ def test_too_many_files_are_refused(tmp_path):
     path = raw_zip(tmp_path / "many.fmu", [stored("modelDescription.xml", MODEL_DESCRIPTION)]
                    + [stored(f"resources/{i}.txt", b"x") for i in range(10)])
     message = refused(check_fmu(path, Options(limits=ArchiveLimits(max_files=10))))
-    assert message.endswith("11 files in the archive, more than the limit of 10 (--max-files "
-                            "raises it)")
+    assert message.endswith("11 files in the archive, more than the limit of 10 (raise it "
+                            "with COSIM_MAX_FILES=N in the environment, or cosim validate "
+                            "--max-files)")
 
 
 def test_huge_model_description_is_refused_unless_the_limit_is_raised(tmp_path):
@@ -109,8 +111,10 @@ def test_huge_model_description_is_refused_unless_the_limit_is_raised(tmp_path):
     text = MODEL_DESCRIPTION.replace(b"<fmiModelDescription", padding + b"<fmiModelDescription")
     path = raw_zip(tmp_path / "huge.fmu", [stored("modelDescription.xml", text)])
     assert refused(check_fmu(path)).endswith("modelDescription.xml is 5 MiB, more than the "
-                                             "limit of 4 MiB (--max-model-description-mb "
-                                             "raises it)")
+                                             "limit of 4 MiB (raise it with "
+                                             "COSIM_MAX_MODEL_DESCRIPTION_MB=MIB in the "
+                                             "environment, or cosim validate "
+                                             "--max-model-description-mb)")
     raised = check_fmu(path, Options(limits=ArchiveLimits(max_model_description=8 * MB)))
     assert not any("archive refused" in p.message for p in raised), raised
 
@@ -155,4 +159,4 @@ def test_cli_names_the_flag_that_raises_a_limit(tmp_path):
                            "--max-files", "1"], capture_output=True, text=True)
     assert done.returncode == 1
     assert ("archive refused before extraction: 2 files in the archive, more than the limit of "
-            "1 (--max-files raises it)") in done.stdout
+            "1 (raise it with COSIM_MAX_FILES=N") in " ".join(done.stdout.split())

@@ -49,7 +49,6 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
-from cosim.interop.compliance.archive import ArchiveLimits, ArchiveRefused, inspect
 from cosim.interop.compliance.common import (
     ALL_CHECKS,
     CLAUSES,
@@ -76,6 +75,7 @@ from cosim.interop.compliance.host import _Host
 from cosim.interop.compliance.model_description import check_model_description
 from cosim.interop.compliance.watchdog import SETUP_CALL_ALLOWANCE, Limits
 from cosim.interop.compliance.worker import _run_worker
+from cosim.run.archive import ArchiveLimits, ArchiveRefused, inspect
 
 __all__ = ["ALL_CHECKS", "CLAUSES", "CONVENTION", "DYNAMIC_CHECKS", "ERROR", "FMI3_CHECKS",
            "FMI3_DYNAMIC_CHECKS", "FMI3_STATIC_CHECKS", "NOTE", "checks_for",

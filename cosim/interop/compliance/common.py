@@ -145,8 +145,8 @@ def passed(problems: list[Problem]) -> bool:
 
 def _read_xml(path: Path, max_bytes: int | None = None) -> ElementTree.Element:
     """The parsed modelDescription.xml (refused over ``max_bytes``; the checks read it after
-    :func:`~cosim.interop.compliance.archive.inspect` bounded it)."""
-    from cosim.interop.compliance.archive import ArchiveRefused
+    :func:`~cosim.run.archive.inspect` bounded it)."""
+    from cosim.run.archive import ArchiveRefused
 
     with zipfile.ZipFile(path) as z:
         if max_bytes is not None and z.getinfo("modelDescription.xml").file_size > max_bytes:

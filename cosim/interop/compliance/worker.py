@@ -76,7 +76,7 @@ def _emit(kind: str, payload: Any) -> None:
 
 def _worker(args: dict) -> None:
     """Run dynamic checks, reporting progress on stdout (see ``_run_worker``)."""
-    from cosim.interop.compliance.archive import ArchiveLimits, extract
+    from cosim.run.archive import ArchiveLimits, extract
 
     if args.get("board"):
         WATCHDOG.start(args["board"])

@@ -9,8 +9,9 @@ import zipfile
 from pathlib import Path
 from typing import Any
 
-from fmpy import extract, read_model_description
+from fmpy import read_model_description
 
+from cosim.run.archive import ArchiveLimits, ArchiveRefused, extract, inspect
 from cosim.run.master.unit import Unit
 from cosim.run.scenario import Scenario, ScenarioError
 
@@ -20,9 +21,15 @@ _EXTRACTED: dict[tuple[str, float], str] = {}
 
 
 def extract_once(path: Path) -> str:
+    """The folder the FMU file ``path`` is extracted into, once per process, within the
+    limits of :meth:`ArchiveLimits.from_environment` (a failed extraction leaves no folder);
+    :class:`ScenarioError` naming the file when the archive breaks one."""
     key = (str(path.resolve()), path.stat().st_mtime)
     if key not in _EXTRACTED:
-        _EXTRACTED[key] = extract(str(path))
+        try:
+            _EXTRACTED[key] = extract(path, ArchiveLimits.from_environment())
+        except (ArchiveRefused, ValueError) as err:
+            raise ScenarioError(f"{path}: {err}") from None
     return _EXTRACTED[key]
 
 
@@ -51,8 +58,9 @@ def warm_up(path: Path) -> None:
     """Extract ``path`` (once per process) and instantiate it once, so its bundled modules are
     imported (and shared by processes forked afterwards); failures are left to the runs."""
     try:
+        folder = extract_once(path)  # within the limits, before the XML is parsed
         md = read_model_description(str(path))
-        unit = unit_class(md)("warm-up", path, extract_once(path), md)
+        unit = unit_class(md)("warm-up", path, folder, md)
         unit.instantiate()
         unit.free()
     except Exception:  # noqa: BLE001 - the run of a point reports what is wrong
@@ -68,17 +76,25 @@ def binary_dirs(md: Any) -> tuple[str, list[str]]:
         else (platform, [platform])
 
 
+def archive_names(where: str, path: Path) -> set[str]:
+    """The entry names of the FMU file ``path``, its zip directory checked against
+    :meth:`ArchiveLimits.from_environment` before anything is decompressed; otherwise a
+    :class:`ScenarioError` starting with ``where``."""
+    try:
+        return {entry.filename for entry in inspect(path, ArchiveLimits.from_environment())}
+    except (zipfile.BadZipFile, OSError) as err:
+        raise ScenarioError(f"{where}: not an FMU (not a readable zip archive: {err})") from None
+    except (ArchiveRefused, ValueError) as err:
+        raise ScenarioError(f"{where}: refused before extraction: {err}") from None
+
+
 def read_fmu(sc: Scenario, instance: str, path: Path) -> Any:
     """The modelDescription of the FMU of ``instance``, after checking the file is an FMU with a
     co-simulation (or FMI 3 Scheduled Execution) binary for this platform: otherwise a
     :class:`ScenarioError` naming the scenario file, the instance and the path (instead of
     BadZipFile / KeyError later)."""
     where = f"{sc.path}: [fmus.{instance}] fmu = {str(path)!r}"
-    try:
-        with zipfile.ZipFile(path) as archive:
-            names = set(archive.namelist())
-    except (zipfile.BadZipFile, OSError) as err:
-        raise ScenarioError(f"{where}: not an FMU (not a readable zip archive: {err})") from None
+    names = archive_names(where, path)
     if "modelDescription.xml" not in names:
         raise ScenarioError(f"{where}: not an FMU (no modelDescription.xml in the archive)")
     try:
@@ -102,6 +118,12 @@ def read_fmu(sc: Scenario, instance: str, path: Path) -> Any:
     if f"binaries/{folder}/{ident}{suffix}" not in names:
         found = sorted({n.split("/")[1] for n in names
                         if n.startswith("binaries/") and n.count("/") >= 2 and n.split("/")[1]})
+        if folder in found:  # the platform's folder, without the library the XML names
+            held = sorted(n.removeprefix(f"binaries/{folder}/") for n in names
+                          if n.startswith(f"binaries/{folder}/") and n.endswith(suffix))
+            raise ScenarioError(f"{where}: binaries/{folder}/ has no {ident}{suffix}, the "
+                                f"library of modelIdentifier {ident!r} in modelDescription.xml "
+                                f"(it holds {', '.join(held) or f'no {suffix} file'})")
         raise ScenarioError(f"{where}: no binary for this platform ({folder}; the FMU has "
                             f"{', '.join(found) or 'no binaries'}): FMI {version} looks for "
                             f"binaries/{folder}/{ident}{suffix}")

@@ -5,19 +5,30 @@ a byte is written); entries with absolute, drive or parent-directory paths and s
 are refused; extraction writes at most the declared sizes and removes its folder when it fails.
 
 The defaults are far above any real FMU (ours are a few MB; the FMI Reference FMUs below one);
-``cosim validate --max-extracted-mb / --max-files / --max-model-description-mb`` raise them.
+the environment variables of :data:`LIMIT_SETTINGS` raise them for every command that opens an
+FMU (``cosim run``, ``sweep``, ``reproduce``, ``validate``), and ``cosim validate``'s options
+``--max-extracted-mb / --max-files / --max-model-description-mb`` for that command.
 """
 
 from __future__ import annotations
 
+import os
 import shutil
 import stat
 import tempfile
 import zipfile
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from pathlib import Path, PurePosixPath
 
 MB = 1 << 20
+
+# field of ArchiveLimits -> (cosim validate's option, environment variable, unit in bytes)
+LIMIT_SETTINGS = {
+    "max_extracted": ("--max-extracted-mb", "COSIM_MAX_EXTRACTED_MB", MB),
+    "max_files": ("--max-files", "COSIM_MAX_FILES", 1),
+    "max_model_description": ("--max-model-description-mb", "COSIM_MAX_MODEL_DESCRIPTION_MB",
+                              MB),
+}
 
 
 @dataclass(frozen=True)
@@ -27,6 +38,34 @@ class ArchiveLimits:
     max_extracted: int = 512 * MB  # bytes, all files extracted
     max_files: int = 10_000  # entries
     max_model_description: int = 4 * MB  # bytes of modelDescription.xml (1e6 variables: 5.7 MB)
+
+    @classmethod
+    def from_environment(cls) -> ArchiveLimits:
+        """The defaults, each replaced by its environment variable of :data:`LIMIT_SETTINGS`
+        where set (MiB for sizes, a count for files); ValueError naming a variable whose value
+        is not a positive number."""
+        given = {}
+        for limit in fields(cls):
+            _, variable, unit = LIMIT_SETTINGS[limit.name]
+            text = os.environ.get(variable)
+            if text is None:
+                continue
+            try:
+                value = float(text)
+            except ValueError:
+                value = float("nan")
+            if not value > 0 or value == float("inf"):
+                raise ValueError(f"environment variable {variable}={text!r}: expected a "
+                                 "positive number")
+            given[limit.name] = int(value * unit)
+        return cls(**given)
+
+
+def raise_hint(limit: str) -> str:
+    """How the user raises ``limit`` (a field of :class:`ArchiveLimits`)."""
+    option, variable, unit = LIMIT_SETTINGS[limit]
+    example = "N" if unit == 1 else "MIB"
+    return f"raise it with {variable}={example} in the environment, or cosim validate {option}"
 
 
 class ArchiveRefused(Exception):
@@ -48,12 +87,12 @@ def inspect(path: str | Path, limits: ArchiveLimits = ArchiveLimits()) -> list[z
         entries = z.infolist()
     if len(entries) > limits.max_files:
         raise ArchiveRefused(f"{len(entries)} files in the archive, more than the limit of "
-                             f"{limits.max_files} (--max-files raises it)")
+                             f"{limits.max_files} ({raise_hint('max_files')})")
     total = sum(e.file_size for e in entries)
     if total > limits.max_extracted:
         raise ArchiveRefused(f"the archive ({_size(path.stat().st_size)}) expands to "
                              f"{_size(total)}, more than the limit of "
-                             f"{_size(limits.max_extracted)} (--max-extracted-mb raises it)")
+                             f"{_size(limits.max_extracted)} ({raise_hint('max_extracted')})")
     for e in entries:
         name = e.filename
         parts = PurePosixPath(name).parts
@@ -64,7 +103,7 @@ def inspect(path: str | Path, limits: ArchiveLimits = ArchiveLimits()) -> list[z
         if name == "modelDescription.xml" and e.file_size > limits.max_model_description:
             raise ArchiveRefused(f"modelDescription.xml is {_size(e.file_size)}, more than the "
                                  f"limit of {_size(limits.max_model_description)} "
-                                 "(--max-model-description-mb raises it)")
+                                 f"({raise_hint('max_model_description')})")
     return entries
 
 
