@@ -9,8 +9,9 @@ import zipfile
 from pathlib import Path
 from typing import Any
 
-from fmpy import extract, read_model_description
+from fmpy import extract
 
+from cosim.run.master.fmi3 import read_model_description
 from cosim.run.master.unit import Unit
 from cosim.run.scenario import Scenario, ScenarioError
 
@@ -51,7 +52,7 @@ def warm_up(path: Path) -> None:
     """Extract ``path`` (once per process) and instantiate it once, so its bundled modules are
     imported (and shared by processes forked afterwards); failures are left to the runs."""
     try:
-        md = read_model_description(str(path))
+        md = read_model_description(path)
         unit = unit_class(md)("warm-up", path, extract_once(path), md)
         unit.instantiate()
         unit.free()
@@ -82,7 +83,7 @@ def read_fmu(sc: Scenario, instance: str, path: Path) -> Any:
     if "modelDescription.xml" not in names:
         raise ScenarioError(f"{where}: not an FMU (no modelDescription.xml in the archive)")
     try:
-        md = read_model_description(str(path))
+        md = read_model_description(path)
     except Exception as err:  # noqa: BLE001 - fmpy raises many kinds on a bad XML
         raise ScenarioError(f"{where}: modelDescription.xml is not valid: {err}") from None
     version = str(md.fmiVersion)
