@@ -229,9 +229,15 @@ def clocked_description(fmi3_xml: bytes, clock: str) -> tuple[bytes, tuple[str, 
             raise ValueError(f"{root.get('modelName')}: a periodic Clock ticks at the "
                              f"parameter {SAMPLE_TIME}, which this model does not have")
         defines.append(f"ATO_SAMPLE_TIME_VR={int(sample.get('valueReference'))}L")
+    clocked_vrs = set()
     for v in variables:
         if v.get("causality") == "output" and v.get("variability") == "discrete":
             v.set("clocks", str(CLOCK_VR))
+            clocked_vrs.add(v.get("valueReference"))
+    structure = root.find("ModelStructure")
+    for unknown in structure.findall("InitialUnknown"):  # not clocked ones (sec. 2.4.8)
+        if unknown.get("valueReference") in clocked_vrs:
+            structure.remove(unknown)
     position = list(variables).index(by_name["time"]) + 1
     variables.insert(position, ET.Element("Clock", {
         "name": CLOCK_NAME, "valueReference": str(CLOCK_VR),

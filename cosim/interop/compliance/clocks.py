@@ -603,12 +603,15 @@ def _check_clock_calls(host: _Host3, ctx: dict) -> list[Problem]:
         return result
 
     terminate, next_event = event_mode({vr for vr, t in following.items() if t == now})
+    in_event = True  # Event Mode; a step without an event stays in Step Mode (sec. 4.2)
     while now < stop and not terminate and count < MAX_ACTIVATIONS and not run.problems:
         due_times = [t for t in following.values() if t is not None and t > now]
         if next_event is not None and Fraction(next_event) > now:
             due_times.append(Fraction(next_event))
         end = min([now + Fraction(host.h), stop, *due_times])
-        inst.must("enterStepMode")
+        if in_event:
+            inst.must("enterStepMode")
+            in_event = False
         event, terminate, _, _ = inst.must("doStep", currentCommunicationPoint=float(now),
                                            communicationStepSize=float(end - now))
         now = end
@@ -617,6 +620,7 @@ def _check_clock_calls(host: _Host3, ctx: dict) -> list[Problem]:
                              and abs(float(now) - next_event) <= 1e-9 * max(1.0, float(now))):
             continue
         inst.must("enterEventMode")
+        in_event = True
         terminate, next_event = event_mode(due)
     errors = [m for s, m in inst.messages if s >= 3]
     if not terminate:
