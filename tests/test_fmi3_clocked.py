@@ -47,8 +47,10 @@ def _run(name: str, interval: float, controller: Path | None) -> dict:
     sc = load_scenario(name, ["simulation.fmi_version=3",
                               f"simulation.output_interval={interval}"])
     sc.record = [*sc.record, *TIMING]
+    ctrl = sc.components["controller"]  # its events from the FMU alone, not [fmus] sample_time
+    ctrl.parameters["sample_time"], ctrl.sample_time = ctrl.sample_time, None
     if controller is not None:
-        sc.components["controller"].fmu_path = controller
+        ctrl.fmu_path = controller
     frame = run_scenario(sc, build=False, plot=False).frame
     return {c: frame[c].tolist() for c in frame.columns
             if not any(fnmatch.fnmatch(c, p) for p in IRREPRODUCIBLE)}

@@ -28,7 +28,8 @@ sampled or self-triggered controller is its FMI 3 build with one input Clock ``s
 ``nextEventTime``: ``periodic``, intervalVariability ``fixed``, interval its parameter
 ``sample_time`` (fmi3GetIntervalDecimal in Initialization Mode), shift 0; ``countdown``: the
 FMU gives the time to its next event in Event Mode (self-triggered controllers). Its
-outputs are clocked by it (``clocks``). The front is compiled with the Clock's settings
+outputs are clocked by it (``clocks``); it does not return early from doStep (the importer
+steps to the ticks). The front is compiled with the Clock's settings
 (``front/fmi3_front.c``, ATO_CLOCK_VR); the model is unchanged.
 """
 
@@ -238,6 +239,7 @@ def clocked_description(fmi3_xml: bytes, clock: str) -> tuple[bytes, tuple[str, 
     for unknown in structure.findall("InitialUnknown"):  # not clocked ones (sec. 2.4.8)
         if unknown.get("valueReference") in clocked_vrs:
             structure.remove(unknown)
+    root.find("CoSimulation").set("mightReturnEarlyFromDoStep", "false")  # ticks, not returns
     position = list(variables).index(by_name["time"]) + 1
     variables.insert(position, ET.Element("Clock", {
         "name": CLOCK_NAME, "valueReference": str(CLOCK_VR),

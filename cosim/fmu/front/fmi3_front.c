@@ -40,9 +40,11 @@
  *    fmi3IntervalChanged and the time from now to the backend's next event once per new next
  *    event, fmi3IntervalUnchanged otherwise.
  *
- * fmi3UpdateDiscreteStates then says nextEventTimeDefined = false and fmi3DoStep never sets
- * eventHandlingNeeded (the importer ticks the Clock); the backend is unchanged, so the events
- * are those of the unclocked build when the Clock ticks at its announced times.
+ * fmi3UpdateDiscreteStates then says nextEventTimeDefined = false and fmi3DoStep neither sets
+ * eventHandlingNeeded nor returns early (mightReturnEarlyFromDoStep = false: the importer ticks
+ * the Clock, and a step over a tick runs that event with the inputs held, as the FMI 2 twin
+ * does); the backend is unchanged, so the events are those of the unclocked build when the
+ * Clock ticks at its announced times.
  */
 #define _GNU_SOURCE
 #include <math.h>
@@ -585,7 +587,7 @@ fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunicationPoi
         if (announced < 0)
             return fmi3Error;
         if (announced && ticks(te) > ticks(t) && ticks(te) < ticks(end) &&
-            f->earlyReturnAllowed) {
+            f->earlyReturnAllowed && !CLOCKED) {
             /* FMI 3.0 sec. 4.2, fmi3DoStep: return early at the event the FMU announced */
             h = te - t;
             end = te;

@@ -29,7 +29,9 @@
   ticks once that long after. Times are exact fractions until rounded to the FMU's double. A
   tick is an event where the master activates the clock (fmi3SetClock) before
   fmi3UpdateDiscreteStates. ``changing`` and ``triggered`` input clocks are refused. Output
-  clocks are the FMU's business (their ticks come as ``eventHandlingNeeded``).
+  clocks are the FMU's business (their ticks come as ``eventHandlingNeeded``). An FMU with
+  input clocks is scheduled by their ticks alone: an output named ``next_event_time`` (the
+  FMI 2 convention of :mod:`cosim.run.master.unit`) is not read as its next event.
 """
 
 from __future__ import annotations
@@ -258,6 +260,8 @@ class Fmi3Unit(Unit):
         self.input_clocks = [c for c in (clock_attributes(path).values()
                                          if any(v.type == "Clock" for v in md.modelVariables)
                                          else ()) if c.causality == "input"]
+        if self.input_clocks:  # its events are its Clocks' ticks, not a next_event_time output
+            self.has_next_event_output = False
         self.event_mode = False
         self._in_event = False
         self._needs_event = False
