@@ -863,12 +863,22 @@ fmi3Status fmi3GetClock(fmi3Instance instance, const fmi3ValueReference vr[], si
     return nvr == 0 ? fmi3OK : unsupported(instance, "fmi3GetClock", "no clocks");
 }
 
+static int is_clock(fmi3ValueReference vr)
+{
+#if ATO_CLOCK_VR >= 0
+    return vr == (fmi3ValueReference)ATO_CLOCK_VR;
+#else
+    (void)vr;
+    return 0;
+#endif
+}
+
 /* every value reference of vr[] is the input Clock's, else fmi3Error with a message */
 static int clock_references(Front* f, const char* call, const fmi3ValueReference vr[],
                             size_t nvr)
 {
     for (size_t i = 0; i < nvr; i++) {
-        if (!CLOCKED || (long)vr[i] != ATO_CLOCK_VR) {
+        if (!is_clock(vr[i])) {
             front_log(f, fmi3Error, "logStatusError", "%s: %s: value reference %u is not a "
                       "Clock of this FMU (FMI 3.0 sec. 2.2.8)", f->name, call, (unsigned)vr[i]);
             return 0;
