@@ -62,13 +62,12 @@ def build(names: Annotated[list[str] | None, typer.Argument(
               "or countdown (the FMU gives the time to its next event: self-triggered "
               "controllers)")] = None) -> None:
     """Build FMUs into fmus/ (all, or the named ones)."""
-    from cosim.fmu.build import build_fmus, resolve
+    from cosim.fmu.build import build_clocked, build_fmus, resolve
     from cosim.fmu.fmi3 import Fmi3BuildError
 
     versions = _fmi_versions(fmi)
     if clock is not None:
-        _build_clocked(names, clock, fmi, native)
-        return
+        _check_clock(names, clock, fmi, native)
     if native:
         _build_native(names, versions)
         return
@@ -78,36 +77,27 @@ def build(names: Annotated[list[str] | None, typer.Argument(
         _fail(str(err))
     for spec in specs:
         try:
-            paths = build_fmus(spec, fmi_versions=versions)
+            paths = ([build_clocked(spec, clock)] if clock is not None
+                     else build_fmus(spec, fmi_versions=versions))
         except Fmi3BuildError as err:
             _fail(f"{spec.identifier}: {err}")
+        except ValueError as err:  # a model without a clocked build (the message names it)
+            _fail(str(err))
         for path in paths:
             shown = path.relative_to(Path.cwd()) if path.is_relative_to(Path.cwd()) else path
-            out.print(f"built {shown}  ({spec.description})", highlight=False, markup=False)
+            kind = f", {clock} Clock" if clock is not None else ""
+            out.print(f"built {shown}  ({spec.description}{kind})", highlight=False,
+                      markup=False)
 
 
-def _build_clocked(names: list[str] | None, clock: str, fmi: str, native: bool) -> None:
-    from cosim.fmu.build import build_clocked, resolve
-    from cosim.fmu.fmi3 import CLOCK_VARIABILITY, Fmi3BuildError
+def _check_clock(names: list[str] | None, clock: str, fmi: str, native: bool) -> None:
+    from cosim.fmu.fmi3 import CLOCK_VARIABILITY
 
     if clock not in CLOCK_VARIABILITY:
         _fail(f"--clock {clock!r}: expected one of {', '.join(CLOCK_VARIABILITY)}")
     if fmi != "3" or native or not names:
         _fail(f"--clock {clock}: clocked builds are FMI 3 builds of named Python controllers: "
               "give --fmi 3 and the controllers' identifiers, without --native")
-    try:
-        specs = resolve(names)
-    except ValueError as err:
-        _fail(str(err))
-    for spec in specs:
-        try:
-            path = build_clocked(spec, clock)
-        except Fmi3BuildError as err:
-            _fail(f"{spec.identifier}: {err}")
-        except ValueError as err:  # names the model
-            _fail(str(err))
-        out.print(f"built {path}  ({spec.description}, {clock} Clock)", highlight=False,
-                  markup=False)
 
 
 def _build_native(names: list[str] | None, versions: tuple[int, ...]) -> list[Path]:
