@@ -932,8 +932,10 @@ fmi3Status fmi3SetFMUState(fmi3Instance instance, fmi3FMUState FMUState)
     if (!backend->set_fmu_state)
         return missing(f, "fmi3SetFMUState");
     fmi3Status s = forwarded(f, backend->set_fmu_state(f->inner, st->inner));
-    if (s <= fmi3Warning)
+    if (s <= fmi3Warning) {
         f->time = st->time;
+        f->clock_given = 0; /* countdown: the next event is given again (the same tick) */
+    }
     return s;
 }
 
