@@ -57,12 +57,20 @@ def build(names: Annotated[list[str] | None, typer.Argument(
               "--native", help="build the native C FMUs (no Python needed) into fmus/native/ "
               "instead, of the FMI versions --fmi names: Linux with gcc, Windows too when "
               "x86_64-w64-mingw32-gcc is installed; the named ones or all that have a C "
-              "model")] = False) -> None:
+              "model")] = False,
+          clock: Annotated[str | None, typer.Option(
+              "--clock", help="with --fmi 3, the named controllers with an input Clock "
+              "activating their events instead of nextEventTime, into "
+              "fmus/fmi3/<clock>/<id>.fmu: periodic (a fixed Clock of interval sample_time) "
+              "or countdown (the FMU gives the time to its next event: self-triggered "
+              "controllers)")] = None) -> None:
     """Build FMUs into fmus/ (all, or the named ones)."""
-    from cosim.fmu.build import build_fmus, resolve
+    from cosim.fmu.build import build_clocked, build_fmus, resolve
     from cosim.fmu.fmi3 import Fmi3BuildError
 
     versions = _fmi_versions(fmi)
+    if clock is not None:
+        _check_clock(names, clock, fmi, native)
     if native:
         _build_native(names, versions)
         return
@@ -72,12 +80,27 @@ def build(names: Annotated[list[str] | None, typer.Argument(
         _fail(str(err))
     for spec in specs:
         try:
-            paths = build_fmus(spec, fmi_versions=versions)
+            paths = ([build_clocked(spec, clock)] if clock is not None
+                     else build_fmus(spec, fmi_versions=versions))
         except Fmi3BuildError as err:
             _fail(f"{spec.identifier}: {err}")
+        except ValueError as err:  # a model without a clocked build (the message names it)
+            _fail(str(err))
         for path in paths:
             shown = path.relative_to(Path.cwd()) if path.is_relative_to(Path.cwd()) else path
-            out.print(f"built {shown}  ({spec.description})", highlight=False, markup=False)
+            kind = f", {clock} Clock" if clock is not None else ""
+            out.print(f"built {shown}  ({spec.description}{kind})", highlight=False,
+                      markup=False)
+
+
+def _check_clock(names: list[str] | None, clock: str, fmi: str, native: bool) -> None:
+    from cosim.fmu.fmi3 import CLOCK_VARIABILITY
+
+    if clock not in CLOCK_VARIABILITY:
+        _fail(f"--clock {clock!r}: expected one of {', '.join(CLOCK_VARIABILITY)}")
+    if fmi != "3" or native or not names:
+        _fail(f"--clock {clock}: clocked builds are FMI 3 builds of named Python controllers: "
+              "give --fmi 3 and the controllers' identifiers, without --native")
 
 
 def _build_native(names: list[str] | None, versions: tuple[int, ...]) -> list[Path]:

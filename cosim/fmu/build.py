@@ -21,7 +21,9 @@ fmi2Fatal for a rejected call as fmi2Error. Without gcc the FMU keeps pythonfmu'
 warning says so). The win64 binary is pythonfmu's.
 
 The FMI 3.0 build of an FMU (``fmus/fmi3/<identifier>.fmu``) is derived from the same FMI 2
-build by :mod:`cosim.fmu.fmi3` (an FMI 3 front in C in front of the shim; needs gcc).
+build by :mod:`cosim.fmu.fmi3` (an FMI 3 front in C in front of the shim; needs gcc); a
+controller's clocked FMI 3 build (``fmus/fmi3/<clock>/<identifier>.fmu``, ``clock`` periodic
+or countdown) from its FMI 3 build (:func:`cosim.fmu.fmi3.clocked`).
 """
 
 from __future__ import annotations
@@ -125,6 +127,10 @@ class FmuSpec:
     def path_fmi3(self) -> Path:
         """The FMI 3.0 build (:mod:`cosim.fmu.fmi3`)."""
         return FMU_DIR / "fmi3" / f"{self.identifier}.fmu"
+
+    def path_clocked(self, clock: str) -> Path:
+        """The FMI 3.0 build with an input Clock of kind ``clock`` (:func:`build_clocked`)."""
+        return FMU_DIR / "fmi3" / clock / f"{self.identifier}.fmu"
 
     def path_for(self, fmi_version: int) -> Path:
         """The build of FMI version ``fmi_version`` (2 or 3)."""
@@ -432,6 +438,19 @@ def build_fmus(spec: FmuSpec, dest: Path = FMU_DIR, fmi_versions: tuple[int, ...
             os.replace(staged, final)  # atomic: a reader never sees a half-written FMU
             finals.append(final)
     return finals
+
+
+def build_clocked(spec: FmuSpec, clock: str) -> Path:
+    """Build the controller's FMI 3 build (when stale) and its ``clock`` build
+    (:func:`cosim.fmu.fmi3.clocked`) at :meth:`FmuSpec.path_clocked`; its path."""
+    from cosim.fmu import fmi3
+
+    build_stale([spec], fmi_version=3)
+    final = spec.path_clocked(clock)
+    staged = final.with_name(f".{final.name}.{os.getpid()}.tmp")
+    fmi3.clocked(spec.path_fmi3, clock, staged)
+    os.replace(staged, final)  # atomic: a reader never sees a half-written FMU
+    return final
 
 
 def is_intact(path: Path) -> bool:

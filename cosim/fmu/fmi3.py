@@ -21,6 +21,16 @@ returns early there when allowed); every model declares
 carried over: the front is compiled here, for x86-64 Linux only. The native FMUs' FMI 3 builds
 (:mod:`cosim.fmu.native_build`) link the same front with a C model instead, for Linux and
 Windows, with :func:`model_description` of their FMI 2 modelDescription.
+
+A clocked build (:func:`clocked`, ``cosim build --fmi 3 --clock periodic|countdown``) of a
+sampled or self-triggered controller is its FMI 3 build with one input Clock ``sample``
+(value reference :data:`CLOCK_VR`) that activates its events (FMI 3.0 sec. 2.2.8) in place of
+``nextEventTime``: ``periodic``, intervalVariability ``fixed``, interval its parameter
+``sample_time`` (fmi3GetIntervalDecimal in Initialization Mode), shift 0; ``countdown``: the
+FMU gives the time to its next event in Event Mode (self-triggered controllers). Its
+outputs are clocked by it (``clocks``); it does not return early from doStep (the importer
+steps to the ticks). The front is compiled with the Clock's settings
+(``front/fmi3_front.c``, ATO_CLOCK_VR); the model is unchanged.
 """
 
 from __future__ import annotations
@@ -41,6 +51,10 @@ PLATFORM = "x86_64-linux"
 EVENT_TIME_OUTPUT = "next_event_time"  # the controllers' announced next event (slave.py)
 TIME_VR = 2147483647  # the independent variable `time`: ATO_TIME_VR of front/ato_backend.h
 FMI2_SUFFIX = "_fmi2"  # <id>_fmi2.so: the FMI 2 binary (shim) the front's backend loads
+CLOCK_VR = TIME_VR - 1  # the input Clock `sample` of a clocked build
+CLOCK_NAME = "sample"
+CLOCK_VARIABILITY = {"periodic": "fixed", "countdown": "countdown"}  # build -> FMI 3 attribute
+SAMPLE_TIME = "sample_time"  # the controllers' sample time parameter (s): the periodic interval
 
 _TYPES = {"Real": "Float64", "Integer": "Int32", "Boolean": "Boolean", "String": "String",
           "Enumeration": "Enumeration"}
@@ -158,12 +172,13 @@ def _gcc(args: list[str], what: str) -> None:
         raise Fmi3BuildError(f"gcc failed on {what}: {done.stderr.strip()[-2000:]}")
 
 
-def front_binary(event_vr: int) -> Path:
-    """The front linked with its dlopen backend for event-time value reference ``event_vr``
-    (-1: none): the front compiled once per process, the small backend once per value
-    reference."""
-    if event_vr in _front_cache:
-        return _front_cache[event_vr]
+def front_binary(event_vr: int, defines: tuple[str, ...] = ()) -> Path:
+    """The front (compiled with the C macros ``defines``, ``NAME=value``: a clocked build's)
+    linked with its dlopen backend for event-time value reference ``event_vr`` (-1: none):
+    each front compiled once per process, the small backend once per value reference."""
+    key = (event_vr, defines)
+    if key in _front_cache:
+        return _front_cache[key]
     gcc = shutil.which("gcc")
     if not sys.platform.startswith("linux"):
         raise Fmi3BuildError(f"FMI 3 builds are made on Linux only (this is {sys.platform})")
@@ -178,17 +193,81 @@ def front_binary(event_vr: int) -> Path:
         _front_dir.append(Path(tempfile.mkdtemp(prefix="atocosim_front_")))
         atexit.register(shutil.rmtree, _front_dir[0], True)
     folder = _front_dir[0]
-    front = folder / "fmi3_front.o"
+    variant = "_".join(d.replace("=", "") for d in defines)
+    front = folder / f"fmi3_front{'_' + variant if variant else ''}.o"
     if not front.is_file():
-        _gcc([gcc, "-c", *flags, "-o", str(front), str(FRONT_SOURCES[0])], "the FMI 3 front")
+        _gcc([gcc, "-c", *flags, *(f"-D{d}" for d in defines), "-o", str(front),
+              str(FRONT_SOURCES[0])], "the FMI 3 front")
     label = event_vr if event_vr >= 0 else "none"
     backend = folder / f"backend_{label}.o"
     _gcc([gcc, "-c", *flags, f"-DATO_EVENT_TIME_VR={int(event_vr)}", "-o", str(backend),
           str(FRONT_SOURCES[1])], "the FMI 3 front's backend")
-    out = folder / f"fmi3_front_{label}.so"
+    out = folder / f"fmi3_front_{label}{'_' + variant if variant else ''}.so"
     _gcc([gcc, "-shared", "-o", str(out), str(front), str(backend), "-ldl", "-lm"],
          "linking the FMI 3 front")
-    _front_cache[event_vr] = out
+    _front_cache[key] = out
+    return out
+
+
+def clocked_description(fmi3_xml: bytes, clock: str) -> tuple[bytes, tuple[str, ...]]:
+    """The modelDescription.xml of the ``clock`` (``periodic`` or ``countdown``) build of the
+    FMI 3 controller whose modelDescription is ``fmi3_xml``, and the front's C macros for it; a
+    model that is no sampled controller (no ``next_event_time`` output, or no ``sample_time``
+    parameter for a periodic Clock) is a ValueError."""
+    if clock not in CLOCK_VARIABILITY:
+        raise ValueError(f"clock {clock!r}: expected one of {list(CLOCK_VARIABILITY)}")
+    root = ET.fromstring(fmi3_xml)
+    variables = root.find("ModelVariables")
+    by_name = {v.get("name"): v for v in variables}
+    event = by_name.get(EVENT_TIME_OUTPUT)
+    if event is None or event.get("causality") != "output":
+        raise ValueError(f"{root.get('modelName')}: a {clock} Clock activates a sampled "
+                         f"controller's events: this model has no {EVENT_TIME_OUTPUT} output")
+    defines = [f"ATO_CLOCK_VR={CLOCK_VR}L", f"ATO_CLOCK_COUNTDOWN={int(clock == 'countdown')}"]
+    if clock == "periodic":
+        sample = by_name.get(SAMPLE_TIME)
+        if sample is None or sample.get("causality") != "parameter":
+            raise ValueError(f"{root.get('modelName')}: a periodic Clock ticks at the "
+                             f"parameter {SAMPLE_TIME}, which this model does not have")
+        defines.append(f"ATO_SAMPLE_TIME_VR={int(sample.get('valueReference'))}L")
+    clocked_vrs = set()
+    for v in variables:
+        if v.get("causality") == "output" and v.get("variability") == "discrete":
+            v.set("clocks", str(CLOCK_VR))
+            clocked_vrs.add(v.get("valueReference"))
+    structure = root.find("ModelStructure")
+    for unknown in structure.findall("InitialUnknown"):  # not clocked ones (sec. 2.4.8)
+        if unknown.get("valueReference") in clocked_vrs:
+            structure.remove(unknown)
+    root.find("CoSimulation").set("mightReturnEarlyFromDoStep", "false")  # ticks, not returns
+    position = list(variables).index(by_name["time"]) + 1
+    variables.insert(position, ET.Element("Clock", {
+        "name": CLOCK_NAME, "valueReference": str(CLOCK_VR),
+        "description": "activates the controller's events (its sample instants)",
+        "causality": "input", "variability": "discrete",
+        "intervalVariability": CLOCK_VARIABILITY[clock]}))
+    ET.indent(root, "\t")
+    text = ET.tostring(root, encoding="unicode")
+    return ('<?xml version="1.0" encoding="UTF-8"?>\n' + text + "\n").encode(), tuple(defines)
+
+
+def clocked(fmi3_fmu: Path, clock: str, out: Path) -> Path:
+    """Write the ``clock`` build ``out`` (:func:`clocked_description`) of the FMI 3 build
+    ``fmi3_fmu`` of a Python controller: its modelDescription and front replaced."""
+    with zipfile.ZipFile(fmi3_fmu) as zin:
+        xml = zin.read("modelDescription.xml")
+        md, defines = clocked_description(xml, clock)
+        identifier = ET.fromstring(xml).find("CoSimulation").get("modelIdentifier")
+        event_vr = int(next(v.get("valueReference") for v in ET.fromstring(xml).iter()
+                            if v.get("name") == EVENT_TIME_OUTPUT))
+        front = front_binary(event_vr, defines)
+        target = f"binaries/{PLATFORM}/{identifier}.so"
+        out.parent.mkdir(parents=True, exist_ok=True)
+        with zipfile.ZipFile(out, "w", zipfile.ZIP_DEFLATED) as zout:
+            for item in zin.infolist():
+                data = (md if item.filename == "modelDescription.xml" else
+                        front.read_bytes() if item.filename == target else zin.read(item))
+                zout.writestr(item, data)
     return out
 
 

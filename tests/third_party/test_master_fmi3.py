@@ -176,6 +176,7 @@ def _clock_run(c_fmus3, tmp_path, kind: str, parameters: dict) -> tuple:
 @pytest.mark.parametrize("kind, parameters", [
     ("constant", {"interval": 0.7, "shift": 0.5}),  # ignored: the modelDescription's hold
     ("fixed", {"interval": 0.3, "shift": 0.1}),
+    ("typed", {"interval": 0.7, "shift": 0.5}),  # constant, interval from its ClockType
 ])
 def test_periodic_clocks_tick_at_shift_plus_multiples_of_the_interval(c_fmus3, tmp_path, kind,
                                                                       parameters):
@@ -230,6 +231,26 @@ def test_a_clock_attribute_that_is_not_valid_names_the_variable(c_fmus3, tmp_pat
                                               r"intervalDecimal = '-0.3': must be > 0"):
         clock_attributes(path)
     assert clock_attributes(c_fmus3["ClockedConstant3"])[10].interval == Fraction(0.3)
+
+
+def test_a_clock_takes_the_attributes_of_its_clock_type_it_does_not_declare(c_fmus3, tmp_path):
+    """ClockedTyped3's clock: intervalDecimal from its ClockType, its own shiftDecimal over the
+    type's (FMI 3.0 sec. 2.4.4); a declaredType with no ClockType names the type."""
+    from cosim.run.master.fmi3 import clock_attributes
+
+    tick = clock_attributes(c_fmus3["ClockedTyped3"])[10]
+    assert (tick.interval_variability, tick.interval, tick.shift) == (
+        "constant", Fraction(0.3), Fraction(0.1))
+    path = tmp_path / "untyped.fmu"
+    with zipfile.ZipFile(c_fmus3["ClockedTyped3"]) as src, zipfile.ZipFile(path, "w") as out:
+        for item in src.namelist():
+            data = src.read(item)
+            if item == "modelDescription.xml":
+                data = data.replace(b'declaredType="Tick"', b'declaredType="Tock"')
+            out.writestr(item, data)
+    with pytest.raises(SimulationError, match=r"untyped.fmu: modelDescription.xml: Clock 'tick' "
+                                              r"declaredType = 'Tock': no ClockType"):
+        clock_attributes(path)
 
 
 def test_unset_inputs_keep_their_start_values(c_fmus3, tmp_path, caplog):

@@ -12,7 +12,7 @@ import hashlib
 import shutil
 import subprocess
 import zipfile
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from xml.etree.ElementTree import Element, SubElement, indent, tostring
 
@@ -35,6 +35,7 @@ class Spec3:
     stop_time: float = 1.0
     step: float = 0.125
     scheduled: bool = False  # a Scheduled Execution FMU (fmi3_scheduled.c), not co-simulation
+    clock_types: dict[str, dict[str, str]] = field(default_factory=dict)  # ClockType attributes
 
 
 def _start(kind: str) -> str:
@@ -105,6 +106,12 @@ CLOCKED3 = {kind: clocked(f"Clocked{kind.title()}3", kind, **attributes) for kin
     ("constant", {"intervalDecimal": "0.3", "shiftDecimal": "0.1"}),
     ("fixed", {}), ("tunable", {}))}
 CLOCKED3["fraction"] = clocked("ClockedFraction3", "fixed", supportsFraction="true")
+# a constant clock with its interval from its ClockType "Tick" and its own shift (0.1 s)
+# overriding the type's (0.5 s): ticks as ClockedConstant3's
+CLOCKED3["typed"] = replace(
+    clocked("ClockedTyped3", "constant", declaredType="Tick", shiftDecimal="0.1"),
+    clock_types={"Tick": {"intervalVariability": "constant", "intervalDecimal": "0.3",
+                          "shiftDecimal": "0.5"}})
 
 # the Scheduled Execution FMU of fmi3_scheduled.c: partitions fast, slow, alarm, kick
 TASKS3 = Spec3("Tasks3", "TASKS", (
@@ -153,8 +160,12 @@ def model_description(spec: Spec3) -> bytes:
         defs = SubElement(root, "UnitDefinitions")
         for unit in units:
             SubElement(SubElement(defs, "Unit", {"name": unit}), "BaseUnit", {"s": "1"})
-    if any(v[1] == "Enumeration" for v in spec.variables):
+    enumerations = any(v[1] == "Enumeration" for v in spec.variables)
+    if enumerations or spec.clock_types:
         types = SubElement(root, "TypeDefinitions")
+        for name, attributes in spec.clock_types.items():
+            SubElement(types, "ClockType", {"name": name, **attributes})
+    if enumerations:
         enum = SubElement(types, "EnumerationType", {"name": "Mode"})
         for value, item in enumerate(MODE_ITEMS, start=1):
             SubElement(enum, "Item", {"name": item, "value": str(value)})

@@ -27,6 +27,24 @@
  *
  * The front keeps no model data; it answers the independent variable `time` (ATO_TIME_VR)
  * itself, and its FMU state is the backend's with that time. It has no Python in it.
+ *
+ * Clocked builds (`cosim build --fmi 3 --clock periodic|countdown`, cosim/fmu/fmi3.py) compile
+ * it with ATO_CLOCK_VR, the value reference of one input Clock that activates the model's
+ * events (FMI 3.0 sec. 2.2.8, 4.1.3), instead of announcing them as nextEventTime:
+ *
+ *  - ATO_CLOCK_COUNTDOWN = 0: a `fixed` periodic Clock of interval the Real parameter of value
+ *    reference ATO_SAMPLE_TIME_VR (fmi3GetIntervalDecimal in Initialization Mode; shift 0:
+ *    the first tick at the start time); an event whose next one is not one interval later (a
+ *    self-triggered model) is an error;
+ *  - ATO_CLOCK_COUNTDOWN = 1: a `countdown` Clock: in Event Mode fmi3GetIntervalDecimal gives
+ *    fmi3IntervalChanged and the time from now to the backend's next event once per new next
+ *    event, fmi3IntervalUnchanged otherwise.
+ *
+ * fmi3UpdateDiscreteStates then says nextEventTimeDefined = false and fmi3DoStep neither sets
+ * eventHandlingNeeded nor returns early (mightReturnEarlyFromDoStep = false: the importer ticks
+ * the Clock, and a step over a tick runs that event with the inputs held, as the FMI 2 twin
+ * does); the backend is unchanged, so the events are those of the unclocked build when the
+ * Clock ticks at its announced times.
  */
 #define _GNU_SOURCE
 #include <math.h>
@@ -38,6 +56,17 @@
 #include "ato_backend.h"
 #include "fmi3Functions.h"
 #include "instance_registry.h"
+
+#ifndef ATO_CLOCK_VR
+#define ATO_CLOCK_VR -1L /* the input Clock's value reference; -1: no clock (see above) */
+#endif
+#ifndef ATO_CLOCK_COUNTDOWN
+#define ATO_CLOCK_COUNTDOWN 0
+#endif
+#ifndef ATO_SAMPLE_TIME_VR
+#define ATO_SAMPLE_TIME_VR -1L
+#endif
+#define CLOCKED (ATO_CLOCK_VR >= 0)
 
 typedef enum {
     MODE_INSTANTIATED,
@@ -69,6 +98,8 @@ typedef struct {
     fmi3Boolean earlyReturnAllowed;
     Mode mode;
     double time; /* the independent variable (ATO_TIME_VR), s */
+    double clock_next; /* countdown: the tick last given by fmi3GetIntervalDecimal, s */
+    int clock_given;   /* countdown: clock_next holds a tick */
     char name[256];
 } Front;
 
@@ -411,6 +442,7 @@ fmi3Status fmi3EnterInitializationMode(fmi3Instance instance, fmi3Boolean tolera
     if (s2 <= fmi3Warning) {
         f->mode = MODE_INITIALIZATION;
         f->time = startTime;
+        f->clock_given = 0;
     }
     return s2 > s ? s2 : s;
 }
@@ -450,6 +482,9 @@ fmi3Status fmi3EnterStepMode(fmi3Instance instance)
     f->mode = MODE_STEP;
     return fmi3OK;
 }
+
+static long long ticks(double t);
+static int clock_interval(Front* f, double* interval, fmi3IntervalQualifier* qualifier);
 
 /* the backend's announced next event time (s); 0 when it has none, -1 on error */
 static int next_event(Front* f, double* t)
@@ -492,6 +527,21 @@ fmi3Status fmi3UpdateDiscreteStates(fmi3Instance instance,
         *nominalsOfContinuousStatesChanged = fmi3False;
     if (valuesOfContinuousStatesChanged)
         *valuesOfContinuousStatesChanged = fmi3False;
+    if (CLOCKED && !ATO_CLOCK_COUNTDOWN && found) {
+        double period = 0.0;
+        fmi3IntervalQualifier qualifier;
+        if (!clock_interval(f, &period, &qualifier))
+            return fmi3Error;
+        if (ticks(t) > ticks(f->time) + ticks(period)) {
+            front_log(f, fmi3Error, "logStatusError", "%s: the model's next event at t = %.17g s "
+                      "is more than one interval (%.17g s) of its periodic Clock after t = "
+                      "%.17g s: a self-triggered model takes a countdown Clock", f->name, t,
+                      period, f->time);
+            return fmi3Error;
+        }
+    }
+    if (CLOCKED) /* the input Clock activates the events, not nextEventTime */
+        found = 0;
     if (nextEventTimeDefined)
         *nextEventTimeDefined = found ? fmi3True : fmi3False;
     if (nextEventTime)
@@ -537,7 +587,7 @@ fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunicationPoi
         if (announced < 0)
             return fmi3Error;
         if (announced && ticks(te) > ticks(t) && ticks(te) < ticks(end) &&
-            f->earlyReturnAllowed) {
+            f->earlyReturnAllowed && !CLOCKED) {
             /* FMI 3.0 sec. 4.2, fmi3DoStep: return early at the event the FMU announced */
             h = te - t;
             end = te;
@@ -548,7 +598,7 @@ fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunicationPoi
         f->inner, t, h, noSetFMUStatePriorToCurrentCommunicationPoint ? fmi2True : fmi2False));
     if (s > fmi3Warning)
         return s;
-    if (announced && f->eventModeUsed) {
+    if (announced && f->eventModeUsed && !CLOCKED) {
         if (ticks(te) == ticks(end)) {
             event_at_end = 1;
         } else if (ticks(te) < ticks(end)) {
@@ -813,11 +863,38 @@ fmi3Status fmi3GetClock(fmi3Instance instance, const fmi3ValueReference vr[], si
     return nvr == 0 ? fmi3OK : unsupported(instance, "fmi3GetClock", "no clocks");
 }
 
+static int is_clock(fmi3ValueReference vr)
+{
+#if ATO_CLOCK_VR >= 0
+    return vr == (fmi3ValueReference)ATO_CLOCK_VR;
+#else
+    (void)vr;
+    return 0;
+#endif
+}
+
+/* every value reference of vr[] is the input Clock's, else fmi3Error with a message */
+static int clock_references(Front* f, const char* call, const fmi3ValueReference vr[],
+                            size_t nvr)
+{
+    for (size_t i = 0; i < nvr; i++) {
+        if (!is_clock(vr[i])) {
+            front_log(f, fmi3Error, "logStatusError", "%s: %s: value reference %u is not a "
+                      "Clock of this FMU (FMI 3.0 sec. 2.2.8)", f->name, call, (unsigned)vr[i]);
+            return 0;
+        }
+    }
+    return 1;
+}
+
 fmi3Status fmi3SetClock(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr,
                         const fmi3Clock values[])
 {
-    (void)vr, (void)values;
-    return nvr == 0 ? fmi3OK : unsupported(instance, "fmi3SetClock", "no clocks");
+    Front* f = (Front*)instance;
+    (void)values; /* the backend's events run at their times; the tick only says when */
+    if (!allowed(f, "fmi3SetClock", ALLOW_EVENT))
+        return fmi3Error;
+    return clock_references(f, "fmi3SetClock", vr, nvr) ? fmi3OK : fmi3Error;
 }
 
 /* -- FMU state (the backend's; FMI 3.0 sec. 2.2) ----------------------------------------------- */
@@ -855,8 +932,10 @@ fmi3Status fmi3SetFMUState(fmi3Instance instance, fmi3FMUState FMUState)
     if (!backend->set_fmu_state)
         return missing(f, "fmi3SetFMUState");
     fmi3Status s = forwarded(f, backend->set_fmu_state(f->inner, st->inner));
-    if (s <= fmi3Warning)
+    if (s <= fmi3Warning) {
         f->time = st->time;
+        f->clock_given = 0; /* countdown: the next event is given again (the same tick) */
+    }
     return s;
 }
 
@@ -986,12 +1065,55 @@ fmi3Status fmi3ExitConfigurationMode(fmi3Instance instance)
     return unsupported(instance, "fmi3ExitConfigurationMode", "no structural parameters");
 }
 
+/* the Clock's interval (s) and qualifier now (FMI 3.0 sec. 2.2.8.2, fmi3GetIntervalDecimal);
+ * 0 on error (logged) */
+static int clock_interval(Front* f, double* interval, fmi3IntervalQualifier* qualifier)
+{
+    *interval = 0.0;
+    *qualifier = fmi3IntervalUnchanged;
+    if (!ATO_CLOCK_COUNTDOWN) { /* fixed: the sample time, given in Initialization Mode */
+        fmi2ValueReference vr = (fmi2ValueReference)ATO_SAMPLE_TIME_VR;
+        fmi2Status s = backend->get_real ? backend->get_real(f->inner, &vr, 1, interval)
+                                         : fmi2Error;
+        if (s > fmi2Warning) {
+            forwarded(f, s);
+            return 0;
+        }
+        if (f->mode == MODE_INITIALIZATION)
+            *qualifier = fmi3IntervalChanged;
+        return 1;
+    }
+    if (f->mode != MODE_EVENT) { /* countdown: known in Event Mode */
+        *qualifier = fmi3IntervalNotYetKnown;
+        return 1;
+    }
+    double te = 0.0;
+    int found = next_event(f, &te);
+    if (found < 0)
+        return 0;
+    if (found && te > f->time && !(f->clock_given && te == f->clock_next)) {
+        *interval = te - f->time;
+        *qualifier = fmi3IntervalChanged;
+        f->clock_next = te;
+        f->clock_given = 1;
+    }
+    return 1;
+}
+
 fmi3Status fmi3GetIntervalDecimal(fmi3Instance instance, const fmi3ValueReference vr[],
                                   size_t nvr, fmi3Float64 intervals[],
                                   fmi3IntervalQualifier qualifiers[])
 {
-    (void)vr, (void)intervals, (void)qualifiers;
-    return nvr == 0 ? fmi3OK : unsupported(instance, "fmi3GetIntervalDecimal", "no clocks");
+    Front* f = (Front*)instance;
+    if (nvr == 0)
+        return fmi3OK;
+    if (!allowed(f, "fmi3GetIntervalDecimal", ALLOW_INITIALIZATION | ALLOW_EVENT) ||
+        !clock_references(f, "fmi3GetIntervalDecimal", vr, nvr))
+        return fmi3Error;
+    for (size_t i = 0; i < nvr; i++)
+        if (!clock_interval(f, &intervals[i], &qualifiers[i]))
+            return fmi3Error;
+    return fmi3OK;
 }
 
 fmi3Status fmi3GetIntervalFraction(fmi3Instance instance, const fmi3ValueReference vr[],
@@ -1005,8 +1127,17 @@ fmi3Status fmi3GetIntervalFraction(fmi3Instance instance, const fmi3ValueReferen
 fmi3Status fmi3GetShiftDecimal(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr,
                                fmi3Float64 shifts[])
 {
-    (void)vr, (void)shifts;
-    return nvr == 0 ? fmi3OK : unsupported(instance, "fmi3GetShiftDecimal", "no clocks");
+    Front* f = (Front*)instance;
+    if (nvr == 0)
+        return fmi3OK;
+    if (ATO_CLOCK_COUNTDOWN)
+        return unsupported(instance, "fmi3GetShiftDecimal", "a countdown Clock has no shift");
+    if (!allowed(f, "fmi3GetShiftDecimal", ALLOW_INITIALIZATION | ALLOW_EVENT) ||
+        !clock_references(f, "fmi3GetShiftDecimal", vr, nvr))
+        return fmi3Error;
+    for (size_t i = 0; i < nvr; i++)
+        shifts[i] = 0.0; /* the first tick at the start time, the model's first event */
+    return fmi3OK;
 }
 
 fmi3Status fmi3GetShiftFraction(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr,

@@ -62,7 +62,14 @@ from fmpy.fmi3 import (
 from cosim.interop.compliance.common import NOTE, SKIPPED, Problem, _read_xml
 from cosim.interop.compliance.fmi3 import _Host3, _Instance3
 from cosim.run.master.errors import SimulationError
-from cosim.run.master.fmi3 import PERIODIC, ClockAttributes, _clock, clock_attributes
+from cosim.run.master.fmi3 import (
+    PERIODIC,
+    ClockAttributes,
+    _clock,
+    clock_attributes,
+    clock_types,
+    declared_attributes,
+)
 
 STATIC = "fmi3-clocks"
 SCHEDULED = "fmi3-scheduled-execution"
@@ -110,7 +117,7 @@ def clock_checks(path: Path) -> list[Problem]:
     node = root.find("ModelVariables")
     variables = list(node) if node is not None else []
     by_vr = {v.get("valueReference"): v for v in variables}
-    clock_types = {t.get("name"): t.attrib for t in root.iter("ClockType")}
+    types = clock_types(root)
     scheduled = root.find("ScheduledExecution") is not None
     problems: list[Problem] = []
 
@@ -121,8 +128,7 @@ def clock_checks(path: Path) -> list[Problem]:
     for var in variables:
         if var.tag == "Clock":
             clock_vrs.add(var.get("valueReference"))
-            attributes = {**clock_types.get(var.get("declaredType"), {}), **var.attrib}
-            _clock_rules(path, var, attributes, scheduled, bad)
+            _clock_rules(path, var, declared_attributes(types, var), scheduled, bad)
     for var in variables:
         _clocked_rules(var, by_vr, clock_vrs, bad)
     previous = [v.get("previous") for v in variables if v.get("previous") is not None]
@@ -597,12 +603,15 @@ def _check_clock_calls(host: _Host3, ctx: dict) -> list[Problem]:
         return result
 
     terminate, next_event = event_mode({vr for vr, t in following.items() if t == now})
+    in_event = True  # Event Mode; a step without an event stays in Step Mode (sec. 4.2)
     while now < stop and not terminate and count < MAX_ACTIVATIONS and not run.problems:
         due_times = [t for t in following.values() if t is not None and t > now]
         if next_event is not None and Fraction(next_event) > now:
             due_times.append(Fraction(next_event))
         end = min([now + Fraction(host.h), stop, *due_times])
-        inst.must("enterStepMode")
+        if in_event:
+            inst.must("enterStepMode")
+            in_event = False
         event, terminate, _, _ = inst.must("doStep", currentCommunicationPoint=float(now),
                                            communicationStepSize=float(end - now))
         now = end
@@ -611,6 +620,7 @@ def _check_clock_calls(host: _Host3, ctx: dict) -> list[Problem]:
                              and abs(float(now) - next_event) <= 1e-9 * max(1.0, float(now))):
             continue
         inst.must("enterEventMode")
+        in_event = True
         terminate, next_event = event_mode(due)
     errors = [m for s, m in inst.messages if s >= 3]
     if not terminate:

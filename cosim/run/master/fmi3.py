@@ -29,13 +29,16 @@
   ticks once that long after. Times are exact fractions until rounded to the FMU's double. A
   tick is an event where the master activates the clock (fmi3SetClock) before
   fmi3UpdateDiscreteStates. ``changing`` and ``triggered`` input clocks are refused. Output
-  clocks are the FMU's business (their ticks come as ``eventHandlingNeeded``).
+  clocks are the FMU's business (their ticks come as ``eventHandlingNeeded``). An FMU with
+  input clocks is scheduled by their ticks alone: an output named ``next_event_time`` (the
+  FMI 2 convention of :mod:`cosim.run.master.unit`) is not read as its next event.
 """
 
 from __future__ import annotations
 
 import copy
 import ctypes
+import io
 import math
 import zipfile
 from collections.abc import Callable
@@ -69,6 +72,7 @@ _WARNING, _DISCARD = 1, 2
 INTERVAL_VARIABILITIES = ("constant", "fixed", "tunable", "changing", "countdown", "triggered")
 PERIODIC = ("constant", "fixed", "tunable")
 ASKED = ("fixed", "tunable")  # interval and shift asked of the FMU
+TYPE_OWN = ("name", "description")  # a ClockType's attributes that are not its clocks'
 
 
 @dataclass(frozen=True)
@@ -90,13 +94,37 @@ class ClockAttributes:
 
 def clock_attributes(path: Path) -> dict[int, ClockAttributes]:
     """The Clock variables of the FMU at ``path`` by value reference, from its
-    modelDescription.xml; a value that is not valid is a :class:`SimulationError` naming the
-    file, the variable and the attribute."""
+    modelDescription.xml: a Clock with a ``declaredType`` takes the attributes of that
+    ``ClockType`` (TypeDefinitions) it does not declare itself (FMI 3.0 sec. 2.4.4: the
+    variable's attributes override its type's); a value that is not valid is a
+    :class:`SimulationError` naming the file, the variable and the attribute."""
     with zipfile.ZipFile(path) as archive:
         root = ElementTree.fromstring(archive.read("modelDescription.xml"))
-    clocks = [_clock(path, element.attrib)
-              for element in root.iterfind("ModelVariables/Clock")]
+    types = clock_types(root)
+    clocks = []
+    for element in root.iterfind("ModelVariables/Clock"):
+        declared = element.get("declaredType")
+        if declared is not None and declared not in types:
+            raise SimulationError(f"{path}: modelDescription.xml: Clock "
+                                  f"{element.get('name', '?')!r} declaredType = {declared!r}: "
+                                  f"no ClockType of that name in TypeDefinitions "
+                                  f"(ClockTypes: {sorted(types)})")
+        clocks.append(_clock(path, declared_attributes(types, element)))
     return {c.value_reference: c for c in clocks}
+
+
+def clock_types(root: ElementTree.Element) -> dict[str | None, dict[str, str]]:
+    """The ClockTypes of a modelDescription ``root`` by name: the attributes they give their
+    clocks (FMI 3.0 sec. 2.4.4)."""
+    return {t.get("name"): {k: v for k, v in t.attrib.items() if k not in TYPE_OWN}
+            for t in root.iterfind("TypeDefinitions/ClockType")}
+
+
+def declared_attributes(types: dict[str | None, dict[str, str]],
+                        clock: ElementTree.Element) -> dict[str, str]:
+    """The attributes of the Clock element ``clock``: its declared type's (from ``types``,
+    :func:`clock_types`) overridden by its own."""
+    return {**types.get(clock.get("declaredType"), {}), **clock.attrib}
 
 
 def _clock(path: Path, a: dict[str, str]) -> ClockAttributes:
@@ -145,6 +173,37 @@ def _clock(path: Path, a: dict[str, str]) -> ClockAttributes:
         raise bad("valueReference", "not an unsigned integer") from None
     return ClockAttributes(name, vr, a.get("causality", "local"), kind, interval, shift,
                            fraction == "true", number("priority", int, 0, False))
+
+
+def resolved_description(path: Path) -> io.BytesIO | None:
+    """An archive holding only the modelDescription.xml of the FMU at ``path`` with each Clock's
+    declared ClockType resolved (:func:`declared_attributes`, ``declaredType`` dropped), for
+    fmpy, which refuses (0.3.32) a Clock whose declaredType is a ClockType; None when the FMU
+    has no ClockType."""
+    with zipfile.ZipFile(path) as archive:
+        xml = archive.read("modelDescription.xml")
+    if b"ClockType" not in xml:
+        return None
+    root = ElementTree.fromstring(xml)
+    types = clock_types(root)
+    for clock in root.iterfind("ModelVariables/Clock"):
+        if clock.get("declaredType") in types:
+            attributes = declared_attributes(types, clock)
+            del attributes["declaredType"]
+            clock.attrib = attributes
+    resolved = io.BytesIO()
+    with zipfile.ZipFile(resolved, "w") as archive:
+        archive.writestr("modelDescription.xml", ElementTree.tostring(root))
+    return resolved
+
+
+def read_model_description(path: Path, **options: Any) -> Any:
+    """fmpy's modelDescription of the FMU at ``path`` (``options`` to
+    :func:`fmpy.read_model_description`), read from :func:`resolved_description` when the FMU
+    has ClockTypes."""
+    from fmpy import read_model_description as fmpy_read
+
+    return fmpy_read(resolved_description(path) or str(path), **options)
 
 
 def family_of(kind: str) -> str:
@@ -201,6 +260,8 @@ class Fmi3Unit(Unit):
         self.input_clocks = [c for c in (clock_attributes(path).values()
                                          if any(v.type == "Clock" for v in md.modelVariables)
                                          else ()) if c.causality == "input"]
+        if self.input_clocks:  # its events are its Clocks' ticks, not a next_event_time output
+            self.has_next_event_output = False
         self.event_mode = False
         self._in_event = False
         self._needs_event = False

@@ -9,9 +9,8 @@ import zipfile
 from pathlib import Path
 from typing import Any
 
-from fmpy import read_model_description
-
 from cosim.run.archive import ArchiveLimits, ArchiveRefused, extract, inspect
+from cosim.run.master.fmi3 import read_model_description
 from cosim.run.master.unit import Unit
 from cosim.run.scenario import Scenario, ScenarioError
 
@@ -59,7 +58,7 @@ def warm_up(path: Path) -> None:
     imported (and shared by processes forked afterwards); failures are left to the runs."""
     try:
         folder = extract_once(path)  # within the limits, before the XML is parsed
-        md = read_model_description(str(path))
+        md = read_model_description(path)
         unit = unit_class(md)("warm-up", path, folder, md)
         unit.instantiate()
         unit.free()
@@ -98,7 +97,7 @@ def read_fmu(sc: Scenario, instance: str, path: Path) -> Any:
     if "modelDescription.xml" not in names:
         raise ScenarioError(f"{where}: not an FMU (no modelDescription.xml in the archive)")
     try:
-        md = read_model_description(str(path))
+        md = read_model_description(path)
     except Exception as err:  # noqa: BLE001 - fmpy raises many kinds on a bad XML
         raise ScenarioError(f"{where}: modelDescription.xml is not valid: {err}") from None
     version = str(md.fmiVersion)
