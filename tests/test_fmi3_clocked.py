@@ -22,8 +22,8 @@ import pytest
 from cosim.fmu import fmi3
 from cosim.fmu.build import build_stale, catalog
 from cosim.interop.compliance import NOTE, Options, check_fmu, format_report, passed
-from cosim.run.master import run_scenario
 from cosim.run.scenario import load_scenario
+from cosim.run.simulate import run_scenario
 
 # clock -> (scenario, controller)
 CASES = {"periodic": ("seed000_stop_pid", "StopPid"),
