@@ -40,7 +40,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
 
-BASELINE = "8a1e303"  # the commit the campaigns are measured against (issue 40)
+BASELINE = "8a1e303"  # the default --baseline: the commit the campaigns are compared with
 ENTRIES = ("seed000", "seed004")
 SEEDS = 5  # K, report seeds per claim
 TARGET = 5.0  # baseline time / this tree's time (this tree at most a fifth of the baseline)
