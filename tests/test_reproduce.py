@@ -438,7 +438,13 @@ def test_redraw_makes_the_same_tables_claims_and_figures_from_the_record_alone(
     reproduce(str(path), out, workers=1, seeds=2, echo=False)
     made = {f: (out / f).read_bytes() for f in ("table.md", "table.csv", "claims.csv",
                                                 "claims.md", "speed.png",
-                                                "speed_ensemble.png")}
+                                                "speed_ensemble.png",
+                                                "speed_ensemble.svg")}
+    page_text = made["table.md"].decode()
+    # the ensemble figure (png shown, svg linked) follows its single run's figure
+    assert (page_text.index("(speed.png)") < page_text.index("(speed_ensemble.png)")
+            < page_text.index("[SVG](speed_ensemble.svg)"))
+    assert "over the claims' 2 report seeds" in page_text
     for f in made:
         (out / f).unlink()
 

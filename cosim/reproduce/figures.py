@@ -29,6 +29,16 @@ def figure_section(figure: Figure, frames: dict[str, Any], out: Path, plot_forma
     return figure_lines(title, written, out)
 
 
+def ensemble_lines(figure: Figure, written: list[Path], out: Path, seeds: int) -> list[str]:
+    """The page's lines of ``figure``'s ensemble figure (``written``: its png, then its svg),
+    placed under the single run's figure: the same runs over the claims' disturbance
+    ensemble of ``seeds`` report seeds, each run's median with its 5-95 % band
+    (:func:`cosim.run.figures.ensemble_figure_of`)."""
+    title = figure.title if figure.title is not None else figure.file
+    return ["", f"The same runs over the claims' {seeds} report seeds (median and 5-95 % band):",
+            *figure_lines(f"{title}, over {seeds} seeds", written, out)]
+
+
 def figure_lines(title: str, written: list[Path], out: Path) -> list[str]:
     """The page's lines of one figure drawn to ``written`` (paths under ``out``): the first
     shown as the image, each further one (its svg) linked under it by its format's name."""

@@ -26,7 +26,7 @@ from cosim.reproduce.entry import (
     entry_names,
     load_entry,
 )
-from cosim.reproduce.figures import figure_section, sweep_section
+from cosim.reproduce.figures import ensemble_lines, figure_section, sweep_section
 from cosim.reproduce.run import (
     figure_runs,
     merged_summaries,
@@ -124,18 +124,11 @@ def evaluate(entry: Entry, record: Record, out: Path, plot_format: str = "png") 
         singles += ["", derived_markdown(derived)]
     if ranked:
         singles += ["", ranking_markdown(ranked)]
-    drawn: list[str] = []
-    scenarios = run_scenarios(entry)
-    frames = {name: record.frame(series_name("run", name))
-              for name in figure_runs(entry, FIGURE_KINDS)}
-    for figure in entry.figures:
-        drawn += figure_section(figure, frames, out, plot_format, scenarios)
-    for sweep in entry.sweeps:
-        drawn += sweep_section(sweep, record.result("sweep", sweep.name), out, plot_format)
     verdicts: list[str] = []
     claim_rows: list[dict[str, Any]] = []
+    spread: dict[str, list[Path]] = {}  # a figure's file -> its ensemble figure's paths
     if entry.claims:  # the verdicts lead the page; the figures and single runs follow
-        claim_rows, claims_text = write_claims(entry, record, out, plot_format)
+        claim_rows, claims_text, spread = write_claims(entry, record, out, plot_format)
         lead = headline_markdown(entry.statements, claim_rows)
         stated = (["#### The paper's statements", "",
                    statements_markdown(entry.statements, claim_rows), ""]
@@ -148,6 +141,16 @@ def evaluate(entry: Entry, record: Record, out: Path, plot_format: str = "png") 
             f", at report seed {v} (`{k}`: member 1 of the claims' disturbance ensemble)"
             for k, v in table_seed(entry).items())
             + " (the claims above are over the seed ensemble).", ""]
+    drawn: list[str] = []
+    scenarios = run_scenarios(entry)
+    frames = {name: record.frame(series_name("run", name))
+              for name in figure_runs(entry, FIGURE_KINDS)}
+    for figure in entry.figures:
+        drawn += figure_section(figure, frames, out, plot_format, scenarios)
+        if figure.file in spread:
+            drawn += ensemble_lines(figure, spread[figure.file], out, record.seeds)
+    for sweep in entry.sweeps:
+        drawn += sweep_section(sweep, record.result("sweep", sweep.name), out, plot_format)
     alias = f" (or `cosim reproduce {entry.alias}`)" if entry.alias else ""
     source = (f"Reproduced by `cosim reproduce {entry.name}`{alias} from the entry "
               f"`scenarios/reproduce/{entry.path.name}`. {builds_sentence(entry, record)}")
@@ -247,7 +250,7 @@ def reproduce_page(name: str, out_dir: str | Path | None = None, workers: int | 
     """Run one entry (:func:`simulate`), keep its record (``record/``,
     :mod:`cosim.run.record`) and write everything made of it (:func:`evaluate`): the tables,
     sweeps, figures (in ``plot_format``: png at 200 dpi with its svg beside it, svg or pdf;
-    the ensembles' figures without the svg) and, with claims,
+    each line figure also over the claims' disturbance ensemble) and, with claims,
     claims.csv/claims.md over ``seeds`` members (default 20; :mod:`cosim.run.ensemble`,
     ``rounding``: also the perturbed floating-point rerun); every batch of runs goes through
     :mod:`cosim.run.runner` (``workers``, ``scheduler``). With ``echo`` the tables are printed

@@ -524,10 +524,11 @@ def record_member_series(entry: Entry, out: Path, record: Record) -> None:
 
 
 def write_claims(entry: Entry, record: Record, out: Path, plot_format: str = "png"
-                 ) -> tuple[list[dict[str, Any]], str]:
+                 ) -> tuple[list[dict[str, Any]], str, dict[str, list[Path]]]:
     """Evaluate the entry's claims on ``record``'s members; write ``claims.csv``,
-    ``claims.md`` (and ``variants.*``) and the ensemble figures (``plot_format``) to ``out``;
-    returns the claims' rows and the markdown of claims.md below its title."""
+    ``claims.md`` (and ``variants.*``) and the ensemble figures (``plot_format``; a png with
+    its svg beside it) to ``out``; returns the claims' rows, the markdown of claims.md below
+    its title, and the paths of each ensemble figure by its figure's ``file``."""
     import pandas as pd
 
     from cosim.reproduce.series import run_scenarios
@@ -538,17 +539,19 @@ def write_claims(entry: Entry, record: Record, out: Path, plot_format: str = "pn
     rows = evaluate(entry, summaries, k, rounding)
     out.mkdir(parents=True, exist_ok=True)
     n = len(members(entry, "disturbance", k))
+    drawn: dict[str, list[Path]] = {}
     for figure in entry.figures if n > 1 else []:
         if not figure.line_kind():
             continue
         runs = [r for r in figure.runs or entry.run_names()
                 if all(series_name("member", r, i) in record.series for i in range(n))]
         if runs:
-            draw_ensemble_figure(figure.spec(),
-                                 {r: [record.series[series_name("member", r, i)]
-                                      for i in range(n)] for r in runs},
-                                 out / f"{Path(figure.file).stem}_ensemble.{plot_format}",
-                                 run_scenarios(entry))
+            drawn[figure.file] = draw_ensemble_figure(
+                figure.spec(),
+                {r: [record.series[series_name("member", r, i)] for i in range(n)]
+                 for r in runs},
+                out / f"{Path(figure.file).stem}_ensemble.{plot_format}", run_scenarios(entry),
+                vector=True)
     pd.DataFrame(rows).to_csv(out / "claims.csv", index=False)
     host = host_text([record.results[ident] for ident, job in record.jobs.items()
                       if job.kind == "member" and job.key[1] == "repeat"])
@@ -560,7 +563,7 @@ def write_claims(entry: Entry, record: Record, out: Path, plot_format: str = "pn
         text += ("\n#### The claims under each variant\n\n"
                  + variants_markdown(entry, rows, var_rows) + "\n")
     (out / "claims.md").write_text(f"## Claims of {entry.title}\n\n" + text)
-    return rows, text
+    return rows, text, drawn
 
 
 def verdict_summary(rows: list[dict[str, Any]], k: int) -> str:

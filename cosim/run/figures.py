@@ -452,10 +452,12 @@ def figure_columns(spec: dict[str, Any], scenario: Any, columns: list[str]) -> s
 
 
 def draw_ensemble_figure(spec: dict[str, Any], frames: dict[str, list[Any]], path: Path,
-                         scenarios: dict[str, Any] | None = None) -> None:
+                         scenarios: dict[str, Any] | None = None, vector: bool = False
+                         ) -> list[Path]:
     """:func:`ensemble_figure_of` the members' recorded series (run name -> one frame per
-    member), saved to ``path`` (png at 200 dpi, svg or pdf by its suffix: :func:`save_figure`)."""
-    save_figure(ensemble_figure_of(spec, frames, scenarios or {}), path)
+    member), saved to ``path`` (png at 200 dpi, svg or pdf by its suffix) and, with
+    ``vector``, as svg beside a png (:func:`save_figure`); the paths written."""
+    return save_figure(ensemble_figure_of(spec, frames, scenarios or {}), path, vector)
 
 
 def ensemble_figure_of(spec: dict[str, Any], frames: dict[str, list[Any]],
