@@ -201,3 +201,28 @@ def test_a_nan_output_is_a_warning_naming_the_variable_and_time(hostile_fmus, tm
                           plot=False)
     assert result.summary["warnings"] == [
         "h.y is nan from t = 0.25 s on (7 of 9 recorded points are NaN or infinite)"]
+
+
+def test_a_sweep_calls_a_third_party_fmu_only_in_its_workers(hostile_fmus, tmp_path):
+    """The sweep's warm-up (before its workers fork) only extracts an FMU that is not one of
+    the package's Python builds: one that blocks in fmi2Instantiate stops its point at the
+    time limit, in a worker, and the sweep ends (with the warm-up calling it, the sweep's own
+    process would block)."""
+    import pandas as pd
+
+    out = tmp_path / "sweep"
+    proc = cosim("sweep", str(scenario(tmp_path, hostile_fmus["BlockInInstantiate"])), "--set",
+                 "simulation.stop_time=1", "--workers", "1", "--time-limit", "0.5", "--out",
+                 str(out), "--no-plot")
+    try:
+        proc.communicate(timeout=BOUND_S)
+    except subprocess.TimeoutExpired:
+        for child in psutil.Process(proc.pid).children(recursive=True):
+            child.kill()
+        proc.kill()
+        proc.communicate()
+        raise AssertionError(f"the sweep did not end within {BOUND_S} s") from None
+    [row] = pd.read_csv(out / "sweep.csv").to_dict("records")
+    assert row["status"] == "failed"
+    assert row["error"].startswith("stopped after its time limit of 0.5 s: FMU h in "
+                                   "fmi2Instantiate"), row["error"]

@@ -9,6 +9,7 @@ import zipfile
 from pathlib import Path
 from typing import Any
 
+from cosim.fmu.build import FMU_DIR
 from cosim.run.archive import ArchiveLimits, ArchiveRefused, extract, inspect
 from cosim.run.master.fmi3 import read_model_description
 from cosim.run.master.unit import Unit
@@ -53,11 +54,24 @@ def unit_class(md: Any) -> type[Unit]:
     return Fmi2Unit
 
 
+def own_python_build(path: Path, folder: str | Path) -> bool:
+    """Whether the FMU file ``path`` (extracted into ``folder``) is one of this package's
+    Python builds: a file of the package's FMU folder (:data:`cosim.fmu.build.FMU_DIR`) whose
+    binary is pythonfmu's (``resources/slavemodule.txt``), i.e. code of this package."""
+    return (Path(path).resolve().is_relative_to(FMU_DIR.resolve())
+            and (Path(folder) / "resources" / "slavemodule.txt").is_file())
+
+
 def warm_up(path: Path) -> None:
-    """Extract ``path`` (once per process) and instantiate it once, so its bundled modules are
-    imported (and shared by processes forked afterwards); failures are left to the runs."""
+    """Extract ``path`` (once per process) and, for one of this package's Python builds
+    (:func:`own_python_build`), instantiate it once, so its bundled modules are imported (and
+    shared by processes forked afterwards). Any other FMU (native or third-party) is only
+    extracted: its code runs in the workers alone, where a crash or hang ends one child and
+    not the run (:mod:`cosim.run.isolation`). Failures are left to the runs."""
     try:
         folder = extract_once(path)  # within the limits, before the XML is parsed
+        if not own_python_build(path, folder):
+            return
         md = read_model_description(path)
         unit = unit_class(md)("warm-up", path, folder, md)
         unit.instantiate()
