@@ -63,6 +63,16 @@ def test_nominal_values_from_scenario_then_fmu(built_fmus):
         nominal_values("seed000_stop_rmpc", ["train.mass"])
 
 
+def test_nominal_values_read_the_fmu_within_the_archive_limits(built_fmus, monkeypatch):
+    """A start value is read from the FMU only after its archive passed the limits (here a
+    modelDescription limit of about 1 KiB, which every real modelDescription exceeds)."""
+    monkeypatch.setenv("COSIM_MAX_MODEL_DESCRIPTION_MB", "0.001")
+    assert nominal_values("seed000_stop_rmpc", ["plant.mass"]) == {"plant.mass": 490000.0}
+    with pytest.raises(ValueError, match=r"\[fmus\.plant\] fmu = .*modelDescription\.xml is "
+                                         r".* more than the limit of 1\.02 KiB"):
+        nominal_values("seed000_stop_rmpc", ["plant.grade_scale"])
+
+
 def test_summarize_counts_the_window_and_infeasible():
     frame = pd.DataFrame({"scenario": ["a"] * 3, "controller.N": [5] * 3,
                           "stop_error_m": [0.1, -0.6, 0.2], "controller_executions": [10, 20, 30],

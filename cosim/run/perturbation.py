@@ -19,8 +19,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from fmpy import read_model_description
 
+from cosim.run.master.loading import read_fmu
 from cosim.run.scenario import ScenarioError, load_scenario
 
 
@@ -89,7 +89,7 @@ def nominal_values(scenario: str | Path, keys: Sequence[str]) -> dict[str, float
             out[key] = float(comp.parameters[name])
             continue
         if comp_name not in starts:
-            md = read_model_description(str(comp.fmu_path))
+            md = read_fmu(sc, comp_name, comp.fmu_path)  # within the archive limits
             starts[comp_name] = {v.name: v.start for v in md.modelVariables}
         if name not in starts[comp_name]:
             raise ScenarioError(f"{sc.path}: --perturb {key}: {comp.fmu} has no variable "
