@@ -34,8 +34,9 @@ from typing import Any
 import pandas as pd
 
 from cosim.run.columns import column_info
+from cosim.run.figures.run import draw_run
 from cosim.run.master import ProgressFn, RunResult
-from cosim.run.results import PLOT_FORMATS, UNITS_FILE, draw_run, write_results
+from cosim.run.results import PLOT_FORMATS, UNITS_FILE, write_results
 from cosim.run.scenario import SCENARIO_DIR, Scenario, load_scenario
 from cosim.run.simulate import ensure_built, run_scenario
 

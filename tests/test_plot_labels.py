@@ -7,7 +7,7 @@ from __future__ import annotations
 import pytest
 
 from cosim.run.columns import display_unit, variable_info, variable_unit
-from cosim.run.results import format_stop_error
+from cosim.run.figures.run import format_stop_error
 from cosim.run.scenario import load_scenario
 
 
@@ -26,7 +26,7 @@ def test_stop_error_text_is_never_negative_zero_and_keeps_two_digits(error):
     """Below 1 m: the number read back is within half its last digit of the error in cm,
     written to 1 mm from 1 mm up and with two significant digits below (down to the finest
     decimal written), and signed only when it is not zero."""
-    from cosim.run.results import MAX_CM_DECIMALS
+    from cosim.run.figures.run import MAX_CM_DECIMALS
 
     text = format_stop_error(error)
     number = text.removesuffix(" cm")
@@ -54,7 +54,7 @@ def _figure_of(result, monkeypatch, tmp_path):
     """The matplotlib figure plot_run draws for ``result`` (captured at savefig)."""
     from matplotlib.figure import Figure
 
-    from cosim.run.results import plot_run
+    from cosim.run.figures.run import plot_run
 
     drawn = []
     real = Figure.savefig
@@ -130,7 +130,7 @@ def test_run_figure_reads_as_a_paper_figure(rsmpc_run):
     controller's v_ref) drawn as steps, the measured speed as a line; no offset notation."""
     import matplotlib.pyplot as plt
 
-    from cosim.run.results import draw_run
+    from cosim.run.figures.run import draw_run
 
     fig = draw_run(rsmpc_run)
     fig.canvas.draw()
@@ -171,7 +171,7 @@ def test_run_figure_draws_measured_solid_references_continuous_and_the_error(rsm
     import numpy as np
 
     from cosim.run.figures import reference_curve
-    from cosim.run.results import draw_run
+    from cosim.run.figures.run import draw_run
 
     fig = draw_run(rsmpc_run)
     main, error, twin = fig.axes
@@ -205,7 +205,7 @@ def test_long_command_label_stays_clear_of_the_title():
     import numpy as np
     import pandas as pd
 
-    from cosim.run.results import draw_run
+    from cosim.run.figures.run import draw_run
 
     command = "controller.locomotive force demand (> 0 traction, < 0 electric brake) (kN)"
     s = np.linspace(0.0, 20000.0, 400)
@@ -253,7 +253,7 @@ def test_plot_format_and_resolution(rsmpc_run, tmp_path, fmt):
 
 
 def test_sweep_keys_are_named_by_their_declarations(built_fmus):
-    from cosim.run.sweep import key_labels
+    from cosim.run.figures.sweep import key_labels
 
     sc = load_scenario("seed000_stop_rmpc")
     text, unit = variable_info(sc, "controller.N")
@@ -269,7 +269,7 @@ def test_sweep_axes_fit_the_data(errors_m, zoomed):
     import matplotlib.pyplot as plt
     import pandas as pd
 
-    from cosim.run.sweep import draw_sweep
+    from cosim.run.figures.sweep import draw_sweep
 
     frame = pd.DataFrame({"scenario": "s", "controller.N": [3, 4, 5], "stop_error_m": errors_m,
                           "command_switches": [10, 9, 8], "controller_executions": [30, 20, 10]})
@@ -300,7 +300,7 @@ def test_perturbed_boxes_are_not_collapsed(monkeypatch, tmp_path):
     import pandas as pd
     from matplotlib.figure import Figure
 
-    from cosim.run.perturb import plot_perturbed
+    from cosim.run.figures.perturb import plot_perturbed
 
     drawn = []
     real = Figure.savefig
@@ -504,7 +504,7 @@ def test_sweep_series_are_named_by_their_labels():
     import matplotlib.pyplot as plt
     import pandas as pd
 
-    from cosim.run.sweep import draw_sweep
+    from cosim.run.figures.sweep import draw_sweep
 
     frame = pd.DataFrame({"scenario": ["a_rmpc"] * 2 + ["a_rsmpc"] * 2, "controller.N": [3, 4] * 2,
                           "stop_error_m": [0.01, 0.02, 0.03, 0.01],

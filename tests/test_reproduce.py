@@ -345,7 +345,7 @@ def test_entry_set_overrides_every_run_and_sweep_and_a_runs_own_set_wins(
 def test_sweep_figure_plots_against_the_first_key_and_makes_no_series_of_held_keys() -> None:
     import pandas as pd
 
-    from cosim.run.sweep import draw_sweep
+    from cosim.run.figures.sweep import draw_sweep
 
     frame = pd.DataFrame({"scenario": ["a"] * 3 + ["b"] * 3, "controller.N": [3, 4, 5] * 2,
                           "plant.disturbance_amplitude": [0.02] * 6,

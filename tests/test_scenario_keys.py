@@ -49,7 +49,7 @@ def test_the_known_keys_are_those_the_metrics_read():
         if (isinstance(node, ast.Subscript) and getattr(node.value, "id", "") == "cfg"
                 and isinstance(node.slice, ast.Constant)):
             read.add(node.slice.value)
-    plotted = {"speed_limit"}  # drawn by cosim.run.results (the speed panel), not a metric
+    plotted = {"speed_limit"}  # drawn by cosim.run.figures.run (the speed panel), not a metric
     assert read | plotted == set(SUMMARY_KEYS)
 
 

@@ -56,8 +56,8 @@ def sweep_section(sweep: Sweep, stored: dict[str, Any], out: Path, plot_format: 
     ``stored`` (columns and rows); the page's lines of it."""
     import pandas as pd
 
+    from cosim.run.figures.sweep import draw_sweep, key_labels
     from cosim.run.scenario import load_scenario
-    from cosim.run.sweep import draw_sweep, key_labels
 
     frame = pd.DataFrame(stored["rows"], columns=stored["columns"])
     keys = list(sweep.grid)

@@ -47,6 +47,7 @@ from cosim.fmu.profiles import StoppingCurve
 KMH_PER_MPS = 3.6
 PAPERS = "cosim.papers"  # the registry of paper metrics (a layer above this one)
 STANDSTILL_MPS = 1e-3
+STOP_WINDOW_M = 0.5  # m, the ATO stop window +-50 cm
 
 
 def graded_allowance(v_ref: np.ndarray, limit: float, below: float,

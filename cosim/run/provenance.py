@@ -43,10 +43,11 @@ INPUTS_FILE = "inputs.sha256"  # in a reproduction's folder: the digest of the i
 NOT_INPUTS = {"cosim/run/docs_pages.py", "cosim/run/provenance.py"}
 # read a record and the entry only: tables, claims, figures, the page
 EVALUATION_ONLY = {"cosim/run/ensemble.py", "cosim/run/claims.py",
-                   "cosim/run/record.py", "cosim/run/console.py", "cosim/run/figures.py"}
+                   "cosim/run/record.py", "cosim/run/console.py"}
 # every module under these folders is evaluation-only: the reproduction (its entries, jobs,
-# tables, figures and page), whose jobs the record keeps and compares
-EVALUATION_ONLY_FOLDERS = ("cosim/reproduce/",)
+# tables, figures and page), whose jobs the record keeps and compares, and every figure
+# (a run's, a sweep's, an ensemble's, a paper's), which draws numbers and makes none
+EVALUATION_ONLY_FOLDERS = ("cosim/reproduce/", "cosim/run/figures/")
 
 
 def evaluation_only(relative: str) -> bool:

@@ -1,10 +1,13 @@
-"""Every figure of a reproduction drawn from recorded series: the runs' overlays and panels,
-the ensembles' medians and bands, and the helpers they share (labels and units from the
-declarations, the roles and drawing styles of measured and reference curves, legends
-right of the axes). It imports none of the runners; the runners and :mod:`cosim.reproduce`
-import it. Figures are matplotlib figures saved at
-:data:`PLOT_DPI` (png), or as svg / pdf by the file's suffix
-(:func:`save_figure`: the same bytes on every draw).
+"""Every figure, drawn from recorded series; it imports none of the runners, and the runners
+and :mod:`cosim.reproduce` import it. Here: a reproduction's figures (the runs' overlays and
+panels, the ensembles' medians and bands) and the helpers every figure shares (labels and
+units from the declarations, the roles and drawing styles of measured and reference curves,
+legends right of the axes); :mod:`cosim.run.figures.run` a run's figure (``plot.png``),
+:mod:`cosim.run.figures.sweep` a sweep's, :mod:`cosim.run.figures.perturb` a perturbation
+study's. Figures are matplotlib figures saved at :data:`PLOT_DPI` (png), or as svg / pdf by
+the file's suffix (:func:`save_figure`: the same bytes on every draw). No figure is an input
+of a record's simulation digest (:mod:`cosim.run.provenance`): a figure is redrawn from the
+record.
 """
 
 from __future__ import annotations
