@@ -109,7 +109,7 @@ def clock_attributes(path: Path) -> dict[int, ClockAttributes]:
                                   f"{element.get('name', '?')!r} declaredType = {declared!r}: "
                                   f"no ClockType of that name in TypeDefinitions "
                                   f"(ClockTypes: {sorted(types)})")
-        clocks.append(_clock(path, declared_attributes(types, element)))
+        clocks.append(read_clock(path, declared_attributes(types, element)))
     return {c.value_reference: c for c in clocks}
 
 
@@ -127,8 +127,14 @@ def declared_attributes(types: dict[str | None, dict[str, str]],
     return {**types.get(clock.get("declaredType"), {}), **clock.attrib}
 
 
-def _clock(path: Path, a: dict[str, str]) -> ClockAttributes:
-    """One Clock element's attributes ``a``, checked."""
+def read_clock(path: Path, a: dict[str, str]) -> ClockAttributes:
+    """The :class:`ClockAttributes` of one Clock element of the FMU at ``path``, from its
+    attributes ``a`` (its ClockType's resolved, :func:`declared_attributes`), checked against
+    FMI 3.0 sec. 2.4.7.4 (a known ``intervalVariability``; ``intervalDecimal`` and
+    ``resolution`` > 0, ``shiftDecimal`` >= 0; a ``constant`` clock declares its interval;
+    ``intervalCounter`` / ``shiftCounter`` need a ``resolution``; ``supportsFraction`` a
+    boolean; ``valueReference`` an unsigned integer; ``priority`` >= 0): a value that is not
+    valid is a :class:`SimulationError` naming the file, the clock and the attribute."""
     name = a.get("name", "?")
 
     def bad(key: str, why: str) -> SimulationError:
