@@ -29,7 +29,11 @@
   ticks once that long after. Times are exact fractions until rounded to the FMU's double. A
   tick is an event where the master activates the clock (fmi3SetClock) before
   fmi3UpdateDiscreteStates. ``changing`` and ``triggered`` input clocks are refused. Output
-  clocks are the FMU's business (their ticks come as ``eventHandlingNeeded``). An FMU with
+  clocks tick at the FMU's events (``eventHandlingNeeded`` or ``nextEventTime``); those wired
+  in the scenario to a triggered input clock of a Scheduled Execution FMU (FMI 3.0 sec.
+  2.2.9: "the timing could be given by a triggered output Clock ... of a connected FMU") are
+  asked with fmi3GetClock in Event Mode before each fmi3UpdateDiscreteStates (sec. 2.3.5: a
+  clock active during fmi3UpdateDiscreteStates is deactivated by the FMU itself). An FMU with
   input clocks is scheduled by their ticks alone: an output named ``next_event_time`` (the
   FMI 2 convention of :mod:`cosim.run.master.unit`) is not read as its next event.
 """
@@ -263,9 +267,15 @@ class Fmi3Unit(Unit):
         super().__init__(name, path, unzipdir, md)
         self.slave = CheckedSlave(self._open(md, unzipdir), self)
         self.can_event_mode = self._has_event_mode(md)
-        self.input_clocks = [c for c in (clock_attributes(path).values()
-                                         if any(v.type == "Clock" for v in md.modelVariables)
-                                         else ()) if c.causality == "input"]
+        clocks = (list(clock_attributes(path).values())
+                  if any(v.type == "Clock" for v in md.modelVariables) else [])
+        self.input_clocks = [c for c in clocks if c.causality == "input"]
+        self.output_clocks = [c for c in clocks if c.causality == "output"]
+        self.clock_names = {c.name: c for c in clocks}
+        # output clocks wired to other FMUs' input clocks (:meth:`watch_clock`), and those of
+        # them that ticked at the last event (:meth:`take_ticks`)
+        self.watched_clocks: list[int] = []
+        self.ticked: list[int] = []
         if self.input_clocks:  # its events are its Clocks' ticks, not a next_event_time output
             self.has_next_event_output = False
         self.event_mode = False
@@ -537,6 +547,7 @@ class Fmi3Unit(Unit):
         if ticking:
             self.slave.setClock(ticking, [True] * len(ticking))
         for _ in range(MAX_EVENT_ITERATIONS):
+            self._read_output_clocks()
             update, terminate, _, _, defined, nxt = self.slave.updateDiscreteStates()
             if terminate:
                 raise FmuTerminated(self, ticks)
@@ -558,6 +569,23 @@ class Fmi3Unit(Unit):
         self._ask_intervals(now, ticks)
         self.slave.enterStepMode()
         self._in_event = self._needs_event = False
+
+    def watch_clock(self, vr: int) -> None:
+        """Ask the output clock ``vr`` at every event (it is wired to an input clock)."""
+        if vr not in self.watched_clocks:
+            self.watched_clocks.append(vr)
+
+    def _read_output_clocks(self) -> None:
+        """fmi3GetClock of the watched output clocks: those active join ``self.ticked``."""
+        if self.watched_clocks:
+            values = self.slave.getClock(self.watched_clocks)
+            self.ticked += [vr for vr, on in zip(self.watched_clocks, values)
+                            if on and vr not in self.ticked]
+
+    def take_ticks(self) -> list[int]:
+        """The watched output clocks that ticked at the last event (each handed out once)."""
+        ticked, self.ticked = self.ticked, []
+        return ticked
 
     def _advance(self, ticking: list[int], ticks: int) -> None:
         """Each clock of ``ticking`` ticked at ``ticks``: a periodic one ticks next one interval

@@ -45,7 +45,7 @@ from fmpy.fmi3 import (
 
 from cosim.fmu.state import to_seconds
 from cosim.run.master.errors import SimulationError
-from cosim.run.master.fmi3 import Fmi3Unit, clock_attributes
+from cosim.run.master.fmi3 import Fmi3Unit
 
 
 class Fmi3ScheduledUnit(Fmi3Unit):
@@ -57,9 +57,6 @@ class Fmi3ScheduledUnit(Fmi3Unit):
 
     def __init__(self, name: str, path: Any, unzipdir: str, md: Any) -> None:
         super().__init__(name, path, unzipdir, md)
-        clocks = clock_attributes(path).values()
-        self.output_clocks = [c for c in clocks if c.causality == "output"]
-        self.clock_names = {c.name: c for c in clocks}
         self._priority = {}
         for clock in self.input_clocks:
             if clock.priority is None:
@@ -74,7 +71,8 @@ class Fmi3ScheduledUnit(Fmi3Unit):
         self.feedthrough = any(self.deps.values())
         self._triggered: set[int] = set()  # triggered input clocks due at this point
         self._updated = False  # the FMU called the clock-update callback
-        self.ticked: list[int] = []  # output clocks that ticked at the last activations
+        # every output clock is asked in Clock Update Mode (sec. 5.2.2)
+        self.watched_clocks = [c.value_reference for c in self.output_clocks]
         self.activations: list[tuple[str, float]] = []  # (input clock, activation time s)
 
     @staticmethod
@@ -151,13 +149,4 @@ class Fmi3ScheduledUnit(Fmi3Unit):
                 self._advance([vr], ticks)
             if self._updated:
                 due.update(self._ask_intervals(now, ticks, zero_allowed=True))
-                if self.output_clocks:
-                    values = self.slave.getClock([c.value_reference
-                                                  for c in self.output_clocks])
-                    self.ticked += [c.value_reference
-                                    for c, on in zip(self.output_clocks, values) if on]
-
-    def take_ticks(self) -> list[int]:
-        """The output clocks that ticked at the last activations (each handed out once)."""
-        ticked, self.ticked = self.ticked, []
-        return ticked
+                self._read_output_clocks()
