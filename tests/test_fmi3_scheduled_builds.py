@@ -13,6 +13,8 @@ next event is, both on the nanosecond grid of the controllers' own clocks,
 from __future__ import annotations
 
 import fnmatch
+import subprocess
+import sys
 import zipfile
 from pathlib import Path
 from xml.etree import ElementTree as ET
@@ -168,3 +170,37 @@ def test_scheduled_builds_pass_validate(scheduled_builds, clock):
     assert passed(problems), format_report(path, problems)
     (note,) = [p.message for p in problems if p.check == "fmi3-scheduled-execution"]
     assert f"{fmi3.CLOCK_NAME} at 0, 0.2, 0.4," in note
+
+
+@pytest.mark.slow
+def test_mixed_scenario_scheduled_co_simulation_and_fmi2():
+    """scenarios/mixed/seed000_stop_pid_scheduled.toml: the SE StopPid drives the FMI 3
+    co-simulation train, an FMI 2 StopPid reads the same measurements in shadow. The two
+    controllers give the same command at every output point (bit for bit: the same core, the
+    same inputs at the same instants), and the loop is seed000_stop_pid's, whose three FMUs
+    are all FMI 2: the same train positions and speeds."""
+    specs = catalog()
+    build_stale([specs["BrakeDelayTrain"], specs["StopPid"]], fmi_version=3)
+    build_stale([specs["BrakeDelayTrain"], specs["StopPid"]])
+    build_clocked(specs["StopPid"], "periodic", "se")
+    mixed = run_scenario(load_scenario(ROOT / "scenarios" / "mixed" /
+                                       "seed000_stop_pid_scheduled.toml"),
+                         build=False, plot=False)
+    plain = run_scenario(load_scenario("seed000_stop_pid"), build=False, plot=False).frame
+    frame = mixed.frame
+    assert mixed.executions["controller"] == mixed.executions["shadow"] > 1
+    assert frame["controller.brake_command"].tolist() == frame["shadow.brake_command"].tolist()
+    assert frame["controller.executions"].tolist() == frame["shadow.executions"].tolist()
+    for column in ("time", "plant.s", "plant.v", "controller.brake_command"):
+        assert frame[column].tolist() == plain[column].tolist(), column
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--interface", "se"], "--interface se: an interface of a clocked build: give --clock too"),
+    (["--clock", "periodic", "--interface", "me"], "--interface 'me': expected one of cs, se"),
+])
+def test_cli_interface_errors(args, message):
+    done = subprocess.run([sys.executable, "-m", "cosim.cli", "build", "StopPid", "--fmi", "3",
+                           *args], capture_output=True, text=True, timeout=120)
+    assert done.returncode != 0
+    assert message in " ".join((done.stdout + done.stderr).split())
