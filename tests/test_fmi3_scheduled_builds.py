@@ -204,3 +204,29 @@ def test_cli_interface_errors(args, message):
                            *args], capture_output=True, text=True, timeout=120)
     assert done.returncode != 0
     assert message in " ".join((done.stdout + done.stderr).split())
+
+
+def test_a_binary_refusing_the_event_mode_it_declares_is_named(tmp_path):
+    """The FMI 3 train's modelDescription edited to declare hasEventMode = true: the event
+    algorithm asks for Event Mode, the front refuses it (it has no events); the error names
+    the call, its arguments, the FMU's reason and the way out."""
+    spec = catalog()["BrakeDelayTrain"]
+    build_stale([spec, catalog()["StopPid"]], fmi_version=3)
+    fmu = tmp_path / "EventTrain.fmu"
+    with zipfile.ZipFile(spec.path_fmi3) as source, zipfile.ZipFile(fmu, "w") as out:
+        for item in source.infolist():
+            data = source.read(item)
+            if item.filename == "modelDescription.xml":
+                assert b'hasEventMode="true"' not in data
+                data = data.replace(b"<CoSimulation ", b'<CoSimulation hasEventMode="true" ')
+            out.writestr(item, data)
+    sc = load_scenario("seed000_stop_pid", ["simulation.fmi_version=3",
+                                            "simulation.stop_time=1"])
+    sc.components["plant"].fmu_path = fmu
+    with pytest.raises(SimulationError) as err:
+        Master(sc).run()
+    text = str(err.value)
+    assert "plant (" in text and "EventTrain.fmu): fmi3InstantiateCoSimulation(eventModeUsed " \
+        "= true, earlyReturnAllowed = true) returned NULL" in text
+    assert "but this FMU declares hasEventMode = false" in text  # the front's reason
+    assert 'declares hasEventMode = true' in text and 'algorithm = "fixed"' in text

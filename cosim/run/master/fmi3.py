@@ -58,7 +58,7 @@ from fmpy.fmi3 import FMU3Slave, fmi3IntervalChanged, fmi3IntervalNotYetKnown
 
 from cosim.fmu.state import to_seconds, to_ticks
 from cosim.run.fmi_types import enumeration_items
-from cosim.run.master.errors import FmuTerminated, SimulationError
+from cosim.run.master.errors import FmuCallError, FmuTerminated, SimulationError
 from cosim.run.master.fmi2 import CheckedSlave
 from cosim.run.master.unit import Unit, Variable
 
@@ -357,8 +357,26 @@ class Fmi3Unit(Unit):
         def log(env: Any, status: int, category: Any, message: Any) -> None:
             self.messages.append(message.decode("utf-8", "replace") if message else "")
 
-        self.slave.instantiate(loggingOn=True, eventModeUsed=self.event_mode,
-                               earlyReturnAllowed=self.event_mode, logMessage=log)
+        try:
+            self.slave.instantiate(loggingOn=True, eventModeUsed=self.event_mode,
+                                   earlyReturnAllowed=self.event_mode, logMessage=log)
+        except FmuCallError as err:  # fmpy: "Failed to instantiate FMU" (the FMU gave NULL)
+            raise SimulationError(self._refused_instantiation()) from err
+
+    def _refused_instantiation(self) -> str:
+        """Why fmi3InstantiateCoSimulation returned NULL: its arguments, the FMU's words, and,
+        with Event Mode asked for, that the modelDescription declares it (FMI 3.0 sec. 4.2:
+        eventModeUsed = true only if hasEventMode = true, which the binary then accepts)."""
+        text = (f"{self.name} ({self.path}): fmi3InstantiateCoSimulation(eventModeUsed = "
+                f"{str(self.event_mode).lower()}, earlyReturnAllowed = "
+                f"{str(self.event_mode).lower()}) returned NULL: "
+                f"{self.last_messages() or 'the FMU gave no reason'}")
+        if self.event_mode:
+            text += ("; its modelDescription.xml declares hasEventMode = true, so the event "
+                     "algorithm asked for Event Mode, which its binary refuses (FMI 3.0 sec. "
+                     "4.2: an FMU declaring hasEventMode accepts eventModeUsed = true): run it "
+                     "with algorithm = \"fixed\" (no Event Mode), or fix the FMU")
+        return text
 
     def enter_initialization(self, start: float, stop: float) -> None:
         self._start_ticks = to_ticks(start)
