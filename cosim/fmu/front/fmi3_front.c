@@ -334,6 +334,19 @@ static void host_error(fmi3InstanceEnvironment env, fmi3LogMessageCallback log,
         log(env, fmi3Error, "logStatusError", message);
 }
 
+/* NULL, with the reason (printf format ``fmt``) sent to the host's logMessage */
+static fmi3Instance refused(fmi3InstanceEnvironment env, fmi3LogMessageCallback log,
+                            const char* fmt, ...)
+{
+    char text[8192];
+    va_list args;
+    va_start(args, fmt);
+    vsnprintf(text, sizeof text, fmt, args);
+    va_end(args);
+    host_error(env, log, text);
+    return NULL;
+}
+
 /* a front with its backend instance, or NULL (the reason logged) */
 static Front* new_front(fmi3String instanceName, fmi3String instantiationToken,
                         fmi3String resourcePath, fmi3Boolean visible, fmi3Boolean loggingOn,
@@ -387,35 +400,24 @@ fmi3Instance fmi3InstantiateCoSimulation(
     size_t nRequiredIntermediateVariables, fmi3InstanceEnvironment instanceEnvironment,
     fmi3LogMessageCallback logMessage, fmi3IntermediateUpdateCallback intermediateUpdate)
 {
-    char text[8192];
+    const char* name = instanceName ? instanceName : "";
     (void)requiredIntermediateVariables;
     (void)intermediateUpdate;
-    if (ATO_SCHEDULED) {
-        snprintf(text, sizeof text, "%s: this FMU supports Scheduled Execution only (no "
-                 "CoSimulation element in its modelDescription.xml): instantiate it with "
-                 "fmi3InstantiateScheduledExecution", instanceName ? instanceName : "");
-        host_error(instanceEnvironment, logMessage, text);
-        return NULL;
-    }
-    if (!get_backend()) {
-        snprintf(text, sizeof text, "%s: %s", instanceName ? instanceName : "", backend_error);
-        host_error(instanceEnvironment, logMessage, text);
-        return NULL;
-    }
-    if (eventModeUsed && backend->event_time_vr < 0) {
-        snprintf(text, sizeof text, "%s: eventModeUsed = true, but this FMU declares "
-                 "hasEventMode = false (FMI 3.0 sec. 4.2, fmi3InstantiateCoSimulation)",
-                 instanceName ? instanceName : "");
-        host_error(instanceEnvironment, logMessage, text);
-        return NULL;
-    }
-    if (nRequiredIntermediateVariables > 0) {
-        snprintf(text, sizeof text, "%s: this FMU provides no intermediate update "
-                 "(providesIntermediateUpdate = false); requiredIntermediateVariables must be "
-                 "empty (FMI 3.0 sec. 4.2, fmi3InstantiateCoSimulation)", instanceName ? instanceName : "");
-        host_error(instanceEnvironment, logMessage, text);
-        return NULL;
-    }
+    if (ATO_SCHEDULED)
+        return refused(instanceEnvironment, logMessage, "%s: this FMU supports Scheduled "
+                       "Execution only (no CoSimulation element in its modelDescription.xml): "
+                       "instantiate it with fmi3InstantiateScheduledExecution", name);
+    if (!get_backend())
+        return refused(instanceEnvironment, logMessage, "%s: %s", name, backend_error);
+    if (eventModeUsed && backend->event_time_vr < 0)
+        return refused(instanceEnvironment, logMessage, "%s: eventModeUsed = true, but this "
+                       "FMU declares hasEventMode = false (FMI 3.0 sec. 4.2, "
+                       "fmi3InstantiateCoSimulation)", name);
+    if (nRequiredIntermediateVariables > 0)
+        return refused(instanceEnvironment, logMessage, "%s: this FMU provides no intermediate "
+                       "update (providesIntermediateUpdate = false); "
+                       "requiredIntermediateVariables must be empty (FMI 3.0 sec. 4.2, "
+                       "fmi3InstantiateCoSimulation)", name);
     return new_front(instanceName, instantiationToken, resourcePath, visible, loggingOn,
                      eventModeUsed, earlyReturnAllowed, instanceEnvironment, logMessage);
 }
@@ -443,27 +445,18 @@ fmi3Instance fmi3InstantiateScheduledExecution(
     fmi3LogMessageCallback logMessage, fmi3ClockUpdateCallback clockUpdate,
     fmi3LockPreemptionCallback lockPreemption, fmi3UnlockPreemptionCallback unlockPreemption)
 {
-    char text[8192];
+    const char* name = instanceName ? instanceName : "";
     (void)lockPreemption, (void)unlockPreemption;
-    if (!ATO_SCHEDULED) {
-        snprintf(text, sizeof text, "%s: this FMU supports co-simulation only (no "
-                 "ScheduledExecution element in its modelDescription.xml)",
-                 instanceName ? instanceName : "");
-        host_error(instanceEnvironment, logMessage, text);
-        return NULL;
-    }
-    if (!get_backend()) {
-        snprintf(text, sizeof text, "%s: %s", instanceName ? instanceName : "", backend_error);
-        host_error(instanceEnvironment, logMessage, text);
-        return NULL;
-    }
-    if (!clockUpdate) {
-        snprintf(text, sizeof text, "%s: fmi3InstantiateScheduledExecution: clockUpdate is "
-                 "NULL (FMI 3.0 sec. 5.2.1: the FMU calls it to announce its countdown Clock)",
-                 instanceName ? instanceName : "");
-        host_error(instanceEnvironment, logMessage, text);
-        return NULL;
-    }
+    if (!ATO_SCHEDULED)
+        return refused(instanceEnvironment, logMessage, "%s: this FMU supports co-simulation "
+                       "only (no ScheduledExecution element in its modelDescription.xml)",
+                       name);
+    if (!get_backend())
+        return refused(instanceEnvironment, logMessage, "%s: %s", name, backend_error);
+    if (!clockUpdate)
+        return refused(instanceEnvironment, logMessage, "%s: fmi3InstantiateScheduledExecution: "
+                       "clockUpdate is NULL (FMI 3.0 sec. 5.2.1: the FMU calls it to announce "
+                       "its countdown Clock)", name);
     Front* f = new_front(instanceName, instantiationToken, resourcePath, visible, loggingOn,
                          fmi3False, fmi3False, instanceEnvironment, logMessage);
     if (f)
