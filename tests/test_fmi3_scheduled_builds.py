@@ -164,7 +164,7 @@ def test_the_master_runs_a_scheduled_build_only_with_the_event_algorithm(schedul
 def test_scheduled_builds_pass_validate(scheduled_builds, clock):
     """``cosim validate`` (FMI 3: its Scheduled Execution checks) passes; the partition runs
     at the samples from the start time (the countdown Clock's first interval, asked in
-    Initialization Mode, is 0: FMI 3.0 sec. 2.2.9.4)."""
+    Initialization Mode, is 0: FMI 3.0 sec. 2.2.8.2, countdown Clock)."""
     path = scheduled_builds[clock]
     problems = check_fmu(path, Options(strict=False))
     assert passed(problems), format_report(path, problems)

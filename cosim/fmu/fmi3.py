@@ -37,7 +37,8 @@ Co-Simulation in Event Mode (FMI 3.0 sec. 4.1.3: the importer ticks the Clock wi
 fmi3SetClock in Event Mode), or ``se``, Scheduled Execution (FMI 3.0 chap. 5: the Clock is the
 input Clock of the model's one partition, which the importer runs with
 fmi3ActivateModelPartition at its ticks; the Clock declares ``priority`` 0, sec. 2.4.7.4; the
-countdown Clock's first tick is at the start time, sec. 2.2.9.4; the front's ATO_SCHEDULED).
+countdown Clock's first tick is at the start time, sec. 2.2.8.2 (countdown Clock); the front's
+ATO_SCHEDULED).
 The ``ScheduledExecution`` element keeps the attributes every interface has (sec. 2.4.1,
 fmi3InterfaceType) and offers no FMU state.
 """

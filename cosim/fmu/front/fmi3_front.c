@@ -62,7 +62,7 @@
  *     outputs are what fmi3Get* gives until the next activation;
  *  4. countdown: the front calls fmi3ClockUpdateCallback when the backend's next event is a
  *     new one, and fmi3GetIntervalDecimal gives the time to it (fmi3IntervalChanged, sec.
- *     2.2.9.4 and 5.2.2, Clock Update Mode); in Initialization Mode it gives 0 (the model's
+ *     2.2.8.2 and 5.2.2, Clock Update Mode); in Initialization Mode it gives 0 (the model's
  *     first event is at the start time: the first tick, t_0 = t_start + 0).
  *
  * The events, their inputs and their outputs are those of the co-simulation build whose
@@ -1262,7 +1262,8 @@ static int clock_interval(Front* f, double* interval, fmi3IntervalQualifier* qua
         return 1;
     }
     if (ATO_SCHEDULED && f->mode == MODE_INITIALIZATION) {
-        /* sec. 2.2.9.4: t_0 = t_start + interval; the model's first event is at the start */
+        /* sec. 2.2.8.2 (countdown Clock): t_0 = t_start + interval; the model's first event
+         * is at the start time */
         *qualifier = fmi3IntervalChanged;
         return 1;
     }

@@ -143,7 +143,7 @@ class Master:
         """Source unit -> its output clock (value reference) -> the (unit, input clock) it
         triggers, from the scenario's clock ``connections``: an output clock of an FMI 3 FMU
         (Scheduled Execution or co-simulation) to a ``triggered`` input clock of a Scheduled
-        Execution FMU (FMI 3.0 sec. 2.2.9, triggered input Clock; sec. 5.2.2)."""
+        Execution FMU (FMI 3.0 sec. 2.2.8.2, triggered input Clock; sec. 5.2.2)."""
         out: dict[Unit, dict[int, list[tuple[Unit, int]]]] = {}
         for c in connections:
             key = f"{self.scenario.path}: [connections] \"{c.dst}.{c.dst_var}\" = " \

@@ -31,7 +31,7 @@
   fmi3UpdateDiscreteStates. ``changing`` and ``triggered`` input clocks are refused. Output
   clocks tick at the FMU's events (``eventHandlingNeeded`` or ``nextEventTime``); those wired
   in the scenario to a triggered input clock of a Scheduled Execution FMU (FMI 3.0 sec.
-  2.2.9: "the timing could be given by a triggered output Clock ... of a connected FMU") are
+  2.2.8.2: "the timing could be given by a triggered output Clock ... of a connected FMU") are
   asked with fmi3GetClock in Event Mode before each fmi3UpdateDiscreteStates (sec. 2.3.5: a
   clock active during fmi3UpdateDiscreteStates is deactivated by the FMU itself). An FMU with
   input clocks is scheduled by their ticks alone: an output named ``next_event_time`` (the

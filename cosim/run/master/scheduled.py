@@ -8,12 +8,12 @@ ticks (sec. 5.2.2):
 * periodic clocks (``constant``, ``fixed``, ``tunable``) tick at start + shift + k interval,
   attributes and FMU queries as for co-simulation (:mod:`cosim.run.master.fmi3`);
 * a ``countdown`` clock ticks when the FMU says so: first where its interval asked in
-  Initialization Mode puts it (sec. 2.2.9.4: t_0 = t_start + interval, when the qualifier is
-  ``fmi3IntervalChanged``; none when ``fmi3IntervalNotYetKnown``), then after the FMU calls
-  the clock-update callback (sec. 5.2.1) from inside a partition, when the master asks its
-  interval (fmi3GetIntervalDecimal, qualifier ``fmi3IntervalChanged``): it ticks that long
-  after the activation that set it; interval 0 is a tick at the same time, after the
-  partition that set it;
+  Initialization Mode puts it (sec. 2.2.8.2, countdown Clock: t_0 = t_start + interval, when
+  the qualifier is ``fmi3IntervalChanged``; none when ``fmi3IntervalNotYetKnown``), then
+  after the FMU calls the clock-update callback (sec. 5.2.1) from inside a partition, when
+  the master asks its interval (fmi3GetIntervalDecimal, qualifier ``fmi3IntervalChanged``):
+  it ticks that long after the activation that set it; interval 0 is a tick at the same
+  time, after the partition that set it;
 * a ``triggered`` clock ticks where an output clock wired to it in the scenario's
   [connections] ticks (the master asks every output clock with fmi3GetClock after each
   clock-update callback).
@@ -114,7 +114,7 @@ class Fmi3ScheduledUnit(Fmi3Unit):
         self._in_event = False
         start = Fraction(to_seconds(self._start_ticks))
         for clock, (interval, qualifier) in zip(countdowns, first):
-            if qualifier == fmi3IntervalChanged:  # sec. 2.2.9.4: t_0 = t_start + interval
+            if qualifier == fmi3IntervalChanged:  # sec. 2.2.8.2: t_0 = t_start + interval
                 self._clock_next[clock.value_reference] = self._schedule(
                     float(start + interval), self._start_ticks - 1)
 
