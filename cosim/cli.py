@@ -63,14 +63,21 @@ def build(names: Annotated[list[str] | None, typer.Argument(
               "activating their events instead of nextEventTime, into "
               "fmus/fmi3/<clock>/<id>.fmu: periodic (a fixed Clock of interval sample_time) "
               "or countdown (the FMU gives the time to its next event: self-triggered "
-              "controllers)")] = None) -> None:
+              "controllers)")] = None,
+          interface: Annotated[str, typer.Option(
+              "--interface", help="with --clock, the clocked build's interface: cs "
+              "(Co-Simulation in Event Mode, the importer ticks the Clock) or se (Scheduled "
+              "Execution: the Clock's model partition, activated by the importer at its "
+              "ticks; into fmus/fmi3/se/<clock>/<id>.fmu)")] = "cs") -> None:
     """Build FMUs into fmus/ (all, or the named ones)."""
     from cosim.fmu.build import build_clocked, build_fmus, resolve
-    from cosim.fmu.fmi3 import Fmi3BuildError
+    from cosim.fmu.fmi3 import INTERFACES, Fmi3BuildError
 
     versions = _fmi_versions(fmi)
     if clock is not None:
-        _check_clock(names, clock, fmi, native)
+        _check_clock(names, clock, fmi, native, interface)
+    elif interface != "cs":
+        _fail(f"--interface {interface}: an interface of a clocked build: give --clock too")
     if native:
         _build_native(names, versions)
         return
@@ -80,7 +87,7 @@ def build(names: Annotated[list[str] | None, typer.Argument(
         _fail(str(err))
     for spec in specs:
         try:
-            paths = ([build_clocked(spec, clock)] if clock is not None
+            paths = ([build_clocked(spec, clock, interface)] if clock is not None
                      else build_fmus(spec, fmi_versions=versions))
         except Fmi3BuildError as err:
             _fail(f"{spec.identifier}: {err}")
@@ -88,16 +95,20 @@ def build(names: Annotated[list[str] | None, typer.Argument(
             _fail(str(err))
         for path in paths:
             shown = path.relative_to(Path.cwd()) if path.is_relative_to(Path.cwd()) else path
-            kind = f", {clock} Clock" if clock is not None else ""
+            kind = (f", {clock} Clock, {INTERFACES[interface]}" if clock is not None
+                    else "")
             out.print(f"built {shown}  ({spec.description}{kind})", highlight=False,
                       markup=False)
 
 
-def _check_clock(names: list[str] | None, clock: str, fmi: str, native: bool) -> None:
-    from cosim.fmu.fmi3 import CLOCK_VARIABILITY
+def _check_clock(names: list[str] | None, clock: str, fmi: str, native: bool,
+                 interface: str) -> None:
+    from cosim.fmu.fmi3 import CLOCK_VARIABILITY, INTERFACES
 
     if clock not in CLOCK_VARIABILITY:
         _fail(f"--clock {clock!r}: expected one of {', '.join(CLOCK_VARIABILITY)}")
+    if interface not in INTERFACES:
+        _fail(f"--interface {interface!r}: expected one of {', '.join(INTERFACES)}")
     if fmi != "3" or native or not names:
         _fail(f"--clock {clock}: clocked builds are FMI 3 builds of named Python controllers: "
               "give --fmi 3 and the controllers' identifiers, without --native")

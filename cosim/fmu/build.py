@@ -128,9 +128,11 @@ class FmuSpec:
         """The FMI 3.0 build (:mod:`cosim.fmu.fmi3`)."""
         return FMU_DIR / "fmi3" / f"{self.identifier}.fmu"
 
-    def path_clocked(self, clock: str) -> Path:
-        """The FMI 3.0 build with an input Clock of kind ``clock`` (:func:`build_clocked`)."""
-        return FMU_DIR / "fmi3" / clock / f"{self.identifier}.fmu"
+    def path_clocked(self, clock: str, interface: str = "cs") -> Path:
+        """The FMI 3.0 build with an input Clock of kind ``clock`` (:func:`build_clocked`):
+        fmus/fmi3/<clock>/ (Co-Simulation), fmus/fmi3/se/<clock>/ (Scheduled Execution)."""
+        folder = FMU_DIR / "fmi3" / ("se" if interface == "se" else "")
+        return folder / clock / f"{self.identifier}.fmu"
 
     def path_for(self, fmi_version: int) -> Path:
         """The build of FMI version ``fmi_version`` (2 or 3)."""
@@ -440,15 +442,16 @@ def build_fmus(spec: FmuSpec, dest: Path = FMU_DIR, fmi_versions: tuple[int, ...
     return finals
 
 
-def build_clocked(spec: FmuSpec, clock: str) -> Path:
-    """Build the controller's FMI 3 build (when stale) and its ``clock`` build
-    (:func:`cosim.fmu.fmi3.clocked`) at :meth:`FmuSpec.path_clocked`; its path."""
+def build_clocked(spec: FmuSpec, clock: str, interface: str = "cs") -> Path:
+    """Build the controller's FMI 3 build (when stale) and its ``clock`` build with
+    ``interface`` (:func:`cosim.fmu.fmi3.clocked`) at :meth:`FmuSpec.path_clocked`; its
+    path."""
     from cosim.fmu import fmi3
 
     build_stale([spec], fmi_version=3)
-    final = spec.path_clocked(clock)
+    final = spec.path_clocked(clock, interface)
     staged = final.with_name(f".{final.name}.{os.getpid()}.tmp")
-    fmi3.clocked(spec.path_fmi3, clock, staged)
+    fmi3.clocked(spec.path_fmi3, clock, staged, interface)
     os.replace(staged, final)  # atomic: a reader never sees a half-written FMU
     return final
 

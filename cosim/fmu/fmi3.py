@@ -31,6 +31,16 @@ FMU gives the time to its next event in Event Mode (self-triggered controllers).
 outputs are clocked by it (``clocks``); it does not return early from doStep (the importer
 steps to the ticks). The front is compiled with the Clock's settings
 (``front/fmi3_front.c``, ATO_CLOCK_VR); the model is unchanged.
+
+A clocked build has one of two interfaces (``--interface``, :data:`INTERFACES`): ``cs``,
+Co-Simulation in Event Mode (FMI 3.0 sec. 4.1.3: the importer ticks the Clock with
+fmi3SetClock in Event Mode), or ``se``, Scheduled Execution (FMI 3.0 chap. 5: the Clock is the
+input Clock of the model's one partition, which the importer runs with
+fmi3ActivateModelPartition at its ticks; the Clock declares ``priority`` 0, sec. 2.4.7.4; the
+countdown Clock's first tick is at the start time, sec. 2.2.8.2 (countdown Clock); the front's
+ATO_SCHEDULED).
+The ``ScheduledExecution`` element keeps the attributes every interface has (sec. 2.4.1,
+fmi3InterfaceType) and offers no FMU state.
 """
 
 from __future__ import annotations
@@ -55,6 +65,12 @@ CLOCK_VR = TIME_VR - 1  # the input Clock `sample` of a clocked build
 CLOCK_NAME = "sample"
 CLOCK_VARIABILITY = {"periodic": "fixed", "countdown": "countdown"}  # build -> FMI 3 attribute
 SAMPLE_TIME = "sample_time"  # the controllers' sample time parameter (s): the periodic interval
+# clocked build's interface -> its modelDescription element: Co-Simulation (Event Mode) or
+# Scheduled Execution (FMI 3.0 chap. 5)
+INTERFACES = {"cs": "CoSimulation", "se": "ScheduledExecution"}
+# the fmi3InterfaceType attributes a ScheduledExecution element keeps (FMI 3.0 sec. 2.4.1)
+_SCHEDULED_ATTRIBUTES = ("modelIdentifier", "needsExecutionTool",
+                         "canBeInstantiatedOnlyOncePerProcess")
 
 _TYPES = {"Real": "Float64", "Integer": "Int32", "Boolean": "Boolean", "String": "String",
           "Enumeration": "Enumeration"}
@@ -209,13 +225,17 @@ def front_binary(event_vr: int, defines: tuple[str, ...] = ()) -> Path:
     return out
 
 
-def clocked_description(fmi3_xml: bytes, clock: str) -> tuple[bytes, tuple[str, ...]]:
-    """The modelDescription.xml of the ``clock`` (``periodic`` or ``countdown``) build of the
-    FMI 3 controller whose modelDescription is ``fmi3_xml``, and the front's C macros for it; a
-    model that is no sampled controller (no ``next_event_time`` output, or no ``sample_time``
-    parameter for a periodic Clock) is a ValueError."""
+def clocked_description(fmi3_xml: bytes, clock: str,
+                        interface: str = "cs") -> tuple[bytes, tuple[str, ...]]:
+    """The modelDescription.xml of the ``clock`` (``periodic`` or ``countdown``) build with
+    ``interface`` (:data:`INTERFACES`) of the FMI 3 controller whose modelDescription is
+    ``fmi3_xml``, and the front's C macros for it; a model that is no sampled controller (no
+    ``next_event_time`` output, or no ``sample_time`` parameter for a periodic Clock) is a
+    ValueError."""
     if clock not in CLOCK_VARIABILITY:
         raise ValueError(f"clock {clock!r}: expected one of {list(CLOCK_VARIABILITY)}")
+    if interface not in INTERFACES:
+        raise ValueError(f"interface {interface!r}: expected one of {list(INTERFACES)}")
     root = ET.fromstring(fmi3_xml)
     variables = root.find("ModelVariables")
     by_name = {v.get("name"): v for v in variables}
@@ -239,24 +259,32 @@ def clocked_description(fmi3_xml: bytes, clock: str) -> tuple[bytes, tuple[str, 
     for unknown in structure.findall("InitialUnknown"):  # not clocked ones (sec. 2.4.8)
         if unknown.get("valueReference") in clocked_vrs:
             structure.remove(unknown)
-    root.find("CoSimulation").set("mightReturnEarlyFromDoStep", "false")  # ticks, not returns
+    cs = root.find("CoSimulation")
+    cs.set("mightReturnEarlyFromDoStep", "false")  # ticks, not returns
+    declared = {"name": CLOCK_NAME, "valueReference": str(CLOCK_VR),
+                        "description": "activates the controller's events (its sample instants)",
+                        "causality": "input", "variability": "discrete",
+                        "intervalVariability": CLOCK_VARIABILITY[clock]}
+    if interface == "se":
+        defines.append("ATO_SCHEDULED=1")
+        scheduled = ET.Element(INTERFACES[interface], {k: cs.get(k) for k in _SCHEDULED_ATTRIBUTES
+                                                       if cs.get(k) is not None})
+        root.insert(list(root).index(cs), scheduled)
+        root.remove(cs)
+        declared["priority"] = "0"  # its one partition (sec. 2.4.7.4)
     position = list(variables).index(by_name["time"]) + 1
-    variables.insert(position, ET.Element("Clock", {
-        "name": CLOCK_NAME, "valueReference": str(CLOCK_VR),
-        "description": "activates the controller's events (its sample instants)",
-        "causality": "input", "variability": "discrete",
-        "intervalVariability": CLOCK_VARIABILITY[clock]}))
+    variables.insert(position, ET.Element("Clock", declared))
     ET.indent(root, "\t")
     text = ET.tostring(root, encoding="unicode")
     return ('<?xml version="1.0" encoding="UTF-8"?>\n' + text + "\n").encode(), tuple(defines)
 
 
-def clocked(fmi3_fmu: Path, clock: str, out: Path) -> Path:
-    """Write the ``clock`` build ``out`` (:func:`clocked_description`) of the FMI 3 build
-    ``fmi3_fmu`` of a Python controller: its modelDescription and front replaced."""
+def clocked(fmi3_fmu: Path, clock: str, out: Path, interface: str = "cs") -> Path:
+    """Write the ``clock`` build with ``interface`` ``out`` (:func:`clocked_description`) of the
+    FMI 3 build ``fmi3_fmu`` of a Python controller: its modelDescription and front replaced."""
     with zipfile.ZipFile(fmi3_fmu) as zin:
         xml = zin.read("modelDescription.xml")
-        md, defines = clocked_description(xml, clock)
+        md, defines = clocked_description(xml, clock, interface)
         identifier = ET.fromstring(xml).find("CoSimulation").get("modelIdentifier")
         event_vr = int(next(v.get("valueReference") for v in ET.fromstring(xml).iter()
                             if v.get("name") == EVENT_TIME_OUTPUT))

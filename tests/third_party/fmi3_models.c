@@ -1,5 +1,7 @@
 /* Small FMI 3.0 co-simulation FMUs for the tests (one model per MODEL_* define):
-   TimeEvents (announces nextEventTime, or returns early), Feedthrough (y_T = u_T for every
+   TimeEvents (announces nextEventTime, or returns early; its output clock "ticked", vr 17, is
+   active in the Event Mode of each of its events until fmi3UpdateDiscreteStates handles it),
+   Feedthrough (y_T = u_T for every
    type, 64-bit integers exactly, an array), Terminator (terminateSimulation at stop_at),
    Countdown (a countdown input clock whose interval doubles at every tick), Clocked (a
    periodic input clock "tick" whose interval and shift the FMU gives on request, its interval
@@ -256,7 +258,10 @@ fmi3Status fmi3SetClock(fmi3Instance i, const fmi3ValueReference vr[], size_t n,
     for (size_t j = 0; j < n; j++) { if (vr[j] != 10) return fmi3Error; if (v[j]) m->tick = 1; }
     return fmi3OK; }
 fmi3Status fmi3GetClock(fmi3Instance i, const fmi3ValueReference vr[], size_t n, fmi3Clock v[]) {
-    (void)i; (void)vr; for (size_t j = 0; j < n; j++) v[j] = fmi3ClockInactive; return fmi3OK; }
+    M *m = i;
+    for (size_t j = 0; j < n; j++)
+        v[j] = vr[j] == 17 && m->time >= m->next - m->tol ? fmi3ClockActive : fmi3ClockInactive;
+    return fmi3OK; }
 fmi3Status fmi3GetIntervalDecimal(fmi3Instance i, const fmi3ValueReference vr[], size_t n,
                                   fmi3Float64 iv[], fmi3IntervalQualifier q[]) {
     M *m = i;

@@ -91,6 +91,22 @@ def test_an_output_clock_triggers_another_fmus_partition(c_fmus3, tmp_path):
     assert frame["b.n_kick"].iloc[-1] == 5 and frame["b.t_kick"].iloc[-1] == 1.0
 
 
+def test_a_co_simulation_output_clock_triggers_a_partition(c_fmus3, tmp_path):
+    """Ticker3 (co-simulation, Event Mode: an event every 0.1 s from 0.1 s, its output clock
+    ticked active at each) -> Tasks3's triggered clock kick: kick runs at every Ticker3 event,
+    after Tasks3's own partitions due then (kick has the lowest priority); Ticker3 also runs
+    as before (n = 10 events by 1 s)."""
+    sc = write_scenario(tmp_path, {"ticker": (c_fmus3["Ticker3"], {"period": 0.1}, {}),
+                                   "b": (c_fmus3["Tasks3"], {}, {})},
+                        connections={"b.kick": "ticker.ticked"}, stop=1.0)
+    master, frame = run(sc)
+    kicks = [k / 10 for k in range(1, 11)]
+    assert_activations(activations(master, "b"), tasks_schedule(1.0, 0.25, 0.45, kicks))
+    last = frame.iloc[-1]
+    assert (last["b.n_kick"], last["ticker.n"]) == (10, 10)
+    assert math.isclose(last["b.t_kick"], 1.0, rel_tol=8 * EPS)
+
+
 def test_clock_connections_are_checked(c_fmus3, c_fmus, tmp_path):
     fmu = c_fmus3["Tasks3"]
     sc = write_scenario(tmp_path, {"a": (fmu, {}, {}), "b": (fmu, {}, {})},
@@ -104,8 +120,13 @@ def test_clock_connections_are_checked(c_fmus3, c_fmus, tmp_path):
         run(sc)
     sc = write_scenario(tmp_path, {"a": (fmu, {}, {}), "cd": (c_fmus3["Countdown3"], {}, {})},
                         connections={"a.kick": "cd.tick"})
-    with pytest.raises(ScenarioError, match=r"cd.tick: clocks are wired between Scheduled "
-                                            r"Execution FMUs only"):
+    with pytest.raises(ScenarioError, match=r"cd.tick is not an output Clock"):
+        run(sc)
+    sc = write_scenario(tmp_path, {"a": (fmu, {}, {}), "cd": (c_fmus3["Countdown3"], {}, {})},
+                        connections={"cd.tick": "a.done"})
+    with pytest.raises(ScenarioError, match=r"cd.tick: a Clock connection activates a model "
+                                            r"partition of a Scheduled Execution FMU; cd is a "
+                                            r"co-simulation FMU"):
         run(sc)
 
 

@@ -66,6 +66,12 @@ TERMINATOR3 = Spec3("Terminator3", "TERMINATOR", (
     ("x", "Float64", "output", "continuous", 6, None, {"unit": "s"}),
 ), dependencies={"x": ()})
 
+# TimeEvents with its output clock "ticked", active at each of its events
+TICKER3 = Spec3("Ticker3", "TIMEEVENTS", (
+    *TIME_EVENTS3.variables,
+    ("ticked", "Clock", "output", "discrete", 17, None, {"intervalVariability": "triggered"}),
+), dependencies={"q": (), "n": (), "ticked": ()}, event_mode=True)
+
 COUNTDOWN3 = Spec3("Countdown3", "COUNTDOWN", (
     ("first", "Float64", "parameter", "fixed", 7, "0.1", {"unit": "s"}),
     ("tick", "Clock", "input", "discrete", 10, None, {"intervalVariability": "countdown"}),
@@ -140,7 +146,7 @@ TASKS3 = Spec3("Tasks3", "TASKS", (
                  "y": ("u",), "t_alarm": (), "t_kick": ()}, scheduled=True)
 
 SPECS3 = (FEEDTHROUGH3, TIME_EVENTS3, TERMINATOR3, COUNTDOWN3, THIRDS3, *CLOCKED3.values(),
-          TASKS3)
+          TASKS3, TICKER3)
 
 
 def model_description(spec: Spec3) -> bytes:

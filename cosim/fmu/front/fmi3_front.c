@@ -45,6 +45,29 @@
  * the Clock, and a step over a tick runs that event with the inputs held, as the FMI 2 twin
  * does); the backend is unchanged, so the events are those of the unclocked build when the
  * Clock ticks at its announced times.
+ *
+ * Scheduled Execution builds (`--interface se`) are also compiled with ATO_SCHEDULED = 1: the
+ * same Clock, now the input Clock of the model's one model partition (FMI 3.0 chap. 5), and
+ * fmi3InstantiateScheduledExecution in place of fmi3InstantiateCoSimulation. After
+ * fmi3ExitInitializationMode the FMU is in Clock Activation Mode (sec. 5.2.1);
+ * fmi3ActivateModelPartition(sample, t) is the event at t:
+ *
+ *  1. the backend steps from the previous activation to t (fmi2DoStep: it commits the event
+ *     of the previous activation with the inputs it had there);
+ *  2. the inputs set since the previous activation reach the backend (fmi3Set* in Clock
+ *     Activation Mode are held by the front until then: sec. 5.2.1 sets inputs before the
+ *     activation that uses them, and the backend, one event behind, still needs the previous
+ *     ones to commit it);
+ *  3. the event at t is computed from them (the backend's event-time output is read): its
+ *     outputs are what fmi3Get* gives until the next activation;
+ *  4. countdown: the front calls fmi3ClockUpdateCallback when the backend's next event is a
+ *     new one, and fmi3GetIntervalDecimal gives the time to it (fmi3IntervalChanged, sec.
+ *     2.2.8.2 and 5.2.2, Clock Update Mode); in Initialization Mode it gives 0 (the model's
+ *     first event is at the start time: the first tick, t_0 = t_start + 0).
+ *
+ * The events, their inputs and their outputs are those of the co-simulation build whose
+ * Clock ticks at the same times. FMU state is not offered (its held inputs are not in the
+ * backend's state: canGetAndSetFMUState = false).
  */
 #define _GNU_SOURCE
 #include <math.h>
@@ -66,7 +89,15 @@
 #ifndef ATO_SAMPLE_TIME_VR
 #define ATO_SAMPLE_TIME_VR -1L
 #endif
+#ifndef ATO_SCHEDULED
+#define ATO_SCHEDULED 0 /* 1: a Scheduled Execution build (see above) */
+#endif
 #define CLOCKED (ATO_CLOCK_VR >= 0)
+#if ATO_SCHEDULED
+#define STATE_MACHINE "FMI 3.0 sec. 5.2, state machine for Scheduled Execution"
+#else
+#define STATE_MACHINE "FMI 3.0 sec. 4.2, co-simulation state machine"
+#endif
 
 typedef enum {
     MODE_INSTANTIATED,
@@ -74,11 +105,13 @@ typedef enum {
     MODE_EVENT,
     MODE_STEP,
     MODE_TERMINATED,
+    MODE_CLOCK_ACTIVATION, /* Scheduled Execution (sec. 5.2.1) */
     MODE_FAILED /* after fmi3Fatal from the backend: only fmi3FreeInstance is allowed */
 } Mode;
 
 static const char* const MODE_NAMES[] = {"Instantiated", "Initialization Mode", "Event Mode",
-                                         "Step Mode", "Terminated", "failed (fatal error)"};
+                                         "Step Mode", "Terminated", "Clock Activation Mode",
+                                         "failed (fatal error)"};
 
 enum {
     ALLOW_INSTANTIATED = 1 << MODE_INSTANTIATED,
@@ -86,7 +119,17 @@ enum {
     ALLOW_EVENT = 1 << MODE_EVENT,
     ALLOW_STEP = 1 << MODE_STEP,
     ALLOW_TERMINATED = 1 << MODE_TERMINATED,
+    ALLOW_CLOCK_ACTIVATION = 1 << MODE_CLOCK_ACTIVATION,
 };
+
+/* an input set in Clock Activation Mode, held until the next activation (see above) */
+typedef struct {
+    char kind; /* 'r' Real, 'i' Integer, 'b' Boolean, 's' String */
+    fmi2ValueReference vr;
+    fmi2Real real;
+    fmi2Integer integer; /* Integer and Boolean */
+    char* string;
+} HeldInput;
 
 typedef struct {
     fmi2Component inner;
@@ -100,6 +143,10 @@ typedef struct {
     double time; /* the independent variable (ATO_TIME_VR), s */
     double clock_next; /* countdown: the tick last given by fmi3GetIntervalDecimal, s */
     int clock_given;   /* countdown: clock_next holds a tick */
+    fmi3ClockUpdateCallback clockUpdate; /* Scheduled Execution */
+    int activated;     /* Scheduled Execution: a partition ran (at `time`) */
+    HeldInput* held;   /* Scheduled Execution: inputs set since the last activation */
+    size_t n_held, cap_held;
     char name[256];
 } Front;
 
@@ -183,8 +230,8 @@ static int allowed(Front* f, const char* call, unsigned modes)
     if (modes & (1u << f->mode))
         return 1;
     front_log(f, fmi3Error, "logStatusError",
-              "%s: %s is not allowed in state %s (FMI 3.0 sec. 4.2, co-simulation state "
-              "machine)", f->name, call, MODE_NAMES[f->mode]);
+              "%s: %s is not allowed in state %s (" STATE_MACHINE ")", f->name, call,
+              MODE_NAMES[f->mode]);
     return 0;
 }
 
@@ -287,35 +334,26 @@ static void host_error(fmi3InstanceEnvironment env, fmi3LogMessageCallback log,
         log(env, fmi3Error, "logStatusError", message);
 }
 
-fmi3Instance fmi3InstantiateCoSimulation(
-    fmi3String instanceName, fmi3String instantiationToken, fmi3String resourcePath,
-    fmi3Boolean visible, fmi3Boolean loggingOn, fmi3Boolean eventModeUsed,
-    fmi3Boolean earlyReturnAllowed, const fmi3ValueReference requiredIntermediateVariables[],
-    size_t nRequiredIntermediateVariables, fmi3InstanceEnvironment instanceEnvironment,
-    fmi3LogMessageCallback logMessage, fmi3IntermediateUpdateCallback intermediateUpdate)
+/* NULL, with the reason (printf format ``fmt``) sent to the host's logMessage */
+static fmi3Instance refused(fmi3InstanceEnvironment env, fmi3LogMessageCallback log,
+                            const char* fmt, ...)
 {
     char text[8192];
-    (void)requiredIntermediateVariables;
-    (void)intermediateUpdate;
-    if (!get_backend()) {
-        snprintf(text, sizeof text, "%s: %s", instanceName ? instanceName : "", backend_error);
-        host_error(instanceEnvironment, logMessage, text);
-        return NULL;
-    }
-    if (eventModeUsed && backend->event_time_vr < 0) {
-        snprintf(text, sizeof text, "%s: eventModeUsed = true, but this FMU declares "
-                 "hasEventMode = false (FMI 3.0 sec. 4.2, fmi3InstantiateCoSimulation)",
-                 instanceName ? instanceName : "");
-        host_error(instanceEnvironment, logMessage, text);
-        return NULL;
-    }
-    if (nRequiredIntermediateVariables > 0) {
-        snprintf(text, sizeof text, "%s: this FMU provides no intermediate update "
-                 "(providesIntermediateUpdate = false); requiredIntermediateVariables must be "
-                 "empty (FMI 3.0 sec. 4.2, fmi3InstantiateCoSimulation)", instanceName ? instanceName : "");
-        host_error(instanceEnvironment, logMessage, text);
-        return NULL;
-    }
+    va_list args;
+    va_start(args, fmt);
+    vsnprintf(text, sizeof text, fmt, args);
+    va_end(args);
+    host_error(env, log, text);
+    return NULL;
+}
+
+/* a front with its backend instance, or NULL (the reason logged) */
+static Front* new_front(fmi3String instanceName, fmi3String instantiationToken,
+                        fmi3String resourcePath, fmi3Boolean visible, fmi3Boolean loggingOn,
+                        fmi3Boolean eventModeUsed, fmi3Boolean earlyReturnAllowed,
+                        fmi3InstanceEnvironment instanceEnvironment,
+                        fmi3LogMessageCallback logMessage)
+{
     Front* f = (Front*)calloc(1, sizeof *f);
     if (!f)
         return NULL;
@@ -355,6 +393,35 @@ fmi3Instance fmi3InstantiateCoSimulation(
     return f;
 }
 
+fmi3Instance fmi3InstantiateCoSimulation(
+    fmi3String instanceName, fmi3String instantiationToken, fmi3String resourcePath,
+    fmi3Boolean visible, fmi3Boolean loggingOn, fmi3Boolean eventModeUsed,
+    fmi3Boolean earlyReturnAllowed, const fmi3ValueReference requiredIntermediateVariables[],
+    size_t nRequiredIntermediateVariables, fmi3InstanceEnvironment instanceEnvironment,
+    fmi3LogMessageCallback logMessage, fmi3IntermediateUpdateCallback intermediateUpdate)
+{
+    const char* name = instanceName ? instanceName : "";
+    (void)requiredIntermediateVariables;
+    (void)intermediateUpdate;
+    if (ATO_SCHEDULED)
+        return refused(instanceEnvironment, logMessage, "%s: this FMU supports Scheduled "
+                       "Execution only (no CoSimulation element in its modelDescription.xml): "
+                       "instantiate it with fmi3InstantiateScheduledExecution", name);
+    if (!get_backend())
+        return refused(instanceEnvironment, logMessage, "%s: %s", name, backend_error);
+    if (eventModeUsed && backend->event_time_vr < 0)
+        return refused(instanceEnvironment, logMessage, "%s: eventModeUsed = true, but this "
+                       "FMU declares hasEventMode = false (FMI 3.0 sec. 4.2, "
+                       "fmi3InstantiateCoSimulation)", name);
+    if (nRequiredIntermediateVariables > 0)
+        return refused(instanceEnvironment, logMessage, "%s: this FMU provides no intermediate "
+                       "update (providesIntermediateUpdate = false); "
+                       "requiredIntermediateVariables must be empty (FMI 3.0 sec. 4.2, "
+                       "fmi3InstantiateCoSimulation)", name);
+    return new_front(instanceName, instantiationToken, resourcePath, visible, loggingOn,
+                     eventModeUsed, earlyReturnAllowed, instanceEnvironment, logMessage);
+}
+
 fmi3Instance fmi3InstantiateModelExchange(fmi3String instanceName, fmi3String instantiationToken,
                                           fmi3String resourcePath, fmi3Boolean visible,
                                           fmi3Boolean loggingOn,
@@ -369,20 +436,88 @@ fmi3Instance fmi3InstantiateModelExchange(fmi3String instanceName, fmi3String in
     return NULL;
 }
 
+/* FMI 3.0 sec. 5.2.1: a Scheduled Execution build (ATO_SCHEDULED) only; the preemption
+ * callbacks are not needed: the model has one partition, and the backend is called from
+ * within fmi3ActivateModelPartition and the get and set functions only */
 fmi3Instance fmi3InstantiateScheduledExecution(
     fmi3String instanceName, fmi3String instantiationToken, fmi3String resourcePath,
     fmi3Boolean visible, fmi3Boolean loggingOn, fmi3InstanceEnvironment instanceEnvironment,
     fmi3LogMessageCallback logMessage, fmi3ClockUpdateCallback clockUpdate,
     fmi3LockPreemptionCallback lockPreemption, fmi3UnlockPreemptionCallback unlockPreemption)
 {
-    char text[512];
-    (void)instantiationToken, (void)resourcePath, (void)visible, (void)loggingOn;
-    (void)clockUpdate, (void)lockPreemption, (void)unlockPreemption;
-    snprintf(text, sizeof text, "%s: this FMU supports co-simulation only (no "
-             "ScheduledExecution element in its modelDescription.xml)",
-             instanceName ? instanceName : "");
-    host_error(instanceEnvironment, logMessage, text);
-    return NULL;
+    const char* name = instanceName ? instanceName : "";
+    (void)lockPreemption, (void)unlockPreemption;
+    if (!ATO_SCHEDULED)
+        return refused(instanceEnvironment, logMessage, "%s: this FMU supports co-simulation "
+                       "only (no ScheduledExecution element in its modelDescription.xml)",
+                       name);
+    if (!get_backend())
+        return refused(instanceEnvironment, logMessage, "%s: %s", name, backend_error);
+    if (!clockUpdate)
+        return refused(instanceEnvironment, logMessage, "%s: fmi3InstantiateScheduledExecution: "
+                       "clockUpdate is NULL (FMI 3.0 sec. 5.2.1: the FMU calls it to announce "
+                       "its countdown Clock)", name);
+    Front* f = new_front(instanceName, instantiationToken, resourcePath, visible, loggingOn,
+                         fmi3False, fmi3False, instanceEnvironment, logMessage);
+    if (f)
+        f->clockUpdate = clockUpdate;
+    return f;
+}
+
+/* -- inputs held in Clock Activation Mode (Scheduled Execution) ------------------------------- */
+static void drop_held(Front* f)
+{
+    for (size_t i = 0; i < f->n_held; ++i)
+        free(f->held[i].string);
+    f->n_held = 0;
+}
+
+/* true when the front holds this set call's values (Clock Activation Mode) */
+static int holding(const Front* f)
+{
+    return ATO_SCHEDULED && f->mode == MODE_CLOCK_ACTIVATION;
+}
+
+/* one held input; 0 when out of memory (logged) */
+static int hold(Front* f, HeldInput input)
+{
+    if (f->n_held == f->cap_held) {
+        size_t cap = f->cap_held ? 2 * f->cap_held : 16;
+        HeldInput* more = (HeldInput*)realloc(f->held, cap * sizeof *more);
+        if (!more) {
+            front_log(f, fmi3Error, "logStatusError", "%s: out of memory", f->name);
+            free(input.string);
+            return 0;
+        }
+        f->held = more;
+        f->cap_held = cap;
+    }
+    f->held[f->n_held++] = input;
+    return 1;
+}
+
+/* the held inputs to the backend, in the order they were set */
+static fmi3Status release_held(Front* f)
+{
+    fmi3Status worst = fmi3OK;
+    for (size_t i = 0; i < f->n_held && worst <= fmi3Warning; ++i) {
+        HeldInput* h = &f->held[i];
+        fmi2Status s = fmi2Error;
+        if (h->kind == 'r' && backend->set_real)
+            s = backend->set_real(f->inner, &h->vr, 1, &h->real);
+        else if (h->kind == 'i' && backend->set_integer)
+            s = backend->set_integer(f->inner, &h->vr, 1, &h->integer);
+        else if (h->kind == 'b' && backend->set_boolean)
+            s = backend->set_boolean(f->inner, &h->vr, 1, &h->integer);
+        else if (h->kind == 's' && backend->set_string) {
+            fmi2String value = h->string;
+            s = backend->set_string(f->inner, &h->vr, 1, &value);
+        }
+        fmi3Status s3 = forwarded(f, s);
+        worst = s3 > worst ? s3 : worst;
+    }
+    drop_held(f);
+    return worst;
 }
 
 /* what a second fmi3FreeInstance needs for its message (instance_registry.h) */
@@ -409,6 +544,8 @@ void fmi3FreeInstance(fmi3Instance instance)
         registry_release(f, buf);
         if (f->inner)
             backend->free_instance(f->inner);
+        drop_held(f);
+        free(f->held);
         free(f);
         return;
     }
@@ -443,6 +580,8 @@ fmi3Status fmi3EnterInitializationMode(fmi3Instance instance, fmi3Boolean tolera
         f->mode = MODE_INITIALIZATION;
         f->time = startTime;
         f->clock_given = 0;
+        f->activated = 0;
+        drop_held(f);
     }
     return s2 > s ? s2 : s;
 }
@@ -455,8 +594,11 @@ fmi3Status fmi3ExitInitializationMode(fmi3Instance instance)
     if (!backend->exit_initialization_mode)
         return missing(f, "fmi3ExitInitializationMode");
     fmi3Status s = forwarded(f, backend->exit_initialization_mode(f->inner));
-    if (s <= fmi3Warning) /* FMI 3.0 sec. 4.2: Event Mode if eventModeUsed, else Step Mode */
-        f->mode = f->eventModeUsed ? MODE_EVENT : MODE_STEP;
+    /* FMI 3.0 sec. 4.2: Event Mode if eventModeUsed, else Step Mode; sec. 5.2: Clock
+     * Activation Mode */
+    if (s <= fmi3Warning)
+        f->mode = ATO_SCHEDULED ? MODE_CLOCK_ACTIVATION
+                                : f->eventModeUsed ? MODE_EVENT : MODE_STEP;
     return s;
 }
 
@@ -485,6 +627,24 @@ fmi3Status fmi3EnterStepMode(fmi3Instance instance)
 
 static long long ticks(double t);
 static int clock_interval(Front* f, double* interval, fmi3IntervalQualifier* qualifier);
+
+/* periodic Clock (ATO_CLOCK_COUNTDOWN = 0): is the model's next event ``t`` (s) at most one
+ * interval after now? Else 0, logged: a self-triggered model takes a countdown Clock */
+static int on_periodic_clock(Front* f, double t)
+{
+    double period = 0.0;
+    fmi3IntervalQualifier qualifier;
+    if (!CLOCKED || ATO_CLOCK_COUNTDOWN)
+        return 1;
+    if (!clock_interval(f, &period, &qualifier))
+        return 0;
+    if (ticks(t) <= ticks(f->time) + ticks(period))
+        return 1;
+    front_log(f, fmi3Error, "logStatusError", "%s: the model's next event at t = %.17g s is "
+              "more than one interval (%.17g s) of its periodic Clock after t = %.17g s: a "
+              "self-triggered model takes a countdown Clock", f->name, t, period, f->time);
+    return 0;
+}
 
 /* the backend's announced next event time (s); 0 when it has none, -1 on error */
 static int next_event(Front* f, double* t)
@@ -527,19 +687,8 @@ fmi3Status fmi3UpdateDiscreteStates(fmi3Instance instance,
         *nominalsOfContinuousStatesChanged = fmi3False;
     if (valuesOfContinuousStatesChanged)
         *valuesOfContinuousStatesChanged = fmi3False;
-    if (CLOCKED && !ATO_CLOCK_COUNTDOWN && found) {
-        double period = 0.0;
-        fmi3IntervalQualifier qualifier;
-        if (!clock_interval(f, &period, &qualifier))
-            return fmi3Error;
-        if (ticks(t) > ticks(f->time) + ticks(period)) {
-            front_log(f, fmi3Error, "logStatusError", "%s: the model's next event at t = %.17g s "
-                      "is more than one interval (%.17g s) of its periodic Clock after t = "
-                      "%.17g s: a self-triggered model takes a countdown Clock", f->name, t,
-                      period, f->time);
-            return fmi3Error;
-        }
-    }
+    if (found && !on_periodic_clock(f, t))
+        return fmi3Error;
     if (CLOCKED) /* the input Clock activates the events, not nextEventTime */
         found = 0;
     if (nextEventTimeDefined)
@@ -623,7 +772,7 @@ fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunicationPoi
 fmi3Status fmi3Terminate(fmi3Instance instance)
 {
     Front* f = (Front*)instance;
-    if (!allowed(f, "fmi3Terminate", ALLOW_EVENT | ALLOW_STEP))
+    if (!allowed(f, "fmi3Terminate", ALLOW_EVENT | ALLOW_STEP | ALLOW_CLOCK_ACTIVATION))
         return fmi3Error;
     fmi3Status s = forwarded(f, backend->terminate(f->inner));
     if (s <= fmi3Warning)
@@ -635,19 +784,22 @@ fmi3Status fmi3Reset(fmi3Instance instance)
 {
     Front* f = (Front*)instance;
     if (!allowed(f, "fmi3Reset", ALLOW_INSTANTIATED | ALLOW_INITIALIZATION | ALLOW_EVENT |
-                 ALLOW_STEP | ALLOW_TERMINATED))
+                 ALLOW_STEP | ALLOW_TERMINATED | ALLOW_CLOCK_ACTIVATION))
         return fmi3Error;
     fmi3Status s = forwarded(f, backend->reset(f->inner));
     if (s <= fmi3Warning) {
         f->mode = MODE_INSTANTIATED;
         f->time = 0.0;
+        drop_held(f);
     }
     return s;
 }
 
 /* -- getting and setting variable values ----------------------------------------------------------- */
-#define GET_MODES (ALLOW_INITIALIZATION | ALLOW_EVENT | ALLOW_STEP | ALLOW_TERMINATED)
-#define SET_MODES (ALLOW_INSTANTIATED | ALLOW_INITIALIZATION | ALLOW_EVENT | ALLOW_STEP)
+#define GET_MODES (ALLOW_INITIALIZATION | ALLOW_EVENT | ALLOW_STEP | ALLOW_TERMINATED |        \
+                   ALLOW_CLOCK_ACTIVATION)
+#define SET_MODES (ALLOW_INSTANTIATED | ALLOW_INITIALIZATION | ALLOW_EVENT | ALLOW_STEP |        \
+                   ALLOW_CLOCK_ACTIVATION)
 
 static int scalars(Front* f, const char* call, size_t nvr, size_t nValues)
 {
@@ -717,6 +869,12 @@ fmi3Status fmi3SetFloat64(fmi3Instance instance, const fmi3ValueReference vr[], 
         }
     if (nvr == 0)
         return fmi3OK;
+    if (holding(f)) {
+        for (size_t i = 0; i < nvr; ++i)
+            if (!hold(f, (HeldInput){'r', vr[i], values[i], 0, NULL}))
+                return fmi3Error;
+        return fmi3OK;
+    }
     if (!backend->set_real)
         return missing(f, "fmi3SetFloat64");
     return forwarded(f, backend->set_real(f->inner, vr, nvr, values));
@@ -743,6 +901,12 @@ fmi3Status fmi3SetInt32(fmi3Instance instance, const fmi3ValueReference vr[], si
         return fmi3Error;
     if (nvr == 0)
         return fmi3OK;
+    if (holding(f)) {
+        for (size_t i = 0; i < nvr; ++i)
+            if (!hold(f, (HeldInput){'i', vr[i], 0.0, values[i], NULL}))
+                return fmi3Error;
+        return fmi3OK;
+    }
     if (!backend->set_integer)
         return missing(f, "fmi3SetInt32");
     return forwarded(f, backend->set_integer(f->inner, vr, nvr, values));
@@ -777,6 +941,12 @@ fmi3Status fmi3SetBoolean(fmi3Instance instance, const fmi3ValueReference vr[], 
         return fmi3Error;
     if (nvr == 0)
         return fmi3OK;
+    if (holding(f)) {
+        for (size_t i = 0; i < nvr; ++i)
+            if (!hold(f, (HeldInput){'b', vr[i], 0.0, values[i] ? fmi2True : fmi2False, NULL}))
+                return fmi3Error;
+        return fmi3OK;
+    }
     if (!backend->set_boolean)
         return missing(f, "fmi3SetBoolean");
     fmi2Boolean* tmp = (fmi2Boolean*)calloc(nvr, sizeof *tmp);
@@ -810,6 +980,14 @@ fmi3Status fmi3SetString(fmi3Instance instance, const fmi3ValueReference vr[], s
         return fmi3Error;
     if (nvr == 0)
         return fmi3OK;
+    if (holding(f)) {
+        for (size_t i = 0; i < nvr; ++i) {
+            char* copy = strdup(values[i] ? values[i] : "");
+            if (!copy || !hold(f, (HeldInput){'s', vr[i], 0.0, 0, copy}))
+                return fmi3Error;
+        }
+        return fmi3OK;
+    }
     if (!backend->set_string)
         return missing(f, "fmi3SetString");
     return forwarded(f, backend->set_string(f->inner, vr, nvr, values));
@@ -1083,8 +1261,14 @@ static int clock_interval(Front* f, double* interval, fmi3IntervalQualifier* qua
             *qualifier = fmi3IntervalChanged;
         return 1;
     }
-    if (f->mode != MODE_EVENT) { /* countdown: known in Event Mode */
-        *qualifier = fmi3IntervalNotYetKnown;
+    if (ATO_SCHEDULED && f->mode == MODE_INITIALIZATION) {
+        /* sec. 2.2.8.2 (countdown Clock): t_0 = t_start + interval; the model's first event
+         * is at the start time */
+        *qualifier = fmi3IntervalChanged;
+        return 1;
+    }
+    if (f->mode != MODE_EVENT && f->mode != MODE_CLOCK_ACTIVATION) {
+        *qualifier = fmi3IntervalNotYetKnown; /* countdown: known in Event Mode */
         return 1;
     }
     double te = 0.0;
@@ -1107,7 +1291,8 @@ fmi3Status fmi3GetIntervalDecimal(fmi3Instance instance, const fmi3ValueReferenc
     Front* f = (Front*)instance;
     if (nvr == 0)
         return fmi3OK;
-    if (!allowed(f, "fmi3GetIntervalDecimal", ALLOW_INITIALIZATION | ALLOW_EVENT) ||
+    if (!allowed(f, "fmi3GetIntervalDecimal", ALLOW_INITIALIZATION | ALLOW_EVENT |
+                                              ALLOW_CLOCK_ACTIVATION) ||
         !clock_references(f, "fmi3GetIntervalDecimal", vr, nvr))
         return fmi3Error;
     for (size_t i = 0; i < nvr; i++)
@@ -1258,9 +1443,43 @@ fmi3Status fmi3GetOutputDerivatives(fmi3Instance instance, const fmi3ValueRefere
                                   "maxOutputDerivativeOrder = 0");
 }
 
+/* FMI 3.0 sec. 5.2.1: the event at activationTime (steps 1-4 at the top of this file) */
 fmi3Status fmi3ActivateModelPartition(fmi3Instance instance, fmi3ValueReference clockReference,
                                       fmi3Float64 activationTime)
 {
-    (void)clockReference, (void)activationTime;
-    return unsupported(instance, "fmi3ActivateModelPartition", "scheduled execution only");
+    Front* f = (Front*)instance;
+    double t = activationTime, te = 0.0;
+    if (!ATO_SCHEDULED)
+        return unsupported(instance, "fmi3ActivateModelPartition", "scheduled execution only");
+    if (!allowed(f, "fmi3ActivateModelPartition", ALLOW_CLOCK_ACTIVATION) ||
+        !clock_references(f, "fmi3ActivateModelPartition", &clockReference, 1))
+        return fmi3Error;
+    if (!isfinite(t) || ticks(t) < ticks(f->time) ||
+        (f->activated && ticks(t) == ticks(f->time))) {
+        front_log(f, fmi3Error, "logStatusError", "%s: fmi3ActivateModelPartition at "
+                  "activationTime = %.17g s after the %s at %.17g s (FMI 3.0 sec. 5.2.1: "
+                  "activation times of a Clock increase strictly)", f->name, t,
+                  f->activated ? "activation" : "start time", f->time);
+        return fmi3Error;
+    }
+    if (ticks(t) > ticks(f->time)) { /* 1. commit the previous event, step to t */
+        if (!backend->do_step)
+            return missing(f, "fmi3ActivateModelPartition");
+        fmi3Status s = forwarded(f, backend->do_step(f->inner, f->time, t - f->time, fmi2True));
+        if (s > fmi3Warning)
+            return s;
+    }
+    f->time = t;
+    f->activated = 1;
+    fmi3Status s = release_held(f); /* 2. the inputs of this activation */
+    if (s > fmi3Warning)
+        return s;
+    int found = next_event(f, &te); /* 3. the event computed (its outputs shown) */
+    if (found < 0)
+        return fmi3Error;
+    if (found && !on_periodic_clock(f, te))
+        return fmi3Error;
+    if (ATO_CLOCK_COUNTDOWN && found && te > t && !(f->clock_given && te == f->clock_next))
+        f->clockUpdate(f->environment); /* 4. a new next event: Clock Update Mode */
+    return s;
 }

@@ -65,10 +65,10 @@ from cosim.run.master.errors import SimulationError
 from cosim.run.master.fmi3 import (
     PERIODIC,
     ClockAttributes,
-    _clock,
     clock_attributes,
     clock_types,
     declared_attributes,
+    read_clock,
 )
 
 STATIC = "fmi3-clocks"
@@ -162,7 +162,7 @@ def _clock_rules(path: Path, var: ElementTree.Element, a: dict[str, str], schedu
     causality = a.get("causality", "local")
     kind = a.get("intervalVariability")
     try:
-        _clock(path, a)  # the values: numbers in range, a known intervalVariability
+        read_clock(path, a)  # the values: numbers in range, a known intervalVariability
     except SimulationError as err:
         bad(str(err), f"{CLOCK_TYPE}; {TYPES}")
     if causality not in _CAUSALITIES:

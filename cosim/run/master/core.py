@@ -141,29 +141,31 @@ class Master:
     def _clock_links(self, connections: list[Connection]
                      ) -> dict[Unit, dict[int, list[tuple[Unit, int]]]]:
         """Source unit -> its output clock (value reference) -> the (unit, input clock) it
-        triggers, from the scenario's clock ``connections``: an output clock of a Scheduled
-        Execution FMU to a ``triggered`` input clock of one (FMI 3.0 sec. 5.2.2)."""
+        triggers, from the scenario's clock ``connections``: an output clock of an FMI 3 FMU
+        (Scheduled Execution or co-simulation) to a ``triggered`` input clock of a Scheduled
+        Execution FMU (FMI 3.0 sec. 2.2.8.2, triggered input Clock; sec. 5.2.2)."""
         out: dict[Unit, dict[int, list[tuple[Unit, int]]]] = {}
         for c in connections:
             key = f"{self.scenario.path}: [connections] \"{c.dst}.{c.dst_var}\" = " \
                   f"\"{c.src}.{c.src_var}\""
             src, dst = self.by_name[c.src], self.by_name[c.dst]
             for unit, var, causality in ((src, c.src_var, "output"), (dst, c.dst_var, "input")):
-                if not isinstance(unit, Fmi3ScheduledUnit):
-                    raise ScenarioError(f"{key}: {unit.name}.{var}: clocks are wired between "
-                                        "Scheduled Execution FMUs only (a Clock connects to a "
-                                        "Clock)")
-                clock = unit.clock_names.get(var)
+                clock = getattr(unit, "clock_names", {}).get(var)
                 if clock is None or clock.causality != causality:
                     raise ScenarioError(f"{key}: {unit.name}.{var} is not an {causality} Clock "
                                         "(a Clock connects to a Clock)")
+            if not isinstance(dst, Fmi3ScheduledUnit):
+                raise ScenarioError(f"{key}: {dst.name}.{c.dst_var}: a Clock connection "
+                                    "activates a model partition of a Scheduled Execution FMU; "
+                                    f"{dst.name} is a co-simulation FMU")
             target = dst.clock_names[c.dst_var]
             if target.interval_variability != "triggered":
                 raise ScenarioError(f"{key}: {c.dst}.{c.dst_var} has intervalVariability "
                                     f"{target.interval_variability!r}: only a triggered input "
                                     "clock ticks when another clock does")
-            out.setdefault(src, {}).setdefault(src.clock_names[c.src_var].value_reference,
-                                               []).append((dst, target.value_reference))
+            source = src.clock_names[c.src_var].value_reference  # type: ignore[attr-defined]
+            src.watch_clock(source)  # type: ignore[attr-defined]
+            out.setdefault(src, {}).setdefault(source, []).append((dst, target.value_reference))
         return out
 
     def _deliver(self, unit: Unit, ticks: int, pending: list[Unit],

@@ -29,7 +29,11 @@
   ticks once that long after. Times are exact fractions until rounded to the FMU's double. A
   tick is an event where the master activates the clock (fmi3SetClock) before
   fmi3UpdateDiscreteStates. ``changing`` and ``triggered`` input clocks are refused. Output
-  clocks are the FMU's business (their ticks come as ``eventHandlingNeeded``). An FMU with
+  clocks tick at the FMU's events (``eventHandlingNeeded`` or ``nextEventTime``); those wired
+  in the scenario to a triggered input clock of a Scheduled Execution FMU (FMI 3.0 sec.
+  2.2.8.2: "the timing could be given by a triggered output Clock ... of a connected FMU") are
+  asked with fmi3GetClock in Event Mode before each fmi3UpdateDiscreteStates (sec. 2.3.5: a
+  clock active during fmi3UpdateDiscreteStates is deactivated by the FMU itself). An FMU with
   input clocks is scheduled by their ticks alone: an output named ``next_event_time`` (the
   FMI 2 convention of :mod:`cosim.run.master.unit`) is not read as its next event.
 """
@@ -54,7 +58,7 @@ from fmpy.fmi3 import FMU3Slave, fmi3IntervalChanged, fmi3IntervalNotYetKnown
 
 from cosim.fmu.state import to_seconds, to_ticks
 from cosim.run.fmi_types import enumeration_items
-from cosim.run.master.errors import FmuTerminated, SimulationError
+from cosim.run.master.errors import FmuCallError, FmuTerminated, SimulationError
 from cosim.run.master.fmi2 import CheckedSlave
 from cosim.run.master.unit import Unit, Variable
 
@@ -109,7 +113,7 @@ def clock_attributes(path: Path) -> dict[int, ClockAttributes]:
                                   f"{element.get('name', '?')!r} declaredType = {declared!r}: "
                                   f"no ClockType of that name in TypeDefinitions "
                                   f"(ClockTypes: {sorted(types)})")
-        clocks.append(_clock(path, declared_attributes(types, element)))
+        clocks.append(read_clock(path, declared_attributes(types, element)))
     return {c.value_reference: c for c in clocks}
 
 
@@ -127,8 +131,14 @@ def declared_attributes(types: dict[str | None, dict[str, str]],
     return {**types.get(clock.get("declaredType"), {}), **clock.attrib}
 
 
-def _clock(path: Path, a: dict[str, str]) -> ClockAttributes:
-    """One Clock element's attributes ``a``, checked."""
+def read_clock(path: Path, a: dict[str, str]) -> ClockAttributes:
+    """The :class:`ClockAttributes` of one Clock element of the FMU at ``path``, from its
+    attributes ``a`` (its ClockType's resolved, :func:`declared_attributes`), checked against
+    FMI 3.0 sec. 2.4.7.4 (a known ``intervalVariability``; ``intervalDecimal`` and
+    ``resolution`` > 0, ``shiftDecimal`` >= 0; a ``constant`` clock declares its interval;
+    ``intervalCounter`` / ``shiftCounter`` need a ``resolution``; ``supportsFraction`` a
+    boolean; ``valueReference`` an unsigned integer; ``priority`` >= 0): a value that is not
+    valid is a :class:`SimulationError` naming the file, the clock and the attribute."""
     name = a.get("name", "?")
 
     def bad(key: str, why: str) -> SimulationError:
@@ -257,9 +267,15 @@ class Fmi3Unit(Unit):
         super().__init__(name, path, unzipdir, md)
         self.slave = CheckedSlave(self._open(md, unzipdir), self)
         self.can_event_mode = self._has_event_mode(md)
-        self.input_clocks = [c for c in (clock_attributes(path).values()
-                                         if any(v.type == "Clock" for v in md.modelVariables)
-                                         else ()) if c.causality == "input"]
+        clocks = (list(clock_attributes(path).values())
+                  if any(v.type == "Clock" for v in md.modelVariables) else [])
+        self.input_clocks = [c for c in clocks if c.causality == "input"]
+        self.output_clocks = [c for c in clocks if c.causality == "output"]
+        self.clock_names = {c.name: c for c in clocks}
+        # output clocks wired to other FMUs' input clocks (:meth:`watch_clock`), and those of
+        # them that ticked at the last event (:meth:`take_ticks`)
+        self.watched_clocks: list[int] = []
+        self.ticked: list[int] = []
         if self.input_clocks:  # its events are its Clocks' ticks, not a next_event_time output
             self.has_next_event_output = False
         self.event_mode = False
@@ -341,8 +357,26 @@ class Fmi3Unit(Unit):
         def log(env: Any, status: int, category: Any, message: Any) -> None:
             self.messages.append(message.decode("utf-8", "replace") if message else "")
 
-        self.slave.instantiate(loggingOn=True, eventModeUsed=self.event_mode,
-                               earlyReturnAllowed=self.event_mode, logMessage=log)
+        try:
+            self.slave.instantiate(loggingOn=True, eventModeUsed=self.event_mode,
+                                   earlyReturnAllowed=self.event_mode, logMessage=log)
+        except FmuCallError as err:  # fmpy: "Failed to instantiate FMU" (the FMU gave NULL)
+            raise SimulationError(self._refused_instantiation()) from err
+
+    def _refused_instantiation(self) -> str:
+        """Why fmi3InstantiateCoSimulation returned NULL: its arguments, the FMU's words, and,
+        with Event Mode asked for, that the modelDescription declares it (FMI 3.0 sec. 4.2:
+        eventModeUsed = true only if hasEventMode = true, which the binary then accepts)."""
+        text = (f"{self.name} ({self.path}): fmi3InstantiateCoSimulation(eventModeUsed = "
+                f"{str(self.event_mode).lower()}, earlyReturnAllowed = "
+                f"{str(self.event_mode).lower()}) returned NULL: "
+                f"{self.last_messages() or 'the FMU gave no reason'}")
+        if self.event_mode:
+            text += ("; its modelDescription.xml declares hasEventMode = true, so the event "
+                     "algorithm asked for Event Mode, which its binary refuses (FMI 3.0 sec. "
+                     "4.2: an FMU declaring hasEventMode accepts eventModeUsed = true): run it "
+                     "with algorithm = \"fixed\" (no Event Mode), or fix the FMU")
+        return text
 
     def enter_initialization(self, start: float, stop: float) -> None:
         self._start_ticks = to_ticks(start)
@@ -531,6 +565,7 @@ class Fmi3Unit(Unit):
         if ticking:
             self.slave.setClock(ticking, [True] * len(ticking))
         for _ in range(MAX_EVENT_ITERATIONS):
+            self._read_output_clocks()
             update, terminate, _, _, defined, nxt = self.slave.updateDiscreteStates()
             if terminate:
                 raise FmuTerminated(self, ticks)
@@ -552,6 +587,23 @@ class Fmi3Unit(Unit):
         self._ask_intervals(now, ticks)
         self.slave.enterStepMode()
         self._in_event = self._needs_event = False
+
+    def watch_clock(self, vr: int) -> None:
+        """Ask the output clock ``vr`` at every event (it is wired to an input clock)."""
+        if vr not in self.watched_clocks:
+            self.watched_clocks.append(vr)
+
+    def _read_output_clocks(self) -> None:
+        """fmi3GetClock of the watched output clocks: those active join ``self.ticked``."""
+        if self.watched_clocks:
+            values = self.slave.getClock(self.watched_clocks)
+            self.ticked += [vr for vr, on in zip(self.watched_clocks, values)
+                            if on and vr not in self.ticked]
+
+    def take_ticks(self) -> list[int]:
+        """The watched output clocks that ticked at the last event (each handed out once)."""
+        ticked, self.ticked = self.ticked, []
+        return ticked
 
     def _advance(self, ticking: list[int], ticks: int) -> None:
         """Each clock of ``ticking`` ticked at ``ticks``: a periodic one ticks next one interval

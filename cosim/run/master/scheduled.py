@@ -7,11 +7,13 @@ ticks (sec. 5.2.2):
 
 * periodic clocks (``constant``, ``fixed``, ``tunable``) tick at start + shift + k interval,
   attributes and FMU queries as for co-simulation (:mod:`cosim.run.master.fmi3`);
-* a ``countdown`` clock ticks when the FMU says so: it calls the clock-update callback
-  (sec. 5.2.1) from inside a partition, and the master then asks its interval
-  (fmi3GetIntervalDecimal, qualifier ``fmi3IntervalChanged``): it ticks that long after the
-  activation that set it; interval 0 is a tick at the same time, after the partition that set
-  it;
+* a ``countdown`` clock ticks when the FMU says so: first where its interval asked in
+  Initialization Mode puts it (sec. 2.2.8.2, countdown Clock: t_0 = t_start + interval, when
+  the qualifier is ``fmi3IntervalChanged``; none when ``fmi3IntervalNotYetKnown``), then
+  after the FMU calls the clock-update callback (sec. 5.2.1) from inside a partition, when
+  the master asks its interval (fmi3GetIntervalDecimal, qualifier ``fmi3IntervalChanged``):
+  it ticks that long after the activation that set it; interval 0 is a tick at the same
+  time, after the partition that set it;
 * a ``triggered`` clock ticks where an output clock wired to it in the scenario's
   [connections] ticks (the master asks every output clock with fmi3GetClock after each
   clock-update callback).
@@ -28,19 +30,22 @@ that is not a whole nanosecond is passed as the FMU's own double).
 from __future__ import annotations
 
 import os
+from fractions import Fraction
 from typing import Any
 
 from fmpy.fmi3 import (
     FMU3ScheduledExecution,
     fmi3ClockUpdateCallback,
     fmi3InstanceEnvironment,
+    fmi3IntervalChanged,
     fmi3LockPreemptionCallback,
     fmi3LogMessageCallback,
     fmi3UnlockPreemptionCallback,
 )
 
+from cosim.fmu.state import to_seconds
 from cosim.run.master.errors import SimulationError
-from cosim.run.master.fmi3 import Fmi3Unit, clock_attributes
+from cosim.run.master.fmi3 import Fmi3Unit
 
 
 class Fmi3ScheduledUnit(Fmi3Unit):
@@ -52,9 +57,6 @@ class Fmi3ScheduledUnit(Fmi3Unit):
 
     def __init__(self, name: str, path: Any, unzipdir: str, md: Any) -> None:
         super().__init__(name, path, unzipdir, md)
-        clocks = clock_attributes(path).values()
-        self.output_clocks = [c for c in clocks if c.causality == "output"]
-        self.clock_names = {c.name: c for c in clocks}
         self._priority = {}
         for clock in self.input_clocks:
             if clock.priority is None:
@@ -69,7 +71,8 @@ class Fmi3ScheduledUnit(Fmi3Unit):
         self.feedthrough = any(self.deps.values())
         self._triggered: set[int] = set()  # triggered input clocks due at this point
         self._updated = False  # the FMU called the clock-update callback
-        self.ticked: list[int] = []  # output clocks that ticked at the last activations
+        # every output clock is asked in Clock Update Mode (sec. 5.2.2)
+        self.watched_clocks = [c.value_reference for c in self.output_clocks]
         self.activations: list[tuple[str, float]] = []  # (input clock, activation time s)
 
     @staticmethod
@@ -105,8 +108,15 @@ class Fmi3ScheduledUnit(Fmi3Unit):
                                   f"{self.last_messages() or 'the FMU gave no reason'}")
 
     def exit_initialization(self) -> None:
+        countdowns = [c for c in self.input_clocks if c.interval_variability == "countdown"]
+        first = self._intervals(countdowns) if countdowns else []  # in Initialization Mode
         super().exit_initialization()  # now in Clock Activation Mode (sec. 5.2.1)
         self._in_event = False
+        start = Fraction(to_seconds(self._start_ticks))
+        for clock, (interval, qualifier) in zip(countdowns, first):
+            if qualifier == fmi3IntervalChanged:  # sec. 2.2.8.2: t_0 = t_start + interval
+                self._clock_next[clock.value_reference] = self._schedule(
+                    float(start + interval), self._start_ticks - 1)
 
     def _do_step(self, t: int, h: int) -> int:
         return t + h  # time passes between activations; the FMU has no doStep
@@ -139,13 +149,4 @@ class Fmi3ScheduledUnit(Fmi3Unit):
                 self._advance([vr], ticks)
             if self._updated:
                 due.update(self._ask_intervals(now, ticks, zero_allowed=True))
-                if self.output_clocks:
-                    values = self.slave.getClock([c.value_reference
-                                                  for c in self.output_clocks])
-                    self.ticked += [c.value_reference
-                                    for c, on in zip(self.output_clocks, values) if on]
-
-    def take_ticks(self) -> list[int]:
-        """The output clocks that ticked at the last activations (each handed out once)."""
-        ticked, self.ticked = self.ticked, []
-        return ticked
+                self._read_output_clocks()
