@@ -125,6 +125,8 @@ FFDL = ("ato_ffdl.c", "ato_ffdl.h")
 SLIDING = (*FFDL, "ato_sliding.c", "ato_sliding.h")
 # the seed-004 controllers' shared parameter checks and move blocks
 HYBRID = ("ato_hybrid.c", "ato_hybrid.h")
+# the GPC with RLS of controllers/common/gpc.py (seeds 001 and 003)
+GPC = ("ato_gpc.c", "ato_gpc.h", "ato_linalg.c", "ato_linalg.h")
 
 NATIVE: dict[str, NativeSpec] = {
     "BrakeDelayTrain": NativeSpec("BrakeDelayTrain", "brake_delay.c",
@@ -158,7 +160,7 @@ NATIVE: dict[str, NativeSpec] = {
     "EmuIsmpc3": NativeSpec("EmuIsmpc3", "ffdl_ismpc.c", (*DATADRIVEN, *SLIDING),
                             data=("references",), generated=("ato_datadriven_const.h",),
                             solvers=("daqp",)),
-    "EmuGpc3": NativeSpec("EmuGpc3", "emu_gpc.c", DATADRIVEN, data=("references",),
+    "EmuGpc3": NativeSpec("EmuGpc3", "emu_gpc.c", (*DATADRIVEN, *GPC), data=("references",),
                           generated=("ato_datadriven_const.h",)),
     # seed 000's predictive stopping controllers: one law, DAQP from its sdist; the tube
     # controllers' terminal sets as computed by the core (ato_stop_mpc_sets.h)
