@@ -167,6 +167,11 @@ static void at_time(const eco_profile* p, double t, double* s, double* v, double
     *a = acc;
 }
 
+/* the exponent of CPython's float ** 2, which calls libm's pow (it differs from x * x by
+ * an ulp in about one case in a thousand); volatile, so gcc does not fold pow(x, 2.0) into
+ * x * x */
+static volatile double SQUARE = 2.0;
+
 /* SpeedProfile.at_position: (v_ref, a_ref) at position s (v^2 linear in each step) */
 static void at_position(const eco_profile* p, double s, double* v, double* a) {
     int last = p->n - 1;
@@ -182,7 +187,7 @@ static void at_position(const eco_profile* p, double s, double* v, double* a) {
     }
     int i = ato_bisect_right(p->s, p->n, s) - 1;
     double acc = p->accel[i];
-    *v = sqrt(ato_max(pow(p->v[i], 2.0) + 2.0 * acc * (s - p->s[i]), 0.0));
+    *v = sqrt(ato_max(pow(p->v[i], SQUARE) + 2.0 * acc * (s - p->s[i]), 0.0));
     *a = acc;
 }
 
