@@ -44,18 +44,14 @@ import dataclasses
 import fnmatch
 import functools
 import math
-import shutil
 import tempfile
 
 import numpy as np
 import pytest
-from fmpy import extract, read_model_description
 from fmpy.fmi1 import FMICallException
-from fmpy.fmi2 import FMU2Slave
-from native_helpers import open_native
+from native_helpers import build_unzipped, law_doubles, open_native, set_law_doubles
 
 from cosim.fmu.build import catalog
-from cosim.fmu.native_build import build_native
 
 IDENT = "Crh3Gpc"
 UNIT = 2.0**-53
@@ -72,11 +68,7 @@ TIMING = ("*wall_time*", "*real_time*", "*solve_time*", "*cpu_time*")
 
 @pytest.fixture(scope="module")
 def native(tmp_path_factory):
-    if shutil.which("gcc") is None:
-        pytest.skip("gcc not installed: native FMUs cannot be built")
-    path = build_native(IDENT, dest=tmp_path_factory.mktemp("native"), windows=False)
-    md = read_model_description(str(path), validate=True)
-    return path, md, extract(str(path), unzipdir=str(tmp_path_factory.mktemp("unzip")))
+    return build_unzipped(IDENT, tmp_path_factory)
 
 
 @functools.cache
@@ -169,43 +161,22 @@ class Twins:
     """The native FMU and the Python FMU of Crh3Gpc with a scenario's controller parameters."""
 
     def __init__(self, native, params: dict) -> None:
-        _, md, unzipdir = native
-        self.vars = {v.name: v for v in md.modelVariables}
-        self.native = FMU2Slave(guid=md.guid, unzipDirectory=unzipdir, instanceName="native",
-                                modelIdentifier=md.coSimulation.modelIdentifier)
-        self.native.instantiate()
+        self.native, vr = open_native(native, params)
         self.py = catalog()[IDENT].load()(instance_name="python", resources=tempfile.mkdtemp())
-        self.native.setupExperiment(startTime=0.0)
         self.py.setup_experiment(0.0)
-        self.native.enterInitializationMode()
         self.py.enter_initialization_mode()
         for name, value in params.items():
-            vr = [self.vars[name].valueReference]
-            if isinstance(value, str):
-                self.native.setString(vr, [value])
-                self.py.set_string(vr, [value])
-            else:
-                self.native.setReal(vr, [float(value)])
-                self.py.set_real(vr, [float(value)])
-        self.native.exitInitializationMode()
+            setter = self.py.set_string if isinstance(value, str) else self.py.set_real
+            setter([vr[name]], [value])
         self.py.exit_initialization_mode()
-        self.in_vrs = [self.vars[n].valueReference for n in INPUTS]
-        self.out_names = [v.name for v in md.modelVariables
+        self.in_vrs = [vr[n] for n in INPUTS]
+        self.out_names = [v.name for v in native[1].modelVariables
                           if v.causality == "output" and v.type == "Real"]
-        self.out_vrs = [self.vars[n].valueReference for n in self.out_names]
-
-    def native_law_state(self, size: int) -> tuple[bytes, np.ndarray]:
-        """The native FMU state image and its law state (the image's last ``size`` doubles,
-        ato_controller.c)."""
-        image = bytes(self.native.serializeFMUstate(self.native.getFMUstate()))
-        return image, np.frombuffer(image[len(image) - 8 * size:], float)
+        self.out_vrs = [vr[n] for n in self.out_names]
 
     def sync_native(self) -> None:
         """Set the native law state to the Python core's."""
-        want = law_state(self.py.core.get_state())
-        image, _ = self.native_law_state(want.size)
-        image = image[:len(image) - 8 * want.size] + want.tobytes()
-        self.native.setFMUstate(self.native.deSerializeFMUstate(image))
+        set_law_doubles(self.native, law_state(self.py.core.get_state()))
 
     def sample(self, t: float, h: float, values) -> tuple[np.ndarray, np.ndarray]:
         """Both twins' outputs of the event at t from ``values``, then a step of h."""
@@ -245,7 +216,7 @@ def compare_samples(native, scenario: str, stride: int = 1) -> tuple[int, float]
         bound = one_sample_bound(probe, before, t, dict(zip(INPUTS, map(float, values[k]))))
         native_out, py_out = twins.sample(t, h, values[k])
         after = law_state(core.get_state())
-        _, got = twins.native_law_state(after.size)
+        got = law_doubles(twins.native, after.size)
         bad = np.flatnonzero(~(np.abs(got - after) <= bound))
         assert bad.size == 0, (f"{scenario} at t = {t}: state values {bad.tolist()} native "
                                f"{got[bad].tolist()}, Python {after[bad].tolist()}, bound "

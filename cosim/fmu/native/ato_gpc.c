@@ -1,10 +1,17 @@
 /* ato_gpc.c: the GPC of controllers/common/gpc.py (see ato_gpc.h). */
 #include <math.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
 #include "ato_gpc.h"
 #include "ato_linalg.h"
+
+int ato_gpc_check(const ato_gpc_params* p, char* err, size_t err_size) {
+    if (p->Nu <= p->Ny) return 1;
+    snprintf(err, err_size, "Nu = %d must be <= Ny = %d", p->Nu, p->Ny);
+    return 0;
+}
 
 int ato_gpc_state_count(const ato_gpc_params* p) {
     int nreg = p->n * p->na + p->m * p->nb;

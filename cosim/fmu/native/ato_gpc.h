@@ -18,6 +18,8 @@
 #ifndef ATO_GPC_H
 #define ATO_GPC_H
 
+#include <stddef.h>
+
 /* GpcParams and the model's dimensions */
 typedef struct ato_gpc_params {
     int n, m, Ny, Nu, na, nb;
@@ -31,6 +33,17 @@ typedef struct ato_gpc {
     /* scratch */
     double *G, *H, *f, *g, *refs, *sim_dy, *sim_du, *moves, *Px, *Pn, *x, *k, *dy, *tx, *y;
 } ato_gpc;
+
+/* the ato_gpc_params of the parameter values v of a law whose generated header declares
+ * GpcParams' fields, for n outputs and m inputs */
+#define ATO_GPC_PARAMS(v, n_out, m_in)                                                       \
+    ((ato_gpc_params){(n_out), (m_in), (int)(v)[ATO_VR_Ny], (int)(v)[ATO_VR_Nu],               \
+                      (int)(v)[ATO_VR_na], (int)(v)[ATO_VR_nb], (v)[ATO_VR_forgetting],          \
+                      (v)[ATO_VR_control_weight], (v)[ATO_VR_a_init], (v)[ATO_VR_b_init],          \
+                      (v)[ATO_VR_p0], (v)[ATO_VR_p_max], (v)[ATO_VR_excitation]})
+
+/* GpcParams.check_relations (Nu <= Ny); 0 after writing the core's message into err */
+int ato_gpc_check(const ato_gpc_params* p, char* err, size_t err_size);
 
 /* the number of state doubles of a GPC with these parameters */
 int ato_gpc_state_count(const ato_gpc_params* p);

@@ -202,11 +202,8 @@ static double npmax(double a, double b) { return isnan(a) || isnan(b) ? a + b : 
 
 law_core* law_make(const ato_values* p, double t0, char* err, size_t n) {
     const double* v = p->v;
-    int Ny = (int)v[ATO_VR_Ny], Nu = (int)v[ATO_VR_Nu];
-    if (Nu > Ny) { /* GpcParams.check_relations */
-        snprintf(err, n, "Nu = %d must be <= Ny = %d", Nu, Ny);
-        return NULL;
-    }
+    ato_gpc_params gp = ATO_GPC_PARAMS(v, 1, 1);
+    if (!ato_gpc_check(&gp, err, n)) return NULL;
     const char* start = p->s[ATO_VR_model_start];
     int identified = strcmp(start, "identified") == 0;
     if (!identified && strcmp(start, "cold") != 0) {
@@ -219,9 +216,6 @@ law_core* law_make(const ato_values* p, double t0, char* err, size_t n) {
         return NULL;
     }
     double gamma = v[ATO_VR_rotating_mass_factor];
-    ato_gpc_params gp = {1, 1, Ny, Nu, (int)v[ATO_VR_na], (int)v[ATO_VR_nb],
-                         v[ATO_VR_forgetting], v[ATO_VR_control_weight], v[ATO_VR_a_init],
-                         v[ATO_VR_b_init], v[ATO_VR_p0], v[ATO_VR_p_max], v[ATO_VR_excitation]};
     if (identified) { /* Crh3Gpc: the identified ARX model at departure, b in m/s per m/s^2 */
         double a = NAN, b = NAN, gravity = NAN, value;
         char line[256], key[64];
@@ -232,9 +226,12 @@ law_core* law_make(const ato_values* p, double t0, char* err, size_t n) {
             free(c);
             return NULL;
         }
-        while (fgets(line, sizeof line, f))
-            if (sscanf(line, "%63s %lf", key, &value) == 2)
-                *(strcmp(key, "a") == 0 ? &a : strcmp(key, "b") == 0 ? &b : &gravity) = value;
+        while (fgets(line, sizeof line, f)) {
+            if (sscanf(line, "%63s %lf", key, &value) != 2) continue;
+            if (strcmp(key, "a") == 0) a = value;
+            if (strcmp(key, "b") == 0) b = value;
+            if (strcmp(key, "gravity") == 0) gravity = value;
+        }
         fclose(f);
         double to_unit = 100.0 * (1.0 + gamma) / gravity;
         gp.a_init = a;

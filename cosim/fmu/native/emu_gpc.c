@@ -33,19 +33,13 @@ static double npmax(double a, double b) { return isnan(a) || isnan(b) ? a + b : 
 law_core* law_make(const ato_values* p, double t0, char* err, size_t n) {
     (void)t0;
     const double* v = p->v;
-    int Ny = (int)v[ATO_VR_Ny], Nu = (int)v[ATO_VR_Nu];
-    if (Nu > Ny) { /* GpcParams.check_relations */
-        snprintf(err, n, "Nu = %d must be <= Ny = %d", Nu, Ny);
-        return NULL;
-    }
+    ato_gpc_params gp = ATO_GPC_PARAMS(v, N, N);
+    if (!ato_gpc_check(&gp, err, n)) return NULL;
     law_core* c = calloc(1, sizeof *c);
     if (!dd_drive_make(&c->drive, p, err, n)) {
         free(c);
         return NULL;
     }
-    ato_gpc_params gp = {N, N, Ny, Nu, (int)v[ATO_VR_na], (int)v[ATO_VR_nb],
-                         v[ATO_VR_forgetting], v[ATO_VR_control_weight], v[ATO_VR_a_init],
-                         v[ATO_VR_b_init], v[ATO_VR_p0], v[ATO_VR_p_max], v[ATO_VR_excitation]};
     c->share = v[ATO_VR_share_gain];
     int law = ato_gpc_state_count(&gp);
     c->count = DD_DRIVE_STATE + law + N;
