@@ -7,8 +7,9 @@ the C header ``<id>_decl.h`` (value references, starts, ranges as ``ato_var`` ro
 from the same declarations at build time, so nothing is declared twice. Route data are exported
 from the bundled route files (parsed by :mod:`plants.route`) to ``resources/routes/<name>.grade``
 and, for the models that read them, ``<name>.<profile>`` (:data:`ROUTE_PROFILES`); the
-bundled reference profiles and EMPC region tables (:data:`DATA`) to ``resources/references``
-and ``resources/regions``. A controller is its law's C file linked with ``ato_controller.c``,
+bundled reference profiles, EMPC region tables and the seed-003 trackers' target profiles
+planned at build time (:data:`DATA`) to ``resources/references``, ``resources/regions`` and
+``resources/eco_profiles``. A controller is its law's C file linked with ``ato_controller.c``,
 the C twin of the sampled-controller timing of :mod:`cosim.fmu.slave`.
 Every plant links the generic plant backend ``ato_plant_backend.c``; BrakeDelayTrain,
 Crh3Train and the Emus read the step profiles of :data:`STEP_PROFILES` from
