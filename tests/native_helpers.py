@@ -1,12 +1,14 @@
 """Test helpers for the native C FMUs (cosim/fmu/native): a model built and unzipped once,
 instances through fmpy with parameters set by their declared type, the messages an instance
-logs with logging off, and the rows by which two model descriptions are compared."""
+logs with logging off, a native controller's law state read and set through its FMU state
+image, and the rows by which two model descriptions are compared."""
 
 from __future__ import annotations
 
 import shutil
 from pathlib import Path
 
+import numpy as np
 import pytest
 from fmpy import extract, read_model_description
 from fmpy.fmi2 import (
@@ -75,6 +77,26 @@ def open_native(native: Native, params: dict | None = None, messages: list[str] 
     set_by_type(fmu, native[1], params or {})
     fmu.exitInitializationMode()
     return fmu, vr
+
+
+def law_doubles(fmu: FMU2Slave, size: int) -> np.ndarray:
+    """A native controller's law state: the last ``size`` doubles of its FMU state image
+    (ato_controller.c)."""
+    state = fmu.getFMUstate()
+    image = bytes(fmu.serializeFMUstate(state))
+    fmu.freeFMUstate(state)
+    return np.frombuffer(image[len(image) - 8 * size:], float)
+
+
+def set_law_doubles(fmu: FMU2Slave, doubles: np.ndarray) -> None:
+    """Set a native controller's law state to ``doubles`` (the end of its FMU state image)."""
+    state = fmu.getFMUstate()
+    image = bytes(fmu.serializeFMUstate(state))
+    fmu.freeFMUstate(state)
+    image = image[:len(image) - 8 * doubles.size] + np.asarray(doubles, float).tobytes()
+    restored = fmu.deSerializeFMUstate(image)
+    fmu.setFMUstate(restored)
+    fmu.freeFMUstate(restored)
 
 
 def variable_rows(md) -> list[tuple]:

@@ -87,6 +87,11 @@ class EcoTrackingParams(Checked):
                               max=0.0)
     sample_time: float = sample_time(1.0)
 
+    # the fields the profiles are planned with (:meth:`train`, :meth:`settings`)
+    planning_fields: ClassVar[tuple[str, ...]] = (
+        "mass", "rotating_mass_factor", "cruise_speed", "limit_speed", "accel_max",
+        "brake_decel", "traction_share")
+
     def train(self) -> Crh3Params:
         """The nominal train the profiles are planned on (plant defaults, this mass)."""
         return replace(Crh3Params(), mass=self.mass,
@@ -144,6 +149,26 @@ TRACKER_OUTPUTS: tuple[Var, ...] = (
 )
 
 
+def plan_profile(track: EcoTrackingParams, values: dict[str, Any], data_dir: Path
+                 ) -> SpeedProfile:
+    """The target profile of the :data:`PROFILE_VARS` in ``values`` (``profile``,
+    ``optimum``, ``route``, ``scheduled_time``) for the train and limits of ``track``; the
+    bundled route and optimum files under ``data_dir`` (the FMU's resources or the project
+    tree)."""
+    kind = values["profile"]
+    if kind not in TRACKER_PROFILES:
+        raise ValueError(f"profile = {kind!r} must be one of {TRACKER_PROFILES}")
+    route = load_route(values["route"], routes_dir_in(data_dir))
+    scheduled = float(values["scheduled_time"])
+    if kind == PMP:
+        name = str(values["optimum"])
+        path = Path(name) if Path(name).suffix else optimum_dir_in(data_dir) / f"{name}.csv"
+        return read_optimum(path, route, scheduled if scheduled > 0 else None,
+                            track.settings())
+    return generate(kind, route, scheduled if scheduled > 0 else None, track.train(),
+                    track.settings())
+
+
 class EcoTracker(StatefulCore, Declared):
     """Base of the seed-003 trackers; a subclass sets ``params_class`` (a dataclass with the
     group ``track`` (:class:`EcoTrackingParams`, prefix "") and its law's group), ``horizon``
@@ -160,21 +185,7 @@ class EcoTracker(StatefulCore, Declared):
     def from_parameters(cls, values: dict[str, Any], data_dir: Path,
                         t0: float = 0.0) -> EcoTracker:
         params = build(cls.params_class(), values)
-        kind = values["profile"]
-        if kind not in TRACKER_PROFILES:
-            raise ValueError(f"profile = {kind!r} must be one of {TRACKER_PROFILES}")
-        route = load_route(values["route"], routes_dir_in(data_dir))
-        track: EcoTrackingParams = params.track
-        scheduled = float(values["scheduled_time"])
-        if kind == PMP:
-            name = str(values["optimum"])
-            path = Path(name) if Path(name).suffix else (optimum_dir_in(data_dir)
-                                                         / f"{name}.csv")
-            profile = read_optimum(path, route, scheduled if scheduled > 0 else None,
-                                   track.settings())
-        else:
-            profile = generate(kind, route, scheduled if scheduled > 0 else None,
-                               track.train(), track.settings())
+        profile = plan_profile(params.track, values, data_dir)
         return cls.build_core(params, profile, t0, data_dir)
 
     @classmethod

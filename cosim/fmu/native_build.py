@@ -7,8 +7,9 @@ the C header ``<id>_decl.h`` (value references, starts, ranges as ``ato_var`` ro
 from the same declarations at build time, so nothing is declared twice. Route data are exported
 from the bundled route files (parsed by :mod:`plants.route`) to ``resources/routes/<name>.grade``
 and, for the models that read them, ``<name>.<profile>`` (:data:`ROUTE_PROFILES`); the
-bundled reference profiles and EMPC region tables (:data:`DATA`) to ``resources/references``
-and ``resources/regions``. A controller is its law's C file linked with ``ato_controller.c``,
+bundled reference profiles, EMPC region tables and the seed-003 trackers' target profiles
+planned at build time (:data:`DATA`) to ``resources/references``, ``resources/regions`` and
+``resources/eco_profiles``. A controller is its law's C file linked with ``ato_controller.c``,
 the C twin of the sampled-controller timing of :mod:`cosim.fmu.slave`.
 Every plant links the generic plant backend ``ato_plant_backend.c``; BrakeDelayTrain,
 Crh3Train and the Emus read the step profiles of :data:`STEP_PROFILES` from
@@ -125,6 +126,8 @@ FFDL = ("ato_ffdl.c", "ato_ffdl.h")
 SLIDING = (*FFDL, "ato_sliding.c", "ato_sliding.h")
 # the seed-004 controllers' shared parameter checks and move blocks
 HYBRID = ("ato_hybrid.c", "ato_hybrid.h")
+# the GPC with RLS of controllers/common/gpc.py (seeds 001 and 003)
+GPC = ("ato_gpc.c", "ato_gpc.h", "ato_linalg.c", "ato_linalg.h")
 
 NATIVE: dict[str, NativeSpec] = {
     "BrakeDelayTrain": NativeSpec("BrakeDelayTrain", "brake_delay.c",
@@ -158,8 +161,11 @@ NATIVE: dict[str, NativeSpec] = {
     "EmuIsmpc3": NativeSpec("EmuIsmpc3", "ffdl_ismpc.c", (*DATADRIVEN, *SLIDING),
                             data=("references",), generated=("ato_datadriven_const.h",),
                             solvers=("daqp",)),
-    "EmuGpc3": NativeSpec("EmuGpc3", "emu_gpc.c", DATADRIVEN, data=("references",),
+    "EmuGpc3": NativeSpec("EmuGpc3", "emu_gpc.c", (*DATADRIVEN, *GPC), data=("references",),
                           generated=("ato_datadriven_const.h",)),
+    # seed 003's GPC: its target profiles planned at build time (eco_profile_tables)
+    "Crh3Gpc": NativeSpec("Crh3Gpc", "crh3_gpc.c", (*CONTROLLER, *PROFILE, *GPC),
+                          data=("eco_profiles",)),
     # seed 000's predictive stopping controllers: one law, DAQP from its sdist; the tube
     # controllers' terminal sets as computed by the core (ato_stop_mpc_sets.h)
     **{identifier: NativeSpec(identifier, "stop_mpc.c",
@@ -423,8 +429,55 @@ def preview_tables() -> dict[str, str]:
     return {"preview/default.gains": "\n".join(lines) + "\n"}
 
 
+def eco_profile_tables() -> dict[str, str]:
+    """The seed-003 trackers' target profiles, planned at build time by the Python planner
+    (:func:`controllers.eco.tracking.plan_profile`) with the declared defaults, on the route
+    their ``route`` parameter names by default: ``eco_profiles/<route>/<profile>.profile``
+    per generated kind (``PROFILE_KINDS``) and ``eco_profiles/<route>/pmp/<optimum>.profile``
+    per bundled optimum. Each holds lines ``<parameter> <value>``: the values it was planned
+    with (``EcoTrackingParams.planning_fields`` for a generated kind, and ``scheduled_time``),
+    which the native FMU requires; the phase boundaries ``accelerate_end_time``,
+    ``brake_start_position``, ``brake_start_time``; then ``points n`` and n lines ``s v t
+    accel`` (m, m/s, s, m/s^2 of the step from the point). And ``eco_profiles/identified.arx``:
+    ``a`` and ``b`` of the identified ARX model at departure (the model set's first, ARX
+    units) and the ``gravity`` of Crh3Gpc's unit change. %.17g via repr: exact."""
+    tracking = importlib.import_module("controllers.eco.tracking")  # by name: layering
+    rmpc = importlib.import_module("controllers.robust.rmpc")
+    route_module = importlib.import_module("plants.route")
+    project = Path(tracking.__file__).resolve().parents[2]
+    track = tracking.EcoTrackingParams()
+    defaults = {v.name: v.start for v in tracking.PROFILE_VARS}
+    route = str(defaults["route"])
+    scheduled = f"scheduled_time {float(defaults['scheduled_time'])!r}"
+    planned = [f"{name} {float(getattr(track, name))!r}" for name in track.planning_fields]
+    wanted = [(f"{kind}.profile", {"profile": kind}, [*planned, scheduled])
+              for kind in tracking.PROFILE_KINDS]
+    wanted += [(f"pmp/{csv.stem}.profile", {"profile": tracking.PMP, "optimum": csv.stem},
+                [scheduled])
+               for csv in sorted(tracking.optimum_dir_in(project).glob("*.csv"))]
+    tables = {}
+    for rel, chosen, settings in wanted:
+        profile = tracking.plan_profile(track, {**defaults, **chosen}, project)
+        rows = [f"{float(a)!r} {float(b)!r} {float(c)!r} {float(d)!r}" for a, b, c, d in zip(
+            profile.s.tolist(), profile.v.tolist(), profile.t.tolist(),
+            profile.accel.tolist())]
+        tables[f"eco_profiles/{route}/{rel}"] = "\n".join([
+            f"# seed-003 target profile {profile.kind} of route {route} (generated): the "
+            "parameters it is planned with, its phase boundaries, then s v t accel", *settings,
+            f"accelerate_end_time {profile.accelerate_end_time!r}",
+            f"brake_start_position {profile.brake_start_position!r}",
+            f"brake_start_time {profile.brake_start_time!r}", f"points {len(rows)}", *rows,
+            ""])
+    models = rmpc.load_model_set("identified")
+    tables["eco_profiles/identified.arx"] = (
+        "# the identified ARX model at departure (a, b) and the gravity of the unit change\n"
+        f"a {float(models.a[0])!r}\nb {float(models.b[0])!r}\n"
+        f"gravity {float(route_module.GRAVITY)!r}\n")
+    return tables
+
+
 DATA = {"references": reference_tables, "empc_regions": empc_tables,
-        "preview_gains": preview_tables}
+        "preview_gains": preview_tables, "eco_profiles": eco_profile_tables}
 
 
 # the step profiles of a route a native plant reads (plants.route.Route fields); sums such as

@@ -8,7 +8,7 @@
 
 #include "ato_bundled.h"
 
-static int bisect_right(const double* xs, int n, double s) {
+int ato_bisect_right(const double* xs, int n, double s) {
     int lo = 0, hi = n;
     while (lo < hi) {
         int mid = (lo + hi) / 2;
@@ -21,7 +21,7 @@ double ato_interp(double x, const double* xp, const double* fp, int n) {
     if (isnan(x)) return x;
     if (x < xp[0]) return fp[0];
     if (x > xp[n - 1]) return fp[n - 1];
-    int j = bisect_right(xp, n, x) - 1;
+    int j = ato_bisect_right(xp, n, x) - 1;
     if (j == n - 1 || xp[j] == x) return fp[j];
     double slope = (fp[j + 1] - fp[j]) / (xp[j + 1] - xp[j]);
     double r = slope * (x - xp[j]) + fp[j];
@@ -40,7 +40,7 @@ double ato_profile_speed(const ato_profile* p, double x) {
 
 double ato_profile_accel(const ato_profile* p, double x) {
     if (x < p->x[0] || x >= p->x[p->n - 1]) return 0.0;
-    return p->accel[bisect_right(p->x, p->n, x) - 1];
+    return p->accel[ato_bisect_right(p->x, p->n, x) - 1];
 }
 
 double ato_profile_position(const ato_profile* p, double t) {
@@ -48,7 +48,7 @@ double ato_profile_position(const ato_profile* p, double t) {
     int n = p->n;
     if (t <= x[0]) return v[0] * (t - x[0]);
     if (t >= x[n - 1]) return p->cum[n - 1] + v[n - 1] * (t - x[n - 1]);
-    int i = bisect_right(x, n, t) - 1;
+    int i = ato_bisect_right(x, n, t) - 1;
     double dt = t - x[i];
     double a = (v[i + 1] - v[i]) / (x[i + 1] - x[i]);
     return p->cum[i] + v[i] * dt + 0.5 * a * dt * dt;

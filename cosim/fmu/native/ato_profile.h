@@ -31,6 +31,8 @@ double ato_profile_accel(const ato_profile* p, double x);
 /* s_ref(t) = int_0^t v_ref (m) of a time profile (controllers/hybrid/hybrid_mpc.py
  * reference_position: v linear between points, the end speeds outside them) */
 double ato_profile_position(const ato_profile* p, double t);
+/* numpy.searchsorted(xs, x, side="right") of the increasing xs[0..n-1] */
+int ato_bisect_right(const double* xs, int n, double x);
 /* numpy.interp(x, xp, fp) for a scalar x */
 double ato_interp(double x, const double* xp, const double* fp, int n);
 
