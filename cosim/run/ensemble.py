@@ -47,8 +47,10 @@ from cosim.run.claims import (
     with_rounding,
 )
 from cosim.run.figures import draw_ensemble_figure
+from cosim.run.master.pool import InstancePool
 from cosim.run.record import Job as RecordJob
 from cosim.run.record import Record, known, save, series_name
+from cosim.run.simulate import ensure_built, run_scenario
 
 if TYPE_CHECKING:
     from cosim.reproduce.entry import Entry
@@ -166,13 +168,17 @@ def claim_jobs(entry: Entry, k: int, rounding: bool = True, build: str = "python
                                              if key[1] != "repeat"]
 
 
+# the FMU instances of this process's members, reset from one member to the next
+MEMBER_INSTANCES = InstancePool()
+
+
 def _run_member(scenario: str, overrides: dict[str, Any], out_dir: str | None = None
                 ) -> dict[str, Any]:
-    from cosim.run.simulate import run_scenario
-
+    """One member in this (worker) process, on the instances of :data:`MEMBER_INSTANCES`;
+    its summary with :func:`with_host`."""
     before = host_load()
     summary = run_scenario(scenario, overrides=overrides, out_dir=out_dir, build=False,
-                           plot=False).summary
+                           plot=False, pool=MEMBER_INSTANCES).summary
     return with_host(summary, before)
 
 
@@ -467,7 +473,6 @@ def simulate_claims(entry: Entry, out: Path, record: Record, workers: int | None
     ``record``, with the series of the members the ensemble figures draw; a member
     ``previous`` holds with the same specification is taken from it, not run again."""
     from cosim.run.scenario import load_scenario
-    from cosim.run.simulate import ensure_built
 
     wanted = member_jobs(entry, record.seeds, record.rounding, record.build)
     reuse = {job.key for job in wanted if known(previous, job)}
