@@ -52,6 +52,10 @@ class InstancePool:
         else:
             unit.free()
 
+    def kept(self) -> list[Unit]:
+        """The instances kept now."""
+        return list(self._units.values())
+
     def clear(self) -> None:
         """Free every kept instance."""
         units, self._units = list(self._units.values()), {}
