@@ -31,11 +31,11 @@ class InstancePool:
 
     @staticmethod
     def key(instance: str, path: Path, event_mode: bool) -> Key:
-        return (instance, str(path.resolve()), path.stat().st_mtime, event_mode)
+        return (instance, str(path), path.stat().st_mtime, event_mode)
 
     def description(self, sc: Scenario, instance: str, path: Path) -> Any:
         """:func:`cosim.run.master.loading.read_fmu` of ``path``, once per file version."""
-        at = (str(path.resolve()), path.stat().st_mtime)
+        at = (str(path), path.stat().st_mtime)
         if at not in self._descriptions:
             self._descriptions[at] = read_fmu(sc, instance, path)
         return self._descriptions[at]
