@@ -1,12 +1,13 @@
 """FMU instances kept alive between runs in one process (an ensemble worker's members).
 
 A run through :class:`cosim.run.master.core.Master` given an :class:`InstancePool` takes the
-instance of each of its FMUs from the pool where one is kept (same instance name, FMU file,
-unit class and event mode) and resets it (:meth:`cosim.run.master.unit.Unit.reset`: fmi2Reset,
-FMI 2.0.4 sec. 2.1.6, back to the state right after fmi2Instantiate, every variable at its
-start value) instead of reading the FMU file, loading its library and instantiating it again;
-after a completed run its instances go back into the pool, after a failure they are freed.
-Only units that can be reset (:attr:`cosim.run.master.unit.Unit.reusable`) are kept.
+instance of each of its FMUs from the pool where one is kept (same instance name, version of
+the FMU file and event mode) and resets it (:meth:`cosim.run.master.unit.Unit.reset`:
+fmi2Reset, FMI 2.0.4 sec. 2.1.6, back to the state right after fmi2Instantiate, every variable
+at its start value) instead of checking the archive, parsing its modelDescription, loading its
+library and instantiating it again; after a completed run its instances go back into the
+pool, after a failure they are freed. Only units that can be reset
+(:attr:`cosim.run.master.unit.Unit.reusable`: the FMI 2.0 ones) are kept.
 """
 
 from __future__ import annotations
@@ -31,6 +32,7 @@ class InstancePool:
 
     @staticmethod
     def key(instance: str, path: Path, event_mode: bool) -> Key:
+        """Where the instance ``instance`` of the FMU file ``path`` is kept."""
         return (instance, str(path), path.stat().st_mtime, event_mode)
 
     def description(self, sc: Scenario, instance: str, path: Path) -> Any:
