@@ -27,6 +27,7 @@ floating-point path). The runs go through the shared runner (:mod:`cosim.run.run
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import sys
 from collections.abc import Callable
@@ -47,8 +48,11 @@ from cosim.run.claims import (
     with_rounding,
 )
 from cosim.run.figures import draw_ensemble_figure
+from cosim.run.master.pool import InstancePool
 from cosim.run.record import Job as RecordJob
 from cosim.run.record import Record, known, save, series_name
+from cosim.run.scenario import Scenario, load_scenario
+from cosim.run.simulate import ensure_built, run_scenario
 
 if TYPE_CHECKING:
     from cosim.reproduce.entry import Entry
@@ -166,14 +170,28 @@ def claim_jobs(entry: Entry, k: int, rounding: bool = True, build: str = "python
                                              if key[1] != "repeat"]
 
 
+# the FMU instances of this process's members, reset from one member to the next
+MEMBER_INSTANCES = InstancePool()
+
+
 def _run_member(scenario: str, overrides: dict[str, Any], out_dir: str | None = None
                 ) -> dict[str, Any]:
-    from cosim.run.simulate import run_scenario
-
+    """One member in this (worker) process, on the instances of :data:`MEMBER_INSTANCES`;
+    its summary with :func:`with_host`. With ``out_dir`` it records the scenario's
+    ``[record]`` variables and writes them (results.csv, summary.json; no plot), else it
+    records only what its summary reads (:func:`member_scenario`) and writes nothing."""
     before = host_load()
-    summary = run_scenario(scenario, overrides=overrides, out_dir=out_dir, build=False,
-                           plot=False).summary
+    sc = load_scenario(scenario, overrides)
+    summary = run_scenario(sc if out_dir is not None else member_scenario(sc), out_dir=out_dir,
+                           build=False, plot=False, pool=MEMBER_INSTANCES).summary
     return with_host(summary, before)
+
+
+def member_scenario(sc: Scenario) -> Scenario:
+    """``sc`` recording only the variables its ``[summary]`` names (and the infeasibility
+    counters, :meth:`cosim.run.master.core.Master._recorded_refs`): every metric of a
+    member, none of the scenario's other ``[record]`` variables."""
+    return dataclasses.replace(sc, record=[])
 
 
 def host_load() -> float:
@@ -239,9 +257,11 @@ def execute(jobs: list[Job], workers: int | None, label: str = "claims",
             reference_path: bool = True,
             on_result: Callable[[Any, dict[str, Any] | None], None] | None = None
             ) -> dict[tuple[str, str, int, int], dict[str, Any] | None]:
-    """Run the jobs with :func:`cosim.run.runner.run_tasks` (main path, then each perturbed
-    path: path 1 in processes started with ``ATO_COSIM_NO_KERNELS=1`` unless
-    ``reference_path`` is false); a failed run gives None (its metrics are missing).
+    """Run the jobs with :func:`cosim.run.runner.run_tasks`: the main path and the perturbed
+    paths in one pool of workers, each worker running its members on the same FMU instances
+    (:data:`MEMBER_INSTANCES`), except path 1 in workers of its own started with
+    ``ATO_COSIM_NO_KERNELS=1`` (unless ``reference_path`` is false), after the others; a
+    failed run gives None (its metrics are missing).
     ``dirs``: job key -> folder for the run's results (others write none);
     ``on_result(key, summary)`` as each ends."""
     from cosim.run import runner
@@ -261,12 +281,14 @@ def execute(jobs: list[Job], workers: int | None, label: str = "claims",
 
     from cosim.run.sweep import warm_up_for
 
-    for path in sorted({key[3] for key, _sc, _ov in jobs}):
+    by_env: dict[bool, list[Job]] = {}  # the paths of one environment share their workers
+    for job in sorted(jobs, key=lambda job: job[0][3]):
+        by_env.setdefault(job[0][3] == 1 and reference_path, []).append(job)
+    for reference, group in sorted(by_env.items()):
         tasks = [runner.Task(key, _run_member, (sc, ov, dirs.get(key)))
-                 for key, sc, ov in jobs if key[3] == path]
+                 for key, sc, ov in group]
         runner.run_tasks(tasks, finished, failed, workers, scheduler, label,
-                         env=ROUNDING_ENV if path == 1 and reference_path else None,
-                         progress=progress,
+                         env=ROUNDING_ENV if reference else None, progress=progress,
                          warm_up=warm_up_for([(sc, ov) for _k, sc, ov in jobs]),
                          what="the claims' runs")
     return out
@@ -466,9 +488,6 @@ def simulate_claims(entry: Entry, out: Path, record: Record, workers: int | None
     """Run the claims' members (K and rounding path of ``record``) and add their summaries to
     ``record``, with the series of the members the ensemble figures draw; a member
     ``previous`` holds with the same specification is taken from it, not run again."""
-    from cosim.run.scenario import load_scenario
-    from cosim.run.simulate import ensure_built
-
     wanted = member_jobs(entry, record.seeds, record.rounding, record.build)
     reuse = {job.key for job in wanted if known(previous, job)}
     jobs = [j for j in claim_jobs(entry, record.seeds, record.rounding, record.build)

@@ -35,7 +35,9 @@ Every error names the file, the key and what is wrong.
 
 from __future__ import annotations
 
+import copy
 import difflib
+import functools
 import importlib
 import math
 import re
@@ -401,8 +403,16 @@ def load_scenario(name_or_path: str | Path,
     return scenario
 
 
+@functools.lru_cache(maxsize=256)
+def _parsed_scenario(path: str, mtime_ns: int, size: int) -> dict[str, Any]:
+    """The scenario file ``path`` parsed, once per version of it (modification time, size)
+    in this process (an ensemble loads the same file for every member)."""
+    return read_toml(Path(path))
+
+
 def _load_scenario(path: Path, overrides: dict[str, Any] | list[str] | None) -> Scenario:
-    raw = read_toml(path)
+    stat = path.stat()
+    raw = copy.deepcopy(_parsed_scenario(str(path), stat.st_mtime_ns, stat.st_size))
     apply_overrides(raw, overrides, str(path))
     _refuse_unknown(path, "top level", raw, ("description", "simulation", "fmus",
                                               "connections", "record", "summary"))

@@ -18,6 +18,7 @@ from cosim.fmu.native_build import build_natives, native_is_stale
 from cosim.run import interrupt, isolation
 from cosim.run.master.core import Master, ProgressFn, RunResult
 from cosim.run.master.errors import SimulationError
+from cosim.run.master.pool import InstancePool
 from cosim.run.metrics import compute_summary
 from cosim.run.results import FILES, is_complete_run, write_results
 from cosim.run.scenario import Scenario, ScenarioError, catalog_path, load_scenario
@@ -26,17 +27,18 @@ from cosim.run.scenario import Scenario, ScenarioError, catalog_path, load_scena
 def run_scenario(scenario: str | Path | Scenario, overrides: dict[str, Any] | list[str] | None
                  = None, algorithm: str | None = None, out_dir: str | Path | None = None,
                  progress: ProgressFn | None = None, build: bool = True,
-                 plot: bool = True, force: bool = False, plot_format: str = "png"
-                 ) -> RunResult:
+                 plot: bool = True, force: bool = False, plot_format: str = "png",
+                 pool: InstancePool | None = None) -> RunResult:
     """Load (and override) a scenario, build missing or stale FMUs, run it, compute the summary
     and, with ``out_dir``, write results.csv, summary.json and plot.png (see
-    :func:`cosim.run.results.write_results` for ``force``). A failure raises
+    :func:`cosim.run.results.write_results` for ``force``); ``pool``: the FMU instances kept
+    between runs (:mod:`cosim.run.master.pool`). A failure raises
     :class:`SimulationError`, SIGINT/SIGTERM :class:`cosim.run.interrupt.Interrupted`, both
     after writing the partial results."""
     sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario, overrides)
     if build:
         ensure_built(sc)
-    master = Master(sc, algorithm, progress)
+    master = Master(sc, algorithm, progress, pool)
     # SIGINT/SIGTERM only set a flag while the FMUs run (never an exception inside their code);
     # the master stops at the next communication point and what was recorded is written
     with interrupt.guard():

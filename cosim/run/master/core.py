@@ -26,6 +26,7 @@ from cosim.run.master.algorithms import ALGORITHM_CLASSES
 from cosim.run.master.errors import FmuCallError, FmuTerminated, SimulationError
 from cosim.run.master.loading import extract_once, read_fmu, unit_class
 from cosim.run.master.observers import LIST_FAMILIES, Recorder
+from cosim.run.master.pool import InstancePool, Key
 from cosim.run.master.scheduled import Fmi3ScheduledUnit
 from cosim.run.master.unit import Unit
 from cosim.run.scenario import (
@@ -71,8 +72,15 @@ class Master:
     """Loads the FMUs of a scenario, initialises and wires them, and runs an algorithm."""
 
     def __init__(self, scenario: Scenario, algorithm: str | None = None,
-                 progress: ProgressFn | None = None) -> None:
+                 progress: ProgressFn | None = None, pool: InstancePool | None = None
+                 ) -> None:
+        """``pool``: where the FMU instances are taken from (reset) and given back to after
+        a completed run (:mod:`cosim.run.master.pool`); without one each run instantiates
+        and frees its own."""
         self.scenario = scenario
+        self.pool = pool
+        self.pool_keys: dict[Unit, Key] = {}
+        self.reused: set[Unit] = set()  # taken from the pool: reset, not instantiated
         self.algorithm_name = algorithm or scenario.simulation.algorithm
         if self.algorithm_name not in ALGORITHM_CLASSES:
             raise ScenarioError(f"unknown algorithm {self.algorithm_name!r}; expected one of "
@@ -99,7 +107,9 @@ class Master:
             if not comp.fmu_path.is_file():
                 raise ScenarioError(f"{sc.path}: [fmus.{comp.name}] fmu = {comp.fmu!r}: "
                                     f"{comp.fmu_path} not found (run `cosim build`)")
-            descriptions[comp.name] = read_fmu(sc, comp.name, comp.fmu_path)
+            descriptions[comp.name] = (read_fmu(sc, comp.name, comp.fmu_path)
+                                       if self.pool is None else
+                                       self.pool.description(sc, comp.name, comp.fmu_path))
             extracted[comp.fmu_path] = extract_once(comp.fmu_path)
         views = {name: unit_class(md).scenario_view(md) for name, md in descriptions.items()}
         clocks = {name: {v.name for v in md.modelVariables if v.type == "Clock"}
@@ -121,7 +131,16 @@ class Master:
         by_name: dict[str, Unit] = {}
         for comp in sc.components.values():
             md = descriptions[comp.name]
-            unit = unit_class(md)(comp.name, comp.fmu_path, extracted[comp.fmu_path], md)
+            unit = None
+            if self.pool is not None:
+                key = self.pool.key(comp.name, comp.fmu_path, self.event_mode)
+                unit = self.pool.take(key)
+            if unit is None:
+                unit = unit_class(md)(comp.name, comp.fmu_path, extracted[comp.fmu_path], md)
+            else:
+                self.reused.add(unit)
+            if self.pool is not None:
+                self.pool_keys[unit] = key
             if comp.sample_time is not None:
                 unit.sample_ticks = to_ticks(comp.sample_time)
             if comp.max_step is not None:
@@ -204,7 +223,10 @@ class Master:
         sc = self.scenario
         for unit in self.units:
             comp = sc.components[unit.name]
-            unit.instantiate(event_mode=ALGORITHM_CLASSES[self.algorithm_name].event_mode)
+            if unit in self.reused:
+                unit.reset()
+            else:
+                unit.instantiate(event_mode=self.event_mode)
             self._blas_refresh()  # the FMU's modules may have loaded a BLAS library
             unit.time_ticks = self.start_ticks
             params = dict(comp.parameters)
@@ -225,6 +247,11 @@ class Master:
                     self.transfer(link, link.src.get([link.src_name])[0])
         for unit in self.units:
             unit.exit_initialization()
+
+    @property
+    def event_mode(self) -> bool:
+        """Does the algorithm handle the FMUs' events (FMI 3 Event Mode)?"""
+        return ALGORITHM_CLASSES[self.algorithm_name].event_mode
 
     # -- used by the algorithms ------------------------------------------------------------------
     def transfer(self, link: Link, value: Any) -> None:
@@ -330,9 +357,13 @@ class Master:
                                       else f"{type(err).__name__}: {err}")
                 raise
             finally:
+                kept = self.pool is not None and self.partial is None
                 for unit in self.units:
                     try:
-                        unit.free()
+                        if kept:
+                            self.pool.give(self.pool_keys[unit], unit)
+                        else:
+                            unit.free()
                     except Exception:  # noqa: BLE001 - freeing must not hide the real error
                         pass
         self.wall_time = time.perf_counter() - t0

@@ -145,6 +145,14 @@ class Fmi2Unit(Unit):
     def free(self) -> None:
         self.slave.freeInstance()
 
+    reusable = True
+
+    def reset(self) -> None:
+        """fmi2Reset (FMI 2.0.4 sec. 2.1.6): the state after fmi2Instantiate, every variable
+        at its start value; what the FMU logs while resetting is kept, as at instantiation."""
+        self.reset_run_state()
+        self.slave.reset()
+
     def get_state(self) -> Any:
         return self.slave.getFMUstate()
 

@@ -69,6 +69,12 @@ class Unit(ABC):
         # the FMU's own communication step (DefaultExperiment stepSize), ticks; None: not given
         self.default_step_ticks: int | None = (to_ticks(float(step)) if step is not None
                                                and float(step) > 0 else None)
+        self.has_next_event_output = "next_event_time" in self.vars
+        self.reset_run_state()
+
+    def reset_run_state(self) -> None:
+        """The run-dependent state of this side of the instance, as before its first run:
+        time, counters, schedule and log."""
         self.time_ticks = 0
         self.do_steps = 0
         self.wall_time = 0.0
@@ -77,7 +83,6 @@ class Unit(ABC):
         self.sample_ticks: int | None = None
         self.max_step_ticks: int | None = None
         self.next_event_ticks: int | None = None
-        self.has_next_event_output = "next_event_time" in self.vars
         self.messages: list[str] = []
 
     @staticmethod
@@ -124,6 +129,13 @@ class Unit(ABC):
 
     @abstractmethod
     def terminate(self) -> None: ...
+
+    reusable = False  # reset() is implemented: the instance serves another run
+
+    def reset(self) -> None:
+        """The instance back to its state right after :meth:`instantiate` (every variable at
+        its start value) and :meth:`reset_run_state`, for another run without a new instance."""
+        raise NotImplementedError(f"{type(self).__name__} cannot be reset")
 
     @abstractmethod
     def free(self) -> None: ...

@@ -1,0 +1,83 @@
+"""Ensemble members on reset FMU instances (:mod:`cosim.run.master.pool`): a member run on the
+instances a previous member of other parameters and seed left behind (fmi2Reset) equals the
+same member run on fresh instances, bit for bit, in every recorded signal, every value the
+master passed on, every final output and every metric, on the Python and the native builds;
+a failed run keeps none of its instances."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import pandas as pd
+import pytest
+
+from cosim.fmu.state import to_ticks
+from cosim.run.master.errors import SimulationError
+from cosim.run.master.fmi2 import Fmi2Unit
+from cosim.run.master.pool import InstancePool
+from cosim.run.master.unit import Unit
+from cosim.run.scenario import load_scenario
+from cosim.run.simulate import ensure_built, run_scenario
+
+SCENARIO = "seed000_stop_rmpc"
+NATIVE = {"plant.build": "native", "controller.build": "native"}
+# two members: other disturbance seed, other horizon (a parameter the controller's set-up reads)
+FIRST = {"plant.disturbance_amplitude": 0.02, "plant.disturbance_seed": 3, "controller.N": 5}
+SECOND = {"plant.disturbance_amplitude": 0.02, "plant.disturbance_seed": 8, "controller.N": 10}
+# measurements of the run, not results of it: wall and solver times
+MEASURED_PREFIXES = ("wall_time_s", "real_time_factor", "fmu_wall_time_s", "qp_solve_time_",
+                     "qp_cpu_time_")
+
+
+def _results(result: Any) -> dict[str, Any]:
+    """What a member produces, the measured times left out."""
+    return {"summary": {k: v for k, v in result.summary.items()
+                        if not k.startswith(MEASURED_PREFIXES)},
+            "final_outputs": result.final_outputs, "values": result.connection_values,
+            "changes": result.connection_changes, "executions": result.executions,
+            "do_steps": result.do_steps, "sim_time_s": result.sim_time_s,
+            "terminated_by": result.terminated_by}
+
+
+def _member(overrides: dict[str, Any], pool: InstancePool) -> Any:
+    return run_scenario(SCENARIO, overrides=overrides, build=False, plot=False, pool=pool)
+
+
+@pytest.mark.parametrize("build", [{}, NATIVE], ids=["python", "native"])
+def test_a_reset_member_equals_a_fresh_one(built_fmus, build: dict[str, str]) -> None:
+    ensure_built(load_scenario(SCENARIO, build))
+    pool = InstancePool()
+    first = _member({**FIRST, **build}, pool)
+    kept: list[Unit] = pool.kept()
+    assert len(kept) == 2  # plant and controller
+    reset = _member({**SECOND, **build}, pool)
+    assert {id(u) for u in pool.kept()} == {id(u) for u in kept}  # the same instances served
+    fresh = _member({**SECOND, **build}, InstancePool())
+    pd.testing.assert_frame_equal(reset.frame, fresh.frame, check_exact=True)
+    assert _results(reset) == _results(fresh)
+    # the second member is another run: its signals differ from the first's
+    assert not first.frame["plant.s"].equals(reset.frame["plant.s"])
+    pool.clear()
+    assert len(pool) == 0
+
+
+def test_a_failed_run_keeps_none_of_its_instances(built_fmus, monkeypatch) -> None:
+    pool = InstancePool()
+    quick = {"simulation.stop_time": 2.0}
+    _member(quick, pool)
+    assert len(pool) == 2
+    real_step = Fmi2Unit.step_to
+
+    def failing_step(self: Fmi2Unit, ticks: int) -> int:
+        if self.name == "plant" and ticks > to_ticks(1.0):
+            raise SimulationError("plant: doStep at t = 1 s failed: test fault")
+        return real_step(self, ticks)
+
+    monkeypatch.setattr(Fmi2Unit, "step_to", failing_step)
+    with pytest.raises(SimulationError, match="test fault"):
+        _member(quick, pool)
+    assert len(pool) == 0  # freed, not kept in the state the failure left
+    monkeypatch.undo()
+    again = _member(quick, pool)
+    assert again.completed and len(pool) == 2
+    pool.clear()
