@@ -42,10 +42,7 @@ from __future__ import annotations
 
 import fnmatch
 import math
-import os
 import shutil
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -315,18 +312,3 @@ def test_whole_seed002_loop_with_native_plant_and_controller_equals_python(name)
     compare_loops(name, None)
 
 
-@pytest.mark.parametrize("ident", [
-    "FreightPid",  # the four share the backend and the base: the others in the slow suite
-    *(pytest.param(i, marks=pytest.mark.slow)
-      for i in ("FreightSmc", "FreightFpid", "FreightPreview"))])
-def test_compliance_suite_passes_the_native_freight_controllers(ident, tmp_path):
-    """cosim validate (calling sequence, state, reset, wrong-state calls, bad parameters,
-    non-finite inputs) finds no error and no warning."""
-    if shutil.which("gcc") is None:
-        pytest.skip("gcc not installed: native FMUs cannot be built")
-    path = build_native(ident, dest=tmp_path, windows=False)
-    done = subprocess.run([sys.executable, "-m", "cosim.cli", "validate", str(path)],
-                          capture_output=True, text=True, timeout=300,
-                          env=dict(os.environ, PYTHONPATH=str(ROOT)))
-    assert done.returncode == 0, done.stdout + done.stderr
-    assert "0 error(s), 0 warning(s)" in done.stdout

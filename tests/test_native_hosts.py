@@ -211,7 +211,9 @@ def test_fmpy_runs_the_fmi3_build_like_the_fmi2_build(native, identifier):
 @pytest.mark.parametrize("identifier", IDENTIFIERS)
 def test_compliance_suite_passes(native, identifier, version):
     """cosim.interop.compliance (what ``cosim validate --native --fmi all`` runs), strict: no
-    error and no warning."""
+    error and no warning, for every native model in both FMI versions (the one place each
+    native build's compliance is asserted; the command itself:
+    test_cli_validates_native_builds_of_both_versions)."""
     from cosim.interop.compliance import ERROR, WARNING, check_fmu, format_report
 
     path = native(identifier)[version]
