@@ -36,20 +36,9 @@ N_STEPS = 40
 
 
 @pytest.fixture(scope="module")
-def native(tmp_path_factory):
-    """identifier -> {FMI version: path}, each model built once (Linux binaries)."""
-    if shutil.which("gcc") is None:
-        pytest.skip("gcc not installed: native FMUs cannot be built")
-    dest = tmp_path_factory.mktemp("native")
-    built: dict[str, dict[int, Path]] = {}
-
-    def get(identifier: str) -> dict[int, Path]:
-        if identifier not in built:
-            built[identifier] = dict(zip(VERSIONS, build_natives(identifier, VERSIONS, dest,
-                                                                 windows=False)))
-        return built[identifier]
-
-    return get
+def native(native_builds):
+    """identifier -> {FMI version: path}, each model built once per test run (Linux binaries)."""
+    return native_builds
 
 
 def probe(md) -> tuple[dict[int, float], list[int]]:
