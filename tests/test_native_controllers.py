@@ -46,7 +46,7 @@ from fmpy.fmi2 import FMU2Slave
 from controllers.hybrid.explicit import PARAM_NAMES, ExplicitLaw
 from controllers.hybrid.explicit_mpc import regions_path
 from cosim.fmu.build import catalog
-from cosim.fmu.native_build import build_native, native_path
+from cosim.fmu.native_build import native_path
 from cosim.run.scenario import ScenarioError, load_scenario
 from cosim.run.simulate import run_scenario
 from plants.emu import emu_config
@@ -85,13 +85,10 @@ def empc_force_bound(regions: str = "seed004_empc_crh3_3car") -> float:
 
 
 @pytest.fixture(scope="module")
-def natives(tmp_path_factory):
-    if shutil.which("gcc") is None:
-        pytest.skip("gcc not installed: native FMUs cannot be built")
-    dest = tmp_path_factory.mktemp("native")
+def natives(tmp_path_factory, native_builds):
     out = {}
     for ident in CONTROLLERS:
-        path = build_native(ident, dest=dest, windows=False)
+        path = native_builds(ident)[2]
         md = read_model_description(str(path), validate=True)
         out[ident] = (md, extract(str(path), unzipdir=str(tmp_path_factory.mktemp(ident))))
     return out

@@ -32,8 +32,8 @@ OUTPUTS = ("v", "s", "a", "a_c", "applied_command", "grade")
 
 
 @pytest.fixture(scope="module")
-def native(tmp_path_factory):
-    return build_unzipped("BrakeDelayTrain", tmp_path_factory)
+def native(tmp_path_factory, native_builds):
+    return build_unzipped("BrakeDelayTrain", tmp_path_factory, native_builds)
 
 
 def commands(seed: int, n: int) -> list[tuple[float, float]]:

@@ -54,8 +54,8 @@ pytestmark = pytest.mark.skipif(not kernels.KERNELS,
 
 
 @pytest.fixture(scope="module")
-def native(tmp_path_factory):
-    return build_unzipped("FreightTrain", tmp_path_factory)
+def native(tmp_path_factory, native_builds):
+    return build_unzipped("FreightTrain", tmp_path_factory, native_builds)
 
 
 def core_of(params: dict) -> FreightTrain:

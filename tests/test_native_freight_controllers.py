@@ -53,7 +53,6 @@ from native_helpers import set_by_type
 from test_native_controllers import _callbacks, _flat, gamma
 
 from cosim.fmu.build import catalog
-from cosim.fmu.native_build import build_native
 from cosim.run.scenario import load_scenario
 from cosim.run.simulate import run_scenario
 
@@ -73,11 +72,8 @@ def bound(k: int) -> float:
 
 
 @pytest.fixture(scope="module")
-def natives(tmp_path_factory):
-    if shutil.which("gcc") is None:
-        pytest.skip("gcc not installed: native FMUs cannot be built")
-    dest = tmp_path_factory.mktemp("native")
-    return {ident: build_native(ident, dest=dest, windows=False) for ident in CONTROLLERS}
+def natives(native_builds):
+    return {ident: native_builds(ident)[2] for ident in CONTROLLERS}
 
 
 def core_of(ident: str, params: dict | None = None):

@@ -67,9 +67,9 @@ def gamma(n: int) -> float:
 
 
 @pytest.fixture(scope="module")
-def natives(tmp_path_factory):
+def natives(tmp_path_factory, native_builds):
     """identifier -> (FMU path, model description, unzipped folder), built once."""
-    return {ident: build_unzipped(ident, tmp_path_factory) for ident in IDENTS}
+    return {ident: build_unzipped(ident, tmp_path_factory, native_builds) for ident in IDENTS}
 
 
 def miqp_force_bound(core: HybridMpc, t: float, inputs: dict[str, float]) -> float:

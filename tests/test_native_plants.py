@@ -48,8 +48,8 @@ TIMING_KEYS = ("wall_time", "real_time_factor", "fmu_wall", "solve_time", "cpu_t
 
 
 @pytest.fixture(scope="module")
-def natives(tmp_path_factory):
-    return {ident: build_unzipped(ident, tmp_path_factory)
+def natives(tmp_path_factory, native_builds):
+    return {ident: build_unzipped(ident, tmp_path_factory, native_builds)
             for ident in ("Crh3Train", "Emu3", "Emu8")}
 
 
