@@ -497,6 +497,23 @@ def test_ensemble_figure_draws_held_bands_as_steps(built_fmus):
     assert not ax.get_legend().get_window_extent(renderer).overlaps(
         ax.get_window_extent(renderer))
     plt.close(fig)
+    # members spanning 10 km of position: the axis in km, as the single run's figure
+    far = [_stopping_frame(1e4) for _ in range(3)]
+    fig = ensemble_figure_of({"file": "e.png", "x": "plant.s", "y": "plant.v"},
+                             {"RSMPC": far}, {"RSMPC": sc})
+    ax = fig.axes[0]
+    [line] = ax.get_lines()
+    assert ax.get_xlabel() == f"{variable_info(sc, 'plant.s')[0]} (km)"
+    assert np.allclose(line.get_xdata(), far[0]["plant.s"] / 1000.0)
+    plt.close(fig)
+    # a difference (y_minus) in a panel is named by its declarations, not by raw names
+    fig = ensemble_figure_of({"file": "e.png", "x": "time", "y": "plant.v",
+                              "y_minus": "controller.v_ref", "kind": "panels"},
+                             {"RSMPC": far}, {"RSMPC": sc})
+    [text] = [t.get_text().replace("\n", " ") for t in fig.axes[0].get_legend().get_texts()]
+    assert text == (f"{variable_info(sc, 'plant.v')[0]} - "
+                    f"{variable_info(sc, 'controller.v_ref')[0]} (median of 3)"), text
+    plt.close(fig)
 
 
 def _title_clear_of_axes(fig) -> None:

@@ -492,7 +492,8 @@ def ensemble_figure_of(spec: dict[str, Any], frames: dict[str, list[Any]],
     a reference column the members did not record and no declared curve gives is left out);
     held signals as steps, the measured medians solid in their colours, the reference as its
     continuous curve (solid, mid grey, beneath: :data:`REFERENCE_STYLE`), labels and units from
-    the declarations (:func:`series_style`), the legend outside."""
+    the declarations (:func:`series_style`), a long position axis in km (:func:`x_axis`), the
+    legend outside."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -505,17 +506,20 @@ def ensemble_figure_of(spec: dict[str, Any], frames: dict[str, list[Any]],
     fig, axes = plt.subplots(len(frames) if panels else 1, 1, squeeze=False, sharex=True,
                              figsize=(9, 2.6 * len(frames) if panels else 4.5),
                              layout="constrained")  # room for the title and outside legends
+    xlabel, xfactor = x_axis(spec, first, {n: m[0] for n, m in frames.items() if m})
     for j, (name, members_) in enumerate(frames.items()):
         ax = axes[j if panels else 0][0]
-        x0 = members_[0]["time"] if spec["x"] == "time" else members_[0][spec["x"]]
+        x0 = (members_[0]["time"] if spec["x"] == "time" else members_[0][spec["x"]]) * xfactor
         k = 0 if panels else j * len(ys)  # the measured series' style index
         for y in ys:
-            plain = "y_reduce" in spec or "y_minus" in spec
-            style = ({"drawstyle": "default", "text": y, "reference": False} if plain
+            style = ({"drawstyle": "default", "text": y, "reference": False}
+                     if "y_reduce" in spec
                      else series_style(scenarios.get(name), y, spec.get("reference", ())))
+            if "y_minus" in spec:  # a difference: measured, labelled as one
+                style = {**style, "reference": False}
             curves = []
             for frame in members_:
-                x = frame["time"] if spec["x"] == "time" else frame[spec["x"]]
+                x = (frame["time"] if spec["x"] == "time" else frame[spec["x"]]) * xfactor
                 curve = (reference_curve(scenarios.get(name), frame, y) if style["reference"]
                          else None)
                 if curve is None and style["reference"] and y not in frame:
@@ -525,8 +529,8 @@ def ensemble_figure_of(spec: dict[str, Any], frames: dict[str, list[Any]],
             if len(curves) < len(members_):
                 continue
             stack = np.vstack(curves)
-            label = (style["text"] if panels else name if len(ys) == 1
-                     else f"{name}: {style['text']}")
+            text = series_label(spec, scenarios.get(name), y, style)
+            label = text if panels else name if len(ys) == 1 else f"{name}: {text}"
             kwargs: dict[str, Any] = {"drawstyle": style["drawstyle"]}
             kwargs.update(REFERENCE_STYLE if style["reference"] else
                           {**measured_style(k), "marker": None})
@@ -541,7 +545,7 @@ def ensemble_figure_of(spec: dict[str, Any], frames: dict[str, list[Any]],
             draw_limits(ax, spec, members_[0], x0, name)
         finish_axes(ax, spec, name if panels else None, ylabel, panels or j == 0)
         legend_outside(ax)
-    axes[-1][0].set_xlabel(axis_text(spec, "x", first, spec["x"])[0])
+    axes[-1][0].set_xlabel(xlabel)
     fig.suptitle(f"{spec.get('title', '')} (median, 5-95 % band over the seeds)")
     return fig
 
