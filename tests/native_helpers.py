@@ -5,11 +5,9 @@ image, and the rows by which two model descriptions are compared."""
 
 from __future__ import annotations
 
-import shutil
 from pathlib import Path
 
 import numpy as np
-import pytest
 from fmpy import extract, read_model_description
 from fmpy.fmi2 import (
     FMU2Slave,
@@ -18,17 +16,14 @@ from fmpy.fmi2 import (
     fmi2CallbackLoggerTYPE,
 )
 
-from cosim.fmu.native_build import build_native
-
 Native = tuple[Path, object, str]  # the FMU file, its model description, its unzipped folder
 
 
-def build_unzipped(identifier: str, tmp_path_factory) -> Native:
-    """The native FMI 2 FMU ``identifier`` (Linux binary only), its validated model
-    description and the folder it is unzipped to; skips where gcc is absent."""
-    if shutil.which("gcc") is None:
-        pytest.skip("gcc not installed: native FMUs cannot be built")
-    path = build_native(identifier, dest=tmp_path_factory.mktemp("native"), windows=False)
+def build_unzipped(identifier: str, tmp_path_factory, native_builds) -> Native:
+    """The native FMI 2 FMU ``identifier`` (Linux binary only; the run's build, fixture
+    ``native_builds``), its validated model description and the folder it is unzipped to;
+    skips where gcc is absent."""
+    path = native_builds(identifier)[2]
     md = read_model_description(str(path), validate=True)
     unzipdir = extract(str(path), unzipdir=str(tmp_path_factory.mktemp("unzip")))
     return path, md, unzipdir

@@ -18,7 +18,6 @@ from fmpy import extract, read_model_description, simulate_fmu
 from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import FMU2Slave
 from fmpy.fmi3 import FMU3Slave, fmi3Error
-from fmpy.validation import validate_fmu
 
 from cosim.fmu.build import catalog
 from cosim.fmu.fmi3 import TIME_VR, model_description
@@ -49,8 +48,9 @@ def test_catalog_splits_into_controllers_and_plants():
 
 @pytest.mark.parametrize("identifier", IDENTIFIERS)
 def test_fmi3_model_description_is_the_fmi2_one(identifier, fmi3_builds):
+    """The FMI 3 build declares the FMI 2 twin's variables, dependencies and binaries (fmpy's
+    validation of it: check ``fmi3-validation``, tests/compliance/test_compliance_fmi3.py)."""
     path3 = fmi3_builds[identifier]
-    assert validate_fmu(str(path3)) == []
     md2 = read_model_description(str(SPECS[identifier].path))
     md3 = read_model_description(str(path3))
     assert md3.fmiVersion == "3.0"

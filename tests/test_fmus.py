@@ -1,4 +1,5 @@
-"""Built FMUs: fmpy validation, many FMUs in one process, closed-loop state save/restore
+"""Built FMUs (fmpy validation of each: tests/compliance/test_compliance.py, check
+``fmpy-validation``): many FMUs in one process, closed-loop state save/restore
 through FMI, an FMU run in a fresh virtual environment without this package, and one value
 check per FMU derived independently of its code (analytic law, invariant or scipy)."""
 
@@ -17,13 +18,6 @@ import pytest
 from fmi_state_helpers import rerun_after_restore
 from fmpy import extract, read_model_description
 from fmpy.fmi2 import FMU2Slave
-from fmpy.validation import validate_fmu
-
-
-def test_every_fmu_validates(built_fmus):
-    assert built_fmus, "the catalog is empty"
-    for spec in built_fmus.values():
-        assert validate_fmu(str(spec.path)) == [], spec.identifier
 
 
 class Instance:
@@ -449,6 +443,7 @@ def _crh3_tracker_first_event(path: Path) -> None:
 
 
 def test_every_fmu_has_a_value_check(built_fmus):
+    assert built_fmus, "the catalog is empty"
     assert set(built_fmus) == set(VALUE_CHECKS)
 
 

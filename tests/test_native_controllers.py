@@ -46,7 +46,7 @@ from fmpy.fmi2 import FMU2Slave
 from controllers.hybrid.explicit import PARAM_NAMES, ExplicitLaw
 from controllers.hybrid.explicit_mpc import regions_path
 from cosim.fmu.build import catalog
-from cosim.fmu.native_build import build_native, native_path
+from cosim.fmu.native_build import native_path
 from cosim.run.scenario import ScenarioError, load_scenario
 from cosim.run.simulate import run_scenario
 from plants.emu import emu_config
@@ -85,13 +85,10 @@ def empc_force_bound(regions: str = "seed004_empc_crh3_3car") -> float:
 
 
 @pytest.fixture(scope="module")
-def natives(tmp_path_factory):
-    if shutil.which("gcc") is None:
-        pytest.skip("gcc not installed: native FMUs cannot be built")
-    dest = tmp_path_factory.mktemp("native")
+def natives(tmp_path_factory, native_builds):
     out = {}
     for ident in CONTROLLERS:
-        path = build_native(ident, dest=dest, windows=False)
+        path = native_builds(ident)[2]
         md = read_model_description(str(path), validate=True)
         out[ident] = (md, extract(str(path), unzipdir=str(tmp_path_factory.mktemp(ident))))
     return out
@@ -430,28 +427,6 @@ def test_build_option_errors_name_the_key():
     sc = load_scenario("seed000_stop_pid", ["controller.build=native",
                                             "simulation.fmi_version=3"])
     assert sc.components["controller"].fmu_path == native_path("StopPid", 3)
-
-
-@pytest.mark.parametrize("ident", [
-    "StopPid", "Empc3",  # the speed PIDs share the backend: in the slow suite
-    *(pytest.param(i, marks=pytest.mark.slow) for i in ("EmuSpeedPid3", "EmuSpeedPid8"))])
-def test_compliance_suite_passes_the_native_controllers(ident, tmp_path):
-    """cosim validate (calling sequence, state, reset, wrong-state calls, bad parameters,
-    non-finite inputs) finds no error and no warning."""
-    if shutil.which("gcc") is None:
-        pytest.skip("gcc not installed: native FMUs cannot be built")
-    import os
-    import subprocess
-    import sys
-    from pathlib import Path
-
-    root = Path(__file__).resolve().parents[1]
-    path = build_native(ident, dest=tmp_path, windows=False)
-    done = subprocess.run([sys.executable, "-m", "cosim.cli", "validate", str(path)],
-                          capture_output=True, text=True, timeout=300,
-                          env=dict(os.environ, PYTHONPATH=str(root)))
-    assert done.returncode == 0, done.stdout + done.stderr
-    assert "0 error(s), 0 warning(s)" in done.stdout
 
 
 @pytest.mark.parametrize(("ident", "params", "message"), [

@@ -79,7 +79,6 @@ from fmpy.fmi2 import FMU2Slave
 from native_helpers import set_by_type
 
 from cosim.fmu.build import catalog
-from cosim.fmu.native_build import build_native
 
 UNIT = 2.0**-53
 EPS = 512 * UNIT  # backward error of a sample's blocks (module docstring)
@@ -98,13 +97,10 @@ needs_gcc = pytest.mark.skipif(shutil.which("gcc") is None,
 
 
 @pytest.fixture(scope="module")
-def natives(tmp_path_factory):
-    if shutil.which("gcc") is None:
-        pytest.skip("gcc not installed: native FMUs cannot be built")
-    dest = tmp_path_factory.mktemp("native")
+def natives(tmp_path_factory, native_builds):
     out = {}
     for ident in SCENARIOS:
-        path = build_native(ident, dest=dest, windows=False)
+        path = native_builds(ident)[2]
         md = read_model_description(str(path), validate=True)
         out[ident] = (path, md, extract(str(path), unzipdir=str(tmp_path_factory.mktemp(ident))))
     return out

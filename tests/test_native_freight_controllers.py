@@ -42,10 +42,7 @@ from __future__ import annotations
 
 import fnmatch
 import math
-import os
 import shutil
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -56,7 +53,6 @@ from native_helpers import set_by_type
 from test_native_controllers import _callbacks, _flat, gamma
 
 from cosim.fmu.build import catalog
-from cosim.fmu.native_build import build_native
 from cosim.run.scenario import load_scenario
 from cosim.run.simulate import run_scenario
 
@@ -76,11 +72,8 @@ def bound(k: int) -> float:
 
 
 @pytest.fixture(scope="module")
-def natives(tmp_path_factory):
-    if shutil.which("gcc") is None:
-        pytest.skip("gcc not installed: native FMUs cannot be built")
-    dest = tmp_path_factory.mktemp("native")
-    return {ident: build_native(ident, dest=dest, windows=False) for ident in CONTROLLERS}
+def natives(native_builds):
+    return {ident: native_builds(ident)[2] for ident in CONTROLLERS}
 
 
 def core_of(ident: str, params: dict | None = None):
@@ -315,18 +308,3 @@ def test_whole_seed002_loop_with_native_plant_and_controller_equals_python(name)
     compare_loops(name, None)
 
 
-@pytest.mark.parametrize("ident", [
-    "FreightPid",  # the four share the backend and the base: the others in the slow suite
-    *(pytest.param(i, marks=pytest.mark.slow)
-      for i in ("FreightSmc", "FreightFpid", "FreightPreview"))])
-def test_compliance_suite_passes_the_native_freight_controllers(ident, tmp_path):
-    """cosim validate (calling sequence, state, reset, wrong-state calls, bad parameters,
-    non-finite inputs) finds no error and no warning."""
-    if shutil.which("gcc") is None:
-        pytest.skip("gcc not installed: native FMUs cannot be built")
-    path = build_native(ident, dest=tmp_path, windows=False)
-    done = subprocess.run([sys.executable, "-m", "cosim.cli", "validate", str(path)],
-                          capture_output=True, text=True, timeout=300,
-                          env=dict(os.environ, PYTHONPATH=str(ROOT)))
-    assert done.returncode == 0, done.stdout + done.stderr
-    assert "0 error(s), 0 warning(s)" in done.stdout

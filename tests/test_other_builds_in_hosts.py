@@ -5,8 +5,6 @@ controller executes the events inside each step with the inputs held."""
 
 from __future__ import annotations
 
-import shutil
-
 import pytest
 from fmpy import read_model_description, simulate_fmu
 
@@ -34,15 +32,11 @@ def test_every_fmi3_build_runs_at_the_compliance_checkers_step(built_fmus_fmi3, 
 
 
 @pytest.fixture(scope="module")
-def native_fmus(tmp_path_factory):
+def native_fmus(native_builds):
     """Every native FMU in both FMI versions (Linux binaries)."""
-    from cosim.fmu.native_build import NATIVE, build_natives
+    from cosim.fmu.native_build import NATIVE
 
-    if shutil.which("gcc") is None:
-        pytest.skip("gcc not installed: native FMUs cannot be built")
-    dest = tmp_path_factory.mktemp("native")
-    return [path for name in sorted(NATIVE)
-            for path in build_natives(name, (2, 3), dest=dest, windows=False)]
+    return [path for name in sorted(NATIVE) for path in native_builds(name).values()]
 
 
 def test_every_native_fmu_runs_in_fmpy_by_default_and_at_the_checkers_step(native_fmus):

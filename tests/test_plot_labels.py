@@ -403,6 +403,38 @@ def test_reproduce_figures_read_as_paper_figures(built_fmus):
     plt.close(panels)
 
 
+def test_error_from_the_reference_is_the_curve_minus_the_measured_speed(built_fmus):
+    """``error = "reference"``: under the tracking axes, each run's reference as drawn (the
+    declared stopping curve at the recorded positions, not the held column) minus its
+    measured speed, in the tracking axes' unit; a figure without a reference series is
+    refused naming the figure and the run."""
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    from cosim.run.figures import FigureError, figure_of
+    sc = load_scenario("seed000_stop_rsmpc")
+    frames = {"RSMPC": _stopping_frame(), "RSMPC 2": _stopping_frame(1e4)}
+    scenarios = {name: sc for name in frames}
+    fig = figure_of({"file": "f.png", "x": "plant.s", "y": ["plant.v", "controller.v_ref"],
+                     "kind": "overlay", "error": "reference"}, frames, scenarios)
+    main, error = fig.axes
+    assert error.get_shared_x_axes().joined(main, error)
+    assert error.get_ylabel() == "reference − measured (km/h)"
+    runs = [ln for ln in error.get_lines() if ln.get_label() != "_nolegend_"
+            and len(ln.get_xdata()) > 2]  # the zero line is an axhline of two points
+    for line, name in zip(runs, frames, strict=True):
+        frame = frames[name]
+        s = frame["plant.s"].to_numpy()
+        curve = np.sqrt(2 * 0.5 * np.maximum(sc.summary["stop_point"] - s, 0.0))
+        assert np.allclose(line.get_ydata(), 3.6 * (curve - frame["plant.v"].to_numpy()))
+    plt.close(fig)
+    with pytest.raises(FigureError, match="figure g.png: error = 'reference' needs a "
+                                          "reference and a measured series; run 'RSMPC' has "
+                                          "no reference"):
+        figure_of({"file": "g.png", "x": "plant.s", "y": ["plant.v"], "kind": "overlay",
+                   "error": "reference"}, frames, scenarios)
+
+
 def test_per_unit_panels_name_each_unit_and_keep_coinciding_curves_visible(built_fmus):
     """Seed 001's per-unit figures: every unit's curve labelled by its own declaration (not the
     train's mean speed, not a raw name), ``y_minus`` said in the label, curves of one panel
@@ -464,6 +496,23 @@ def test_ensemble_figure_draws_held_bands_as_steps(built_fmus):
     renderer = fig.canvas.get_renderer()
     assert not ax.get_legend().get_window_extent(renderer).overlaps(
         ax.get_window_extent(renderer))
+    plt.close(fig)
+    # members spanning 10 km of position: the axis in km, as the single run's figure
+    far = [_stopping_frame(1e4) for _ in range(3)]
+    fig = ensemble_figure_of({"file": "e.png", "x": "plant.s", "y": "plant.v"},
+                             {"RSMPC": far}, {"RSMPC": sc})
+    ax = fig.axes[0]
+    [line] = ax.get_lines()
+    assert ax.get_xlabel() == f"{variable_info(sc, 'plant.s')[0]} (km)"
+    assert np.allclose(line.get_xdata(), far[0]["plant.s"] / 1000.0)
+    plt.close(fig)
+    # a difference (y_minus) in a panel is named by its declarations, not by raw names
+    fig = ensemble_figure_of({"file": "e.png", "x": "time", "y": "plant.v",
+                              "y_minus": "controller.v_ref", "kind": "panels"},
+                             {"RSMPC": far}, {"RSMPC": sc})
+    [text] = [t.get_text().replace("\n", " ") for t in fig.axes[0].get_legend().get_texts()]
+    assert text == (f"{variable_info(sc, 'plant.v')[0]} - "
+                    f"{variable_info(sc, 'controller.v_ref')[0]} (median of 3)"), text
     plt.close(fig)
 
 

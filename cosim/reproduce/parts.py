@@ -136,7 +136,9 @@ class Figure:
         kinds=LINE_KINDS)
     error: str | None = doc(
         "a recorded error column (e.g. ``controller.speed_error``) drawn, times ``y_scale``, "
-        "in a panel under each tracking axes", default=None, kinds=LINE_KINDS)
+        "in a panel under each tracking axes; or ``\"reference\"``: each run's reference as "
+        "drawn (its continuous curve) minus its measured series", default=None,
+        kinds=LINE_KINDS)
     y_reduce: str | None = doc("``mean``: the mean of the columns y matches", default=None,
                                kinds=LINE_KINDS)
     y_minus: str | None = doc("a column: y - this column is drawn (an error)", default=None,

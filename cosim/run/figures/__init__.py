@@ -221,10 +221,17 @@ def panel_count(spec: dict[str, Any], runs: int) -> int:
     return per_run * (runs if spec.get("kind", "overlay") == "panels" else 1)
 
 
+ERROR_FROM_REFERENCE = "reference"  # error = this: the reference minus the measured series
+ERROR_FROM_REFERENCE_TEXT = "reference − measured"
+
+
 def error_label(spec: dict[str, Any], scenario: Any, ylabel: str) -> str:
-    """The error panel's y label: the ``error`` column's declared description in the unit of
-    the tracking axes' label ``ylabel`` (the error is drawn with the same factor)."""
-    text = variable_info(scenario, spec["error"])[0] if scenario is not None else spec["error"]
+    """The error panel's y label: the ``error`` column's declared description (or
+    :data:`ERROR_FROM_REFERENCE_TEXT`) in the unit of the tracking axes' label ``ylabel`` (the
+    error is drawn with the same factor)."""
+    column = spec["error"]
+    text = (ERROR_FROM_REFERENCE_TEXT if column == ERROR_FROM_REFERENCE
+            else variable_info(scenario, column)[0] if scenario is not None else column)
     unit = ylabel.rsplit("(", 1)[1].rstrip(")") if ylabel.endswith(")") and "(" in ylabel \
         else None
     return f"{text} ({unit})" if unit else text
@@ -292,6 +299,7 @@ def figure_of(spec: dict[str, Any], frames: dict[str, Any], scenarios: dict[str,
         ylabel, scale = axis_text(spec, "y", scenario, ys[0])
         k = 0 if panels else i * measured  # the measured series' style index
         run_style: dict[str, Any] | None = None
+        drawn: dict[str, Any] = {}  # "reference" / "measured": the first of each, unscaled
         for y in ys:
             style = series_style(scenario, y, references) if "y_reduce" not in spec else \
                 {"drawstyle": "default", "text": y, "reference": False}
@@ -300,9 +308,11 @@ def figure_of(spec: dict[str, Any], frames: dict[str, Any], scenarios: dict[str,
             if style["reference"] and "y_minus" not in spec:
                 curve = reference_curve(scenario, frame, y)
                 values = values if curve is None else curve
+                drawn.setdefault("reference", values)
                 ax.plot(x, values * scale, label=legend_once(text, seen, "reference"),
                         **REFERENCE_STYLE)
                 continue
+            drawn.setdefault("measured", values)
             label = text if panels else (name if measured == 1 else f"{name}: {text}")
             kwargs = measured_style(k)
             k += 1
@@ -313,8 +323,8 @@ def figure_of(spec: dict[str, Any], frames: dict[str, Any], scenarios: dict[str,
             draw_limits(ax, spec, frame, x, name, seen)
         finish_axes(ax, spec, name if panels else None, ylabel, panels or i == 0)
         if error:
-            draw_error(axes[row + 1][0], spec, frame, x, name, scenario, ylabel, scale,
-                       run_style or measured_style(k), i == 0 or panels)
+            draw_error(axes[row + 1][0], spec, error_values(spec, frame, name, drawn), x,
+                       scenario, ylabel, scale, run_style or measured_style(k), i == 0 or panels)
     labelled = [ax for ax in fig.axes if len(ax.get_legend_handles_labels()[1]) > 1]
     if labelled:  # one legend: the runs' (or series') styles are the same in every axes
         handles, labels = labelled[0].get_legend_handles_labels()
@@ -325,16 +335,31 @@ def figure_of(spec: dict[str, Any], frames: dict[str, Any], scenarios: dict[str,
     return fig
 
 
-def draw_error(ax: Any, spec: dict[str, Any], frame: Any, x: Any, run: str, scenario: Any,
-               ylabel: str, scale: float, style: dict[str, Any], first: bool) -> None:
-    """The error panel of one run: its recorded ``error`` column times ``scale`` (the tracking
-    axes' factor) solid in the run's colour (without markers), and the zero error (its
-    reference) as a reference (:data:`REFERENCE_STYLE`)."""
+def error_values(spec: dict[str, Any], frame: Any, run: str, drawn: dict[str, Any]) -> Any:
+    """The error one run's panel shows (before ``y_scale``): its recorded ``error`` column, or
+    with ``error = "reference"`` (:data:`ERROR_FROM_REFERENCE`) the run's reference as drawn
+    (its continuous curve where the scenario declares one) minus its first measured series
+    (``drawn``: "reference" / "measured" -> values); :class:`FigureError` naming the figure
+    and the run when what it needs is missing."""
     column = spec["error"]
+    if column == ERROR_FROM_REFERENCE:
+        if missing := [role for role in ("reference", "measured") if role not in drawn]:
+            raise FigureError(f"figure {spec['file']}: error = {column!r} needs a reference "
+                              f"and a measured series; run {run!r} has no {missing[0]} among "
+                              f"y {spec['y']!r}")
+        return drawn["reference"] - drawn["measured"]
     if column not in frame:
         raise FigureError(f"figure {spec['file']}: run {run!r} recorded no {column!r} "
                           f"(key error)")
-    ax.plot(x, frame[column].to_numpy(dtype=float) * scale,
+    return frame[column].to_numpy(dtype=float)
+
+
+def draw_error(ax: Any, spec: dict[str, Any], values: Any, x: Any, scenario: Any,
+               ylabel: str, scale: float, style: dict[str, Any], first: bool) -> None:
+    """The error panel of one run: its error ``values`` (:func:`error_values`) times ``scale``
+    (the tracking axes' factor) solid in the run's colour (without markers), and the zero
+    error (its reference) as a reference (:data:`REFERENCE_STYLE`)."""
+    ax.plot(x, values * scale,
             **{**style, "marker": None, "linewidth": 1.0})  # spikes would crowd the markers
     if first:
         ax.axhline(0.0, **REFERENCE_STYLE)
@@ -470,7 +495,8 @@ def ensemble_figure_of(spec: dict[str, Any], frames: dict[str, list[Any]],
     a reference column the members did not record and no declared curve gives is left out);
     held signals as steps, the measured medians solid in their colours, the reference as its
     continuous curve (solid, mid grey, beneath: :data:`REFERENCE_STYLE`), labels and units from
-    the declarations (:func:`series_style`), the legend outside."""
+    the declarations (:func:`series_style`), a long position axis in km (:func:`x_axis`), the
+    legend outside."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -483,17 +509,20 @@ def ensemble_figure_of(spec: dict[str, Any], frames: dict[str, list[Any]],
     fig, axes = plt.subplots(len(frames) if panels else 1, 1, squeeze=False, sharex=True,
                              figsize=(9, 2.6 * len(frames) if panels else 4.5),
                              layout="constrained")  # room for the title and outside legends
+    xlabel, xfactor = x_axis(spec, first, {n: m[0] for n, m in frames.items() if m})
     for j, (name, members_) in enumerate(frames.items()):
         ax = axes[j if panels else 0][0]
-        x0 = members_[0]["time"] if spec["x"] == "time" else members_[0][spec["x"]]
+        x0 = (members_[0]["time"] if spec["x"] == "time" else members_[0][spec["x"]]) * xfactor
         k = 0 if panels else j * len(ys)  # the measured series' style index
         for y in ys:
-            plain = "y_reduce" in spec or "y_minus" in spec
-            style = ({"drawstyle": "default", "text": y, "reference": False} if plain
+            style = ({"drawstyle": "default", "text": y, "reference": False}
+                     if "y_reduce" in spec
                      else series_style(scenarios.get(name), y, spec.get("reference", ())))
+            if "y_minus" in spec:  # a difference: measured, labelled as one
+                style = {**style, "reference": False}
             curves = []
             for frame in members_:
-                x = frame["time"] if spec["x"] == "time" else frame[spec["x"]]
+                x = (frame["time"] if spec["x"] == "time" else frame[spec["x"]]) * xfactor
                 curve = (reference_curve(scenarios.get(name), frame, y) if style["reference"]
                          else None)
                 if curve is None and style["reference"] and y not in frame:
@@ -503,8 +532,8 @@ def ensemble_figure_of(spec: dict[str, Any], frames: dict[str, list[Any]],
             if len(curves) < len(members_):
                 continue
             stack = np.vstack(curves)
-            label = (style["text"] if panels else name if len(ys) == 1
-                     else f"{name}: {style['text']}")
+            text = series_label(spec, scenarios.get(name), y, style)
+            label = text if panels else name if len(ys) == 1 else f"{name}: {text}"
             kwargs: dict[str, Any] = {"drawstyle": style["drawstyle"]}
             kwargs.update(REFERENCE_STYLE if style["reference"] else
                           {**measured_style(k), "marker": None})
@@ -519,7 +548,7 @@ def ensemble_figure_of(spec: dict[str, Any], frames: dict[str, list[Any]],
             draw_limits(ax, spec, members_[0], x0, name)
         finish_axes(ax, spec, name if panels else None, ylabel, panels or j == 0)
         legend_outside(ax)
-    axes[-1][0].set_xlabel(axis_text(spec, "x", first, spec["x"])[0])
+    axes[-1][0].set_xlabel(xlabel)
     fig.suptitle(f"{spec.get('title', '')} (median, 5-95 % band over the seeds)")
     return fig
 
