@@ -277,9 +277,8 @@ def rendered(tmp_path_factory: pytest.TempPathFactory) -> dict[str, dict]:
     tmp = tmp_path_factory.mktemp("rendered")
     site = _site(tmp)
     SCREENSHOTS.mkdir(parents=True, exist_ok=True)
-    for old in SCREENSHOTS.glob("*.png"):
-        old.unlink()
     found: dict[str, dict] = {}
+    names: set[str] = set()
     for page in sorted(site.rglob("index.html")):
         rel = page.parent.relative_to(site).as_posix()
         if rel.startswith("404"):
@@ -292,9 +291,20 @@ def rendered(tmp_path_factory: pytest.TempPathFactory) -> dict[str, dict]:
         probe = json.loads(match.group(1))
         name = "index" if rel == "." else rel.replace("/", "__")
         height = min(max(int(probe["height"]), 900), MAX_SHOT_PX)
+        shot = tmp / f"{name}.png"
         _browse(browser, tmp / "profile", page.as_uri(), f"--window-size={WIDTH_PX},{height}",
-                f"--screenshot={SCREENSHOTS / name}.png")
+                f"--screenshot={shot}")
+        # into the artefact folder whole (a copy, then an atomic rename): pytest-xdist may run
+        # this fixture in two workers at once, and neither may see the other's half-written
+        # or deleted file
+        part = SCREENSHOTS / f".{name}.{os.getpid()}.part"
+        shutil.copyfile(shot, part)
+        os.replace(part, SCREENSHOTS / f"{name}.png")
+        names.add(name)
         found["" if rel == "." else rel + "/"] = probe
+    for old in SCREENSHOTS.glob("*.png"):  # pages the site no longer has
+        if old.stem not in names:
+            old.unlink()
     return found
 
 
