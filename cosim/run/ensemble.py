@@ -559,6 +559,7 @@ def write_claims(entry: Entry, record: Record, out: Path, plot_format: str = "pn
     out.mkdir(parents=True, exist_ok=True)
     n = len(members(entry, "disturbance", k))
     drawn: dict[str, list[Path]] = {}
+    scenarios = run_scenarios(entry) if n > 1 else {}  # loaded once, for every figure
     for figure in entry.figures if n > 1 else []:
         if not figure.line_kind():
             continue
@@ -569,7 +570,7 @@ def write_claims(entry: Entry, record: Record, out: Path, plot_format: str = "pn
                 figure.spec(),
                 {r: [record.series[series_name("member", r, i)] for i in range(n)]
                  for r in runs},
-                out / f"{Path(figure.file).stem}_ensemble.{plot_format}", run_scenarios(entry),
+                out / f"{Path(figure.file).stem}_ensemble.{plot_format}", scenarios,
                 vector=True)
     pd.DataFrame(rows).to_csv(out / "claims.csv", index=False)
     host = host_text([record.results[ident] for ident, job in record.jobs.items()
