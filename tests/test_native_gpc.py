@@ -67,8 +67,8 @@ TIMING = ("*wall_time*", "*real_time*", "*solve_time*", "*cpu_time*")
 
 
 @pytest.fixture(scope="module")
-def native(tmp_path_factory):
-    return build_unzipped(IDENT, tmp_path_factory)
+def native(tmp_path_factory, native_builds):
+    return build_unzipped(IDENT, tmp_path_factory, native_builds)
 
 
 @functools.cache
