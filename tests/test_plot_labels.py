@@ -471,9 +471,11 @@ def test_per_unit_panels_name_each_unit_and_keep_coinciding_curves_visible(built
     plt.close(fig)
 
 
-def test_ensemble_figure_draws_held_bands_as_steps(built_fmus):
+def test_ensemble_figure_draws_held_bands_as_steps(built_fmus, tmp_path):
     """The median and 5-95 % band over the members: a held signal's median and band as steps,
-    its label from the declaration, the legend outside."""
+    its label from the declaration, the legend outside; in the svg the medians are vector
+    paths and the bands one embedded raster image each (a band of a long run as a polygon is
+    megabytes)."""
     import matplotlib.pyplot as plt
     import numpy as np
 
@@ -496,6 +498,11 @@ def test_ensemble_figure_draws_held_bands_as_steps(built_fmus):
     renderer = fig.canvas.get_renderer()
     assert not ax.get_legend().get_window_extent(renderer).overlaps(
         ax.get_window_extent(renderer))
+    assert ax.collections[0].get_rasterized() and not line.get_rasterized()
+    fig.savefig(tmp_path / "e.svg")
+    svg = (tmp_path / "e.svg").read_text()
+    assert svg.count("<image") == 1 and "FillBetweenPolyCollection" not in svg
+    assert svg.count('<g id="line2d_') >= 1
     plt.close(fig)
     # members spanning 10 km of position: the axis in km, as the single run's figure
     far = [_stopping_frame(1e4) for _ in range(3)]

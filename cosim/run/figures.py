@@ -539,7 +539,7 @@ def ensemble_figure_of(spec: dict[str, Any], frames: dict[str, list[Any]],
                             label=f"{label} (median of {len(members_)})", **kwargs)
             ax.fill_between(x0, np.percentile(stack, 5, axis=0),
                             np.percentile(stack, 95, axis=0), color=line.get_color(),
-                            alpha=0.25, linewidth=0,
+                            alpha=0.25, linewidth=0, rasterized=True,
                             step="post" if style["drawstyle"] == "steps-post" else None)
         if "limit_ref" in spec and (panels or j == 0):
             draw_limits(ax, spec, members_[0], x0, name)
