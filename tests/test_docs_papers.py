@@ -44,8 +44,10 @@ def _cells(line: str) -> int:
 
 @pytest.mark.parametrize("name", _pages())
 def test_a_paper_page_reads_citation_verdicts_figures_runs_notes(name: str) -> None:
-    """The page opens with the entry's title, citation (with its DOI or that the paper gives
-    none) and summary; the sections follow in the reader's order."""
+    """The page opens with the entry's title and citation (with its DOI or that the paper
+    gives none); then the verdicts, the paper's summary and how it is reproduced under them
+    (before the statements), or under the citation where the entry has no claims; the
+    sections follow in the reader's order."""
     entry = load_entry(name)
     text = (PAPERS / f"{name}.md").read_text()
     headings = re.findall(r"^(#{1,4}) (.+)$", text, re.M)
@@ -57,13 +59,19 @@ def test_a_paper_page_reads_citation_verdicts_figures_runs_notes(name: str) -> N
     assert present == [s for s in sections if s in order]  # in this order
     assert sections[:1] == present[:1] and "Single runs" in present
     opening = text[:text.index("### ")]
-    assert entry.citation in opening and " ".join(entry.summary.split()) in opening
     doi = f"https://doi.org/{entry.doi}" if entry.doi else "DOI not given in the paper."
-    assert doi in opening
+    assert entry.citation in opening and doi in opening
+    summary = " ".join(entry.summary.split())
+    source = f"Reproduced by `cosim reproduce {name}`"
     if entry.claims:
         verdicts = re.search(r"^### Verdicts$(.*?)^### ", text, re.M | re.S).group(1)
+        assert verdicts.lstrip().startswith("**Verdicts**")
         assert "**Headline**" in verdicts or not any(s.headline for s in entry.statements)
         assert "#### The paper's statements" in verdicts or not entry.statements
+        after = verdicts.split("#### ")[0]  # above the statements and the claims
+        assert summary in after and source in after and summary not in opening
+    else:
+        assert summary in opening and source in opening
 
 
 @pytest.mark.parametrize("name", _pages())

@@ -214,6 +214,7 @@ def _chromium() -> str | None:
 # the folder as an artefact): $ATO_COSIM_SCREENSHOTS, default runs/site-screenshots/.
 SCREENSHOTS = Path(os.environ.get("ATO_COSIM_SCREENSHOTS", ROOT / "runs" / "site-screenshots"))
 WIDTH_PX = 1280  # the reader's window
+FIRST_SCREEN_PX = 800  # the height of a 1280 x 800 screen's window: what a reader sees unscrolled
 MAX_SHOT_PX = 16000  # a full-page screenshot's height is the page's, up to this
 
 # Run in each built page after it loads: what a reader sees, as JSON in a script element that
@@ -229,6 +230,12 @@ window.addEventListener('load', () => setTimeout(() => {
                height: document.documentElement.scrollHeight, width: window.innerWidth};
   if (art) {
     const text = art.innerText;
+    // a paper page's citation (the paragraph under its title) and its verdicts paragraph:
+    // their bottoms in page coordinates
+    const bottom = e => e ? e.getBoundingClientRect().bottom + window.scrollY : null;
+    out.citation_bottom = bottom(art.querySelector('h1 + p'));
+    out.verdicts_bottom = bottom([...art.querySelectorAll('p')].find(
+      p => (p.querySelector('strong') || {}).textContent === 'Verdicts'));
     out.fences = (text.match(/```/g) || []).length;
     out.headings = [...art.querySelectorAll('h2, h3')].map(h => (
       {id: h.id, text: h.textContent.replace('\u00b6', '').trim(), in_toc: toc.has(h.id)}));
@@ -294,13 +301,20 @@ def rendered(tmp_path_factory: pytest.TempPathFactory) -> dict[str, dict]:
         shot = tmp / f"{name}.png"
         _browse(browser, tmp / "profile", page.as_uri(), f"--window-size={WIDTH_PX},{height}",
                 f"--screenshot={shot}")
-        # into the artefact folder whole (a copy, then an atomic rename): pytest-xdist may run
-        # this fixture in two workers at once, and neither may see the other's half-written
-        # or deleted file
-        part = SCREENSHOTS / f".{name}.{os.getpid()}.part"
-        shutil.copyfile(shot, part)
-        os.replace(part, SCREENSHOTS / f"{name}.png")
-        names.add(name)
+        shots = {name: shot}
+        if probe.get("verdicts_bottom") is not None:  # a paper page: also its first screen
+            first = tmp / f"{name}__first_screen.png"
+            _browse(browser, tmp / "profile", page.as_uri(),
+                    f"--window-size={WIDTH_PX},{FIRST_SCREEN_PX}", f"--screenshot={first}")
+            shots[first.stem] = first
+        for stem, path in shots.items():
+            # into the artefact folder whole (a copy, then an atomic rename): pytest-xdist may
+            # run this fixture in two workers at once, and neither may see the other's
+            # half-written or deleted file
+            part = SCREENSHOTS / f".{stem}.{os.getpid()}.part"
+            shutil.copyfile(path, part)
+            os.replace(part, SCREENSHOTS / f"{stem}.png")
+            names.add(stem)
         found["" if rel == "." else rel + "/"] = probe
     for old in SCREENSHOTS.glob("*.png"):  # pages the site no longer has
         if old.stem not in names:
@@ -332,6 +346,24 @@ def test_every_page_renders_its_text_headings_and_figures(rendered: dict[str, di
     paper_images = [i for p, probe in rendered.items() if p.startswith("papers/")
                     for i in probe["images"]]
     assert paper_images or not list((DOCS / "papers").rglob("*.png"))
+
+
+@pytest.mark.slow
+def test_each_paper_shows_its_citation_and_verdicts_on_the_first_screen(
+        rendered: dict[str, dict]) -> None:
+    """On a 1280 x 800 screen, unscrolled, a paper's page shows its citation and its verdicts
+    paragraph whole (the first-screen screenshot of each kept beside its full page)."""
+    papers = {p: probe for p, probe in rendered.items()
+              if p.startswith("papers/") and p != "papers/"}
+    assert len(papers) == len(list(DOCS.glob("papers/*.md"))) - 1, sorted(papers)  # index.md
+    below = {p: (probe["citation_bottom"], probe["verdicts_bottom"])
+             for p, probe in papers.items()
+             if None in (probe["citation_bottom"], probe["verdicts_bottom"])
+             or max(probe["citation_bottom"], probe["verdicts_bottom"]) > FIRST_SCREEN_PX}
+    assert not below, below
+    for page in papers:
+        name = page.rstrip("/").replace("/", "__")
+        assert (SCREENSHOTS / f"{name}__first_screen.png").stat().st_size > 0, page
 
 
 @pytest.mark.slow

@@ -124,9 +124,16 @@ def evaluate(entry: Entry, record: Record, out: Path, plot_format: str = "png") 
         singles += ["", derived_markdown(derived)]
     if ranked:
         singles += ["", ranking_markdown(ranked)]
-    verdicts: list[str] = []
     claim_rows: list[dict[str, Any]] = []
     spread: dict[str, list[Path]] = {}  # a figure's file -> its ensemble figure's paths
+    alias = f" (or `cosim reproduce {entry.alias}`)" if entry.alias else ""
+    source = (f"Reproduced by `cosim reproduce {entry.name}`{alias} from the entry "
+              f"`scenarios/reproduce/{entry.path.name}`. {builds_sentence(entry, record)}")
+    # what the paper claims and how it is reproduced: under the verdicts where there are
+    # claims (the citation and the verdicts fit a reader's first screen), else under the
+    # citation
+    about = [*summary_lines(entry), source.rstrip(), ""]
+    verdicts: list[str] = []
     if entry.claims:  # the verdicts lead the page; the figures and single runs follow
         claim_rows, claims_text, spread = write_claims(entry, record, out, plot_format)
         lead = headline_markdown(entry.statements, claim_rows)
@@ -134,7 +141,7 @@ def evaluate(entry: Entry, record: Record, out: Path, plot_format: str = "png") 
                    statements_markdown(entry.statements, claim_rows), ""]
                   if entry.statements else [])
         verdicts = ["### Verdicts", "", verdict_summary(claim_rows, record.seeds), "",
-                    *([lead, ""] if lead else []), *stated,
+                    *([lead, ""] if lead else []), *about, *stated,
                     "#### Claims: the paper's, then ours, then the sanity checks", "",
                     claims_text.rstrip("\n"), ""]
         singles[:0] = ["Each run once, as its scenario is shipped" + "".join(
@@ -151,10 +158,7 @@ def evaluate(entry: Entry, record: Record, out: Path, plot_format: str = "png") 
             drawn += ensemble_lines(figure, spread[figure.file], out, record.seeds)
     for sweep in entry.sweeps:
         drawn += sweep_section(sweep, record.result("sweep", sweep.name), out, plot_format)
-    alias = f" (or `cosim reproduce {entry.alias}`)" if entry.alias else ""
-    source = (f"Reproduced by `cosim reproduce {entry.name}`{alias} from the entry "
-              f"`scenarios/reproduce/{entry.path.name}`. {builds_sentence(entry, record)}")
-    parts = [f"## {entry.title}", "", *citation_lines(entry), source.rstrip(), "", *verdicts,
+    parts = [f"## {entry.title}", "", *citation_lines(entry), *(verdicts or about),
              *(["### The paper's figures, redrawn", *drawn, ""] if drawn else []),
              "### Single runs", "", *singles]
     if entry.notes:
@@ -166,14 +170,16 @@ def evaluate(entry: Entry, record: Record, out: Path, plot_format: str = "png") 
 
 
 def citation_lines(entry: Entry) -> list[str]:
-    """The page's opening paragraphs: the citation with its DOI (or that the paper gives
-    none), then what the paper claims (``summary``, as one paragraph)."""
+    """The page's opening paragraph: the citation with its DOI (or that the paper gives
+    none)."""
     doi = (f"DOI [{entry.doi}](https://doi.org/{entry.doi})." if entry.doi
            else "DOI not given in the paper.")
-    lines = [f"{entry.citation} {doi}" if entry.citation else doi, ""]
-    if entry.summary:
-        lines += [" ".join(entry.summary.split()), ""]
-    return lines
+    return [f"{entry.citation} {doi}" if entry.citation else doi, ""]
+
+
+def summary_lines(entry: Entry) -> list[str]:
+    """What the paper claims (``summary``, as one paragraph), or nothing."""
+    return [" ".join(entry.summary.split()), ""] if entry.summary else []
 
 
 def statement_reading(st: Statement, by_id: dict[str, dict[str, Any]]) -> str:
