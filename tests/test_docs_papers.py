@@ -44,10 +44,10 @@ def _cells(line: str) -> int:
 
 @pytest.mark.parametrize("name", _pages())
 def test_a_paper_page_reads_citation_verdicts_figures_runs_notes(name: str) -> None:
-    """The page opens with the entry's title and citation (with its DOI or that the paper
-    gives none); then the verdicts, the paper's summary and how it is reproduced under them
-    (before the statements), or under the citation where the entry has no claims; the
-    sections follow in the reader's order."""
+    """The page opens with the entry's title, citation (with its DOI or that the paper gives
+    none) and summary; then the verdicts (their counts, the headline reading, the paper's
+    claims that fail, how the page is reproduced, the statements); the sections follow in
+    the reader's order."""
     entry = load_entry(name)
     text = (PAPERS / f"{name}.md").read_text()
     headings = re.findall(r"^(#{1,4}) (.+)$", text, re.M)
@@ -59,19 +59,25 @@ def test_a_paper_page_reads_citation_verdicts_figures_runs_notes(name: str) -> N
     assert present == [s for s in sections if s in order]  # in this order
     assert sections[:1] == present[:1] and "Single runs" in present
     opening = text[:text.index("### ")]
+    assert entry.citation in opening and " ".join(entry.summary.split()) in opening
     doi = f"https://doi.org/{entry.doi}" if entry.doi else "DOI not given in the paper."
-    assert entry.citation in opening and doi in opening
-    summary = " ".join(entry.summary.split())
+    assert doi in opening
     source = f"Reproduced by `cosim reproduce {name}`"
     if entry.claims:
         verdicts = re.search(r"^### Verdicts$(.*?)^### ", text, re.M | re.S).group(1)
         assert verdicts.lstrip().startswith("**Verdicts**")
         assert "**Headline**" in verdicts or not any(s.headline for s in entry.statements)
         assert "#### The paper's statements" in verdicts or not entry.statements
-        after = verdicts.split("#### ")[0]  # above the statements and the claims
-        assert summary in after and source in after and summary not in opening
+        lead = verdicts.split("#### ")[0]  # above the statements and the claims
+        assert source in lead
+        failing = re.findall(r"^- .* \(`(\w+)`\)$", lead, re.M)  # the list of failures
+        paper = re.search(r"\d+ of the paper: ([^;.]*)", lead).group(1)  # the counts
+        fails = re.search(r"(\d+) fails", paper)
+        assert len(failing) == (int(fails.group(1)) if fails else 0), (paper, failing)
+        for ident in failing:  # each a claims-table row that fails
+            assert re.search(rf"^\| {ident}: [^\n]*\| fails \|", verdicts, re.M), ident
     else:
-        assert summary in opening and source in opening
+        assert source in opening
 
 
 @pytest.mark.parametrize("name", _pages())

@@ -104,7 +104,7 @@ def evaluate(entry: Entry, record: Record, out: Path, plot_format: str = "png") 
     ``claims.*`` and the figures in ``plot_format`` to ``out``."""
     import pandas as pd
 
-    from cosim.run.ensemble import host_text, verdict_summary, write_claims
+    from cosim.run.ensemble import failed_claims_markdown, host_text, verdict_summary, write_claims
 
     check_jobs(record, wanted_jobs(entry, record.seeds, record.rounding, record.build))
     out.mkdir(parents=True, exist_ok=True)
@@ -129,10 +129,6 @@ def evaluate(entry: Entry, record: Record, out: Path, plot_format: str = "png") 
     alias = f" (or `cosim reproduce {entry.alias}`)" if entry.alias else ""
     source = (f"Reproduced by `cosim reproduce {entry.name}`{alias} from the entry "
               f"`scenarios/reproduce/{entry.path.name}`. {builds_sentence(entry, record)}")
-    # what the paper claims and how it is reproduced: under the verdicts where there are
-    # claims (the citation and the verdicts fit a reader's first screen), else under the
-    # citation
-    about = [*summary_lines(entry), source.rstrip(), ""]
     verdicts: list[str] = []
     if entry.claims:  # the verdicts lead the page; the figures and single runs follow
         claim_rows, claims_text, spread = write_claims(entry, record, out, plot_format)
@@ -140,8 +136,10 @@ def evaluate(entry: Entry, record: Record, out: Path, plot_format: str = "png") 
         stated = (["#### The paper's statements", "",
                    statements_markdown(entry.statements, claim_rows), ""]
                   if entry.statements else [])
+        failed = failed_claims_markdown(claim_rows)
         verdicts = ["### Verdicts", "", verdict_summary(claim_rows, record.seeds), "",
-                    *([lead, ""] if lead else []), *about, *stated,
+                    *([lead, ""] if lead else []), *([failed, ""] if failed else []),
+                    source.rstrip(), "", *stated,
                     "#### Claims: the paper's, then ours, then the sanity checks", "",
                     claims_text.rstrip("\n"), ""]
         singles[:0] = ["Each run once, as its scenario is shipped" + "".join(
@@ -158,7 +156,8 @@ def evaluate(entry: Entry, record: Record, out: Path, plot_format: str = "png") 
             drawn += ensemble_lines(figure, spread[figure.file], out, record.seeds)
     for sweep in entry.sweeps:
         drawn += sweep_section(sweep, record.result("sweep", sweep.name), out, plot_format)
-    parts = [f"## {entry.title}", "", *citation_lines(entry), *(verdicts or about),
+    parts = [f"## {entry.title}", "", *citation_lines(entry),
+             *(verdicts or [source.rstrip(), ""]),
              *(["### The paper's figures, redrawn", *drawn, ""] if drawn else []),
              "### Single runs", "", *singles]
     if entry.notes:
@@ -170,16 +169,14 @@ def evaluate(entry: Entry, record: Record, out: Path, plot_format: str = "png") 
 
 
 def citation_lines(entry: Entry) -> list[str]:
-    """The page's opening paragraph: the citation with its DOI (or that the paper gives
-    none)."""
+    """The page's opening paragraphs: the citation with its DOI (or that the paper gives
+    none), then what the paper claims (``summary``, as one paragraph)."""
     doi = (f"DOI [{entry.doi}](https://doi.org/{entry.doi})." if entry.doi
            else "DOI not given in the paper.")
-    return [f"{entry.citation} {doi}" if entry.citation else doi, ""]
-
-
-def summary_lines(entry: Entry) -> list[str]:
-    """What the paper claims (``summary``, as one paragraph), or nothing."""
-    return [" ".join(entry.summary.split()), ""] if entry.summary else []
+    lines = [f"{entry.citation} {doi}" if entry.citation else doi, ""]
+    if entry.summary:
+        lines += [" ".join(entry.summary.split()), ""]
+    return lines
 
 
 def statement_reading(st: Statement, by_id: dict[str, dict[str, Any]]) -> str:

@@ -568,22 +568,27 @@ def write_claims(entry: Entry, record: Record, out: Path, plot_format: str = "pn
 
 
 def verdict_summary(rows: list[dict[str, Any]], k: int) -> str:
-    """The verdicts in two sentences for the top of a paper's page: the counts per origin
-    (after the multiplicity adjustment) and the paper's claims that fail here."""
+    """The verdicts in one sentence for the top of a paper's page: the counts per origin
+    (after the multiplicity adjustment)."""
     counts = []
     for origin in dict.fromkeys(r.get("origin", "paper") for r in rows):
         mine = [r for r in rows if r.get("origin", "paper") == origin]
         got = ", ".join(f"{n} {v}" for v in VERDICTS
                         if (n := sum(final_verdict(r) == v for r in mine)))
         counts.append(f"{len(mine)} {'of the paper' if origin == 'paper' else origin}: {got}")
-    text = (f"**Verdicts** over K = {k} seeds (Benjamini-Hochberg adjusted; table below): "
+    return (f"**Verdicts** over K = {k} seeds (Benjamini-Hochberg adjusted; table below): "
             + "; ".join(counts) + ".")
+
+
+def failed_claims_markdown(rows: list[dict[str, Any]]) -> str:
+    """The paper's claims that fail here (after the multiplicity adjustment), as a list under
+    its lead sentence; empty when none fails."""
     failed = [r for r in rows if r.get("origin", "paper") == "paper"
               and final_verdict(r) == "fails"]
-    if failed:
-        text += (" Not reproduced (the paper's claims that fail here): "
-                 + "; ".join(f"{r['text']} (`{r['id']}`)" for r in failed) + ".")
-    return text
+    if not failed:
+        return ""
+    return "\n".join(["Not reproduced (the paper's claims that fail here):", "",
+                      *(f"- {r['text']} (`{r['id']}`)" for r in failed)])
 
 
 def run_claims(entry: Entry, out: Path, k: int, workers: int | None = None,
