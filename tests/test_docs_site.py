@@ -227,16 +227,19 @@ window.addEventListener('load', () => setTimeout(() => {
   const toc = new Set([...document.querySelectorAll('nav.md-nav--secondary a.md-nav__link')]
     .map(a => decodeURIComponent((a.getAttribute('href') || '').split('#')[1] || '')));
   const out = {article: !!art, h1: !!(art && art.querySelector('h1')),
+               nav: [...document.querySelectorAll('nav.md-nav--primary a.md-nav__link')]
+                 .map(a => a.textContent.replace(/\\s+/g, ' ').trim()),
                height: document.documentElement.scrollHeight, width: window.innerWidth};
   if (art) {
     const text = art.innerText;
-    // a paper page's citation (the paragraph under its title), its verdicts and headline
-    // paragraphs: their bottoms in page coordinates
+    // a paper page's citation (the paragraph under its title) and verdicts paragraph: their
+    // bottoms; its headline paragraph: its top (page coordinates)
     const bottom = e => e ? e.getBoundingClientRect().bottom + window.scrollY : null;
+    const top = e => e ? e.getBoundingClientRect().top + window.scrollY : null;
     const led = word => [...art.querySelectorAll('p')].find(
       p => (p.querySelector('strong') || {}).textContent === word);
     out.first_screen = {citation: bottom(art.querySelector('h1 + p')),
-                        verdicts: bottom(led('Verdicts')), headline: bottom(led('Headline'))};
+                        verdicts: bottom(led('Verdicts')), headline: top(led('Headline'))};
     out.fences = (text.match(/```/g) || []).length;
     out.headings = [...art.querySelectorAll('h2, h3')].map(h => (
       {id: h.id, text: h.textContent.replace('\u00b6', '').trim(), in_toc: toc.has(h.id)}));
@@ -352,9 +355,10 @@ def test_every_page_renders_its_text_headings_and_figures(rendered: dict[str, di
 @pytest.mark.slow
 def test_each_paper_shows_its_citation_and_verdicts_on_the_first_screen(
         rendered: dict[str, dict]) -> None:
-    """On a 1280 x 800 screen, unscrolled, a paper's page shows its citation, its verdicts'
-    counts and its headline reading whole (the first-screen screenshot of each kept beside
-    its full page)."""
+    """On a 1280 x 800 screen, unscrolled, a paper's page shows its citation and its verdicts'
+    counts whole and its headline reading begins (the first-screen screenshot of each kept
+    beside its full page); the site's navigation names it by its title (author, year,
+    topic)."""
     from cosim.reproduce.entry import load_entry
 
     papers = {p: probe for p, probe in rendered.items()
@@ -368,6 +372,8 @@ def test_each_paper_shows_its_citation_and_verdicts_on_the_first_screen(
         assert all(where.values()) and max(where.values()) <= FIRST_SCREEN_PX, (page, where)
         name = page.rstrip("/").replace("/", "__")
         assert (SCREENSHOTS / f"{name}__first_screen.png").stat().st_size > 0, page
+        # the navigation names the paper as its page's heading does, not by its file
+        assert entry.title in probe["nav"], (page, entry.title, probe["nav"])
 
 
 @pytest.mark.slow
