@@ -738,3 +738,30 @@ def test_ensemble_figure_draws_the_reference_the_members_recorded(built_fmus):
     [speed] = fig.axes[0].get_lines()
     assert speed.get_label().startswith("Eco: ")
     plt.close(fig)
+
+
+@pytest.mark.parametrize("runs", [2, 18])
+def test_an_overlay_of_many_runs_keeps_its_axes_beside_the_legend(runs, tmp_path):
+    """However many runs a figure overlays, the legend right of the axes fits beside them:
+    the figure grows to the legend's height (no "axes sizes collapsed" from the constrained
+    layout) and the axes keep at least their designed height."""
+    import warnings
+
+    import matplotlib.pyplot as plt
+
+    from cosim.run.figures import PANEL_HEIGHT, figure_of, save_figure
+
+    frames = {f"run {i}, a label long enough to wrap in the legend's column": _stopping_frame(i)
+              for i in range(runs)}
+    fig = figure_of({"file": "f.png", "x": "time", "y": "plant.s"}, frames, {})
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # matplotlib's collapse warning fails the test
+        fig.canvas.draw()
+        [ax] = fig.axes
+        legend = ax.get_legend()
+        renderer = fig.canvas.get_renderer()
+        axes_in = ax.get_window_extent(renderer).height / fig.dpi
+        assert axes_in >= PANEL_HEIGHT * 0.75, axes_in  # ticks and labels take the rest
+        assert legend.get_window_extent(renderer).height <= fig.bbox.height
+        save_figure(fig, tmp_path / "f.png")
+    plt.close("all")

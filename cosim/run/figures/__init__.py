@@ -143,11 +143,30 @@ def legend_outside(ax: Any, handles: list[Any] | None = None,
     if handles is None or labels is None:
         handles, labels = ax.get_legend_handles_labels()
     wrapped = [textwrap.fill(text, LEGEND_WIDTH) for text in labels]
-    return ax.legend(handles, wrapped, loc="upper left", bbox_to_anchor=(1.01, 1.0),
-                     fontsize=9, frameon=False, borderaxespad=0.0)
+    legend = ax.legend(handles, wrapped, loc="upper left", bbox_to_anchor=(1.01, 1.0),
+                       fontsize=9, frameon=False, borderaxespad=0.0)
+    fit_legend_height(ax, legend)
+    return legend
+
+
+def fit_legend_height(ax: Any, legend: Any) -> None:
+    """Make the figure tall enough for ``legend`` (right of ``ax``) to fit beside the axes'
+    rows: a legend taller than its rows' share of the figure would squeeze the axes to
+    nothing under the constrained layout. The figure's height becomes at least the legend's
+    height over the rows' share of the height ratios, plus :data:`TITLE_AND_AXIS_LABEL`."""
+    fig = ax.figure
+    height = legend.get_window_extent(fig.canvas.get_renderer()).height / fig.dpi  # inches
+    rows = ax.get_subplotspec()
+    grid = rows.get_gridspec()
+    ratios = list(grid.get_height_ratios() or [1.0] * grid.nrows)
+    share = sum(ratios[rows.rowspan.start:rows.rowspan.stop]) / sum(ratios)
+    need = height / share + TITLE_AND_AXIS_LABEL
+    if need > fig.get_figheight():
+        fig.set_figheight(need)
 
 
 LEGEND_WIDTH = 36  # characters of a legend line: a long declared description wraps
+TITLE_AND_AXIS_LABEL = 0.8  # inches of a figure's height above and below its axes
 
 
 MARKERS = ("o", "s", "^", "D", "v", "P", "X", "*")  # per measured series of one axes
@@ -286,7 +305,8 @@ def figure_of(spec: dict[str, Any], frames: dict[str, Any], scenarios: dict[str,
             f"at most {MAX_PANELS} fit a page: name fewer runs, or draw kind = \"overlay\"")
     heights = [PANEL_HEIGHT, ERROR_HEIGHT] * (count // 2) if error else [PANEL_HEIGHT] * count
     fig, axes = plt.subplots(count, 1, squeeze=False, sharex=True,
-                             figsize=(9, sum(heights) + 0.8), height_ratios=heights,
+                             figsize=(9, sum(heights) + TITLE_AND_AXIS_LABEL),
+                             height_ratios=heights,
                              layout="constrained")  # room for the title and the legend
     per_run = 2 if error else 1
     xlabel, xfactor = x_axis(spec, first_scenario(names, scenarios), frames)
