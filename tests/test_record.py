@@ -1,6 +1,6 @@
 """The record of a reproduction's simulations (cosim.run.record): summaries read back bit for
-bit, series at the record's digits, the same record the same bytes, and a record that cannot
-serve an entry named as such."""
+bit, series at the record's digits, the same record the same bytes, a record that cannot
+serve an entry named as such, and a save cut at any step leaving one complete record."""
 
 from __future__ import annotations
 
@@ -11,6 +11,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
+import cosim.run.record as record_module
 from cosim.run.record import (
     SERIES_DIGITS,
     Job,
@@ -128,3 +129,53 @@ def test_a_record_of_one_rerun_flag_reads_as_paths(tmp_path: Path) -> None:
     back = load(tmp_path)
     [key] = [k for k in back.jobs if k[0] == "member"]
     assert key == ("member", "PID", "disturbance", 1, 1) and type(key[4]) is int
+
+
+@pytest.mark.parametrize("cut", ["writing", "between the renames", "removing the old"])
+def test_a_save_stopped_anywhere_leaves_one_complete_record(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch, cut: str) -> None:
+    """A checkpoint cut by a kill keeps every member recorded: the old record until the new
+    one is complete, the new one after (here the cut is an exception at each step of save)."""
+    first = _record()
+    save(first, tmp_path)
+    second = _record()
+    second.add(Job("run", ("PID", 1), "stop", {"seed": 7}), {"stop_error_m": 0.25})
+
+    class Cut(Exception):
+        pass
+
+    def stop(*args: object, **kwargs: object) -> None:
+        raise Cut
+
+    if cut == "writing":
+        monkeypatch.setattr(record_module, "_gzip", stop)
+    elif cut == "between the renames":
+        renames = []
+        real = Path.replace
+
+        def replace(self: Path, target: Path) -> Path:
+            renames.append(self.name)
+            if len(renames) == 2:  # the staged record onto the record's place
+                raise Cut
+            return real(self, target)
+
+        monkeypatch.setattr(Path, "replace", replace)
+    else:
+        real_rmtree = record_module.shutil.rmtree
+
+        def rmtree(path: Path, **kwargs: object) -> None:
+            if Path(path).name == ".record.old":
+                raise Cut
+            real_rmtree(path, **kwargs)
+
+        monkeypatch.setattr(record_module.shutil, "rmtree", rmtree)
+    with pytest.raises(Cut):
+        save(second, tmp_path)
+    monkeypatch.undo()
+    back = load(tmp_path)
+    want = first if cut == "writing" else second
+    assert back.jobs == want.jobs and back.results.keys() == want.results.keys()
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(
+        ["record"] + ([".record.tmp"] if cut == "writing" else []))
+    save(second, tmp_path)  # and the next save goes through
+    assert load(tmp_path).jobs == second.jobs

@@ -24,6 +24,7 @@ import hashlib
 import io
 import json
 import re
+import shutil
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -118,11 +119,13 @@ def _gzip(data: bytes) -> bytes:
 
 def save(record: Record, folder: Path) -> Path:
     """Write ``record`` to ``folder/record/`` (replacing what was there); returns that
-    folder."""
-    import shutil
+    folder.
 
-    target = folder / RECORD_DIR
-    staging = folder / f".{RECORD_DIR}.tmp"
+    The new record is written whole beside the old one, then the two folders are swapped by
+    renames, so a kill at any point leaves one complete record: the old one until the swap,
+    the new one after it (:func:`_settle`, which every reader calls, finishes a swap that was
+    cut between its two renames)."""
+    target, staging, old = _settle(folder)
     shutil.rmtree(staging, ignore_errors=True)
     (staging / _SERIES_DIR).mkdir(parents=True)
     files = {}
@@ -138,9 +141,27 @@ def save(record: Record, folder: Path) -> Path:
                      for ident, job in sorted(record.jobs.items(),  # not the runs' finishing
                                               key=lambda item: json.dumps(item[0]))]}
     (staging / _JOBS_FILE).write_bytes(_gzip(json.dumps(body, sort_keys=True).encode()))
-    shutil.rmtree(target, ignore_errors=True)
+    if target.exists():
+        target.replace(old)  # from here until the next rename, ``staging`` is complete
     staging.replace(target)
+    shutil.rmtree(old, ignore_errors=True)
     return target
+
+
+def _settle(folder: Path) -> tuple[Path, Path, Path]:
+    """The record's folder, its staging folder and the replaced record's folder, after
+    finishing a :func:`save` that was stopped between its two renames: with no record but a
+    replaced one, the staging folder is complete if it has its jobs file (it is written
+    before the first rename) and becomes the record, else the replaced record comes back;
+    a replaced record left beside a record is removed."""
+    target = folder / RECORD_DIR
+    staging = folder / f".{RECORD_DIR}.tmp"
+    old = folder / f".{RECORD_DIR}.old"
+    if old.exists():
+        if not target.exists():
+            (staging if (staging / _JOBS_FILE).exists() else old).replace(target)
+        shutil.rmtree(old, ignore_errors=True)
+    return target, staging, old
 
 
 def _body(path: Path) -> dict[str, Any]:
@@ -154,7 +175,7 @@ def _body(path: Path) -> dict[str, Any]:
 
 def simulation_of(folder: Path) -> tuple[str, int]:
     """(simulation digest, K of the claims' members) of the record in ``folder/record/``."""
-    body = _body(folder / RECORD_DIR / _JOBS_FILE)
+    body = _body(_settle(folder)[0] / _JOBS_FILE)
     return str(body.get("simulation")), int(body.get("seeds", 0))
 
 
@@ -162,7 +183,7 @@ def build_of(folder: Path) -> str:
     """The build (``cosim reproduce --build``) of the record in ``folder/record/``; "python"
     where there is no record."""
     try:
-        return str(_body(folder / RECORD_DIR / _JOBS_FILE).get("build", "python"))
+        return str(_body(_settle(folder)[0] / _JOBS_FILE).get("build", "python"))
     except RecordError:
         return "python"
 
@@ -170,7 +191,7 @@ def build_of(folder: Path) -> str:
 def load(folder: Path) -> Record:
     """The record in ``folder/record/`` (:class:`RecordError` naming the file if there is
     none or it cannot be read)."""
-    path = folder / RECORD_DIR / _JOBS_FILE
+    path = _settle(folder)[0] / _JOBS_FILE
     body = _body(path)
     if body.get("format") != FORMAT:
         raise RecordError(f"{path}: record format {body.get('format')!r}, this version reads "
