@@ -33,6 +33,7 @@ from typing import Any
 
 import pandas as pd
 
+from cosim.cli import summary_rows
 from cosim.run.columns import column_info
 from cosim.run.figures.run import draw_run
 from cosim.run.master import ProgressFn, RunResult
@@ -180,8 +181,6 @@ def compare(runs: Mapping[str, Run] | Sequence[Run],
     metrics ``cosim run`` prints, in its order, that any of the runs has. A metric holding a
     value per FMU (``executions``) gives a row per FMU (``executions.controller``); a run
     without a metric shows NaN."""
-    from cosim.cli import summary_rows
-
     if isinstance(runs, Mapping):
         labelled = list(runs.items())
     else:

@@ -155,7 +155,7 @@ def test_host_packages_cover_every_fmu_import(monkeypatch: pytest.MonkeyPatch) -
     # each FMU's imports found once (a pure function of its bundled files): the page's list and
     # the check below read the same answers
     third_party_imports = functools.cache(reference.third_party_imports)
-    monkeypatch.setattr(reference, "third_party_imports", third_party_imports)
+    monkeypatch.setattr(docs_pages, "third_party_imports", third_party_imports)
     listed = docs_pages.host_packages()
     for spec in catalog().values():
         for name in third_party_imports(spec.module):

@@ -39,7 +39,7 @@ import numpy as np
 import pandas as pd
 
 from cosim.fmu.state import to_seconds, to_ticks
-from cosim.run.scenario import Scenario, load_scenario
+from cosim.run.scenario import Scenario, check_against_fmus, load_scenario
 
 
 class LibcosimError(RuntimeError):
@@ -261,8 +261,6 @@ def run_libcosim(scenario: str | Path | Scenario, overrides: dict[str, Any] | No
     from h to stop_time) and the recorded ``component.variable`` columns. libcosim runs in a
     child process (:func:`_isolated`), so its aborts become a :class:`LibcosimError`."""
     from fmpy import read_model_description
-
-    from cosim.run.scenario import check_against_fmus
 
     sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario, overrides)
     # what cosim run refuses (names, types, ranges) is refused here too, naming the key

@@ -26,8 +26,17 @@ from pathlib import Path
 from typing import Any
 from xml.etree.ElementTree import Element, SubElement, indent, register_namespace, tostring
 
+from cosim.interop.libcosim import ENUMERATION_REASON, enumerations_used
+from cosim.run.dependencies import order_connections, output_dependencies
 from cosim.run.fmi_types import enumeration_items, to_fmi
-from cosim.run.scenario import Scenario, check_against_fmus, check_timing, load_scenario
+from cosim.run.scenario import (
+    Scenario,
+    ScenarioError,
+    check_against_fmus,
+    check_timing,
+    load_scenario,
+)
+from cosim.run.simulate import ensure_built
 
 SSD = "http://ssp-standard.org/SSP1/SystemStructureDescription"
 SSC = "http://ssp-standard.org/SSP1/SystemStructureCommon"
@@ -184,13 +193,8 @@ def export_ssp(scenario: str | Path | Scenario, out: str | Path,
     ranges, units, unconnected inputs, algebraic loops)."""
     from fmpy import read_model_description
 
-    from cosim.run.dependencies import order_connections, output_dependencies
-    from cosim.run.scenario import ScenarioError
-
     sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario, overrides)
     if build:
-        from cosim.run.simulate import ensure_built
-
         ensure_built(sc)
     descriptions = {}
     for comp in sc.components.values():
@@ -243,8 +247,6 @@ def export_notes(sc: Scenario) -> list[str]:
     the Enumeration variables the scenario sets or connects, which libcosim cannot run
     (:data:`cosim.interop.libcosim.ENUMERATION_REASON`)."""
     from fmpy import read_model_description
-
-    from cosim.interop.libcosim import ENUMERATION_REASON, enumerations_used
 
     notes = [f"[fmus.{c.name}] max_step = {c.max_step:g} s is kept as an SSP annotation "
              f"({ANNOTATION_TYPE}); SSP 1.0 has no such field and libcosim ignores it: run the "

@@ -13,6 +13,8 @@ from typing import Any
 from cosim.reproduce.entry import Figure, Sweep, slug
 from cosim.reproduce.tables import fmt, frame_markdown, md_row
 from cosim.run.figures import draw_figure, legend_outside, save_figure, speed_class_errors
+from cosim.run.figures.sweep import draw_sweep, key_labels
+from cosim.run.scenario import load_scenario
 
 
 def figure_section(figure: Figure, frames: dict[str, Any], out: Path, plot_format: str,
@@ -55,9 +57,6 @@ def sweep_section(sweep: Sweep, stored: dict[str, Any], out: Path, plot_format: 
     """Write ``sweep``'s table (``<slug>/sweep.csv``) and figure from its recorded result
     ``stored`` (columns and rows); the page's lines of it."""
     import pandas as pd
-
-    from cosim.run.figures.sweep import draw_sweep, key_labels
-    from cosim.run.scenario import load_scenario
 
     frame = pd.DataFrame(stored["rows"], columns=stored["columns"])
     keys = list(sweep.grid)

@@ -45,6 +45,16 @@ from cosim.reproduce.tables import (
     table_markdown,
     table_rows,
 )
+from cosim.run.console import fit_table
+from cosim.run.ensemble import (
+    VERDICTS,
+    compact_table,
+    failed_claims_markdown,
+    final_verdict,
+    host_text,
+    verdict_summary,
+    write_claims,
+)
 from cosim.run.provenance import INPUTS_FILE, entry_digest, simulation_digest
 from cosim.run.record import Record, RecordError, check_jobs, load, save, series_name
 from cosim.run.results import locked_destination
@@ -103,8 +113,6 @@ def evaluate(entry: Entry, record: Record, out: Path, plot_format: str = "png") 
     lacks a job the entry reads): writes ``table.md`` / ``table.csv`` (``entry.table``),
     ``claims.*`` and the figures in ``plot_format`` to ``out``."""
     import pandas as pd
-
-    from cosim.run.ensemble import failed_claims_markdown, host_text, verdict_summary, write_claims
 
     check_jobs(record, wanted_jobs(entry, record.seeds, record.rounding, record.build))
     out.mkdir(parents=True, exist_ok=True)
@@ -183,8 +191,6 @@ def statement_reading(st: Statement, by_id: dict[str, dict[str, Any]]) -> str:
     """Whether a statement is reproduced, from the adjusted verdicts of its claims:
     "reproduced" when every claim holds, "not reproduced" when one fails, "undecided"
     otherwise (inconclusive, insufficient, rounding-sensitive or no effect)."""
-    from cosim.run.ensemble import final_verdict
-
     verdicts = [final_verdict(by_id[c]) for c in st.claims or []]
     if verdicts and all(v == "holds" for v in verdicts):
         return "reproduced"
@@ -195,8 +201,6 @@ def headline_markdown(statements: list[Statement], rows: list[dict[str, Any]]) -
     """One line for the top of the page: each headline statement (``headline = true``) and
     whether it is reproduced, with the claims that decide it (those that do not hold, or all
     of them when every one holds)."""
-    from cosim.run.ensemble import final_verdict
-
     by_id = {r["id"]: r for r in rows}
     items = []
     for st in statements:
@@ -215,8 +219,6 @@ def headline_markdown(statements: list[Statement], rows: list[dict[str, Any]]) -
 def statements_markdown(statements: list[Statement], rows: list[dict[str, Any]]) -> str:
     """Each of the paper's statements with the verdicts (adjusted) of the claims that test it,
     or why it is not tested."""
-    from cosim.run.ensemble import final_verdict
-
     by_id = {r["id"]: r for r in rows}
 
     def where(st: Statement) -> str:  # its place in the paper: given, or its claims'
@@ -340,9 +342,6 @@ def console_text(entry: Entry, rows: list[Cell], claim_rows: list[dict[str, Any]
     are."""
     import textwrap
 
-    from cosim.run.console import fit_table
-    from cosim.run.ensemble import compact_table
-
     names = {m.key: f"m{i + 1}" for i, m in enumerate(entry.metrics)}
     by_run: dict[str, dict[str, Any]] = {}
     for r in rows:
@@ -366,8 +365,6 @@ def console_text(entry: Entry, rows: list[Cell], claim_rows: list[dict[str, Any]
 def claims_summary(claims: dict[str, list[dict[str, Any]]]) -> str:
     """Claims per verdict (after the multiplicity adjustment) per entry, from each entry's
     claims' rows (an entry without claims: dashes)."""
-    from cosim.run.ensemble import VERDICTS, final_verdict
-
     lines = [md_row(["entry", "claims", *VERDICTS]), "|" + " --- |" * (2 + len(VERDICTS))]
     for name, rows in claims.items():
         if not rows:

@@ -13,16 +13,18 @@ import numpy as np
 from cosim.reproduce.builds import build_overrides
 from cosim.reproduce.entry import FIGURE_KINDS, REPRODUCE_DIR, Entry, Figure, ReproduceError, slug
 from cosim.reproduce.series import record_series, run_scenarios
+from cosim.run import runner
+from cosim.run.ensemble import host_load, member_jobs, simulate_claims, with_host
 from cosim.run.provenance import simulation_digest
 from cosim.run.record import Job, Record, known, save, series_name
+from cosim.run.scenario import load_scenario
+from cosim.run.simulate import ensure_built, run_scenario
+from cosim.run.sweep import parse_grid, run_sweep, warm_up_for
 
 
 def _run_one(scenario: str, overrides: dict[str, Any], out_dir: str,
              plot_format: str = "png") -> dict[str, Any]:
     """One run of ``scenario`` with ``overrides`` into ``out_dir`` (a task): its summary."""
-    from cosim.run.ensemble import host_load, with_host
-    from cosim.run.simulate import run_scenario
-
     before = host_load()
     result = run_scenario(scenario, overrides=overrides, out_dir=out_dir, build=False,
                           plot_format=plot_format)
@@ -91,11 +93,6 @@ def run_entry(entry: Entry, out_dir: Path, workers: int | None = None,
     ``previous`` holds with the same specification is taken from it, not run again. A failed
     run raises
     :class:`ReproduceError` naming it, after the others finished."""
-    from cosim.run import runner
-    from cosim.run.scenario import load_scenario
-    from cosim.run.simulate import ensure_built
-    from cosim.run.sweep import warm_up_for
-
     jobs = run_jobs(entry, build)
     for job in jobs:  # bad overrides fail here, before anything runs; build once
         if job.key[1] == 0:
@@ -166,9 +163,6 @@ def simulate(entry: Entry, out: Path, workers: int | None = None, seeds: int | N
     where ``previous`` ran with this tree's simulation inputs, K, rounding path and ``build``
     (the catalog FMUs' native C builds where they exist, or every FMU's Python build; None:
     the entry's ``build``; the run folders under ``out`` then hold its files)."""
-    from cosim.run.ensemble import simulate_claims
-    from cosim.run.sweep import parse_grid, run_sweep
-
     k = claims_k(entry, seeds)
     build = build or entry.build
     digest = (simulation_digest(entry.name, build) if entry.path.parent == REPRODUCE_DIR
@@ -222,7 +216,5 @@ def claims_k(entry: Entry, seeds: int | None) -> int:
 def wanted_jobs(entry: Entry, k: int, rounding: bool, build: str = "python") -> list[Job]:
     """Every simulation the entry's tables, sweeps and claims at ``k`` members read, on
     ``build``."""
-    from cosim.run.ensemble import member_jobs
-
     return run_jobs(entry, build) + sweep_jobs(entry, build) + (
         member_jobs(entry, k, rounding, build) if entry.claims else [])

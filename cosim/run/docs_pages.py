@@ -37,10 +37,15 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-from cosim.fmu.build import ROOT
-from cosim.fmu.reference import REFERENCE_PATH, fmu_reference
-from cosim.run.provenance import INPUTS_FILE
-from cosim.run.record import RECORD_DIR
+from cosim.fmu.build import ROOT, catalog
+from cosim.fmu.reference import REFERENCE_PATH, fmu_reference, third_party_imports
+from cosim.reproduce.entry import ReproduceError, load_entry
+from cosim.reproduce.page import redraw_entry
+from cosim.reproduce.schema import SCHEMA_PATH, schema_markdown
+from cosim.reproduce.tables import md_row
+from cosim.run.ensemble import CLAIMS_HEADER
+from cosim.run.provenance import INPUTS_FILE, entry_digest, simulation_digest
+from cosim.run.record import RECORD_DIR, RecordError, build_of, simulation_of
 
 DOCS = ROOT / "docs"
 BENCHMARKS_JSON = ROOT / "benchmarks" / "results.json"
@@ -143,9 +148,6 @@ def mark_claims_tables(text: str) -> str:
     a ``<div class="claims-table" markdown>`` (the ``md_in_html`` extension), which the site's
     stylesheet fits in the content width at 1280 px: the claim column wraps, the verdict and
     the last column stay in view."""
-    from cosim.reproduce.tables import md_row
-    from cosim.run.ensemble import CLAIMS_HEADER
-
     table = re.compile(rf"^{re.escape(md_row(list(CLAIMS_HEADER)))}\n(?:\|.*(?:\n|$))*", re.M)
     return table.sub(lambda m: f'<div class="{CLAIMS_CLASS}" markdown>\n\n'
                                f'{m.group(0).rstrip()}\n\n</div>\n', text)
@@ -161,8 +163,6 @@ def record_simulation(folder: Path) -> str | None:
     """The simulation digest of the record in ``folder`` (None if there is none, it cannot be
     read, or it has fewer members than the entry declares for a page:
     :func:`too_few_members`)."""
-    from cosim.run.record import RecordError, simulation_of
-
     try:
         digest, k = simulation_of(folder)
     except RecordError:
@@ -173,8 +173,6 @@ def record_simulation(folder: Path) -> str | None:
 def too_few_members(name: str, k: int) -> str | None:
     """Why a page of entry ``name`` cannot be published from K = ``k`` members (None if it
     can): fewer than the entry's ``[ensemble]`` declares (``members``, default 20)."""
-    from cosim.reproduce.entry import load_entry
-
     entry = load_entry(name)
     need = entry.ensemble.declared_k()
     if entry.claims and k < need:
@@ -209,11 +207,6 @@ def source_dir(name: str, reproduce_dir: Path = REPRODUCE_DIR) -> Path | None:
     import shutil
     import tempfile
 
-    from cosim.reproduce.entry import ReproduceError
-    from cosim.reproduce.page import redraw_entry
-    from cosim.run.provenance import entry_digest, simulation_digest
-    from cosim.run.record import build_of
-
     run_dir = reproduce_dir / name
     page_dir = DOCS / "papers" / name
     if (_table_file(run_dir) is not None
@@ -240,9 +233,6 @@ def source_dir(name: str, reproduce_dir: Path = REPRODUCE_DIR) -> Path | None:
 def stale_papers(reproduce_dir: Path = REPRODUCE_DIR) -> list[str]:
     """One line per paper whose page (or the run it would be made from) does not come from the
     tree's current inputs, saying what to run."""
-    from cosim.run.provenance import entry_digest, simulation_digest
-    from cosim.run.record import build_of
-
     out: list[str] = []
     for name in paper_names():
         run_dir = reproduce_dir / name
@@ -256,8 +246,6 @@ def stale_papers(reproduce_dir: Path = REPRODUCE_DIR) -> list[str]:
             if run_digest(run_dir) != current:
                 out.append(f"{run_dir} was made from other inputs than this tree's: {todo}")
             elif record_simulation(run_dir) is None:
-                from cosim.run.record import RecordError, simulation_of
-
                 try:
                     why = too_few_members(name, simulation_of(run_dir)[1])
                 except RecordError as err:
@@ -302,9 +290,6 @@ def papers_index(present: set[str]) -> str:
 
 def host_packages() -> str:
     """Every third-party package some FMU's bundled modules import, once each."""
-    from cosim.fmu.build import catalog
-    from cosim.fmu.reference import third_party_imports
-
     names = {name for spec in catalog().values() for name in third_party_imports(spec.module)}
     return ", ".join(f"`{name}`" for name in sorted(names))
 
@@ -329,8 +314,6 @@ def fill_generated(text: str, key: str, content: str) -> str:
 
 def generated_pages(reproduce_dir: Path = REPRODUCE_DIR) -> Iterator[tuple[Path, bytes]]:
     """Every generated file whose source is present: (path, content)."""
-    from cosim.reproduce.schema import SCHEMA_PATH, schema_markdown
-
     yield REFERENCE_PATH, fmu_reference().encode()
     yield SCHEMA_PATH, schema_markdown().encode()
     if BENCHMARKS_JSON.is_file():

@@ -32,10 +32,15 @@ import math
 import sys
 from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
+from cosim.reproduce.builds import build_overrides, check_rounding_path
+from cosim.reproduce.entry import Entry, slug
+from cosim.reproduce.series import MEMBER_ROWS, record_series, run_scenarios
+from cosim.reproduce.tables import md_row, summary_value
+from cosim.run import runner
 from cosim.run.claims import (
     ALPHA,
     ORIGINS,
@@ -49,13 +54,12 @@ from cosim.run.claims import (
 )
 from cosim.run.figures import draw_ensemble_figure
 from cosim.run.master.pool import InstancePool
+from cosim.run.perturbation import draw_samples, nominal_values, parse_perturb
 from cosim.run.record import Job as RecordJob
 from cosim.run.record import Record, known, save, series_name
 from cosim.run.scenario import Scenario, load_scenario
 from cosim.run.simulate import ensure_built, run_scenario
-
-if TYPE_CHECKING:
-    from cosim.reproduce.entry import Entry
+from cosim.run.sweep import warm_up_for
 
 CHECKPOINT_EVERY = 20  # members between two saves of the partial record
 
@@ -85,8 +89,6 @@ def members(entry: Entry, ensemble: str, k: int) -> list[dict[str, Any]]:
 
 
 def _draws(entry: Entry, k: int) -> list[dict[str, float]]:
-    from cosim.run.perturbation import draw_samples, nominal_values, parse_perturb
-
     perts = parse_perturb(entry.ensemble.perturb)
     scenario = next(r.scenario for r in entry.runs
                     if any(c.ensemble == "mismatch" and r.name in c.runs
@@ -99,8 +101,6 @@ def _rounding_overrides(entry: Entry, run: Any, base: dict[str, Any], path: int
                         ) -> dict[str, Any]:
     """Perturbed path ``path``'s parameters (``base``'s value, else the run's, else the
     declared one) scaled by 1 + :data:`ROUNDING_RELATIVE`."""
-    from cosim.run.perturbation import nominal_values
-
     out: dict[str, Any] = {}
     for key in entry.ensemble.rounding_keys(path):
         value = base.get(key, run.overrides.get(key))
@@ -138,8 +138,6 @@ def claim_jobs(entry: Entry, k: int, rounding: bool = True, build: str = "python
     once, with the
     ``build`` of the catalog FMUs (:func:`cosim.reproduce.builds.build_overrides`); the
     ``repeat`` members first, interleaved by repeat index (A0, B0, A1, B1, ...)."""
-    from cosim.reproduce.builds import build_overrides, check_rounding_path
-
     runs = {r.name: r for r in entry.runs}
     paths = entry.ensemble.rounding_paths()
     builds = {name: build_overrides(run.scenario, run.overrides, build)
@@ -244,8 +242,6 @@ def host_text(summaries: list[dict[str, Any] | None]) -> str:
 
 def member_dir(out: Path, key: tuple[str, str, int, int]) -> Path:
     """Where a main-path member writes results.csv (``ensemble/<run>/<ensemble>_<i>``)."""
-    from cosim.reproduce.entry import slug
-
     return out / "ensemble" / slug(key[0]) / f"{key[1]}_{key[2] + 1:02d}"
 
 
@@ -264,8 +260,6 @@ def execute(jobs: list[Job], workers: int | None, label: str = "claims",
     failed run gives None (its metrics are missing).
     ``dirs``: job key -> folder for the run's results (others write none);
     ``on_result(key, summary)`` as each ends."""
-    from cosim.run import runner
-
     dirs = dirs or {}
     out: dict[tuple[str, str, int, int], dict[str, Any] | None] = {}
     progress = runner.Progress(len(jobs), label)
@@ -278,8 +272,6 @@ def execute(jobs: list[Job], workers: int | None, label: str = "claims",
     def failed(task: runner.Task, err: BaseException) -> None:
         print(f"{label}: {task.key} failed: {err}", file=sys.stderr)
         out[task.key] = None
-
-    from cosim.run.sweep import warm_up_for
 
     by_env: dict[bool, list[Job]] = {}  # the paths of one environment share their workers
     for job in sorted(jobs, key=lambda job: job[0][3]):
@@ -296,8 +288,6 @@ def execute(jobs: list[Job], workers: int | None, label: str = "claims",
 
 def _metric(summaries: dict[Any, dict[str, Any] | None], run: str, ens: str, n: int,
             path: int, metric: str) -> np.ndarray:
-    from cosim.reproduce.tables import summary_value
-
     vals = []
     for i in range(n):
         s = summaries.get((run, ens, i, path))
@@ -339,8 +329,6 @@ def variants_markdown(entry: Entry, rows: list[dict[str, Any]], var_rows: list[d
     """Each claim's verdict as written and under every variant (a column each, the claims in
     the order of :func:`by_origin`; "=": the variant replaces none of the claim's runs), then
     what each variant replaces."""
-    from cosim.reproduce.tables import md_row
-
     names = [v.name for v in entry.variants]
     got = {(r["variant"], r["id"]): r for r in var_rows}
 
@@ -414,8 +402,6 @@ def claims_markdown(rows: list[dict[str, Any]], k: int, rounding: str = "",
     source; then the counts per origin and what the columns mean (``rounding``: the
     perturbed paths in words, :func:`rounding_text`; ``host``: where the repeat claims were
     measured, :func:`host_text`)."""
-    from cosim.reproduce.tables import md_row
-
     headings = headings or {}
     lines = [md_row(list(CLAIMS_HEADER)), "|" + " --- |" * len(CLAIMS_HEADER)]
     for r in by_origin(rows):
@@ -527,8 +513,6 @@ def record_member_series(entry: Entry, out: Path, record: Record) -> None:
     """The series of the members the ensemble figures draw (main path, disturbance, banded
     runs) from their results.csv under ``out``, added to ``record`` (thinned to
     :data:`cosim.reproduce.series.MEMBER_ROWS` rows)."""
-    from cosim.reproduce.series import MEMBER_ROWS, record_series, run_scenarios
-
     scenarios = run_scenarios(entry)
     banded = _banded(entry)
     lines = [f for f in entry.figures if f.line_kind()]
@@ -549,8 +533,6 @@ def write_claims(entry: Entry, record: Record, out: Path, plot_format: str = "pn
     its svg beside it) to ``out``; returns the claims' rows, the markdown of claims.md below
     its title, and the paths of each ensemble figure by its figure's ``file``."""
     import pandas as pd
-
-    from cosim.reproduce.series import run_scenarios
 
     k, rounding = record.seeds, record.rounding
     summaries = {job.key: record.results[ident] for ident, job in record.jobs.items()

@@ -49,6 +49,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
+from cosim.interop.compliance.clocks import clock_checks
 from cosim.interop.compliance.common import (
     ALL_CHECKS,
     CLAUSES,
@@ -71,6 +72,7 @@ from cosim.interop.compliance.common import (
     skipped,
     standard_of,
 )
+from cosim.interop.compliance.fmi3 import static_checks
 from cosim.interop.compliance.host import _Host
 from cosim.interop.compliance.model_description import check_model_description
 from cosim.interop.compliance.watchdog import SETUP_CALL_ALLOWANCE, Limits
@@ -170,9 +172,6 @@ def checks_for(path: str | Path) -> tuple[str, ...]:
 
 def _check_fmi3(path: Path, opts: Options) -> list[Problem]:
     """The FMI 3.0 checks (:mod:`cosim.interop.compliance.fmi3`)."""
-    from cosim.interop.compliance.clocks import clock_checks
-    from cosim.interop.compliance.fmi3 import static_checks
-
     problems = static_checks(path) + clock_checks(path)
     if not opts.dynamic:
         return classify(problems, opts.strict)

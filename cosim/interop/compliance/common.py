@@ -8,6 +8,8 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from xml.etree import ElementTree
 
+from cosim.run.archive import ArchiveRefused
+
 ERROR, WARNING, NOTE = "error", "warning", "note"
 SKIPPED = "skipped"  # a check that could not run (never reported as "ok")
 
@@ -146,8 +148,6 @@ def passed(problems: list[Problem]) -> bool:
 def _read_xml(path: Path, max_bytes: int | None = None) -> ElementTree.Element:
     """The parsed modelDescription.xml (refused over ``max_bytes``; the checks read it after
     :func:`~cosim.run.archive.inspect` bounded it)."""
-    from cosim.run.archive import ArchiveRefused
-
     with zipfile.ZipFile(path) as z:
         if max_bytes is not None and z.getinfo("modelDescription.xml").file_size > max_bytes:
             raise ArchiveRefused(f"modelDescription.xml is larger than {max_bytes} bytes")

@@ -44,6 +44,8 @@ from cosim.interop.compliance.common import (
     _read_xml,
     skipped,
 )
+from cosim.interop.compliance.host import WATCHDOG, _differs, _matching, _out_name, describe_call
+from cosim.run.master.fmi3 import read_model_description, resolved_description
 
 # FMI 3.0 sec. 2.4 (ModelVariables): legal causality for each variability
 _LEGAL = {
@@ -68,8 +70,6 @@ def _binary_ok(path: Path, identifier: str | None) -> bool:
 def static_checks(path: Path) -> list[Problem]:
     """The static FMI 3.0 checks (unclassified: see ``common.classify``)."""
     from fmpy.validation import validate_fmu
-
-    from cosim.run.master.fmi3 import resolved_description
 
     problems: list[Problem] = []
     try:  # with ClockTypes: fmpy validates the description alone (no file-path checks)
@@ -177,9 +177,6 @@ class _Host3:
 
     def __init__(self, path: Path, unzipdir: str, n_steps: int,
                  irreproducible: tuple[str, ...] = ()) -> None:
-        from cosim.interop.compliance.host import _matching
-        from cosim.run.master.fmi3 import read_model_description
-
         self.path, self.unzipdir = path, unzipdir
         self.md = read_model_description(path, validate=False)
         self.cs = self.md.coSimulation  # None: no co-simulation interface
@@ -249,8 +246,6 @@ class _Instance3:
     INSTANTIATE = "fmi3InstantiateCoSimulation"
 
     def __init__(self, host: _Host3, name: str, **kw: Any) -> None:
-        from cosim.interop.compliance.host import WATCHDOG, describe_call
-
         self.host = host
         self.messages: list[tuple[int, str]] = []
 
@@ -286,8 +281,6 @@ class _Instance3:
 
     def call(self, method: str, *args: Any, **kwargs: Any) -> tuple[int, Any]:
         from fmpy.fmi1 import FMICallException
-
-        from cosim.interop.compliance.host import WATCHDOG, describe_call
 
         try:
             return 0, WATCHDOG.call(describe_call(method, args, kwargs, "fmi3"),
@@ -329,8 +322,6 @@ class _Instance3:
         return False, None
 
     def free(self) -> None:
-        from cosim.interop.compliance.host import WATCHDOG, describe_call
-
         if self.alive:
             WATCHDOG.call(describe_call("fmi3FreeInstance"), self.fmu.freeInstance)
             self.alive = False
@@ -467,8 +458,6 @@ def _check_early_return(host: _Host3, ctx: dict) -> list[Problem]:
 
 
 def _check_fmu_state(host: _Host3, ctx: dict) -> list[Problem]:
-    from cosim.interop.compliance.host import _differs, _out_name
-
     if not host.cs.canGetAndSetFMUstate:
         return []
     problems: list[Problem] = []

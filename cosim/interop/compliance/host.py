@@ -17,6 +17,8 @@ from cosim.interop.compliance.common import (
     _num,
     _read_xml,
 )
+from cosim.interop.compliance.watchdog import CallBoard
+from cosim.run.master import logging_callbacks
 
 
 class _Host:
@@ -114,8 +116,6 @@ class _Watchdog:
         self.board = None
 
     def start(self, board_path: str) -> None:
-        from cosim.interop.compliance.watchdog import CallBoard
-
         self.board = CallBoard(board_path)
 
     def call(self, description: str, function: Any, *args: Any, **kwargs: Any) -> Any:
@@ -139,8 +139,6 @@ class _Instance:
 
     def __init__(self, host: _Host, name: str) -> None:
         from fmpy.fmi2 import FMU2Slave
-
-        from cosim.run.master import logging_callbacks
 
         self.host = host
         self.messages: list[tuple[int, str]] = []

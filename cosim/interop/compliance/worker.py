@@ -21,6 +21,7 @@ from cosim.interop.compliance.calling_sequence import (
     _check_reset,
     _check_two_instances,
 )
+from cosim.interop.compliance.clocks import DYNAMIC as CLOCKS
 from cosim.interop.compliance.common import (
     _MARK,
     DYNAMIC_CHECKS,
@@ -36,6 +37,7 @@ from cosim.interop.compliance.errors import (
     _check_wrong_state,
     _collapse_fatal,
 )
+from cosim.interop.compliance.fmi3 import DYNAMIC, _Failed3, _Host3
 from cosim.interop.compliance.host import (
     WATCHDOG,
     _CallFailed,
@@ -55,6 +57,7 @@ from cosim.interop.compliance.watchdog import (
     call_name,
     supervise,
 )
+from cosim.run.archive import ArchiveLimits, extract
 
 _DYNAMIC = {
     "calling-sequence": _check_calling_sequence,
@@ -76,8 +79,6 @@ def _emit(kind: str, payload: Any) -> None:
 
 def _worker(args: dict) -> None:
     """Run dynamic checks, reporting progress on stdout (see ``_run_worker``)."""
-    from cosim.run.archive import ArchiveLimits, extract
-
     if args.get("board"):
         WATCHDOG.start(args["board"])
     paths = [Path(p) for p in args["paths"]]
@@ -127,9 +128,6 @@ def _worker(args: dict) -> None:
 
 def _fmi3_worker(args: dict, path: Path, unzipdir: str) -> None:
     """The FMI 3.0 dynamic checks (:mod:`cosim.interop.compliance.fmi3`), same protocol."""
-    from cosim.interop.compliance.clocks import DYNAMIC as CLOCKS
-    from cosim.interop.compliance.fmi3 import DYNAMIC, _Failed3, _Host3
-
     host = _Host3(path, unzipdir, args["n_steps"], tuple(args["irreproducible"]))
     checks = {**DYNAMIC, **CLOCKS}
     ctx: dict[str, Any] = {}

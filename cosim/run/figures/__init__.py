@@ -17,7 +17,9 @@ from typing import Any
 
 import numpy as np
 
+from cosim.fmu.profiles import StoppingCurve
 from cosim.run.columns import display_unit, is_held, variable_info
+from cosim.run.metrics import graded_allowance, matching_columns
 
 PLOT_DPI = 200  # raster figures (png) at print resolution
 
@@ -394,8 +396,6 @@ def draw_limits(ax: Any, spec: dict[str, Any], frame: Any, x: Any, run: str,
     ``limit_kmh`` at or below ``limit_below_kmh``, ``limit_fraction`` of the speed above) of
     the ``limit_ref`` speed (times ``y_scale``) on an error figure's axes; each named once in
     the legend of a figure whose labels ``seen`` collects."""
-    from cosim.run.metrics import graded_allowance
-
     ref_col = spec["limit_ref"]
     if ref_col not in frame:
         raise FigureError(f"figure {spec['file']}: run {run!r} recorded no {ref_col!r}")
@@ -418,8 +418,6 @@ def reference_curve(scenario: Any, frame: Any, y: str) -> Any:
     otherwise (the recorded column is the curve)."""
     import numpy as np
 
-    from cosim.fmu.profiles import StoppingCurve
-
     cfg = getattr(scenario, "summary", {}) or {}
     position = cfg.get("position")
     if (y != cfg.get("reference_speed") or "reference_decel" not in cfg
@@ -433,8 +431,6 @@ def figure_series(frame: Any, spec: dict[str, Any], y: str, run: str) -> Any:
     """The values a figure plots for ``y`` of one run (before ``y_scale``): the column, or with
     ``y_reduce = "mean"`` the mean of the columns ``y`` names (``"plant.v[*]"``; a column of
     that name is that mean as recorded), minus the ``y_minus`` column where given."""
-    from cosim.run.metrics import matching_columns
-
     if "y_reduce" in spec and y in frame:  # the reduction as recorded (cosim.run.record)
         cols = [y]
     else:
@@ -453,8 +449,6 @@ def speed_class_errors(frame: Any, spec: dict[str, Any]) -> list[dict[str, Any]]
     max |error| over the ``y`` columns, the class's strictest allowance (at its lowest sample
     speed) and whether every sample keeps its own allowance (all in the figure's units)."""
     import numpy as np
-
-    from cosim.run.metrics import graded_allowance
 
     scale = float(spec.get("y_scale", 1.0))
     ys = spec["y"] if isinstance(spec["y"], list) else [spec["y"]]
@@ -486,8 +480,6 @@ def figure_columns(spec: dict[str, Any], scenario: Any, columns: list[str]) -> s
     ``ref``, ``error`` and the position behind a stopping-curve reference
     (:func:`reference_curve`)."""
     import pandas as pd
-
-    from cosim.run.metrics import matching_columns
 
     empty = pd.DataFrame(columns=columns)
     ys = spec["y"] if isinstance(spec["y"], list) else [spec["y"]]
