@@ -674,8 +674,11 @@ def test_the_native_build_runs_each_fmu_that_has_a_native_model() -> None:
     assert build_overrides("seed000_stop_rsmpc", {}, "python") == {}
     assert build_overrides("seed000_stop_rsmpc", {"controller.build": "python"},
                            "native") == {"plant.build": "native"}
-    # seed 003's controllers have no native model: the plant alone
-    assert build_overrides("seed003_crh3_gpc_eco", {}, "native") == {"plant.build": "native"}
+    # seed 003's GPC has a native model, its LMI MPC none: the plant alone
+    assert build_overrides("seed003_crh3_gpc_eco", {}, "native") == {
+        "plant.build": "native", "controller.build": "native"}
+    assert build_overrides("seed003_crh3_lmimpc_eco", {}, "native") == {
+        "plant.build": "native"}
     with pytest.raises(ReproduceError, match="--build fast: one of native, python"):
         build_overrides("seed000_stop_rsmpc", {}, "fast")
     entry = load_entry("seed000")
