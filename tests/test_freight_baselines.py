@@ -164,7 +164,9 @@ def test_fuzzy_pid_feedforward_is_the_pids_term() -> None:
     from plants.route import load_route
 
     route = load_route("freight_20km")
-    pid = FreightPid(FreightPidParams(), route.reference, route)
+    # the PID's look-ahead set to the fuzzy PID's: the same a_ref(s + v t_p)
+    pid = FreightPid(FreightPidParams(preview_time=FuzzyPidParams().preview_time),
+                     route.reference, route)
     plain = FreightFuzzyPid(FuzzyPidParams(), route.reference, route)
     fed = FreightFuzzyPid(replace(FuzzyPidParams(), reference_feedforward=True),
                           route.reference, route)

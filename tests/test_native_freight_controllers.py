@@ -52,6 +52,7 @@ from freight_loop import closed_loop
 from native_helpers import set_by_type
 from test_native_controllers import _callbacks, _flat, gamma
 
+from controllers.preview.preview import PreviewParams
 from cosim.fmu.build import catalog
 from cosim.run.scenario import load_scenario
 from cosim.run.simulate import run_scenario
@@ -206,6 +207,9 @@ def test_native_state_round_trip(natives, ident):
     assert any(row[OUTPUTS.index("pipe_reduction")] > 0 for row in first)
 
 
+M_R = PreviewParams().preview_steps  # the declared (tuned) reference preview of the design
+
+
 @pytest.mark.parametrize(("ident", "params", "message"), [
     ("FreightPid", {"sample_time": 0.1}, "sample_time = 0.1: the native FMU carries the "
      "mean-speed observer's design model for sample_time = 0.2 only"),
@@ -215,8 +219,8 @@ def test_native_state_round_trip(natives, ident):
     ("FreightPid", {"route": "routes/freight_20km.toml"}, "route = 'routes/freight_20km.toml':"
      " the native FMU knows the bundled routes"),
     ("FreightPid", {"release_share": 0.9}, "need 0 < release_share (0.9) < ed_share (0.8)"),
-    ("FreightPreview", {"M_R": 100}, "M_R = 100.0: the native FMU carries the preview gains "
-     "of the default design (M_R = 150.0) only"),
+    ("FreightPreview", {"M_R": M_R + 1}, f"M_R = {float(M_R + 1)}: the native FMU carries the "
+     f"preview gains of the default design (M_R = {float(M_R)}) only"),
 ])
 def test_native_refuses_what_it_cannot_run(natives, ident, params, message):
     """Parameters the native FMU does not carry data for, or that the core refuses, are

@@ -2,7 +2,8 @@
 
 Every freight speed controller (:class:`controllers.common.freight_blending.FreightTracker`)
 carries one and feeds back ``v_f = (1 - w) v_head + w v_c`` (``mean_weight`` w, per law in the
-generated :data:`TUNING_FILE`; w = 0: the measured head speed alone).
+generated :data:`controllers.common.freight_tuning.TUNING_FILE`; w = 0: the measured head
+speed alone).
 
 In the total force balance of the train the coupler forces cancel (eq. 1 summed over the
 vehicles, eq. 7): ``M (1 + gamma) dv_c/dt = F_loco - F_air - sum_i F_r,i``, ``v_c`` the
@@ -31,12 +32,11 @@ Our addition, not the paper's (its design model is one mass, so its measured spe
 
 from __future__ import annotations
 
-from functools import cache
-from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
 
+from controllers.common.freight_tuning import tuned_param
 from cosim.fmu.declare import param
 from cosim.fmu.state import StatefulCore
 from plants.freight import friction_coefficient_at
@@ -45,30 +45,12 @@ if TYPE_CHECKING:
     from controllers.common.freight_blending import FreightBlending
     from controllers.preview.design import DelayedModel
 
-#: written by ``benchmarks/seed002_tuning.py`` (one protocol for the four laws), not by hand
-TUNING_FILE = Path(__file__).with_name("freight_tuning.toml")
-
-
-@cache
-def tuned(law: str, key: str) -> float:
-    """The pick of ``key`` for ``law`` in :data:`TUNING_FILE` (``[<law>] <key> = value``)."""
-    try:
-        import tomllib
-    except ModuleNotFoundError:  # Python 3.10
-        import tomli as tomllib  # type: ignore[no-redef]
-    data = tomllib.loads(TUNING_FILE.read_text())
-    try:
-        return float(data[law][key])
-    except KeyError:
-        raise KeyError(f"{TUNING_FILE}: no [{law}] {key} (rerun benchmarks/seed002_tuning.py)"
-                       ) from None
-
 
 def mean_weight_param(law: str) -> float:
     """The ``mean_weight`` parameter of a freight law, its default the tuned pick."""
-    return param(tuned(law, "mean_weight"), "1", "weight w of the observed train-mean speed "
-                 "in the fed-back speed (1 - w) v_head + w v_mean (0: the head alone)",
-                 min=0.0, max=1.0)
+    return tuned_param(law, "mean_weight", "1", "weight w of the observed train-mean speed "
+                       "in the fed-back speed (1 - w) v_head + w v_mean (0: the head alone)",
+                       min=0.0, max=1.0)
 
 
 def correction_time_param() -> float:

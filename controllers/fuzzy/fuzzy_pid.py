@@ -30,6 +30,7 @@ import numpy as np
 import skfuzzy as fuzz
 
 from controllers.common.freight_blending import BlendingParams, FreightTracker, tracker_outputs
+from controllers.common.freight_tuning import tuned_param
 from controllers.common.mean_observer import correction_time_param, mean_weight_param
 from controllers.pid.freight_pid import preview_time_param, reference_feedforward
 from cosim.fmu.declare import Checked, group, param, sample_time
@@ -83,12 +84,17 @@ def infer(E: float, EC: float, rules: tuple[tuple[str, ...], ...]) -> float:
 class FuzzyPidParams(Checked):
     blending: BlendingParams = group(BlendingParams(), "")
     sample_time: float = sample_time(0.2)
-    kp: float = param(0.3, "1/s", "base proportional gain (m/s2 per m/s)", min=0.0)
-    ki: float = param(0.01, "1/s2", "base integral gain (m/s2 per m)", min=0.0)
-    kp_scale: float = param(0.05, "1/s", "Kp change per unit of dKp", min=0.0)
-    ki_scale: float = param(0.003, "1/s2", "Ki change per unit of dKi", min=0.0)
-    e_scale: float = param(0.5 / 3.6, "m/s", "speed error of one unit of E", min=1e-9)
-    ec_scale: float = param(0.02, "m/s2", "error rate of one unit of EC", min=1e-9)
+    kp: float = tuned_param("FPID", "kp", "1/s", "base proportional gain (m/s2 per m/s)",
+                            min=0.0)
+    ki: float = tuned_param("FPID", "ki", "1/s2", "base integral gain (m/s2 per m)", min=0.0)
+    kp_scale: float = tuned_param("FPID", "kp_scale", "1/s", "Kp change per unit of dKp",
+                                  min=0.0)
+    ki_scale: float = tuned_param("FPID", "ki_scale", "1/s2", "Ki change per unit of dKi",
+                                  min=0.0)
+    e_scale: float = tuned_param("FPID", "e_scale", "m/s", "speed error of one unit of E",
+                                 min=1e-9)
+    ec_scale: float = tuned_param("FPID", "ec_scale", "m/s2", "error rate of one unit of EC",
+                                  min=1e-9)
     fuzzy_nodes: int = param(13, "1", "nodes per axis of the precomputed rule surface",
                              min=2, max=1001, integer=True)
     reference_feedforward: bool = param(False, description="add the freight PID's "

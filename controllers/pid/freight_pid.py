@@ -22,28 +22,33 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from controllers.common.freight_blending import BlendingParams, FreightTracker, tracker_outputs
+from controllers.common.freight_tuning import tuned, tuned_param
 from controllers.common.mean_observer import correction_time_param, mean_weight_param
 from controllers.pid.speed_pid import SpeedPid, SpeedPidParams
 from cosim.fmu.declare import Checked, group, param
 from plants.route import ReferenceProfile, Route
 
+PREVIEW_TIME = "look-ahead of the reference acceleration feedforward"
+
 
 def preview_time_param() -> float:
-    """The look-ahead ``t_p`` of the reference-acceleration feedforward (PID, fuzzy PID)."""
-    return param(2.0, "s", "look-ahead of the reference acceleration feedforward", min=0.0)
+    """The look-ahead ``t_p`` of the fuzzy PID's optional reference-acceleration feedforward
+    (the PID's is tuned: :class:`FreightPidParams`)."""
+    return param(2.0, "s", PREVIEW_TIME, min=0.0)
 
 
 def default_pid() -> SpeedPidParams:
-    """Gains for the 10,676 t train at T = 0.2 s (m/s^2 per m/s, per m, jerk limit m/s^3)."""
-    return SpeedPidParams(kp=0.3, ki=0.01, kd=0.0, accel_min=-1.0, accel_max=1.0,
-                          rate_limit=0.05, sample_time=0.2)
+    """The tuned gains for the 10,676 t train at T = 0.2 s (m/s^2 per m/s, per m; PI: kd = 0),
+    demand limits (m/s^2) and jerk limit (m/s^3)."""
+    return SpeedPidParams(kp=tuned("PID", "kp"), ki=tuned("PID", "ki"), kd=0.0,
+                          accel_min=-1.0, accel_max=1.0, rate_limit=0.05, sample_time=0.2)
 
 
 @dataclass(frozen=True)
 class FreightPidParams(Checked):
     pid: SpeedPidParams = group(default_pid(), "")
     blending: BlendingParams = group(BlendingParams(), "")
-    preview_time: float = preview_time_param()
+    preview_time: float = tuned_param("PID", "preview_time", "s", PREVIEW_TIME, min=0.0)
     resistance_feedforward: bool = param(True, description="add the modelled running "
                                          "resistance to the demand")
     mean_weight: float = mean_weight_param("PID")

@@ -37,6 +37,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from controllers.common.freight_blending import BlendingParams, FreightTracker, tracker_outputs
+from controllers.common.freight_tuning import tuned_param
 from controllers.common.mean_observer import correction_time_param, mean_weight_param
 from controllers.preview.design import DelayedModel, lag_delay_model, preview_gains
 from cosim.fmu.declare import Checked, group, param, sample_time
@@ -50,12 +51,12 @@ class PreviewParams(Checked):
     q_e: float = param(1.0, "1", "weight of the speed error (m/s)^2 in eq. (37)", min=1e-12)
     q_dz: float = param(0.0, "1", "weight of the state differences Delta z in eq. (37)",
                         min=0.0)
-    h: float = param(1e4, "1", "weight H of the input difference (m/s^2)^2 in eq. (37)",
-                     min=1e-12)
-    preview_steps: int = param(150, "1", "reference preview M_R (samples)", min=0, max=10000,
-                               integer=True, name="M_R")
-    disturbance_steps: int = param(150, "1", "disturbance preview M_d (samples)", min=0,
-                                   max=10000, integer=True, name="M_d")
+    h: float = tuned_param("Preview", "h", "1", "weight H of the input difference "
+                           "(m/s^2)^2 in eq. (37)", min=1e-12)
+    preview_steps: int = tuned_param("Preview", "M_R", "1", "reference preview M_R (samples)",
+                                     min=0, max=10000, integer=True)
+    disturbance_steps: int = tuned_param("Preview", "M_d", "1", "disturbance preview M_d "
+                                         "(samples)", min=0, max=10000, integer=True)
     traction_delay: float = param(0.5, "s", "tau of the design model (eq. 15)", min=0.0)
     traction_time_constant: float = param(1.5, "s", "t_vb of the design model (eq. 15)",
                                           min=1e-6)

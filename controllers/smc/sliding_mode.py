@@ -23,6 +23,7 @@ import math
 from dataclasses import dataclass
 
 from controllers.common.freight_blending import BlendingParams, FreightTracker, tracker_outputs
+from controllers.common.freight_tuning import tuned_param
 from controllers.common.mean_observer import correction_time_param, mean_weight_param
 from cosim.fmu.declare import Checked, group, param, sample_time
 from plants.route import ReferenceProfile, Route
@@ -32,10 +33,11 @@ from plants.route import ReferenceProfile, Route
 class SlidingModeParams(Checked):
     blending: BlendingParams = group(BlendingParams(), "")
     sample_time: float = sample_time(0.2)
-    lam: float = param(0.05, "1/s", "lambda: integral weight of the sliding variable",
-                       min=0.0, name="lambda")
-    q: float = param(0.3, "1/s", "exponential reaching rate q", min=0.0)
-    eps: float = param(0.03, "m/s2", "switching gain eps of the reaching law", min=0.0)
+    lam: float = tuned_param("SMC", "lambda", "1/s", "lambda: integral weight of the "
+                             "sliding variable", min=0.0)
+    q: float = tuned_param("SMC", "q", "1/s", "exponential reaching rate q", min=0.0)
+    eps: float = tuned_param("SMC", "eps", "m/s2", "switching gain eps of the reaching law",
+                             min=0.0)
     boundary_layer: float = param(0.0, "m/s", "phi of sat(sigma / phi) (0: sgn, the paper's)",
                                   min=0.0)
     mean_weight: float = mean_weight_param("SMC")

@@ -46,6 +46,7 @@ from cosim.run.claims import (
 from cosim.run.scenario import SCENARIO_DIR, read_toml
 
 REPRODUCE_DIR = SCENARIO_DIR / "reproduce"
+ROOT = SCENARIO_DIR.parent  # the repository: the root of the paths of ``tuned``
 
 __all__ = ["DERIVED_KINDS", "FIGURE_KINDS", "LINE_KINDS", "REPRODUCE_DIR", "Derived", "Entry",
            "Figure", "Metric", "PaperValue", "Ranking", "ReproduceError", "Run", "Statement",
@@ -187,8 +188,10 @@ def load_entry(name: str | Path) -> Entry:
     common = top["overrides"]
     lists = {key: _tables(str(path), key, data.get(key, [])) for key in PARTS}
     runs = [_part(Run, path, "runs", r, i) for i, r in enumerate(lists["runs"])]
-    runs = [Run(name=r.name, scenario=r.scenario, overrides={**common, **r.overrides},
-                repeat=r.repeat) for r in runs]
+    runs = [Run(name=r.name, scenario=r.scenario,
+                overrides={**common, **_tuned(f"{path}: [[runs]] #{i + 1}", r.tuned),
+                           **r.overrides}, tuned=r.tuned, repeat=r.repeat)
+            for i, r in enumerate(runs)]
     for i, run in enumerate(runs):
         if run.repeat < 1:
             raise ReproduceError(f"{path}: [[runs]] #{i + 1}: repeat = {run.repeat!r} must be "
@@ -224,6 +227,28 @@ def load_entry(name: str | Path) -> Entry:
     return Entry(name=path.stem, path=path, **top, runs=runs, metrics=metrics, paper=paper,
                  derived=derived, rankings=rankings, sweeps=sweeps, figures=figures,
                  ensemble=ensemble, claims=claims, variants=variants, statements=statements)
+
+
+def _tuned(where: str, tuned: dict[str, str]) -> dict[str, Any]:
+    """The overrides a run's ``tuned`` key names: ``FMU.PARAMETER`` -> value for every key of
+    each named table."""
+    out: dict[str, Any] = {}
+    for fmu, ref in tuned.items():
+        at = f"{where}: tuned.{fmu} = {ref!r}"
+        file, sep, table = str(ref).partition("#")
+        if not (sep and file and table):
+            raise ReproduceError(f"{at}: expected \"FILE#TABLE\" (a TOML file from the "
+                                 "repository root and one of its tables)")
+        path = ROOT / file
+        if not path.is_file():
+            raise ReproduceError(f"{at}: no file {path}")
+        data = read_toml(path, ReproduceError)
+        values = data.get(table)
+        if not isinstance(values, dict) or not values:
+            raise ReproduceError(f"{at}: {path} has no table [{table}] of values (its tables: "
+                                 f"{sorted(k for k, v in data.items() if isinstance(v, dict))})")
+        out.update({f"{fmu}.{key}": value for key, value in values.items()})
+    return out
 
 
 def _claim_keys(path: Path, data: dict[str, Any]) -> None:

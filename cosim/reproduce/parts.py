@@ -26,6 +26,12 @@ class Run:
     overrides: dict[str, Any] = doc(
         "overrides of the scenario (as ``--set``: ``FMU.PARAMETER`` -> value); the entry's "
         "``set`` is merged under them (the run's own value wins)", toml="set", default={})
+    tuned: dict[str, str] = doc(
+        "generated parameter values of the run's FMUs: FMU name -> ``FILE#TABLE``, a TOML file "
+        "(path from the repository root) whose table ``TABLE`` maps that FMU's parameter names "
+        "to values (the picks of a tuning protocol, e.g. "
+        "``controllers/common/freight_tuning.toml#SMC, boundary layer``); merged over the "
+        "entry's ``set`` and under the run's own", default={})
     repeat: int = doc(
         "how many times the run is made (>= 1); numeric metrics are then shown as \"median "
         "[min, max]\" (e.g. computation times) and the first repetition feeds the figures",

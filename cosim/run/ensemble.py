@@ -105,6 +105,10 @@ def _rounding_overrides(entry: Entry, run: Any, base: dict[str, Any], path: int
     for key in entry.ensemble.rounding_keys(path):
         value = base.get(key, run.overrides.get(key))
         if value is None:
+            # the start value of the scenario's own FMU (its Python build where it names a
+            # catalog identifier): built first where missing, as on a fresh checkout that
+            # runs the native builds
+            ensure_built(load_scenario(run.scenario))
             value = nominal_values(run.scenario, [key])[key]
         if value is None:
             raise ValueError(f"{entry.path}: [ensemble] rounding perturbation {key!r}: no "

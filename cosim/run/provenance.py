@@ -2,7 +2,8 @@
 stale), and what its simulations depend on, as another (so a record knows when it is).
 
 The inputs of entry ``scenarios/reproduce/NAME.toml`` are: the entry itself; every scenario it
-names (a string value equal to a file stem in ``scenarios/``); the files bundled into every FMU
+names (a string value equal to a file stem in ``scenarios/``); the files of generated
+parameter values its runs name (``[[runs]] tuned``); the files bundled into every FMU
 those scenarios and the entry name (a string equal to a catalog identifier:
 ``cosim.fmu.build.bundled_files`` of its wrapper, i.e. the cores, their data and the FMU layer)
 and, on the native build (``cosim reproduce --build native``), for one with a native model
@@ -84,6 +85,11 @@ def entry_inputs(name: str, build: str = "python") -> list[Path]:
             fmus.update(s for s in _strings(tomllib.loads(scenario.read_text())) if s in known)
         if text in known:
             fmus.add(text)
+    for run in data.get("runs", []):  # the files of generated parameter values ([[runs]] tuned)
+        for ref in run.get("tuned", {}).values():
+            path = ROOT / str(ref).partition("#")[0]
+            if path.is_file():
+                files.add(path)
     for identifier in sorted(fmus):
         files.update(bundled_files(known[identifier].module))
         if build == "native" and identifier in NATIVE:  # its C model, FMI 3 front included
