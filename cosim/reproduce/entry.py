@@ -43,10 +43,9 @@ from cosim.run.claims import (
     check_claims,
     check_ensemble,
 )
-from cosim.run.scenario import SCENARIO_DIR, read_toml
+from cosim.run.scenario import ROOT, SCENARIO_DIR, read_toml
 
 REPRODUCE_DIR = SCENARIO_DIR / "reproduce"
-ROOT = SCENARIO_DIR.parent  # the repository: the root of the paths of ``tuned``
 
 __all__ = ["DERIVED_KINDS", "FIGURE_KINDS", "LINE_KINDS", "REPRODUCE_DIR", "Derived", "Entry",
            "Figure", "Metric", "PaperValue", "Ranking", "ReproduceError", "Run", "Statement",

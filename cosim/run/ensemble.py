@@ -97,19 +97,22 @@ def _draws(entry: Entry, k: int) -> list[dict[str, float]]:
     return draw_samples(perts, nominals, k, entry.ensemble.perturb_seed)
 
 
-def _rounding_overrides(entry: Entry, run: Any, base: dict[str, Any], path: int
-                        ) -> dict[str, Any]:
+def _rounding_overrides(entry: Entry, run: Any, base: dict[str, Any], path: int,
+                        nominals: dict[tuple[str, str], Any]) -> dict[str, Any]:
     """Perturbed path ``path``'s parameters (``base``'s value, else the run's, else the
-    declared one) scaled by 1 + :data:`ROUNDING_RELATIVE`."""
+    declared one) scaled by 1 + :data:`ROUNDING_RELATIVE`; ``nominals`` keeps the declared
+    values read so far ((scenario, key) -> value), each read once."""
     out: dict[str, Any] = {}
     for key in entry.ensemble.rounding_keys(path):
         value = base.get(key, run.overrides.get(key))
         if value is None:
-            # the start value of the scenario's own FMU (its Python build where it names a
-            # catalog identifier): built first where missing, as on a fresh checkout that
-            # runs the native builds
-            ensure_built(load_scenario(run.scenario))
-            value = nominal_values(run.scenario, [key])[key]
+            if (run.scenario, key) not in nominals:
+                # the start value of the scenario's own FMU (its Python build where it names
+                # a catalog identifier): built first where missing, as on a fresh checkout
+                # that runs the native builds
+                ensure_built(load_scenario(run.scenario))
+                nominals[run.scenario, key] = nominal_values(run.scenario, [key])[key]
+            value = nominals[run.scenario, key]
         if value is None:
             raise ValueError(f"{entry.path}: [ensemble] rounding perturbation {key!r}: no "
                              "nominal value to perturb")
@@ -150,6 +153,7 @@ def claim_jobs(entry: Entry, k: int, rounding: bool = True, build: str = "python
         check_rounding_path(entry, builds)
     jobs: dict[tuple[str, str, int, bool], Job] = {}
     cache: dict[tuple[str, int], list[dict[str, Any]]] = {}
+    nominals: dict[tuple[str, str], Any] = {}  # declared values of the rounding paths
     for _var, claim, names, with_rnd, kc in claim_cases(entry, k, rounding):
         ens = claim.ensemble
         if (ens, kc) not in cache:
@@ -163,7 +167,8 @@ def claim_jobs(entry: Entry, k: int, rounding: bool = True, build: str = "python
                     if ens == "mismatch":  # the drawn plant wins over the run's nominal
                         overrides.update(member)
                     if path:
-                        overrides.update(_rounding_overrides(entry, run, overrides, path))
+                        overrides.update(_rounding_overrides(entry, run, overrides, path,
+                                                             nominals))
                     jobs.setdefault(key, (key, run.scenario, overrides))
     order = {name: j for j, name in enumerate(dict.fromkeys(key[0] for key in jobs))}
     repeats = sorted((key for key in jobs if key[1] == "repeat"),
