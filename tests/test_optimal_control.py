@@ -179,14 +179,20 @@ def test_the_cruise_is_at_the_holding_speed_of_the_multiplier() -> None:
     """The singular arc of the maximum principle: the train holds ``V`` with ``psi(V) = eta_t
     lambda`` (Howlett & Pudney 1995), ``lambda`` the run's own multiplier (``-dJ/dT / m_eff``
     from the stationarity of its switching points). Tolerance: the two grids' differences of
-    the held speed and of ``V``."""
+    the held speed and of ``V``, plus ``V``'s error from the multiplier's own accuracy (its
+    spread over the switching points, through ``dV = eta_t dlambda / psi'(V)``)."""
     coarse = SectionSolver(LONG, EMU, GRID)
     T = 1.15 * coarse.fastest().running_time
     runs = [coarse.for_time(T), SectionSolver(LONG, EMU, GRID.finer()).for_time(T)]
     held = [_longest_hold(r) for r in runs]
     V = [r.hold_speed for r in runs]
-    tol = abs(held[0] - held[1]) + abs(V[0] - V[1])
-    assert abs(held[1] - V[1]) <= tol, (held, V)
+    fine = runs[1]
+    assert math.isfinite(fine.multiplier_spread)
+    h = 1e-6 * V[1]
+    slope = (EMU.psi(V[1] + h) - EMU.psi(V[1] - h)) / (2.0 * h)  # psi'(V), m/s^2
+    from_multiplier = EMU.traction_efficiency * fine.multiplier_spread / slope
+    tol = abs(held[0] - held[1]) + abs(V[0] - V[1]) + from_multiplier
+    assert abs(held[1] - V[1]) <= tol, (held, V, from_multiplier)
 
 
 @pytest.mark.slow

@@ -79,10 +79,12 @@ def test_an_optimum_for_another_line_or_schedule_is_refused(tmp_path):
 @pytest.mark.slow
 @pytest.mark.parametrize("reading", sorted(OPTIMA))
 def test_bundled_optimum_is_what_its_command_writes(reading, tmp_path):
-    """The stale check: the command in the header, run again, writes the same optimum to the
-    optimiser's accuracy: SLSQP's ftol on the energy and its square root (in units of the
-    line's length) on the switching points, where the energy is stationary; plus the
-    file's printed precision (energy 7 digits, speed 1e-6 m/s, time 1e-4 s)."""
+    """The stale check: the command in the header, run again, writes the same optimum: the
+    same energy to SLSQP's ftol plus one unit of the header's last printed digit (both values
+    are printed to 7 digits), and the same arrival time to its ftol plus the file's 1e-4 s.
+    The speeds are not compared point by point: the energy is flat to first order in them
+    (stationary), so runs of one energy to 7 digits can cruise a stretch a few hundredths of a
+    m/s apart, wherever SLSQP reached its ftol."""
     path = OPTIMA[reading]
     command = next(line for line in _header(path) if line.startswith(COMMAND_PREFIX))
     args = shlex.split(command[len(COMMAND_PREFIX):])
@@ -93,8 +95,6 @@ def test_bundled_optimum_is_what_its_command_writes(reading, tmp_path):
     old = sp.read_optimum(path, load_route("seed003_crh3"))
     new = sp.read_optimum(fresh, load_route("seed003_crh3"))
     e_old, e_new = _energy(path), _energy(fresh)
-    assert abs(e_new - e_old) <= (SLSQP_FTOL + 5e-7) * abs(e_old)
+    printed_unit = 10.0 ** (np.floor(np.log10(abs(e_old))) - 6)  # J: 7 significant digits
+    assert abs(e_new - e_old) <= SLSQP_FTOL * abs(e_old) + printed_unit
     assert abs(new.arrival_time - old.arrival_time) <= 1e-4 + SLSQP_FTOL * old.arrival_time
-    shift = np.sqrt(SLSQP_FTOL) * old.stop_point  # m, a switching point's accuracy
-    slope = np.max(np.abs(np.diff(old.v)) / np.diff(old.s))  # largest |dv/ds| (1/s)
-    assert np.max(np.abs(np.interp(old.s, new.s, new.v) - old.v)) <= shift * slope + 1e-6

@@ -39,6 +39,9 @@ class OptimalRun:
     multiplier: float  # lambda (J/kg/s per unit effective mass): -dJ/dT / m_eff
     hold_speed: float  # V of psi(V) = eta_t lambda (m/s; nan if the resistance has no slope)
     brake_hold_speed: float  # W of psi(W) = lambda / eta_r (m/s; inf without regeneration)
+    # the multiplier's accuracy (J/kg/s): the largest distance of the estimate from any one free
+    # switching point's own -dJ/dz / (m_eff dT/dz); nan where not estimated (the cost-to-go's)
+    multiplier_spread: float = math.nan
 
     @property
     def running_time(self) -> float:

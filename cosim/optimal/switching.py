@@ -79,9 +79,13 @@ _REGIME_OF_MODE = {POWER: MAX_TRACTION, COAST: COASTING, REGEN: MAX_REGEN, BRAKE
 # m/s): a run that would stop short creeps on, slowly and late, so time and energy stay
 # continuous in the switching points; no solution comes near it
 _E_FLOOR = 0.5 * 0.05**2
-# SLSQP's ftol on the scaled energy: the accuracy the switching points are found to (the
-# energy to about this share, the points, where the energy is stationary, to its square root)
+# SLSQP's ftol: it stops when an iteration changes the scaled energy (units of its largest
+# change over the position step) by less than this. Where the energy is flat (cruising a
+# little above V on one stretch and below on another) the points stay where it stopped.
 SLSQP_FTOL = 1e-12
+# SLSQP's iteration bound: well above the iterations it takes to reach its ftol on the lines
+# here; a round stopped by the bound leaves points SLSQP would still move
+SLSQP_MAX_ITER = 1000
 
 
 @numba.njit(cache=True)
@@ -363,9 +367,9 @@ class SwitchingProblem:
             gc[:, i] = (cu - cd) / (2.0 * delta)
         return J, T, c, gJ, gT, gc
 
-    def multiplier(self, z: np.ndarray) -> float:
-        """``mu / m_eff`` of the stationarity ``dJ/dz = -mu dT/dz`` over the unknowns free of
-        their bounds (switching points that coincide move as one), by least squares."""
+    def _stationarity_rows(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(dJ/dz, dT/dz)`` of the unknowns free of their bounds (switching points that
+        coincide move as one), those with ``|dT/dz| > 1e-12``."""
         points, lengths = self.split(z)
         _, _, _, gJ, gT, _ = self.gradients(z)
         L = self.length
@@ -387,10 +391,26 @@ class SwitchingProblem:
                     rows_T.append(gT[self.n_points + k])
         gj, gt = np.array(rows_J), np.array(rows_T)
         keep = np.abs(gt) > 1e-12
-        if not keep.any():
+        return gj[keep], gt[keep]
+
+    def multiplier(self, z: np.ndarray) -> float:
+        """``mu / m_eff`` of the stationarity ``dJ/dz = -mu dT/dz`` over the unknowns free of
+        their bounds (switching points that coincide move as one), by least squares."""
+        gj, gt = self._stationarity_rows(z)
+        if not gt.size:
             return math.nan
-        mu = -float(gj[keep] @ gt[keep] / (gt[keep] @ gt[keep]))
+        mu = -float(gj @ gt / (gt @ gt))
         return mu / self.train.effective_mass
+
+    def multiplier_spread(self, z: np.ndarray) -> float:
+        """The accuracy (J/kg/s) of :meth:`multiplier`: the largest distance of it from one
+        free unknown's own ``-dJ/dz / (m_eff dT/dz)`` (0 with one unknown; nan with none).
+        At an exact optimum every unknown gives the same value; SLSQP stops at its ftol."""
+        gj, gt = self._stationarity_rows(z)
+        if not gt.size:
+            return math.nan
+        own = -gj / gt / self.train.effective_mass
+        return float(np.max(np.abs(own - self.multiplier(z))))
 
     def feasible(self, z: np.ndarray, running_time: float) -> bool:
         """On time (to 1e-9 relative) and every coasted limit kept (to 1e-9 of its energy)."""
@@ -398,7 +418,7 @@ class SwitchingProblem:
         return T <= running_time * (1.0 + 1e-9) and bool(np.all(c >= -1e-9))
 
     def solve(self, points: np.ndarray, brake_lengths: np.ndarray, running_time: float,
-              scale: float = 50.0, max_iter: int = 100) -> Switching:
+              scale: float = 50.0, max_iter: int = SLSQP_MAX_ITER) -> Switching:
         """The switching points and braking lengths of least energy on time, from ``points``
         and ``brake_lengths`` (module text), made exactly on time by :meth:`on_time`.
 
@@ -483,9 +503,10 @@ class SwitchingProblem:
                 return y
         return z
 
-    def run(self, points: np.ndarray, brake_lengths: np.ndarray, multiplier: float
-            ) -> OptimalRun:
-        """The run of the switching points as an :class:`OptimalRun` on the integration grid."""
+    def run(self, points: np.ndarray, brake_lengths: np.ndarray, multiplier: float,
+            multiplier_spread: float = math.nan) -> OptimalRun:
+        """The run of the switching points as an :class:`OptimalRun` on the integration grid
+        (``multiplier_spread``: the multiplier's accuracy, :meth:`multiplier_spread`)."""
         x, mode, g, cap, limit, w, tail_mode, bound, tail = self.grid(
             self.unknowns(points, brake_lengths))
         tr = self.train
@@ -513,7 +534,8 @@ class SwitchingProblem:
             grade=w[steps],
             traction_work=float(trac), regen_work=float(regen), brake_work=float(brake),
             energy=float(trac / tr.traction_efficiency - tr.regen_efficiency * regen),
-            multiplier=multiplier, hold_speed=V, brake_hold_speed=W)
+            multiplier=multiplier, hold_speed=V, brake_hold_speed=W,
+            multiplier_spread=multiplier_spread)
 
 
 _MIN_OUTPUT_STEP = 0.05  # m: nodes closer than this to the one before are not written out
@@ -587,9 +609,11 @@ def refine(section: Section, train: Train, run: OptimalRun, running_time: float,
     if best is None:
         return start
     _, problem, sol = best
-    lam = problem.multiplier(problem.unknowns(sol.points, sol.brake_lengths))
-    lam = lam if math.isfinite(lam) else run.multiplier
-    refined = problem.run(sol.points, sol.brake_lengths, lam)
+    z = problem.unknowns(sol.points, sol.brake_lengths)
+    lam = problem.multiplier(z)
+    lam, spread = (lam, problem.multiplier_spread(z)) if math.isfinite(lam) else (
+        run.multiplier, math.nan)
+    refined = problem.run(sol.points, sol.brake_lengths, lam, spread)
     if refined.energy <= start.energy or start.running_time > running_time:
         return refined
     return start
