@@ -5,12 +5,8 @@ optimal preview, the paper's sliding mode, the sliding mode with a boundary laye
 fuzzy PID, the fuzzy PID with the PID's feedforward, the PID) has its own tunable parameters,
 declared in :data:`GAINS` with a search box (a decade or more either side of the usual value, in
 log for gains, linear for the observer weight w and the feedforward look-ahead). Every law gets
-the same protocol and the same budget, :data:`BUDGET` evaluations:
-
-* stage 1: :data:`STAGES` [0] points of a scrambled Sobol sequence (``scipy.stats.qmc``, the same
-  seed for every law) in the law's box;
-* each further stage: the next number of Sobol points in a box of half the previous width (in
-  the box's unit coordinates) around the best point so far, moved to stay inside the box.
+the same protocol and the same budget (``tuning_protocol.py``: :data:`BUDGET` evaluations
+in Sobol stages, each further stage in a box of half the width around the best so far).
 
 An evaluation is the full scenario run of ``cosim reproduce`` (the FMUs on the entry's build,
 the plant's compiled kernel, the entry's row with its disturbance) on every calibration
@@ -39,57 +35,32 @@ import math
 import os
 import re
 import sys
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from scipy.stats import qmc
 
 ROOT = Path(__file__).resolve().parent.parent
-sys.path[:0] = [str(ROOT)]
+sys.path[:0] = [str(ROOT), str(ROOT / "benchmarks")]
+
+from tuning_protocol import (  # noqa: E402
+    BUDGET,
+    STAGES,
+    Gain,
+    parameters,
+    stage_points,
+    write_log,
+)
 
 from controllers.common.freight_tuning import TUNING_FILE  # noqa: E402
 
-STAGES = (32, 16, 16)  # Sobol points per stage (powers of two: balanced); the same for every law
-BUDGET = sum(STAGES)  # evaluations per law, each on every calibration seed
-SOBOL_SEED = 2      # the scrambling of stage k uses SOBOL_SEED + k, for every law
 SEED_KEY = "plant.disturbance_seed"
 METRICS = ("train_mean_speed_rmse_kmh", "speed_rmse_kmh")
 FMU = "controller"  # the component every freight scenario names its law
 LOG_FILE = ROOT / "runs" / "tuning" / "seed002.csv"
-EDGE = 0.02  # a pick this close to an end of its box (unit coordinate) is flagged in the file
 # the laws whose candidates run on the controller's Python FMU: the native preview carries the
 # gains of its declared design only (computed when it is built, from the picks), and equals the
 # Python FMU to rounding (tests/test_native_freight_controllers.py)
 PYTHON_CONTROLLER = {"Preview"}
-
-
-@dataclass(frozen=True)
-class Gain:
-    """A tunable parameter of a law: its FMU name, its search range and scale."""
-
-    name: str
-    lo: float
-    hi: float
-    log: bool = True
-    integer: bool = False
-    also: tuple[str, ...] = ()  # parameters given the same value (the preview's M_d = M_R)
-
-    def value(self, u: float) -> float | int:
-        """The value at unit coordinate ``u`` in [0, 1] (6 significant digits)."""
-        x = self.lo * (self.hi / self.lo) ** u if self.log else self.lo + (self.hi - self.lo) * u
-        return int(round(x)) if self.integer else float(f"{x:.6g}")
-
-    def unit(self, value: float) -> float:
-        """The unit coordinate of ``value`` (the inverse of :meth:`value`)."""
-        if self.log:
-            return math.log(value / self.lo) / math.log(self.hi / self.lo)
-        return (value - self.lo) / (self.hi - self.lo)
-
-    def at_edge(self, value: float) -> bool:
-        """Whether ``value`` lies within :data:`EDGE` of an end of the box (unit coordinate):
-        the best point may lie outside it."""
-        return not EDGE <= self.unit(value) <= 1.0 - EDGE
 
 
 W = Gain("mean_weight", 0.0, 1.0, log=False)  # the observer weight: every law has it
@@ -113,26 +84,6 @@ def criterion(summaries: list[dict | None]) -> float:
     if any(s is None for s in summaries):
         return math.inf
     return float(np.mean([math.log(s[METRICS[0]] * s[METRICS[1]]) for s in summaries]))
-
-
-def parameters(gains: tuple[Gain, ...], u: np.ndarray) -> dict[str, float | int]:
-    """The parameter values at the point ``u`` of the unit cube."""
-    out: dict[str, float | int] = {}
-    for g, x in zip(gains, u, strict=True):
-        out[g.name] = g.value(float(x))
-        out.update({name: out[g.name] for name in g.also})
-    return out
-
-
-def stage_points(stage: int, dims: int, best: np.ndarray | None) -> np.ndarray:
-    """The unit-cube points of ``stage`` (0-based): Sobol points in the whole cube, then in a
-    box of width 2**-stage around ``best``, moved to lie inside the cube."""
-    points = qmc.Sobol(dims, scramble=True, seed=SOBOL_SEED + stage).random(STAGES[stage])
-    if stage == 0:
-        return points
-    width = 0.5 ** stage
-    low = np.clip(best - width / 2, 0.0, 1.0 - width)
-    return low + width * points
 
 
 def write_picks(picks: dict[str, dict], best: dict[str, float], seeds: list[int],
@@ -234,12 +185,7 @@ def main() -> None:
     failed = [law for law in GAINS if law not in picks]
     if failed:
         raise SystemExit(f"seed002 tuning: every evaluation of {failed} failed (see above)")
-    LOG_FILE.parent.mkdir(parents=True, exist_ok=True)
-    keys = list(dict.fromkeys(k for row in log for k in row))
-    with LOG_FILE.open("w", newline="") as f:
-        writer = csv.DictWriter(f, keys)
-        writer.writeheader()
-        writer.writerows(log)
+    write_log(LOG_FILE, log)
     print(f"wrote {LOG_FILE}")
     if not a.dry_run:
         write_picks(picks, best, seeds)

@@ -61,9 +61,13 @@ clipped input they remember, so they have nothing to wind up.
 Null-space force sharing (``share_gain``, ours; every law has it, :func:`null_space_share`):
 a fraction of the units' departure from their mean input is removed per sample within the
 null space of the law's input gain (``Phi_2`` for the FFDL laws, the RLS model's ``B_1`` for
-GPC), which moves only the force split between the units. On by default for the three FFDL
-laws (one estimator, one inverse), off for GPC (its ``B_1`` is the RLS's, whose weak
-directions need not be the train's).
+GPC), which moves only the force split between the units.
+
+Defaults: every tunable parameter of a law (its gains, ``share_gain``, the FFDL laws'
+``pinv_cutoff``) defaults to its pick by one protocol for every law
+(``benchmarks/seed001_tuning.py``, written to ``controllers/datadriven/tuned.py``); the
+estimators (FFDL's ``mu``, ``lambda``, ``Phi(1)``; GPC's RLS) and the horizons are the
+paper's. The classes' docstrings give the paper's values.
 
 FFDL-MFAC (Xiong and Hou 2022, the paper's ref. 18), with weight ``delta`` and step ``rho``::
 
@@ -75,7 +79,8 @@ as the control weight (``lambda`` in Hou's notation) and ``rho`` as the control 
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
+from typing import Any
 
 import numpy as np
 
@@ -85,6 +90,14 @@ from controllers.common.qp import DenseQP
 from controllers.datadriven.tuned import TUNED
 from cosim.fmu.declare import Checked, group, param
 from cosim.fmu.state import StatefulCore
+
+TUNED_BY = "picked by benchmarks/seed001_tuning.py, controllers/datadriven/tuned.py"
+
+
+def tuned(law: str, cls: type, **fixed: Any) -> Any:
+    """``cls`` (a parameter group) with ``fixed`` and ``law``'s picks of its fields."""
+    names = {f.name for f in fields(cls)}
+    return cls(**fixed, **{k: v for k, v in TUNED[law].items() if k in names})
 
 
 class Law(StatefulCore):
@@ -123,18 +136,18 @@ def null_space_share(u: np.ndarray, M: np.ndarray, K: np.ndarray, gain: float) -
 @dataclass(frozen=True)
 class MfacParams(Checked):
     """FFDL-MFAC (paper section 4.1, 3): Phi(1) = 0.52 I, mu = 1, lambda = 0.2, delta = 1,
-    rho = 0.85."""
+    rho = 0.85; the tunable parameters default to their picks (module text)."""
 
-    ffdl: FfdlParams = group(FfdlParams(phi1_init=0.52, phi2_init=0.52), "")
+    ffdl: FfdlParams = group(tuned("MFAC", FfdlParams, phi1_init=0.52, phi2_init=0.52), "")
     delta: float = param(TUNED["MFAC"]["delta"], "1", "delta: weight on the input move "
-                         "(the paper's 1 is for a scaling it does not give; picked by "
-                         "benchmarks/seed001_tuning.py, controllers/datadriven/tuned.py)",
+                         f"(the paper's 1 is for a scaling it does not give; {TUNED_BY})",
                          min=0.0)
-    rho: float = param(0.85, "1", "rho: step size of the control law", min=0.0, max=2.0)
-    share_gain: float = param(0.2, "1", "force sharing: fraction of the units' departure "
-                              "from their mean input removed per sample, in the null space "
-                              "of Phi_2 (0: off, the paper's MFAC; not in the paper)",
-                              min=0.0, max=1.0)
+    rho: float = param(TUNED["MFAC"]["rho"], "1", "rho: step size of the control law (the "
+                       f"paper's 0.85; {TUNED_BY})", min=0.0, max=2.0)
+    share_gain: float = param(TUNED["MFAC"]["share_gain"], "1", "force sharing: fraction of "
+                              "the units' departure from their mean input removed per sample, "
+                              "in the null space of Phi_2 (0: off, the paper's MFAC; not in "
+                              f"the paper; {TUNED_BY})", min=0.0, max=1.0)
 
 
 class Mfac(Law):
@@ -244,17 +257,16 @@ class SlidingLaw(Law):
 @dataclass(frozen=True)
 class IsmcParams(Checked):
     """FFDL-ISMC (section 4.1, 2): Phi(1) = 0.5 I, mu = 1, lambda = 0.2, beta = 0.05, k1 =
-    0.5, k2 = 2, alpha = 0.65."""
+    0.5, k2 = 2, alpha = 0.65; the tunable parameters default to their picks (module text)."""
 
-    ffdl: FfdlParams = group(FfdlParams(), "")
-    surface: SurfaceParams = group(SurfaceParams(), "")
-    beta: float = param(0.05, "1", "beta: switching gain (eq. 25, units of y per "
-                  "sample)", min=0.0)
+    ffdl: FfdlParams = group(tuned("ISMC", FfdlParams), "")
+    surface: SurfaceParams = group(tuned("ISMC", SurfaceParams), "")
+    beta: float = param(TUNED["ISMC"]["beta"], "1", "beta: switching gain (eq. 25, units of "
+                        f"y per sample; the paper's 0.05; {TUNED_BY})", min=0.0)
     boundary_layer: float = param(TUNED["ISMC"]["boundary_layer"], "1", "Delta: width of "
                                   "the saturation boundary layer replacing sgn (eq. 27, km/h; "
-                                  "converted to the units of y; not in the paper: picked by "
-                                  "benchmarks/seed001_tuning.py, controllers/datadriven/"
-                                  "tuned.py)", min=1e-9)
+                                  f"converted to the units of y; not in the paper: {TUNED_BY})",
+                                  min=1e-9)
 
 
 class Ismc(SlidingLaw):
@@ -274,16 +286,15 @@ class Ismc(SlidingLaw):
 @dataclass(frozen=True)
 class IsmpcParams(Checked):
     """FFDL-ISMPC (section 4.1, 1): Phi(1) = 0.5 I, mu = 1, lambda = 0.2, k1 = 0.5, k2 = 2,
-    alpha = 0.5, N = 10."""
+    alpha = 0.5, N = 10; the tunable parameters default to their picks (module text)."""
 
-    ffdl: FfdlParams = group(FfdlParams(), "")
-    surface: SurfaceParams = group(SurfaceParams(alpha=0.5), "")
+    ffdl: FfdlParams = group(tuned("ISMPC", FfdlParams), "")
+    surface: SurfaceParams = group(tuned("ISMPC", SurfaceParams), "")
     horizon: int = param(10, "1", "N: prediction and control horizon (eq. 57)", min=1,
                          max=50, integer=True, name="N")
     theta: float = param(TUNED["ISMPC"]["theta"], "1", "theta: weight of ||U||^2 in J_2 "
-                         "(eq. 66; not given in the paper: picked by benchmarks/"
-                         "seed001_tuning.py, controllers/datadriven/tuned.py; for km/h and "
-                         "m/s2, converted with the scaling)", min=0.0)
+                         f"(eq. 66; not given in the paper: {TUNED_BY}; for km/h and m/s2, "
+                         "converted with the scaling)", min=0.0)
     constraints: str = param("qp", description='the input box in the MPC of eq. 67: "qp", '
                              "the constrained QP (DAQP) when the unconstrained minimiser "
                              'leaves the box; "clip": the unconstrained minimiser (eq. 72) '
@@ -389,18 +400,14 @@ class GpcLawParams(Checked):
     """GPC baseline (section 4.1, 4): Ny = 3, Nu = 2, forgetting factor 0.9, the paper's
     textbook RLS: no bound on the covariance (``p_max`` = ``NO_COVARIANCE_BOUND``, never
     reached; the shared core's 1e4, ours, is a safeguard the paper does not have, README
-    seed 001). The control weight (not in the paper) is picked by the protocol of
-    ``benchmarks/seed001_tuning.py`` (``controllers/datadriven/tuned.py``) like ISMC's Delta,
-    ISMPC's theta and MFAC's delta."""
+    seed 001). The control weight (not in the paper) and the force sharing's gain are
+    picked by the protocol every law gets (``benchmarks/seed001_tuning.py``)."""
 
-    gpc: GpcParams = group(GpcParams(p_max=NO_COVARIANCE_BOUND,
-                                     control_weight=TUNED["GPC"]["control_weight"]), "")
-    share_gain: float = param(0.0, "1", "force sharing: fraction of the units' departure "
-                              "from their mean input removed per sample, in the null space "
-                              "of the RLS model's B_1 (0: off, the paper's GPC; not in the "
-                              "paper; off by default: B_1's weak directions are not the "
-                              "train's, on a plant whose units act independently it breaks "
-                              "the tracking)", min=0.0, max=1.0)
+    gpc: GpcParams = group(tuned("GPC", GpcParams, p_max=NO_COVARIANCE_BOUND), "")
+    share_gain: float = param(TUNED["GPC"]["share_gain"], "1", "force sharing: fraction of "
+                              "the units' departure from their mean input removed per sample, "
+                              "in the null space of the RLS model's B_1 (0: off, the paper's "
+                              f"GPC; not in the paper; {TUNED_BY})", min=0.0, max=1.0)
 
 
 SHARE_INVERSE = FfdlParams()  # the regularised inverse of B_1 for GPC's force sharing
