@@ -35,7 +35,6 @@ weight); a diverged run makes the point infinitely bad. Every evaluation goes to
 from __future__ import annotations
 
 import argparse
-import csv
 import dataclasses
 import math
 import os
@@ -57,6 +56,7 @@ from tuning_protocol import (  # noqa: E402
     STAGES,
     Gain,
     parameters,
+    picks_from_log,
     stage_points,
     write_log,
 )
@@ -179,23 +179,6 @@ def write_picks(picks: dict[str, dict[str, float]], best: dict[str, float],
                                       ("AT_EDGE", edges))))
 
 
-def picks_from_log(path: Path) -> tuple[dict[str, dict], dict[str, float]]:
-    """Each law's best evaluation in the log ``path`` (the first of equal ones) and its
-    criterion."""
-    picks: dict[str, dict] = {}
-    best: dict[str, float] = {}
-    with path.open(newline="") as f:
-        for row in csv.DictReader(f):
-            law, c = row["law"], float(row["criterion"])
-            if law in GAINS and c < best.get(law, math.inf):
-                best[law] = round(c, 4)
-                picks[law] = {g.name: float(row[g.name]) for g in GAINS[law]}
-    missing = [law for law in GAINS if law not in picks]
-    if missing:
-        raise SystemExit(f"{path}: no finished evaluation of {missing}")
-    return picks, best
-
-
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--workers", type=int, default=2)
@@ -205,7 +188,8 @@ def main() -> None:
     a = ap.parse_args()
     seeds = calibration_seeds()
     if a.from_log:
-        picks, best = picks_from_log(LOG_FILE)
+        picks, best = picks_from_log(LOG_FILE, GAINS)
+        best = {law: round(c, 4) for law, c in best.items()}
         if not a.dry_run:
             write_picks(picks, best, seeds)
             print(f"wrote {OUT.relative_to(ROOT)}")

@@ -29,7 +29,6 @@ nothing is typed by hand. Every evaluation goes to ``runs/tuning/seed002.csv``.
 from __future__ import annotations
 
 import argparse
-import csv
 import json
 import math
 import os
@@ -42,6 +41,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path[:0] = [str(ROOT), str(ROOT / "benchmarks")]
 
+import tuning_protocol  # noqa: E402
 from tuning_protocol import (  # noqa: E402
     BUDGET,
     STAGES,
@@ -109,22 +109,9 @@ def write_picks(picks: dict[str, dict], best: dict[str, float], seeds: list[int]
 
 
 def picks_from_log(path: Path) -> tuple[dict[str, dict], dict[str, float]]:
-    """Each law's best evaluation in the log ``path`` (the first of equal ones, as a run picks)
-    and its criterion."""
-    picks: dict[str, dict] = {}
-    best: dict[str, float] = {}
-    with path.open(newline="") as f:
-        for row in csv.DictReader(f):
-            law, c = row["law"], float(row["criterion"])
-            if law in GAINS and c < best.get(law, math.inf):
-                names = [n for g in GAINS[law] for n in (g.name, *g.also)]
-                integer = {n for g in GAINS[law] if g.integer for n in (g.name, *g.also)}
-                best[law] = c
-                picks[law] = {n: int(row[n]) if n in integer else float(row[n]) for n in names}
-    missing = [law for law in GAINS if law not in picks]
-    if missing:
-        raise SystemExit(f"{path}: no finished evaluation of {missing}")
-    return picks, best
+    """Each law's best evaluation in the log ``path`` and its criterion
+    (:func:`tuning_protocol.picks_from_log` over :data:`GAINS`)."""
+    return tuning_protocol.picks_from_log(path, GAINS)
 
 
 def main() -> None:

@@ -82,3 +82,23 @@ def write_log(path: Path, rows: list[dict]) -> None:
         writer = csv.DictWriter(f, keys)
         writer.writeheader()
         writer.writerows(rows)
+
+
+def picks_from_log(path: Path, gains: dict[str, tuple[Gain, ...]]
+                   ) -> tuple[dict[str, dict], dict[str, float]]:
+    """Each law's best evaluation in the log ``path`` (:func:`write_log`; the first of equal
+    ones, as a run picks) and its criterion."""
+    picks: dict[str, dict] = {}
+    best: dict[str, float] = {}
+    with path.open(newline="") as f:
+        for row in csv.DictReader(f):
+            law, c = row["law"], float(row["criterion"])
+            if law in gains and c < best.get(law, math.inf):
+                names = [n for g in gains[law] for n in (g.name, *g.also)]
+                integer = {n for g in gains[law] if g.integer for n in (g.name, *g.also)}
+                best[law] = c
+                picks[law] = {n: int(row[n]) if n in integer else float(row[n]) for n in names}
+    missing = [law for law in gains if law not in picks]
+    if missing:
+        raise SystemExit(f"{path}: no finished evaluation of {missing}")
+    return picks, best

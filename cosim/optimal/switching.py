@@ -393,24 +393,18 @@ class SwitchingProblem:
         keep = np.abs(gt) > 1e-12
         return gj[keep], gt[keep]
 
-    def multiplier(self, z: np.ndarray) -> float:
-        """``mu / m_eff`` of the stationarity ``dJ/dz = -mu dT/dz`` over the unknowns free of
-        their bounds (switching points that coincide move as one), by least squares."""
+    def multiplier(self, z: np.ndarray) -> tuple[float, float]:
+        """``(mu / m_eff, its accuracy)`` (J/kg/s) of the stationarity ``dJ/dz = -mu dT/dz``
+        over the unknowns free of their bounds (switching points that coincide move as one),
+        by least squares; the accuracy is the largest distance of the estimate from one free
+        unknown's own ``-dJ/dz / (m_eff dT/dz)`` (0 with one unknown; both nan with none). At
+        an exact optimum every unknown gives the same value; SLSQP stops at its ftol."""
         gj, gt = self._stationarity_rows(z)
         if not gt.size:
-            return math.nan
-        mu = -float(gj @ gt / (gt @ gt))
-        return mu / self.train.effective_mass
-
-    def multiplier_spread(self, z: np.ndarray) -> float:
-        """The accuracy (J/kg/s) of :meth:`multiplier`: the largest distance of it from one
-        free unknown's own ``-dJ/dz / (m_eff dT/dz)`` (0 with one unknown; nan with none).
-        At an exact optimum every unknown gives the same value; SLSQP stops at its ftol."""
-        gj, gt = self._stationarity_rows(z)
-        if not gt.size:
-            return math.nan
-        own = -gj / gt / self.train.effective_mass
-        return float(np.max(np.abs(own - self.multiplier(z))))
+            return math.nan, math.nan
+        m = self.train.effective_mass
+        lam = -float(gj @ gt / (gt @ gt)) / m
+        return lam, float(np.max(np.abs(-gj / gt / m - lam)))
 
     def feasible(self, z: np.ndarray, running_time: float) -> bool:
         """On time (to 1e-9 relative) and every coasted limit kept (to 1e-9 of its energy)."""
@@ -506,7 +500,7 @@ class SwitchingProblem:
     def run(self, points: np.ndarray, brake_lengths: np.ndarray, multiplier: float,
             multiplier_spread: float = math.nan) -> OptimalRun:
         """The run of the switching points as an :class:`OptimalRun` on the integration grid
-        (``multiplier_spread``: the multiplier's accuracy, :meth:`multiplier_spread`)."""
+        (``multiplier_spread``: the multiplier's accuracy, :meth:`multiplier`)."""
         x, mode, g, cap, limit, w, tail_mode, bound, tail = self.grid(
             self.unknowns(points, brake_lengths))
         tr = self.train
@@ -610,9 +604,9 @@ def refine(section: Section, train: Train, run: OptimalRun, running_time: float,
         return start
     _, problem, sol = best
     z = problem.unknowns(sol.points, sol.brake_lengths)
-    lam = problem.multiplier(z)
-    lam, spread = (lam, problem.multiplier_spread(z)) if math.isfinite(lam) else (
-        run.multiplier, math.nan)
+    lam, spread = problem.multiplier(z)
+    if not math.isfinite(lam):
+        lam, spread = run.multiplier, math.nan
     refined = problem.run(sol.points, sol.brake_lengths, lam, spread)
     if refined.energy <= start.energy or start.running_time > running_time:
         return refined
