@@ -6,6 +6,7 @@ import fmpy
 import numpy as np
 import pytest
 
+from cosim.run.master import native_loop
 from cosim.run.scenario import ScenarioError, load_scenario
 from cosim.run.simulate import run_scenario
 
@@ -197,6 +198,7 @@ def test_failure_mid_run_keeps_partial_results(built_fmus, tmp_path, monkeypatch
         return real_step(self, ticks)
 
     monkeypatch.setattr(master_mod.FmuUnit, "step_to", failing_step)
+    monkeypatch.setenv(native_loop.ENV, "off")  # the fault is injected into the Python loop
     with pytest.raises(master_mod.SimulationError, match="test fault.*partial results up to"):
         run_scenario(PID, build=False, out_dir=tmp_path)
     frame = pd.read_csv(tmp_path / "results.csv")

@@ -11,7 +11,7 @@ import pytest
 
 from cosim.fmu.state import to_ticks
 from cosim.run import master as master_mod
-from cosim.run.master import SimulationError
+from cosim.run.master import SimulationError, native_loop
 from cosim.run.scenario import load_scenario
 from cosim.run.simulate import run_scenario
 
@@ -68,6 +68,9 @@ def _steps(monkeypatch) -> dict[str, list[tuple[int, int]]]:
     """Record every doStep (start, size) in ticks, per instance."""
     log: dict[str, list[tuple[int, int]]] = {}
     real = master_mod.FmuUnit._do_step
+    # the Python loop's calls (the C loop makes the same ones: tests/third_party/
+    # test_native_loop.py)
+    monkeypatch.setenv(native_loop.ENV, "off")
 
     def do_step(self, t, h):
         log.setdefault(self.name, []).append((t, h))
@@ -123,6 +126,9 @@ def test_next_event_time_not_in_the_future_is_an_error(built_fmus, tmp_path, mon
         return real_update(self, now, announced)
 
     monkeypatch.setattr(master_mod.FmuUnit, "update_schedule", update_schedule)
+    # the fault is injected into the Python loop (the C loop's own: tests/third_party/
+    # test_native_loop.py, an FMU announcing a time not in the future)
+    monkeypatch.setenv(native_loop.ENV, "off")
     with pytest.raises(SimulationError) as err:
         run_scenario(PID, build=False, out_dir=tmp_path, plot=False)
     says = str(err.value)

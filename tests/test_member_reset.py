@@ -12,6 +12,7 @@ import pandas as pd
 import pytest
 
 from cosim.fmu.state import to_ticks
+from cosim.run.master import native_loop
 from cosim.run.master.errors import SimulationError
 from cosim.run.master.fmi2 import Fmi2Unit
 from cosim.run.master.pool import InstancePool
@@ -74,6 +75,7 @@ def test_a_failed_run_keeps_none_of_its_instances(built_fmus, monkeypatch) -> No
         return real_step(self, ticks)
 
     monkeypatch.setattr(Fmi2Unit, "step_to", failing_step)
+    monkeypatch.setenv(native_loop.ENV, "off")  # the fault is injected into the Python loop
     with pytest.raises(SimulationError, match="test fault"):
         _member(quick, pool)
     assert len(pool) == 0  # freed, not kept in the state the failure left

@@ -63,6 +63,23 @@ def test_nominal_values_from_scenario_then_fmu(built_fmus):
         nominal_values("seed000_stop_rmpc", ["train.mass"])
 
 
+def test_nominal_values_come_from_the_fmu_the_job_runs(built_fmus, monkeypatch):
+    """A job's ``NAME.fmu`` / ``NAME.build`` choose the FMU whose start value is the nominal;
+    its other overrides are not the nominal plant."""
+    from cosim.run import perturbation
+
+    read: list[str] = []
+    real = perturbation.read_fmu
+    monkeypatch.setattr(perturbation, "read_fmu",
+                        lambda sc, name, path: read.append(str(path)) or real(sc, name, path))
+    other = str(built_fmus["StopRmpc"].path)  # an FMU with no plant.grade_scale
+    job = {"plant.fmu": other, "plant.mass": 1.0}
+    with pytest.raises(ValueError, match="has no variable 'grade_scale'"):
+        nominal_values("seed000_stop_rmpc", ["plant.grade_scale"], job)
+    assert read == [other]
+    assert nominal_values("seed000_stop_rmpc", ["plant.mass"], job) == {"plant.mass": 490000.0}
+
+
 def test_nominal_values_read_the_fmu_within_the_archive_limits(built_fmus, monkeypatch):
     """A start value is read from the FMU only after its archive passed the limits (here a
     modelDescription limit of about 1 KiB, which every real modelDescription exceeds)."""

@@ -25,12 +25,17 @@ def test_inputs_are_the_entry_its_scenarios_their_cores_and_the_evaluation() -> 
     assert "cosim/run/docs_pages.py" not in files  # the page writer is not an input
     assert not any(f.startswith("scenarios/seed001") for f in files)
     assert "controllers/datadriven/laws.py" not in files  # another paper's law
+    # another package's data (the hybrid MPC's regions, the eco optimum)
+    assert not any(f.startswith(("controllers/hybrid/data/", "controllers/eco/data/"))
+                   for f in files)
+    assert "plants/routes/seed000_stop.toml" in files  # the data a bundled module reads
 
 
 def test_the_native_build_adds_the_c_models_it_runs() -> None:
     python = _rel(entry_inputs("seed000"))
     native = _rel(entry_inputs("seed000", "native"))
-    assert not any(f.endswith(".c") for f in python)  # a Python record: no C is its input
+    # a Python record's only C input is the master's loop (it runs the Python builds too)
+    assert [f for f in python if f.endswith(".c")] == ["cosim/run/master/native_loop.c"]
     assert {"cosim/fmu/native/brake_delay.c", "cosim/fmu/native/stop_mpc.c",
             "cosim/fmu/native_build.py"} <= set(native)
     assert set(python) < set(native)

@@ -264,7 +264,8 @@ def _imports_cached(path: Path, module: str, mtime_ns: int) -> frozenset[str]:
 
 
 def bundled_files(module: str) -> list[Path]:
-    """Project files an FMU wrapper needs: its transitive imports, packages' __init__ and data."""
+    """Project files an FMU wrapper needs: its transitive imports, packages' __init__ and the
+    data of their folders (:func:`_data_files`)."""
     todo, seen = [module], set()
     files: set[Path] = set()
     while todo:
@@ -282,11 +283,23 @@ def bundled_files(module: str) -> list[Path]:
             continue
         files.add(path)
         todo.extend(_imports_of(path, mod))
-    for pkg_dir in {f.parent for f in files}:
-        for data in pkg_dir.rglob("*"):
-            if data.is_file() and data.suffix in (".toml", ".csv", ".json", ".npz"):
-                files.add(data)
+    for folder in {f.parent for f in files}:
+        files.update(_data_files(folder))
     return sorted(files)
+
+
+DATA_SUFFIXES = (".toml", ".csv", ".json", ".npz")
+
+
+def _data_files(folder: Path) -> list[Path]:
+    """The data a module in ``folder`` may read: data files in ``folder`` and in its
+    subfolders that hold no Python module (``data/``, ``routes/``); a subpackage's data goes
+    with the subpackage's own modules."""
+    out = [p for p in folder.iterdir() if p.is_file() and p.suffix in DATA_SUFFIXES]
+    for sub in folder.iterdir():
+        if sub.is_dir() and not any(sub.rglob("*.py")):
+            out += [p for p in sub.rglob("*") if p.is_file() and p.suffix in DATA_SUFFIXES]
+    return out
 
 
 def bundle_digest(bundle: Path) -> str:

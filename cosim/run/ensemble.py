@@ -90,10 +90,9 @@ def members(entry: Entry, ensemble: str, k: int) -> list[dict[str, Any]]:
 
 def _draws(entry: Entry, k: int) -> list[dict[str, float]]:
     perts = parse_perturb(entry.ensemble.perturb)
-    scenario = next(r.scenario for r in entry.runs
-                    if any(c.ensemble == "mismatch" and r.name in c.runs
-                           for c in entry.claims))
-    nominals = nominal_values(scenario, [p.key for p in perts])
+    run = next(r for r in entry.runs
+               if any(c.ensemble == "mismatch" and r.name in c.runs for c in entry.claims))
+    nominals = nominal_values(run.scenario, [p.key for p in perts], run.overrides)
     return draw_samples(perts, nominals, k, entry.ensemble.perturb_seed)
 
 
@@ -110,8 +109,9 @@ def _rounding_overrides(entry: Entry, run: Any, base: dict[str, Any], path: int,
                 # the start value of the scenario's own FMU (its Python build where it names
                 # a catalog identifier): built first where missing, as on a fresh checkout
                 # that runs the native builds
-                ensure_built(load_scenario(run.scenario))
-                nominals[run.scenario, key] = nominal_values(run.scenario, [key])[key]
+                ensure_built(load_scenario(run.scenario, run.overrides))
+                nominals[run.scenario, key] = nominal_values(run.scenario, [key],
+                                                             run.overrides)[key]
             value = nominals[run.scenario, key]
         if value is None:
             raise ValueError(f"{entry.path}: [ensemble] rounding perturbation {key!r}: no "

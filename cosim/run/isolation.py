@@ -61,6 +61,7 @@ def watch(units: list[Any]) -> None:
         return
     for unit in units:
         index = len(_names)
+        unit.crumb_index = index  # the C loop's breadcrumb (cosim.run.master.native_loop)
         _names.append(f"{unit.name} {getattr(unit, 'C_PREFIX', '') or 'fmi2'}")
         for code, (method, _) in enumerate(CALLS):
             setattr(unit, method, _traced(getattr(unit, method), unit, index, code))

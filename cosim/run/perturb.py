@@ -80,7 +80,7 @@ def run_perturbed(scenario: str | Sequence[str], grid: dict[str, Sequence[Any]],
     draws: list[dict[str, float]] | None = None
     for path in paths:
         ensure_built(load_scenario(path, {**points[0]}))
-        nominals = nominal_values(path, [p.key for p in perts])
+        nominals = nominal_values(path, [p.key for p in perts], {**points[0]})
         these = draw_samples(perts, nominals, samples, seed)
         if draws is None:
             draws = these

@@ -74,9 +74,13 @@ def parse_perturb(items: Iterable[str]) -> list[Perturbation]:
     return out
 
 
-def nominal_values(scenario: str | Path, keys: Sequence[str]) -> dict[str, float | None]:
-    """The value each ``FMU.parameter`` has in the scenario, else the FMU's start value."""
-    sc = load_scenario(scenario)
+def nominal_values(scenario: str | Path, keys: Sequence[str],
+                   overrides: dict[str, Any] | None = None) -> dict[str, float | None]:
+    """The value each ``FMU.parameter`` has in the scenario, else the start value of the FMU
+    a job with ``overrides`` runs (their ``NAME.fmu`` and ``NAME.build`` choose it; other
+    overrides are the job's, not the nominal plant)."""
+    chosen = {k: v for k, v in (overrides or {}).items() if k.endswith((".fmu", ".build"))}
+    sc = load_scenario(scenario, chosen)
     out: dict[str, float | None] = {}
     starts: dict[str, dict[str, Any]] = {}
     for key in keys:

@@ -10,7 +10,8 @@ and, on the native build (``cosim reproduce --build native``), for one with a na
 every file that model is made from (``cosim.fmu.native_build.native_sources``: its C, the C
 fronts and the builder);
 and the code that runs and evaluates them (``cosim/run/``, ``cosim/papers/``,
-``cosim/reproduce/``), leaving out the pages' own writer. :func:`entry_digest` is a SHA-256
+``cosim/reproduce/``: their Python and the master's C loop), leaving out the pages' own
+writer. :func:`entry_digest` is a SHA-256
 over their relative paths and contents, so it is the same on every machine for the same tree.
 
 The *simulation* inputs (:func:`simulation_digest`) are the same files less the entry and the
@@ -95,9 +96,10 @@ def entry_inputs(name: str, build: str = "python") -> list[Path]:
         if build == "native" and identifier in NATIVE:  # its C model, FMI 3 front included
             files.update(native_sources(identifier, 3))
     for folder in EVALUATION:
-        for path in (ROOT / folder).rglob("*.py"):
-            if path.relative_to(ROOT).as_posix() not in NOT_INPUTS:
-                files.add(path)
+        for pattern in ("*.py", "*.c"):  # C: the master's compiled loop (native_loop.c)
+            for path in (ROOT / folder).rglob(pattern):
+                if path.relative_to(ROOT).as_posix() not in NOT_INPUTS:
+                    files.add(path)
     return sorted(files)
 
 

@@ -15,7 +15,7 @@ import pytest
 from fmpy import simulate_fmu
 from third_party_fmus import MODE_ITEMS
 
-from cosim.run.master import SimulationError
+from cosim.run.master import SimulationError, native_loop
 from cosim.run.scenario import ScenarioError, load_scenario
 from cosim.run.simulate import run_scenario
 
@@ -230,6 +230,7 @@ def test_event_master_steps_a_fixed_step_fmu_on_its_own_grid(c_fmus, tmp_path, m
         return real(self, t, h)
 
     monkeypatch.setattr(master_mod.Fmi2Unit, "_do_step", do_step)
+    monkeypatch.setenv(native_loop.ENV, "off")  # the Python loop's calls (the C loop's: equal)
     sc = write_scenario(tmp_path, {"fixed": (c_fmus["DiscarderFixed"], {}, {"u": 1.0}),
                                    "other": (c_fmus["Feedthrough"], {"k": 1.0}, {"u": 1.0})},
                         extra={"other": {"max_step": 0.05}})
@@ -255,6 +256,7 @@ def test_event_master_steps_a_fixed_step_fmu_at_its_default_experiment_step(c_fm
         return real(self, t, h)
 
     monkeypatch.setattr(master_mod.Fmi2Unit, "_do_step", do_step)
+    monkeypatch.setenv(native_loop.ENV, "off")  # the Python loop's calls (the C loop's: equal)
     sc = write_scenario(tmp_path, {"fixed": (c_fmus["DiscarderFixedStep"], {"max_step": 0.05},
                                              {"u": 1.0})})
     r = run_scenario(sc, build=False)

@@ -96,6 +96,21 @@ EVENTS = Spec("Events", "events.c", (
 FEEDTHROUGH_LYING = Spec("FeedthroughLying", "feedthrough.c", FEEDTHROUGH.variables,
                          dependencies={"y": (), "z": ()})
 
+# y = k u named next_event_time: an FMU announcing its next event (the FMI 2 convention of the
+# master) at whatever time its input says, a time in the past included
+ANNOUNCER = Spec("Announcer", "feedthrough.c", (
+    ("k", "Real", "parameter", "fixed", 0, "1.0", {"unit": "1"}),
+    ("u", "Real", "input", "continuous", 1, "0.5", {"unit": "s"}),
+    ("next_event_time", "Real", "output", "continuous", 2, None, {"unit": "s"}),
+    ("z", "Real", "output", "continuous", 3, None, {"unit": "s"}),
+), dependencies={"next_event_time": ("u",), "z": ()})
+
+# an output whose value reference the binary does not have: every fmi2GetReal of it fails
+BAD_REFERENCE = Spec("BadReference", "feedthrough.c", (
+    *FEEDTHROUGH.variables,
+    ("w", "Real", "output", "continuous", 9, None, {"unit": "1"}),
+), dependencies={"y": ("u",), "z": (), "w": ()})
+
 # doStep with a NaN step size never returns
 HANGER = Spec("Hanger", "events.c", EVENTS.variables, dependencies=EVENTS.dependencies,
               defines=("HANG_ON_NAN_STEP",))
@@ -120,7 +135,7 @@ HOSTILE = {name: Spec(name, "hostile.c", _HOSTILE_VARIABLES, dependencies={"y": 
            )}
 
 SPECS = (ALL_TYPES, TERMINATOR, DISCARDER, DISCARDER_FIXED, DISCARDER_FIXED_STEP, FEEDTHROUGH,
-         FEEDTHROUGH_UNDECLARED, EVENTS, FEEDTHROUGH_LYING, HANGER)
+         FEEDTHROUGH_UNDECLARED, EVENTS, FEEDTHROUGH_LYING, HANGER, ANNOUNCER, BAD_REFERENCE)
 
 
 def model_description(spec: Spec) -> bytes:

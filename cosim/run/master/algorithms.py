@@ -4,12 +4,16 @@ algorithms): which FMUs step when, and in which order values flow. They see only
 
 from __future__ import annotations
 
+import logging
 from abc import ABC, abstractmethod
 from typing import TYPE_CHECKING
 
 from cosim.fmu.state import to_seconds
 from cosim.run import exchange
+from cosim.run.master import native_loop
 from cosim.run.master.errors import SimulationError
+
+LOG = logging.getLogger(__name__)
 
 if TYPE_CHECKING:
     from cosim.run.master.core import Master
@@ -77,6 +81,11 @@ class EventDriven(Algorithm):
     def run(self) -> None:
         m = self.m
         self.fixed_grid()
+        why = native_loop.why_not(m)
+        if why is None:
+            native_loop.NativeLoop(m).run()
+            return
+        LOG.debug("%s: the event-driven loop runs in Python: %s", m.scenario.path, why)
         rec = m.recorder
         t = m.start_ticks
         units = m.units

@@ -178,15 +178,19 @@ class Fmi2Unit(Unit):
                 for v in self.slave.getString(vrs)]
 
     # -- stepping ----------------------------------------------------------------------------
-    def _do_step(self, t: int, h: int) -> int:
+    def _do_step(self, t: int, h: int, first_status: int | None = None) -> int:
         """One communication step; fmi2Discard ends the run if the FMU terminated, else the
         step is retried in smaller pieces (``MAX_HALVINGS``) if the FMU handles variable steps.
-        Inputs keep the values set at ``t`` over every piece."""
+        Inputs keep the values set at ``t`` over every piece. ``first_status``: the first
+        fmi2DoStep(t, h) was made (and counted) already and returned this status."""
         end, piece, halvings = t + h, h, 0
         while t < end:
             piece = min(piece, end - t)
-            status = self._c_do_step(to_seconds(t), to_seconds(piece))
-            self.do_steps += 1
+            if first_status is None:
+                status = self._c_do_step(to_seconds(t), to_seconds(piece))
+                self.do_steps += 1
+            else:
+                status, first_status = first_status, None
             if status <= _FMI2_WARNING:
                 t += piece
                 continue

@@ -145,14 +145,18 @@ class Recorder(Observer):
             out[:, cols] = self._exact[index]
         return out
 
+    def grow(self) -> None:
+        """Twice the rows (a run with more output points than foreseen)."""
+        self._store = np.vstack([self._store, np.full_like(self._store, np.nan)])
+        self._exact[:] = [np.vstack([a, np.zeros_like(a)]) for a in self._exact]
+        self.bind()  # the integer groups' targets are the new arrays
+
     def sample(self, ticks: int) -> None:
         """Read the values at ``ticks`` into the next row (:meth:`commit` keeps it)."""
         if self._reads is None:
             self.bind()
         if self.rows == len(self._store):
-            self._store = np.vstack([self._store, np.full_like(self._store, np.nan)])
-            self._exact[:] = [np.vstack([a, np.zeros_like(a)]) for a in self._exact]
-            self.bind()  # the integer groups' targets are the new arrays
+            self.grow()
         row = self._store[self.rows]
         row[0] = to_seconds(ticks)
         address = row.ctypes.data

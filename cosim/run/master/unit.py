@@ -220,10 +220,11 @@ class Unit(ABC):
         var = self.vars[name]
         self.write(var.family, [var.vr], [to_fmi(var.type, value, var.items)])
 
-    def step_to(self, ticks: int) -> int:
+    def step_to(self, ticks: int, first_status: int | None = None) -> int:
         """doStep from this FMU's own time to ``ticks``, in steps of at most the instance's
         ``max_step`` (inputs held over them) when a master's step is longer: the time
-        reached (earlier than ``ticks`` when the FMU returned early)."""
+        reached (earlier than ``ticks`` when the FMU returned early). ``first_status``: the
+        first doStep was made already (by the C loop) and returned this status (FMI 2)."""
         t0 = time.perf_counter()
         try:
             while self.time_ticks < ticks:
@@ -231,7 +232,12 @@ class Unit(ABC):
                 if self.max_step_ticks:
                     h = min(h, self.max_step_ticks)
                 try:
-                    reached = self._do_step(self.time_ticks, h)
+                    if first_status is None:
+                        reached = self._do_step(self.time_ticks, h)
+                    else:
+                        reached = self._do_step(self.time_ticks, h,  # type: ignore[call-arg]
+                                                first_status=first_status)
+                        first_status = None
                 except (FmuTerminated, SimulationError):
                     raise
                 except Exception as err:  # fmpy raises FMICallException with the status
