@@ -3,12 +3,17 @@ again by its tuning script's own criterion on the calibration seeds, give the cr
 script recorded beside them (seed 001: ``BEST`` in ``controllers/datadriven/tuned.py``, the core
 closed loops of ``benchmarks/seed001_tuning.py``; seed 002: the ``# criterion`` line of each
 table of ``controllers/common/freight_tuning.toml``, the FMU runs of
-``benchmarks/seed002_tuning.py``). A change to a law, a plant, the route or the master that
-moves a criterion makes the picks stale: the failure says which script to run again.
+``benchmarks/seed002_tuning.py``); seed 003's picks (written into its scenario files, no
+criterion beside them) are the best of their grid when ``benchmarks/seed003_tuning.py``'s
+grid is evaluated again. A change to a law, a plant, the route or the master that moves a
+criterion makes the picks stale: the failure says which script to run again.
 
 Tolerance: half a unit of the recorded criterion's 4th decimal (it is printed ``%.4f``); the
 evaluation is the same deterministic computation as the script's, so on any machine it differs
-from the recorded value only by that rounding (and floating-point rounding far below it)."""
+from the recorded value only by that rounding (and floating-point rounding far below it).
+Seed 003: the pick is the grid point of the smallest criterion (as written: rounded to 6
+decimals), any point within floating-point rounding of it (:data:`ROUNDING`, relative) counting
+as tied, so two points tied to rounding may swap without failing."""
 
 from __future__ import annotations
 
@@ -30,6 +35,7 @@ except ModuleNotFoundError:  # Python 3.10
 
 ROOT = Path(__file__).resolve().parents[1]
 PRINTED = 0.5e-4  # half a unit of the 4th decimal of the recorded criterion
+ROUNDING = 1e-9  # relative: floating-point rounding of a criterion, far above one ulp
 
 pytestmark = pytest.mark.slow
 
@@ -94,3 +100,27 @@ def test_seed002_picks_give_their_recorded_criterion(built_fmus, law: str) -> No
     assert abs(c - recorded) <= PRINTED, (
         f"{law}: its picks give criterion {c:.6f}, the tuning recorded {recorded}: the picks "
         "are stale; run `python benchmarks/seed002_tuning.py` again")
+
+
+@pytest.mark.parametrize("tracker", ["GPC", "LMI MPC"])
+def test_seed003_picks_are_the_best_of_their_grid(built_fmus, tracker: str) -> None:
+    import math
+
+    from cosim.run.scenario import load_scenario
+
+    script = _script("seed003_tuning")
+    scenario, key, grid, _pattern = script.GRIDS[tracker]
+    plants = script.calibration_plants(3)  # the script's default --plants
+    picked = float(load_scenario(scenario).components["controller"].parameters[key])
+    criteria = {}
+    for value in grid:
+        mses = [script.evaluate(scenario, key, value, plant) for plant in plants]
+        criteria[value] = sum(math.log(m) for m in mses) / len(mses)
+    best = min(criteria.values())
+    # the grid points at the smallest criterion up to rounding; the script writes the pick
+    # rounded to 6 decimals
+    tied = {round(v, 6) for v, c in criteria.items() if c <= best + ROUNDING * abs(best)}
+    assert picked in tied, (
+        f"{tracker}: {key} = {picked} is written, the grid's best is at {sorted(tied)} "
+        f"(criterion {best:.6f}): the pick is stale; run `python benchmarks/seed003_tuning.py "
+        "--write` again")
