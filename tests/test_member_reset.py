@@ -83,3 +83,36 @@ def test_a_failed_run_keeps_none_of_its_instances(built_fmus, monkeypatch) -> No
     again = _member(quick, pool)
     assert again.completed and len(pool) == 2
     pool.clear()
+
+
+def test_a_run_failing_to_load_frees_the_instances_it_took(built_fmus, monkeypatch) -> None:
+    """A run whose loading fails after it took its instances from the pool (here: a fault
+    injected into the connections' ordering) frees them: none is kept, none is lost."""
+    from cosim.run.master.core import Master
+    from cosim.run.scenario import ScenarioError
+
+    pool = InstancePool()
+    quick = {"simulation.stop_time": 2.0}
+    _member(quick, pool)
+    kept = pool.kept()
+    assert len(kept) == 2
+    freed: list[Unit] = []
+    real_free = Fmi2Unit.free
+
+    def counted_free(self: Fmi2Unit) -> None:
+        freed.append(self)
+        real_free(self)
+
+    def broken(self: Master) -> None:
+        raise ScenarioError("test fault after the instances were taken")
+
+    monkeypatch.setattr(Fmi2Unit, "free", counted_free)
+    monkeypatch.setattr(Master, "_value_flow_order", broken)
+    with pytest.raises(ScenarioError, match="test fault"):
+        _member(quick, pool)
+    assert len(pool) == 0
+    assert sorted(map(id, freed)) == sorted(map(id, kept))
+    monkeypatch.undo()
+    again = _member(quick, pool)  # new instances
+    assert again.completed and len(pool) == 2
+    pool.clear()

@@ -42,6 +42,8 @@ class EventDriven(Algorithm):
     ``max_step`` (else its DefaultExperiment ``stepSize``, else ``base_step``, else
     ``output_interval``). An FMU that returns early
     (FMI 3) steps first and ends the point where it returned: the others step only to there.
+    Where every FMU is an FMI 2 instance called through its C functions, the same points run
+    in C with the same calls (:mod:`cosim.run.master.native_loop`).
     """
 
     name = "event"

@@ -324,7 +324,11 @@ class Master:
         """Run to the stop time. On a failure or an interrupt the result recorded so far is
         kept in ``self.partial`` (a :class:`RunResult` with ``completed`` False)."""
         t0 = time.perf_counter()
-        self.load()
+        try:
+            self.load()
+        except BaseException:
+            self._free_taken()
+            raise
         refs = self._recorded_refs()
         n_points = int((self.stop_ticks - self.start_ticks) // self.output_ticks) + 2
         self.recorder = Recorder(refs, n_points)
@@ -368,6 +372,16 @@ class Master:
                         pass
         self.wall_time = time.perf_counter() - t0
         return self._result(final_outputs, self.wall_time)
+
+    def _free_taken(self) -> None:
+        """After a failed :meth:`load`: free the instances it took from the pool (they were
+        instantiated by an earlier run); the ones it created are not instantiated yet."""
+        for unit in self.reused:
+            try:
+                unit.free()
+            except Exception:  # noqa: BLE001 - freeing must not hide the real error
+                pass
+        self.reused.clear()
 
     def _end_at(self, stop: FmuTerminated) -> None:
         """An FMU ended the simulation: a last output point at its last successful time."""
