@@ -1,5 +1,5 @@
 """Metrics of seed 003 (CRH3 energy-efficient operation): the energy account of eq. 9 and
-Table 2's energy per driving phase, in MJ."""
+Table 2's energy per driving phase, in MJ, and the distance-time tracking of Fig. 6."""
 
 from __future__ import annotations
 
@@ -91,3 +91,25 @@ def energy_brake_work(run: RunRecord) -> dict[str, Any]:
     brake_work = float(np.sum(np.diff(work[: end + 1])[brake])) / 1e6
     return {"energy_brake_work_mj": brake_work,
             "energy_total_paper_mj": float(np.sum(net_steps[~brake])) / 1e6 + brake_work}
+
+
+@metric("distance_tracking", keys=("reference_position",),
+        description="the distance-time tracking of Fig. 6: the position error s - s_ref(t) "
+                    "against the profile's time-indexed position, from the start up to the "
+                    "arrival (the first sample of the final standstill)",
+        outputs={"distance_rmse_m": ("RMS of s - s_ref(t) up to the arrival", "m"),
+                 "max_abs_distance_error_m": ("largest absolute s - s_ref(t) up to the "
+                                              "arrival", "m")})
+def distance_tracking(run: RunRecord) -> dict[str, Any]:
+    """With ``reference_position`` (the recorded s_ref(t), the profile's position at the time
+    since departure, m) and the run's position: ``distance_rmse_m``, the RMS of s - s_ref over
+    the recorded samples from the start up to the arrival (the end of the run if the train
+    never came to rest), and ``max_abs_distance_error_m``, the largest |s - s_ref| there
+    (m)."""
+    ref = run.series("reference_position")
+    if ref is None or run.position is None:
+        return {}
+    end = run.arrival_index if run.arrival_index is not None else len(ref) - 1
+    err = run.position[: end + 1] - ref[: end + 1]
+    return {"distance_rmse_m": float(np.sqrt(np.mean(err ** 2))),
+            "max_abs_distance_error_m": float(np.max(np.abs(err)))}

@@ -2,8 +2,10 @@
 reproduction entry; schema: :mod:`cosim.reproduce.entry`).
 
 Each claim compares, per member, a tested quantity with its claimed side: ``less`` /
-``greater`` the paired difference A - B (same seed / same mismatch sample) with 0, ``below`` /
-``above`` a metric with ``threshold``, ``inside`` a metric with ``range``. Its
+``greater`` the paired difference A - B (same seed / same mismatch sample) with 0, ``equal``
+that difference with the band +-``margin`` x |median of B| (an equivalence: "no longer
+improves noticeably", "levels off"), ``below`` / ``above`` a metric with ``threshold``,
+``inside`` a metric with ``range``. Its
 ``quantifier`` says what the paper's sentence asserts about the runs:
 
 - ``every`` (universal: "stops within +-50 cm", "in every speed class"): holds only if every
@@ -16,11 +18,13 @@ Each claim compares, per member, a tested quantity with its claimed side: ``less
 - ``typical`` (the usual run: "A tracks better than B"): the sign test on the median
   (``scipy.stats.quantile_test``, exact and distribution-free), each direction at
   (1 - ``CONFIDENCE``) / 2, so a decision is the median's exact 95 % CI (order statistics,
-  shown) strictly on one side; ``inside`` holds when both edges' tests decide (an
-  intersection-union test).
+  shown) strictly on one side; ``inside`` and ``equal`` hold when both edges' tests decide
+  (an intersection-union test, for ``equal`` the two one-sided tests of equivalence), and
+  fail when one edge's test decides the other way (the median outside the band).
 
 The default quantifier is ``every`` for ``below`` / ``above`` / ``inside`` (the papers state
-such bounds as requirements each run meets) and ``typical`` for ``less`` / ``greater``.
+such bounds as requirements each run meets) and ``typical`` for ``less`` / ``greater`` /
+``equal`` (``equal`` takes ``typical`` only).
 
 Verdicts: ``holds``, ``fails``, ``inconclusive`` (the test decides neither way), ``no effect``
 (a ``typical`` less / greater claim with a ``margin``: the test decides neither way and the
@@ -61,7 +65,8 @@ import numpy as np
 from cosim.run.console import decimal_exponent
 from cosim.run.perturbation import parse_perturb
 
-CLAIM_KINDS = ("less", "greater", "below", "above", "inside")
+CLAIM_KINDS = ("less", "greater", "equal", "below", "above", "inside")
+PAIRED_KINDS = ("less", "greater", "equal")  # comparing two runs, paired by member
 QUANTIFIERS = ("every", "share", "typical")
 ENSEMBLES = ("disturbance", "mismatch", "repeat")
 ORIGINS = ("paper", "ours", "sanity")  # the paper's statement, ours, a check of the setup
@@ -98,15 +103,16 @@ CLAIM_KEYS: dict[str, tuple[str, str, str]] = {
     "text": ("a string", REQUIRED, "the claim in words (\"ISMPC has a lower MSE than ISMC\")"),
     "metric": ("a string", REQUIRED, "the summary key tested ('.' for a nested key; a bool "
                "counts 1 / 0)"),
-    "kind": ("less | greater | below | above | inside", REQUIRED,
-             "less / greater: runs[0] against runs[1], paired by member; below / above: "
-             "runs[0] against threshold; inside: runs[0] within range"),
+    "kind": ("less | greater | equal | below | above | inside", REQUIRED,
+             "less / greater: runs[0] against runs[1], paired by member; equal: their "
+             "difference within +-margin x |median of runs[1]|; below / above: runs[0] "
+             "against threshold; inside: runs[0] within range"),
     "runs": ("a list of strings", REQUIRED, "the ``[[runs]]`` names compared: two for less / "
-             "greater, one otherwise"),
+             "greater / equal, one otherwise"),
     "threshold": ("a number", "none", "below / above: the bound, in the metric's unit"),
     "range": ("[low, high]", "none", "inside: the band, in the metric's unit"),
     "quantifier": ("every | share | typical", "every for below / above / inside, typical for "
-                   "less / greater", "what the claim asserts of the runs "
+                   "less / greater / equal", "what the claim asserts of the runs "
                    "(:mod:`cosim.run.claims`)"),
     "share": ("a number in (0, 1)", "none", "with quantifier share: at least this fraction "
               "of the runs"),
@@ -122,9 +128,11 @@ CLAIM_KEYS: dict[str, tuple[str, str, str]] = {
              "a claim family: one claim per combination of values (the cross product); "
              "``{name}`` / ``{name.field}`` in any string, the id included, is filled "
              "(:func:`cosim.run.claims.expand_families`)"),
-    "margin": ("a number in (0, 1)", "none", "typical less / greater: the smallest effect the "
-               "claim calls material, as a fraction of B's median; an undecided claim whose "
-               "median difference's CI lies within it reads \"no effect\""),
+    "margin": ("a number in (0, 1)", "none (required by equal)", "typical less / greater / "
+               "equal: the smallest effect the claim calls material, as a fraction of B's "
+               "median; an undecided less / greater claim whose median difference's CI lies "
+               "within it reads \"no effect\"; equal: the band the difference is claimed "
+               "within"),
 }
 _CLAIM_KEYS = set(CLAIM_KEYS)
 _ENSEMBLE_KEYS = set(ENSEMBLE_KEYS)
@@ -336,7 +344,7 @@ class Claim:
     text: str
     metric: str  # the summary key tested
     kind: str  # one of CLAIM_KINDS
-    runs: list[str]  # two for less / greater, one otherwise
+    runs: list[str]  # two for less / greater / equal, one otherwise
     threshold: float | None = None  # below / above, in the metric's unit
     band: list[float] | None = None  # inside: the TOML key "range", [low, high]
     quantifier: str = "typical"  # one of QUANTIFIERS (the kind's default where not given)
@@ -346,7 +354,8 @@ class Claim:
     origin: str = "paper"  # one of ORIGINS
     source: str = ""  # where the paper makes it
     paper: str = ""  # the paper's value(s), as text
-    margin: float | None = None  # typical less / greater: the material effect, of B's median
+    margin: float | None = None  # typical less / greater / equal: the material effect, of
+    # B's median
 
     @classmethod
     def from_table(cls, table: dict[str, Any]) -> Claim:
@@ -385,7 +394,7 @@ def check_claims(where: str, claims: list[dict[str, Any]], run_names: list[str],
         if kind not in CLAIM_KINDS:
             raise ClaimsError(f"{at}: kind = {kind!r} (known: {CLAIM_KINDS})")
         runs = claim["runs"]
-        need = 2 if kind in ("less", "greater") else 1
+        need = 2 if kind in PAIRED_KINDS else 1
         if not (isinstance(runs, list) and len(runs) == need):
             raise ClaimsError(f"{at}: runs = {runs!r}: kind {kind!r} compares {need} run(s)")
         for run in runs:
@@ -424,11 +433,15 @@ def check_claims(where: str, claims: list[dict[str, Any]], run_names: list[str],
                               "metric's absolute value per member)")
         margin = claim.get("margin")
         if margin is not None and (
-                kind not in ("less", "greater") or quantifier != "typical"
+                kind not in PAIRED_KINDS or quantifier != "typical"
                 or isinstance(margin, bool) or not isinstance(margin, (int, float))
                 or not 0.0 < margin < 1.0):
             raise ClaimsError(f"{at}: margin = {margin!r}: a fraction in (0, 1) of B's median, "
-                              "for a typical less / greater claim only")
+                              "for a typical less / greater / equal claim only")
+        if kind == "equal" and (margin is None or quantifier != "typical"):
+            raise ClaimsError(f"{at}: kind 'equal' needs a margin (the band +-margin x |median "
+                              f"of B| the difference is claimed within) and quantifier "
+                              f"'typical'; margin = {margin!r}, quantifier = {quantifier!r}")
         if claim.get("origin", "paper") not in ORIGINS:
             raise ClaimsError(f"{at}: origin = {claim['origin']!r} (known: {ORIGINS})")
     return [Claim.from_table(claim) for claim in claims]
@@ -531,10 +544,13 @@ def verdict(claim: Claim, a: np.ndarray, b: np.ndarray | None = None) -> dict[st
     kind = claim.kind
     quantifier = claim.quantifier
     a = np.asarray(a, dtype=float)
-    if kind in ("less", "greater"):
+    if kind in PAIRED_KINDS:
         assert b is not None
         x = a - np.asarray(b, dtype=float)  # paired difference
         lo_edge = hi_edge = 0.0
+        if kind == "equal":  # the band +-margin x |median of B|
+            hi_edge = float(claim.margin) * abs(float(np.median(b))) if np.size(b) else math.nan
+            lo_edge = -hi_edge
     elif kind in ("below", "above"):
         x = a
         lo_edge = hi_edge = float(claim.threshold)  # type: ignore[arg-type]
@@ -551,7 +567,7 @@ def verdict(claim: Claim, a: np.ndarray, b: np.ndarray | None = None) -> dict[st
                            "median": math.nan, "ci_low": math.nan, "ci_high": math.nan,
                            "worst": math.nan, "share_low": math.nan, "p_value": None,
                            "note": ""}
-    if kind in ("less", "greater"):
+    if kind in PAIRED_KINDS:
         out.update(a_median=float(np.median(a)) if a.size else math.nan,
                    b_median=float(np.median(b)) if np.size(b) else math.nan)
     if x.size == 0 or np.isnan(x).any():
@@ -587,7 +603,7 @@ def verdict(claim: Claim, a: np.ndarray, b: np.ndarray | None = None) -> dict[st
             p_hold, p_fail = _sign_p(x, lo_edge, "less"), _sign_p(x, lo_edge, "greater")
         elif kind in ("greater", "above"):
             p_hold, p_fail = _sign_p(x, lo_edge, "greater"), _sign_p(x, lo_edge, "less")
-        else:  # inside: both edges (intersection-union); outside: either
+        else:  # inside / equal: both edges (intersection-union); outside: either
             p_hold = max(_sign_p(x, lo_edge, "greater"), _sign_p(x, hi_edge, "less"))
             p_fail = min(_sign_p(x, lo_edge, "less"), _sign_p(x, hi_edge, "greater"))
         can = 0.5 ** n < half
@@ -597,7 +613,9 @@ def verdict(claim: Claim, a: np.ndarray, b: np.ndarray | None = None) -> dict[st
         out.update(verdict="insufficient", note=f"K >= {need} needed")
         return out
     out["verdict"] = "holds" if p_hold < half else "fails" if p_fail < half else "inconclusive"
-    if out["verdict"] == "inconclusive" and claim.margin is not None:
+    if kind == "equal":
+        out["note"] = f"band +-{claim.margin:.0%} of B's median = +-{number(hi_edge)}"
+    if out["verdict"] == "inconclusive" and claim.margin is not None and kind != "equal":
         bound = float(claim.margin) * abs(out["b_median"])
         if -bound < out["ci_low"] and out["ci_high"] < bound:
             out.update(verdict="no effect", note=f"the median difference's CI is within "
@@ -701,7 +719,7 @@ def ours_text(row: dict[str, Any]) -> str:
     if worst is not None:
         text += f", worst {f(worst)}"
     b = row.get("b_median")
-    if row.get("kind") in ("less", "greater") and b and math.isfinite(b) and not math.isnan(
+    if row.get("kind") in PAIRED_KINDS and b and math.isfinite(b) and not math.isnan(
             row["median"]):  # the effect's size: "no effect" and "undecided" look apart
         share = 100.0 * row["median"] / abs(b)
         text += f" ({'+' if share > 0 else ''}{fixed(share, decimals_for([share], 2))} % of B)"

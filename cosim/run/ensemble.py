@@ -44,6 +44,7 @@ from cosim.run import runner
 from cosim.run.claims import (
     ALPHA,
     ORIGINS,
+    PAIRED_KINDS,
     ROUNDING_RELATIVE,
     Claim,
     adjust,
@@ -415,7 +416,7 @@ def claims_markdown(rows: list[dict[str, Any]], k: int, rounding: str = "",
     lines = [md_row(list(CLAIMS_HEADER)), "|" + " --- |" * len(CLAIMS_HEADER)]
     for r in by_origin(rows):
         heading = headings.get(r["metric"], r["metric"])
-        what = f"A - B, {heading}" if r["kind"] in ("less", "greater") else heading
+        what = f"A - B, {heading}" if r["kind"] in PAIRED_KINDS else heading
         robust = ("n/a" if r["ensemble"] == "repeat" else "-" if r["rounding_robust"] is None
                   else "yes" if r["rounding_robust"] else "no")
         quant = r.get("quantifier", "typical")
@@ -447,6 +448,11 @@ def claims_markdown(rows: list[dict[str, Any]], k: int, rounding: str = "",
               "whatever they show (the note says which K would). rounding-sensitive: the "
               "verdict differs on a perturbed floating-point rerun"
               + (f" ({rounding})" if rounding else "") + "."]
+    if any(r["kind"] == "equal" for r in rows):
+        lines[-1] += (" An equal claim (A no different from B, \"levels off\") holds when the "
+                      "median difference's CI lies inside +-margin of B's median (the band "
+                      "ours states), fails when the sign test puts the median outside it; k "
+                      "of K: members inside the band.")
     if any(r["ensemble"] == "repeat" for r in rows):
         lines[-1] += (" repeat: the members are repetitions of the same nominal run (K fixed "
                       "by the entry, not by --seeds), paired by repeat index; no rounding "

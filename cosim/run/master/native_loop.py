@@ -38,7 +38,6 @@ from cosim.run.master.fmi2 import Fmi2Unit
 
 if TYPE_CHECKING:
     from cosim.run.master.core import Link, Master
-    from cosim.run.master.unit import Unit
 
 ENV = "ATO_COSIM_NATIVE_LOOP"  # "off": the Python loop
 SOURCE = Path(__file__).with_suffix(".c")
@@ -171,17 +170,10 @@ def why_not(m: Master) -> str | None:
         src, dst = lk.src.vars[lk.src_name].family, lk.dst.vars[lk.dst_name].family
         if src not in FAMILIES or dst not in FAMILIES or (src == "Real") != (dst == "Real"):
             return f"connection {lk.conn.src}.{lk.src_name} -> {lk.conn.dst}.{lk.dst_name}"
-    for batch, target, _extra, _unit in _record_reads(m):
+    for batch, target, _extra, _unit in m.recorder.reads():
         if not batch.fast or not isinstance(target, (int, slice)):
             return f"recorded {batch.family} variables of {batch.unit.name}"
     return None if library() is not None else "no compiled loop"
-
-
-def _record_reads(m: Master) -> list[tuple[Any, Any, int, Unit]]:
-    rec = m.recorder
-    if rec._reads is None:
-        rec.bind()
-    return rec._reads  # type: ignore[return-value]
 
 
 class NativeLoop:
@@ -238,7 +230,7 @@ class NativeLoop:
     def bind_recorder(self) -> None:
         """The recorder's reads as ROW ops into its store (again after the store grows)."""
         rec = self.m.recorder
-        reads = _record_reads(self.m)
+        reads = self.m.recorder.reads()
         ops = (COp * max(len(reads), 1))()
         for i, (batch, target, extra, unit) in enumerate(reads):
             op = ops[i]

@@ -135,6 +135,14 @@ class Recorder(Observer):
                 target = slice(offset, offset + len(vrs))
             self._reads.append((batch, target, offset + len(vrs) - 1 if extra else -1, unit))
 
+    def reads(self) -> list[tuple[Batch, Any, int, Any]]:
+        """The FMI reads of one row, bound on first use: per recorded group (batch, target in
+        the row: a float column offset, a slice, an integer array or a list of strings, the
+        column of its extra value or -1, unit)."""
+        if self._reads is None:
+            self.bind()
+        return self._reads  # type: ignore[return-value]
+
     @property
     def data(self) -> np.ndarray:
         """The recorded rows, columns as :attr:`columns` (with time first)."""
