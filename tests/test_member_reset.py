@@ -1,8 +1,9 @@
 """Ensemble members on reset FMU instances (:mod:`cosim.run.master.pool`): a member run on the
-instances a previous member of other parameters and seed left behind (fmi2Reset) equals the
-same member run on fresh instances, bit for bit, in every recorded signal, every value the
-master passed on, every final output and every metric, on the Python and the native builds;
-a failed run keeps none of its instances."""
+instances a previous member of other parameters and seed left behind (fmi2Reset, fmi3Reset)
+equals the same member run on fresh instances, bit for bit, in every recorded signal, every
+value the master passed on, every final output and every metric, on the Python and the native
+builds, the FMI 3 co-simulation builds in Event Mode and a Scheduled Execution controller; a
+failed run keeps none of its instances."""
 
 from __future__ import annotations
 
@@ -11,10 +12,12 @@ from typing import Any
 import pandas as pd
 import pytest
 
+from cosim.fmu.build import ROOT, build_clocked, build_stale, catalog
 from cosim.fmu.state import to_ticks
 from cosim.run.master import native_loop
 from cosim.run.master.errors import SimulationError
 from cosim.run.master.fmi2 import Fmi2Unit
+from cosim.run.master.fmi3 import Fmi3Unit
 from cosim.run.master.pool import InstancePool
 from cosim.run.master.unit import Unit
 from cosim.run.scenario import load_scenario
@@ -40,26 +43,59 @@ def _results(result: Any) -> dict[str, Any]:
             "terminated_by": result.terminated_by}
 
 
-def _member(overrides: dict[str, Any], pool: InstancePool) -> Any:
-    return run_scenario(SCENARIO, overrides=overrides, build=False, plot=False, pool=pool)
+def _member(overrides: dict[str, Any], pool: InstancePool, scenario: Any = SCENARIO) -> Any:
+    return run_scenario(scenario, overrides=overrides, build=False, plot=False, pool=pool)
+
+
+def _reset_equals_fresh(scenario: Any, first: dict[str, Any], second: dict[str, Any],
+                        units: int, varied: str) -> list[Unit]:
+    """Member ``second`` on the instances member ``first`` left in a pool equals it on fresh
+    instances (and differs from ``first`` in ``varied``); the kept instances."""
+    pool = InstancePool()
+    one = _member(first, pool, scenario)
+    kept: list[Unit] = pool.kept()
+    assert len(kept) == units
+    reset = _member(second, pool, scenario)
+    assert {id(u) for u in pool.kept()} == {id(u) for u in kept}  # the same instances served
+    fresh = _member(second, InstancePool(), scenario)
+    pd.testing.assert_frame_equal(reset.frame, fresh.frame, check_exact=True)
+    assert _results(reset) == _results(fresh)
+    assert not one.frame[varied].equals(reset.frame[varied])  # another run
+    pool.clear()
+    assert len(pool) == 0
+    return kept
 
 
 @pytest.mark.parametrize("build", [{}, NATIVE], ids=["python", "native"])
 def test_a_reset_member_equals_a_fresh_one(built_fmus, build: dict[str, str]) -> None:
     ensure_built(load_scenario(SCENARIO, build))
-    pool = InstancePool()
-    first = _member({**FIRST, **build}, pool)
-    kept: list[Unit] = pool.kept()
-    assert len(kept) == 2  # plant and controller
-    reset = _member({**SECOND, **build}, pool)
-    assert {id(u) for u in pool.kept()} == {id(u) for u in kept}  # the same instances served
-    fresh = _member({**SECOND, **build}, InstancePool())
-    pd.testing.assert_frame_equal(reset.frame, fresh.frame, check_exact=True)
-    assert _results(reset) == _results(fresh)
-    # the second member is another run: its signals differ from the first's
-    assert not first.frame["plant.s"].equals(reset.frame["plant.s"])
-    pool.clear()
-    assert len(pool) == 0
+    _reset_equals_fresh(SCENARIO, {**FIRST, **build}, {**SECOND, **build}, 2, "plant.s")
+
+
+def test_a_reset_fmi3_member_equals_a_fresh_one(built_fmus_fmi3) -> None:
+    """The FMI 3.0 co-simulation builds under the event algorithm: fmi3Reset."""
+    fmi3 = {"simulation.fmi_version": 3}
+    kept = _reset_equals_fresh(SCENARIO, {**FIRST, **fmi3}, {**SECOND, **fmi3}, 2, "plant.s")
+    assert all(isinstance(u, Fmi3Unit) for u in kept)
+
+
+@pytest.mark.slow
+def test_a_reset_scheduled_execution_member_equals_a_fresh_one() -> None:
+    """scenarios/mixed/seed000_stop_pid_scheduled.toml: a Scheduled Execution controller
+    activated by its periodic clock, an FMI 3 co-simulation train and an FMI 2 controller in
+    one run; every unit reset (fmi3Reset, fmi2Reset) between members of other start speeds
+    and reference decelerations."""
+    from cosim.run.master.scheduled import Fmi3ScheduledUnit
+
+    specs = catalog()
+    build_stale([specs["BrakeDelayTrain"], specs["StopPid"]], fmi_version=3)
+    build_stale([specs["BrakeDelayTrain"], specs["StopPid"]])
+    build_clocked(specs["StopPid"], "periodic", "se")
+    path = ROOT / "scenarios" / "mixed" / "seed000_stop_pid_scheduled.toml"
+    first = {"plant.v0": 19.0, "controller.ref_decel": 0.45, "shadow.ref_decel": 0.45}
+    second = {"plant.v0": 20.5, "controller.ref_decel": 0.55, "shadow.ref_decel": 0.55}
+    kept = _reset_equals_fresh(path, first, second, 3, "plant.s")
+    assert sum(isinstance(u, Fmi3ScheduledUnit) for u in kept) == 1
 
 
 def test_a_failed_run_keeps_none_of_its_instances(built_fmus, monkeypatch) -> None:

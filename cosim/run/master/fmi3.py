@@ -275,17 +275,10 @@ class Fmi3Unit(Unit):
         # output clocks wired to other FMUs' input clocks (:meth:`watch_clock`), and those of
         # them that ticked at the last event (:meth:`take_ticks`)
         self.watched_clocks: list[int] = []
-        self.ticked: list[int] = []
         if self.input_clocks:  # its events are its Clocks' ticks, not a next_event_time output
             self.has_next_event_output = False
         self.event_mode = False
-        self._in_event = False
-        self._needs_event = False
-        self._announced: int | None = None
-        self._exact: dict[int, float] = {}  # ticks -> the FMU's own time there (s), not whole ns
-        self._clock_next: dict[int, int | None] = {}
-        # periodic clock vr -> (origin s, interval s, index of its next tick k)
-        self._clock_period: dict[int, tuple[Fraction, Fraction, int]] = {}
+        self._reset_event_state()
         self._expand_dependencies()
         slave = self.slave
         self._getters: dict[str, Callable[[list[int]], list[Any]]] = {
@@ -298,6 +291,19 @@ class Fmi3Unit(Unit):
         self._setters[ARRAY] = self._write_elements
 
     scenario_view = staticmethod(scenario_view)
+
+    def _reset_event_state(self) -> None:
+        """The run-dependent event state, as before the first run: clocks ticked, Event Mode
+        entered or needed, the announced event, the FMU's exact times and the clocks'
+        schedules."""
+        self.ticked: list[int] = []
+        self._in_event = False
+        self._needs_event = False
+        self._announced: int | None = None
+        self._exact: dict[int, float] = {}  # ticks -> the FMU's own time there (s), not whole ns
+        self._clock_next: dict[int, int | None] = {}
+        # periodic clock vr -> (origin s, interval s, index of its next tick k)
+        self._clock_period: dict[int, tuple[Fraction, Fraction, int]] = {}
 
     FMPY_CLASS: type = FMU3Slave  # fmpy's class of this interface
     INTERFACE = "coSimulation"  # the modelDescription's interface element (fmpy's attribute)
@@ -427,6 +433,17 @@ class Fmi3Unit(Unit):
 
     def free(self) -> None:
         self.slave.freeInstance()
+
+    reusable = True
+
+    def reset(self) -> None:
+        """fmi3Reset (FMI 3.0: the instance as if just made by fmi3Instantiate<Interface>,
+        every variable at its start value, with the instantiation's own arguments: Event Mode
+        used or not, early return), and this side's run state as before the first run; the
+        clocks other FMUs watch stay, as the scenario's connections do."""
+        self.reset_run_state()
+        self._reset_event_state()
+        self.slave.reset()
 
     def get_state(self) -> Any:
         return self.slave.getFMUState()

@@ -3,11 +3,12 @@
 A run through :class:`cosim.run.master.core.Master` given an :class:`InstancePool` takes the
 instance of each of its FMUs from the pool where one is kept (same instance name, version of
 the FMU file and event mode) and resets it (:meth:`cosim.run.master.unit.Unit.reset`:
-fmi2Reset, FMI 2.0.4 sec. 2.1.6, back to the state right after fmi2Instantiate, every variable
-at its start value) instead of checking the archive, parsing its modelDescription, loading its
-library and instantiating it again; after a completed run its instances go back into the
-pool, after a failure they are freed. Only units that can be reset
-(:attr:`cosim.run.master.unit.Unit.reusable`: the FMI 2.0 ones) are kept.
+fmi2Reset, FMI 2.0.4 sec. 2.1.6, or fmi3Reset, back to the state right after instantiation,
+every variable at its start value) instead of checking the archive, parsing its
+modelDescription, loading its library and instantiating it again; after a completed run its
+instances go back into the pool, after a failure they are freed. Only units that can be reset
+(:attr:`cosim.run.master.unit.Unit.reusable`: FMI 2.0, and FMI 3.0 co-simulation and
+Scheduled Execution) are kept.
 """
 
 from __future__ import annotations

@@ -79,6 +79,14 @@ class Fmi3ScheduledUnit(Fmi3Unit):
     def _has_event_mode(md: Any) -> bool:
         return True  # Clock Activation Mode takes Event Mode's place
 
+    def reset(self) -> None:
+        """fmi3Reset (as :meth:`Fmi3Unit.reset`), and the activations of the last run
+        forgotten: no triggered clock due, no clock update, no activation recorded."""
+        super().reset()
+        self._triggered = set()
+        self._updated = False
+        self.activations = []
+
     def instantiate(self, event_mode: bool = False) -> None:
         if not event_mode:
             raise SimulationError(f"{self.name}: a Scheduled Execution FMU runs its model "
