@@ -19,8 +19,7 @@ graph of every import statement (module-level and function-local; those under ``
 TYPE_CHECKING:`` only, which never run, left out) has no cycle. An import moved into a function
 still counts, so a cycle is cut by moving the shared piece down or passing it in. Project
 modules are imported at module level; only ``cosim/cli.py`` imports them inside functions (so
-``cosim --help`` starts without loading the runners), besides the modules of
-:data:`LAZY_NOT_YET`.
+``cosim --help`` starts without loading the runners).
 """
 
 from __future__ import annotations
@@ -160,15 +159,8 @@ def test_the_cycle_check_sees_function_local_imports(tmp_path: Path) -> None:
     assert cycle_of({**graph, "cosim.run.b": set()}) is None
 
 
-# module -> why it still imports project modules inside functions. The command line imports
-# lazily on purpose (start-up time); the others are what is left of the lazy imports that hid
-# import cycles (issue 37), to be moved to module level: the list only shrinks (a listed module
-# that no longer imports lazily fails the test until it is taken off)
+# module -> why it imports project modules inside functions: the command line, on purpose
 LAZY_ALLOWED = {"cosim.cli": "start-up time: `cosim --help` loads no runner"}
-NOT_YET = "not yet moved to module level (issue 37)"
-LAZY_NOT_YET: dict[str, str] = {module: NOT_YET for module in (
-    "cosim.fmu.build", "cosim.fmu.native_build", "cosim.fmu.native_solvers", "cosim.papers",
-    "cosim.run.master.loading", "cosim.run.runner", "cosim.run.sweep")}
 
 
 def function_local_imports(path: Path, module: str) -> list[tuple[int, str]]:
@@ -207,9 +199,6 @@ def test_only_the_cli_imports_project_modules_inside_functions(path: Path, modul
                                                               ) -> None:
     lazy = function_local_imports(path, module)
     if module in LAZY_ALLOWED:
-        return
-    if module in LAZY_NOT_YET:
-        assert lazy, f"{module} imports nothing lazily any more: take it off LAZY_NOT_YET"
         return
     assert not lazy, (f"{path.relative_to(ROOT)}:{lazy[0][0]}: {lazy[0][1]} imported inside a "
                       "function: import it at module level (only cosim/cli.py imports lazily)")

@@ -49,7 +49,8 @@ import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 
-from cosim.fmu.slave import BUNDLE_DIR
+from cosim.fmu import fmi3
+from cosim.fmu.slave import BUNDLE_DIR, CoreSlave
 
 ROOT = Path(__file__).resolve().parents[2]
 PROJECT_PACKAGES = ("cosim", "plants", "controllers")
@@ -214,8 +215,6 @@ def summary_line(doc: str) -> str:
 def _imported_catalog() -> dict[str, FmuSpec]:
     """The catalog found by importing every wrapper module: each slave class defined there
     with variables (the reference for :func:`catalog`)."""
-    from cosim.fmu.slave import CoreSlave
-
     specs: dict[str, FmuSpec] = {}
     for mod_name in _wrapper_modules():
         module = importlib.import_module(mod_name)
@@ -437,8 +436,6 @@ def build_fmus(spec: FmuSpec, dest: Path = FMU_DIR, fmi_versions: tuple[int, ...
     from it: :mod:`cosim.fmu.fmi3`); the paths in the order given."""
     from pythonfmu.builder import FmuBuilder
 
-    from cosim.fmu import fmi3
-
     for version in fmi_versions:
         _checked_version(version)
     dest.mkdir(parents=True, exist_ok=True)
@@ -485,8 +482,6 @@ def build_clocked(spec: FmuSpec, clock: str, interface: str = "cs") -> Path:
     """Build the controller's FMI 3 build (when stale) and its ``clock`` build with
     ``interface`` (:func:`cosim.fmu.fmi3.clocked`) at :meth:`FmuSpec.path_clocked`; its
     path."""
-    from cosim.fmu import fmi3
-
     build_stale([spec], fmi_version=3)
     final = spec.path_clocked(clock, interface)
     staged = final.with_name(f".{final.name}.{os.getpid()}.tmp")
@@ -506,8 +501,6 @@ def is_intact(path: Path) -> bool:
 
 
 def _builder_files(fmi_version: int) -> list[Path]:
-    from cosim.fmu import fmi3
-
     files = [Path(__file__).resolve(), SHIM_SOURCE,
              SHIM_SOURCE.parent / "front" / "instance_registry.h"]
     return files + fmi3.builder_files() if fmi_version == 3 else files

@@ -26,6 +26,8 @@ from dataclasses import dataclass
 from importlib import metadata
 from pathlib import Path, PurePosixPath
 
+from cosim.fmu.disk_cache import cache_root
+
 
 @dataclass(frozen=True)
 class SolverSource:
@@ -87,8 +89,6 @@ _LOCK = threading.Lock()  # parallel model builds (threads) share one download
 
 def solver_cache() -> Path:
     """The folder holding the solvers' sdists and extracted sources."""
-    from cosim.fmu.disk_cache import cache_root
-
     root = cache_root()
     if root is None:  # the project cache is off: a per-user temporary folder
         return Path(tempfile.gettempdir()) / "ato-cosim-solvers"

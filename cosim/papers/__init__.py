@@ -34,6 +34,8 @@ from typing import Any
 
 import numpy as np
 
+from cosim.run.metrics import matching_columns
+
 
 @dataclass(frozen=True)
 class RunRecord:
@@ -66,8 +68,6 @@ class RunRecord:
     def columns(self, key: str) -> list[str]:
         """The recorded columns the ``[summary]`` key ``key`` names (a name, a
         ``"plant.v[*]"`` pattern or a list of those)."""
-        from cosim.run.metrics import matching_columns
-
         return matching_columns(self.frame, self.summary.get(key))
 
 

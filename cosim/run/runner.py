@@ -34,7 +34,10 @@ from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Any
 
+import cosim.run.master  # noqa: F401 - fmpy, numpy, the scenario code: a worker has them
+import cosim.run.metrics  # noqa: F401
 from cosim.run import interrupt, isolation
+from cosim.run.threads import limit_blas_for_process
 
 LOCAL_DASK = "local-dask"
 DASK_EXTRA = "dask"
@@ -117,13 +120,9 @@ def pool_size(workers: int | None, tasks: int) -> int:
 
 
 def worker_setup(env: dict[str, str] | None = None) -> None:
-    """A worker process, once: ``env`` set, one BLAS thread for good, and the master's
-    imports done before the first run."""
+    """A worker process, once: ``env`` set and one BLAS thread for good (the master's imports
+    are this module's, done before the first run)."""
     os.environ.update(env or {})
-    import cosim.run.master  # noqa: F401 - fmpy, numpy, the scenario code
-    import cosim.run.metrics  # noqa: F401
-    from cosim.run.threads import limit_blas_for_process
-
     limit_blas_for_process()
 
 
@@ -192,9 +191,6 @@ def _run_local(tasks: Sequence[Task], done: Callable[[Task, Any], None],
     child, :func:`cosim.run.isolation.hung`)."""
     spawn = bool(env) or not isolation.FORK
     if not spawn and warm_up is not None:
-        import cosim.run.master  # noqa: F401 - the imports, here, once
-        import cosim.run.metrics  # noqa: F401
-
         warm_up()
     kwargs = {} if broadcast is None else {"broadcast": broadcast}
     queue = list(tasks)

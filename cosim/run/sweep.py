@@ -28,9 +28,20 @@ from typing import Any
 
 import pandas as pd
 
-from cosim.run import interrupt, isolation, runner
+from cosim.run import dask_sweep, interrupt, isolation, runner
 from cosim.run.figures.sweep import key_labels, plot_sweep
 from cosim.run.grid import MAX_RUNS, check_runs, grid_points, parse_grid
+from cosim.run.master import SimulationError, warm_up
+from cosim.run.master.loading import archive_names
+from cosim.run.scenario import (
+    Scenario,
+    ScenarioError,
+    blame_override,
+    check_against_fmus,
+    find_scenario,
+    load_scenario,
+)
+from cosim.run.simulate import ensure_built, run_scenario
 
 __all__ = ["MAX_RUNS", "check_runs", "grid_points", "parse_grid", "run_sweep"]
 
@@ -43,10 +54,6 @@ def run_point(scenario: Any, point: dict[str, Any]) -> dict[str, Any]:
     """One grid point (in a worker): status, error and the summary figures. ``scenario`` is
     a path (loaded here with ``point`` as overrides) or a loaded :class:`Scenario` (already
     overridden). Never raises for a failing run: the row says what went wrong."""
-    from cosim.run.master import SimulationError
-    from cosim.run.scenario import Scenario, ScenarioError
-    from cosim.run.simulate import run_scenario
-
     loaded = isinstance(scenario, Scenario)
     name = Path(str(scenario.path if loaded else scenario)).stem
     row: dict[str, Any] = {"scenario": name, **point, "status": "ok", "error": ""}
@@ -76,8 +83,6 @@ def check_point(path: str, point: dict[str, Any]) -> None:
     point names no variable or gives a value of the wrong type (``controller.N=abc`` for an
     Integer). A value outside [min, max] is left to the point's run, which fails alone: a
     sweep may probe a range's edge on purpose."""
-    from cosim.run.scenario import ScenarioError, blame_override, check_against_fmus, load_scenario
-
     sc = load_scenario(path, point)
     descriptions = {c.name: _description(c.fmu_path)
                     for c in sc.components.values() if c.fmu_path.is_file()}
@@ -92,8 +97,6 @@ def check_point(path: str, point: dict[str, Any]) -> None:
 @functools.lru_cache(maxsize=64)
 def _cached_description(path: Path, mtime_ns: int) -> Any:
     from fmpy import read_model_description
-
-    from cosim.run.master.loading import archive_names
 
     archive_names(str(path), path)  # bounded before the XML is parsed
     return read_model_description(str(path))
@@ -205,9 +208,6 @@ def run_sweep(scenario: str | Sequence[str], grid: dict[str, Sequence[Any]],
     failed; a point whose worker crashes fails naming the signal and the FMU call. More than
     ``max_runs`` runs (points times scenarios) are refused before any work (:func:`check_runs`).
     """
-    from cosim.run.scenario import find_scenario, load_scenario
-    from cosim.run.simulate import ensure_built
-
     scenarios = [scenario] if isinstance(scenario, (str, Path)) else list(scenario)
     if not scenarios:
         raise ValueError("run_sweep: no scenario given")
@@ -272,9 +272,6 @@ def warm_up_for(jobs: list[tuple[str, dict[str, Any]]]) -> Callable[[], None]:
     worker)."""
 
     def warm() -> None:
-        from cosim.run.master import warm_up
-        from cosim.run.scenario import load_scenario
-
         fmus: dict[str, None] = {}
         for path, point in jobs:
             try:
@@ -313,8 +310,6 @@ def _execute(jobs: list[tuple[str, dict[str, Any]]], workers: int | None,
                          label=label, warm_up=warm_up_for(jobs), what="the sweep",
                          time_limit=time_limit)
         return
-    from cosim.run import dask_sweep
-
     tasks, blobs = dask_sweep.tasks(jobs, finished, run_point, shared_fmus)
     runner.run_tasks(tasks, lambda _t, row: finished(row), failed, workers, scheduler,
                      label=label, broadcast=blobs, what="the sweep")

@@ -11,7 +11,9 @@ from typing import Any
 
 from cosim.fmu.build import FMU_DIR
 from cosim.run.archive import ArchiveLimits, ArchiveRefused, extract, inspect
-from cosim.run.master.fmi3 import read_model_description
+from cosim.run.master.fmi2 import Fmi2Unit
+from cosim.run.master.fmi3 import Fmi3Unit, read_model_description
+from cosim.run.master.scheduled import Fmi3ScheduledUnit
 from cosim.run.master.unit import Unit
 from cosim.run.scenario import Scenario, ScenarioError
 
@@ -43,14 +45,8 @@ def unit_class(md: Any) -> type[Unit]:
     """The unit class of the FMI version ``md`` declares."""
     if str(md.fmiVersion).startswith("3"):
         if md.coSimulation is None:
-            from cosim.run.master.scheduled import Fmi3ScheduledUnit
-
             return Fmi3ScheduledUnit
-        from cosim.run.master.fmi3 import Fmi3Unit
-
         return Fmi3Unit
-    from cosim.run.master.fmi2 import Fmi2Unit
-
     return Fmi2Unit
 
 
