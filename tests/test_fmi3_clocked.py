@@ -28,8 +28,12 @@ from cosim.fmu.build import build_stale, catalog
 from cosim.interop.compliance import NOTE, Options, check_fmu, format_report, passed
 from cosim.run.scenario import load_scenario
 from cosim.run.simulate import run_scenario
-from tests.test_fmi3_scheduled_builds import SCENARIOS, _sampled_controllers, clock_of
-from tests.test_fmi3_scheduled_builds import TIMING as SE_TIMING
+from tests.test_fmi3_scheduled_builds import (
+    SCENARIOS,
+    _sampled_controllers,
+    assert_same_run,
+    clock_of,
+)
 
 # clock -> (scenario, controller)
 CASES = {"periodic": ("seed000_stop_pid", "StopPid"),
@@ -115,23 +119,6 @@ def test_clocked_builds_pass_validate(clocked_builds, clock):
     assert f"{fmi3.CLOCK_NAME} at {first}," in note
 
 
-def _run_scenario_fmi3(name: str, clocked: dict[str, Path]) -> tuple[dict, dict]:
-    """The scenario on every FMU's FMI 3 build, the components of ``clocked`` on those
-    clocked builds (their events from the FMU alone, not [fmus] sample_time): the recorded
-    values (irreproducible timings left out) and the executions."""
-    sc = load_scenario(name, ["simulation.fmi_version=3"])
-    sc.record = [*sc.record, *(f"{c}.{v}" for c in _sampled_controllers(name)
-                               for v in SE_TIMING)]
-    for component, path in clocked.items():
-        comp = sc.components[component]
-        comp.parameters["sample_time"], comp.sample_time = comp.sample_time, None
-        comp.fmu_path = path
-    result = run_scenario(sc, build=False, plot=False)
-    frame = result.frame
-    return ({c: frame[c].tolist() for c in frame.columns
-             if not any(fnmatch.fnmatch(c, p) for p in IRREPRODUCIBLE)}, result.executions)
-
-
 @pytest.mark.slow
 @pytest.mark.parametrize("name", SCENARIOS)
 def test_clocked_co_simulation_build_equals_the_fmi3_build_in_every_scenario(name, tmp_path):
@@ -148,11 +135,4 @@ def test_clocked_co_simulation_build_equals_the_fmi3_build_in_every_scenario(nam
     clocked = {component: fmi3.clocked(specs[identifier].path_fmi3, clock_of(identifier),
                                        tmp_path / component / f"{identifier}.fmu")
                for component, identifier in controllers.items()}
-    plain, plain_executions = _run_scenario_fmi3(name, {})
-    ticked, ticked_executions = _run_scenario_fmi3(name, clocked)
-    assert ticked_executions == plain_executions
-    assert ticked.keys() == plain.keys()
-    assert {c: ticked[c] for c in ticked if ticked[c] != plain[c]} == {}
-    for component in controllers:
-        executions = ticked[f"{component}.executions"]
-        assert executions[-1] > executions[0] > 0  # it ran, from its event at the start time
+    assert_same_run(name, clocked, ("simulation.fmi_version=3",))

@@ -56,11 +56,12 @@ def clock_of(identifier: str) -> str:
     return "countdown" if identifier in SELF_TRIGGERED else "periodic"
 
 
-def _run(name: str, scheduled: dict[str, Path]) -> tuple[dict, dict]:
+def _run(name: str, scheduled: dict[str, Path], overrides: tuple[str, ...] = ()
+         ) -> tuple[dict, dict]:
     """The scenario's recorded values (irreproducible timings left out) and executions, with
-    the components of ``scheduled`` on those SE builds (their events from the FMU alone, not
-    [fmus] sample_time)."""
-    sc = load_scenario(name)
+    ``overrides`` and the components of ``scheduled`` on those builds (SE or clocked; their
+    events from the FMU alone, not [fmus] sample_time)."""
+    sc = load_scenario(name, list(overrides))
     sc.record = [*sc.record, *(f"{c}.{v}" for c in _sampled_controllers(name) for v in TIMING)]
     for component, path in scheduled.items():
         comp = sc.components[component]
@@ -83,14 +84,22 @@ def test_scheduled_build_equals_the_fmi2_build(name):
                  if c.fmu in specs])
     scheduled = {component: build_clocked(specs[identifier], clock_of(identifier), "se")
                  for component, identifier in controllers.items()}
-    plain, plain_executions = _run(name, {})
-    ticked, ticked_executions = _run(name, scheduled)
+    assert_same_run(name, scheduled)
+
+
+def assert_same_run(name: str, builds: dict[str, Path], overrides: tuple[str, ...] = ()
+                    ) -> None:
+    """The scenario with the components of ``builds`` on those builds equals it without them
+    (``overrides`` on both): the same executions and recorded values bit for bit, and each of
+    those components ran from its event at the start time."""
+    plain, plain_executions = _run(name, {}, overrides)
+    ticked, ticked_executions = _run(name, builds, overrides)
     assert ticked_executions == plain_executions
     assert ticked.keys() == plain.keys()
     assert {c: ticked[c] for c in ticked if ticked[c] != plain[c]} == {}
-    for component in controllers:
+    for component in builds:
         executions = ticked[f"{component}.executions"]
-        assert executions[-1] > executions[0] > 0  # it ran, from its event at the start time
+        assert executions[-1] > executions[0] > 0
 
 
 @pytest.fixture(scope="module")
