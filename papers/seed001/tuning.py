@@ -17,19 +17,19 @@ Phi(1), GPC's RLS forgetting and orders: the paper's, the information every law 
 the horizons (ISMPC's N, GPC's Ny and Nu: the paper's), the sample time and data scaling, and
 the mechanisms' switches (comfort clip, anti-windup, common sums: the entry's variants).
 
-Every law gets the same protocol and budget (``tuning_protocol.py``: :data:`BUDGET` evaluations
-in Sobol stages, each further stage in a box of half the width around the best so far), after
-one evaluation of its incumbent (the law's defaults when the script starts: a search that
-cannot do better than the setting it starts from keeps it, for every law alike). An
+Every law gets the same protocol and budget (``benchmarks/tuning_protocol.py``: :data:`BUDGET`
+evaluations in Sobol stages, each further stage in a box of half the width around the best so
+far), after one evaluation of its incumbent (the law's defaults when the script starts: a
+search that cannot do better than the setting it starts from keeps it, for every law alike). An
 evaluation is the direct core loop (the FMUs run the same cores) on every *calibration* seed
-(``[ensemble] calibration_seeds`` of ``scenarios/reproduce/seed001.toml``, disjoint from its
+(``[ensemble] calibration_seeds`` of ``papers/seed001/entry.toml``, disjoint from its
 report seeds) under both main disturbances (the smooth one, 0.03 m/s2, tau = 10 s, and the
 paper's white noise as the scenarios ship it). Criterion (fixed before any ranking was looked
 at): the mean of log(MSE x IAE) (eqs. 87, 88, the paper's tracking indices with equal
 weight); a diverged run makes the point infinitely bad. Every evaluation goes to
 ``runs/tuning/seed001.csv``.
 
-    python benchmarks/seed001_tuning.py [--workers 2] [--dry-run] [--from-log]
+    python papers/seed001/tuning.py [--workers 2] [--dry-run] [--from-log]
 """
 
 from __future__ import annotations
@@ -47,7 +47,7 @@ from typing import Any
 import numpy as np
 import tomllib
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]  # papers/NAME/ -> the repository
 sys.path[:0] = [str(ROOT), str(ROOT / "benchmarks")]
 
 from seed001_scaling_sweep import closed_loop  # noqa: E402
@@ -62,11 +62,13 @@ from tuning_protocol import (  # noqa: E402
 )
 
 from controllers.datadriven.emu_control import EmuGpc, EmuIsmc, EmuIsmpc, EmuMfac  # noqa: E402
-from cosim.papers.seed001 import unit_indices  # noqa: E402
+from cosim.papers import paper_metrics  # noqa: E402
 from cosim.run.claims import parse_seeds  # noqa: E402
 from plants.route import load_reference  # noqa: E402
 
-ENTRY = ROOT / "scenarios" / "reproduce" / "seed001.toml"
+unit_indices = paper_metrics("seed001").unit_indices  # this folder's metrics.py, as registered
+
+ENTRY = ROOT / "papers" / "seed001" / "entry.toml"
 OUT = ROOT / "controllers" / "datadriven" / "tuned.py"
 LOG_FILE = ROOT / "runs" / "tuning" / "seed001.csv"
 DISTURBANCES = (False, True)  # white?: the smooth main rows and the paper's white noise

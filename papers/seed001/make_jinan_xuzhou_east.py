@@ -1,6 +1,7 @@
 """Generate the synthetic Jinan West - Xuzhou East line and its 300 km/h reference profile.
 
-    python scripts/make_jinan_xuzhou_east.py   # writes plants/routes/jinan_xuzhou_east.{toml,csv}
+    python papers/seed001/make_jinan_xuzhou_east.py
+    # writes plants/routes/jinan_xuzhou_east.{toml,csv}
 
 How the line is made (seed 001 only names the section; its Fig. 4 is not in the text):
 
@@ -32,7 +33,7 @@ neutral section until the tail has passed it by 100 m; service braking at 0.4 m/
 lower limits and 0.5 m/s^2 to the stop at Xuzhou East (backward pass). The reserve,
 :data:`TRACTION_RESERVE` = 0.09 m/s^2 of the whole train's mass, is 3 sigma of the slowly
 varying disturbance the seed 001 reproduction applies (0.03 m/s^2 per unit mass, the main rows
-of scenarios/reproduce/seed001.toml): a real ATO plans its profile with a traction reserve, and
+of papers/seed001/entry.toml): a real ATO plans its profile with a traction reserve, and
 with it a retarding disturbance exceeds what is left above the profile in 0.13 % of the time
 even if the three units' disturbances were fully correlated (they are independent, so the
 train's mean is 5 sigma inside). Before, the profile used 85 % of the envelope, which leaves
@@ -50,7 +51,7 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]  # papers/NAME/ -> the repository
 sys.path.insert(0, str(ROOT))
 
 from plants.emu import emu_config  # noqa: E402

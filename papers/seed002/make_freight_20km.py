@@ -1,6 +1,6 @@
 """Generate the reference speed profile of the 20 km freight route (seed 002, 22.8 min run).
 
-    python scripts/make_freight_20km.py   # writes plants/routes/freight_20km_reference.csv
+    python papers/seed002/make_freight_20km.py   # writes plants/routes/freight_20km_reference.csv
 
 The line itself (``plants/routes/freight_20km.toml``) is hand-made; see its header. The
 reference is a plan this train can follow (a freight ATO's planned profile): a one-mass run of
@@ -55,7 +55,7 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]  # papers/NAME/ -> the repository
 sys.path.insert(0, str(ROOT))
 
 from controllers.common.freight_blending import BlendingParams  # noqa: E402

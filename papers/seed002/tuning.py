@@ -1,11 +1,11 @@
 """Seed 002: one tuning protocol for every freight law's own gains; writes the picks.
 
-Each law as the reproduction runs it (a row of ``scenarios/reproduce/seed002.toml``: the
+Each law as the reproduction runs it (a row of ``papers/seed002/entry.toml``: the
 optimal preview, the paper's sliding mode, the sliding mode with a boundary layer, the paper's
 fuzzy PID, the fuzzy PID with the PID's feedforward, the PID) has its own tunable parameters,
 declared in :data:`GAINS` with a search box (a decade or more either side of the usual value, in
 log for gains, linear for the observer weight w and the feedforward look-ahead). Every law gets
-the same protocol and the same budget (``tuning_protocol.py``: :data:`BUDGET` evaluations
+the same protocol and the same budget (``benchmarks/tuning_protocol.py``: :data:`BUDGET` evaluations
 in Sobol stages, each further stage in a box of half the width around the best so far).
 
 An evaluation is the full scenario run of ``cosim reproduce`` (the FMUs on the entry's build,
@@ -23,7 +23,7 @@ The picks go to ``controllers/common/freight_tuning.toml``: the four laws' FMUs 
 tables as their parameters' defaults, the two other rows name theirs (``[[runs]] tuned``);
 nothing is typed by hand. Every evaluation goes to ``runs/tuning/seed002.csv``.
 
-    python benchmarks/seed002_tuning.py [--workers 2] [--build native|python] [--dry-run]
+    python papers/seed002/tuning.py [--workers 2] [--build native|python] [--dry-run]
 """
 
 from __future__ import annotations
@@ -38,7 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]  # papers/NAME/ -> the repository
 sys.path[:0] = [str(ROOT), str(ROOT / "benchmarks")]
 
 import tuning_protocol  # noqa: E402
