@@ -12,7 +12,7 @@ draws. Every tracker gets the same budget, BUDGET points of a log grid.
     python papers/seed003/tuning.py [--plants 3] [--write]
 
 ``--write`` puts the picks into the seed 003 scenario files (the lines marked
-``# picked by benchmarks/seed003_tuning.py``); without it the table is only printed.
+``# picked by papers/seed003/tuning.py``); without it the table is only printed.
 """
 
 from __future__ import annotations
@@ -32,8 +32,7 @@ from cosim.reproduce.entry import load_entry  # noqa: E402
 from cosim.run.perturbation import draw_samples, nominal_values, parse_perturb  # noqa: E402
 
 BUDGET = 5  # evaluations per tracker (each on every calibration plant), the same for both
-# the marker on the picked lines of the scenario files (written before the move to papers/)
-MARK = "# picked by benchmarks/seed003_tuning.py"
+MARK = "# picked by papers/seed003/tuning.py"
 
 # tracker: (eco scenario, parameter, grid, scenario files whose line the pick replaces)
 GRIDS = {
