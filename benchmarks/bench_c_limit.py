@@ -42,7 +42,7 @@ from raw_loop import connection_groups, start_values  # noqa: E402
 
 from cosim.fmu.native_build import CC_FLAGS, LINUX_CC, build_natives, native_path  # noqa: E402
 from cosim.run.master import Master  # noqa: E402
-from cosim.run.scenario import Scenario, load_scenario  # noqa: E402
+from cosim.run.scenario import Scenario, find_scenario, load_scenario  # noqa: E402
 
 SCENARIOS = {"EMU": "seed001_emu_pid", "freight": "seed002_freight_pid"}
 TARGET = 0.5  # the master's share of the C loop's speed (C loop wall / master loop wall)
@@ -51,11 +51,11 @@ SOURCE = HERE / "c_loop.c"
 
 def native_scenario(scenario: str) -> Scenario:
     """``scenario`` with every component on its native C build (built when missing)."""
-    sc = load_scenario(ROOT / "scenarios" / f"{scenario}.toml")
+    sc = load_scenario(find_scenario(scenario))
     for comp in sc.components.values():
         if not native_path(comp.fmu, 2).is_file():
             build_natives(comp.fmu, (2,))
-    return load_scenario(ROOT / "scenarios" / f"{scenario}.toml",
+    return load_scenario(find_scenario(scenario),
                          {f"{name}.build": "native" for name in sc.components})
 
 

@@ -1,6 +1,6 @@
 """Campaign benchmark: seed 001's claims over an ensemble (throughput of the shared runner).
 
-Runs the claims' runs of ``scenarios/reproduce/seed001.toml`` at K report seeds (main path and,
+Runs the claims' runs of ``papers/seed001/entry.toml`` at K report seeds (main path and,
 unless ``--no-rounding``, the perturbed floating-point path; :func:`cosim.run.ensemble.run_claims`
 through :mod:`cosim.run.runner`) three ways in one run: 1 worker, 2 local worker processes, and
 a 2-worker local Dask cluster; prints the wall times, the load averages before and after, and

@@ -28,6 +28,7 @@ sys.path.insert(0, str(ROOT))
 from controllers.pid.freight_pid import FreightPid, FreightPidParams  # noqa: E402
 from cosim.fmu.build import resolve  # noqa: E402
 from cosim.fmu.state import to_ticks  # noqa: E402
+from cosim.run.scenario import find_scenario  # noqa: E402
 from cosim.run.simulate import run_scenario  # noqa: E402
 from plants.freight import FreightParams, FreightTrain  # noqa: E402
 from plants.route import load_route  # noqa: E402
@@ -98,7 +99,7 @@ def main() -> None:
     result = None
     for _ in range(args.repeat):
         t0 = time.perf_counter()
-        result = run_scenario(ROOT / "scenarios" / f"{SCENARIO}.toml", plot=False)
+        result = run_scenario(find_scenario(SCENARIO), plot=False)
         walls.setdefault("closed loop, master (FMUs)", []).append(time.perf_counter() - t0)
     frame = result.frame
     sim_time = float(result.sim_time_s)

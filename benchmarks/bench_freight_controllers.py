@@ -27,6 +27,7 @@ from controllers.fuzzy.fuzzy_pid import FreightFuzzyPid, FuzzyPidParams  # noqa:
 from controllers.pid.freight_pid import FreightPid, FreightPidParams  # noqa: E402
 from controllers.preview.preview import FreightPreview, PreviewParams  # noqa: E402
 from controllers.smc.sliding_mode import FreightSlidingMode, SlidingModeParams  # noqa: E402
+from cosim.run.scenario import find_scenario  # noqa: E402
 from cosim.run.simulate import run_scenario  # noqa: E402
 from plants.route import load_route  # noqa: E402
 
@@ -68,7 +69,7 @@ def main() -> None:
     for name in CONTROLLERS:
         load0 = os.getloadavg()[0]
         c0 = time.process_time()
-        result = run_scenario(ROOT / "scenarios" / f"seed002_freight_{name}.toml", plot=False)
+        result = run_scenario(find_scenario(f"seed002_freight_{name}"), plot=False)
         cpu = time.process_time() - c0  # this process: master + both FMUs (in-process)
         s = result.summary
         fmu = s.get("fmu_wall_time_s", {})

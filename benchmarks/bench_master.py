@@ -29,14 +29,14 @@ sys.path[:0] = [str(ROOT), str(HERE)]
 from raw_loop import raw_fmpy_loop  # noqa: E402
 
 from cosim.run.master import Master  # noqa: E402
-from cosim.run.scenario import load_scenario  # noqa: E402
+from cosim.run.scenario import find_scenario, load_scenario  # noqa: E402
 
 SCENARIOS = ("seed000_stop_pid", "seed002_freight_pid", "seed001_emu_pid")
 
 
 def master_run(scenario: str) -> tuple[float, float, float]:
     """(loop wall, run wall, loop CPU) seconds of the event-driven master on ``scenario``."""
-    master = Master(load_scenario(ROOT / "scenarios" / f"{scenario}.toml"))
+    master = Master(load_scenario(find_scenario(scenario)))
     t0 = time.perf_counter()
     master.run()
     return master.loop_wall_time, time.perf_counter() - t0, master.loop_cpu_time

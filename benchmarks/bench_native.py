@@ -58,7 +58,7 @@ from fmpy.fmi2 import FMU2Slave  # noqa: E402
 from cosim.fmu.build import build_stale, catalog  # noqa: E402
 from cosim.fmu.native_build import NATIVE, build_native  # noqa: E402
 from cosim.fmu.state import to_ticks  # noqa: E402
-from cosim.run.scenario import load_scenario  # noqa: E402
+from cosim.run.scenario import find_scenario, load_scenario, scenario_files  # noqa: E402
 from cosim.run.simulate import run_scenario  # noqa: E402
 from plants.brake_delay import BrakeDelayTrain  # noqa: E402
 from plants.freight import FreightTrain  # noqa: E402
@@ -67,7 +67,7 @@ STOP, STEP, COMMAND = 60.0, 0.2, 40.0
 
 
 def plant_parameters() -> dict:
-    sc = load_scenario(ROOT / "scenarios" / "seed000_stop_pid.toml")
+    sc = load_scenario(find_scenario("seed000_stop_pid"))
     return dict(sc.components["plant"].parameters)
 
 
@@ -126,7 +126,7 @@ def _median(fn, repeat: int) -> tuple[float, float]:
 def freight_inputs() -> tuple[float, dict, list[tuple[float, float]]]:
     """(step, plant parameters, (force demand, pipe reduction) per step) of the closed loop
     of seed002_freight_pid with the Python FMUs."""
-    sc = load_scenario(ROOT / "scenarios" / "seed002_freight_pid.toml")
+    sc = load_scenario(find_scenario("seed002_freight_pid"))
     frame = run_scenario(sc, plot=False).frame
     demand = frame["controller.force_demand"].to_numpy()
     reduction = frame["controller.pipe_reduction"].to_numpy()
@@ -233,9 +233,9 @@ def freight_loops(repeat: int, scenarios: list[str] | None = None) -> dict:
     print("closed loop, event master, seed 002: whole-run real-time factor (wall), the FMUs' "
           f"wall time and the rest (master + fmpy), median of {repeat}:")
     out = {}
-    names = scenarios or sorted(p.stem for p in (ROOT / "scenarios").glob("seed002_*.toml"))
+    names = scenarios or [n for n in scenario_files() if n.startswith("seed002_")]
     for sc in names:
-        scenario = load_scenario(ROOT / "scenarios" / f"{sc}.toml")
+        scenario = load_scenario(find_scenario(sc))
         stop_time = scenario.simulation.stop_time
         configs = [(label, comps) for label, comps in FREIGHT_LOOPS
                    if all(scenario.components[c].fmu in NATIVE for c in comps)]
@@ -308,7 +308,7 @@ def plants_only(repeat: int) -> None:
     build_stale([specs[ident] for ident, *_ in PLANTS])
     for ident, scenario, step, stop, inputs in PLANTS:
         native = build_native(ident, windows=False)
-        sc = load_scenario(ROOT / "scenarios" / f"{scenario}.toml")
+        sc = load_scenario(find_scenario(scenario))
         params = dict(sc.components["plant"].parameters)
         if ident == "Emu8":  # the 8-car train: its own configuration, the line and noise
             params.pop("configuration", None)
@@ -389,7 +389,7 @@ def bench_brake_delay(repeat: int) -> None:
               f"{STOP / medians[name]:10.0f}")
     print(f"  native / Python FMU speed-up: {medians['Python FMU'] / medians['native FMU']:.1f}x")
     print("\nclosed loop, event master (plant FMU wall time and whole-run real-time factor):")
-    for sc in sorted(p.stem for p in (ROOT / "scenarios").glob("seed000_*.toml")):
+    for sc in [n for n in scenario_files() if n.startswith("seed000_")]:
         res = {}
         for label, over in (("Python", None), ("native", {"plant.fmu": str(native)})):
             run_scenario(sc, overrides=over, plot=False)  # warm-up

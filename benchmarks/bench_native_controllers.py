@@ -26,14 +26,14 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 from cosim.fmu.native_build import NATIVE  # noqa: E402
-from cosim.run.scenario import SCENARIO_DIR, load_scenario  # noqa: E402
+from cosim.run.scenario import load_scenario, scenario_files  # noqa: E402
 from cosim.run.simulate import run_scenario  # noqa: E402
 
 
 def loops() -> list[tuple[str, tuple[str, ...]]]:
     """(scenario, instances run native) for every shipped loop with a native controller."""
     out = []
-    for path in sorted(SCENARIO_DIR.glob("*.toml")):
+    for path in list(scenario_files().values()):
         sc = load_scenario(path)
         comps = sc.components
         if "controller" in comps and comps["controller"].fmu in NATIVE:

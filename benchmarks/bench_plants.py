@@ -28,7 +28,7 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 from cosim.fmu.state import to_ticks  # noqa: E402
-from cosim.run.scenario import load_scenario  # noqa: E402
+from cosim.run.scenario import find_scenario, load_scenario  # noqa: E402
 from cosim.run.simulate import run_scenario  # noqa: E402
 from plants.emu import Emu, emu_config  # noqa: E402
 from plants.route import load_route  # noqa: E402
@@ -37,7 +37,7 @@ SCENARIOS = ["seed001_emu_pid", "seed004_crh3_pid"]
 
 
 def _plant_setup(name: str):
-    sc = load_scenario(ROOT / "scenarios" / f"{name}.toml")
+    sc = load_scenario(find_scenario(name))
     plant = sc.components["plant"]
     ctl = sc.components["controller"]
     return sc, plant, ctl
@@ -111,7 +111,7 @@ def main() -> None:
         walls = []
         for _ in range(args.repeat):
             t0 = time.perf_counter()
-            result = run_scenario(ROOT / "scenarios" / f"{name}.toml", plot=False)
+            result = run_scenario(find_scenario(name), plot=False)
             walls.append(time.perf_counter() - t0)
         step = float(ctl.sample_time or sc.simulation.base_step)
         n = len([c for c in result.frame.columns if c.startswith("plant.applied_force[")])

@@ -30,6 +30,7 @@ sys.path.insert(0, str(ROOT))
 from controllers.common.lmi import KothareLmi  # noqa: E402
 from controllers.robust.rmpc import Crh3LmiMpc  # noqa: E402
 from cosim.fmu.state import to_ticks  # noqa: E402
+from cosim.run.scenario import find_scenario  # noqa: E402
 from plants.crh3 import Crh3Params, Crh3Train  # noqa: E402
 from plants.route import load_route  # noqa: E402
 
@@ -95,7 +96,7 @@ def scenario(name: str = "seed003_crh3_lmimpc_eco") -> dict:
 
     build_stale()
     t0 = time.perf_counter()
-    result = run_scenario(ROOT / "scenarios" / f"{name}.toml", build=False, plot=False)
+    result = run_scenario(find_scenario(name), build=False, plot=False)
     wall = time.perf_counter() - t0
     s = result.summary
     return {"real_time_factor": float(result.sim_time_s) / wall, "wall_s": wall,

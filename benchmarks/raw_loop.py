@@ -22,7 +22,7 @@ ROOT = Path(__file__).resolve().parent.parent
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-from cosim.run.scenario import Component, Scenario, load_scenario  # noqa: E402
+from cosim.run.scenario import Component, Scenario, find_scenario, load_scenario  # noqa: E402
 
 CASTS = {"Real": float, "Integer": int, "Boolean": bool, "String": str}  # FMI type -> Python
 
@@ -62,7 +62,7 @@ def raw_fmpy_loop(scenario: str, split: bool = False) -> dict:
     from fmpy import extract, read_model_description
     from fmpy.fmi2 import FMU2Slave
 
-    sc = load_scenario(ROOT / "scenarios" / f"{scenario}.toml")
+    sc = load_scenario(find_scenario(scenario))
     step = float(sc.simulation.base_step)
     units: dict[str, dict] = {}
     unzipped_dirs = {name: extract(str(comp.fmu_path)) for name, comp in sc.components.items()}

@@ -82,6 +82,7 @@ from raw_loop import raw_fmpy_loop  # noqa: E402
 
 from cosim.fmu.build import build_stale  # noqa: E402
 from cosim.run import docs_pages  # noqa: E402
+from cosim.run.scenario import find_scenario  # noqa: E402
 from cosim.run.simulate import run_scenario  # noqa: E402
 
 FREIGHT, EMU = "seed002_freight_pid", "seed001_emu_pid"
@@ -95,7 +96,7 @@ def closed_loop(scenario: str, repeat: int) -> tuple[dict, object]:
     walls, cpus, raws, raw_cpus, result = [], [], [], [], None
     for _ in range(repeat):
         t0, c0 = time.perf_counter(), time.process_time()
-        result = run_scenario(ROOT / "scenarios" / f"{scenario}.toml", build=False, plot=False)
+        result = run_scenario(find_scenario(scenario), build=False, plot=False)
         walls.append(time.perf_counter() - t0)
         cpus.append(time.process_time() - c0)
         raw = raw_fmpy_loop(scenario)

@@ -15,7 +15,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from cosim.run.scenario import SCENARIO_DIR  # noqa: E402
+from cosim.run.scenario import scenario_files  # noqa: E402
 from cosim.run.simulate import run_scenario  # noqa: E402
 
 COLUMNS = [("stop_error_m", "stop err m", "{:+.3f}"), ("max_abs_speed_error_kmh", "max|e| km/h",
@@ -30,7 +30,7 @@ def main() -> None:
     parser.add_argument("scenarios", nargs="*")
     parser.add_argument("--algorithm", default=None)
     args = parser.parse_args()
-    names = args.scenarios or sorted(p.stem for p in SCENARIO_DIR.glob("*.toml"))
+    names = args.scenarios or list(scenario_files())
     header = f"{'scenario':<22}" + "".join(f"{label:>13}" for _, label, _ in COLUMNS)
     print(header + f"{'controller executions':>24}")
     for name in names:

@@ -46,9 +46,11 @@ from controllers.datadriven.emu_control import (  # noqa: E402
 )
 from controllers.datadriven.laws import IsmcParams, IsmpcParams, MfacParams  # noqa: E402
 from cosim.fmu.state import to_ticks  # noqa: E402
-from cosim.papers.seed001 import unit_indices  # noqa: E402
+from cosim.papers import paper_metrics  # noqa: E402
 from plants.emu import Emu, emu_config  # noqa: E402
 from plants.route import load_reference, load_route  # noqa: E402
+
+unit_indices = paper_metrics("seed001").unit_indices  # papers/seed001/metrics.py
 
 CONTROLLERS = {"ISMPC": EmuIsmpc, "ISMC": EmuIsmc, "MFAC": EmuMfac, "GPC": EmuGpc}
 LAWS = {"ISMPC": IsmpcParams, "ISMC": IsmcParams, "MFAC": MfacParams}  # set for km/h, m/s2

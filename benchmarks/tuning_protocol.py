@@ -6,8 +6,9 @@ per tunable parameter and the same budget of evaluations, spent in Sobol stages.
 * each further stage: the next number of Sobol points in a box of half the previous width (in
   the box's unit coordinates) around the best point so far, moved to stay inside the box.
 
-The scripts that use it (``seed001_tuning.py``, ``seed002_tuning.py``) declare the boxes, the
-criterion and the calibration seeds.
+The scripts that use it (``papers/seed001/tuning.py``, ``papers/seed002/tuning.py``) declare the
+boxes, the criterion and the calibration seeds. It stays in ``benchmarks/`` as a library the two
+papers share (they put ``benchmarks/`` on ``sys.path``); it belongs to no one paper.
 """
 
 from __future__ import annotations

@@ -38,7 +38,7 @@ from cosim.run.columns import column_info
 from cosim.run.figures.run import draw_run
 from cosim.run.master import ProgressFn, RunResult
 from cosim.run.results import PLOT_FORMATS, UNITS_FILE, write_results
-from cosim.run.scenario import SCENARIO_DIR, Scenario, load_scenario
+from cosim.run.scenario import Scenario, load_scenario, scenario_files
 from cosim.run.simulate import ensure_built, run_scenario
 
 __all__ = ["Run", "build", "compare", "load", "read_results", "run", "scenarios"]
@@ -47,8 +47,9 @@ Overrides = Mapping[str, Any] | Sequence[str]
 
 
 def scenarios() -> list[str]:
-    """The names of the shipped scenarios (``scenarios/*.toml``), as ``cosim list`` shows."""
-    return sorted(path.stem for path in SCENARIO_DIR.glob("*.toml"))
+    """The names of the shipped scenarios (``scenarios/*.toml`` and each paper's
+    ``papers/*/scenarios/*.toml``), as ``cosim list`` shows."""
+    return list(scenario_files())
 
 
 def load(scenario: str | Path, overrides: Overrides | None = None) -> Scenario:

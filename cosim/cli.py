@@ -145,10 +145,11 @@ def list_() -> None:
     """List the FMUs, the shipped scenarios and the papers.
 
     A line each: the FMUs this project builds (whether their FMI 2 and FMI 3 builds are in
-    fmus/), the scenarios in scenarios/ with their descriptions, and the papers reproduced
-    (scenarios/reproduce/) with the alias `cosim reproduce` also takes."""
+    fmus/), the scenarios (scenarios/ and each paper's papers/NAME/scenarios/) with their
+    descriptions, and the papers reproduced (papers/NAME/entry.toml) with the alias `cosim
+    reproduce` also takes."""
     from cosim.fmu.build import catalog
-    from cosim.run.scenario import SCENARIO_DIR, ScenarioError, read_toml
+    from cosim.run.scenario import ScenarioError, read_toml, scenario_files
 
     table = Table(title="FMUs", show_edge=False)
     table.add_column("identifier")
@@ -162,7 +163,7 @@ def list_() -> None:
     table = Table(title="Scenarios", show_edge=False)
     table.add_column("name")
     table.add_column("description")
-    for path in sorted(SCENARIO_DIR.glob("*.toml")):
+    for path in scenario_files().values():
         try:
             desc = escape(str(read_toml(path).get("description", "")))
         except ScenarioError as err:
@@ -245,7 +246,8 @@ def real_time_notes(summary: dict, stepping: float | None) -> dict[str, str]:
 @app.command()
 def run(
     ctx: typer.Context,
-    scenario: Annotated[str, typer.Argument(help="scenario name in scenarios/ or a path")],
+    scenario: Annotated[str, typer.Argument(
+        help="a shipped scenario's name (`cosim list`) or a path")],
     out_dir: Annotated[Path | None, typer.Option("--out", help="output folder "
                                                  "(default runs/<scenario>)")] = None,
     algorithm: Annotated[str | None, typer.Option(
@@ -547,7 +549,8 @@ def _lenient_hint(strict: list, lenient: list) -> str:
 @app.command()
 def sweep(
     scenarios: Annotated[list[str], typer.Argument(
-        help="scenario name(s) in scenarios/ or paths, e.g. seed000_stop_rmpc seed000_stop_rsmpc")],
+        help="shipped scenario name(s) (`cosim list`) or paths, e.g. seed000_stop_rmpc "
+        "seed000_stop_rsmpc")],
     set_: Annotated[list[str], typer.Option(
         "--set", help="grid, e.g. controller.N=3..15 or controller.beta=1,2,4 (repeatable)")],
     out_dir: Annotated[Path | None, typer.Option("--out", help="output folder "
@@ -751,7 +754,7 @@ def export(
 @app.command()
 def reproduce(
     name: Annotated[str, typer.Argument(
-        help="a paper: its entry in scenarios/reproduce/ (seed000, ...), its alias "
+        help="a paper: its entry papers/NAME/entry.toml (seed000, ...), its alias "
         "(liu2022, ...; `cosim list`) or 'all'")],
     out_dir: Annotated[Path | None, typer.Option("--out", help="output folder "
                                                  "(default runs/reproduce/<name>)")] = None,

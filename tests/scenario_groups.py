@@ -14,7 +14,7 @@ from __future__ import annotations
 
 from functools import cache
 
-from cosim.run.scenario import SCENARIO_DIR, load_scenario
+from cosim.run.scenario import load_scenario, scenario_files
 
 
 @cache
@@ -29,6 +29,6 @@ def one_per_fmu_pair(names: list[str] | None = None) -> list[str]:
     distinct :func:`fmu_pair`."""
     chosen: dict[tuple[str, ...], str] = {}
     for name in sorted(names if names is not None
-                       else (p.stem for p in SCENARIO_DIR.glob("*.toml"))):
+                       else (scenario_files())):
         chosen.setdefault(fmu_pair(name), name)
     return sorted(chosen.values())

@@ -10,7 +10,7 @@ import pytest
 
 from cosim.interop.compliance import ALL_CHECKS, SKIPPED, check_fmu, format_report
 from cosim.run import archive
-from cosim.run.scenario import SCENARIO_DIR, ScenarioError
+from cosim.run.scenario import ScenarioError, find_scenario
 from cosim.run.simulate import run_scenario
 
 
@@ -50,7 +50,7 @@ def renamed_library(tmp: Path, ours: Path) -> Path:
 
 
 def scenario_with(tmp: Path, fmu: Path) -> Path:
-    text = (SCENARIO_DIR / "seed000_stop_pid.toml").read_text()
+    text = (find_scenario("seed000_stop_pid")).read_text()
     text = text.replace('fmu = "StopPid"', f'fmu = "{fmu}"')
     path = tmp / "bad.toml"
     path.write_text(text)

@@ -10,7 +10,7 @@ import sys
 
 import pytest
 
-from cosim.run.scenario import SCENARIO_DIR
+from cosim.run.scenario import find_scenario
 
 
 def cosim(*args: str, cwd=None, env=None) -> subprocess.CompletedProcess:
@@ -34,7 +34,7 @@ def test_set_errors_name_the_set_option_and_keep_the_table_name(built_fmus, tmp_
 
 
 def test_unconnected_input_hint_keeps_its_table_names(built_fmus, tmp_path):
-    text = (SCENARIO_DIR / "seed000_stop_pid.toml").read_text()
+    text = (find_scenario("seed000_stop_pid")).read_text()
     text = re.sub(r'^"controller\.v" = "plant\.v"\n', "", text, flags=re.M)
     path = tmp_path / "unconnected.toml"  # kept at its start value, said in the log
     path.write_text(text)
@@ -225,7 +225,7 @@ def test_out_of_range_times_name_the_option_key_and_value(override, says):
 
 
 def test_huge_stop_time_and_latin1_scenario_are_errors_without_traceback(tmp_path):
-    text = (SCENARIO_DIR / "seed000_stop_pid.toml").read_text()
+    text = (find_scenario("seed000_stop_pid")).read_text()
     huge = tmp_path / "huge.toml"
     huge.write_text(re.sub(r"^stop_time = .*$", "stop_time = 1e300", text, count=1, flags=re.M))
     done = cosim("run", str(huge), "--out", str(tmp_path / "a"), "--quiet")

@@ -173,28 +173,28 @@ def _entry_texts() -> dict[str, str]:
     sources of the paper's figures and claims, figure titles, claim texts."""
     import tomllib
 
-    from cosim.reproduce.entry import REPRODUCE_DIR
+    from cosim.run.scenario import entry_files
 
     texts: dict[str, str] = {}
-    for path in sorted(REPRODUCE_DIR.glob("*.toml")):
+    for name, path in entry_files().items():
         data = tomllib.loads(path.read_text())
-        texts[f"{path.name}: title"] = data.get("title", "")
-        texts[f"{path.name}: notes"] = data.get("notes", "")
+        texts[f"{name}: title"] = data.get("title", "")
+        texts[f"{name}: notes"] = data.get("notes", "")
         for table in ("runs", "paper", "derived", "rankings", "figures", "claims", "metrics"):
             for i, row in enumerate(data.get(table, [])):
                 for key in ("name", "source", "title", "paper", "label", "text"):
                     if isinstance(row.get(key), str):
-                        texts[f"{path.name}: [[{table}]] #{i + 1} {key}"] = row[key]
+                        texts[f"{name}: [[{table}]] #{i + 1} {key}"] = row[key]
     return texts
 
 
 def test_entries_scenarios_and_metrics_say_what_is() -> None:
     """No history in what the paper pages, scenario descriptions and the metric list publish."""
     from cosim import papers
-    from cosim.run.scenario import SCENARIO_DIR, load_scenario
+    from cosim.run.scenario import load_scenario, scenario_files
 
     texts = _entry_texts()
-    for path in sorted(SCENARIO_DIR.glob("*.toml")):
+    for path in scenario_files().values():
         texts[f"{path.name}: description"] = load_scenario(path.stem).description
     for name, m in papers.registry().items():
         texts[f"metric {name}"] = m.description

@@ -254,7 +254,7 @@ def test_emu_fmus_close_the_loop_through_the_master(built_fmus) -> None:
     """Emu3 + EmuSpeedPid3 FMUs (seed 004 scenario, first 260 s): CTCS-3 tracking."""
     from cosim.run.simulate import run_scenario
 
-    result = run_scenario("scenarios/seed004_crh3_pid.toml",
+    result = run_scenario("seed004_crh3_pid",
                           overrides={"simulation.stop_time": 260.0}, plot=False)
     s = result.summary
     assert s["ctcs3_speed_error_ok"] is True

@@ -1,4 +1,4 @@
-"""Seed 003 summary metrics (cosim/papers/seed003.py): eq. 9 energies, per Table 2 phase, counted
+"""Seed 003 summary metrics (papers/seed003/metrics.py): eq. 9 energies, per Table 2 phase, counted
 up to the arrival; and the reproduce entry's derived saving rows."""
 
 from __future__ import annotations

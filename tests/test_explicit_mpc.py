@@ -178,7 +178,7 @@ def test_empc_fmu_through_the_master(built_fmus) -> None:
     every parameter inside the regions."""
     from cosim.run.simulate import run_scenario
 
-    result = run_scenario("scenarios/seed004_crh3_empc.toml",
+    result = run_scenario("seed004_crh3_empc",
                           overrides={"simulation.stop_time": 120.0}, plot=False)
     s = result.summary
     assert s["completed"] and s["qp_infeasible"] == 0 and s["qp_solves"] == 121
@@ -195,7 +195,7 @@ def test_cases_and_empc_complete_the_whole_run(built_fmus) -> None:
     seed004`` (claims.csv), not pinned here."""
     from cosim.run.simulate import run_scenario
 
-    s = {name: run_scenario(f"scenarios/seed004_crh3_{name}.toml", plot=False).summary
+    s = {name: run_scenario(f"seed004_crh3_{name}", plot=False).summary
          for name in ("gmpc_case1", "gmpc_case2", "gmpc_case3", "empc")}
     assert all(x["completed"] and x["qp_infeasible"] == 0 for x in s.values())
     assert s["empc"]["qp_solves"] == 801

@@ -17,14 +17,14 @@ import fnmatch
 import pytest
 from scenario_groups import one_per_fmu_pair
 
-from cosim.run.scenario import SCENARIO_DIR, load_scenario
+from cosim.run.scenario import load_scenario, scenario_files
 from cosim.run.simulate import run_scenario
 
 SHORT_S = 30.0
 # recorded columns that measure wall-clock time: irreproducible between any two runs
 IRREPRODUCIBLE = ("*wall_time*", "*solve_time*", "*cpu_time*", "*real_time*", "*time_ms*",
                   "*time_s_*", "*diagnostics*")
-SCENARIOS = sorted(p.stem for p in SCENARIO_DIR.glob("*.toml"))
+SCENARIOS = list(scenario_files())
 
 
 def _reproducible(frame):

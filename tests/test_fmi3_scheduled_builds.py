@@ -27,7 +27,7 @@ from cosim.fmu.build import ROOT, build_clocked, build_stale, catalog
 from cosim.interop.compliance import Options, check_fmu, format_report, passed
 from cosim.run.master import SimulationError
 from cosim.run.master.core import Master
-from cosim.run.scenario import load_scenario
+from cosim.run.scenario import load_scenario, scenario_files
 from cosim.run.simulate import run_scenario
 
 TIMING = ("executions", "next_event_time")
@@ -36,7 +36,7 @@ IRREPRODUCIBLE = ("*solve_time*", "*wall_time*", "*cpu_time*")
 # a countdown Clock; every other sampled controller takes the periodic Clock, whose front
 # refuses an event more than one interval away, so a missing entry here fails loudly
 SELF_TRIGGERED = {"StopRsmpc"}
-SCENARIOS = sorted(p.stem for p in (ROOT / "scenarios").glob("*.toml"))
+SCENARIOS = list(scenario_files())
 
 
 def _sampled_controllers(name: str) -> dict[str, str]:

@@ -20,7 +20,8 @@ ROOT = Path(__file__).resolve().parent.parent
 
 def _script():
     spec = importlib.util.spec_from_file_location("make_freight_20km",
-                                                  ROOT / "scripts" / "make_freight_20km.py")
+                                                  ROOT / "papers" / "seed002" /
+                                                  "make_freight_20km.py")
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module

@@ -1,4 +1,4 @@
-"""Seed 002's tuning of every freight law's own gains (benchmarks/seed002_tuning.py): the
+"""Seed 002's tuning of every freight law's own gains (papers/seed002/tuning.py): the
 generated file holds exactly the gains the protocol declares, inside their boxes; the four
 laws' FMUs take their picks as defaults and the other rows take theirs through the entry's
 ``[[runs]] tuned``; the protocol's search points stay in their boxes; a ``tuned`` reference that
@@ -31,7 +31,7 @@ except ModuleNotFoundError:  # Python 3.10
 
 ROOT = Path(__file__).resolve().parents[1]
 _spec = importlib.util.spec_from_file_location("seed002_tuning",
-                                               ROOT / "benchmarks" / "seed002_tuning.py")
+                                               ROOT / "papers" / "seed002" / "tuning.py")
 tuning = importlib.util.module_from_spec(_spec)
 sys.modules["seed002_tuning"] = tuning
 _spec.loader.exec_module(tuning)

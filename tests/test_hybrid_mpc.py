@@ -259,7 +259,7 @@ def test_gmpc_and_mbmpc_fmus_through_the_master(built_fmus) -> None:
     from cosim.run.simulate import run_scenario
 
     for name in ("seed004_crh3_gmpc", "seed004_crh3_mbmpc"):
-        result = run_scenario(f"scenarios/{name}.toml",
+        result = run_scenario(name,
                               overrides={"simulation.stop_time": 120.0}, plot=False)
         s = result.summary
         assert s["completed"] and s["qp_infeasible"] == 0 and s["qp_solves"] == 121

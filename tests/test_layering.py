@@ -5,8 +5,16 @@
     cosim.run  <-  cosim.interop  <-  cosim.cli
         ^    ^
         |    cosim.reproduce  <-  cosim.cli  (paper reproductions: entries, jobs, tables, page)
-    cosim.papers  (paper metrics; cosim.run consults their registry by module name, importlib)
+    cosim.papers  (the metric registry; cosim.run consults it by module name, importlib)
+        ^
+    papers/NAME/metrics.py  (a paper's metric plug-ins; only the registry loads them, by path)
     plants  <-  cosim.optimal  <-  cosim.cli  (offline planning on the plants' physics)
+
+A paper's folder ``papers/NAME/`` holds its metric plug-ins (``metrics.py``, checked as module
+``papers.NAME.metrics``: it imports ``cosim.fmu``, ``cosim.run`` and ``cosim.papers`` only) and
+its scripts (tuning, route and data: top-level programs like ``benchmarks/``, which may import
+the project); no module, script or test imports a paper's folder (the registry loads the
+metrics by path, tests load a script by path).
 
 ``cosim.fmu`` (bundled into every FMU) imports nothing else of the project; ``cosim.run`` and
 ``cosim.interop`` never import plants or controllers (the catalog finds the FMU wrappers by
@@ -47,6 +55,8 @@ ALLOWED: dict[str, set[str]] = {
     # the Python entry point: a peer of the CLI (it reads the CLI's choice of printed metrics)
     "cosim.api": {"cosim.fmu", "cosim.run", "cosim.cli", "cosim.api"},
     "cosim": {"cosim"},  # cosim/__init__.py: nothing
+    # a paper's metric plug-ins (papers/NAME/metrics.py): the registry and what a metric reads
+    "papers": {"cosim.fmu", "cosim.run", "cosim.papers"},
 }
 # module -> the parts it may import besides its part's: the claims' ensembles and the pages
 # evaluate a reproduction's record with the reproduction's helpers (evaluation-only modules)
@@ -75,7 +85,32 @@ def modules() -> list[tuple[Path, str]]:
             rel = path.relative_to(ROOT).with_suffix("")
             parts = rel.parts[:-1] if rel.name == "__init__" else rel.parts
             out.append((path, ".".join(parts)))
+    for path in sorted((ROOT / "papers").glob("*/metrics.py")):  # loaded by the registry
+        out.append((path, f"papers.{path.parent.name}.metrics"))
     return out
+
+
+def scripts() -> list[Path]:
+    """Every Python file that is not a module of :func:`modules`: the benchmarks, the tests
+    and the papers' scripts (tuning, route and data)."""
+    listed = {path for path, _ in modules()}
+    return sorted(path for top in ("benchmarks", "tests", "papers")
+                  for path in (ROOT / top).rglob("*.py") if path not in listed)
+
+
+@pytest.mark.parametrize("path", [p for p, _ in modules()] + scripts(),
+                         ids=lambda p: str(p.relative_to(ROOT)))
+def test_nothing_imports_a_paper_folder(path: Path) -> None:
+    """A paper's folder is loaded (its metrics by the registry, a script by path), never
+    imported: no import statement anywhere names ``papers``."""
+    tree = ast.parse(path.read_text(), filename=str(path))
+    for node in ast.walk(tree):
+        names = ([a.name for a in node.names] if isinstance(node, ast.Import)
+                 else [node.module or ""] if isinstance(node, ast.ImportFrom) and not node.level
+                 else [])
+        assert not any(n == "papers" or n.startswith("papers.") for n in names), (
+            f"{path.relative_to(ROOT)}:{node.lineno}: imports {names}: load a paper's "
+            "metrics through cosim.papers (paper_metrics), a script by its path")
 
 
 @pytest.mark.parametrize(("path", "module"), modules(), ids=lambda x: str(x))
@@ -125,9 +160,10 @@ def imported_modules(path: Path, module: str, known: set[str]) -> set[str]:
     return (found & known) - {module}
 
 
-def import_graph(top: str = "cosim") -> dict[str, set[str]]:
-    """Module -> the project modules it imports, over every module under ``top``."""
-    found = [(path, module) for path, module in modules() if module.split(".")[0] == top]
+def import_graph(tops: tuple[str, ...] = ("cosim", "papers")) -> dict[str, set[str]]:
+    """Module -> the project modules it imports, over every module under ``tops`` (cosim and
+    the papers' metric plug-ins)."""
+    found = [(path, module) for path, module in modules() if module.split(".")[0] in tops]
     known = {module for _, module in found}
     return {module: imported_modules(path, module, known) for path, module in found}
 

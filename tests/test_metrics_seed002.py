@@ -1,4 +1,4 @@
-"""Seed 002 summary metrics (cosim/papers/seed002.py): per-mode speed errors and train-mean
+"""Seed 002 summary metrics (papers/seed002/metrics.py): per-mode speed errors and train-mean
 errors; the command range and variation of the generic summary."""
 
 from __future__ import annotations

@@ -25,6 +25,7 @@ from native_helpers import build_unzipped, initialising, open_native, variable_r
 
 from cosim.fmu.native_build import CompilerMissing, _compiler, build_native
 from cosim.fmu.state import to_ticks
+from cosim.run.scenario import scenario_files
 from plants.brake_delay import BrakeDelayTrain
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -231,7 +232,7 @@ def test_windows_binary_under_wine(tmp_path):
                                atol=0.0)
 
 
-SEED000 = sorted(p.stem for p in (ROOT / "scenarios").glob("seed000_*.toml"))
+SEED000 = [n for n in scenario_files() if n.startswith("seed000_")]
 TIMING_KEYS = ("wall_time", "real_time_factor", "fmu_wall", "solve_time")  # clock readings
 
 

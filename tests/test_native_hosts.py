@@ -218,7 +218,9 @@ def _shipped_scenario(identifier: str) -> tuple[Path, str] | None:
         import tomllib
     except ModuleNotFoundError:  # Python 3.10
         import tomli as tomllib  # type: ignore[no-redef]
-    for path in sorted((ROOT / "scenarios").glob("*.toml")):
+    from cosim.run.scenario import scenario_files
+
+    for path in scenario_files().values():
         for name, spec in tomllib.loads(path.read_text()).get("fmus", {}).items():
             if spec.get("fmu") == identifier:
                 return path, name

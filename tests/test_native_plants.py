@@ -39,6 +39,7 @@ from native_helpers import build_unzipped, open_native
 from scenario_groups import one_per_fmu_pair
 
 from cosim.fmu.state import to_seconds, to_ticks
+from cosim.run.scenario import scenario_files
 from plants.crh3 import Crh3Train
 from plants.emu import Emu
 
@@ -104,9 +105,9 @@ def scenario_run(name: str, stop: float | None = None, plant: Path | None = None
 
 
 def plant_parameters(name: str) -> dict:
-    from cosim.run.scenario import load_scenario
+    from cosim.run.scenario import find_scenario, load_scenario
 
-    return dict(load_scenario(ROOT / "scenarios" / f"{name}.toml").components["plant"]
+    return dict(load_scenario(find_scenario(name)).components["plant"]
                 .parameters)
 
 
@@ -432,8 +433,8 @@ def emu_loop_bound(scenario: str, stop: float) -> float:
     return k * (1.0 + k * h) * expm_bound(core, h)
 
 
-SEED003 = sorted(p.stem for p in (ROOT / "scenarios").glob("seed003_*.toml"))
-EMU_LOOPS = sorted(p.stem for p in (ROOT / "scenarios").glob("seed00[14]_*.toml"))
+SEED003 = [n for n in scenario_files() if n.startswith("seed003_")]
+EMU_LOOPS = [n for n in scenario_files() if n.startswith(("seed001_", "seed004_"))]
 
 
 def test_crh3_closed_loop_is_the_same(natives):

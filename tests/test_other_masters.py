@@ -11,10 +11,10 @@ import pytest
 from scenario_groups import one_per_fmu_pair
 
 from cosim.interop.libcosim import compare_frames, run_libcosim, simulate_single
-from cosim.run.scenario import SCENARIO_DIR, load_scenario
+from cosim.run.scenario import find_scenario, load_scenario, scenario_files
 from cosim.run.simulate import run_scenario
 
-SCENARIOS = sorted((Path(__file__).resolve().parent.parent / "scenarios").glob("*.toml"))
+SCENARIOS = list(scenario_files().values())
 SHORT = 40.0  # s of each scenario in the quick test; the full runs are marked slow
 
 
@@ -46,7 +46,7 @@ def test_libcosim_matches_jacobi(path, built_fmus):
 @pytest.mark.parametrize("name", one_per_fmu_pair())
 def test_libcosim_matches_jacobi_full_run(name, built_fmus):
     """Whole runs, one scenario per pair of FMUs (:mod:`scenario_groups`)."""
-    sc, ours, theirs = _ours_and_libcosim(SCENARIO_DIR / f"{name}.toml", None)
+    sc, ours, theirs = _ours_and_libcosim(find_scenario(name), None)
     _assert_match(sc, ours, theirs)
 
 
@@ -68,7 +68,7 @@ def test_libcosim_delivers_the_command_one_step_later(built_fmus):
     """The Jacobi delay is real: under libcosim every event uses the previous sample's plant
     outputs and the plant gets each command one sample late, which the event master does not
     do (the same check fails on its run, so it tells the two apart)."""
-    path = Path(__file__).resolve().parent.parent / "scenarios" / "seed000_stop_pid.toml"
+    path = find_scenario("seed000_stop_pid")
     sc = load_scenario(path, {"simulation.stop_time": 10.0})
     sc.record = [*sc.record, "plant.brake_command"]
     event = run_scenario(sc, algorithm="event", plot=False).frame

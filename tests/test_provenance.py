@@ -17,13 +17,17 @@ def _rel(paths: list[Path]) -> set[str]:
 
 def test_inputs_are_the_entry_its_scenarios_their_cores_and_the_evaluation() -> None:
     files = _rel(entry_inputs("seed000"))
-    assert "scenarios/reproduce/seed000.toml" in files
-    assert "scenarios/seed000_stop_pid.toml" in files
+    assert "papers/seed000/entry.toml" in files
+    assert "papers/seed000/scenarios/seed000_stop_pid.toml" in files
     assert "controllers/pid/stop_pid.py" in files  # the core behind StopPid
     assert "plants/brake_delay.py" in files  # the plant behind BrakeDelayTrain
     assert "cosim/run/claims.py" in files
     assert "cosim/run/docs_pages.py" not in files  # the page writer is not an input
-    assert not any(f.startswith("scenarios/seed001") for f in files)
+    assert not any(f.startswith("papers/seed001/scenarios/") for f in files)
+    # every paper's metric plug-ins (the registry loads them all), not its tuning or scripts
+    assert {f"papers/seed00{n}/metrics.py" for n in range(1, 5)} <= files
+    assert not any(f.startswith("papers/") and f.endswith(("tuning.py", "README.md"))
+                   for f in files)
     assert "controllers/datadriven/laws.py" not in files  # another paper's law
     # another package's data (the hybrid MPC's regions, the eco optimum)
     assert not any(f.startswith(("controllers/hybrid/data/", "controllers/eco/data/"))

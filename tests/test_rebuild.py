@@ -7,7 +7,7 @@ import shutil
 from pathlib import Path
 
 from cosim.fmu import build
-from cosim.run.scenario import SCENARIO_DIR
+from cosim.run.scenario import find_scenario
 from cosim.run.simulate import run_scenario
 
 TWEAK = '''
@@ -22,7 +22,7 @@ def test_a_rebuild_in_the_same_process_runs_the_new_code(built_fmus, tmp_path, m
     spec = built_fmus["BrakeDelayTrain"]
     dest = tmp_path / "fmus"
     fmu = build.build_fmu(spec, dest=dest)
-    text = (SCENARIO_DIR / "seed000_stop_pid.toml").read_text()
+    text = (find_scenario("seed000_stop_pid")).read_text()
     scenario = tmp_path / "local_plant.toml"
     scenario.write_text(text.replace('fmu = "BrakeDelayTrain"', f'fmu = "{fmu}"'))
     overrides = {"simulation.stop_time": 2.0}

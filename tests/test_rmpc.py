@@ -194,7 +194,7 @@ def test_lmi_mpc_scenarios_meet_the_paper_limits(profile, built_fmus) -> None:
     seed003``."""
     from cosim.run.simulate import run_scenario
 
-    rmpc = run_scenario(f"scenarios/seed003_crh3_lmimpc_{profile}.toml", plot=False).summary
+    rmpc = run_scenario(f"seed003_crh3_lmimpc_{profile}", plot=False).summary
     assert rmpc["completed"]
     assert abs(rmpc["arrival_time_error_s"]) <= 5.0
     assert abs(rmpc["stop_error_m"]) <= 0.5

@@ -6,9 +6,9 @@ from __future__ import annotations
 import pytest
 
 from cosim.fmu.build import FMU_DIR
-from cosim.run.scenario import SCENARIO_DIR, ScenarioError, load_scenario
+from cosim.run.scenario import ScenarioError, find_scenario, load_scenario
 
-PID = SCENARIO_DIR / "seed000_stop_pid.toml"
+PID = find_scenario("seed000_stop_pid")
 
 
 def test_default_is_fmi2_builds():

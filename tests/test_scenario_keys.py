@@ -6,7 +6,12 @@ import re
 
 import pytest
 
-from cosim.run.scenario import SCENARIO_DIR, ScenarioError, load_scenario
+from cosim.run.scenario import (
+    ScenarioError,
+    find_scenario,
+    load_scenario,
+    scenario_files,
+)
 
 
 @pytest.mark.parametrize("table,line,says", [
@@ -16,7 +21,7 @@ from cosim.run.scenario import SCENARIO_DIR, ScenarioError, load_scenario
                                            "'variables'?)"),
 ])
 def test_misspelt_keys_are_rejected(tmp_path, table, line, says):
-    text = (SCENARIO_DIR / "seed000_stop_pid.toml").read_text()
+    text = (find_scenario("seed000_stop_pid")).read_text()
     assert table in text
     path = tmp_path / "typo.toml"
     path.write_text(text.replace(f"{table}\n", f"{table}\n{line}\n", 1))
@@ -26,7 +31,7 @@ def test_misspelt_keys_are_rejected(tmp_path, table, line, says):
 
 
 def test_every_shipped_scenario_uses_known_keys():
-    for path in sorted(SCENARIO_DIR.glob("*.toml")):
+    for path in list(scenario_files().values()):
         load_scenario(path)
 
 
@@ -124,7 +129,7 @@ def test_paper_metrics_declare_their_entries_and_the_docs_list_them():
                                 "which [summary] metrics does not name"),
 ])
 def test_paper_metrics_are_named_before_their_keys_are_read(tmp_path, line, says):
-    text = (SCENARIO_DIR / "seed000_stop_pid.toml").read_text()
+    text = (find_scenario("seed000_stop_pid")).read_text()
     path = tmp_path / "metrics.toml"
     path.write_text(text.replace("[summary]\n", f"[summary]\n{line}\n", 1))
     with pytest.raises(ScenarioError) as err:
@@ -151,7 +156,7 @@ def test_the_generic_runner_names_no_paper():
 ])
 def test_a_misspelt_simulation_key_is_named_before_a_missing_one(tmp_path, line, says):
     """`stoptime = 60` in place of stop_time: the unknown key is what the user must see."""
-    text = (SCENARIO_DIR / "seed000_stop_pid.toml").read_text()
+    text = (find_scenario("seed000_stop_pid")).read_text()
     text = re.sub(r"^stop_time = .*$", line, text, count=1, flags=re.M)
     assert line in text
     path = tmp_path / "typo.toml"
@@ -162,7 +167,7 @@ def test_a_misspelt_simulation_key_is_named_before_a_missing_one(tmp_path, line,
 
 
 def test_misspelt_fmu_and_top_level_keys_get_a_hint(tmp_path):
-    text = (SCENARIO_DIR / "seed000_stop_pid.toml").read_text()
+    text = (find_scenario("seed000_stop_pid")).read_text()
     for old, new, says in (("[fmus.plant]\n", "[fmus.plant]\nsample_tme = 0.1\n",
                             "[fmus.plant] sample_tme: unknown key (did you mean 'sample_time'?)"),
                            ("[connections]", "[conections]",

@@ -1,6 +1,6 @@
 """Seed 001's mechanisms, each on every law it applies to: the comfort clip alike for the four
 laws, anti-windup of the sliding laws' sums, null-space force sharing, ISMPC with and without
-its QP, GPC's plan / apply split, and the paper metrics of cosim.papers.seed001."""
+its QP, GPC's plan / apply split, and the paper metrics of papers/seed001/metrics.py."""
 
 from __future__ import annotations
 
@@ -22,8 +22,11 @@ from controllers.datadriven.laws import (
     SurfaceParams,
     null_space_share,
 )
-from cosim.papers.seed001 import comfort, unit_tracking_si
+from cosim.papers import paper_metrics
 from plants.route import load_reference
+
+comfort = paper_metrics("seed001").comfort  # papers/seed001/metrics.py
+unit_tracking_si = paper_metrics("seed001").unit_tracking_si
 
 CORES = (EmuMfac, EmuIsmc, EmuIsmpc, EmuGpc)
 CRUISE_S = 100_000.0  # m: the seed-001 reference cruises at 300 km/h here (a_ref = 0)

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -17,7 +16,6 @@ from plants.resistance import KMH
 from plants.route import Route, StepProfile, load_route
 
 ROUTE = load_route("seed003_crh3")
-SCENARIOS = Path(__file__).resolve().parents[1] / "scenarios"
 DELTA_T_MAX = 5.0  # s, sec. 4
 
 
@@ -133,7 +131,7 @@ def test_scenarios_plan_the_generated_arrival_times() -> None:
     # the fixed family plans the optimal rows' schedule (their scenario, profile overridden)
     for kind in sp.PROFILE_KINDS:
         stem = "optimal" if kind == "fixed_family" else kind
-        sc = load_scenario(SCENARIOS / f"seed003_crh3_gpc_{stem}.toml")
+        sc = load_scenario(f"seed003_crh3_gpc_{stem}")
         planned = float(sc.summary["planned_arrival_time"])
         prof = sp.generate(kind, ROUTE)
         assert abs(prof.arrival_time - planned) <= sp.ProfileSettings().time_tolerance

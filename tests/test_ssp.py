@@ -3,17 +3,16 @@
 from __future__ import annotations
 
 import zipfile
-from pathlib import Path
 
 import pytest
 from fmpy.ssp.ssd import read_ssd
 
 from cosim.interop.libcosim import compare_frames, run_ssp
 from cosim.interop.ssp import export_ssp
-from cosim.run.scenario import load_scenario
+from cosim.run.scenario import find_scenario, load_scenario, scenario_files
 from cosim.run.simulate import run_scenario
 
-SCENARIOS = sorted((Path(__file__).resolve().parent.parent / "scenarios").glob("*.toml"))
+SCENARIOS = list(scenario_files().values())
 SHORT = {"simulation.stop_time": 30.0}
 
 
@@ -55,7 +54,7 @@ def test_ssp_in_libcosim_matches_our_jacobi(path, tmp_path, built_fmus):
 
 def test_ssp_carries_parameter_values(tmp_path, built_fmus):
     """A changed parameter reaches libcosim through the SSP (not just FMU defaults)."""
-    path = Path(__file__).resolve().parent.parent / "scenarios" / "seed000_stop_pid.toml"
+    path = find_scenario("seed000_stop_pid")
     runs = {}
     for kp in (60.0, 20.0):
         sc = load_scenario(path, {**SHORT, "controller.kp": kp, "plant.mass": 539000.0})
@@ -69,7 +68,7 @@ def test_ssp_carries_parameter_values(tmp_path, built_fmus):
 
 
 def test_export_rejects_unknown_parameter(tmp_path, built_fmus):
-    path = Path(__file__).resolve().parent.parent / "scenarios" / "seed000_stop_pid.toml"
+    path = find_scenario("seed000_stop_pid")
     sc = load_scenario(path)
     sc.components["plant"].parameters["no_such_parameter"] = 1.0
     with pytest.raises(ValueError, match="no_such_parameter"):

@@ -1,10 +1,10 @@
 """The generated tuning picks are today's code's (slow): each law's picked parameters, evaluated
 again by its tuning script's own criterion on the calibration seeds, give the criterion the
 script recorded beside them (seed 001: ``BEST`` in ``controllers/datadriven/tuned.py``, the core
-closed loops of ``benchmarks/seed001_tuning.py``; seed 002: the ``# criterion`` line of each
+closed loops of ``papers/seed001/tuning.py``; seed 002: the ``# criterion`` line of each
 table of ``controllers/common/freight_tuning.toml``, the FMU runs of
-``benchmarks/seed002_tuning.py``); seed 003's picks (written into its scenario files, no
-criterion beside them) are the best of their grid when ``benchmarks/seed003_tuning.py``'s
+``papers/seed002/tuning.py``); seed 003's picks (written into its scenario files, no
+criterion beside them) are the best of their grid when ``papers/seed003/tuning.py``'s
 grid is evaluated again. A change to a law, a plant, the route or the master that moves a
 criterion makes the picks stale: the failure says which script to run again.
 
@@ -43,7 +43,8 @@ pytestmark = pytest.mark.slow
 def _script(name: str) -> ModuleType:
     if name in sys.modules:
         return sys.modules[name]
-    spec = importlib.util.spec_from_file_location(name, ROOT / "benchmarks" / f"{name}.py")
+    paper = name.removesuffix("_tuning")  # seed001_tuning: papers/seed001/tuning.py
+    spec = importlib.util.spec_from_file_location(name, ROOT / "papers" / paper / "tuning.py")
     module = importlib.util.module_from_spec(spec)
     sys.modules[name] = module
     spec.loader.exec_module(module)  # type: ignore[union-attr]
@@ -58,7 +59,7 @@ def test_seed001_picks_give_their_recorded_criterion(law: str) -> None:
     c = script.criterion(rows)
     assert abs(c - tuned.BEST[law]) <= PRINTED, (
         f"{law}: its picks give criterion {c:.6f}, the tuning recorded {tuned.BEST[law]}: the "
-        "picks are stale; run `python benchmarks/seed001_tuning.py` again")
+        "picks are stale; run `python papers/seed001/tuning.py` again")
 
 
 def _seed002_best() -> dict[str, float]:
@@ -99,7 +100,7 @@ def test_seed002_picks_give_their_recorded_criterion(built_fmus, law: str) -> No
     recorded = _seed002_best()[law]
     assert abs(c - recorded) <= PRINTED, (
         f"{law}: its picks give criterion {c:.6f}, the tuning recorded {recorded}: the picks "
-        "are stale; run `python benchmarks/seed002_tuning.py` again")
+        "are stale; run `python papers/seed002/tuning.py` again")
 
 
 @pytest.mark.parametrize("tracker", ["GPC", "LMI MPC"])
@@ -122,5 +123,5 @@ def test_seed003_picks_are_the_best_of_their_grid(built_fmus, tracker: str) -> N
     tied = {round(v, 6) for v, c in criteria.items() if c <= best + ROUNDING * abs(best)}
     assert picked in tied, (
         f"{tracker}: {key} = {picked} is written, the grid's best is at {sorted(tied)} "
-        f"(criterion {best:.6f}): the pick is stale; run `python benchmarks/seed003_tuning.py "
+        f"(criterion {best:.6f}): the pick is stale; run `python papers/seed003/tuning.py "
         "--write` again")

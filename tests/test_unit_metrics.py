@@ -1,11 +1,13 @@
-"""Seed 001's per-unit indices (eqs. 87-89) in cosim/papers/seed001.py, on analytic signals."""
+"""Seed 001's per-unit indices (eqs. 87-89) in papers/seed001/metrics.py, on analytic signals."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from cosim.papers.seed001 import unit_indices
+from cosim.papers import paper_metrics
+
+unit_indices = paper_metrics("seed001").unit_indices
 
 
 def test_mse_iae_and_ma_of_known_signals() -> None:

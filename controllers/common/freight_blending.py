@@ -19,7 +19,7 @@ brake < 0, within the HXD1 envelope at the measured speed) and ``pipe_reduction`
   Hold times: once applied it stays at least ``min_apply_time``; once released it is not
   re-applied for ``min_release_time`` (auxiliary reservoirs recharge);
 * a stop the reference plans with the air brake (its final braking ramps the electric brake to
-  ``stop_ed_share`` and then needs more: ``scripts/make_freight_20km.py``) gets the stage its
+  ``stop_ed_share`` and then needs more: ``papers/seed002/make_freight_20km.py``) gets the stage its
   braking needs beyond that share (the smallest on that reference) at the sample nearest to
   the planned onset (:meth:`FreightBlending.planned_onsets`); before it the look-ahead of the
   rule above stops at the onset, so every controller applies the air brake where the plan does;
@@ -102,9 +102,10 @@ class BlendingParams(Checked):
                                   "brake alone would stop the train more than this short",
                                   min=0.0)
     stop_ed_share: float = param(0.5, "1", "share of the electric brake the reference's "
-                                 "final braking is planned with (scripts/make_freight_20km.py): "
-                                 "the smallest reduction is applied where the reference brakes "
-                                 "harder than that (0: no planned application)", min=0.0,
+                                 "final braking is planned with "
+                                 "(papers/seed002/make_freight_20km.py): the smallest "
+                                 "reduction is applied where the reference brakes harder "
+                                 "than that (0: no planned application)", min=0.0,
                                  max=1.0)
 
     def check_relations(self) -> None:
@@ -223,7 +224,7 @@ class FreightBlending(StatefulCore):
         start of the run of segments ending at the stop over which the reference brakes harder
         than ``stop_ed_share`` of the electric brake (the reference's final braking ramps the
         electric brake to that share, then adds the smallest air-brake stage; see
-        ``scripts/make_freight_20km.py``). Empty when ``stop_ed_share`` is 0."""
+        ``papers/seed002/make_freight_20km.py``). Empty when ``stop_ed_share`` is 0."""
         share = self.p.stop_ed_share
         x, v = self.profile.x, self.profile.v
         if share <= 0.0:

@@ -1,5 +1,5 @@
 """The seed-002 freight laws' tuned gains: the picks of one tuning protocol
-(``benchmarks/seed002_tuning.py``), read from the generated :data:`TUNING_FILE`.
+(``papers/seed002/tuning.py``), read from the generated :data:`TUNING_FILE`.
 
 Each table of the file is a law as the reproduction runs it (``[SMC]``, ``["SMC, boundary
 layer"]``, ...); its keys are the law's parameter names as its FMU declares them (``kp``,
@@ -22,7 +22,7 @@ try:
 except ModuleNotFoundError:  # Python 3.10
     import tomli as tomllib  # type: ignore[no-redef]
 
-#: written by ``benchmarks/seed002_tuning.py`` (one protocol for every law), not by hand
+#: written by ``papers/seed002/tuning.py`` (one protocol for every law), not by hand
 TUNING_FILE = Path(__file__).with_name("freight_tuning.toml")
 
 
@@ -37,7 +37,7 @@ def tuned(law: str, key: str) -> float:
     try:
         return _picks()[law][key]
     except KeyError:
-        raise KeyError(f"{TUNING_FILE}: no [{law}] {key} (rerun benchmarks/seed002_tuning.py)"
+        raise KeyError(f"{TUNING_FILE}: no [{law}] {key} (rerun papers/seed002/tuning.py)"
                        ) from None
 
 

@@ -65,7 +65,7 @@ GPC), which moves only the force split between the units.
 
 Defaults: every tunable parameter of a law (its gains, ``share_gain``, the FFDL laws'
 ``pinv_cutoff``) defaults to its pick by one protocol for every law
-(``benchmarks/seed001_tuning.py``, written to ``controllers/datadriven/tuned.py``); the
+(``papers/seed001/tuning.py``, written to ``controllers/datadriven/tuned.py``); the
 estimators (FFDL's ``mu``, ``lambda``, ``Phi(1)``; GPC's RLS) and the horizons are the
 paper's. The classes' docstrings give the paper's values.
 
@@ -91,7 +91,7 @@ from controllers.datadriven.tuned import TUNED
 from cosim.fmu.declare import Checked, group, param
 from cosim.fmu.state import StatefulCore
 
-TUNED_BY = "picked by benchmarks/seed001_tuning.py, controllers/datadriven/tuned.py"
+TUNED_BY = "picked by papers/seed001/tuning.py, controllers/datadriven/tuned.py"
 
 
 def tuned(law: str, cls: type, **fixed: Any) -> Any:
@@ -401,7 +401,7 @@ class GpcLawParams(Checked):
     textbook RLS: no bound on the covariance (``p_max`` = ``NO_COVARIANCE_BOUND``, never
     reached; the shared core's 1e4, ours, is a safeguard the paper does not have, README
     seed 001). The control weight (not in the paper) and the force sharing's gain are
-    picked by the protocol every law gets (``benchmarks/seed001_tuning.py``)."""
+    picked by the protocol every law gets (``papers/seed001/tuning.py``)."""
 
     gpc: GpcParams = group(tuned("GPC", GpcParams, p_max=NO_COVARIANCE_BOUND), "")
     share_gain: float = param(TUNED["GPC"]["share_gain"], "1", "force sharing: fraction of "

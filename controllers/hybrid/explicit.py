@@ -25,7 +25,7 @@ force and speed rows of the GMPC are left out: on the seed 004 runs they never b
 presolve drops them as unreachable), and each would multiply the regions.
 
 The region data (``F, f`` of the first move only, ``E, e``, a bounding box per region) is made
-offline by ``scripts/make_empc_regions.py`` (PPOPT, optional extra ``empc-offline``) and
+offline by ``papers/seed004/make_empc_regions.py`` (PPOPT, optional extra ``empc-offline``) and
 stored as a compressed ``.npz`` next to this module; online only numpy is needed. Point
 location: a binary search tree over the regions' bounding boxes (:class:`BoxTree`, built at
 load): each node splits one parameter at a threshold, regions whose box straddles it go to both

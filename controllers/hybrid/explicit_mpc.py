@@ -10,7 +10,7 @@ parameter box is clipped into it (counted in ``empc_outside``, as is a point on 
 regions, where the least-violated leaf region is used).
 
 The region data are built offline for one design (horizon, blocks, Q, R, train) by
-``scripts/make_empc_regions.py``; the controller refuses data built for another design.
+``papers/seed004/make_empc_regions.py``; the controller refuses data built for another design.
 
 What it is: the explicit solution of a *reduced* MPC (mode and PWA segment held over the
 horizon, the reference linearised, inputs blocked 3:4:3, the coupler-force and speed rows left
@@ -71,7 +71,7 @@ class ExplicitMpc(HybridMpc):
     setup_vars = (*HybridMpc.setup_vars,
                   Var("regions", "parameter", REGIONS_DEFAULT, description="bundled EMPC "
                       "region data (controllers/hybrid/data/NAME.npz) or path of an .npz "
-                      "written by scripts/make_empc_regions.py"),
+                      "written by papers/seed004/make_empc_regions.py"),
                   Var("evaluation", "parameter", "explicit", description='"explicit": the '
                       'region lookup of eq. 18; "online": the same reduced mp-QP solved at '
                       "theta by DAQP every event (the explicit law's online twin)"))
@@ -149,7 +149,7 @@ class ExplicitMpc(HybridMpc):
         path = regions_path(REGIONS_DEFAULT) if regions is None else Path(regions)
         if not path.is_file():
             raise ValueError(f"regions = {str(path)!r}: no such file (make it with "
-                             "scripts/make_empc_regions.py)")
+                             "papers/seed004/make_empc_regions.py)")
         self.law = ExplicitLaw.load(path)
         want = self.design_meta(params)
         for key, value in want.items():
@@ -159,7 +159,7 @@ class ExplicitMpc(HybridMpc):
             if not same:
                 raise ValueError(f"regions = {path.name!r} were built for {key} = {have}, "
                                  f"this controller has {value!r}: regenerate them with "
-                                 "scripts/make_empc_regions.py")
+                                 "papers/seed004/make_empc_regions.py")
         self.ratio = {m: self.limit_ratio(self.train, m) for m in (0, 1)}
         # the online twin: the mp-QP of every mode and segment, solved at theta per event
         self.online: dict[tuple[int, int], ParametricQp] = {}

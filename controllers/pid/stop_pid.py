@@ -15,7 +15,7 @@ the error, by backward difference over the sample time. The feedforward stops at
 rest after the curve has ended, the feedforward becomes ``u_max`` (full brake), which is what
 stops the train near the point with the default gains. The plain PID (false) is the paper's
 baseline; it needs its own gains to stop inside the window (see the seed 000 scenario
-``seed000_stop_pid_plain`` and ``scenarios/reproduce/seed000.toml``).
+``seed000_stop_pid_plain`` and ``papers/seed000/entry.toml``).
 """
 
 from __future__ import annotations

@@ -761,16 +761,15 @@ def stop_mpc_designs() -> list[dict]:
         import tomllib
     except ModuleNotFoundError:  # Python 3.10
         import tomli as tomllib  # type: ignore[no-redef]
-    folder = Path(scenario_mod.SCENARIO_DIR)
     designs: list[dict] = [{}]
     scenarios: dict[str, dict] = {}
-    for path in sorted(folder.glob("*.toml")):
+    for path in scenario_mod.scenario_files().values():
         data = tomllib.loads(path.read_text())
         controller = data.get("fmus", {}).get("controller", {})
         if controller.get("fmu") in TUBE_STOP_CONTROLLERS:
             scenarios[path.stem] = dict(controller.get("parameters", {}))
             designs.append(scenarios[path.stem])
-    for path in sorted((folder / "reproduce").glob("*.toml")):
+    for path in scenario_mod.entry_files().values():
         for run in tomllib.loads(path.read_text()).get("runs", []):
             if run.get("scenario") in scenarios:
                 values = dict(scenarios[run["scenario"]])

@@ -2,8 +2,9 @@
 
 The generic summary (:func:`cosim.run.metrics.compute_summary`) knows no paper. A scenario names
 the paper metrics it wants in ``[summary] metrics = ["ctcs3", "unit_indices"]``; each name is a
-function registered here, in the module of the paper that defines it (``cosim/papers/seed001.py``
-and so on), with the ``[summary]`` keys it reads::
+function registered here, in the metrics module of the paper that defines it (its plug-in
+``papers/NAME/metrics.py``: ``papers/seed001/metrics.py`` and so on), with the ``[summary]`` keys
+it reads::
 
     from cosim.papers import RunRecord, metric
 
@@ -18,23 +19,27 @@ and so on), with the ``[summary]`` keys it reads::
 A metric function takes the run's :class:`RunRecord` and returns the entries it adds to
 ``summary.json`` (an empty dict when the recording lacks what it needs), each one declared in
 ``outputs`` with its description and unit (a key it does not declare is an error; the list in
-docs/scenarios.md is generated from these declarations by ``cosim docs``). Every module of this
-package is imported when the registry is first consulted, so a new module or function needs no
-other registration. A key a metric declares is a valid ``[summary]`` key only in a scenario that
-names the metric.
+docs/scenarios.md is generated from these declarations by ``cosim docs``). Every paper's
+``papers/*/metrics.py`` is loaded by path when the registry is first consulted (module name
+``papers.NAME.metrics``; nothing imports a paper's folder, this package knows no paper), so a
+new paper's metrics or a new function needs no other registration (:func:`paper_metrics`
+gives a paper's module to a script or test that calls its functions). A key a metric declares
+is a valid ``[summary]`` key only in a scenario that names the metric.
 """
 
 from __future__ import annotations
 
-import importlib
-import pkgutil
+import importlib.util
+import sys
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
+from types import ModuleType
 from typing import Any
 
 import numpy as np
 
 from cosim.run.metrics import matching_columns
+from cosim.run.scenario import PAPERS_DIR  # papers/NAME/: a paper's folder
 
 
 @dataclass(frozen=True)
@@ -118,11 +123,33 @@ def metric(name: str, keys: tuple[str, ...] = (), *, description: str,
     return register
 
 
+def paper_metrics(name: str) -> ModuleType:
+    """The metrics module of paper ``name`` (``papers/NAME/metrics.py``), loaded once by path
+    under the module name ``papers.NAME.metrics`` (its functions register their metrics);
+    ``KeyError`` when that paper has no metrics module."""
+    module_name = f"papers.{name}.metrics"
+    if module_name in sys.modules:
+        return sys.modules[module_name]
+    path = PAPERS_DIR / name / "metrics.py"
+    if not path.is_file():
+        raise KeyError(f"paper {name!r} has no metrics module ({path})")
+    spec = importlib.util.spec_from_file_location(module_name, path)
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[module_name] = module
+    try:
+        spec.loader.exec_module(module)
+    except BaseException:
+        del sys.modules[module_name]
+        raise
+    return module
+
+
 def registry() -> dict[str, Metric]:
-    """Every registered metric by name (the modules of this package imported once)."""
+    """Every registered metric by name (every paper's ``papers/*/metrics.py`` loaded once)."""
     if not _loaded:
-        for info in pkgutil.iter_modules(__path__):
-            importlib.import_module(f"{__name__}.{info.name}")
+        for path in sorted(PAPERS_DIR.glob("*/metrics.py")):
+            paper_metrics(path.parent.name)
         _loaded.append(True)
     return dict(_REGISTRY)
 

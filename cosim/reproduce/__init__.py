@@ -2,7 +2,7 @@
 
 One module per job:
 
-- :mod:`cosim.reproduce.entry`: an entry ``scenarios/reproduce/NAME.toml`` as typed data and
+- :mod:`cosim.reproduce.entry`: an entry ``papers/NAME/entry.toml`` as typed data and
   its one loader (:func:`cosim.reproduce.entry.load_entry`), of the parts in
   :mod:`cosim.reproduce.parts`, whose fields are TOML keys (:mod:`cosim.reproduce.fields`);
 - :mod:`cosim.reproduce.schema`: the schema page ``docs/reproduce_schema.md`` written from them;

@@ -1,4 +1,4 @@
-"""A reproduction entry ``scenarios/reproduce/NAME.toml`` as typed data, and its one loader.
+"""A reproduction entry ``papers/NAME/entry.toml`` as typed data, and its one loader.
 
 An entry is an :class:`Entry` of parts, one dataclass per TOML table
 (:mod:`cosim.reproduce.parts`: :class:`Run`, :class:`Metric`, :class:`PaperValue`,
@@ -43,21 +43,20 @@ from cosim.run.claims import (
     check_claims,
     check_ensemble,
 )
-from cosim.run.scenario import ROOT, SCENARIO_DIR, read_toml
+from cosim.run.scenario import PAPERS_DIR, ROOT, entry_files, read_toml
 
-REPRODUCE_DIR = SCENARIO_DIR / "reproduce"
-
-__all__ = ["DERIVED_KINDS", "FIGURE_KINDS", "LINE_KINDS", "REPRODUCE_DIR", "Derived", "Entry",
+__all__ = ["DERIVED_KINDS", "FIGURE_KINDS", "LINE_KINDS", "Derived", "Entry",
            "Figure", "Metric", "PaperValue", "Ranking", "ReproduceError", "Run", "Statement",
            "Sweep", "Variant", "check_statements", "check_variants", "entry_aliases",
-           "entry_names", "load_entry", "resolve_name", "slug"]
+           "entry_name", "entry_names", "load_entry", "resolve_name", "shipped", "slug"]
 
 
 @dataclass(frozen=True, kw_only=True)
 class Entry:
     """A reproduction entry: one paper's runs, its figures, and where ours meets the paper's."""
 
-    name: str = doc("the entry's name: its file's stem", toml=False)
+    name: str = doc("the entry's name: its paper's folder (``papers/NAME/entry.toml``), else "
+                    "its file's stem", toml=False)
     path: Path = doc("the entry's file", toml=False)
     title: str = doc("the paper's name for a reader: \"Author et al. year, topic\" (the page's "
                      "title, the site's navigation, `cosim list` and `cosim reproduce`)")
@@ -110,15 +109,27 @@ CLAIM_PARTS = ("ensemble", "claims", "variants", "statements")  # read after the
 
 
 def entry_names() -> list[str]:
-    """The shipped entries: the stems of ``scenarios/reproduce/*.toml``."""
-    return sorted(p.stem for p in REPRODUCE_DIR.glob("*.toml"))
+    """The shipped entries: the folder names of ``papers/*/entry.toml``
+    (:func:`cosim.run.scenario.entry_files`)."""
+    return list(entry_files())
+
+
+def shipped(entry: Entry) -> bool:
+    """Whether ``entry`` was read from a shipped entry file (not from another path)."""
+    return entry_files().get(entry.name) == entry.path
+
+
+def entry_name(path: Path) -> str:
+    """The name of the entry at ``path``: its paper's folder for ``papers/NAME/entry.toml``,
+    else the file's stem."""
+    in_papers = path.name == "entry.toml" and path.resolve().parent.parent == PAPERS_DIR.resolve()
+    return path.parent.name if in_papers else path.stem
 
 
 def entry_aliases() -> dict[str, str]:
     """Each shipped entry's ``alias`` -> its file's stem (entries without one left out)."""
     out: dict[str, str] = {}
-    for name in entry_names():
-        path = REPRODUCE_DIR / f"{name}.toml"
+    for name, path in entry_files().items():
         alias = read_toml(path, ReproduceError).get("alias", "")
         if alias:
             out[alias] = name
@@ -149,10 +160,10 @@ def slug(name: str) -> str:
 
 
 def _read(name: str | Path) -> tuple[Path, dict[str, Any]]:
-    """The path of entry ``name`` (a name in ``scenarios/reproduce/`` or a path) and its TOML."""
+    """The path of entry ``name`` (a shipped entry's name or alias, or a path) and its TOML."""
     path = Path(name)
     if not path.suffix:
-        path = REPRODUCE_DIR / f"{resolve_name(str(name))}.toml"
+        path = entry_files()[resolve_name(str(name))]
     if not path.is_file():
         raise ReproduceError(f"no reproduction entry {str(name)!r} (known: {entry_names()})")
     return path, read_toml(path, ReproduceError)
@@ -171,8 +182,8 @@ def _cross(where: str, what: str, value: Any, names: list[str], table: str = "[[
 
 
 def load_entry(name: str | Path) -> Entry:
-    """Read and check an entry by name (its file in ``scenarios/reproduce/`` without ``.toml``)
-    or path; :class:`ReproduceError` names the file, table and key of anything wrong."""
+    """Read and check an entry by name (its paper's folder, ``papers/NAME/entry.toml``) or
+    path; :class:`ReproduceError` names the file, table and key of anything wrong."""
     path, data = _read(name)
     top = check_table(Entry, str(path), data, skip=(*PARTS, *CLAIM_PARTS))
     if not re.fullmatch(r"[A-Za-z0-9_-]+", top["table"]):
@@ -223,7 +234,7 @@ def load_entry(name: str | Path) -> Entry:
     variants = check_variants(str(path), data.get("variants", []), names)
     statements = check_statements(str(path), data.get("statements", []),
                                   [c.id for c in claims])
-    return Entry(name=path.stem, path=path, **top, runs=runs, metrics=metrics, paper=paper,
+    return Entry(name=entry_name(path), path=path, **top, runs=runs, metrics=metrics, paper=paper,
                  derived=derived, rankings=rankings, sweeps=sweeps, figures=figures,
                  ensemble=ensemble, claims=claims, variants=variants, statements=statements)
 

@@ -19,12 +19,12 @@ from typing import Any
 
 from cosim.reproduce.entry import (
     FIGURE_KINDS,
-    REPRODUCE_DIR,
     Entry,
     ReproduceError,
     Statement,
     entry_names,
     load_entry,
+    shipped,
 )
 from cosim.reproduce.figures import ensemble_lines, figure_section, sweep_section
 from cosim.reproduce.run import (
@@ -58,6 +58,7 @@ from cosim.run.ensemble import (
 from cosim.run.provenance import INPUTS_FILE, entry_digest, simulation_digest
 from cosim.run.record import Record, RecordError, check_jobs, load, save, series_name
 from cosim.run.results import locked_destination
+from cosim.run.scenario import ROOT
 
 
 @dataclass(frozen=True)
@@ -135,8 +136,10 @@ def evaluate(entry: Entry, record: Record, out: Path, plot_format: str = "png") 
     claim_rows: list[dict[str, Any]] = []
     spread: dict[str, list[Path]] = {}  # a figure's file -> its ensemble figure's paths
     alias = f" (or `cosim reproduce {entry.alias}`)" if entry.alias else ""
-    source = (f"Reproduced by `cosim reproduce {entry.name}`{alias} from the entry "
-              f"`scenarios/reproduce/{entry.path.name}`. {builds_sentence(entry, record)}")
+    where = (entry.path.relative_to(ROOT).as_posix() if shipped(entry)
+             else entry.path.name)
+    source = (f"Reproduced by `cosim reproduce {entry.name}`{alias} from the entry `{where}`. "
+              f"{builds_sentence(entry, record)}")
     verdicts: list[str] = []
     if entry.claims:  # the verdicts lead the page; the figures and single runs follow
         claim_rows, claims_text, spread = write_claims(entry, record, out, plot_format)
@@ -327,7 +330,7 @@ def redraw_page(name: str, out_dir: str | Path | None = None, plot_format: str =
         page = evaluate(entry, record, out, plot_format)
     except RecordError as err:
         raise ReproduceError(str(err)) from err
-    if (entry.path.parent == REPRODUCE_DIR
+    if (shipped(entry)
             and record.simulation == simulation_digest(entry.name, record.build)):
         inputs.write_text(entry_digest(entry.name, record.build) + "\n")
     if echo:
@@ -387,7 +390,7 @@ def reproduce_all(out_dir: str | Path | None = None, workers: int | None = None,
                                       plot_format, resume=resume, build=build)
                  for name in entry_names()}
         parts = ["# Reproduced results", "", "Made by `cosim reproduce all`; each section by "
-                 "`cosim reproduce NAME` from the entry in `scenarios/reproduce/`.", "",
+                 "`cosim reproduce NAME` from the entry `papers/NAME/entry.toml`.", "",
                  claims_summary({name: page.claim_rows for name, page in pages.items()})]
         for name, page in pages.items():
             # relative links from out/: prefix the entry folder

@@ -22,7 +22,7 @@ class Run:
     """``[[runs]]``: one run of a scenario, a row of the table."""
 
     name: str = doc("the row's name; unique in the entry, other tables name the run by it")
-    scenario: str = doc("the scenario run: a file stem in ``scenarios/`` or a path")
+    scenario: str = doc("the scenario run: a shipped scenario's name (``cosim list``) or a path")
     overrides: dict[str, Any] = doc(
         "overrides of the scenario (as ``--set``: ``FMU.PARAMETER`` -> value); the entry's "
         "``set`` is merged under them (the run's own value wins)", toml="set", default={})
@@ -105,7 +105,7 @@ class Sweep:
     """``[[sweeps]]``: a ``cosim sweep`` of scenarios over a grid (``sweep.csv``, its figure)."""
 
     name: str = doc("the sweep's name (its folder is the name's slug)")
-    scenarios: list[str] = doc("the scenarios swept (file stems in ``scenarios/`` or paths)")
+    scenarios: list[str] = doc("the scenarios swept (shipped scenarios' names or paths)")
     grid: dict[str, Any] = doc(
         "override key -> values (\"3..15\", \"1,2\" or a list; as ``cosim sweep``); the first "
         "key is the figure's x axis; the entry's ``set`` is added for keys not swept")

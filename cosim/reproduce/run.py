@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 
 from cosim.reproduce.builds import build_overrides
-from cosim.reproduce.entry import FIGURE_KINDS, REPRODUCE_DIR, Entry, Figure, ReproduceError, slug
+from cosim.reproduce.entry import FIGURE_KINDS, Entry, Figure, ReproduceError, shipped, slug
 from cosim.reproduce.series import record_series, run_scenarios
 from cosim.run import runner
 from cosim.run.ensemble import host_load, member_jobs, simulate_claims, with_host
@@ -165,8 +165,7 @@ def simulate(entry: Entry, out: Path, workers: int | None = None, seeds: int | N
     the entry's ``build``; the run folders under ``out`` then hold its files)."""
     k = claims_k(entry, seeds)
     build = build or entry.build
-    digest = (simulation_digest(entry.name, build) if entry.path.parent == REPRODUCE_DIR
-              else "")
+    digest = simulation_digest(entry.name, build) if shipped(entry) else ""
     record = Record(entry.name, digest, k, rounding, build)
     ours = (digest, k, rounding, build)
     if previous is not None and (previous.simulation, previous.seeds, previous.rounding,

@@ -17,7 +17,7 @@ from cosim.run.claims import CLAIM_KEYS, ENSEMBLE_KEYS, REQUIRED
 SCHEMA_PATH = ROOT / "docs" / "reproduce_schema.md"
 
 INTRO = """\
-Each paper has an entry `scenarios/reproduce/NAME.toml`: the paper's runs, its numbers and
+Each paper has an entry `papers/NAME/entry.toml`: the paper's runs, its numbers and
 tolerances, its figures and its claims live there, not in code. `cosim reproduce NAME` runs
 every simulation the entry needs and keeps their record (`record/`); the tables, claims,
 figures and the page (`table.md`) are made from that record and the entry alone, so

@@ -1,8 +1,9 @@
 """What a reproduction's figures depend on, as one digest (so a generated page knows when it is
 stale), and what its simulations depend on, as another (so a record knows when it is).
 
-The inputs of entry ``scenarios/reproduce/NAME.toml`` are: the entry itself; every scenario it
-names (a string value equal to a file stem in ``scenarios/``); the files of generated
+The inputs of entry ``papers/NAME/entry.toml`` are: the entry itself; every scenario it
+names (a string value equal to a shipped scenario's name,
+:func:`cosim.run.scenario.scenario_files`); the files of generated
 parameter values its runs name (``[[runs]] tuned``); the files bundled into every FMU
 those scenarios and the entry name (a string equal to a catalog identifier:
 ``cosim.fmu.build.bundled_files`` of its wrapper, i.e. the cores, their data and the FMU layer)
@@ -10,7 +11,8 @@ and, on the native build (``cosim reproduce --build native``), for one with a na
 every file that model is made from (``cosim.fmu.native_build.native_sources``: its C, the C
 fronts and the builder);
 and the code that runs and evaluates them (``cosim/run/``, ``cosim/papers/``,
-``cosim/reproduce/``: their Python and the master's C loop), leaving out the pages' own
+``cosim/reproduce/``: their Python and the master's C loop; every paper's metric plug-ins,
+``papers/*/metrics.py``, which the registry loads), leaving out the pages' own
 writer. :func:`entry_digest` is a SHA-256
 over their relative paths and contents, so it is the same on every machine for the same tree.
 
@@ -32,15 +34,15 @@ from typing import Any
 
 from cosim.fmu.build import ROOT, bundled_files, catalog
 from cosim.fmu.native_build import NATIVE, native_sources
+from cosim.run.scenario import entry_files, scenario_files
 
 try:
     import tomllib
 except ModuleNotFoundError:  # Python 3.10
     import tomli as tomllib  # type: ignore[no-redef]
 
-SCENARIOS = ROOT / "scenarios"
-ENTRIES = SCENARIOS / "reproduce"
 EVALUATION = ("cosim/run", "cosim/papers", "cosim/reproduce")
+PAPER_METRICS = "papers/*/metrics.py"  # every paper's metric plug-ins (cosim.papers.registry)
 INPUTS_FILE = "inputs.sha256"  # in a reproduction's folder: the digest of the inputs it ran
 NOT_INPUTS = {"cosim/run/docs_pages.py", "cosim/run/provenance.py"}
 # read a record and the entry only: tables, claims, figures, the page
@@ -72,16 +74,17 @@ def _strings(value: Any) -> Iterator[str]:
 def entry_inputs(name: str, build: str = "python") -> list[Path]:
     """The files entry ``name``'s results on ``build`` (``cosim reproduce --build``) depend on,
     sorted (see the module docstring)."""
-    entry = ENTRIES / f"{name}.toml"
+    entry = entry_files()[name]
     data = tomllib.loads(entry.read_text())
     known = catalog()
+    scenarios = scenario_files()
     files: set[Path] = {entry}
     fmus: set[str] = set()
     for text in set(_strings(data)):
         if "\n" in text or "/" in text or len(text) > 100:  # prose, not a name
             continue
-        scenario = SCENARIOS / f"{text}.toml"
-        if scenario.is_file():
+        scenario = scenarios.get(text)
+        if scenario is not None:
             files.add(scenario)
             fmus.update(s for s in _strings(tomllib.loads(scenario.read_text())) if s in known)
         if text in known:
@@ -100,13 +103,14 @@ def entry_inputs(name: str, build: str = "python") -> list[Path]:
             for path in (ROOT / folder).rglob(pattern):
                 if path.relative_to(ROOT).as_posix() not in NOT_INPUTS:
                     files.add(path)
+    files.update(ROOT.glob(PAPER_METRICS))
     return sorted(files)
 
 
 def simulation_inputs(name: str, build: str = "python") -> list[Path]:
     """:func:`entry_inputs` less the entry itself and the evaluation-only modules
     (:func:`evaluation_only`)."""
-    entry = ENTRIES / f"{name}.toml"
+    entry = entry_files()[name]
     return [p for p in entry_inputs(name, build)
             if p != entry and not evaluation_only(p.relative_to(ROOT).as_posix())]
 

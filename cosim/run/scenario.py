@@ -56,7 +56,8 @@ from cosim.fmu.state import TICKS_PER_SECOND, to_ticks
 from cosim.run import fmi_types
 from cosim.run.metrics import PAPERS
 
-SCENARIO_DIR = ROOT / "scenarios"
+SCENARIO_DIR = ROOT / "scenarios"  # scenarios of no one paper (scenarios/*.toml)
+PAPERS_DIR = ROOT / "papers"  # a folder per paper: papers/NAME/entry.toml, scenarios/*.toml, ...
 ALGORITHMS = ("event", "fixed", "jacobi")
 FMI_VERSIONS = (2, 3)
 UNCONNECTED_INPUTS = ("start", "error")  # [simulation] unconnected_inputs
@@ -153,15 +154,40 @@ class Scenario:
     overrides: dict[str, str] = field(default_factory=dict)
 
 
+def scenario_files() -> dict[str, Path]:
+    """The shipped scenarios by name, sorted: ``scenarios/*.toml`` and each paper's
+    ``papers/*/scenarios/*.toml`` (the one list every caller reads); :class:`ScenarioError`
+    naming both files when a name is found twice."""
+    found: dict[str, Path] = {}
+    for path in [*SCENARIO_DIR.glob("*.toml"), *PAPERS_DIR.glob("*/scenarios/*.toml")]:
+        if path.stem in found:
+            raise ScenarioError(f"scenario {path.stem!r} is shipped twice: {found[path.stem]} "
+                                f"and {path}")
+        found[path.stem] = path
+    return dict(sorted(found.items()))
+
+
+def entry_files() -> dict[str, Path]:
+    """The reproduction entries by name, sorted: ``papers/NAME/entry.toml`` (the paper's
+    folder names its entry)."""
+    return {path.parent.name: path for path in sorted(PAPERS_DIR.glob("*/entry.toml"))}
+
+
 def find_scenario(name_or_path: str | Path) -> Path:
-    """A scenario by path, or by name in ``scenarios/`` (with or without ``.toml``)."""
+    """A scenario by path, or by name among :func:`scenario_files` (with or without
+    ``.toml``)."""
     path = Path(name_or_path)
     if path.is_file():
         return path
-    for candidate in (SCENARIO_DIR / f"{name_or_path}.toml", SCENARIO_DIR / str(name_or_path)):
-        if candidate.is_file():
+    shipped = scenario_files()
+    name = str(name_or_path)
+    name = name[:-len(".toml")] if name.endswith(".toml") else name
+    if name in shipped:
+        return shipped[name]
+    for candidate in (SCENARIO_DIR / f"{name}.toml", SCENARIO_DIR / f"{name_or_path}"):
+        if candidate.is_file():  # a path under scenarios/ (scenarios/mixed/...)
             return candidate
-    known = sorted(p.stem for p in SCENARIO_DIR.glob("*.toml"))
+    known = sorted(shipped)
     hint = difflib.get_close_matches(str(name_or_path), known, n=1)
     raise ScenarioError(f"{name_or_path}: no such scenario file"
                         + (f" (did you mean {hint[0]!r}?)" if hint else f"; shipped: {known}"))

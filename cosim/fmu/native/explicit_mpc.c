@@ -269,7 +269,7 @@ law_core* law_make(const ato_values* p, double t0, char* err, size_t n) {
         if (!have || !isclose(strtod(have, NULL), fvals[i])) {
             char a[40];
             snprintf(err, n, "regions = '%s.npz' were built for %s = %s, this controller has "
-                     "%s: regenerate them with scripts/make_empc_regions.py", name,
+                     "%s: regenerate them with papers/seed004/make_empc_regions.py", name,
                      fkeys[i], have ? have : "None", ato_repr(fvals[i], a));
             return fail(c, &t);
         }
@@ -280,7 +280,7 @@ law_core* law_make(const ato_values* p, double t0, char* err, size_t n) {
         const char* have = table_meta(&t, skeys[i]);
         if (!have || strcmp(have, svals[i]) != 0) {
             snprintf(err, n, "regions = '%s.npz' were built for %s = %s, this controller has "
-                     "'%s': regenerate them with scripts/make_empc_regions.py", name, skeys[i],
+                     "'%s': regenerate them with papers/seed004/make_empc_regions.py", name, skeys[i],
                      have ? have : "None", svals[i]);
             return fail(c, &t);
         }

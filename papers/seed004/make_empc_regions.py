@@ -8,7 +8,7 @@ PWA segment, the mp-QP of :func:`controllers.hybrid.explicit.parametric_qp` is s
 PPOPT's combinatorial algorithm; each region keeps the first move's law, its inequalities and a
 bounding box (2 LPs per parameter, scipy's HiGHS). Prints the regions and solve times.
 
-    python scripts/make_empc_regions.py [--blocks 3:4:3] [--out PATH]
+    python papers/seed004/make_empc_regions.py [--blocks 3:4:3] [--out PATH]
 """
 
 from __future__ import annotations
@@ -25,7 +25,7 @@ from scipy.optimize import linprog
 # gurobipy (a hard dependency of PPOPT) is hidden: importing it then fails, so no code path can
 # reach the proprietary solver, whatever PPOPT's defaults are
 sys.modules["gurobipy"] = None  # type: ignore[assignment]
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]  # papers/NAME/ -> the repository
 sys.path.insert(0, str(ROOT))
 
 from controllers.hybrid.explicit import (  # noqa: E402

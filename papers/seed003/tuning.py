@@ -9,10 +9,10 @@ comparison, Fig. 5); the calibration plants are mismatch samples drawn from the 
 ``[ensemble] perturb`` with the ``calibration_seeds`` (one draw per seed), never the report
 draws. Every tracker gets the same budget, BUDGET points of a log grid.
 
-    python benchmarks/seed003_tuning.py [--plants 3] [--write]
+    python papers/seed003/tuning.py [--plants 3] [--write]
 
 ``--write`` puts the picks into the seed 003 scenario files (the lines marked
-``# picked by benchmarks/seed003_tuning.py``); without it the table is only printed.
+``# picked by papers/seed003/tuning.py``); without it the table is only printed.
 """
 
 from __future__ import annotations
@@ -25,14 +25,14 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]  # papers/NAME/ -> the repository
 sys.path[:0] = [str(ROOT)]
 
 from cosim.reproduce.entry import load_entry  # noqa: E402
 from cosim.run.perturbation import draw_samples, nominal_values, parse_perturb  # noqa: E402
 
 BUDGET = 5  # evaluations per tracker (each on every calibration plant), the same for both
-MARK = "# picked by benchmarks/seed003_tuning.py"
+MARK = "# picked by papers/seed003/tuning.py"
 
 # tracker: (eco scenario, parameter, grid, scenario files whose line the pick replaces)
 GRIDS = {
@@ -66,7 +66,7 @@ def write_pick(pattern: str, key: str, value: float) -> list[Path]:
     """Replace the marked ``key = ...`` line of every matching scenario file."""
     line = re.compile(rf"^{re.escape(key)} = [^#\n]*{re.escape(MARK)}.*$", re.M)
     changed = []
-    for path in sorted((ROOT / "scenarios").glob(pattern)):
+    for path in sorted((ROOT / "papers" / "seed003" / "scenarios").glob(pattern)):
         text = path.read_text()
         new, n = line.subn(f"{key} = {value!r}   {MARK} (mean log speed MSE, "
                            "calibration plants)", text)
