@@ -7,6 +7,7 @@ failed run keeps none of its instances."""
 
 from __future__ import annotations
 
+import ctypes
 from typing import Any
 
 import pandas as pd
@@ -14,6 +15,7 @@ import pytest
 
 from cosim.fmu.build import ROOT, build_clocked, build_stale, catalog
 from cosim.fmu.state import to_ticks
+from cosim.run import isolation
 from cosim.run.master import native_loop
 from cosim.run.master.errors import SimulationError
 from cosim.run.master.fmi2 import Fmi2Unit
@@ -96,6 +98,28 @@ def test_a_reset_scheduled_execution_member_equals_a_fresh_one() -> None:
     second = {"plant.v0": 20.5, "controller.ref_decel": 0.55, "shadow.ref_decel": 0.55}
     kept = _reset_equals_fresh(path, first, second, 3, "plant.s")
     assert sum(isinstance(u, Fmi3ScheduledUnit) for u in kept) == 1
+
+
+def test_a_reused_instance_is_traced_once_however_many_members(built_fmus, monkeypatch
+                                                                ) -> None:
+    """In a worker (a child process of :mod:`cosim.run.isolation`), each run traces its
+    units' FMU calls: a unit the pool kept is traced again from its own methods, so every
+    traced call wraps the method once after any number of members (a wrapper per member
+    grew the call depth by one per member, until a worker's thousandth member failed with
+    RecursionError)."""
+    # the breadcrumb and labels a child has (shared memory)
+    monkeypatch.setattr(isolation, "_crumb", (ctypes.c_double * 3)())
+    monkeypatch.setattr(isolation, "_labels", (ctypes.c_char * isolation._LABEL_BYTES)())
+    pool = InstancePool()
+    quick = {"simulation.stop_time": 2.0}
+    for seed in range(3):
+        assert _member({**quick, "plant.disturbance_seed": seed + 1,
+                        "plant.disturbance_amplitude": 0.02}, pool).completed
+    for unit in pool.kept():
+        for method, _ in isolation.CALLS:
+            traced = getattr(unit, method)
+            assert not hasattr(traced.__wrapped__, "__wrapped__"), (unit.name, method)
+    pool.clear()
 
 
 def test_a_failed_run_keeps_none_of_its_instances(built_fmus, monkeypatch) -> None:

@@ -56,7 +56,9 @@ class ChildFailed(Exception):
 
 def watch(units: list[Any]) -> None:
     """In a child: record every FMU call of ``units`` (see the module doc); elsewhere
-    nothing. Each call costs one shared-memory write on entry and one on return."""
+    nothing. Each call costs one shared-memory write on entry and one on return. A unit
+    watched again (an instance a pool kept for the next job) is traced from its own methods,
+    not from the previous job's tracing: one wrapper per call, however many jobs."""
     if _crumb is None:
         return
     for unit in units:
@@ -64,7 +66,8 @@ def watch(units: list[Any]) -> None:
         unit.crumb_index = index  # the C loop's breadcrumb (cosim.run.master.native_loop)
         _names.append(f"{unit.name} {getattr(unit, 'C_PREFIX', '') or 'fmi2'}")
         for code, (method, _) in enumerate(CALLS):
-            setattr(unit, method, _traced(getattr(unit, method), unit, index, code))
+            call = getattr(unit, method)
+            setattr(unit, method, _traced(getattr(call, "__wrapped__", call), unit, index, code))
     text = "\n".join(_names).encode()[:_LABEL_BYTES - 1]
     _labels[:len(text) + 1] = text + b"\0"
 
@@ -81,6 +84,7 @@ def _traced(call: Callable[..., Any], unit: Any, index: int, code: int) -> Calla
         finally:
             crumb[1] = _IDLE
 
+    traced.__wrapped__ = call  # type: ignore[attr-defined]
     return traced
 
 
