@@ -1,7 +1,7 @@
 """Campaign benchmark: an entry's claims on the native C builds against the Python builds.
 
 Runs the claims' members of an entry (default seed 002: the freight plant and its four
-controllers, all native) at K report seeds on the main path (:func:`cosim.run.ensemble.
+controllers, all native) at K report seeds on the main path (:func:`cosim.reproduce.verdicts.
 run_claims`, ``--build python`` then ``--build native``, each on 2 workers) in one run, and
 prints the wall and CPU seconds of each (the CPU of this process and its finished workers),
 the load averages before and after, the ratio python / native of each, and whether the two
@@ -27,7 +27,8 @@ sys.path.insert(0, str(ROOT))
 from bench_campaign import _cpu_s  # noqa: E402
 
 from cosim.reproduce.entry import load_entry  # noqa: E402
-from cosim.run.ensemble import claim_jobs, run_claims  # noqa: E402
+from cosim.reproduce.members import claim_jobs  # noqa: E402
+from cosim.reproduce.verdicts import run_claims  # noqa: E402
 
 BUILDS = ("python", "native")
 

@@ -1,8 +1,9 @@
 """Campaign benchmark: seed 001's claims over an ensemble (throughput of the shared runner).
 
 Runs the claims' runs of ``papers/seed001/entry.toml`` at K report seeds (main path and,
-unless ``--no-rounding``, the perturbed floating-point path; :func:`cosim.run.ensemble.run_claims`
-through :mod:`cosim.run.runner`) three ways in one run: 1 worker, 2 local worker processes, and
+unless ``--no-rounding``, the perturbed floating-point path;
+:func:`cosim.reproduce.verdicts.run_claims` through :mod:`cosim.run.runner`) three ways in one run:
+1 worker, 2 local worker processes, and
 a 2-worker local Dask cluster; prints the wall times, the load averages before and after, and
 the ratios 1 worker / 2 workers and 1 worker / Dask (target >= 1.8x), with the CPU seconds of
 each way (on a loaded machine the wall ratio measures the share of the cores left, the CPU
@@ -28,7 +29,8 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 from cosim.reproduce.entry import load_entry  # noqa: E402
-from cosim.run.ensemble import claim_jobs, run_claims  # noqa: E402
+from cosim.reproduce.members import claim_jobs  # noqa: E402
+from cosim.reproduce.verdicts import run_claims  # noqa: E402
 
 WAYS = (("1 worker", 1, None), ("2 workers", 2, None), ("dask 2 workers", 2, "local-dask"))
 

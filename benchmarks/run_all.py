@@ -80,8 +80,8 @@ import bench_seed003  # noqa: E402
 import bench_sweep  # noqa: E402
 from raw_loop import raw_fmpy_loop  # noqa: E402
 
+from cosim import site  # noqa: E402
 from cosim.fmu.build import build_stale  # noqa: E402
-from cosim.run import docs_pages  # noqa: E402
 from cosim.run.scenario import find_scenario  # noqa: E402
 from cosim.run.simulate import run_scenario  # noqa: E402
 
@@ -438,9 +438,9 @@ def main() -> None:
                                    default=float) + "\n")
     print(f"wrote {args.out} (load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} "
           "cores: figures scale with it)")
-    if args.out == docs_pages.BENCHMARKS_JSON:  # the site's page follows its source
-        page = docs_pages.DOCS / "benchmarks.md"
-        page.write_text(docs_pages.benchmarks_page(args.out))
+    if args.out == site.BENCHMARKS_JSON:  # the site's page follows its source
+        page = site.DOCS / "benchmarks.md"
+        page.write_text(site.benchmarks_page(args.out))
         print(f"wrote {page}")
 
 

@@ -1005,7 +1005,7 @@ def docs(check: Annotated[bool, typer.Option(
     The CLI reference (docs/cli.md), the FMU reference (docs/fmus.md, from the cores'
     declarations), the benchmarks (docs/benchmarks.md, from benchmarks/results.json) and a page
     per paper (docs/papers/NAME.md, from runs/reproduce/NAME/ where it exists)."""
-    from cosim.run.docs_pages import DOCS, generated_pages, stale, stale_papers, write
+    from cosim.site import DOCS, generated_pages, stale, stale_papers, write
 
     def pages():
         yield DOCS / "cli.md", cli_reference().encode()

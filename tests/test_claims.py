@@ -9,18 +9,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from cosim.reproduce.claims import Claim, check_claims, expand_families
+from cosim.reproduce.ensemble import ClaimsError, check_ensemble, parse_seeds
 from cosim.reproduce.entry import ReproduceError, Run, Variant, entry_names, load_entry
-from cosim.run.claims import (
-    Claim,
-    ClaimsError,
-    check_claims,
-    check_ensemble,
-    expand_families,
-    median_ci,
-    parse_seeds,
-    with_rounding,
-)
-from cosim.run.claims import verdict as claim_verdict
+from cosim.reproduce.stats import median_ci, with_rounding
+from cosim.reproduce.stats import verdict as claim_verdict
 
 
 def verdict(table: dict, a: np.ndarray, b: np.ndarray | None = None) -> dict:
@@ -78,7 +71,7 @@ def test_a_universal_claim_is_decided_by_its_worst_member() -> None:
     """"Stops within +-50 cm": 19 of 20 inside and one at 0.70 m fails, though the median and
     its CI are well inside; 20 of 20 holds, with the share of runs it supports: the one-sided
     Clopper-Pearson bound, alpha^(1/K) for K of K."""
-    from cosim.run.claims import ALPHA
+    from cosim.reproduce.stats import ALPHA
 
     inside = {**LESS, "kind": "inside", "range": [-0.5, 0.5], "runs": ["A"]}
     x = 0.1 + 0.01 * NOISE
@@ -99,7 +92,7 @@ def test_a_typical_claim_decides_at_most_alpha_of_null_samples_and_small_k_is_in
     K too small to decide whatever the members show, the verdict says which K would."""
     from scipy.stats import binom
 
-    from cosim.run.claims import ALPHA
+    from cosim.reproduce.stats import ALPHA
 
     for K in (6, 10, 20, 33):
         decided = 0.0
@@ -136,7 +129,7 @@ def test_a_share_claim_is_the_exact_binomial_test() -> None:
 def test_multiplicity_adjustment_is_benjamini_hochberg() -> None:
     """adjust() against the definition: q_(i) = min_{j >= i} p_(j) m / j over the sorted
     p-values; a decision is kept where q < alpha; rows without a p-value keep theirs."""
-    from cosim.run.claims import ALPHA, adjust
+    from cosim.reproduce.stats import ALPHA, adjust
 
     ps = [0.001, 0.04, 0.03, 0.2, 0.012]
     rows = [{"verdict": "holds", "p_value": p} for p in ps] + [
@@ -274,7 +267,7 @@ def test_an_entry_claims_get_verdicts_end_to_end(built_fmus, tmp_path: Path) -> 
     a number, and ``tests/test_docs_site.py::test_generated_pages_are_current`` fails when it
     differs, so the costlier entries (each 36-117 claim jobs of whole runs at K = 3) need no
     second, smaller run here."""
-    from cosim.run.ensemble import run_claims
+    from cosim.reproduce.verdicts import run_claims
 
     name = CLAIMS_SMOKE_ENTRY
     entry = load_entry(name)
@@ -375,7 +368,7 @@ def test_ratio_ci_of_repeated_timings() -> None:
     """The ratio of medians of two independent repetition sets with its bootstrap CI: exact
     for constant repetitions, proportional to a scale of one side (same resamples), bracketing
     the point ratio, and without bounds under 3 repetitions."""
-    from cosim.run.claims import ratio_ci
+    from cosim.reproduce.stats import ratio_ci
 
     assert ratio_ci(np.full(5, 2.0), np.full(4, 1.0)) == (2.0, 2.0, 2.0)
     rng = np.random.default_rng(3)
@@ -399,7 +392,8 @@ def _variant_entry() -> object:
 
 
 def test_variants_replace_runs_in_every_claim_and_get_their_own_verdicts() -> None:
-    from cosim.run.ensemble import claim_jobs, evaluate
+    from cosim.reproduce.members import claim_jobs
+    from cosim.reproduce.verdicts import evaluate
 
     entry = _variant_entry()
     jobs = {key for key, _sc, _ov in claim_jobs(entry, 6, rounding=False)}
@@ -474,7 +468,7 @@ def _repeat_entry(repeats: int = 4) -> object:
 
 
 def test_repeat_members_are_the_nominal_run_interleaved_without_rounding() -> None:
-    from cosim.run.ensemble import claim_jobs, members
+    from cosim.reproduce.members import claim_jobs, members
 
     entry = _repeat_entry(4)
     # K of a repeat claim is the entry's repeats, whatever --seeds (here 2 and 3)
@@ -495,7 +489,7 @@ def test_repeat_members_are_the_nominal_run_interleaved_without_rounding() -> No
 
 
 def test_repeat_verdict_over_the_repeats_pairs_by_index() -> None:
-    from cosim.run.ensemble import claims_markdown, evaluate
+    from cosim.reproduce.verdicts import claims_markdown, evaluate
 
     entry = _repeat_entry(5)
     drift = np.arange(5.0)  # a load drift met by both runs of a pair
@@ -536,7 +530,7 @@ def test_repeat_claim_needs_repeats() -> None:
 
 
 def test_seed004_timing_claims_repeat_ten_times() -> None:
-    from cosim.run.ensemble import claim_cases, members
+    from cosim.reproduce.members import claim_cases, members
 
     entry = load_entry("seed004")
     timing = [c for c in entry.claims if c.metric == "qp_cpu_time_total_s"]
@@ -549,7 +543,7 @@ def test_seed004_timing_claims_repeat_ten_times() -> None:
 def test_repeat_claim_end_to_end_on_a_fast_entry(tmp_path: Path) -> None:
     import pandas as pd
 
-    from cosim.run.ensemble import run_claims
+    from cosim.reproduce.verdicts import run_claims
 
     path = tmp_path / "tiny.toml"
     path.write_text(
@@ -576,8 +570,8 @@ def test_a_second_rounding_path_perturbs_other_parameters_without_the_reference_
     """``rounding_perturb_second``: every perturbed member runs on a second path (2) with
     only its own parameters scaled by 1 + 1e-12 and no numpy reference path; it may not
     share a parameter with the first path."""
-    from cosim.run.claims import ROUNDING_RELATIVE
-    from cosim.run.ensemble import ROUNDING_ENV, claim_jobs, member_jobs
+    from cosim.reproduce.ensemble import ROUNDING_RELATIVE
+    from cosim.reproduce.members import ROUNDING_ENV, claim_jobs, member_jobs
 
     entry = _variant_entry()
     entry.ensemble = check_ensemble("e.toml", {
@@ -602,7 +596,8 @@ def test_a_second_rounding_path_perturbs_other_parameters_without_the_reference_
 def test_a_timing_run_records_its_machine_and_load_and_the_page_states_them() -> None:
     """Each run's summary carries ``host`` (CPU, cores, the 1-minute load average before
     and after); the repeat claims' note gives the machine and the load's range."""
-    from cosim.run.ensemble import claims_markdown, host_text, with_host
+    from cosim.reproduce.members import host_text, with_host
+    from cosim.reproduce.verdicts import claims_markdown
 
     summary = with_host({"qp_cpu_time_total_s": 1.0}, 0.5)
     host = summary["host"]

@@ -13,7 +13,7 @@ import pytest
 
 from cosim.reproduce.entry import entry_names, load_entry
 from cosim.reproduce.tables import md_row
-from cosim.run.ensemble import CLAIMS_HEADER, by_origin, claims_markdown
+from cosim.reproduce.verdicts import CLAIMS_HEADER, by_origin, claims_markdown
 
 PAPERS = Path(__file__).resolve().parent.parent / "docs" / "papers"
 _CELL_SEP = re.compile(r"(?<!\\)\|")  # a cell border: a pipe not escaped

@@ -24,8 +24,8 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner
 
+from cosim import site
 from cosim.cli import app, cli_reference
-from cosim.run import docs_pages
 
 ROOT = Path(__file__).resolve().parent.parent
 DOCS = ROOT / "docs"
@@ -71,9 +71,9 @@ def test_generated_pages_are_current() -> None:
 def test_check_names_a_stale_page(tmp_path: Path) -> None:
     page = tmp_path / "page.md"
     page.write_text("old\n")
-    assert docs_pages.stale(iter([(page, b"new\n")])) == [page]
-    assert docs_pages.stale(iter([(page, b"old\n")])) == []
-    assert docs_pages.stale(iter([(tmp_path / "missing.md", b"x")])) == [tmp_path / "missing.md"]
+    assert site.stale(iter([(page, b"new\n")])) == [page]
+    assert site.stale(iter([(page, b"old\n")])) == []
+    assert site.stale(iter([(tmp_path / "missing.md", b"x")])) == [tmp_path / "missing.md"]
 
 
 def test_cli_reference_lists_every_command_and_option() -> None:
@@ -97,7 +97,7 @@ def test_paper_page_is_the_whole_table_else_the_claims_and_copies_figures(tmp_pa
                                    "\n\n[SVG](fig/a.svg)\n")
     (run / "fig" / "a.png").write_bytes(b"PNG")
     (run / "fig" / "a.svg").write_bytes(b"<svg/>")
-    page = docs_pages.paper_page("seedX", run)
+    page = site.paper_page("seedX", run)
     assert page is not None
     text = page[DOCS / "papers" / "seedX.md"].decode()
     assert text.count("# Claims") == 1
@@ -106,9 +106,9 @@ def test_paper_page_is_the_whole_table_else_the_claims_and_copies_figures(tmp_pa
     assert page[DOCS / "papers" / "seedX" / "fig" / "a.png"] == b"PNG"
     assert page[DOCS / "papers" / "seedX" / "fig" / "a.svg"] == b"<svg/>"
     (run / "table.md").write_text("## T\n\nthe table, claims, figures and notes\n")
-    page = docs_pages.paper_page("seedX", run)
+    page = site.paper_page("seedX", run)
     assert b"the table, claims" in page[DOCS / "papers" / "seedX.md"]
-    assert docs_pages.paper_page("seedY", tmp_path / "none") is None
+    assert site.paper_page("seedY", tmp_path / "none") is None
 
 
 def test_only_the_claims_table_is_marked_for_the_stylesheet() -> None:
@@ -118,32 +118,32 @@ def test_only_the_claims_table_is_marked_for_the_stylesheet() -> None:
     import markdown
 
     from cosim.reproduce.tables import md_row
-    from cosim.run.ensemble import CLAIMS_HEADER
+    from cosim.reproduce.verdicts import CLAIMS_HEADER
 
     claims = [md_row(list(CLAIMS_HEADER)), "|" + " --- |" * len(CLAIMS_HEADER),
               md_row(["a_b: A stops first", "holds", "20 of 20", "0.1 [0, 0.2]", "-", "sec. 4",
                       "yes"])]
     text = "\n".join(["# P", "", "| x | y |", "| --- | --- |", "| 1 | 2 |", "", *claims, "",
                       "after", ""])
-    html = markdown.markdown(docs_pages.mark_claims_tables(text),
+    html = markdown.markdown(site.mark_claims_tables(text),
                              extensions=["tables", "md_in_html"])
     assert html.count("<table>") == 2
-    div = re.search(rf'<div class="{docs_pages.CLAIMS_CLASS}">(.*?)</div>', html, re.S)
+    div = re.search(rf'<div class="{site.CLAIMS_CLASS}">(.*?)</div>', html, re.S)
     assert div and "<th>verdict</th>" in div.group(1) and "<td>a_b: A stops first</td>" \
         in div.group(1)
     assert "<td>1</td>" not in div.group(1) and "after" not in div.group(1)
     assert "<p>after</p>" in html
     config = (ROOT / "mkdocs.yml").read_text()
     assert "- md_in_html" in config and "- stylesheets/extra.css" in config
-    assert f".{docs_pages.CLAIMS_CLASS} " in (DOCS / "stylesheets" / "extra.css").read_text()
+    assert f".{site.CLAIMS_CLASS} " in (DOCS / "stylesheets" / "extra.css").read_text()
 
 
 def test_fill_generated_replaces_only_its_block() -> None:
     text = "a <!-- generated: k -->old<!-- end generated --> b"
-    assert docs_pages.fill_generated(text, "k", "new") == (
+    assert site.fill_generated(text, "k", "new") == (
         "a <!-- generated: k -->new<!-- end generated --> b")
     with pytest.raises(ValueError, match="generated: other"):
-        docs_pages.fill_generated(text, "other", "x")
+        site.fill_generated(text, "other", "x")
 
 
 def test_host_packages_cover_every_fmu_import(monkeypatch: pytest.MonkeyPatch) -> None:
@@ -155,8 +155,8 @@ def test_host_packages_cover_every_fmu_import(monkeypatch: pytest.MonkeyPatch) -
     # each FMU's imports found once (a pure function of its bundled files): the page's list and
     # the check below read the same answers
     third_party_imports = functools.cache(reference.third_party_imports)
-    monkeypatch.setattr(docs_pages, "third_party_imports", third_party_imports)
-    listed = docs_pages.host_packages()
+    monkeypatch.setattr(site, "third_party_imports", third_party_imports)
+    listed = site.host_packages()
     for spec in catalog().values():
         for name in third_party_imports(spec.module):
             assert f"`{name}`" in listed
@@ -381,7 +381,7 @@ def test_paper_claims_tables_fit_1280px(rendered: dict[str, dict]) -> None:
     """Each claims table's verdict column and its last column (rounding-robust) lie inside the
     window and inside the table's own scrolling box at 1280 px, so a reader sees the whole
     table without scrolling sideways."""
-    from cosim.run.ensemble import CLAIMS_HEADER
+    from cosim.reproduce.verdicts import CLAIMS_HEADER
 
     papers = {p: probe for p, probe in rendered.items()
               if p.startswith("papers/") and p != "papers/"}

@@ -4,7 +4,7 @@
         ^                         (plants and controllers use cosim's FMU side, never the reverse)
     cosim.run  <-  cosim.interop  <-  cosim.cli
         ^    ^
-        |    cosim.reproduce  <-  cosim.cli  (paper reproductions: entries, jobs, tables, page)
+        |    cosim.reproduce  <-  cosim.site  <-  cosim.cli  (reproductions; the generated pages)
     cosim.papers  (the metric registry; cosim.run consults it by module name, importlib)
         ^
     papers/NAME/metrics.py  (a paper's metric plug-ins; only the registry loads them, by path)
@@ -18,9 +18,9 @@ metrics by path, tests load a script by path).
 
 ``cosim.fmu`` (bundled into every FMU) imports nothing else of the project; ``cosim.run`` and
 ``cosim.interop`` never import plants or controllers (the catalog finds the FMU wrappers by
-file name, not by import). The modules of ``cosim.run`` that evaluate a reproduction's record
-(:data:`ALSO_ALLOWED`) also import ``cosim.reproduce``. Checked on the import statements of
-every module (``ast``), those inside functions included.
+file name, not by import); what evaluates a reproduction's record (its claims, statistics,
+record, tables and page) is ``cosim.reproduce``, above ``cosim.run``. Checked on the import
+statements of every module (``ast``), those inside functions included.
 
 No module of ``cosim`` imports, directly or through others, a module that imports it: the
 graph of every import statement (module-level and function-local; those under ``if
@@ -50,22 +50,16 @@ ALLOWED: dict[str, set[str]] = {
     "cosim.interop": {"cosim.fmu", "cosim.run", "cosim.interop"},
     "cosim.optimal": {"cosim.fmu", "plants", "cosim.optimal"},
     "cosim.reproduce": {"cosim.fmu", "cosim.run", "cosim.reproduce"},
+    # the documentation site's generated pages: the FMU reference, the schema, the papers
+    "cosim.site": {"cosim.fmu", "cosim.run", "cosim.reproduce", "cosim.site"},
     "cosim.cli": {"cosim.fmu", "cosim.run", "cosim.papers", "cosim.interop", "cosim.optimal",
-                  "cosim.reproduce", "cosim.cli"},
+                  "cosim.reproduce", "cosim.site", "cosim.cli"},
     # the Python entry point: a peer of the CLI (it reads the CLI's choice of printed metrics)
     "cosim.api": {"cosim.fmu", "cosim.run", "cosim.cli", "cosim.api"},
     "cosim": {"cosim"},  # cosim/__init__.py: nothing
     # a paper's metric plug-ins (papers/NAME/metrics.py): the registry and what a metric reads
     "papers": {"cosim.fmu", "cosim.run", "cosim.papers"},
 }
-# module -> the parts it may import besides its part's: the claims' ensembles and the pages
-# evaluate a reproduction's record with the reproduction's helpers (evaluation-only modules)
-ALSO_ALLOWED: dict[str, set[str]] = {
-    "cosim.run.ensemble": {"cosim.reproduce"},
-    "cosim.run.docs_pages": {"cosim.reproduce"},
-}
-
-
 def part_of(module: str) -> str | None:
     for part in sorted(ALLOWED, key=len, reverse=True):
         if module == part or module.startswith(part + "."):
@@ -118,7 +112,7 @@ def test_imports_run_one_way(path: Path, module: str) -> None:
     own = part_of(module)
     assert own is not None, f"{module} belongs to no part: add it to ALLOWED"
     for line, imported in project_imports(path, module):
-        assert part_of(imported) in ALLOWED[own] | ALSO_ALLOWED.get(module, set()), (
+        assert part_of(imported) in ALLOWED[own], (
             f"{path.relative_to(ROOT)}:{line}: {own} must not import {imported}")
 
 

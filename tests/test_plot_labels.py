@@ -680,9 +680,9 @@ def test_paper_figures_from_their_records_read_as_published(built_fmus, entry_na
     import matplotlib.pyplot as plt
 
     from cosim.reproduce.entry import load_entry
+    from cosim.reproduce.record import load, series_name
     from cosim.reproduce.series import run_scenarios
     from cosim.run.figures import LEGEND_WIDTH, MAX_PANELS, figure_of, measured_line
-    from cosim.run.record import load, series_name
 
     entry = load_entry(entry_name)
     figure = next(f for f in entry.figures if f.file == file)

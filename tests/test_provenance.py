@@ -5,10 +5,10 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from cosim import site
 from cosim.fmu.build import ROOT
-from cosim.run import docs_pages
+from cosim.reproduce.record import Record, build_of, save
 from cosim.run.provenance import entry_digest, entry_inputs, simulation_digest
-from cosim.run.record import Record, build_of, save
 
 
 def _rel(paths: list[Path]) -> set[str]:
@@ -21,8 +21,8 @@ def test_inputs_are_the_entry_its_scenarios_their_cores_and_the_evaluation() -> 
     assert "papers/seed000/scenarios/seed000_stop_pid.toml" in files
     assert "controllers/pid/stop_pid.py" in files  # the core behind StopPid
     assert "plants/brake_delay.py" in files  # the plant behind BrakeDelayTrain
-    assert "cosim/run/claims.py" in files
-    assert "cosim/run/docs_pages.py" not in files  # the page writer is not an input
+    assert "cosim/reproduce/claims.py" in files
+    assert "cosim/site.py" not in files  # the page writer is not an input
     assert not any(f.startswith("papers/seed001/scenarios/") for f in files)
     # every paper's metric plug-ins (the registry loads them all), not its tuning or scripts
     assert {f"papers/seed00{n}/metrics.py" for n in range(1, 5)} <= files
@@ -62,39 +62,39 @@ def test_digest_is_a_function_of_contents(monkeypatch) -> None:
 
 
 def test_stale_papers_names_runs_and_pages_made_from_other_inputs(tmp_path, monkeypatch) -> None:
-    monkeypatch.setattr(docs_pages, "paper_names", lambda: ["seed000"])
+    monkeypatch.setattr(site, "paper_names", lambda: ["seed000"])
     run = tmp_path / "seed000"
     run.mkdir()
     (run / "claims.md").write_text("## claims\n")
-    (run / docs_pages.INPUTS_FILE).write_text(entry_digest("seed000") + "\n")
+    (run / site.INPUTS_FILE).write_text(entry_digest("seed000") + "\n")
     with monkeypatch.context() as m:  # the local run decides where no current page does
-        m.setattr(docs_pages, "_page_digest", lambda name: None)
-        (line,) = docs_pages.stale_papers(tmp_path)  # no record behind it: not publishable
+        m.setattr(site, "_page_digest", lambda name: None)
+        (line,) = site.stale_papers(tmp_path)  # no record behind it: not publishable
         assert "cannot be published" in line and "no record" in line
         save(Record("seed000", simulation_digest("seed000"), 3, True), run)  # too few members
-        (line,) = docs_pages.stale_papers(tmp_path)
+        (line,) = site.stale_papers(tmp_path)
         assert "K = 3 members, the entry declares 20" in line and "--seeds 20" in line
         save(Record("seed000", simulation_digest("seed000"), 20, True), run)
-        assert docs_pages.stale_papers(tmp_path) == []
-        page = docs_pages.paper_page("seed000", run)[docs_pages.DOCS / "papers" / "seed000.md"]
+        assert site.stale_papers(tmp_path) == []
+        page = site.paper_page("seed000", run)[site.DOCS / "papers" / "seed000.md"]
         assert f"<!-- inputs {entry_digest('seed000')} -->" in page.decode()
-        (run / docs_pages.INPUTS_FILE).write_text("0" * 64 + "\n")
-        (line,) = docs_pages.stale_papers(tmp_path)
+        (run / site.INPUTS_FILE).write_text("0" * 64 + "\n")
+        (line,) = site.stale_papers(tmp_path)
         # the record's simulation inputs are still the tree's: redrawn, not rerun
         assert "other inputs" in line and "run `cosim docs`" in line and "no simulation" in line
         save(Record("seed000", "0" * 64, 20, True), run)  # a record of other simulation inputs
-        (line,) = docs_pages.stale_papers(tmp_path)
-        folder = docs_pages.DOCS / "papers" / "seed000"
-        committed = docs_pages.record_simulation(folder)
+        (line,) = site.stale_papers(tmp_path)
+        folder = site.DOCS / "papers" / "seed000"
+        committed = site.record_simulation(folder)
         if committed != simulation_digest("seed000", build_of(folder)):
             assert "run `cosim reproduce seed000`, then `cosim docs`" in line
     (run / "claims.md").unlink()  # no run here: the committed page's header decides
-    committed = docs_pages.DOCS / "papers" / "seed000.md"
-    text = committed.read_text() if committed.is_file() else docs_pages.NOT_REPRODUCED
-    found = docs_pages._INPUTS.search(text)
+    committed = site.DOCS / "papers" / "seed000.md"
+    text = committed.read_text() if committed.is_file() else site.NOT_REPRODUCED
+    found = site._INPUTS.search(text)
     if found is None:  # the page saying how to make it carries no result: not stale
-        expect_stale = text != docs_pages.NOT_REPRODUCED.format(name="seed000")
+        expect_stale = text != site.NOT_REPRODUCED.format(name="seed000")
     else:
         expect_stale = found.group(1) != entry_digest(
-            "seed000", build_of(docs_pages.DOCS / "papers" / "seed000"))
-    assert bool(docs_pages.stale_papers(tmp_path)) == expect_stale
+            "seed000", build_of(site.DOCS / "papers" / "seed000"))
+    assert bool(site.stale_papers(tmp_path)) == expect_stale

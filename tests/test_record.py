@@ -1,4 +1,4 @@
-"""The record of a reproduction's simulations (cosim.run.record): summaries read back bit for
+"""The record of a reproduction's simulations (cosim.reproduce.record): summaries read back bit for
 bit, series at the record's digits, the same record the same bytes, a record that cannot
 serve an entry named as such, and a save cut at any step leaving one complete record."""
 
@@ -11,8 +11,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-import cosim.run.record as record_module
-from cosim.run.record import (
+import cosim.reproduce.record as record_module
+from cosim.reproduce.record import (
     SERIES_DIGITS,
     Job,
     Record,

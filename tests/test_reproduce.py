@@ -428,9 +428,9 @@ def test_redraw_makes_the_same_tables_claims_and_figures_from_the_record_alone(
     """Everything after the simulations is a function of the record: redrawn with every
     simulation entry point disabled it is byte for byte what the run wrote; a changed claim
     is re-evaluated on the recorded members; a run the record lacks is named."""
+    import cosim.reproduce.members as ensemble
     import cosim.reproduce.page as page
     import cosim.reproduce.run as rep
-    import cosim.run.ensemble as ensemble
 
     path = tmp_path / "entry.toml"
     path.write_text(CLAIMED.replace("kind = \"overlay\"", "kind = \"overlay\"\nruns = [\"PID\"]"))
@@ -536,9 +536,9 @@ def test_resume_runs_only_what_the_record_lacks(built_fmus, tmp_path: Path,
     that lost a member gets that member run again and the same claims."""
     import gzip
 
+    import cosim.reproduce.members as ensemble
     import cosim.reproduce.run as rep
-    import cosim.run.ensemble as ensemble
-    from cosim.run.record import load, save
+    from cosim.reproduce.record import load, save
 
     path = tmp_path / "entry.toml"
     path.write_text(CLAIMED)
@@ -569,8 +569,8 @@ def test_the_table_runs_are_member_one_of_the_disturbance_ensemble() -> None:
     """A single run of the table takes the first report seed (so it is member 1 of the
     claims' ensemble, and its seed is named on the page); entries without a random input
     add nothing."""
+    from cosim.reproduce.members import claim_jobs
     from cosim.reproduce.run import run_jobs, table_seed
-    from cosim.run.ensemble import claim_jobs
 
     entry = load_entry("seed000")
     key = entry.ensemble.seed_key
@@ -607,7 +607,7 @@ def test_single_run_cells_whose_printed_figure_moves_on_the_rerun_are_marked() -
 def test_fixed_notation_keeps_three_digits_of_the_smallest_magnitude() -> None:
     """One fixed notation per set of numbers: whole numbers without decimals, else enough
     decimals for three significant digits of the smallest non-zero magnitude."""
-    from cosim.run.claims import MAX_DECIMALS, decimals_for, fixed
+    from cosim.reproduce.numbers import MAX_DECIMALS, decimals_for, fixed
 
     assert decimals_for([31130.0, 2.0, 0.0]) == 0
     assert decimals_for([1.518e-4, 0.004643]) == 6  # 0.000152: 3 digits
@@ -625,7 +625,7 @@ def test_fixed_notation_at_and_just_below_powers_of_ten() -> None:
     the printed digits, not from log10's last bit."""
     import math
 
-    from cosim.run.claims import decimals_for, number
+    from cosim.reproduce.numbers import decimals_for, number
 
     def significant(text: str) -> int:
         return len(text.replace("-", "").replace(".", "").lstrip("0"))
@@ -697,7 +697,7 @@ def test_a_native_rounding_rerun_needs_a_perturbed_parameter(tmp_path: Path) -> 
     rounding rerun would repeat the main run, so it is refused, naming the key."""
     from dataclasses import replace
 
-    from cosim.run.ensemble import claim_jobs
+    from cosim.reproduce.members import claim_jobs
 
     shipped = load_entry("seed002")
     entry = replace(shipped, ensemble=replace(shipped.ensemble, rounding_perturb=[]))
@@ -714,7 +714,7 @@ def test_a_native_rounding_rerun_needs_a_perturbed_parameter(tmp_path: Path) -> 
 def test_a_native_campaign_gives_the_python_campaigns_verdicts(tmp_path: Path) -> None:
     """Seed 002's claims at K = 2 on the native builds (plant and every controller in C) and
     on the Python builds: the same verdicts and members on the claimed side."""
-    from cosim.run.ensemble import run_claims
+    from cosim.reproduce.verdicts import run_claims
 
     entry = load_entry("seed002")
     rows = {build: run_claims(entry, tmp_path / build, 2, workers=2, rounding=False,

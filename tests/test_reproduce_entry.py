@@ -143,9 +143,10 @@ def test_the_schema_page_is_current() -> None:
 
 def test_the_schema_page_documents_every_key() -> None:
     """Every key an entry may have is on the page, with its meaning."""
+    from cosim.reproduce.claims import CLAIM_KEYS
+    from cosim.reproduce.ensemble import ENSEMBLE_KEYS
     from cosim.reproduce.entry import PARTS, Entry, Statement, Variant
     from cosim.reproduce.fields import keys_of
-    from cosim.run.claims import CLAIM_KEYS, ENSEMBLE_KEYS
 
     page = schema_markdown()
     sections = re.split(r"^## ", page, flags=re.M)

@@ -79,7 +79,7 @@ def _seed002_best() -> dict[str, float]:
 def test_seed002_picks_give_their_recorded_criterion(built_fmus, law: str) -> None:
     from cosim.reproduce.builds import build_overrides
     from cosim.reproduce.entry import load_entry
-    from cosim.run.ensemble import execute
+    from cosim.reproduce.members import execute
     from cosim.run.scenario import load_scenario
     from cosim.run.simulate import ensure_built
 

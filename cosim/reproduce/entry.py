@@ -8,8 +8,9 @@ An entry is an :class:`Entry` of parts, one dataclass per TOML table
 entry against them: unknown keys (with the nearest known name), missing keys, types, ranges
 and the names one part gives another; its errors name the file, the table and the key with
 its value. The claims' own tables (``[ensemble]``, ``[[claims]]``) are checked by
-:mod:`cosim.run.claims`, whose ``*_KEYS`` tables document their keys. The schema page
-``docs/reproduce_schema.md`` is written from both (:mod:`cosim.reproduce.schema`).
+:mod:`cosim.reproduce.ensemble` and :mod:`cosim.reproduce.claims`, whose ``*_KEYS`` tables
+document their keys. The schema page ``docs/reproduce_schema.md`` is written from both
+(:mod:`cosim.reproduce.schema`).
 """
 
 from __future__ import annotations
@@ -19,6 +20,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from cosim.reproduce.claims import CLAIM_KEYS, Claim, check_claims
+from cosim.reproduce.ensemble import ENSEMBLE_KEYS, ClaimsError, Ensemble, check_ensemble
 from cosim.reproduce.fields import ReproduceError, build, check_keys, check_table, doc, span_error
 from cosim.reproduce.parts import (
     DERIVED_KINDS,
@@ -33,15 +36,6 @@ from cosim.reproduce.parts import (
     Statement,
     Sweep,
     Variant,
-)
-from cosim.run.claims import (
-    CLAIM_KEYS,
-    ENSEMBLE_KEYS,
-    Claim,
-    ClaimsError,
-    Ensemble,
-    check_claims,
-    check_ensemble,
 )
 from cosim.run.scenario import PAPERS_DIR, ROOT, entry_files, read_toml
 
@@ -88,10 +82,10 @@ class Entry:
     sweeps: list[Sweep] = doc("sweeps of scenarios over a grid", default=[])
     figures: list[Figure] = doc("figures of the runs' series", default=[])
     ensemble: Ensemble = doc("how a run is varied over seeds for the claims "
-                             "(:class:`cosim.run.claims.Ensemble`)", default=Ensemble())
+                             "(:class:`cosim.reproduce.ensemble.Ensemble`)", default=Ensemble())
     claims: list[Claim] = doc(
         "the paper's claims, tested over the ensemble (families expanded; "
-        ":func:`cosim.run.claims.check_claims`)", default=[])
+        ":func:`cosim.reproduce.claims.check_claims`)", default=[])
     variants: list[Variant] = doc("every claim again with some runs replaced", default=[])
     statements: list[Statement] = doc(
         "each assertion of the paper with the claims that test it, or why it is untestable",
@@ -262,7 +256,7 @@ def _tuned(where: str, tuned: dict[str, str]) -> dict[str, Any]:
 
 
 def _claim_keys(path: Path, data: dict[str, Any]) -> None:
-    """The keys of the claims' tables (checked further by :mod:`cosim.run.claims`)."""
+    """The keys of the claims' tables (checked further by :mod:`cosim.reproduce.claims`)."""
     if "ensemble" in data:
         check_keys(f"{path}: [ensemble]", data["ensemble"], list(ENSEMBLE_KEYS))
     for i, table in enumerate(_tables(str(path), "claims", data.get("claims", []))):

@@ -5,7 +5,7 @@ the page ``table.md`` (the citation and what the paper claims; the verdicts: the
 paper's statements, the claims grouped by origin; the paper's figures and sweeps redrawn; the
 single runs, ours beside the paper's, derived figures and rankings; the notes) with
 ``table.csv``, and
-``claims.*`` (:mod:`cosim.run.ensemble`). :func:`redraw_entry` (``--redraw``) is that half
+``claims.*`` (:mod:`cosim.reproduce.verdicts`). :func:`redraw_entry` (``--redraw``) is that half
 alone, :func:`reproduce` one entry end to end (:func:`cosim.reproduce.run.simulate`, the
 record, :func:`evaluate`) and :func:`reproduce_all` every entry with one ``REPRODUCTION.md``."""
 
@@ -27,6 +27,8 @@ from cosim.reproduce.entry import (
     shipped,
 )
 from cosim.reproduce.figures import ensemble_lines, figure_section, sweep_section
+from cosim.reproduce.members import host_text
+from cosim.reproduce.record import Record, RecordError, check_jobs, load, save, series_name
 from cosim.reproduce.run import (
     figure_runs,
     merged_summaries,
@@ -45,18 +47,16 @@ from cosim.reproduce.tables import (
     table_markdown,
     table_rows,
 )
-from cosim.run.console import fit_table
-from cosim.run.ensemble import (
+from cosim.reproduce.verdicts import (
     VERDICTS,
     compact_table,
     failed_claims_markdown,
     final_verdict,
-    host_text,
     verdict_summary,
     write_claims,
 )
+from cosim.run.console import fit_table
 from cosim.run.provenance import INPUTS_FILE, entry_digest, simulation_digest
-from cosim.run.record import Record, RecordError, check_jobs, load, save, series_name
 from cosim.run.results import locked_destination
 from cosim.run.scenario import ROOT
 
@@ -68,7 +68,7 @@ class Page:
     table: Path  # the page's file (``table.md`` or the entry's ``table`` name)
     markdown: str  # its content
     rows: list[Cell]  # the table's cells (:func:`cosim.reproduce.tables.table_rows`)
-    claim_rows: list[dict[str, Any]]  # one per claim (:func:`cosim.run.ensemble.evaluate`)
+    claim_rows: list[dict[str, Any]]  # one per claim (:func:`cosim.reproduce.verdicts.evaluate`)
 
 
 def single_run_reruns(entry: Entry, record: Record) -> dict[str, list[dict[str, Any]]]:
@@ -110,7 +110,7 @@ def builds_sentence(entry: Entry, record: Record) -> str:
 
 def evaluate(entry: Entry, record: Record, out: Path, plot_format: str = "png") -> Page:
     """Tables, sweeps' tables and figures, figures, claims and the page of ``entry`` from
-    ``record`` alone (no simulation; :class:`cosim.run.record.RecordError` if the record
+    ``record`` alone (no simulation; :class:`cosim.reproduce.record.RecordError` if the record
     lacks a job the entry reads): writes ``table.md`` / ``table.csv`` (``entry.table``),
     ``claims.*`` and the figures in ``plot_format`` to ``out``."""
     import pandas as pd
@@ -256,10 +256,10 @@ def reproduce_page(name: str, out_dir: str | Path | None = None, workers: int | 
                    scheduler: str | None = None, plot_format: str = "png", echo: bool = True,
                    resume: bool = False, build: str | None = None) -> Page:
     """Run one entry (:func:`simulate`), keep its record (``record/``,
-    :mod:`cosim.run.record`) and write everything made of it (:func:`evaluate`): the tables,
+    :mod:`cosim.reproduce.record`) and write everything made of it (:func:`evaluate`): the tables,
     sweeps, figures (in ``plot_format``: png at 200 dpi with its svg beside it, svg or pdf;
     each line figure also over the claims' disturbance ensemble) and, with claims,
-    claims.csv/claims.md over ``seeds`` members (default 20; :mod:`cosim.run.ensemble`,
+    claims.csv/claims.md over ``seeds`` members (default 20; :mod:`cosim.reproduce.members`,
     ``rounding``: also the perturbed floating-point rerun); every batch of runs goes through
     :mod:`cosim.run.runner` (``workers``, ``scheduler``). With ``echo`` the tables are printed
     in 80 columns (:func:`console_text`). With ``resume`` the jobs the folder's record already

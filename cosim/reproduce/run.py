@@ -1,6 +1,6 @@
 """The simulations of a reproduction entry: its table runs (with repetitions), sweeps and the
-claims' members (:mod:`cosim.run.ensemble`), run through :mod:`cosim.run.runner`, and the
-:class:`cosim.run.record.Record` of their results and of the series the figures draw."""
+claims' members (:mod:`cosim.reproduce.members`), run through :mod:`cosim.run.runner`, and the
+:class:`cosim.reproduce.record.Record` of their results and of the series the figures draw."""
 
 from __future__ import annotations
 
@@ -12,11 +12,11 @@ import numpy as np
 
 from cosim.reproduce.builds import build_overrides
 from cosim.reproduce.entry import FIGURE_KINDS, Entry, Figure, ReproduceError, shipped, slug
+from cosim.reproduce.members import host_load, member_jobs, simulate_claims, with_host
+from cosim.reproduce.record import Job, Record, known, save, series_name
 from cosim.reproduce.series import record_series, run_scenarios
 from cosim.run import runner
-from cosim.run.ensemble import host_load, member_jobs, simulate_claims, with_host
 from cosim.run.provenance import simulation_digest
-from cosim.run.record import Job, Record, known, save, series_name
 from cosim.run.scenario import load_scenario
 from cosim.run.simulate import ensure_built, run_scenario
 from cosim.run.sweep import parse_grid, run_sweep, warm_up_for

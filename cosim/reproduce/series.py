@@ -10,9 +10,9 @@ import numpy as np
 import pandas as pd
 
 from cosim.reproduce.entry import Entry, Figure
+from cosim.reproduce.record import Record, read_csv
 from cosim.run.figures import figure_columns
 from cosim.run.metrics import matching_columns
-from cosim.run.record import Record, read_csv
 from cosim.run.scenario import load_scenario
 
 MEMBER_ROWS = 2000  # rows of a member's series at most: the ensemble bands, evenly thinned

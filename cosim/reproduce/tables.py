@@ -14,7 +14,8 @@ from typing import Any
 import numpy as np
 
 from cosim.reproduce.entry import Entry
-from cosim.run.claims import decimals_for, fixed, ratio_ci
+from cosim.reproduce.numbers import decimals_for, fixed
+from cosim.reproduce.stats import ratio_ci
 
 
 def summary_value(summary: dict[str, Any], key: str) -> Any:
@@ -55,7 +56,7 @@ def md_row(cells: list[str]) -> str:
 
 def fmt(value: Any, decimals: int | None = None) -> str:
     """A value in a markdown cell: "-" for none, yes / no, a number in fixed notation with
-    ``decimals`` decimals (its column's, :func:`cosim.run.claims.decimals_for`; None: its
+    ``decimals`` decimals (its column's, :func:`cosim.reproduce.numbers.decimals_for`; None: its
     own), a text as it is."""
     if value is None:
         return "-"
@@ -201,7 +202,7 @@ def table_rows(entry: Entry, summaries: dict[str, dict[str, Any]],
 
 
 def column_decimals(entry: Entry, summaries: dict[str, dict[str, Any]], key: str) -> int:
-    """The fixed notation of metric ``key``'s column (:func:`cosim.run.claims.decimals_for`
+    """The fixed notation of metric ``key``'s column (:func:`cosim.reproduce.numbers.decimals_for`
     of every run's value and repetitions)."""
     values: list[Any] = []
     for run in entry.runs:

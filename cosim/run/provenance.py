@@ -12,15 +12,15 @@ every file that model is made from (``cosim.fmu.native_build.native_sources``: i
 fronts and the builder);
 and the code that runs and evaluates them (``cosim/run/``, ``cosim/papers/``,
 ``cosim/reproduce/``: their Python and the master's C loop; every paper's metric plug-ins,
-``papers/*/metrics.py``, which the registry loads), leaving out the pages' own
-writer. :func:`entry_digest` is a SHA-256
+``papers/*/metrics.py``, which the registry loads); the pages' own writer
+(:mod:`cosim.site`) is not among them. :func:`entry_digest` is a SHA-256
 over their relative paths and contents, so it is the same on every machine for the same tree.
 
 The *simulation* inputs (:func:`simulation_digest`) are the same files less the entry and the
 modules that only turn a record into tables, claims, figures and pages (:data:`EVALUATION_ONLY`,
 every module of :data:`EVALUATION_ONLY_FOLDERS`):
 what fixes a simulation's result given its job (scenario and overrides, which the record keeps
-and :func:`cosim.run.record.check_jobs` compares). A record whose simulation digest is the
+and :func:`cosim.reproduce.record.check_jobs` compares). A record whose simulation digest is the
 tree's serves the page whatever changed in the entry or the evaluation code: the page is then
 redrawn from it in seconds (``cosim docs``) instead of rerunning the simulations.
 """
@@ -44,10 +44,9 @@ except ModuleNotFoundError:  # Python 3.10
 EVALUATION = ("cosim/run", "cosim/papers", "cosim/reproduce")
 PAPER_METRICS = "papers/*/metrics.py"  # every paper's metric plug-ins (cosim.papers.registry)
 INPUTS_FILE = "inputs.sha256"  # in a reproduction's folder: the digest of the inputs it ran
-NOT_INPUTS = {"cosim/run/docs_pages.py", "cosim/run/provenance.py"}
+NOT_INPUTS = {"cosim/run/provenance.py"}
 # read a record and the entry only: tables, claims, figures, the page
-EVALUATION_ONLY = {"cosim/run/ensemble.py", "cosim/run/claims.py",
-                   "cosim/run/record.py", "cosim/run/console.py"}
+EVALUATION_ONLY = {"cosim/run/console.py"}
 # every module under these folders is evaluation-only: the reproduction (its entries, jobs,
 # tables, figures and page), whose jobs the record keeps and compares, and every figure
 # (a run's, a sweep's, an ensemble's, a paper's), which draws numbers and makes none

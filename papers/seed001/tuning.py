@@ -63,7 +63,7 @@ from tuning_protocol import (  # noqa: E402
 
 from controllers.datadriven.emu_control import EmuGpc, EmuIsmc, EmuIsmpc, EmuMfac  # noqa: E402
 from cosim.papers import paper_metrics  # noqa: E402
-from cosim.run.claims import parse_seeds  # noqa: E402
+from cosim.reproduce.ensemble import parse_seeds  # noqa: E402
 from plants.route import load_reference  # noqa: E402
 
 unit_indices = paper_metrics("seed001").unit_indices  # this folder's metrics.py, as registered

@@ -117,7 +117,7 @@ def picks_from_log(path: Path) -> tuple[dict[str, dict], dict[str, float]]:
 def main() -> None:
     from cosim.reproduce.builds import build_overrides
     from cosim.reproduce.entry import load_entry
-    from cosim.run.ensemble import execute
+    from cosim.reproduce.members import execute
     from cosim.run.scenario import load_scenario
     from cosim.run.simulate import ensure_built
 

@@ -431,7 +431,7 @@ def figure_series(frame: Any, spec: dict[str, Any], y: str, run: str) -> Any:
     """The values a figure plots for ``y`` of one run (before ``y_scale``): the column, or with
     ``y_reduce = "mean"`` the mean of the columns ``y`` names (``"plant.v[*]"``; a column of
     that name is that mean as recorded), minus the ``y_minus`` column where given."""
-    if "y_reduce" in spec and y in frame:  # the reduction as recorded (cosim.run.record)
+    if "y_reduce" in spec and y in frame:  # the reduction as recorded (cosim.reproduce.record)
         cols = [y]
     else:
         cols = matching_columns(frame, y) if "y_reduce" in spec else [y] if y in frame else []

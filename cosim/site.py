@@ -20,7 +20,7 @@ evaluation code; the run writes it to ``runs/reproduce/NAME/inputs.sha256``). :f
 lists every page whose inputs have changed since, or that has no run behind it, so
 ``cosim docs --check`` fails on results the tree no longer gives.
 
-The record of the simulations (``record/``, :mod:`cosim.run.record`) is copied beside the page
+The record of the simulations (``record/``, :mod:`cosim.reproduce.record`) is copied beside the page
 (``docs/papers/NAME/record/``). Where only the entry or the evaluation code changed (the
 record's simulation digest is the tree's, :func:`cosim.run.provenance.simulation_digest`),
 ``cosim docs`` redraws the page from that record (the local run's, else the committed one) in
@@ -41,11 +41,11 @@ from cosim.fmu.build import ROOT, catalog
 from cosim.fmu.reference import REFERENCE_PATH, fmu_reference, third_party_imports
 from cosim.reproduce.entry import ReproduceError, load_entry
 from cosim.reproduce.page import redraw_entry
+from cosim.reproduce.record import RECORD_DIR, RecordError, build_of, simulation_of
 from cosim.reproduce.schema import SCHEMA_PATH, schema_markdown
 from cosim.reproduce.tables import md_row
-from cosim.run.ensemble import CLAIMS_HEADER
+from cosim.reproduce.verdicts import CLAIMS_HEADER
 from cosim.run.provenance import INPUTS_FILE, entry_digest, simulation_digest
-from cosim.run.record import RECORD_DIR, RecordError, build_of, simulation_of
 from cosim.run.scenario import entry_files
 
 DOCS = ROOT / "docs"
@@ -145,8 +145,9 @@ CLAIMS_CLASS = "claims-table"  # docs/stylesheets/extra.css fits it in the page'
 
 
 def mark_claims_tables(text: str) -> str:
-    """``text`` with each claims table (header :data:`cosim.run.ensemble.CLAIMS_HEADER`) inside
-    a ``<div class="claims-table" markdown>`` (the ``md_in_html`` extension), which the site's
+    """``text`` with each claims table (header
+    :data:`cosim.reproduce.verdicts.CLAIMS_HEADER`) inside a ``<div class="claims-table"
+    markdown>`` (the ``md_in_html`` extension), which the site's
     stylesheet fits in the content width at 1280 px: the claim column wraps, the verdict and
     the last column stay in view."""
     table = re.compile(rf"^{re.escape(md_row(list(CLAIMS_HEADER)))}\n(?:\|.*(?:\n|$))*", re.M)

@@ -1,0 +1,292 @@
+"""An entry's claims evaluated on the record of their members: one row per claim (the
+statistics of :mod:`cosim.reproduce.stats`, adjusted for multiplicity), ``claims.csv`` /
+``claims.md`` (and ``variants.*``), the ensemble figures, and the verdicts' sentences of a
+paper's page."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from cosim.reproduce.claims import ORIGINS, PAIRED_KINDS
+from cosim.reproduce.entry import Entry
+from cosim.reproduce.members import claim_cases, host_text, members, simulate_claims
+from cosim.reproduce.numbers import decimals_for, fixed
+from cosim.reproduce.record import Record, series_name
+from cosim.reproduce.series import run_scenarios
+from cosim.reproduce.stats import ALPHA, adjust, verdict, with_rounding
+from cosim.reproduce.tables import md_row, summary_value
+from cosim.run.figures import draw_ensemble_figure
+
+
+def _metric(summaries: dict[Any, dict[str, Any] | None], run: str, ens: str, n: int,
+            path: int, metric: str) -> np.ndarray:
+    vals = []
+    for i in range(n):
+        s = summaries.get((run, ens, i, path))
+        v = None if s is None else summary_value(s, metric)
+        ok = isinstance(v, (int, float))  # a bool (a rule met) counts as 1 / 0
+        vals.append(float(v) if ok else math.nan)
+    return np.array(vals)
+
+
+def evaluate(entry: Entry, summaries: dict[Any, dict[str, Any] | None], k: int,
+             rounding: bool = True, variants: bool = False) -> list[dict[str, Any]]:
+    """One row per claim (see :func:`cosim.reproduce.stats.verdict`); with ``variants`` one row
+    per claim and ``[[variants]]`` entry that replaces one of its runs instead."""
+    rows = []
+    for var, claim, names, with_rnd, kc in claim_cases(entry, k, rounding):
+        if (var != "main") != variants:
+            continue
+        ens = claim.ensemble
+        n = len(members(entry, ens, kc))
+        results = []
+        for path in (0, *entry.ensemble.rounding_paths()) if with_rnd else (0,):
+            a = _metric(summaries, names[0], ens, n, path, claim.metric)
+            b = (_metric(summaries, names[1], ens, n, path, claim.metric)
+                 if len(names) > 1 else None)
+            if claim.transform == "abs":  # e.g. the stop error's size, either side
+                a, b = np.abs(a), None if b is None else np.abs(b)
+            results.append(verdict(claim, a, b))
+        row = with_rounding(results[0], results[1:])
+        rows.append({**({"variant": var} if variants else {}),
+                     "id": claim.id, "source": claim.source, "text": claim.text,
+                     "paper": claim.paper, "metric": claim.metric, "kind": claim.kind,
+                     "runs": " vs ".join(names), "ensemble": ens, "origin": claim.origin,
+                     "share": claim.share, "threshold": claim.bound(), **row})
+    return adjust(rows)
+
+
+def variants_markdown(entry: Entry, rows: list[dict[str, Any]], var_rows: list[dict[str, Any]]
+                      ) -> str:
+    """Each claim's verdict as written and under every variant (a column each, the claims in
+    the order of :func:`by_origin`; "=": the variant replaces none of the claim's runs), then
+    what each variant replaces."""
+    names = [v.name for v in entry.variants]
+    got = {(r["variant"], r["id"]): r for r in var_rows}
+
+    def cell(r: dict[str, Any] | None) -> str:
+        if r is None:
+            return "="
+        flag = "" if r["rounding_robust"] in (None, True) else " (r)"
+        return f"{_shown(r)}{flag} ({r['k']}/{r['K']})"
+
+    lines = [md_row(["claim", "main", *names]), "|" + " --- |" * (2 + len(names))]
+    for r in by_origin(rows):
+        lines.append(md_row([r["id"], cell(r), *(cell(got.get((n, r["id"]))) for n in names)]))
+    lines += ["", "Verdict (k of K on the claimed side) of every claim with the runs of each "
+              "variant in place of those it replaces; (r): rounding-sensitive. The cells of "
+              "all variants are one family: their p-values are adjusted together "
+              f"(Benjamini-Hochberg, false discovery rate {ALPHA:g}), and a decision the "
+              "adjustment does not keep reads \"inconclusive (raw: ...)\". Variants:", ""]
+    for v in entry.variants:
+        rep = "; ".join(f"{a} -> {b}" for a, b in v.replace.items())
+        rnd = "" if v.rounding else " (no perturbed floating-point rerun)"
+        if v.seeds is not None:
+            rnd += f" (the first {v.seeds} report seeds at most)"
+        lines.append(f"- **{v.name}**: {v.text}{rnd}. {rep}.")
+    return "\n".join(lines)
+
+
+VERDICTS = ("holds", "fails", "inconclusive", "no effect", "insufficient", "rounding-sensitive")
+
+
+def final_verdict(r: dict[str, Any]) -> str:
+    """A claim row's verdict as read: adjusted for multiplicity where it was, else raw."""
+    return r.get("adjusted", r["verdict"])
+
+
+def _shown(r: dict[str, Any]) -> str:
+    """The adjusted verdict, with the raw one where the adjustment changed it."""
+    adjusted = final_verdict(r)
+    return adjusted if adjusted == r["verdict"] else f"{adjusted} (raw: {r['verdict']})"
+
+
+def rounding_text(entry: Entry, build: str = "python") -> str:
+    """The perturbed floating-point paths of ``entry``'s members on ``build``, in words (the
+    numpy reference path only on the Python build: every plant has a native model)."""
+    ens = entry.ensemble
+    first = [f"`{key}` x (1 + 1e-12)" for key in ens.rounding_perturb]
+    if ens.rounding_reference_path and build == "python":
+        first.append("the Python plants' numpy reference path")
+    paths = [" and ".join(first)]
+    if ens.rounding_perturb_second:
+        paths.append(" and ".join(f"`{key}` x (1 + 1e-12)" for key in
+                                  ens.rounding_perturb_second))
+    return "; ".join(f"path {i}: {text}" for i, text in enumerate(paths, 1))
+
+
+CLAIMS_HEADER = ("claim", "verdict", "k of K", "ours: median [95 % CI]", "paper", "source",
+                 "rounding-robust")
+
+
+def by_origin(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """The claims' rows grouped by origin (the paper's, ours, the sanity checks: the order of
+    :data:`cosim.reproduce.claims.ORIGINS`), each group in the entry's order."""
+    return sorted(rows, key=lambda r: ORIGINS.index(r.get("origin", "paper")))
+
+
+def claims_markdown(rows: list[dict[str, Any]], k: int, rounding: str = "",
+                    host: str = "", headings: dict[str, str] | None = None) -> str:
+    """The claims table: each claim (the paper's first, then ours, then the sanity checks:
+    :func:`by_origin`) with its verdict first (adjusted for multiplicity, the raw one where
+    they differ), k of K, ours (after the metric's heading with its unit where ``headings``,
+    metric key -> the entry's ``[[metrics]]`` heading, has it), the paper's figure and
+    source; then the counts per origin and what the columns mean (``rounding``: the
+    perturbed paths in words, :func:`rounding_text`; ``host``: where the repeat claims were
+    measured, :func:`host_text`)."""
+    headings = headings or {}
+    lines = [md_row(list(CLAIMS_HEADER)), "|" + " --- |" * len(CLAIMS_HEADER)]
+    for r in by_origin(rows):
+        heading = headings.get(r["metric"], r["metric"])
+        what = f"A - B, {heading}" if r["kind"] in PAIRED_KINDS else heading
+        robust = ("n/a" if r["ensemble"] == "repeat" else "-" if r["rounding_robust"] is None
+                  else "yes" if r["rounding_robust"] else "no")
+        quant = r.get("quantifier", "typical")
+        if quant == "share":
+            quant = f"share >= {r.get('share', '')}"
+        lines.append(md_row([f"{r['id']}: {r['text']} ({quant}; {r['runs']}; {r['metric']}, "
+                           f"{r['ensemble']}; {r.get('origin', 'paper')})", _shown(r),
+                           f"{r['k']} of {r['K']}", f"{what}: {ours_text(r)}", r["paper"],
+                           r["source"], robust]))
+    origins = dict.fromkeys(r.get("origin", "paper") for r in rows)
+    counts = []
+    for origin in origins:
+        mine = [r for r in rows if r.get("origin", "paper") == origin]
+        counts.append(f"{origin} ({len(mine)}): " + ", ".join(
+            f"{v} {n}" for v in VERDICTS if (n := sum(final_verdict(r) == v
+                                                      for r in mine))))
+    lines += ["", f"--seeds {k}. " + "; ".join(counts) + ".", "",
+              "Quantifiers: *every* holds only if every member is on the claimed side (ours "
+              "gives the worst member); *typical* is the sign test on the median (exact, "
+              "distribution-free; the CI is the median's exact 95 % CI, a decision that CI "
+              "strictly on one side); *share >= p* the exact binomial test of k of K against "
+              "p. A - B: the paired difference per member (same seed / mismatch sample); k of "
+              "K: members on the claimed side. The claims of the paper are one family: the "
+              "p-values of the typical and share claims are adjusted by Benjamini-Hochberg "
+              f"(false discovery rate {ALPHA:g}); a decision the adjustment does not keep "
+              "reads \"inconclusive (raw: ...)\". no effect: undecided, and the median "
+              "difference's CI within the claim's stated margin of B's median (ours says "
+              "which). insufficient: K members cannot decide "
+              "whatever they show (the note says which K would). rounding-sensitive: the "
+              "verdict differs on a perturbed floating-point rerun"
+              + (f" ({rounding})" if rounding else "") + "."]
+    if any(r["kind"] == "equal" for r in rows):
+        lines[-1] += (" An equal claim (A no different from B, \"levels off\") holds when the "
+                      "median difference's CI lies inside +-margin of B's median (the band "
+                      "ours states), fails when the sign test puts the median outside it; k "
+                      "of K: members inside the band.")
+    if any(r["ensemble"] == "repeat" for r in rows):
+        lines[-1] += (" repeat: the members are repetitions of the same nominal run (K fixed "
+                      "by the entry, not by --seeds), paired by repeat index; no rounding "
+                      "rerun (n/a)" + (f"; {host}" if host else "") + ".")
+    return "\n".join(lines)
+
+
+def compact_table(rows: list[dict[str, Any]]) -> str:
+    """The claims in at most 80 columns (id, k of K, adjusted verdict)."""
+    lines = [f"{'claim':<44} {'k/K':>7}  verdict", "-" * 72]
+    for r in rows:
+        flag = "" if r["rounding_robust"] in (None, True) else " (r)"
+        lines.append(f"{r['id'][:44]:<44} {r['k']:>3}/{r['K']:<3}  "
+                     f"{final_verdict(r)}{flag}")
+    return "\n".join(lines)
+
+
+def ours_text(row: dict[str, Any]) -> str:
+    """``median [low, high]`` of the tested quantity in one fixed notation (:func:`fixed`;
+    ``-`` where unknown); for a universal claim the worst member too."""
+    worst = row.get("worst", math.nan) if row.get("quantifier") == "every" else None
+    shown = [row["median"], row["ci_low"], row["ci_high"], worst]
+    decimals = decimals_for(shown)
+
+    def f(v: float | None) -> str:
+        return "-" if v is None else fixed(float(v), decimals)
+    text = f"{f(row['median'])} [{f(row['ci_low'])}, {f(row['ci_high'])}]"
+    if worst is not None:
+        text += f", worst {f(worst)}"
+    b = row.get("b_median")
+    if row.get("kind") in PAIRED_KINDS and b and math.isfinite(b) and not math.isnan(
+            row["median"]):  # the effect's size: "no effect" and "undecided" look apart
+        share = 100.0 * row["median"] / abs(b)
+        text += f" ({'+' if share > 0 else ''}{fixed(share, decimals_for([share], 2))} % of B)"
+    return f"{text} ({row['note']})" if row.get("note") else text
+
+
+def write_claims(entry: Entry, record: Record, out: Path, plot_format: str = "png"
+                 ) -> tuple[list[dict[str, Any]], str, dict[str, list[Path]]]:
+    """Evaluate the entry's claims on ``record``'s members; write ``claims.csv``,
+    ``claims.md`` (and ``variants.*``) and the ensemble figures (``plot_format``; a png with
+    its svg beside it) to ``out``; returns the claims' rows, the markdown of claims.md below
+    its title, and the paths of each ensemble figure by its figure's ``file``."""
+    import pandas as pd
+
+    k, rounding = record.seeds, record.rounding
+    summaries = {job.key: record.results[ident] for ident, job in record.jobs.items()
+                 if job.kind == "member"}
+    rows = evaluate(entry, summaries, k, rounding)
+    out.mkdir(parents=True, exist_ok=True)
+    n = len(members(entry, "disturbance", k))
+    drawn: dict[str, list[Path]] = {}
+    scenarios = run_scenarios(entry) if n > 1 else {}  # loaded once, for every figure
+    for figure in entry.figures if n > 1 else []:
+        if not figure.line_kind():
+            continue
+        runs = [r for r in figure.runs or entry.run_names()
+                if all(series_name("member", r, i) in record.series for i in range(n))]
+        if runs:
+            drawn[figure.file] = draw_ensemble_figure(
+                figure.spec(),
+                {r: [record.series[series_name("member", r, i)] for i in range(n)]
+                 for r in runs},
+                out / f"{Path(figure.file).stem}_ensemble.{plot_format}", scenarios,
+                vector=True)
+    pd.DataFrame(rows).to_csv(out / "claims.csv", index=False)
+    host = host_text([record.results[ident] for ident, job in record.jobs.items()
+                      if job.kind == "member" and job.key[1] == "repeat"])
+    text = claims_markdown(rows, k, rounding_text(entry, record.build) if rounding else "",
+                           host, {m.key: m.heading for m in entry.metrics}) + "\n"
+    if entry.variants:
+        var_rows = evaluate(entry, summaries, k, rounding, variants=True)
+        pd.DataFrame(var_rows).to_csv(out / "variants.csv", index=False)
+        text += ("\n#### The claims under each variant\n\n"
+                 + variants_markdown(entry, rows, var_rows) + "\n")
+    (out / "claims.md").write_text(f"## Claims of {entry.title}\n\n" + text)
+    return rows, text, drawn
+
+
+def verdict_summary(rows: list[dict[str, Any]], k: int) -> str:
+    """The verdicts in one sentence for the top of a paper's page: the counts per origin
+    (after the multiplicity adjustment)."""
+    counts = []
+    for origin in dict.fromkeys(r.get("origin", "paper") for r in rows):
+        mine = [r for r in rows if r.get("origin", "paper") == origin]
+        got = ", ".join(f"{n} {v}" for v in VERDICTS
+                        if (n := sum(final_verdict(r) == v for r in mine)))
+        counts.append(f"{len(mine)} {'of the paper' if origin == 'paper' else origin}: {got}")
+    return (f"**Verdicts** over K = {k} seeds (Benjamini-Hochberg adjusted; table below): "
+            + "; ".join(counts) + ".")
+
+
+def failed_claims_markdown(rows: list[dict[str, Any]]) -> str:
+    """The paper's claims that fail here (after the multiplicity adjustment), as a list under
+    its lead sentence; empty when none fails."""
+    failed = [r for r in rows if r.get("origin", "paper") == "paper"
+              and final_verdict(r) == "fails"]
+    if not failed:
+        return ""
+    return "\n".join(["Not reproduced (the paper's claims that fail here):", "",
+                      *(f"- {r['text']} (`{r['id']}`)" for r in failed)])
+
+
+def run_claims(entry: Entry, out: Path, k: int, workers: int | None = None,
+               rounding: bool = True, scheduler: str | None = None,
+               plot_format: str = "png", build: str = "python") -> list[dict[str, Any]]:
+    """Run and evaluate the entry's claims (:func:`simulate_claims`, then
+    :func:`write_claims` on that record); returns the claims' rows."""
+    record = Record(entry.name, "", k, rounding, build)
+    simulate_claims(entry, out, record, workers, scheduler)
+    return write_claims(entry, record, out, plot_format)[0]
