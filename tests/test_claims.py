@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from claim_rows import claim_row
 
 from cosim.reproduce.claims import Claim, check_claims, expand_families
 from cosim.reproduce.ensemble import ClaimsError, check_ensemble, parse_seeds
@@ -31,40 +32,40 @@ def test_planted_difference_holds() -> None:
     # A = B - 1 on every seed (plus the same seed noise): the paired difference is -1 exactly
     b = 5.0 + NOISE
     r = verdict(LESS, b - 1.0 + 0.01 * RNG.standard_normal(20), b)
-    assert r["verdict"] == "holds" and r["k"] == 20 and r["K"] == 20
-    assert r["ci_low"] <= r["median"] <= r["ci_high"] < 0.0
+    assert r.verdict == "holds" and r.k == 20 and r.K == 20
+    assert r.ci_low <= r.median <= r.ci_high < 0.0
 
 
 def test_no_difference_is_inconclusive() -> None:
     # independent N(0, 1) pairs: the median difference's CI covers 0 for this fixed sample
     a, b = RNG.standard_normal(20), RNG.standard_normal(20)
     r = verdict(LESS, a, b)
-    assert r["ci_low"] < 0.0 < r["ci_high"]
-    assert r["verdict"] == "inconclusive"
+    assert r.ci_low < 0.0 < r.ci_high
+    assert r.verdict == "inconclusive"
 
 
 def test_reversed_difference_fails() -> None:
     b = 5.0 + NOISE
     r = verdict(LESS, b + 1.0, b)
-    assert r["verdict"] == "fails" and r["k"] == 0
-    assert verdict({**LESS, "kind": "greater"}, b + 1.0, b)["verdict"] == "holds"
+    assert r.verdict == "fails" and r.k == 0
+    assert verdict({**LESS, "kind": "greater"}, b + 1.0, b).verdict == "holds"
 
 
 def test_threshold_and_range_kinds_under_each_quantifier() -> None:
     x = 0.1 + 0.01 * NOISE
     below = {**LESS, "kind": "below", "threshold": 0.2, "runs": ["A"]}
-    assert verdict(below, x)["verdict"] == "holds"
-    assert verdict({**below, "kind": "above"}, x)["verdict"] == "fails"
+    assert verdict(below, x).verdict == "holds"
+    assert verdict({**below, "kind": "above"}, x).verdict == "fails"
     inside = {**LESS, "kind": "inside", "range": [-0.5, 0.5], "runs": ["A"]}
-    assert verdict(inside, x)["verdict"] == "holds"
-    assert verdict(inside, x + 1.0)["verdict"] == "fails"
+    assert verdict(inside, x).verdict == "holds"
+    assert verdict(inside, x + 1.0).verdict == "fails"
     # the median at the edge: some members outside, so "every" fails on them; the median's
     # sign test decides neither way
     straddle = 0.5 + 0.01 * NOISE
     r = verdict(inside, straddle)
-    assert r["quantifier"] == "every" and r["verdict"] == "fails"
-    assert r["worst"] == straddle.max() and r["k"] == int(np.sum(straddle <= 0.5))
-    assert verdict({**inside, "quantifier": "typical"}, straddle)["verdict"] == "inconclusive"
+    assert r.quantifier == "every" and r.verdict == "fails"
+    assert r.worst == straddle.max() and r.k == int(np.sum(straddle <= 0.5))
+    assert verdict({**inside, "quantifier": "typical"}, straddle).verdict == "inconclusive"
 
 
 def test_a_universal_claim_is_decided_by_its_worst_member() -> None:
@@ -78,11 +79,11 @@ def test_a_universal_claim_is_decided_by_its_worst_member() -> None:
     one_out = x.copy()
     one_out[7] = 0.70
     r = verdict(inside, one_out)
-    assert r["verdict"] == "fails" and (r["k"], r["K"]) == (19, 20) and r["worst"] == 0.70
-    assert r["p_value"] is None  # a counterexample is not an inference
+    assert r.verdict == "fails" and (r.k, r.K) == (19, 20) and r.worst == 0.70
+    assert r.p_value is None  # a counterexample is not an inference
     r = verdict(inside, x)
-    assert r["verdict"] == "holds"
-    assert r["share_low"] == pytest.approx(ALPHA ** (1 / 20), rel=1e-9)
+    assert r.verdict == "holds"
+    assert r.share_low == pytest.approx(ALPHA ** (1 / 20), rel=1e-9)
 
 
 def test_a_typical_claim_decides_at_most_alpha_of_null_samples_and_small_k_is_insufficient(
@@ -99,17 +100,17 @@ def test_a_typical_claim_decides_at_most_alpha_of_null_samples_and_small_k_is_in
         for k in range(K + 1):
             x = np.where(np.arange(K) < k, -1.0, 1.0) * (1.0 + np.arange(K))
             r = verdict(LESS, x, np.zeros(K))
-            assert r["k"] == k and r["verdict"] in ("holds", "fails", "inconclusive")
-            if r["verdict"] != "inconclusive":
+            assert r.k == k and r.verdict in ("holds", "fails", "inconclusive")
+            if r.verdict != "inconclusive":
                 decided += binom.pmf(k, K, 0.5)
         assert decided <= ALPHA
     for K in (1, 3, 5):
         x = -1.0 - np.arange(K)  # every member on the claimed side
         r = verdict(LESS, x, np.zeros(K)) if K > 1 else verdict(LESS, x, np.array([0.0]))
         if K == 1:
-            assert r["verdict"] == "holds" and r["note"] == "one run"  # deterministic
+            assert r.verdict == "holds" and r.note == "one run"  # deterministic
         else:
-            assert r["verdict"] == "insufficient" and r["note"] == "K >= 6 needed"
+            assert r.verdict == "insufficient" and r.note == "K >= 6 needed"
 
 
 def test_a_share_claim_is_the_exact_binomial_test() -> None:
@@ -118,12 +119,12 @@ def test_a_share_claim_is_the_exact_binomial_test() -> None:
     share = {**LESS, "kind": "below", "threshold": 0.0, "runs": ["A"],
              "quantifier": "share", "share": 0.8}
     x = -1.0 - np.arange(20.0)
-    assert verdict(share, x)["verdict"] == "holds"
+    assert verdict(share, x).verdict == "holds"
     x[3] = 1.0
-    assert verdict(share, x)["verdict"] == "inconclusive"
-    assert verdict(share, -x)["verdict"] == "fails"  # 1 of 20
+    assert verdict(share, x).verdict == "inconclusive"
+    assert verdict(share, -x).verdict == "fails"  # 1 of 20
     r = verdict(share, -1.0 - np.arange(5.0))
-    assert r["verdict"] == "insufficient" and r["note"] == "K >= 17 needed"
+    assert r.verdict == "insufficient" and r.note == "K >= 17 needed"
 
 
 def test_multiplicity_adjustment_is_benjamini_hochberg() -> None:
@@ -132,16 +133,15 @@ def test_multiplicity_adjustment_is_benjamini_hochberg() -> None:
     from cosim.reproduce.stats import ALPHA, adjust
 
     ps = [0.001, 0.04, 0.03, 0.2, 0.012]
-    rows = [{"verdict": "holds", "p_value": p} for p in ps] + [
-        {"verdict": "fails", "p_value": None}]
-    out = adjust(rows)
+    out = adjust([*ps, None], ["holds"] * len(ps) + ["fails"])
     order = np.argsort(ps)
     m = len(ps)
     q = np.minimum.accumulate((np.array(ps)[order] * m / np.arange(1, m + 1))[::-1])[::-1]
     want = np.empty(m)
     want[order] = q
-    assert [r["adjusted_p"] for r in out[:m]] == pytest.approx(list(want), rel=1e-12)
-    assert [r["adjusted"] for r in out] == [
+    assert [p for p, _ in out[:m]] == pytest.approx(list(want), rel=1e-12)
+    assert out[m][0] is None
+    assert [v for _, v in out] == [
         "holds" if w < ALPHA else "inconclusive" for w in want] + ["fails"]
 
 
@@ -149,13 +149,13 @@ def test_degenerate_samples_give_a_stated_verdict() -> None:
     # all equal (a deterministic run): the value decides
     med, lo, hi, note = median_ci(np.full(5, 2.0))
     assert (med, lo, hi, note) == (2.0, 2.0, 2.0, "all equal")
-    assert verdict(LESS, np.array([1.0]), np.array([2.0]))["verdict"] == "holds"
-    assert verdict(LESS, np.array([2.0]), np.array([2.0]))["verdict"] == "fails"
+    assert verdict(LESS, np.array([1.0]), np.array([2.0])).verdict == "holds"
+    assert verdict(LESS, np.array([2.0]), np.array([2.0])).verdict == "fails"
     # NaN / missing metric and a K too small to decide
     r = verdict(LESS, np.array([1.0, np.nan, 1.0]), np.array([2.0, 2.0, 2.0]))
-    assert r["verdict"] == "inconclusive" and r["note"] == "metric missing"
+    assert r.verdict == "inconclusive" and r.note == "metric missing"
     r = verdict(LESS, np.array([1.0, 1.5]), np.array([2.0, 2.0]))
-    assert r["verdict"] == "insufficient" and r["note"] == "K >= 6 needed"
+    assert r.verdict == "insufficient" and r.note == "K >= 6 needed"
 
 
 def test_rounding_sensitive_is_never_holds() -> None:
@@ -163,18 +163,18 @@ def test_rounding_sensitive_is_never_holds() -> None:
     main = verdict(LESS, b - 1.0, b)
     fake_perturbed = verdict(LESS, b + 1.0, b)  # a perturbed path that flips the order
     out = with_rounding(main, [fake_perturbed])
-    assert main["verdict"] == "holds"
-    assert out["verdict"] == "rounding-sensitive" and out["rounding_robust"] is False
-    assert out["main_verdict"] == "holds" and out["rounding_verdict"] == "fails"
+    assert main.verdict == "holds"
+    assert out.verdict == "rounding-sensitive" and out.rounding_robust is False
+    assert out.main.verdict == "holds" and out.rounding_verdict == "fails"
     agree = verdict(LESS, b - 1.0 + 1e-12, b)
     same = with_rounding(main, [agree])
-    assert same["verdict"] == "holds" and same["rounding_robust"] is True
+    assert same.verdict == "holds" and same.rounding_robust is True
     # two independent paths: one agreeing by chance does not hide the other's flip
     both = with_rounding(main, [agree, fake_perturbed])
-    assert both["verdict"] == "rounding-sensitive" and both["rounding_robust"] is False
-    assert both["rounding_verdict"] == "holds / fails"
-    assert with_rounding(main, [agree, agree])["verdict"] == "holds"
-    assert with_rounding(main, None)["rounding_robust"] is None
+    assert both.verdict == "rounding-sensitive" and both.rounding_robust is False
+    assert both.rounding_verdict == "holds / fails"
+    assert with_rounding(main, [agree, agree]).verdict == "holds"
+    assert with_rounding(main, None).rounding_robust is None
 
 
 def test_seeds_parse_and_must_be_disjoint() -> None:
@@ -272,13 +272,13 @@ def test_an_entry_claims_get_verdicts_end_to_end(built_fmus, tmp_path: Path) -> 
     name = CLAIMS_SMOKE_ENTRY
     entry = load_entry(name)
     rows = run_claims(entry, tmp_path, 3, workers=2)
-    assert [r["id"] for r in rows] == [c.id for c in entry.claims]
+    assert [r.claim.id for r in rows] == [c.id for c in entry.claims]
     for r in rows:  # K = 3 decides universal claims on the members, and no median
-        main = r["main_verdict"]
-        if r["quantifier"] == "every" and r["note"] != "metric missing":
-            assert main == ("holds" if r["k"] == r["K"] else "fails"), r
-        elif r["note"] not in ("all equal", "one run", "metric missing"):
-            assert main == "insufficient" and r["note"] == "K >= 6 needed", r
+        main = r.main.verdict
+        if r.main.quantifier == "every" and r.main.note != "metric missing":
+            assert main == ("holds" if r.main.k == r.main.K else "fails"), r
+        elif r.main.note not in ("all equal", "one run", "metric missing"):
+            assert main == "insufficient" and r.main.note == "K >= 6 needed", r
     assert (tmp_path / "claims.csv").is_file() and (tmp_path / "claims.md").is_file()
 
 
@@ -308,11 +308,11 @@ def test_a_margin_tells_no_effect_from_undecided() -> None:
     wide = b + 5.0 * centred  # differences ~5: CI beyond +-1
     claim = {**LESS, "margin": 0.01}
     small = verdict(claim, tiny, b)
-    assert small["verdict"] == "no effect" and "1%" in small["note"]
-    assert -1.0 < small["ci_low"] and small["ci_high"] < 1.0
-    assert verdict(claim, wide, b)["verdict"] == "inconclusive"
-    assert verdict(claim, b - 3.0, b)["verdict"] == "holds"
-    assert verdict(LESS, tiny, b)["verdict"] == "inconclusive"  # no margin, no equivalence
+    assert small.verdict == "no effect" and "1%" in small.note
+    assert -1.0 < small.ci_low and small.ci_high < 1.0
+    assert verdict(claim, wide, b).verdict == "inconclusive"
+    assert verdict(claim, b - 3.0, b).verdict == "holds"
+    assert verdict(LESS, tiny, b).verdict == "inconclusive"  # no margin, no equivalence
 
 
 def test_an_equal_claim_is_the_two_one_sided_tests_of_its_band() -> None:
@@ -324,15 +324,15 @@ def test_an_equal_claim_is_the_two_one_sided_tests_of_its_band() -> None:
     claim = {**LESS, "kind": "equal", "margin": 0.05}
     inside = verdict(claim, b + 0.5 * centred, b)
     band = 0.05 * abs(float(np.median(b)))
-    assert inside["verdict"] == "holds" and inside["k"] == 20
-    assert -band < inside["ci_low"] and inside["ci_high"] < band
-    assert "5%" in inside["note"]
-    assert verdict(claim, b - 3.0 * band + 0.1 * centred, b)["verdict"] == "fails"
-    assert verdict(claim, b + 3.0 * band + 0.1 * centred, b)["verdict"] == "fails"
+    assert inside.verdict == "holds" and inside.k == 20
+    assert -band < inside.ci_low and inside.ci_high < band
+    assert "5%" in inside.note
+    assert verdict(claim, b - 3.0 * band + 0.1 * centred, b).verdict == "fails"
+    assert verdict(claim, b + 3.0 * band + 0.1 * centred, b).verdict == "fails"
     edge = verdict(claim, b + band + 0.5 * centred, b)  # the median on the edge: undecided
-    assert edge["verdict"] == "inconclusive" and edge["ci_low"] < band < edge["ci_high"]
+    assert edge.verdict == "inconclusive" and edge.ci_low < band < edge.ci_high
     # the same samples under "less" with the margin: the tiny difference is "no effect"
-    assert verdict({**claim, "kind": "less"}, b + 0.05 * centred, b)["verdict"] == "no effect"
+    assert verdict({**claim, "kind": "less"}, b + 0.05 * centred, b).verdict == "no effect"
 
 
 @pytest.mark.parametrize("change", [{}, {"margin": 0.1, "quantifier": "every"},
@@ -355,7 +355,7 @@ def test_a_margin_is_a_fraction_on_a_typical_comparison(change: dict) -> None:
 def test_reproduction_summary_counts_verdicts() -> None:
     from cosim.reproduce.page import claims_summary
 
-    rows = [{"id": i, "verdict": v, "adjusted": a} for i, v, a in (
+    rows = [claim_row(id=i, verdict=v, adjusted=a) for i, v, a in (
         ("x", "holds", "holds"), ("y", "fails", "fails"), ("z", "holds", "inconclusive"))]
     lines = claims_summary({"a": rows, "b": []}).splitlines()
     assert lines[0] == ("| entry | claims | holds | fails | inconclusive | no effect | "
@@ -415,9 +415,9 @@ def test_variants_replace_runs_in_every_claim_and_get_their_own_verdicts() -> No
             summaries[(run, "disturbance", i, False)] = {"m": value + 0.01 * i}
     main = evaluate(entry, summaries, 6, rounding=False)
     alt = evaluate(entry, summaries, 6, rounding=False, variants=True)
-    assert [(r["id"], r["verdict"]) for r in main] == [("a_below_b", "fails"),
+    assert [(r.claim.id, r.verdict) for r in main] == [("a_below_b", "fails"),
                                                        ("c_below_b", "holds")]
-    assert [(r["variant"], r["id"], r["verdict"], r["K"]) for r in alt] == [
+    assert [(r.variant, r.claim.id, r.verdict, r.main.K) for r in alt] == [
         ("alt", "a_below_b", "holds", 4)]
 
 
@@ -502,15 +502,15 @@ def test_repeat_verdict_over_the_repeats_pairs_by_index() -> None:
         for i in range(2):
             for rnd in (False, True):
                 summaries[(r, "disturbance", i, rnd)] = {"m": 0.0 if r == "A" else 1.0}
-    rows = {r["id"]: r for r in evaluate(entry, summaries, 2, rounding=True)}
+    rows = {r.claim.id: r for r in evaluate(entry, summaries, 2, rounding=True)}
     # the paired differences are exactly -0.5 and +0.5 on every repeat, though the drift
     # spans the samples of each run
     a = rows["a_faster_than_b"]
-    assert (a["verdict"], a["k"], a["K"], a["median"]) == ("holds", 5, 5, -0.5)
-    assert a["rounding_robust"] is None and a["rounding_verdict"] is None
+    assert (a.verdict, a.main.k, a.main.K, a.main.median) == ("holds", 5, 5, -0.5)
+    assert a.result.rounding_robust is None and a.result.rounding_verdict is None
     c = rows["c_faster_than_b"]
-    assert (c["verdict"], c["k"], c["K"]) == ("fails", 0, 5)
-    assert rows["a_below_b"]["K"] == 2 and rows["a_below_b"]["rounding_robust"] is True
+    assert (c.verdict, c.main.k, c.main.K) == ("fails", 0, 5)
+    assert rows["a_below_b"].main.K == 2 and rows["a_below_b"].result.rounding_robust is True
     text = claims_markdown(list(rows.values()), 2)
     line = next(x for x in text.splitlines() if x.startswith("| a_faster_than_b"))
     assert line.rstrip(" |").endswith("n/a") and "repeat index" in text
@@ -556,11 +556,11 @@ def test_repeat_claim_end_to_end_on_a_fast_entry(tmp_path: Path) -> None:
         '[[claims]]\nid = "a_within_bound"\ntext = "t"\nmetric = "wall_time_s"\n'
         'kind = "below"\nthreshold = 1e9\nruns = ["A"]\n')
     entry = load_entry(path)
-    rows = {r["id"]: r for r in run_claims(entry, tmp_path / "out", 2, workers=1)}
-    assert rows["a_faster"]["K"] == 3 and rows["a_faster"]["rounding_robust"] is None
-    assert rows["a_faster"]["verdict"] == "insufficient"  # 3 repeats cannot decide a median
+    rows = {r.claim.id: r for r in run_claims(entry, tmp_path / "out", 2, workers=1)}
+    assert rows["a_faster"].main.K == 3 and rows["a_faster"].result.rounding_robust is None
+    assert rows["a_faster"].verdict == "insufficient"  # 3 repeats cannot decide a median
     # no seed key: the disturbance claim is one run, with its rounding rerun
-    assert rows["a_within_bound"]["K"] == 1 and rows["a_within_bound"]["rounding_robust"]
+    assert rows["a_within_bound"].main.K == 1 and rows["a_within_bound"].result.rounding_robust
     csv = pd.read_csv(tmp_path / "out" / "claims.csv")
     assert list(csv["K"]) == [3, 1]
     assert "n/a" in (tmp_path / "out" / "claims.md").read_text()
@@ -608,8 +608,6 @@ def test_a_timing_run_records_its_machine_and_load_and_the_page_states_them() ->
     text = host_text(runs)
     assert text == "measured on X, 2 cores, 1-minute load average 0.5-3.2 over the repeats"
     assert host_text([{"qp": 1.0}, None]) == ""
-    row = {"id": "t", "text": "t", "paper": "", "source": "", "metric": "m", "kind": "less",
-           "runs": "A vs B", "ensemble": "repeat", "origin": "ours", "k": 10, "K": 10,
-           "verdict": "holds", "rounding_robust": None, "median": -1.0, "ci_low": -2.0,
-           "ci_high": -0.5, "quantifier": "typical"}
+    row = claim_row(id="t", text="t", metric="m", ensemble="repeat", origin="ours", k=10,
+                    K=10, rounding_robust=None, median=-1.0, ci_low=-2.0, ci_high=-0.5)
     assert text in claims_markdown([row], 20, host=text)

@@ -10,10 +10,11 @@ from pathlib import Path
 
 import markdown
 import pytest
+from claim_rows import claim_row
 
 from cosim.reproduce.entry import entry_names, load_entry
 from cosim.reproduce.tables import md_row
-from cosim.reproduce.verdicts import CLAIMS_HEADER, by_origin, claims_markdown
+from cosim.reproduce.verdicts import CLAIMS_HEADER, ClaimRow, by_origin, claims_markdown
 
 PAPERS = Path(__file__).resolve().parent.parent / "docs" / "papers"
 _CELL_SEP = re.compile(r"(?<!\\)\|")  # a cell border: a pipe not escaped
@@ -126,14 +127,11 @@ def test_page_numbers_are_in_fixed_notation(name: str) -> None:
     assert not re.findall(r"\d\.?\d*e[+-]\d\d", tables)
 
 
-def _row(**change: object) -> dict[str, object]:
-    row: dict[str, object] = {
-        "id": "a_below_b", "text": "A stops closer than B", "quantifier": "typical",
-        "runs": "A vs B", "metric": "stop_error_m", "ensemble": "disturbance",
-        "origin": "paper", "verdict": "holds", "k": 20, "K": 20, "kind": "less",
+def _row(**change: object) -> ClaimRow:
+    fields: dict[str, object] = {
         "median": -0.0001518, "ci_low": -0.0002, "ci_high": -0.00012, "b_median": 0.3,
-        "paper": "5.95 cm", "source": "Table 1", "rounding_robust": True}
-    return row | change
+        "paper": "5.95 cm", "source": "Table 1"}
+    return claim_row(**(fields | change))
 
 
 def test_claims_rows_keep_their_cells_and_group_by_origin() -> None:
@@ -148,5 +146,5 @@ def test_claims_rows_keep_their_cells_and_group_by_origin() -> None:
     assert all(_cells(line) == len(CLAIMS_HEADER) for line in table)
     assert [line.split(":")[0].strip("| ") for line in table[2:]] == [
         "paper_1", "paper_2", "ours_1", "sanity_1"]
-    assert [r["id"] for r in by_origin(rows)] == ["paper_1", "paper_2", "ours_1", "sanity_1"]
+    assert [r.claim.id for r in by_origin(rows)] == ["paper_1", "paper_2", "ours_1", "sanity_1"]
     assert "A - B, stop error (m): -0.000152 [-0.000200, -0.000120] (-0.051 % of B)" in text

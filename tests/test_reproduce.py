@@ -9,6 +9,7 @@ from typing import Any
 
 import pandas as pd
 import pytest
+from claim_rows import claim_row
 
 from cosim.reproduce.entry import Figure, ReproduceError, entry_names, load_entry
 from cosim.reproduce.figures import draw_speed_classes, figure_section
@@ -497,9 +498,10 @@ def test_the_headline_reads_reproduced_only_when_every_claim_holds() -> None:
     decide it; statements not marked as headline stay out of it."""
     from cosim.reproduce.page import headline_markdown
     from cosim.reproduce.parts import Statement
+    from cosim.reproduce.verdicts import ClaimRow
 
-    def row(cid: str, verdict: str, adjusted: str, k: int) -> dict[str, object]:
-        return {"id": cid, "verdict": verdict, "adjusted": adjusted, "k": k, "K": 20}
+    def row(cid: str, verdict: str, adjusted: str, k: int) -> ClaimRow:
+        return claim_row(id=cid, verdict=verdict, adjusted=adjusted, k=k, K=20)
 
     rows = [row("a", "holds", "holds", 20), row("b", "holds", "inconclusive", 14),
             row("c", "fails", "fails", 0)]

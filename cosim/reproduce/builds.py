@@ -5,10 +5,10 @@ cannot perturb."""
 from __future__ import annotations
 
 import functools
-from typing import Any
 
 from cosim.fmu.native_build import NATIVE
 from cosim.reproduce.entry import Entry, ReproduceError
+from cosim.reproduce.record import Overrides
 from cosim.run.scenario import load_scenario
 
 BUILDS = ("native", "python")  # --build: the catalog FMUs' native C builds where they exist
@@ -20,7 +20,7 @@ def _native_components(scenario: str, fmus: tuple[tuple[str, str], ...]) -> tupl
     return tuple(c.name for c in sc.components.values() if c.fmu in NATIVE)
 
 
-def build_overrides(scenario: str, overrides: dict[str, Any], build: str) -> dict[str, str]:
+def build_overrides(scenario: str, overrides: Overrides, build: str) -> dict[str, str]:
     """The overrides that run ``scenario`` (with ``overrides``) on ``build``: with "native",
     ``NAME.build = "native"`` for every FMU whose catalog identifier has a native C model
     (:data:`cosim.fmu.native_build.NATIVE`; the others stay Python) and whose build

@@ -10,15 +10,17 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
+import pandas as pd
+
 from cosim.reproduce.entry import Figure, Sweep, slug
 from cosim.reproduce.tables import fmt, frame_markdown, md_row
 from cosim.run.figures import draw_figure, legend_outside, save_figure, speed_class_errors
 from cosim.run.figures.sweep import draw_sweep, key_labels
-from cosim.run.scenario import load_scenario
+from cosim.run.scenario import Scenario, load_scenario
 
 
-def figure_section(figure: Figure, frames: dict[str, Any], out: Path, plot_format: str,
-                   scenarios: dict[str, Any]) -> list[str]:
+def figure_section(figure: Figure, frames: dict[str, pd.DataFrame], out: Path, plot_format: str,
+                   scenarios: dict[str, Scenario]) -> list[str]:
     """Draw ``figure`` from the runs' series ``frames`` into ``out`` (``plot_format``; a png
     with its svg beside it); the page's lines of it (:func:`figure_lines`, and the table of a
     speed-classes figure)."""
@@ -76,7 +78,7 @@ def sweep_section(sweep: Sweep, stored: dict[str, Any], out: Path, plot_format: 
             *figure_lines(sweep.name, written, out)]
 
 
-def draw_speed_classes(figure: Figure, frames: dict[str, Any], path: Path
+def draw_speed_classes(figure: Figure, frames: dict[str, pd.DataFrame], path: Path
                        ) -> tuple[str, list[Path]]:
     """Grouped bars of :func:`cosim.run.figures.speed_class_errors` per run with each class's
     limit, drawn to ``path`` (and an svg beside a png); writes ``<file>.csv`` beside the

@@ -39,7 +39,7 @@ from cosim.reproduce.claims import Claim, variant_runs
 from cosim.reproduce.ensemble import ROUNDING_RELATIVE
 from cosim.reproduce.entry import Entry, slug
 from cosim.reproduce.record import Job as RecordJob
-from cosim.reproduce.record import Record, known, save, series_name
+from cosim.reproduce.record import MemberKey, Overrides, Record, Summary, known, save, series_name
 from cosim.reproduce.series import MEMBER_ROWS, record_series, run_scenarios
 from cosim.run import runner
 from cosim.run.master.pool import InstancePool
@@ -50,10 +50,10 @@ from cosim.run.sweep import warm_up_for
 
 CHECKPOINT_EVERY = 20  # members between two saves of the partial record
 
-Job = tuple[tuple[str, str, int, int], str, dict[str, Any]]  # (run, ensemble, i, path)
+Job = tuple[MemberKey, str, Overrides]  # the member, its scenario and overrides
 
 
-def members(entry: Entry, ensemble: str, k: int) -> list[dict[str, Any]]:
+def members(entry: Entry, ensemble: str, k: int) -> list[Overrides]:
     """Overrides of each member (before the run's own ``set``) of one ensemble kind."""
     ens = entry.ensemble
     if k < 1:
@@ -83,12 +83,12 @@ def _draws(entry: Entry, k: int) -> list[dict[str, float]]:
     return draw_samples(perts, nominals, k, entry.ensemble.perturb_seed)
 
 
-def _rounding_overrides(entry: Entry, run: Any, base: dict[str, Any], path: int,
-                        nominals: dict[tuple[str, str], Any]) -> dict[str, Any]:
+def _rounding_overrides(entry: Entry, run: Any, base: Overrides, path: int,
+                        nominals: dict[tuple[str, str], Any]) -> Overrides:
     """Perturbed path ``path``'s parameters (``base``'s value, else the run's, else the
     declared one) scaled by 1 + :data:`ROUNDING_RELATIVE`; ``nominals`` keeps the declared
     values read so far ((scenario, key) -> value), each read once."""
-    out: dict[str, Any] = {}
+    out: Overrides = {}
     for key in entry.ensemble.rounding_keys(path):
         value = base.get(key, run.overrides.get(key))
         if value is None:
@@ -139,7 +139,7 @@ def claim_jobs(entry: Entry, k: int, rounding: bool = True, build: str = "python
     if rounding:
         check_rounding_path(entry, builds)
     jobs: dict[tuple[str, str, int, bool], Job] = {}
-    cache: dict[tuple[str, int], list[dict[str, Any]]] = {}
+    cache: dict[tuple[str, int], list[Overrides]] = {}
     nominals: dict[tuple[str, str], Any] = {}  # declared values of the rounding paths
     for _var, claim, names, with_rnd, kc in claim_cases(entry, k, rounding):
         ens = claim.ensemble
@@ -168,8 +168,8 @@ def claim_jobs(entry: Entry, k: int, rounding: bool = True, build: str = "python
 MEMBER_INSTANCES = InstancePool()
 
 
-def _run_member(scenario: str, overrides: dict[str, Any], out_dir: str | None = None
-                ) -> dict[str, Any]:
+def _run_member(scenario: str, overrides: Overrides, out_dir: str | None = None
+                ) -> Summary:
     """One member in this (worker) process, on the instances of :data:`MEMBER_INSTANCES`;
     its summary with :func:`with_host`. With ``out_dir`` it records the scenario's
     ``[record]`` variables and writes them (results.csv, summary.json; no plot), else it
@@ -211,7 +211,7 @@ def cpu_model() -> str:
     return platform.processor() or platform.machine()
 
 
-def with_host(summary: dict[str, Any], load_before: float) -> dict[str, Any]:
+def with_host(summary: Summary, load_before: float) -> Summary:
     """``summary`` with ``host``: where and under what load the run was measured (the CPU,
     its core count, the 1-minute load average before and after the run), which a timing
     claim's page states."""
@@ -221,7 +221,7 @@ def with_host(summary: dict[str, Any], load_before: float) -> dict[str, Any]:
                                 "load_before": load_before, "load_after": host_load()}}
 
 
-def host_text(summaries: list[dict[str, Any] | None]) -> str:
+def host_text(summaries: list[Summary | None]) -> str:
     """The machine and the range of its 1-minute load average over ``summaries`` (those
     with a ``host``), in words; "" where none has one."""
     hosts = [s["host"] for s in summaries if s and isinstance(s.get("host"), dict)]
@@ -247,8 +247,8 @@ ROUNDING_ENV = {"ATO_COSIM_NO_KERNELS": "1"}  # the plants' numpy reference path
 def execute(jobs: list[Job], workers: int | None, label: str = "claims",
             scheduler: str | None = None, dirs: dict[Any, str] | None = None,
             reference_path: bool = True,
-            on_result: Callable[[Any, dict[str, Any] | None], None] | None = None
-            ) -> dict[tuple[str, str, int, int], dict[str, Any] | None]:
+            on_result: Callable[[MemberKey, Summary | None], None] | None = None
+            ) -> dict[MemberKey, Summary | None]:
     """Run the jobs with :func:`cosim.run.runner.run_tasks`: the main path and the perturbed
     paths in one pool of workers, each worker running its members on the same FMU instances
     (:data:`MEMBER_INSTANCES`), except path 1 in workers of its own started with
@@ -257,7 +257,7 @@ def execute(jobs: list[Job], workers: int | None, label: str = "claims",
     ``dirs``: job key -> folder for the run's results (others write none);
     ``on_result(key, summary)`` as each ends."""
     dirs = dirs or {}
-    out: dict[tuple[str, str, int, int], dict[str, Any] | None] = {}
+    out: dict[MemberKey, Summary | None] = {}
     progress = runner.Progress(len(jobs), label)
 
     def finished(task: runner.Task, summary: Any) -> None:
@@ -320,7 +320,7 @@ def simulate_claims(entry: Entry, out: Path, record: Record, workers: int | None
             record.add(job, previous.result(job.kind, *job.key))
     finished = 0
 
-    def checkpoint(key: Any, summary: dict[str, Any] | None) -> None:
+    def checkpoint(key: MemberKey, summary: Summary | None) -> None:
         nonlocal finished
         if summary is not None:  # a failed member is run again on --resume
             record.add(by_key[key], summary)

@@ -28,7 +28,15 @@ from cosim.reproduce.entry import (
 )
 from cosim.reproduce.figures import ensemble_lines, figure_section, sweep_section
 from cosim.reproduce.members import host_text
-from cosim.reproduce.record import Record, RecordError, check_jobs, load, save, series_name
+from cosim.reproduce.record import (
+    Record,
+    RecordError,
+    Summary,
+    check_jobs,
+    load,
+    save,
+    series_name,
+)
 from cosim.reproduce.run import (
     figure_runs,
     merged_summaries,
@@ -49,6 +57,7 @@ from cosim.reproduce.tables import (
 )
 from cosim.reproduce.verdicts import (
     VERDICTS,
+    ClaimRow,
     compact_table,
     failed_claims_markdown,
     final_verdict,
@@ -68,10 +77,10 @@ class Page:
     table: Path  # the page's file (``table.md`` or the entry's ``table`` name)
     markdown: str  # its content
     rows: list[Cell]  # the table's cells (:func:`cosim.reproduce.tables.table_rows`)
-    claim_rows: list[dict[str, Any]]  # one per claim (:func:`cosim.reproduce.verdicts.evaluate`)
+    claim_rows: list[ClaimRow]  # one per claim (:func:`cosim.reproduce.verdicts.evaluate`)
 
 
-def single_run_reruns(entry: Entry, record: Record) -> dict[str, list[dict[str, Any]]]:
+def single_run_reruns(entry: Entry, record: Record) -> dict[str, list[Summary]]:
     """Run name -> the summaries of the table's single run on the perturbed floating-point
     paths: the reruns of member 1 of the disturbance ensemble, which is the single run
     (:func:`cosim.reproduce.run.table_seed`), where the record has them."""
@@ -133,7 +142,7 @@ def evaluate(entry: Entry, record: Record, out: Path, plot_format: str = "png") 
         singles += ["", derived_markdown(derived)]
     if ranked:
         singles += ["", ranking_markdown(ranked)]
-    claim_rows: list[dict[str, Any]] = []
+    claim_rows: list[ClaimRow] = []
     spread: dict[str, list[Path]] = {}  # a figure's file -> its ensemble figure's paths
     alias = f" (or `cosim reproduce {entry.alias}`)" if entry.alias else ""
     where = (entry.path.relative_to(ROOT).as_posix() if shipped(entry)
@@ -190,7 +199,7 @@ def citation_lines(entry: Entry) -> list[str]:
     return lines
 
 
-def statement_reading(st: Statement, by_id: dict[str, dict[str, Any]]) -> str:
+def statement_reading(st: Statement, by_id: dict[str, ClaimRow]) -> str:
     """Whether a statement is reproduced, from the adjusted verdicts of its claims:
     "reproduced" when every claim holds, "not reproduced" when one fails, "undecided"
     otherwise (inconclusive, insufficient, rounding-sensitive or no effect)."""
@@ -200,11 +209,11 @@ def statement_reading(st: Statement, by_id: dict[str, dict[str, Any]]) -> str:
     return "not reproduced" if "fails" in verdicts else "undecided"
 
 
-def headline_markdown(statements: list[Statement], rows: list[dict[str, Any]]) -> str:
+def headline_markdown(statements: list[Statement], rows: list[ClaimRow]) -> str:
     """One line for the top of the page: each headline statement (``headline = true``) and
     whether it is reproduced, with the claims that decide it (those that do not hold, or all
     of them when every one holds)."""
-    by_id = {r["id"]: r for r in rows}
+    by_id = {r.claim.id: r for r in rows}
     items = []
     for st in statements:
         if not st.headline:
@@ -213,27 +222,27 @@ def headline_markdown(statements: list[Statement], rows: list[dict[str, Any]]) -
         shown = [c for c in st.claims or []
                  if final_verdict(by_id[c]) != "holds"] or st.claims or []
         why = "; ".join(f"`{c}` {final_verdict(by_id[c])} "
-                        f"{by_id[c]['k']}/{by_id[c]['K']}" for c in shown)
+                        f"{by_id[c].main.k}/{by_id[c].main.K}" for c in shown)
         items.append(f"{st.text}: **{reading}** ({why})")
     return ("**Headline** (the results the paper is about): " + ". ".join(items) + "."
             if items else "")
 
 
-def statements_markdown(statements: list[Statement], rows: list[dict[str, Any]]) -> str:
+def statements_markdown(statements: list[Statement], rows: list[ClaimRow]) -> str:
     """Each of the paper's statements with the verdicts (adjusted) of the claims that test it,
     or why it is not tested."""
-    by_id = {r["id"]: r for r in rows}
+    by_id = {r.claim.id: r for r in rows}
 
     def where(st: Statement) -> str:  # its place in the paper: given, or its claims'
         return st.where or "; ".join(dict.fromkeys(
-            by_id[c]["source"] for c in st.claims or [] if by_id[c]["source"]))
+            by_id[c].claim.source for c in st.claims or [] if by_id[c].claim.source))
 
     lines = [md_row(["the paper says", "where", "tested by (verdict, k of K)"]),
              "| --- | --- | --- |"]
     for st in statements:
         if st.claims is not None:
             cell = "; ".join(f"`{c}`: {final_verdict(by_id[c])} "
-                             f"({by_id[c]['k']}/{by_id[c]['K']})" for c in st.claims)
+                             f"({by_id[c].main.k}/{by_id[c].main.K})" for c in st.claims)
         else:
             cell = f"not tested: {st.untestable}"
         lines.append(md_row([st.text, where(st), cell]))
@@ -338,7 +347,7 @@ def redraw_page(name: str, out_dir: str | Path | None = None, plot_format: str =
     return page
 
 
-def console_text(entry: Entry, rows: list[Cell], claim_rows: list[dict[str, Any]],
+def console_text(entry: Entry, rows: list[Cell], claim_rows: list[ClaimRow],
                  out: Path) -> str:
     """The entry's results for an 80-column terminal: ours per run and metric (columns
     numbered, their names below), the claims (id, k of K, verdict) and where the full tables
@@ -365,7 +374,7 @@ def console_text(entry: Entry, rows: list[Cell], claim_rows: list[dict[str, Any]
     return "\n".join(lines)
 
 
-def claims_summary(claims: dict[str, list[dict[str, Any]]]) -> str:
+def claims_summary(claims: dict[str, list[ClaimRow]]) -> str:
     """Claims per verdict (after the multiplicity adjustment) per entry, from each entry's
     claims' rows (an entry without claims: dashes)."""
     lines = [md_row(["entry", "claims", *VERDICTS]), "|" + " --- |" * (2 + len(VERDICTS))]

@@ -37,6 +37,11 @@ _SERIES_DIR = "series"
 FORMAT = 1
 SERIES_DIGITS = 7
 
+# What the reproduction passes between its modules, as the runner gives it:
+Summary = dict[str, Any]  # a run's summary (its summary.json): metric key -> value, tables nested
+Overrides = dict[str, Any]  # a job's scenario overrides: "FMU.PARAMETER" -> value
+MemberKey = tuple[str, str, int, int]  # a claim's member: run, ensemble, index, fp path
+
 
 class RecordError(ValueError):
     """A record that cannot serve an entry (the message says which job or file, and why)."""
@@ -53,7 +58,7 @@ class Job:
     kind: str
     key: tuple[Any, ...]
     scenario: str | list[str]
-    overrides: dict[str, Any]
+    overrides: Overrides
     env: dict[str, str] = field(default_factory=dict)
 
     def spec(self) -> dict[str, Any]:

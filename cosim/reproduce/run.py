@@ -13,7 +13,7 @@ import numpy as np
 from cosim.reproduce.builds import build_overrides
 from cosim.reproduce.entry import FIGURE_KINDS, Entry, Figure, ReproduceError, shipped, slug
 from cosim.reproduce.members import host_load, member_jobs, simulate_claims, with_host
-from cosim.reproduce.record import Job, Record, known, save, series_name
+from cosim.reproduce.record import Job, Overrides, Record, Summary, known, save, series_name
 from cosim.reproduce.series import record_series, run_scenarios
 from cosim.run import runner
 from cosim.run.provenance import simulation_digest
@@ -22,8 +22,8 @@ from cosim.run.simulate import ensure_built, run_scenario
 from cosim.run.sweep import parse_grid, run_sweep, warm_up_for
 
 
-def _run_one(scenario: str, overrides: dict[str, Any], out_dir: str,
-             plot_format: str = "png") -> dict[str, Any]:
+def _run_one(scenario: str, overrides: Overrides, out_dir: str,
+             plot_format: str = "png") -> Summary:
     """One run of ``scenario`` with ``overrides`` into ``out_dir`` (a task): its summary."""
     before = host_load()
     result = run_scenario(scenario, overrides=overrides, out_dir=out_dir, build=False,
@@ -31,7 +31,7 @@ def _run_one(scenario: str, overrides: dict[str, Any], out_dir: str,
     return with_host(result.summary, before)
 
 
-def _merge_repeats(summaries: list[dict[str, Any]]) -> dict[str, Any]:
+def _merge_repeats(summaries: list[Summary]) -> Summary:
     """The first summary, each numeric value replaced by the median over the repetitions;
     ``repeats`` holds every repetition's summary."""
     import statistics
@@ -85,7 +85,7 @@ def sweep_jobs(entry: Entry, build: str = "python") -> list[Job]:
 def run_entry(entry: Entry, out_dir: Path, workers: int | None = None,
               scheduler: str | None = None, plot_format: str = "png",
               record: Record | None = None, previous: Record | None = None,
-              build: str = "python") -> dict[str, dict[str, Any]]:
+              build: str = "python") -> dict[str, Summary]:
     """Run every run of ``entry`` on ``build`` with :func:`cosim.run.runner.run_tasks`
     (``workers`` processes or the Dask ``scheduler``; a run with ``repeat = k`` k times,
     repetitions 2.. under ``runs/<run>/repeat_NN``); returns run name -> summary (medians and
@@ -98,7 +98,7 @@ def run_entry(entry: Entry, out_dir: Path, workers: int | None = None,
         if job.key[1] == 0:
             ensure_built(load_scenario(job.scenario, job.overrides))
     tasks = []
-    done: dict[Any, dict[str, Any]] = {}
+    done: dict[Any, Summary] = {}
     for job in jobs:
         if previous is not None and known(previous, job):
             done[job.key] = previous.result(job.kind, *job.key)
@@ -124,8 +124,8 @@ def run_entry(entry: Entry, out_dir: Path, workers: int | None = None,
     return merged_summaries(entry, {key: done[key] for key in done})
 
 
-def merged_summaries(entry: Entry, done: dict[Any, dict[str, Any]]
-                     ) -> dict[str, dict[str, Any]]:
+def merged_summaries(entry: Entry, done: dict[Any, Summary]
+                     ) -> dict[str, Summary]:
     """Run name -> its summary from (run name, repetition) -> summary: a repeated run's
     medians with ``repeats`` (:func:`_merge_repeats`)."""
     result = {}

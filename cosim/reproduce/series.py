@@ -13,7 +13,7 @@ from cosim.reproduce.entry import Entry, Figure
 from cosim.reproduce.record import Record, read_csv
 from cosim.run.figures import figure_columns
 from cosim.run.metrics import matching_columns
-from cosim.run.scenario import load_scenario
+from cosim.run.scenario import Scenario, load_scenario
 
 MEMBER_ROWS = 2000  # rows of a member's series at most: the ensemble bands, evenly thinned
 
@@ -50,6 +50,6 @@ def record_series(record: Record, name: str, folder: Path, figures: list[Figure]
     record.series[name] = frame
 
 
-def run_scenarios(entry: Entry) -> dict[str, Any]:
+def run_scenarios(entry: Entry) -> dict[str, Scenario]:
     """Run name -> its loaded scenario (with the run's ``set``)."""
     return {r.name: load_scenario(r.scenario, r.overrides) for r in entry.runs}

@@ -53,7 +53,8 @@ rounding verdict does not apply: ``rounding_robust`` is None).
 from __future__ import annotations
 
 import math
-from typing import Any
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -63,6 +64,51 @@ from cosim.reproduce.numbers import number
 CONFIDENCE = 0.95
 N_RESAMPLES = 9999
 BOOTSTRAP_SEED = 12345
+
+
+@dataclass(frozen=True, kw_only=True)
+class Verdict:
+    """One claim tested on its members (:func:`verdict`), in the unit of its metric."""
+
+    quantifier: str  # one of cosim.reproduce.claims.QUANTIFIERS
+    k: int  # members on the claimed side
+    K: int  # members
+    median: float = math.nan  # of the tested quantity (A - B for a paired claim)
+    ci_low: float = math.nan  # the median's exact 95 % CI (order statistics)
+    ci_high: float = math.nan
+    worst: float = math.nan  # the member furthest toward the wrong side
+    share_low: float = math.nan  # every: Clopper-Pearson lower bound of the share of runs
+    p_value: float | None = None  # two-sided, enters the multiplicity adjustment (not every)
+    note: str = ""
+    a_median: float = math.nan  # paired claims: the median of runs[0]'s metric
+    b_median: float = math.nan  # paired claims: the median of runs[1]'s metric
+    verdict: str = "inconclusive"  # holds, fails, inconclusive, no effect or insufficient
+
+
+@dataclass(frozen=True)
+class Rounded:
+    """A claim's verdict on the main floating-point path and on each perturbed one."""
+
+    main: Verdict
+    perturbed: tuple[Verdict, ...] = ()  # in path order; none: no perturbed rerun
+
+    @property
+    def rounding_robust(self) -> bool | None:
+        """Whether every perturbed path gives the main path's verdict (None: no rerun)."""
+        if not self.perturbed:
+            return None
+        return all(p.verdict == self.main.verdict for p in self.perturbed)
+
+    @property
+    def rounding_verdict(self) -> str | None:
+        """Each perturbed path's verdict, in path order, joined by " / " (None: no rerun)."""
+        return " / ".join(p.verdict for p in self.perturbed) if self.perturbed else None
+
+    @property
+    def verdict(self) -> str:
+        """The main path's verdict, or ``rounding-sensitive`` where a perturbed path's
+        differs."""
+        return "rounding-sensitive" if self.rounding_robust is False else self.main.verdict
 
 
 def median_ci(values: np.ndarray) -> tuple[float, float, float, str]:
@@ -132,7 +178,7 @@ def _median_ci(x: np.ndarray) -> tuple[float, float]:
     return (lo, hi) if math.isfinite(lo) and math.isfinite(hi) else (math.nan, math.nan)
 
 
-def _k_needed(decides: Any) -> int:
+def _k_needed(decides: Callable[[int], bool]) -> int:
     """The smallest K at which ``decides(K)`` (the best outcome decides) is true."""
     k = 1
     while not decides(k) and k < 10_000:
@@ -140,7 +186,7 @@ def _k_needed(decides: Any) -> int:
     return k
 
 
-def verdict(claim: Claim, a: np.ndarray, b: np.ndarray | None = None) -> dict[str, Any]:
+def verdict(claim: Claim, a: np.ndarray, b: np.ndarray | None = None) -> Verdict:
     """Evaluate one claim on its members: ``a`` (runs[0]) and, for less/greater, ``b``
     (runs[1]) paired by index. Returns the median and its exact 95 % CI of the tested
     quantity, k of K on the claimed side, the worst member, the quantifier, the p-value that
@@ -167,7 +213,7 @@ def verdict(claim: Claim, a: np.ndarray, b: np.ndarray | None = None) -> dict[st
         good = x > lo_edge
     else:
         good = (x >= lo_edge) & (x <= hi_edge)
-    out: dict[str, Any] = {"quantifier": quantifier, "k": int(np.sum(good)), "K": int(x.size),
+    out: dict[str, object] = {"quantifier": quantifier, "k": int(np.sum(good)), "K": int(x.size),
                            "median": math.nan, "ci_low": math.nan, "ci_high": math.nan,
                            "worst": math.nan, "share_low": math.nan, "p_value": None,
                            "note": ""}
@@ -176,7 +222,7 @@ def verdict(claim: Claim, a: np.ndarray, b: np.ndarray | None = None) -> dict[st
                    b_median=float(np.median(b)) if np.size(b) else math.nan)
     if x.size == 0 or np.isnan(x).any():
         out.update(note="metric missing", verdict="inconclusive")
-        return out
+        return Verdict(**out)  # type: ignore[arg-type]
     out["median"] = float(np.median(x))
     out["worst"] = float(_worst(kind, x, lo_edge, hi_edge))
     if np.all(x == x[0]):  # a deterministic result: its value decides
@@ -185,7 +231,7 @@ def verdict(claim: Claim, a: np.ndarray, b: np.ndarray | None = None) -> dict[st
                    verdict="holds" if good[0] else "fails")
         if quantifier == "every":
             out["p_value"] = None
-        return out
+        return Verdict(**out)  # type: ignore[arg-type]
     out["ci_low"], out["ci_high"] = _median_ci(x)
     n, k = x.size, out["k"]
     half = ALPHA / 2.0
@@ -195,7 +241,7 @@ def verdict(claim: Claim, a: np.ndarray, b: np.ndarray | None = None) -> dict[st
         out["share_low"] = float(binomtest(k, n, 0.5, alternative="greater")
                                  .proportion_ci(CONFIDENCE).low)
         out["verdict"] = "holds" if k == n else "fails"
-        return out
+        return Verdict(**out)  # type: ignore[arg-type]
     if quantifier == "share":
         p = float(claim.share)  # type: ignore[arg-type]
         p_hold, p_fail = _binom_p(k, n, p, "greater"), _binom_p(k, n, p, "less")
@@ -215,7 +261,7 @@ def verdict(claim: Claim, a: np.ndarray, b: np.ndarray | None = None) -> dict[st
     out["p_value"] = min(1.0, 2.0 * min(p_hold, p_fail))
     if not can or n < need:
         out.update(verdict="insufficient", note=f"K >= {need} needed")
-        return out
+        return Verdict(**out)  # type: ignore[arg-type]
     out["verdict"] = "holds" if p_hold < half else "fails" if p_fail < half else "inconclusive"
     if kind == "equal":
         out["note"] = f"band +-{claim.margin:.0%} of B's median = +-{number(hi_edge)}"
@@ -224,7 +270,7 @@ def verdict(claim: Claim, a: np.ndarray, b: np.ndarray | None = None) -> dict[st
         if -bound < out["ci_low"] and out["ci_high"] < bound:
             out.update(verdict="no effect", note=f"the median difference's CI is within "
                                                  f"+-{claim.margin:.0%} of B's median")
-    return out
+    return Verdict(**out)  # type: ignore[arg-type]
 
 
 def _worst(kind: str, x: np.ndarray, lo: float, hi: float) -> float:
@@ -236,36 +282,24 @@ def _worst(kind: str, x: np.ndarray, lo: float, hi: float) -> float:
     return float(x[np.argmax(np.maximum(lo - x, x - hi))])
 
 
-def adjust(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
-    """The rows of one family with ``adjusted_p`` (Benjamini-Hochberg over the rows' p-values,
-    ``scipy.stats.false_discovery_control``) and ``adjusted`` (the verdict, a decision kept
-    only where the adjusted p-value is below :data:`ALPHA`; rows without a p-value keep
-    theirs)."""
+def adjust(p_values: Sequence[float | None], verdicts: Sequence[str]
+           ) -> list[tuple[float | None, str]]:
+    """(adjusted p-value, adjusted verdict) of each claim of one family: Benjamini-Hochberg
+    over the claims' p-values (``scipy.stats.false_discovery_control``), a decision kept only
+    where the adjusted p-value is below :data:`ALPHA`; a claim without a p-value keeps its
+    verdict."""
     from scipy.stats import false_discovery_control
 
-    tested = [i for i, r in enumerate(rows) if r.get("p_value") is not None]
-    adjusted = (false_discovery_control([rows[i]["p_value"] for i in tested], method="bh")
+    tested = [i for i, p in enumerate(p_values) if p is not None]
+    adjusted = (false_discovery_control([p_values[i] for i in tested], method="bh")
                 if tested else [])
-    out = [dict(r, adjusted_p=None, adjusted=r["verdict"]) for r in rows]
+    out: list[tuple[float | None, str]] = [(None, v) for v in verdicts]
     for i, q in zip(tested, adjusted, strict=True):
-        out[i]["adjusted_p"] = float(q)
-        if out[i]["verdict"] in ("holds", "fails") and not q < ALPHA:
-            out[i]["adjusted"] = "inconclusive"
+        keep = verdicts[i] not in ("holds", "fails") or q < ALPHA
+        out[i] = (float(q), verdicts[i] if keep else "inconclusive")
     return out
 
 
-def with_rounding(main: dict[str, Any], perturbed: list[dict[str, Any]] | None
-                  ) -> dict[str, Any]:
-    """``main`` with ``rounding_verdict`` (each perturbed floating-point path's verdict, in
-    path order, joined by " / "), ``rounding_robust`` and the final ``verdict``
-    (``rounding-sensitive`` when any perturbed path's verdict differs)."""
-    out = dict(main, main_verdict=main["verdict"])
-    if not perturbed:
-        out.update(rounding_verdict=None, rounding_robust=None)
-        return out
-    same = all(p["verdict"] == main["verdict"] for p in perturbed)
-    out.update(rounding_verdict=" / ".join(p["verdict"] for p in perturbed),
-               rounding_robust=same)
-    if not same:
-        out["verdict"] = "rounding-sensitive"
-    return out
+def with_rounding(main: Verdict, perturbed: Sequence[Verdict] | None) -> Rounded:
+    """``main`` beside each perturbed floating-point path's verdict (:class:`Rounded`)."""
+    return Rounded(main, tuple(perturbed or ()))

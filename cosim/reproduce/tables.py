@@ -15,10 +15,11 @@ import numpy as np
 
 from cosim.reproduce.entry import Entry
 from cosim.reproduce.numbers import decimals_for, fixed
+from cosim.reproduce.record import Summary
 from cosim.reproduce.stats import ratio_ci
 
 
-def summary_value(summary: dict[str, Any], key: str) -> Any:
+def summary_value(summary: Summary, key: str) -> Any:
     """``summary["a"]["b"]`` for ``key = "a.b"``; None where absent."""
     value: Any = summary
     for part in key.split("."):
@@ -28,7 +29,7 @@ def summary_value(summary: dict[str, Any], key: str) -> Any:
     return value
 
 
-def repeat_values(summary: dict[str, Any], key: str) -> list[float] | None:
+def repeat_values(summary: Summary, key: str) -> list[float] | None:
     """A metric's value in every repetition of a repeated run (None if not repeated or not
     numeric)."""
     reps = summary.get("repeats")
@@ -40,7 +41,7 @@ def repeat_values(summary: dict[str, Any], key: str) -> list[float] | None:
     return [float(v) for v in vals]
 
 
-def repeat_spread(summary: dict[str, Any], key: str) -> tuple[float, float, int] | None:
+def repeat_spread(summary: Summary, key: str) -> tuple[float, float, int] | None:
     """``(min, max, n)`` of a metric over a repeated run's repetitions (None if not repeated
     or not numeric)."""
     vals = repeat_values(summary, key)
@@ -165,8 +166,8 @@ def _within(ours: Any, band: list[float] | None, value: float | None,
     return within
 
 
-def table_rows(entry: Entry, summaries: dict[str, dict[str, Any]],
-               perturbed: dict[str, list[dict[str, Any]]] | None = None) -> list[Cell]:
+def table_rows(entry: Entry, summaries: dict[str, Summary],
+               perturbed: dict[str, list[Summary]] | None = None) -> list[Cell]:
     """Long format: one cell per (run, metric) with ours, the paper's and the verdict;
     ``perturbed`` (run name -> the summaries of the same run on the perturbed floating-point
     paths, where it has them) marks the cells whose printed figure one of them moves."""
@@ -201,7 +202,7 @@ def table_rows(entry: Entry, summaries: dict[str, dict[str, Any]],
     return rows
 
 
-def column_decimals(entry: Entry, summaries: dict[str, dict[str, Any]], key: str) -> int:
+def column_decimals(entry: Entry, summaries: dict[str, Summary], key: str) -> int:
     """The fixed notation of metric ``key``'s column (:func:`cosim.reproduce.numbers.decimals_for`
     of every run's value and repetitions)."""
     values: list[Any] = []
@@ -211,7 +212,7 @@ def column_decimals(entry: Entry, summaries: dict[str, dict[str, Any]], key: str
     return decimals_for(values)
 
 
-def _ratio(summaries: dict[str, dict[str, Any]], refs: dict[tuple[str, str], Any], run: str,
+def _ratio(summaries: dict[str, Summary], refs: dict[tuple[str, str], Any], run: str,
            base_run: str, key: str, ours: Any, value: float | None) -> Ratio:
     """The ratio of ``run``'s ``key`` to ``base_run``'s, with its CI and the paper's."""
     base = summary_value(summaries[base_run], key)
@@ -231,7 +232,7 @@ def _ratio(summaries: dict[str, dict[str, Any]], refs: dict[tuple[str, str], Any
                  else None)
 
 
-def derived_rows(entry: Entry, summaries: dict[str, dict[str, Any]]) -> list[DerivedRow]:
+def derived_rows(entry: Entry, summaries: dict[str, Summary]) -> list[DerivedRow]:
     """One row per ``[[derived]]`` figure, in the long format of :func:`table_rows`."""
     rows = []
     for der in entry.derived:
@@ -248,7 +249,7 @@ def derived_rows(entry: Entry, summaries: dict[str, dict[str, Any]]) -> list[Der
     return rows
 
 
-def ranking_rows(entry: Entry, summaries: dict[str, dict[str, Any]]) -> list[RankingRow]:
+def ranking_rows(entry: Entry, summaries: dict[str, Summary]) -> list[RankingRow]:
     """One row per ``[[rankings]]``: the runs ordered by the metric (lowest first; equal values
     keep the entry's order), the paper's order and the pairs ordered the other way round
     (``within``: no such pair). A run without the metric ranks last."""

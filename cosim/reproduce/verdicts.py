@@ -5,24 +5,64 @@ paper's page."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from cosim.reproduce.claims import ORIGINS, PAIRED_KINDS
+from cosim.reproduce.claims import ORIGINS, PAIRED_KINDS, Claim
 from cosim.reproduce.entry import Entry
 from cosim.reproduce.members import claim_cases, host_text, members, simulate_claims
 from cosim.reproduce.numbers import decimals_for, fixed
-from cosim.reproduce.record import Record, series_name
+from cosim.reproduce.record import MemberKey, Record, Summary, series_name
 from cosim.reproduce.series import run_scenarios
-from cosim.reproduce.stats import ALPHA, adjust, verdict, with_rounding
+from cosim.reproduce.stats import ALPHA, Rounded, Verdict, adjust, verdict, with_rounding
 from cosim.reproduce.tables import md_row, summary_value
 from cosim.run.figures import draw_ensemble_figure
 
 
-def _metric(summaries: dict[Any, dict[str, Any] | None], run: str, ens: str, n: int,
+@dataclass(frozen=True, kw_only=True)
+class ClaimRow:
+    """One claim evaluated on its members: the claim, the runs it compared (a variant's in
+    place of those it replaces), its verdicts on every floating-point path and the verdict
+    after the multiplicity adjustment."""
+
+    claim: Claim
+    runs: list[str]
+    result: Rounded
+    variant: str | None = None  # the [[variants]] entry it ran under (None: as written)
+    adjusted_p: float | None = None  # Benjamini-Hochberg over the family (None: not tested)
+    adjusted: str = ""  # the verdict as read, after the adjustment
+
+    @property
+    def main(self) -> Verdict:
+        """The verdict on the main floating-point path."""
+        return self.result.main
+
+    @property
+    def verdict(self) -> str:
+        """The verdict before the adjustment (``rounding-sensitive`` where a perturbed path
+        differs)."""
+        return self.result.verdict
+
+    def csv(self) -> dict[str, Any]:
+        """The row of ``claims.csv`` / ``variants.csv``: the claim, then its statistics."""
+        c = self.claim
+        return {**({"variant": self.variant} if self.variant is not None else {}),
+                "id": c.id, "source": c.source, "text": c.text, "paper": c.paper,
+                "metric": c.metric, "kind": c.kind, "runs": " vs ".join(self.runs),
+                "ensemble": c.ensemble, "origin": c.origin, "share": c.share,
+                "threshold": c.bound(), **dataclasses.asdict(self.main),
+                "main_verdict": self.main.verdict,
+                "rounding_verdict": self.result.rounding_verdict,
+                "rounding_robust": self.result.rounding_robust, "verdict": self.verdict,
+                "adjusted_p": self.adjusted_p, "adjusted": self.adjusted}
+
+
+def _metric(summaries: dict[MemberKey, Summary | None], run: str, ens: str, n: int,
             path: int, metric: str) -> np.ndarray:
     vals = []
     for i in range(n):
@@ -33,8 +73,8 @@ def _metric(summaries: dict[Any, dict[str, Any] | None], run: str, ens: str, n: 
     return np.array(vals)
 
 
-def evaluate(entry: Entry, summaries: dict[Any, dict[str, Any] | None], k: int,
-             rounding: bool = True, variants: bool = False) -> list[dict[str, Any]]:
+def evaluate(entry: Entry, summaries: dict[MemberKey, Summary | None], k: int,
+             rounding: bool = True, variants: bool = False) -> list[ClaimRow]:
     """One row per claim (see :func:`cosim.reproduce.stats.verdict`); with ``variants`` one row
     per claim and ``[[variants]]`` entry that replaces one of its runs instead."""
     rows = []
@@ -51,32 +91,31 @@ def evaluate(entry: Entry, summaries: dict[Any, dict[str, Any] | None], k: int,
             if claim.transform == "abs":  # e.g. the stop error's size, either side
                 a, b = np.abs(a), None if b is None else np.abs(b)
             results.append(verdict(claim, a, b))
-        row = with_rounding(results[0], results[1:])
-        rows.append({**({"variant": var} if variants else {}),
-                     "id": claim.id, "source": claim.source, "text": claim.text,
-                     "paper": claim.paper, "metric": claim.metric, "kind": claim.kind,
-                     "runs": " vs ".join(names), "ensemble": ens, "origin": claim.origin,
-                     "share": claim.share, "threshold": claim.bound(), **row})
-    return adjust(rows)
+        rows.append(ClaimRow(claim=claim, runs=list(names),
+                             result=with_rounding(results[0], results[1:]),
+                             variant=var if variants else None))
+    adjusted = adjust([r.main.p_value for r in rows], [r.verdict for r in rows])
+    return [dataclasses.replace(r, adjusted_p=q, adjusted=v)
+            for r, (q, v) in zip(rows, adjusted, strict=True)]
 
 
-def variants_markdown(entry: Entry, rows: list[dict[str, Any]], var_rows: list[dict[str, Any]]
-                      ) -> str:
+def variants_markdown(entry: Entry, rows: list[ClaimRow], var_rows: list[ClaimRow]) -> str:
     """Each claim's verdict as written and under every variant (a column each, the claims in
     the order of :func:`by_origin`; "=": the variant replaces none of the claim's runs), then
     what each variant replaces."""
     names = [v.name for v in entry.variants]
-    got = {(r["variant"], r["id"]): r for r in var_rows}
+    got = {(r.variant, r.claim.id): r for r in var_rows}
 
-    def cell(r: dict[str, Any] | None) -> str:
+    def cell(r: ClaimRow | None) -> str:
         if r is None:
             return "="
-        flag = "" if r["rounding_robust"] in (None, True) else " (r)"
-        return f"{_shown(r)}{flag} ({r['k']}/{r['K']})"
+        flag = "" if r.result.rounding_robust in (None, True) else " (r)"
+        return f"{_shown(r)}{flag} ({r.main.k}/{r.main.K})"
 
     lines = [md_row(["claim", "main", *names]), "|" + " --- |" * (2 + len(names))]
     for r in by_origin(rows):
-        lines.append(md_row([r["id"], cell(r), *(cell(got.get((n, r["id"]))) for n in names)]))
+        lines.append(md_row([r.claim.id, cell(r),
+                             *(cell(got.get((n, r.claim.id))) for n in names)]))
     lines += ["", "Verdict (k of K on the claimed side) of every claim with the runs of each "
               "variant in place of those it replaces; (r): rounding-sensitive. The cells of "
               "all variants are one family: their p-values are adjusted together "
@@ -94,15 +133,15 @@ def variants_markdown(entry: Entry, rows: list[dict[str, Any]], var_rows: list[d
 VERDICTS = ("holds", "fails", "inconclusive", "no effect", "insufficient", "rounding-sensitive")
 
 
-def final_verdict(r: dict[str, Any]) -> str:
+def final_verdict(r: ClaimRow) -> str:
     """A claim row's verdict as read: adjusted for multiplicity where it was, else raw."""
-    return r.get("adjusted", r["verdict"])
+    return r.adjusted or r.verdict
 
 
-def _shown(r: dict[str, Any]) -> str:
+def _shown(r: ClaimRow) -> str:
     """The adjusted verdict, with the raw one where the adjustment changed it."""
     adjusted = final_verdict(r)
-    return adjusted if adjusted == r["verdict"] else f"{adjusted} (raw: {r['verdict']})"
+    return adjusted if adjusted == r.verdict else f"{adjusted} (raw: {r.verdict})"
 
 
 def rounding_text(entry: Entry, build: str = "python") -> str:
@@ -123,13 +162,13 @@ CLAIMS_HEADER = ("claim", "verdict", "k of K", "ours: median [95 % CI]", "paper"
                  "rounding-robust")
 
 
-def by_origin(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
+def by_origin(rows: list[ClaimRow]) -> list[ClaimRow]:
     """The claims' rows grouped by origin (the paper's, ours, the sanity checks: the order of
     :data:`cosim.reproduce.claims.ORIGINS`), each group in the entry's order."""
-    return sorted(rows, key=lambda r: ORIGINS.index(r.get("origin", "paper")))
+    return sorted(rows, key=lambda r: ORIGINS.index(r.claim.origin))
 
 
-def claims_markdown(rows: list[dict[str, Any]], k: int, rounding: str = "",
+def claims_markdown(rows: list[ClaimRow], k: int, rounding: str = "",
                     host: str = "", headings: dict[str, str] | None = None) -> str:
     """The claims table: each claim (the paper's first, then ours, then the sanity checks:
     :func:`by_origin`) with its verdict first (adjusted for multiplicity, the raw one where
@@ -141,21 +180,22 @@ def claims_markdown(rows: list[dict[str, Any]], k: int, rounding: str = "",
     headings = headings or {}
     lines = [md_row(list(CLAIMS_HEADER)), "|" + " --- |" * len(CLAIMS_HEADER)]
     for r in by_origin(rows):
-        heading = headings.get(r["metric"], r["metric"])
-        what = f"A - B, {heading}" if r["kind"] in PAIRED_KINDS else heading
-        robust = ("n/a" if r["ensemble"] == "repeat" else "-" if r["rounding_robust"] is None
-                  else "yes" if r["rounding_robust"] else "no")
-        quant = r.get("quantifier", "typical")
+        c, robust_path = r.claim, r.result.rounding_robust
+        heading = headings.get(c.metric, c.metric)
+        what = f"A - B, {heading}" if c.kind in PAIRED_KINDS else heading
+        robust = ("n/a" if c.ensemble == "repeat" else "-" if robust_path is None
+                  else "yes" if robust_path else "no")
+        quant = r.main.quantifier
         if quant == "share":
-            quant = f"share >= {r.get('share', '')}"
-        lines.append(md_row([f"{r['id']}: {r['text']} ({quant}; {r['runs']}; {r['metric']}, "
-                           f"{r['ensemble']}; {r.get('origin', 'paper')})", _shown(r),
-                           f"{r['k']} of {r['K']}", f"{what}: {ours_text(r)}", r["paper"],
-                           r["source"], robust]))
-    origins = dict.fromkeys(r.get("origin", "paper") for r in rows)
+            quant = f"share >= {c.share}"
+        lines.append(md_row([f"{c.id}: {c.text} ({quant}; {' vs '.join(r.runs)}; {c.metric}, "
+                             f"{c.ensemble}; {c.origin})", _shown(r),
+                             f"{r.main.k} of {r.main.K}", f"{what}: {ours_text(r)}", c.paper,
+                             c.source, robust]))
+    origins = dict.fromkeys(r.claim.origin for r in rows)
     counts = []
     for origin in origins:
-        mine = [r for r in rows if r.get("origin", "paper") == origin]
+        mine = [r for r in rows if r.claim.origin == origin]
         counts.append(f"{origin} ({len(mine)}): " + ", ".join(
             f"{v} {n}" for v in VERDICTS if (n := sum(final_verdict(r) == v
                                                       for r in mine))))
@@ -174,50 +214,51 @@ def claims_markdown(rows: list[dict[str, Any]], k: int, rounding: str = "",
               "whatever they show (the note says which K would). rounding-sensitive: the "
               "verdict differs on a perturbed floating-point rerun"
               + (f" ({rounding})" if rounding else "") + "."]
-    if any(r["kind"] == "equal" for r in rows):
+    if any(r.claim.kind == "equal" for r in rows):
         lines[-1] += (" An equal claim (A no different from B, \"levels off\") holds when the "
                       "median difference's CI lies inside +-margin of B's median (the band "
                       "ours states), fails when the sign test puts the median outside it; k "
                       "of K: members inside the band.")
-    if any(r["ensemble"] == "repeat" for r in rows):
+    if any(r.claim.ensemble == "repeat" for r in rows):
         lines[-1] += (" repeat: the members are repetitions of the same nominal run (K fixed "
                       "by the entry, not by --seeds), paired by repeat index; no rounding "
                       "rerun (n/a)" + (f"; {host}" if host else "") + ".")
     return "\n".join(lines)
 
 
-def compact_table(rows: list[dict[str, Any]]) -> str:
+def compact_table(rows: list[ClaimRow]) -> str:
     """The claims in at most 80 columns (id, k of K, adjusted verdict)."""
     lines = [f"{'claim':<44} {'k/K':>7}  verdict", "-" * 72]
     for r in rows:
-        flag = "" if r["rounding_robust"] in (None, True) else " (r)"
-        lines.append(f"{r['id'][:44]:<44} {r['k']:>3}/{r['K']:<3}  "
+        flag = "" if r.result.rounding_robust in (None, True) else " (r)"
+        lines.append(f"{r.claim.id[:44]:<44} {r.main.k:>3}/{r.main.K:<3}  "
                      f"{final_verdict(r)}{flag}")
     return "\n".join(lines)
 
 
-def ours_text(row: dict[str, Any]) -> str:
+def ours_text(row: ClaimRow) -> str:
     """``median [low, high]`` of the tested quantity in one fixed notation (:func:`fixed`;
     ``-`` where unknown); for a universal claim the worst member too."""
-    worst = row.get("worst", math.nan) if row.get("quantifier") == "every" else None
-    shown = [row["median"], row["ci_low"], row["ci_high"], worst]
+    v = row.main
+    worst = v.worst if v.quantifier == "every" else None
+    shown = [v.median, v.ci_low, v.ci_high, worst]
     decimals = decimals_for(shown)
 
     def f(v: float | None) -> str:
         return "-" if v is None else fixed(float(v), decimals)
-    text = f"{f(row['median'])} [{f(row['ci_low'])}, {f(row['ci_high'])}]"
+    text = f"{f(v.median)} [{f(v.ci_low)}, {f(v.ci_high)}]"
     if worst is not None:
         text += f", worst {f(worst)}"
-    b = row.get("b_median")
-    if row.get("kind") in PAIRED_KINDS and b and math.isfinite(b) and not math.isnan(
-            row["median"]):  # the effect's size: "no effect" and "undecided" look apart
-        share = 100.0 * row["median"] / abs(b)
+    b = v.b_median
+    if row.claim.kind in PAIRED_KINDS and b and math.isfinite(b) and not math.isnan(
+            v.median):  # the effect's size: "no effect" and "undecided" look apart
+        share = 100.0 * v.median / abs(b)
         text += f" ({'+' if share > 0 else ''}{fixed(share, decimals_for([share], 2))} % of B)"
-    return f"{text} ({row['note']})" if row.get("note") else text
+    return f"{text} ({v.note})" if v.note else text
 
 
 def write_claims(entry: Entry, record: Record, out: Path, plot_format: str = "png"
-                 ) -> tuple[list[dict[str, Any]], str, dict[str, list[Path]]]:
+                 ) -> tuple[list[ClaimRow], str, dict[str, list[Path]]]:
     """Evaluate the entry's claims on ``record``'s members; write ``claims.csv``,
     ``claims.md`` (and ``variants.*``) and the ensemble figures (``plot_format``; a png with
     its svg beside it) to ``out``; returns the claims' rows, the markdown of claims.md below
@@ -244,26 +285,26 @@ def write_claims(entry: Entry, record: Record, out: Path, plot_format: str = "pn
                  for r in runs},
                 out / f"{Path(figure.file).stem}_ensemble.{plot_format}", scenarios,
                 vector=True)
-    pd.DataFrame(rows).to_csv(out / "claims.csv", index=False)
+    pd.DataFrame([r.csv() for r in rows]).to_csv(out / "claims.csv", index=False)
     host = host_text([record.results[ident] for ident, job in record.jobs.items()
                       if job.kind == "member" and job.key[1] == "repeat"])
     text = claims_markdown(rows, k, rounding_text(entry, record.build) if rounding else "",
                            host, {m.key: m.heading for m in entry.metrics}) + "\n"
     if entry.variants:
         var_rows = evaluate(entry, summaries, k, rounding, variants=True)
-        pd.DataFrame(var_rows).to_csv(out / "variants.csv", index=False)
+        pd.DataFrame([r.csv() for r in var_rows]).to_csv(out / "variants.csv", index=False)
         text += ("\n#### The claims under each variant\n\n"
                  + variants_markdown(entry, rows, var_rows) + "\n")
     (out / "claims.md").write_text(f"## Claims of {entry.title}\n\n" + text)
     return rows, text, drawn
 
 
-def verdict_summary(rows: list[dict[str, Any]], k: int) -> str:
+def verdict_summary(rows: list[ClaimRow], k: int) -> str:
     """The verdicts in one sentence for the top of a paper's page: the counts per origin
     (after the multiplicity adjustment)."""
     counts = []
-    for origin in dict.fromkeys(r.get("origin", "paper") for r in rows):
-        mine = [r for r in rows if r.get("origin", "paper") == origin]
+    for origin in dict.fromkeys(r.claim.origin for r in rows):
+        mine = [r for r in rows if r.claim.origin == origin]
         got = ", ".join(f"{n} {v}" for v in VERDICTS
                         if (n := sum(final_verdict(r) == v for r in mine)))
         counts.append(f"{len(mine)} {'of the paper' if origin == 'paper' else origin}: {got}")
@@ -271,20 +312,20 @@ def verdict_summary(rows: list[dict[str, Any]], k: int) -> str:
             + "; ".join(counts) + ".")
 
 
-def failed_claims_markdown(rows: list[dict[str, Any]]) -> str:
+def failed_claims_markdown(rows: list[ClaimRow]) -> str:
     """The paper's claims that fail here (after the multiplicity adjustment), as a list under
     its lead sentence; empty when none fails."""
-    failed = [r for r in rows if r.get("origin", "paper") == "paper"
+    failed = [r for r in rows if r.claim.origin == "paper"
               and final_verdict(r) == "fails"]
     if not failed:
         return ""
     return "\n".join(["Not reproduced (the paper's claims that fail here):", "",
-                      *(f"- {r['text']} (`{r['id']}`)" for r in failed)])
+                      *(f"- {r.claim.text} (`{r.claim.id}`)" for r in failed)])
 
 
 def run_claims(entry: Entry, out: Path, k: int, workers: int | None = None,
                rounding: bool = True, scheduler: str | None = None,
-               plot_format: str = "png", build: str = "python") -> list[dict[str, Any]]:
+               plot_format: str = "png", build: str = "python") -> list[ClaimRow]:
     """Run and evaluate the entry's claims (:func:`simulate_claims`, then
     :func:`write_claims` on that record); returns the claims' rows."""
     record = Record(entry.name, "", k, rounding, build)
