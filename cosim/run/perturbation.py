@@ -1,6 +1,6 @@
 """The plant-mismatch syntax and its seeded draws, shared by ``cosim sweep --perturb``
-(:mod:`cosim.run.perturb`) and a reproduction's ``[ensemble] perturb`` (:mod:`cosim.run.claims`).
-Forms of ``KEY=SPEC``:
+(:mod:`cosim.run.perturb`) and a reproduction's ``[ensemble] perturb``
+(:mod:`cosim.reproduce.ensemble`). Forms of ``KEY=SPEC``:
 
 * ``+-10%``: uniform within 10 % of the nominal value (the scenario's, else the FMU's start);
 * ``+-0.05``: uniform within 0.05 (in the parameter's unit) of the nominal value;
