@@ -20,7 +20,8 @@ How the line is made (seed 001 only names the section; its Fig. 4 is not in the 
   between stations). Segments of 1.5-6 km get the grade of that profile (0.5 permille steps,
   the rounding carried into the next segment, capped at the line's design maximum of 20), so
   the integrated elevation meets every station's and the section ends 5 m above its start
-  instead of drifting (independent grades had put Xuzhou East 305 m below Jinan West).
+  instead of drifting (independent random grades wander like a random walk: a draw of them
+  can end Xuzhou East 305 m below Jinan West, a mostly downhill run).
 * Curves and tunnels are synthetic, drawn with a fixed seed within the line's public design
   figures (minimum curve radius mostly 7,000 m): curves of 7,000-12,000 m every 8-15 km;
   tunnels in the hilly Tai'an - Qufu stretch.
