@@ -129,19 +129,37 @@ def test_bundled_jinan_xuzhou_east_line() -> None:
     assert 3000.0 < ref.run_time() < 4000.0  # about 59 min at 300 km/h
 
 
-def test_jinan_xuzhou_east_reference_keeps_a_traction_reserve() -> None:
-    """The reference needs at most the traction envelope minus 3 sigma of the slowly varying
-    disturbance of the seed 001 reproduction (its coloured rows), on every 25 m segment: the
-    force m a + resistance + line resistance at the segment's start speed."""
+@pytest.mark.parametrize("factor", [1.0, 0.5, 2.0])
+def test_jinan_xuzhou_east_reference_keeps_a_traction_reserve(factor: float) -> None:
+    """Each reference needs at most the traction envelope minus its reserve, on every 25 m
+    segment: the force m a + resistance + line resistance at the segment's start speed. The
+    main profile's reserve is 3 sigma of the slowly varying disturbance of the seed 001
+    reproduction (its main rows); the variant rows' profiles are planned with half and twice it
+    (``factor``), each named by its reserve, run by the four laws of its variant rows until
+    after the profile's end and with the profile's run time as the planned arrival."""
     from cosim.reproduce.entry import load_entry
+    from cosim.run.scenario import load_scenario
     from plants.emu import emu_config
 
-    # the main rows' level (the variants' half and twice are ablations of it; the reference
-    # is planned for the main rows)
-    (main,) = [r for r in load_entry("seed001").runs if r.name == "FFDL-ISMPC"]
-    reserve = 3.0 * main.overrides["plant.disturbance_accel_std"]  # m/s^2: 0.09
+    entry = load_entry("seed001")
+    (main,) = [r for r in entry.runs if r.name == "FFDL-ISMPC"]
+    reserve = factor * 3.0 * main.overrides["plant.disturbance_accel_std"]  # m/s^2: 0.09 main
     route = load_route("jinan_xuzhou_east")
-    ref, p = route.reference, emu_config("crh380a_3unit")
+    if factor == 1.0:
+        ref, rows = route.reference, [main]
+    else:
+        name = f"jinan_xuzhou_east_reference_reserve_{reserve:g}".replace(".", "p")
+        rows = [r for r in entry.runs if r.overrides.get("controller.reference") == name]
+        assert sorted(r.name for r in rows) == sorted(
+            f"{law}, traction reserve {reserve:g}"
+            for law in ("FFDL-ISMPC", "FFDL-ISMC", "FFDL-MFAC", "GPC"))
+        ref = load_reference(name)
+    for row in rows:  # the run outlasts the profile; arrival is planned at its end (0.1 s CSV)
+        scenario = load_scenario(row.scenario, row.overrides)
+        assert scenario.simulation.stop_time >= ref.run_time()
+        assert scenario.summary["planned_arrival_time"] == pytest.approx(ref.run_time(),
+                                                                         abs=0.05)
+    p = emu_config("crh380a_3unit")
     mass, length = sum(p.masses), sum(p.lengths)
     s, v = ref.x[:-1], ref.v[:-1]
     accel = np.array([ref.accel(x) for x in s])
@@ -151,8 +169,8 @@ def test_jinan_xuzhou_east_reference_keeps_a_traction_reserve() -> None:
     envelope = np.minimum(sum(p.max_traction_force),
                           sum(p.max_traction_power) / np.maximum(v, 1e-3)) / mass
     # 1e-3 m/s^2: the CSV's 1e-4 km/h rounding over 25 m (5e-5 m/s^2 at 300 km/h) and the
-    # envelope's change over a segment (3e-5); 85 % of the envelope (the old profile) leaves
-    # 0.033 m/s^2 at 300 km/h and fails this by 0.057 m/s^2
+    # envelope's change over a segment (3e-5); 85 % of the envelope leaves 0.033 m/s^2 at
+    # 300 km/h and fails the main reserve by 0.057 m/s^2
     assert np.max(needed - (envelope - reserve)) <= 1e-3
     # and it uses that envelope: somewhere the reserve is all that is left
     assert np.min(envelope - needed) == pytest.approx(reserve, abs=1e-3)

@@ -1,7 +1,11 @@
 """Generate the synthetic Jinan West - Xuzhou East line and its 300 km/h reference profile.
 
     python papers/seed001/make_jinan_xuzhou_east.py
-    # writes plants/routes/jinan_xuzhou_east.{toml,csv}
+    # writes plants/routes/jinan_xuzhou_east.toml, jinan_xuzhou_east_reference.csv (the
+    # reserve TRACTION_RESERVE) and jinan_xuzhou_east_reference_reserve_0p045.csv,
+    # ..._reserve_0p18.csv (the variant reserves VARIANT_RESERVES)
+    python papers/seed001/make_jinan_xuzhou_east.py --reserve 0.045
+    # writes only the reference at that reserve, beside the line's existing TOML
 
 How the line is made (seed 001 only names the section; its Fig. 4 is not in the text):
 
@@ -16,7 +20,8 @@ How the line is made (seed 001 only names the section; its Fig. 4 is not in the 
   between stations). Segments of 1.5-6 km get the grade of that profile (0.5 permille steps,
   the rounding carried into the next segment, capped at the line's design maximum of 20), so
   the integrated elevation meets every station's and the section ends 5 m above its start
-  instead of drifting (independent grades had put Xuzhou East 305 m below Jinan West).
+  instead of drifting (independent random grades wander like a random walk: a draw of them
+  can end Xuzhou East 305 m below Jinan West, a mostly downhill run).
 * Curves and tunnels are synthetic, drawn with a fixed seed within the line's public design
   figures (minimum curve radius mostly 7,000 m): curves of 7,000-12,000 m every 8-15 km;
   tunnels in the hilly Tai'an - Qufu stretch.
@@ -36,15 +41,22 @@ varying disturbance the seed 001 reproduction applies (0.03 m/s^2 per unit mass,
 of papers/seed001/entry.toml): a real ATO plans its profile with a traction reserve, and
 with it a retarding disturbance exceeds what is left above the profile in 0.13 % of the time
 even if the three units' disturbances were fully correlated (they are independent, so the
-train's mean is 5 sigma inside). Before, the profile used 85 % of the envelope, which leaves
-only 0.033 m/s^2 at 300 km/h (the disturbance's own sigma), so every controller lagged the same
-when accelerating at high speed. Braking needs no such change: the brake envelope gives at
-least 0.70 m/s^2 up to 300 km/h, above 0.5 m/s^2 plus the reserve. The CSV stores
-``position_m, speed_kmh``; between points the acceleration is constant (see plants/route.py).
+train's mean is 5 sigma inside). A profile at 85 % of the envelope would leave only
+0.033 m/s^2 at 300 km/h (the disturbance's own sigma): every controller would sit on the power
+limit alike when accelerating at high speed, and the comparison would measure the envelope,
+not the laws. The reserve is our open choice (the paper gives no profile), so profiles at half
+and twice it, :data:`VARIANT_RESERVES` = 0.045 and 0.18 m/s^2, are written too
+(``jinan_xuzhou_east_reference_reserve_0p045.csv``, ``..._0p18.csv``: the decimal point
+spelled ``p``, since a bundled name has no suffix; the variant rows of
+papers/seed001/entry.toml set them as the controllers' ``reference``). Braking needs no
+reserve: the brake envelope gives at least 0.70 m/s^2 up to 300 km/h, above 0.5 m/s^2 plus
+the largest reserve. The CSV stores ``position_m, speed_kmh``; between points the
+acceleration is constant (see plants/route.py).
 """
 
 from __future__ import annotations
 
+import argparse
 import math
 import sys
 from pathlib import Path
@@ -68,6 +80,7 @@ STATION_ELEVATION_M = {"Jinan West": 35.0, "Tai'an": 140.0, "Qufu East": 65.0,
 GRID_M = 25.0
 CRUISE_KMH = 300.0
 TRACTION_RESERVE = 0.09  # m/s^2 of the train's mass: 3 x 0.03 m/s^2 (seed 001 main rows)
+VARIANT_RESERVES = (0.045, 0.18)  # m/s^2: half and twice TRACTION_RESERVE (variant rows)
 MAX_REF_ACCEL = 0.5  # m/s^2
 LIMIT_MARGIN_KMH = 5.0
 DECEL_LIMIT = 0.4  # m/s^2, ahead of a lower speed limit
@@ -152,7 +165,19 @@ def write_toml(line: dict, path: Path) -> None:
     path.write_text("\n".join(text))
 
 
-def make_reference(route_path: Path) -> tuple[np.ndarray, np.ndarray]:
+def reference_name(reserve: float) -> str:
+    """Bundled name of the reference planned with ``reserve`` (m/s^2): the main one for
+    :data:`TRACTION_RESERVE`, else ``<NAME>_reference_reserve_<reserve>`` with the decimal
+    point spelled ``p`` (0.045 -> ``0p045``)."""
+    if reserve == TRACTION_RESERVE:
+        return f"{NAME}_reference"
+    return f"{NAME}_reference_reserve_{reserve:g}".replace(".", "p")
+
+
+def make_reference(route_path: Path, reserve: float = TRACTION_RESERVE
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """Positions (m) and speeds (m/s) of the reference on the 25 m grid, accelerating at the
+    traction envelope minus ``reserve`` (m/s^2 of the train's mass)."""
     route = load_route(route_path)
     p = emu_config("crh380a_3unit")
     mass = sum(p.masses)
@@ -175,7 +200,7 @@ def make_reference(route_path: Path) -> tuple[np.ndarray, np.ndarray]:
         if coast[i]:
             acc = -resist
         else:
-            traction = min(ft, pt / max(vi, 1e-3)) / mass - TRACTION_RESERVE
+            traction = min(ft, pt / max(vi, 1e-3)) / mass - reserve
             acc = min(traction - resist, MAX_REF_ACCEL)
         ds = s[i + 1] - s[i]
         v[i + 1] = math.sqrt(max(min(vi * vi + 2.0 * acc * ds, limit[i + 1] ** 2), 0.0))
@@ -186,23 +211,45 @@ def make_reference(route_path: Path) -> tuple[np.ndarray, np.ndarray]:
     return s, v
 
 
-def main() -> None:
-    rng = np.random.default_rng(SEED)
-    out = ROOT / "plants" / "routes"
-    line = make_line(rng)
-    toml_path = out / f"{NAME}.toml"
-    write_toml(line, toml_path)
-    csv_path = out / f"{NAME}_reference.csv"
-    csv_path.write_text("position_m,speed_kmh\n0.0,0.0\n1.0,0.0\n")  # placeholder to load route
-    s, v = make_reference(toml_path)
+def write_reference(toml_path: Path, reserve: float) -> Path:
+    """Write the reference planned with ``reserve`` (m/s^2) beside the line ``toml_path``,
+    print its run time, and return its path."""
+    csv_path = toml_path.parent / f"{reference_name(reserve)}.csv"
+    s, v = make_reference(toml_path, reserve)
     lines = [f"# Reference speed-distance profile of {NAME} (CRH380A, 300 km/h class);",
              "# generated by papers/seed001/make_jinan_xuzhou_east.py, see plants/routes/README.md",
              "position_m,speed_kmh"]
+    if reserve != TRACTION_RESERVE:
+        lines.insert(2, f"# traction reserve {reserve:g} m/s^2 (the main profile's is "
+                        f"{TRACTION_RESERVE:g} m/s^2)")
     lines += [f"{si:.1f},{vi / KMH:.4f}" for si, vi in zip(s, v, strict=True)]
     csv_path.write_text("\n".join(lines) + "\n")
-    # the reference itself: load_route keeps the route parsed above (with the placeholder)
-    print(f"{toml_path}: {line['length_m'] / 1e3:.3f} km, run time "
+    print(f"{csv_path.name}: reserve {reserve:g} m/s^2, run time "
           f"{load_reference(csv_path).run_time():.1f} s, max {v.max() / KMH:.1f} km/h")
+    return csv_path
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--reserve", type=float, action="append",
+                        help="write only the reference at this traction reserve (m/s^2), "
+                             "beside the existing line TOML; repeatable")
+    args = parser.parse_args()
+    out = ROOT / "plants" / "routes"
+    toml_path = out / f"{NAME}.toml"
+    if args.reserve:
+        for reserve in args.reserve:
+            write_reference(toml_path, reserve)
+        return
+    rng = np.random.default_rng(SEED)
+    line = make_line(rng)
+    write_toml(line, toml_path)
+    csv_path = out / f"{NAME}_reference.csv"
+    csv_path.write_text("position_m,speed_kmh\n0.0,0.0\n1.0,0.0\n")  # placeholder to load route
+    # the reference itself: load_route keeps the route parsed above (with the placeholder)
+    print(f"{toml_path}: {line['length_m'] / 1e3:.3f} km")
+    for reserve in (TRACTION_RESERVE, *VARIANT_RESERVES):
+        write_reference(toml_path, reserve)
 
 
 if __name__ == "__main__":
