@@ -3,7 +3,10 @@
    active in the Event Mode of each of its events until fmi3UpdateDiscreteStates handles it),
    Feedthrough (y_T = u_T for every
    type, 64-bit integers exactly, an array), Terminator (terminateSimulation at stop_at),
-   Countdown (a countdown input clock whose interval doubles at every tick), Clocked (a
+   Countdown (a countdown input clock: its first interval "first" told in Initialization Mode
+   only, as FMI 3.0 sec. 2.2.8.2 has the importer ask it there; after each tick it ticks again
+   at interval 0 until it has ticked "repeat" + 1 times at that instant, then its interval
+   doubles, or becomes "period" when it was 0), Clocked (a
    periodic input clock "tick" whose interval and shift the FMU gives on request, its interval
    multiplied by growth at every tick). TimeEvents compares times within its parameter
    tolerance (0: exactly). */
@@ -18,9 +21,10 @@
 
 typedef struct {
     fmi3Float64 time, period, u, q, next, stop_at, interval, first, tol, last_event, shift,
-        growth, interval_counter, shift_counter, resolution; /* the last three: Fraction */
-    fmi3Int32 n;
-    fmi3Boolean announce, eventMode, earlyReturn, tick, pending;
+        growth, interval_counter, shift_counter, resolution, /* these three: Fraction */
+        repeat, report; /* Countdown: ticks at interval 0 after each tick, interval told */
+    fmi3Int32 n, burst;
+    fmi3Boolean announce, eventMode, earlyReturn, tick, pending, init;
     double num[NT]; /* numeric and Boolean feedthrough values (as double, exact up to 2^53) */
     fmi3Int64 i64; fmi3UInt64 u64; /* the Int64 and UInt64 feedthrough values, exact */
     char *str;
@@ -55,11 +59,15 @@ fmi3Status fmi3SetDebugLogging(fmi3Instance i, fmi3Boolean on, size_t n, const f
     (void)i; (void)on; (void)n; (void)c; return fmi3OK; }
 fmi3Status fmi3EnterInitializationMode(fmi3Instance i, fmi3Boolean td, fmi3Float64 tol,
     fmi3Float64 start, fmi3Boolean sd, fmi3Float64 stop) {
-    M *m = i; (void)td; (void)tol; (void)sd; (void)stop; m->time = start; return fmi3OK; }
+    M *m = i; (void)td; (void)tol; (void)sd; (void)stop; m->time = start; m->init = fmi3True;
+    return fmi3OK; }
 fmi3Status fmi3ExitInitializationMode(fmi3Instance i) {
-    M *m = i; m->next = m->time + m->period; m->pending = fmi3True;
+    M *m = i; m->next = m->time + m->period; m->pending = fmi3True; m->init = fmi3False;
 #if !defined(MODEL_CLOCKED)
     m->interval = m->first;
+#endif
+#if defined(MODEL_COUNTDOWN)
+    m->pending = fmi3False; /* the first interval was told in Initialization Mode */
 #endif
     return fmi3OK; }
 fmi3Status fmi3EnterEventMode(fmi3Instance i) { (void)i; return fmi3OK; }
@@ -82,8 +90,12 @@ fmi3Status fmi3UpdateDiscreteStates(fmi3Instance i, fmi3Boolean *need, fmi3Boole
     if (m->tick) { m->n++; m->q = m->time; m->tick = fmi3False;
                    if (m->growth != 1.0) { m->interval *= m->growth; m->pending = fmi3True; } }
 #elif defined(MODEL_COUNTDOWN)
-    if (m->tick) { m->n++; m->q = m->u; m->interval *= 2; m->pending = fmi3True;
-                   m->tick = fmi3False; }
+    if (m->tick) {
+        m->n++; m->q = m->u; m->tick = fmi3False; m->pending = fmi3True;
+        if (m->burst < m->repeat) { m->burst++; m->report = 0.0; }
+        else { m->burst = 0; m->interval = m->interval > 0 ? 2 * m->interval : m->period;
+               m->report = m->interval; }
+    }
 #endif
     return fmi3OK;
 }
@@ -146,6 +158,7 @@ static double *slot(M *m, fmi3ValueReference vr) {
     case 14: return &m->interval_counter;
     case 15: return &m->shift_counter;
     case 16: return &m->resolution;
+    case 18: return &m->repeat;
     }
 #endif
     return NULL;
@@ -269,8 +282,12 @@ fmi3Status fmi3GetIntervalDecimal(fmi3Instance i, const fmi3ValueReference vr[],
         if (vr[j] != 10) return fmi3Error;
         iv[j] = m->interval;
         q[j] = m->pending ? fmi3IntervalChanged : fmi3IntervalUnchanged;
+#if defined(MODEL_COUNTDOWN)
+        iv[j] = m->init ? m->first : m->report;
+        if (m->init) q[j] = fmi3IntervalChanged;
+#endif
     }
-    m->pending = fmi3False;
+    if (!m->init) m->pending = fmi3False;
     return fmi3OK; }
 fmi3Status fmi3GetIntervalFraction(fmi3Instance i, const fmi3ValueReference vr[], size_t n,
                                    fmi3UInt64 counters[], fmi3UInt64 resolutions[],

@@ -72,8 +72,12 @@ TICKER3 = Spec3("Ticker3", "TIMEEVENTS", (
     ("ticked", "Clock", "output", "discrete", 17, None, {"intervalVariability": "triggered"}),
 ), dependencies={"q": (), "n": (), "ticked": ()}, event_mode=True)
 
+# first: the clock's first interval (asked in Initialization Mode); repeat: its ticks at
+# interval 0 after each tick; period: its interval after a tick at interval 0
 COUNTDOWN3 = Spec3("Countdown3", "COUNTDOWN", (
     ("first", "Float64", "parameter", "fixed", 7, "0.1", {"unit": "s"}),
+    ("repeat", "Int32", "parameter", "fixed", 18, "0", {}),
+    ("period", "Float64", "parameter", "fixed", 0, "0.1", {"unit": "s"}),
     ("tick", "Clock", "input", "discrete", 10, None, {"intervalVariability": "countdown"}),
     ("u", "Float64", "input", "continuous", 1, "0.0", {}),
     ("q", "Float64", "output", "discrete", 2, None, {}),
@@ -112,6 +116,12 @@ CLOCKED3 = {kind: clocked(f"Clocked{kind.title()}3", kind, **attributes) for kin
     ("constant", {"intervalDecimal": "0.3", "shiftDecimal": "0.1"}),
     ("fixed", {}), ("tunable", {}))}
 CLOCKED3["fraction"] = clocked("ClockedFraction3", "fixed", supportsFraction="true")
+# fixed and tunable clocks that declare their interval and shift (0.3 s, 0.1 s): the importer
+# asks neither (FMI 3.0 sec. 2.2.8.2), so the FMU's parameters interval and shift go unheard
+CLOCKED3["declared"] = clocked("ClockedDeclared3", "fixed", intervalDecimal="0.3",
+                               shiftDecimal="0.1")
+CLOCKED3["steady"] = clocked("ClockedSteady3", "tunable", intervalDecimal="0.3",
+                             shiftDecimal="0.1")
 # a constant clock with its interval from its ClockType "Tick" and its own shift (0.1 s)
 # overriding the type's (0.5 s): ticks as ClockedConstant3's
 CLOCKED3["typed"] = replace(

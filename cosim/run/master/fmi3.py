@@ -17,25 +17,31 @@
   nearest nanosecond (the next one when that is not later than now), and the FMU is stepped
   exactly to its double (``currentCommunicationPoint + communicationStepSize`` equal to it)
   and from it.
-* Input clocks (sec. 2.2.9, 5.2.2), attributes read from modelDescription.xml
-  (:func:`clock_attributes`; fmpy does not fill them): a periodic clock ticks at start + shift
-  + k interval, with interval and shift from the modelDescription (``constant``:
-  ``intervalDecimal`` / ``shiftDecimal``, or ``intervalCounter`` / ``shiftCounter`` over
-  ``resolution``) or asked of the FMU in Initialization Mode (``fixed``, ``tunable``:
-  fmi3GetIntervalDecimal / fmi3GetShiftDecimal, the Fraction variants when
-  ``supportsFraction``); a ``tunable`` clock's interval is asked again in every Event Mode
-  and, when the FMU says ``fmi3IntervalChanged``, it ticks next that long after its last
-  tick; a ``countdown`` clock's interval is asked in every Event Mode and, when changed, it
-  ticks once that long after. Times are exact fractions until rounded to the FMU's double. A
-  tick is an event where the master activates the clock (fmi3SetClock) before
-  fmi3UpdateDiscreteStates. ``changing`` and ``triggered`` input clocks are refused. Output
-  clocks tick at the FMU's events (``eventHandlingNeeded`` or ``nextEventTime``); those wired
-  in the scenario to a triggered input clock of a Scheduled Execution FMU (FMI 3.0 sec.
-  2.2.8.2: "the timing could be given by a triggered output Clock ... of a connected FMU") are
-  asked with fmi3GetClock in Event Mode before each fmi3UpdateDiscreteStates (sec. 2.3.5: a
-  clock active during fmi3UpdateDiscreteStates is deactivated by the FMU itself). An FMU with
-  input clocks is scheduled by their ticks alone: an output named ``next_event_time`` (the
-  FMI 2 convention of :mod:`cosim.run.master.unit`) is not read as its next event.
+* Input clocks (sec. 2.2.8), attributes read from modelDescription.xml
+  (:func:`clock_attributes`; fmpy does not fill them), each asked of the FMU where sec.
+  2.2.8.2 (Clock Types) says: a periodic clock ticks at start + shift + k interval, with
+  interval and shift from the modelDescription (``constant``, and a ``fixed`` or
+  ``tunable`` clock that declares its interval: ``intervalDecimal`` / ``shiftDecimal``, or
+  ``intervalCounter`` / ``shiftCounter`` over ``resolution``; the master sets no interval)
+  or asked of the FMU in Initialization Mode (a ``fixed`` or ``tunable`` clock that declares
+  no interval: fmi3GetIntervalDecimal / fmi3GetShiftDecimal, the Fraction variants when
+  ``supportsFraction``); such a ``tunable`` clock's interval is asked again in every Event
+  Mode and, when the FMU says ``fmi3IntervalChanged``, it ticks next that long after its
+  last tick; a ``countdown`` clock's interval is asked in Initialization Mode (its first
+  tick that long after the start time, 0 included) and in every Event Mode after
+  fmi3UpdateDiscreteStates, and, when the FMU says ``fmi3IntervalChanged``, it ticks once
+  that long after the event (0: at the event itself, the clock set and
+  fmi3UpdateDiscreteStates called again). Times are exact fractions until rounded to the
+  FMU's double. A tick is an event where the master activates the clock (fmi3SetClock)
+  before fmi3UpdateDiscreteStates. ``changing`` and ``triggered`` input clocks are refused.
+  Output clocks tick at the FMU's events (``eventHandlingNeeded`` or ``nextEventTime``);
+  those wired in the scenario to a triggered input clock of a Scheduled Execution FMU (sec.
+  2.2.8.2, in FMI 3.0.2's words: "The timing could be given by a triggered output Clock ...
+  of a connected FMU") are asked with fmi3GetClock in Event Mode before each
+  fmi3UpdateDiscreteStates (sec. 2.3.5: a clock active during fmi3UpdateDiscreteStates is
+  deactivated by the FMU itself). An FMU with input clocks is scheduled by their ticks alone:
+  an output named ``next_event_time`` (the FMI 2 convention of :mod:`cosim.run.master.unit`)
+  is not read as its next event.
 """
 
 from __future__ import annotations
@@ -390,25 +396,51 @@ class Fmi3Unit(Unit):
 
     def exit_initialization(self) -> None:
         periods = self._periods() if self.event_mode else {}
+        first = self._first_countdowns() if self.event_mode else {}
         self.slave.exitInitializationMode()
         if self.event_mode:  # FMI 3.0 sec. 4.2.1: now in Event Mode
             self._in_event = True
+            start = Fraction(to_seconds(self._start_ticks))
             for clock in self.input_clocks:
                 vr = clock.value_reference
                 self._clock_next[vr] = None
                 if vr in periods:
-                    origin = Fraction(to_seconds(self._start_ticks)) + periods[vr][1]
+                    origin = start + periods[vr][1]
                     self._clock_period[vr] = (origin, periods[vr][0], 0)
                     self._clock_next[vr] = self._schedule(float(origin), self._start_ticks - 1)
+                elif vr in first:  # sec. 2.2.8.2, countdown Clock: t_0 = t_start + interval
+                    self._clock_next[vr] = self._schedule(float(start + first[vr]),
+                                                          self._start_ticks - 1)
+
+    def _first_countdowns(self) -> dict[int, Fraction]:
+        """The first interval (s) of every countdown input clock the FMU gives one for, asked
+        in Initialization Mode (FMI 3.0 sec. 2.2.8.2: the importer calls fmi3GetInterval for
+        a countdown Clock in Initialization Mode, in every Event Mode and in every Clock Update
+        Mode; its first tick is t_0 = t_start + T_interval,0 with T_interval,0 >= 0): those
+        with the qualifier ``fmi3IntervalChanged`` (none is due for another qualifier); an
+        interval below 0 is a :class:`SimulationError`."""
+        countdowns = [c for c in self.input_clocks if c.interval_variability == "countdown"]
+        out = {}
+        for clock, (interval, qualifier) in zip(countdowns, self._intervals(countdowns)):
+            if qualifier != fmi3IntervalChanged:
+                continue
+            if interval < 0:
+                raise SimulationError(f"{self.name}: countdown clock {clock.name}: "
+                                      f"fmi3GetIntervalDecimal in Initialization Mode gave "
+                                      f"{float(interval)!r} s (must be >= 0)")
+            out[clock.value_reference] = interval
+        return out
 
     def _periods(self) -> dict[int, tuple[Fraction, Fraction]]:
         """(interval, shift) in s of every periodic input clock, in Initialization Mode: from
-        the modelDescription (constant) or asked of the FMU (fixed, tunable); a
-        clock the master cannot tick is a :class:`SimulationError`."""
+        the modelDescription (constant, and fixed or tunable with a declared interval: FMI 3.0
+        sec. 2.2.8.2, the declared values hold when the importer sets none) or asked of the
+        FMU (fixed, tunable without one); a clock the master cannot tick is a
+        :class:`SimulationError`."""
         out = {}
         for clock in self.input_clocks:
             kind = clock.interval_variability
-            if kind == "constant":
+            if kind == "constant" or (kind in ASKED and clock.interval is not None):
                 out[clock.value_reference] = (clock.interval, clock.shift or Fraction(0))
             elif kind in ASKED:
                 (interval, qualifier), = self._intervals([clock])
@@ -577,22 +609,25 @@ class Fmi3Unit(Unit):
             self._in_event = True
 
     def complete_event(self, ticks: int) -> None:
+        """Handle the event at ``ticks``: the input clocks due there set (fmi3SetClock),
+        fmi3UpdateDiscreteStates until no update is needed, then the countdown and tunable
+        clocks' intervals asked; a countdown clock whose interval is 0 ticks at this event
+        (FMI 3.0 sec. 2.2.8.2: t_i = t_event + T_interval,i, T_interval,i >= 0): it is set and
+        the discrete states updated again, until no clock ticks at interval 0."""
         now = self._seconds(ticks)
         ticking = [vr for vr, nxt in self._clock_next.items() if nxt == ticks]
-        if ticking:
-            self.slave.setClock(ticking, [True] * len(ticking))
         for _ in range(MAX_EVENT_ITERATIONS):
-            self._read_output_clocks()
-            update, terminate, _, _, defined, nxt = self.slave.updateDiscreteStates()
-            if terminate:
-                raise FmuTerminated(self, ticks)
-            if not update:
+            if ticking:
+                self.slave.setClock(ticking, [True] * len(ticking))
+            defined, nxt = self._update_discrete_states(ticks)
+            self._advance(ticking, ticks)
+            ticking = self._ask_intervals(now, ticks, zero_allowed=True)
+            if not ticking:
                 break
         else:
-            raise SimulationError(f"{self.name}: fmi3UpdateDiscreteStates at t = "
-                                  f"{to_seconds(ticks):g} s still needs an update after "
-                                  f"{MAX_EVENT_ITERATIONS} calls (an event iteration that "
-                                  "does not converge)")
+            raise SimulationError(f"{self.name}: at t = {to_seconds(ticks):g} s a countdown "
+                                  f"clock still ticks again at interval 0 after "
+                                  f"{MAX_EVENT_ITERATIONS} ticks")
         self._announced = None
         if defined:
             if not (math.isfinite(nxt) and nxt > now):
@@ -600,10 +635,24 @@ class Fmi3Unit(Unit):
                                       f"current time {now!r} s (an FMU announcing "
                                       "its next event must give a later time)")
             self._announced = self._schedule(nxt, ticks)
-        self._advance(ticking, ticks)
-        self._ask_intervals(now, ticks)
         self.slave.enterStepMode()
         self._in_event = self._needs_event = False
+
+    def _update_discrete_states(self, ticks: int) -> tuple[bool, float]:
+        """fmi3UpdateDiscreteStates at the event at ``ticks`` until no update is needed (the
+        watched output clocks asked before each call): (nextEventTimeDefined, nextEventTime)
+        of the last call."""
+        for _ in range(MAX_EVENT_ITERATIONS):
+            self._read_output_clocks()
+            update, terminate, _, _, defined, nxt = self.slave.updateDiscreteStates()
+            if terminate:
+                raise FmuTerminated(self, ticks)
+            if not update:
+                return defined, nxt
+        raise SimulationError(f"{self.name}: fmi3UpdateDiscreteStates at t = "
+                              f"{to_seconds(ticks):g} s still needs an update after "
+                              f"{MAX_EVENT_ITERATIONS} calls (an event iteration that "
+                              "does not converge)")
 
     def watch_clock(self, vr: int) -> None:
         """Ask the output clock ``vr`` at every event (it is wired to an input clock)."""
@@ -633,12 +682,13 @@ class Fmi3Unit(Unit):
                 self._clock_next[vr] = self._schedule(float(origin + (k + 1) * period), ticks)
 
     def _ask_intervals(self, now: float, ticks: int, zero_allowed: bool = False) -> list[int]:
-        """Ask the countdown and tunable input clocks' intervals (fmi3GetIntervalDecimal) at
-        the event at ``ticks`` (the FMU's time ``now``, s); a changed one schedules the clock's
-        next tick. ``zero_allowed`` (Scheduled Execution): a countdown interval 0 means a tick
-        now; those clocks are returned (else an interval must be positive)."""
-        asked = [c for c in self.input_clocks
-                 if c.interval_variability in ("countdown", "tunable")]
+        """Ask the intervals (fmi3GetIntervalDecimal) of the countdown input clocks and of the
+        tunable ones that declare no interval at the event at ``ticks`` (the FMU's time
+        ``now``, s); a changed one schedules the clock's next tick. ``zero_allowed``: a
+        countdown interval 0 means a tick now; those clocks are returned (else an interval
+        must be positive)."""
+        asked = [c for c in self.input_clocks if c.interval_variability == "countdown"
+                 or (c.interval_variability == "tunable" and c.interval is None)]
         now_ticking = []
         for clock, (interval, qualifier) in zip(asked, self._intervals(asked) if asked else ()):
             if qualifier != fmi3IntervalChanged:

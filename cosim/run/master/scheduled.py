@@ -30,20 +30,17 @@ that is not a whole nanosecond is passed as the FMU's own double).
 from __future__ import annotations
 
 import os
-from fractions import Fraction
 from typing import Any
 
 from fmpy.fmi3 import (
     FMU3ScheduledExecution,
     fmi3ClockUpdateCallback,
     fmi3InstanceEnvironment,
-    fmi3IntervalChanged,
     fmi3LockPreemptionCallback,
     fmi3LogMessageCallback,
     fmi3UnlockPreemptionCallback,
 )
 
-from cosim.fmu.state import to_seconds
 from cosim.run.master.errors import SimulationError
 from cosim.run.master.fmi3 import Fmi3Unit
 
@@ -116,15 +113,8 @@ class Fmi3ScheduledUnit(Fmi3Unit):
                                   f"{self.last_messages() or 'the FMU gave no reason'}")
 
     def exit_initialization(self) -> None:
-        countdowns = [c for c in self.input_clocks if c.interval_variability == "countdown"]
-        first = self._intervals(countdowns) if countdowns else []  # in Initialization Mode
         super().exit_initialization()  # now in Clock Activation Mode (sec. 5.2.1)
         self._in_event = False
-        start = Fraction(to_seconds(self._start_ticks))
-        for clock, (interval, qualifier) in zip(countdowns, first):
-            if qualifier == fmi3IntervalChanged:  # sec. 2.2.8.2: t_0 = t_start + interval
-                self._clock_next[clock.value_reference] = self._schedule(
-                    float(start + interval), self._start_ticks - 1)
 
     def _do_step(self, t: int, h: int) -> int:
         return t + h  # time passes between activations; the FMU has no doStep
