@@ -131,7 +131,7 @@ def test_clock_connections_are_checked(c_fmus3, c_fmus, tmp_path):
 
 
 def test_an_input_clock_without_priority_is_refused(c_fmus3, tmp_path):
-    """FMI 3.0 sec. 2.4.7.4: an input clock of a Scheduled Execution FMU declares a priority;
+    """FMI 3.0 sec. 2.4.4: an input clock of a Scheduled Execution FMU declares a priority;
     Tasks3 with the alarm clock's removed."""
     fmu = tmp_path / "NoPriority.fmu"
     with zipfile.ZipFile(c_fmus3["Tasks3"]) as source, zipfile.ZipFile(fmu, "w") as out:

@@ -1,6 +1,6 @@
 """Small FMI 3.0 co-simulation FMUs written in C (tests/third_party/fmi3_models.c), built as a
 third-party tool would ship them: gcc against fmpy's FMI 3 headers, zipped with a
-modelDescription.xml (binaries/x86_64-linux, FMI 3.0 sec. 2.5.1.1).
+modelDescription.xml (binaries/x86_64-linux, FMI 3.0 sec. 2.5.1.4).
 
 Variables are ``(name, type, causality, variability, value reference, start, extra)``;
 ``extra`` may hold ``dimension`` (array size), ``unit``, and a Clock's attributes

@@ -1,16 +1,16 @@
 """The FMI 3.0 co-simulation unit on fmpy's ``FMU3Slave`` (FMI 3.0 sec. 4).
 
 * Types: Float64/32, Int8..UInt64, Boolean, String, Binary (bytes), Enumeration (its Int64
-  functions, FMI 3.0 sec. 2.4.7.4). An array variable ``x`` of n elements appears as the
+  functions, FMI 3.0 sec. 2.2.7.2). An array variable ``x`` of n elements appears as the
   variables ``x[1]`` .. ``x[n]`` (the FMI 2 flattening, so ``x[*]`` globs match); an element
   is read and written through the whole array (one get, or one get and one set).
-* Event Mode (sec. 4.1.3), when the algorithm handles events and the FMU ``hasEventMode``:
-  after initialisation and at every event the master calls fmi3UpdateDiscreteStates until no
-  update is needed; ``nextEventTimeDefined`` / ``nextEventTime`` make that time a
-  communication point with an event; a doStep returning ``eventHandlingNeeded`` gives an
-  event at the time reached; early return (``earlyReturnAllowed``) ends the communication
-  point at ``lastSuccessfulTime``; ``terminateSimulation`` ends the run
-  (:class:`FmuTerminated`).
+* Event Mode (sec. 2.3.5; fmi3EnterEventMode and fmi3DoStep: sec. 4.2.1), when the
+  algorithm handles events and the FMU ``hasEventMode``: after initialisation and at every
+  event the master calls fmi3UpdateDiscreteStates until no update is needed;
+  ``nextEventTimeDefined`` / ``nextEventTime`` make that time a communication point with an
+  event; a doStep returning ``eventHandlingNeeded`` gives an event at the time reached; early
+  return (``earlyReturnAllowed``, sec. 4.1.3) ends the communication point at
+  ``lastSuccessfulTime``; ``terminateSimulation`` ends the run (:class:`FmuTerminated`).
 * Event times: the master's schedule is in integer nanoseconds, the FMU's own times are
   doubles. An announced ``nextEventTime``, a clock tick or a ``lastSuccessfulTime`` that is
   not a whole nanosecond (1/3 s) is kept as the FMU's double: its communication point is the
@@ -78,7 +78,8 @@ C_NUMBER_TYPES = {"Float64": ctypes.c_double, "Float32": ctypes.c_float,
 ARRAY = "Array"  # the family of array elements (read and written through their array)
 MAX_EVENT_ITERATIONS = 1000  # fmi3UpdateDiscreteStates calls at one event before giving up
 _WARNING, _DISCARD = 1, 2
-# FMI 3.0 sec. 2.4.7.4 and fmi3Variable.xsd (Clock); "calculated" was dropped before 3.0
+# FMI 3.0 sec. 2.4.4 (ClockType attributes) and fmi3AttributeGroups.xsd (fmi3ClockAttributes);
+# "calculated" was dropped before 3.0
 INTERVAL_VARIABILITIES = ("constant", "fixed", "tunable", "changing", "countdown", "triggered")
 PERIODIC = ("constant", "fixed", "tunable")
 ASKED = ("fixed", "tunable")  # interval and shift asked of the FMU
@@ -87,7 +88,7 @@ TYPE_OWN = ("name", "description")  # a ClockType's attributes that are not its 
 
 @dataclass(frozen=True)
 class ClockAttributes:
-    """A Clock variable's attributes (FMI 3.0 sec. 2.4.7.4): interval and shift in s, exact
+    """A Clock variable's attributes (FMI 3.0 sec. 2.4.4): interval and shift in s, exact
     (None: not declared)."""
 
     name: str
@@ -98,7 +99,7 @@ class ClockAttributes:
     shift: Fraction | None
     supports_fraction: bool
     # Scheduled Execution: the priority of the clock's model partition (lower value = higher
-    # priority, FMI 3.0 sec. 2.4.7.4); None: not declared
+    # priority, FMI 3.0 sec. 2.4.4); None: not declared
     priority: int | None = None
 
 
@@ -140,11 +141,12 @@ def declared_attributes(types: dict[str | None, dict[str, str]],
 def read_clock(path: Path, a: dict[str, str]) -> ClockAttributes:
     """The :class:`ClockAttributes` of one Clock element of the FMU at ``path``, from its
     attributes ``a`` (its ClockType's resolved, :func:`declared_attributes`), checked against
-    FMI 3.0 sec. 2.4.7.4 (a known ``intervalVariability``; ``intervalDecimal`` and
+    FMI 3.0 sec. 2.4.4 (a known ``intervalVariability``; ``intervalDecimal`` and
     ``resolution`` > 0, ``shiftDecimal`` >= 0; a ``constant`` clock declares its interval;
     ``intervalCounter`` / ``shiftCounter`` need a ``resolution``; ``supportsFraction`` a
-    boolean; ``valueReference`` an unsigned integer; ``priority`` >= 0): a value that is not
-    valid is a :class:`SimulationError` naming the file, the clock and the attribute."""
+    boolean; ``priority`` >= 0; ``valueReference``, sec. 2.4.7.4, an unsigned integer): a
+    value that is not valid is a :class:`SimulationError` naming the file, the clock and the
+    attribute."""
     name = a.get("name", "?")
 
     def bad(key: str, why: str) -> SimulationError:
@@ -228,7 +230,7 @@ def family_of(kind: str) -> str:
 
 def elements(md: Any) -> list[tuple[Any, str, int | None, int]]:
     """(fmpy variable, name, element index or None, array size) of every non-Clock variable;
-    an array's elements are ``name[1]`` ... (row-major, FMI 3.0 sec. 2.4.7.6)."""
+    an array's elements are ``name[1]`` ... (row-major, FMI 3.0 sec. 2.2.7.1)."""
     out = []
     for v in md.modelVariables:
         if v.type == "Clock":
@@ -377,7 +379,7 @@ class Fmi3Unit(Unit):
 
     def _refused_instantiation(self) -> str:
         """Why fmi3InstantiateCoSimulation returned NULL: its arguments, the FMU's words, and,
-        with Event Mode asked for, that the modelDescription declares it (FMI 3.0 sec. 4.2:
+        with Event Mode asked for, that the modelDescription declares it (FMI 3.0 sec. 2.3.1:
         eventModeUsed = true only if hasEventMode = true, which the binary then accepts)."""
         text = (f"{self.name} ({self.path}): fmi3InstantiateCoSimulation(eventModeUsed = "
                 f"{str(self.event_mode).lower()}, earlyReturnAllowed = "
@@ -386,8 +388,9 @@ class Fmi3Unit(Unit):
         if self.event_mode:
             text += ("; its modelDescription.xml declares hasEventMode = true, so the event "
                      "algorithm asked for Event Mode, which its binary refuses (FMI 3.0 sec. "
-                     "4.2: an FMU declaring hasEventMode accepts eventModeUsed = true): run it "
-                     "with algorithm = \"fixed\" (no Event Mode), or fix the FMU")
+                     "2.3.1, 4.4: an FMU declaring hasEventMode accepts eventModeUsed = "
+                     "true): run it with algorithm = \"fixed\" (no Event Mode), or fix the "
+                     "FMU")
         return text
 
     def enter_initialization(self, start: float, stop: float) -> None:
@@ -398,7 +401,7 @@ class Fmi3Unit(Unit):
         periods = self._periods() if self.event_mode else {}
         first = self._first_countdowns() if self.event_mode else {}
         self.slave.exitInitializationMode()
-        if self.event_mode:  # FMI 3.0 sec. 4.2.1: now in Event Mode
+        if self.event_mode:  # FMI 3.0 sec. 2.3.3: now in Event Mode
             self._in_event = True
             start = Fraction(to_seconds(self._start_ticks))
             for clock in self.input_clocks:

@@ -3,7 +3,7 @@
 A Scheduled Execution FMU has no doStep: after Initialization Mode it is in Clock Activation
 Mode, and the master runs each of its model partitions with
 ``fmi3ActivateModelPartition(clockReference, activationTime)`` when the partition's input clock
-ticks (sec. 5.2.2):
+ticks (sec. 5.2.1):
 
 * periodic clocks (``constant``, ``fixed``, ``tunable``) tick at start + shift + k interval,
   attributes and FMU queries as for co-simulation (:mod:`cosim.run.master.fmi3`);
@@ -18,7 +18,7 @@ ticks (sec. 5.2.2):
   [connections] ticks (the master asks every output clock with fmi3GetClock after each
   clock-update callback).
 
-Every input clock declares a ``priority`` (sec. 2.4.7.4: required in Scheduled Execution;
+Every input clock declares a ``priority`` (sec. 2.4.4: required in Scheduled Execution;
 lower value = higher priority). The master runs partitions one at a time (no preemption):
 the partitions due at one time are activated in priority order (equal priorities: by value
 reference), and a partition made due at that time by another (countdown 0, a trigger) joins
@@ -59,7 +59,7 @@ class Fmi3ScheduledUnit(Fmi3Unit):
             if clock.priority is None:
                 raise SimulationError(
                     f"{path}: modelDescription.xml: input Clock {clock.name!r} has no priority "
-                    "(FMI 3.0 sec. 2.4.7.4: every input clock of a Scheduled Execution FMU "
+                    "(FMI 3.0 sec. 2.4.4: every input clock of a Scheduled Execution FMU "
                     "declares one)")
             self._priority[clock.value_reference] = (clock.priority, clock.value_reference)
         clock_vars = set(self.clock_names)
