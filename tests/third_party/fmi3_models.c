@@ -8,8 +8,10 @@
    at interval 0 until it has ticked "repeat" + 1 times at that instant, then its interval
    doubles, or becomes "period" when it was 0), Clocked (a
    periodic input clock "tick" whose interval and shift the FMU gives on request, its interval
-   multiplied by growth at every tick). TimeEvents compares times within its parameter
-   tolerance (0: exactly). */
+   multiplied by growth at every tick), Pulses (events, announced as nextEventTime, at the
+   times k period, k = 0 .. 30, whose bit k is set in its parameter "pattern"; its output clock
+   "ticked", vr 17, is active in the Event Mode of each of them as TimeEvents'). TimeEvents
+   compares times within its parameter tolerance (0: exactly). */
 #include <stdlib.h>
 #include <string.h>
 #include <math.h>
@@ -22,7 +24,8 @@
 typedef struct {
     fmi3Float64 time, period, u, q, next, stop_at, interval, first, tol, last_event, shift,
         growth, interval_counter, shift_counter, resolution, /* these three: Fraction */
-        repeat, report; /* Countdown: ticks at interval 0 after each tick, interval told */
+        repeat, report, /* Countdown: ticks at interval 0 after each tick, interval told */
+        pattern; /* Pulses: bit k set: an event at k period */
     fmi3Int32 n, burst;
     fmi3Boolean announce, eventMode, earlyReturn, tick, pending, init;
     double num[NT]; /* numeric and Boolean feedthrough values (as double, exact up to 2^53) */
@@ -33,6 +36,9 @@ typedef struct {
     fmi3LogMessageCallback log; fmi3InstanceEnvironment env;
 } M;
 
+#if defined(MODEL_PULSES)
+static double next_pulse(M *m, int k);
+#endif
 static void say(M *m, const char *msg) { if (m->log) m->log(m->env, fmi3OK, "log", msg); }
 
 fmi3Instance fmi3InstantiateCoSimulation(fmi3String name, fmi3String token, fmi3String res,
@@ -46,6 +52,9 @@ fmi3Instance fmi3InstantiateCoSimulation(fmi3String name, fmi3String token, fmi3
     m->period = 0.1; m->announce = fmi3True; m->stop_at = 0.75; m->first = 0.1;
     m->tol = EPS; m->interval = 0.3; m->shift = 0.1; m->growth = 1.0;
     m->interval_counter = 3; m->shift_counter = 1; m->resolution = 10;
+#if defined(MODEL_PULSES)
+    m->period = 1.0; m->pattern = 771; /* the declared start values */
+#endif
     for (int k = 0; k < NT; k++) /* the Feedthrough's declared start values */
         m->num[k] = k < 2 ? 1.5 : k == 10 ? 0.0 : 1.0;
     m->i64 = 1; m->u64 = 1; /* the exact Int64 and UInt64 start values */
@@ -69,11 +78,24 @@ fmi3Status fmi3ExitInitializationMode(fmi3Instance i) {
 #if defined(MODEL_COUNTDOWN)
     m->pending = fmi3False; /* the first interval was told in Initialization Mode */
 #endif
+#if defined(MODEL_PULSES)
+    m->next = next_pulse(m, -1);
+#endif
     return fmi3OK; }
 fmi3Status fmi3EnterEventMode(fmi3Instance i) { (void)i; return fmi3OK; }
 fmi3Status fmi3EnterStepMode(fmi3Instance i) { (void)i; return fmi3OK; }
 fmi3Status fmi3Terminate(fmi3Instance i) { say(i, "terminated"); return fmi3OK; }
 fmi3Status fmi3Reset(fmi3Instance i) { (void)i; return fmi3OK; }
+
+#if defined(MODEL_PULSES)
+/* Pulses: the time of the first pulse after pulse k (k = -1: the first), or infinity */
+static double next_pulse(M *m, int k) {
+    long bits = (long)m->pattern;
+    for (int j = k + 1; j <= 30; j++)
+        if (bits >> j & 1) return j * m->period;
+    return INFINITY;
+}
+#endif
 
 static inline void time_event(M *m) {
     m->n++; m->q = m->u; m->last_event = m->time; m->next += m->period; }
@@ -86,6 +108,12 @@ fmi3Status fmi3UpdateDiscreteStates(fmi3Instance i, fmi3Boolean *need, fmi3Boole
 #if defined(MODEL_TIMEEVENTS)
     if (m->time >= m->next - m->tol) time_event(m);
     *defined = m->announce; *next = m->next;
+#elif defined(MODEL_PULSES)
+    if (m->time >= m->next - m->tol) {
+        m->n++; m->q = m->u; m->last_event = m->time;
+        m->next = next_pulse(m, (int)floor(m->time / m->period + 0.5));
+    }
+    *defined = isfinite(m->next); *next = *defined ? m->next : 0.0;
 #elif defined(MODEL_CLOCKED)
     if (m->tick) { m->n++; m->q = m->time; m->tick = fmi3False;
                    if (m->growth != 1.0) { m->interval *= m->growth; m->pending = fmi3True; } }
@@ -105,7 +133,7 @@ fmi3Status fmi3DoStep(fmi3Instance i, fmi3Float64 t, fmi3Float64 h, fmi3Boolean 
     M *m = i; (void)noSet;
     double end = t + h;
     *event = fmi3False; *term = fmi3False; *early = fmi3False; *last = end;
-#if defined(MODEL_TIMEEVENTS)
+#if defined(MODEL_TIMEEVENTS) || defined(MODEL_PULSES)
     if (m->eventMode) {
         if (end > m->next + m->tol) {  /* passes over the event */
             if (!m->earlyReturn) { say(m, "doStep passes over an event"); return fmi3Error; }
@@ -114,7 +142,12 @@ fmi3Status fmi3DoStep(fmi3Instance i, fmi3Float64 t, fmi3Float64 h, fmi3Boolean 
         }
         if (fabs(end - m->next) <= m->tol && !m->announce) *event = fmi3True;
     } else {
+#if defined(MODEL_PULSES)
+        while (m->next <= end + m->tol) {
+            m->n++; m->next = next_pulse(m, (int)floor(m->next / m->period + 0.5)); }
+#else
         while (m->next <= end + m->tol) time_event(m);
+#endif
     }
 #elif defined(MODEL_TERMINATOR)
     if (end >= m->stop_at - EPS) { *term = fmi3True; *last = end; }
@@ -159,6 +192,7 @@ static double *slot(M *m, fmi3ValueReference vr) {
     case 15: return &m->shift_counter;
     case 16: return &m->resolution;
     case 18: return &m->repeat;
+    case 19: return &m->pattern;
     }
 #endif
     return NULL;

@@ -172,6 +172,32 @@ def test_reference_clocks_ticks_as_documented(reference_clocks, tmp_path):
         key=lambda a: (a[1], a[0]))
 
 
+def test_cosim_run_gives_the_reference_clocks_documented_tick_table(reference_clocks, c_fmus3,
+                                                                    tmp_path):
+    """`cosim run` on the Reference FMU Clocks with its inClock2 wired to Pulses3's output
+    clock (a co-simulation FMU whose events are at 0, 1, 8 and 9 s): the tick table of its
+    modelDescription, inClock1 every second, inClock2 at 0, 1, 8 and 9 s, the countdown
+    inClock3 at 4 s, in results.csv after each second's activations (up to 10 s)."""
+    sc = write_scenario(tmp_path, {"c": (reference_clocks, {}, {}),
+                                   "p": (c_fmus3["Pulses3"], {}, {})},
+                        connections={"c.inClock2": "p.ticked"}, stop=10.0, output=1.0)
+    done = subprocess.run([sys.executable, "-m", "cosim.cli", "run", str(sc), "--quiet",
+                           "--no-plot", "--out", str(tmp_path / "out")],
+                          capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr
+    frame = pd.read_csv(tmp_path / "out" / "results.csv")
+    t = frame["time"].to_numpy()
+    np.testing.assert_array_equal(t, np.arange(11.0))
+    in1 = t + 1
+    in2 = np.array([sum(s <= k for s in (0, 1, 8, 9)) for k in t])
+    in3 = (t >= 4).astype(int)
+    np.testing.assert_array_equal(frame["c.inClock1Ticks"], in1)
+    np.testing.assert_array_equal(frame["c.inClock2Ticks"], in2)
+    np.testing.assert_array_equal(frame["c.inClock3Ticks"], in3)
+    np.testing.assert_array_equal(frame["c.totalInClockTicks"], in1 + in2 + in3)
+    np.testing.assert_array_equal(frame["p.n"], in2)
+
+
 def test_reference_clocks_with_its_triggered_clocks_wired(reference_clocks, c_fmus3, tmp_path):
     """Clocks' outClock ticks when totalInClockTicks reaches a multiple of 5 (at 4 s and 8 s
     with inClock1 and inClock3 alone): it triggers Tasks3's kick there. With inClock2 triggered

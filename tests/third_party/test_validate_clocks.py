@@ -239,6 +239,8 @@ def test_scheduled_test_fmu_partitions_run_at_their_analytic_times(c_fmus3):
     ("ClockedFixed3", [0.1 + 0.3 * k for k in range(7)]),  # the same, asked of the FMU
     ("ClockedFraction3", [0.1 + 0.3 * k for k in range(7)]),  # 3/10 s and 1/10 s
     ("ClockedTyped3", [0.1 + 0.3 * k for k in range(7)]),  # interval from its ClockType
+    ("ClockedDeclared3", [0.1 + 0.3 * k for k in range(7)]),  # fixed, declared: not asked
+    ("ClockedSteady3", [0.1 + 0.3 * k for k in range(7)]),  # tunable, declared: not asked
     ("Countdown3", [0.1, 0.3, 0.7, 1.5]),  # first 0.1 s, the interval doubling at each tick
 ])
 def test_clocked_cosimulation_fmus_pass_with_their_ticks(c_fmus3, name, ticks):

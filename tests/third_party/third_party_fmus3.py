@@ -74,6 +74,16 @@ TICKER3 = Spec3("Ticker3", "TIMEEVENTS", (
 
 # first: the clock's first interval (asked in Initialization Mode); repeat: its ticks at
 # interval 0 after each tick; period: its interval after a tick at interval 0
+# events at k period for the bits k set in pattern (771: 0, 1, 8, 9 s), announced as
+# nextEventTime; its output clock "ticked" active at each (the Reference FMU Clocks' inClock2
+# ticks, "triggered by the simulation algorithm at 0, 1, 8 and 9")
+PULSES3 = Spec3("Pulses3", "PULSES", (
+    ("period", "Float64", "parameter", "fixed", 0, "1.0", {"unit": "s"}),
+    ("pattern", "Int32", "parameter", "fixed", 19, "771", {}),
+    ("n", "Int32", "output", "discrete", 3, None, {}),
+    ("ticked", "Clock", "output", "discrete", 17, None, {"intervalVariability": "triggered"}),
+), dependencies={"n": (), "ticked": ()}, event_mode=True, stop_time=10.0)
+
 COUNTDOWN3 = Spec3("Countdown3", "COUNTDOWN", (
     ("first", "Float64", "parameter", "fixed", 7, "0.1", {"unit": "s"}),
     ("repeat", "Int32", "parameter", "fixed", 18, "0", {}),
@@ -156,7 +166,7 @@ TASKS3 = Spec3("Tasks3", "TASKS", (
                  "y": ("u",), "t_alarm": (), "t_kick": ()}, scheduled=True)
 
 SPECS3 = (FEEDTHROUGH3, TIME_EVENTS3, TERMINATOR3, COUNTDOWN3, THIRDS3, *CLOCKED3.values(),
-          TASKS3, TICKER3)
+          TASKS3, TICKER3, PULSES3)
 
 
 def model_description(spec: Spec3) -> bytes:
