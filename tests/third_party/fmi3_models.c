@@ -55,6 +55,9 @@ fmi3Instance fmi3InstantiateCoSimulation(fmi3String name, fmi3String token, fmi3
 #if defined(MODEL_PULSES)
     m->period = 1.0; m->pattern = 771; /* the declared start values */
 #endif
+#if defined(COUNTDOWN_REPEAT)
+    m->repeat = COUNTDOWN_REPEAT; /* the declared start value of repeat */
+#endif
     for (int k = 0; k < NT; k++) /* the Feedthrough's declared start values */
         m->num[k] = k < 2 ? 1.5 : k == 10 ? 0.0 : 1.0;
     m->i64 = 1; m->u64 = 1; /* the exact Int64 and UInt64 start values */

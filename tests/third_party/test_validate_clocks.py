@@ -242,6 +242,8 @@ def test_scheduled_test_fmu_partitions_run_at_their_analytic_times(c_fmus3):
     ("ClockedDeclared3", [0.1 + 0.3 * k for k in range(7)]),  # fixed, declared: not asked
     ("ClockedSteady3", [0.1 + 0.3 * k for k in range(7)]),  # tunable, declared: not asked
     ("Countdown3", [0.1, 0.3, 0.7, 1.5]),  # first 0.1 s, the interval doubling at each tick
+    # the same, and after each tick interval 0: a second tick in the same Event Mode
+    ("CountdownTwice3", [0.1, 0.1, 0.3, 0.3, 0.7, 0.7, 1.5, 1.5]),
 ])
 def test_clocked_cosimulation_fmus_pass_with_their_ticks(c_fmus3, name, ticks):
     problems = check_fmu(c_fmus3[name], Options(strict=False))

@@ -36,6 +36,7 @@ class Spec3:
     step: float = 0.125
     scheduled: bool = False  # a Scheduled Execution FMU (fmi3_scheduled.c), not co-simulation
     clock_types: dict[str, dict[str, str]] = field(default_factory=dict)  # ClockType attributes
+    defines: tuple[str, ...] = ()  # C macros besides MODEL_<model> (start values the C sets)
 
 
 def _start(kind: str) -> str:
@@ -93,6 +94,11 @@ COUNTDOWN3 = Spec3("Countdown3", "COUNTDOWN", (
     ("q", "Float64", "output", "discrete", 2, None, {}),
     ("n", "Int32", "output", "discrete", 3, None, {}),
 ), dependencies={"q": (), "n": ()}, event_mode=True, stop_time=2.0)
+# Countdown ticking twice at each instant (repeat 1: interval 0 once after each tick)
+COUNTDOWN_TWICE3 = replace(
+    COUNTDOWN3, name="CountdownTwice3", defines=("COUNTDOWN_REPEAT=1",),
+    variables=tuple(v if v[0] != "repeat" else (*v[:5], "1", v[6])
+                    for v in COUNTDOWN3.variables))
 
 # TimeEvents with its time tolerance and t_event, the FMU's own time at its last event (with
 # tolerance 0 and period 1/3 s: events at doubles that are not whole nanoseconds)
@@ -166,7 +172,7 @@ TASKS3 = Spec3("Tasks3", "TASKS", (
                  "y": ("u",), "t_alarm": (), "t_kick": ()}, scheduled=True)
 
 SPECS3 = (FEEDTHROUGH3, TIME_EVENTS3, TERMINATOR3, COUNTDOWN3, THIRDS3, *CLOCKED3.values(),
-          TASKS3, TICKER3, PULSES3)
+          TASKS3, TICKER3, PULSES3, COUNTDOWN_TWICE3)
 
 
 def model_description(spec: Spec3) -> bytes:
@@ -242,7 +248,8 @@ def build(spec: Spec3, out_dir: Path, work: Path) -> Path:
     model = "fmi3_scheduled.c" if spec.scheduled else "fmi3_models.c"
     subprocess.run(["gcc", "-std=c99", "-D_DEFAULT_SOURCE", "-Wall", "-Wextra", "-Werror",
                     "-shared", "-fPIC", "-O1", f"-I{headers}", f"-DMODEL_{spec.model}",
-                    *(["-DSCHEDULED_EXECUTION"] if spec.scheduled else []), "-o", str(lib),
+                    *(["-DSCHEDULED_EXECUTION"] if spec.scheduled else []),
+                    *(f"-D{d}" for d in spec.defines), "-o", str(lib),
                     str(HERE / model), str(HERE / "fmi3_stubs.c"), "-lm"],
                    check=True, capture_output=True, text=True)
     path = out_dir / f"{spec.name}.fmu"
