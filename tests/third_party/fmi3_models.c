@@ -8,7 +8,8 @@
    at interval 0 until it has ticked "repeat" + 1 times at that instant, then its interval
    doubles, or becomes "period" when it was 0), Clocked (a
    periodic input clock "tick" whose interval and shift the FMU gives on request, its interval
-   multiplied by growth at every tick), Pulses (events, announced as nextEventTime, at the
+   multiplied by growth at every tick; with CLOCK_CHANGING it is a changing Clock: its first
+   interval told in Initialization Mode, the next one in each Event Mode where it ticked), Pulses (events, announced as nextEventTime, at the
    times k period, k = 0 .. 30, whose bit k is set in its parameter "pattern"; its output clock
    "ticked", vr 17, is active in the Event Mode of each of them as TimeEvents'). TimeEvents
    compares times within its parameter tolerance (0: exactly). */
@@ -119,7 +120,11 @@ fmi3Status fmi3UpdateDiscreteStates(fmi3Instance i, fmi3Boolean *need, fmi3Boole
     *defined = isfinite(m->next); *next = *defined ? m->next : 0.0;
 #elif defined(MODEL_CLOCKED)
     if (m->tick) { m->n++; m->q = m->time; m->tick = fmi3False;
-                   if (m->growth != 1.0) { m->interval *= m->growth; m->pending = fmi3True; } }
+                   if (m->growth != 1.0) { m->interval *= m->growth; m->pending = fmi3True; }
+#if defined(CLOCK_CHANGING)
+                   m->pending = fmi3True; /* a changing Clock's next interval, told at once */
+#endif
+    }
 #elif defined(MODEL_COUNTDOWN)
     if (m->tick) {
         m->n++; m->q = m->u; m->tick = fmi3False; m->pending = fmi3True;
@@ -322,6 +327,8 @@ fmi3Status fmi3GetIntervalDecimal(fmi3Instance i, const fmi3ValueReference vr[],
 #if defined(MODEL_COUNTDOWN)
         iv[j] = m->init ? m->first : m->report;
         if (m->init) q[j] = fmi3IntervalChanged;
+#elif defined(CLOCK_CHANGING)
+        if (m->init) q[j] = fmi3IntervalChanged; /* the first interval */
 #endif
     }
     if (!m->init) m->pending = fmi3False;

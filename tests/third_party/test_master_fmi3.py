@@ -254,6 +254,22 @@ def test_a_tunable_clock_ticks_at_the_intervals_the_fmu_retunes_to(c_fmus3, tmp_
     np.testing.assert_array_equal(q, last)
 
 
+def test_a_changing_clock_ticks_at_the_intervals_the_fmu_gives_where_it_ticked(c_fmus3,
+                                                                               tmp_path):
+    """A changing clock (FMI 3.0 sec. 2.2.8.2: t_0 = t_start + T_interval,0, asked in
+    Initialization Mode; t_i = t_(i-1) + T_interval,i, asked in the Event Mode where it
+    ticked): interval 0.1 s, multiplied by 2 at every tick: ticks at 0.1, 0.3, 0.7, 1.5 s."""
+    times, n_ticks, q = _clock_run(c_fmus3, tmp_path, "changing",
+                                   {"interval": 0.1, "growth": 2.0})
+    ticks, t = [0.1], Fraction(0.1)
+    for k in range(1, 4):
+        t += Fraction(0.1) * 2**k
+        ticks.append(float(t))
+    n, last = _last_tick(times, np.array(ticks))
+    np.testing.assert_array_equal(n_ticks, n)
+    np.testing.assert_array_equal(q, last)
+
+
 def test_a_clock_attribute_that_is_not_valid_names_the_variable(c_fmus3, tmp_path):
     from cosim.run.master.fmi3 import clock_attributes
 

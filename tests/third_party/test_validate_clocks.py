@@ -241,6 +241,7 @@ def test_scheduled_test_fmu_partitions_run_at_their_analytic_times(c_fmus3):
     ("ClockedTyped3", [0.1 + 0.3 * k for k in range(7)]),  # interval from its ClockType
     ("ClockedDeclared3", [0.1 + 0.3 * k for k in range(7)]),  # fixed, declared: not asked
     ("ClockedSteady3", [0.1 + 0.3 * k for k in range(7)]),  # tunable, declared: not asked
+    ("ClockedChanging3", [0.3 * k for k in range(1, 7)]),  # changing, interval 0.3 s
     ("Countdown3", [0.1, 0.3, 0.7, 1.5]),  # first 0.1 s, the interval doubling at each tick
     # the same, and after each tick interval 0: a second tick in the same Event Mode
     ("CountdownTwice3", [0.1, 0.1, 0.3, 0.3, 0.7, 0.7, 1.5, 1.5]),

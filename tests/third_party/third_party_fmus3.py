@@ -136,6 +136,10 @@ CLOCKED3["fraction"] = clocked("ClockedFraction3", "fixed", supportsFraction="tr
 # asks neither (FMI 3.0 sec. 2.2.8.2), so the FMU's parameters interval and shift go unheard
 CLOCKED3["declared"] = clocked("ClockedDeclared3", "fixed", intervalDecimal="0.3",
                                shiftDecimal="0.1")
+# a changing clock (first tick interval after the start, then interval times growth after
+# each tick, told in the Event Mode where it ticked)
+CLOCKED3["changing"] = replace(clocked("ClockedChanging3", "changing"),
+                               defines=("CLOCK_CHANGING",))
 CLOCKED3["steady"] = clocked("ClockedSteady3", "tunable", intervalDecimal="0.3",
                              shiftDecimal="0.1")
 # a constant clock with its interval from its ClockType "Tick" and its own shift (0.1 s)

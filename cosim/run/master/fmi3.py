@@ -31,9 +31,10 @@
   tick that long after the start time, 0 included) and in every Event Mode after
   fmi3UpdateDiscreteStates, and, when the FMU says ``fmi3IntervalChanged``, it ticks once
   that long after the event (0: at the event itself, the clock set and
-  fmi3UpdateDiscreteStates called again). Times are exact fractions until rounded to the
-  FMU's double. A tick is an event where the master activates the clock (fmi3SetClock)
-  before fmi3UpdateDiscreteStates. ``changing`` and ``triggered`` input clocks are refused.
+  fmi3UpdateDiscreteStates called again); a ``changing`` clock likewise, its interval asked
+  in Initialization Mode and in each Event Mode where it ticked. Times are exact fractions
+  until rounded to the FMU's double. A tick is an event where the master activates the clock
+  (fmi3SetClock) before fmi3UpdateDiscreteStates. ``triggered`` input clocks are refused.
   Output clocks tick at the FMU's events (``eventHandlingNeeded`` or ``nextEventTime``);
   those wired in the scenario to a triggered input clock of a Scheduled Execution FMU (sec.
   2.2.8.2, in FMI 3.0.2's words: "The timing could be given by a triggered output Clock ...
@@ -265,7 +266,7 @@ class Fmi3Unit(Unit):
 
     fmi_version = "3.0"
     # input clocks without a schedule of their own that the master ticks
-    UNSCHEDULED_CLOCKS: tuple[str, ...] = ("countdown",)
+    UNSCHEDULED_CLOCKS: tuple[str, ...] = ("countdown", "changing")
     C_TYPES = C_NUMBER_TYPES
     C_PREFIX = "fmi3"
     C_COUNTS = True
@@ -399,7 +400,7 @@ class Fmi3Unit(Unit):
 
     def exit_initialization(self) -> None:
         periods = self._periods() if self.event_mode else {}
-        first = self._first_countdowns() if self.event_mode else {}
+        first = self._first_aperiodic() if self.event_mode else {}
         self.slave.exitInitializationMode()
         if self.event_mode:  # FMI 3.0 sec. 2.3.3: now in Event Mode
             self._in_event = True
@@ -411,24 +412,26 @@ class Fmi3Unit(Unit):
                     origin = start + periods[vr][1]
                     self._clock_period[vr] = (origin, periods[vr][0], 0)
                     self._clock_next[vr] = self._schedule(float(origin), self._start_ticks - 1)
-                elif vr in first:  # sec. 2.2.8.2, countdown Clock: t_0 = t_start + interval
+                elif vr in first:  # sec. 2.2.8.2, aperiodic Clock: t_0 = t_start + interval
                     self._clock_next[vr] = self._schedule(float(start + first[vr]),
                                                           self._start_ticks - 1)
 
-    def _first_countdowns(self) -> dict[int, Fraction]:
-        """The first interval (s) of every countdown input clock the FMU gives one for, asked
-        in Initialization Mode (FMI 3.0 sec. 2.2.8.2: the importer calls fmi3GetInterval for
-        a countdown Clock in Initialization Mode, in every Event Mode and in every Clock Update
-        Mode; its first tick is t_0 = t_start + T_interval,0 with T_interval,0 >= 0): those
-        with the qualifier ``fmi3IntervalChanged`` (none is due for another qualifier); an
-        interval below 0 is a :class:`SimulationError`."""
-        countdowns = [c for c in self.input_clocks if c.interval_variability == "countdown"]
+    def _first_aperiodic(self) -> dict[int, Fraction]:
+        """The first interval (s) of every countdown and changing input clock the FMU gives
+        one for, asked in Initialization Mode (FMI 3.0 sec. 2.2.8.2: the importer calls
+        fmi3GetInterval for such a Clock in Initialization Mode; its first tick is t_0 =
+        t_start + T_interval,0 with T_interval,0 >= 0): those with the qualifier
+        ``fmi3IntervalChanged`` (none is due for another qualifier); an interval below 0 is a
+        :class:`SimulationError`."""
+        aperiodic = [c for c in self.input_clocks
+                     if c.interval_variability in ("countdown", "changing")]
         out = {}
-        for clock, (interval, qualifier) in zip(countdowns, self._intervals(countdowns)):
+        for clock, (interval, qualifier) in zip(aperiodic, self._intervals(aperiodic)):
             if qualifier != fmi3IntervalChanged:
                 continue
             if interval < 0:
-                raise SimulationError(f"{self.name}: countdown clock {clock.name}: "
+                raise SimulationError(f"{self.name}: {clock.interval_variability} clock "
+                                      f"{clock.name}: "
                                       f"fmi3GetIntervalDecimal in Initialization Mode gave "
                                       f"{float(interval)!r} s (must be >= 0)")
             out[clock.value_reference] = interval
@@ -624,7 +627,8 @@ class Fmi3Unit(Unit):
                 self.slave.setClock(ticking, [True] * len(ticking))
             defined, nxt = self._update_discrete_states(ticks)
             self._advance(ticking, ticks)
-            ticking = self._ask_intervals(now, ticks, zero_allowed=True)
+            ticking = self._ask_intervals(now, ticks, self._asked_in_event(ticking),
+                                          zero_allowed=True)
             if not ticking:
                 break
         else:
@@ -684,28 +688,39 @@ class Fmi3Unit(Unit):
                 self._clock_period[vr] = (origin, period, k + 1)
                 self._clock_next[vr] = self._schedule(float(origin + (k + 1) * period), ticks)
 
-    def _ask_intervals(self, now: float, ticks: int, zero_allowed: bool = False) -> list[int]:
-        """Ask the intervals (fmi3GetIntervalDecimal) of the countdown input clocks and of the
-        tunable ones that declare no interval at the event at ``ticks`` (the FMU's time
-        ``now``, s); a changed one schedules the clock's next tick. ``zero_allowed``: a
-        countdown interval 0 means a tick now; those clocks are returned (else an interval
-        must be positive)."""
-        asked = [c for c in self.input_clocks if c.interval_variability == "countdown"
-                 or (c.interval_variability == "tunable" and c.interval is None)]
+    def _asked_in_event(self, ticked: list[int]) -> list[ClockAttributes]:
+        """The input clocks whose intervals are asked in an Event Mode where the clocks
+        ``ticked`` ticked (FMI 3.0 sec. 2.2.8.2): every countdown clock, every tunable one that
+        declares no interval, and the changing ones that ticked."""
+        return [c for c in self.input_clocks if c.interval_variability == "countdown"
+                or (c.interval_variability == "tunable" and c.interval is None)
+                or (c.interval_variability == "changing" and c.value_reference in ticked)]
+
+    def _countdown_and_tunable(self) -> list[ClockAttributes]:
+        """The countdown input clocks and the tunable ones that declare no interval."""
+        return self._asked_in_event([])
+
+    def _ask_intervals(self, now: float, ticks: int, asked: list[ClockAttributes],
+                       zero_allowed: bool = False) -> list[int]:
+        """Ask the intervals (fmi3GetIntervalDecimal) of the input clocks ``asked`` at the
+        event at ``ticks`` (the FMU's time ``now``, s); a changed one schedules the clock's
+        next tick (a countdown or changing clock that long after now, a tunable one that long
+        after its last tick). ``zero_allowed``: a countdown or changing interval 0 means a
+        tick now; those clocks are returned (else an interval must be positive)."""
         now_ticking = []
         for clock, (interval, qualifier) in zip(asked, self._intervals(asked) if asked else ()):
             if qualifier != fmi3IntervalChanged:
                 continue
             vr = clock.value_reference
-            countdown = clock.interval_variability == "countdown"
-            if countdown and zero_allowed and interval == 0:
+            aperiodic = clock.interval_variability in ("countdown", "changing")
+            if aperiodic and zero_allowed and interval == 0:
                 now_ticking.append(vr)
                 continue
             if not interval > 0:
                 raise SimulationError(f"{self.name}: {clock.interval_variability} clock "
                                       f"{clock.name} interval {float(interval)!r} s at t = "
                                       f"{now!r} s (must be positive)")
-            if countdown:
+            if aperiodic:
                 self._clock_next[vr] = self._schedule(float(Fraction(now) + interval), ticks)
             else:  # tunable: the next tick is the new interval after the last one
                 origin, period, k = self._clock_period[vr]

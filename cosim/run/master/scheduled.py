@@ -146,5 +146,6 @@ class Fmi3ScheduledUnit(Fmi3Unit):
             if self._clock_next.get(vr) == ticks:
                 self._advance([vr], ticks)
             if self._updated:
-                due.update(self._ask_intervals(now, ticks, zero_allowed=True))
+                due.update(self._ask_intervals(now, ticks, self._countdown_and_tunable(),
+                                               zero_allowed=True))
                 self._read_output_clocks()
