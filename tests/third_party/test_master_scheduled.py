@@ -147,6 +147,18 @@ def test_an_input_clock_without_priority_is_refused(c_fmus3, tmp_path):
         run(sc)
 
 
+def test_a_changing_clock_activates_its_partition_where_the_fmu_says(c_fmus3, tmp_path):
+    """TasksChanging3: slow is a changing clock (FMI 3.0 sec. 2.2.8.2), its first interval
+    0.25 s asked in Initialization Mode, each next one asked right after its activation,
+    doubled: activations at 0.25, 0.75 and 1.75 s (t_i = t_(i-1) + T_interval,i)."""
+    sc = write_scenario(tmp_path, {"t": (c_fmus3["TasksChanging3"], {}, {})}, stop=2.0)
+    master, frame = run(sc)
+    assert [a for a in activations(master, "t") if a[0] == "slow"] == [
+        ("slow", 0.25), ("slow", 0.75), ("slow", 1.75)]
+    assert master.by_name["t"].activations.count(("slow", 0.75)) == 1
+    assert frame["t.n_slow"].iloc[-1] == 3
+
+
 def test_a_fixed_step_algorithm_refuses_a_scheduled_execution_fmu(c_fmus3, tmp_path):
     sc = write_scenario(tmp_path, {"t": (c_fmus3["Tasks3"], {}, {})}, algorithm="fixed")
     with pytest.raises(SimulationError, match=r'Scheduled Execution.*algorithm = "event"'):

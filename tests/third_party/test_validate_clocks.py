@@ -234,6 +234,16 @@ def test_scheduled_test_fmu_partitions_run_at_their_analytic_times(c_fmus3):
     assert activated(summary, "alarm") == pytest.approx([0.45], abs=1e-12)
 
 
+def test_a_changing_clock_partition_runs_where_the_fmu_says(c_fmus3):
+    """TasksChanging3: slow a changing clock, first after 0.25 s, each next interval doubled
+    (asked after each activation): activated at 0.25, 0.75 and 1.75 s, as the master does."""
+    problems = check_fmu(c_fmus3["TasksChanging3"], Options(strict=False))
+    for check in ("fmi3-clocks", "fmi3-scheduled-execution"):
+        assert not [p for p in problems if p.check == check and p.severity == ERROR], problems
+    summary = note(problems, "fmi3-scheduled-execution")
+    assert activated(summary, "slow") == [0.25, 0.75, 1.75]
+
+
 @pytest.mark.parametrize("name, ticks", [
     ("ClockedConstant3", [0.1 + 0.3 * k for k in range(7)]),  # interval 0.3 s, shift 0.1 s
     ("ClockedFixed3", [0.1 + 0.3 * k for k in range(7)]),  # the same, asked of the FMU

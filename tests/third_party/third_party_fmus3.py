@@ -175,8 +175,15 @@ TASKS3 = Spec3("Tasks3", "TASKS", (
 ), dependencies={"done": (), "n_fast": (), "n_slow": (), "n_alarm": (), "n_kick": (),
                  "y": ("u",), "t_alarm": (), "t_kick": ()}, scheduled=True)
 
+# Tasks3 with slow a changing clock: first after slow_interval, each next interval doubled
+TASKS_CHANGING3 = replace(
+    TASKS3, name="TasksChanging3", defines=("SLOW_CHANGING",), stop_time=2.0,
+    variables=tuple(v if v[0] != "slow" else (*v[:6], {"intervalVariability": "changing",
+                                                       "priority": "0"})
+                    for v in TASKS3.variables))
+
 SPECS3 = (FEEDTHROUGH3, TIME_EVENTS3, TERMINATOR3, COUNTDOWN3, THIRDS3, *CLOCKED3.values(),
-          TASKS3, TICKER3, PULSES3, COUNTDOWN_TWICE3)
+          TASKS3, TICKER3, PULSES3, COUNTDOWN_TWICE3, TASKS_CHANGING3)
 
 
 def model_description(spec: Spec3) -> bytes:

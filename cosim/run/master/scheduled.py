@@ -14,6 +14,10 @@ ticks (sec. 5.2.1):
   the master asks its interval (fmi3GetIntervalDecimal, qualifier ``fmi3IntervalChanged``):
   it ticks that long after the activation that set it; interval 0 is a tick at the same
   time, after the partition that set it;
+* a ``changing`` clock ticks first where its interval asked in Initialization Mode puts it,
+  then that long after each of its activations that the master asks its interval right after
+  (sec. 2.2.8.2: fmi3GetInterval in Clock Activation Mode if and only if the Clock ticked);
+  interval 0 as for a countdown clock;
 * a ``triggered`` clock ticks where an output clock wired to it in the scenario's
   [connections] ticks (the master asks every output clock with fmi3GetClock after each
   clock-update callback).
@@ -48,7 +52,7 @@ from cosim.run.master.fmi3 import Fmi3Unit
 class Fmi3ScheduledUnit(Fmi3Unit):
     """An FMI 3.0 Scheduled Execution FMU instance."""
 
-    UNSCHEDULED_CLOCKS = ("countdown", "triggered")
+    UNSCHEDULED_CLOCKS = ("countdown", "changing", "triggered")
     FMPY_CLASS = FMU3ScheduledExecution
     INTERFACE = "scheduledExecution"
 
@@ -71,6 +75,8 @@ class Fmi3ScheduledUnit(Fmi3Unit):
         # every output clock is asked in Clock Update Mode (sec. 5.2.2)
         self.watched_clocks = [c.value_reference for c in self.output_clocks]
         self.activations: list[tuple[str, float]] = []  # (input clock, activation time s)
+        self._changing = {c.value_reference: c for c in self.input_clocks
+                          if c.interval_variability == "changing"}
 
     @staticmethod
     def _has_event_mode(md: Any) -> bool:
@@ -145,6 +151,9 @@ class Fmi3ScheduledUnit(Fmi3Unit):
             self.activations.append((names[vr], now))
             if self._clock_next.get(vr) == ticks:
                 self._advance([vr], ticks)
+            if vr in self._changing:  # its next interval, asked where it ticked
+                due.update(self._ask_intervals(now, ticks, [self._changing[vr]],
+                                               zero_allowed=True))
             if self._updated:
                 due.update(self._ask_intervals(now, ticks, self._countdown_and_tunable(),
                                                zero_allowed=True))
