@@ -1075,7 +1075,7 @@ fmi3Status fmi3SetClock(fmi3Instance instance, const fmi3ValueReference vr[], si
     return clock_references(f, "fmi3SetClock", vr, nvr) ? fmi3OK : fmi3Error;
 }
 
-/* -- FMU state (the backend's; FMI 3.0 sec. 2.2.7.4) ----------------------------------------------- */
+/* -- FMU state (the backend's; FMI 3.0 sec. 2.2.7.4) ------------------------------------------ */
 #define STATE_MODES (ALLOW_INSTANTIATED | ALLOW_INITIALIZATION | ALLOW_EVENT | ALLOW_STEP |    \
                      ALLOW_TERMINATED)
 

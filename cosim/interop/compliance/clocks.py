@@ -38,8 +38,9 @@ Clock, twice at one time (sec. 5.2.1); fmi3SetClock (sec. 2.2.8.4).
 Dynamic, co-simulation with Clocks and Event Mode (sec. 2.2.8.2 table): fmi3GetInterval /
 fmi3GetShift in Initialization Mode as the Clock type requires, then a run whose steps end at
 the input Clocks' ticks, where the Clocks are activated with fmi3SetClock in Event Mode; in
-every Event Mode the ``countdown`` Clocks' intervals (interval 0: the Clock ticks again in the
-same Event Mode) and the output Clocks (fmi3GetClock) are read. Every call returns fmi3OK or
+every Event Mode the ``countdown`` Clocks' intervals and, where they ticked, the ``changing``
+ones' (interval 0: the Clock ticks again in the same Event Mode) and the output Clocks
+(fmi3GetClock) are read. Every call returns fmi3OK or
 fmi3Warning.
 """
 
@@ -577,8 +578,8 @@ def _check_clock_calls(host: _Host3, ctx: dict) -> list[Problem]:
     now, terminate, count = start, False, 0
 
     def event_mode(due: set[int]) -> tuple[bool, float | None]:
-        """The Event Mode at ``now`` with the Clocks ``due`` ticking; a countdown Clock given
-        interval 0 ticks again in it (t_i = t_event + 0), until none is."""
+        """The Event Mode at ``now`` with the Clocks ``due`` ticking; a countdown or changing
+        Clock given interval 0 ticks again in it, until none is."""
         nonlocal count
         while True:
             for vr in due:
@@ -604,8 +605,9 @@ def _check_clock_calls(host: _Host3, ctx: dict) -> list[Problem]:
             for out in outputs:
                 run.ok(inst.call("getClock", [out.value_reference])[0],
                        f"fmi3GetClock({out.name}) in Event Mode", TYPES)
-            due = {c.value_reference for c in countdowns
-                   if following[c.value_reference] == now}
+            due = {c.value_reference for c in inputs
+                   if c.interval_variability in ("countdown", "changing")
+                   and following[c.value_reference] == now}
             if not due or result[0] or count >= MAX_ACTIVATIONS:
                 return result
 

@@ -80,7 +80,7 @@ ARRAY = "Array"  # the family of array elements (read and written through their 
 MAX_EVENT_ITERATIONS = 1000  # fmi3UpdateDiscreteStates calls at one event before giving up
 _WARNING, _DISCARD = 1, 2
 # FMI 3.0 sec. 2.4.4 (ClockType attributes) and fmi3AttributeGroups.xsd (fmi3ClockAttributes);
-# "calculated" was dropped before 3.0
+# "calculated" is not one of them
 INTERVAL_VARIABILITIES = ("constant", "fixed", "tunable", "changing", "countdown", "triggered")
 PERIODIC = ("constant", "fixed", "tunable")
 ASKED = ("fixed", "tunable")  # interval and shift asked of the FMU
@@ -616,10 +616,10 @@ class Fmi3Unit(Unit):
 
     def complete_event(self, ticks: int) -> None:
         """Handle the event at ``ticks``: the input clocks due there set (fmi3SetClock),
-        fmi3UpdateDiscreteStates until no update is needed, then the countdown and tunable
-        clocks' intervals asked; a countdown clock whose interval is 0 ticks at this event
-        (FMI 3.0 sec. 2.2.8.2: t_i = t_event + T_interval,i, T_interval,i >= 0): it is set and
-        the discrete states updated again, until no clock ticks at interval 0."""
+        fmi3UpdateDiscreteStates until no update is needed, then the intervals asked
+        (:meth:`_asked_in_event`); a countdown or changing clock whose interval is 0 ticks at
+        this event (FMI 3.0 sec. 2.2.8.2: T_interval,i >= 0): it is set and the discrete
+        states updated again, until no clock ticks at interval 0."""
         now = self._seconds(ticks)
         ticking = [vr for vr, nxt in self._clock_next.items() if nxt == ticks]
         for _ in range(MAX_EVENT_ITERATIONS):
@@ -633,7 +633,7 @@ class Fmi3Unit(Unit):
                 break
         else:
             raise SimulationError(f"{self.name}: at t = {to_seconds(ticks):g} s a countdown "
-                                  f"clock still ticks again at interval 0 after "
+                                  f"or changing clock still ticks again at interval 0 after "
                                   f"{MAX_EVENT_ITERATIONS} ticks")
         self._announced = None
         if defined:
