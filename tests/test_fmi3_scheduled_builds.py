@@ -116,7 +116,7 @@ def scheduled_builds(tmp_path_factory) -> dict[str, Path]:
 @pytest.mark.parametrize("clock", ["periodic", "countdown"])
 def test_scheduled_description(scheduled_builds, clock):
     """A ScheduledExecution element in place of CoSimulation with the fmi3InterfaceType
-    attributes only (FMI 3.0 sec. 2.4.1); the input Clock declares priority 0 (sec. 2.4.7.4:
+    attributes only (FMI 3.0 sec. 2.4.2); the input Clock declares priority 0 (sec. 2.4.4:
     required in Scheduled Execution); the outputs are clocked by it."""
     with zipfile.ZipFile(scheduled_builds[clock]) as z:
         root = ET.fromstring(z.read("modelDescription.xml"))

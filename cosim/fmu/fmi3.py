@@ -33,13 +33,13 @@ steps to the ticks). The front is compiled with the Clock's settings
 (``front/fmi3_front.c``, ATO_CLOCK_VR); the model is unchanged.
 
 A clocked build has one of two interfaces (``--interface``, :data:`INTERFACES`): ``cs``,
-Co-Simulation in Event Mode (FMI 3.0 sec. 4.1.3: the importer ticks the Clock with
+Co-Simulation in Event Mode (FMI 3.0 sec. 2.2.8.2: the importer ticks the Clock with
 fmi3SetClock in Event Mode), or ``se``, Scheduled Execution (FMI 3.0 chap. 5: the Clock is the
 input Clock of the model's one partition, which the importer runs with
-fmi3ActivateModelPartition at its ticks; the Clock declares ``priority`` 0, sec. 2.4.7.4; the
+fmi3ActivateModelPartition at its ticks; the Clock declares ``priority`` 0, sec. 2.4.4; the
 countdown Clock's first tick is at the start time, sec. 2.2.8.2 (countdown Clock); the front's
 ATO_SCHEDULED).
-The ``ScheduledExecution`` element keeps the attributes every interface has (sec. 2.4.1,
+The ``ScheduledExecution`` element keeps the attributes every interface has (sec. 2.4.2,
 fmi3InterfaceType) and offers no FMU state.
 """
 
@@ -68,7 +68,7 @@ SAMPLE_TIME = "sample_time"  # the controllers' sample time parameter (s): the p
 # clocked build's interface -> its modelDescription element: Co-Simulation (Event Mode) or
 # Scheduled Execution (FMI 3.0 chap. 5)
 INTERFACES = {"cs": "CoSimulation", "se": "ScheduledExecution"}
-# the fmi3InterfaceType attributes a ScheduledExecution element keeps (FMI 3.0 sec. 2.4.1)
+# the fmi3InterfaceType attributes a ScheduledExecution element keeps (FMI 3.0 sec. 2.4.2)
 _SCHEDULED_ATTRIBUTES = ("modelIdentifier", "needsExecutionTool",
                          "canBeInstantiatedOnlyOncePerProcess")
 
@@ -119,7 +119,7 @@ def model_description(fmi2_xml: bytes) -> tuple[bytes, int]:
         cs["mightReturnEarlyFromDoStep"] = "true"
     ET.SubElement(root, "CoSimulation", cs)
 
-    units = src.find("UnitDefinitions")  # identical in FMI 3.0 (sec. 2.4, UnitDefinitions)
+    units = src.find("UnitDefinitions")  # identical in FMI 3.0 (sec. 2.4.3, UnitDefinitions)
     if units is None:
         units = ET.Element("UnitDefinitions")
     if not any(u.get("name") == "s" for u in units):  # the unit of `time`
@@ -138,7 +138,8 @@ def model_description(fmi2_xml: bytes) -> tuple[bytes, int]:
         root.append(experiment)
 
     node = ET.SubElement(root, "ModelVariables")
-    # FMI 3.0 sec. 2.4 (ModelVariables): exactly one independent variable; the front answers it
+    # FMI 3.0 sec. 2.4.7.4 (causality independent): exactly one independent variable; the
+    # front answers it
     ET.SubElement(node, "Float64", {"name": "time", "valueReference": str(TIME_VR),
                                     "description": "simulation time", "causality": "independent",
                                     "variability": "continuous", "unit": "s"})
@@ -271,7 +272,7 @@ def clocked_description(fmi3_xml: bytes, clock: str,
                                                        if cs.get(k) is not None})
         root.insert(list(root).index(cs), scheduled)
         root.remove(cs)
-        declared["priority"] = "0"  # its one partition (sec. 2.4.7.4)
+        declared["priority"] = "0"  # its one partition (sec. 2.4.4)
     position = list(variables).index(by_name["time"]) + 1
     variables.insert(position, ET.Element("Clock", declared))
     ET.indent(root, "\t")

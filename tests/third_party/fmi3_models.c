@@ -3,10 +3,16 @@
    active in the Event Mode of each of its events until fmi3UpdateDiscreteStates handles it),
    Feedthrough (y_T = u_T for every
    type, 64-bit integers exactly, an array), Terminator (terminateSimulation at stop_at),
-   Countdown (a countdown input clock whose interval doubles at every tick), Clocked (a
+   Countdown (a countdown input clock: its first interval "first" told in Initialization Mode
+   only, as FMI 3.0 sec. 2.2.8.2 has the importer ask it there; after each tick it ticks again
+   at interval 0 until it has ticked "repeat" + 1 times at that instant, then its interval
+   doubles, or becomes "period" when it was 0), Clocked (a
    periodic input clock "tick" whose interval and shift the FMU gives on request, its interval
-   multiplied by growth at every tick). TimeEvents compares times within its parameter
-   tolerance (0: exactly). */
+   multiplied by growth at every tick; with CLOCK_CHANGING it is a changing Clock: its first
+   interval told in Initialization Mode, the next one in each Event Mode where it ticked), Pulses (events, announced as nextEventTime, at the
+   times k period, k = 0 .. 30, whose bit k is set in its parameter "pattern"; its output clock
+   "ticked", vr 17, is active in the Event Mode of each of them as TimeEvents'). TimeEvents
+   compares times within its parameter tolerance (0: exactly). */
 #include <stdlib.h>
 #include <string.h>
 #include <math.h>
@@ -18,9 +24,11 @@
 
 typedef struct {
     fmi3Float64 time, period, u, q, next, stop_at, interval, first, tol, last_event, shift,
-        growth, interval_counter, shift_counter, resolution; /* the last three: Fraction */
-    fmi3Int32 n;
-    fmi3Boolean announce, eventMode, earlyReturn, tick, pending;
+        growth, interval_counter, shift_counter, resolution, /* these three: Fraction */
+        repeat, report, /* Countdown: ticks at interval 0 after each tick, interval told */
+        pattern; /* Pulses: bit k set: an event at k period */
+    fmi3Int32 n, burst;
+    fmi3Boolean announce, eventMode, earlyReturn, tick, pending, init;
     double num[NT]; /* numeric and Boolean feedthrough values (as double, exact up to 2^53) */
     fmi3Int64 i64; fmi3UInt64 u64; /* the Int64 and UInt64 feedthrough values, exact */
     char *str;
@@ -29,6 +37,9 @@ typedef struct {
     fmi3LogMessageCallback log; fmi3InstanceEnvironment env;
 } M;
 
+#if defined(MODEL_PULSES)
+static double next_pulse(M *m, int k);
+#endif
 static void say(M *m, const char *msg) { if (m->log) m->log(m->env, fmi3OK, "log", msg); }
 
 fmi3Instance fmi3InstantiateCoSimulation(fmi3String name, fmi3String token, fmi3String res,
@@ -42,6 +53,12 @@ fmi3Instance fmi3InstantiateCoSimulation(fmi3String name, fmi3String token, fmi3
     m->period = 0.1; m->announce = fmi3True; m->stop_at = 0.75; m->first = 0.1;
     m->tol = EPS; m->interval = 0.3; m->shift = 0.1; m->growth = 1.0;
     m->interval_counter = 3; m->shift_counter = 1; m->resolution = 10;
+#if defined(MODEL_PULSES)
+    m->period = 1.0; m->pattern = 771; /* the declared start values */
+#endif
+#if defined(COUNTDOWN_REPEAT)
+    m->repeat = COUNTDOWN_REPEAT; /* the declared start value of repeat */
+#endif
     for (int k = 0; k < NT; k++) /* the Feedthrough's declared start values */
         m->num[k] = k < 2 ? 1.5 : k == 10 ? 0.0 : 1.0;
     m->i64 = 1; m->u64 = 1; /* the exact Int64 and UInt64 start values */
@@ -55,17 +72,34 @@ fmi3Status fmi3SetDebugLogging(fmi3Instance i, fmi3Boolean on, size_t n, const f
     (void)i; (void)on; (void)n; (void)c; return fmi3OK; }
 fmi3Status fmi3EnterInitializationMode(fmi3Instance i, fmi3Boolean td, fmi3Float64 tol,
     fmi3Float64 start, fmi3Boolean sd, fmi3Float64 stop) {
-    M *m = i; (void)td; (void)tol; (void)sd; (void)stop; m->time = start; return fmi3OK; }
+    M *m = i; (void)td; (void)tol; (void)sd; (void)stop; m->time = start; m->init = fmi3True;
+    return fmi3OK; }
 fmi3Status fmi3ExitInitializationMode(fmi3Instance i) {
-    M *m = i; m->next = m->time + m->period; m->pending = fmi3True;
+    M *m = i; m->next = m->time + m->period; m->pending = fmi3True; m->init = fmi3False;
 #if !defined(MODEL_CLOCKED)
     m->interval = m->first;
+#endif
+#if defined(MODEL_COUNTDOWN)
+    m->pending = fmi3False; /* the first interval was told in Initialization Mode */
+#endif
+#if defined(MODEL_PULSES)
+    m->next = next_pulse(m, -1);
 #endif
     return fmi3OK; }
 fmi3Status fmi3EnterEventMode(fmi3Instance i) { (void)i; return fmi3OK; }
 fmi3Status fmi3EnterStepMode(fmi3Instance i) { (void)i; return fmi3OK; }
 fmi3Status fmi3Terminate(fmi3Instance i) { say(i, "terminated"); return fmi3OK; }
 fmi3Status fmi3Reset(fmi3Instance i) { (void)i; return fmi3OK; }
+
+#if defined(MODEL_PULSES)
+/* Pulses: the time of the first pulse after pulse k (k = -1: the first), or infinity */
+static double next_pulse(M *m, int k) {
+    long bits = (long)m->pattern;
+    for (int j = k + 1; j <= 30; j++)
+        if (bits >> j & 1) return j * m->period;
+    return INFINITY;
+}
+#endif
 
 static inline void time_event(M *m) {
     m->n++; m->q = m->u; m->last_event = m->time; m->next += m->period; }
@@ -78,12 +112,26 @@ fmi3Status fmi3UpdateDiscreteStates(fmi3Instance i, fmi3Boolean *need, fmi3Boole
 #if defined(MODEL_TIMEEVENTS)
     if (m->time >= m->next - m->tol) time_event(m);
     *defined = m->announce; *next = m->next;
+#elif defined(MODEL_PULSES)
+    if (m->time >= m->next - m->tol) {
+        m->n++; m->q = m->u; m->last_event = m->time;
+        m->next = next_pulse(m, (int)floor(m->time / m->period + 0.5));
+    }
+    *defined = isfinite(m->next); *next = *defined ? m->next : 0.0;
 #elif defined(MODEL_CLOCKED)
     if (m->tick) { m->n++; m->q = m->time; m->tick = fmi3False;
-                   if (m->growth != 1.0) { m->interval *= m->growth; m->pending = fmi3True; } }
+                   if (m->growth != 1.0) { m->interval *= m->growth; m->pending = fmi3True; }
+#if defined(CLOCK_CHANGING)
+                   m->pending = fmi3True; /* a changing Clock's next interval, told at once */
+#endif
+    }
 #elif defined(MODEL_COUNTDOWN)
-    if (m->tick) { m->n++; m->q = m->u; m->interval *= 2; m->pending = fmi3True;
-                   m->tick = fmi3False; }
+    if (m->tick) {
+        m->n++; m->q = m->u; m->tick = fmi3False; m->pending = fmi3True;
+        if (m->burst < m->repeat) { m->burst++; m->report = 0.0; }
+        else { m->burst = 0; m->interval = m->interval > 0 ? 2 * m->interval : m->period;
+               m->report = m->interval; }
+    }
 #endif
     return fmi3OK;
 }
@@ -93,7 +141,7 @@ fmi3Status fmi3DoStep(fmi3Instance i, fmi3Float64 t, fmi3Float64 h, fmi3Boolean 
     M *m = i; (void)noSet;
     double end = t + h;
     *event = fmi3False; *term = fmi3False; *early = fmi3False; *last = end;
-#if defined(MODEL_TIMEEVENTS)
+#if defined(MODEL_TIMEEVENTS) || defined(MODEL_PULSES)
     if (m->eventMode) {
         if (end > m->next + m->tol) {  /* passes over the event */
             if (!m->earlyReturn) { say(m, "doStep passes over an event"); return fmi3Error; }
@@ -102,7 +150,12 @@ fmi3Status fmi3DoStep(fmi3Instance i, fmi3Float64 t, fmi3Float64 h, fmi3Boolean 
         }
         if (fabs(end - m->next) <= m->tol && !m->announce) *event = fmi3True;
     } else {
+#if defined(MODEL_PULSES)
+        while (m->next <= end + m->tol) {
+            m->n++; m->next = next_pulse(m, (int)floor(m->next / m->period + 0.5)); }
+#else
         while (m->next <= end + m->tol) time_event(m);
+#endif
     }
 #elif defined(MODEL_TERMINATOR)
     if (end >= m->stop_at - EPS) { *term = fmi3True; *last = end; }
@@ -146,6 +199,8 @@ static double *slot(M *m, fmi3ValueReference vr) {
     case 14: return &m->interval_counter;
     case 15: return &m->shift_counter;
     case 16: return &m->resolution;
+    case 18: return &m->repeat;
+    case 19: return &m->pattern;
     }
 #endif
     return NULL;
@@ -269,8 +324,14 @@ fmi3Status fmi3GetIntervalDecimal(fmi3Instance i, const fmi3ValueReference vr[],
         if (vr[j] != 10) return fmi3Error;
         iv[j] = m->interval;
         q[j] = m->pending ? fmi3IntervalChanged : fmi3IntervalUnchanged;
+#if defined(MODEL_COUNTDOWN)
+        iv[j] = m->init ? m->first : m->report;
+        if (m->init) q[j] = fmi3IntervalChanged;
+#elif defined(CLOCK_CHANGING)
+        if (m->init) q[j] = fmi3IntervalChanged; /* the first interval */
+#endif
     }
-    m->pending = fmi3False;
+    if (!m->init) m->pending = fmi3False;
     return fmi3OK; }
 fmi3Status fmi3GetIntervalFraction(fmi3Instance i, const fmi3ValueReference vr[], size_t n,
                                    fmi3UInt64 counters[], fmi3UInt64 resolutions[],

@@ -5,7 +5,9 @@
            n_slow += 1, ticks the output clock done
      alarm (vr 3, countdown clock, priority 2): n_alarm += 1, t_alarm = activation time
      kick  (vr 4, triggered clock, priority 3): n_kick += 1, t_kick = activation time
-   Every activation is logged as "activate <clock> at <time>" (%.17g). */
+   Every activation is logged as "activate <clock> at <time>" (%.17g). With SLOW_CHANGING slow
+   is a changing clock instead: its first interval slow_interval, doubled at each activation
+   (fmi3GetIntervalDecimal gives it with fmi3IntervalChanged). */
 #include <stdio.h>
 #include <stdlib.h>
 #include "fmi3Functions.h"
@@ -145,6 +147,9 @@ fmi3Status fmi3ActivateModelPartition(fmi3Instance i, fmi3ValueReference clock,
         break;
     case SLOW:
         m->n_slow++; m->done = fmi3True; m->update(m->env);
+#if defined(SLOW_CHANGING)
+        m->slow_interval *= 2;
+#endif
         break;
     case ALARM: m->n_alarm++; m->t_alarm = time; break;
     default: m->n_kick++; m->t_kick = time; break;

@@ -92,20 +92,54 @@ def test_announced_events_and_early_return_are_communication_points(c_fmus3, tmp
     assert r.do_steps["clock"] == 8 + 3
 
 
-def test_countdown_clock_ticks_at_the_intervals_the_fmu_gives(c_fmus3, tmp_path):
-    """first 0.1 s, doubling: ticks at 0.1, 0.3, 0.7, 1.5 s (sum of 0.1 2^k)."""
+def _countdown_run(c_fmus3, tmp_path, parameters: dict) -> tuple[np.ndarray, ...]:
+    """(times, n, q) of Countdown3 with ``parameters``, its input u the time (Terminator3's
+    x), so q is the time of its last tick."""
     sc = write_scenario(tmp_path, {
-        "cd": (c_fmus3["Countdown3"], {"first": 0.1}, {}),
+        "cd": (c_fmus3["Countdown3"], parameters, {}),
         "clock": (c_fmus3["Terminator3"], {"stop_at": 10.0}, {})},
         connections={"cd.u": "clock.x"}, stop=2.0)
-    r = run_scenario(sc, build=False)
-    f = r.frame
-    ticks = np.array([0.1, 0.3, 0.7, 1.5])
-    times = f["time"].to_numpy()
-    n = (times[:, None] >= ticks[None, :] - 1e-12).sum(axis=1)
-    np.testing.assert_array_equal(f["cd.n"].to_numpy(), n)
-    last = np.array([ticks[k - 1] if k else 0.0 for k in n])
-    np.testing.assert_allclose(f["cd.q"].to_numpy(), last, rtol=0, atol=1e-15)
+    f = run_scenario(sc, build=False).frame
+    return f["time"].to_numpy(), f["cd.n"].to_numpy(), f["cd.q"].to_numpy()
+
+
+def test_countdown_clock_ticks_at_the_intervals_the_fmu_gives(c_fmus3, tmp_path):
+    """first 0.1 s, told by the FMU in Initialization Mode only (FMI 3.0 sec. 2.2.8.2: the
+    importer asks a countdown clock's interval there; t_0 = t_start + T_interval,0), then
+    doubling, told in Event Mode: ticks at 0.1, 0.3, 0.7, 1.5 s (sums of 0.1 2^k); q is the
+    time at the last tick (sums of doubles 0.1 2^k, within 2 ulp of 1.5)."""
+    times, n_ticks, q = _countdown_run(c_fmus3, tmp_path, {"first": 0.1})
+    n, last = _last_tick(times, np.array([0.1, 0.3, 0.7, 1.5]))
+    assert n[-1] == 4
+    np.testing.assert_array_equal(n_ticks, n)
+    np.testing.assert_allclose(q, last, rtol=0, atol=2 * np.spacing(1.5))
+
+
+def test_a_countdown_clock_with_first_interval_0_ticks_at_the_start(c_fmus3, tmp_path):
+    """first 0 s (T_interval,0 >= 0, FMI 3.0 sec. 2.2.8.2): a tick at the start time, in the
+    Event Mode after Initialization Mode; then period 0.1 s, doubling: 0, 0.1, 0.3, 0.7, 1.5 s."""
+    times, n_ticks, q = _countdown_run(c_fmus3, tmp_path, {"first": 0.0, "period": 0.1})
+    n, last = _last_tick(times, np.array([0.0, 0.1, 0.3, 0.7, 1.5]))
+    assert n[0] == 1
+    np.testing.assert_array_equal(n_ticks, n)
+    np.testing.assert_allclose(q, last, rtol=0, atol=2 * np.spacing(1.5))
+
+
+def test_a_countdown_clock_at_interval_0_ticks_again_at_the_same_event(c_fmus3, tmp_path):
+    """repeat 2: after each tick the FMU says interval 0 twice (t_i = t_event + 0, FMI 3.0
+    sec. 2.2.8.2), so the clock ticks three times at each of 0.1, 0.3, 0.7, 1.5 s (the
+    master sets it and calls fmi3UpdateDiscreteStates again in the same Event Mode)."""
+    times, n_ticks, q = _countdown_run(c_fmus3, tmp_path, {"first": 0.1, "repeat": 2})
+    n, last = _last_tick(times, np.array([0.1, 0.3, 0.7, 1.5]))
+    np.testing.assert_array_equal(n_ticks, 3 * n)
+    np.testing.assert_allclose(q, last, rtol=0, atol=2 * np.spacing(1.5))
+
+
+def test_a_countdown_clock_with_a_negative_first_interval_is_refused(c_fmus3, tmp_path):
+    sc = write_scenario(tmp_path, {"cd": (c_fmus3["Countdown3"], {"first": -0.1}, {})})
+    with pytest.raises(SimulationError, match=r"countdown clock tick: fmi3GetIntervalDecimal "
+                                              r"in Initialization Mode gave -0\.1 s"):
+        run_scenario(sc, build=False)
 
 
 def test_clocks_need_the_event_algorithm(c_fmus3, tmp_path):
@@ -177,6 +211,9 @@ def _clock_run(c_fmus3, tmp_path, kind: str, parameters: dict) -> tuple:
     ("constant", {"interval": 0.7, "shift": 0.5}),  # ignored: the modelDescription's hold
     ("fixed", {"interval": 0.3, "shift": 0.1}),
     ("typed", {"interval": 0.7, "shift": 0.5}),  # constant, interval from its ClockType
+    ("declared", {"interval": 0.7, "shift": 0.5}),  # fixed, declaring 0.3 s and 0.1 s
+    # tunable, declaring 0.3 s and 0.1 s: not asked, so growth does not retune it
+    ("steady", {"interval": 0.7, "shift": 0.5, "growth": 2.0}),
 ])
 def test_periodic_clocks_tick_at_shift_plus_multiples_of_the_interval(c_fmus3, tmp_path, kind,
                                                                       parameters):
@@ -208,6 +245,22 @@ def test_a_tunable_clock_ticks_at_the_intervals_the_fmu_retunes_to(c_fmus3, tmp_
     Event Mode): ticks at 0.1, 0.1 + 0.2, + 0.4, + 0.8 = 0.1, 0.3, 0.7, 1.5 s."""
     times, n_ticks, q = _clock_run(c_fmus3, tmp_path, "tunable",
                                    {"interval": 0.1, "shift": 0.1, "growth": 2.0})
+    ticks, t = [0.1], Fraction(0.1)
+    for k in range(1, 4):
+        t += Fraction(0.1) * 2**k
+        ticks.append(float(t))
+    n, last = _last_tick(times, np.array(ticks))
+    np.testing.assert_array_equal(n_ticks, n)
+    np.testing.assert_array_equal(q, last)
+
+
+def test_a_changing_clock_ticks_at_the_intervals_the_fmu_gives_where_it_ticked(c_fmus3,
+                                                                               tmp_path):
+    """A changing clock (FMI 3.0 sec. 2.2.8.2: t_0 = t_start + T_interval,0, asked in
+    Initialization Mode; t_i = t_(i-1) + T_interval,i, asked in the Event Mode where it
+    ticked): interval 0.1 s, multiplied by 2 at every tick: ticks at 0.1, 0.3, 0.7, 1.5 s."""
+    times, n_ticks, q = _clock_run(c_fmus3, tmp_path, "changing",
+                                   {"interval": 0.1, "growth": 2.0})
     ticks, t = [0.1], Fraction(0.1)
     for k in range(1, 4):
         t += Fraction(0.1) * 2**k

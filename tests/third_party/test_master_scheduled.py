@@ -131,7 +131,7 @@ def test_clock_connections_are_checked(c_fmus3, c_fmus, tmp_path):
 
 
 def test_an_input_clock_without_priority_is_refused(c_fmus3, tmp_path):
-    """FMI 3.0 sec. 2.4.7.4: an input clock of a Scheduled Execution FMU declares a priority;
+    """FMI 3.0 sec. 2.4.4: an input clock of a Scheduled Execution FMU declares a priority;
     Tasks3 with the alarm clock's removed."""
     fmu = tmp_path / "NoPriority.fmu"
     with zipfile.ZipFile(c_fmus3["Tasks3"]) as source, zipfile.ZipFile(fmu, "w") as out:
@@ -145,6 +145,18 @@ def test_an_input_clock_without_priority_is_refused(c_fmus3, tmp_path):
     with pytest.raises(SimulationError, match=r"NoPriority.fmu: modelDescription.xml: input "
                                               r"Clock 'alarm' has no priority"):
         run(sc)
+
+
+def test_a_changing_clock_activates_its_partition_where_the_fmu_says(c_fmus3, tmp_path):
+    """TasksChanging3: slow is a changing clock (FMI 3.0 sec. 2.2.8.2), its first interval
+    0.25 s asked in Initialization Mode, each next one asked right after its activation,
+    doubled: activations at 0.25, 0.75 and 1.75 s (t_i = t_(i-1) + T_interval,i)."""
+    sc = write_scenario(tmp_path, {"t": (c_fmus3["TasksChanging3"], {}, {})}, stop=2.0)
+    master, frame = run(sc)
+    assert [a for a in activations(master, "t") if a[0] == "slow"] == [
+        ("slow", 0.25), ("slow", 0.75), ("slow", 1.75)]
+    assert master.by_name["t"].activations.count(("slow", 0.75)) == 1
+    assert frame["t.n_slow"].iloc[-1] == 3
 
 
 def test_a_fixed_step_algorithm_refuses_a_scheduled_execution_fmu(c_fmus3, tmp_path):
@@ -170,6 +182,32 @@ def test_reference_clocks_ticks_as_documented(reference_clocks, tmp_path):
     assert master.by_name["c"].activations == sorted(
         [("inClock1", float(k)) for k in range(11)] + [("inClock3", 4.0)],
         key=lambda a: (a[1], a[0]))
+
+
+def test_cosim_run_gives_the_reference_clocks_documented_tick_table(reference_clocks, c_fmus3,
+                                                                    tmp_path):
+    """`cosim run` on the Reference FMU Clocks with its inClock2 wired to Pulses3's output
+    clock (a co-simulation FMU whose events are at 0, 1, 8 and 9 s): the tick table of its
+    modelDescription, inClock1 every second, inClock2 at 0, 1, 8 and 9 s, the countdown
+    inClock3 at 4 s, in results.csv after each second's activations (up to 10 s)."""
+    sc = write_scenario(tmp_path, {"c": (reference_clocks, {}, {}),
+                                   "p": (c_fmus3["Pulses3"], {}, {})},
+                        connections={"c.inClock2": "p.ticked"}, stop=10.0, output=1.0)
+    done = subprocess.run([sys.executable, "-m", "cosim.cli", "run", str(sc), "--quiet",
+                           "--no-plot", "--out", str(tmp_path / "out")],
+                          capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr
+    frame = pd.read_csv(tmp_path / "out" / "results.csv")
+    t = frame["time"].to_numpy()
+    np.testing.assert_array_equal(t, np.arange(11.0))
+    in1 = t + 1
+    in2 = np.array([sum(s <= k for s in (0, 1, 8, 9)) for k in t])
+    in3 = (t >= 4).astype(int)
+    np.testing.assert_array_equal(frame["c.inClock1Ticks"], in1)
+    np.testing.assert_array_equal(frame["c.inClock2Ticks"], in2)
+    np.testing.assert_array_equal(frame["c.inClock3Ticks"], in3)
+    np.testing.assert_array_equal(frame["c.totalInClockTicks"], in1 + in2 + in3)
+    np.testing.assert_array_equal(frame["p.n"], in2)
 
 
 def test_reference_clocks_with_its_triggered_clocks_wired(reference_clocks, c_fmus3, tmp_path):

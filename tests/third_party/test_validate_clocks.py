@@ -234,12 +234,27 @@ def test_scheduled_test_fmu_partitions_run_at_their_analytic_times(c_fmus3):
     assert activated(summary, "alarm") == pytest.approx([0.45], abs=1e-12)
 
 
+def test_a_changing_clock_partition_runs_where_the_fmu_says(c_fmus3):
+    """TasksChanging3: slow a changing clock, first after 0.25 s, each next interval doubled
+    (asked after each activation): activated at 0.25, 0.75 and 1.75 s, as the master does."""
+    problems = check_fmu(c_fmus3["TasksChanging3"], Options(strict=False))
+    for check in ("fmi3-clocks", "fmi3-scheduled-execution"):
+        assert not [p for p in problems if p.check == check and p.severity == ERROR], problems
+    summary = note(problems, "fmi3-scheduled-execution")
+    assert activated(summary, "slow") == [0.25, 0.75, 1.75]
+
+
 @pytest.mark.parametrize("name, ticks", [
     ("ClockedConstant3", [0.1 + 0.3 * k for k in range(7)]),  # interval 0.3 s, shift 0.1 s
     ("ClockedFixed3", [0.1 + 0.3 * k for k in range(7)]),  # the same, asked of the FMU
     ("ClockedFraction3", [0.1 + 0.3 * k for k in range(7)]),  # 3/10 s and 1/10 s
     ("ClockedTyped3", [0.1 + 0.3 * k for k in range(7)]),  # interval from its ClockType
+    ("ClockedDeclared3", [0.1 + 0.3 * k for k in range(7)]),  # fixed, declared: not asked
+    ("ClockedSteady3", [0.1 + 0.3 * k for k in range(7)]),  # tunable, declared: not asked
+    ("ClockedChanging3", [0.3 * k for k in range(1, 7)]),  # changing, interval 0.3 s
     ("Countdown3", [0.1, 0.3, 0.7, 1.5]),  # first 0.1 s, the interval doubling at each tick
+    # the same, and after each tick interval 0: a second tick in the same Event Mode
+    ("CountdownTwice3", [0.1, 0.1, 0.3, 0.3, 0.7, 0.7, 1.5, 1.5]),
 ])
 def test_clocked_cosimulation_fmus_pass_with_their_ticks(c_fmus3, name, ticks):
     problems = check_fmu(c_fmus3[name], Options(strict=False))

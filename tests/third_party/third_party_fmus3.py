@@ -1,6 +1,6 @@
 """Small FMI 3.0 co-simulation FMUs written in C (tests/third_party/fmi3_models.c), built as a
 third-party tool would ship them: gcc against fmpy's FMI 3 headers, zipped with a
-modelDescription.xml (binaries/x86_64-linux, FMI 3.0 sec. 2.5.1.1).
+modelDescription.xml (binaries/x86_64-linux, FMI 3.0 sec. 2.5.1.4).
 
 Variables are ``(name, type, causality, variability, value reference, start, extra)``;
 ``extra`` may hold ``dimension`` (array size), ``unit``, and a Clock's attributes
@@ -36,6 +36,7 @@ class Spec3:
     step: float = 0.125
     scheduled: bool = False  # a Scheduled Execution FMU (fmi3_scheduled.c), not co-simulation
     clock_types: dict[str, dict[str, str]] = field(default_factory=dict)  # ClockType attributes
+    defines: tuple[str, ...] = ()  # C macros besides MODEL_<model> (start values the C sets)
 
 
 def _start(kind: str) -> str:
@@ -72,13 +73,32 @@ TICKER3 = Spec3("Ticker3", "TIMEEVENTS", (
     ("ticked", "Clock", "output", "discrete", 17, None, {"intervalVariability": "triggered"}),
 ), dependencies={"q": (), "n": (), "ticked": ()}, event_mode=True)
 
+# first: the clock's first interval (asked in Initialization Mode); repeat: its ticks at
+# interval 0 after each tick; period: its interval after a tick at interval 0
+# events at k period for the bits k set in pattern (771: 0, 1, 8, 9 s), announced as
+# nextEventTime; its output clock "ticked" active at each (the Reference FMU Clocks' inClock2
+# ticks, "triggered by the simulation algorithm at 0, 1, 8 and 9")
+PULSES3 = Spec3("Pulses3", "PULSES", (
+    ("period", "Float64", "parameter", "fixed", 0, "1.0", {"unit": "s"}),
+    ("pattern", "Int32", "parameter", "fixed", 19, "771", {}),
+    ("n", "Int32", "output", "discrete", 3, None, {}),
+    ("ticked", "Clock", "output", "discrete", 17, None, {"intervalVariability": "triggered"}),
+), dependencies={"n": (), "ticked": ()}, event_mode=True, stop_time=10.0)
+
 COUNTDOWN3 = Spec3("Countdown3", "COUNTDOWN", (
     ("first", "Float64", "parameter", "fixed", 7, "0.1", {"unit": "s"}),
+    ("repeat", "Int32", "parameter", "fixed", 18, "0", {}),
+    ("period", "Float64", "parameter", "fixed", 0, "0.1", {"unit": "s"}),
     ("tick", "Clock", "input", "discrete", 10, None, {"intervalVariability": "countdown"}),
     ("u", "Float64", "input", "continuous", 1, "0.0", {}),
     ("q", "Float64", "output", "discrete", 2, None, {}),
     ("n", "Int32", "output", "discrete", 3, None, {}),
 ), dependencies={"q": (), "n": ()}, event_mode=True, stop_time=2.0)
+# Countdown ticking twice at each instant (repeat 1: interval 0 once after each tick)
+COUNTDOWN_TWICE3 = replace(
+    COUNTDOWN3, name="CountdownTwice3", defines=("COUNTDOWN_REPEAT=1",),
+    variables=tuple(v if v[0] != "repeat" else (*v[:5], "1", v[6])
+                    for v in COUNTDOWN3.variables))
 
 # TimeEvents with its time tolerance and t_event, the FMU's own time at its last event (with
 # tolerance 0 and period 1/3 s: events at doubles that are not whole nanoseconds)
@@ -112,6 +132,16 @@ CLOCKED3 = {kind: clocked(f"Clocked{kind.title()}3", kind, **attributes) for kin
     ("constant", {"intervalDecimal": "0.3", "shiftDecimal": "0.1"}),
     ("fixed", {}), ("tunable", {}))}
 CLOCKED3["fraction"] = clocked("ClockedFraction3", "fixed", supportsFraction="true")
+# fixed and tunable clocks that declare their interval and shift (0.3 s, 0.1 s): the importer
+# asks neither (FMI 3.0 sec. 2.2.8.2), so the FMU's parameters interval and shift go unheard
+CLOCKED3["declared"] = clocked("ClockedDeclared3", "fixed", intervalDecimal="0.3",
+                               shiftDecimal="0.1")
+# a changing clock (first tick interval after the start, then interval times growth after
+# each tick, told in the Event Mode where it ticked)
+CLOCKED3["changing"] = replace(clocked("ClockedChanging3", "changing"),
+                               defines=("CLOCK_CHANGING",))
+CLOCKED3["steady"] = clocked("ClockedSteady3", "tunable", intervalDecimal="0.3",
+                             shiftDecimal="0.1")
 # a constant clock with its interval from its ClockType "Tick" and its own shift (0.1 s)
 # overriding the type's (0.5 s): ticks as ClockedConstant3's
 CLOCKED3["typed"] = replace(
@@ -145,8 +175,15 @@ TASKS3 = Spec3("Tasks3", "TASKS", (
 ), dependencies={"done": (), "n_fast": (), "n_slow": (), "n_alarm": (), "n_kick": (),
                  "y": ("u",), "t_alarm": (), "t_kick": ()}, scheduled=True)
 
+# Tasks3 with slow a changing clock: first after slow_interval, each next interval doubled
+TASKS_CHANGING3 = replace(
+    TASKS3, name="TasksChanging3", defines=("SLOW_CHANGING",), stop_time=2.0,
+    variables=tuple(v if v[0] != "slow" else (*v[:6], {"intervalVariability": "changing",
+                                                       "priority": "0"})
+                    for v in TASKS3.variables))
+
 SPECS3 = (FEEDTHROUGH3, TIME_EVENTS3, TERMINATOR3, COUNTDOWN3, THIRDS3, *CLOCKED3.values(),
-          TASKS3, TICKER3)
+          TASKS3, TICKER3, PULSES3, COUNTDOWN_TWICE3, TASKS_CHANGING3)
 
 
 def model_description(spec: Spec3) -> bytes:
@@ -222,7 +259,8 @@ def build(spec: Spec3, out_dir: Path, work: Path) -> Path:
     model = "fmi3_scheduled.c" if spec.scheduled else "fmi3_models.c"
     subprocess.run(["gcc", "-std=c99", "-D_DEFAULT_SOURCE", "-Wall", "-Wextra", "-Werror",
                     "-shared", "-fPIC", "-O1", f"-I{headers}", f"-DMODEL_{spec.model}",
-                    *(["-DSCHEDULED_EXECUTION"] if spec.scheduled else []), "-o", str(lib),
+                    *(["-DSCHEDULED_EXECUTION"] if spec.scheduled else []),
+                    *(f"-D{d}" for d in spec.defines), "-o", str(lib),
                     str(HERE / model), str(HERE / "fmi3_stubs.c"), "-lm"],
                    check=True, capture_output=True, text=True)
     path = out_dir / f"{spec.name}.fmu"

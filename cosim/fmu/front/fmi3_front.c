@@ -10,13 +10,13 @@
  *    Terminated, with fmi3Reset back to Instantiated; a call made in a state where the
  *    standard does not allow it is answered with fmi3Error and a message naming the call and
  *    the state, and the backend is not called;
- * 2. implements Event Mode (hasEventMode, FMI 3.0 sec. 4.1 and 4.2) for a backend that has
+ * 2. implements Event Mode (hasEventMode, FMI 3.0 sec. 2.3.5 and 4.2) for a backend that has
  *    an event-time output (ato_backend.event_time_vr): fmi3UpdateDiscreteStates returns
  *    nextEventTimeDefined = true and nextEventTime = that output; fmi3DoStep sets
  *    eventHandlingNeeded when the step ends at the announced event; and, when the importer
  *    instantiated with earlyReturnAllowed, a step that would pass over the announced event is
  *    stepped only up to it and returns earlyReturn = true with lastSuccessfulTime = the event
- *    time (FMI 3.0 sec. 4.1 and 4.2, fmi3DoStep "earlyReturn"). Without early return the full step is
+ *    time (FMI 3.0 sec. 4.1.3 and 4.2.1, fmi3DoStep "earlyReturn"). Without early return the full step is
  *    forwarded: the FMU then behaves exactly as its FMI 2 twin (which computes or refuses it);
  * 3. converts FMI 3 arguments to FMI 2 ones: Float64 -> Real, Int32 -> Integer, Boolean
  *    (bool) -> Boolean (int), String -> String; the other FMI 3 types (and clocks, binaries,
@@ -30,7 +30,7 @@
  *
  * Clocked builds (`cosim build --fmi 3 --clock periodic|countdown`, cosim/fmu/fmi3.py) compile
  * it with ATO_CLOCK_VR, the value reference of one input Clock that activates the model's
- * events (FMI 3.0 sec. 2.2.8, 4.1.3), instead of announcing them as nextEventTime:
+ * events (FMI 3.0 sec. 2.2.8, 2.3.5), instead of announcing them as nextEventTime:
  *
  *  - ATO_CLOCK_COUNTDOWN = 0: a `fixed` periodic Clock of interval the Real parameter of value
  *    reference ATO_SAMPLE_TIME_VR (fmi3GetIntervalDecimal in Initialization Mode; shift 0:
@@ -411,12 +411,12 @@ fmi3Instance fmi3InstantiateCoSimulation(
         return refused(instanceEnvironment, logMessage, "%s: %s", name, backend_error);
     if (eventModeUsed && backend->event_time_vr < 0)
         return refused(instanceEnvironment, logMessage, "%s: eventModeUsed = true, but this "
-                       "FMU declares hasEventMode = false (FMI 3.0 sec. 4.2, "
+                       "FMU declares hasEventMode = false (FMI 3.0 sec. 2.3.1, "
                        "fmi3InstantiateCoSimulation)", name);
     if (nRequiredIntermediateVariables > 0)
         return refused(instanceEnvironment, logMessage, "%s: this FMU provides no intermediate "
                        "update (providesIntermediateUpdate = false); "
-                       "requiredIntermediateVariables must be empty (FMI 3.0 sec. 4.2, "
+                       "requiredIntermediateVariables must be empty (FMI 3.0 sec. 2.3.1, "
                        "fmi3InstantiateCoSimulation)", name);
     return new_front(instanceName, instantiationToken, resourcePath, visible, loggingOn,
                      eventModeUsed, earlyReturnAllowed, instanceEnvironment, logMessage);
@@ -609,7 +609,7 @@ fmi3Status fmi3EnterEventMode(fmi3Instance instance)
         return fmi3Error;
     if (!f->eventModeUsed) {
         front_log(f, fmi3Error, "logStatusError", "%s: fmi3EnterEventMode: the FMU was "
-                  "instantiated with eventModeUsed = false (FMI 3.0 sec. 4.2, fmi3EnterEventMode)", f->name);
+                  "instantiated with eventModeUsed = false (FMI 3.0 sec. 4.2.1, fmi3EnterEventMode)", f->name);
         return fmi3Error;
     }
     f->mode = MODE_EVENT;
@@ -728,7 +728,7 @@ fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunicationPoi
     if (!(h > 0.0) || !isfinite(h) || !isfinite(t)) {
         front_log(f, fmi3Error, "logStatusError", "%s: fmi3DoStep(currentCommunicationPoint "
                   "= %.17g, communicationStepSize = %.17g): the step size must be positive and "
-                  "finite (FMI 3.0 sec. 4.2, fmi3DoStep)", f->name, t, h);
+                  "finite (FMI 3.0 sec. 4.2.1, fmi3DoStep)", f->name, t, h);
         return fmi3Error;
     }
     if (f->eventModeUsed || f->earlyReturnAllowed) {
@@ -737,7 +737,7 @@ fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunicationPoi
             return fmi3Error;
         if (announced && ticks(te) > ticks(t) && ticks(te) < ticks(end) &&
             f->earlyReturnAllowed && !CLOCKED) {
-            /* FMI 3.0 sec. 4.2, fmi3DoStep: return early at the event the FMU announced */
+            /* FMI 3.0 sec. 4.2.1, fmi3DoStep: return early at the event the FMU announced */
             h = te - t;
             end = te;
             early = 1;
@@ -806,7 +806,7 @@ static int scalars(Front* f, const char* call, size_t nvr, size_t nValues)
     if (nvr == nValues)
         return 1;
     front_log(f, fmi3Error, "logStatusError", "%s: %s: nValues = %zu but %zu value references: "
-              "this FMU has scalar variables only (FMI 3.0 sec. 2.2, getting and setting variable values)", f->name, call,
+              "this FMU has scalar variables only (FMI 3.0 sec. 2.2.7.2, getting and setting variable values)", f->name, call,
               nValues, nvr);
     return 0;
 }
@@ -863,7 +863,7 @@ fmi3Status fmi3SetFloat64(fmi3Instance instance, const fmi3ValueReference vr[], 
     for (size_t i = 0; i < nvr; ++i)
         if (vr[i] == ATO_TIME_VR) {
             front_log(f, fmi3Error, "logStatusError", "%s: fmi3SetFloat64: `time` is the "
-                      "independent variable and cannot be set (FMI 3.0 sec. 2.4, causality independent)",
+                      "independent variable and cannot be set (FMI 3.0 sec. 2.4.7.4, causality independent)",
                       f->name);
             return fmi3Error;
         }
@@ -1075,7 +1075,7 @@ fmi3Status fmi3SetClock(fmi3Instance instance, const fmi3ValueReference vr[], si
     return clock_references(f, "fmi3SetClock", vr, nvr) ? fmi3OK : fmi3Error;
 }
 
-/* -- FMU state (the backend's; FMI 3.0 sec. 2.2) ----------------------------------------------- */
+/* -- FMU state (the backend's; FMI 3.0 sec. 2.2.7.4) ------------------------------------------ */
 #define STATE_MODES (ALLOW_INSTANTIATED | ALLOW_INITIALIZATION | ALLOW_EVENT | ALLOW_STEP |    \
                      ALLOW_TERMINATED)
 

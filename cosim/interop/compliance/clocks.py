@@ -38,8 +38,10 @@ Clock, twice at one time (sec. 5.2.1); fmi3SetClock (sec. 2.2.8.4).
 Dynamic, co-simulation with Clocks and Event Mode (sec. 2.2.8.2 table): fmi3GetInterval /
 fmi3GetShift in Initialization Mode as the Clock type requires, then a run whose steps end at
 the input Clocks' ticks, where the Clocks are activated with fmi3SetClock in Event Mode; in
-every Event Mode the ``countdown`` Clocks' intervals and the output Clocks (fmi3GetClock) are
-read. Every call returns fmi3OK or fmi3Warning.
+every Event Mode the ``countdown`` Clocks' intervals and, where they ticked, the ``changing``
+ones' (interval 0: the Clock ticks again in the same Event Mode) and the output Clocks
+(fmi3GetClock) are read. Every call returns fmi3OK or
+fmi3Warning.
 """
 
 from __future__ import annotations
@@ -576,31 +578,38 @@ def _check_clock_calls(host: _Host3, ctx: dict) -> list[Problem]:
     now, terminate, count = start, False, 0
 
     def event_mode(due: set[int]) -> tuple[bool, float | None]:
+        """The Event Mode at ``now`` with the Clocks ``due`` ticking; a countdown or changing
+        Clock given interval 0 ticks again in it, until none is."""
         nonlocal count
-        for vr in due:
-            activations[by_vr[vr].name].append(float(now))
-            count += 1
-            if vr in periods:
-                ticks[vr] += 1
-                following[vr] = periods[vr][0] + ticks[vr] * periods[vr][1]
-            else:
-                following[vr] = None
-        if due:
-            vrs = sorted(due)
-            run.ok(inst.call("setClock", vrs, [True] * len(vrs))[0],
-                   f"fmi3SetClock({', '.join(by_vr[vr].name for vr in vrs)}) in Event Mode",
-                   TYPES)
-        result = inst.event_mode(run.problems)
-        # countdown Clocks: in every Event Mode; changing ones: when they ticked
-        for c in countdowns + [by_vr[vr] for vr in due
-                               if by_vr[vr].interval_variability == "changing"]:
-            interval, _ = _interval(run, c, f"Event Mode at {float(now)!r} s", TYPES)
-            if interval is not None:
-                following[c.value_reference] = now + interval
-        for out in outputs:
-            run.ok(inst.call("getClock", [out.value_reference])[0],
-                   f"fmi3GetClock({out.name}) in Event Mode", TYPES)
-        return result
+        while True:
+            for vr in due:
+                activations[by_vr[vr].name].append(float(now))
+                count += 1
+                if vr in periods:
+                    ticks[vr] += 1
+                    following[vr] = periods[vr][0] + ticks[vr] * periods[vr][1]
+                else:
+                    following[vr] = None
+            if due:
+                vrs = sorted(due)
+                run.ok(inst.call("setClock", vrs, [True] * len(vrs))[0],
+                       f"fmi3SetClock({', '.join(by_vr[vr].name for vr in vrs)}) in Event "
+                       "Mode", TYPES)
+            result = inst.event_mode(run.problems)
+            # countdown Clocks: in every Event Mode; changing ones: when they ticked
+            for c in countdowns + [by_vr[vr] for vr in due
+                                   if by_vr[vr].interval_variability == "changing"]:
+                interval, _ = _interval(run, c, f"Event Mode at {float(now)!r} s", TYPES)
+                if interval is not None:
+                    following[c.value_reference] = now + interval
+            for out in outputs:
+                run.ok(inst.call("getClock", [out.value_reference])[0],
+                       f"fmi3GetClock({out.name}) in Event Mode", TYPES)
+            due = {c.value_reference for c in inputs
+                   if c.interval_variability in ("countdown", "changing")
+                   and following[c.value_reference] == now}
+            if not due or result[0] or count >= MAX_ACTIVATIONS:
+                return result
 
     terminate, next_event = event_mode({vr for vr, t in following.items() if t == now})
     in_event = True  # Event Mode; a step without an event stays in Step Mode (sec. 4.2)

@@ -67,19 +67,19 @@ FMI3_CHECKS = FMI3_STATIC_CHECKS + FMI3_DYNAMIC_CHECKS
 # check -> (FMI 3.0 clause, requirement of its findings unless a finding says otherwise)
 FMI3_CLAUSES: dict[str, tuple[str, str]] = {
     "fmi3-validation": ("2.4 (FMI Description Schema, modelDescription rules)", REQUIRED),
-    "fmi3-variables": ("2.4 (ModelVariables: causality, variability, initial, start, "
+    "fmi3-variables": ("2.4.7 (ModelVariables: causality, variability, initial, start, "
                        "min/max, units; exactly one independent variable)", REQUIRED),
-    "fmi3-model-structure": ("2.4 (ModelStructure: every output listed as Output)",
+    "fmi3-model-structure": ("2.4.8 (ModelStructure: every output listed as Output)",
                              REQUIRED),
-    "fmi3-capabilities": ("4.4 (the CoSimulation element) and 2.5 (binaries/<platform>)",
+    "fmi3-capabilities": ("4.4 (the CoSimulation element) and 2.5.1.4 (binaries/<platform>)",
                           REQUIRED),
     "fmi3-calling-sequence": ("4.2 (co-simulation state machine: instantiate, initialise, "
                               "fmi3DoStep, terminate)", REQUIRED),
-    "fmi3-event-mode": ("4.1, 4.2 (Event Mode: fmi3UpdateDiscreteStates, nextEventTime, "
+    "fmi3-event-mode": ("2.3.5, 4.2.1 (Event Mode: fmi3UpdateDiscreteStates, nextEventTime, "
                         "eventHandlingNeeded)", REQUIRED),
-    "fmi3-early-return": ("4.1, 4.2 (fmi3DoStep earlyReturn, lastSuccessfulTime; "
+    "fmi3-early-return": ("4.1.3, 4.2.1 (fmi3DoStep earlyReturn, lastSuccessfulTime; "
                           "mightReturnEarlyFromDoStep)", REQUIRED),
-    "fmi3-fmu-state": ("2.2 (fmi3Get/SetFMUState, serialisation restore the FMU state)",
+    "fmi3-fmu-state": ("2.2.7.4 (fmi3Get/SetFMUState, serialisation restore the FMU state)",
                        REQUIRED),
     "fmi3-wrong-state": ("4.2 (calls outside the state machine are the importer's error; an "
                          "FMU should detect them)", RECOMMENDED),

@@ -47,7 +47,7 @@ from cosim.interop.compliance.common import (
 from cosim.interop.compliance.host import WATCHDOG, _differs, _matching, _out_name, describe_call
 from cosim.run.master.fmi3 import read_model_description, resolved_description
 
-# FMI 3.0 sec. 2.4 (ModelVariables): legal causality for each variability
+# FMI 3.0 sec. 2.4.7.4 (Variable Attributes): legal causality for each variability
 _LEGAL = {
     "constant": {"output", "local"},
     "fixed": {"parameter", "calculatedParameter", "structuralParameter", "local"},

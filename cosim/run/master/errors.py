@@ -22,7 +22,7 @@ class FmuCallError(SimulationError):
 class FmuTerminated(Exception):  # noqa: N818 - a normal end of the run, not an error
     """An FMU ended the simulation: FMI 2 doStep returned fmi2Discard with fmi2Terminated true
     (FMI 2.0.4 sec. 4.2.2), or FMI 3 fmi3DoStep / fmi3UpdateDiscreteStates returned
-    ``terminateSimulation`` (FMI 3.0 sec. 4.2.1, 3.2.2); ``ticks`` is its last successful
+    ``terminateSimulation`` (FMI 3.0 sec. 4.2.1, 2.3.5); ``ticks`` is its last successful
     time."""
 
     def __init__(self, unit: Any, ticks: int) -> None:

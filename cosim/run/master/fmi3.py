@@ -1,41 +1,48 @@
 """The FMI 3.0 co-simulation unit on fmpy's ``FMU3Slave`` (FMI 3.0 sec. 4).
 
 * Types: Float64/32, Int8..UInt64, Boolean, String, Binary (bytes), Enumeration (its Int64
-  functions, FMI 3.0 sec. 2.4.7.4). An array variable ``x`` of n elements appears as the
+  functions, FMI 3.0 sec. 2.2.7.2). An array variable ``x`` of n elements appears as the
   variables ``x[1]`` .. ``x[n]`` (the FMI 2 flattening, so ``x[*]`` globs match); an element
   is read and written through the whole array (one get, or one get and one set).
-* Event Mode (sec. 4.1.3), when the algorithm handles events and the FMU ``hasEventMode``:
-  after initialisation and at every event the master calls fmi3UpdateDiscreteStates until no
-  update is needed; ``nextEventTimeDefined`` / ``nextEventTime`` make that time a
-  communication point with an event; a doStep returning ``eventHandlingNeeded`` gives an
-  event at the time reached; early return (``earlyReturnAllowed``) ends the communication
-  point at ``lastSuccessfulTime``; ``terminateSimulation`` ends the run
-  (:class:`FmuTerminated`).
+* Event Mode (sec. 2.3.5; fmi3EnterEventMode and fmi3DoStep: sec. 4.2.1), when the
+  algorithm handles events and the FMU ``hasEventMode``: after initialisation and at every
+  event the master calls fmi3UpdateDiscreteStates until no update is needed;
+  ``nextEventTimeDefined`` / ``nextEventTime`` make that time a communication point with an
+  event; a doStep returning ``eventHandlingNeeded`` gives an event at the time reached; early
+  return (``earlyReturnAllowed``, sec. 4.1.3) ends the communication point at
+  ``lastSuccessfulTime``; ``terminateSimulation`` ends the run (:class:`FmuTerminated`).
 * Event times: the master's schedule is in integer nanoseconds, the FMU's own times are
   doubles. An announced ``nextEventTime``, a clock tick or a ``lastSuccessfulTime`` that is
   not a whole nanosecond (1/3 s) is kept as the FMU's double: its communication point is the
   nearest nanosecond (the next one when that is not later than now), and the FMU is stepped
   exactly to its double (``currentCommunicationPoint + communicationStepSize`` equal to it)
   and from it.
-* Input clocks (sec. 2.2.9, 5.2.2), attributes read from modelDescription.xml
-  (:func:`clock_attributes`; fmpy does not fill them): a periodic clock ticks at start + shift
-  + k interval, with interval and shift from the modelDescription (``constant``:
-  ``intervalDecimal`` / ``shiftDecimal``, or ``intervalCounter`` / ``shiftCounter`` over
-  ``resolution``) or asked of the FMU in Initialization Mode (``fixed``, ``tunable``:
-  fmi3GetIntervalDecimal / fmi3GetShiftDecimal, the Fraction variants when
-  ``supportsFraction``); a ``tunable`` clock's interval is asked again in every Event Mode
-  and, when the FMU says ``fmi3IntervalChanged``, it ticks next that long after its last
-  tick; a ``countdown`` clock's interval is asked in every Event Mode and, when changed, it
-  ticks once that long after. Times are exact fractions until rounded to the FMU's double. A
-  tick is an event where the master activates the clock (fmi3SetClock) before
-  fmi3UpdateDiscreteStates. ``changing`` and ``triggered`` input clocks are refused. Output
-  clocks tick at the FMU's events (``eventHandlingNeeded`` or ``nextEventTime``); those wired
-  in the scenario to a triggered input clock of a Scheduled Execution FMU (FMI 3.0 sec.
-  2.2.8.2: "the timing could be given by a triggered output Clock ... of a connected FMU") are
-  asked with fmi3GetClock in Event Mode before each fmi3UpdateDiscreteStates (sec. 2.3.5: a
-  clock active during fmi3UpdateDiscreteStates is deactivated by the FMU itself). An FMU with
-  input clocks is scheduled by their ticks alone: an output named ``next_event_time`` (the
-  FMI 2 convention of :mod:`cosim.run.master.unit`) is not read as its next event.
+* Input clocks (sec. 2.2.8), attributes read from modelDescription.xml
+  (:func:`clock_attributes`; fmpy does not fill them), each asked of the FMU where sec.
+  2.2.8.2 (Clock Types) says: a periodic clock ticks at start + shift + k interval, with
+  interval and shift from the modelDescription (``constant``, and a ``fixed`` or
+  ``tunable`` clock that declares its interval: ``intervalDecimal`` / ``shiftDecimal``, or
+  ``intervalCounter`` / ``shiftCounter`` over ``resolution``; the master sets no interval)
+  or asked of the FMU in Initialization Mode (a ``fixed`` or ``tunable`` clock that declares
+  no interval: fmi3GetIntervalDecimal / fmi3GetShiftDecimal, the Fraction variants when
+  ``supportsFraction``); such a ``tunable`` clock's interval is asked again in every Event
+  Mode and, when the FMU says ``fmi3IntervalChanged``, it ticks next that long after its
+  last tick; a ``countdown`` clock's interval is asked in Initialization Mode (its first
+  tick that long after the start time, 0 included) and in every Event Mode after
+  fmi3UpdateDiscreteStates, and, when the FMU says ``fmi3IntervalChanged``, it ticks once
+  that long after the event (0: at the event itself, the clock set and
+  fmi3UpdateDiscreteStates called again); a ``changing`` clock likewise, its interval asked
+  in Initialization Mode and in each Event Mode where it ticked. Times are exact fractions
+  until rounded to the FMU's double. A tick is an event where the master activates the clock
+  (fmi3SetClock) before fmi3UpdateDiscreteStates. ``triggered`` input clocks are refused.
+  Output clocks tick at the FMU's events (``eventHandlingNeeded`` or ``nextEventTime``);
+  those wired in the scenario to a triggered input clock of a Scheduled Execution FMU (sec.
+  2.2.8.2, in FMI 3.0.2's words: "The timing could be given by a triggered output Clock ...
+  of a connected FMU") are asked with fmi3GetClock in Event Mode before each
+  fmi3UpdateDiscreteStates (sec. 2.3.5: a clock active during fmi3UpdateDiscreteStates is
+  deactivated by the FMU itself). An FMU with input clocks is scheduled by their ticks alone:
+  an output named ``next_event_time`` (the FMI 2 convention of :mod:`cosim.run.master.unit`)
+  is not read as its next event.
 """
 
 from __future__ import annotations
@@ -72,7 +79,8 @@ C_NUMBER_TYPES = {"Float64": ctypes.c_double, "Float32": ctypes.c_float,
 ARRAY = "Array"  # the family of array elements (read and written through their array)
 MAX_EVENT_ITERATIONS = 1000  # fmi3UpdateDiscreteStates calls at one event before giving up
 _WARNING, _DISCARD = 1, 2
-# FMI 3.0 sec. 2.4.7.4 and fmi3Variable.xsd (Clock); "calculated" was dropped before 3.0
+# FMI 3.0 sec. 2.4.4 (ClockType attributes) and fmi3AttributeGroups.xsd (fmi3ClockAttributes);
+# "calculated" is not one of them
 INTERVAL_VARIABILITIES = ("constant", "fixed", "tunable", "changing", "countdown", "triggered")
 PERIODIC = ("constant", "fixed", "tunable")
 ASKED = ("fixed", "tunable")  # interval and shift asked of the FMU
@@ -81,7 +89,7 @@ TYPE_OWN = ("name", "description")  # a ClockType's attributes that are not its 
 
 @dataclass(frozen=True)
 class ClockAttributes:
-    """A Clock variable's attributes (FMI 3.0 sec. 2.4.7.4): interval and shift in s, exact
+    """A Clock variable's attributes (FMI 3.0 sec. 2.4.4): interval and shift in s, exact
     (None: not declared)."""
 
     name: str
@@ -92,7 +100,7 @@ class ClockAttributes:
     shift: Fraction | None
     supports_fraction: bool
     # Scheduled Execution: the priority of the clock's model partition (lower value = higher
-    # priority, FMI 3.0 sec. 2.4.7.4); None: not declared
+    # priority, FMI 3.0 sec. 2.4.4); None: not declared
     priority: int | None = None
 
 
@@ -134,11 +142,12 @@ def declared_attributes(types: dict[str | None, dict[str, str]],
 def read_clock(path: Path, a: dict[str, str]) -> ClockAttributes:
     """The :class:`ClockAttributes` of one Clock element of the FMU at ``path``, from its
     attributes ``a`` (its ClockType's resolved, :func:`declared_attributes`), checked against
-    FMI 3.0 sec. 2.4.7.4 (a known ``intervalVariability``; ``intervalDecimal`` and
+    FMI 3.0 sec. 2.4.4 (a known ``intervalVariability``; ``intervalDecimal`` and
     ``resolution`` > 0, ``shiftDecimal`` >= 0; a ``constant`` clock declares its interval;
     ``intervalCounter`` / ``shiftCounter`` need a ``resolution``; ``supportsFraction`` a
-    boolean; ``valueReference`` an unsigned integer; ``priority`` >= 0): a value that is not
-    valid is a :class:`SimulationError` naming the file, the clock and the attribute."""
+    boolean; ``priority`` >= 0; ``valueReference``, sec. 2.4.7.4, an unsigned integer): a
+    value that is not valid is a :class:`SimulationError` naming the file, the clock and the
+    attribute."""
     name = a.get("name", "?")
 
     def bad(key: str, why: str) -> SimulationError:
@@ -222,7 +231,7 @@ def family_of(kind: str) -> str:
 
 def elements(md: Any) -> list[tuple[Any, str, int | None, int]]:
     """(fmpy variable, name, element index or None, array size) of every non-Clock variable;
-    an array's elements are ``name[1]`` ... (row-major, FMI 3.0 sec. 2.4.7.6)."""
+    an array's elements are ``name[1]`` ... (row-major, FMI 3.0 sec. 2.2.7.1)."""
     out = []
     for v in md.modelVariables:
         if v.type == "Clock":
@@ -257,7 +266,7 @@ class Fmi3Unit(Unit):
 
     fmi_version = "3.0"
     # input clocks without a schedule of their own that the master ticks
-    UNSCHEDULED_CLOCKS: tuple[str, ...] = ("countdown",)
+    UNSCHEDULED_CLOCKS: tuple[str, ...] = ("countdown", "changing")
     C_TYPES = C_NUMBER_TYPES
     C_PREFIX = "fmi3"
     C_COUNTS = True
@@ -371,7 +380,7 @@ class Fmi3Unit(Unit):
 
     def _refused_instantiation(self) -> str:
         """Why fmi3InstantiateCoSimulation returned NULL: its arguments, the FMU's words, and,
-        with Event Mode asked for, that the modelDescription declares it (FMI 3.0 sec. 4.2:
+        with Event Mode asked for, that the modelDescription declares it (FMI 3.0 sec. 2.3.1:
         eventModeUsed = true only if hasEventMode = true, which the binary then accepts)."""
         text = (f"{self.name} ({self.path}): fmi3InstantiateCoSimulation(eventModeUsed = "
                 f"{str(self.event_mode).lower()}, earlyReturnAllowed = "
@@ -380,8 +389,9 @@ class Fmi3Unit(Unit):
         if self.event_mode:
             text += ("; its modelDescription.xml declares hasEventMode = true, so the event "
                      "algorithm asked for Event Mode, which its binary refuses (FMI 3.0 sec. "
-                     "4.2: an FMU declaring hasEventMode accepts eventModeUsed = true): run it "
-                     "with algorithm = \"fixed\" (no Event Mode), or fix the FMU")
+                     "2.3.1, 4.4: an FMU declaring hasEventMode accepts eventModeUsed = "
+                     "true): run it with algorithm = \"fixed\" (no Event Mode), or fix the "
+                     "FMU")
         return text
 
     def enter_initialization(self, start: float, stop: float) -> None:
@@ -390,25 +400,53 @@ class Fmi3Unit(Unit):
 
     def exit_initialization(self) -> None:
         periods = self._periods() if self.event_mode else {}
+        first = self._first_aperiodic() if self.event_mode else {}
         self.slave.exitInitializationMode()
-        if self.event_mode:  # FMI 3.0 sec. 4.2.1: now in Event Mode
+        if self.event_mode:  # FMI 3.0 sec. 2.3.3: now in Event Mode
             self._in_event = True
+            start = Fraction(to_seconds(self._start_ticks))
             for clock in self.input_clocks:
                 vr = clock.value_reference
                 self._clock_next[vr] = None
                 if vr in periods:
-                    origin = Fraction(to_seconds(self._start_ticks)) + periods[vr][1]
+                    origin = start + periods[vr][1]
                     self._clock_period[vr] = (origin, periods[vr][0], 0)
                     self._clock_next[vr] = self._schedule(float(origin), self._start_ticks - 1)
+                elif vr in first:  # sec. 2.2.8.2, aperiodic Clock: t_0 = t_start + interval
+                    self._clock_next[vr] = self._schedule(float(start + first[vr]),
+                                                          self._start_ticks - 1)
+
+    def _first_aperiodic(self) -> dict[int, Fraction]:
+        """The first interval (s) of every countdown and changing input clock the FMU gives
+        one for, asked in Initialization Mode (FMI 3.0 sec. 2.2.8.2: the importer calls
+        fmi3GetInterval for such a Clock in Initialization Mode; its first tick is t_0 =
+        t_start + T_interval,0 with T_interval,0 >= 0): those with the qualifier
+        ``fmi3IntervalChanged`` (none is due for another qualifier); an interval below 0 is a
+        :class:`SimulationError`."""
+        aperiodic = [c for c in self.input_clocks
+                     if c.interval_variability in ("countdown", "changing")]
+        out = {}
+        for clock, (interval, qualifier) in zip(aperiodic, self._intervals(aperiodic)):
+            if qualifier != fmi3IntervalChanged:
+                continue
+            if interval < 0:
+                raise SimulationError(f"{self.name}: {clock.interval_variability} clock "
+                                      f"{clock.name}: "
+                                      f"fmi3GetIntervalDecimal in Initialization Mode gave "
+                                      f"{float(interval)!r} s (must be >= 0)")
+            out[clock.value_reference] = interval
+        return out
 
     def _periods(self) -> dict[int, tuple[Fraction, Fraction]]:
         """(interval, shift) in s of every periodic input clock, in Initialization Mode: from
-        the modelDescription (constant) or asked of the FMU (fixed, tunable); a
-        clock the master cannot tick is a :class:`SimulationError`."""
+        the modelDescription (constant, and fixed or tunable with a declared interval: FMI 3.0
+        sec. 2.2.8.2, the declared values hold when the importer sets none) or asked of the
+        FMU (fixed, tunable without one); a clock the master cannot tick is a
+        :class:`SimulationError`."""
         out = {}
         for clock in self.input_clocks:
             kind = clock.interval_variability
-            if kind == "constant":
+            if kind == "constant" or (kind in ASKED and clock.interval is not None):
                 out[clock.value_reference] = (clock.interval, clock.shift or Fraction(0))
             elif kind in ASKED:
                 (interval, qualifier), = self._intervals([clock])
@@ -577,22 +615,26 @@ class Fmi3Unit(Unit):
             self._in_event = True
 
     def complete_event(self, ticks: int) -> None:
+        """Handle the event at ``ticks``: the input clocks due there set (fmi3SetClock),
+        fmi3UpdateDiscreteStates until no update is needed, then the intervals asked
+        (:meth:`_asked_in_event`); a countdown or changing clock whose interval is 0 ticks at
+        this event (FMI 3.0 sec. 2.2.8.2: T_interval,i >= 0): it is set and the discrete
+        states updated again, until no clock ticks at interval 0."""
         now = self._seconds(ticks)
         ticking = [vr for vr, nxt in self._clock_next.items() if nxt == ticks]
-        if ticking:
-            self.slave.setClock(ticking, [True] * len(ticking))
         for _ in range(MAX_EVENT_ITERATIONS):
-            self._read_output_clocks()
-            update, terminate, _, _, defined, nxt = self.slave.updateDiscreteStates()
-            if terminate:
-                raise FmuTerminated(self, ticks)
-            if not update:
+            if ticking:
+                self.slave.setClock(ticking, [True] * len(ticking))
+            defined, nxt = self._update_discrete_states(ticks)
+            self._advance(ticking, ticks)
+            ticking = self._ask_intervals(now, ticks, self._asked_in_event(ticking),
+                                          zero_allowed=True)
+            if not ticking:
                 break
         else:
-            raise SimulationError(f"{self.name}: fmi3UpdateDiscreteStates at t = "
-                                  f"{to_seconds(ticks):g} s still needs an update after "
-                                  f"{MAX_EVENT_ITERATIONS} calls (an event iteration that "
-                                  "does not converge)")
+            raise SimulationError(f"{self.name}: at t = {to_seconds(ticks):g} s a countdown "
+                                  f"or changing clock still ticks again at interval 0 after "
+                                  f"{MAX_EVENT_ITERATIONS} ticks")
         self._announced = None
         if defined:
             if not (math.isfinite(nxt) and nxt > now):
@@ -600,10 +642,24 @@ class Fmi3Unit(Unit):
                                       f"current time {now!r} s (an FMU announcing "
                                       "its next event must give a later time)")
             self._announced = self._schedule(nxt, ticks)
-        self._advance(ticking, ticks)
-        self._ask_intervals(now, ticks)
         self.slave.enterStepMode()
         self._in_event = self._needs_event = False
+
+    def _update_discrete_states(self, ticks: int) -> tuple[bool, float]:
+        """fmi3UpdateDiscreteStates at the event at ``ticks`` until no update is needed (the
+        watched output clocks asked before each call): (nextEventTimeDefined, nextEventTime)
+        of the last call."""
+        for _ in range(MAX_EVENT_ITERATIONS):
+            self._read_output_clocks()
+            update, terminate, _, _, defined, nxt = self.slave.updateDiscreteStates()
+            if terminate:
+                raise FmuTerminated(self, ticks)
+            if not update:
+                return defined, nxt
+        raise SimulationError(f"{self.name}: fmi3UpdateDiscreteStates at t = "
+                              f"{to_seconds(ticks):g} s still needs an update after "
+                              f"{MAX_EVENT_ITERATIONS} calls (an event iteration that "
+                              "does not converge)")
 
     def watch_clock(self, vr: int) -> None:
         """Ask the output clock ``vr`` at every event (it is wired to an input clock)."""
@@ -632,27 +688,39 @@ class Fmi3Unit(Unit):
                 self._clock_period[vr] = (origin, period, k + 1)
                 self._clock_next[vr] = self._schedule(float(origin + (k + 1) * period), ticks)
 
-    def _ask_intervals(self, now: float, ticks: int, zero_allowed: bool = False) -> list[int]:
-        """Ask the countdown and tunable input clocks' intervals (fmi3GetIntervalDecimal) at
-        the event at ``ticks`` (the FMU's time ``now``, s); a changed one schedules the clock's
-        next tick. ``zero_allowed`` (Scheduled Execution): a countdown interval 0 means a tick
-        now; those clocks are returned (else an interval must be positive)."""
-        asked = [c for c in self.input_clocks
-                 if c.interval_variability in ("countdown", "tunable")]
+    def _asked_in_event(self, ticked: list[int]) -> list[ClockAttributes]:
+        """The input clocks whose intervals are asked in an Event Mode where the clocks
+        ``ticked`` ticked (FMI 3.0 sec. 2.2.8.2): every countdown clock, every tunable one that
+        declares no interval, and the changing ones that ticked."""
+        return [c for c in self.input_clocks if c.interval_variability == "countdown"
+                or (c.interval_variability == "tunable" and c.interval is None)
+                or (c.interval_variability == "changing" and c.value_reference in ticked)]
+
+    def _countdown_and_tunable(self) -> list[ClockAttributes]:
+        """The countdown input clocks and the tunable ones that declare no interval."""
+        return self._asked_in_event([])
+
+    def _ask_intervals(self, now: float, ticks: int, asked: list[ClockAttributes],
+                       zero_allowed: bool = False) -> list[int]:
+        """Ask the intervals (fmi3GetIntervalDecimal) of the input clocks ``asked`` at the
+        event at ``ticks`` (the FMU's time ``now``, s); a changed one schedules the clock's
+        next tick (a countdown or changing clock that long after now, a tunable one that long
+        after its last tick). ``zero_allowed``: a countdown or changing interval 0 means a
+        tick now; those clocks are returned (else an interval must be positive)."""
         now_ticking = []
         for clock, (interval, qualifier) in zip(asked, self._intervals(asked) if asked else ()):
             if qualifier != fmi3IntervalChanged:
                 continue
             vr = clock.value_reference
-            countdown = clock.interval_variability == "countdown"
-            if countdown and zero_allowed and interval == 0:
+            aperiodic = clock.interval_variability in ("countdown", "changing")
+            if aperiodic and zero_allowed and interval == 0:
                 now_ticking.append(vr)
                 continue
             if not interval > 0:
                 raise SimulationError(f"{self.name}: {clock.interval_variability} clock "
                                       f"{clock.name} interval {float(interval)!r} s at t = "
                                       f"{now!r} s (must be positive)")
-            if countdown:
+            if aperiodic:
                 self._clock_next[vr] = self._schedule(float(Fraction(now) + interval), ticks)
             else:  # tunable: the next tick is the new interval after the last one
                 origin, period, k = self._clock_period[vr]

@@ -78,7 +78,7 @@ def warm_up(path: Path) -> None:
 
 def binary_dirs(md: Any) -> tuple[str, list[str]]:
     """(this platform's binaries folder, every folder that would do) for ``md``'s version:
-    FMI 2 ``linux64`` (FMI 2.0.4 sec. 2.4), FMI 3 ``x86_64-linux`` (FMI 3.0 sec. 2.5.1.1)."""
+    FMI 2 ``linux64`` (FMI 2.0.4 sec. 2.4), FMI 3 ``x86_64-linux`` (FMI 3.0 sec. 2.5.1.4.1)."""
     from fmpy import platform, platform_tuple
 
     return (platform_tuple, [platform_tuple]) if str(md.fmiVersion).startswith("3") \

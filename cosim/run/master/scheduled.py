@@ -3,7 +3,7 @@
 A Scheduled Execution FMU has no doStep: after Initialization Mode it is in Clock Activation
 Mode, and the master runs each of its model partitions with
 ``fmi3ActivateModelPartition(clockReference, activationTime)`` when the partition's input clock
-ticks (sec. 5.2.2):
+ticks (sec. 5.2.1):
 
 * periodic clocks (``constant``, ``fixed``, ``tunable``) tick at start + shift + k interval,
   attributes and FMU queries as for co-simulation (:mod:`cosim.run.master.fmi3`);
@@ -14,11 +14,15 @@ ticks (sec. 5.2.2):
   the master asks its interval (fmi3GetIntervalDecimal, qualifier ``fmi3IntervalChanged``):
   it ticks that long after the activation that set it; interval 0 is a tick at the same
   time, after the partition that set it;
+* a ``changing`` clock ticks first where its interval asked in Initialization Mode puts it,
+  then that long after each of its activations that the master asks its interval right after
+  (sec. 2.2.8.2: fmi3GetInterval in Clock Activation Mode if and only if the Clock ticked);
+  interval 0 as for a countdown clock;
 * a ``triggered`` clock ticks where an output clock wired to it in the scenario's
   [connections] ticks (the master asks every output clock with fmi3GetClock after each
   clock-update callback).
 
-Every input clock declares a ``priority`` (sec. 2.4.7.4: required in Scheduled Execution;
+Every input clock declares a ``priority`` (sec. 2.4.4: required in Scheduled Execution;
 lower value = higher priority). The master runs partitions one at a time (no preemption):
 the partitions due at one time are activated in priority order (equal priorities: by value
 reference), and a partition made due at that time by another (countdown 0, a trigger) joins
@@ -30,20 +34,17 @@ that is not a whole nanosecond is passed as the FMU's own double).
 from __future__ import annotations
 
 import os
-from fractions import Fraction
 from typing import Any
 
 from fmpy.fmi3 import (
     FMU3ScheduledExecution,
     fmi3ClockUpdateCallback,
     fmi3InstanceEnvironment,
-    fmi3IntervalChanged,
     fmi3LockPreemptionCallback,
     fmi3LogMessageCallback,
     fmi3UnlockPreemptionCallback,
 )
 
-from cosim.fmu.state import to_seconds
 from cosim.run.master.errors import SimulationError
 from cosim.run.master.fmi3 import Fmi3Unit
 
@@ -51,7 +52,7 @@ from cosim.run.master.fmi3 import Fmi3Unit
 class Fmi3ScheduledUnit(Fmi3Unit):
     """An FMI 3.0 Scheduled Execution FMU instance."""
 
-    UNSCHEDULED_CLOCKS = ("countdown", "triggered")
+    UNSCHEDULED_CLOCKS = ("countdown", "changing", "triggered")
     FMPY_CLASS = FMU3ScheduledExecution
     INTERFACE = "scheduledExecution"
 
@@ -62,7 +63,7 @@ class Fmi3ScheduledUnit(Fmi3Unit):
             if clock.priority is None:
                 raise SimulationError(
                     f"{path}: modelDescription.xml: input Clock {clock.name!r} has no priority "
-                    "(FMI 3.0 sec. 2.4.7.4: every input clock of a Scheduled Execution FMU "
+                    "(FMI 3.0 sec. 2.4.4: every input clock of a Scheduled Execution FMU "
                     "declares one)")
             self._priority[clock.value_reference] = (clock.priority, clock.value_reference)
         clock_vars = set(self.clock_names)
@@ -74,6 +75,8 @@ class Fmi3ScheduledUnit(Fmi3Unit):
         # every output clock is asked in Clock Update Mode (sec. 5.2.2)
         self.watched_clocks = [c.value_reference for c in self.output_clocks]
         self.activations: list[tuple[str, float]] = []  # (input clock, activation time s)
+        self._changing = {c.value_reference: c for c in self.input_clocks
+                          if c.interval_variability == "changing"}
 
     @staticmethod
     def _has_event_mode(md: Any) -> bool:
@@ -116,15 +119,8 @@ class Fmi3ScheduledUnit(Fmi3Unit):
                                   f"{self.last_messages() or 'the FMU gave no reason'}")
 
     def exit_initialization(self) -> None:
-        countdowns = [c for c in self.input_clocks if c.interval_variability == "countdown"]
-        first = self._intervals(countdowns) if countdowns else []  # in Initialization Mode
         super().exit_initialization()  # now in Clock Activation Mode (sec. 5.2.1)
         self._in_event = False
-        start = Fraction(to_seconds(self._start_ticks))
-        for clock, (interval, qualifier) in zip(countdowns, first):
-            if qualifier == fmi3IntervalChanged:  # sec. 2.2.8.2: t_0 = t_start + interval
-                self._clock_next[clock.value_reference] = self._schedule(
-                    float(start + interval), self._start_ticks - 1)
 
     def _do_step(self, t: int, h: int) -> int:
         return t + h  # time passes between activations; the FMU has no doStep
@@ -155,6 +151,10 @@ class Fmi3ScheduledUnit(Fmi3Unit):
             self.activations.append((names[vr], now))
             if self._clock_next.get(vr) == ticks:
                 self._advance([vr], ticks)
+            if vr in self._changing:  # its next interval, asked where it ticked
+                due.update(self._ask_intervals(now, ticks, [self._changing[vr]],
+                                               zero_allowed=True))
             if self._updated:
-                due.update(self._ask_intervals(now, ticks, zero_allowed=True))
+                due.update(self._ask_intervals(now, ticks, self._countdown_and_tunable(),
+                                               zero_allowed=True))
                 self._read_output_clocks()
