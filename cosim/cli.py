@@ -115,7 +115,7 @@ def _check_clock(names: list[str] | None, clock: str, fmi: str, native: bool,
 
 
 def _build_native(names: list[str] | None, versions: tuple[int, ...]) -> list[Path]:
-    from cosim.fmu.native_build import NATIVE, CompilerMissing, build_all_natives
+    from cosim.build.native import NATIVE, CompilerMissing, build_all_natives
 
     built: list[Path] = []
     try:  # the models side by side, one per core
@@ -410,7 +410,7 @@ class _ProgressReporter:
 def _native_paths(names: list[str] | None, versions: tuple[int, ...]) -> list[Path]:
     """The native builds of the identifiers ``names`` (None: every native FMU) in
     ``versions``, built where missing."""
-    from cosim.fmu.native_build import NATIVE, CompilerMissing, build_natives, native_path
+    from cosim.build.native import NATIVE, CompilerMissing, build_natives, native_path
 
     paths: list[Path] = []
     for name in sorted(NATIVE) if names is None else names:

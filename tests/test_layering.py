@@ -2,6 +2,8 @@
 
     cosim.fmu  <-  plants  <-  controllers
         ^                         (plants and controllers use cosim's FMU side, never the reverse)
+    cosim.build  (the native builder: build time only, bundled into no FMU)
+        ^
     cosim.run  <-  cosim.interop  <-  cosim.cli
         ^    ^
         |    cosim.reproduce  <-  cosim.cli  (paper reproductions: entries, jobs, tables, page)
@@ -16,7 +18,10 @@ its scripts (tuning, route and data: top-level programs like ``benchmarks/``, wh
 the project); no module, script or test imports a paper's folder (the registry loads the
 metrics by path, tests load a script by path).
 
-``cosim.fmu`` (bundled into every FMU) imports nothing else of the project; ``cosim.run`` and
+``cosim.fmu`` (bundled into every FMU) imports nothing else of the project; ``cosim.build``
+imports only ``cosim.fmu`` in its import statements (its native builder still loads the
+modules of plants and controllers whose data it exports, and ``cosim.run.scenario`` for the
+shipped scenarios, by name with ``importlib`` at build time: not seen here); ``cosim.run`` and
 ``cosim.interop`` never import plants or controllers (the catalog finds the FMU wrappers by
 file name, not by import). The modules of ``cosim.run`` that evaluate a reproduction's record
 (:data:`ALSO_ALLOWED`) also import ``cosim.reproduce``. Checked on the import statements of
@@ -45,13 +50,14 @@ ALLOWED: dict[str, set[str]] = {
     "cosim.fmu": {"cosim.fmu"},
     "plants": {"cosim.fmu", "plants"},
     "controllers": {"cosim.fmu", "plants", "controllers"},
-    "cosim.run": {"cosim.fmu", "cosim.run"},
+    "cosim.build": {"cosim.fmu", "cosim.build"},
+    "cosim.run": {"cosim.fmu", "cosim.build", "cosim.run"},
     "cosim.papers": {"cosim.fmu", "cosim.run", "cosim.papers"},
     "cosim.interop": {"cosim.fmu", "cosim.run", "cosim.interop"},
     "cosim.optimal": {"cosim.fmu", "plants", "cosim.optimal"},
-    "cosim.reproduce": {"cosim.fmu", "cosim.run", "cosim.reproduce"},
-    "cosim.cli": {"cosim.fmu", "cosim.run", "cosim.papers", "cosim.interop", "cosim.optimal",
-                  "cosim.reproduce", "cosim.cli"},
+    "cosim.reproduce": {"cosim.fmu", "cosim.build", "cosim.run", "cosim.reproduce"},
+    "cosim.cli": {"cosim.fmu", "cosim.build", "cosim.run", "cosim.papers", "cosim.interop",
+                  "cosim.optimal", "cosim.reproduce", "cosim.cli"},
     # the Python entry point: a peer of the CLI (it reads the CLI's choice of printed metrics)
     "cosim.api": {"cosim.fmu", "cosim.run", "cosim.cli", "cosim.api"},
     "cosim": {"cosim"},  # cosim/__init__.py: nothing
@@ -120,6 +126,18 @@ def test_imports_run_one_way(path: Path, module: str) -> None:
     for line, imported in project_imports(path, module):
         assert part_of(imported) in ALLOWED[own] | ALSO_ALLOWED.get(module, set()), (
             f"{path.relative_to(ROOT)}:{line}: {own} must not import {imported}")
+
+
+def test_the_builder_is_a_part_of_its_own() -> None:
+    """The native builder's modules belong to ``cosim.build``, whose imports the checker
+    reads: the run side imports it, the FMU layer and the cores never do."""
+    built = {module for _, module in modules() if part_of(module) == "cosim.build"}
+    assert {"cosim.build", "cosim.build.native", "cosim.build.solvers"} <= built
+    native = ROOT / "cosim" / "build" / "native.py"
+    assert {part_of(m) for _, m in project_imports(native, "cosim.build.native")} == {
+        "cosim.fmu", "cosim.build"}
+    assert all("cosim.build" not in ALLOWED[part] for part in ("cosim.fmu", "plants",
+                                                               "controllers"))
 
 
 def test_the_checker_catches_an_upward_import(tmp_path: Path) -> None:

@@ -543,7 +543,7 @@ def linalg(tmp_path_factory):
     """cosim/fmu/native/ato_linalg.c compiled alone (the build's flags), through ctypes."""
     import ctypes
 
-    from cosim.fmu.native_build import CC_FLAGS, NATIVE_DIR
+    from cosim.build.native import CC_FLAGS, NATIVE_DIR
 
     if shutil.which("gcc") is None:
         pytest.skip("gcc not installed")

@@ -13,8 +13,8 @@ import os
 from pathlib import Path
 from typing import Any
 
+from cosim.build.native import build_natives, native_is_stale
 from cosim.fmu.build import build_stale, catalog
-from cosim.fmu.native_build import build_natives, native_is_stale
 from cosim.run import interrupt, isolation
 from cosim.run.master.core import Master, ProgressFn, RunResult
 from cosim.run.master.errors import SimulationError
