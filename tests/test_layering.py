@@ -2,7 +2,7 @@
 
     cosim.fmu  <-  plants  <-  controllers
         ^                         (plants and controllers use cosim's FMU side, never the reverse)
-    cosim.build  (the native builder: build time only, bundled into no FMU)
+    cosim.build  (the native builder, above the cores: build time only, bundled into no FMU)
         ^
     cosim.run  <-  cosim.interop  <-  cosim.cli
         ^    ^
@@ -19,9 +19,9 @@ the project); no module, script or test imports a paper's folder (the registry l
 metrics by path, tests load a script by path).
 
 ``cosim.fmu`` (bundled into every FMU) imports nothing else of the project; ``cosim.build``
-imports only ``cosim.fmu`` in its import statements (its native builder still loads the
-modules of plants and controllers whose data it exports, and ``cosim.run.scenario`` for the
-shipped scenarios, by name with ``importlib`` at build time: not seen here); ``cosim.run`` and
+stands above the cores: it imports ``cosim.fmu``, ``plants`` and ``controllers`` in import
+statements (no ``importlib``), each core's build-time data coming from the core's own
+``native_data`` through the catalog; ``cosim.run`` and
 ``cosim.interop`` never import plants or controllers (the catalog finds the FMU wrappers by
 file name, not by import). The modules of ``cosim.run`` that evaluate a reproduction's record
 (:data:`ALSO_ALLOWED`) also import ``cosim.reproduce``. Checked on the import statements of
@@ -50,7 +50,7 @@ ALLOWED: dict[str, set[str]] = {
     "cosim.fmu": {"cosim.fmu"},
     "plants": {"cosim.fmu", "plants"},
     "controllers": {"cosim.fmu", "plants", "controllers"},
-    "cosim.build": {"cosim.fmu", "cosim.build"},
+    "cosim.build": {"cosim.fmu", "plants", "controllers", "cosim.build"},
     "cosim.run": {"cosim.fmu", "cosim.build", "cosim.run"},
     "cosim.papers": {"cosim.fmu", "cosim.run", "cosim.papers"},
     "cosim.interop": {"cosim.fmu", "cosim.run", "cosim.interop"},
@@ -128,14 +128,24 @@ def test_imports_run_one_way(path: Path, module: str) -> None:
             f"{path.relative_to(ROOT)}:{line}: {own} must not import {imported}")
 
 
-def test_the_builder_is_a_part_of_its_own() -> None:
-    """The native builder's modules belong to ``cosim.build``, whose imports the checker
-    reads: the run side imports it, the FMU layer and the cores never do."""
-    built = {module for _, module in modules() if part_of(module) == "cosim.build"}
-    assert {"cosim.build", "cosim.build.native", "cosim.build.solvers"} <= built
+def test_the_builder_stands_above_the_cores_in_its_imports() -> None:
+    """The native builder's modules belong to ``cosim.build``: the route data it exports come
+    from ``plants`` in an import statement the checker reads, it loads no module by name
+    (``importlib.import_module``, ``__import__``), and neither the FMU layer nor a core
+    imports it."""
+    built = [(path, module) for path, module in modules() if part_of(module) == "cosim.build"]
+    assert {"cosim.build", "cosim.build.native", "cosim.build.solvers"} <= {
+        module for _, module in built}
     native = ROOT / "cosim" / "build" / "native.py"
     assert {part_of(m) for _, m in project_imports(native, "cosim.build.native")} == {
-        "cosim.fmu", "cosim.build"}
+        "cosim.fmu", "plants", "cosim.build"}
+    for path, _ in built:
+        tree = ast.parse(path.read_text(), filename=str(path))
+        called = {node.func.attr if isinstance(node.func, ast.Attribute) else node.func.id
+                  for node in ast.walk(tree) if isinstance(node, ast.Call)
+                  and isinstance(node.func, (ast.Attribute, ast.Name))}
+        assert not called & {"import_module", "__import__"}, (
+            f"{path.relative_to(ROOT)} loads a module by name")
     assert all("cosim.build" not in ALLOWED[part] for part in ("cosim.fmu", "plants",
                                                                "controllers"))
 
