@@ -10,11 +10,12 @@ import pytest
 from cosim.build.native import (
     NATIVE,
     core_data,
+    native_sources,
     shipped_entries,
     shipped_scenarios,
     shipped_values,
 )
-from cosim.fmu.build import catalog
+from cosim.fmu.build import ROOT, bundled_files, catalog
 from cosim.run.scenario import entry_files, scenario_files
 
 try:
@@ -101,3 +102,11 @@ def test_shipped_values_are_the_defaults_then_scenarios_then_runs() -> None:
     assert runs > 0
     assert shipped_values(fmus) == expected
     assert shipped_values(("NoSuchFmu",)) == [{}]
+
+
+def test_every_native_build_is_made_from_the_literals_it_is_written_with() -> None:
+    """The builder writes every model's declarations with cosim/fmu/c_text.py, so that file is
+    a source of every native FMU, also of one whose Python bundle does not hold it."""
+    c_text = ROOT / "cosim" / "fmu" / "c_text.py"
+    assert c_text not in bundled_files(catalog()["StopPid"].module)
+    assert all(c_text in native_sources(identifier) for identifier in NATIVE)

@@ -632,15 +632,16 @@ def _compile_side_by_side(jobs: list[tuple[str, Path, Path, bool]]) -> None:
 
 def native_sources(identifier: str, fmi_version: int = 2) -> list[Path]:
     """Every file the native FMU ``identifier`` is made from: its C files, the FMI 2 front
-    (and for FMI 3.0 the FMI 3 front and the modelDescription derivation), this builder and
-    the Python wrapper's files (declarations, bundled data)."""
+    (and for FMI 3.0 the FMI 3 front and the modelDescription derivation), this builder, the
+    C literals it writes with (``cosim/fmu/c_text.py``) and the Python wrapper's files
+    (declarations, the core and its ``native_data``, bundled data)."""
     spec = NATIVE[identifier]
     fmi3_files = [FRONT_DIR / "fmi3_front.c", FMU_LAYER / "fmi3.py"] if fmi_version == 3 else []
     return [NATIVE_DIR / spec.source, NATIVE_DIR / "ato_vars.h",
             *(NATIVE_DIR / name for name in (*spec.helpers, *spec.shared)),
             FRONT_DIR / "fmi2_front.c",
             FRONT_DIR / "ato_backend.h", FRONT_DIR / "instance_registry.h", Path(__file__),
-            *([HERE / "solvers.py"] if spec.solvers else []),
+            FMU_LAYER / "c_text.py", *([HERE / "solvers.py"] if spec.solvers else []),
             *bundled_files(catalog()[identifier].module), *fmi3_files]
 
 
