@@ -56,7 +56,7 @@ from fmpy import extract, read_model_description  # noqa: E402
 from fmpy.fmi2 import FMU2Slave  # noqa: E402
 
 from cosim.build.native import NATIVE, build_native  # noqa: E402
-from cosim.fmu.build import build_stale, catalog  # noqa: E402
+from cosim.build.python import build_stale, catalog  # noqa: E402
 from cosim.fmu.state import to_ticks  # noqa: E402
 from cosim.run.scenario import find_scenario, load_scenario, scenario_files  # noqa: E402
 from cosim.run.simulate import run_scenario  # noqa: E402

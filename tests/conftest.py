@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from cosim.fmu.build import build_stale, catalog
+from cosim.build.python import build_stale, catalog
 
 
 @pytest.fixture(scope="session")

@@ -12,7 +12,7 @@ import sys
 
 import pytest
 
-from cosim.fmu.build import build_stale, catalog
+from cosim.build.python import build_stale, catalog
 
 CHILD = r"""
 import json, sys

@@ -15,7 +15,7 @@ from cosim.build.native import (
     shipped_scenarios,
     shipped_values,
 )
-from cosim.fmu.build import ROOT, bundled_files, catalog
+from cosim.build.python import ROOT, bundled_files, catalog
 from cosim.run.scenario import entry_files, scenario_files
 
 try:

@@ -78,7 +78,7 @@ from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import FMU2Slave
 from native_helpers import set_by_type
 
-from cosim.fmu.build import catalog
+from cosim.build.python import catalog
 
 UNIT = 2.0**-53
 EPS = 512 * UNIT  # backward error of a sample's blocks (module docstring)

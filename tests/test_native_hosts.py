@@ -170,7 +170,7 @@ def test_the_loader_trace_lists_libpython_for_a_python_fmu(hosts, tmp_path):
     build of the first native model, in the FMI 3 host, given only the PYTHONPATH it needs."""
     import site
 
-    from cosim.fmu.build import build_stale, catalog
+    from cosim.build.python import build_stale, catalog
 
     spec = catalog()[IDENTIFIERS[0]]
     build_stale([spec], fmi_version=3)
@@ -232,7 +232,7 @@ def test_libcosim_runs_the_fmi2_build_in_a_shipped_loop(native, identifier):
     """The first shipped scenario that uses the model, with the native FMU in its place
     (first 20 s): libcosim's fixed-step master gives our master's Jacobi run of the same FMUs
     exactly (both deliver every output to the next step unchanged)."""
-    from cosim.fmu.build import build_stale, catalog
+    from cosim.build.python import build_stale, catalog
     from cosim.interop.libcosim import compare_frames, run_libcosim
     from cosim.run.scenario import load_scenario
     from cosim.run.simulate import run_scenario
@@ -263,7 +263,7 @@ def test_shipped_loop_with_the_fmi3_build_equals_the_fmi2_build(native, identifi
     the native FMI 3 build in the model's place (the other components' FMI 3 builds, Event
     Mode for the controllers) the recorded series and the summary equal the FMI 2 run's; only
     the wall-clock figures differ."""
-    from cosim.fmu.build import build_stale, catalog
+    from cosim.build.python import build_stale, catalog
     from cosim.run.scenario import load_scenario
     from cosim.run.simulate import run_scenario
 

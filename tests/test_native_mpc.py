@@ -37,7 +37,7 @@ from fmpy.fmi2 import FMU2Slave
 
 from controllers.mpc.stop_mpc import StopMpcParams
 from cosim.build.native import build_all_natives
-from cosim.fmu.build import catalog
+from cosim.build.python import catalog
 from cosim.fmu.declare import build
 from cosim.fmu.state import to_ticks
 from cosim.run.scenario import load_scenario

@@ -8,7 +8,7 @@ from __future__ import annotations
 import pytest
 from fmpy import read_model_description, simulate_fmu
 
-from cosim.fmu.build import catalog
+from cosim.build.python import catalog
 
 IDENTIFIERS = sorted(catalog())
 

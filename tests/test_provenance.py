@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from cosim.fmu.build import ROOT
+from cosim.build.python import ROOT
 from cosim.run import docs_pages
 from cosim.run.provenance import entry_digest, entry_inputs, simulation_digest
 from cosim.run.record import Record, build_of, save

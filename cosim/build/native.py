@@ -64,9 +64,9 @@ try:
 except ModuleNotFoundError:  # Python 3.10
     import tomli as tomllib  # type: ignore[no-redef]
 
+from cosim.build import fmi3
+from cosim.build.python import FMU_DIR, ROOT, bundled_files, catalog
 from cosim.build.solvers import solver_files
-from cosim.fmu import fmi3
-from cosim.fmu.build import FMU_DIR, ROOT, bundled_files, catalog
 from cosim.fmu.c_text import c_double, c_string
 from cosim.fmu.disk_cache import cache_root
 from plants.route import ROUTES_DIR, load_reference, load_route
@@ -233,7 +233,7 @@ def decl_header(identifier: str, variables, guid: str, options: dict | None = No
     lines.append("};")
     # the backend's event_time_vr (ato_backend.h): the value reference of the next_event_time
     # output, -1 for a model without events, from the same declaration as the FMI 3
-    # modelDescription's hasEventMode (cosim.fmu.fmi3)
+    # modelDescription's hasEventMode (cosim.build.fmi3)
     event_vr = next((vr for vr, v in enumerate(variables)
                      if v.name == EVENT_TIME_OUTPUT and v.causality == "output"), -1)
     lines.append(f"#define ATO_EVENT_TIME_VR {event_vr}")
@@ -636,7 +636,7 @@ def native_sources(identifier: str, fmi_version: int = 2) -> list[Path]:
     C literals it writes with (``cosim/fmu/c_text.py``) and the Python wrapper's files
     (declarations, the core and its ``native_data``, bundled data)."""
     spec = NATIVE[identifier]
-    fmi3_files = [FRONT_DIR / "fmi3_front.c", FMU_LAYER / "fmi3.py"] if fmi_version == 3 else []
+    fmi3_files = [FRONT_DIR / "fmi3_front.c", HERE / "fmi3.py"] if fmi_version == 3 else []
     return [NATIVE_DIR / spec.source, NATIVE_DIR / "ato_vars.h",
             *(NATIVE_DIR / name for name in (*spec.helpers, *spec.shared)),
             FRONT_DIR / "fmi2_front.c",
@@ -797,7 +797,7 @@ def package_fmi3(fmi2_fmu: Path, out: Path, windows: bool | None = None) -> Path
     (the front of the Python FMUs' FMI 3 builds, here linked with the model, whose backend
     calls the model directly) plus the FMI 3 headers (the FMI 2 ones stay: the backend
     interface is declared with them), ``buildDescription.xml`` names it, modelDescription.xml
-    is :func:`cosim.fmu.fmi3.model_description` of the FMI 2 one (same variables and GUID as
+    is :func:`cosim.build.fmi3.model_description` of the FMI 2 one (same variables and GUID as
     ``instantiationToken``), and the sources are compiled into
     ``binaries/x86_64-linux/<id>.so`` and, with ``windows`` (default: when mingw-w64 is
     installed), ``binaries/x86_64-windows/<id>.dll``."""

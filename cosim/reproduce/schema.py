@@ -8,7 +8,7 @@ import dataclasses
 import inspect
 import re
 
-from cosim.fmu.build import ROOT
+from cosim.build.python import ROOT
 from cosim.reproduce.entry import CLAIM_PARTS, PARTS, Entry
 from cosim.reproduce.fields import keys_of, required, type_hints, type_text
 from cosim.reproduce.parts import Statement, Variant

@@ -51,7 +51,7 @@ except ModuleNotFoundError:  # Python 3.10
     import tomli as tomllib  # type: ignore[no-redef]
 
 from cosim.build import native
-from cosim.fmu.build import FMU_DIR, ROOT, catalog
+from cosim.build.python import FMU_DIR, ROOT, catalog
 from cosim.fmu.state import TICKS_PER_SECOND, to_ticks
 from cosim.run import fmi_types
 from cosim.run.metrics import PAPERS

@@ -54,7 +54,7 @@ import zipfile
 from pathlib import Path
 from xml.etree import ElementTree as ET
 
-FRONT_DIR = Path(__file__).resolve().parent / "front"
+FRONT_DIR = Path(__file__).resolve().parents[1] / "fmu" / "front"  # the FMU layer's C fronts
 FRONT_SOURCES = (FRONT_DIR / "fmi3_front.c", FRONT_DIR / "ato_backend_fmi2dl.c")
 FRONT_HEADER = FRONT_DIR / "ato_backend.h"
 PLATFORM = "x86_64-linux"
