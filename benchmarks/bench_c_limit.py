@@ -40,7 +40,7 @@ import fmpy  # noqa: E402
 from fmpy import extract, read_model_description  # noqa: E402
 from raw_loop import connection_groups, start_values  # noqa: E402
 
-from cosim.fmu.native_build import CC_FLAGS, LINUX_CC, build_natives, native_path  # noqa: E402
+from cosim.build.native import CC_FLAGS, LINUX_CC, build_natives, native_path  # noqa: E402
 from cosim.run.master import Master  # noqa: E402
 from cosim.run.scenario import Scenario, find_scenario, load_scenario  # noqa: E402
 

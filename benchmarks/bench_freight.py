@@ -26,7 +26,7 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 from controllers.pid.freight_pid import FreightPid, FreightPidParams  # noqa: E402
-from cosim.fmu.build import resolve  # noqa: E402
+from cosim.build.python import resolve  # noqa: E402
 from cosim.fmu.state import to_ticks  # noqa: E402
 from cosim.run.scenario import find_scenario  # noqa: E402
 from cosim.run.simulate import run_scenario  # noqa: E402

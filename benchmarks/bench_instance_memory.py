@@ -20,7 +20,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from cosim.fmu.build import build_stale, catalog  # noqa: E402
+from cosim.build.python import build_stale, catalog  # noqa: E402
 
 DEFAULT = ["StopPid", "BrakeDelayTrain"]
 

@@ -23,7 +23,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from cosim.fmu.build import FMU_DIR, build_stale, resolve  # noqa: E402
+from cosim.build.python import FMU_DIR, build_stale, resolve  # noqa: E402
 
 
 def fresh_process_times(names: list[str], count: int = 6) -> dict[str, dict[str, float]]:

@@ -55,8 +55,8 @@ sys.path.insert(0, str(ROOT))
 from fmpy import extract, read_model_description  # noqa: E402
 from fmpy.fmi2 import FMU2Slave  # noqa: E402
 
-from cosim.fmu.build import build_stale, catalog  # noqa: E402
-from cosim.fmu.native_build import NATIVE, build_native  # noqa: E402
+from cosim.build.native import NATIVE, build_native  # noqa: E402
+from cosim.build.python import build_stale, catalog  # noqa: E402
 from cosim.fmu.state import to_ticks  # noqa: E402
 from cosim.run.scenario import find_scenario, load_scenario, scenario_files  # noqa: E402
 from cosim.run.simulate import run_scenario  # noqa: E402
@@ -326,7 +326,7 @@ def build_all() -> dict:
     """``python -m cosim.cli build --native --fmi all`` in the project folder: wall time (s),
     CPU time of the command and its compilers (s, user + system), the number of FMUs built,
     whether the Windows binaries were among them, and the load averages before and after."""
-    from cosim.fmu.native_build import WINDOWS_CC
+    from cosim.build.native import WINDOWS_CC
 
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     load_before = os.getloadavg()[0]

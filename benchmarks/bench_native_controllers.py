@@ -25,7 +25,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from cosim.fmu.native_build import NATIVE  # noqa: E402
+from cosim.build.native import NATIVE  # noqa: E402
 from cosim.run.scenario import load_scenario, scenario_files  # noqa: E402
 from cosim.run.simulate import run_scenario  # noqa: E402
 

@@ -91,7 +91,7 @@ def replay(ctl: Crh3LmiMpc, problems: list, every: int) -> dict[str, dict]:
 
 
 def scenario(name: str = "seed003_crh3_lmimpc_eco") -> dict:
-    from cosim.fmu.build import build_stale
+    from cosim.build.python import build_stale
     from cosim.run.simulate import run_scenario
 
     build_stale()

@@ -81,7 +81,7 @@ import bench_sweep  # noqa: E402
 from raw_loop import raw_fmpy_loop  # noqa: E402
 
 from cosim import site  # noqa: E402
-from cosim.fmu.build import build_stale  # noqa: E402
+from cosim.build.python import build_stale  # noqa: E402
 from cosim.run.scenario import find_scenario  # noqa: E402
 from cosim.run.simulate import run_scenario  # noqa: E402
 

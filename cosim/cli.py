@@ -70,8 +70,8 @@ def build(names: Annotated[list[str] | None, typer.Argument(
               "Execution: the Clock's model partition, activated by the importer at its "
               "ticks; into fmus/fmi3/se/<clock>/<id>.fmu)")] = "cs") -> None:
     """Build FMUs into fmus/ (all, or the named ones)."""
-    from cosim.fmu.build import build_clocked, build_fmus, resolve
-    from cosim.fmu.fmi3 import INTERFACES, Fmi3BuildError
+    from cosim.build.fmi3 import INTERFACES, Fmi3BuildError
+    from cosim.build.python import build_clocked, build_fmus, resolve
 
     versions = _fmi_versions(fmi)
     if clock is not None:
@@ -103,7 +103,7 @@ def build(names: Annotated[list[str] | None, typer.Argument(
 
 def _check_clock(names: list[str] | None, clock: str, fmi: str, native: bool,
                  interface: str) -> None:
-    from cosim.fmu.fmi3 import CLOCK_VARIABILITY, INTERFACES
+    from cosim.build.fmi3 import CLOCK_VARIABILITY, INTERFACES
 
     if clock not in CLOCK_VARIABILITY:
         _fail(f"--clock {clock!r}: expected one of {', '.join(CLOCK_VARIABILITY)}")
@@ -115,7 +115,7 @@ def _check_clock(names: list[str] | None, clock: str, fmi: str, native: bool,
 
 
 def _build_native(names: list[str] | None, versions: tuple[int, ...]) -> list[Path]:
-    from cosim.fmu.native_build import NATIVE, CompilerMissing, build_all_natives
+    from cosim.build.native import NATIVE, CompilerMissing, build_all_natives
 
     built: list[Path] = []
     try:  # the models side by side, one per core
@@ -133,7 +133,7 @@ def _build_native(names: list[str] | None, versions: tuple[int, ...]) -> list[Pa
 
 def _built(path: Path) -> str:
     """``cosim list``'s cell for one FMU file: built, no, or corrupt (rebuilt on next use)."""
-    from cosim.fmu.build import is_intact
+    from cosim.build.python import is_intact
 
     if not path.is_file():
         return "no"
@@ -148,7 +148,7 @@ def list_() -> None:
     fmus/), the scenarios (scenarios/ and each paper's papers/NAME/scenarios/) with their
     descriptions, and the papers reproduced (papers/NAME/entry.toml) with the alias `cosim
     reproduce` also takes."""
-    from cosim.fmu.build import catalog
+    from cosim.build.python import catalog
     from cosim.run.scenario import ScenarioError, read_toml, scenario_files
 
     table = Table(title="FMUs", show_edge=False)
@@ -410,7 +410,7 @@ class _ProgressReporter:
 def _native_paths(names: list[str] | None, versions: tuple[int, ...]) -> list[Path]:
     """The native builds of the identifiers ``names`` (None: every native FMU) in
     ``versions``, built where missing."""
-    from cosim.fmu.native_build import NATIVE, CompilerMissing, build_natives, native_path
+    from cosim.build.native import NATIVE, CompilerMissing, build_natives, native_path
 
     paths: list[Path] = []
     for name in sorted(NATIVE) if names is None else names:
@@ -475,7 +475,7 @@ def validate(
 
     The compliance checks of cosim.interop.compliance, chosen by the FMU's fmiVersion;
     non-zero exit on an error."""
-    from cosim.fmu.build import build_fmu, catalog
+    from cosim.build.python import build_fmu, catalog
 
     versions = _fmi_versions(fmi)
     specs = catalog()

@@ -2,7 +2,7 @@
 
 Each page is made from a source in the repository or the runs and is never edited by hand:
 
-- ``docs/fmus.md``: the FMU reference, from the cores' declarations (``cosim.fmu.reference``);
+- ``docs/fmus.md``: the FMU reference, from the cores' declarations (``cosim.build.reference``);
 - ``docs/reproduce_schema.md``: the schema of a reproduction entry, from its dataclasses
   (``cosim.reproduce.schema``);
 - ``docs/benchmarks.md``: from ``benchmarks/results.json`` (written by
@@ -37,8 +37,8 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-from cosim.fmu.build import ROOT, catalog
-from cosim.fmu.reference import REFERENCE_PATH, fmu_reference, third_party_imports
+from cosim.build.python import ROOT, catalog
+from cosim.build.reference import REFERENCE_PATH, fmu_reference, third_party_imports
 from cosim.reproduce.entry import ReproduceError, load_entry
 from cosim.reproduce.page import redraw_entry
 from cosim.reproduce.record import RECORD_DIR, RecordError, build_of, simulation_of

@@ -51,6 +51,7 @@ import numpy as np
 from scipy import special
 from scipy.linalg import expm
 
+from cosim.fmu.c_text import ShippedValues, config_header
 from cosim.fmu.declare import Checked, Declared, Var, build, param, parameters
 from cosim.fmu.state import StatefulCore, to_seconds, to_ticks
 from plants import dead_time, kernels
@@ -267,6 +268,15 @@ class Emu(StatefulCore, Declared):
         Var.output("grade", "‰", "grade at the head (uphill > 0)"),
         Var.output("neutral", "1", "1 while the first unit is in a neutral section"),
     )
+
+    @classmethod
+    def native_data(cls, identifier: str, shipped: ShippedValues) -> dict[str, str]:
+        """The build-time data of the native twin (:mod:`cosim.build.native`):
+        ``sources/<identifier>_config.h``, the named train configurations
+        (:data:`CONFIGURATIONS`) as the ``ato_config`` table the C plant reads its
+        ``configuration`` parameter from (:func:`cosim.fmu.c_text.config_header`)."""
+        return {f"sources/{identifier}_config.h":
+                config_header("plants.emu:CONFIGURATIONS", CONFIGURATIONS)}
 
     @classmethod
     def declarations(cls, units: int = 3) -> tuple[Var, ...]:

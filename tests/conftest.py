@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from cosim.fmu.build import build_stale, catalog
+from cosim.build.python import build_stale, catalog
 
 
 @pytest.fixture(scope="session")
@@ -34,7 +34,7 @@ def native_builds(tmp_path_factory, worker_id) -> Callable[[str], dict[int, Path
     versions), built once per test run: the first pytest-xdist worker to ask builds them under
     a file lock in the run's temporary folder, the others find them there. Skips where gcc is
     absent."""
-    from cosim.fmu.native_build import FMI_VERSIONS, build_natives, native_path
+    from cosim.build.native import FMI_VERSIONS, build_natives, native_path
 
     if shutil.which("gcc") is None:
         pytest.skip("gcc not installed: native FMUs cannot be built")

@@ -17,9 +17,9 @@ from pathlib import Path
 import pytest
 from fmpy import read_model_description
 
-from cosim.fmu.build import ROOT, catalog
+from cosim.build.python import ROOT, catalog
+from cosim.build.reference import REFERENCE_PATH
 from cosim.fmu.declare import KEEP, Var, build, group, param, parameters
-from cosim.fmu.reference import REFERENCE_PATH
 
 _TYPES = {float: "Real", int: "Integer", bool: "Boolean", str: "String"}
 
@@ -161,7 +161,7 @@ def test_catalog_read_from_source_equals_the_imported_wrappers() -> None:
     """The catalog is read from the wrapper modules' source (no import: a run needs one or
     two of 24 wrappers); importing them all finds the same FMUs, classes and descriptions
     (a wrapper class not named ``...Fmu``, or a ``...Fmu`` class that is no slave, fails)."""
-    from cosim.fmu.build import _imported_catalog
+    from cosim.build.python import _imported_catalog
 
     assert catalog() == _imported_catalog()
     cut = {k: v.description for k, v in catalog().items() if not v.description.endswith(".")}

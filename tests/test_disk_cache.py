@@ -126,7 +126,7 @@ def test_tube_mpc_design_warm_equals_cold_without_scipy(tmp_path):
 def test_fmu_carries_checked_hash_bytecode():
     """Every bundled module has a pyc for this interpreter whose PEP 552 header says
     'checked hash' and whose hash is the bundled source's."""
-    from cosim.fmu.build import build_stale, catalog
+    from cosim.build.python import build_stale, catalog
 
     spec = catalog()["StopRmpc"]
     build_stale([spec])
@@ -150,7 +150,7 @@ def test_is_stale_shortcut_agrees_with_the_exact_scan(tmp_path, monkeypatch):
     """The mtime shortcut (no project file newer than the FMU) never hides a stale FMU: the
     project's newest file is at least as new as any bundled one, and when it is newer than
     the FMU the exact import scan decides."""
-    from cosim.fmu import build
+    from cosim.build import python as build
 
     spec = build.catalog()["StopRmpc"]
     monkeypatch.setattr(build, "FMU_DIR", tmp_path)

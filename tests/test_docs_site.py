@@ -149,8 +149,8 @@ def test_fill_generated_replaces_only_its_block() -> None:
 def test_host_packages_cover_every_fmu_import(monkeypatch: pytest.MonkeyPatch) -> None:
     import functools
 
-    from cosim.fmu import reference
-    from cosim.fmu.build import catalog
+    from cosim.build import reference
+    from cosim.build.python import catalog
 
     # each FMU's imports found once (a pure function of its bundled files): the page's list and
     # the check below read the same answers

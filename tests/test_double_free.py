@@ -12,7 +12,7 @@ import sys
 
 import pytest
 
-from cosim.fmu.build import build_stale, catalog
+from cosim.build.python import build_stale, catalog
 
 CHILD = r"""
 import json, sys
@@ -66,7 +66,7 @@ def test_python_fmu_fmi3_build_refuses_a_second_free(built_fmus):
 
 @pytest.mark.parametrize("version", ["2", "3"])
 def test_native_fmu_refuses_a_second_free(version):
-    from cosim.fmu.native_build import CompilerMissing, build_natives, native_is_stale, native_path
+    from cosim.build.native import CompilerMissing, build_natives, native_is_stale, native_path
 
     fmi = int(version)
     if native_is_stale("StopPid", fmi):

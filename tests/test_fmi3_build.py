@@ -1,4 +1,4 @@
-"""FMI 3.0 builds of our FMUs (``cosim build --fmi 3``, :mod:`cosim.fmu.fmi3`): valid FMI 3.0
+"""FMI 3.0 builds of our FMUs (``cosim build --fmi 3``, :mod:`cosim.build.fmi3`): valid FMI 3.0
 co-simulation FMUs with the FMI 2 twin's variables, run by fmpy alone in Event Mode, giving the
 FMI 2 twin's outputs bit for bit (the same Python core computes both: the front only forwards
 and converts, it does no arithmetic on values), announcing their events as ``nextEventTime`` and
@@ -19,8 +19,8 @@ from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import FMU2Slave
 from fmpy.fmi3 import FMU3Slave, fmi3Error
 
-from cosim.fmu.build import catalog
-from cosim.fmu.fmi3 import TIME_VR, model_description
+from cosim.build.fmi3 import TIME_VR, model_description
+from cosim.build.python import catalog
 
 SPECS = catalog()
 IDENTIFIERS = sorted(SPECS)

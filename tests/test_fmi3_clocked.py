@@ -1,5 +1,5 @@
 """Clocked FMI 3.0 builds of our controllers (``cosim build --fmi 3 --clock``,
-:func:`cosim.fmu.fmi3.clocked`): an input Clock activates the controller's events in place of
+:func:`cosim.build.fmi3.clocked`): an input Clock activates the controller's events in place of
 ``nextEventTime`` (a ``fixed`` periodic Clock for the sampled StopPid, a ``countdown`` Clock for
 the self-triggered StopRsmpc).
 
@@ -23,8 +23,8 @@ from xml.etree import ElementTree as ET
 
 import pytest
 
-from cosim.fmu import fmi3
-from cosim.fmu.build import build_stale, catalog
+from cosim.build import fmi3
+from cosim.build.python import build_stale, catalog
 from cosim.interop.compliance import NOTE, Options, check_fmu, format_report, passed
 from cosim.run.scenario import load_scenario
 from cosim.run.simulate import run_scenario

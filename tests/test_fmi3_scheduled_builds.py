@@ -1,5 +1,5 @@
 """Scheduled Execution builds of our controllers (``cosim build --fmi 3 --clock periodic|countdown
---interface se``, :func:`cosim.fmu.fmi3.clocked` with ``interface="se"``): the input Clock
+--interface se``, :func:`cosim.build.fmi3.clocked` with ``interface="se"``): the input Clock
 ``sample`` is the input Clock of the controller's one model partition (FMI 3.0 chap. 5), which
 the master (:mod:`cosim.run.master.scheduled`) activates at its ticks.
 
@@ -22,8 +22,8 @@ from xml.etree import ElementTree as ET
 import pytest
 from fmpy.fmi3 import FMU3Slave
 
-from cosim.fmu import fmi3
-from cosim.fmu.build import ROOT, build_clocked, build_stale, catalog
+from cosim.build import fmi3
+from cosim.build.python import ROOT, build_clocked, build_stale, catalog
 from cosim.interop.compliance import Options, check_fmu, format_report, passed
 from cosim.run.master import SimulationError
 from cosim.run.master.core import Master

@@ -463,7 +463,7 @@ def test_a_truncated_fmu_is_stale_and_not_listed_as_built(built_fmus, tmp_path, 
     import subprocess
     import sys
 
-    from cosim.fmu import build
+    from cosim.build import python as build
 
     good = built_fmus["StopPid"].path
     monkeypatch.setattr(build, "FMU_DIR", tmp_path)
@@ -479,7 +479,7 @@ def test_a_truncated_fmu_is_stale_and_not_listed_as_built(built_fmus, tmp_path, 
         assert not build.is_intact(spec.path)
         assert build.is_stale(spec)
     done = subprocess.run(
-        [sys.executable, "-c", "import sys; from cosim.fmu import build; "
+        [sys.executable, "-c", "import sys; from cosim.build import python as build; "
          f"build.FMU_DIR = __import__('pathlib').Path({str(tmp_path)!r}); "
          "from cosim import cli; sys.argv = ['cosim', 'list']; cli.main()"],
         capture_output=True, text=True, timeout=120)
@@ -488,7 +488,7 @@ def test_a_truncated_fmu_is_stale_and_not_listed_as_built(built_fmus, tmp_path, 
 
 
 def _fmu_ids() -> list[str]:
-    from cosim.fmu.build import catalog
+    from cosim.build.python import catalog
 
     return list(catalog())
 

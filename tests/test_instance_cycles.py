@@ -3,7 +3,7 @@ process (FMI 2 and the FMI 3 build, with and without fmi2Reset / fmi3Reset betwe
 
 pythonfmu 0.7 executes the FMU's entry file again for every instance and keeps, never
 released, the list of bases of each class it finds there. The generated entry file
-(``cosim.fmu.build``) binds the one class of the process on every execution, so one class is
+(``cosim.build.python``) binds the one class of the process on every execution, so one class is
 alive after many instances (a class made per execution stayed alive with its declarations,
 about 6 KB an instance). Each case runs in a child process: a crash fails the test instead
 of ending pytest."""

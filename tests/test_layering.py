@@ -2,6 +2,8 @@
 
     cosim.fmu  <-  plants  <-  controllers
         ^                         (plants and controllers use cosim's FMU side, never the reverse)
+    cosim.build  (the builders and the catalog, above the cores: bundled into no FMU)
+        ^
     cosim.run  <-  cosim.interop  <-  cosim.cli
         ^    ^
         |    cosim.reproduce  <-  cosim.site  <-  cosim.cli  (reproductions; the generated pages)
@@ -16,7 +18,11 @@ its scripts (tuning, route and data: top-level programs like ``benchmarks/``, wh
 the project); no module, script or test imports a paper's folder (the registry loads the
 metrics by path, tests load a script by path).
 
-``cosim.fmu`` (bundled into every FMU) imports nothing else of the project; ``cosim.run`` and
+``cosim.fmu`` (bundled into every FMU) imports nothing else of the project; ``cosim.build``
+(the builders) stands above the cores: it may import ``cosim.fmu``, ``plants`` and
+``controllers``, in import statements (only the catalog loads modules by name, the wrappers it
+finds by file name: :data:`LOADS_BY_NAME`), each core's build-time data for C coming from the
+core's own ``native_data`` through the catalog; ``cosim.run`` and
 ``cosim.interop`` never import plants or controllers (the catalog finds the FMU wrappers by
 file name, not by import); what evaluates a reproduction's record (its claims, statistics,
 record, tables and page) is ``cosim.reproduce``, above ``cosim.run``. Checked on the import
@@ -45,15 +51,16 @@ ALLOWED: dict[str, set[str]] = {
     "cosim.fmu": {"cosim.fmu"},
     "plants": {"cosim.fmu", "plants"},
     "controllers": {"cosim.fmu", "plants", "controllers"},
-    "cosim.run": {"cosim.fmu", "cosim.run"},
+    "cosim.build": {"cosim.fmu", "plants", "controllers", "cosim.build"},
+    "cosim.run": {"cosim.fmu", "cosim.build", "cosim.run"},
     "cosim.papers": {"cosim.fmu", "cosim.run", "cosim.papers"},
     "cosim.interop": {"cosim.fmu", "cosim.run", "cosim.interop"},
     "cosim.optimal": {"cosim.fmu", "plants", "cosim.optimal"},
-    "cosim.reproduce": {"cosim.fmu", "cosim.run", "cosim.reproduce"},
+    "cosim.reproduce": {"cosim.fmu", "cosim.build", "cosim.run", "cosim.reproduce"},
     # the documentation site's generated pages: the FMU reference, the schema, the papers
-    "cosim.site": {"cosim.fmu", "cosim.run", "cosim.reproduce", "cosim.site"},
-    "cosim.cli": {"cosim.fmu", "cosim.run", "cosim.papers", "cosim.interop", "cosim.optimal",
-                  "cosim.reproduce", "cosim.site", "cosim.cli"},
+    "cosim.site": {"cosim.fmu", "cosim.build", "cosim.run", "cosim.reproduce", "cosim.site"},
+    "cosim.cli": {"cosim.fmu", "cosim.build", "cosim.run", "cosim.papers", "cosim.interop",
+                  "cosim.optimal", "cosim.reproduce", "cosim.site", "cosim.cli"},
     # the Python entry point: a peer of the CLI (it reads the CLI's choice of printed metrics)
     "cosim.api": {"cosim.fmu", "cosim.run", "cosim.cli", "cosim.api"},
     "cosim": {"cosim"},  # cosim/__init__.py: nothing
@@ -114,6 +121,35 @@ def test_imports_run_one_way(path: Path, module: str) -> None:
     for line, imported in project_imports(path, module):
         assert part_of(imported) in ALLOWED[own], (
             f"{path.relative_to(ROOT)}:{line}: {own} must not import {imported}")
+
+
+# module of cosim.build -> why it loads modules by name: the catalog, on purpose
+LOADS_BY_NAME = {"cosim.build.python": "the catalog imports the wrappers it finds by file name "
+                                       "(**/*_fmu.py), and a built FMU's entry imports its bundle"}
+
+
+def test_the_builder_stands_above_the_cores_in_its_imports() -> None:
+    """The builders belong to ``cosim.build``: the route data the native builder exports come
+    from ``plants`` in an import statement the checker reads, no module but the catalog's
+    loads a module by name (``importlib.import_module``, ``__import__``), and neither the FMU
+    layer nor a core imports the builders."""
+    built = [(path, module) for path, module in modules() if part_of(module) == "cosim.build"]
+    assert {"cosim.build", "cosim.build.native", "cosim.build.solvers", "cosim.build.python",
+            "cosim.build.fmi3", "cosim.build.reference"} <= {module for _, module in built}
+    native = ROOT / "cosim" / "build" / "native.py"
+    assert {part_of(m) for _, m in project_imports(native, "cosim.build.native")} == {
+        "cosim.fmu", "plants", "cosim.build"}
+    for path, module in built:
+        if module in LOADS_BY_NAME:
+            continue
+        tree = ast.parse(path.read_text(), filename=str(path))
+        called = {node.func.attr if isinstance(node.func, ast.Attribute) else node.func.id
+                  for node in ast.walk(tree) if isinstance(node, ast.Call)
+                  and isinstance(node.func, (ast.Attribute, ast.Name))}
+        assert not called & {"import_module", "__import__"}, (
+            f"{path.relative_to(ROOT)} loads a module by name")
+    assert all("cosim.build" not in ALLOWED[part] for part in ("cosim.fmu", "plants",
+                                                               "controllers"))
 
 
 def test_the_checker_catches_an_upward_import(tmp_path: Path) -> None:

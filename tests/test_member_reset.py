@@ -13,7 +13,7 @@ from typing import Any
 import pandas as pd
 import pytest
 
-from cosim.fmu.build import ROOT, build_clocked, build_stale, catalog
+from cosim.build.python import ROOT, build_clocked, build_stale, catalog
 from cosim.fmu.state import to_ticks
 from cosim.run import isolation
 from cosim.run.master import native_loop

@@ -1,6 +1,6 @@
 """The native builder is a function of its sources: the GUID is derived from them, and the
 compiled binaries come from the build cache when the same sources were compiled before
-(cosim/fmu/native_build.py, ``_compile_cached``)."""
+(cosim/build/native.py, ``_compile_cached``)."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from cosim.fmu import native_build
+from cosim.build import native as native_build
 
 IDENT = "StopPid"  # the smallest native model: its compile is the cheapest
 

@@ -45,8 +45,8 @@ from fmpy.fmi2 import FMU2Slave
 
 from controllers.hybrid.explicit import PARAM_NAMES, ExplicitLaw
 from controllers.hybrid.explicit_mpc import regions_path
-from cosim.fmu.build import catalog
-from cosim.fmu.native_build import native_path
+from cosim.build.native import native_path
+from cosim.build.python import catalog
 from cosim.run.scenario import ScenarioError, load_scenario
 from cosim.run.simulate import run_scenario
 from plants.emu import emu_config

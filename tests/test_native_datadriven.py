@@ -78,7 +78,7 @@ from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import FMU2Slave
 from native_helpers import set_by_type
 
-from cosim.fmu.build import catalog
+from cosim.build.python import catalog
 
 UNIT = 2.0**-53
 EPS = 512 * UNIT  # backward error of a sample's blocks (module docstring)
@@ -543,7 +543,7 @@ def linalg(tmp_path_factory):
     """cosim/fmu/native/ato_linalg.c compiled alone (the build's flags), through ctypes."""
     import ctypes
 
-    from cosim.fmu.native_build import CC_FLAGS, NATIVE_DIR
+    from cosim.build.native import CC_FLAGS, NATIVE_DIR
 
     if shutil.which("gcc") is None:
         pytest.skip("gcc not installed")

@@ -23,7 +23,7 @@ from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import FMU2Slave
 from native_helpers import build_unzipped, initialising, open_native, variable_rows
 
-from cosim.fmu.native_build import CompilerMissing, _compiler, build_native
+from cosim.build.native import CompilerMissing, _compiler, build_native
 from cosim.fmu.state import to_ticks
 from cosim.run.scenario import scenario_files
 from plants.brake_delay import BrakeDelayTrain

@@ -53,7 +53,7 @@ from native_helpers import set_by_type
 from test_native_controllers import _callbacks, _flat, gamma
 
 from controllers.preview.preview import PreviewParams
-from cosim.fmu.build import catalog
+from cosim.build.python import catalog
 from cosim.run.scenario import load_scenario
 from cosim.run.simulate import run_scenario
 

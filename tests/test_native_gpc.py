@@ -51,7 +51,7 @@ import pytest
 from fmpy.fmi1 import FMICallException
 from native_helpers import build_unzipped, law_doubles, open_native, set_law_doubles
 
-from cosim.fmu.build import catalog
+from cosim.build.python import catalog
 
 IDENT = "Crh3Gpc"
 UNIT = 2.0**-53

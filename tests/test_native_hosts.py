@@ -1,4 +1,4 @@
-"""Every native FMU (each model of ``cosim.fmu.native_build.NATIVE``, FMI 2.0 and FMI 3.0) in
+"""Every native FMU (each model of ``cosim.build.native.NATIVE``, FMI 2.0 and FMI 3.0) in
 hosts without Python: the C hosts of tests/c_host in an empty environment with no libpython
 loaded (the dynamic loader's own trace says which libraries it loaded), fmpy, libcosim (FMI
 2), the compliance suite, fmpy's build from the FMU's sources, and the Windows binaries under
@@ -24,7 +24,7 @@ from fmpy import extract, read_model_description
 from fmpy.fmi2 import FMU2Slave
 from fmpy.model_description import read_build_description
 
-from cosim.fmu.native_build import FMI_VERSIONS, NATIVE, build_natives, native_path
+from cosim.build.native import FMI_VERSIONS, NATIVE, build_natives, native_path
 
 ROOT = Path(__file__).resolve().parents[1]
 HOSTS = ROOT / "tests" / "c_host"
@@ -170,7 +170,7 @@ def test_the_loader_trace_lists_libpython_for_a_python_fmu(hosts, tmp_path):
     build of the first native model, in the FMI 3 host, given only the PYTHONPATH it needs."""
     import site
 
-    from cosim.fmu.build import build_stale, catalog
+    from cosim.build.python import build_stale, catalog
 
     spec = catalog()[IDENTIFIERS[0]]
     build_stale([spec], fmi_version=3)
@@ -232,7 +232,7 @@ def test_libcosim_runs_the_fmi2_build_in_a_shipped_loop(native, identifier):
     """The first shipped scenario that uses the model, with the native FMU in its place
     (first 20 s): libcosim's fixed-step master gives our master's Jacobi run of the same FMUs
     exactly (both deliver every output to the next step unchanged)."""
-    from cosim.fmu.build import build_stale, catalog
+    from cosim.build.python import build_stale, catalog
     from cosim.interop.libcosim import compare_frames, run_libcosim
     from cosim.run.scenario import load_scenario
     from cosim.run.simulate import run_scenario
@@ -263,7 +263,7 @@ def test_shipped_loop_with_the_fmi3_build_equals_the_fmi2_build(native, identifi
     the native FMI 3 build in the model's place (the other components' FMI 3 builds, Event
     Mode for the controllers) the recorded series and the summary equal the FMI 2 run's; only
     the wall-clock figures differ."""
-    from cosim.fmu.build import build_stale, catalog
+    from cosim.build.python import build_stale, catalog
     from cosim.run.scenario import load_scenario
     from cosim.run.simulate import run_scenario
 
@@ -385,7 +385,7 @@ def test_cli_native_errors_name_the_value(args, message):
 
 
 def test_windows_build_without_mingw_names_it(monkeypatch, tmp_path):
-    import cosim.fmu.native_build as nb
+    import cosim.build.native as nb
 
     real = shutil.which
     monkeypatch.setattr(nb.shutil, "which", lambda name: None if name == nb.WINDOWS_CC
@@ -402,7 +402,7 @@ def test_windows_build_without_mingw_names_it(monkeypatch, tmp_path):
 def test_building_several_refuses_before_writing(monkeypatch, tmp_path):
     """build_all_natives (what ``cosim build --native`` calls) names the missing compiler, the
     unknown model and the unknown FMI version before any model is built."""
-    import cosim.fmu.native_build as nb
+    import cosim.build.native as nb
 
     real = shutil.which
     monkeypatch.setattr(nb.shutil, "which", lambda name: None if name == nb.LINUX_CC
@@ -421,7 +421,7 @@ def test_fmi3_packaging_refuses_an_fmu_without_our_fmi2_front(tmp_path):
     """package_fmi3 derives from our native FMI 2 FMUs only, and says which file is missing."""
     import zipfile
 
-    from cosim.fmu.native_build import package_fmi3
+    from cosim.build.native import package_fmi3
 
     if shutil.which("gcc") is None:
         pytest.skip("gcc not installed")

@@ -49,7 +49,7 @@ from fmpy.fmi2 import FMU2Slave
 from controllers.hybrid.hybrid_mpc import HybridMpc
 from controllers.hybrid.miqp import _RETRY_SETTINGS
 from controllers.hybrid.model import KN, Limits
-from cosim.fmu.build import catalog
+from cosim.build.python import catalog
 from cosim.fmu.state import to_ticks
 from cosim.run.scenario import load_scenario
 from plants.emu import Emu, emu_config

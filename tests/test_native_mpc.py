@@ -36,9 +36,9 @@ from fmpy import extract, read_model_description
 from fmpy.fmi2 import FMU2Slave
 
 from controllers.mpc.stop_mpc import StopMpcParams
-from cosim.fmu.build import catalog
+from cosim.build.native import build_all_natives
+from cosim.build.python import catalog
 from cosim.fmu.declare import build
-from cosim.fmu.native_build import build_all_natives
 from cosim.fmu.state import to_ticks
 from cosim.run.scenario import load_scenario
 from cosim.run.simulate import run_scenario

@@ -1,4 +1,4 @@
-"""The solvers' C sources of the native FMUs (cosim/fmu/native_solvers.py): taken from the
+"""The solvers' C sources of the native FMUs (cosim/build/solvers.py): taken from the
 registry's source distribution at the installed version, never from the repository; a model
 that links one ships its sources and licence; the C build solves as the Python wheel does."""
 
@@ -15,8 +15,9 @@ from xml.etree import ElementTree
 import numpy as np
 import pytest
 
-from cosim.fmu import native_build, native_solvers
-from cosim.fmu.native_solvers import SOLVERS, SolverUnavailable, solver_files
+from cosim.build import native as native_build
+from cosim.build import solvers as native_solvers
+from cosim.build.solvers import SOLVERS, SolverUnavailable, solver_files
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -8,7 +8,7 @@ from __future__ import annotations
 import pytest
 from fmpy import read_model_description, simulate_fmu
 
-from cosim.fmu.build import catalog
+from cosim.build.python import catalog
 
 IDENTIFIERS = sorted(catalog())
 
@@ -34,7 +34,7 @@ def test_every_fmi3_build_runs_at_the_compliance_checkers_step(built_fmus_fmi3, 
 @pytest.fixture(scope="module")
 def native_fmus(native_builds):
     """Every native FMU in both FMI versions (Linux binaries)."""
-    from cosim.fmu.native_build import NATIVE
+    from cosim.build.native import NATIVE
 
     return [path for name in sorted(NATIVE) for path in native_builds(name).values()]
 

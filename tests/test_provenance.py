@@ -6,7 +6,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from cosim import site
-from cosim.fmu.build import ROOT
+from cosim.build.python import ROOT
 from cosim.reproduce.record import Record, build_of, save
 from cosim.run.provenance import entry_digest, entry_inputs, simulation_digest
 
@@ -41,7 +41,7 @@ def test_the_native_build_adds_the_c_models_it_runs() -> None:
     # a Python record's only C input is the master's loop (it runs the Python builds too)
     assert [f for f in python if f.endswith(".c")] == ["cosim/run/master/native_loop.c"]
     assert {"cosim/fmu/native/brake_delay.c", "cosim/fmu/native/stop_mpc.c",
-            "cosim/fmu/native_build.py"} <= set(native)
+            "cosim/build/native.py"} <= set(native)
     assert set(python) < set(native)
     assert simulation_digest("seed000", "native") != simulation_digest("seed000")
 

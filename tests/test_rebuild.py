@@ -6,7 +6,7 @@ from __future__ import annotations
 import shutil
 from pathlib import Path
 
-from cosim.fmu import build
+from cosim.build import python as build
 from cosim.run.scenario import find_scenario
 from cosim.run.simulate import run_scenario
 

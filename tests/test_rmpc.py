@@ -128,7 +128,7 @@ def test_the_polytope_covers_mass_and_resistance_and_its_gain_decreases_v_on_eve
 
 def _rmpc_core(profile: str, **overrides):
     from controllers.robust.rmpc import Crh3LmiMpc
-    from cosim.fmu.build import ROOT
+    from cosim.build.python import ROOT
 
     starts = {v.name: v.start for v in Crh3LmiMpc.declarations() if v.causality == "parameter"}
     return Crh3LmiMpc.from_parameters({**starts, "profile": profile, **overrides}, data_dir=ROOT)

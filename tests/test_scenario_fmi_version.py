@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import pytest
 
-from cosim.fmu.build import FMU_DIR
+from cosim.build.python import FMU_DIR
 from cosim.run.scenario import ScenarioError, find_scenario, load_scenario
 
 PID = find_scenario("seed000_stop_pid")

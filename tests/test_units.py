@@ -13,7 +13,7 @@ import xml.etree.ElementTree as ET
 
 import pytest
 
-from cosim.fmu.build import catalog
+from cosim.build.python import catalog
 from cosim.fmu.declare import UNITS
 
 # The symbols the unit strings may use: SI base and derived units, and the dimensionless
@@ -136,7 +136,8 @@ def test_native_and_fmi3_descriptions_define_the_permille_grade(identifier):
     """The native builds' FMI 2 modelDescription and the FMI 3 one derived from it (what
     ``cosim build --native`` and the FMI 3 builds write) define every unit they use by its
     meaning, the grade's as permille."""
-    from cosim.fmu import fmi3, native_build
+    from cosim.build import fmi3
+    from cosim.build import native as native_build
 
     fmi2_xml = native_build.model_description(identifier, catalog()[identifier].load(), [],
                                               str(uuid.uuid4()))

@@ -21,8 +21,18 @@ from pathlib import Path
 import numpy as np
 
 from controllers.common.gpc import Gpc, GpcParams
-from controllers.eco.tracking import EcoTracker, EcoTrackingParams, SpeedProfile
+from controllers.eco.tracking import (
+    PMP,
+    PROFILE_KINDS,
+    PROFILE_VARS,
+    EcoTracker,
+    EcoTrackingParams,
+    SpeedProfile,
+    optimum_dir_in,
+    plan_profile,
+)
 from controllers.robust.rmpc import load_model_set, models_dir_in
+from cosim.fmu.c_text import ShippedValues
 from cosim.fmu.declare import Checked, group, param
 from plants.route import GRAVITY
 
@@ -52,6 +62,52 @@ class Crh3Gpc(EcoTracker):
 
     params_class = Crh3GpcParams
     state_fields = (*EcoTracker.tracker_state, "gpc")
+
+    @classmethod
+    def native_data(cls, identifier: str, shipped: ShippedValues) -> dict[str, str]:
+        """The build-time data of the native twin (:mod:`cosim.build.native`): the target
+        profiles, planned by the Python planner (:func:`controllers.eco.tracking.plan_profile`)
+        with the declared defaults on the route the ``route`` parameter names by default,
+        ``resources/eco_profiles/<route>/<profile>.profile`` per generated kind
+        (``PROFILE_KINDS``) and ``resources/eco_profiles/<route>/pmp/<optimum>.profile`` per
+        bundled optimum. Each holds lines ``<parameter> <value>``: the values it was planned
+        with (``EcoTrackingParams.planning_fields`` for a generated kind, and
+        ``scheduled_time``), which the native FMU requires; the phase boundaries
+        ``accelerate_end_time``, ``brake_start_position``, ``brake_start_time``; then ``points
+        n`` and n lines ``s v t accel`` (m, m/s, s, m/s^2 of the step from the point). And
+        ``resources/eco_profiles/identified.arx``: ``a`` and ``b`` of the identified ARX model
+        at departure (the model set's first, ARX units) and the ``gravity`` of the unit
+        change. %.17g via repr: exact."""
+        project = Path(__file__).resolve().parents[2]
+        track = EcoTrackingParams()
+        defaults = {v.name: v.start for v in PROFILE_VARS}
+        route = str(defaults["route"])
+        scheduled = f"scheduled_time {float(defaults['scheduled_time'])!r}"
+        planned = [f"{name} {float(getattr(track, name))!r}" for name in track.planning_fields]
+        wanted = [(f"{kind}.profile", {"profile": kind}, [*planned, scheduled])
+                  for kind in PROFILE_KINDS]
+        wanted += [(f"pmp/{csv.stem}.profile", {"profile": PMP, "optimum": csv.stem},
+                    [scheduled])
+                   for csv in sorted(optimum_dir_in(project).glob("*.csv"))]
+        tables = {}
+        for rel, chosen, settings in wanted:
+            profile = plan_profile(track, {**defaults, **chosen}, project)
+            rows = [f"{float(a)!r} {float(b)!r} {float(c)!r} {float(d)!r}"
+                    for a, b, c, d in zip(profile.s.tolist(), profile.v.tolist(),
+                                          profile.t.tolist(), profile.accel.tolist())]
+            tables[f"resources/eco_profiles/{route}/{rel}"] = "\n".join([
+                f"# seed-003 target profile {profile.kind} of route {route} (generated): the "
+                "parameters it is planned with, its phase boundaries, then s v t accel",
+                *settings, f"accelerate_end_time {profile.accelerate_end_time!r}",
+                f"brake_start_position {profile.brake_start_position!r}",
+                f"brake_start_time {profile.brake_start_time!r}", f"points {len(rows)}", *rows,
+                ""])
+        models = load_model_set("identified")
+        tables["resources/eco_profiles/identified.arx"] = (
+            "# the identified ARX model at departure (a, b) and the gravity of the unit change\n"
+            f"a {float(models.a[0])!r}\nb {float(models.b[0])!r}\n"
+            f"gravity {float(GRAVITY)!r}\n")
+        return tables
 
     @classmethod
     def build_core(cls, params: Crh3GpcParams, profile: SpeedProfile, t0: float,

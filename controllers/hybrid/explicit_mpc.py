@@ -32,17 +32,24 @@ import numpy as np
 
 from controllers.hybrid.explicit import (
     DATA_DIR,
+    MODES,
     PARAM_NAMES,
     ExplicitLaw,
     ParametricQp,
     parametric_qp,
     solve_parametric,
 )
-from controllers.hybrid.hybrid_mpc import HybridMpc, HybridMpcParams, reference_position
+from controllers.hybrid.hybrid_mpc import (
+    HybridMpc,
+    HybridMpcParams,
+    chain_model,
+    reference_position,
+)
 from controllers.hybrid.miqp import parse_blocks
 from controllers.hybrid.model import KN, ChainModel
+from cosim.fmu.c_text import ShippedValues, numbers_line
 from cosim.fmu.declare import Var, build
-from plants.emu import EmuParams
+from plants.emu import EmuParams, emu_config
 from plants.route import ReferenceProfile, load_reference, routes_dir_in
 
 REGIONS_DEFAULT = "seed004_empc_crh3_3car"
@@ -80,6 +87,48 @@ class ExplicitMpc(HybridMpc):
                               "regions (clipped into the box, or nearest region)", start=0),
                    Var.output("empc_region", "1", "region applied at the last event "
                               "(index in its mode/segment set)", start=-1))
+
+    @classmethod
+    def native_data(cls, identifier: str, shipped: ShippedValues) -> dict[str, str]:
+        """The build-time data of the native twin (:mod:`cosim.build.native`; the hybrid
+        MPC's control models are not among them: the regions hold the law):
+        ``resources/regions/<name>.empc`` per bundled region file
+        (``controllers/hybrid/data/*.npz``): its design settings (``meta key value``), the
+        design constants of the online law (mean-speed weights ``c``, PWA ``breakpoints``,
+        ``motored`` cars, per-mode limit ratios) and per mode and segment the parameter box,
+        the regions (E, e, row offsets, first-move F, f, tolerance) and the bounding-box tree
+        (:class:`controllers.hybrid.explicit.BoxTree`) built from them; one ``key count
+        values...`` line per array (%.17g via repr: exact)."""
+        tables = {}
+        for path in sorted(DATA_DIR.glob("*.npz")):
+            law = ExplicitLaw.load(path)
+            meta = law.meta
+            train = emu_config(str(meta["configuration"]))
+            params = replace(HybridMpcParams(), fit_speed_max=float(meta["fit_speed_max"]),
+                             sample_time=float(meta["sample_time"]),
+                             configuration=str(meta["configuration"]))
+            model = chain_model(train, params)
+            lines = [f"# EMPC region data {path.stem} (from {path.name}; generated)"]
+            lines += [f"meta {key} {value}" for key, value in meta.items()]
+            lines += [numbers_line("c", model.c[:model.n]),
+                      numbers_line("breakpoints", model.res.breakpoints),
+                      numbers_line("motored", model.motored),
+                      *(numbers_line(f"ratio{m}", cls.limit_ratio(train, m)) for m in MODES),
+                      numbers_line("keys", sorted(law.sets))]
+            for (mode, seg), rs in sorted(law.sets.items()):
+                p = f"m{mode}s{seg}_"
+                tree = rs.tree
+                lines += [numbers_line(p + "box", law.boxes[mode, seg]),
+                          numbers_line(p + "E", rs.E), numbers_line(p + "e", rs.e),
+                          numbers_line(p + "rows", rs.rows),
+                          numbers_line(p + "na", [rs.F.shape[1]]),
+                          numbers_line(p + "F", rs.F), numbers_line(p + "f", rs.f),
+                          numbers_line(p + "tol", [rs.tol]),
+                          *(numbers_line(p + name, getattr(tree, name))
+                            for name in ("dim", "thr", "left", "right", "start", "stop",
+                                         "items"))]
+            tables[f"resources/regions/{path.stem}.empc"] = "\n".join(lines) + "\n"
+        return tables
 
     # -- design (shared with the offline script) ----------------------------------------------
     @staticmethod

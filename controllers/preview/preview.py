@@ -40,6 +40,7 @@ from controllers.common.freight_blending import BlendingParams, FreightTracker, 
 from controllers.common.freight_tuning import tuned_param
 from controllers.common.mean_observer import correction_time_param, mean_weight_param
 from controllers.preview.design import DelayedModel, lag_delay_model, preview_gains
+from cosim.fmu.c_text import ShippedValues, numbers_line
 from cosim.fmu.declare import Checked, group, param, sample_time
 from plants.route import ReferenceProfile, Route
 
@@ -91,6 +92,29 @@ class FreightPreview(FreightTracker):
         self.z_prev: np.ndarray | None = None
         self.u_prev = 0.0  # m/s^2, u(k-1)
         self.d_prev: float | None = None  # m/s^2, d(k-1)
+
+    #: the design settings written beside the gains, which the native FMU checks against its
+    #: parameters (it refuses other ones)
+    NATIVE_DESIGN = ("sample_time", "q_e", "q_dz", "h", "preview_steps", "disturbance_steps",
+                     "traction_delay", "traction_time_constant")
+
+    @classmethod
+    def native_data(cls, identifier: str, shipped: ShippedValues) -> dict[str, str]:
+        """The tracker's build-time data (:meth:`FreightTracker.native_data`) and
+        ``resources/preview/default.gains``: the optimal preview servo's gains (eqs. 33-36,
+        :func:`controllers.preview.design.preview_gains` on the design model) for the declared
+        defaults of the design parameters: one ``key count values...`` line each for the
+        design settings (:data:`NATIVE_DESIGN`) and ``F0`` (1 + n), ``FR`` (M_R) and ``Fd``
+        (M_d + 1); %.17g via repr: exact."""
+        p = PreviewParams()
+        model = lag_delay_model(p.sample_time, p.traction_delay, p.traction_time_constant)
+        g = preview_gains(model, p.q_e, p.q_dz, p.h, p.preview_steps, p.disturbance_steps)
+        lines = ["# optimal preview gains for the default design of controllers.preview.preview",
+                 *(numbers_line(key, [float(getattr(p, key))]) for key in cls.NATIVE_DESIGN),
+                 numbers_line("F0", g.F0[0]), numbers_line("FR", g.FR),
+                 numbers_line("Fd", g.Fd)]
+        return {**super().native_data(identifier, shipped),
+                "resources/preview/default.gains": "\n".join(lines) + "\n"}
 
     def design_model(self) -> DelayedModel:
         """Eq. (15)/(18) with the preview's design dead time and lag (the observer's too)."""

@@ -34,7 +34,7 @@
  * without arguments, '%' not escaped, so the logger forwards it with every '%' doubled: a host
  * that formats the message (FMI 2.0.4 sec. 2.1.5) prints it unchanged.
  *
- * Compile-time settings (cosim/fmu/build.py): SHIM_LIBPYTHON_SONAME, SHIM_LIBPYTHON_PATH (strings,
+ * Compile-time settings (cosim/build/python.py): SHIM_LIBPYTHON_SONAME, SHIM_LIBPYTHON_PATH (strings,
  * may be empty).
  */
 #define _GNU_SOURCE

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import functools
 
-from cosim.fmu.native_build import NATIVE
+from cosim.build.native import NATIVE
 from cosim.reproduce.entry import Entry, ReproduceError
 from cosim.reproduce.record import Overrides
 from cosim.run.scenario import load_scenario
@@ -23,7 +23,7 @@ def _native_components(scenario: str, fmus: tuple[tuple[str, str], ...]) -> tupl
 def build_overrides(scenario: str, overrides: Overrides, build: str) -> dict[str, str]:
     """The overrides that run ``scenario`` (with ``overrides``) on ``build``: with "native",
     ``NAME.build = "native"`` for every FMU whose catalog identifier has a native C model
-    (:data:`cosim.fmu.native_build.NATIVE`; the others stay Python) and whose build
+    (:data:`cosim.build.native.NATIVE`; the others stay Python) and whose build
     ``overrides`` do not set; with "python" none."""
     if build not in BUILDS:
         raise ReproduceError(f"--build {build}: one of {', '.join(BUILDS)}")

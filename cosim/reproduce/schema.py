@@ -9,7 +9,7 @@ import dataclasses
 import inspect
 import re
 
-from cosim.fmu.build import ROOT
+from cosim.build.python import ROOT
 from cosim.reproduce.claims import CLAIM_KEYS
 from cosim.reproduce.ensemble import ENSEMBLE_KEYS, REQUIRED
 from cosim.reproduce.entry import CLAIM_PARTS, PARTS, Entry

@@ -6,9 +6,9 @@ names (a string value equal to a shipped scenario's name,
 :func:`cosim.run.scenario.scenario_files`); the files of generated
 parameter values its runs name (``[[runs]] tuned``); the files bundled into every FMU
 those scenarios and the entry name (a string equal to a catalog identifier:
-``cosim.fmu.build.bundled_files`` of its wrapper, i.e. the cores, their data and the FMU layer)
+``cosim.build.python.bundled_files`` of its wrapper, i.e. the cores, their data and the FMU layer)
 and, on the native build (``cosim reproduce --build native``), for one with a native model
-every file that model is made from (``cosim.fmu.native_build.native_sources``: its C, the C
+every file that model is made from (``cosim.build.native.native_sources``: its C, the C
 fronts and the builder);
 and the code that runs and evaluates them (``cosim/run/``, ``cosim/papers/``,
 ``cosim/reproduce/``: their Python and the master's C loop; every paper's metric plug-ins,
@@ -32,8 +32,8 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-from cosim.fmu.build import ROOT, bundled_files, catalog
-from cosim.fmu.native_build import NATIVE, native_sources
+from cosim.build.native import NATIVE, native_sources
+from cosim.build.python import ROOT, bundled_files, catalog
 from cosim.run.scenario import entry_files, scenario_files
 
 try:

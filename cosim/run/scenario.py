@@ -50,8 +50,8 @@ try:
 except ModuleNotFoundError:  # Python 3.10
     import tomli as tomllib  # type: ignore[no-redef]
 
-from cosim.fmu import native_build
-from cosim.fmu.build import FMU_DIR, ROOT, catalog
+from cosim.build import native
+from cosim.build.python import FMU_DIR, ROOT, catalog
 from cosim.fmu.state import TICKS_PER_SECOND, to_ticks
 from cosim.run import fmi_types
 from cosim.run.metrics import PAPERS
@@ -369,10 +369,10 @@ def native_path(source: Path, key: str, fmu: str, fmi_version: int) -> Path:
     if fmu.endswith(".fmu"):
         raise ScenarioError(f"{source}: {key} = 'native': fmu = {fmu!r} is a file, used as "
                             "given; build selects the build of a catalog identifier")
-    if fmu not in native_build.NATIVE:
+    if fmu not in native.NATIVE:
         raise ScenarioError(f"{source}: {key} = 'native': {fmu!r} has no native model "
-                            f"(native: {sorted(native_build.NATIVE)})")
-    return native_build.native_path(fmu, fmi_version)
+                            f"(native: {sorted(native.NATIVE)})")
+    return native.native_path(fmu, fmi_version)
 
 
 def _resolve_fmu(source: Path, key: str, fmu: Any, fmi_version: int = 2,

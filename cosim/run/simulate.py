@@ -13,8 +13,8 @@ import os
 from pathlib import Path
 from typing import Any
 
-from cosim.fmu.build import build_stale, catalog
-from cosim.fmu.native_build import build_natives, native_is_stale
+from cosim.build.native import build_natives, native_is_stale
+from cosim.build.python import build_stale, catalog
 from cosim.run import interrupt, isolation
 from cosim.run.master.core import Master, ProgressFn, RunResult
 from cosim.run.master.errors import SimulationError
@@ -90,7 +90,7 @@ def _ensure_python_built(sc: Scenario) -> list[Path]:
         return []
     if "fmi_version" not in inspect.signature(build_stale).parameters:
         raise ScenarioError(f"{sc.path}: [simulation] fmi_version = 3: this installation cannot "
-                            "build FMI 3.0 FMUs (cosim.fmu.build has no FMI 3 builds); give "
+                            "build FMI 3.0 FMUs (cosim.build.python has no FMI 3 builds); give "
                             "explicit .fmu paths or fmi_version = 2")
     return build_stale(wanted, fmi_version=version)
 

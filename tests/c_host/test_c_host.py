@@ -18,7 +18,7 @@ import pytest
 from fmpy import extract, read_model_description
 from fmpy.fmi2 import FMU2Slave
 
-from cosim.fmu.build import SHIM_SUFFIX, shim_binary
+from cosim.build.python import SHIM_SUFFIX, shim_binary
 
 HERE = Path(__file__).resolve().parent
 STEP, N_STEPS, COMMAND = 0.2, 25, 50.0
@@ -145,7 +145,7 @@ def test_plain_pythonfmu_binary_needs_libpython_loaded_first(host, plant, shim):
 
 
 def _fmu_ids() -> list[str]:
-    from cosim.fmu.build import catalog
+    from cosim.build.python import catalog
 
     return list(catalog())
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import pytest
 
-from cosim.fmu.build import catalog
+from cosim.build.python import catalog
 from cosim.interop.compliance import ALL_CHECKS, ERROR, Options, check_together, format_report
 
 IDENTIFIERS = sorted(catalog())

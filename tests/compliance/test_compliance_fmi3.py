@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from cosim.fmu.build import catalog
+from cosim.build.python import catalog
 from cosim.interop.compliance import (
     ERROR,
     FMI3_CHECKS,

@@ -14,7 +14,7 @@ import pytest
 import pythonfmu
 from fmpy import extract, read_model_description
 
-from cosim.fmu.build import SHIM_SUFFIX, shim_binary
+from cosim.build.python import SHIM_SUFFIX, shim_binary
 from cosim.interop.compliance import _Host
 
 FMI2_FUNCTIONS = (

@@ -4,7 +4,7 @@
  * pythonfmu's binary, shipped next to the front as <modelIdentifier>_fmi2.so (the shim then
  * finds pythonfmu's binary as <modelIdentifier>_fmi2_pythonfmu.so).
  *
- * Compile-time setting (cosim/fmu/build.py): ATO_EVENT_TIME_VR, the value reference of the
+ * Compile-time setting (cosim/build/python.py): ATO_EVENT_TIME_VR, the value reference of the
  * model's `next_event_time` output, or -1 (a plant: no events).
  */
 #define _GNU_SOURCE

@@ -28,7 +28,7 @@
  * The front keeps no model data; it answers the independent variable `time` (ATO_TIME_VR)
  * itself, and its FMU state is the backend's with that time. It has no Python in it.
  *
- * Clocked builds (`cosim build --fmi 3 --clock periodic|countdown`, cosim/fmu/fmi3.py) compile
+ * Clocked builds (`cosim build --fmi 3 --clock periodic|countdown`, cosim/build/fmi3.py) compile
  * it with ATO_CLOCK_VR, the value reference of one input Clock that activates the model's
  * events (FMI 3.0 sec. 2.2.8, 2.3.5), instead of announcing them as nextEventTime:
  *

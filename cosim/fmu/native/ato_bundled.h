@@ -1,6 +1,6 @@
 /*
  * ato_bundled.h: a data file bundled in the FMU's resources, opened by name:
- * <resources>/<folder>/<name>.<ext> (written at build time by cosim/fmu/native_build.py). The
+ * <resources>/<folder>/<name>.<ext> (written at build time by cosim/build/native.py). The
  * native FMU reads bundled data only: a name holding '/', '\\' or '.' is a file path, which
  * only the Python FMU reads.
  */

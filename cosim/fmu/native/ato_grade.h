@@ -1,7 +1,7 @@
 /*
  * ato_grade.h: a controller's view of a bundled route's grades (plants.route.Route.grade and
  * grade_accel), read from resources/routes/<route>.grade (written at build time by
- * cosim/fmu/native_build.py route_tables): the step profile of the grade (permille, uphill
+ * cosim/build/native.py route_tables): the step profile of the grade (permille, uphill
  * positive) over position (m).
  */
 #ifndef ATO_GRADE_H

@@ -9,7 +9,7 @@
  *    rotr64(hi ^ lo, hi >> 58) of the new state; seeded as pcg_setseq_128_srandom_r;
  *    128-bit arithmetic in two 64-bit words (plain C99, no compiler extension);
  *  - standard_normal: numpy's 256-strip ziggurat, its tables measured from numpy at build
- *    time (ato_numpy_normal.h, cosim/fmu/native_build.py numpy_normal_header), the tail by
+ *    time (ato_numpy_normal.h, cosim/build/native.py numpy_normal_header), the tail by
  *    Marsaglia's method with log1p.
  */
 #ifndef ATO_NUMPY_RANDOM_H

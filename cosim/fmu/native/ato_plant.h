@@ -2,7 +2,7 @@
  * ato_plant.h: what the native plant models share, each law written once.
  *
  *  - route step profiles (plants.route.StepProfile): read from the FMU's
- *    resources/routes/<route>.profiles (written by cosim/fmu/native_build.py from the bundled
+ *    resources/routes/<route>.profiles (written by cosim/build/native.py from the bundled
  *    routes, IEEE bits in hex), their point value (`at`), pointwise sums (StepProfile.sum),
  *    the cumulative integral and the interpolation the length means use
  *    (StepProfile._cumulative, plants.route._interp_scalar and plants.kernels._interp: the same

@@ -1,6 +1,6 @@
 /*
  * ato_vars.h: the variable table of a native model, as the generated <model>_decl.h fills it
- * (cosim/fmu/native_build.py writes that header from the core's Python declarations, so
+ * (cosim/build/native.py writes that header from the core's Python declarations, so
  * names, value references, starts and ranges are declared once).
  */
 #ifndef ATO_VARS_H

@@ -16,7 +16,7 @@
  *
  * is solved by DAQP (daqp_quadprog, default settings, its active set started from the signs
  * of the previous plan's duals shifted by one stage: controllers/common/qp.py DenseQP), built
- * from the sources of its registry distribution at build time (cosim/fmu/native_solvers.py).
+ * from the sources of its registry distribution at build time (cosim/build/solvers.py).
  * theta is rescaled to the units of y and u (x (gy / gu)^2).
  *
  * State: the drive's (ato_datadriven.h), the sliding law's (ato_sliding.h: estimator, u, E, F,

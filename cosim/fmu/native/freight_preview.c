@@ -99,7 +99,7 @@ law_core* law_make(const ato_values* p, double t0, char* err, size_t n) {
     }
     char path[4096], a[40], b[40];
     snprintf(path, sizeof path, "%s/preview/default.gains", p->resources);
-    /* the design the gains were computed for (PREVIEW_DESIGN of native_build.py) */
+    /* the design the gains were computed for (FreightPreview.NATIVE_DESIGN) */
     static const struct { const char* key; int vr; const char* name; } design[] = {
         {"sample_time", ATO_VR_sample_time, "sample_time"}, {"q_e", ATO_VR_q_e, "q_e"},
         {"q_dz", ATO_VR_q_dz, "q_dz"}, {"h", ATO_VR_h, "h"},

@@ -17,7 +17,7 @@ checks:
   parameters are rejected (non-OK status or rejected at initialisation) with a logged message.
   The expected status is fmi2Error; fmi2Fatal is an error too (it declares every instance of
   the FMU unusable, so a master cannot recover; plain pythonfmu 0.7 binaries return it for any
-  Python exception, ours go through a shim that returns fmi2Error, see ``cosim/fmu/build.py``).
+  Python exception, ours go through a shim that returns fmi2Error, see ``cosim/build/python.py``).
 
 The dynamic checks run in a worker subprocess (``python -m cosim.interop.compliance.worker``), so an
 FMU that crashes or hangs the host is reported as a problem of the check it was in, naming the

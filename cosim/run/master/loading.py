@@ -9,7 +9,7 @@ import zipfile
 from pathlib import Path
 from typing import Any
 
-from cosim.fmu.build import FMU_DIR
+from cosim.build.python import FMU_DIR
 from cosim.run.archive import ArchiveLimits, ArchiveRefused, extract, inspect
 from cosim.run.master.fmi2 import Fmi2Unit
 from cosim.run.master.fmi3 import Fmi3Unit, read_model_description
@@ -52,7 +52,7 @@ def unit_class(md: Any) -> type[Unit]:
 
 def own_python_build(path: Path, folder: str | Path) -> bool:
     """Whether the FMU file ``path`` (extracted into ``folder``) is one of this package's
-    Python builds: a file of the package's FMU folder (:data:`cosim.fmu.build.FMU_DIR`) whose
+    Python builds: a file of the package's FMU folder (:data:`cosim.build.python.FMU_DIR`) whose
     binary is pythonfmu's (``resources/slavemodule.txt``), i.e. code of this package."""
     return (Path(path).resolve().is_relative_to(FMU_DIR.resolve())
             and (Path(folder) / "resources" / "slavemodule.txt").is_file())

@@ -30,8 +30,8 @@ import tempfile
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from cosim.build.native import CC_FLAGS, LINUX_CC
 from cosim.fmu.disk_cache import cache_root
-from cosim.fmu.native_build import CC_FLAGS, LINUX_CC
 from cosim.run import exchange, isolation
 from cosim.run.master.errors import SimulationError
 from cosim.run.master.fmi2 import Fmi2Unit

@@ -1,5 +1,5 @@
 """C sources of the numerical solvers a native FMU links (:attr:`NativeSpec.solvers
-<cosim.fmu.native_build.NativeSpec>`), taken at build time from the solver's published source
+<cosim.build.native.NativeSpec>`), taken at build time from the solver's published source
 distribution on the package registry, never from this repository.
 
 A solver is named by its Python distribution (:data:`SOLVERS`): the version installed in this

@@ -6,11 +6,14 @@ wrapper's own (``CoreSlave.to_xml``: value references, units, ranges, starts, st
 the C header ``<id>_decl.h`` (value references, starts, ranges as ``ato_var`` rows) is written
 from the same declarations at build time, so nothing is declared twice. Route data are exported
 from the bundled route files (parsed by :mod:`plants.route`) to ``resources/routes/<name>.grade``
-and, for the models that read them, ``<name>.<profile>`` (:data:`ROUTE_PROFILES`); the
-bundled reference profiles, EMPC region tables and the seed-003 trackers' target profiles
-planned at build time (:data:`DATA`) to ``resources/references``, ``resources/regions`` and
-``resources/eco_profiles``. A controller is its law's C file linked with ``ato_controller.c``,
-the C twin of the sampled-controller timing of :mod:`cosim.fmu.slave`.
+and, for the models that read them, ``<name>.<profile>`` (:data:`ROUTE_PROFILES`), and the
+bundled reference profiles (:data:`DATA`) to ``resources/references``. What a model's core
+computes for its C twin (EMPC region tables, preview gains, the seed-003 trackers' planned
+target profiles, generated headers of model data) the core declares itself: its
+``native_data(identifier, shipped)`` (path in the FMU -> text), which the builder asks of the
+catalog's core of every model (:func:`core_data`), handing it the parameter values the project
+ships for any FMU (:func:`shipped_values`). A controller is its law's C file linked with
+``ato_controller.c``, the C twin of the sampled-controller timing of :mod:`cosim.fmu.slave`.
 Every plant links the generic plant backend ``ato_plant_backend.c``; BrakeDelayTrain,
 Crh3Train and the Emus read the step profiles of :data:`STEP_PROFILES` from
 ``<name>.profiles``.
@@ -39,7 +42,6 @@ from __future__ import annotations
 import fcntl
 import functools
 import hashlib
-import importlib
 import math
 import os
 import re
@@ -50,20 +52,29 @@ import tempfile
 import threading
 import uuid
 import zipfile
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 from xml.etree.ElementTree import Element, SubElement, indent, tostring
 
 import numpy as np
 
-from cosim.fmu import declare, fmi3
-from cosim.fmu.build import FMU_DIR, bundled_files, catalog
+try:
+    import tomllib
+except ModuleNotFoundError:  # Python 3.10
+    import tomli as tomllib  # type: ignore[no-redef]
+
+from cosim.build import fmi3
+from cosim.build.python import FMU_DIR, ROOT, bundled_files, catalog
+from cosim.build.solvers import solver_files
+from cosim.fmu.c_text import c_double, c_string
 from cosim.fmu.disk_cache import cache_root
-from cosim.fmu.native_solvers import solver_files
+from plants.route import ROUTES_DIR, load_reference, load_route
 
 HERE = Path(__file__).resolve().parent
-NATIVE_DIR = HERE / "native"
-FRONT_DIR = HERE / "front"
+FMU_LAYER = HERE.parent / "fmu"  # cosim/fmu: the C models and fronts beside the Python slaves
+NATIVE_DIR = FMU_LAYER / "native"
+FRONT_DIR = FMU_LAYER / "front"
 NATIVE_FMU_DIR = FMU_DIR / "native"
 CC_FLAGS = ["-std=c99", "-O2", "-ffp-contract=off", "-fno-fast-math", "-Wall", "-Wextra"]
 LINUX_CC = "gcc"
@@ -75,17 +86,17 @@ class NativeSpec:
     """A native model: the C file of its backend (in cosim/fmu/native/), further C files it
     links and headers it includes (``helpers``, same folder; a controller's law links with
     ``ato_controller.c``), the route profiles it reads besides the grade steps
-    (``route_profiles``, keys of :data:`ROUTE_PROFILES`) and the other generated resources it
-    reads (``data``, keys of :data:`DATA`: reference profiles, region tables); files it shares
-    with other plant models (``shared``, C and headers, same folder; with ``ato_plant.c`` the
-    route's step profiles ``<name>.profiles`` are exported), for a model with named train data
-    ``configurations``: ``"module:NAME"`` of a mapping configuration name -> factory of a
-    declared dataclass, written to ``<id>_config.h`` (:func:`config_header`), and the headers
+    (``route_profiles``, keys of :data:`ROUTE_PROFILES`) and the other resources the builder
+    writes for it (``data``, keys of :data:`DATA`: the bundled reference profiles); files it
+    shares with other plant models (``shared``, C and headers, same folder; with
+    ``ato_plant.c`` the route's step profiles ``<name>.profiles`` are exported), the headers
     of :data:`GENERATED` it includes (``generated``), and the numerical solvers it links
-    (``solvers``, keys of :data:`cosim.fmu.native_solvers.SOLVERS`: their C sources come from
+    (``solvers``, keys of :data:`cosim.build.solvers.SOLVERS`: their C sources come from
     the registry's source distribution at build time, their licence is shipped in the FMU);
     ``defines``: ``(name, value)`` macros of the model's header ``ato_model.h`` (a law file
-    shared by several models, e.g. which of the seed 000 predictive controllers)."""
+    shared by several models, e.g. which of the seed 000 predictive controllers). What the
+    model's core computes for it at build time (region tables, gains, planned profiles,
+    generated headers) is not listed here: the core declares it (:func:`core_data`)."""
 
     identifier: str
     source: str
@@ -93,7 +104,6 @@ class NativeSpec:
     route_profiles: tuple[str, ...] = ()
     data: tuple[str, ...] = ()
     shared: tuple[str, ...] = ()
-    configurations: str | None = None
     generated: tuple[str, ...] = ()
     solvers: tuple[str, ...] = ()
     defines: tuple[tuple[str, int], ...] = ()
@@ -140,40 +150,30 @@ NATIVE: dict[str, NativeSpec] = {
     "EmuSpeedPid8": NativeSpec("EmuSpeedPid8", "speed_pid.c", (*CONTROLLER, *PROFILE),
                                data=("references",)),
     "Empc3": NativeSpec("Empc3", "explicit_mpc.c", (*CONTROLLER, *PROFILE, *HYBRID),
-                        data=("references", "empc_regions")),
+                        data=("references",)),
     **{identifier: NativeSpec(identifier, "hybrid_mpc.c", (*CONTROLLER, *PROFILE, *HYBRID),
-                              data=("references",), generated=("ato_hybrid_model.h",),
-                              solvers=("daqp",))
+                              data=("references",), solvers=("daqp",))
        for identifier in ("Gmpc3", "MbMpc3")},
     **{identifier: NativeSpec(identifier, source, (*CONTROLLER, *PROFILE, *FREIGHT_TRACKER),
-                              data=("references",), generated=generated)
-       for identifier, source, generated in (
-           ("FreightPid", "freight_pid.c", ("ato_freight_tracker.h",)),
-           ("FreightSmc", "freight_smc.c", ("ato_freight_tracker.h",)),
-           ("FreightFpid", "freight_fpid.c", ("ato_freight_tracker.h", "ato_fuzzy_rules.h")))},
-    "FreightPreview": NativeSpec("FreightPreview", "freight_preview.c",
-                                 (*CONTROLLER, *PROFILE, *FREIGHT_TRACKER),
-                                 data=("references", "preview_gains"),
-                                 generated=("ato_freight_tracker.h",)),
+                              data=("references",))
+       for identifier, source in (("FreightPid", "freight_pid.c"),
+                                  ("FreightSmc", "freight_smc.c"),
+                                  ("FreightFpid", "freight_fpid.c"),
+                                  ("FreightPreview", "freight_preview.c"))},
     "EmuMfac3": NativeSpec("EmuMfac3", "ffdl_mfac.c", (*DATADRIVEN, *FFDL),
-                           data=("references",), generated=("ato_datadriven_const.h",)),
+                           data=("references",)),
     "EmuIsmc3": NativeSpec("EmuIsmc3", "ffdl_ismc.c", (*DATADRIVEN, *SLIDING),
-                           data=("references",), generated=("ato_datadriven_const.h",)),
+                           data=("references",)),
     "EmuIsmpc3": NativeSpec("EmuIsmpc3", "ffdl_ismpc.c", (*DATADRIVEN, *SLIDING),
-                            data=("references",), generated=("ato_datadriven_const.h",),
-                            solvers=("daqp",)),
-    "EmuGpc3": NativeSpec("EmuGpc3", "emu_gpc.c", (*DATADRIVEN, *GPC), data=("references",),
-                          generated=("ato_datadriven_const.h",)),
-    # seed 003's GPC: its target profiles planned at build time (eco_profile_tables)
-    "Crh3Gpc": NativeSpec("Crh3Gpc", "crh3_gpc.c", (*CONTROLLER, *PROFILE, *GPC),
-                          data=("eco_profiles",)),
+                            data=("references",), solvers=("daqp",)),
+    "EmuGpc3": NativeSpec("EmuGpc3", "emu_gpc.c", (*DATADRIVEN, *GPC), data=("references",)),
+    # seed 003's GPC: its target profiles planned at build time by its core
+    "Crh3Gpc": NativeSpec("Crh3Gpc", "crh3_gpc.c", (*CONTROLLER, *PROFILE, *GPC)),
     # seed 000's predictive stopping controllers: one law, DAQP from its sdist; the tube
     # controllers' terminal sets as computed by the core (ato_stop_mpc_sets.h)
     **{identifier: NativeSpec(identifier, "stop_mpc.c",
                               (*CONTROLLER, *GRADE, "ato_linalg.c", "ato_linalg.h"),
-                              solvers=("daqp",),
-                              generated=("ato_stop_mpc_sets.h",),
-                              defines=(("ATO_STOP_MPC_KIND", kind),))
+                              solvers=("daqp",), defines=(("ATO_STOP_MPC_KIND", kind),))
        for kind, identifier in enumerate(("StopMpc", "StopRmpc", "StopRsmpc"))},
     "FreightTrain": NativeSpec("FreightTrain", "freight.c", ("freight_kernel.c",),
                                ("speed_limit", "additional"),
@@ -181,7 +181,6 @@ NATIVE: dict[str, NativeSpec] = {
                                generated=("ato_numpy_normal.h",)),
     "Crh3Train": NativeSpec("Crh3Train", "crh3.c", shared=PLANT_SHARED),
     **{identifier: NativeSpec(identifier, "emu.c", shared=(*PLANT_SHARED, *NUMPY_RANDOM),
-                              configurations="plants.emu:CONFIGURATIONS",
                               generated=("ato_numpy_normal.h",))
        for identifier in ("Emu3", "Emu8")},
 }
@@ -191,20 +190,9 @@ class CompilerMissing(RuntimeError):
     """The C compiler a native build needs is not installed."""
 
 
-def _c_string(text: str) -> str:
-    return '"' + text.replace("\\", "\\\\").replace('"', '\\"') + '"'
-
-
 def c_identifier(name: str) -> str:
     """A variable name as a C identifier: ``v[12]`` -> ``v_12`` (``[`` -> ``_``, ``]`` dropped)."""
     return name.replace("[", "_").replace("]", "")
-
-
-def _c_double(value: float) -> str:
-    """A double literal that reads back to the same float (hex, exact)."""
-    if math.isinf(value):
-        return "INFINITY" if value > 0 else "-INFINITY"
-    return float(value).hex()
 
 
 def decl_header(identifier: str, variables, guid: str, options: dict | None = None) -> str:
@@ -215,11 +203,11 @@ def decl_header(identifier: str, variables, guid: str, options: dict | None = No
     in index order)."""
     types = {float: "ATO_REAL", int: "ATO_INTEGER", bool: "ATO_BOOLEAN", str: "ATO_STRING"}
     causality = {"parameter": "ATO_PARAMETER", "input": "ATO_INPUT", "output": "ATO_OUTPUT"}
-    lines = [f"/* generated by cosim/fmu/native_build.py from the declarations of {identifier};"
+    lines = [f"/* generated by cosim/build/native.py from the declarations of {identifier};"
              " do not edit */",
              "#include <math.h>", '#include "ato_vars.h"',
-             f"#define ATO_MODEL_IDENTIFIER {_c_string(identifier)}",
-             f"#define ATO_GUID {_c_string(guid)}",
+             f"#define ATO_MODEL_IDENTIFIER {c_string(identifier)}",
+             f"#define ATO_GUID {c_string(guid)}",
              f"#define ATO_N_VARS {len(variables)}", "enum {"]
     lines += [f"    ATO_VR_{c_identifier(v.name)} = {vr}," for vr, v in enumerate(variables)]
     lines += ["};"]
@@ -236,16 +224,16 @@ def decl_header(identifier: str, variables, guid: str, options: dict | None = No
     lines += ["static const ato_var ATO_VARS[ATO_N_VARS] = {"]
     for v in variables:
         start = 0.0 if isinstance(v.start, str) else float(v.start)
-        text = _c_string(v.start) if isinstance(v.start, str) else "0"
+        text = c_string(v.start) if isinstance(v.start, str) else "0"
         lines.append(
-            f"    {{{_c_string(v.name)}, {causality[v.causality]}, {types[v.type]}, "
-            f"{_c_double(start)}, {text}, {int(v.min is not None)}, {int(v.max is not None)}, "
-            f"{_c_double(v.min if v.min is not None else 0.0)}, "
-            f"{_c_double(v.max if v.max is not None else 0.0)}}},")
+            f"    {{{c_string(v.name)}, {causality[v.causality]}, {types[v.type]}, "
+            f"{c_double(start)}, {text}, {int(v.min is not None)}, {int(v.max is not None)}, "
+            f"{c_double(v.min if v.min is not None else 0.0)}, "
+            f"{c_double(v.max if v.max is not None else 0.0)}}},")
     lines.append("};")
     # the backend's event_time_vr (ato_backend.h): the value reference of the next_event_time
     # output, -1 for a model without events, from the same declaration as the FMI 3
-    # modelDescription's hasEventMode (cosim.fmu.fmi3)
+    # modelDescription's hasEventMode (cosim.build.fmi3)
     event_vr = next((vr for vr, v in enumerate(variables)
                      if v.name == EVENT_TIME_OUTPUT and v.causality == "output"), -1)
     lines.append(f"#define ATO_EVENT_TIME_VR {event_vr}")
@@ -291,12 +279,10 @@ def build_description(identifier: str, sources: list[str]) -> bytes:
 def route_tables() -> dict[str, str]:
     """``<name>.grade`` text per bundled route: its grade steps ``start permille`` (%.17g via
     repr, which reads back exactly), the first start ``-inf``."""
-    # by name, as the catalog imports the wrappers: cosim.fmu never imports plants statically
-    route = importlib.import_module("plants.route")
     tables = {}
-    for toml in sorted(route.ROUTES_DIR.glob("*.toml")):
+    for toml in sorted(ROUTES_DIR.glob("*.toml")):
         try:
-            grade = route.load_route(toml.stem).grade
+            grade = load_route(toml.stem).grade
         except ValueError:  # a reference-profile TOML beside the routes, not a route
             continue
         rows = [f"{'-inf' if math.isinf(s) else repr(float(s))} {float(g)!r}"
@@ -328,11 +314,10 @@ ROUTE_PROFILES = {"speed_limit": _speed_limit_table, "additional": _additional_t
 def route_profile_tables(kinds: tuple[str, ...]) -> dict[str, str]:
     """``<name>.<kind>`` text per bundled route and profile kind (:data:`ROUTE_PROFILES`):
     rows of two floats (repr, which reads back exactly; ``inf`` where a value is infinite)."""
-    route = importlib.import_module("plants.route")
     tables = {}
-    for toml in sorted(route.ROUTES_DIR.glob("*.toml")):
+    for toml in sorted(ROUTES_DIR.glob("*.toml")):
         try:
-            loaded = route.load_route(toml.stem)
+            loaded = load_route(toml.stem)
         except ValueError:  # a reference-profile TOML beside the routes, not a route
             continue
         for kind in kinds:
@@ -346,11 +331,10 @@ def reference_tables() -> dict[str, str]:
     """``references/<name>.ref`` per bundled reference profile (:func:`plants.route.
     load_reference`): the line ``kind distance|time`` then its points ``x v`` (SI, %.17g via
     repr, which reads back exactly)."""
-    route = importlib.import_module("plants.route")  # by name: layering
     tables = {}
-    for path in sorted([*route.ROUTES_DIR.glob("*.csv"), *route.ROUTES_DIR.glob("*.toml")]):
+    for path in sorted([*ROUTES_DIR.glob("*.csv"), *ROUTES_DIR.glob("*.toml")]):
         try:
-            profile = route.load_reference(path.stem)
+            profile = load_reference(path.stem)
         except (ValueError, AttributeError):  # a route, not a reference profile
             continue
         rows = [f"{float(x)!r} {float(v)!r}" for x, v in zip(profile.x.tolist(),
@@ -361,124 +345,8 @@ def reference_tables() -> dict[str, str]:
     return tables
 
 
-def _numbers(key: str, values) -> str:
-    flat = [float(x) for x in np.asarray(values, dtype=float).ravel().tolist()]
-    return f"{key} {len(flat)} " + " ".join(repr(x) for x in flat)
-
-
-def empc_tables() -> dict[str, str]:
-    """``regions/<name>.empc`` per bundled EMPC region file (controllers/hybrid/data/*.npz):
-    its design settings (``meta key value``), the design constants of the online law
-    (mean-speed weights ``c``, PWA ``breakpoints``, ``motored`` cars, per-mode limit ratios)
-    and per mode and segment the parameter box, the regions (E, e, row offsets, first-move
-    F, f, tolerance) and the bounding-box tree :class:`controllers.hybrid.explicit.BoxTree`
-    built from them; one ``key count values...`` line per array (%.17g via repr: exact)."""
-    explicit = importlib.import_module("controllers.hybrid.explicit")  # by name: layering
-    empc = importlib.import_module("controllers.hybrid.explicit_mpc")
-    hybrid = importlib.import_module("controllers.hybrid.hybrid_mpc")
-    emu = importlib.import_module("plants.emu")
-    tables = {}
-    for path in sorted(explicit.DATA_DIR.glob("*.npz")):
-        law = explicit.ExplicitLaw.load(path)
-        meta = law.meta
-        train = emu.emu_config(str(meta["configuration"]))
-        params = replace(hybrid.HybridMpcParams(), fit_speed_max=float(meta["fit_speed_max"]),
-                         sample_time=float(meta["sample_time"]),
-                         configuration=str(meta["configuration"]))
-        model = hybrid.chain_model(train, params)
-        lines = [f"# EMPC region data {path.stem} (from {path.name}; generated)"]
-        lines += [f"meta {key} {value}" for key, value in meta.items()]
-        lines += [_numbers("c", model.c[:model.n]), _numbers("breakpoints",
-                                                             model.res.breakpoints),
-                  _numbers("motored", model.motored),
-                  *(_numbers(f"ratio{m}", empc.ExplicitMpc.limit_ratio(train, m))
-                    for m in explicit.MODES),
-                  _numbers("keys", sorted(law.sets))]
-        for (mode, seg), rs in sorted(law.sets.items()):
-            p = f"m{mode}s{seg}_"
-            tree = rs.tree
-            lines += [_numbers(p + "box", law.boxes[mode, seg]), _numbers(p + "E", rs.E),
-                      _numbers(p + "e", rs.e), _numbers(p + "rows", rs.rows),
-                      _numbers(p + "na", [rs.F.shape[1]]), _numbers(p + "F", rs.F),
-                      _numbers(p + "f", rs.f), _numbers(p + "tol", [rs.tol]),
-                      *(_numbers(p + name, getattr(tree, name))
-                        for name in ("dim", "thr", "left", "right", "start", "stop", "items"))]
-        tables[f"regions/{path.stem}.empc"] = "\n".join(lines) + "\n"
-    return tables
-
-
-# generated resources a native model may ask for (NativeSpec.data)
-PREVIEW_DESIGN = ("sample_time", "q_e", "q_dz", "h", "preview_steps", "disturbance_steps",
-                  "traction_delay", "traction_time_constant")
-
-
-def preview_tables() -> dict[str, str]:
-    """``preview/default.gains``: the optimal preview servo's gains (eqs. 33-36,
-    :func:`controllers.preview.design.preview_gains` on the design model of
-    :meth:`controllers.preview.preview.FreightPreview.design_model`) computed by the Python
-    core for the declared defaults of the design parameters: one ``key count values...`` line
-    each for the design settings (checked by the native FMU against its parameters) and
-    ``F0`` (1 + n), ``FR`` (M_R) and ``Fd`` (M_d + 1); %.17g via repr: exact."""
-    preview = importlib.import_module("controllers.preview.preview")  # by name: layering
-    design = importlib.import_module("controllers.preview.design")
-    p = preview.PreviewParams()
-    model = design.lag_delay_model(p.sample_time, p.traction_delay, p.traction_time_constant)
-    g = design.preview_gains(model, p.q_e, p.q_dz, p.h, p.preview_steps, p.disturbance_steps)
-    lines = [f"# optimal preview gains for the default design of {preview.__name__}",
-             *(_numbers(key, [float(getattr(p, key))]) for key in PREVIEW_DESIGN),
-             _numbers("F0", g.F0[0]), _numbers("FR", g.FR), _numbers("Fd", g.Fd)]
-    return {"preview/default.gains": "\n".join(lines) + "\n"}
-
-
-def eco_profile_tables() -> dict[str, str]:
-    """The seed-003 trackers' target profiles, planned at build time by the Python planner
-    (:func:`controllers.eco.tracking.plan_profile`) with the declared defaults, on the route
-    their ``route`` parameter names by default: ``eco_profiles/<route>/<profile>.profile``
-    per generated kind (``PROFILE_KINDS``) and ``eco_profiles/<route>/pmp/<optimum>.profile``
-    per bundled optimum. Each holds lines ``<parameter> <value>``: the values it was planned
-    with (``EcoTrackingParams.planning_fields`` for a generated kind, and ``scheduled_time``),
-    which the native FMU requires; the phase boundaries ``accelerate_end_time``,
-    ``brake_start_position``, ``brake_start_time``; then ``points n`` and n lines ``s v t
-    accel`` (m, m/s, s, m/s^2 of the step from the point). And ``eco_profiles/identified.arx``:
-    ``a`` and ``b`` of the identified ARX model at departure (the model set's first, ARX
-    units) and the ``gravity`` of Crh3Gpc's unit change. %.17g via repr: exact."""
-    tracking = importlib.import_module("controllers.eco.tracking")  # by name: layering
-    rmpc = importlib.import_module("controllers.robust.rmpc")
-    route_module = importlib.import_module("plants.route")
-    project = Path(tracking.__file__).resolve().parents[2]
-    track = tracking.EcoTrackingParams()
-    defaults = {v.name: v.start for v in tracking.PROFILE_VARS}
-    route = str(defaults["route"])
-    scheduled = f"scheduled_time {float(defaults['scheduled_time'])!r}"
-    planned = [f"{name} {float(getattr(track, name))!r}" for name in track.planning_fields]
-    wanted = [(f"{kind}.profile", {"profile": kind}, [*planned, scheduled])
-              for kind in tracking.PROFILE_KINDS]
-    wanted += [(f"pmp/{csv.stem}.profile", {"profile": tracking.PMP, "optimum": csv.stem},
-                [scheduled])
-               for csv in sorted(tracking.optimum_dir_in(project).glob("*.csv"))]
-    tables = {}
-    for rel, chosen, settings in wanted:
-        profile = tracking.plan_profile(track, {**defaults, **chosen}, project)
-        rows = [f"{float(a)!r} {float(b)!r} {float(c)!r} {float(d)!r}" for a, b, c, d in zip(
-            profile.s.tolist(), profile.v.tolist(), profile.t.tolist(),
-            profile.accel.tolist())]
-        tables[f"eco_profiles/{route}/{rel}"] = "\n".join([
-            f"# seed-003 target profile {profile.kind} of route {route} (generated): the "
-            "parameters it is planned with, its phase boundaries, then s v t accel", *settings,
-            f"accelerate_end_time {profile.accelerate_end_time!r}",
-            f"brake_start_position {profile.brake_start_position!r}",
-            f"brake_start_time {profile.brake_start_time!r}", f"points {len(rows)}", *rows,
-            ""])
-    models = rmpc.load_model_set("identified")
-    tables["eco_profiles/identified.arx"] = (
-        "# the identified ARX model at departure (a, b) and the gravity of the unit change\n"
-        f"a {float(models.a[0])!r}\nb {float(models.b[0])!r}\n"
-        f"gravity {float(route_module.GRAVITY)!r}\n")
-    return tables
-
-
-DATA = {"references": reference_tables, "empc_regions": empc_tables,
-        "preview_gains": preview_tables, "eco_profiles": eco_profile_tables}
+# resources the builder writes for the models that ask for them (NativeSpec.data)
+DATA = {"references": reference_tables}
 
 
 # the step profiles of a route a native plant reads (plants.route.Route fields); sums such as
@@ -495,11 +363,10 @@ def step_profile_tables() -> dict[str, str]:
     """``<name>.profiles`` text per bundled route: for each of :data:`STEP_PROFILES` a line
     ``profile <field> <count>`` and ``count`` lines ``<start bits> <value bits>`` (IEEE bits
     in hex, the decimal value after ``#``), the first start ``-inf``."""
-    route = importlib.import_module("plants.route")
     tables = {}
-    for toml in sorted(route.ROUTES_DIR.glob("*.toml")):
+    for toml in sorted(ROUTES_DIR.glob("*.toml")):
         try:
-            loaded = route.load_route(toml.stem)
+            loaded = load_route(toml.stem)
         except ValueError:  # a reference-profile TOML beside the routes, not a route
             continue
         lines = [f"# step profiles of route {toml.stem}: start_m value (IEEE bits, hex)"]
@@ -510,38 +377,6 @@ def step_profile_tables() -> dict[str, str]:
                       for a, b in zip(profile.starts.tolist(), profile.values.tolist())]
         tables[toml.stem] = "\n".join(lines) + "\n"
     return tables
-
-
-def config_header(identifier: str, where: str) -> str:
-    """``<id>_config.h``: the named configurations (``where`` = ``"module:NAME"``, a mapping
-    name -> factory of a dataclass of floats and tuples of floats) as ``ato_config`` rows:
-    per field a pointer to its values (one for a scalar) and their count, in field order."""
-    import dataclasses
-
-    module, name = where.split(":")
-    configurations = getattr(importlib.import_module(module), name)
-    fields: list[str] = []
-    lines = [f"/* generated by cosim/fmu/native_build.py from {where}; do not edit */",
-             "#ifndef ATO_CONFIG_H", "#define ATO_CONFIG_H"]
-    rows = []
-    for k, (cname, factory) in enumerate(configurations.items()):
-        config = factory()
-        fields = [f.name for f in dataclasses.fields(config)]
-        for field in fields:
-            value = getattr(config, field)
-            values = value if isinstance(value, tuple) else (value,)
-            lines.append(f"static const double ATO_CFG_{k}_{field}[] = "
-                         f"{{{', '.join(_c_double(float(x)) for x in values)}}};")
-        rows.append("    {" + _c_string(cname) + ", {"
-                    + ", ".join(f"{{ATO_CFG_{k}_{f}, sizeof ATO_CFG_{k}_{f} / sizeof(double)}}"
-                                for f in fields) + "}},")
-    lines += [f"#define ATO_CFG_{f.upper()} {i}" for i, f in enumerate(fields)]
-    lines += ["typedef struct { const double* values; int n; } ato_config_field;",
-              f"typedef struct {{ const char* name; ato_config_field field[{len(fields)}]; }}"
-              " ato_config;",
-              f"#define ATO_N_CONFIGS {len(rows)}",
-              "static const ato_config ATO_CONFIGS[ATO_N_CONFIGS] = {", *rows, "};", "#endif"]
-    return "\n".join(lines) + "\n"
 
 
 _PCG_MULT = 0x2360ED051FC65DA44385DF649FCCF645  # PCG64's 128-bit LCG multiplier
@@ -559,8 +394,6 @@ def numpy_normal_header() -> str:
     ``exp(-x_idx^2 / 2)`` of the strip edge ``x_idx = wi[idx] 2^52``, moved into the interval
     that numpy's accept/reject boundary at ``u = 0`` leaves for it (bisection on ``rabs``), so
     a decision can differ from numpy's only for a draw inside that interval (a few ulp)."""
-    import numpy as np
-
     bg = np.random.PCG64(0)
     gen = np.random.Generator(bg)
     minv = pow(_PCG_MULT, -1, 1 << 128)
@@ -626,257 +459,64 @@ def numpy_normal_header() -> str:
         return f"static const {ctype} {name}[256] = {{\n    " + ",\n    ".join(rows) + "\n};"
 
     return "\n".join([
-        f"/* generated by cosim/fmu/native_build.py from numpy {np.__version__}"
+        f"/* generated by cosim/build/native.py from numpy {np.__version__}"
         " (numpy_normal_header); do not edit */",
         "#include <stdint.h>",
         table("ATO_ZIG_KI", "uint64_t", ki, lambda v: f"{v}ULL"),
-        table("ATO_ZIG_WI", "double", wi, _c_double),
-        table("ATO_ZIG_FI", "double", fi, _c_double),
+        table("ATO_ZIG_WI", "double", wi, c_double),
+        table("ATO_ZIG_FI", "double", fi, c_double),
     ]) + "\n"
 
 
-def _c_array(name: str, values) -> str:
-    flat = [float(x) for x in np.asarray(values, dtype=float).ravel().tolist()]
-    return (f"static const double {name}[{max(len(flat), 1)}] = {{"
-            + ", ".join(_c_double(x) for x in flat or [0.0]) + "};")
+# headers the builder generates for the models that include them (NativeSpec.generated)
+GENERATED = {"ato_numpy_normal.h": numpy_normal_header}
 
 
-def freight_tracker_header() -> str:
-    """``ato_freight_tracker.h``: the data of the freight controllers' shared base
-    (:class:`controllers.common.freight_blending.FreightTracker`) that the Python core derives
-    from the nominal train (``BlendingParams.train``, not an FMU parameter) at construction,
-    computed here by the core itself: the sums ``M (1 + gamma)``, weight, brake scale and the
-    Davis terms (numpy's pairwise sums), each vehicle's brake scale and application / release
-    delays, the brake-pipe and traction data, per bundled route with a reference profile the
-    knots and values of the length-mean additional resistance and the reference's name, and
-    the observer's design model (:meth:`FreightTracker.design_model`) at the declared default
-    sample time (a native FMU refuses another one)."""
-    blending = importlib.import_module("controllers.common.freight_blending")  # layering
-    route_mod = importlib.import_module("plants.route")
-    design = importlib.import_module("controllers.preview.design")
-    kernels = importlib.import_module("plants.kernels")
-    params = blending.BlendingParams()
-    tp = params.train
-    lines = ["/* generated by cosim/fmu/native_build.py from controllers.common.freight_blending"
-             " (the nominal train of BlendingParams); do not edit */",
-             "#ifndef ATO_FREIGHT_TRACKER_H", "#define ATO_FREIGHT_TRACKER_H"]
-    routes = []
-    model = None
-    for toml in sorted(route_mod.ROUTES_DIR.glob("*.toml")):
-        try:
-            route = route_mod.load_route(toml.stem)
-        except ValueError:  # a reference-profile TOML beside the routes
-            continue
-        if route.reference is None or route.reference.kind != "distance":
-            continue
-        b = blending.FreightBlending(params, route.reference, route)
-        model = b.model
-        try:
-            import tomllib
-        except ModuleNotFoundError:  # Python 3.10
-            import tomli as tomllib  # type: ignore[no-redef]
-        reference = Path(str(tomllib.loads(toml.read_text())["reference"])).stem
-        routes.append((toml.stem, b, reference))
-    if model is None:
-        raise RuntimeError("no bundled route with a reference profile")
-    b = routes[0][1]
-    n = model.m_eff.size
-    scalars = {
-        "N_VEHICLES": None, "M_EFF": b.m_eff, "WEIGHT": b.weight, "BRAKE_SCALE_SUM":
-        b.brake_scale, "RES_A": b._res_a, "RES_B": b._res_b, "RES_C": b._res_c,
-        "KMH": kernels.KMH, "MAX_TRACTION_FORCE": tp.max_traction_force,
-        "MAX_TRACTION_POWER": tp.max_traction_power, "MAX_ED_FORCE": tp.max_ed_force,
-        "MAX_ED_POWER": tp.max_ed_power, "ED_FADE_SPEED": tp.ed_fade_speed,
-        "TRACTION_DELAY": tp.traction_delay, "TRACTION_TIME_CONSTANT": tp.traction_time_constant,
-        "MAX_CYLINDER_PRESSURE": tp.max_cylinder_pressure, "FILL_TIME": tp.brake_fill_time,
-        "FILL_EXPONENT": tp.brake_fill_exponent, "RELEASE_TIME": tp.brake_release_time,
-        "RELEASE_EXPONENT": tp.brake_release_exponent,
-        "FULL_SERVICE_REDUCTION": tp.full_service_reduction, "MIN_REDUCTION": tp.min_reduction,
-        "STICTION_SPEED": tp.stiction_speed, "RELEASED_PA": blending.RELEASED_PA}
-    lines.append(f"#define FT_N_VEHICLES {n}")
-    lines += [f"#define FT_{k} {_c_double(float(v))}" for k, v in scalars.items()
-              if v is not None]
-    lines += [_c_array("FT_BRAKE_SCALE", model.brake_scale),
-              _c_array("FT_APPLY_DELAY", model.apply_delay),
-              _c_array("FT_RELEASE_DELAY", model.release_delay)]
-    # the observer's design model at the default sample time of the laws (0.2 s)
-    T = 0.2
-    dm = design.lag_delay_model(T, tp.traction_delay, tp.traction_time_constant)
-    lines += [f"#define FT_DESIGN_SAMPLE_TIME {_c_double(T)}", f"#define FT_NZ {dm.n}",
-              _c_array("FT_A", dm.A), _c_array("FT_B", dm.B[:, 0]), _c_array("FT_E", dm.E[:, 0])]
-    rows = []
-    for k, (name, rb, reference) in enumerate(routes):
-        lines += [_c_array(f"FT_KNOTS_{k}", rb._add_knots),
-                  _c_array(f"FT_VALUES_{k}", rb._add_values)]
-        rows.append(f"    {{{_c_string(name)}, {_c_string(reference)}, "
-                    f"{rb._add_knots.size}, FT_KNOTS_{k}, FT_VALUES_{k}}},")
-    lines += ["typedef struct { const char* route; const char* reference; int n;"
-              " const double* knots; const double* values; } ft_route;",
-              f"#define FT_N_ROUTES {len(rows)}",
-              "static const ft_route FT_ROUTES[FT_N_ROUTES] = {", *rows, "};", "#endif"]
-    return "\n".join(lines) + "\n"
+def shipped_scenarios() -> list[Path]:
+    """The shipped scenarios, sorted by name: ``scenarios/*.toml`` and each paper's
+    ``papers/*/scenarios/*.toml`` (the files of :func:`cosim.run.scenario.scenario_files`)."""
+    return sorted([*(ROOT / "scenarios").glob("*.toml"),
+                   *(ROOT / "papers").glob("*/scenarios/*.toml")], key=lambda p: p.stem)
 
 
-def fuzzy_rules_header() -> str:
-    """``ato_fuzzy_rules.h``: the fuzzy PID's rule surfaces (``controllers.fuzzy.fuzzy_pid.
-    RuleSurface`` of ``KP_RULES`` and ``KI_RULES``: the Mamdani inference of scikit-fuzzy on
-    the node grid) tabulated by the core at the declared default ``fuzzy_nodes``, and the grid
-    step (a native FMU refuses another node count)."""
-    fuzzy = importlib.import_module("controllers.fuzzy.fuzzy_pid")  # by name: layering
-    nodes = int(fuzzy.FuzzyPidParams().fuzzy_nodes)
-    kp = fuzzy.RuleSurface(fuzzy.KP_RULES, nodes)
-    ki = fuzzy.RuleSurface(fuzzy.KI_RULES, nodes)
-    return "\n".join([
-        "/* generated by cosim/fmu/native_build.py from controllers.fuzzy.fuzzy_pid; do not"
-        " edit */", "#ifndef ATO_FUZZY_RULES_H", "#define ATO_FUZZY_RULES_H",
-        f"#define FZ_NODES {nodes}", f"#define FZ_STEP {_c_double(float(kp.step))}",
-        _c_array("FZ_KP", kp.table), _c_array("FZ_KI", ki.table), "#endif"]) + "\n"
+def shipped_entries() -> list[Path]:
+    """The reproduction entries ``papers/*/entry.toml``, sorted by paper (the files of
+    :func:`cosim.run.scenario.entry_files`)."""
+    return sorted((ROOT / "papers").glob("*/entry.toml"))
 
 
-def datadriven_constants_header() -> str:
-    """``ato_datadriven_const.h``: the constants of the seed-001 data-driven cores that are
-    not FMU variables, from their Python declarations: the km/h per m/s of the laws' rescaling
-    (``controllers.common.ffdl.KMH_PER_MPS``), the anti-windup's bound tolerance
-    (``SlidingLaw.BOUND_TOL``) and the regularised inverse of GPC's force sharing
-    (``SHARE_INVERSE``: eps, cutoff)."""
-    ffdl = importlib.import_module("controllers.common.ffdl")
-    laws = importlib.import_module("controllers.datadriven.laws")
-    share = laws.SHARE_INVERSE
-    rows = {"DD_KMH_PER_MPS": ffdl.KMH_PER_MPS, "DD_BOUND_TOL": laws.SlidingLaw.BOUND_TOL,
-            "DD_SHARE_EPS": share.pinv_regularisation, "DD_SHARE_CUTOFF": share.pinv_cutoff}
-    return "\n".join(["/* generated by cosim/fmu/native_build.py from controllers/common/ffdl.py"
-                      " and controllers/datadriven/laws.py; do not edit */",
-                      *(f"#define {k} {_c_double(float(v))}" for k, v in rows.items())]) + "\n"
-
-
-TUBE_STOP_CONTROLLERS = ("StopRmpc", "StopRsmpc")
-
-
-def stop_mpc_designs() -> list[dict]:
-    """The parameter values (FMU names) of the tube controllers of seed 000 that the shipped
-    scenarios and reproduction runs use: the declared defaults, each scenario's controller
-    parameters, and each reproduction run's ``controller.*`` settings over its scenario's."""
-    scenario_mod = importlib.import_module("cosim.run.scenario")
-    try:
-        import tomllib
-    except ModuleNotFoundError:  # Python 3.10
-        import tomli as tomllib  # type: ignore[no-redef]
-    designs: list[dict] = [{}]
-    scenarios: dict[str, dict] = {}
-    for path in scenario_mod.scenario_files().values():
-        data = tomllib.loads(path.read_text())
-        controller = data.get("fmus", {}).get("controller", {})
-        if controller.get("fmu") in TUBE_STOP_CONTROLLERS:
-            scenarios[path.stem] = dict(controller.get("parameters", {}))
-            designs.append(scenarios[path.stem])
-    for path in scenario_mod.entry_files().values():
+def shipped_values(fmus: tuple[str, ...]) -> list[dict[str, Any]]:
+    """The parameter values (FMU names) the project ships for the catalog FMUs ``fmus``: the
+    declared defaults (``{}``), then per shipped scenario (:func:`shipped_scenarios`) each of
+    its components whose ``fmu`` is one of them with its ``parameters``, then per
+    reproduction run (:func:`shipped_entries`, ``[[runs]]``) of such a scenario that
+    component's values with the run's ``<component>.*`` settings over them."""
+    values: list[dict[str, Any]] = [{}]
+    used: dict[str, list[tuple[str, dict[str, Any]]]] = {}
+    for path in shipped_scenarios():
+        components = tomllib.loads(path.read_text()).get("fmus", {})
+        for name, component in components.items():
+            if isinstance(component, dict) and component.get("fmu") in fmus:
+                given = dict(component.get("parameters", {}))
+                used.setdefault(path.stem, []).append((name, given))
+                values.append(given)
+    for path in shipped_entries():
         for run in tomllib.loads(path.read_text()).get("runs", []):
-            if run.get("scenario") in scenarios:
-                values = dict(scenarios[run["scenario"]])
-                values.update({key.split(".", 1)[1]: value
+            for name, given in used.get(run.get("scenario"), []):
+                merged = dict(given)
+                merged.update({key.split(".", 1)[1]: value
                                for key, value in run.get("set", {}).items()
-                               if key.startswith("controller.")})
-                designs.append(values)
-    return designs
+                               if key.startswith(f"{name}.")})
+                values.append(merged)
+    return values
 
 
-def stop_mpc_sets_header() -> str:
-    """``ato_stop_mpc_sets.h``: the terminal sets of the seed 000 tube controllers (the
-    maximal robust positively invariant sets of :func:`controllers.mpc.terminal.
-    robust_invariant_set`, computed by :class:`controllers.mpc.stop_mpc.TubeStopMpc` itself)
-    for each design of :func:`stop_mpc_designs`, each with the data it is computed from:
-    A_cl, the rows ``C e <= h`` of :meth:`terminal_constraints` and the vertices of W. The
-    native law builds its own design from its parameters and takes the set whose data match
-    (one set per distinct data)."""
-    stop_mpc = importlib.import_module("controllers.mpc.stop_mpc")  # by name: layering
-    lines = ["/* generated by cosim/fmu/native_build.py from controllers.mpc.stop_mpc (the "
-             "terminal sets of the seed 000 designs); do not edit */",
-             "#ifndef ATO_STOP_MPC_SETS_H", "#define ATO_STOP_MPC_SETS_H"]
-    rows, seen = [], set()
-    for values in stop_mpc_designs():
-        core = stop_mpc.TubeStopMpc(declare.build(stop_mpc.StopMpcParams, values))
-        C, h = core.terminal_constraints()
-        data = (core.A_cl, C, h, core.w_vertices, core.F_term, core.h_term)
-        key = b"".join(np.ascontiguousarray(x, dtype=float).tobytes() for x in data)
-        if key in seen:
-            continue
-        seen.add(key)
-        k = len(rows)
-        lines += [_c_array(f"SM_ACL_{k}", core.A_cl), _c_array(f"SM_C_{k}", C),
-                  _c_array(f"SM_H_{k}", h), _c_array(f"SM_W_{k}", core.w_vertices),
-                  _c_array(f"SM_ROWS_{k}", core.F_term), _c_array(f"SM_RHS_{k}", core.h_term)]
-        rows.append(f"    {{{C.shape[0]}, {core.F_term.shape[0]}, SM_ACL_{k}, SM_C_{k}, "
-                    f"SM_H_{k}, SM_W_{k}, SM_ROWS_{k}, SM_RHS_{k}}},")
-    lines += ["typedef struct { int n_c, n_rows; const double *a_cl, *c, *h, *w, *rows, *rhs; }"
-              " sm_set;", f"#define SM_N_SETS {len(rows)}",
-              "static const sm_set SM_SETS[SM_N_SETS] = {", *rows, "};", "#endif"]
-    return "\n".join(lines) + "\n"
-
-
-def hybrid_model_header() -> str:
-    """``ato_hybrid_model.h``: the control models of the seed-004 hybrid MPC
-    (:func:`controllers.hybrid.hybrid_mpc.chain_model`) of every 3-car configuration at the
-    declared default ``sample_time`` and ``fit_speed_max`` (the zero-order-hold matrices
-    ``A0``, ``B``, ``g``, the mean-speed weights ``c``, the coupler rows and the PWA
-    resistance least-squares fitted to the Davis curve), computed by the core itself; the
-    MIQP's constants (``EPS_REG``, the retry settings, ``ENUMERATE_MAX_FREE``) from
-    :mod:`controllers.hybrid.miqp`. A native FMU refuses another sample time or fit speed."""
-    hybrid = importlib.import_module("controllers.hybrid.hybrid_mpc")  # by name: layering
-    miqp = importlib.import_module("controllers.hybrid.miqp")
-    emu = importlib.import_module("plants.emu")
-    p = hybrid.HybridMpcParams()
-    lines = ["/* generated by cosim/fmu/native_build.py from controllers.hybrid (chain_model at"
-             " the default sample_time and fit_speed_max); do not edit */",
-             "#ifndef ATO_HYBRID_MODEL_H", "#define ATO_HYBRID_MODEL_H",
-             f"#define HY_SAMPLE_TIME {_c_double(float(p.sample_time))}",
-             f"#define HY_FIT_SPEED_MAX {_c_double(float(p.fit_speed_max))}",
-             f"#define HY_EPS_REG {_c_double(miqp.EPS_REG)}",
-             f"#define HY_ENUMERATE_MAX_FREE {int(miqp.ENUMERATE_MAX_FREE)}"]
-    keys = ("cycle_tol", "pivot_tol", "primal_tol")
-    retries = miqp._RETRY_SETTINGS
-    if any(set(r) - set(keys) for r in retries):
-        raise ValueError(f"retry settings {retries}: only {keys} are exported")
-    lines += [f"#define HY_N_RETRIES {len(retries)}",
-              "typedef struct { int cycle_tol; double pivot_tol, primal_tol; } hy_retry;",
-              "/* -1: DAQP's default */",
-              "static const hy_retry HY_RETRIES[HY_N_RETRIES] = {"
-              + ", ".join(f"{{{int(r.get('cycle_tol', -1))}, "
-                          f"{_c_double(float(r.get('pivot_tol', -1.0)))}, "
-                          f"{_c_double(float(r.get('primal_tol', -1.0)))}}}" for r in retries)
-              + "};"]
-    rows = []
-    for k, name in enumerate(sorted(emu.CONFIGURATIONS)):
-        train = emu.emu_config(name)
-        if train.n != 3:
-            continue
-        md = hybrid.chain_model(train, p)
-        arrays = {"m": md.m, "motored": md.motored.astype(float), "A0": md.A0, "B": md.B,
-                  "g": md.g, "c": md.c, "coupler_rows": md.coupler_rows,
-                  "breakpoints": md.res.breakpoints, "alpha": md.res.alpha,
-                  "beta": md.res.beta}
-        lines += [_c_array(f"HY_{k}_{key}", value) for key, value in arrays.items()]
-        rows.append(f"    {{{_c_string(name)}, {_c_double(md.k)}, {_c_double(md.d)}, "
-                    f"{_c_double(md.U)}, " + ", ".join(f"HY_{k}_{key}" for key in arrays)
-                    + "},")
-    lines += ["typedef struct { const char* name; int cars; } hy_config;",
-              f"#define HY_N_CONFIGS {len(emu.CONFIGURATIONS)}",
-              "static const hy_config HY_CONFIGS[HY_N_CONFIGS] = {"
-              + ", ".join(f"{{{_c_string(name)}, {emu.emu_config(name).n}}}"
-                          for name in sorted(emu.CONFIGURATIONS)) + "};"]
-    lines += ["typedef struct { const char* name; double k, d, U; const double *m, *motored, "
-              "*A0, *B, *g, *c, *coupler_rows, *breakpoints, *alpha, *beta; } hy_model;",
-              f"#define HY_N_MODELS {len(rows)}",
-              "static const hy_model HY_MODELS[HY_N_MODELS] = {", *rows, "};", "#endif"]
-    return "\n".join(lines) + "\n"
-
-
-# headers some native models include, generated at build time (NativeSpec.generated)
-GENERATED = {"ato_numpy_normal.h": numpy_normal_header,
-             "ato_freight_tracker.h": freight_tracker_header,
-             "ato_fuzzy_rules.h": fuzzy_rules_header,
-             "ato_datadriven_const.h": datadriven_constants_header,
-             "ato_stop_mpc_sets.h": stop_mpc_sets_header,
-             "ato_hybrid_model.h": hybrid_model_header}
+def core_data(identifier: str, slave_class: Any) -> dict[str, str]:
+    """What the core of the catalog FMU ``identifier`` ships to its native twin: its
+    ``native_data(identifier, shipped_values)`` (path in the FMU -> text: generated headers
+    under ``sources/``, data files under ``resources/``), none for a core without one."""
+    declared = getattr(slave_class.core_class, "native_data", None)
+    return {} if declared is None else declared(identifier, shipped_values)
 
 
 def _compiler(name: str) -> str:
@@ -992,15 +632,16 @@ def _compile_side_by_side(jobs: list[tuple[str, Path, Path, bool]]) -> None:
 
 def native_sources(identifier: str, fmi_version: int = 2) -> list[Path]:
     """Every file the native FMU ``identifier`` is made from: its C files, the FMI 2 front
-    (and for FMI 3.0 the FMI 3 front and the modelDescription derivation), this builder and
-    the Python wrapper's files (declarations, bundled data)."""
+    (and for FMI 3.0 the FMI 3 front and the modelDescription derivation), this builder, the
+    C literals it writes with (``cosim/fmu/c_text.py``) and the Python wrapper's files
+    (declarations, the core and its ``native_data``, bundled data)."""
     spec = NATIVE[identifier]
     fmi3_files = [FRONT_DIR / "fmi3_front.c", HERE / "fmi3.py"] if fmi_version == 3 else []
     return [NATIVE_DIR / spec.source, NATIVE_DIR / "ato_vars.h",
             *(NATIVE_DIR / name for name in (*spec.helpers, *spec.shared)),
             FRONT_DIR / "fmi2_front.c",
             FRONT_DIR / "ato_backend.h", FRONT_DIR / "instance_registry.h", Path(__file__),
-            *([HERE / "native_solvers.py"] if spec.solvers else []),
+            FMU_LAYER / "c_text.py", *([HERE / "solvers.py"] if spec.solvers else []),
             *bundled_files(catalog()[identifier].module), *fmi3_files]
 
 
@@ -1034,6 +675,7 @@ def build_native(identifier: str, dest: Path = NATIVE_FMU_DIR, windows: bool | N
             if windows:
                 raise
     slave_class = catalog()[identifier].load()
+    from_core = core_data(identifier, slave_class)
     guid = GUID_PLACEHOLDER  # the sources' own GUID is stamped in once they are written
     headers = Path(fmpy.__file__).parent / "c-code"
     solvers = [solver_files(name) for name in spec.solvers]
@@ -1055,13 +697,15 @@ def build_native(identifier: str, dest: Path = NATIVE_FMU_DIR, windows: bool | N
             shutil.copy2(NATIVE_DIR / name, src)
         for name in spec.generated:
             (src / name).write_text(GENERATED[name]())
-        if spec.configurations:
-            (src / f"{identifier}_config.h").write_text(
-                config_header(identifier, spec.configurations))
+        for rel, text in from_core.items():  # the core's headers (sources/), data (resources/)
+            target = root / rel
+            target.parent.mkdir(parents=True, exist_ok=True)
+            target.write_text(text)
+        config = f"{identifier}_config.h"  # named train data, from the core (Emu)
         if spec.shared:  # the plant model includes this FMU's headers by one name
             (src / "ato_model_decl.h").write_text(
                 f'#include "{identifier}_decl.h"\n'
-                + (f'#include "{identifier}_config.h"\n' if spec.configurations else ""))
+                + (f'#include "{config}"\n' if f"sources/{config}" in from_core else ""))
         for h in ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h"):
             shutil.copy2(headers / h, src)
         for solver in solvers:  # the solver's own files, flat beside ours, and its licence
@@ -1077,7 +721,7 @@ def build_native(identifier: str, dest: Path = NATIVE_FMU_DIR, windows: bool | N
             decl_header(identifier, slave_class.variables, guid,
                         getattr(slave_class, "core_options", None)))
         (src / "ato_model.h").write_text(  # the model's header for the shared C files
-            f'/* generated by cosim/fmu/native_build.py */\n#include "{identifier}_decl.h"\n'
+            f'/* generated by cosim/build/native.py */\n#include "{identifier}_decl.h"\n'
             + "".join(f"#define {name} {int(value)}\n" for name, value in spec.defines))
         (src / "buildDescription.xml").write_bytes(build_description(identifier, c_files))
         (root / "modelDescription.xml").write_bytes(
@@ -1153,7 +797,7 @@ def package_fmi3(fmi2_fmu: Path, out: Path, windows: bool | None = None) -> Path
     (the front of the Python FMUs' FMI 3 builds, here linked with the model, whose backend
     calls the model directly) plus the FMI 3 headers (the FMI 2 ones stay: the backend
     interface is declared with them), ``buildDescription.xml`` names it, modelDescription.xml
-    is :func:`cosim.fmu.fmi3.model_description` of the FMI 2 one (same variables and GUID as
+    is :func:`cosim.build.fmi3.model_description` of the FMI 2 one (same variables and GUID as
     ``instantiationToken``), and the sources are compiled into
     ``binaries/x86_64-linux/<id>.so`` and, with ``windows`` (default: when mingw-w64 is
     installed), ``binaries/x86_64-windows/<id>.dll``."""

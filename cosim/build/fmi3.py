@@ -19,7 +19,7 @@ controllers, :data:`cosim.fmu.slave.CONTROLLER_TIMING_VARS`) declares ``hasEvent
 returns early there when allowed); every model declares
 ``canHandleVariableCommunicationStepSize`` as its FMI 2 twin does. The win64 binary is not
 carried over: the front is compiled here, for x86-64 Linux only. The native FMUs' FMI 3 builds
-(:mod:`cosim.fmu.native_build`) link the same front with a C model instead, for Linux and
+(:mod:`cosim.build.native`) link the same front with a C model instead, for Linux and
 Windows, with :func:`model_description` of their FMI 2 modelDescription.
 
 A clocked build (:func:`clocked`, ``cosim build --fmi 3 --clock periodic|countdown``) of a
@@ -54,7 +54,7 @@ import zipfile
 from pathlib import Path
 from xml.etree import ElementTree as ET
 
-FRONT_DIR = Path(__file__).resolve().parent / "front"
+FRONT_DIR = Path(__file__).resolve().parents[1] / "fmu" / "front"  # the FMU layer's C fronts
 FRONT_SOURCES = (FRONT_DIR / "fmi3_front.c", FRONT_DIR / "ato_backend_fmi2dl.c")
 FRONT_HEADER = FRONT_DIR / "ato_backend.h"
 PLATFORM = "x86_64-linux"

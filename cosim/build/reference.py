@@ -11,7 +11,7 @@ import ast
 import sys
 from pathlib import Path
 
-from cosim.fmu.build import PROJECT_PACKAGES, ROOT, bundled_files, catalog
+from cosim.build.python import PROJECT_PACKAGES, ROOT, bundled_files, catalog
 from cosim.fmu.declare import Var
 
 REFERENCE_PATH = ROOT / "docs" / "fmus.md"
