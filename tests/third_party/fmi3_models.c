@@ -9,10 +9,14 @@
    doubles, or becomes "period" when it was 0), Clocked (a
    periodic input clock "tick" whose interval and shift the FMU gives on request, its interval
    multiplied by growth at every tick; with CLOCK_CHANGING it is a changing Clock: its first
-   interval told in Initialization Mode, the next one in each Event Mode where it ticked), Pulses (events, announced as nextEventTime, at the
+   interval told in Initialization Mode, the next one in each Event Mode where it ticked; with
+   CLOCK_TRIGGERED it is a triggered Clock: fmi3SetClock outside Event Mode is refused, FMI 3.0
+   sec. 2.2.8.4, and at each tick y takes its clocked input u and the FMU logs
+   "tick at t = <its time, %.17g>"), Pulses (events, announced as nextEventTime, at the
    times k period, k = 0 .. 30, whose bit k is set in its parameter "pattern"; its output clock
    "ticked", vr 17, is active in the Event Mode of each of them as TimeEvents'). TimeEvents
    compares times within its parameter tolerance (0: exactly). */
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include <math.h>
@@ -28,7 +32,7 @@ typedef struct {
         repeat, report, /* Countdown: ticks at interval 0 after each tick, interval told */
         pattern; /* Pulses: bit k set: an event at k period */
     fmi3Int32 n, burst;
-    fmi3Boolean announce, eventMode, earlyReturn, tick, pending, init;
+    fmi3Boolean announce, eventMode, earlyReturn, tick, pending, init, inEvent;
     double num[NT]; /* numeric and Boolean feedthrough values (as double, exact up to 2^53) */
     fmi3Int64 i64; fmi3UInt64 u64; /* the Int64 and UInt64 feedthrough values, exact */
     char *str;
@@ -76,6 +80,7 @@ fmi3Status fmi3EnterInitializationMode(fmi3Instance i, fmi3Boolean td, fmi3Float
     return fmi3OK; }
 fmi3Status fmi3ExitInitializationMode(fmi3Instance i) {
     M *m = i; m->next = m->time + m->period; m->pending = fmi3True; m->init = fmi3False;
+    m->inEvent = m->eventMode; /* FMI 3.0 sec. 2.3.3: then in Event Mode when it is used */
 #if !defined(MODEL_CLOCKED)
     m->interval = m->first;
 #endif
@@ -86,8 +91,8 @@ fmi3Status fmi3ExitInitializationMode(fmi3Instance i) {
     m->next = next_pulse(m, -1);
 #endif
     return fmi3OK; }
-fmi3Status fmi3EnterEventMode(fmi3Instance i) { (void)i; return fmi3OK; }
-fmi3Status fmi3EnterStepMode(fmi3Instance i) { (void)i; return fmi3OK; }
+fmi3Status fmi3EnterEventMode(fmi3Instance i) { M *m = i; m->inEvent = fmi3True; return fmi3OK; }
+fmi3Status fmi3EnterStepMode(fmi3Instance i) { M *m = i; m->inEvent = fmi3False; return fmi3OK; }
 fmi3Status fmi3Terminate(fmi3Instance i) { say(i, "terminated"); return fmi3OK; }
 fmi3Status fmi3Reset(fmi3Instance i) { (void)i; return fmi3OK; }
 
@@ -123,6 +128,11 @@ fmi3Status fmi3UpdateDiscreteStates(fmi3Instance i, fmi3Boolean *need, fmi3Boole
                    if (m->growth != 1.0) { m->interval *= m->growth; m->pending = fmi3True; }
 #if defined(CLOCK_CHANGING)
                    m->pending = fmi3True; /* a changing Clock's next interval, told at once */
+#elif defined(CLOCK_TRIGGERED)
+                   m->last_event = m->u; /* y, the clocked input at the tick */
+                   char text[64];
+                   snprintf(text, sizeof text, "tick at t = %.17g", m->time);
+                   say(m, text);
 #endif
     }
 #elif defined(MODEL_COUNTDOWN)
@@ -310,6 +320,9 @@ fmi3Status fmi3SetBinary(fmi3Instance i, const fmi3ValueReference vr[], size_t n
 fmi3Status fmi3SetClock(fmi3Instance i, const fmi3ValueReference vr[], size_t n,
                         const fmi3Clock v[]) {
     M *m = i;
+#if defined(CLOCK_TRIGGERED)
+    if (!m->inEvent) { say(m, "fmi3SetClock outside Event Mode refused"); return fmi3Error; }
+#endif
     for (size_t j = 0; j < n; j++) { if (vr[j] != 10) return fmi3Error; if (v[j]) m->tick = 1; }
     return fmi3OK; }
 fmi3Status fmi3GetClock(fmi3Instance i, const fmi3ValueReference vr[], size_t n, fmi3Clock v[]) {

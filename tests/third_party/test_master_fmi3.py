@@ -322,3 +322,89 @@ def test_unset_inputs_keep_their_start_values(c_fmus3, tmp_path, caplog):
     assert len(lines) == 1
     assert "ft.u_Float32 = 1.5, ft.u_Int8 = 1" in lines[0] and "ft.ua[3] = 0" in lines[0]
     assert "u_Float64" not in lines[0]
+
+
+def _triggered_run(c_fmus3, tmp_path, period: float) -> tuple:
+    """Pulses3 (events at k period for k = 0, 1, 8, 9, its output clock "ticked" active at
+    each) driving Triggered3's triggered input clock "tick", Triggered3's clocked input u its
+    count n: (master, frame, Pulses3's tick times, Triggered3's tick times as it logged them)."""
+    from cosim.run.master.core import Master
+    from cosim.run.scenario import load_scenario
+
+    sc = write_scenario(tmp_path, {"p": (c_fmus3["Pulses3"], {"period": period}, {}),
+                                   "y": (c_fmus3["Triggered3"], {}, {})},
+                        connections={"y.tick": "p.ticked", "y.u": "p.n"}, stop=10 * period,
+                        output=period)
+    master = Master(load_scenario(sc))
+    frame = master.run().frame
+    ticks = [k * period for k in (0, 1, 8, 9)]  # Pulses3's own doubles: j period in C
+    logged = [float(m.removeprefix("tick at t = ")) for m in master.by_name["y"].messages
+              if m.startswith("tick at t = ")]
+    return master, frame, ticks, logged
+
+
+@pytest.mark.parametrize("period", [1.0, 1 / 3])
+def test_an_output_clock_triggers_a_co_simulation_fmus_triggered_clock(c_fmus3, tmp_path,
+                                                                       period):
+    """FMI 3.0 sec. 2.2.8.2 (triggered Clock: it ticks when the importer says, here when
+    Pulses3's output clock does): Triggered3's clock ticks at Pulses3's event times exactly
+    (the FMU's own time, also at 1/3 s multiples that are not whole nanoseconds), once each,
+    in Event Mode (it refuses fmi3SetClock elsewhere, sec. 2.2.8.4), with its clocked input u
+    set from Pulses3's count after Pulses3's event: y = 1, 2, 3, 4 at the ticks."""
+    master, frame, ticks, logged = _triggered_run(c_fmus3, tmp_path, period)
+    assert logged == ticks
+    last = frame.iloc[-1]
+    assert (last["y.n"], last["p.n"]) == (4, 4)
+    assert last["y.q"] == ticks[-1]
+    assert last["y.y"] == 4
+    t = frame["time"].to_numpy()
+    # a recorded time is the tick rounded to whole nanoseconds: within 0.5 ns of it
+    expected_y = np.array([sum(s <= x + 0.5e-9 for s in ticks) for x in t])
+    np.testing.assert_array_equal(frame["y.y"].to_numpy(), expected_y)
+    np.testing.assert_array_equal(frame["y.n"].to_numpy(), expected_y)
+
+
+def test_a_triggered_clock_must_be_connected_to_an_output_clock(c_fmus3, tmp_path):
+    """A co-simulation FMU's triggered input clock wired to nothing would never tick (FMI 3.0
+    sec. 2.2.8.2), one wired to a variable that is not a Clock cannot: both refused, naming
+    the scenario file, the key and its value."""
+    from cosim.run.master.core import Master
+    from cosim.run.scenario import ScenarioError, load_scenario
+
+    fmu = c_fmus3["Triggered3"]
+    sc = write_scenario(tmp_path, {"y": (fmu, {}, {})})
+    with pytest.raises(ScenarioError, match=(
+            rf"{sc}: \[fmus.y\] fmu = '{fmu}': input Clock 'tick' is triggered "
+            r".*no output Clock is connected to it")):
+        Master(load_scenario(sc)).run()
+    sc = write_scenario(tmp_path, {"p": (c_fmus3["Pulses3"], {}, {}), "y": (fmu, {}, {})},
+                        connections={"y.tick": "p.n"})
+    with pytest.raises(ScenarioError, match=(
+            rf"{sc}: \[connections\] \"y.tick\" = \"p.n\": p.n is not an output Clock")):
+        Master(load_scenario(sc)).run()
+
+
+def test_a_source_returning_early_triggers_at_its_own_event_time(c_fmus3, tmp_path):
+    """Ticker3 (events every 0.1 s, its own sums of 0.1, not announced: it returns early at
+    each, FMI 3.0 sec. 4.1.3; its output clock "ticked" active there) driving Triggered3: the
+    triggered FMU steps after the source, so it is at the source's early-return time and its
+    clock ticks there exactly (0.30000000000000004 s and the like are not whole nanoseconds:
+    the source's double), with u = the source's count after its event; stop 0.95 s, before
+    the tenth event (within Ticker3's tolerance of 1.0 s, where it would not return early)."""
+    from cosim.run.master.core import Master
+    from cosim.run.scenario import load_scenario
+
+    sc = write_scenario(tmp_path, {"y": (c_fmus3["Triggered3"], {}, {}),
+                                   "p": (c_fmus3["Ticker3"], {"announce": False}, {})},
+                        connections={"y.tick": "p.ticked", "y.u": "p.n"}, stop=0.95)
+    master = Master(load_scenario(sc))
+    frame = master.run().frame
+    ticks, t = [], 0.0
+    for _ in range(9):  # up to 0.8999999999999999 s (the next, 0.9999999999999999, after 0.95)
+        t += 0.1  # the FMU's own event times (m->next += period in C)
+        ticks.append(t)
+    logged = [float(m.removeprefix("tick at t = ")) for m in master.by_name["y"].messages
+              if m.startswith("tick at t = ")]
+    assert logged == ticks
+    last = frame.iloc[-1]
+    assert (last["y.n"], last["y.y"], last["p.n"]) == (9, 9, 9)

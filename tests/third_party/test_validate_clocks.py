@@ -263,6 +263,17 @@ def test_clocked_cosimulation_fmus_pass_with_their_ticks(c_fmus3, name, ticks):
     assert activated(summary, "tick") == pytest.approx(ticks, abs=1e-12)
 
 
+def test_a_triggered_input_clock_passes_and_is_reported_not_exercised(c_fmus3):
+    """Triggered3: a co-simulation FMU whose only input clock is triggered (FMI 3.0 sec.
+    2.2.8.2: it ticks when an output clock of a connected FMU does) passes, and the note says
+    the clock was not exercised alone, citing the clause."""
+    problems = check_fmu(c_fmus3["Triggered3"], Options(strict=False))
+    assert passed(problems), format_report(c_fmus3["Triggered3"], problems)
+    summary = note(problems, "fmi3-clock-calls")
+    assert re.search(r"\btick not exercised \(a triggered Clock ticks when an output Clock "
+                     r"of a connected FMU does, FMI 3\.0 sec\. 2\.2\.8\.2", summary), summary
+
+
 def replant(src: Path, dest: Path, old: str, new: str) -> Path:
     """A copy of the FMU ``src`` whose modelDescription.xml has ``old`` replaced by ``new``."""
     with zipfile.ZipFile(src) as zin, zipfile.ZipFile(dest, "w") as zout:

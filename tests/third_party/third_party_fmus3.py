@@ -182,8 +182,21 @@ TASKS_CHANGING3 = replace(
                                                        "priority": "0"})
                     for v in TASKS3.variables))
 
+# a co-simulation FMU with a triggered input clock "tick" (FMI 3.0 sec. 2.2.8.2: it ticks
+# when the importer says, here an output clock connected to it): at each tick n counts it, q is
+# the FMU's time and y its clocked input u; it logs "tick at t = <q, %.17g>" and refuses
+# fmi3SetClock outside Event Mode
+TRIGGERED3 = Spec3("Triggered3", "CLOCKED", (
+    ("tick", "Clock", "input", "discrete", 10, None, {"intervalVariability": "triggered"}),
+    ("u", "Int32", "input", "discrete", 1, "0", {"clocks": "10"}),
+    ("q", "Float64", "output", "discrete", 2, None, {"unit": "s", "clocks": "10"}),
+    ("n", "Int32", "output", "discrete", 3, None, {"clocks": "10"}),
+    ("y", "Int32", "output", "discrete", 9, None, {"clocks": "10"}),
+), dependencies={"q": (), "n": (), "y": ("u",)}, event_mode=True, stop_time=10.0,
+    defines=("CLOCK_TRIGGERED",))
+
 SPECS3 = (FEEDTHROUGH3, TIME_EVENTS3, TERMINATOR3, COUNTDOWN3, THIRDS3, *CLOCKED3.values(),
-          TASKS3, TICKER3, PULSES3, COUNTDOWN_TWICE3, TASKS_CHANGING3)
+          TASKS3, TICKER3, PULSES3, COUNTDOWN_TWICE3, TASKS_CHANGING3, TRIGGERED3)
 
 
 def model_description(spec: Spec3) -> bytes:
@@ -224,8 +237,10 @@ def model_description(spec: Spec3) -> bytes:
                   "variability": variability}
         if "unit" in extra:
             attrib["unit"] = extra["unit"]
+        if "clocks" in extra:  # a clocked variable: its clocks' value references
+            attrib["clocks"] = extra["clocks"]
         if kind == "Clock":
-            attrib.update({k: v for k, v in extra.items() if k != "unit"})
+            attrib.update({k: v for k, v in extra.items() if k not in ("unit", "clocks")})
         if kind == "Enumeration":
             attrib["declaredType"] = "Mode"
         if causality == "output" and kind != "Clock":
@@ -246,8 +261,10 @@ def model_description(spec: Spec3) -> bytes:
             if name in spec.dependencies:
                 attrib["dependencies"] = " ".join(str(vrs[d]) for d in spec.dependencies[name])
             SubElement(ms, "Output", attrib)
-    for name, kind, causality, *_ in spec.variables:
-        if causality == "output" and kind != "Clock":
+    for name, kind, causality, *_, extra in spec.variables:
+        # a clocked output is no initial unknown (FMI 3.0 sec. 2.4.8: InitialUnknown lists
+        # the outputs that are not clocked)
+        if causality == "output" and kind != "Clock" and "clocks" not in extra:
             SubElement(ms, "InitialUnknown", {"valueReference": str(vrs[name])})
     indent(root)
     return b'<?xml version="1.0" encoding="UTF-8"?>\n' + tostring(root, encoding="utf-8")

@@ -41,7 +41,9 @@ the input Clocks' ticks, where the Clocks are activated with fmi3SetClock in Eve
 every Event Mode the ``countdown`` Clocks' intervals and, where they ticked, the ``changing``
 ones' (interval 0: the Clock ticks again in the same Event Mode) and the output Clocks
 (fmi3GetClock) are read. Every call returns fmi3OK or
-fmi3Warning.
+fmi3Warning. A ``triggered`` input Clock is not activated: it ticks when the importer says,
+from an output Clock of a connected FMU (sec. 2.2.8.2), which an FMU run alone has not; the
+note says so.
 """
 
 from __future__ import annotations
@@ -637,7 +639,11 @@ def _check_clock_calls(host: _Host3, ctx: dict) -> list[Problem]:
     inst.free()
     if errors:
         run.fail(f"error messages in a run with Clocks: {errors[0]}", TYPES)
-    summary = "; ".join(f"{name} at {_times(ts)} s" if ts else f"{name} never"
+    triggered = {c.name for c in inputs if c.interval_variability == "triggered"}
+    summary = "; ".join(f"{name} at {_times(ts)} s" if ts else
+                        f"{name} not exercised (a triggered Clock ticks when an output Clock "
+                        f"of a connected FMU does, {TYPES}: an FMU run alone has none)"
+                        if name in triggered else f"{name} never"
                         for name, ts in activations.items())
     if summary:
         run.problems.append(Problem(CLOCK_CALLS, f"input Clocks activated up to "

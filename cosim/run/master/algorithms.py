@@ -41,7 +41,9 @@ class EventDriven(Algorithm):
     cannot handle variable communication step sizes steps on its own fixed grid of
     ``max_step`` (else its DefaultExperiment ``stepSize``, else ``base_step``, else
     ``output_interval``). An FMU that returns early
-    (FMI 3) steps first and ends the point where it returned: the others step only to there.
+    (FMI 3) steps first and ends the point where it returned: the others step only to there;
+    an FMU with a triggered input clock driven by another FMU's output clock steps after the
+    FMUs that may return early, so it is at its source's tick time.
     Where every FMU is an FMI 2 instance called through its C functions, the same points run
     in C with the same calls (:mod:`cosim.run.master.native_loop`).
     """
@@ -95,6 +97,10 @@ class EventDriven(Algorithm):
         limited = [u for u in units if not u.scheduled and u.max_step_ticks]
         eventful = [u for u in units if u.has_events]
         early = [u for u in units if u.may_return_early and not u.scheduled]
+        # an FMU whose triggered input clock another FMU's output clock drives steps after the
+        # others: it reaches no further than where a source returned early, its tick time
+        # (FMI 3.0 sec. 2.2.8.2)
+        early.sort(key=lambda u: bool(getattr(u, "time_sources", ())))
         late = [u for u in units if u not in early]
         due = set(units)
         while True:

@@ -161,9 +161,14 @@ class Master:
                      ) -> dict[Unit, dict[int, list[tuple[Unit, int]]]]:
         """Source unit -> its output clock (value reference) -> the (unit, input clock) it
         triggers, from the scenario's clock ``connections``: an output clock of an FMI 3 FMU
-        (Scheduled Execution or co-simulation) to a ``triggered`` input clock of a Scheduled
-        Execution FMU (FMI 3.0 sec. 2.2.8.2, triggered input Clock; sec. 5.2.2)."""
+        (Scheduled Execution or co-simulation) to a ``triggered`` input clock of an FMI 3 FMU
+        (FMI 3.0 sec. 2.2.8.2, triggered input Clock: it ticks when the importer says; of a
+        Scheduled Execution FMU, sec. 5.2.2; of a co-simulation FMU, in its Event Mode, sec.
+        4.2.1). Either end not a Clock of that causality, or the input clock not triggered, is
+        a :class:`ScenarioError` naming the scenario file and the connection; so is a
+        co-simulation FMU's triggered input clock wired to nothing (it would never tick)."""
         out: dict[Unit, dict[int, list[tuple[Unit, int]]]] = {}
+        wired: set[tuple[Unit, str]] = set()
         for c in connections:
             key = f"{self.scenario.path}: [connections] \"{c.dst}.{c.dst_var}\" = " \
                   f"\"{c.src}.{c.src_var}\""
@@ -173,10 +178,6 @@ class Master:
                 if clock is None or clock.causality != causality:
                     raise ScenarioError(f"{key}: {unit.name}.{var} is not an {causality} Clock "
                                         "(a Clock connects to a Clock)")
-            if not isinstance(dst, Fmi3ScheduledUnit):
-                raise ScenarioError(f"{key}: {dst.name}.{c.dst_var}: a Clock connection "
-                                    "activates a model partition of a Scheduled Execution FMU; "
-                                    f"{dst.name} is a co-simulation FMU")
             target = dst.clock_names[c.dst_var]
             if target.interval_variability != "triggered":
                 raise ScenarioError(f"{key}: {c.dst}.{c.dst_var} has intervalVariability "
@@ -184,19 +185,44 @@ class Master:
                                     "clock ticks when another clock does")
             source = src.clock_names[c.src_var].value_reference  # type: ignore[attr-defined]
             src.watch_clock(source)  # type: ignore[attr-defined]
+            if not isinstance(dst, Fmi3ScheduledUnit):
+                dst.take_times_from(src)  # type: ignore[attr-defined]
+            wired.add((dst, c.dst_var))
             out.setdefault(src, {}).setdefault(source, []).append((dst, target.value_reference))
+        for unit in self.units:
+            if isinstance(unit, Fmi3ScheduledUnit):
+                continue  # a partition nothing triggers never runs (sec. 5.2.2)
+            for clock in getattr(unit, "input_clocks", ()):
+                if clock.interval_variability == "triggered" and (unit, clock.name) not in wired:
+                    comp = self.scenario.components[unit.name]
+                    raise ScenarioError(
+                        f"{self.scenario.path}: [fmus.{unit.name}] fmu = {comp.fmu!r}: input "
+                        f"Clock {clock.name!r} is triggered (intervalVariability = "
+                        "\"triggered\", FMI 3.0 sec. 2.2.8.2: it ticks only when the importer "
+                        "activates it) and no output Clock is connected to it: connect one in "
+                        f"[connections] (\"{unit.name}.{clock.name}\" = "
+                        "\"<fmu>.<output clock>\")")
         return out
 
     def _deliver(self, unit: Unit, ticks: int, pending: list[Unit],
                  open_events: set[Unit]) -> None:
         """Trigger the input clocks wired to the output clocks ``unit`` ticked at ``ticks``: a
         triggered FMU not yet handled at this point is handled before its outputs are read,
-        one already handled is activated again now (its outputs flow from the next point)."""
+        one already handled is activated again now (its outputs flow from the next point). A
+        triggered co-simulation FMU is at ``ticks`` (its clock ticks in its Event Mode at the
+        source's tick time, FMI 3.0 sec. 2.2.8.2, 4.2.1); one that is not is a
+        :class:`SimulationError`."""
         wired = self.clock_links.get(unit)
         if not wired:
             return
         for vr in unit.take_ticks():  # type: ignore[attr-defined]
             for dst, clock in wired.get(vr, ()):
+                if dst.time_ticks != ticks and not isinstance(dst, Fmi3ScheduledUnit):
+                    raise SimulationError(
+                        f"{unit.name}: its output clock ticked at t = {to_seconds(ticks)!r} s "
+                        f"where {dst.name}, whose triggered input clock it drives, is at t = "
+                        f"{to_seconds(dst.time_ticks)!r} s (FMI 3.0 sec. 2.2.8.2: the clock "
+                        "ticks at the same time in both)")
                 dst.trigger(clock)  # type: ignore[attr-defined]
                 if dst in open_events:
                     continue

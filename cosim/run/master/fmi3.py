@@ -34,13 +34,21 @@
   fmi3UpdateDiscreteStates called again); a ``changing`` clock likewise, its interval asked
   in Initialization Mode and in each Event Mode where it ticked. Times are exact fractions
   until rounded to the FMU's double. A tick is an event where the master activates the clock
-  (fmi3SetClock) before fmi3UpdateDiscreteStates. ``triggered`` input clocks are refused.
+  (fmi3SetClock) before fmi3UpdateDiscreteStates.
   Output clocks tick at the FMU's events (``eventHandlingNeeded`` or ``nextEventTime``);
-  those wired in the scenario to a triggered input clock of a Scheduled Execution FMU (sec.
-  2.2.8.2, in FMI 3.0.2's words: "The timing could be given by a triggered output Clock ...
-  of a connected FMU") are asked with fmi3GetClock in Event Mode before each
-  fmi3UpdateDiscreteStates (sec. 2.3.5: a clock active during fmi3UpdateDiscreteStates is
-  deactivated by the FMU itself). An FMU with input clocks is scheduled by their ticks alone:
+  those wired in the scenario to a triggered input clock (sec. 2.2.8.2, in FMI 3.0.2's
+  words: "The timing could be given by a triggered output Clock ... of a connected FMU") are
+  asked with fmi3GetClock in Event Mode before each fmi3UpdateDiscreteStates (sec. 2.3.5: a
+  clock active during fmi3UpdateDiscreteStates is deactivated by the FMU itself).
+* A ``triggered`` input clock (sec. 2.2.8.2: it ticks when the importer says, here when the
+  output clock wired to it in the scenario does) ticks at the source FMU's event, where this
+  FMU is at the same communication point (:meth:`Fmi3Unit.trigger`): it enters Event Mode
+  (fmi3EnterEventMode, sec. 4.2.1), the clock is activated (fmi3SetClock, sec. 2.2.8.4; only
+  in Event Mode, sec. 2.3.5), its inputs are set from the values after the source's event,
+  then fmi3UpdateDiscreteStates (sec. 2.3.5) before its outputs are read; its time there is
+  the source's own double (:meth:`Fmi3Unit.take_times_from`). A triggered input clock wired
+  to nothing is refused (:mod:`cosim.run.master.core`). An FMU with input clocks is
+  scheduled by their ticks alone:
   an output named ``next_event_time`` (the FMI 2 convention of :mod:`cosim.run.master.unit`)
   is not read as its next event.
 """
@@ -265,8 +273,10 @@ class Fmi3Unit(Unit):
     """An FMI 3.0 co-simulation FMU instance."""
 
     fmi_version = "3.0"
-    # input clocks without a schedule of their own that the master ticks
-    UNSCHEDULED_CLOCKS: tuple[str, ...] = ("countdown", "changing")
+    # input clocks without a schedule of their own that the master ticks (sec. 2.2.8.2: the
+    # FMU gives a countdown or changing clock's intervals; a triggered one ticks when an
+    # output clock wired to it does)
+    UNSCHEDULED_CLOCKS: tuple[str, ...] = ("countdown", "changing", "triggered")
     C_TYPES = C_NUMBER_TYPES
     C_PREFIX = "fmi3"
     C_COUNTS = True
@@ -284,6 +294,9 @@ class Fmi3Unit(Unit):
         # output clocks wired to other FMUs' input clocks (:meth:`watch_clock`), and those of
         # them that ticked at the last event (:meth:`take_ticks`)
         self.watched_clocks: list[int] = []
+        # FMUs whose output clocks trigger input clocks of this one: their own times (s) at
+        # communication points that are not whole nanoseconds are this FMU's there too
+        self.time_sources: list[Fmi3Unit] = []
         if self.input_clocks:  # its events are its Clocks' ticks, not a next_event_time output
             self.has_next_event_output = False
         self.event_mode = False
@@ -306,6 +319,7 @@ class Fmi3Unit(Unit):
         entered or needed, the announced event, the FMU's exact times and the clocks'
         schedules."""
         self.ticked: list[int] = []
+        self._triggered: list[int] = []  # triggered input clocks set at this point
         self._in_event = False
         self._needs_event = False
         self._announced: int | None = None
@@ -534,7 +548,25 @@ class Fmi3Unit(Unit):
     # -- stepping ----------------------------------------------------------------------------
     def _seconds(self, ticks: int) -> float:
         """The FMU's own time (s) at the communication point ``ticks``."""
-        return self._exact.get(ticks, to_seconds(ticks))
+        exact = self._exact_at(ticks)
+        return to_seconds(ticks) if exact is None else exact
+
+    def _exact_at(self, ticks: int) -> float | None:
+        """The FMU's own time (s) at ``ticks`` when it is not whole nanoseconds (its own,
+        else that of a :attr:`time_sources` FMU), else None."""
+        exact = self._exact.get(ticks)
+        for source in self.time_sources:
+            if exact is not None:
+                break
+            exact = source._exact.get(ticks)
+        return exact
+
+    def take_times_from(self, source: Fmi3Unit) -> None:
+        """``source``'s output clocks trigger input clocks of this FMU: at a communication
+        point that is not a whole nanosecond this FMU's time is ``source``'s own double, so a
+        triggered clock ticks at the source's tick time exactly."""
+        if source is not self and source not in self.time_sources:
+            self.time_sources.append(source)
 
     def _schedule(self, seconds: float, after: int) -> int:
         """The communication point (ticks, later than ``after``) of an event the FMU has at
@@ -545,7 +577,8 @@ class Fmi3Unit(Unit):
         return ticks
 
     def _do_step(self, t: int, h: int) -> int:
-        if self._exact and (t in self._exact or t + h in self._exact):
+        if (self._exact or self.time_sources) and (
+                self._exact_at(t) is not None or self._exact_at(t + h) is not None):
             start, end = self._seconds(t), self._seconds(t + h)
             size = end - start
             for _ in range(4):  # the FMU computes start + size: make it end exactly
@@ -607,7 +640,19 @@ class Fmi3Unit(Unit):
 
     def event_pending(self, ticks: int) -> bool:
         return (self._in_event or self._needs_event or self._announced == ticks
-                or ticks in self._clock_next.values())
+                or bool(self._triggered) or ticks in self._clock_next.values())
+
+    def trigger(self, vr: int) -> None:
+        """The triggered input clock ``vr`` ticks at this communication point (its source's
+        output clock did): Event Mode entered if it is not yet (fmi3EnterEventMode, FMI 3.0
+        sec. 4.2.1) and the clock activated (fmi3SetClock, sec. 2.2.8.4, in Event Mode: sec.
+        2.3.5), before this FMU's inputs are set and fmi3UpdateDiscreteStates is called
+        (:meth:`complete_event`)."""
+        if not self._in_event:
+            self.slave.enterEventMode()
+            self._in_event = True
+        self.slave.setClock([vr], [True])
+        self._triggered.append(vr)
 
     def begin_event(self, ticks: int) -> None:
         if not self._in_event:
@@ -615,8 +660,9 @@ class Fmi3Unit(Unit):
             self._in_event = True
 
     def complete_event(self, ticks: int) -> None:
-        """Handle the event at ``ticks``: the input clocks due there set (fmi3SetClock),
-        fmi3UpdateDiscreteStates until no update is needed, then the intervals asked
+        """Handle the event at ``ticks``: the input clocks due there set (fmi3SetClock; the
+        triggered ones were, by :meth:`trigger`), fmi3UpdateDiscreteStates until no update is
+        needed, then the intervals asked
         (:meth:`_asked_in_event`); a countdown or changing clock whose interval is 0 ticks at
         this event (FMI 3.0 sec. 2.2.8.2: T_interval,i >= 0): it is set and the discrete
         states updated again, until no clock ticks at interval 0."""
@@ -636,6 +682,7 @@ class Fmi3Unit(Unit):
                                   f"or changing clock still ticks again at interval 0 after "
                                   f"{MAX_EVENT_ITERATIONS} ticks")
         self._announced = None
+        self._triggered = []
         if defined:
             if not (math.isfinite(nxt) and nxt > now):
                 raise SimulationError(f"{self.name}: nextEventTime = {nxt!r} s is not after the "
