@@ -52,8 +52,8 @@ def compare(name: str, k: int) -> dict[str, object]:
     out["load_after"] = os.getloadavg()[0]
     for what in ("wall", "cpu"):
         out[f"ratio {what}"] = out[f"python {what}"] / out[f"native {what}"]
-    out["same verdicts"] = ([(r["id"], r["verdict"], r["k"]) for r in rows["python"]]
-                            == [(r["id"], r["verdict"], r["k"]) for r in rows["native"]])
+    out["same verdicts"] = ([(r.claim.id, r.verdict, r.main.k) for r in rows["python"]]
+                            == [(r.claim.id, r.verdict, r.main.k) for r in rows["native"]])
     return out
 
 

@@ -721,5 +721,5 @@ def test_a_native_campaign_gives_the_python_campaigns_verdicts(tmp_path: Path) -
     entry = load_entry("seed002")
     rows = {build: run_claims(entry, tmp_path / build, 2, workers=2, rounding=False,
                               build=build) for build in ("native", "python")}
-    assert [(r["id"], r["verdict"], r["k"]) for r in rows["native"]] == [
-        (r["id"], r["verdict"], r["k"]) for r in rows["python"]]
+    assert [(r.claim.id, r.verdict, r.main.k) for r in rows["native"]] == [
+        (r.claim.id, r.verdict, r.main.k) for r in rows["python"]]
