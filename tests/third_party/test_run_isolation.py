@@ -19,6 +19,9 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
 BOUND_S = 120.0  # s, a bound no healthy step here comes near, even on a loaded machine
+# s, a sweep point's time limit: long enough for a forked worker to reach the FMU call that
+# blocks even on a busy machine (a limit that expires before the call names no FMU)
+LIMIT_S = 10.0
 
 CRASHES = {"SegfaultInDoStep": "crashed with SIGSEGV", "AbortInDoStep": "crashed with SIGABRT",
            "ExitInDoStep": "exited with status 3"}
@@ -161,12 +164,11 @@ def test_a_sweep_point_over_its_time_limit_is_stopped(hostile_fmus, tmp_path):
 
     path = str(scenario(tmp_path, hostile_fmus["BlockInDoStep"]))
     frame = run_sweep(path, {"simulation.stop_time": [1.0]}, tmp_path / "sweep", workers=1,
-                      plot=False,
-                      time_limit=0.5)
+                      plot=False, time_limit=LIMIT_S)
     [row] = frame.to_dict("records")
     assert row["status"] == "failed"
-    assert row["error"] == ("stopped after its time limit of 0.5 s: FMU h in fmi2DoStep at "
-                            "t = 0 s")
+    assert row["error"] == (f"stopped after its time limit of {LIMIT_S:g} s: FMU h in "
+                            "fmi2DoStep at t = 0 s")
 
 
 def test_no_sweep_worker_outlives_a_killed_sweep(hostile_fmus, tmp_path):
@@ -212,8 +214,8 @@ def test_a_sweep_calls_a_third_party_fmu_only_in_its_workers(hostile_fmus, tmp_p
 
     out = tmp_path / "sweep"
     proc = cosim("sweep", str(scenario(tmp_path, hostile_fmus["BlockInInstantiate"])), "--set",
-                 "simulation.stop_time=1", "--workers", "1", "--time-limit", "0.5", "--out",
-                 str(out), "--no-plot")
+                 "simulation.stop_time=1", "--workers", "1", "--time-limit", str(LIMIT_S),
+                 "--out", str(out), "--no-plot")
     try:
         proc.communicate(timeout=BOUND_S)
     except subprocess.TimeoutExpired:
@@ -224,5 +226,5 @@ def test_a_sweep_calls_a_third_party_fmu_only_in_its_workers(hostile_fmus, tmp_p
         raise AssertionError(f"the sweep did not end within {BOUND_S} s") from None
     [row] = pd.read_csv(out / "sweep.csv").to_dict("records")
     assert row["status"] == "failed"
-    assert row["error"].startswith("stopped after its time limit of 0.5 s: FMU h in "
+    assert row["error"].startswith(f"stopped after its time limit of {LIMIT_S:g} s: FMU h in "
                                    "fmi2Instantiate"), row["error"]
