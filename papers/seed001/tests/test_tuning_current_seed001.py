@@ -2,8 +2,8 @@
 (``BEST`` in ``controllers/datadriven/tuned.py``), evaluated again by the criterion of
 ``papers/seed001/tuning.py`` (its core closed loops) on the calibration seeds, give the criterion
 the script recorded beside them. A change to a law, a plant, the route or the master that moves
-a criterion makes the picks stale: the failure says which script to run again (split from
-``tests/test_tuning_current.py``, issue 37; seed 002's and 003's checks are in their folders).
+a criterion makes the picks stale: the failure says which script to run again (seed 002's and
+003's picks are checked in their own folders' tests).
 
 Tolerance: half a unit of the recorded criterion's 4th decimal (it is printed ``%.4f``); the
 evaluation is the same deterministic computation as the script's, so on any machine it differs
