@@ -15,8 +15,11 @@
 A paper's folder ``papers/NAME/`` holds its metric plug-ins (``metrics.py``, checked as module
 ``papers.NAME.metrics``: it imports ``cosim.fmu``, ``cosim.run`` and ``cosim.papers`` only) and
 its scripts (tuning, route and data: top-level programs like ``benchmarks/``, which may import
-the project); no module, script or test imports a paper's folder (the registry loads the
-metrics by path, tests load a script by path).
+the project) and its tests (``papers/NAME/tests/``, in the suite's ``testpaths``); no module,
+script or test imports a paper's folder (the registry loads the metrics by path, tests load a
+script by path). A paper's tests import the library (``cosim``, ``plants``, ``controllers``),
+the shared test helpers (``tests.NAME``; the shared fixtures are the root ``conftest.py``'s)
+and their own folder's modules; nothing outside the paper's folder imports them.
 
 ``cosim.fmu`` (bundled into every FMU) imports nothing else of the project; ``cosim.build``
 (the builders) stands above the cores: it may import ``cosim.fmu``, ``plants`` and
@@ -93,10 +96,12 @@ def modules() -> list[tuple[Path, str]]:
 
 def scripts() -> list[Path]:
     """Every Python file that is not a module of :func:`modules`: the benchmarks, the tests
+    (``tests/``, the papers' ``papers/NAME/tests/`` and the shared fixtures, ``conftest.py``)
     and the papers' scripts (tuning, route and data)."""
     listed = {path for path, _ in modules()}
-    return sorted(path for top in ("benchmarks", "tests", "papers")
-                  for path in (ROOT / top).rglob("*.py") if path not in listed)
+    return sorted([path for top in ("benchmarks", "tests", "papers")
+                   for path in (ROOT / top).rglob("*.py") if path not in listed]
+                  + [ROOT / "conftest.py"])
 
 
 @pytest.mark.parametrize("path", [p for p, _ in modules()] + scripts(),
@@ -112,6 +117,90 @@ def test_nothing_imports_a_paper_folder(path: Path) -> None:
         assert not any(n == "papers" or n.startswith("papers.") for n in names), (
             f"{path.relative_to(ROOT)}:{node.lineno}: imports {names}: load a paper's "
             "metrics through cosim.papers (paper_metrics), a script by its path")
+
+
+# what a paper's tests may import of the project, besides their own folder's modules
+PAPER_TESTS_IMPORT = {"cosim", "plants", "controllers", "tests"}
+
+
+def paper_test_files() -> dict[Path, list[Path]]:
+    """A paper's tests folder (``papers/NAME/tests``) -> its Python files."""
+    return {folder: sorted(folder.rglob("*.py"))
+            for folder in sorted((ROOT / "papers").glob("*/tests")) if folder.is_dir()}
+
+
+def imported_names(path: Path) -> list[tuple[int, str]]:
+    """The absolute imports of ``path``: (line, dotted name), ``from a import b`` giving
+    ``a`` and ``a.b``."""
+    tree = ast.parse(path.read_text(), filename=str(path))
+    found = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            found += [(node.lineno, a.name) for a in node.names]
+        elif isinstance(node, ast.ImportFrom) and not node.level and node.module:
+            found += [(node.lineno, node.module)]
+            found += [(node.lineno, f"{node.module}.{a.name}") for a in node.names]
+    return found
+
+
+def paper_test_import_problems(path: Path, own: set[str], helpers: set[str],
+                               project: set[str]) -> list[str]:
+    """What a paper's test file ``path`` imports of the project beyond the library, the shared
+    helpers (``tests.NAME``) and ``own`` (its folder's module names): bare helper names too
+    (``tests/`` is on ``sys.path`` only when a test there ran first)."""
+    problems = []
+    for line, name in imported_names(path):
+        top = name.split(".")[0]
+        if top in own or top in PAPER_TESTS_IMPORT:
+            continue
+        if top in project or top in helpers:
+            shown = path.relative_to(ROOT) if ROOT in path.parents else path
+            problems.append(f"{shown}:{line}: imports {name}")
+    return problems
+
+
+PROJECT_TOPS = {"cosim", "plants", "controllers", "tests", "papers", "benchmarks", "conftest"}
+
+
+@pytest.mark.parametrize("folder", list(paper_test_files()),
+                         ids=lambda p: str(p.relative_to(ROOT)))
+def test_a_papers_tests_import_the_library_and_the_shared_helpers(folder: Path) -> None:
+    """``papers/NAME/tests/*.py`` import ``cosim``, ``plants``, ``controllers``, the shared
+    helpers as ``tests.NAME`` and their own folder's modules, nothing else of the project."""
+    helpers = {p.stem for p in (ROOT / "tests").rglob("*.py")}
+    own = {p.stem for p in paper_test_files()[folder]}
+    for path in paper_test_files()[folder]:
+        problems = paper_test_import_problems(path, own, helpers, PROJECT_TOPS)
+        assert not problems, "; ".join(problems) + (
+            ": a paper's tests import the library and the shared test helpers (tests.NAME)")
+
+
+def test_nothing_outside_a_papers_folder_imports_its_tests() -> None:
+    """No module or script outside ``papers/NAME/`` imports a module of its ``tests/`` (by its
+    name: the suite's import mode puts each test's folder on ``sys.path``)."""
+    folders = paper_test_files()
+    assert folders, "no paper has a tests folder"
+    for folder, files in folders.items():
+        names = {p.stem for p in files}
+        for path in [p for p, _ in modules()] + scripts():
+            if folder.parent in path.parents:
+                continue  # the paper's own folder
+            for line, name in imported_names(path):
+                assert not set(name.split(".")) & names, (
+                    f"{path.relative_to(ROOT)}:{line}: imports {name}, a test of "
+                    f"{folder.relative_to(ROOT)}: a paper's tests are its own")
+
+
+def test_the_paper_test_checker_catches_a_bare_helper_and_another_papers_test(
+        tmp_path: Path) -> None:
+    code = tmp_path / "test_x.py"
+    code.write_text("from tests.claim_rows import claim_row\nfrom claim_rows import claim_row\n"
+                    "import benchmarks.run_all\nfrom cosim import papers\nimport numpy\n"
+                    "from test_y import helper\n")
+    problems = paper_test_import_problems(code, {"test_x", "test_y"}, {"claim_rows"},
+                                          PROJECT_TOPS)
+    assert [p.rsplit(": ", 1)[1] for p in problems] == [
+        "imports claim_rows", "imports claim_rows.claim_row", "imports benchmarks.run_all"]
 
 
 @pytest.mark.parametrize(("path", "module"), modules(), ids=lambda x: str(x))

@@ -1,6 +1,6 @@
-"""A paper is a folder (issue 37): ``papers/NAME/`` holds its entry, scenarios, metric plug-ins
-and scripts; :func:`cosim.run.scenario.scenario_files` and :func:`entry_files` are the one list
-of each, and the metric registry loads ``papers/*/metrics.py`` by path."""
+"""A paper is a folder (issue 37): ``papers/NAME/`` holds its entry, scenarios, metric plug-ins,
+scripts and tests; :func:`cosim.run.scenario.scenario_files` and :func:`entry_files` are the one
+list of each, and the metric registry loads ``papers/*/metrics.py`` by path."""
 
 from __future__ import annotations
 
@@ -13,6 +13,11 @@ from cosim.reproduce.entry import entry_aliases, entry_names, load_entry
 from cosim.run import scenario as scenario_mod
 from cosim.run.scenario import ScenarioError, entry_files, find_scenario, scenario_files
 
+try:
+    import tomllib
+except ModuleNotFoundError:  # Python 3.10
+    import tomli as tomllib  # type: ignore[no-redef]
+
 ROOT = Path(__file__).resolve().parents[1]
 
 
@@ -24,6 +29,25 @@ def test_every_paper_folder_has_its_entry_scenarios_and_readme() -> None:
         shipped = sorted((folder / "scenarios").glob("*.toml"))
         assert shipped and all(p.stem.startswith(folder.name + "_") for p in shipped)
         assert f"docs/papers/{folder.name}.md" in (folder / "README.md").read_text()
+
+
+def test_a_papers_tests_are_in_its_folder_and_in_the_suite() -> None:
+    """A paper's own tests live in ``papers/NAME/tests/`` (issue 37), files named ``test_*.py``
+    (a name no other folder of the suite uses: the import mode puts each test's folder on
+    ``sys.path`` and imports it by its name), collected by ``python -m pytest`` (``papers`` in
+    ``testpaths``) and named in the paper's README."""
+    options = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["pytest"]
+    assert options["ini_options"]["testpaths"] == ["tests", "papers"]
+    with_tests = sorted(p.parent.name for p in (ROOT / "papers").glob("*/tests") if p.is_dir())
+    assert with_tests == [f"seed00{n}" for n in range(1, 5)]
+    for name in with_tests:
+        folder = ROOT / "papers" / name
+        files = sorted((folder / "tests").glob("*.py"))
+        assert files and all(p.name.startswith("test_") for p in files), files
+        assert f"python -m pytest papers/{name}/tests" in (folder / "README.md").read_text()
+    names = [p.name for p in [*ROOT.joinpath("tests").rglob("test_*.py"),
+                              *ROOT.joinpath("papers").glob("*/tests/**/test_*.py")]]
+    assert len(names) == len(set(names)), sorted(n for n in set(names) if names.count(n) > 1)
 
 
 def test_names_and_aliases_find_the_moved_files() -> None:

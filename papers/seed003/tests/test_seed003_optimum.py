@@ -20,7 +20,7 @@ from cosim.optimal.regimes import REGIME_NAMES
 from cosim.optimal.switching import SLSQP_FTOL
 from plants.route import load_route
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[3]  # the repository (papers/seed003/tests/..)
 OPTIMA = {"service_brake": optimum_dir_in(ROOT) / "seed003_crh3_optimum_service_brake.csv",
           "plant_brake": optimum_dir_in(ROOT) / "seed003_crh3_optimum_plant_brake.csv"}
 ENERGY = re.compile(r"regenerated\) ([0-9.e+-]+) J")

@@ -29,9 +29,8 @@ try:
 except ModuleNotFoundError:  # Python 3.10
     import tomli as tomllib  # type: ignore[no-redef]
 
-ROOT = Path(__file__).resolve().parents[1]
-_spec = importlib.util.spec_from_file_location("seed002_tuning",
-                                               ROOT / "papers" / "seed002" / "tuning.py")
+PAPER = Path(__file__).resolve().parents[1]  # papers/seed002
+_spec = importlib.util.spec_from_file_location("seed002_tuning", PAPER / "tuning.py")
 tuning = importlib.util.module_from_spec(_spec)
 sys.modules["seed002_tuning"] = tuning
 _spec.loader.exec_module(tuning)

@@ -1,5 +1,7 @@
-"""Shared fixtures: FMUs are built once per session (only those missing or out of date), the
-native FMUs once per test run."""
+"""Shared fixtures of the suite, for ``tests/`` and each paper's ``papers/NAME/tests/`` (the
+rootdir's conftest, so a run of either folder alone sees them too): FMUs are built once per
+session (only those missing or out of date), the native FMUs once per test run. The shared test
+helpers are modules of ``tests/`` (``from tests.claim_rows import claim_row``)."""
 
 from __future__ import annotations
 

@@ -15,13 +15,13 @@ import pytest
 from controllers.common.freight_blending import BlendingParams, FreightBlending
 from plants.route import KMH, load_route
 
-ROOT = Path(__file__).resolve().parent.parent
+PAPER = Path(__file__).resolve().parents[1]  # papers/seed002
+ROOT = PAPER.parents[1]
 
 
 def _script():
     spec = importlib.util.spec_from_file_location("make_freight_20km",
-                                                  ROOT / "papers" / "seed002" /
-                                                  "make_freight_20km.py")
+                                                  PAPER / "make_freight_20km.py")
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module
