@@ -780,6 +780,10 @@ def reproduce(
     build: Annotated[str | None, typer.Option(
         "--build", help="native: the native C builds of the FMUs that have one (the others "
         "Python); python: every FMU's Python build (default: the entry's build)")] = None,
+    run_files: Annotated[str, typer.Option(
+        "--run-files", help="what each table run writes into runs/<run>/: figures "
+        "(summary.json; results.csv where a figure draws the run) or all (also results.csv "
+        "and plot of every run, as `cosim run`)")] = "figures",
 ) -> None:
     """Reproduce a paper's results and test its claims.
 
@@ -791,6 +795,7 @@ def reproduce(
     from cosim.reproduce.entry import ReproduceError, entry_names, resolve_name
     from cosim.reproduce.page import redraw_entry, reproduce_all
     from cosim.reproduce.page import reproduce as reproduce_entry
+    from cosim.reproduce.run import RUN_FILES
     from cosim.run import interrupt, runner
     from cosim.run.master import SimulationError
     from cosim.run.results import PLOT_FORMATS, OutputError, check_destination
@@ -801,6 +806,8 @@ def reproduce(
             raise OutputError(f"--format {plot_format}: one of {', '.join(PLOT_FORMATS)}")
         if build is not None and build not in BUILDS:
             raise ReproduceError(f"--build {build}: one of {', '.join(BUILDS)}")
+        if run_files not in RUN_FILES:
+            raise ReproduceError(f"--run-files {run_files}: one of {', '.join(RUN_FILES)}")
         runner.check_workers(workers, scheduler)
         if out_dir is not None:
             check_destination(out_dir)
@@ -812,12 +819,13 @@ def reproduce(
                                     else out_dir / each, plot_format)
         elif name == "all":
             path = reproduce_all(out_dir, workers, seeds, not no_rounding, scheduler,
-                                 plot_format, build, resume)
+                                 plot_format, build, resume, run_files)
         else:
             if not Path(name).is_file():
                 name = resolve_name(name)
             path = reproduce_entry(name, out_dir, workers, seeds, not no_rounding,
-                                   scheduler, plot_format, resume=resume, build=build)
+                                   scheduler, plot_format, resume=resume, build=build,
+                                   run_files=run_files)
     except interrupt.Interrupted as err:
         console.print(f"[bold yellow]{escape(str(err))}[/]", highlight=False, soft_wrap=True)
         raise typer.Exit(interrupt.EXIT_INTERRUPTED) from None

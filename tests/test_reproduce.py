@@ -18,6 +18,10 @@ from cosim.reproduce.tables import ranking_markdown, ranking_rows, summary_value
 from cosim.run.figures import speed_class_errors
 from cosim.run.simulate import run_scenario
 
+# measurements of a run, not results of it (wall, CPU and solver times)
+MEASURED_PREFIXES = ("wall_time_s", "real_time_factor", "fmu_wall_time_s", "qp_solve_time_",
+                     "qp_cpu_time_", "host")
+
 ENTRY = """
 title = "Test entry"
 notes = "why we differ"
@@ -723,3 +727,114 @@ def test_a_native_campaign_gives_the_python_campaigns_verdicts(tmp_path: Path) -
                               build=build) for build in ("native", "python")}
     assert [(r.claim.id, r.verdict, r.main.k) for r in rows["native"]] == [
         (r.claim.id, r.verdict, r.main.k) for r in rows["python"]]
+
+
+def test_each_table_run_writes_what_the_record_reads_unless_all_is_asked(
+        built_fmus, tmp_path: Path) -> None:
+    """``--run-files figures`` (the default): a run a figure draws keeps its results.csv (the
+    record's series are read from it), a run no figure draws and every later repetition only
+    its summary.json, no run its plot; ``all``: every run's files as ``cosim run`` writes
+    them. The table is the same either way."""
+    path = tmp_path / "entry.toml"
+    path.write_text(ENTRY.replace('set = { "controller.kp" = 30.0 }',
+                                  'set = { "controller.kp" = 30.0 }\nrepeat = 2')
+                    + 'runs = ["PID"]\n')  # the figure draws "PID" only
+    reproduce(str(path), tmp_path / "lean", workers=1)
+    files = {p.relative_to(tmp_path / "lean" / "runs").as_posix()
+             for p in (tmp_path / "lean" / "runs").rglob("*") if p.is_file()}
+    assert files == {"pid/results.csv", "pid/results.units.json", "pid/summary.json",
+                     "pid_kp_30/summary.json", "pid_kp_30/repeat_02/summary.json"}
+    reproduce(str(path), tmp_path / "all", workers=1, run_files="all")
+    for run in ("pid", "pid_kp_30", "pid_kp_30/repeat_02"):
+        assert {p.name for p in (tmp_path / "all" / "runs" / run).iterdir() if p.is_file()} \
+            == {"results.csv", "results.units.json", "summary.json", "plot.png"}
+    lean, full = (pd.read_csv(tmp_path / out / "table.csv") for out in ("lean", "all"))
+    measured = lean.metric.str.startswith(MEASURED_PREFIXES)
+    pd.testing.assert_frame_equal(lean[~measured], full[~measured], check_exact=True)
+    with pytest.raises(ReproduceError, match="--run-files every: one of figures, all"):
+        reproduce(str(path), tmp_path / "bad", workers=1, run_files="every")
+
+
+def _lean_cases() -> list[tuple[str, str]]:
+    """(entry, run) of each distinct scenario the shipped entries' table runs use (its first
+    run)."""
+    seen: dict[str, tuple[str, str]] = {}
+    for name in entry_names():
+        for run in load_entry(name).runs:
+            seen.setdefault(run.scenario, (name, run.name))
+    return sorted(seen.values())
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("entry", "run"), _lean_cases())
+def test_a_run_recording_only_what_its_summary_reads_gives_the_same_summary(
+        entry: str, run: str) -> None:
+    """A table run or claim member that records only what its summary reads
+    (:func:`cosim.reproduce.members.member_scenario`, how the campaigns run them) gives the
+    summary of the same run recording every ``[record]`` variable, bit for bit but for the
+    measured times: every metric, the paper's plug-ins among them, finds what it reads."""
+    from cosim.reproduce.builds import build_overrides
+    from cosim.reproduce.members import member_scenario
+    from cosim.run.scenario import load_scenario
+    from cosim.run.simulate import ensure_built
+
+    spec = next(r for r in load_entry(entry).runs if r.name == run)
+    overrides = {**build_overrides(spec.scenario, spec.overrides, load_entry(entry).build),
+                 **spec.overrides}
+    sc = load_scenario(spec.scenario, overrides)
+    ensure_built(sc)
+    full = run_scenario(sc, build=False, plot=False).summary
+    lean = run_scenario(member_scenario(sc), build=False, plot=False).summary
+    def results(summary: dict[str, Any]) -> str:  # NaN equals NaN, every float by its repr
+        return json.dumps({k: v for k, v in summary.items()
+                           if not k.startswith(MEASURED_PREFIXES)}, sort_keys=True, default=repr)
+
+    assert results(lean) == results(full)
+
+
+def _without_measured(value: Any, columns: list[str] | None = None) -> Any:
+    """``value`` (a summary, or a sweep's rows under ``columns``) without the measured times,
+    as JSON text in which NaN equals NaN and each float is its repr."""
+    if columns is not None:  # a sweep: rows of cells
+        keep = [i for i, c in enumerate(columns) if not c.startswith(MEASURED_PREFIXES)]
+        value = [[row[i] for i in keep] for row in value]
+    elif isinstance(value, dict):
+        if "columns" in value and "rows" in value:
+            return _without_measured(value["rows"], value["columns"])
+        value = {k: v for k, v in value.items() if not k.startswith(MEASURED_PREFIXES)}
+    return json.dumps(value, sort_keys=True, default=repr)
+
+
+@pytest.mark.slow
+def test_a_small_k_campaign_gives_the_published_records_results_job_for_job(
+        tmp_path: Path) -> None:
+    """The published page's record (``docs/papers/seed000/record/``, K = 20) was made by the
+    code of its commit; this tree's campaign at K = 2 with both rounding paths gives every job
+    both records hold (every table run, the sweep, the first two members of every claim on
+    every path) the same result bit for bit, the measured times left out, and its table
+    (every metric but the measured ones) equals the one redrawn from the published record.
+    Skipped only where the page is not current (`cosim docs --check` fails then)."""
+    import shutil
+
+    from cosim.reproduce.record import load
+    from cosim.run.provenance import simulation_digest
+
+    published = Path(__file__).resolve().parent.parent / "docs" / "papers" / "seed000"
+    before = load(published)
+    if before.simulation != simulation_digest("seed000", before.build):
+        pytest.skip("the seed000 page was made from other simulation inputs")
+    reproduce("seed000", tmp_path / "now", seeds=2, echo=False)
+    now = load(tmp_path / "now")
+    assert now.build == before.build
+    common = now.jobs.keys() & before.jobs.keys()
+    assert len(common) == len(now.jobs)  # every job of K = 2 is one of K = 20's
+    differ = [ident for ident in sorted(common, key=repr)
+              if _without_measured(now.results[ident]) != _without_measured(
+                  before.results[ident])]
+    assert not differ, differ[:5]
+    shutil.copytree(published / "record", tmp_path / "published" / "record")
+    redraw_entry("seed000", tmp_path / "published")
+    tables = [pd.read_csv(tmp_path / out / "table.csv") for out in ("now", "published")]
+    kept = [t[~t.metric.str.startswith(MEASURED_PREFIXES)].reset_index(drop=True)
+            for t in tables]
+    pd.testing.assert_frame_equal(kept[0], kept[1], check_exact=True)

@@ -254,16 +254,17 @@ def statements_markdown(statements: list[Statement], rows: list[ClaimRow]) -> st
 def reproduce(name: str, out_dir: str | Path | None = None, workers: int | None = None,
               seeds: int | None = None, rounding: bool = True, scheduler: str | None = None,
               plot_format: str = "png", echo: bool = True, resume: bool = False,
-              build: str | None = None) -> Path:
+              build: str | None = None, run_files: str = "figures") -> Path:
     """:func:`reproduce_page`'s file."""
     return reproduce_page(name, out_dir, workers, seeds, rounding, scheduler, plot_format,
-                          echo, resume, build).table
+                          echo, resume, build, run_files).table
 
 
 def reproduce_page(name: str, out_dir: str | Path | None = None, workers: int | None = None,
                    seeds: int | None = None, rounding: bool = True,
                    scheduler: str | None = None, plot_format: str = "png", echo: bool = True,
-                   resume: bool = False, build: str | None = None) -> Page:
+                   resume: bool = False, build: str | None = None,
+                   run_files: str = "figures") -> Page:
     """Run one entry (:func:`simulate`), keep its record (``record/``,
     :mod:`cosim.reproduce.record`) and write everything made of it (:func:`evaluate`): the tables,
     sweeps, figures (in ``plot_format``: png at 200 dpi with its svg beside it, svg or pdf;
@@ -275,17 +276,19 @@ def reproduce_page(name: str, out_dir: str | Path | None = None, workers: int | 
     holds (same specification, simulation inputs, K, path and build) are not run again.
     ``build``: "native" runs the catalog FMUs' native C builds where they exist
     (:func:`cosim.reproduce.builds.build_overrides`), "python" every FMU's Python build, None the
-    entry's ``build``."""
+    entry's ``build``. ``run_files``: what each table run writes under ``runs/``
+    (:func:`cosim.reproduce.run.run_entry`)."""
     entry = load_entry(name)
     out = Path(out_dir) if out_dir is not None else Path("runs") / "reproduce" / entry.name
     with locked_destination(out):
         return _reproduce_into(entry, name, out, workers, seeds, rounding, scheduler,
-                               plot_format, echo, resume, build)
+                               plot_format, echo, resume, build, run_files)
 
 
 def _reproduce_into(entry: Entry, name: str, out: Path, workers: int | None,
                     seeds: int | None, rounding: bool, scheduler: str | None,
-                    plot_format: str, echo: bool, resume: bool, build: str | None) -> Page:
+                    plot_format: str, echo: bool, resume: bool, build: str | None,
+                    run_files: str = "figures") -> Page:
     """:func:`reproduce_page` into the folder ``out``, which this process holds locked."""
     inputs = out / INPUTS_FILE
     inputs.unlink(missing_ok=True)  # a folder being rewritten vouches for no inputs
@@ -302,7 +305,7 @@ def _reproduce_into(entry: Entry, name: str, out: Path, workers: int | None,
             print(f"{name}: nothing to resume ({err}): everything runs", file=sys.stderr,
                   flush=True)
     record = simulate(entry, out, workers, seeds, rounding, scheduler, plot_format, previous,
-                      build)
+                      build, run_files)
     save(record, out)
     # the page is made from the record as stored (its series at SERIES_DIGITS digits), so
     # --redraw makes it again byte for byte
@@ -390,13 +393,15 @@ def claims_summary(claims: dict[str, list[ClaimRow]]) -> str:
 def reproduce_all(out_dir: str | Path | None = None, workers: int | None = None,
                   seeds: int | None = None, rounding: bool = True,
                   scheduler: str | None = None, plot_format: str = "png",
-                  build: str | None = None, resume: bool = False) -> Path:
+                  build: str | None = None, resume: bool = False,
+                  run_files: str = "figures") -> Path:
     """Every entry; one ``REPRODUCTION.md`` with the claims held / failed / inconclusive per
     paper and each entry's tables and figures."""
     out = Path(out_dir) if out_dir is not None else Path("runs") / "reproduce"
     with locked_destination(out):
         pages = {name: reproduce_page(name, out / name, workers, seeds, rounding, scheduler,
-                                      plot_format, resume=resume, build=build)
+                                      plot_format, resume=resume, build=build,
+                                      run_files=run_files)
                  for name in entry_names()}
         parts = ["# Reproduced results", "", "Made by `cosim reproduce all`; each section by "
                  "`cosim reproduce NAME` from the entry `papers/NAME/entry.toml`.", "",

@@ -4,6 +4,7 @@ claims' members (:mod:`cosim.reproduce.members`), run through :mod:`cosim.run.ru
 
 from __future__ import annotations
 
+import json
 import sys
 from pathlib import Path
 from typing import Any
@@ -12,23 +13,46 @@ import numpy as np
 
 from cosim.reproduce.builds import build_overrides
 from cosim.reproduce.entry import FIGURE_KINDS, Entry, Figure, ReproduceError, shipped, slug
-from cosim.reproduce.members import host_load, member_jobs, simulate_claims, with_host
+from cosim.reproduce.members import (
+    MEMBER_INSTANCES,
+    host_load,
+    member_jobs,
+    member_scenario,
+    simulate_claims,
+    with_host,
+)
 from cosim.reproduce.record import Job, Overrides, Record, Summary, known, save, series_name
 from cosim.reproduce.series import record_series, run_scenarios
 from cosim.run import runner
 from cosim.run.provenance import simulation_digest
+from cosim.run.results import _json_safe as json_safe
 from cosim.run.scenario import load_scenario
 from cosim.run.simulate import ensure_built, run_scenario
 from cosim.run.sweep import parse_grid, run_sweep, warm_up_for
 
+RUN_FILES = ("figures", "all")  # --run-files: what each table run writes into runs/<run>/
 
-def _run_one(scenario: str, overrides: Overrides, out_dir: str,
+
+def _run_one(scenario: str, overrides: Overrides, out_dir: str, write: str,
              plot_format: str = "png") -> Summary:
-    """One run of ``scenario`` with ``overrides`` into ``out_dir`` (a task): its summary."""
+    """One table run of ``scenario`` with ``overrides`` (a task) on this worker's FMU
+    instances (:data:`cosim.reproduce.members.MEMBER_INSTANCES`): its summary, with into
+    ``out_dir`` per ``write``: "all" results.csv, results.units.json, summary.json and the
+    run's plot (as ``cosim run`` writes them); "csv" the same without the plot; "summary"
+    summary.json alone, the run recording only what its summary reads
+    (:func:`cosim.reproduce.members.member_scenario`)."""
     before = host_load()
-    result = run_scenario(scenario, overrides=overrides, out_dir=out_dir, build=False,
-                          plot_format=plot_format)
-    return with_host(result.summary, before)
+    sc = load_scenario(scenario, overrides)
+    if write == "summary":
+        summary = run_scenario(member_scenario(sc), build=False, plot=False,
+                               pool=MEMBER_INSTANCES).summary
+        folder = Path(out_dir)
+        folder.mkdir(parents=True, exist_ok=True)
+        (folder / "summary.json").write_text(json.dumps(json_safe(summary), indent=2) + "\n")
+    else:
+        summary = run_scenario(sc, out_dir=out_dir, build=False, plot=write == "all",
+                               plot_format=plot_format, pool=MEMBER_INSTANCES).summary
+    return with_host(summary, before)
 
 
 def _merge_repeats(summaries: list[Summary]) -> Summary:
@@ -85,18 +109,24 @@ def sweep_jobs(entry: Entry, build: str = "python") -> list[Job]:
 def run_entry(entry: Entry, out_dir: Path, workers: int | None = None,
               scheduler: str | None = None, plot_format: str = "png",
               record: Record | None = None, previous: Record | None = None,
-              build: str = "python") -> dict[str, Summary]:
+              build: str = "python", run_files: str = "figures") -> dict[str, Summary]:
     """Run every run of ``entry`` on ``build`` with :func:`cosim.run.runner.run_tasks`
     (``workers`` processes or the Dask ``scheduler``; a run with ``repeat = k`` k times,
     repetitions 2.. under ``runs/<run>/repeat_NN``); returns run name -> summary (medians and
     ``repeats`` for a repeated run), each repetition's summary added to ``record``; a run
     ``previous`` holds with the same specification is taken from it, not run again. A failed
     run raises
-    :class:`ReproduceError` naming it, after the others finished."""
+    :class:`ReproduceError` naming it, after the others finished. ``run_files`` (one of
+    :data:`RUN_FILES`): "figures" writes results.csv only for the first repetition of a run a
+    figure draws (the record's series are read from it) and summary.json for every run;
+    "all" every run's results.csv and plot in ``plot_format`` too."""
     jobs = run_jobs(entry, build)
     for job in jobs:  # bad overrides fail here, before anything runs; build once
         if job.key[1] == 0:
             ensure_built(load_scenario(job.scenario, job.overrides))
+    if run_files not in RUN_FILES:
+        raise ReproduceError(f"--run-files {run_files}: one of {', '.join(RUN_FILES)}")
+    drawn = set(figure_runs(entry, FIGURE_KINDS))
     tasks = []
     done: dict[Any, Summary] = {}
     for job in jobs:
@@ -106,8 +136,10 @@ def run_entry(entry: Entry, out_dir: Path, workers: int | None = None,
         name, k = job.key
         base = out_dir / "runs" / slug(name)
         out = base if k == 0 else base / f"repeat_{k + 1:02d}"
-        tasks.append(runner.Task(job.key, _run_one,
-                                 (job.scenario, dict(job.overrides), str(out), plot_format)))
+        write = ("all" if run_files == "all" else
+                 "csv" if k == 0 and name in drawn else "summary")
+        tasks.append(runner.Task(job.key, _run_one, (job.scenario, dict(job.overrides),
+                                                     str(out), write, plot_format)))
     errors: list[tuple[Any, BaseException]] = []
     runner.run_tasks(tasks, lambda t, summary: done.__setitem__(t.key, summary),
                      lambda t, err: errors.append((t.key, err)), workers, scheduler,
@@ -156,13 +188,15 @@ def figure_runs(entry: Entry, kinds: tuple[str, ...]) -> dict[str, list[Figure]]
 
 def simulate(entry: Entry, out: Path, workers: int | None = None, seeds: int | None = None,
              rounding: bool = True, scheduler: str | None = None, plot_format: str = "png",
-             previous: Record | None = None, build: str | None = None) -> Record:
+             previous: Record | None = None, build: str | None = None,
+             run_files: str = "figures") -> Record:
     """Every simulation ``entry`` needs (its runs, sweeps and claims' members), through
     :mod:`cosim.run.runner`; the record of their results and of the series the figures draw.
     A job ``previous`` holds with the same specification is taken from it, not run again,
     where ``previous`` ran with this tree's simulation inputs, K, rounding path and ``build``
     (the catalog FMUs' native C builds where they exist, or every FMU's Python build; None:
-    the entry's ``build``; the run folders under ``out`` then hold its files)."""
+    the entry's ``build``; the run folders under ``out`` then hold its files). ``run_files``:
+    what each table run writes (:func:`run_entry`)."""
     k = claims_k(entry, seeds)
     build = build or entry.build
     digest = simulation_digest(entry.name, build) if shipped(entry) else ""
@@ -176,7 +210,8 @@ def simulate(entry: Entry, out: Path, workers: int | None = None, seeds: int | N
         print(f"{entry.name}: the record under {out} has other {', '.join(why)}: nothing of it "
               "is reused", file=sys.stderr, flush=True)
         previous = None
-    run_entry(entry, out, workers, scheduler, plot_format, record, previous, build)
+    run_entry(entry, out, workers, scheduler, plot_format, record, previous, build,
+              run_files)
     save(record, out)  # a checkpoint: an interrupted run resumes from here (--resume)
     record_run_series(entry, out, record)
     for job in sweep_jobs(entry, build):
