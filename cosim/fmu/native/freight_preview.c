@@ -288,12 +288,4 @@ static double accel_demand(void* law, ft_state* b, double t, double v, double s,
     return u - (n_air ? c->air[0] : 0.0);
 }
 
-void law_outputs(const law_core* c, double* out) { ft_outputs(&c->st.base, out); }
-
-int law_compute(law_core* c, double t, const ato_values* p, double* out, char* err, size_t n) {
-    if (!ft_compute(&c->base, &c->st.base, t, p->v[ATO_VR_v], p->v[ATO_VR_s], accel_demand, c,
-                    err, n))
-        return 0;
-    law_outputs(c, out);
-    return 1;
-}
+FT_LAW_COMPUTE(accel_demand)
