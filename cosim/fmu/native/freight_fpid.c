@@ -42,11 +42,8 @@ law_core* law_make(const ato_values* p, double t0, char* err, size_t n) {
                  ato_repr(v[ATO_VR_fuzzy_nodes], a), FZ_NODES);
         return NULL;
     }
-    law_core* c = calloc(1, sizeof *c);
-    if (!c) {
-        snprintf(err, n, "out of memory");
-        return NULL;
-    }
+    law_core* c = ft_new(sizeof *c, err, n);
+    if (!c) return NULL;
     c->sample_time = v[ATO_VR_sample_time];
     c->kp = v[ATO_VR_kp];
     c->ki = v[ATO_VR_ki];

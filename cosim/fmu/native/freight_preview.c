@@ -92,11 +92,8 @@ void law_free(law_core* c) {
 law_core* law_make(const ato_values* p, double t0, char* err, size_t n) {
     (void)t0;
     const double* v = p->v;
-    law_core* c = calloc(1, sizeof *c);
-    if (!c) {
-        snprintf(err, n, "out of memory");
-        return NULL;
-    }
+    law_core* c = ft_new(sizeof *c, err, n);
+    if (!c) return NULL;
     char path[4096], a[40], b[40];
     snprintf(path, sizeof path, "%s/preview/default.gains", p->resources);
     /* the design the gains were computed for (FreightPreview.NATIVE_DESIGN) */

@@ -31,11 +31,8 @@ struct law_core {
 law_core* law_make(const ato_values* p, double t0, char* err, size_t n) {
     (void)t0;
     const double* v = p->v;
-    law_core* c = calloc(1, sizeof *c);
-    if (!c) {
-        snprintf(err, n, "out of memory");
-        return NULL;
-    }
+    law_core* c = ft_new(sizeof *c, err, n);
+    if (!c) return NULL;
     c->sample_time = v[ATO_VR_sample_time];
     c->lam = v[ATO_VR_lambda];
     c->q = v[ATO_VR_q];

@@ -67,6 +67,8 @@ void ft_reset(ft_state* st);
 int ft_compute(const ft_const* c, ft_state* st, double t, double v, double s, ft_demand law,
                void* law_data, char* err, size_t err_size);
 void ft_outputs(const ft_state* st, double* out);
+/* a freight law's core: size bytes, zeroed; NULL after "out of memory" in err */
+void* ft_new(size_t size, char* err, size_t err_size);
 /* the end of a law's law_make: the shared part made (ft_make) and the state st reset; 0 after
  * a message in err, the shared part freed */
 int ft_start(ft_const* c, ft_state* st, const ato_values* p, char* err, size_t err_size);
