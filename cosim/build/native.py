@@ -12,11 +12,12 @@ computes for its C twin (EMPC region tables, preview gains, the seed-003 tracker
 target profiles, generated headers of model data) the core declares itself: its
 ``native_data(identifier, shipped)`` (path in the FMU -> text), which the builder asks of the
 catalog's core of every model (:func:`core_data`), handing it the parameter values the project
-ships for any FMU (:func:`shipped_values`). A controller is its law's C file linked with
-``ato_controller.c``, the C twin of the sampled-controller timing of :mod:`cosim.fmu.slave`.
-Every plant links the generic plant backend ``ato_plant_backend.c``; BrakeDelayTrain,
-Crh3Train and the Emus read the step profiles of :data:`STEP_PROFILES` from
-``<name>.profiles``.
+ships for any FMU (:func:`shipped_values`). Every native FMU links the runtime
+``ato_runtime.c``, the C twin of :mod:`cosim.fmu.slave`'s CoreSlave, under a policy: a
+controller is its law's C file linked with ``ato_controller.c``, the sampled controllers'
+event policy (the timing of :mod:`cosim.fmu.slave`); every plant links the plants' stepping
+policy ``ato_plant_backend.c``; BrakeDelayTrain, Crh3Train and the Emus read the step
+profiles of :data:`STEP_PROFILES` from ``<name>.profiles``.
 
 The FMU holds ``binaries/linux64/<id>.so`` (gcc), ``binaries/win64/<id>.dll`` when the
 mingw-w64 cross compiler ``x86_64-w64-mingw32-gcc`` is installed, and ``sources/`` (the C
@@ -113,14 +114,17 @@ class NativeSpec:
         return NATIVE_FMU_DIR / f"{self.identifier}.fmu"
 
 
-# the sampled-controller backend of a law and what the laws share
-CONTROLLER = ("ato_controller.c", "ato_law.h", "ato_law_common.h", "ato_math.h")
+# the runtime under every native FMU (ato_runtime.c, the twin of CoreSlave: variables, their
+# checks, logging, FMU-state image, the FMI 2-shaped table); a backend is a policy on it
+RUNTIME = ("ato_runtime.c", "ato_runtime.h")
+# the sampled controllers' event policy over a law and what the laws share
+CONTROLLER = (*RUNTIME, "ato_controller.c", "ato_law.h", "ato_law_common.h", "ato_math.h")
 BUNDLED = ("ato_bundled.c", "ato_bundled.h")  # bundled data files opened by name
 # reference profiles (resources/references)
 PROFILE = ("ato_profile.c", "ato_profile.h", *BUNDLED)
-# the generic plant backend (ato_plant_backend.c: FMI 2-shaped functions, variables, FMU
+# the plants' stepping policy (ato_plant_backend.c: the core stepped, its part of the FMU
 # state) and the plant helpers (ato_plant.c: route profiles, envelope, resistance)
-PLANT_BACKEND = ("ato_plant_backend.h", "ato_plant_backend.c", "ato_math.h")
+PLANT_BACKEND = (*RUNTIME, "ato_plant_backend.h", "ato_plant_backend.c", "ato_math.h")
 PLANT_SHARED = (*PLANT_BACKEND, "ato_plant.h", "ato_plant.c", *BUNDLED)
 # numpy's default_rng(seed words).standard_normal in C (seeded disturbances)
 NUMPY_RANDOM = ("ato_numpy_random.h", "ato_numpy_random.c")
@@ -175,7 +179,8 @@ NATIVE: dict[str, NativeSpec] = {
                               (*CONTROLLER, *GRADE, "ato_linalg.c", "ato_linalg.h"),
                               solvers=("daqp",), defines=(("ATO_STOP_MPC_KIND", kind),))
        for kind, identifier in enumerate(("StopMpc", "StopRmpc", "StopRsmpc"))},
-    "FreightTrain": NativeSpec("FreightTrain", "freight.c", ("freight_kernel.c",),
+    "FreightTrain": NativeSpec("FreightTrain", "freight.c",
+                               ("freight_kernel.c", "freight_kernel.h"),
                                ("speed_limit", "additional"),
                                shared=(*PLANT_BACKEND, *NUMPY_RANDOM, *BUNDLED),
                                generated=("ato_numpy_normal.h",)),

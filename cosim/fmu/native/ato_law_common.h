@@ -64,4 +64,52 @@ static inline double ato_pid_step(double* integral, const ato_pid_gains* g, doub
     return u;
 }
 
+/* controllers/pid's SpeedPid (speed_pid.c, freight_pid.c): its parameters and its state (the
+ * state's layout is part of the laws' FMU state) */
+typedef struct {
+    ato_pid_gains pid;
+    double derivative_filter, accel_min, accel_max, rate_limit;
+} ato_speed_pid;
+typedef struct {
+    double integral, prev_speed, derivative, demand, error;
+    int has_prev;
+} ato_speed_pid_state;
+
+/* SpeedPid.update: the demand within [accel_min, accel_max], [a_lo, a_hi] and the rate limit
+ * (inconsistent limits: the upper one wins), from the feedforward ff, PID on e = v_ref - v with
+ * the derivative on the measured speed (first-order filter) and conditional integration */
+static inline double ato_speed_pid_update(const ato_speed_pid* c, ato_speed_pid_state* st,
+                                          double v, double v_ref, double ff, double a_lo,
+                                          double a_hi) {
+    double T = c->pid.sample_time;
+    double lo = ato_max(c->accel_min, a_lo);
+    double hi = ato_min(c->accel_max, a_hi);
+    lo = ato_min(lo, hi); /* inconsistent limits: the upper one wins */
+    if (c->rate_limit > 0) {
+        double step = c->rate_limit * T;
+        double lo2 = ato_min(ato_max(lo, st->demand - step), hi);
+        double hi2 = ato_max(ato_min(hi, st->demand + step), lo);
+        lo = lo2;
+        hi = hi2;
+    }
+    double error = v_ref - v;
+    if (st->has_prev) {
+        double raw = (v - st->prev_speed) / T;
+        if (c->derivative_filter > 0) {
+            double alpha = T / (c->derivative_filter + T);
+            st->derivative += alpha * (raw - st->derivative);
+        } else {
+            st->derivative = raw;
+        }
+    }
+    st->prev_speed = v;
+    st->has_prev = 1;
+    /* - kd D added as + (-(kd D)): the same double */
+    double demand = ato_pid_step(&st->integral, &c->pid, ff, -(c->pid.kd * st->derivative),
+                                 error, lo, hi);
+    st->demand = demand;
+    st->error = error;
+    return demand;
+}
+
 #endif

@@ -294,6 +294,6 @@ static int load(void* core, ato_rd* r) {
 }
 
 const ato_model ATO_MODEL = {
-    ATO_MODEL_IDENTIFIER, ATO_GUID, "ATO-Crh3Train-state-1", ATO_N_VARS, ATO_VARS,
+    {ATO_MODEL_IDENTIFIER, ATO_GUID, "ATO-Crh3Train-state-1", ATO_N_VARS, ATO_VARS},
     create, destroy, step, outputs, save, load,
 };

@@ -628,6 +628,7 @@ static int load(void* core, ato_rd* r) {
 }
 
 const ato_model ATO_MODEL = {
-    ATO_MODEL_IDENTIFIER, ATO_GUID, "ATO-" ATO_MODEL_IDENTIFIER "-state-1", ATO_N_VARS,
-    ATO_VARS, create, destroy, step, outputs, save, load,
+    {ATO_MODEL_IDENTIFIER, ATO_GUID, "ATO-" ATO_MODEL_IDENTIFIER "-state-1", ATO_N_VARS,
+     ATO_VARS},
+    create, destroy, step, outputs, save, load,
 };

@@ -30,26 +30,12 @@
 #include "ato_plant_backend.h"
 #include "ato_model_decl.h"
 #include "ato_numpy_random.h"
+#include "freight_kernel.h"
 
 #define BEFORE_START (-(1LL << 62))
 #define GRAVITY 9.81
 #define KMH (1.0 / 3.6)
 #define MAX_PRESSURE_OUTPUTS 64
-
-/* freight_kernel.c */
-enum { C_STICTION, C_K, C_C, C_SLACK, C_MODEL, C_TAU, C_RAMP_RATE, C_F_MAX, C_P_MAX, C_ED_MAX,
-       C_ED_P_MAX, C_ED_FADE, C_PMAX, C_FILL_T, C_FILL_E, C_REL_T, C_REL_E, C_R_FULL, C_R_MIN,
-       N_CONST };
-enum { S_TRACTION, S_ENERGY, S_PEAK_DRAFT, S_PEAK_BUFF, S_ACCEL, S_FIRST, S_HELD, N_SCALARS };
-#define N_WORK 8
-void freight_steps(int64_t n, int64_t n_sub, int64_t K, int64_t nx, double *x, double *v,
-                   double *pres, double *sc, const double *hs, const double *t0s,
-                   const double *t1s, const double *demands, const double *arrivals,
-                   const double *values, const double *m_eff, const double *length,
-                   const double *res_a, const double *res_b, const double *res_c,
-                   const double *wpk, const double *brake_scale, const double *xs,
-                   const double *cum, const double *slopes, int64_t *hint_f, int64_t *hint_r,
-                   const double *cp, double *work, double *targets);
 
 typedef struct { int64_t tick; double value; } tcmd;   /* traction demand history (N) */
 typedef struct { double t, value; } bcmd;             /* brake-pipe history (s, Pa) */
@@ -505,6 +491,7 @@ static int load(void* core, ato_rd* r) {
 }
 
 const ato_model ATO_MODEL = {
-    ATO_MODEL_IDENTIFIER, ATO_GUID, "ATO-" ATO_MODEL_IDENTIFIER "-state-1", ATO_N_VARS,
-    ATO_VARS, create, destroy, step, outputs, save, load,
+    {ATO_MODEL_IDENTIFIER, ATO_GUID, "ATO-" ATO_MODEL_IDENTIFIER "-state-1", ATO_N_VARS,
+     ATO_VARS},
+    create, destroy, step, outputs, save, load,
 };

@@ -42,11 +42,8 @@ law_core* law_make(const ato_values* p, double t0, char* err, size_t n) {
                  ato_repr(v[ATO_VR_fuzzy_nodes], a), FZ_NODES);
         return NULL;
     }
-    law_core* c = calloc(1, sizeof *c);
-    if (!c) {
-        snprintf(err, n, "out of memory");
-        return NULL;
-    }
+    law_core* c = ft_new(sizeof *c, err, n);
+    if (!c) return NULL;
     c->sample_time = v[ATO_VR_sample_time];
     c->kp = v[ATO_VR_kp];
     c->ki = v[ATO_VR_ki];
@@ -56,22 +53,16 @@ law_core* law_make(const ato_values* p, double t0, char* err, size_t n) {
     c->ec_scale = v[ATO_VR_ec_scale];
     c->preview_time = v[ATO_VR_preview_time];
     c->reference_feedforward = v[ATO_VR_reference_feedforward] != 0.0;
-    if (!ft_make(&c->base, p, err, n)) {
-        ft_free(&c->base);
+    if (!ft_start(&c->base, &c->st.base, p, err, n)) {
         free(c);
         return NULL;
     }
-    ft_reset(&c->st.base);
     c->st.kp_now = c->kp;
     c->st.ki_now = c->ki;
     return c;
 }
 
-void law_free(law_core* c) {
-    ft_free(&c->base);
-    free(c);
-}
-ATO_LAW_PLAIN_STATE(st)
+FT_LAW_PLAIN(st)
 
 /* RuleSurface.__call__ */
 static double surface(const double* t, double E, double EC) {
@@ -113,12 +104,4 @@ static double accel_demand(void* law, ft_state* b, double t, double v, double s,
     return u;
 }
 
-void law_outputs(const law_core* c, double* out) { ft_outputs(&c->st.base, out); }
-
-int law_compute(law_core* c, double t, const ato_values* p, double* out, char* err, size_t n) {
-    if (!ft_compute(&c->base, &c->st.base, t, p->v[ATO_VR_v], p->v[ATO_VR_s], accel_demand, c,
-                    err, n))
-        return 0;
-    law_outputs(c, out);
-    return 1;
-}
+FT_LAW_COMPUTE(accel_demand)

@@ -7,10 +7,8 @@
 #include <math.h>
 #include <stdint.h>
 
-enum { C_STICTION, C_K, C_C, C_SLACK, C_MODEL, C_TAU, C_RAMP_RATE, C_F_MAX, C_P_MAX, C_ED_MAX,
-       C_ED_P_MAX, C_ED_FADE, C_PMAX, C_FILL_T, C_FILL_E, C_REL_T, C_REL_E, C_R_FULL, C_R_MIN };
-enum { S_TRACTION, S_ENERGY, S_PEAK_DRAFT, S_PEAK_BUFF, S_ACCEL, S_FIRST, S_HELD };
-enum { W_START, W_MEAN_P, W_Y, W_W, W_DIAG, W_CPRIME, W_RPRIME, W_V1 };
+#include "freight_kernel.h"
+
 #define KMH (1.0 / 3.6)
 
 /* as Python's min/max (the first argument on ties) */
@@ -109,8 +107,6 @@ static int holds(double trac, const double *mean_p, int braking, const double *x
     return fabs(trac + grade) <= capacity;
 }
 
-/* Arguments as plants.kernels.freight_steps; n vehicles, n_sub sub-steps, K commands, nx
- * route knots; arrivals is K x n (C order), work N_WORK x n, targets K doubles of scratch. */
 void freight_steps(int64_t n, int64_t n_sub, int64_t K, int64_t nx, double *x, double *v,
                    double *pres, double *sc, const double *hs, const double *t0s,
                    const double *t1s, const double *demands, const double *arrivals,

@@ -92,11 +92,8 @@ void law_free(law_core* c) {
 law_core* law_make(const ato_values* p, double t0, char* err, size_t n) {
     (void)t0;
     const double* v = p->v;
-    law_core* c = calloc(1, sizeof *c);
-    if (!c) {
-        snprintf(err, n, "out of memory");
-        return NULL;
-    }
+    law_core* c = ft_new(sizeof *c, err, n);
+    if (!c) return NULL;
     char path[4096], a[40], b[40];
     snprintf(path, sizeof path, "%s/preview/default.gains", p->resources);
     /* the design the gains were computed for (FreightPreview.NATIVE_DESIGN) */
@@ -288,12 +285,4 @@ static double accel_demand(void* law, ft_state* b, double t, double v, double s,
     return u - (n_air ? c->air[0] : 0.0);
 }
 
-void law_outputs(const law_core* c, double* out) { ft_outputs(&c->st.base, out); }
-
-int law_compute(law_core* c, double t, const ato_values* p, double* out, char* err, size_t n) {
-    if (!ft_compute(&c->base, &c->st.base, t, p->v[ATO_VR_v], p->v[ATO_VR_s], accel_demand, c,
-                    err, n))
-        return 0;
-    law_outputs(c, out);
-    return 1;
-}
+FT_LAW_COMPUTE(accel_demand)

@@ -31,11 +31,8 @@ struct law_core {
 law_core* law_make(const ato_values* p, double t0, char* err, size_t n) {
     (void)t0;
     const double* v = p->v;
-    law_core* c = calloc(1, sizeof *c);
-    if (!c) {
-        snprintf(err, n, "out of memory");
-        return NULL;
-    }
+    law_core* c = ft_new(sizeof *c, err, n);
+    if (!c) return NULL;
     c->sample_time = v[ATO_VR_sample_time];
     c->lam = v[ATO_VR_lambda];
     c->q = v[ATO_VR_q];
@@ -47,20 +44,14 @@ law_core* law_make(const ato_values* p, double t0, char* err, size_t n) {
         free(c);
         return NULL;
     }
-    if (!ft_make(&c->base, p, err, n)) {
-        ft_free(&c->base);
+    if (!ft_start(&c->base, &c->st.base, p, err, n)) {
         free(c);
         return NULL;
     }
-    ft_reset(&c->st.base);
     return c;
 }
 
-void law_free(law_core* c) {
-    ft_free(&c->base);
-    free(c);
-}
-ATO_LAW_PLAIN_STATE(st)
+FT_LAW_PLAIN(st)
 
 static double switching(double sigma, double phi) {
     if (phi > 0) return ft_max(-1.0, ft_min(1.0, sigma / phi));
@@ -81,12 +72,4 @@ static double accel_demand(void* law, ft_state* b, double t, double v, double s,
     return ft_min(ft_max(u, lo), hi);
 }
 
-void law_outputs(const law_core* c, double* out) { ft_outputs(&c->st.base, out); }
-
-int law_compute(law_core* c, double t, const ato_values* p, double* out, char* err, size_t n) {
-    if (!ft_compute(&c->base, &c->st.base, t, p->v[ATO_VR_v], p->v[ATO_VR_s], accel_demand, c,
-                    err, n))
-        return 0;
-    law_outputs(c, out);
-    return 1;
-}
+FT_LAW_COMPUTE(accel_demand)

@@ -586,6 +586,22 @@ int ft_make(ft_const* c, const ato_values* p, char* err, size_t n) {
     return 1;
 }
 
+void* ft_new(size_t size, char* err, size_t err_size) {
+    void* c = calloc(1, size);
+    if (!c) snprintf(err, err_size, "out of memory");
+    return c;
+}
+
+int ft_start(ft_const* c, ft_state* st, const ato_values* p, char* err,
+             size_t err_size) {
+    if (!ft_make(c, p, err, err_size)) {
+        ft_free(c);
+        return 0;
+    }
+    ft_reset(st);
+    return 1;
+}
+
 void ft_free(ft_const* c) {
     ato_profile_free(&c->profile);
     free(c->stops);

@@ -67,6 +67,32 @@ void ft_reset(ft_state* st);
 int ft_compute(const ft_const* c, ft_state* st, double t, double v, double s, ft_demand law,
                void* law_data, char* err, size_t err_size);
 void ft_outputs(const ft_state* st, double* out);
+/* a freight law's core: size bytes, zeroed; NULL after "out of memory" in err */
+void* ft_new(size_t size, char* err, size_t err_size);
+/* the end of a law's law_make: the shared part made (ft_make) and the state st reset; 0 after
+ * a message in err, the shared part freed */
+int ft_start(ft_const* c, ft_state* st, const ato_values* p, char* err, size_t err_size);
+
+/* The law functions the freight laws have alike, for a core with the shared part in `base`
+ * and its state in ST (a struct whose ft_state is ST.base). FT_LAW_PLAIN: law_free and the
+ * plain state of a core that holds nothing else on the heap; FT_LAW_COMPUTE: law_outputs and
+ * law_compute over the law's demand DEMAND (an ft_demand defined before). */
+#define FT_LAW_PLAIN(ST)                                                                        \
+    void law_free(law_core* c) {                                                                \
+        ft_free(&c->base);                                                                      \
+        free(c);                                                                                \
+    }                                                                                           \
+    ATO_LAW_PLAIN_STATE(ST)
+#define FT_LAW_COMPUTE(DEMAND)                                                                  \
+    void law_outputs(const law_core* c, double* out) { ft_outputs(&c->st.base, out); }         \
+    int law_compute(law_core* c, double t, const ato_values* p, double* out, char* err,        \
+                    size_t n) {                                                                 \
+        if (!ft_compute(&c->base, &c->st.base, t, p->v[ATO_VR_v], p->v[ATO_VR_s], DEMAND, c,  \
+                        err, n))                                                                \
+            return 0;                                                                           \
+        law_outputs(c, out);                                                                    \
+        return 1;                                                                               \
+    }
 /* ReferenceProfile.accel(s + max(v, 0) t_p) (controllers/pid/freight_pid.py) */
 double ft_reference_feedforward(const ft_const* c, double v, double s, double preview_time);
 

@@ -21,14 +21,12 @@
 #define UNITS ATO_OPTION_units
 
 typedef struct {
-    double integral, prev_speed, derivative, demand, error; /* SpeedPid */
-    int has_prev;
+    ato_speed_pid_state pid; /* SpeedPid */
     double forces[UNITS], v_ref, a_ref;
 } pid_state;
 
 struct law_core {
-    ato_pid_gains pid;
-    double derivative_filter, accel_min, accel_max, rate_limit;
+    ato_speed_pid pid;
     double mass, hold_accel, stop_speed;
     ato_profile profile;
     pid_state st;
@@ -39,16 +37,16 @@ law_core* law_make(const ato_values* p, double t0, char* err, size_t n) {
     const double* v = p->v;
     law_core c;
     memset(&c, 0, sizeof c);
-    c.pid = ATO_PID_GAINS(v);
-    c.derivative_filter = v[ATO_VR_derivative_filter];
-    c.accel_min = v[ATO_VR_accel_min];
-    c.accel_max = v[ATO_VR_accel_max];
-    c.rate_limit = v[ATO_VR_rate_limit];
+    c.pid.pid = ATO_PID_GAINS(v);
+    c.pid.derivative_filter = v[ATO_VR_derivative_filter];
+    c.pid.accel_min = v[ATO_VR_accel_min];
+    c.pid.accel_max = v[ATO_VR_accel_max];
+    c.pid.rate_limit = v[ATO_VR_rate_limit];
     c.mass = v[ATO_VR_mass];
     c.hold_accel = v[ATO_VR_hold_accel];
     c.stop_speed = v[ATO_VR_stop_speed];
     /* DistributedSpeedPidParams.check_relations (the declared ranges: ato_controller.c) */
-    if (!ato_check_less("accel_min", c.accel_min, "accel_max", c.accel_max, err, n))
+    if (!ato_check_less("accel_min", c.pid.accel_min, "accel_max", c.pid.accel_max, err, n))
         return NULL;
     if (!ato_profile_load(&c.profile, p->resources, p->s[ATO_VR_reference], err, n))
         return NULL;
@@ -64,47 +62,18 @@ ATO_LAW_PLAIN_STATE(st)
 /* SpeedPid.update with a_res = 0 and the limits a_lo, a_hi */
 static double update(law_core* c, double v, double v_ref, double a_ref, double a_lo,
                      double a_hi) {
-    pid_state* st = &c->st;
-    double T = c->pid.sample_time;
-    double lo = ato_max(c->accel_min, a_lo);
-    double hi = ato_min(c->accel_max, a_hi);
-    lo = ato_min(lo, hi); /* inconsistent limits: the upper one wins */
-    if (c->rate_limit > 0) {
-        double step = c->rate_limit * T;
-        double lo2 = ato_min(ato_max(lo, st->demand - step), hi);
-        double hi2 = ato_max(ato_min(hi, st->demand + step), lo);
-        lo = lo2;
-        hi = hi2;
-    }
-    double error = v_ref - v;
-    if (st->has_prev) {
-        double raw = (v - st->prev_speed) / T;
-        if (c->derivative_filter > 0) {
-            double alpha = T / (c->derivative_filter + T);
-            st->derivative += alpha * (raw - st->derivative);
-        } else {
-            st->derivative = raw;
-        }
-    }
-    st->prev_speed = v;
-    st->has_prev = 1;
-    double ff = (c->pid.feedforward ? a_ref : 0.0) + 0.0;
-    /* - kd D added as + (-(kd D)): the same double */
-    double demand = ato_pid_step(&st->integral, &c->pid, ff, -(c->pid.kd * st->derivative),
-                                 error, lo, hi);
-    st->demand = demand;
-    st->error = error;
-    return demand;
+    double ff = (c->pid.pid.feedforward ? a_ref : 0.0) + 0.0;
+    return ato_speed_pid_update(&c->pid, &c->st.pid, v, v_ref, ff, a_lo, a_hi);
 }
 
 void law_outputs(const law_core* c, double* out) {
     const pid_state* st = &c->st;
     for (int i = 0; i < UNITS; i++) out[ATO_VR_force_1 + i] = st->forces[i];
-    out[ATO_VR_force_demand] = c->mass * st->demand;
-    out[ATO_VR_accel_demand] = st->demand;
+    out[ATO_VR_force_demand] = c->mass * st->pid.demand;
+    out[ATO_VR_accel_demand] = st->pid.demand;
     out[ATO_VR_v_ref] = st->v_ref;
     out[ATO_VR_a_ref] = st->a_ref;
-    out[ATO_VR_speed_error] = -st->error;
+    out[ATO_VR_speed_error] = -st->pid.error;
 }
 
 int law_compute(law_core* c, double t, const ato_values* p, double* out, char* err, size_t n) {
@@ -125,7 +94,7 @@ int law_compute(law_core* c, double t, const ato_values* p, double* out, char* e
     double demand = update(c, v, v_ref, a_ref, -total_brake / c->mass, total_trac / c->mass);
     if (v_ref <= 0.0 && a_ref <= 0.0 && v < c->stop_speed) {
         demand = ato_max(c->hold_accel, -total_brake / c->mass); /* hold at the stop */
-        st->demand = demand;
+        st->pid.demand = demand;
     }
     double force = c->mass * demand;
     const double* share;
