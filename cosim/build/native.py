@@ -53,6 +53,7 @@ import tempfile
 import threading
 import uuid
 import zipfile
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -70,7 +71,7 @@ from cosim.build.python import FMU_DIR, ROOT, bundled_files, catalog
 from cosim.build.solvers import solver_files
 from cosim.fmu.c_text import c_double, c_string
 from cosim.fmu.disk_cache import cache_root
-from plants.route import ROUTES_DIR, load_reference, load_route
+from plants.route import ROUTES_DIR, Route, load_reference, load_route
 
 HERE = Path(__file__).resolve().parent
 FMU_LAYER = HERE.parent / "fmu"  # cosim/fmu: the C models and fronts beside the Python slaves
@@ -281,18 +282,25 @@ def build_description(identifier: str, sources: list[str]) -> bytes:
     return b'<?xml version="1.0" encoding="UTF-8"?>\n' + tostring(root, encoding="utf-8")
 
 
+def bundled_routes() -> Iterator[tuple[str, Route]]:
+    """(name, route) of every bundled route, by name; the reference-profile TOMLs beside the
+    routes are skipped."""
+    for toml in sorted(ROUTES_DIR.glob("*.toml")):
+        try:
+            yield toml.stem, load_route(toml.stem)
+        except ValueError:  # a reference-profile TOML beside the routes, not a route
+            continue
+
+
 def route_tables() -> dict[str, str]:
     """``<name>.grade`` text per bundled route: its grade steps ``start permille`` (%.17g via
     repr, which reads back exactly), the first start ``-inf``."""
     tables = {}
-    for toml in sorted(ROUTES_DIR.glob("*.toml")):
-        try:
-            grade = load_route(toml.stem).grade
-        except ValueError:  # a reference-profile TOML beside the routes, not a route
-            continue
+    for name, route in bundled_routes():
+        grade = route.grade
         rows = [f"{'-inf' if math.isinf(s) else repr(float(s))} {float(g)!r}"
                 for s, g in zip(grade.starts.tolist(), grade.values.tolist())]
-        tables[toml.stem] = f"# grade steps of route {toml.stem}: start_m permille\n" + \
+        tables[name] = f"# grade steps of route {name}: start_m permille\n" + \
             "\n".join(rows) + "\n"
     return tables
 
@@ -320,14 +328,10 @@ def route_profile_tables(kinds: tuple[str, ...]) -> dict[str, str]:
     """``<name>.<kind>`` text per bundled route and profile kind (:data:`ROUTE_PROFILES`):
     rows of two floats (repr, which reads back exactly; ``inf`` where a value is infinite)."""
     tables = {}
-    for toml in sorted(ROUTES_DIR.glob("*.toml")):
-        try:
-            loaded = load_route(toml.stem)
-        except ValueError:  # a reference-profile TOML beside the routes, not a route
-            continue
+    for name, loaded in bundled_routes():
         for kind in kinds:
             title, rows = ROUTE_PROFILES[kind](loaded)
-            tables[f"{toml.stem}.{kind}"] = f"# {title} of route {toml.stem}\n" + \
+            tables[f"{name}.{kind}"] = f"# {title} of route {name}\n" + \
                 "\n".join(rows) + "\n"
     return tables
 
@@ -369,18 +373,14 @@ def step_profile_tables() -> dict[str, str]:
     ``profile <field> <count>`` and ``count`` lines ``<start bits> <value bits>`` (IEEE bits
     in hex, the decimal value after ``#``), the first start ``-inf``."""
     tables = {}
-    for toml in sorted(ROUTES_DIR.glob("*.toml")):
-        try:
-            loaded = load_route(toml.stem)
-        except ValueError:  # a reference-profile TOML beside the routes, not a route
-            continue
-        lines = [f"# step profiles of route {toml.stem}: start_m value (IEEE bits, hex)"]
+    for name, loaded in bundled_routes():
+        lines = [f"# step profiles of route {name}: start_m value (IEEE bits, hex)"]
         for field in STEP_PROFILES:
             profile = getattr(loaded, field)
             lines.append(f"profile {field} {profile.starts.size}")
             lines += [f"{_bits(a)} {_bits(b)}  # {a!r} {b!r}"
                       for a, b in zip(profile.starts.tolist(), profile.values.tolist())]
-        tables[toml.stem] = "\n".join(lines) + "\n"
+        tables[name] = "\n".join(lines) + "\n"
     return tables
 
 
