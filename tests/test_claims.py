@@ -529,19 +529,6 @@ def test_repeat_claim_needs_repeats() -> None:
                      check_ensemble("e.toml", {}))
 
 
-def test_seed004_timing_claims_take_the_entrys_repeats_whatever_the_seeds() -> None:
-    from cosim.reproduce.members import claim_cases, members
-
-    entry = load_entry("seed004")
-    timing = [c for c in entry.claims if c.metric == "qp_cpu_time_total_s"]
-    assert timing and all(c.ensemble == "repeat" for c in timing)
-    assert entry.ensemble.repeats is not None
-    assert (len(members(entry, "repeat", 2)) == len(members(entry, "repeat", 20))
-            == entry.ensemble.repeats)
-    rounding = {c.id: rnd for _v, c, _r, rnd, _k in claim_cases(entry, 2)}
-    assert [rounding[c.id] for c in timing] == [False] * len(timing)
-
-
 def test_repeat_claim_end_to_end_on_a_fast_entry(tmp_path: Path) -> None:
     import pandas as pd
 

@@ -229,15 +229,6 @@ def test_speed_classes_grade_the_error_against_ctcs3() -> None:
     assert high["max_abs_error"] == pytest.approx(2.9995, abs=tol) and high["met"]
 
 
-def test_seed001_declares_figures_6_to_10() -> None:
-    """Issue 15: Figs. 6-10 of seed 001, Fig. 8 graded by CTCS-3 as data (2 km/h, 30 km/h, 2 %)."""
-    figs = {re.match(r"fig(\d+)_", f.file).group(1): f for f in load_entry("seed001").figures}
-    assert sorted(figs, key=int) == ["6", "7", "8", "9", "10"]
-    fig8 = figs["8"]
-    assert fig8.kind == "speed_classes" and (fig8.classes or [])[:3] == [0, 30, 50]
-    assert (fig8.limit_kmh, fig8.limit_below_kmh, fig8.limit_fraction) == (2.0, 30.0, 0.02)
-
-
 def test_speed_classes_figure_writes_table_and_csv(tmp_path: Path) -> None:
     text, written = draw_speed_classes(Figure(**CLASSES, paper="A fails at 30"),
                                        {"A": _graded_frame(), "B": _graded_frame()},
@@ -292,12 +283,6 @@ def test_figure_series_mean_of_pattern_minus_reference() -> None:
         figure_series(frame, {"file": "f.png"}, "plant.a", "A")
     with pytest.raises(FigureError, match="recorded no 'controller.x'"):
         figure_series(frame, {**spec, "y_minus": "controller.x"}, "plant.v[*]", "A")
-
-
-def test_seed002_plots_the_train_mean_error() -> None:
-    """Issue 16: the 0.3 km/h target is judged on the train-mean speed; its error is a figure."""
-    figs = [f for f in load_entry("seed002").figures if f.y_reduce == "mean"]
-    assert [(f.y, f.y_minus) for f in figs] == [(["plant.v[*]"], "controller.v_ref")]
 
 
 def test_reproduce_out_that_cannot_be_written_is_a_clear_error(tmp_path: Path,
