@@ -11,14 +11,12 @@ from the recorded value only by that rounding (and floating-point rounding far b
 
 from __future__ import annotations
 
-import importlib.util
-import sys
 from pathlib import Path
-from types import ModuleType
 
 import pytest
 
 from controllers.datadriven import tuned
+from tests.paper_scripts import paper_script
 
 PRINTED = 0.5e-4  # half a unit of the 4th decimal of the recorded criterion
 
@@ -27,21 +25,9 @@ pytestmark = pytest.mark.slow
 PAPER = Path(__file__).resolve().parents[1]  # papers/seed001
 
 
-def _script(name: str) -> ModuleType:
-    """The paper's tuning script (``papers/seed001/tuning.py``), loaded by path once as
-    module ``name``."""
-    if name in sys.modules:
-        return sys.modules[name]
-    spec = importlib.util.spec_from_file_location(name, PAPER / "tuning.py")
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[name] = module
-    spec.loader.exec_module(module)  # type: ignore[union-attr]
-    return module
-
-
 @pytest.mark.parametrize("law", sorted(tuned.TUNED))
 def test_seed001_picks_give_their_recorded_criterion(law: str) -> None:
-    script = _script("seed001_tuning")
+    script = paper_script(PAPER / "tuning.py", "seed001_tuning")
     rows = [script.run((law, 0, tuned.TUNED[law], white, seed))
             for white in script.DISTURBANCES for seed in script.calibration_seeds()]
     c = script.criterion(rows)

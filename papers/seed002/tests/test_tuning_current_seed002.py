@@ -10,15 +10,13 @@ from the recorded value only by that rounding (and floating-point rounding far b
 
 from __future__ import annotations
 
-import importlib.util
 import re
-import sys
 from pathlib import Path
-from types import ModuleType
 
 import pytest
 
 from controllers.common.freight_tuning import TUNING_FILE
+from tests.paper_scripts import paper_script
 
 try:
     import tomllib
@@ -30,18 +28,6 @@ PRINTED = 0.5e-4  # half a unit of the 4th decimal of the recorded criterion
 pytestmark = pytest.mark.slow
 
 PAPER = Path(__file__).resolve().parents[1]  # papers/seed002
-
-
-def _script(name: str) -> ModuleType:
-    """The paper's tuning script (``papers/seed002/tuning.py``), loaded by path once as
-    module ``name``."""
-    if name in sys.modules:
-        return sys.modules[name]
-    spec = importlib.util.spec_from_file_location(name, PAPER / "tuning.py")
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[name] = module
-    spec.loader.exec_module(module)  # type: ignore[union-attr]
-    return module
 
 
 def _seed002_best() -> dict[str, float]:
@@ -65,7 +51,7 @@ def test_seed002_picks_give_their_recorded_criterion(built_fmus, law: str) -> No
     from cosim.run.scenario import load_scenario
     from cosim.run.simulate import ensure_built
 
-    script = _script("seed002_tuning")
+    script = paper_script(PAPER / "tuning.py", "seed002_tuning")
     entry = load_entry("seed002")
     run = next(r for r in entry.runs if r.name == law)
     own = {**run.overrides, **({f"{script.FMU}.build": "python"}

@@ -9,12 +9,11 @@ points tied to rounding may swap without failing."""
 
 from __future__ import annotations
 
-import importlib.util
-import sys
 from pathlib import Path
-from types import ModuleType
 
 import pytest
+
+from tests.paper_scripts import paper_script
 
 ROUNDING = 1e-9  # relative: floating-point rounding of a criterion, far above one ulp
 
@@ -23,25 +22,13 @@ pytestmark = pytest.mark.slow
 PAPER = Path(__file__).resolve().parents[1]  # papers/seed003
 
 
-def _script(name: str) -> ModuleType:
-    """The paper's tuning script (``papers/seed003/tuning.py``), loaded by path once as
-    module ``name``."""
-    if name in sys.modules:
-        return sys.modules[name]
-    spec = importlib.util.spec_from_file_location(name, PAPER / "tuning.py")
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[name] = module
-    spec.loader.exec_module(module)  # type: ignore[union-attr]
-    return module
-
-
 @pytest.mark.parametrize("tracker", ["GPC", "LMI MPC"])
 def test_seed003_picks_are_the_best_of_their_grid(built_fmus, tracker: str) -> None:
     import math
 
     from cosim.run.scenario import load_scenario
 
-    script = _script("seed003_tuning")
+    script = paper_script(PAPER / "tuning.py", "seed003_tuning")
     scenario, key, grid, _pattern = script.GRIDS[tracker]
     plants = script.calibration_plants(3)  # the script's default --plants
     picked = float(load_scenario(scenario).components["controller"].parameters[key])
