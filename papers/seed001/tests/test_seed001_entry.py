@@ -8,7 +8,7 @@ from cosim.reproduce.entry import load_entry
 
 
 def test_seed001_declares_figures_6_to_10() -> None:
-    """Issue 15: Figs. 6-10 of seed 001, Fig. 8 graded by CTCS-3 as data (2 km/h, 30 km/h, 2 %)."""
+    """Figs. 6-10 of seed 001, Fig. 8 graded by CTCS-3 as data (2 km/h, 30 km/h, 2 %)."""
     figs = {re.match(r"fig(\d+)_", f.file).group(1): f for f in load_entry("seed001").figures}
     assert sorted(figs, key=int) == ["6", "7", "8", "9", "10"]
     fig8 = figs["8"]

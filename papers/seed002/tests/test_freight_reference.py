@@ -1,4 +1,4 @@
-"""The freight_20km reference (seed 002) is a plan the train can follow (issue 16): traction
+"""The freight_20km reference (seed 002) is a plan the train can follow: traction
 within its share of the HXD1 envelope, bounded jerk, slowing with the electric brake alone, and
 a final stop planned with the smallest air-brake stage that the shared blending applies where
 the plan does. Checked on the shipped CSV against the nominal one-mass model of

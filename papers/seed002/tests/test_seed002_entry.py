@@ -6,6 +6,6 @@ from cosim.reproduce.entry import load_entry
 
 
 def test_seed002_plots_the_train_mean_error() -> None:
-    """Issue 16: the 0.3 km/h target is judged on the train-mean speed; its error is a figure."""
+    """The 0.3 km/h target is judged on the train-mean speed; its error is a figure."""
     figs = [f for f in load_entry("seed002").figures if f.y_reduce == "mean"]
     assert [(f.y, f.y_minus) for f in figs] == [(["plant.v[*]"], "controller.v_ref")]
