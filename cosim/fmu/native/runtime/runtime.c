@@ -78,20 +78,22 @@ ato_num ato_fmt(double x) {
                  mant + 1, "", exp10 < 0 ? '-' : '+', abs(exp10));
         return out;
     }
-    char body[40];
+    /* fixed notation, written in place: at most 23 characters (sign, "0.", three zeros and
+     * 17 digits for exp10 = -4; sign, 16 digits, "." and one digit for exp10 = 15) */
+    char* body = out.s;
     int at = 0;
+    if (*sign) body[at++] = '-';
     if (exp10 < 0) {
-        at += snprintf(body + at, sizeof body - at, "0.");
+        at += snprintf(body + at, sizeof out.s - at, "0.");
         for (int i = 0; i < -exp10 - 1; i++) body[at++] = '0';
-        at += snprintf(body + at, sizeof body - at, "%s", mant);
+        at += snprintf(body + at, sizeof out.s - at, "%s", mant);
     } else {
         for (int i = 0; i <= exp10; i++) body[at++] = i < k ? mant[i] : '0';
         body[at++] = '.';
-        if (exp10 + 1 < k) at += snprintf(body + at, sizeof body - at, "%s", mant + exp10 + 1);
+        if (exp10 + 1 < k) at += snprintf(body + at, sizeof out.s - at, "%s", mant + exp10 + 1);
         else body[at++] = '0';
     }
     body[at] = 0;
-    snprintf(out.s, sizeof out.s, "%s%s", sign, body);
     return out;
 }
 
