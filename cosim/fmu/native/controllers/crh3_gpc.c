@@ -42,7 +42,7 @@ typedef struct {
 } eco_profile;
 
 struct law_core {
-    ato_gpc gpc;
+    gpc_core gpc;
     eco_profile prof;
     double t0, m_eff, accel_min, accel_max, limit_speed, position_gain, max_correction;
     double stop_speed, hold_accel, sample_time;
@@ -202,8 +202,8 @@ static double npmax(double a, double b) { return isnan(a) || isnan(b) ? a + b : 
 
 law_core* law_make(const ato_values* p, double t0, char* err, size_t n) {
     const double* v = p->v;
-    ato_gpc_params gp = ATO_GPC_PARAMS(v, 1, 1);
-    if (!ato_gpc_check(&gp, err, n)) return NULL;
+    gpc_params gp = GPC_PARAMS(v, 1, 1);
+    if (!gpc_check(&gp, err, n)) return NULL;
     const char* start = p->s[ATO_VR_model_start];
     int identified = strcmp(start, "identified") == 0;
     if (!identified && strcmp(start, "cold") != 0) {
@@ -247,15 +247,15 @@ law_core* law_make(const ato_values* p, double t0, char* err, size_t n) {
     c->stop_speed = v[ATO_VR_stop_speed];
     c->hold_accel = v[ATO_VR_hold_accel];
     c->sample_time = v[ATO_VR_sample_time];
-    c->count = TRACKER_STATE + ato_gpc_state_count(&gp);
+    c->count = TRACKER_STATE + gpc_state_count(&gp);
     c->st = calloc(c->count, sizeof(double));
     c->st[6] = 1.0; /* phase: accelerate */
-    ato_gpc_make(&c->gpc, &gp, c->st + TRACKER_STATE);
+    gpc_make(&c->gpc, &gp, c->st + TRACKER_STATE);
     return c;
 }
 
 void law_free(law_core* c) {
-    ato_gpc_free(&c->gpc);
+    gpc_free(&c->gpc);
     profile_free(&c->prof);
     free(c->st);
     free(c);
@@ -314,22 +314,22 @@ int law_compute(law_core* c, double t, const ato_values* p, double* out, char* e
     double hi = ato_min(c->accel_max, ato_max(p->v[ATO_VR_traction_limit], 0.0) / c->m_eff);
     double lo = ato_max(c->accel_min, -ato_max(p->v[ATO_VR_brake_limit], 0.0) / c->m_eff);
     lo = ato_min(lo, hi);
-    ato_gpc* g = &c->gpc;
+    gpc_core* g = &c->gpc;
     references(c, t, s, g->refs, st);
     int holding = st[6] == PHASE_BRAKE && st[2] <= 0.0 && v < c->stop_speed;
     double u;
     if (holding) { /* Crh3Gpc.law_hold */
         u = ato_min(ato_max(c->hold_accel, lo), hi);
-        ato_gpc_observe(g, &v, 0);
-        ato_gpc_applied(g, &u);
+        gpc_observe(g, &v, 0);
+        gpc_applied(g, &u);
     } else { /* Crh3Gpc.law_control */
-        ato_gpc_observe(g, &v, 1);
-        if (!ato_gpc_plan(g, g->refs, &u)) {
+        gpc_observe(g, &v, 1);
+        if (!gpc_plan(g, g->refs, &u)) {
             snprintf(err, n, "GPC: G'G + w I is singular (Singular matrix)");
             return 0;
         }
         u = ato_npclip(u, lo, hi);
-        ato_gpc_applied(g, &u);
+        gpc_applied(g, &u);
     }
     st[7] = holding;
     st[1] = u;

@@ -21,7 +21,7 @@
 
 struct law_core {
     dd_drive drive;
-    ato_gpc gpc;
+    gpc_core gpc;
     double share;
     int count;
     double* st;
@@ -33,25 +33,25 @@ static double npmax(double a, double b) { return isnan(a) || isnan(b) ? a + b : 
 law_core* law_make(const ato_values* p, double t0, char* err, size_t n) {
     (void)t0;
     const double* v = p->v;
-    ato_gpc_params gp = ATO_GPC_PARAMS(v, N, N);
-    if (!ato_gpc_check(&gp, err, n)) return NULL;
+    gpc_params gp = GPC_PARAMS(v, N, N);
+    if (!gpc_check(&gp, err, n)) return NULL;
     law_core* c = calloc(1, sizeof *c);
     if (!dd_drive_make(&c->drive, p, err, n)) {
         free(c);
         return NULL;
     }
     c->share = v[ATO_VR_share_gain];
-    int law = ato_gpc_state_count(&gp);
+    int law = gpc_state_count(&gp);
     c->count = DD_DRIVE_STATE + law + N;
     c->st = calloc(c->count, sizeof(double));
-    ato_gpc_make(&c->gpc, &gp, c->st + DD_DRIVE_STATE);
+    gpc_make(&c->gpc, &gp, c->st + DD_DRIVE_STATE);
     c->u = c->st + DD_DRIVE_STATE + law;
     return c;
 }
 
 void law_free(law_core* c) {
     dd_drive_free(&c->drive);
-    ato_gpc_free(&c->gpc);
+    gpc_free(&c->gpc);
     free(c->st);
     free(c);
 }
@@ -60,19 +60,19 @@ DD_LAW_FLAT_STATE
 int law_compute(law_core* c, double t, const ato_values* p, double* out, char* err, size_t n) {
     dd_sample smp;
     dd_sample_inputs(&c->drive, t, p->v, &smp);
-    ato_gpc* g = &c->gpc;
+    gpc_core* g = &c->gpc;
     if (smp.holding) {
-        ato_gpc_observe(g, smp.y, 0);
-        ato_gpc_applied(g, smp.hold);
+        gpc_observe(g, smp.y, 0);
+        gpc_applied(g, smp.hold);
         memcpy(c->u, smp.hold, sizeof(double) * N);
     } else {
-        ato_gpc_observe(g, smp.y, 1);
+        gpc_observe(g, smp.y, 1);
         for (int r = 0; r < g->p.Ny * N; r++) { /* R = max(y_r + j (y_r(t+1) - y_r), 0) */
             double ref = npmax(smp.y_r + (double)(r / N + 1) * (smp.y_r_next - smp.y_r), 0.0);
             g->refs[r] = ref * 1.0;
         }
         double u[N];
-        if (!ato_gpc_plan(g, g->refs, u)) {
+        if (!gpc_plan(g, g->refs, u)) {
             snprintf(err, n, "GPC: G'G + w I is singular (Singular matrix)");
             return 0;
         }
@@ -86,7 +86,7 @@ int law_compute(law_core* c, double t, const ato_values* p, double* out, char* e
             for (int i = 0; i < N; i++) u[i] = u[i] - sh[i];
         }
         for (int i = 0; i < N; i++) c->u[i] = ato_npclip(u[i], smp.lo[i], smp.hi[i]);
-        ato_gpc_applied(g, c->u);
+        gpc_applied(g, c->u);
     }
     dd_commit(&smp, c->u, c->st);
     dd_outputs(c->st, out);

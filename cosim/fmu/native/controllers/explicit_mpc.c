@@ -211,8 +211,8 @@ law_core* law_make(const ato_values* p, double t0, char* err, size_t n) {
     c->sample_time = v[ATO_VR_sample_time];
     c->horizon = (int)v[ATO_VR_N];
     /* HybridMpcParams.check and the profile, in their order */
-    static const ato_hybrid_vrs vrs = ATO_HYBRID_VRS;
-    if (!ato_hybrid_check(p, &vrs, &c->profile, err, n)) return fail(c, NULL);
+    static const hybrid_vrs vrs = HYBRID_VRS;
+    if (!hybrid_check(p, &vrs, &c->profile, err, n)) return fail(c, NULL);
     const char* posref = s[ATO_VR_position_reference];
     const char* dmode = s[ATO_VR_delta_mode];
     double r_increment = v[ATO_VR_dR];

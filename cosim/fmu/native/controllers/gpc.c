@@ -7,20 +7,20 @@
 #include "gpc.h"
 #include "linalg.h"
 
-int ato_gpc_check(const ato_gpc_params* p, char* err, size_t err_size) {
+int gpc_check(const gpc_params* p, char* err, size_t err_size) {
     if (p->Nu <= p->Ny) return 1;
     snprintf(err, err_size, "Nu = %d must be <= Ny = %d", p->Nu, p->Ny);
     return 0;
 }
 
-int ato_gpc_state_count(const ato_gpc_params* p) {
+int gpc_state_count(const gpc_params* p) {
     int nreg = p->n * p->na + p->m * p->nb;
     return p->n * nreg + nreg * nreg + p->n + p->na * p->n + p->nb * p->m + p->m + 2;
 }
 
 static double* doubles(int count) { return calloc(count > 0 ? count : 1, sizeof(double)); }
 
-void ato_gpc_make(ato_gpc* g, const ato_gpc_params* p, double* st) {
+void gpc_make(gpc_core* g, const gpc_params* p, double* st) {
     memset(g, 0, sizeof *g);
     g->p = *p;
     int n = p->n, m = p->m, nr = n * p->na + m * p->nb;
@@ -34,7 +34,7 @@ void ato_gpc_make(ato_gpc* g, const ato_gpc_params* p, double* st) {
     g->u_prev = at; at += m;
     g->started = at++;
     g->updates = at;
-    memset(st, 0, sizeof(double) * ato_gpc_state_count(p));
+    memset(st, 0, sizeof(double) * gpc_state_count(p));
     for (int i = 0; i < n; i++) {
         for (int j = 0; j < n; j++) g->theta[i * nr + j] = p->a_init * (i == j ? 1.0 : 0.0);
         for (int j = 0; j < m; j++)
@@ -60,13 +60,13 @@ void ato_gpc_make(ato_gpc* g, const ato_gpc_params* p, double* st) {
     g->y = doubles(n);
 }
 
-void ato_gpc_free(ato_gpc* g) {
+void gpc_free(gpc_core* g) {
     double* scratch[] = {g->G, g->H, g->f, g->g, g->refs, g->sim_dy, g->sim_du, g->moves,
                          g->Px, g->Pn, g->x, g->k, g->dy, g->tx, g->y};
     for (size_t i = 0; i < sizeof scratch / sizeof scratch[0]; i++) free(scratch[i]);
 }
 
-void ato_gpc_observe(ato_gpc* g, const double* y, int adapt) {
+void gpc_observe(gpc_core* g, const double* y, int adapt) {
     int n = g->p.n;
     if (*g->started == 0.0) {
         memcpy(g->y_prev, y, sizeof(double) * n);
@@ -110,7 +110,7 @@ void ato_gpc_observe(ato_gpc* g, const double* y, int adapt) {
 }
 
 /* Gpc._simulate: y(t+1..t+Ny) into out (Ny x n) for the moves (Ny x m) */
-static void simulate(ato_gpc* g, const double* moves, double* out) {
+static void simulate(gpc_core* g, const double* moves, double* out) {
     int n = g->p.n, m = g->p.m, nr = g->nreg, ka = n * g->p.na;
     double *y = g->y, *dy = g->dy;
     memcpy(g->sim_dy, g->dy_hist, sizeof(double) * g->p.na * n);
@@ -134,7 +134,7 @@ static void simulate(ato_gpc* g, const double* moves, double* out) {
     }
 }
 
-int ato_gpc_plan(ato_gpc* g, const double* refs, double* u) {
+int gpc_plan(gpc_core* g, const double* refs, double* u) {
     int m = g->p.m, rows = g->p.Ny * g->p.n, cols = g->p.Nu * m;
     /* Gpc.prediction_matrices */
     memset(g->moves, 0, sizeof(double) * g->p.Ny * m);
@@ -163,7 +163,7 @@ int ato_gpc_plan(ato_gpc* g, const double* refs, double* u) {
     return 1;
 }
 
-void ato_gpc_applied(ato_gpc* g, const double* u) {
+void gpc_applied(gpc_core* g, const double* u) {
     int m = g->p.m;
     memmove(g->du_hist + m, g->du_hist, sizeof(double) * (g->p.nb - 1) * m);
     for (int i = 0; i < m; i++) g->du_hist[i] = u[i] - g->u_prev[i];

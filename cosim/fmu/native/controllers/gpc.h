@@ -11,7 +11,7 @@
  * operations in its order; products summed in index order and the solve by Gaussian
  * elimination (linalg.h), where numpy calls BLAS and LAPACK.
  *
- * State: Gpc.state_fields as doubles in the caller's array, ato_gpc_state_count of them:
+ * State: Gpc.state_fields as doubles in the caller's array, gpc_state_count of them:
  * theta (n x n_reg, row-major), P (n_reg x n_reg), y_prev (n), dy_hist (na x n), du_hist
  * (nb x m), u_prev (m), started, updates.
  */
@@ -21,41 +21,41 @@
 #include <stddef.h>
 
 /* GpcParams and the model's dimensions */
-typedef struct ato_gpc_params {
+typedef struct gpc_params {
     int n, m, Ny, Nu, na, nb;
     double forgetting, weight, a_init, b_init, p0, p_max, excitation;
-} ato_gpc_params;
+} gpc_params;
 
-typedef struct ato_gpc {
-    ato_gpc_params p;
+typedef struct gpc_core {
+    gpc_params p;
     int nreg;
     double *theta, *P, *y_prev, *dy_hist, *du_hist, *u_prev, *started, *updates; /* state */
     /* scratch */
     double *G, *H, *f, *g, *refs, *sim_dy, *sim_du, *moves, *Px, *Pn, *x, *k, *dy, *tx, *y;
-} ato_gpc;
+} gpc_core;
 
-/* the ato_gpc_params of the parameter values v of a law whose generated header declares
+/* the gpc_params of the parameter values v of a law whose generated header declares
  * GpcParams' fields, for n outputs and m inputs */
-#define ATO_GPC_PARAMS(v, n_out, m_in)                                                       \
-    ((ato_gpc_params){(n_out), (m_in), (int)(v)[ATO_VR_Ny], (int)(v)[ATO_VR_Nu],               \
+#define GPC_PARAMS(v, n_out, m_in)                                                       \
+    ((gpc_params){(n_out), (m_in), (int)(v)[ATO_VR_Ny], (int)(v)[ATO_VR_Nu],               \
                       (int)(v)[ATO_VR_na], (int)(v)[ATO_VR_nb], (v)[ATO_VR_forgetting],          \
                       (v)[ATO_VR_control_weight], (v)[ATO_VR_a_init], (v)[ATO_VR_b_init],          \
                       (v)[ATO_VR_p0], (v)[ATO_VR_p_max], (v)[ATO_VR_excitation]})
 
 /* GpcParams.check_relations (Nu <= Ny); 0 after writing the core's message into err */
-int ato_gpc_check(const ato_gpc_params* p, char* err, size_t err_size);
+int gpc_check(const gpc_params* p, char* err, size_t err_size);
 
 /* the number of state doubles of a GPC with these parameters */
-int ato_gpc_state_count(const ato_gpc_params* p);
-/* the GPC over the state array st (ato_gpc_state_count doubles), set to Gpc's start */
-void ato_gpc_make(ato_gpc* g, const ato_gpc_params* p, double* st);
-void ato_gpc_free(ato_gpc* g);
+int gpc_state_count(const gpc_params* p);
+/* the GPC over the state array st (gpc_state_count doubles), set to Gpc's start */
+void gpc_make(gpc_core* g, const gpc_params* p, double* st);
+void gpc_free(gpc_core* g);
 /* Gpc.observe: the measurement y(t) (n), one RLS step when adapt */
-void ato_gpc_observe(ato_gpc* g, const double* y, int adapt);
+void gpc_observe(gpc_core* g, const double* y, int adapt);
 /* Gpc.plan: the unclipped input u (m) for the references refs (Ny x n, row-major) of
  * y(t+1..t+Ny); 0 when G'G + w I is singular (numpy: "Singular matrix") */
-int ato_gpc_plan(ato_gpc* g, const double* refs, double* u);
+int gpc_plan(gpc_core* g, const double* refs, double* u);
 /* Gpc.applied: record the input u(t) (m) actually applied */
-void ato_gpc_applied(ato_gpc* g, const double* u);
+void gpc_applied(gpc_core* g, const double* u);
 
 #endif

@@ -5,7 +5,7 @@
 #include <stdlib.h>
 #include <string.h>
 
-int ato_hybrid_blocks(const char* text, int horizon, int* blocks, int* count, char* err,
+int hybrid_blocks(const char* text, int horizon, int* blocks, int* count, char* err,
                       size_t n) {
     const char* q = text;
     while (*q == ' ' || *q == '\t') q++;
@@ -47,14 +47,14 @@ int ato_hybrid_blocks(const char* text, int horizon, int* blocks, int* count, ch
     return 1;
 }
 
-int ato_hybrid_check(const ato_values* p, const ato_hybrid_vrs* vr, ato_profile* profile,
+int hybrid_check(const ato_values* p, const hybrid_vrs* vr, ato_profile* profile,
                      char* err, size_t n) {
     const double* v = p->v;
     char* const* s = p->s;
     int horizon = (int)v[vr->N];
     int* blocks = malloc((horizon > 0 ? horizon : 1) * sizeof(int));
     int count = 0;
-    int ok = ato_hybrid_blocks(s[vr->move_blocks], horizon, blocks, &count, err, n);
+    int ok = hybrid_blocks(s[vr->move_blocks], horizon, blocks, &count, err, n);
     free(blocks);
     if (!ok) return 0;
     const char* posref = s[vr->position_reference];

@@ -14,7 +14,7 @@
 /* the block lengths of `text` ("3:4:3"; blank: one stage per block) into blocks[] (room for
  * `horizon`), their count into *count; 0 after the core's message (positive lengths summing
  * to N) */
-int ato_hybrid_blocks(const char* text, int horizon, int* blocks, int* count, char* err,
+int hybrid_blocks(const char* text, int horizon, int* blocks, int* count, char* err,
                       size_t n);
 
 /* HybridMpcParams.check and the profile of HybridMpc.__init__, in their order, for the
@@ -23,15 +23,15 @@ int ato_hybrid_blocks(const char* text, int horizon, int* blocks, int* count, ch
 typedef struct {
     int N, q_speed, q_position, R, dR, move_blocks, sample_time, coupler_force_max,
         position_reference, delta_mode, reference;
-} ato_hybrid_vrs;
+} hybrid_vrs;
 
 /* the value references of a law whose generated header declares HybridMpcParams */
-#define ATO_HYBRID_VRS                                                                      \
+#define HYBRID_VRS                                                                      \
     {ATO_VR_N, ATO_VR_q_speed, ATO_VR_q_position, ATO_VR_R, ATO_VR_dR, ATO_VR_move_blocks,  \
      ATO_VR_sample_time, ATO_VR_coupler_force_max, ATO_VR_position_reference,              \
      ATO_VR_delta_mode, ATO_VR_reference}
 
-int ato_hybrid_check(const ato_values* p, const ato_hybrid_vrs* vr, ato_profile* profile,
+int hybrid_check(const ato_values* p, const hybrid_vrs* vr, ato_profile* profile,
                      char* err, size_t n);
 
 #endif

@@ -605,8 +605,8 @@ law_core* law_make(const ato_values* p, double t0, char* err, size_t n) {
     const double* v = p->v;
     char* const* s = p->s;
     law_core* c = calloc(1, sizeof(law_core));
-    static const ato_hybrid_vrs vrs = ATO_HYBRID_VRS;
-    if (!ato_hybrid_check(p, &vrs, &c->profile, err, n)) return fail(c);
+    static const hybrid_vrs vrs = HYBRID_VRS;
+    if (!hybrid_check(p, &vrs, &c->profile, err, n)) return fail(c);
     const char* config = s[ATO_VR_configuration];
     for (int q = 0; q < HY_N_MODELS; q++)
         if (strcmp(HY_MODELS[q].name, config) == 0) c->md = &HY_MODELS[q];
@@ -639,7 +639,7 @@ law_core* law_make(const ato_values* p, double t0, char* err, size_t n) {
             return fail(c);
         }
     c->horizon = (int)v[ATO_VR_N];
-    ato_hybrid_blocks(s[ATO_VR_move_blocks], c->horizon, c->blocks, &c->n_blocks, err, n);
+    hybrid_blocks(s[ATO_VR_move_blocks], c->horizon, c->blocks, &c->n_blocks, err, n);
     c->sample_time = v[ATO_VR_sample_time];
     c->brake_from = v[ATO_VR_brake_from];
     c->brake_until_speed = v[ATO_VR_brake_until_speed];
