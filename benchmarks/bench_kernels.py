@@ -1,7 +1,7 @@
 """The freight sub-step kernel: numba vs the same kernel in C vs the numpy reference.
 
 Issue 10 item 1 asks to measure a numba kernel and a C kernel built with gcc on the freight
-plant, choose one and say why. ``cosim/fmu/native/freight_kernel.c`` is
+plant, choose one and say why. ``cosim/fmu/native/plants/freight_kernel.c`` is
 :func:`plants.kernels.freight_steps` line by line in C (same operations in the same order,
 ``-O2 -ffp-contract=off``, no fast-math); it is compiled here into a temporary folder and called
 through ctypes on the arguments the plant passes to the numba kernel in one communication
@@ -25,7 +25,7 @@ identical results (tests/test_kernels.py); their speed ratio is what this benchm
   compiles for the host CPU; a C kernel must be built (or cross-built) for each target;
 * FMU without Python: the C kernel is a self-contained function. The C
   file, tested equal to the numba kernel (``tests/test_kernels.py``), is the kernel of the
-  native FreightTrain FMU (``cosim/fmu/native/freight.c``, ``docs/native_fmus.md``), where
+  native FreightTrain FMU (``cosim/fmu/native/plants/freight.c``, ``docs/native_fmus.md``), where
   that port is done.
 
     python benchmarks/bench_kernels.py [--repeat 2000]
@@ -50,12 +50,13 @@ HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 sys.path.insert(0, str(ROOT))
 
+from cosim.build.native import native_file  # noqa: E402
 from cosim.fmu.state import to_ticks  # noqa: E402
 from plants import kernels  # noqa: E402
 from plants.freight import FreightParams, FreightTrain  # noqa: E402
 from plants.route import load_route  # noqa: E402
 
-C_SOURCE = ROOT / "cosim" / "fmu" / "native" / "freight_kernel.c"
+C_SOURCE = native_file("freight_kernel.c")  # cosim/fmu/native/plants/
 COMM = 0.2  # s, one communication step = 20 sub-steps of 0.01 s
 GCC_FLAGS = ["-O2", "-fPIC", "-shared", "-ffp-contract=off"]
 

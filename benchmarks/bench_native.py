@@ -15,7 +15,7 @@ FreightTrain (seed 002, HXD1 + 108 C80):
   seed002_freight_pid commands in its closed loop (recorded once, replayed open loop) over the
   whole run in 0.2-s steps, every output read after every step, through the core (numba
   kernel, no FMI), the Python FMU and the native FMU; and the bare C kernel
-  (cosim/fmu/native/freight_kernel.c through ctypes on the arguments of one communication
+  (cosim/fmu/native/plants/freight_kernel.c through ctypes on the arguments of one communication
   step, as benchmarks/bench_kernels.py calls it): its time per sub-step times the run's
   sub-steps, the bound no FMU of this kernel can beat;
 * closed loop: every shipped seed-002 scenario with the Python plant and controller FMUs, the

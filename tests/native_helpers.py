@@ -76,7 +76,7 @@ def open_native(native: Native, params: dict | None = None, messages: list[str] 
 
 def law_doubles(fmu: FMU2Slave, size: int) -> np.ndarray:
     """A native controller's law state: the last ``size`` doubles of its FMU state image
-    (ato_controller.c)."""
+    (controller_backend.c)."""
     state = fmu.getFMUstate()
     image = bytes(fmu.serializeFMUstate(state))
     fmu.freeFMUstate(state)

@@ -100,7 +100,7 @@ def test_freight_kernel_matches_the_numpy_reference(seed: int, slack: float) -> 
 @pytest.mark.skipif(shutil.which("gcc") is None, reason="gcc not installed")
 @pytest.mark.parametrize("case", ["cruise", "brake wave"])
 def test_c_kernel_matches_numba(case: str, tmp_path) -> None:
-    """The C version of the freight kernel (cosim/fmu/native/freight_kernel.c, the kernel of
+    """The C version of the freight kernel (cosim/fmu/native/plants/freight_kernel.c, the kernel of
     the native FreightTrain FMU, measured against numba in
     benchmarks/bench_kernels.py) stays the same kernel: same operations in the same order, so
     they differ at most by libm's pow/exp roundings, bounded as against the numpy path."""

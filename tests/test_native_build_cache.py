@@ -72,7 +72,8 @@ def test_a_changed_source_gives_a_new_guid_and_a_new_compile(counted_compiles, t
     before = _members(native_build.build_native(IDENT, dest=tmp_path / "a", windows=False))
     native = tmp_path / "native"
     shutil.copytree(native_build.NATIVE_DIR, native)
-    law = native / native_build.NATIVE[IDENT].source
+    law = native / native_build.native_file(native_build.NATIVE[IDENT].source).relative_to(
+        native_build.NATIVE_DIR)
     law.write_text(law.read_text() + "\n/* one more line */\n")
     monkeypatch.setattr(native_build, "NATIVE_DIR", native)
     after = _members(native_build.build_native(IDENT, dest=tmp_path / "b", windows=False))

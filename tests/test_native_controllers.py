@@ -1,5 +1,5 @@
-"""The native C controller FMUs (cosim/fmu/native/ato_controller.c over a law file) against
-the Python FMU wrappers of their cores (cosim/fmu/slave.py's SampledControllerSlave over
+"""The native C controller FMUs (cosim/fmu/native/runtime/controller_backend.c over a law file)
+against the Python FMU wrappers of their cores (cosim/fmu/slave.py's SampledControllerSlave over
 controllers/...), driven through the same FMI calls, and the shipped closed loops with native
 controllers against the same loops with Python ones.
 

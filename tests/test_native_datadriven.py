@@ -1,6 +1,6 @@
 """The native C FMUs of the seed-001 data-driven controllers EmuMfac3, EmuIsmc3, EmuIsmpc3 and
-EmuGpc3 (cosim/fmu/native/ffdl_mfac.c, ffdl_ismc.c, ffdl_ismpc.c, emu_gpc.c over
-ato_datadriven.c, ato_ffdl.c, ato_sliding.c, ato_linalg.c; ISMPC's QP by DAQP compiled from
+EmuGpc3 (cosim/fmu/native/controllers/ffdl_mfac.c, ffdl_ismc.c, ffdl_ismpc.c, emu_gpc.c over
+datadriven.c, ffdl.c, sliding.c, linalg.c; ISMPC's QP by DAQP compiled from
 its source distribution) against the Python FMUs of their cores
 (controllers.datadriven.emu_control), on the inputs of the shipped seed-001 scenarios.
 
@@ -8,7 +8,7 @@ What is compared, and why so. The cores' scalar operations (scaling, input box, 
 holding brake, estimator and RLS updates, sliding surface, sums, clips) are written in C in
 the cores' order, compiled -std=c99 -ffp-contract=off, and equal bit for bit; the matrix
 products (numpy: BLAS, other summation orders, fused multiply-adds), the SVD of Phi_2
-(numpy: LAPACK's dgesdd; C: cyclic Jacobi on Phi_2'Phi_2, ato_linalg.h) and the linear solves
+(numpy: LAPACK's dgesdd; C: cyclic Jacobi on Phi_2'Phi_2, linalg.h) and the linear solves
 (LAPACK's dgesv; C: Gaussian elimination with the same pivoting) are not the same operations,
 so a sample's outputs differ by rounding. Those differences are not compared over a run: the
 laws feed their own inputs back into their estimators (u -> du -> Phi or theta -> u), and on
@@ -18,7 +18,7 @@ loops are known to. So the comparison is one sample at a time from the same stat
 Python FMU is run open loop on the recorded plant outputs of the shipped scenario (the
 closed loop with the Python controller and the native plant), and before every sample the
 native FMU's law state is set to the Python core's (its FMU state image with the law's
-doubles replaced, in the order ato_datadriven.h, ato_ffdl.h and emu_gpc.c document); then
+doubles replaced, in the order datadriven.h, ffdl.h and emu_gpc.c document); then
 both compute the sample and every output and every state value after it are compared.
 
 Bound of one sample. Each implementation computes the exact sample of a state whose blocks
@@ -376,7 +376,7 @@ class Twins:
 
     def native_law_state(self, size: int) -> tuple[bytes, np.ndarray]:
         """The native FMU state image and its law state (the image's last ``size`` doubles,
-        ato_controller.c)."""
+        controller_backend.c)."""
         image = bytes(self.native.serializeFMUstate(self.native.getFMUstate()))
         return image, np.frombuffer(image[len(image) - 8 * size:], float)
 
@@ -540,16 +540,16 @@ def test_shipped_closed_loop_with_native_controller_over_a_short_horizon(natives
 
 @pytest.fixture(scope="module")
 def linalg(tmp_path_factory):
-    """cosim/fmu/native/ato_linalg.c compiled alone (the build's flags), through ctypes."""
+    """cosim/fmu/native/numerics/linalg.c compiled alone (the build's flags), through ctypes."""
     import ctypes
 
-    from cosim.build.native import CC_FLAGS, NATIVE_DIR
+    from cosim.build.native import CC_FLAGS, native_file
 
     if shutil.which("gcc") is None:
         pytest.skip("gcc not installed")
-    lib = tmp_path_factory.mktemp("linalg") / "ato_linalg.so"
+    lib = tmp_path_factory.mktemp("linalg") / "linalg.so"
     subprocess.run(["gcc", "-shared", "-fPIC", *CC_FLAGS, "-o", str(lib),
-                    str(NATIVE_DIR / "ato_linalg.c"), "-lm"], check=True)
+                    str(native_file("linalg.c")), "-lm"], check=True)
     return ctypes.CDLL(str(lib))
 
 

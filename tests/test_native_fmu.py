@@ -1,4 +1,4 @@
-"""The native C BrakeDelayTrain FMU (cosim/fmu/native/brake_delay.c behind the FMI 2 front)
+"""The native C BrakeDelayTrain FMU (cosim/fmu/native/plants/brake_delay.c behind the FMI 2 front)
 against its Python core, plants.brake_delay.BrakeDelayTrain.
 
 Tolerance: none. The C model performs the core's IEEE double operations in the core's order

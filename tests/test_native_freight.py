@@ -1,5 +1,5 @@
-"""The native C FreightTrain FMU (cosim/fmu/native/freight.c and freight_kernel.c behind the FMI 2
-front) against its Python core, plants.freight.FreightTrain with its compiled kernel (the path
+"""The native C FreightTrain FMU (cosim/fmu/native/plants/freight.c and freight_kernel.c behind the
+FMI 2 front) against its Python core, plants.freight.FreightTrain with its compiled kernel (the path
 the Python FMU runs).
 
 Tolerance. The C files are compiled -std=c99 -ffp-contract=off (no fused multiply-add, no fast

@@ -1,8 +1,7 @@
-"""The native C freight controller FMUs (FreightPid, FreightSmc, FreightFpid, FreightPreview: a
-law file over
-cosim/fmu/native/freight_tracker.c, the shared observer and blending, behind ato_controller.c)
-against their Python cores, and the shipped seed-002 closed loops with the native plant and
-controller against the all-Python loops.
+"""The native C freight controller FMUs (FreightPid, FreightSmc, FreightFpid, FreightPreview: a law
+file over cosim/fmu/native/controllers/freight_tracker.c, the shared observer and blending, behind
+controller_backend.c) against their Python cores, and the shipped seed-002 closed loops with the
+native plant and controller against the all-Python loops.
 
 Tolerance. The C files are compiled -std=c99 -ffp-contract=off and perform the cores' IEEE
 double operations in the cores' order (scalar arithmetic, sqrt, exp and libm pow, numpy.interp

@@ -1,5 +1,5 @@
-"""The native C FMU of seed 003's GPC tracker Crh3Gpc (cosim/fmu/native/crh3_gpc.c over
-ato_gpc.c, the GPC numerics it shares with seed 001's EmuGpc3) against the Python FMU of its
+"""The native C FMU of seed 003's GPC tracker Crh3Gpc (cosim/fmu/native/controllers/crh3_gpc.c over
+gpc.c, the GPC numerics it shares with seed 001's EmuGpc3) against the Python FMU of its
 core (controllers.eco.gpc.Crh3Gpc) on the inputs of the shipped seed-003 GPC scenarios, and the
 shipped closed loops with the native controller against the Python one.
 

@@ -1,6 +1,7 @@
-"""The native hybrid MPCs (Gmpc3, MbMpc3: cosim/fmu/native/hybrid_mpc.c over DAQP built from its
-source distribution) against their Python cores (controllers/hybrid/hybrid_mpc.py, miqp.py),
-sample by sample on the shipped seed 004 scenarios' inputs, and in the scenarios' closed loops.
+"""The native hybrid MPCs (Gmpc3, MbMpc3: cosim/fmu/native/controllers/hybrid_mpc.c over DAQP built
+from its source distribution) against their Python cores (controllers/hybrid/hybrid_mpc.py,
+miqp.py), sample by sample on the shipped seed 004 scenarios' inputs, and in the scenarios' closed
+loops.
 
 Lockstep: the plant core (Emu, the scenario's train and route) is driven by the Python
 controller; at every sample both controllers get the plant's outputs as inputs and compute one

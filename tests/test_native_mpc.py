@@ -1,5 +1,5 @@
-"""The native seed 000 predictive stopping controllers (cosim/fmu/native/stop_mpc.c with DAQP
-built from its sdist) against their Python cores (controllers/mpc/stop_mpc.py).
+"""The native seed 000 predictive stopping controllers (cosim/fmu/native/controllers/stop_mpc.c
+with DAQP built from its sdist) against their Python cores (controllers/mpc/stop_mpc.py).
 
 Sample by sample: the native FMU and the Python FMU get the same FMI calls with the inputs of
 the Python closed loop of each shipped seed 000 scenario (and the reproduction's variants:

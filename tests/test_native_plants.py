@@ -1,4 +1,4 @@
-"""The native C plant FMUs Crh3Train, Emu3 and Emu8 (cosim/fmu/native/crh3.c, emu.c) against
+"""The native C plant FMUs Crh3Train, Emu3 and Emu8 (cosim/fmu/native/plants/crh3.c, emu.c) against
 their Python cores (plants.crh3.Crh3Train; plants.emu.Emu with the compiled kernels of
 plants.kernels), on the inputs of the shipped scenarios.
 
@@ -71,7 +71,7 @@ class Native:
 
     def core_state(self, n: int) -> dict:
         """The Emu core's state fields from the native FMU's serialized state (layout of
-        ato_plant_backend.c: front mode, magic, variables, strings, flags, start, executions,
+        plant_backend.c: front mode, magic, variables, strings, flags, start, executions,
         core)."""
         state = self.fmu.getFMUstate()
         data = bytes(self.fmu.serializeFMUstate(state))

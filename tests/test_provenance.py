@@ -40,7 +40,7 @@ def test_the_native_build_adds_the_c_models_it_runs() -> None:
     native = _rel(entry_inputs("seed000", "native"))
     # a Python record's only C input is the master's loop (it runs the Python builds too)
     assert [f for f in python if f.endswith(".c")] == ["cosim/run/master/native_loop.c"]
-    assert {"cosim/fmu/native/brake_delay.c", "cosim/fmu/native/stop_mpc.c",
+    assert {"cosim/fmu/native/plants/brake_delay.c", "cosim/fmu/native/controllers/stop_mpc.c",
             "cosim/build/native.py"} <= set(native)
     assert set(python) < set(native)
     assert simulation_digest("seed000", "native") != simulation_digest("seed000")

@@ -1,8 +1,9 @@
 """Build-time side: what makes the FMUs and runs in none. :mod:`cosim.build.python` is the
 catalog of the wrappers (``plants/**/*_fmu.py``, ``controllers/**/*_fmu.py``) and the builder of
 their Python FMUs, :mod:`cosim.build.fmi3` their FMI 3.0 builds, :mod:`cosim.build.native`
-the native C FMUs (FMI 2.0, and FMI 3.0 derived from them) from the C models and fronts of
-``cosim/fmu/native`` and ``cosim/fmu/front``, the Python wrappers' declarations and the data
+the native C FMUs (FMI 2.0, and FMI 3.0 derived from them) from the C of ``cosim/fmu/native``
+(its folders ``runtime``, ``numerics``, ``plants`` and ``controllers``) and the fronts of
+``cosim/fmu/front``, the Python wrappers' declarations and the data
 the cores compute at build time, :mod:`cosim.build.solvers` the C sources of the numerical
 solvers they link, taken from the solvers' published source distributions, and
 :mod:`cosim.build.reference` the FMU reference page.

@@ -12,12 +12,15 @@ computes for its C twin (EMPC region tables, preview gains, the seed-003 tracker
 target profiles, generated headers of model data) the core declares itself: its
 ``native_data(identifier, shipped)`` (path in the FMU -> text), which the builder asks of the
 catalog's core of every model (:func:`core_data`), handing it the parameter values the project
-ships for any FMU (:func:`shipped_values`). Every native FMU links the runtime
-``ato_runtime.c``, the C twin of :mod:`cosim.fmu.slave`'s CoreSlave, under a policy: a
-controller is its law's C file linked with ``ato_controller.c``, the sampled controllers'
-event policy (the timing of :mod:`cosim.fmu.slave`); every plant links the plants' stepping
-policy ``ato_plant_backend.c``; BrakeDelayTrain, Crh3Train and the Emus read the step
-profiles of :data:`STEP_PROFILES` from ``<name>.profiles``.
+ships for any FMU (:func:`shipped_values`). The C files are in the folders of
+:data:`NATIVE_FOLDERS` under ``cosim/fmu/native/`` (``runtime``, ``numerics``, ``plants``,
+``controllers``), each named once, and copied side by side into the FMU's ``sources/``
+(:func:`native_file` finds one by name). Every native FMU links the runtime ``runtime.c``,
+the C twin of :mod:`cosim.fmu.slave`'s CoreSlave, under a policy: a controller is its law's C
+file linked with ``controller_backend.c``, the sampled controllers' event policy (the timing
+of :mod:`cosim.fmu.slave`); every plant links the plants' stepping policy
+``plant_backend.c``; BrakeDelayTrain, Crh3Train and the Emus read the step profiles of
+:data:`STEP_PROFILES` from ``<name>.profiles``.
 
 The FMU holds ``binaries/linux64/<id>.so`` (gcc), ``binaries/win64/<id>.dll`` when the
 mingw-w64 cross compiler ``x86_64-w64-mingw32-gcc`` is installed, and ``sources/`` (the C
@@ -75,7 +78,8 @@ from plants.route import ROUTES_DIR, Route, load_reference, load_route
 
 HERE = Path(__file__).resolve().parent
 FMU_LAYER = HERE.parent / "fmu"  # cosim/fmu: the C models and fronts beside the Python slaves
-NATIVE_DIR = FMU_LAYER / "native"
+NATIVE_DIR = FMU_LAYER / "native"  # runtime/, numerics/, plants/, controllers/ (NATIVE_FOLDERS)
+NATIVE_FOLDERS = ("runtime", "numerics", "plants", "controllers")
 FRONT_DIR = FMU_LAYER / "front"
 NATIVE_FMU_DIR = FMU_DIR / "native"
 CC_FLAGS = ["-std=c99", "-O2", "-ffp-contract=off", "-fno-fast-math", "-Wall", "-Wextra"]
@@ -85,13 +89,14 @@ WINDOWS_CC = "x86_64-w64-mingw32-gcc"
 
 @dataclass(frozen=True)
 class NativeSpec:
-    """A native model: the C file of its backend (in cosim/fmu/native/), further C files it
-    links and headers it includes (``helpers``, same folder; a controller's law links with
-    ``ato_controller.c``), the route profiles it reads besides the grade steps
-    (``route_profiles``, keys of :data:`ROUTE_PROFILES`) and the other resources the builder
+    """A native model: the C file of its backend, further C files it links and headers it
+    includes (``helpers``; a controller's law links with ``controller_backend.c``), each named
+    by its file name and found in its folder of cosim/fmu/native/ (:func:`native_file`), the
+    route profiles it reads besides the grade steps (``route_profiles``, keys of
+    :data:`ROUTE_PROFILES`) and the other resources the builder
     writes for it (``data``, keys of :data:`DATA`: the bundled reference profiles); files it
-    shares with other plant models (``shared``, C and headers, same folder; with
-    ``ato_plant.c`` the route's step profiles ``<name>.profiles`` are exported), the headers
+    shares with other plant models (``shared``, C and headers; with
+    ``plant_common.c`` the route's step profiles ``<name>.profiles`` are exported), the headers
     of :data:`GENERATED` it includes (``generated``), and the numerical solvers it links
     (``solvers``, keys of :data:`cosim.build.solvers.SOLVERS`: their C sources come from
     the registry's source distribution at build time, their licence is shipped in the FMU);
@@ -115,35 +120,35 @@ class NativeSpec:
         return NATIVE_FMU_DIR / f"{self.identifier}.fmu"
 
 
-# the runtime under every native FMU (ato_runtime.c, the twin of CoreSlave: variables, their
+# the runtime under every native FMU (runtime.c, the twin of CoreSlave: variables, their
 # checks, logging, FMU-state image, the FMI 2-shaped table); a backend is a policy on it
-RUNTIME = ("ato_runtime.c", "ato_runtime.h")
+RUNTIME = ("runtime.c", "runtime.h")
 # the sampled controllers' event policy over a law and what the laws share
-CONTROLLER = (*RUNTIME, "ato_controller.c", "ato_law.h", "ato_law_common.h", "ato_math.h")
-BUNDLED = ("ato_bundled.c", "ato_bundled.h")  # bundled data files opened by name
+CONTROLLER = (*RUNTIME, "controller_backend.c", "law.h", "law_common.h", "minmax.h")
+BUNDLED = ("bundled.c", "bundled.h")  # bundled data files opened by name
 # reference profiles (resources/references)
-PROFILE = ("ato_profile.c", "ato_profile.h", *BUNDLED)
-# the plants' stepping policy (ato_plant_backend.c: the core stepped, its part of the FMU
-# state) and the plant helpers (ato_plant.c: route profiles, envelope, resistance)
-PLANT_BACKEND = (*RUNTIME, "ato_plant_backend.h", "ato_plant_backend.c", "ato_math.h")
-PLANT_SHARED = (*PLANT_BACKEND, "ato_plant.h", "ato_plant.c", *BUNDLED)
+PROFILE = ("profile.c", "profile.h", *BUNDLED)
+# the plants' stepping policy (plant_backend.c: the core stepped, its part of the FMU
+# state) and the plant helpers (plant_common.c: route profiles, envelope, resistance)
+PLANT_BACKEND = (*RUNTIME, "plant_backend.h", "plant_backend.c", "minmax.h")
+PLANT_SHARED = (*PLANT_BACKEND, "plant_common.h", "plant_common.c", *BUNDLED)
 # numpy's default_rng(seed words).standard_normal in C (seeded disturbances)
-NUMPY_RANDOM = ("ato_numpy_random.h", "ato_numpy_random.c")
-GRADE = ("ato_grade.c", "ato_grade.h", *BUNDLED)  # a controller's bundled route grades
+NUMPY_RANDOM = ("numpy_random.h", "numpy_random.c")
+GRADE = ("grade.c", "grade.h", *BUNDLED)  # a controller's bundled route grades
 # the freight controllers' shared base: observer, blending, brake-pipe model (freight_tracker.c)
 FREIGHT_TRACKER = ("freight_tracker.c", "freight_tracker.h")
 # the seed-001 data-driven controllers: their drive part (scaling, input box, reference,
 # holding brake) and small dense linear algebra (truncated inverse, solve); the FFDL
 # estimator for MFAC and ISMC
-DATADRIVEN = (*CONTROLLER, *PROFILE, "ato_datadriven.c", "ato_datadriven.h", "ato_linalg.c",
-              "ato_linalg.h")
-FFDL = ("ato_ffdl.c", "ato_ffdl.h")
+DATADRIVEN = (*CONTROLLER, *PROFILE, "datadriven.c", "datadriven.h", "linalg.c",
+              "linalg.h")
+FFDL = ("ffdl.c", "ffdl.h")
 # the integral sliding surface and equivalent control of ISMC and ISMPC
-SLIDING = (*FFDL, "ato_sliding.c", "ato_sliding.h")
+SLIDING = (*FFDL, "sliding.c", "sliding.h")
 # the seed-004 controllers' shared parameter checks and move blocks
-HYBRID = ("ato_hybrid.c", "ato_hybrid.h")
+HYBRID = ("hybrid.c", "hybrid.h")
 # the GPC with RLS of controllers/common/gpc.py (seeds 001 and 003)
-GPC = ("ato_gpc.c", "ato_gpc.h", "ato_linalg.c", "ato_linalg.h")
+GPC = ("gpc.c", "gpc.h", "linalg.c", "linalg.h")
 
 NATIVE: dict[str, NativeSpec] = {
     "BrakeDelayTrain": NativeSpec("BrakeDelayTrain", "brake_delay.c",
@@ -177,7 +182,7 @@ NATIVE: dict[str, NativeSpec] = {
     # seed 000's predictive stopping controllers: one law, DAQP from its sdist; the tube
     # controllers' terminal sets as computed by the core (ato_stop_mpc_sets.h)
     **{identifier: NativeSpec(identifier, "stop_mpc.c",
-                              (*CONTROLLER, *GRADE, "ato_linalg.c", "ato_linalg.h"),
+                              (*CONTROLLER, *GRADE, "linalg.c", "linalg.h"),
                               solvers=("daqp",), defines=(("ATO_STOP_MPC_KIND", kind),))
        for kind, identifier in enumerate(("StopMpc", "StopRmpc", "StopRsmpc"))},
     "FreightTrain": NativeSpec("FreightTrain", "freight.c",
@@ -190,6 +195,38 @@ NATIVE: dict[str, NativeSpec] = {
                               generated=("ato_numpy_normal.h",))
        for identifier in ("Emu3", "Emu8")},
 }
+
+
+def native_file(name: str) -> Path:
+    """The C file or header ``name`` of the native models: the one file of that name in a
+    folder of :data:`NATIVE_FOLDERS` under :data:`NATIVE_DIR` (the FMU's ``sources/`` holds
+    them side by side, so a name is never used twice). Raises :class:`FileNotFoundError`
+    naming the file and the folders searched when none has it."""
+    found = _native_index(NATIVE_DIR).get(name)
+    if found is None:
+        raise FileNotFoundError(
+            f"native C file {name!r} not found in {NATIVE_DIR}/"
+            f"{{{','.join(NATIVE_FOLDERS)}}}/ (a NativeSpec names a file that is not there)")
+    return found
+
+
+@functools.cache
+def _native_index(root: Path) -> dict[str, Path]:
+    """File name -> path of every C file and header under ``root``'s :data:`NATIVE_FOLDERS`,
+    read once per folder; raises :class:`ValueError` when a name is in two places or a file
+    lies outside those folders (a flat ``sources/`` could hold only one of them)."""
+    index: dict[str, Path] = {}
+    for path in sorted(root.rglob("*")):
+        if path.suffix not in (".c", ".h"):
+            continue
+        if path.relative_to(root).parts[0] not in NATIVE_FOLDERS or path.parent.parent != root:
+            raise ValueError(f"{path}: a native C file belongs directly in one of "
+                             f"{root}/{{{','.join(NATIVE_FOLDERS)}}}/")
+        if path.name in index:
+            raise ValueError(f"{path.name}: in {index[path.name].parent} and {path.parent}; "
+                             "the FMU's flat sources/ needs one name per file")
+        index[path.name] = path
+    return index
 
 
 class CompilerMissing(RuntimeError):
@@ -211,7 +248,7 @@ def decl_header(identifier: str, variables, guid: str, options: dict | None = No
     causality = {"parameter": "ATO_PARAMETER", "input": "ATO_INPUT", "output": "ATO_OUTPUT"}
     lines = [f"/* generated by cosim/build/native.py from the declarations of {identifier};"
              " do not edit */",
-             "#include <math.h>", '#include "ato_vars.h"',
+             "#include <math.h>", '#include "vars.h"',
              f"#define ATO_MODEL_IDENTIFIER {c_string(identifier)}",
              f"#define ATO_GUID {c_string(guid)}",
              f"#define ATO_N_VARS {len(variables)}", "enum {"]
@@ -642,8 +679,7 @@ def native_sources(identifier: str, fmi_version: int = 2) -> list[Path]:
     (declarations, the core and its ``native_data``, bundled data)."""
     spec = NATIVE[identifier]
     fmi3_files = [FRONT_DIR / "fmi3_front.c", HERE / "fmi3.py"] if fmi_version == 3 else []
-    return [NATIVE_DIR / spec.source, NATIVE_DIR / "ato_vars.h",
-            *(NATIVE_DIR / name for name in (*spec.helpers, *spec.shared)),
+    return [*map(native_file, (spec.source, "vars.h", *spec.helpers, *spec.shared)),
             FRONT_DIR / "fmi2_front.c",
             FRONT_DIR / "ato_backend.h", FRONT_DIR / "instance_registry.h", Path(__file__),
             FMU_LAYER / "c_text.py", *([HERE / "solvers.py"] if spec.solvers else []),
@@ -695,11 +731,8 @@ def build_native(identifier: str, dest: Path = NATIVE_FMU_DIR, windows: bool | N
         shutil.copy2(FRONT_DIR / "fmi2_front.c", src)
         shutil.copy2(FRONT_DIR / "ato_backend.h", src)
         shutil.copy2(FRONT_DIR / "instance_registry.h", src)
-        for name in (spec.source, *spec.helpers):
-            shutil.copy2(NATIVE_DIR / name, src)
-        shutil.copy2(NATIVE_DIR / "ato_vars.h", src)
-        for name in spec.shared:
-            shutil.copy2(NATIVE_DIR / name, src)
+        for name in (spec.source, *spec.helpers, "vars.h", *spec.shared):  # flat, by name
+            shutil.copy2(native_file(name), src)
         for name in spec.generated:
             (src / name).write_text(GENERATED[name]())
         for rel, text in from_core.items():  # the core's headers (sources/), data (resources/)
@@ -737,7 +770,7 @@ def build_native(identifier: str, dest: Path = NATIVE_FMU_DIR, windows: bool | N
             (routes / f"{name}.grade").write_text(text)
         for name, text in route_profile_tables(spec.route_profiles).items():
             (routes / name).write_text(text)
-        if "ato_plant.c" in spec.shared:
+        if "plant_common.c" in spec.shared:
             for name, text in step_profile_tables().items():
                 (routes / f"{name}.profiles").write_text(text)
         for kind in spec.data:
