@@ -158,6 +158,27 @@ def test_degenerate_samples_give_a_stated_verdict() -> None:
     assert r.verdict == "insufficient" and r.note == "K >= 6 needed"
 
 
+def test_the_median_ci_is_scipys_exact_interval_for_every_k_with_ties() -> None:
+    """The verdicts' CI of the median (its order statistics found once per K) against
+    ``scipy.stats.quantile_test``'s interval on each sample itself: K = 1..60, continuous and
+    tied samples, bit for bit, NaN where K is too small for one."""
+    from scipy.stats import quantile_test
+
+    from cosim.reproduce.stats import CONFIDENCE, _median_ci
+
+    rng = np.random.default_rng(7)
+    for k in range(1, 61):
+        for x in (rng.normal(size=k), rng.integers(0, 3, size=k).astype(float)):
+            ci = quantile_test(x, q=float(np.median(x)), p=0.5).confidence_interval(CONFIDENCE)
+            want = ((float(ci.low), float(ci.high))
+                    if np.isfinite(ci.low) and np.isfinite(ci.high) else None)
+            got = _median_ci(x)
+            if want is None:
+                assert all(np.isnan(got)), (k, got)
+            else:
+                assert got == want, (k, x, got, want)
+
+
 def test_rounding_sensitive_is_never_holds() -> None:
     b = 5.0 + NOISE
     main = verdict(LESS, b - 1.0, b)

@@ -52,6 +52,7 @@ rounding verdict does not apply: ``rounding_robust`` is None).
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -168,14 +169,27 @@ def _binom_p(k: int, n: int, p: float, alternative: str) -> float:
     return float(binomtest(k, n, p, alternative=alternative).pvalue)
 
 
-def _median_ci(x: np.ndarray) -> tuple[float, float]:
-    """The exact distribution-free CI of the median (order statistics, the sign test's dual),
-    NaN where K is too small for one."""
+@functools.cache
+def _median_ci_ranks(n: int) -> tuple[int, int] | None:
+    """The 0-based ranks, in the sorted sample, of the ends of the exact 95 % CI of the median
+    of n values (``scipy.stats.quantile_test``'s interval, whose order statistics depend on n
+    alone: read off the sample 0, 1, ..., n - 1, once per n), None where n is too small."""
     from scipy.stats import quantile_test
 
-    ci = quantile_test(x, q=float(np.median(x)), p=0.5).confidence_interval(CONFIDENCE)
+    ci = quantile_test(np.arange(n, dtype=float), q=(n - 1) / 2.0, p=0.5
+                       ).confidence_interval(CONFIDENCE)
     lo, hi = float(ci.low), float(ci.high)
-    return (lo, hi) if math.isfinite(lo) and math.isfinite(hi) else (math.nan, math.nan)
+    return (int(lo), int(hi)) if math.isfinite(lo) and math.isfinite(hi) else None
+
+
+def _median_ci(x: np.ndarray) -> tuple[float, float]:
+    """The exact distribution-free CI of the median (order statistics, the sign test's dual:
+    the sorted members at :func:`_median_ci_ranks`), NaN where K is too small for one."""
+    ranks = _median_ci_ranks(int(np.size(x)))
+    if ranks is None:
+        return math.nan, math.nan
+    ordered = np.sort(np.asarray(x, dtype=float))
+    return float(ordered[ranks[0]]), float(ordered[ranks[1]])
 
 
 def _k_needed(decides: Callable[[int], bool]) -> int:
