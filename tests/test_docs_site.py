@@ -6,10 +6,12 @@ Convention for code blocks in ``docs/*.md``: a ```` ```bash ```` block is run by
 :func:`test_bash_block_runs` in a fresh temporary folder, with this checkout's ``cosim`` first
 on ``PATH``, and must exit 0 within ``BLOCK_TIMEOUT_S``; ```` ```python ```` blocks are executed
 as scripts the same way. An HTML comment ``<!-- norun -->`` on the line right before the fence
-marks a block shown only (installs, long runs): the comment is invisible in the rendered page,
-and the fence's info string stays one word, which is all the site's Markdown (Python-Markdown
-with pymdownx.superfences) recognises; ```` ```bash norun ```` is not a fence there and swallows
-the text after it into a code box. Other fences (toml, text, sh, c) are data or other languages.
+marks a block shown only (installs, long runs), and ``<!-- slow -->`` a block that runs in the
+slow suite only (``pytest -m slow``: one that builds or validates the whole catalog): the
+comment is invisible in the rendered page, and the fence's info string stays one word, which
+is all the site's Markdown (Python-Markdown with pymdownx.superfences) recognises;
+```` ```bash norun ```` is not a fence there and swallows the text after it into a code box.
+Other fences (toml, text, sh, c) are data or other languages.
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ import shutil
 import subprocess
 import sys
 from pathlib import Path
+from typing import Any
 
 import pytest
 from typer.testing import CliRunner
@@ -32,17 +35,22 @@ DOCS = ROOT / "docs"
 BLOCK_TIMEOUT_S = 1800  # a guard against a hang, not a speed check: the longest block builds and
 # validates every native FMU, about 150 s of CPU on 2 cores unloaded (12x margin for a busy machine)
 NORUN = "<!-- norun -->"  # on the line before a fence: the block is shown, not run
-_FENCE = re.compile(r"^(<!-- norun -->\n)?```(bash|python)[ \t]*\n(.*?)^```[ \t]*$",
+SLOW = "<!-- slow -->"  # on the line before a fence: the block runs in the slow suite only
+_FENCE = re.compile(r"^(<!-- (?:norun|slow) -->\n)?```(bash|python)[ \t]*\n(.*?)^```[ \t]*$",
                     re.M | re.S)
 _OPENING = re.compile(r"^[ \t]*```(.*)$", re.M)  # every fence line: opening or closing
 
 
-def _blocks() -> list[tuple[str, str, str]]:
+def _blocks() -> list[Any]:
+    """Every runnable block as (where, language, code), those marked :data:`SLOW` with the
+    slow mark."""
     found = []
     for page in sorted(DOCS.rglob("*.md")):
         for i, m in enumerate(_FENCE.finditer(page.read_text())):
-            if not m.group(1):
-                found.append((f"{page.relative_to(DOCS)}#{i}", m.group(2), m.group(3)))
+            if m.group(1) != NORUN + "\n":
+                marks = pytest.mark.slow if m.group(1) == SLOW + "\n" else ()
+                found.append(pytest.param(f"{page.relative_to(DOCS)}#{i}", m.group(2),
+                                          m.group(3), marks=marks))
     return found
 
 
@@ -59,7 +67,9 @@ def test_norun_marks_only_the_block_after_it() -> None:
     page = f"a\n\n{NORUN}\n```bash\nexit 1\n```\n\n```bash\ntrue\n```\n"
     found = [(m.group(1), m.group(2), m.group(3)) for m in _FENCE.finditer(page)]
     assert found == [(NORUN + "\n", "bash", "exit 1\n"), (None, "bash", "true\n")]
-    run = [code for _, _, code in _blocks()]
+    slow = [m.group(1) for m in _FENCE.finditer(f"{SLOW}\n```bash\ntrue\n```\n")]
+    assert slow == [SLOW + "\n"]
+    run = [block.values[2] for block in _blocks()]
     assert run and not any("pip install" in code for code in run)  # installs are shown only
 
 

@@ -18,6 +18,7 @@ import pytest
 from fmi_state_helpers import rerun_after_restore
 from fmpy import extract, read_model_description
 from fmpy.fmi2 import FMU2Slave
+from matrix import by_model
 
 
 class Instance:
@@ -493,7 +494,7 @@ def _fmu_ids() -> list[str]:
     return list(catalog())
 
 
-@pytest.mark.parametrize("identifier", _fmu_ids())
+@pytest.mark.parametrize("identifier", by_model(_fmu_ids()))
 def test_every_fmu_runs_in_fmpy_at_the_compliance_checkers_step(built_fmus, identifier):
     """fmpy.simulate_fmu with its defaults but the stop time, at the FMU Compliance Checker's
     step (stop time / 500), here twice the FMU's default step: a controller executes the
@@ -507,7 +508,7 @@ def test_every_fmu_runs_in_fmpy_at_the_compliance_checkers_step(built_fmus, iden
     assert result["time"][-1] == pytest.approx(500 * step)
 
 
-@pytest.mark.parametrize("identifier", _fmu_ids())
+@pytest.mark.parametrize("identifier", by_model(_fmu_ids()))
 def test_every_fmu_runs_in_fmpy_with_default_arguments(built_fmus, identifier):
     """``fmpy.simulate_fmu(path)``: the FMU's default experiment, fmpy's default step."""
     from fmpy import simulate_fmu

@@ -180,12 +180,13 @@ def test_nothing_outside_a_papers_folder_imports_its_tests() -> None:
     name: the suite's import mode puts each test's folder on ``sys.path``)."""
     folders = paper_test_files()
     assert folders, "no paper has a tests folder"
-    for folder, files in folders.items():
-        names = {p.stem for p in files}
-        for path in [p for p, _ in modules()] + scripts():
+    tests_of = {folder: {p.stem for p in files} for folder, files in folders.items()}
+    for path in [p for p, _ in modules()] + scripts():
+        imports = imported_names(path)  # each file parsed once
+        for folder, names in tests_of.items():
             if folder.parent in path.parents:
                 continue  # the paper's own folder
-            for line, name in imported_names(path):
+            for line, name in imports:
                 assert not set(name.split(".")) & names, (
                     f"{path.relative_to(ROOT)}:{line}: imports {name}, a test of "
                     f"{folder.relative_to(ROOT)}: a paper's tests are its own")

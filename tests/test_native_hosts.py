@@ -23,6 +23,7 @@ import pytest
 from fmpy import extract, read_model_description
 from fmpy.fmi2 import FMU2Slave
 from fmpy.model_description import read_build_description
+from matrix import by_model
 
 from cosim.build.native import FMI_VERSIONS, NATIVE, build_natives, native_path
 
@@ -139,7 +140,7 @@ def run_bare(exe: Path, args: list[str], tmp: Path, env: dict[str, str] | None =
     return done.stdout, loaded
 
 
-@pytest.mark.parametrize("identifier", IDENTIFIERS)
+@pytest.mark.parametrize("identifier", by_model(IDENTIFIERS))
 def test_c_hosts_run_both_builds_without_python(native, hosts, identifier, tmp_path):
     """The FMI 2 and FMI 3 hosts, started with no environment (no PYTHONPATH, no PYTHONHOME,
     no LD_PRELOAD), load the FMU's binary and no libpython; the FMI 2 host's results equal
@@ -182,7 +183,7 @@ def test_the_loader_trace_lists_libpython_for_a_python_fmu(hosts, tmp_path):
     assert any("libpython" in Path(lib).name for lib in loaded), loaded
 
 
-@pytest.mark.parametrize("identifier", IDENTIFIERS)
+@pytest.mark.parametrize("identifier", by_model(IDENTIFIERS))
 def test_fmpy_runs_the_fmi3_build_like_the_fmi2_build(native, identifier):
     """``fmpy.simulate_fmu`` with its defaults and the probe inputs: the same series."""
     paths = native(identifier)
@@ -197,7 +198,7 @@ def test_fmpy_runs_the_fmi3_build_like_the_fmi2_build(native, identifier):
 
 
 @pytest.mark.parametrize("version", VERSIONS)
-@pytest.mark.parametrize("identifier", IDENTIFIERS)
+@pytest.mark.parametrize("identifier", by_model(IDENTIFIERS))
 def test_compliance_suite_passes(native, identifier, version):
     """cosim.interop.compliance (what ``cosim validate --native --fmi all`` runs), strict: no
     error and no warning, for every native model in both FMI versions (the one place each
@@ -227,7 +228,7 @@ def _shipped_scenario(identifier: str) -> tuple[Path, str] | None:
     return None
 
 
-@pytest.mark.parametrize("identifier", IDENTIFIERS)
+@pytest.mark.parametrize("identifier", by_model(IDENTIFIERS))
 def test_libcosim_runs_the_fmi2_build_in_a_shipped_loop(native, identifier):
     """The first shipped scenario that uses the model, with the native FMU in its place
     (first 20 s): libcosim's fixed-step master gives our master's Jacobi run of the same FMUs
@@ -257,7 +258,7 @@ def test_libcosim_runs_the_fmi2_build_in_a_shipped_loop(native, identifier):
 TIMING_KEYS = ("wall_time", "real_time_factor", "fmu_wall", "solve_time")  # clock readings
 
 
-@pytest.mark.parametrize("identifier", IDENTIFIERS)
+@pytest.mark.parametrize("identifier", by_model(IDENTIFIERS))
 def test_shipped_loop_with_the_fmi3_build_equals_the_fmi2_build(native, identifier):
     """The same shipped scenario (first 20 s) under our master: with ``fmi_version = 3`` and
     the native FMI 3 build in the model's place (the other components' FMI 3 builds, Event
@@ -287,7 +288,7 @@ def test_shipped_loop_with_the_fmi3_build_equals_the_fmi2_build(native, identifi
 
 
 @pytest.mark.parametrize("version", [pytest.param(2, marks=pytest.mark.slow), 3])
-@pytest.mark.parametrize("identifier", IDENTIFIERS)
+@pytest.mark.parametrize("identifier", by_model(IDENTIFIERS))
 def test_sources_build_with_fmpy_and_run_the_same(native, identifier, version, tmp_path):
     """``sources/`` is complete: fmpy's build (CMake, from buildDescription.xml, without our
     compiler options) compiles it into a binary whose results equal ours (the x86-64 baseline
@@ -312,7 +313,7 @@ def test_sources_build_with_fmpy_and_run_the_same(native, identifier, version, t
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("identifier", IDENTIFIERS)
+@pytest.mark.parametrize("identifier", by_model(IDENTIFIERS))
 def test_windows_binaries_under_wine(identifier, tmp_path):
     """binaries/win64/<id>.dll (FMI 2) and binaries/x86_64-windows/<id>.dll (FMI 3), built with
     mingw-w64, loaded and stepped under Wine by the C hosts built with mingw

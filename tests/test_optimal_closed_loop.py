@@ -28,6 +28,7 @@ FLIRT = instance("trains", "CH_Stadler_FLIRT_TPF")
 REFERENCE = instance("tracks", "00_reference")
 
 
+@pytest.mark.slow  # the optimum over 8.5 km and its closed loop: about 30 s of CPU
 def test_the_closed_loop_follows_the_optimum_on_ttobench_reference_track(tmp_path: Path) -> None:
     """The FLIRT from stop 0 to stop 1 of the reference track (8.5 km, level, 140 km/h) in
     330 s on a coarse grid: the written route is the JSON's line, the plant carries the JSON's

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import pytest
 from fmpy import read_model_description, simulate_fmu
+from matrix import by_model
 
 from cosim.build.python import catalog
 
@@ -17,13 +18,13 @@ def _checker_step(path: str) -> float:
     return 2.0 * float(read_model_description(path).defaultExperiment.stepSize)
 
 
-@pytest.mark.parametrize("identifier", IDENTIFIERS)
+@pytest.mark.parametrize("identifier", by_model(IDENTIFIERS))
 def test_every_fmi3_build_runs_in_fmpy_with_default_arguments(built_fmus_fmi3, identifier):
     result = simulate_fmu(str(built_fmus_fmi3[identifier].path_fmi3))
     assert len(result) > 1
 
 
-@pytest.mark.parametrize("identifier", IDENTIFIERS)
+@pytest.mark.parametrize("identifier", by_model(IDENTIFIERS))
 def test_every_fmi3_build_runs_at_the_compliance_checkers_step(built_fmus_fmi3, identifier):
     path = str(built_fmus_fmi3[identifier].path_fmi3)
     step = _checker_step(path)

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from matrix import by_scenario
 from scenario_groups import one_per_fmu_pair
 
 from cosim.interop.libcosim import compare_frames, run_libcosim, simulate_single
@@ -36,7 +37,7 @@ def _assert_match(sc, ours, theirs) -> None:
     assert diffs[worst] <= 1e-9, f"{sc.name}: {worst} differs by {diffs[worst]:.3e}"
 
 
-@pytest.mark.parametrize("path", SCENARIOS, ids=lambda p: p.stem)
+@pytest.mark.parametrize("path", by_scenario(SCENARIOS))
 def test_libcosim_matches_jacobi(path, built_fmus):
     sc, ours, theirs = _ours_and_libcosim(path, SHORT)
     _assert_match(sc, ours, theirs)

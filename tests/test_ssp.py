@@ -6,6 +6,7 @@ import zipfile
 
 import pytest
 from fmpy.ssp.ssd import read_ssd
+from matrix import by_scenario
 
 from cosim.interop.libcosim import compare_frames, run_ssp
 from cosim.interop.ssp import export_ssp
@@ -40,7 +41,7 @@ def test_export_is_valid_and_complete(path, tmp_path, built_fmus):
     assert got == {(c.src, c.src_var, c.dst, c.dst_var) for c in sc.connections}
 
 
-@pytest.mark.parametrize("path", SCENARIOS, ids=lambda p: p.stem)
+@pytest.mark.parametrize("path", by_scenario(SCENARIOS))
 def test_ssp_in_libcosim_matches_our_jacobi(path, tmp_path, built_fmus):
     sc = load_scenario(path, SHORT)
     out = export_ssp(sc, tmp_path / "x.ssp")

@@ -19,6 +19,7 @@ from fmpy import extract, read_model_description
 from fmpy.fmi2 import FMU2Slave
 
 from cosim.build.python import SHIM_SUFFIX, shim_binary
+from tests.matrix import by_model
 
 HERE = Path(__file__).resolve().parent
 STEP, N_STEPS, COMMAND = 0.2, 25, 50.0
@@ -150,7 +151,7 @@ def _fmu_ids() -> list[str]:
     return list(catalog())
 
 
-@pytest.mark.parametrize("identifier", _fmu_ids())
+@pytest.mark.parametrize("identifier", by_model(_fmu_ids()))
 def test_c_host_runs_every_fmu_at_the_compliance_checkers_step(host, shim, built_fmus,
                                                                identifier, tmp_path):
     """The C host (no Python of its own), logging off, at the FMU Compliance Checker's step

@@ -7,12 +7,13 @@ import pytest
 
 from cosim.build.python import catalog
 from cosim.interop.compliance import ALL_CHECKS, ERROR, Options, check_together, format_report
+from tests.matrix import by_model
 
 IDENTIFIERS = sorted(catalog())
 
 
 @pytest.mark.parametrize("check", ALL_CHECKS)
-@pytest.mark.parametrize("identifier", IDENTIFIERS)
+@pytest.mark.parametrize("identifier", by_model(IDENTIFIERS))
 def test_fmu_passes_check(identifier, check, compliance_results, built_fmus):
     problems = compliance_results(identifier)
     errors = [p for p in problems if p.check == check and p.severity == ERROR]

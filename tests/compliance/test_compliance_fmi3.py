@@ -20,6 +20,7 @@ from cosim.interop.compliance import (
     format_report,
     passed,
 )
+from tests.matrix import by_model
 
 IDENTIFIERS = sorted(catalog())
 
@@ -31,7 +32,7 @@ def fmi3_results(built_fmus_fmi3, checked_once):
 
 
 @pytest.mark.parametrize("check", FMI3_CHECKS)
-@pytest.mark.parametrize("identifier", IDENTIFIERS)
+@pytest.mark.parametrize("identifier", by_model(IDENTIFIERS))
 def test_fmi3_build_passes_check(identifier, check, fmi3_results, built_fmus_fmi3):
     problems = fmi3_results(identifier)
     errors = [p for p in problems if p.check == check and p.severity == ERROR]
