@@ -156,16 +156,10 @@ def test_fill_generated_replaces_only_its_block() -> None:
         site.fill_generated(text, "other", "x")
 
 
-def test_host_packages_cover_every_fmu_import(monkeypatch: pytest.MonkeyPatch) -> None:
-    import functools
-
-    from cosim.build import reference
+def test_host_packages_cover_every_fmu_import() -> None:
     from cosim.build.python import catalog
+    from cosim.build.reference import third_party_imports
 
-    # each FMU's imports found once (a pure function of its bundled files): the page's list and
-    # the check below read the same answers
-    third_party_imports = functools.cache(reference.third_party_imports)
-    monkeypatch.setattr(site, "third_party_imports", third_party_imports)
     listed = site.host_packages()
     for spec in catalog().values():
         for name in third_party_imports(spec.module):
@@ -401,3 +395,22 @@ def test_paper_claims_tables_fit_1280px(rendered: dict[str, dict]) -> None:
     hidden = [(p, c["name"]) for p, c in columns
               if c["right"] > min(c["box_right"], WIDTH_PX) + 0.5 or c["left"] < c["box_left"]]
     assert not hidden, hidden
+
+
+def test_a_modules_imports_are_read_again_when_it_changes(tmp_path: Path) -> None:
+    """The FMU reference's imports of a bundled module, parsed once per content stamp: a
+    changed file is parsed again; optional (in a try) and fallback (in a handler) imports."""
+    import os
+
+    from cosim.build.reference import _imports_of
+
+    module = tmp_path / "m.py"
+    module.write_text("import numpy\ntry:\n    import numba\nexcept ImportError:\n"
+                      "    import tomli\nimport os\nfrom cosim import site\n")
+    stat = module.stat()
+    assert _imports_of(module, stat.st_mtime_ns, stat.st_size) == (
+        frozenset({"numpy", "numba", "tomli"}), frozenset({"numba"}), frozenset({"tomli"}))
+    module.write_text("import scipy\n")
+    os.utime(module, ns=(stat.st_atime_ns, stat.st_mtime_ns + 1))
+    stat = module.stat()
+    assert _imports_of(module, stat.st_mtime_ns, stat.st_size)[0] == frozenset({"scipy"})

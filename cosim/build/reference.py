@@ -8,6 +8,7 @@ table of its variables (causality, type, unit, range, start, description).
 from __future__ import annotations
 
 import ast
+import functools
 import sys
 from pathlib import Path
 
@@ -27,31 +28,49 @@ def third_party_imports(module: str) -> list[str]:
     for path in bundled_files(module):
         if path.suffix != ".py":
             continue
-        tree = ast.parse(path.read_text())
-        for node in ast.walk(tree):
-            if isinstance(node, ast.Try):
-                for sub in (n for stmt in node.body for n in ast.walk(stmt)):
-                    if isinstance(sub, (ast.Import, ast.ImportFrom)):
-                        names = ([a.name for a in sub.names] if isinstance(sub, ast.Import)
-                                 else [sub.module or ""])
-                        optional.update(n.split(".")[0] for n in names)
-                for handler in node.handlers:
-                    for sub in ast.walk(handler):
-                        if isinstance(sub, ast.Import):
-                            fallbacks.update(a.name.split(".")[0] for a in sub.names)
-        for node in ast.walk(tree):
-            if isinstance(node, ast.Import):
-                names = [a.name for a in node.names]
-            elif isinstance(node, ast.ImportFrom) and not node.level and node.module:
-                names = [node.module]
-            else:
-                continue
-            for name in names:
-                top = name.split(".")[0]
-                if top not in sys.stdlib_module_names and top not in PROJECT_PACKAGES:
-                    found.add(top)
+        stat = path.stat()
+        imports, in_try, in_handler = _imports_of(path, stat.st_mtime_ns, stat.st_size)
+        found |= imports
+        optional |= in_try
+        fallbacks |= in_handler
     return sorted(f"{name} (Python < 3.11)" if name in fallbacks
                   else f"{name} (optional)" if name in optional else name for name in found)
+
+
+@functools.cache
+def _imports_of(path: Path, mtime_ns: int, size: int
+                ) -> tuple[frozenset[str], frozenset[str], frozenset[str]]:
+    """The module at ``path`` (parsed once per content stamp ``mtime_ns``, ``size``: the
+    catalog's FMUs bundle mostly the same files): the top-level packages outside the
+    standard library and this project it imports; those imported inside a ``try``; those
+    imported inside an ``except`` handler."""
+    tree = ast.parse(path.read_text())
+    in_try: set[str] = set()
+    in_handler: set[str] = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Try):
+            for sub in (n for stmt in node.body for n in ast.walk(stmt)):
+                if isinstance(sub, (ast.Import, ast.ImportFrom)):
+                    names = ([a.name for a in sub.names] if isinstance(sub, ast.Import)
+                             else [sub.module or ""])
+                    in_try.update(n.split(".")[0] for n in names)
+            for handler in node.handlers:
+                for sub in ast.walk(handler):
+                    if isinstance(sub, ast.Import):
+                        in_handler.update(a.name.split(".")[0] for a in sub.names)
+    imports: set[str] = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            names = [a.name for a in node.names]
+        elif isinstance(node, ast.ImportFrom) and not node.level and node.module:
+            names = [node.module]
+        else:
+            continue
+        for name in names:
+            top = name.split(".")[0]
+            if top not in sys.stdlib_module_names and top not in PROJECT_PACKAGES:
+                imports.add(top)
+    return frozenset(imports), frozenset(in_try), frozenset(in_handler)
 
 
 def _cell(value: object) -> str:
