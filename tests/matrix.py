@@ -17,6 +17,8 @@ from typing import Any
 
 import pytest
 
+from tests.scenario_groups import fmu_pair
+
 # one model per family of code (plants: its physics; controllers: its law's C and Python
 # family), each named with what it stands for
 REPRESENTATIVES: dict[str, str] = {
@@ -39,12 +41,11 @@ def by_model(identifiers: Iterable[str]) -> list[Any]:
             for i in identifiers]
 
 
-def _lead_fmu(path: Path) -> str:
-    from cosim.run.scenario import load_scenario
-
-    components = load_scenario(path).components
-    lead = components.get("controller") or components.get("plant")
-    return Path(lead.fmu).stem if lead is not None else ""
+def _lead_fmu(name: str) -> str:
+    """The FMU of the shipped scenario ``name``'s controller, else its plant
+    (:func:`scenario_groups.fmu_pair`)."""
+    roles = dict(item.split("=", 1) for item in fmu_pair(name))
+    return roles.get("controller") or roles.get("plant", "")
 
 
 def by_scenario(paths: Iterable[Path]) -> list[Any]:
@@ -54,7 +55,7 @@ def by_scenario(paths: Iterable[Path]) -> list[Any]:
     seen: set[str] = set()
     out = []
     for path in paths:
-        lead = _lead_fmu(path)
+        lead = _lead_fmu(path.stem)
         sample = lead in REPRESENTATIVES and lead not in seen
         seen.add(lead)
         out.append(pytest.param(path, id=path.stem, marks=() if sample else pytest.mark.slow))

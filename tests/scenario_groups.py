@@ -2,7 +2,8 @@
 
 The tests that compare two ways of running the same FMUs over a scenario (the FMI 3.0 builds
 against the FMI 2.0 builds, libcosim against our master, a native plant against its Python
-core) run the first seconds of every shipped scenario in the default suite, and whole runs
+core) run the first seconds of every shipped scenario (in the default suite, or of a sample of
+them: :mod:`matrix`), and whole runs
 (``slow``) of one scenario per (plant FMU, controller FMU) pair: the scenarios of one pair
 differ only in parameter values and reference data, which both compared paths pass to the
 same code unchanged, so a whole run per pair covers every code path a whole run can reach
