@@ -145,13 +145,20 @@ def test_no_child_outlives_a_killed_parent(hostile_fmus, tmp_path):
 
 def test_a_sweep_point_whose_worker_crashes_names_the_signal_and_the_fmu(hostile_fmus,
                                                                           tmp_path):
-    from cosim.run.sweep import run_sweep
+    """Through the CLI, as a user runs it: a sweep forked from this test's process would
+    inherit pytest's fault handler, and each deliberate crash would print its worker's Python
+    stack on the terminal beside the test report."""
+    import pandas as pd
 
     paths = [str(scenario(tmp_path, hostile_fmus[name]))
              for name in ("SegfaultInDoStep", "SlowFirstStep")]
-    frame = run_sweep(paths, {"simulation.stop_time": [1.0, 0.5]}, tmp_path / "sweep",
-                      workers=2, plot=False)
-    rows = {(r["scenario"], r["simulation.stop_time"]): r for r in frame.to_dict("records")}
+    out = tmp_path / "sweep"
+    proc = cosim("sweep", *paths, "--set", "simulation.stop_time=1,0.5", "--workers", "2",
+                 "--out", str(out), "--no-plot")
+    _, err = proc.communicate(timeout=BOUND_S)
+    assert proc.returncode == 1, err  # a failed point: exit status 1 once the others end
+    rows = {(r["scenario"], r["simulation.stop_time"]): r
+            for r in pd.read_csv(out / "sweep.csv").to_dict("records")}
     for u in (1.0, 0.5):
         crashed = rows[("SegfaultInDoStep", u)]
         assert crashed["status"] == "failed"
