@@ -32,15 +32,17 @@ controller).
   replayed) with Clarabel vs SCS, and the eco scenario's real-time factor (``bench_seed003``);
 * ``cosim build --native --fmi all`` end to end: its wall time vs its CPU time (the command's
   and its compilers'; what one core would take), ratio = CPU / wall (``bench_native``);
-* ``cosim reproduce seed000`` and ``seed004 --seeds 5`` on this tree vs on 8a1e303 checked out
-  beside it, alternating (``bench_baseline.py``): wall and CPU seconds, ratio = 8a1e303 /
-  this tree, and whether every claim's verdict and k of K are the same;
+* ``cosim reproduce seed000`` and ``seed004 --seeds 5`` (``--baseline-entries``: other
+  entries) on this tree vs on 8a1e303 checked out beside it, alternating
+  (``bench_baseline.py``): wall and CPU seconds, ratio = 8a1e303 / this tree, and whether
+  every claim's verdict and k of K are the same; a baseline row of another entry, K or commit
+  stays in ``results.json`` until measured again;
 * the EMU and freight closed loops on their native FMUs through the master vs the bare C loop
   on the same FMUs (``bench_c_limit.py``, alternating): ratio = C loop wall / master loop wall
   (the share of the C loop's speed the master reaches), the final positions compared.
 
     python benchmarks/run_all.py [--quick] [--only campaign ...] [--campaign-seeds K]
-        [--baseline COMMIT] [--baseline-seeds K]
+        [--baseline COMMIT] [--baseline-seeds K] [--baseline-entries ENTRY ...]
 
 ``--only``: measure only the named groups (``closed_loop``, ``kernels``, ``qp``, ``instances``,
 ``master``, ``isolation``, ``sweep``, ``campaign``, ``seed003``, ``native_build``,
@@ -270,11 +272,13 @@ def baseline_row_name(entry: str, seeds: int, commit: str) -> str:
     return f"campaign {entry} K={seeds} vs {commit}"
 
 
-def baseline_campaigns(commit: str, seeds: int, quick: bool) -> dict[str, dict]:
-    """``cosim reproduce ENTRY --seeds K`` on this tree vs ``commit`` checked out beside it,
+def baseline_campaigns(commit: str, seeds: int, quick: bool,
+                       entries: list[str] | None = None) -> dict[str, dict]:
+    """``cosim reproduce ENTRY --seeds K`` for each of ``entries`` (default
+    :data:`bench_baseline.ENTRIES`) on this tree vs ``commit`` checked out beside it,
     alternating (bench_baseline; one pair per entry with ``quick``, else two)."""
     rows = {}
-    results = bench_baseline.compare(list(bench_baseline.ENTRIES), commit, seeds,
+    results = bench_baseline.compare(list(entries or bench_baseline.ENTRIES), commit, seeds,
                                      1 if quick else 2)
     for entry, r in results.items():
         this, base = bench_baseline.THIS, bench_baseline.BASE
@@ -353,6 +357,9 @@ def main() -> None:
                         f"{bench_baseline.BASELINE})")
     parser.add_argument("--baseline-seeds", type=int, default=bench_baseline.SEEDS,
                         help=f"K of the baseline group (default {bench_baseline.SEEDS})")
+    parser.add_argument("--baseline-entries", nargs="+", default=list(bench_baseline.ENTRIES),
+                        help=f"the entries of the baseline group (default "
+                        f"{' '.join(bench_baseline.ENTRIES)})")
     args = parser.parse_args()
     repeat = 1 if args.quick else 3
     build_stale()
@@ -389,7 +396,8 @@ def main() -> None:
     if "native_build" in only:
         measured["native build, all FMUs"] = native_build()
     if "baseline" in only:
-        measured.update(baseline_campaigns(args.baseline, args.baseline_seeds, args.quick))
+        measured.update(baseline_campaigns(args.baseline, args.baseline_seeds, args.quick,
+                                           args.baseline_entries))
     if "c_limit" in only:
         for label in bench_c_limit.SCENARIOS:
             measured[f"{label} master vs bare C loop"] = c_limit(label, repeat)
@@ -398,8 +406,11 @@ def main() -> None:
         r.setdefault("measured_utc", stamp)
         r.setdefault("load_average", os.getloadavg()[0])
     rows.update(measured)
-    targets = {**TARGETS, **{name: baseline_target(args.baseline) for name in measured
-                             if name not in TARGETS}}  # a baseline row of another commit or K
+    kept = [name for name in rows if name.startswith("campaign ") and " vs " in name]
+    targets = {**TARGETS, **{name: rows[name].get("target") or baseline_target(args.baseline)
+                             for name in kept if name not in TARGETS},
+               **{name: baseline_target(args.baseline) for name in measured
+                  if name not in TARGETS}}  # a baseline row of another commit, K or entry
     rows = {name: rows[name] for name in targets if name in rows}  # the table's order
     print(f"{'benchmark':<30} {'figure':>10}  {'reference':>10}  {'ratio':>7}  target / units")
     for name, r in measured.items():
