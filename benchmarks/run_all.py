@@ -56,6 +56,7 @@ import argparse
 import json
 import os
 import platform
+import re
 import statistics
 import sys
 import time
@@ -272,6 +273,9 @@ def baseline_row_name(entry: str, seeds: int, commit: str) -> str:
     return f"campaign {entry} K={seeds} vs {commit}"
 
 
+BASELINE_ROW = re.compile(r"campaign \S+ K=\d+ vs \S+")  # a baseline_row_name
+
+
 def baseline_campaigns(commit: str, seeds: int, quick: bool,
                        entries: list[str] | None = None) -> dict[str, dict]:
     """``cosim reproduce ENTRY --seeds K`` for each of ``entries`` (default
@@ -406,11 +410,10 @@ def main() -> None:
         r.setdefault("measured_utc", stamp)
         r.setdefault("load_average", os.getloadavg()[0])
     rows.update(measured)
-    kept = [name for name in rows if name.startswith("campaign ") and " vs " in name]
+    # a baseline row of another commit, K or entry: its stored target, this run's if measured
     targets = {**TARGETS, **{name: rows[name].get("target") or baseline_target(args.baseline)
-                             for name in kept if name not in TARGETS},
-               **{name: baseline_target(args.baseline) for name in measured
-                  if name not in TARGETS}}  # a baseline row of another commit, K or entry
+                             for name in rows
+                             if name not in TARGETS and BASELINE_ROW.fullmatch(name)}}
     rows = {name: rows[name] for name in targets if name in rows}  # the table's order
     print(f"{'benchmark':<30} {'figure':>10}  {'reference':>10}  {'ratio':>7}  target / units")
     for name, r in measured.items():
