@@ -588,7 +588,9 @@ def test_a_second_rounding_path_perturbs_other_parameters_without_the_reference_
         "seed_key": "plant.seed", "report_seeds": "1..6", "rounding_perturb": ["plant.m"],
         "rounding_perturb_second": ["controller.k"]})
     entry.variants = []
-    entry.runs = [dataclasses.replace(r, overrides={"plant.m": 2.0, "controller.k": 3.0})
+    # a shipped scenario on its Python builds: path 1's environment is read from its FMUs
+    entry.runs = [dataclasses.replace(r, scenario="seed000_stop_pid",
+                                      overrides={"plant.m": 2.0, "controller.k": 3.0})
                   for r in entry.runs]
     jobs = {key: ov for key, _sc, ov in claim_jobs(entry, 2, rounding=True)}
     assert {key[3] for key in jobs} == {0, 1, 2}
@@ -601,6 +603,25 @@ def test_a_second_rounding_path_perturbs_other_parameters_without_the_reference_
     with pytest.raises(ClaimsError, match="rounding_perturb_second shares"):
         check_ensemble("e.toml", {"rounding_perturb": ["plant.m"],
                                   "rounding_perturb_second": ["plant.m"]})
+
+
+def test_path_1_takes_the_reference_environment_only_where_a_python_build_runs() -> None:
+    """A member of native C builds alone has no numpy reference path: its path 1 runs (and
+    is recorded) without ``ATO_COSIM_NO_KERNELS``, in the main path's workers; the same
+    member on the Python builds, or with one FMU kept on its Python build by the run's own
+    ``set``, takes it."""
+    from cosim.reproduce.entry import load_entry
+    from cosim.reproduce.members import ROUNDING_ENV, claim_jobs, member_env, member_jobs
+
+    entry = load_entry("seed000")
+    for build, expected in (("native", {}), ("python", ROUNDING_ENV)):
+        envs = {job.key[3]: job.env for job in member_jobs(entry, 1, build=build)}
+        assert envs[1] == expected and envs[0] == {}, build
+    key, scenario, overrides = next(job for job in claim_jobs(entry, 1, build="native")
+                                    if job[0][3] == 1)
+    kept = {**overrides, "controller.build": "python"}
+    assert member_env((key, scenario, kept), True, {}) == ROUNDING_ENV
+    assert member_env((key, scenario, overrides), False, {}) == {}
 
 
 def test_a_timing_run_records_its_machine_and_load_and_the_page_states_them() -> None:

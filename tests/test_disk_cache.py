@@ -160,13 +160,13 @@ def test_is_stale_shortcut_agrees_with_the_exact_scan(tmp_path, monkeypatch):
         z.writestr("modelDescription.xml", "<fmiModelDescription/>")
     bundled = max(f.stat().st_mtime for f in [*build.bundled_files(spec.module),
                                               Path(build.__file__)])
-    newest = build._newest_project_file()
+    newest = build.newest_project_file()
     assert newest >= bundled
     os.utime(fmu, (newest + 10, newest + 10))
     assert not build.is_stale(spec)  # shortcut
     os.utime(fmu, (bundled - 10, bundled - 10))
     assert build.is_stale(spec)
     # an unrelated file newer than the FMU: the exact scan says fresh
-    monkeypatch.setattr(build, "_newest_project_file", lambda: bundled + 100)
+    monkeypatch.setattr(build, "newest_project_file", lambda: bundled + 100)
     os.utime(fmu, (bundled + 10, bundled + 10))
     assert not build.is_stale(spec)

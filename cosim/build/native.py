@@ -70,7 +70,7 @@ except ModuleNotFoundError:  # Python 3.10
     import tomli as tomllib  # type: ignore[no-redef]
 
 from cosim.build import fmi3
-from cosim.build.python import FMU_DIR, ROOT, bundled_files, catalog
+from cosim.build.python import FMU_DIR, ROOT, bundled_files, catalog, stale_unless_known
 from cosim.build.solvers import solver_files
 from cosim.fmu.c_text import c_double, c_string
 from cosim.fmu.disk_cache import cache_root
@@ -688,8 +688,14 @@ def native_sources(identifier: str, fmi_version: int = 2) -> list[Path]:
 
 def native_is_stale(identifier: str, fmi_version: int = 2) -> bool:
     """True when the native FMI ``fmi_version`` FMU ``identifier`` is missing or older than a
-    file it is made from (:func:`native_sources`)."""
+    file it is made from (:func:`native_sources`; checked once while neither it nor a project
+    file changes, :func:`cosim.build.python.stale_unless_known`)."""
     path = native_path(identifier, fmi_version)
+    return stale_unless_known(("native", identifier, fmi_version), path,
+                              functools.partial(_native_is_stale, identifier, fmi_version, path))
+
+
+def _native_is_stale(identifier: str, fmi_version: int, path: Path) -> bool:
     if not path.is_file():
         return True
     built = path.stat().st_mtime

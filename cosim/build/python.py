@@ -46,6 +46,7 @@ import sysconfig
 import tempfile
 import warnings
 import zipfile
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -185,13 +186,22 @@ def _wrapper_modules() -> list[str]:
     return mods
 
 
+# catalog()'s last reading: the newest project file's time then, and the FMUs it found
+_catalog_read: tuple[float, dict[str, FmuSpec]] | None = None
+
+
 def catalog() -> dict[str, FmuSpec]:
     """All FMUs this project builds, by identifier (wrapper class name without 'Fmu').
 
     Read from the wrapper modules' source (``*_fmu.py`` under plants/ and controllers/: every
     top-level class whose name ends in ``Fmu``), without importing them: importing every
     wrapper costs ~1 s (cvxpy, scipy.stats), and a run, sweep or reproduction needs one or two
-    of them. :func:`_imported_catalog` is the check by import (a test compares the two)."""
+    of them. :func:`_imported_catalog` is the check by import (a test compares the two).
+    Parsed again only when a project file changed (:func:`newest_project_file`)."""
+    global _catalog_read
+    newest = newest_project_file()
+    if _catalog_read is not None and _catalog_read[0] == newest:
+        return dict(_catalog_read[1])
     specs: dict[str, FmuSpec] = {}
     for mod_name in _wrapper_modules():
         path = _module_file(mod_name)
@@ -204,6 +214,7 @@ def catalog() -> dict[str, FmuSpec]:
                     raise ValueError(f"two FMUs named {identifier}: {specs[identifier].module} "
                                      f"and {mod_name}")
                 specs[identifier] = FmuSpec(identifier, mod_name, node.name, doc)
+    _catalog_read = (newest, dict(specs))
     return specs
 
 
@@ -506,14 +517,51 @@ def _builder_files(fmi_version: int) -> list[Path]:
     return files + fmi3.builder_files() if fmi_version == 3 else files
 
 
+# builds found current: (kind, identifier, FMI version) -> their :func:`build_stamp` then;
+# while it is the same they still are (every file a build is made from is a project file), so
+# a campaign's many runs of the same FMUs check them once
+_CURRENT: dict[tuple[str, str, int], tuple[object, ...]] = {}
+
+
+def build_stamp(path: Path) -> tuple[object, ...] | None:
+    """The FMU archive at ``path`` (its path, modification time in ns and size) and the
+    newest project file's time (:func:`newest_project_file`); None where it is missing."""
+    try:
+        st = path.stat()
+    except OSError:
+        return None
+    return str(path), st.st_mtime_ns, st.st_size, newest_project_file()
+
+
+def stale_unless_known(key: tuple[str, str, int], path: Path, stale: Callable[[], bool]
+                       ) -> bool:
+    """``stale()`` of the build ``key`` at ``path``, not asked again while its
+    :func:`build_stamp` is what it was when ``stale()`` last said false."""
+    stamp = build_stamp(path)
+    if stamp is not None and _CURRENT.get(key) == stamp:
+        return False
+    if stale():
+        _CURRENT.pop(key, None)
+        return True
+    if stamp is not None:
+        _CURRENT[key] = stamp
+    return False
+
+
 def is_stale(spec: FmuSpec, fmi_version: int = 2) -> bool:
     """True when the FMU's build of ``fmi_version`` is missing, not an intact archive
-    (:func:`is_intact`), or older than any file it bundles or the builder."""
+    (:func:`is_intact`), or older than any file it bundles or the builder (checked once
+    while neither it nor a project file changes, :func:`stale_unless_known`)."""
     path = spec.path_for(fmi_version)
+    return stale_unless_known(("python", spec.identifier, fmi_version), path,
+                              functools.partial(_is_stale, spec, fmi_version, path))
+
+
+def _is_stale(spec: FmuSpec, fmi_version: int, path: Path) -> bool:
     if not path.is_file() or not is_intact(path):
         return True
     built = path.stat().st_mtime
-    if built >= _newest_project_file():  # no project file changed since: no import scan
+    if built >= newest_project_file():  # no project file changed since: no import scan
         return False
     newest = max(f.stat().st_mtime for f in [*bundled_files(spec.module),
                                              *_builder_files(fmi_version)]
@@ -521,7 +569,7 @@ def is_stale(spec: FmuSpec, fmi_version: int = 2) -> bool:
     return built < newest
 
 
-def _newest_project_file() -> float:
+def newest_project_file() -> float:
     """Newest modification time of any file in the project packages (a superset of what any
     FMU bundles, and the builder: cosim/fmu/front is in cosim): a cheaper bound than the exact
     per-FMU import scan."""

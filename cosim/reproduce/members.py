@@ -17,7 +17,8 @@ Members of a claim's ensemble (K = ``--seeds``, the first K report seeds, except
 Every member of a ``disturbance`` or ``mismatch`` claim runs on the main path (path 0) and on
 each perturbed floating-point path: path 1, the plants' numpy reference path
 (``ATO_COSIM_NO_KERNELS=1`` in the worker, unless ``[ensemble].rounding_reference_path`` is
-false) with each ``[ensemble].rounding_perturb`` parameter scaled by 1 + 1e-12, and, where
+false or every FMU of the run is a native C build, which has none) with each
+``[ensemble].rounding_perturb`` parameter scaled by 1 + 1e-12, and, where
 ``[ensemble].rounding_perturb_second`` names other parameters, path 2 with those scaled
 (:meth:`cosim.reproduce.ensemble.Ensemble.rounding_paths`); a ``repeat`` claim has no such
 rerun (its rounding-robust column reads "n/a": its metric is a measurement, not a result of the
@@ -30,6 +31,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import sys
+import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -48,7 +50,9 @@ from cosim.run.scenario import Scenario, load_scenario
 from cosim.run.simulate import ensure_built, run_scenario
 from cosim.run.sweep import warm_up_for
 
-CHECKPOINT_EVERY = 20  # members between two saves of the partial record
+# s of wall time between two saves of the partial record while members finish: a kill loses at
+# most this much of their work, and short members are not slowed by a save every few of them
+CHECKPOINT_S = 10.0
 
 Job = tuple[MemberKey, str, Overrides]  # the member, its scenario and overrides
 
@@ -244,6 +248,24 @@ def member_dir(out: Path, key: tuple[str, str, int, int]) -> Path:
 ROUNDING_ENV = {"ATO_COSIM_NO_KERNELS": "1"}  # the plants' numpy reference path
 
 
+def member_env(job: Job, reference_path: bool, python_builds: dict[tuple[str, Any], bool]
+               ) -> dict[str, str]:
+    """The environment ``job`` runs in: :data:`ROUNDING_ENV` on perturbed path 1 where
+    ``reference_path`` and one of its FMUs runs a Python build; none for a run of native C
+    builds alone, which have no numpy reference path (its path 1 is the parameter
+    perturbation alone, :func:`cosim.reproduce.builds.check_rounding_path`), nor on the
+    other paths. ``python_builds`` keeps the answer per scenario and build overrides."""
+    key, scenario, overrides = job
+    if key[3] != 1 or not reference_path:
+        return {}
+    builds = tuple(sorted((k, v) for k, v in overrides.items() if k.endswith(".build")))
+    if (scenario, builds) not in python_builds:
+        sc = load_scenario(scenario, dict(builds))
+        python_builds[scenario, builds] = any(c.build != "native"
+                                              for c in sc.components.values())
+    return dict(ROUNDING_ENV) if python_builds[scenario, builds] else {}
+
+
 def execute(jobs: list[Job], workers: int | None, label: str = "claims",
             scheduler: str | None = None, dirs: dict[Any, str] | None = None,
             reference_path: bool = True,
@@ -251,9 +273,10 @@ def execute(jobs: list[Job], workers: int | None, label: str = "claims",
             ) -> dict[MemberKey, Summary | None]:
     """Run the jobs with :func:`cosim.run.runner.run_tasks`: the main path and the perturbed
     paths in one pool of workers, each worker running its members on the same FMU instances
-    (:data:`MEMBER_INSTANCES`), except path 1 in workers of its own started with
-    ``ATO_COSIM_NO_KERNELS=1`` (unless ``reference_path`` is false), after the others; a
-    failed run gives None (its metrics are missing).
+    (:data:`MEMBER_INSTANCES`), except the members whose :func:`member_env` is
+    ``ATO_COSIM_NO_KERNELS=1`` (path 1 with a Python build, unless ``reference_path`` is
+    false), in workers of their own started with it, after the others; a failed run gives
+    None (its metrics are missing).
     ``dirs``: job key -> folder for the run's results (others write none);
     ``on_result(key, summary)`` as each ends."""
     dirs = dirs or {}
@@ -270,8 +293,9 @@ def execute(jobs: list[Job], workers: int | None, label: str = "claims",
         out[task.key] = None
 
     by_env: dict[bool, list[Job]] = {}  # the paths of one environment share their workers
+    python_builds: dict[tuple[str, Any], bool] = {}
     for job in sorted(jobs, key=lambda job: job[0][3]):
-        by_env.setdefault(job[0][3] == 1 and reference_path, []).append(job)
+        by_env.setdefault(bool(member_env(job, reference_path, python_builds)), []).append(job)
     for reference, group in sorted(by_env.items()):
         tasks = [runner.Task(key, _run_member, (sc, ov, dirs.get(key)))
                  for key, sc, ov in group]
@@ -284,11 +308,12 @@ def execute(jobs: list[Job], workers: int | None, label: str = "claims",
 
 def member_jobs(entry: Entry, k: int, rounding: bool = True, build: str = "python"
                 ) -> list[RecordJob]:
-    """:func:`claim_jobs` as record jobs, with the environment each ran in (perturbed path
-    1's :data:`ROUNDING_ENV` unless ``[ensemble].rounding_reference_path`` is false)."""
-    env = ROUNDING_ENV if entry.ensemble.rounding_reference_path else {}
-    return [RecordJob("member", key, scenario, overrides, dict(env) if key[3] == 1 else {})
-            for key, scenario, overrides in claim_jobs(entry, k, rounding, build)]
+    """:func:`claim_jobs` as record jobs, with the environment each ran in
+    (:func:`member_env`)."""
+    python_builds: dict[tuple[str, Any], bool] = {}
+    return [RecordJob("member", *job, member_env(job, entry.ensemble.rounding_reference_path,
+                                                 python_builds))
+            for job in claim_jobs(entry, k, rounding, build)]
 
 
 def _banded(entry: Entry) -> set[str]:
@@ -318,15 +343,15 @@ def simulate_claims(entry: Entry, out: Path, record: Record, workers: int | None
     for job in wanted:  # the reused members first: a checkpoint keeps them
         if job.key in reuse:
             record.add(job, previous.result(job.kind, *job.key))
-    finished = 0
+    saved = time.monotonic()
 
     def checkpoint(key: MemberKey, summary: Summary | None) -> None:
-        nonlocal finished
+        nonlocal saved
         if summary is not None:  # a failed member is run again on --resume
             record.add(by_key[key], summary)
-        finished += 1
-        if finished % CHECKPOINT_EVERY == 0:
+        if time.monotonic() - saved >= CHECKPOINT_S:
             save(record, out)  # an interrupted run resumes from here (--resume)
+            saved = time.monotonic()
 
     summaries = execute(jobs, workers, f"{entry.name} claims", scheduler, dirs,
                         entry.ensemble.rounding_reference_path, checkpoint)
