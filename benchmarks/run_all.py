@@ -276,6 +276,18 @@ def baseline_row_name(entry: str, seeds: int, commit: str) -> str:
 BASELINE_ROW = re.compile(r"campaign \S+ K=\d+ vs \S+")  # a baseline_row_name
 
 
+def verdict_agreement(claims: int, differences: list[dict]) -> str:
+    """How the verdicts of the ``claims`` claims both trees have compare, from
+    :func:`bench_baseline.verdict_differences`: in how many k of K differs (the simulations
+    gave other outcomes) and in how many only the verdict's label (the same k of K, read by
+    other statistics)."""
+    this, base = bench_baseline.THIS, bench_baseline.BASE
+    k_differs = sum(list(d[this])[1] != list(d[base])[1] for d in differences)
+    labels = len(differences) - k_differs
+    return (f"of the {claims} claims of both trees, k of K differs in {k_differs} and the "
+            f"verdict's label alone (the same k of K) in {labels}")
+
+
 def baseline_campaigns(commit: str, seeds: int, quick: bool,
                        entries: list[str] | None = None) -> dict[str, dict]:
     """``cosim reproduce ENTRY --seeds K`` for each of ``entries`` (default
@@ -286,12 +298,9 @@ def baseline_campaigns(commit: str, seeds: int, quick: bool,
                                      1 if quick else 2)
     for entry, r in results.items():
         this, base = bench_baseline.THIS, bench_baseline.BASE
-        n = len(r["verdict_differences"])
-        same = "the same" if r["same_verdicts"] else f"differ in {n} claim{'s' * (n > 1)}"
         rows[baseline_row_name(entry, seeds, commit)] = {
             "figure": r["wall_s"][this], "unit": f"s wall, this tree, cosim reproduce {entry} "
-            f"--seeds {seeds}; verdicts and k of K {same} (the {r['claims']} claims of both "
-            "trees)",
+            f"--seeds {seeds}; {verdict_agreement(r['claims'], r['verdict_differences'])}",
             "reference": r["wall_s"][base],
             "reference_name": f"{commit} checked out beside it (s wall)",
             "ratio": r["ratio_wall"], "ratio_name": f"{commit} / this tree, wall",
