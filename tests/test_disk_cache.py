@@ -146,6 +146,38 @@ def test_fmu_carries_checked_hash_bytecode():
             assert header[8:16] == importlib.util.source_hash(z.read(src))
 
 
+def test_a_build_found_current_is_checked_again_once_it_or_a_project_file_changes(
+        tmp_path, monkeypatch):
+    """A campaign asks for the same FMU once per run: a build found current is not checked
+    again (stale_unless_known) until the archive or the newest project file changes; then the
+    check runs and says stale where a file it bundles is newer."""
+    from cosim.build import python as build
+
+    spec = build.catalog()["StopRmpc"]
+    source = tmp_path / "core.py"
+    source.write_text("x = 1\n")
+    monkeypatch.setattr(build, "FMU_DIR", tmp_path)
+    monkeypatch.setattr(build, "bundled_files", lambda module: [source])
+    monkeypatch.setattr(build, "_builder_files", lambda fmi_version: [])
+    monkeypatch.setattr(build, "newest_project_file", lambda: source.stat().st_mtime)
+    checks = []
+    exact = build._is_stale
+    monkeypatch.setattr(build, "_is_stale", lambda *a: checks.append(a) or exact(*a))
+    fmu = tmp_path / "StopRmpc.fmu"
+    with zipfile.ZipFile(fmu, "w") as z:
+        z.writestr("modelDescription.xml", "<fmiModelDescription/>")
+    os.utime(source, (100, 100))
+    os.utime(fmu, (200, 200))
+    assert not build.is_stale(spec) and not build.is_stale(spec)
+    assert len(checks) == 1  # the second answer was remembered
+    os.utime(source, (300, 300))  # a project file newer than the build
+    assert build.is_stale(spec) and len(checks) == 2
+    os.utime(fmu, (400, 400))  # rebuilt: checked again, current
+    assert not build.is_stale(spec) and len(checks) == 3
+    fmu.unlink()
+    assert build.is_stale(spec)
+
+
 def test_is_stale_shortcut_agrees_with_the_exact_scan(tmp_path, monkeypatch):
     """The mtime shortcut (no project file newer than the FMU) never hides a stale FMU: the
     project's newest file is at least as new as any bundled one, and when it is newer than

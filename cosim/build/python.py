@@ -186,8 +186,9 @@ def _wrapper_modules() -> list[str]:
     return mods
 
 
-# catalog()'s last reading: the newest project file's time then, and the FMUs it found
-_catalog_read: tuple[float, dict[str, FmuSpec]] | None = None
+# catalog()'s last reading: the newest project file's time and the wrapper modules then, and
+# the FMUs it found
+_catalog_read: tuple[tuple[float, tuple[str, ...]], dict[str, FmuSpec]] | None = None
 
 
 def catalog() -> dict[str, FmuSpec]:
@@ -197,13 +198,15 @@ def catalog() -> dict[str, FmuSpec]:
     top-level class whose name ends in ``Fmu``), without importing them: importing every
     wrapper costs ~1 s (cvxpy, scipy.stats), and a run, sweep or reproduction needs one or two
     of them. :func:`_imported_catalog` is the check by import (a test compares the two).
-    Parsed again only when a project file changed (:func:`newest_project_file`)."""
+    Parsed again only when a project file changed (:func:`newest_project_file`) or a wrapper
+    module came or went."""
     global _catalog_read
-    newest = newest_project_file()
-    if _catalog_read is not None and _catalog_read[0] == newest:
+    modules = tuple(_wrapper_modules())
+    stamp = (newest_project_file(), modules)
+    if _catalog_read is not None and _catalog_read[0] == stamp:
         return dict(_catalog_read[1])
     specs: dict[str, FmuSpec] = {}
-    for mod_name in _wrapper_modules():
+    for mod_name in modules:
         path = _module_file(mod_name)
         tree = ast.parse(path.read_text(), filename=str(path))
         for node in tree.body:
@@ -214,7 +217,7 @@ def catalog() -> dict[str, FmuSpec]:
                     raise ValueError(f"two FMUs named {identifier}: {specs[identifier].module} "
                                      f"and {mod_name}")
                 specs[identifier] = FmuSpec(identifier, mod_name, node.name, doc)
-    _catalog_read = (newest, dict(specs))
+    _catalog_read = (stamp, dict(specs))
     return specs
 
 

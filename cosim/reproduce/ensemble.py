@@ -32,8 +32,9 @@ ENSEMBLE_KEYS: dict[str, tuple[str, str, str]] = {
                                 "first (other parameters; never the numpy reference path); "
                                 "none: one rerun"),
     "rounding_reference_path": ("true or false", "true", "the rerun also takes the plants' "
-                                "numpy reference path (``ATO_COSIM_NO_KERNELS=1``); false "
-                                "keeps the compiled kernels (rounding_perturb alone "
+                                "numpy reference path (``ATO_COSIM_NO_KERNELS=1``) where a "
+                                "Python build runs (a run of native C builds alone has none); "
+                                "false keeps the compiled kernels (rounding_perturb alone "
                                 "perturbs it)"),
     "repeats": ("an integer >= 1", "none", "the members of a \"repeat\" claim: repetitions of "
                 "the nominal run, whatever ``--seeds`` (no rounding rerun)"),
