@@ -282,7 +282,7 @@ def verdict_agreement(claims: int, differences: list[dict]) -> str:
     gave other outcomes) and in how many only the verdict's label (the same k of K, read by
     other statistics)."""
     this, base = bench_baseline.THIS, bench_baseline.BASE
-    k_differs = sum(list(d[this])[1] != list(d[base])[1] for d in differences)
+    k_differs = sum(d[this][1] != d[base][1] for d in differences)
     labels = len(differences) - k_differs
     return (f"of the {claims} claims of both trees, k of K differs in {k_differs} and the "
             f"verdict's label alone (the same k of K) in {labels}")

@@ -620,8 +620,8 @@ def test_path_1_takes_the_reference_environment_only_where_a_python_build_runs()
     key, scenario, overrides = next(job for job in claim_jobs(entry, 1, build="native")
                                     if job[0][3] == 1)
     kept = {**overrides, "controller.build": "python"}
-    assert member_env((key, scenario, kept), True, {}) == ROUNDING_ENV
-    assert member_env((key, scenario, overrides), False, {}) == {}
+    assert member_env((key, scenario, kept), True) == ROUNDING_ENV
+    assert member_env((key, scenario, overrides), False) == {}
 
 
 def test_a_timing_run_records_its_machine_and_load_and_the_page_states_them() -> None:

@@ -15,9 +15,23 @@ BUILDS = ("native", "python")  # --build: the catalog FMUs' native C builds wher
 
 
 @functools.lru_cache(maxsize=256)
-def _native_components(scenario: str, fmus: tuple[tuple[str, str], ...]) -> tuple[str, ...]:
+def _components(scenario: str, fmus: tuple[tuple[str, str], ...]
+                ) -> tuple[tuple[str, str, str], ...]:
+    """(name, catalog identifier, build) of each FMU of ``scenario`` with its ``.fmu`` and
+    ``.build`` overrides ``fmus``."""
     sc = load_scenario(scenario, dict(fmus))
-    return tuple(c.name for c in sc.components.values() if c.fmu in NATIVE)
+    return tuple((c.name, c.fmu, c.build) for c in sc.components.values())
+
+
+def _fmu_overrides(overrides: Overrides) -> tuple[tuple[str, str], ...]:
+    return tuple(sorted((k, v) for k, v in overrides.items() if k.endswith((".fmu", ".build"))))
+
+
+def runs_a_python_build(scenario: str, overrides: Overrides) -> bool:
+    """Whether ``scenario`` with ``overrides`` runs an FMU on its Python build (one not set to
+    ``build = "native"``)."""
+    return any(built != "native" for _n, _f, built in
+               _components(scenario, _fmu_overrides(overrides)))
 
 
 def build_overrides(scenario: str, overrides: Overrides, build: str) -> dict[str, str]:
@@ -29,10 +43,9 @@ def build_overrides(scenario: str, overrides: Overrides, build: str) -> dict[str
         raise ReproduceError(f"--build {build}: one of {', '.join(BUILDS)}")
     if build == "python":
         return {}
-    fmus = tuple(sorted((k, v) for k, v in overrides.items()
-                        if k.endswith((".fmu", ".build"))))
-    return {f"{name}.build": "native" for name in _native_components(scenario, fmus)
-            if f"{name}.build" not in overrides}
+    return {f"{name}.build": "native"
+            for name, fmu, _built in _components(scenario, _fmu_overrides(overrides))
+            if fmu in NATIVE and f"{name}.build" not in overrides}
 
 
 def check_rounding_path(entry: Entry, builds: dict[str, dict[str, str]]) -> None:

@@ -36,7 +36,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from cosim.reproduce.builds import build_overrides, check_rounding_path
+from cosim.reproduce.builds import build_overrides, check_rounding_path, runs_a_python_build
 from cosim.reproduce.claims import Claim, variant_runs
 from cosim.reproduce.ensemble import ROUNDING_RELATIVE
 from cosim.reproduce.entry import Entry, slug
@@ -248,22 +248,16 @@ def member_dir(out: Path, key: tuple[str, str, int, int]) -> Path:
 ROUNDING_ENV = {"ATO_COSIM_NO_KERNELS": "1"}  # the plants' numpy reference path
 
 
-def member_env(job: Job, reference_path: bool, python_builds: dict[tuple[str, Any], bool]
-               ) -> dict[str, str]:
+def member_env(job: Job, reference_path: bool) -> dict[str, str]:
     """The environment ``job`` runs in: :data:`ROUNDING_ENV` on perturbed path 1 where
     ``reference_path`` and one of its FMUs runs a Python build; none for a run of native C
     builds alone, which have no numpy reference path (its path 1 is the parameter
     perturbation alone, :func:`cosim.reproduce.builds.check_rounding_path`), nor on the
-    other paths. ``python_builds`` keeps the answer per scenario and build overrides."""
+    other paths."""
     key, scenario, overrides = job
-    if key[3] != 1 or not reference_path:
+    if key[3] != 1 or not reference_path or not runs_a_python_build(scenario, overrides):
         return {}
-    builds = tuple(sorted((k, v) for k, v in overrides.items() if k.endswith(".build")))
-    if (scenario, builds) not in python_builds:
-        sc = load_scenario(scenario, dict(builds))
-        python_builds[scenario, builds] = any(c.build != "native"
-                                              for c in sc.components.values())
-    return dict(ROUNDING_ENV) if python_builds[scenario, builds] else {}
+    return dict(ROUNDING_ENV)
 
 
 def execute(jobs: list[Job], workers: int | None, label: str = "claims",
@@ -293,9 +287,8 @@ def execute(jobs: list[Job], workers: int | None, label: str = "claims",
         out[task.key] = None
 
     by_env: dict[bool, list[Job]] = {}  # the paths of one environment share their workers
-    python_builds: dict[tuple[str, Any], bool] = {}
     for job in sorted(jobs, key=lambda job: job[0][3]):
-        by_env.setdefault(bool(member_env(job, reference_path, python_builds)), []).append(job)
+        by_env.setdefault(bool(member_env(job, reference_path)), []).append(job)
     for reference, group in sorted(by_env.items()):
         tasks = [runner.Task(key, _run_member, (sc, ov, dirs.get(key)))
                  for key, sc, ov in group]
@@ -310,9 +303,7 @@ def member_jobs(entry: Entry, k: int, rounding: bool = True, build: str = "pytho
                 ) -> list[RecordJob]:
     """:func:`claim_jobs` as record jobs, with the environment each ran in
     (:func:`member_env`)."""
-    python_builds: dict[tuple[str, Any], bool] = {}
-    return [RecordJob("member", *job, member_env(job, entry.ensemble.rounding_reference_path,
-                                                 python_builds))
+    return [RecordJob("member", *job, member_env(job, entry.ensemble.rounding_reference_path))
             for job in claim_jobs(entry, k, rounding, build)]
 
 
