@@ -2,14 +2,17 @@
  * switch ON_INSTANTIATE or ON_STEP names what fmi2Instantiate or every fmi2DoStep does first
  * (spin(): a loop at 100 % of a core; block(): waits forever using no CPU; segfault(); abort();
  * exit(3); slow_once(): uses 0.3 s of CPU in the first call of the process, then returns: a
- * healthy FMU with one long call), and NAN_OUTPUT makes y NaN from t = 0.25 on. Otherwise
- * y = 2 u. */
+ * healthy FMU with one long call; the process's environment remembers it, since a host that
+ * unloads and loads the binary again resets its static data), and NAN_OUTPUT makes y NaN
+ * from t = 0.25 on. Otherwise y = 2 u. */
 #define NR 2 /* u (in), y (out) */
 #define NI 0
 #define NB 0
 #define NS 0
 #include <signal.h>
+#include <stdio.h>
 #include <stdlib.h>
+#include <string.h>
 #include <time.h>
 #include <unistd.h>
 
@@ -26,9 +29,11 @@ __attribute__((unused)) static void segfault(void) {
     *nowhere = 1;
 }
 __attribute__((unused)) static void slow_once(void) {
-    static int done = 0;
-    if (done) return;
-    done = 1;
+    char pid[24];
+    snprintf(pid, sizeof pid, "%ld", (long)getpid());
+    const char *done = getenv("HOSTILE_SLOW_ONCE_PID"); /* a forked child has its own call */
+    if (done && strcmp(done, pid) == 0) return;
+    setenv("HOSTILE_SLOW_ONCE_PID", pid, 1);
     clock_t end = clock() + (clock_t)(0.3 * CLOCKS_PER_SEC); /* clock(): CPU time */
     while (clock() < end) {
     }
