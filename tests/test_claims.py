@@ -4,6 +4,7 @@ disjoint seeds, rounding-sensitive marking, and (slow) every entry's claims at s
 from __future__ import annotations
 
 import dataclasses
+import math
 from pathlib import Path
 
 import numpy as np
@@ -196,6 +197,12 @@ def test_rounding_sensitive_is_never_holds() -> None:
     assert both.rounding_verdict == "holds / fails"
     assert with_rounding(main, [agree, agree]).verdict == "holds"
     assert with_rounding(main, None).rounding_robust is None
+    # a path that changed nothing the claims read is no test: only the others count
+    assert with_rounding(main, [agree, fake_perturbed], [True, False]).rounding_robust is True
+    idle = with_rounding(main, [fake_perturbed], [False])
+    assert idle.rounding_tested is False and idle.rounding_robust is None
+    with pytest.raises(ValueError, match="1 changed flags for 2 perturbed paths"):
+        with_rounding(main, [agree, agree], [True])
 
 
 def test_seeds_parse_and_must_be_disjoint() -> None:
@@ -521,8 +528,9 @@ def test_repeat_verdict_over_the_repeats_pairs_by_index() -> None:
         summaries[("C", "repeat", i, False)] = {"t": 2.0 + drift[i]}
     for r in "AB":
         for i in range(2):
-            for rnd in (False, True):
-                summaries[(r, "disturbance", i, rnd)] = {"m": 0.0 if r == "A" else 1.0}
+            for rnd in (False, True):  # the rerun one ulp off: a tested path
+                summaries[(r, "disturbance", i, rnd)] = {
+                    "m": (0.0 if r == "A" else 1.0) + rnd * 2.0**-52}
     rows = {r.claim.id: r for r in evaluate(entry, summaries, 2, rounding=True)}
     # the paired differences are exactly -0.5 and +0.5 on every repeat, though the drift
     # spans the samples of each run
@@ -535,6 +543,62 @@ def test_repeat_verdict_over_the_repeats_pairs_by_index() -> None:
     text = claims_markdown(list(rows.values()), 2)
     line = next(x for x in text.splitlines() if x.startswith("| a_faster_than_b"))
     assert line.rstrip(" |").endswith("n/a") and "repeat index" in text
+
+
+def test_a_rerun_that_changes_no_value_the_claims_read_is_untested() -> None:
+    """A perturbed path that gives every value the claims read bit for bit again in a
+    claim's members tested nothing: the claim reads "untested", not rounding-robust, and a
+    path that changed nothing anywhere is named; the repeat claims' measured values do not
+    count as a change. One ulp anywhere in the claim's members makes it a test."""
+    from cosim.reproduce.verdicts import claims_markdown, compact_table, evaluate
+
+    entry = _repeat_entry(3)
+    entry.claims.append(Claim.from_table({**LESS, "id": "c_below_b", "runs": ["C", "B"]}))
+
+    def summaries(ulp: dict[str, float]) -> dict:
+        out: dict = {}
+        for r in "ABC":
+            for i in range(3):  # timing differs on every run, as measured times do
+                out[(r, "repeat", i, False)] = {"t": 1.0 + i + 0.1 * (r == "A")}
+            for i in range(2):
+                for rnd in (False, True):
+                    base, slope = {"A": (0.0, 0.1), "B": (1.0, 0.3), "C": (0.5, 0.2)}[r]
+                    m = base + slope * i + (i == 1) * rnd * ulp.get(r, 0.0)
+                    out[(r, "disturbance", i, rnd)] = {"m": m, "t": 9.0 + rnd}
+        return out
+
+    rows = {r.claim.id: r for r in evaluate(entry, summaries({}), 2, rounding=True)}
+    for claim in ("a_below_b", "c_below_b"):
+        result = rows[claim].result
+        assert result.rounding_tested is False and result.rounding_robust is None
+        assert result.changed == (False,) and rows[claim].verdict == result.main.verdict
+    text = claims_markdown(list(rows.values()), 2)
+    line = next(x for x in text.splitlines() if x.startswith("| a_below_b"))
+    assert line.rstrip(" |").endswith("untested")
+    assert "Path 1 changed no value a claim reads in any member: it tested nothing." in text
+    assert "(u): the rounding rerun" in compact_table(list(rows.values()))
+    # one ulp in C's second member: c_below_b is tested, a_below_b (A and B) still not, and
+    # path 1 changed a value somewhere
+    rows = {r.claim.id: r for r in evaluate(entry, summaries({"C": 2.0**-53}), 2,
+                                            rounding=True)}
+    assert rows["c_below_b"].result.rounding_tested is True
+    assert rows["c_below_b"].result.rounding_robust is True
+    assert rows["a_below_b"].result.rounding_tested is False
+    text = claims_markdown(list(rows.values()), 2)
+    assert "changed no value a claim reads in any member" not in text
+    assert rows["c_below_b"].csv()["rounding_tested"] is True
+
+
+def test_a_member_on_one_path_only_is_a_change() -> None:
+    from cosim.reproduce.verdicts import changed_values
+
+    both = {("A", "d", 0, 0): {"m": 1.0}, ("A", "d", 0, 1): {"m": 1.0}}
+    assert not changed_values(both, ["A"], "d", 1, 1, ["m"])
+    assert changed_values({**both, ("A", "d", 0, 1): None}, ["A"], "d", 1, 1, ["m"])
+    assert not changed_values({}, ["A"], "d", 1, 1, ["m"])  # on neither path: no evidence
+    nan = {("A", "d", 0, 0): {"m": math.nan}, ("A", "d", 0, 1): {"m": math.nan}}
+    assert not changed_values(nan, ["A"], "d", 1, 1, ["m"])
+    assert changed_values({**nan, ("A", "d", 0, 1): {}}, ["A"], "d", 1, 1, ["m"])
 
 
 @pytest.mark.parametrize("value", [0, -3, 2.5, "10", True])

@@ -92,13 +92,33 @@ class Rounded:
 
     main: Verdict
     perturbed: tuple[Verdict, ...] = ()  # in path order; none: no perturbed rerun
+    # per perturbed path: whether it changed a value the claims read in this claim's members
+    # (False: the rerun gave each of them bit for bit again, so it tested nothing); empty:
+    # every path did
+    changed: tuple[bool, ...] = ()
+
+    def _tested(self) -> tuple[Verdict, ...]:
+        """The perturbed paths' verdicts where the path changed a value (:attr:`changed`)."""
+        flags = self.changed or (True,) * len(self.perturbed)
+        return tuple(p for p, c in zip(self.perturbed, flags, strict=True) if c)
+
+    @property
+    def rounding_tested(self) -> bool | None:
+        """Whether a perturbed path changed a value the claims read in this claim's members
+        (None: no rerun; False: every rerun repeated the main path's values, a test of
+        nothing)."""
+        if not self.perturbed:
+            return None
+        return bool(self._tested())
 
     @property
     def rounding_robust(self) -> bool | None:
-        """Whether every perturbed path gives the main path's verdict (None: no rerun)."""
-        if not self.perturbed:
+        """Whether every perturbed path that changed a value gives the main path's verdict
+        (None: no rerun, or none changed a value: :attr:`rounding_tested`)."""
+        tested = self._tested()
+        if not tested:
             return None
-        return all(p.verdict == self.main.verdict for p in self.perturbed)
+        return all(p.verdict == self.main.verdict for p in tested)
 
     @property
     def rounding_verdict(self) -> str | None:
@@ -314,6 +334,11 @@ def adjust(p_values: Sequence[float | None], verdicts: Sequence[str]
     return out
 
 
-def with_rounding(main: Verdict, perturbed: Sequence[Verdict] | None) -> Rounded:
-    """``main`` beside each perturbed floating-point path's verdict (:class:`Rounded`)."""
-    return Rounded(main, tuple(perturbed or ()))
+def with_rounding(main: Verdict, perturbed: Sequence[Verdict] | None,
+                  changed: Sequence[bool] = ()) -> Rounded:
+    """``main`` beside each perturbed floating-point path's verdict and whether that path
+    changed a value the claims read (:class:`Rounded`; ``changed`` empty: every path did)."""
+    perturbed = tuple(perturbed or ())
+    if changed and len(changed) != len(perturbed):
+        raise ValueError(f"{len(changed)} changed flags for {len(perturbed)} perturbed paths")
+    return Rounded(main, perturbed, tuple(changed))

@@ -58,6 +58,7 @@ class ClaimRow:
                 "threshold": c.bound(), **dataclasses.asdict(self.main),
                 "main_verdict": self.main.verdict,
                 "rounding_verdict": self.result.rounding_verdict,
+                "rounding_tested": self.result.rounding_tested,
                 "rounding_robust": self.result.rounding_robust, "verdict": self.verdict,
                 "adjusted_p": self.adjusted_p, "adjusted": self.adjusted}
 
@@ -73,10 +74,38 @@ def _metric(summaries: dict[MemberKey, Summary | None], run: str, ens: str, n: i
     return np.array(vals)
 
 
+def _same(a: Any, b: Any) -> bool:
+    """Whether two recorded values are the same (bit for bit for numbers; NaN equals NaN)."""
+    if isinstance(a, float) and isinstance(b, float) and math.isnan(a) and math.isnan(b):
+        return True
+    return type(a) is type(b) and a == b
+
+
+def changed_values(summaries: dict[MemberKey, Summary | None], names: list[str], ens: str,
+                   n: int, path: int, metrics: list[str]) -> bool:
+    """Whether perturbed path ``path`` changed any value of ``metrics`` in a member of the
+    runs ``names`` against the main path (a member that ran on one path only counts as a
+    change; one missing on both does not)."""
+    for name in names:
+        for i in range(n):
+            main, other = summaries.get((name, ens, i, 0)), summaries.get((name, ens, i, path))
+            if main is None or other is None:
+                if (main is None) != (other is None):
+                    return True
+                continue
+            if not all(_same(summary_value(main, m), summary_value(other, m)) for m in metrics):
+                return True
+    return False
+
+
 def evaluate(entry: Entry, summaries: dict[MemberKey, Summary | None], k: int,
              rounding: bool = True, variants: bool = False) -> list[ClaimRow]:
     """One row per claim (see :func:`cosim.reproduce.stats.verdict`); with ``variants`` one row
-    per claim and ``[[variants]]`` entry that replaces one of its runs instead."""
+    per claim and ``[[variants]]`` entry that replaces one of its runs instead. Each
+    perturbed path's verdict comes with whether that path changed a value the claims read
+    (the metrics of the entry's claims that are results of the floating-point path: not the
+    measured ones of ``repeat`` claims) in the claim's members (:func:`changed_values`)."""
+    read = sorted({c.metric for c in entry.claims if c.ensemble != "repeat"})
     rows = []
     for var, claim, names, with_rnd, kc in claim_cases(entry, k, rounding):
         if (var != "main") != variants:
@@ -84,15 +113,18 @@ def evaluate(entry: Entry, summaries: dict[MemberKey, Summary | None], k: int,
         ens = claim.ensemble
         n = len(members(entry, ens, kc))
         results = []
-        for path in (0, *entry.ensemble.rounding_paths()) if with_rnd else (0,):
+        paths = (0, *entry.ensemble.rounding_paths()) if with_rnd else (0,)
+        for path in paths:
             a = _metric(summaries, names[0], ens, n, path, claim.metric)
             b = (_metric(summaries, names[1], ens, n, path, claim.metric)
                  if len(names) > 1 else None)
             if claim.transform == "abs":  # e.g. the stop error's size, either side
                 a, b = np.abs(a), None if b is None else np.abs(b)
             results.append(verdict(claim, a, b))
+        changed = [changed_values(summaries, list(names), ens, n, path, read)
+                   for path in paths[1:]]
         rows.append(ClaimRow(claim=claim, runs=list(names),
-                             result=with_rounding(results[0], results[1:]),
+                             result=with_rounding(results[0], results[1:], changed),
                              variant=var if variants else None))
     adjusted = adjust([r.main.p_value for r in rows], [r.verdict for r in rows])
     return [dataclasses.replace(r, adjusted_p=q, adjusted=v)
@@ -109,7 +141,8 @@ def variants_markdown(entry: Entry, rows: list[ClaimRow], var_rows: list[ClaimRo
     def cell(r: ClaimRow | None) -> str:
         if r is None:
             return "="
-        flag = "" if r.result.rounding_robust in (None, True) else " (r)"
+        flag = (" (u)" if r.result.rounding_tested is False
+                else "" if r.result.rounding_robust in (None, True) else " (r)")
         return f"{_shown(r)}{flag} ({r.main.k}/{r.main.K})"
 
     lines = [md_row(["claim", "main", *names]), "|" + " --- |" * (2 + len(names))]
@@ -117,7 +150,8 @@ def variants_markdown(entry: Entry, rows: list[ClaimRow], var_rows: list[ClaimRo
         lines.append(md_row([r.claim.id, cell(r),
                              *(cell(got.get((n, r.claim.id))) for n in names)]))
     lines += ["", "Verdict (k of K on the claimed side) of every claim with the runs of each "
-              "variant in place of those it replaces; (r): rounding-sensitive. The cells of "
+              "variant in place of those it replaces; (r): rounding-sensitive; (u): the rounding "
+              "rerun changed no value the claim reads (untested). The cells of "
               "all variants are one family: their p-values are adjusted together "
               f"(Benjamini-Hochberg, false discovery rate {ALPHA:g}), and a decision the "
               "adjustment does not keep reads \"inconclusive (raw: ...)\". Variants:", ""]
@@ -183,7 +217,8 @@ def claims_markdown(rows: list[ClaimRow], k: int, rounding: str = "",
         c, robust_path = r.claim, r.result.rounding_robust
         heading = headings.get(c.metric, c.metric)
         what = f"A - B, {heading}" if c.kind in PAIRED_KINDS else heading
-        robust = ("n/a" if c.ensemble == "repeat" else "-" if robust_path is None
+        robust = ("n/a" if c.ensemble == "repeat" else "-" if not r.result.perturbed
+                  else "untested" if not r.result.rounding_tested
                   else "yes" if robust_path else "no")
         quant = r.main.quantifier
         if quant == "share":
@@ -213,7 +248,9 @@ def claims_markdown(rows: list[ClaimRow], k: int, rounding: str = "",
               "which). insufficient: K members cannot decide "
               "whatever they show (the note says which K would). rounding-sensitive: the "
               "verdict differs on a perturbed floating-point rerun"
-              + (f" ({rounding})" if rounding else "") + "."]
+              + (f" ({rounding})" if rounding else "") + "; untested (rounding-robust): "
+              "every rerun gave each value the claims read bit for bit again in this claim's "
+              "members, so it tested nothing." + idle_paths_text(rows)]
     if any(r.claim.kind == "equal" for r in rows):
         lines[-1] += (" An equal claim (A no different from B, \"levels off\") holds when the "
                       "median difference's CI lies inside +-margin of B's median (the band "
@@ -226,13 +263,43 @@ def claims_markdown(rows: list[ClaimRow], k: int, rounding: str = "",
     return "\n".join(lines)
 
 
+def idle_paths(rows: list[ClaimRow]) -> list[int]:
+    """The perturbed paths (1, 2, ...) that changed no value the claims read in any claim's
+    members: reruns that tested nothing (:attr:`cosim.reproduce.stats.Rounded.changed`)."""
+    rerun = [r.result for r in rows if r.result.perturbed]
+    if not rerun:
+        return []
+    n = max(len(r.perturbed) for r in rerun)
+    return [i + 1 for i in range(n)
+            if not any(i < len(r.perturbed) and (not r.changed or r.changed[i])
+                       for r in rerun)]
+
+
+def idle_paths_text(rows: list[ClaimRow]) -> str:
+    """A sentence naming :func:`idle_paths` (empty where every path changed a value)."""
+    idle = idle_paths(rows)
+    if not idle:
+        return ""
+    which = " and ".join(f"path {i}" for i in idle)
+    return (f" {which[0].upper()}{which[1:]} changed no value a claim reads in any member: "
+            "it tested nothing.")
+
+
 def compact_table(rows: list[ClaimRow]) -> str:
-    """The claims in at most 80 columns (id, k of K, adjusted verdict)."""
+    """The claims in at most 80 columns (id, k of K, adjusted verdict; (r): the rounding
+    rerun changed the verdict, (u): it changed no value the claim reads), then the perturbed
+    paths that changed no value at all (:func:`idle_paths`)."""
+    import textwrap
+
     lines = [f"{'claim':<44} {'k/K':>7}  verdict", "-" * 72]
     for r in rows:
-        flag = "" if r.result.rounding_robust in (None, True) else " (r)"
+        flag = (" (u)" if r.result.rounding_tested is False
+                else "" if r.result.rounding_robust in (None, True) else " (r)")
         lines.append(f"{r.claim.id[:44]:<44} {r.main.k:>3}/{r.main.K:<3}  "
                      f"{final_verdict(r)}{flag}")
+    if any(r.result.rounding_tested is False for r in rows):
+        lines += textwrap.wrap("(u): the rounding rerun gave each value the claim reads bit "
+                               "for bit again: untested." + idle_paths_text(rows), 80)
     return "\n".join(lines)
 
 
