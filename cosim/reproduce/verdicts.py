@@ -263,6 +263,9 @@ def claims_markdown(rows: list[ClaimRow], k: int, rounding: str = "",
     return "\n".join(lines)
 
 
+IDLE_PATH = "changed no value a claim reads in any member"  # said of a path that tested nothing
+
+
 def idle_paths(rows: list[ClaimRow]) -> list[int]:
     """The perturbed paths (1, 2, ...) that changed no value the claims read in any claim's
     members: reruns that tested nothing (:attr:`cosim.reproduce.stats.Rounded.changed`)."""
@@ -281,8 +284,7 @@ def idle_paths_text(rows: list[ClaimRow]) -> str:
     if not idle:
         return ""
     which = " and ".join(f"path {i}" for i in idle)
-    return (f" {which[0].upper()}{which[1:]} changed no value a claim reads in any member: "
-            "it tested nothing.")
+    return f" {which[0].upper()}{which[1:]} {IDLE_PATH}: it tested nothing."
 
 
 def compact_table(rows: list[ClaimRow]) -> str:
