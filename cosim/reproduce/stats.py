@@ -93,14 +93,20 @@ class Rounded:
     main: Verdict
     perturbed: tuple[Verdict, ...] = ()  # in path order; none: no perturbed rerun
     # per perturbed path: whether it changed a value the claims read in this claim's members
-    # (False: the rerun gave each of them bit for bit again, so it tested nothing); empty:
-    # every path did
+    # (False: the rerun gave each of them bit for bit again, so it tested nothing); none
+    # given: every path did
     changed: tuple[bool, ...] = ()
+
+    def __post_init__(self) -> None:
+        if not self.changed:
+            object.__setattr__(self, "changed", (True,) * len(self.perturbed))
+        elif len(self.changed) != len(self.perturbed):
+            raise ValueError(f"{len(self.changed)} changed flags for {len(self.perturbed)} "
+                             "perturbed paths")
 
     def _tested(self) -> tuple[Verdict, ...]:
         """The perturbed paths' verdicts where the path changed a value (:attr:`changed`)."""
-        flags = self.changed or (True,) * len(self.perturbed)
-        return tuple(p for p, c in zip(self.perturbed, flags, strict=True) if c)
+        return tuple(p for p, c in zip(self.perturbed, self.changed, strict=True) if c)
 
     @property
     def rounding_tested(self) -> bool | None:
@@ -338,7 +344,4 @@ def with_rounding(main: Verdict, perturbed: Sequence[Verdict] | None,
                   changed: Sequence[bool] = ()) -> Rounded:
     """``main`` beside each perturbed floating-point path's verdict and whether that path
     changed a value the claims read (:class:`Rounded`; ``changed`` empty: every path did)."""
-    perturbed = tuple(perturbed or ())
-    if changed and len(changed) != len(perturbed):
-        raise ValueError(f"{len(changed)} changed flags for {len(perturbed)} perturbed paths")
-    return Rounded(main, perturbed, tuple(changed))
+    return Rounded(main, tuple(perturbed or ()), tuple(changed))

@@ -141,9 +141,7 @@ def variants_markdown(entry: Entry, rows: list[ClaimRow], var_rows: list[ClaimRo
     def cell(r: ClaimRow | None) -> str:
         if r is None:
             return "="
-        flag = (" (u)" if r.result.rounding_tested is False
-                else "" if r.result.rounding_robust in (None, True) else " (r)")
-        return f"{_shown(r)}{flag} ({r.main.k}/{r.main.K})"
+        return f"{_shown(r)}{rounding_flag(r)} ({r.main.k}/{r.main.K})"
 
     lines = [md_row(["claim", "main", *names]), "|" + " --- |" * (2 + len(names))]
     for r in by_origin(rows):
@@ -170,6 +168,14 @@ VERDICTS = ("holds", "fails", "inconclusive", "no effect", "insufficient", "roun
 def final_verdict(r: ClaimRow) -> str:
     """A claim row's verdict as read: adjusted for multiplicity where it was, else raw."""
     return r.adjusted or r.verdict
+
+
+def rounding_flag(r: ClaimRow) -> str:
+    """The mark after a verdict in the short tables: " (u)" where the rounding rerun changed
+    no value the claim reads, " (r)" where it changed the verdict, else nothing."""
+    if r.result.rounding_tested is False:
+        return " (u)"
+    return " (r)" if r.result.rounding_robust is False else ""
 
 
 def _shown(r: ClaimRow) -> str:
@@ -269,13 +275,9 @@ IDLE_PATH = "changed no value a claim reads in any member"  # said of a path tha
 def idle_paths(rows: list[ClaimRow]) -> list[int]:
     """The perturbed paths (1, 2, ...) that changed no value the claims read in any claim's
     members: reruns that tested nothing (:attr:`cosim.reproduce.stats.Rounded.changed`)."""
-    rerun = [r.result for r in rows if r.result.perturbed]
-    if not rerun:
-        return []
-    n = max(len(r.perturbed) for r in rerun)
-    return [i + 1 for i in range(n)
-            if not any(i < len(r.perturbed) and (not r.changed or r.changed[i])
-                       for r in rerun)]
+    flags = [r.result.changed for r in rows]
+    n = max(map(len, flags), default=0)
+    return [i + 1 for i in range(n) if not any(f[i] for f in flags if i < len(f))]
 
 
 def idle_paths_text(rows: list[ClaimRow]) -> str:
@@ -283,8 +285,8 @@ def idle_paths_text(rows: list[ClaimRow]) -> str:
     idle = idle_paths(rows)
     if not idle:
         return ""
-    which = " and ".join(f"path {i}" for i in idle)
-    return f" {which[0].upper()}{which[1:]} {IDLE_PATH}: it tested nothing."
+    which = " and ".join(f"path {i}" for i in idle).capitalize()
+    return f" {which} {IDLE_PATH}: it tested nothing."
 
 
 def compact_table(rows: list[ClaimRow]) -> str:
@@ -295,10 +297,8 @@ def compact_table(rows: list[ClaimRow]) -> str:
 
     lines = [f"{'claim':<44} {'k/K':>7}  verdict", "-" * 72]
     for r in rows:
-        flag = (" (u)" if r.result.rounding_tested is False
-                else "" if r.result.rounding_robust in (None, True) else " (r)")
         lines.append(f"{r.claim.id[:44]:<44} {r.main.k:>3}/{r.main.K:<3}  "
-                     f"{final_verdict(r)}{flag}")
+                     f"{final_verdict(r)}{rounding_flag(r)}")
     if any(r.result.rounding_tested is False for r in rows):
         lines += textwrap.wrap("(u): the rounding rerun gave each value the claim reads bit "
                                "for bit again: untested." + idle_paths_text(rows), 80)
