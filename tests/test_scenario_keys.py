@@ -215,3 +215,29 @@ def test_summary_reads_a_parameter_by_reference(tmp_path):
     with pytest.raises(ScenarioError, match=r"bad.toml: \[summary\] stop_point = "
                                             r"'controller.nope'.*'controller' sets no 'nope'"):
         load_scenario(bad)
+
+
+def test_the_listing_follows_files_added_removed_and_new_paper_folders(tmp_path, monkeypatch):
+    """scenario_files is read again when a file appears in or leaves one of its folders, or a
+    paper gains a scenarios folder (it is cached between such changes, not between calls)."""
+    import cosim.run.scenario as scenario
+
+    shared, papers = tmp_path / "scenarios", tmp_path / "papers"
+    shared.mkdir()
+    (papers / "p1" / "scenarios").mkdir(parents=True)
+    (papers / "p2").mkdir()
+    monkeypatch.setattr(scenario, "SCENARIO_DIR", shared)
+    monkeypatch.setattr(scenario, "PAPERS_DIR", papers)
+    (shared / "a.toml").write_text("")
+    (papers / "p1" / "scenarios" / "b.toml").write_text("")
+    assert list(scenario_files()) == ["a", "b"]
+    assert list(scenario_files()) == ["a", "b"]
+    (shared / "a.toml").rename(shared / "c.toml")
+    assert list(scenario_files()) == ["b", "c"]
+    (papers / "p2" / "scenarios").mkdir()
+    (papers / "p2" / "scenarios" / "d.toml").write_text("")
+    assert scenario_files() == {"b": papers / "p1" / "scenarios" / "b.toml",
+                                "c": shared / "c.toml", "d": papers / "p2" / "scenarios" / "d.toml"}
+    (papers / "p2" / "scenarios" / "b.toml").write_text("")
+    with pytest.raises(ScenarioError, match="scenario 'b' is shipped twice"):
+        scenario_files()

@@ -167,3 +167,17 @@ def test_the_eco_search_is_kept_on_disk_and_gives_the_same_profile(tmp_path,
     for name in ("s", "v", "t", "mode"):
         np.testing.assert_array_equal(getattr(again, name), getattr(first, name))
     sp._CACHE.clear()
+
+
+def test_the_stopping_curve_over_an_array_is_its_speed_at_each_position() -> None:
+    """StoppingCurve.speeds (the summary's reference over a recording) gives speed(s) bit for
+    bit, before, at and past the stop point, and NaN where the position is NaN."""
+    from cosim.fmu.profiles import StoppingCurve
+
+    curve = StoppingCurve(0.47, 400.0)
+    s = np.concatenate([np.linspace(-3.0, 400.0, 997), [399.999999999, 400.0, 400.5, 1e9,
+                                                          np.nan]])
+    got = curve.speeds(s)
+    want = [curve.speed(x) for x in s]
+    assert [v.hex() for v in got[:-1]] == [v.hex() for v in want[:-1]]
+    assert math.isnan(got[-1]) and math.isnan(want[-1])

@@ -28,6 +28,12 @@ class StoppingCurve:
         """Reference speed (m/s) at position ``s`` (m); zero at and beyond the stop point."""
         return math.sqrt(2.0 * self.decel * max(self.stop_point - s, 0.0))
 
+    def speeds(self, s: np.ndarray) -> np.ndarray:
+        """:meth:`speed` at each position of ``s`` (m/s), the same floating-point operations
+        element by element."""
+        return np.sqrt(2.0 * self.decel * np.maximum(self.stop_point - np.asarray(s, float),
+                                                     0.0))
+
     def accel(self, s: float) -> float:
         """Reference acceleration dv/dt along the curve (m/s^2): ``-a0`` before the stop point."""
         return -self.decel if s < self.stop_point else 0.0

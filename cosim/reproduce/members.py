@@ -29,6 +29,7 @@ floating-point path). The runs go through the shared runner (:mod:`cosim.run.run
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import sys
 import time
@@ -202,6 +203,7 @@ def host_load() -> float:
         return math.nan
 
 
+@functools.cache
 def cpu_model() -> str:
     """The processor's name (``/proc/cpuinfo``'s model name on Linux, else the platform's)."""
     import platform
@@ -215,13 +217,19 @@ def cpu_model() -> str:
     return platform.processor() or platform.machine()
 
 
+@functools.cache
+def _cores() -> int:
+    """The machine's logical CPUs (0 where unknown)."""
+    import os
+
+    return os.cpu_count() or 0
+
+
 def with_host(summary: Summary, load_before: float) -> Summary:
     """``summary`` with ``host``: where and under what load the run was measured (the CPU,
     its core count, the 1-minute load average before and after the run), which a timing
     claim's page states."""
-    import os
-
-    return {**summary, "host": {"cpu": cpu_model(), "cores": os.cpu_count() or 0,
+    return {**summary, "host": {"cpu": cpu_model(), "cores": _cores(),
                                 "load_before": load_before, "load_after": host_load()}}
 
 

@@ -35,12 +35,13 @@ Every error names the file, the key and what is wrong.
 
 from __future__ import annotations
 
-import copy
 import difflib
 import functools
 import importlib
 import math
+import os
 import re
+import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -56,6 +57,7 @@ from cosim.fmu.state import TICKS_PER_SECOND, to_ticks
 from cosim.run import fmi_types
 from cosim.run.metrics import PAPERS
 
+RACY_S = 2.0  # s: a folder changed this recently may change again within its clock's tick
 SCENARIO_DIR = ROOT / "scenarios"  # scenarios of no one paper (scenarios/*.toml)
 PAPERS_DIR = ROOT / "papers"  # a folder per paper: papers/NAME/entry.toml, scenarios/*.toml, ...
 ALGORITHMS = ("event", "fixed", "jacobi")
@@ -157,14 +159,45 @@ class Scenario:
 def scenario_files() -> dict[str, Path]:
     """The shipped scenarios by name, sorted: ``scenarios/*.toml`` and each paper's
     ``papers/*/scenarios/*.toml`` (the one list every caller reads); :class:`ScenarioError`
-    naming both files when a name is found twice."""
+    naming both files when a name is found twice. The listing is kept while none of its
+    folders changes (:func:`_scenario_folders`), not read at every call: an ensemble resolves
+    a scenario name once per member. A folder changed within :data:`RACY_S` of now is read
+    again at every call (a file system's clock may be coarser than the change, as in git's
+    racy-clean rule)."""
+    folders = _scenario_folders()
+    now = time.time_ns()
+    if any(now - changed < RACY_S * 1e9 for _folder, changed in folders):
+        return dict(_scenario_listing.__wrapped__(folders))
+    return dict(_scenario_listing(folders))
+
+
+def _scenario_folders() -> tuple[tuple[str, int], ...]:
+    """The folders :func:`scenario_files` lists with their modification times (ns; -1 for a
+    missing one): adding, removing or renaming a scenario file changes its folder's time."""
+    def mtime(folder: str) -> int:
+        try:
+            return os.stat(folder).st_mtime_ns
+        except OSError:
+            return -1
+
+    try:
+        papers = sorted(entry.path for entry in os.scandir(PAPERS_DIR) if entry.is_dir())
+    except OSError:
+        papers = []
+    folders = [str(SCENARIO_DIR), *(os.path.join(paper, "scenarios") for paper in papers)]
+    return tuple((folder, mtime(folder)) for folder in folders)
+
+
+@functools.lru_cache(maxsize=8)
+def _scenario_listing(folders: tuple[tuple[str, int], ...]) -> tuple[tuple[str, Path], ...]:
     found: dict[str, Path] = {}
-    for path in [*SCENARIO_DIR.glob("*.toml"), *PAPERS_DIR.glob("*/scenarios/*.toml")]:
+    for path in [p for folder, changed in folders if changed >= 0
+                 for p in Path(folder).glob("*.toml")]:
         if path.stem in found:
             raise ScenarioError(f"scenario {path.stem!r} is shipped twice: {found[path.stem]} "
                                 f"and {path}")
         found[path.stem] = path
-    return dict(sorted(found.items()))
+    return tuple(sorted(found.items()))
 
 
 def entry_files() -> dict[str, Path]:
@@ -436,9 +469,20 @@ def _parsed_scenario(path: str, mtime_ns: int, size: int) -> dict[str, Any]:
     return read_toml(Path(path))
 
 
+def _copied(value: Any) -> Any:
+    """A copy of parsed TOML ``value`` whose tables and arrays are new (the scalars are
+    immutable and shared): what ``copy.deepcopy`` gives for such data, at a fraction of its
+    cost."""
+    if isinstance(value, dict):
+        return {key: _copied(item) for key, item in value.items()}
+    if isinstance(value, list):
+        return [_copied(item) for item in value]
+    return value
+
+
 def _load_scenario(path: Path, overrides: dict[str, Any] | list[str] | None) -> Scenario:
     stat = path.stat()
-    raw = copy.deepcopy(_parsed_scenario(str(path), stat.st_mtime_ns, stat.st_size))
+    raw = _copied(_parsed_scenario(str(path), stat.st_mtime_ns, stat.st_size))
     apply_overrides(raw, overrides, str(path))
     _refuse_unknown(path, "top level", raw, ("description", "simulation", "fmus",
                                               "connections", "record", "summary"))

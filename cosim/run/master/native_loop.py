@@ -10,8 +10,9 @@ Python loop, so the results are the same bit for bit, at about a tenth of the co
 communication point (the master then reaches more than half of a bare C loop's speed on the
 native EMU; ``benchmarks/bench_c_limit.py``). What the Python loop does besides (a refused or
 failed step, a failed get or set, a bad announced event, the first use of a set of due FMUs,
-a full recording, progress and Ctrl-C at every hundredth of the run and every :data:`BUDGET`
-seconds) goes back to Python with the loop's state, which goes on from there.
+a full recording, progress at every hundredth of the run where a progress display is given,
+Ctrl-C every :data:`BUDGET` seconds) goes back to Python with the loop's state, which goes on
+from there.
 
 ``ATO_COSIM_NATIVE_LOOP=off`` keeps the Python loop (as does a machine without a C compiler
 and without the compiled loop in its cache).
@@ -42,7 +43,7 @@ if TYPE_CHECKING:
 ENV = "ATO_COSIM_NATIVE_LOOP"  # "off": the Python loop
 SOURCE = Path(__file__).with_suffix(".c")
 BUDGET = 0.05  # s of wall time in C between progress reports (and Ctrl-C checks), at most
-REPORTS = 100  # progress reports over the run, at least (one per hundredth of it)
+REPORTS = 100  # progress reports over the run with a progress display (one per hundredth)
 HISTORY = 4096  # values of a kept connection history per return to Python
 MAX_UNITS = 64  # the due FMUs are one bit each in a 64-bit mask
 FAMILIES = ("Real", "Integer", "Boolean")  # the C loop's value types (double, int, int)
@@ -299,6 +300,9 @@ class NativeLoop:
             c.time = u.time_ticks
             c.next_event = u.next_event_ticks if u.next_event_ticks is not None else 0
         s.next_output, s.rows = m.next_output_ticks, m.recorder.rows
+        if m._progress_fn is None:  # nothing to report: back to Python every BUDGET only
+            s.report_at = m.stop_ticks + 1
+            return
         every = max((m.stop_ticks - m.start_ticks) // REPORTS, 1)
         s.report_at = m.start_ticks + ((s.t - m.start_ticks) // every + 1) * every
 
