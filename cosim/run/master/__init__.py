@@ -11,27 +11,37 @@ The parts, as in libcosim:
   writing nothing (:func:`cosim.run.simulate.run_scenario` writes it).
 """
 
-from cosim.run.master.algorithms import (
-    ALGORITHM_CLASSES,
-    Algorithm,
-    EventDriven,
-    FixedStep,
-    Jacobi,
-)
-from cosim.run.master.core import (
-    WARNING_COUNTER,
-    Link,
-    Master,
-    ProgressFn,
-    RunResult,
-)
-from cosim.run.master.errors import FmuCallError, FmuTerminated, SimulationError
-from cosim.run.master.fmi2 import CheckedSlave, Fmi2Unit, logging_callbacks
-from cosim.run.master.loading import _EXTRACTED, extract_once, read_fmu, unit_class, warm_up
-from cosim.run.master.observers import Observer, Recorder
-from cosim.run.master.unit import MAX_HALVINGS, Unit, Variable
+from __future__ import annotations
 
-FmuUnit = Fmi2Unit  # the FMI 2.0 unit (the name tests and plug-ins patch)
+import importlib
+from typing import Any
+
+# name -> (module of this package, its name there): imported on first use (PEP 562), so that a
+# process that needs one part (the compliance worker: the FMI 2 logging callbacks) does not
+# import the others (the algorithms' compiled C loop and its builder)
+_PARTS: dict[str, tuple[str, str]] = {
+    **{n: ("algorithms", n) for n in ("ALGORITHM_CLASSES", "Algorithm", "EventDriven",
+                                      "FixedStep", "Jacobi")},
+    **{n: ("core", n) for n in ("WARNING_COUNTER", "Link", "Master", "ProgressFn",
+                                "RunResult")},
+    **{n: ("errors", n) for n in ("FmuCallError", "FmuTerminated", "SimulationError")},
+    **{n: ("fmi2", n) for n in ("CheckedSlave", "Fmi2Unit", "logging_callbacks")},
+    **{n: ("loading", n) for n in ("_EXTRACTED", "extract_once", "read_fmu", "unit_class",
+                                   "warm_up")},
+    **{n: ("observers", n) for n in ("Observer", "Recorder")},
+    **{n: ("unit", n) for n in ("MAX_HALVINGS", "Unit", "Variable")},
+    "FmuUnit": ("fmi2", "Fmi2Unit"),  # the FMI 2.0 unit (the name tests and plug-ins patch)
+}
+
+
+def __getattr__(name: str) -> Any:
+    if name not in _PARTS:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    module, attr = _PARTS[name]
+    value = getattr(importlib.import_module(f"{__name__}.{module}"), attr)
+    globals()[name] = value  # later reads (and a monkeypatch) see a plain attribute
+    return value
+
 
 __all__ = [
     "ALGORITHM_CLASSES", "MAX_HALVINGS", "WARNING_COUNTER", "_EXTRACTED", "Algorithm",
