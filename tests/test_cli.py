@@ -1,18 +1,23 @@
-"""The `cosim` command end to end (as a user runs it, in a subprocess)."""
+"""The `cosim` command end to end: runs as a user runs them (in a subprocess); error messages
+read in this process through typer's test runner (the text a process prints)."""
 
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 import sys
+from pathlib import Path
 
 import pandas as pd
 import pytest
 
+from tests.cli_inproc import cosim_inproc, no_traceback
 
-def cosim(*args: str, cwd=None) -> subprocess.CompletedProcess:
+
+def cosim(*args: str) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-m", "cosim.cli", *args], capture_output=True,
-                          text=True, timeout=600, cwd=cwd)
+                          text=True, timeout=600)
 
 
 def test_run_writes_results_summary_and_plot(built_fmus, tmp_path):
@@ -47,28 +52,35 @@ def test_run_with_set_and_algorithm(built_fmus, tmp_path):
     (("run", "seed000_stop_pid", "--set", "plant.nope=1"), "no variable 'nope'"),
     (("build", "NoSuchFmu"), "unknown FMU"),
 ])
-def test_errors_are_one_clear_line(built_fmus, tmp_path, args, message):
-    done = cosim(*args, cwd=tmp_path)
-    assert done.returncode == 2
+def test_errors_are_one_clear_line(built_fmus, tmp_path, monkeypatch, args, message):
+    monkeypatch.chdir(tmp_path)
+    done = cosim_inproc(*args)
+    assert done.exit_code == 2
     assert message in done.stderr.replace("\n", " ")
-    assert "Traceback" not in done.stderr
+    assert "Traceback" not in done.stderr and no_traceback(done), done.exception
 
 
 def test_list_and_validate(built_fmus):
+    """``cosim list`` names the FMUs and scenarios; ``cosim validate`` passes our FMUs, each
+    report saying PASSED with no error."""
     listed = cosim("list")
     assert listed.returncode == 0
     assert "BrakeDelayTrain" in listed.stdout and "seed000_stop_pid" in listed.stdout
     checked = cosim("validate", "BrakeDelayTrain", "StopPid")
     assert checked.returncode == 0, checked.stdout + checked.stderr
     assert "problem" not in checked.stdout
+    assert "FAIL" not in checked.stdout, checked.stdout
+    reports = re.split(r"^FMU ", checked.stdout, flags=re.M)[1:]
+    assert [Path(r.split()[0]).stem for r in reports] == ["BrakeDelayTrain", "StopPid"], reports
+    assert all("PASSED: 0 error(s)" in r for r in reports), checked.stdout
 
 
 def test_error_keeps_the_scenario_keys(built_fmus, tmp_path):
     """Scenario keys in brackets are printed as written (not taken as console markup)."""
-    done = cosim("run", "seed000_stop_pid", "--algorithm", "fixed", "--set",
-                 "simulation.base_step=1.0", "--set", "simulation.output_interval=1.0",
-                 "--out", str(tmp_path / "x"))
-    assert done.returncode == 2
+    done = cosim_inproc("run", "seed000_stop_pid", "--algorithm", "fixed", "--set",
+                        "simulation.base_step=1.0", "--set", "simulation.output_interval=1.0",
+                        "--out", str(tmp_path / "x"))
+    assert done.exit_code == 2
     assert ("[fmus.controller] sample_time = 0.2 s is not a multiple of [simulation] "
             "base_step = 1.0 s") in " ".join(done.stderr.split() + done.stdout.split())
 

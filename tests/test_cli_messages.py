@@ -1,5 +1,10 @@
 """Messages a person reads: table names survive rich (no markup swallowed), errors caused by a
---set value name the --set option, a non-TTY run prints a progress line every ~10 %."""
+--set value name the --set option, a non-TTY run prints a progress line every ~10 %.
+
+Messages the command prints before any run are read in this process through typer's test
+runner (the text a process prints: test_no_help_text_is_cut_at_80_columns compares the two);
+runs (their lines come from the forked run child) and sweeps that print tables run as
+processes."""
 
 from __future__ import annotations
 
@@ -9,22 +14,34 @@ import subprocess
 import sys
 
 import pytest
+from typer.testing import Result
 
 from cosim.run.scenario import find_scenario
+from tests.cli_inproc import cosim_inproc, no_traceback
 
 
-def cosim(*args: str, cwd=None, env=None) -> subprocess.CompletedProcess:
+def cosim(*args: str, env=None) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-m", "cosim.cli", *args], capture_output=True,
-                          text=True, timeout=600, cwd=cwd, env=env)
+                          text=True, timeout=600, env=env)
 
 
-def one_line(done: subprocess.CompletedProcess) -> str:
+def one_line(done: subprocess.CompletedProcess | Result) -> str:
     return done.stderr.replace("\n", " ")
 
 
+@pytest.fixture(scope="module")
+def pid_run_at_v0_15(built_fmus, tmp_path_factory):
+    """``cosim run seed000_stop_pid --set plant.v0=15 --no-plot`` as a process (the progress
+    lines come from its run child): the finished process and its --out folder."""
+    out = tmp_path_factory.mktemp("pid_run_at_v0_15")
+    done = cosim("run", "seed000_stop_pid", "--set", "plant.v0=15", "--no-plot",
+                 "--out", str(out))
+    return done, out
+
+
 def test_set_errors_name_the_set_option_and_keep_the_table_name(built_fmus, tmp_path):
-    done = cosim("run", "seed000_stop_pid", "--set", "plant.mas=1", "--out", str(tmp_path))
-    assert done.returncode == 2
+    done = cosim_inproc("run", "seed000_stop_pid", "--set", "plant.mas=1", "--out", str(tmp_path))
+    assert done.exit_code == 2
     message = one_line(done)
     # the command echoed whole (a log shows what ran), then the error
     echo = f"cosim run seed000_stop_pid --out {shlex.quote(str(tmp_path))} --set plant.mas=1"
@@ -34,30 +51,33 @@ def test_set_errors_name_the_set_option_and_keep_the_table_name(built_fmus, tmp_
 
 
 def test_unconnected_input_hint_keeps_its_table_names(built_fmus, tmp_path):
+    """An input left unconnected keeps its start value, said in the log when the FMUs are
+    loaded (a 5-s run, as a process: the line comes from its run child); with
+    ``unconnected_inputs = "error"`` the run is refused, naming where to connect or set it."""
     text = (find_scenario("seed000_stop_pid")).read_text()
     text = re.sub(r'^"controller\.v" = "plant\.v"\n', "", text, flags=re.M)
     path = tmp_path / "unconnected.toml"  # kept at its start value, said in the log
     path.write_text(text)
-    done = cosim("run", str(path), "--out", str(tmp_path / "out"))
+    done = cosim("run", str(path), "--out", str(tmp_path / "out"), "--no-plot",
+                 "--set", "simulation.stop_time=5")
     assert done.returncode == 0, done.stderr
     assert "keep their start values: controller.v" in done.stderr, done.stderr
     strict = tmp_path / "strict.toml"  # refused, naming where to connect or set it
     strict.write_text(text.replace("[simulation]\n",
                                    '[simulation]\nunconnected_inputs = "error"\n', 1))
-    done = cosim("run", str(strict), "--out", str(tmp_path / "strict"))
-    assert done.returncode == 2
+    done = cosim_inproc("run", str(strict), "--out", str(tmp_path / "strict"))
+    assert done.exit_code == 2
     message = one_line(done)
     assert "to [connections] or a constant in [fmus.controller.inputs]" in message, message
 
 
 def test_help_keeps_bracketed_table_names():
-    done = cosim("run", "--help")
+    done = cosim_inproc("run", "--help")
     assert "[simulation] algorithm" in done.stdout
 
 
-def test_non_tty_run_prints_progress_every_tenth_and_set_takes_effect(built_fmus, tmp_path):
-    done = cosim("run", "seed000_stop_pid", "--set", "plant.v0=15", "--no-plot",
-                 "--out", str(tmp_path))
+def test_non_tty_run_prints_progress_every_tenth_and_set_takes_effect(pid_run_at_v0_15):
+    done, out = pid_run_at_v0_15
     assert done.returncode == 0, done.stderr
     lines = [line for line in done.stderr.splitlines() if " s sim (" in line]
     percents = [int(re.search(r"\((\d+) %\)", line)[1]) for line in lines]
@@ -65,25 +85,23 @@ def test_non_tty_run_prints_progress_every_tenth_and_set_takes_effect(built_fmus
     assert all("real-time factor" in line for line in lines)
     import pandas as pd
 
-    frame = pd.read_csv(tmp_path / "results.csv")
+    frame = pd.read_csv(out / "results.csv")
     assert frame["plant.v"].iloc[0] == 15.0  # the value the FMU received, not the file's 20
 
 
 def test_sweep_help_keeps_the_bracketed_extra():
-    done = cosim("sweep", "--help")
+    done = cosim_inproc("sweep", "--help")
     assert "ato-cosim[dask]" in done.stdout.replace("\n", " ").replace("│", "").replace(" ", "")
 
 
 def test_command_list_gives_each_command_one_line_at_80_columns():
     """``cosim --help`` at 80 columns: each command's help is one short sentence, on the
     command's own line of the panel (no continuation line)."""
-    import os
-
     import typer
 
     from cosim.cli import app
 
-    done = cosim("--help", env={**os.environ, "COLUMNS": "80"})
+    done = cosim_inproc("--help", env={"COLUMNS": "80"})
     lines = done.stdout.splitlines()
     start = next(i for i, line in enumerate(lines) if "Commands" in line)
     rows = lines[start + 1:next(i for i in range(start + 1, len(lines))
@@ -136,17 +154,18 @@ def test_perturb_table_keeps_the_grid_column_in_every_block_and_one_notation(tmp
     assert len(decimals) == 1, errors
 
 
-def test_progress_and_summary_real_time_factors_say_what_they_measure(built_fmus, tmp_path):
+def test_progress_and_summary_real_time_factors_say_what_they_measure(pid_run_at_v0_15):
     """The progress lines' real-time factor is the stepping's; the summary's is the whole
-    run's (the FMUs' loading included) and names the stepping's, the last progress line's."""
+    run's (the FMUs' loading included) and names the stepping's, the last progress line's
+    (whatever the run's plant.v0)."""
     import json
 
-    done = cosim("run", "seed000_stop_pid", "--no-plot", "--out", str(tmp_path))
+    done, out = pid_run_at_v0_15
     assert done.returncode == 0, done.stderr
     last = [line for line in done.stderr.splitlines() if "(100 %)" in line][-1]
     stepping = re.search(r"real-time factor of the stepping (\S+)$", last)[1]
     text = " ".join(done.stdout.replace("│", " ").split())
-    whole = json.loads((tmp_path / "summary.json").read_text())["real_time_factor"]
+    whole = json.loads((out / "summary.json").read_text())["real_time_factor"]
     assert (f"real_time_factor {whole:.6g} (whole run: loading and initialising the FMUs "
             f"included; stepping alone {stepping}, as the progress lines)") in text, text
 
@@ -158,22 +177,25 @@ def test_progress_and_summary_real_time_factors_say_what_they_measure(built_fmus
                         "(did you mean 'plant'?)"),
 ])
 def test_perturb_typos_get_did_you_mean(tmp_path, item, message):
-    done = cosim("sweep", "seed000_stop_pid", "--set", "plant.mass=490000", "--perturb", item,
-                 "--samples", "1", "--workers", "1", "--no-plot", "--out", str(tmp_path / "s"))
-    assert done.returncode == 2
+    done = cosim_inproc("sweep", "seed000_stop_pid", "--set", "plant.mass=490000",
+                        "--perturb", item, "--samples", "1", "--workers", "1", "--no-plot",
+                        "--out", str(tmp_path / "s"))
+    assert done.exit_code == 2
     assert message in one_line(done), done.stderr
 
 
-def test_validate_typos_get_did_you_mean(tmp_path):
+def test_validate_typos_get_did_you_mean(tmp_path, monkeypatch):
     (tmp_path / "StopPid.fmu").write_bytes(b"")
-    done = cosim("validate", str(tmp_path / "StopPdi.fmu"))
-    assert done.returncode == 2
+    done = cosim_inproc("validate", str(tmp_path / "StopPdi.fmu"))
+    assert done.exit_code == 2
     assert f"no such file (did you mean '{tmp_path / 'StopPid.fmu'}'?)" in one_line(done)
     (tmp_path / "empty").mkdir()  # no .fmu near: the closest identifier
-    done = cosim("validate", "StopPdi.fmu", cwd=tmp_path / "empty")
+    with monkeypatch.context() as in_empty:
+        in_empty.chdir(tmp_path / "empty")
+        done = cosim_inproc("validate", "StopPdi.fmu")
     assert "StopPdi.fmu: no such file (did you mean 'StopPid'?)" in one_line(done)
-    done = cosim("validate", "--native", "StopMcp")
-    assert done.returncode == 2
+    done = cosim_inproc("validate", "--native", "StopMcp")
+    assert done.exit_code == 2
     assert "no native model of 'StopMcp'; native: " in one_line(done)
     assert "(did you mean 'StopMpc'?)" in one_line(done)
 
@@ -236,11 +258,11 @@ def test_huge_stop_time_and_latin1_scenario_are_errors_without_traceback(tmp_pat
     text = (find_scenario("seed000_stop_pid")).read_text()
     huge = tmp_path / "huge.toml"
     huge.write_text(re.sub(r"^stop_time = .*$", "stop_time = 1e300", text, count=1, flags=re.M))
-    done = cosim("run", str(huge), "--out", str(tmp_path / "a"), "--quiet")
-    assert done.returncode == 2 and "Traceback" not in done.stderr
+    done = cosim_inproc("run", str(huge), "--out", str(tmp_path / "a"), "--quiet")
+    assert done.exit_code == 2 and "Traceback" not in done.stderr and no_traceback(done)
     assert f"{huge}: [simulation] stop_time = 1e+300: out of range" in one_line(done)
     latin = tmp_path / "latin.toml"
     latin.write_bytes(b'description = "Z\xfcrich"\n' + text.encode())
-    done = cosim("run", str(latin), "--out", str(tmp_path / "b"), "--quiet")
-    assert done.returncode == 2 and "Traceback" not in done.stderr
+    done = cosim_inproc("run", str(latin), "--out", str(tmp_path / "b"), "--quiet")
+    assert done.exit_code == 2 and "Traceback" not in done.stderr and no_traceback(done)
     assert f"{latin}: not UTF-8 text: byte 16 is 0xfc" in one_line(done)

@@ -13,8 +13,6 @@ next event is, both on the nanosecond grid of the controllers' own clocks,
 from __future__ import annotations
 
 import fnmatch
-import subprocess
-import sys
 import zipfile
 from pathlib import Path
 from xml.etree import ElementTree as ET
@@ -29,6 +27,7 @@ from cosim.run.master import SimulationError
 from cosim.run.master.core import Master
 from cosim.run.scenario import load_scenario, scenario_files
 from cosim.run.simulate import run_scenario
+from tests.cli_inproc import cosim_inproc
 
 TIMING = ("executions", "next_event_time")
 IRREPRODUCIBLE = ("*solve_time*", "*wall_time*", "*cpu_time*")
@@ -209,9 +208,8 @@ def test_mixed_scenario_scheduled_co_simulation_and_fmi2():
     (["--clock", "periodic", "--interface", "me"], "--interface 'me': expected one of cs, se"),
 ])
 def test_cli_interface_errors(args, message):
-    done = subprocess.run([sys.executable, "-m", "cosim.cli", "build", "StopPid", "--fmi", "3",
-                           *args], capture_output=True, text=True, timeout=120)
-    assert done.returncode != 0
+    done = cosim_inproc("build", "StopPid", "--fmi", "3", *args)
+    assert done.exit_code != 0
     assert message in " ".join((done.stdout + done.stderr).split())
 
 

@@ -10,6 +10,7 @@ import pytest
 
 from cosim.run.simulate import run_scenario
 from cosim.run.sweep import grid_points, parse_grid, run_sweep
+from tests.cli_inproc import cosim_inproc
 
 
 def test_parse_grid_ranges_lists_and_errors():
@@ -39,15 +40,11 @@ def test_a_grid_beyond_max_runs_is_refused_by_its_count():
 
 
 def test_cli_sweep_refuses_a_huge_grid_before_any_work(tmp_path):
-    import subprocess
-    import sys
-
     for extra in ([], ["--perturb", "plant.mass=+-10%", "--samples", "1000"]):
-        done = subprocess.run([sys.executable, "-m", "cosim.cli", "sweep", "seed000_stop_pid",
-                               "--set", "controller.kp=1..100000", "--out", str(tmp_path),
-                               *extra], capture_output=True, text=True, timeout=300)
+        done = cosim_inproc("sweep", "seed000_stop_pid", "--set", "controller.kp=1..100000",
+                            "--out", str(tmp_path), *extra)
         message = " ".join(done.stderr.split())
-        assert done.returncode == 2, done.stderr
+        assert done.exit_code == 2, done.stderr
         assert "more than --max-runs 10,000: give --max-runs" in message
         assert ("100,000,000 runs" if extra else "100,000 runs") in message
         assert not (tmp_path / "sweep.csv").exists() and not (tmp_path / "perturb.csv").exists()
@@ -80,7 +77,5 @@ def test_cli_sweep(built_fmus, tmp_path):
     assert max(len(line) for line in done.stdout.splitlines()) <= 80
     assert "sweep: 2/2 runs" in done.stderr and "ETA" in done.stderr  # progress
     assert len(pd.read_csv(tmp_path / "sweep.csv")) == 2
-    bad = subprocess.run([sys.executable, "-m", "cosim.cli", "sweep", "seed000_stop_rsmpc",
-                          "--set", "controller.N=9..x"], capture_output=True, text=True,
-                         timeout=600)
-    assert bad.returncode == 2 and "range needs integers" in bad.stderr
+    bad = cosim_inproc("sweep", "seed000_stop_rsmpc", "--set", "controller.N=9..x")
+    assert bad.exit_code == 2 and "range needs integers" in bad.stderr

@@ -379,9 +379,12 @@ def test_cli_validates_native_builds_of_both_versions():
     (("validate", "--native", "NoSuchTrain"), "no native model of 'NoSuchTrain'; native: "),
     (("build", "--native", "NoSuchTrain"), "no native model of 'NoSuchTrain'; native: "),
 ])
-def test_cli_native_errors_name_the_value(args, message):
-    done = _cosim(*args)
-    assert done.returncode == 2
+def test_cli_native_errors_name_the_value(monkeypatch, args, message):
+    from tests.cli_inproc import cosim_inproc
+
+    monkeypatch.chdir(ROOT)
+    done = cosim_inproc(*args)
+    assert done.exit_code == 2
     assert message in done.stderr.replace("\n", " "), done.stderr
 
 

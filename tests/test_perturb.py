@@ -4,15 +4,13 @@ perturbed plants (issue 11)."""
 
 from __future__ import annotations
 
-import subprocess
-import sys
-
 import numpy as np
 import pandas as pd
 import pytest
 
 from cosim.run.perturb import run_perturbed, summarize
 from cosim.run.perturbation import Perturbation, draw_samples, nominal_values, parse_perturb
+from tests.cli_inproc import cosim_inproc
 
 STUDY = ["plant.mass=+-10%", "plant.brake_time_constant=0.3..0.6", "plant.brake_delay=0.8..1.2",
          "plant.davis_a=+-30%", "plant.davis_b=+-30%", "plant.davis_c=+-30%",
@@ -132,10 +130,9 @@ def test_mismatch_study_at_n5_and_n10_stays_in_the_window(built_fmus, tmp_path):
 
 
 def test_cli_perturb_errors_name_the_item(built_fmus, tmp_path):
-    bad = subprocess.run([sys.executable, "-m", "cosim.cli", "sweep", "seed000_stop_rmpc",
-                          "--set", "controller.N=5", "--perturb", "plant.mass=10%", "--out",
-                          str(tmp_path / "x")], capture_output=True, text=True, timeout=600)
-    assert bad.returncode == 2 and "plant.mass=10%" in bad.stderr
+    bad = cosim_inproc("sweep", "seed000_stop_rmpc", "--set", "controller.N=5",
+                       "--perturb", "plant.mass=10%", "--out", str(tmp_path / "x"))
+    assert bad.exit_code == 2 and "plant.mass=10%" in bad.stderr
 
 
 def test_an_interrupted_study_keeps_its_finished_runs_and_resume_runs_the_rest(built_fmus,

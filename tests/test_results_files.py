@@ -74,8 +74,10 @@ def _holder(destination, is_dir=True):
 
 
 def test_sweep_reproduce_and_export_refuse_a_destination_another_process_holds(tmp_path):
-    import subprocess
-    import sys
+    """``cosim sweep``, ``reproduce`` and ``export`` (run in this process through typer's test
+    runner) refuse a destination whose lock another process holds, naming its pid, and write
+    nothing."""
+    from tests.cli_inproc import cosim_inproc
 
     commands = {
         tmp_path / "sweep": ["sweep", "seed000_stop_pid", "--set", "controller.kp=1,2",
@@ -87,12 +89,11 @@ def test_sweep_reproduce_and_export_refuse_a_destination_another_process_holds(t
         is_dir = destination.suffix != ".ssp"
         holder = _holder(destination, is_dir)
         try:
-            done = subprocess.run([sys.executable, "-m", "cosim.cli", *args],
-                                  capture_output=True, text=True, timeout=300)
+            done = cosim_inproc(*args)
         finally:
             holder.communicate("")
         message = " ".join(done.stderr.split())
-        assert done.returncode == 2, done.stderr
+        assert done.exit_code == 2, done.stderr
         assert f"{destination}: another cosim command is writing into" in message
         assert f"pid {holder.pid}:" in message
         assert not (destination / "sweep.csv").exists() and not destination.is_file()

@@ -82,24 +82,31 @@ def test_hanging_call_is_reported_with_its_arguments(results):
     assert any(p.check == "bad-parameters" for p in results("Hanger", False))
 
 
-def test_cli_lenient_exit_status(c_fmus):
-    def validate(*args: str) -> subprocess.CompletedProcess:
-        return subprocess.run([sys.executable, "-m", "cosim.cli", "validate", *args],
-                              capture_output=True, text=True, timeout=300)
+def validate(*args: str) -> subprocess.CompletedProcess:
+    """``cosim validate ARGS`` as a process (its exit status is what these tests read)."""
+    return subprocess.run([sys.executable, "-m", "cosim.cli", "validate", *args],
+                          capture_output=True, text=True, timeout=300)
 
+
+@pytest.fixture(scope="module")
+def alltypes_strict(c_fmus) -> subprocess.CompletedProcess:
+    """The finished ``cosim validate AllTypes.fmu --call-timeout 1`` (strict, the default)."""
+    return validate(str(c_fmus["AllTypes"]), "--call-timeout", str(CALL_TIMEOUT))
+
+
+def test_cli_lenient_exit_status(c_fmus, alltypes_strict):
+    """``cosim validate --lenient`` exits with 0 on AllTypes, the strict check with 1."""
     done = validate(str(c_fmus["AllTypes"]), "--lenient")
     assert done.returncode == 0, done.stdout
     assert "warning (recommended): input u = nan: accepted" in done.stdout
     assert "[FMI 2.0.4 2.1.7" in done.stdout and "PASSED: 0 error(s)" in done.stdout
-    done = validate(str(c_fmus["AllTypes"]))
+    done = alltypes_strict
     assert done.returncode == 1 and "FAILED" in done.stdout
 
 
-def test_strict_report_of_a_third_party_fmu_suggests_lenient(c_fmus, results):
+def test_strict_report_of_a_third_party_fmu_suggests_lenient(alltypes_strict, results):
     """AllTypes fails the strict checks only on what the standard leaves to the FMU."""
-    done = subprocess.run([sys.executable, "-m", "cosim.cli", "validate",
-                           str(c_fmus["AllTypes"]), "--call-timeout", str(CALL_TIMEOUT)],
-                          capture_output=True, text=True)
+    done = alltypes_strict
     assert done.returncode == 1
     assert ("hint: every error above is something FMI recommends or leaves to the FMU, or a "
             "convention of this project; for a third-party FMU, --lenient checks only what the "
