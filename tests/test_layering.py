@@ -42,8 +42,11 @@ modules are imported at module level; only ``cosim/cli.py`` imports them inside 
 from __future__ import annotations
 
 import ast
+import functools
 import graphlib
+from collections import deque
 from pathlib import Path
+from typing import NamedTuple
 
 import pytest
 
@@ -70,6 +73,39 @@ ALLOWED: dict[str, set[str]] = {
     # a paper's metric plug-ins (papers/NAME/metrics.py): the registry and what a metric reads
     "papers": {"cosim.fmu", "cosim.run", "cosim.papers"},
 }
+
+
+class ImportStatement(NamedTuple):
+    node: ast.Import | ast.ImportFrom
+    in_function: bool  # inside a function (def or async def), at any depth
+    type_checking_only: bool  # in the body of an ``if TYPE_CHECKING:``, at any depth
+
+
+def import_statements(path: Path) -> tuple[ImportStatement, ...]:
+    """The import statements of ``path`` in ``ast.walk`` order (:func:`_import_statements`),
+    read each time and parsed once per text."""
+    return _import_statements(path.read_text(), str(path))
+
+
+@functools.cache
+def _import_statements(source: str, filename: str) -> tuple[ImportStatement, ...]:
+    """One breadth-first walk of the tree (``ast.walk``'s order), each node carrying whether
+    a function encloses it and whether the body of an ``if TYPE_CHECKING:`` (a block that
+    never runs: annotations only) does; only the import statements are kept, not the tree."""
+    found = []
+    todo = deque([(ast.parse(source, filename=filename), False, False)])
+    while todo:
+        node, in_function, checking = todo.popleft()
+        if isinstance(node, (ast.Import, ast.ImportFrom)):
+            found.append(ImportStatement(node, in_function, checking))
+        in_function = in_function or isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef))
+        body = (node.body if isinstance(node, ast.If) and isinstance(node.test, ast.Name)
+                and node.test.id == "TYPE_CHECKING" else [])
+        todo.extend((child, in_function, checking or any(child is b for b in body))
+                    for child in ast.iter_child_nodes(node))
+    return tuple(found)
+
+
 def part_of(module: str) -> str | None:
     for part in sorted(ALLOWED, key=len, reverse=True):
         if module == part or module.startswith(part + "."):
@@ -78,8 +114,7 @@ def part_of(module: str) -> str | None:
 
 
 def project_imports(path: Path, module: str) -> list[tuple[int, str]]:
-    tree = ast.parse(path.read_text(), filename=str(path))
-    return [(line, name) for line, name, _ in _imports(tree, module, path)]
+    return [(line, name) for line, name, _ in _imports(module, path)]
 
 
 def modules() -> list[tuple[Path, str]]:
@@ -109,8 +144,7 @@ def scripts() -> list[Path]:
 def test_nothing_imports_a_paper_folder(path: Path) -> None:
     """A paper's folder is loaded (its metrics by the registry, a script by path), never
     imported: no import statement anywhere names ``papers``."""
-    tree = ast.parse(path.read_text(), filename=str(path))
-    for node in ast.walk(tree):
+    for node, _, _ in import_statements(path):
         names = ([a.name for a in node.names] if isinstance(node, ast.Import)
                  else [node.module or ""] if isinstance(node, ast.ImportFrom) and not node.level
                  else [])
@@ -132,9 +166,8 @@ def paper_test_files() -> dict[Path, list[Path]]:
 def imported_names(path: Path) -> list[tuple[int, str]]:
     """The absolute imports of ``path``: (line, dotted name), ``from a import b`` giving
     ``a`` and ``a.b``."""
-    tree = ast.parse(path.read_text(), filename=str(path))
     found = []
-    for node in ast.walk(tree):
+    for node, _, _ in import_statements(path):
         if isinstance(node, ast.Import):
             found += [(node.lineno, a.name) for a in node.names]
         elif isinstance(node, ast.ImportFrom) and not node.level and node.module:
@@ -250,23 +283,14 @@ def test_the_checker_catches_an_upward_import(tmp_path: Path) -> None:
     assert "plants" not in ALLOWED["cosim.run"]
 
 
-def type_checking_only(tree: ast.Module) -> set[int]:
-    """The ids of the import statements under ``if TYPE_CHECKING:`` (annotations only)."""
-    return {id(node) for block in ast.walk(tree) if isinstance(block, ast.If)
-            and isinstance(block.test, ast.Name) and block.test.id == "TYPE_CHECKING"
-            for stmt in block.body for node in ast.walk(stmt)}
-
-
 def imported_modules(path: Path, module: str, known: set[str]) -> set[str]:
     """The project modules ``path`` (module ``module``) imports at run time, anywhere in it:
     ``from package import submodule`` names the submodule, ``from module import name`` the
     module."""
-    tree = ast.parse(path.read_text(), filename=str(path))
     package = module if path.name == "__init__.py" else module.rpartition(".")[0]
-    skip = type_checking_only(tree)
     found: set[str] = set()
-    for node in ast.walk(tree):
-        if id(node) in skip:
+    for node, _, checking in import_statements(path):
+        if checking:  # under ``if TYPE_CHECKING:`` only (annotations)
             continue
         if isinstance(node, ast.Import):
             found |= {a.name for a in node.names}
@@ -321,18 +345,14 @@ LAZY_ALLOWED = {"cosim.cli": "start-up time: `cosim --help` loads no runner"}
 
 def function_local_imports(path: Path, module: str) -> list[tuple[int, str]]:
     """The project imports inside the functions of ``path`` (line, module imported)."""
-    tree = ast.parse(path.read_text(), filename=str(path))
-    inside = {id(node) for f in ast.walk(tree)
-              if isinstance(f, (ast.FunctionDef, ast.AsyncFunctionDef))
-              for node in ast.walk(f)}
-    return [(line, name) for line, name, node in _imports(tree, module, path)
-            if id(node) in inside]
+    return [(line, name) for line, name, inside in _imports(module, path) if inside]
 
 
-def _imports(tree: ast.Module, module: str, path: Path) -> list[tuple[int, str, ast.AST]]:
+def _imports(module: str, path: Path) -> list[tuple[int, str, bool]]:
+    """(line, project module, whether inside a function) of each import of ``path``."""
     package = module if path.name == "__init__.py" else module.rpartition(".")[0]
     found = []
-    for node in ast.walk(tree):
+    for node, in_function, _ in import_statements(path):
         if isinstance(node, ast.Import):
             names = [a.name for a in node.names]
         elif isinstance(node, ast.ImportFrom):
@@ -343,7 +363,7 @@ def _imports(tree: ast.Module, module: str, path: Path) -> list[tuple[int, str, 
             names = [base]
         else:
             continue
-        found += [(node.lineno, n, node) for n in names if part_of(n) is not None]
+        found += [(node.lineno, n, in_function) for n in names if part_of(n) is not None]
     return found
 
 

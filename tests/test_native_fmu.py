@@ -157,18 +157,14 @@ def test_model_description_is_the_python_fmus(native, built_fmus):
     assert md.coSimulation.canGetAndSetFMUstate and md.coSimulation.canSerializeFMUstate
 
 
-def test_binary_needs_no_python(native, tmp_path):
+def test_binary_needs_no_python(native, c_hosts):
     """The C host of tests/c_host runs the native FMU with no PYTHONPATH and no libpython:
     ldd lists no libpython, and the host's results equal fmpy's."""
     path, md, unzipdir = native
     so = Path(unzipdir) / "binaries" / "linux64" / "BrakeDelayTrain.so"
     ldd = subprocess.run(["ldd", str(so)], capture_output=True, text=True).stdout
     assert "libpython" not in ldd and "libm" in ldd
-    headers = Path(fmpy.__file__).parent / "c-code"
-    exe = tmp_path / "fmu_host"
-    subprocess.run(["gcc", "-std=c99", "-D_DEFAULT_SOURCE", "-O1", f"-I{headers}", "-o",
-                    str(exe), str(ROOT / "tests" / "c_host" / "fmu_host.c"), "-ldl"],
-                   check=True)
+    exe = c_hosts("fmu_host")
     vr = {v.name: v.valueReference for v in md.modelVariables}
     env = {k: v for k, v in os.environ.items()
            if k not in ("PYTHONPATH", "PYTHONHOME", "LD_PRELOAD", "LD_LIBRARY_PATH")}

@@ -98,12 +98,9 @@ def compile_host(source: str, out: Path, windows: bool = False) -> Path:
 
 
 @pytest.fixture(scope="module")
-def hosts(tmp_path_factory) -> dict[int, Path]:
-    if shutil.which("gcc") is None:
-        pytest.skip("gcc not installed")
-    folder = tmp_path_factory.mktemp("hosts")
-    return {2: compile_host("fmu_host.c", folder / "fmu_host"),
-            3: compile_host("fmu3_host.c", folder / "fmu3_host")}
+def hosts(c_hosts) -> dict[int, Path]:
+    """FMI version -> its C host for Linux (the root conftest's ``c_hosts``)."""
+    return {2: c_hosts("fmu_host"), 3: c_hosts("fmu3_host")}
 
 
 def host_args(version: int, unzipdir: str, md2, token: str) -> list[str]:
@@ -232,7 +229,9 @@ def _shipped_scenario(identifier: str) -> tuple[Path, str] | None:
 def test_libcosim_runs_the_fmi2_build_in_a_shipped_loop(native, identifier):
     """The first shipped scenario that uses the model, with the native FMU in its place
     (first 20 s): libcosim's fixed-step master gives our master's Jacobi run of the same FMUs
-    exactly (both deliver every output to the next step unchanged)."""
+    exactly (both deliver every output to the next step unchanged). libcosim runs in this
+    process (``isolated=False``, the same frame as in its child: tests/test_other_masters.py
+    tests the child)."""
     from cosim.build.python import build_stale, catalog
     from cosim.interop.libcosim import compare_frames, run_libcosim
     from cosim.run.scenario import load_scenario
@@ -246,7 +245,7 @@ def test_libcosim_runs_the_fmi2_build_in_a_shipped_loop(native, identifier):
                               "simulation.stop_time": 20.0})
     others = {c.fmu for c in sc.components.values() if c.name != component}
     build_stale([catalog()[name] for name in others if name in catalog()])
-    theirs = run_libcosim(sc)
+    theirs = run_libcosim(sc, isolated=False)
     ours = run_scenario(sc, algorithm="jacobi", plot=False).frame
     diffs = compare_frames(ours, theirs)
     assert diffs and not theirs.drop(columns="time").isna().to_numpy().any()

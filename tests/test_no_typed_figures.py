@@ -13,6 +13,7 @@ unlikely and a copied figure is caught.
 from __future__ import annotations
 
 import ast
+import functools
 import re
 from pathlib import Path
 
@@ -61,7 +62,28 @@ def generated_figures() -> set[str]:
     return out
 
 
-def _scenario_texts() -> tuple[set[str], dict[str, str]]:
+@functools.cache
+def constants(path: Path) -> tuple[frozenset[str], str]:
+    """(the reprs of the float literals, the string constants one per line) of a code file:
+    one parse and one walk of its tree for both."""
+    floats: set[str] = set()
+    strings: list[str] = []
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.Constant):
+            if isinstance(node.value, float):
+                floats.add(repr(node.value))
+            elif isinstance(node.value, str):
+                strings.append(node.value)
+    return frozenset(floats), "\n".join(strings)
+
+
+def code_files() -> list[Path]:
+    """The Python files of :data:`CODE_FOLDERS`, sorted."""
+    return [path for folder in CODE_FOLDERS for path in sorted((ROOT / folder).rglob("*.py"))]
+
+
+@functools.cache
+def _scenario_texts() -> tuple[frozenset[str], dict[str, str]]:
     """(figures the pages may quote: those of the scenario files without their notes and the
     numeric literals of the code, i.e. the papers' values and the parameters; {file: notes})."""
     quoted: set[str] = set()
@@ -74,11 +96,9 @@ def _scenario_texts() -> tuple[set[str], dict[str, str]]:
             notes[path.relative_to(ROOT).as_posix()] = note
             text = text.replace(note, "")
         quoted |= figures(text)
-    for folder in CODE_FOLDERS:
-        for path in (ROOT / folder).rglob("*.py"):
-            quoted |= {repr(node.value) for node in ast.walk(ast.parse(path.read_text()))
-                       if isinstance(node, ast.Constant) and isinstance(node.value, float)}
-    return quoted, notes
+    for path in code_files():
+        quoted |= constants(path)[0]
+    return frozenset(quoted), notes
 
 
 def hand_texts() -> dict[str, str]:
@@ -88,12 +108,8 @@ def hand_texts() -> dict[str, str]:
         if not _generated_page(text):
             texts[page.relative_to(ROOT).as_posix()] = GENERATED_BLOCK.sub("", text)
     texts.update(_scenario_texts()[1])
-    for folder in CODE_FOLDERS:
-        for path in sorted((ROOT / folder).rglob("*.py")):
-            tree = ast.parse(path.read_text())
-            texts[path.relative_to(ROOT).as_posix()] = "\n".join(
-                node.value for node in ast.walk(tree)
-                if isinstance(node, ast.Constant) and isinstance(node.value, str))
+    for path in code_files():
+        texts[path.relative_to(ROOT).as_posix()] = constants(path)[1]
     return texts
 
 

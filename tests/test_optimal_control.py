@@ -14,7 +14,9 @@ on time; ``_at`` charges a run that is not ``lambda m_eff dT``, ``dJ/dT = -lambd
 
 from __future__ import annotations
 
+import functools
 import math
+from collections.abc import Callable
 
 import numpy as np
 import pytest
@@ -130,13 +132,25 @@ def test_no_holding_brake_below_the_braking_cruise_speed(steep_run: OptimalRun) 
     assert np.all((at >= W - 2 * dv) | (at >= lim - 2 * dv))
 
 
+@pytest.fixture(scope="module")
+def level_run() -> Callable[[float], tuple[float, OptimalRun]]:
+    """k -> (T, the run of EMU on LEVEL in T = k times the fastest running time), each k
+    solved once, all on one solver (for_time gives a fresh solver's run bit for bit,
+    whatever ran on it before)."""
+    solver = SectionSolver(LEVEL, EMU, GRID)
+    T0 = solver.fastest().running_time
+
+    @functools.cache
+    def run(k: float) -> tuple[float, OptimalRun]:
+        return k * T0, solver.for_time(k * T0)
+    return run
+
+
 @pytest.mark.parametrize("stretch", [1.1, 1.3])
-def test_the_schedule_is_kept(stretch: float) -> None:
+def test_the_schedule_is_kept(level_run, stretch: float) -> None:
     """On time to the precision of the time's root (Brent's method to 1e-12 m on a switching
     point; the feasibility test of the program allows 1e-9 of the running time)."""
-    solver = SectionSolver(LEVEL, EMU, GRID)
-    T = stretch * solver.fastest().running_time
-    run = solver.for_time(T)
+    T, run = level_run(stretch)
     assert T * (1 - 1e-9) <= run.running_time <= T * (1 + 1e-9)
 
 
@@ -151,10 +165,8 @@ def test_the_run_is_on_time_from_rest_to_rest_within_the_limits() -> None:
     assert math.isfinite(run.energy)
 
 
-def test_a_longer_schedule_needs_less_energy() -> None:
-    solver = SectionSolver(LEVEL, EMU, GRID)
-    T0 = solver.fastest().running_time
-    energies = [solver.for_time(k * T0).energy for k in (1.1, 1.2, 1.4)]
+def test_a_longer_schedule_needs_less_energy(level_run) -> None:
+    energies = [level_run(k)[1].energy for k in (1.1, 1.2, 1.4)]
     assert energies[0] > energies[1] > energies[2]
 
 

@@ -19,11 +19,14 @@ SCENARIOS = list(scenario_files().values())
 SHORT = 40.0  # s of each scenario in the quick test; the full runs are marked slow
 
 
-def _ours_and_libcosim(path: Path, stop_time: float | None):
+def _ours_and_libcosim(path: Path, stop_time: float | None, isolated: bool = True):
+    """The scenario, our Jacobi run's frame and libcosim's (in a child process unless
+    ``isolated`` is false: the frames equal either way, and the child path is tested on
+    its own below)."""
     overrides = {"simulation.stop_time": stop_time} if stop_time else None
     sc = load_scenario(path, overrides)
     ours = run_scenario(sc, algorithm="jacobi", plot=False).frame
-    theirs = run_libcosim(sc)
+    theirs = run_libcosim(sc, isolated=isolated)
     return sc, ours, theirs
 
 
@@ -39,7 +42,11 @@ def _assert_match(sc, ours, theirs) -> None:
 
 @pytest.mark.parametrize("path", by_scenario(SCENARIOS))
 def test_libcosim_matches_jacobi(path, built_fmus):
-    sc, ours, theirs = _ours_and_libcosim(path, SHORT)
+    """libcosim in this process (``isolated=False``): the equality does not depend on the
+    process libcosim runs in; the isolated path is
+    test_libcosim_delivers_the_command_one_step_later's and
+    test_libcosim_aborting_its_process_is_an_error_here_not_an_exit's."""
+    sc, ours, theirs = _ours_and_libcosim(path, SHORT, isolated=False)
     _assert_match(sc, ours, theirs)
 
 

@@ -413,8 +413,28 @@ threshold = 0.5
 """
 
 
+@pytest.fixture(scope="module")
+def claimed_campaign(built_fmus, tmp_path_factory) -> Path:
+    """A folder with ``entry.toml`` (:data:`CLAIMED`, its overlay figure drawing "PID" only)
+    and ``out/``, what ``reproduce(entry, out, workers=1, seeds=2)`` wrote: run once per
+    module; each test works on its own copy (:func:`copy_campaign`)."""
+    folder = tmp_path_factory.mktemp("claimed")
+    path = folder / "entry.toml"
+    path.write_text(CLAIMED.replace("kind = \"overlay\"", "kind = \"overlay\"\nruns = [\"PID\"]"))
+    reproduce(str(path), folder / "out", workers=1, seeds=2, echo=False)
+    return folder
+
+
+def copy_campaign(campaign: Path, tmp_path: Path) -> tuple[Path, Path]:
+    """(entry.toml, out) of a copy of ``campaign`` in ``tmp_path``: the test's own."""
+    import shutil
+
+    shutil.copytree(campaign, tmp_path, dirs_exist_ok=True)
+    return tmp_path / "entry.toml", tmp_path / "out"
+
+
 def test_redraw_makes_the_same_tables_claims_and_figures_from_the_record_alone(
-        built_fmus, tmp_path: Path, monkeypatch) -> None:
+        claimed_campaign: Path, tmp_path: Path, monkeypatch) -> None:
     """Everything after the simulations is a function of the record: redrawn with every
     simulation entry point disabled it is byte for byte what the run wrote; a changed claim
     is re-evaluated on the recorded members; a run the record lacks is named."""
@@ -422,10 +442,7 @@ def test_redraw_makes_the_same_tables_claims_and_figures_from_the_record_alone(
     import cosim.reproduce.page as page
     import cosim.reproduce.run as rep
 
-    path = tmp_path / "entry.toml"
-    path.write_text(CLAIMED.replace("kind = \"overlay\"", "kind = \"overlay\"\nruns = [\"PID\"]"))
-    out = tmp_path / "out"
-    reproduce(str(path), out, workers=1, seeds=2, echo=False)
+    path, out = copy_campaign(claimed_campaign, tmp_path)
     made = {f: (out / f).read_bytes() for f in ("table.md", "table.csv", "claims.csv",
                                                 "claims.md", "speed.png",
                                                 "speed_ensemble.png",
@@ -520,7 +537,7 @@ def _no_simulation(*args, **kwargs):
     raise AssertionError("simulated a job the record holds")
 
 
-def test_resume_runs_only_what_the_record_lacks(built_fmus, tmp_path: Path,
+def test_resume_runs_only_what_the_record_lacks(claimed_campaign: Path, tmp_path: Path,
                                                  monkeypatch, capsys) -> None:
     """--resume takes every job the folder's record holds (same specification) from it: with
     every simulation entry point disabled the whole entry reproduces byte for byte; a record
@@ -531,10 +548,7 @@ def test_resume_runs_only_what_the_record_lacks(built_fmus, tmp_path: Path,
     import cosim.reproduce.run as rep
     from cosim.reproduce.record import load, save
 
-    path = tmp_path / "entry.toml"
-    path.write_text(CLAIMED)
-    out = tmp_path / "out"
-    reproduce(str(path), out, workers=1, seeds=2, echo=False)
+    path, out = copy_campaign(claimed_campaign, tmp_path)
     made = {f: (out / f).read_bytes() for f in ("table.md", "claims.csv")}
     rec = load(out)
     lost = next(ident for ident, job in rec.jobs.items() if job.kind == "member")

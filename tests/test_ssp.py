@@ -43,12 +43,14 @@ def test_export_is_valid_and_complete(path, tmp_path, built_fmus):
 
 @pytest.mark.parametrize("path", by_scenario(SCENARIOS))
 def test_ssp_in_libcosim_matches_our_jacobi(path, tmp_path, built_fmus):
+    """libcosim in this process (``isolated=False``: the same frame as in its child process);
+    test_ssp_carries_parameter_values runs the SSP through the child."""
     sc = load_scenario(path, SHORT)
     out = export_ssp(sc, tmp_path / "x.ssp")
     ours = run_scenario(sc, algorithm="jacobi", plot=False).frame
     refs = [c for c in ours.columns if c != "time"]
     theirs = run_ssp(out, refs, sc.simulation.stop_time,
-                     sc.simulation.base_step or sc.simulation.output_interval)
+                     sc.simulation.base_step or sc.simulation.output_interval, isolated=False)
     diffs = compare_frames(ours, theirs)
     assert len(diffs) == len(refs) and max(diffs.values()) <= 1e-9, diffs
 

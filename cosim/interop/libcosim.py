@@ -255,11 +255,19 @@ def _child(request: str, reply: str) -> None:
 
 
 def run_libcosim(scenario: str | Path | Scenario, overrides: dict[str, Any] | None = None,
-                 step: float | None = None, record: list[str] | None = None) -> pd.DataFrame:
+                 step: float | None = None, record: list[str] | None = None,
+                 isolated: bool = True) -> pd.DataFrame:
     """Run a scenario's FMUs under libcosim's fixed-step master (base step: ``step``, else the
     scenario's ``base_step``, else its ``output_interval``). Returns a frame with ``time`` (s,
-    from h to stop_time) and the recorded ``component.variable`` columns. libcosim runs in a
-    child process (:func:`_isolated`), so its aborts become a :class:`LibcosimError`."""
+    from h to stop_time) and the recorded ``component.variable`` columns.
+
+    ``isolated`` (the default): libcosim runs in a child process (:func:`_isolated`), so its
+    aborts become a :class:`LibcosimError`. ``isolated=False`` runs libcosim in this process
+    and gives the same frame without the child's start-up (a new interpreter importing
+    cosim and every FMU's Python again): for a caller that accepts that libcosim aborting
+    (on an FMU refusing a start value at initialisation, say) ends this process, as no
+    Python exception can catch it; its other errors are raised here as they are (a
+    :class:`LibcosimError`, or the exception of the failing call)."""
     from fmpy import read_model_description
 
     sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario, overrides)
@@ -268,6 +276,8 @@ def run_libcosim(scenario: str | Path | Scenario, overrides: dict[str, Any] | No
                     for c in sc.components.values()}
     check_against_fmus(sc, descriptions)
     _refuse_enumerations(str(sc.path), enumerations_used(sc, descriptions))
+    if not isolated:
+        return _run_libcosim(sc, step, record)
     return _isolated("_run_libcosim", sc, step, record)
 
 
@@ -298,12 +308,17 @@ def _run_libcosim(sc: Scenario, step: float | None, record: list[str] | None) ->
 
 
 def run_ssp(ssp_path: str | Path, record: list[str], stop_time: float,
-            step: float) -> pd.DataFrame:
-    """Run an SSP (e.g. from ``cosim export --ssp``) with libcosim's fixed-step master, in a
-    child process as :func:`run_libcosim`; an SSP with an Enumeration connector or parameter
-    is refused before libcosim starts (:data:`ENUMERATION_REASON`)."""
+            step: float, isolated: bool = True) -> pd.DataFrame:
+    """Run an SSP (e.g. from ``cosim export --ssp``) with libcosim's fixed-step master; an
+    SSP with an Enumeration connector or parameter is refused before libcosim starts
+    (:data:`ENUMERATION_REASON`). ``isolated`` as for :func:`run_libcosim`: by default in a
+    child process, so libcosim's aborts become a :class:`LibcosimError`; ``isolated=False``
+    runs it in this process, the same frame, and an abort of libcosim ends this process."""
     _refuse_enumerations(str(ssp_path), ssp_enumerations(ssp_path))
-    return _isolated("_run_ssp", str(ssp_path), list(record), float(stop_time), float(step))
+    args = (str(ssp_path), list(record), float(stop_time), float(step))
+    if not isolated:
+        return _run_ssp(*args)
+    return _isolated("_run_ssp", *args)
 
 
 def _run_ssp(ssp_path: str, record: list[str], stop_time: float, step: float) -> pd.DataFrame:

@@ -5,14 +5,12 @@ libpython preloaded (the FMU's shim loads it); pythonfmu's plain binary needs it
 from __future__ import annotations
 
 import os
-import shutil
 import site
 import subprocess
 import sys
 import sysconfig
 from pathlib import Path
 
-import fmpy
 import numpy as np
 import pytest
 from fmpy import extract, read_model_description
@@ -21,7 +19,6 @@ from fmpy.fmi2 import FMU2Slave
 from cosim.build.python import SHIM_SUFFIX, shim_binary
 from tests.matrix import by_model
 
-HERE = Path(__file__).resolve().parent
 STEP, N_STEPS, COMMAND = 0.2, 25, 50.0
 OUTPUTS = ("v", "s", "a_c")
 
@@ -33,15 +30,9 @@ def libpython() -> Path:
 
 
 @pytest.fixture(scope="module")
-def host(tmp_path_factory) -> Path:
-    if shutil.which("gcc") is None:
-        pytest.skip("gcc not installed")
-    exe = tmp_path_factory.mktemp("c_host") / "fmu_host"
-    headers = Path(fmpy.__file__).parent / "c-code"
-    subprocess.run(["gcc", "-std=c99", "-D_DEFAULT_SOURCE", "-Wall", "-Wextra", "-Werror",
-                    "-O1", f"-I{headers}", "-o", str(exe), str(HERE / "fmu_host.c"), "-ldl"],
-                   check=True, capture_output=True, text=True)
-    return exe
+def host(c_hosts) -> Path:
+    """fmu_host.c compiled (the root conftest's ``c_hosts``)."""
+    return c_hosts("fmu_host")
 
 
 @pytest.fixture(scope="module")

@@ -5,31 +5,21 @@ the FMI 2 build's under fmpy (same core); a controller in Event Mode announces e
 from __future__ import annotations
 
 import os
-import shutil
 import site
 import subprocess
 from pathlib import Path
 
-import fmpy
 import numpy as np
 import pytest
 from fmpy import extract, read_model_description
 
 from tests.c_host.test_c_host import COMMAND, N_STEPS, OUTPUTS, STEP, fmpy_reference
 
-HERE = Path(__file__).resolve().parent
-
 
 @pytest.fixture(scope="module")
-def host3(tmp_path_factory) -> Path:
-    if shutil.which("gcc") is None:
-        pytest.skip("gcc not installed")
-    exe = tmp_path_factory.mktemp("c_host3") / "fmu3_host"
-    headers = Path(fmpy.__file__).parent / "c-code"
-    subprocess.run(["gcc", "-std=c99", "-D_DEFAULT_SOURCE", "-Wall", "-Wextra", "-Werror",
-                    "-O1", f"-I{headers}", "-o", str(exe), str(HERE / "fmu3_host.c"), "-ldl",
-                    "-lm"], check=True, capture_output=True, text=True)
-    return exe
+def host3(c_hosts) -> Path:
+    """fmu3_host.c compiled (the root conftest's ``c_hosts``)."""
+    return c_hosts("fmu3_host")
 
 
 def _run(host3: Path, path: Path, tmp: Path, step: float, n: int, event_mode: bool,
