@@ -82,9 +82,14 @@ def _size(n: int) -> str:
 def inspect(path: str | Path, limits: ArchiveLimits = ArchiveLimits()) -> list[zipfile.ZipInfo]:
     """The archive's entries, after checking ``limits`` and the entry names on its directory
     (nothing is decompressed). Raises :class:`ArchiveRefused` or ``zipfile.BadZipFile``."""
-    path = Path(path)
     with zipfile.ZipFile(path) as z:
-        entries = z.infolist()
+        return _checked(z, Path(path), limits)
+
+
+def _checked(z: zipfile.ZipFile, path: Path, limits: ArchiveLimits) -> list[zipfile.ZipInfo]:
+    """The entries of the open archive ``z`` (read from ``path``), checked as :func:`inspect`
+    says."""
+    entries = z.infolist()
     if len(entries) > limits.max_files:
         raise ArchiveRefused(f"{len(entries)} files in the archive, more than the limit of "
                              f"{limits.max_files} ({raise_hint('max_files')})")
@@ -109,12 +114,14 @@ def inspect(path: str | Path, limits: ArchiveLimits = ArchiveLimits()) -> list[z
 
 def extract(path: str | Path, limits: ArchiveLimits = ArchiveLimits()) -> str:
     """Extract the FMU into a new temporary folder (returned) within ``limits``; on any failure
-    the folder is removed and the error raised."""
-    entries = inspect(path, limits)
-    folder = Path(tempfile.mkdtemp(prefix="cosim-fmu-"))
-    try:
-        written = 0
-        with zipfile.ZipFile(path) as z:
+    the folder is removed and the error raised. The directory is checked and the files are read
+    through one open handle, so an archive replaced at ``path`` meanwhile (a rebuild renamed
+    into place) is extracted whole from the version first opened, never mixed with the other."""
+    with zipfile.ZipFile(path) as z:
+        entries = _checked(z, Path(path), limits)
+        folder = Path(tempfile.mkdtemp(prefix="cosim-fmu-"))
+        try:
+            written = 0
             for e in entries:
                 target = folder / e.filename
                 if e.is_dir():
@@ -129,7 +136,7 @@ def extract(path: str | Path, limits: ArchiveLimits = ArchiveLimits()) -> str:
                             raise ArchiveRefused("the archive expands past the limit of "
                                                  f"{_size(limits.max_extracted)}")
                         dst.write(chunk)
-        return str(folder)
-    except BaseException:
-        shutil.rmtree(folder, ignore_errors=True)
-        raise
+            return str(folder)
+        except BaseException:
+            shutil.rmtree(folder, ignore_errors=True)
+            raise

@@ -160,3 +160,37 @@ def test_cli_names_the_flag_that_raises_a_limit(tmp_path):
     assert done.returncode == 1
     assert ("archive refused before extraction: 2 files in the archive, more than the limit of "
             "1 (raise it with COSIM_MAX_FILES=N") in " ".join(done.stdout.split())
+
+
+def test_an_archive_replaced_during_extraction_comes_out_whole_from_one_version(
+        tmp_path, monkeypatch):
+    """A rebuild renamed into place while a host extracts the FMU (as ``cosim build`` does
+    while another process loads it): the files come from the archive first opened, all of
+    them, not the directory of one version read against the data of the other (which zipfile
+    refuses with 'Bad CRC-32'). The replacement has the same names and sizes, other bytes."""
+    import os
+
+    from cosim.run import archive
+
+    def fmu(path: Path, guid: str) -> Path:
+        with zipfile.ZipFile(path, "w") as z:
+            z.writestr("modelDescription.xml", MODEL_DESCRIPTION.replace(b"{0}", guid.encode()))
+            z.writestr("resources/data.txt", guid * 100)
+        return path
+
+    path = fmu(tmp_path / "m.fmu", "A" * 36)
+    rebuilt = fmu(tmp_path / ".m.fmu.tmp", "B" * 36)
+    assert rebuilt.stat().st_size == path.stat().st_size
+    mkdtemp = tempfile.mkdtemp
+
+    def replaced_first(*args, **kwargs):  # the rename lands between two steps of extract
+        if rebuilt.exists():
+            os.replace(rebuilt, path)
+        return mkdtemp(*args, **kwargs)
+
+    monkeypatch.setattr(archive.tempfile, "mkdtemp", replaced_first)
+    folder = Path(extract(path))
+    assert not rebuilt.exists()  # the replacement did happen during the extraction
+    assert b"A" * 36 in (folder / "modelDescription.xml").read_bytes()
+    assert (folder / "resources" / "data.txt").read_text() == "A" * 3600
+    assert zipfile.ZipFile(path).read("resources/data.txt") == b"B" * 3600

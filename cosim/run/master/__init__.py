@@ -43,10 +43,4 @@ def __getattr__(name: str) -> Any:
     return value
 
 
-__all__ = [
-    "ALGORITHM_CLASSES", "MAX_HALVINGS", "WARNING_COUNTER", "_EXTRACTED", "Algorithm",
-    "CheckedSlave", "EventDriven", "FixedStep", "Fmi2Unit", "FmuCallError", "FmuTerminated",
-    "FmuUnit", "Jacobi", "Link", "Master", "Observer", "ProgressFn", "Recorder", "RunResult",
-    "SimulationError", "Unit", "Variable", "extract_once", "logging_callbacks",
-    "read_fmu", "unit_class", "warm_up",
-]
+__all__ = sorted(_PARTS)
