@@ -5,10 +5,11 @@ The shared test helpers are modules of ``tests/`` (``from tests.claim_rows impor
 
 from __future__ import annotations
 
+import contextlib
 import fcntl
 import shutil
 import subprocess
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
@@ -17,17 +18,31 @@ from cosim.build.python import build_stale, catalog
 
 
 @pytest.fixture(scope="session")
-def built_fmus() -> dict:
-    """Every catalog FMU, built and up to date: identifier -> FmuSpec (``.path``)."""
-    build_stale()
+def built_fmus(tmp_path_factory, worker_id) -> dict:
+    """Every catalog FMU, built and up to date: identifier -> FmuSpec (``.path``). The
+    pytest-xdist workers build in turn, under a file lock of the run: the first builds what is
+    stale, the next finds it current (instead of every worker building the same FMUs at once
+    in a fresh clone)."""
+    with _run_lock(tmp_path_factory, worker_id, "build-stale"):
+        build_stale()
     return catalog()
 
 
 @pytest.fixture(scope="session")
-def built_fmus_fmi3(built_fmus) -> dict:
-    """Every catalog FMU's FMI 3.0 build, up to date: identifier -> FmuSpec (``.path_fmi3``)."""
-    build_stale(fmi_version=3)
+def built_fmus_fmi3(built_fmus, tmp_path_factory, worker_id) -> dict:
+    """Every catalog FMU's FMI 3.0 build, up to date: identifier -> FmuSpec (``.path_fmi3``),
+    built in turn by the workers as :func:`built_fmus`."""
+    with _run_lock(tmp_path_factory, worker_id, "build-stale-fmi3"):
+        build_stale(fmi_version=3)
     return built_fmus
+
+
+@contextlib.contextmanager
+def _run_lock(tmp_path_factory, worker_id: str, name: str) -> Iterator[None]:
+    """An exclusive file lock ``name`` held across the pytest-xdist workers of this run."""
+    with open(_run_folder(tmp_path_factory, worker_id, "locks") / f"{name}.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        yield
 
 
 

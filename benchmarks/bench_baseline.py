@@ -14,12 +14,20 @@ medians over the repetitions, the ratio baseline / this tree (target: this tree 
 fifth of the baseline's time), and whether the verdicts are the same: ``claims.csv``'s
 ``verdict`` and ``k`` of ``K`` of every claim id both trees have, compared (the differences
 listed, and the claims of one tree only). Both trees get the same options (``--no-rounding``
-on both when given, and only if both CLIs have it). The user's design cache
+on both when given, and only if both CLIs have it).
+
+With ``--same-entry`` this tree runs the baseline's own entry file (read from the baseline
+checkout, e.g. 8a1e303's ``scenarios/reproduce/seed001.toml``) instead of its current entry,
+which later issues gave more claims, variants and rounding paths: the same claims and members
+on both trees, so the times compare the same work, and the k of K of every claim compare the
+simulations (a difference there is a change of the scenarios, plants or controllers the
+entry names since the baseline); the verdict's label can still differ where this tree reads
+the same k of K with other statistics. The user's design cache
 (``$ATO_COSIM_CACHE``) is shared by the trees as in any campaign. Asserts nothing;
 ``benchmarks/run_all.py --only baseline`` records the figures.
 
     python benchmarks/bench_baseline.py [--baseline COMMIT] [--entries seed000 seed004]
-        [--seeds K] [--repeat R] [--workers N] [--no-rounding]
+        [--seeds K] [--repeat R] [--workers N] [--no-rounding] [--same-entry]
 """
 
 from __future__ import annotations
@@ -58,6 +66,19 @@ else:
 """
 
 
+# the path of an entry's file in a tree: its entry module's resolver where it has one, else the
+# older layout (scenarios/reproduce/NAME.toml, as at 8a1e303)
+_ENTRY_FILE = """
+import sys
+from pathlib import Path
+try:
+    from cosim.reproduce.entry import load_entry
+except ImportError:
+    from cosim.run.reproduce import load_entry
+print(Path(load_entry(sys.argv[1]).path).resolve())
+"""
+
+
 class Tree:
     """A checkout of the package: its CLI run as a subprocess with ``PYTHONPATH`` = the tree."""
 
@@ -83,6 +104,10 @@ class Tree:
 
     def entry_build(self, entry: str) -> str:
         return self.run([sys.executable, "-c", _ENTRY_BUILD, entry]).strip()
+
+    def entry_file(self, entry: str) -> Path:
+        """The file of ``entry`` in this tree."""
+        return Path(self.run([sys.executable, "-c", _ENTRY_FILE, entry]).strip())
 
     def build(self, entries: list[str]) -> None:
         """The FMUs the entries' campaigns run: every Python FMU, and the native ones when an
@@ -139,9 +164,11 @@ def verdict_differences(this: dict[str, tuple[str, str]], base: dict[str, tuple[
 
 
 def compare(entries: list[str], commit: str = BASELINE, seeds: int = SEEDS, repeat: int = 1,
-            workers: int | None = None, rounding: bool = True) -> dict[str, dict]:
+            workers: int | None = None, rounding: bool = True, same_entry: bool = False
+            ) -> dict[str, dict]:
     """Per entry: the medians of wall and CPU seconds per tree over ``repeat`` alternating
-    pairs, the ratios baseline / this tree, and the verdicts compared by claim id."""
+    pairs, the ratios baseline / this tree, and the verdicts compared by claim id
+    (``same_entry``: this tree runs the baseline's entry file)."""
     options = ["--seeds", str(seeds)] + ([] if workers is None else ["--workers", str(workers)])
     this = Tree(ROOT, THIS)
     results: dict[str, dict] = {}
@@ -153,8 +180,12 @@ def compare(entries: list[str], commit: str = BASELINE, seeds: int = SEEDS, repe
             if missing:
                 raise SystemExit(f"--no-rounding: not an option of {', '.join(missing)}")
             options.append("--no-rounding")
-        for tree in (this, base):
-            tree.build(entries)
+        # what each tree's CLI is given for an entry: its name, or the baseline's entry file
+        given = {(side, e): e for side in (THIS, BASE) for e in entries}
+        if same_entry:
+            given.update({(THIS, e): str(base.entry_file(e)) for e in entries})
+        for tree, side in ((this, THIS), (base, BASE)):
+            tree.build([given[side, e] for e in entries])
         for entry in entries:
             times: dict[str, list[tuple[float, float]]] = {THIS: [], BASE: []}
             claims: dict[str, dict[str, tuple[str, str]]] = {}
@@ -164,7 +195,8 @@ def compare(entries: list[str], commit: str = BASELINE, seeds: int = SEEDS, repe
                 for tree in order:
                     side = THIS if tree is this else BASE
                     out = Path(tmp) / f"{entry}_{side}_{i}"
-                    times[side].append(timed_campaign(tree, entry, out, options))
+                    times[side].append(timed_campaign(tree, given[side, entry], out,
+                                                      options))
                     claims.setdefault(side, verdicts(out))
             wall = {s: statistics.median(w for w, _ in times[s]) for s in times}
             cpu = {s: statistics.median(c for _, c in times[s]) for s in times}
@@ -177,7 +209,8 @@ def compare(entries: list[str], commit: str = BASELINE, seeds: int = SEEDS, repe
                 "only_this": sorted(claims[THIS].keys() - claims[BASE].keys()),
                 "only_baseline": sorted(claims[BASE].keys() - claims[THIS].keys()),
                 "load_average": [load_before, os.getloadavg()[0]], "seeds": seeds,
-                "repeat": repeat, "baseline": commit, "rounding": rounding}
+                "repeat": repeat, "baseline": commit, "rounding": rounding,
+                "same_entry": same_entry}
     return results
 
 
@@ -191,11 +224,15 @@ def main() -> None:
                         help="--workers of both CLIs (default: theirs)")
     parser.add_argument("--no-rounding", action="store_true",
                         help="no perturbed floating-point rerun, on both trees")
+    parser.add_argument("--same-entry", action="store_true",
+                        help="this tree runs the baseline's entry file (the same claims and "
+                        "members on both trees)")
     args = parser.parse_args()
     results = compare(args.entries, args.baseline, args.seeds, args.repeat, args.workers,
-                      not args.no_rounding)
+                      not args.no_rounding, args.same_entry)
     for entry, r in results.items():
-        print(f"{entry} K = {r['seeds']}: this tree {r['wall_s'][THIS]:.1f} s wall, "
+        print(f"{entry}{' (the baseline entry file on both)' if r['same_entry'] else ''} "
+              f"K = {r['seeds']}: this tree {r['wall_s'][THIS]:.1f} s wall, "
               f"{r['cpu_s'][THIS]:.1f} s CPU; {args.baseline} {r['wall_s'][BASE]:.1f} s wall, "
               f"{r['cpu_s'][BASE]:.1f} s CPU; {args.baseline} / this: wall "
               f"{r['ratio_wall']:.2f}x, CPU {r['ratio_cpu']:.2f}x (target >= {TARGET:g}x); "

@@ -269,11 +269,11 @@ def native_build() -> dict:
             "load_average": [r["load_before"], r["load_after"]]}
 
 
-def baseline_row_name(entry: str, seeds: int, commit: str) -> str:
-    return f"campaign {entry} K={seeds} vs {commit}"
+def baseline_row_name(entry: str, seeds: int, commit: str, same_entry: bool = False) -> str:
+    return f"campaign {entry} K={seeds} vs {commit}" + (" on its entry" if same_entry else "")
 
 
-BASELINE_ROW = re.compile(r"campaign \S+ K=\d+ vs \S+")  # a baseline_row_name
+BASELINE_ROW = re.compile(r"campaign \S+ K=\d+ vs \S+( on its entry)?")  # a baseline_row_name
 
 
 def verdict_agreement(claims: int, differences: list[dict]) -> str:
@@ -289,17 +289,20 @@ def verdict_agreement(claims: int, differences: list[dict]) -> str:
 
 
 def baseline_campaigns(commit: str, seeds: int, quick: bool,
-                       entries: list[str] | None = None) -> dict[str, dict]:
+                       entries: list[str] | None = None, same_entry: bool = False
+                       ) -> dict[str, dict]:
     """``cosim reproduce ENTRY --seeds K`` for each of ``entries`` (default
     :data:`bench_baseline.ENTRIES`) on this tree vs ``commit`` checked out beside it,
-    alternating (bench_baseline; one pair per entry with ``quick``, else two)."""
+    alternating (bench_baseline; one pair per entry with ``quick``, else two; ``same_entry``:
+    this tree runs ``commit``'s entry file)."""
     rows = {}
     results = bench_baseline.compare(list(entries or bench_baseline.ENTRIES), commit, seeds,
-                                     1 if quick else 2)
+                                     1 if quick else 2, same_entry=same_entry)
     for entry, r in results.items():
         this, base = bench_baseline.THIS, bench_baseline.BASE
-        rows[baseline_row_name(entry, seeds, commit)] = {
-            "figure": r["wall_s"][this], "unit": f"s wall, this tree, cosim reproduce {entry} "
+        which = f"{commit}'s entry file for {entry}" if same_entry else entry
+        rows[baseline_row_name(entry, seeds, commit, same_entry)] = {
+            "figure": r["wall_s"][this], "unit": f"s wall, this tree, cosim reproduce {which} "
             f"--seeds {seeds}; {verdict_agreement(r['claims'], r['verdict_differences'])}",
             "reference": r["wall_s"][base],
             "reference_name": f"{commit} checked out beside it (s wall)",
@@ -308,6 +311,7 @@ def baseline_campaigns(commit: str, seeds: int, quick: bool,
             "same_verdicts": r["same_verdicts"],
             "verdict_differences": r["verdict_differences"], "only_this": r["only_this"],
             "only_baseline": r["only_baseline"], "repeat": r["repeat"],
+            "same_entry": same_entry,
             "load_average": r["load_average"]}
     return rows
 
@@ -373,6 +377,9 @@ def main() -> None:
     parser.add_argument("--baseline-entries", nargs="+", default=list(bench_baseline.ENTRIES),
                         help=f"the entries of the baseline group (default "
                         f"{' '.join(bench_baseline.ENTRIES)})")
+    parser.add_argument("--baseline-same-entry", action="store_true",
+                        help="this tree runs the baseline's entry files in the baseline group "
+                        "(the same claims and members on both trees)")
     args = parser.parse_args()
     repeat = 1 if args.quick else 3
     build_stale()
@@ -410,7 +417,7 @@ def main() -> None:
         measured["native build, all FMUs"] = native_build()
     if "baseline" in only:
         measured.update(baseline_campaigns(args.baseline, args.baseline_seeds, args.quick,
-                                           args.baseline_entries))
+                                           args.baseline_entries, args.baseline_same_entry))
     if "c_limit" in only:
         for label in bench_c_limit.SCENARIOS:
             measured[f"{label} master vs bare C loop"] = c_limit(label, repeat)
