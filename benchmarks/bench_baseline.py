@@ -22,7 +22,9 @@ which later issues gave more claims, variants and rounding paths: the same claim
 on both trees, so the times compare the same work, and the k of K of every claim compare the
 simulations (a difference there is a change of the scenarios, plants or controllers the
 entry names since the baseline); the verdict's label can still differ where this tree reads
-the same k of K with other statistics. The user's design cache
+the same k of K with other statistics. The baseline's entry names no build, so this tree runs
+it with the build its own entry for that paper names (``--build``: seed 004's online twin has
+no native model, so python there). The user's design cache
 (``$ATO_COSIM_CACHE``) is shared by the trees as in any campaign. Asserts nothing;
 ``benchmarks/run_all.py --only baseline`` records the figures.
 
@@ -182,8 +184,11 @@ def compare(entries: list[str], commit: str = BASELINE, seeds: int = SEEDS, repe
             options.append("--no-rounding")
         # what each tree's CLI is given for an entry: its name, or the baseline's entry file
         given = {(side, e): e for side in (THIS, BASE) for e in entries}
+        builds: dict[str, list[str]] = {e: [] for e in entries}  # this tree's --build
         if same_entry:
             given.update({(THIS, e): str(base.entry_file(e)) for e in entries})
+            if this.has_option("reproduce", "--build"):  # the build this tree's entry names
+                builds = {e: ["--build", this.entry_build(e)] for e in entries}
         for tree, side in ((this, THIS), (base, BASE)):
             tree.build([given[side, e] for e in entries])
         for entry in entries:
@@ -195,8 +200,9 @@ def compare(entries: list[str], commit: str = BASELINE, seeds: int = SEEDS, repe
                 for tree in order:
                     side = THIS if tree is this else BASE
                     out = Path(tmp) / f"{entry}_{side}_{i}"
+                    extra = builds[entry] if side == THIS else []
                     times[side].append(timed_campaign(tree, given[side, entry], out,
-                                                      options))
+                                                      options + extra))
                     claims.setdefault(side, verdicts(out))
             wall = {s: statistics.median(w for w, _ in times[s]) for s in times}
             cpu = {s: statistics.median(c for _, c in times[s]) for s in times}
