@@ -37,13 +37,18 @@ def built_fmus_fmi3(built_fmus, tmp_path_factory, worker_id) -> dict:
     return built_fmus
 
 
-@contextlib.contextmanager
-def _run_lock(tmp_path_factory, worker_id: str, name: str) -> Iterator[None]:
+def _run_lock(tmp_path_factory, worker_id: str,
+              name: str) -> contextlib.AbstractContextManager[None]:
     """An exclusive file lock ``name`` held across the pytest-xdist workers of this run."""
-    with open(_run_folder(tmp_path_factory, worker_id, "locks") / f"{name}.lock", "w") as lock:
+    return _locked(_run_folder(tmp_path_factory, worker_id, "locks"), name)
+
+
+@contextlib.contextmanager
+def _locked(folder: Path, name: str) -> Iterator[None]:
+    """Hold the exclusive file lock ``folder/name.lock`` (across processes)."""
+    with open(folder / f"{name}.lock", "w") as lock:
         fcntl.flock(lock, fcntl.LOCK_EX)
         yield
-
 
 
 def _run_folder(tmp_path_factory, worker_id: str, name: str) -> Path:
@@ -75,8 +80,7 @@ def c_hosts(tmp_path_factory, worker_id) -> Callable[[str], Path]:
 
     def get(exe: str) -> Path:
         source, libraries = C_HOSTS[exe]
-        with open(dest / f"{exe}.lock", "w") as lock:
-            fcntl.flock(lock, fcntl.LOCK_EX)
+        with _locked(dest, exe):
             if not (dest / f"{exe}.done").is_file():
                 done = subprocess.run(
                     ["gcc", "-std=c99", "-D_DEFAULT_SOURCE", "-Wall", "-Wextra", "-Werror",
@@ -103,8 +107,7 @@ def native_builds(tmp_path_factory, worker_id) -> Callable[[str], dict[int, Path
 
     def get(identifier: str) -> dict[int, Path]:
         done = dest / f"{identifier}.done"
-        with open(dest / f"{identifier}.lock", "w") as lock:
-            fcntl.flock(lock, fcntl.LOCK_EX)
+        with _locked(dest, identifier):
             if not done.is_file():
                 build_natives(identifier, FMI_VERSIONS, dest, windows=False)
                 done.touch()
