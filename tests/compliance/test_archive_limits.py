@@ -194,3 +194,42 @@ def test_an_archive_replaced_during_extraction_comes_out_whole_from_one_version(
     assert b"A" * 36 in (folder / "modelDescription.xml").read_bytes()
     assert (folder / "resources" / "data.txt").read_text() == "A" * 3600
     assert zipfile.ZipFile(path).read("resources/data.txt") == b"B" * 3600
+
+
+def test_a_run_reads_the_description_of_the_version_it_extracted(tmp_path, monkeypatch):
+    """A rebuild renamed into place right after the master extracted the FMU: the
+    modelDescription the run checks its scenario against is the extracted version's (the one
+    whose binary it loads), not the new file's."""
+    import os
+    from types import SimpleNamespace
+
+    from cosim.run.master import loading
+
+    xml = MODEL_DESCRIPTION.replace(  # one output: a description fmpy's schema accepts
+        b"<ModelVariables/><ModelStructure/>",
+        b'<ModelVariables><ScalarVariable name="y" valueReference="0" causality="output" '
+        b'variability="discrete"><Real/></ScalarVariable></ModelVariables><ModelStructure>'
+        b'<Outputs><Unknown index="1"/></Outputs></ModelStructure>')
+
+    def fmu(path: Path, guid: str) -> Path:
+        with zipfile.ZipFile(path, "w") as z:
+            z.writestr("modelDescription.xml", xml.replace(b"{0}", guid.encode()))
+            z.writestr("binaries/linux64/m.so", guid)
+            z.writestr("binaries/win64/m.dll", guid)
+            z.writestr("binaries/darwin64/m.dylib", guid)
+        return path
+
+    path = fmu(tmp_path / "m.fmu", "A" * 36)
+    rebuilt = fmu(tmp_path / ".m.fmu.tmp", "B" * 36)
+    extract_once = loading.extract_once
+
+    def replaced_after(p):  # the rename lands once the master has extracted the file
+        folder = extract_once(p)
+        os.replace(rebuilt, path)
+        return folder
+
+    monkeypatch.setattr(loading, "extract_once", replaced_after)
+    md, folder = loading.open_fmu(SimpleNamespace(path="s.toml"), "m", path)
+    assert not rebuilt.exists()  # the replacement did happen before the XML was read
+    assert md.guid == "A" * 36
+    assert b"A" * 36 in (Path(folder) / "modelDescription.xml").read_bytes()

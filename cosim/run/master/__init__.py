@@ -26,8 +26,8 @@ _PARTS: dict[str, tuple[str, str]] = {
                                 "RunResult")},
     **{n: ("errors", n) for n in ("FmuCallError", "FmuTerminated", "SimulationError")},
     **{n: ("fmi2", n) for n in ("CheckedSlave", "Fmi2Unit", "logging_callbacks")},
-    **{n: ("loading", n) for n in ("_EXTRACTED", "extract_once", "read_fmu", "unit_class",
-                                   "warm_up")},
+    **{n: ("loading", n) for n in ("_EXTRACTED", "extract_once", "open_fmu", "read_fmu",
+                                   "unit_class", "warm_up")},
     **{n: ("observers", n) for n in ("Observer", "Recorder")},
     **{n: ("unit", n) for n in ("MAX_HALVINGS", "Unit", "Variable")},
     "FmuUnit": ("fmi2", "Fmi2Unit"),  # the FMI 2.0 unit (the name tests and plug-ins patch)

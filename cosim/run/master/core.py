@@ -24,7 +24,7 @@ from cosim.run import exchange, interrupt, isolation
 from cosim.run.dependencies import order_connections
 from cosim.run.master.algorithms import ALGORITHM_CLASSES
 from cosim.run.master.errors import FmuCallError, FmuTerminated, SimulationError
-from cosim.run.master.loading import extract_once, read_fmu, unit_class
+from cosim.run.master.loading import open_fmu, unit_class
 from cosim.run.master.observers import LIST_FAMILIES, Recorder
 from cosim.run.master.pool import InstancePool, Key
 from cosim.run.master.scheduled import Fmi3ScheduledUnit
@@ -107,10 +107,10 @@ class Master:
             if not comp.fmu_path.is_file():
                 raise ScenarioError(f"{sc.path}: [fmus.{comp.name}] fmu = {comp.fmu!r}: "
                                     f"{comp.fmu_path} not found (run `cosim build`)")
-            descriptions[comp.name] = (read_fmu(sc, comp.name, comp.fmu_path)
-                                       if self.pool is None else
-                                       self.pool.description(sc, comp.name, comp.fmu_path))
-            extracted[comp.fmu_path] = extract_once(comp.fmu_path)
+            # the description and the folder of one version of the file
+            descriptions[comp.name], extracted[comp.fmu_path] = (
+                open_fmu(sc, comp.name, comp.fmu_path) if self.pool is None
+                else self.pool.description(sc, comp.name, comp.fmu_path))
         views = {name: unit_class(md).scenario_view(md) for name, md in descriptions.items()}
         clocks = {name: {v.name for v in md.modelVariables if v.type == "Clock"}
                   for name, md in descriptions.items()}

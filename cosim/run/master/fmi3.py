@@ -206,9 +206,12 @@ def resolved_description(path: Path) -> io.BytesIO | None:
     """An archive holding only the modelDescription.xml of the FMU at ``path`` with each Clock's
     declared ClockType resolved (:func:`declared_attributes`, ``declaredType`` dropped), for
     fmpy, which refuses (0.3.32) a Clock whose declaredType is a ClockType; None when the FMU
-    has no ClockType."""
-    with zipfile.ZipFile(path) as archive:
-        xml = archive.read("modelDescription.xml")
+    has no ClockType. ``path``: the FMU file or the folder it is extracted into."""
+    if Path(path).is_dir():
+        xml = (Path(path) / "modelDescription.xml").read_bytes()
+    else:
+        with zipfile.ZipFile(path) as archive:
+            xml = archive.read("modelDescription.xml")
     if b"ClockType" not in xml:
         return None
     root = ElementTree.fromstring(xml)
@@ -225,7 +228,8 @@ def resolved_description(path: Path) -> io.BytesIO | None:
 
 
 def read_model_description(path: Path, **options: Any) -> Any:
-    """fmpy's modelDescription of the FMU at ``path`` (``options`` to
+    """fmpy's modelDescription of the FMU at ``path``, a file or the folder it is extracted
+    into (``options`` to
     :func:`fmpy.read_model_description`), read from :func:`resolved_description` when the FMU
     has ClockTypes."""
     from fmpy import read_model_description as fmpy_read

@@ -68,7 +68,7 @@ def warm_up(path: Path) -> None:
         folder = extract_once(path)  # within the limits, before the XML is parsed
         if not own_python_build(path, folder):
             return
-        md = read_model_description(path)
+        md = read_model_description(folder)
         unit = unit_class(md)("warm-up", path, folder, md)
         unit.instantiate()
         unit.free()
@@ -98,16 +98,24 @@ def archive_names(where: str, path: Path) -> set[str]:
 
 
 def read_fmu(sc: Scenario, instance: str, path: Path) -> Any:
-    """The modelDescription of the FMU of ``instance``, after checking the file is an FMU with a
-    co-simulation (or FMI 3 Scheduled Execution) binary for this platform: otherwise a
-    :class:`ScenarioError` naming the scenario file, the instance and the path (instead of
-    BadZipFile / KeyError later)."""
+    """The modelDescription of the FMU of ``instance`` (:func:`open_fmu`)."""
+    return open_fmu(sc, instance, path)[0]
+
+
+def open_fmu(sc: Scenario, instance: str, path: Path) -> tuple[Any, str]:
+    """The modelDescription of the FMU of ``instance`` and the folder it is extracted into
+    (:func:`extract_once`), after checking the file is an FMU with a co-simulation (or FMI 3
+    Scheduled Execution) binary for this platform: otherwise a :class:`ScenarioError` naming
+    the scenario file, the instance and the path (instead of BadZipFile / KeyError later).
+    The XML is read from that folder, so the description and the binary a run loads are of
+    one version of a file rebuilt meanwhile."""
     where = f"{sc.path}: [fmus.{instance}] fmu = {str(path)!r}"
     names = archive_names(where, path)
     if "modelDescription.xml" not in names:
         raise ScenarioError(f"{where}: not an FMU (no modelDescription.xml in the archive)")
+    unzipdir = extract_once(path)  # within the limits, before the XML is parsed
     try:
-        md = read_model_description(path)
+        md = read_model_description(unzipdir)
     except Exception as err:  # noqa: BLE001 - fmpy raises many kinds on a bad XML
         raise ScenarioError(f"{where}: modelDescription.xml is not valid: {err}") from None
     version = str(md.fmiVersion)
@@ -136,4 +144,4 @@ def read_fmu(sc: Scenario, instance: str, path: Path) -> Any:
         raise ScenarioError(f"{where}: no binary for this platform ({folder}; the FMU has "
                             f"{', '.join(found) or 'no binaries'}): FMI {version} looks for "
                             f"binaries/{folder}/{ident}{suffix}")
-    return md
+    return md, unzipdir

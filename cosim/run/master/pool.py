@@ -16,7 +16,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from cosim.run.master.loading import read_fmu
+from cosim.run.master.loading import open_fmu
 from cosim.run.master.unit import Unit
 from cosim.run.scenario import Scenario
 
@@ -29,18 +29,19 @@ class InstancePool:
 
     def __init__(self) -> None:
         self._units: dict[Key, Unit] = {}
-        self._descriptions: dict[tuple[str, float], Any] = {}
+        self._descriptions: dict[tuple[str, float], tuple[Any, str]] = {}
 
     @staticmethod
     def key(instance: str, path: Path, event_mode: bool) -> Key:
         """Where the instance ``instance`` of the FMU file ``path`` is kept."""
         return (instance, str(path), path.stat().st_mtime, event_mode)
 
-    def description(self, sc: Scenario, instance: str, path: Path) -> Any:
-        """:func:`cosim.run.master.loading.read_fmu` of ``path``, once per file version."""
+    def description(self, sc: Scenario, instance: str, path: Path) -> tuple[Any, str]:
+        """:func:`cosim.run.master.loading.open_fmu` of ``path`` (its modelDescription and
+        its folder), once per file version."""
         at = (str(path), path.stat().st_mtime)
         if at not in self._descriptions:
-            self._descriptions[at] = read_fmu(sc, instance, path)
+            self._descriptions[at] = open_fmu(sc, instance, path)
         return self._descriptions[at]
 
     def take(self, key: Key) -> Unit | None:
