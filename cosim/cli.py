@@ -13,8 +13,8 @@ from rich.console import Console
 from rich.markup import escape
 from rich.table import Table
 
+from cosim.run import MAX_RUNS
 from cosim.run.archive import LIMIT_SETTINGS, MB, ArchiveLimits
-from cosim.run.grid import MAX_RUNS
 
 app = typer.Typer(add_completion=False, no_args_is_help=True,
                   help="Train plants and ATO controllers as FMUs: build, run, validate.")

@@ -112,3 +112,14 @@ def test_printed_summary_has_the_family_metrics_and_fits_80_columns() -> None:
         cli.out = old
     assert max(len(line) for line in buffer.getvalue().splitlines()) <= 80
     assert "0.64" in buffer.getvalue()
+
+
+def test_starting_the_cli_imports_no_numerics() -> None:
+    """``import cosim.cli`` (every command's start, ``--help`` included) imports neither numpy
+    nor the scenario and build modules: each command imports what it uses when it runs."""
+    heavy = ("numpy", "pandas", "scipy", "fmpy", "matplotlib", "cosim.run.scenario",
+             "cosim.build.native")
+    code = f"import sys, cosim.cli; print([m for m in {heavy!r} if m in sys.modules])"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True, cwd=Path(__file__).resolve().parents[1])
+    assert out.stdout.strip() == "[]"

@@ -8,9 +8,10 @@ import math
 from collections.abc import Iterable, Sequence
 from typing import Any
 
+from cosim.run import MAX_RUNS
 from cosim.run.scenario import parse_value
 
-MAX_RUNS = 10_000  # runs a sweep starts unless allowed more (cosim sweep --max-runs)
+__all__ = ["MAX_RUNS", "check_runs", "grid_points", "parse_grid"]
 
 
 def parse_grid(items: Iterable[str]) -> dict[str, Sequence[Any]]:
