@@ -22,9 +22,21 @@ which later issues gave more claims, variants and rounding paths: the same claim
 on both trees, so the times compare the same work, and the k of K of every claim compare the
 simulations (a difference there is a change of the scenarios, plants or controllers the
 entry names since the baseline); the verdict's label can still differ where this tree reads
-the same k of K with other statistics. The baseline's entry names no build, so this tree runs
-it with the build its own entry for that paper names (``--build``: seed 004's online twin has
-no native model, so python there). The user's design cache
+the same k of K with other statistics. The baseline's entry leaves most FMU parameters at their
+defaults, and later issues changed some defaults (seed 001's and seed 002's laws were retuned by
+issue 42): so this tree runs a copy of that entry whose every ``[[runs]]`` sets each parameter
+whose default differs between the two trees' builds of its FMU to the baseline's default (the
+run's own ``set`` wins), read from both trees' ``modelDescription.xml`` (:func:`pins`), and the
+campaigns run the same controllers; the pinned parameters are reported. The baseline's entry
+names no build, so this tree runs it with the build its own entry for that paper names
+(``--build``: seed 004's online twin has no native model, so python there). Beside the
+verdicts, the claims' medians over the members (``median``, ``worst``, ``a_median``,
+``b_median`` where both trees write them) are compared: equal numbers from both trees say the
+simulations are the same, whatever the labels. Where this tree's build is native, it runs the
+entry once more on its Python builds, the baseline's, after the timed pairs and outside the
+ratio (``python_check``): its claims against the baseline's say whether the tree changed the
+simulations, and against the native run's what the native builds (which differ at rounding
+level) change in k of K and in the verdicts. The user's design cache
 (``$ATO_COSIM_CACHE``) is shared by the trees as in any campaign. Asserts nothing;
 ``benchmarks/run_all.py --only baseline`` records the figures.
 
@@ -47,6 +59,14 @@ import tempfile
 import time
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
+
+from fmpy import read_model_description
+
+try:
+    import tomllib
+except ModuleNotFoundError:  # Python 3.10
+    import tomli as tomllib  # type: ignore[no-redef]
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -55,6 +75,8 @@ ENTRIES = ("seed000", "seed004")
 SEEDS = 5  # K, report seeds per claim
 TARGET = 5.0  # baseline time / this tree's time (this tree at most a fifth of the baseline)
 THIS, BASE = "this", "baseline"
+# claims.csv columns that are functions of the members' values alone (not of the verdict rules)
+NUMBERS = ("median", "worst", "a_median", "b_median")
 
 # the build of a tree's entry: "native" or "python" (trees without native campaigns: python)
 _ENTRY_BUILD = """
@@ -152,6 +174,85 @@ def timed_campaign(tree: Tree, entry: str, out: Path, options: list[str]) -> tup
     return time.perf_counter() - start, _children_cpu_s() - cpu
 
 
+def parameter_defaults(fmu: Path) -> dict[str, Any]:
+    """Parameter name -> its start value, typed (float, int, bool or str), of the FMU."""
+    cast = {"Real": float, "Float64": float, "Integer": int, "Int32": int, "Int64": int,
+            "Enumeration": int, "Boolean": lambda s: s in ("true", "1"), "String": str}
+    return {v.name: cast[v.type](v.start) for v in read_model_description(str(fmu)).modelVariables
+            if v.causality == "parameter" and v.start is not None and v.type in cast}
+
+
+def changed_defaults(this_fmu: Path, base_fmu: Path) -> dict[str, Any]:
+    """Parameter -> the baseline's default, for every parameter of both builds whose default
+    differs."""
+    this, base = parameter_defaults(this_fmu), parameter_defaults(base_fmu)
+    return {name: base[name] for name in sorted(this.keys() & base.keys())
+            if this[name] != base[name]}
+
+
+def pins(entry_file: Path, base_root: Path) -> tuple[dict[str, Any], dict[str, dict[str, Any]]]:
+    """The baseline's entry with the baseline's defaults set in every ``[[runs]]``, and what was
+    set: run name -> {"component.parameter": the baseline's default}. The run's scenario is
+    this tree's (the one this tree will run); each component's Python build in this tree's
+    ``fmus/`` is compared with the same file in the baseline's."""
+    from cosim.run.scenario import load_scenario  # this tree's (the benchmark runs in it)
+
+    entry = tomllib.loads(entry_file.read_text())
+    pinned: dict[str, dict[str, Any]] = {}
+    for run in entry.get("runs", []):
+        scenario = load_scenario(run["scenario"])
+        extra = {f"{c.name}.{name}": value
+                 for c in scenario.components.values()
+                 if (ROOT / "fmus" / f"{c.fmu}.fmu").is_file()
+                 and (base_root / "fmus" / f"{c.fmu}.fmu").is_file()
+                 for name, value in changed_defaults(ROOT / "fmus" / f"{c.fmu}.fmu",
+                                                     base_root / "fmus" / f"{c.fmu}.fmu").items()}
+        extra = {k: v for k, v in extra.items() if k not in run.get("set", {})}
+        if extra:
+            run["set"] = {**extra, **run.get("set", {})}
+            pinned[run["name"]] = extra
+    return entry, pinned
+
+
+def write_pinned(entry_file: Path, base_root: Path, folder: Path
+                 ) -> tuple[Path, dict[str, dict[str, Any]]]:
+    """The pinned copy of the baseline's entry (:func:`pins`), written as ``folder`` / the
+    entry's file name (an entry is named by its file's stem), and what was set."""
+    import tomli_w  # the test extra's; only this writes TOML (read back and compared)
+
+    entry, pinned = pins(entry_file, base_root)
+    text = tomli_w.dumps(entry)
+    if tomllib.loads(text) != entry:
+        raise RuntimeError(f"{entry_file}: the pinned copy does not read back as written")
+    folder.mkdir(parents=True, exist_ok=True)
+    path = folder / entry_file.name
+    path.write_text(text)
+    return path, pinned
+
+
+def claim_numbers(out: Path) -> dict[str, dict[str, str]]:
+    """claim id -> {column: value} of :data:`NUMBERS` in a campaign's ``claims.csv``."""
+    with open(out / "claims.csv", newline="") as f:
+        return {r["id"]: {c: r[c] for c in NUMBERS if c in r} for r in csv.DictReader(f)}
+
+
+def number_differences(this: dict[str, dict[str, str]], base: dict[str, dict[str, str]]
+                       ) -> list[str]:
+    """The claims of both trees whose :data:`NUMBERS` (the columns both write) differ."""
+    return [claim for claim in sorted(this.keys() & base.keys())
+            if not all(_same_number(this[claim][c], base[claim][c])
+                       for c in this[claim].keys() & base[claim].keys())]
+
+
+def _same_number(a: str, b: str) -> bool:
+    """Two cells of claims.csv hold the same number (both empty or both NaN count as same)."""
+    try:
+        x, y = float(a or "nan"), float(b or "nan")
+    except ValueError:
+        return a == b
+    return x == y or (x != x and y != y)
+
+
 def verdicts(out: Path) -> dict[str, tuple[str, str]]:
     """claim id -> (verdict, "k of K") from a campaign's ``claims.csv``."""
     with open(out / "claims.csv", newline="") as f:
@@ -185,15 +286,20 @@ def compare(entries: list[str], commit: str = BASELINE, seeds: int = SEEDS, repe
         # what each tree's CLI is given for an entry: its name, or the baseline's entry file
         given = {(side, e): e for side in (THIS, BASE) for e in entries}
         builds: dict[str, list[str]] = {e: [] for e in entries}  # this tree's --build
-        if same_entry:
-            given.update({(THIS, e): str(base.entry_file(e)) for e in entries})
-            if this.has_option("reproduce", "--build"):  # the build this tree's entry names
-                builds = {e: ["--build", this.entry_build(e)] for e in entries}
+        if same_entry and this.has_option("reproduce", "--build"):
+            builds = {e: ["--build", this.entry_build(e)] for e in entries}
         for tree, side in ((this, THIS), (base, BASE)):
-            tree.build([given[side, e] for e in entries])
+            tree.build(entries if same_entry else [given[side, e] for e in entries])
+        pinned: dict[str, dict[str, dict[str, Any]]] = {e: {} for e in entries}
+        if same_entry:  # the baseline's entry, its parameter defaults pinned (after the builds)
+            for e in entries:
+                path, pinned[e] = write_pinned(base.entry_file(e), base_root,
+                                               Path(tmp) / "pinned" / e)
+                given[THIS, e] = str(path)
         for entry in entries:
             times: dict[str, list[tuple[float, float]]] = {THIS: [], BASE: []}
             claims: dict[str, dict[str, tuple[str, str]]] = {}
+            numbers: dict[str, dict[str, dict[str, str]]] = {}
             load_before = os.getloadavg()[0]
             for i in range(repeat):
                 order = (base, this) if i % 2 == 0 else (this, base)
@@ -204,14 +310,37 @@ def compare(entries: list[str], commit: str = BASELINE, seeds: int = SEEDS, repe
                     times[side].append(timed_campaign(tree, given[side, entry], out,
                                                       options + extra))
                     claims.setdefault(side, verdicts(out))
+                    numbers.setdefault(side, claim_numbers(out))
             wall = {s: statistics.median(w for w, _ in times[s]) for s in times}
             cpu = {s: statistics.median(c for _, c in times[s]) for s in times}
             diffs = verdict_differences(claims[THIS], claims[BASE])
+            python_check = None
+            if same_entry and builds[entry] == ["--build", "native"]:
+                # the baseline runs Python builds: this tree once more on its Python builds
+                # (after the timed pairs, not in the ratio) separates what the native builds
+                # change (rounding) from what the tree changed since the baseline
+                out = Path(tmp) / f"{entry}_{THIS}_python"
+                time_python = timed_campaign(this, given[THIS, entry], out,
+                                             options + ["--build", "python"])
+                python_claims, python_numbers = verdicts(out), claim_numbers(out)
+                python_check = {
+                    "wall_s": time_python[0], "cpu_s": time_python[1],
+                    "verdict_differences_from_baseline": verdict_differences(python_claims,
+                                                                             claims[BASE]),
+                    "number_differences_from_baseline": number_differences(python_numbers,
+                                                                           numbers[BASE]),
+                    "verdict_differences_from_native": verdict_differences(claims[THIS],
+                                                                           python_claims)}
             results[entry] = {
                 "wall_s": wall, "cpu_s": cpu, "ratio_wall": wall[BASE] / wall[THIS],
                 "ratio_cpu": cpu[BASE] / cpu[THIS],
                 "claims": len(claims[THIS].keys() & claims[BASE].keys()),
                 "same_verdicts": not diffs, "verdict_differences": diffs,
+                "number_differences": number_differences(numbers[THIS], numbers[BASE]),
+                "numbers_compared": [c for c in NUMBERS
+                                     if all(any(c in row for row in numbers[side].values())
+                                            for side in (THIS, BASE))],
+                "pinned": pinned[entry], "python_check": python_check,
                 "only_this": sorted(claims[THIS].keys() - claims[BASE].keys()),
                 "only_baseline": sorted(claims[BASE].keys() - claims[THIS].keys()),
                 "load_average": [load_before, os.getloadavg()[0]], "seeds": seeds,
@@ -247,6 +376,20 @@ def main() -> None:
               f"{r['same_verdicts']}")
         for d in r["verdict_differences"]:
             print(f"  {d['id']}: this {d[THIS]}, {args.baseline} {d[BASE]}")
+        print(f"  claims whose members' medians ({', '.join(r['numbers_compared'])}) differ: "
+              f"{', '.join(r['number_differences']) or 'none'}")
+        check = r["python_check"]
+        if check is not None:
+            labels = sum(d[THIS][0] != d[BASE][0]
+                         for d in check["verdict_differences_from_native"])
+            print(f"  this tree on its Python builds (as the baseline; {check['wall_s']:.1f} s "
+                  f"wall, not timed in the ratio): k of K or verdict differ from the "
+                  f"baseline's in {len(check['verdict_differences_from_baseline'])} claims, "
+                  f"medians in {len(check['number_differences_from_baseline'])}; from the "
+                  f"native run's in {len(check['verdict_differences_from_native'])} claims, "
+                  f"the verdict's label in {labels}")
+        for run, values in r["pinned"].items():
+            print(f"  pinned in {run}: " + ", ".join(f"{k} = {v!r}" for k, v in values.items()))
         for side, label in (("only_this", "this tree"), ("only_baseline", args.baseline)):
             if r[side]:
                 print(f"  claims of {label} only: {', '.join(r[side])}")

@@ -301,9 +301,25 @@ def baseline_campaigns(commit: str, seeds: int, quick: bool,
     for entry, r in results.items():
         this, base = bench_baseline.THIS, bench_baseline.BASE
         which = f"{commit}'s entry file for {entry}" if same_entry else entry
+        pins = (f" ({len({k for v in r['pinned'].values() for k in v})} controller or plant "
+                f"parameters set to {commit}'s defaults in {len(r['pinned'])} of its runs)"
+                if r["pinned"] else "")
+        numbers = (f"; the members' medians ({', '.join(r['numbers_compared'])}) differ in "
+                   f"{len(r['number_differences'])} claims") if r["numbers_compared"] else ""
+        check = r["python_check"]
+        if check is not None:
+            labels = sum(d[this][0] != d[base][0]
+                         for d in check["verdict_differences_from_native"])
+            numbers += (f"; this tree on its Python builds (the baseline's; untimed): k of K or "
+                        f"verdict differ from {commit}'s in "
+                        f"{len(check['verdict_differences_from_baseline'])} claims and medians "
+                        f"in {len(check['number_differences_from_baseline'])}; from this "
+                        f"tree's native run in {len(check['verdict_differences_from_native'])}, "
+                        f"the verdict's label in {labels}")
         rows[baseline_row_name(entry, seeds, commit, same_entry)] = {
             "figure": r["wall_s"][this], "unit": f"s wall, this tree, cosim reproduce {which} "
-            f"--seeds {seeds}; {verdict_agreement(r['claims'], r['verdict_differences'])}",
+            f"--seeds {seeds}{pins}; {verdict_agreement(r['claims'], r['verdict_differences'])}"
+            f"{numbers}",
             "reference": r["wall_s"][base],
             "reference_name": f"{commit} checked out beside it (s wall)",
             "ratio": r["ratio_wall"], "ratio_name": f"{commit} / this tree, wall",
@@ -311,7 +327,9 @@ def baseline_campaigns(commit: str, seeds: int, quick: bool,
             "same_verdicts": r["same_verdicts"],
             "verdict_differences": r["verdict_differences"], "only_this": r["only_this"],
             "only_baseline": r["only_baseline"], "repeat": r["repeat"],
-            "same_entry": same_entry,
+            "same_entry": same_entry, "pinned": r["pinned"], "python_check": check,
+            "number_differences": r["number_differences"],
+            "numbers_compared": r["numbers_compared"],
             "load_average": r["load_average"]}
     return rows
 
@@ -450,6 +468,9 @@ def main() -> None:
             for d in r["verdict_differences"]:
                 print(f"{'':<30} {d['id']}: this tree {d[bench_baseline.THIS]}, baseline "
                       f"{d[bench_baseline.BASE]}")
+            if r.get("numbers_compared"):
+                print(f"{'':<30} members' medians differ in: "
+                      f"{', '.join(r['number_differences']) or 'no claim'}")
         if "same_final_position" in r:
             print(f"{'':<30} CPU ratio {r['cpu_ratio']:.2f}; final position "
                   f"{r['final_position_m']['master']:.17g} m (master), "
