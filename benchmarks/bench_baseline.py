@@ -23,8 +23,8 @@ on both trees, so the times compare the same work, and the k of K of every claim
 simulations (a difference there is a change of the scenarios, plants or controllers the
 entry names since the baseline); the verdict's label can still differ where this tree reads
 the same k of K with other statistics. The baseline's entry leaves most FMU parameters at their
-defaults, and later issues changed some defaults (seed 001's and seed 002's laws were retuned by
-issue 42): so this tree runs a copy of that entry whose every ``[[runs]]`` sets each parameter
+defaults, and the two trees' defaults can differ (seed 001's and seed 002's tuned laws): so
+this tree runs a copy of that entry whose every ``[[runs]]`` sets each parameter
 whose default differs between the two trees' builds of its FMU to the baseline's default (the
 run's own ``set`` wins), read from both trees' ``modelDescription.xml`` (:func:`pins`), and the
 campaigns run the same controllers; the pinned parameters are reported. The baseline's entry
@@ -49,6 +49,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import csv
+import functools
 import os
 import resource
 import shutil
@@ -174,6 +175,7 @@ def timed_campaign(tree: Tree, entry: str, out: Path, options: list[str]) -> tup
     return time.perf_counter() - start, _children_cpu_s() - cpu
 
 
+@functools.cache
 def parameter_defaults(fmu: Path) -> dict[str, Any]:
     """Parameter name -> its start value, typed (float, int, bool or str), of the FMU."""
     cast = {"Real": float, "Float64": float, "Integer": int, "Int32": int, "Int64": int,
@@ -197,17 +199,21 @@ def pins(entry_file: Path, base_root: Path) -> tuple[dict[str, Any], dict[str, d
     ``fmus/`` is compared with the same file in the baseline's."""
     from cosim.run.scenario import load_scenario  # this tree's (the benchmark runs in it)
 
+    @functools.cache
+    def scenario_pins(name: str) -> dict[str, Any]:
+        """"component.parameter" -> the baseline's default, of scenario ``name``."""
+        pins: dict[str, Any] = {}
+        for c in load_scenario(name).components.values():
+            this, base = (root / "fmus" / f"{c.fmu}.fmu" for root in (ROOT, base_root))
+            if this.is_file() and base.is_file():
+                pins.update({f"{c.name}.{k}": v for k, v in changed_defaults(this, base).items()})
+        return pins
+
     entry = tomllib.loads(entry_file.read_text())
     pinned: dict[str, dict[str, Any]] = {}
     for run in entry.get("runs", []):
-        scenario = load_scenario(run["scenario"])
-        extra = {f"{c.name}.{name}": value
-                 for c in scenario.components.values()
-                 if (ROOT / "fmus" / f"{c.fmu}.fmu").is_file()
-                 and (base_root / "fmus" / f"{c.fmu}.fmu").is_file()
-                 for name, value in changed_defaults(ROOT / "fmus" / f"{c.fmu}.fmu",
-                                                     base_root / "fmus" / f"{c.fmu}.fmu").items()}
-        extra = {k: v for k, v in extra.items() if k not in run.get("set", {})}
+        extra = {k: v for k, v in scenario_pins(run["scenario"]).items()
+                 if k not in run.get("set", {})}
         if extra:
             run["set"] = {**extra, **run.get("set", {})}
             pinned[run["name"]] = extra
@@ -323,14 +329,16 @@ def compare(entries: list[str], commit: str = BASELINE, seeds: int = SEEDS, repe
                 time_python = timed_campaign(this, given[THIS, entry], out,
                                              options + ["--build", "python"])
                 python_claims, python_numbers = verdicts(out), claim_numbers(out)
+                from_native = verdict_differences(claims[THIS], python_claims)
                 python_check = {
                     "wall_s": time_python[0], "cpu_s": time_python[1],
                     "verdict_differences_from_baseline": verdict_differences(python_claims,
                                                                              claims[BASE]),
                     "number_differences_from_baseline": number_differences(python_numbers,
                                                                            numbers[BASE]),
-                    "verdict_differences_from_native": verdict_differences(claims[THIS],
-                                                                           python_claims)}
+                    "verdict_differences_from_native": from_native,
+                    "label_differences_from_native": sum(d[THIS][0] != d[BASE][0]
+                                                         for d in from_native)}
             results[entry] = {
                 "wall_s": wall, "cpu_s": cpu, "ratio_wall": wall[BASE] / wall[THIS],
                 "ratio_cpu": cpu[BASE] / cpu[THIS],
@@ -380,14 +388,12 @@ def main() -> None:
               f"{', '.join(r['number_differences']) or 'none'}")
         check = r["python_check"]
         if check is not None:
-            labels = sum(d[THIS][0] != d[BASE][0]
-                         for d in check["verdict_differences_from_native"])
             print(f"  this tree on its Python builds (as the baseline; {check['wall_s']:.1f} s "
                   f"wall, not timed in the ratio): k of K or verdict differ from the "
                   f"baseline's in {len(check['verdict_differences_from_baseline'])} claims, "
                   f"medians in {len(check['number_differences_from_baseline'])}; from the "
                   f"native run's in {len(check['verdict_differences_from_native'])} claims, "
-                  f"the verdict's label in {labels}")
+                  f"the verdict's label in {check['label_differences_from_native']}")
         for run, values in r["pinned"].items():
             print(f"  pinned in {run}: " + ", ".join(f"{k} = {v!r}" for k, v in values.items()))
         for side, label in (("only_this", "this tree"), ("only_baseline", args.baseline)):

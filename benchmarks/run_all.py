@@ -308,14 +308,12 @@ def baseline_campaigns(commit: str, seeds: int, quick: bool,
                    f"{len(r['number_differences'])} claims") if r["numbers_compared"] else ""
         check = r["python_check"]
         if check is not None:
-            labels = sum(d[this][0] != d[base][0]
-                         for d in check["verdict_differences_from_native"])
             numbers += (f"; this tree on its Python builds (the baseline's; untimed): k of K or "
                         f"verdict differ from {commit}'s in "
                         f"{len(check['verdict_differences_from_baseline'])} claims and medians "
                         f"in {len(check['number_differences_from_baseline'])}; from this "
                         f"tree's native run in {len(check['verdict_differences_from_native'])}, "
-                        f"the verdict's label in {labels}")
+                        f"the verdict's label in {check['label_differences_from_native']}")
         rows[baseline_row_name(entry, seeds, commit, same_entry)] = {
             "figure": r["wall_s"][this], "unit": f"s wall, this tree, cosim reproduce {which} "
             f"--seeds {seeds}{pins}; {verdict_agreement(r['claims'], r['verdict_differences'])}"
